@@ -1,0 +1,148 @@
+"""Start an environment server in a subprocess and stop it, leaving nothing behind.
+
+The server runs ``python -m rlenv serve MODULE:CLASS --port 0`` in a process group of its own.
+:class:`ServerProcess` waits for its ``listening on HOST:PORT`` line, keeps the last lines of its
+output for error messages, and on :meth:`~ServerProcess.close` (or at interpreter exit, or when
+garbage collected) ends the whole group.
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+import os
+import queue
+import signal
+import subprocess
+import sys
+import threading
+import time
+import weakref
+from collections.abc import Sequence
+
+from rlenv.errors import RlenvError
+
+__all__ = ["ServerProcess", "ServerStartError"]
+
+logger = logging.getLogger(__name__)
+
+_LISTENING = "listening on "
+_KEPT_LINES = 200
+
+
+class ServerStartError(RlenvError):
+    """The server process exited or stayed silent before it was listening."""
+
+
+class ServerProcess:
+    """A server subprocess for the environment ``target`` (``MODULE:CLASS``).
+
+    Args:
+        target: the environment class, as ``MODULE:CLASS``.
+        host: address for the server to bind.
+        port: port for the server to bind; 0 picks a free one.
+        startup_timeout: seconds to wait for the server to listen.
+        args: extra command-line arguments for ``rlenv serve``.
+
+    Raises:
+        ServerStartError: the server died or did not listen in time; the message holds its
+            output.
+    """
+
+    def __init__(
+        self, target: str, *, host: str = "127.0.0.1", port: int = 0,
+        startup_timeout: float = 60.0, args: Sequence[str] = (),
+    ) -> None:
+        self.target = target
+        command = [sys.executable, "-m", "rlenv", "serve", target, "--host", host,
+                   "--port", str(port), *args]
+        self._lines: collections.deque[str] = collections.deque(maxlen=_KEPT_LINES)
+        self._events: queue.Queue[str | None] = queue.Queue()
+        self.process = subprocess.Popen(
+            command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+            text=True, bufsize=1, start_new_session=True,
+        )
+        self._finalizer = weakref.finalize(self, _terminate, self.process)
+        threading.Thread(target=self._pump, daemon=True, name=f"rlenv-server-{self.pid}").start()
+        try:
+            self.host, self.port = self._wait_until_listening(startup_timeout)
+        except BaseException:
+            self.close()
+            raise
+        logger.info("server %s (pid %d) listening on %s:%d", target, self.pid, self.host,
+                    self.port)
+
+    @property
+    def pid(self) -> int:
+        """The server's process id (also its process group id)."""
+        return self.process.pid
+
+    @property
+    def address(self) -> str:
+        """``host:port`` of the server."""
+        return f"{self.host}:{self.port}"
+
+    @property
+    def output(self) -> str:
+        """The last lines the server wrote (stdout and stderr)."""
+        return "".join(self._lines)
+
+    def is_alive(self) -> bool:
+        """Whether the server process is still running."""
+        return self.process.poll() is None
+
+    def close(self, timeout: float = 5.0) -> None:
+        """End the server's whole process group: SIGTERM, then SIGKILL after ``timeout``."""
+        self._finalizer.detach()
+        _terminate(self.process, timeout)
+
+    def __enter__(self) -> ServerProcess:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"<ServerProcess {self.target} pid={self.pid}>"
+
+    def _pump(self) -> None:
+        assert self.process.stdout is not None
+        for line in self.process.stdout:
+            self._lines.append(line)
+            if line.startswith(_LISTENING):
+                self._events.put(line)
+        self._events.put(None)
+
+    def _wait_until_listening(self, timeout: float) -> tuple[str, int]:
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                line = self._events.get(timeout=max(0.0, deadline - time.monotonic()))
+            except queue.Empty:
+                raise ServerStartError(
+                    f"server {self.target} did not listen within {timeout}s; its output:\n"
+                    f"{self.output}"
+                ) from None
+            if line is None:
+                code = self.process.wait()
+                raise ServerStartError(
+                    f"server {self.target} exited with code {code} before listening; its "
+                    f"output:\n{self.output}"
+                )
+            host, _, port = line[len(_LISTENING):].strip().rpartition(":")
+            return host, int(port)
+
+
+def _terminate(process: subprocess.Popen[str], timeout: float = 5.0) -> None:
+    if process.poll() is not None:
+        return
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        try:
+            os.killpg(process.pid, sig)
+        except ProcessLookupError:
+            return
+        try:
+            process.wait(timeout)
+            return
+        except subprocess.TimeoutExpired:
+            continue

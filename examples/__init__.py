@@ -1,0 +1,1 @@
+"""Example environments shipped with rlenv; each runs with ``python -m examples.NAME``."""

@@ -1,0 +1,208 @@
+"""CartPole in pymunk: blendtorch's remote CartPole, as an rlenv scene.
+
+A cart runs on a horizontal rail; a pole is hinged on top of it. The agent pushes the cart left
+or right and must keep the pole upright and the cart on its track::
+
+    CartPole (CartPoleEnvironment)
+    |___PhysicsFramesTimer
+    |___Agent (CartPoleAgent)          pushes the cart, observes, is rewarded
+    |___World (CartPoleWorld)
+        |___Physics (PhysicsWorld)     rebuilt on every reset, so episodes share no state
+            |___Track (StaticBody)
+            |___Cart (RigidBody)
+            |   |___Box (CollisionShape)
+            |___Pole (RigidBody)
+            |   |___Stick (CollisionShape)
+            |___Rail (Joint: groove, Track-Cart)
+            |___Hinge (Joint: pivot, Cart-Pole)
+
+## Action Space
+``Box(-1, 1, (1,), float32)``: the force on the cart as a fraction of ``max_force`` (10 N);
+positive pushes towards +x.
+
+## Observation Space
+``Box((5,), float32)``:
+
+| index | observation                      | min    | max   |
+|-------|----------------------------------|--------|-------|
+| 0     | cart position x (m)              | -4.8   | 4.8   |
+| 1     | pole centre-of-mass position x (m)| -5.8  | 5.8   |
+| 2     | pole angle (rad, + leans to +x)  | -pi    | pi    |
+| 3     | cart velocity (m/s)              | -inf   | inf   |
+| 4     | pole angular velocity (rad/s)    | -inf   | inf   |
+
+## Rewards
++1 for every physics tick the pole stays up, so a step of ``repeat_action`` ticks earns up to
+``repeat_action``.
+
+## Episode End
+Terminated when the pole leans more than 12 degrees or the cart leaves the track
+(``|x| > 2.4`` m). There is no time limit inside the environment (the client adds one).
+
+## Physics
+pymunk at 60 ticks per second; the space keeps ``damping`` (0.5) of every velocity per second,
+like the default damping of Blender's rigid bodies in the seed's scene.
+
+## Starting State
+Cart position and velocity, pole angle and angular velocity each uniform in [-0.05, 0.05],
+drawn from the episode's seeded generator.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from rlenv import CollisionShape, Joint, PhysicsWorld, RigidBody, StaticBody
+from rlenv.agent import RLAgent
+from rlenv.environment import RLEnvironment
+from rlenv.world import RLEnvWorld
+
+__all__ = ["TARGET", "CartPoleAgent", "CartPoleEnvironment", "CartPoleWorld", "controller", "main"]
+
+TARGET = "examples.cartpole:CartPoleEnvironment"
+"""What ``rlenv serve`` takes to serve this environment."""
+
+POLE_LENGTH = 1.0
+KAPPA = 5.0
+
+
+def controller(observation: np.ndarray) -> np.ndarray:
+    """The seed's proportional controller: push the cart under the pole's centre of mass."""
+    x_cart, x_pole = float(observation[0]), float(observation[1])
+    return np.array([np.clip((x_pole - x_cart) * KAPPA, -1.0, 1.0)], dtype=np.float32)
+
+
+class CartPoleWorld(RLEnvWorld):
+    """The track, the cart and the pole, rebuilt from scratch at every reset."""
+
+    configurable = ("track_limit", "pole_mass", "cart_mass", "damping")
+
+    def __init__(self, name: str = "World") -> None:
+        super().__init__(name)
+        self.track_limit = 2.4
+        self.cart_mass = 1.0
+        self.pole_mass = 0.1
+        self.damping = 0.5
+        self.physics: PhysicsWorld | None = None
+        self.cart: RigidBody | None = None
+        self.pole: RigidBody | None = None
+
+    def reset(self, options: Mapping[str, Any]) -> None:
+        """Replace the physics with a fresh space (no solver state survives an episode)."""
+        if self.physics is not None:
+            self.remove_child(self.physics)
+            self.physics.queue_free()
+        physics = PhysicsWorld(damping=self.damping, name="Physics")
+        physics.add_child(StaticBody(name="Track"))
+        self.cart = RigidBody(self.cart_mass, math.inf, name="Cart")
+        self.cart.add_child(CollisionShape.box(0.5, 0.25, name="Box"))
+        self.pole = RigidBody(name="Pole")
+        self.pole.add_child(
+            CollisionShape.segment((0.0, 0.0), (0.0, POLE_LENGTH), 0.02, mass=self.pole_mass,
+                                   name="Stick")
+        )
+        physics.add_child(self.cart)
+        physics.add_child(self.pole)
+        physics.add_child(Joint.groove("../Track", "../Cart", (-100.0, 0.0), (100.0, 0.0),
+                                       name="Rail"))
+        physics.add_child(Joint.pivot("../Cart", "../Pole", (0.0, 0.0), name="Hinge"))
+        self.physics = physics
+        self.add_child(physics)
+
+    def sample_initial_position(self) -> np.ndarray:
+        """Cart x, cart velocity, pole angle and pole angular velocity, each in +-0.05."""
+        return self.np_random.uniform(-0.05, 0.05, size=4)
+
+    def get_data(self, observation_request: Mapping[str, Any]) -> dict[str, Any]:
+        """Positions of the cart and the pole tip, for displays."""
+        assert self.cart is not None and self.pole is not None
+        tip = self.pole.body.local_to_world((0.0, POLE_LENGTH))
+        return {"cart": list(self.cart.position), "pole_tip": list(tip)}
+
+
+class CartPoleAgent(RLAgent):
+    """Pushes the cart; rewarded +1 per tick while the pole is up."""
+
+    configurable = ("max_force", "angle_limit")
+    action_space = spaces.Box(-1.0, 1.0, (1,), np.float32)
+    observation_space = spaces.Box(
+        low=np.array([-4.8, -5.8, -math.pi, -np.inf, -np.inf], dtype=np.float32),
+        high=np.array([4.8, 5.8, math.pi, np.inf, np.inf], dtype=np.float32),
+        dtype=np.float32,
+    )
+
+    def __init__(self, name: str = "Agent") -> None:
+        super().__init__(name)
+        self.max_force = 10.0
+        self.angle_limit = math.radians(12.0)
+        self.force = 0.0
+
+    @property
+    def world(self) -> CartPoleWorld:
+        """The world whose cart this agent pushes."""
+        world = self.environment.world
+        assert isinstance(world, CartPoleWorld)
+        return world
+
+    def reset(self, arguments: np.ndarray) -> None:
+        """Place the cart and the pole in the sampled initial state."""
+        x, velocity, angle, angular_velocity = (float(v) for v in arguments)
+        world = self.world
+        assert world.cart is not None and world.pole is not None
+        world.cart.position = (x, 0.0)
+        world.cart.velocity = (velocity, 0.0)
+        world.pole.angle = -angle  # pymunk turns a body about its centre of gravity: angle first
+        world.pole.position = (x, 0.0)
+        world.pole.angular_velocity = -angular_velocity
+        world.pole.velocity = (velocity, 0.0)
+        self.force = 0.0
+
+    def set_action(self, action: np.ndarray) -> None:
+        """Remember the force to apply on every tick of the action."""
+        self.force = float(action[0]) * self.max_force
+
+    def _physics_process(self, delta: float) -> None:
+        cart = self.world.cart
+        if cart is not None:
+            cart.apply_force((self.force, 0.0))
+
+    def _after_physics_tick(self, delta: float) -> None:
+        x, _, angle, _, _ = self._state()
+        if abs(angle) > self.angle_limit or abs(x) > self.world.track_limit:
+            self.set_terminated()
+        else:
+            self.add_reward(1.0)
+
+    def get_data(self, observation_request: Mapping[str, Any]) -> np.ndarray:
+        """Cart x, pole x, pole angle, cart velocity, pole angular velocity."""
+        return np.array(self._state(), dtype=np.float32)
+
+    def _state(self) -> tuple[float, float, float, float, float]:
+        cart, pole = self.world.cart, self.world.pole
+        assert cart is not None and pole is not None
+        angle = -pole.angle
+        x_pole = pole.body.local_to_world((0.0, POLE_LENGTH / 2)).x
+        return (cart.position.x, x_pole, angle, cart.velocity.x, -pole.angular_velocity)
+
+
+class CartPoleEnvironment(RLEnvironment):
+    """The CartPole environment: an agent and a world under one node."""
+
+    def __init__(self) -> None:
+        super().__init__("CartPole", repeat_action=4)
+        self.add_child(CartPoleAgent())
+        self.add_child(CartPoleWorld())
+
+
+def main() -> None:
+    """Serve CartPole: ``python -m examples.cartpole [--port P]``."""
+    import sys
+
+    from rlenv.cli import main as cli_main
+
+    raise SystemExit(cli_main(["serve", TARGET, *sys.argv[1:]]))

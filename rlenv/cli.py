@@ -1,0 +1,82 @@
+"""The ``rlenv`` command: ``rlenv serve MODULE:CLASS`` and ``rlenv demo``."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+from collections.abc import Sequence
+from types import FrameType
+
+from rlenv.communication import DEFAULT_HOST
+
+__all__ = ["main"]
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the ``rlenv`` command line; returns the exit code."""
+    parser = argparse.ArgumentParser(prog="rlenv", description=__doc__)
+    parser.add_argument("--log-level", default="WARNING",
+                        choices=["DEBUG", "INFO", "WARNING", "ERROR"], help="default: WARNING")
+    commands = parser.add_subparsers(dest="command", required=True)
+
+    serve = commands.add_parser("serve", help="serve an environment over TCP")
+    serve.add_argument("target", help="the environment class, as MODULE:CLASS")
+    serve.add_argument("--host", default=DEFAULT_HOST, help=f"address to bind (default "
+                       f"{DEFAULT_HOST})")
+    serve.add_argument("--port", type=int, default=0, help="port to bind (default 0: any free)")
+    serve.set_defaults(run=_serve)
+
+    demo = commands.add_parser("demo", help="serve CartPole and balance it with a controller")
+    demo.add_argument("--episodes", type=int, default=5, help="episodes to run (default 5)")
+    demo.add_argument("--repeat-action", type=int, default=1,
+                      help="physics ticks per action (default 1)")
+    demo.add_argument("--seed", type=int, default=0, help="seed of the first episode")
+    demo.set_defaults(run=_demo)
+
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=args.log_level, stream=sys.stderr,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    return args.run(args)
+
+
+def _serve(args: argparse.Namespace) -> int:
+    from rlenv.server import Server
+
+    signal.signal(signal.SIGTERM, _exit_on_signal)
+    with Server(args.target, host=args.host, port=args.port) as server:
+        host, port = server.address
+        print(f"listening on {host}:{port}", flush=True)
+        try:
+            server.serve_forever()
+        except KeyboardInterrupt:
+            pass
+    return 0
+
+
+def _demo(args: argparse.Namespace) -> int:
+    from rlenv_client import Client
+    from rlenv_client.launcher import ServerProcess
+
+    from examples.cartpole import TARGET, controller
+
+    with ServerProcess(TARGET) as server, Client(server.host, server.port) as client:
+        print(f"CartPole served at {server.address}; balancing with a proportional controller")
+        for episode in range(args.episodes):
+            observation, _ = client.reset(seed=args.seed + episode)
+            episode_return, frames, done = 0.0, 0, False
+            while not done:
+                observation, reward, terminated, truncated, info = client.step(
+                    controller(observation), repeat_action=args.repeat_action
+                )
+                episode_return += reward
+                frames += info["frames"]
+                done = terminated or truncated
+            print(f"episode {episode + 1}: return {episode_return:.0f} over {frames} physics "
+                  f"ticks ({frames / 60:.1f} s simulated)", flush=True)
+    return 0
+
+
+def _exit_on_signal(signum: int, frame: FrameType | None) -> None:
+    raise SystemExit(128 + signum)

@@ -1,0 +1,353 @@
+"""RLEnvironment: the node that serves an agent and its world to a client.
+
+The tree of an environment follows the Godot seed::
+
+    Environment (RLEnvironment)
+    |___Agent (RLAgent)
+    |___World (RLEnvWorld)
+
+The environment keeps the tree paused while it waits for its client. A request applies, in
+order, ``config``, ``reset``, ``action`` and ``observation``. An action unpauses the tree for
+exactly ``repeat_action`` physics ticks (fewer only if the episode ends first), then pauses it
+again and answers with the observation, the summed reward, ``terminated``, ``truncated``,
+``info`` and the number of ticks that ran. Every request gets exactly one answer; a refused
+request changes nothing.
+"""
+
+from __future__ import annotations
+
+import logging
+import traceback
+from collections.abc import Mapping
+from enum import Enum
+from typing import Any, ClassVar
+
+import numpy as np
+from gymnasium.utils import seeding
+
+from rlenv.agent import RLAgent
+from rlenv.communication import Communication
+from rlenv.errors import ErrorCode, RequestError
+from rlenv.node import ProcessMode
+from rlenv.protocol import ErrorReply, Hello, Request, Response
+from rlenv.rl_node import RLNode
+from rlenv.spaces import SpaceMismatch, check
+from rlenv.timer import PhysicsFramesTimer
+from rlenv.world import RLEnvWorld
+
+__all__ = ["RLEnvironment"]
+
+logger = logging.getLogger(__name__)
+
+_CONFIG_PARTS = frozenset({"environment", "agent", "world"})
+_RESET_KEYS = frozenset({"seed", "options"})
+_OBSERVATION_PARTS = frozenset({"agent", "world"})
+
+
+class RLEnvironment(RLNode):
+    """Override to build an environment; give it an :class:`RLAgent` and an :class:`RLEnvWorld`.
+
+    Build the children in ``__init__`` (or ``_ready``). By default ``_ready`` takes the first
+    RLAgent child as :attr:`agent` and the first RLEnvWorld child as :attr:`world`; override it
+    to choose others. Override :meth:`_reset` to change how an episode starts, :meth:`_step` to
+    add logic around an action (call ``super()._step``), and :meth:`_get_info` to add to
+    ``info``.
+
+    Args:
+        name: the node name; also the environment name the client sees.
+        repeat_action: physics ticks an action runs by default; clients may configure it.
+
+    Attributes:
+        physics_ticks_per_second: the physics rate the environment is designed for (class
+            attribute; the server builds its tree with it).
+        agent: the agent node.
+        world: the world node.
+        communication: the TCP endpoint.
+        physics_frames_timer: counts the ticks of the running action.
+        repeat_action: ticks an action runs unless the request says otherwise.
+        np_random: the episode's random generator, seeded on ``reset(seed=...)``.
+    """
+
+    CONFIG_KEY: ClassVar[str] = "config"
+    RESET_KEY: ClassVar[str] = "reset"
+    ACTION_KEY: ClassVar[str] = "action"
+    OBSERVATION_KEY: ClassVar[str] = "observation"
+    WORLD_KEY: ClassVar[str] = "world"
+    AGENT_KEY: ClassVar[str] = "agent"
+    ENVIRONMENT_KEY: ClassVar[str] = "environment"
+
+    physics_ticks_per_second: ClassVar[int] = 60
+    configurable: ClassVar[tuple[str, ...]] = ("repeat_action",)
+
+    def __init__(self, name: str | None = None, *, repeat_action: int = 4) -> None:
+        super().__init__(name)
+        self.process_mode = ProcessMode.ALWAYS
+        self.agent: RLAgent | None = None
+        self.world: RLEnvWorld | None = None
+        self.communication = Communication(self.hello)
+        self.physics_frames_timer = PhysicsFramesTimer(
+            name="PhysicsFramesTimer", process_mode=ProcessMode.PAUSABLE
+        )
+        self.physics_frames_timer.timeout.connect(self._finish_action)
+        self.add_child(self.physics_frames_timer)
+        self.repeat_action = repeat_action
+        self._np_random: np.random.Generator | None = None
+        self._episode = _Episode.NOT_STARTED
+        self._request: Request | None = None
+        self._action_started_at = 0
+
+    # --- Godot lifecycle --------------------------------------------------------------------
+
+    def _enter_tree(self) -> None:
+        self.get_tree().paused = True
+
+    @property
+    def request_in_progress(self) -> bool:
+        """Whether a request is being served (an action may be running)."""
+        return self._request is not None
+
+    def _ready(self) -> None:
+        if self.agent is None:
+            self.agent = self.find_child("*", RLAgent, recursive=False)
+        if self.world is None:
+            self.world = self.find_child("*", RLEnvWorld, recursive=False)
+
+    def _process(self, delta: float) -> None:
+        if self._request is not None:  # an action is running; its client waits for the answer
+            return
+        request = self.communication.poll(timeout=None if self.get_tree().paused else 0.0)
+        if request is not None:
+            self._request = request
+            self.call_deferred(self._on_got_connection, request)
+
+    def _physics_process(self, delta: float) -> None:
+        if self._episode is _Episode.ACTING:
+            self.call_deferred(self._end_tick, delta)  # runs after the physics stepped
+
+    # --- the seed's contract ----------------------------------------------------------------
+
+    @property
+    def np_random(self) -> np.random.Generator:
+        """The episode's random generator (seeded from entropy until a seed is given)."""
+        if self._np_random is None:
+            self._np_random, _ = seeding.np_random(None)
+        return self._np_random
+
+    def hello(self) -> Hello:
+        """What a client is told on connecting: name, spaces and rates.
+
+        Raises:
+            RuntimeError: the agent or the world is not set, or the agent has no spaces.
+        """
+        agent = self._require_agent()
+        self._require_world()
+        for attribute in ("action_space", "observation_space"):
+            if not hasattr(agent, attribute):
+                raise RuntimeError(f"{agent!r} must set {attribute} to a gymnasium space")
+        return Hello(
+            environment=self.name,
+            action_space=agent.action_space,
+            observation_space=agent.observation_space,
+            agents=(agent.name,),
+            physics_ticks_per_second=self.get_tree().physics_ticks_per_second,
+            repeat_action=self.repeat_action,
+        )
+
+    def _on_got_connection(self, request: Request) -> None:
+        """Apply a request's parts in order and answer it (actions answer when they end)."""
+        try:
+            action = self._check_request(request)
+            if request.config is not None:
+                self._configure(request.config)
+            if request.reset is not None:
+                self._begin_episode(request.reset)
+            if request.action is not None:
+                self._action_started_at = self.get_tree().physics_frames
+                self._episode = _Episode.ACTING
+                self._step(action, request.repeat_action)
+                return
+            self._send_response(request.observation)
+        except RequestError as error:
+            self._answer_error(error.code, str(error))
+        except Exception as error:  # user code raised: report it, keep serving
+            self.report_error(error)
+
+    def _configure(self, configuration_request: Mapping[str, Any]) -> None:
+        """Apply the ``environment``, ``agent`` and ``world`` parts of a configuration."""
+        if "environment" in configuration_request:
+            self.configure(configuration_request["environment"])
+        if "agent" in configuration_request:
+            self._require_agent().configure(configuration_request["agent"])
+        if "world" in configuration_request:
+            self._require_world().configure(configuration_request["world"])
+
+    def _reset(self, options: Mapping[str, Any]) -> None:
+        """Start an episode: reset the world, then the agent at a sampled initial position."""
+        world = self._require_world()
+        world.reset(options)
+        self._require_agent().reset(world.sample_initial_position())
+
+    def _step(self, action: Any, frames: int | None = None) -> None:
+        """Give ``action`` to the agent and run ``frames`` ticks (default :attr:`repeat_action`).
+
+        Override to add logic around an action, and call ``super()._step(action, frames)``.
+        """
+        self._require_agent().set_action(action)
+        self.get_tree().paused = False
+        self.physics_frames_timer.start(frames or self.repeat_action)
+
+    def _send_response(self, observation_request: Mapping[str, Any] | None) -> None:
+        """Gather the observation the client asked for, the reward and the flags; send them."""
+        request = self._request
+        assert request is not None
+        agent = self._require_agent()
+        observation = None
+        if observation_request is not None:
+            observation = {}
+            if "agent" in observation_request:
+                observation["agent"] = agent.get_data(observation_request["agent"])
+            if "world" in observation_request:
+                observation["world"] = self._require_world().get_data(observation_request["world"])
+        frames = self.get_tree().physics_frames - self._action_started_at
+        response = Response(
+            id=request.id,
+            observation=observation,
+            reward=float(agent.reward),
+            terminated=bool(agent.terminated),
+            truncated=bool(agent.truncated),
+            info=self._get_info(),
+            frames=frames if request.action is not None else 0,
+        )
+        agent.reward = 0.0
+        if response.terminated or response.truncated:
+            self._episode = _Episode.ENDED
+        elif self._episode is _Episode.ACTING:
+            self._episode = _Episode.RUNNING
+        self._request = None
+        self.communication.send(response)
+        self._after_send_response()
+
+    def _after_send_response(self) -> None:
+        """Called after every answer; override to clean up (e.g. recorded frames)."""
+
+    def _get_info(self) -> dict[str, Any]:
+        """Extra diagnostics for ``info``; override to add entries (msgpack-able values)."""
+        return {}
+
+    def report_error(self, error: BaseException) -> None:
+        """Answer the current request with ``environment_error`` for an exception in user code.
+
+        The tree is paused and the next action needs a reset first.
+        """
+        logger.error("environment error", exc_info=error)
+        self.physics_frames_timer.stop()
+        if self.is_inside_tree():
+            self.get_tree().paused = True
+        self._episode = _Episode.NOT_STARTED
+        detail = "".join(traceback.format_exception(error)).rstrip()
+        self._answer_error(ErrorCode.ENVIRONMENT_ERROR, f"{error}; reset required\n{detail}")
+
+    # --- internals --------------------------------------------------------------------------
+
+    def _check_request(self, request: Request) -> Any:
+        """Check every part of ``request`` before anything is applied; return the action."""
+        config = request.config
+        if config is not None:
+            _check_keys(config, _CONFIG_PARTS, "config")
+            for part, node in (("environment", self), ("agent", self.agent), ("world", self.world)):
+                if part in config:
+                    if not isinstance(config[part], Mapping):
+                        raise RequestError(ErrorCode.BAD_REQUEST, f"config.{part} must be a map")
+                    if node is not None:
+                        node.check_config(config[part])
+            if "environment" in config and "repeat_action" in config["environment"]:
+                _check_repeat(config["environment"]["repeat_action"])
+        reset = request.reset
+        if reset is not None:
+            _check_keys(reset, _RESET_KEYS, "reset")
+            seed = reset.get("seed")
+            if seed is not None and (type(seed) is not int or seed < 0):
+                raise RequestError(ErrorCode.BAD_REQUEST, f"reset.seed must be an integer >= 0, "
+                                   f"got {seed!r:.40}")
+            options = reset.get("options")
+            if options is not None and not isinstance(options, Mapping):
+                raise RequestError(ErrorCode.BAD_REQUEST, "reset.options must be a map")
+        if request.observation is not None:
+            _check_keys(request.observation, _OBSERVATION_PARTS, "observation")
+        started = reset is not None or self._episode is not _Episode.NOT_STARTED
+        if not started and (request.action is not None or request.observation is not None):
+            raise RequestError(ErrorCode.RESET_REQUIRED, "no episode has started; reset first")
+        if request.action is None:
+            return None
+        if reset is None and self._episode is _Episode.ENDED:
+            raise RequestError(ErrorCode.RESET_REQUIRED, "the episode has ended; reset first")
+        try:
+            return check(self._require_agent().action_space, request.action, "action")
+        except SpaceMismatch as error:
+            raise RequestError(ErrorCode.INVALID_ACTION, str(error)) from None
+
+    def _begin_episode(self, arguments: Mapping[str, Any]) -> None:
+        seed = arguments.get("seed")
+        if seed is not None:
+            self._np_random, _ = seeding.np_random(seed)
+        agent = self._require_agent()
+        agent.reward = 0.0
+        agent.terminated = agent.truncated = False
+        self._episode = _Episode.RUNNING
+        self._reset(arguments.get("options") or {})
+
+    def _end_tick(self, delta: float) -> None:
+        agent = self.agent
+        if self._episode is not _Episode.ACTING or agent is None:
+            return
+        agent._after_physics_tick(delta)
+        if agent.terminated or agent.truncated:
+            self.physics_frames_timer.stop()
+            self._finish_action()
+
+    def _finish_action(self) -> None:
+        self.get_tree().paused = True
+        request = self._request
+        if request is not None:
+            self._send_response(request.observation)
+
+    def _answer_error(self, code: ErrorCode, message: str) -> None:
+        request, self._request = self._request, None
+        self.communication.send(ErrorReply(request.id if request else None, code, message))
+
+    def _require_agent(self) -> RLAgent:
+        if self.agent is None:
+            raise RuntimeError(f"{self!r} has no agent: add an RLAgent child or set self.agent")
+        return self.agent
+
+    def _require_world(self) -> RLEnvWorld:
+        if self.world is None:
+            raise RuntimeError(f"{self!r} has no world: add an RLEnvWorld child or set self.world")
+        return self.world
+
+
+class _Episode(Enum):
+    """Where the episode stands, as far as requests are concerned."""
+
+    NOT_STARTED = "not started"
+    RUNNING = "running"
+    ACTING = "acting"
+    ENDED = "ended"
+
+
+def _check_keys(part: Mapping[str, Any], allowed: frozenset[str], where: str) -> None:
+    unknown = part.keys() - allowed
+    if unknown:
+        raise RequestError(
+            ErrorCode.BAD_REQUEST,
+            f"unknown key {sorted(map(str, unknown))[0]!r} in {where}; expected any of "
+            + ", ".join(sorted(allowed)),
+        )
+
+
+def _check_repeat(value: Any) -> None:
+    if type(value) is not int or value < 1:
+        raise RequestError(
+            ErrorCode.INVALID_CONFIG, f"repeat_action must be an integer >= 1, got {value!r:.40}"
+        )
+

@@ -1,0 +1,99 @@
+"""PhysicsFramesTimer: a timer that counts physics ticks instead of seconds.
+
+Lockstep simulation has no wall clock, so durations are counted in ticks. The timer counts the
+ticks it processes in (a paused tree runs none) and emits ``timeout`` at the end of the tick that
+completes the wait, after the physics spaces have stepped: whoever listens sees the state that
+tick produced.
+"""
+
+from __future__ import annotations
+
+from rlenv.node import Node, ProcessMode
+from rlenv.signals import Signal
+
+__all__ = ["PhysicsFramesTimer"]
+
+
+class PhysicsFramesTimer(Node):
+    """Fires ``timeout`` after ``wait_frames`` physics ticks.
+
+    Args:
+        wait_frames: ticks to wait after :meth:`start`.
+        one_shot: stop after firing once; otherwise start over and fire every ``wait_frames``.
+        name: the node name.
+        process_mode: when the timer counts; by default it follows its parent.
+    """
+
+    timeout = Signal()
+    """Emitted at the end of the tick that completes the wait."""
+
+    def __init__(
+        self,
+        wait_frames: int = 1,
+        *,
+        one_shot: bool = True,
+        name: str | None = None,
+        process_mode: ProcessMode = ProcessMode.INHERIT,
+    ) -> None:
+        super().__init__(name, process_mode=process_mode)
+        self.wait_frames = _check_frames(wait_frames)
+        self.one_shot = one_shot
+        self._elapsed = 0
+        self._running = False
+        self._generation = 0
+
+    def start(self, frames: int | None = None) -> PhysicsFramesTimer:
+        """Start (or restart) counting; ``frames`` replaces :attr:`wait_frames` when given.
+
+        Returns:
+            The timer, so that ``timer.start(4).timeout.connect(...)`` reads naturally.
+
+        Raises:
+            ValueError: ``frames`` is smaller than 1.
+        """
+        if frames is not None:
+            self.wait_frames = _check_frames(frames)
+        self._elapsed = 0
+        self._running = True
+        self._generation += 1
+        return self
+
+    def stop(self) -> None:
+        """Stop counting; a timeout due at the end of this tick is cancelled."""
+        self._running = False
+        self._generation += 1
+
+    def is_stopped(self) -> bool:
+        """Whether the timer is not counting."""
+        return not self._running
+
+    @property
+    def frames_elapsed(self) -> int:
+        """Ticks counted since the last start (or the last firing, when repeating)."""
+        return self._elapsed
+
+    @property
+    def frames_left(self) -> int:
+        """Ticks still to count before the timer fires (0 when stopped)."""
+        return self.wait_frames - self._elapsed if self._running else 0
+
+    def _physics_process(self, delta: float) -> None:
+        if not self._running:
+            return
+        self._elapsed += 1
+        if self._elapsed >= self.wait_frames:
+            if self.one_shot:
+                self._running = False
+            else:
+                self._elapsed = 0
+            self.get_tree().call_deferred(self._fire, self._generation)
+
+    def _fire(self, generation: int) -> None:
+        if generation == self._generation:
+            self.timeout.emit()
+
+
+def _check_frames(frames: int) -> int:
+    if type(frames) is not int or frames < 1:
+        raise ValueError(f"a timer waits at least 1 physics frame, got {frames!r}")
+    return frames

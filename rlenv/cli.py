@@ -33,6 +33,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     demo.add_argument("--repeat-action", type=int, default=1,
                       help="physics ticks per action (default 1)")
     demo.add_argument("--seed", type=int, default=0, help="seed of the first episode")
+    demo.add_argument("--max-seconds", type=float, default=30.0,
+                      help="simulated seconds after which an episode is cut short (default 30)")
     demo.set_defaults(run=_demo)
 
     args = parser.parse_args(argv)
@@ -63,18 +65,21 @@ def _demo(args: argparse.Namespace) -> int:
 
     with ServerProcess(TARGET) as server, Client(server.host, server.port) as client:
         print(f"CartPole served at {server.address}; balancing with a proportional controller")
+        limit = round(args.max_seconds * client.hello.physics_ticks_per_second)
         for episode in range(args.episodes):
             observation, _ = client.reset(seed=args.seed + episode)
-            episode_return, frames, done = 0.0, 0, False
-            while not done:
-                observation, reward, terminated, truncated, info = client.step(
-                    controller(observation), repeat_action=args.repeat_action
+            episode_return, frames, terminated = 0.0, 0, False
+            while not terminated and frames < limit:
+                repeat = min(args.repeat_action, limit - frames)
+                observation, reward, terminated, _, info = client.step(
+                    controller(observation), repeat_action=repeat
                 )
                 episode_return += reward
                 frames += info["frames"]
-                done = terminated or truncated
+            ending = "the pole fell" if terminated else "time limit"
+            seconds = frames / client.hello.physics_ticks_per_second
             print(f"episode {episode + 1}: return {episode_return:.0f} over {frames} physics "
-                  f"ticks ({frames / 60:.1f} s simulated)", flush=True)
+                  f"ticks ({seconds:.1f} s simulated, {ending})", flush=True)
     return 0
 
 

@@ -12,6 +12,7 @@ Sockets: ``TCP_NODELAY``, one ``sendall`` per frame (header and body together), 
 from __future__ import annotations
 
 import logging
+import select
 import selectors
 import socket
 import time
@@ -37,6 +38,7 @@ logger = logging.getLogger(__name__)
 DEFAULT_HOST = "127.0.0.1"
 _READ_SIZE = 64 * 1024
 _WRITE_TIMEOUT = 10.0
+_PROBE_READS = 16
 
 
 class _Peer:
@@ -114,11 +116,11 @@ class Communication:
             if request is not None:
                 return request
             remaining = None if deadline is None else max(0.0, deadline - time.monotonic())
-            for key, _ in self._selector.select(remaining):
-                if key.fileobj is self._listener:
-                    self._accept()
-                elif self._peer is not None and key.fileobj is self._peer.sock:
-                    self._read(self._peer)
+            ready = {key.fileobj for key, _ in self._selector.select(remaining)}
+            if self._peer is not None and self._peer.sock in ready:
+                self._read(self._peer)  # before accepting: a client may leave as another comes
+            if self._listener in ready:
+                self._accept()
             if deadline is not None and time.monotonic() >= deadline:
                 return self._next_request()
 
@@ -159,6 +161,8 @@ class Communication:
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         sock.settimeout(_WRITE_TIMEOUT)
         peer = _Peer(sock, address_text, self._max_frame_size)
+        if self._peer is not None and self._has_left(self._peer):
+            self._drop(self._peer, "client closed the connection")
         if self._peer is not None:
             logger.info("refused %s: busy with %s", address_text, self._peer.address)
             reply = ErrorReply(
@@ -175,6 +179,14 @@ class Communication:
         self._selector.register(sock, selectors.EVENT_READ)
         logger.info("client %s connected", address_text)
         self._write(peer, peer.connection.send(self._hello()))
+
+    def _has_left(self, peer: _Peer) -> bool:
+        """Whether ``peer`` closed its end; reads what it sent meanwhile (without blocking)."""
+        for _ in range(_PROBE_READS):
+            if peer.connection.peer_closed or not select.select([peer.sock], [], [], 0)[0]:
+                break
+            self._read(peer)
+        return peer.connection.peer_closed
 
     def _read(self, peer: _Peer) -> None:
         try:

@@ -457,6 +457,11 @@ class Connection:
         """Ids of the requests that have not been answered yet, oldest first."""
         return tuple(self._outstanding)
 
+    @property
+    def peer_closed(self) -> bool:
+        """Whether the peer closed its end of the stream (``receive_data(b"")`` was called)."""
+        return self._eof
+
     def receive_data(self, data: bytes) -> None:
         """Buffer bytes read from the peer; ``b""`` means the peer closed its end."""
         if data:

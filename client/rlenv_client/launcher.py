@@ -18,7 +18,7 @@ import sys
 import threading
 import time
 import weakref
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 from rlenv.errors import RlenvError
 
@@ -43,6 +43,7 @@ class ServerProcess:
         port: port for the server to bind; 0 picks a free one.
         startup_timeout: seconds to wait for the server to listen.
         args: extra command-line arguments for ``rlenv serve``.
+        env: extra environment variables for the server (e.g. ``PYTHONPATH``).
 
     Raises:
         ServerStartError: the server died or did not listen in time; the message holds its
@@ -52,6 +53,7 @@ class ServerProcess:
     def __init__(
         self, target: str, *, host: str = "127.0.0.1", port: int = 0,
         startup_timeout: float = 60.0, args: Sequence[str] = (),
+        env: Mapping[str, str] | None = None,
     ) -> None:
         self.target = target
         command = [sys.executable, "-m", "rlenv", "serve", target, "--host", host,
@@ -60,7 +62,7 @@ class ServerProcess:
         self._events: queue.Queue[str | None] = queue.Queue()
         self.process = subprocess.Popen(
             command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-            text=True, bufsize=1, start_new_session=True,
+            text=True, bufsize=1, start_new_session=True, env={**os.environ, **(env or {})},
         )
         self._finalizer = weakref.finalize(self, _terminate, self.process)
         threading.Thread(target=self._pump, daemon=True, name=f"rlenv-server-{self.pid}").start()

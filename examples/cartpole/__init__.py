@@ -40,7 +40,7 @@ Terminated when the pole leans more than 12 degrees or the cart leaves the track
 (``|x| > 2.4`` m). There is no time limit inside the environment (the client adds one).
 
 ## Physics
-pymunk at 60 ticks per second; the space keeps ``damping`` (0.5) of every velocity per second,
+pymunk at 60 ticks per second; the space keeps ``damping`` (0.3) of every velocity per second,
 like the default damping of Blender's rigid bodies in the seed's scene.
 
 ## Starting State
@@ -68,7 +68,7 @@ TARGET = "examples.cartpole:CartPoleEnvironment"
 """What ``rlenv serve`` takes to serve this environment."""
 
 POLE_LENGTH = 1.0
-KAPPA = 5.0
+KAPPA = 2.5
 
 
 def controller(observation: np.ndarray) -> np.ndarray:
@@ -87,7 +87,7 @@ class CartPoleWorld(RLEnvWorld):
         self.track_limit = 2.4
         self.cart_mass = 1.0
         self.pole_mass = 0.1
-        self.damping = 0.5
+        self.damping = 0.3
         self.physics: PhysicsWorld | None = None
         self.cart: RigidBody | None = None
         self.pole: RigidBody | None = None

@@ -1,0 +1,44 @@
+"""Shared fixtures: real servers in subprocesses, each ended after the test."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+from rlenv_client import Client, ServerProcess
+
+from examples.cartpole import TARGET
+
+TESTS = Path(__file__).parent
+
+Serve = Callable[..., ServerProcess]
+
+
+@pytest.fixture
+def serve() -> Iterator[Serve]:
+    """Start servers for ``MODULE:CLASS`` targets (modules of tests/ importable); all are closed
+    when the test ends."""
+    started: list[ServerProcess] = []
+
+    def start(target: str = TARGET, **kwargs: object) -> ServerProcess:
+        process = ServerProcess(target, env={"PYTHONPATH": str(TESTS)}, **kwargs)  # type: ignore[arg-type]
+        started.append(process)
+        return process
+
+    yield start
+    for process in started:
+        process.close()
+
+
+@pytest.fixture
+def server(serve: Serve) -> ServerProcess:
+    """A fresh CartPole server on a free port."""
+    return serve()
+
+
+@pytest.fixture
+def client(server: ServerProcess) -> Iterator[Client]:
+    """A client connected to a fresh CartPole server."""
+    with Client(server.host, server.port, timeout=10) as connected:
+        yield connected

@@ -1,0 +1,85 @@
+"""The command line, the README's promises and the client's import footprint."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+from conftest import Serve
+from rlenv_client import Client
+
+ROOT = Path(__file__).parent.parent
+
+
+def run(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "rlenv", *args], capture_output=True, text=True,
+                          timeout=timeout, stdin=subprocess.DEVNULL)
+
+
+def test_demo_balances_the_pole_and_prints_each_return() -> None:
+    result = run("demo", "--episodes", "2", "--max-seconds", "5")
+    assert result.returncode == 0, result.stderr
+    returns = re.findall(r"episode (\d): return (\d+)", result.stdout)
+    assert [episode for episode, _ in returns] == ["1", "2"]
+    assert all(int(value) == 300 for _, value in returns)  # 5 s at 60 ticks: never fell
+
+
+def test_serve_refuses_a_bad_target_clearly() -> None:
+    result = run("serve", "examples.cartpole:Nothing")
+    assert result.returncode != 0
+    assert "module 'examples.cartpole' has no attribute 'Nothing'" in result.stderr
+    result = run("serve", "examples.cartpole")
+    assert "expected MODULE:CLASS" in result.stderr
+
+
+def test_serve_prints_where_it_listens(serve: Serve) -> None:
+    server = serve()
+    assert server.host == "127.0.0.1" and server.port > 0
+    assert f"listening on {server.host}:{server.port}" in server.output
+
+
+def test_the_example_runs_as_a_module(serve: Serve) -> None:
+    process = subprocess.Popen(
+        [sys.executable, "-m", "examples.cartpole", "--port", "0"], stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT, text=True, start_new_session=True,
+    )
+    try:
+        assert process.stdout is not None
+        line = process.stdout.readline()
+        host, port = re.fullmatch(r"listening on (.+):(\d+)\n", line).groups()  # type: ignore[union-attr]
+        with Client(host, int(port), timeout=10) as client:
+            client.reset(seed=0)
+            assert client.step(np.zeros(1, np.float32))[4]["frames"] == 4
+    finally:
+        process.terminate()
+        process.wait(10)
+
+
+def test_the_client_imports_no_physics_and_no_server() -> None:
+    code = ("import sys, rlenv_client; "
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in "
+            "('pymunk', 'examples') or m in ('rlenv.node', 'rlenv.environment', "
+            "'rlenv.communication')))")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            timeout=60, check=True)
+    assert result.stdout.strip() == "[]"
+
+
+def test_the_readme_example_environment_serves(serve: Serve, tmp_path: Path) -> None:
+    readme = (ROOT / "README.md").read_text()
+    section = readme.split("## Writing an environment", 1)[1]
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)  # type: ignore[union-attr]
+    (tmp_path / "readme_push.py").write_text(code)
+    from rlenv_client import ServerProcess
+
+    with ServerProcess("readme_push:PushEnvironment", env={"PYTHONPATH": str(tmp_path)}) \
+            as server, Client(server.host, server.port, timeout=10) as client:
+        observation, _ = client.reset(seed=1)
+        start = float(np.linalg.norm(observation))
+        toward_centre = np.clip(-observation, -1, 1).astype(np.float32)
+        observation, reward, _, _, info = client.step(toward_centre, repeat_action=8)
+        assert info["frames"] <= 8 and reward < 0
+        assert float(np.linalg.norm(observation)) < start

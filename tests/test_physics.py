@@ -1,0 +1,541 @@
+"""pymunk-backed physics nodes: space membership, stepping, errors, collision signals, joints."""
+
+from __future__ import annotations
+
+import math
+
+import pymunk
+import pytest
+
+from rlenv.node import Node, ProcessMode
+from rlenv.physics import (
+    CollisionShape,
+    Joint,
+    KinematicBody,
+    PhysicsWorld,
+    RigidBody,
+    StaticBody,
+)
+from rlenv.tree import SceneTree
+
+
+@pytest.fixture
+def log() -> list:
+    return []
+
+
+@pytest.fixture
+def tree() -> SceneTree:
+    return SceneTree(60)
+
+
+@pytest.fixture
+def world(tree: SceneTree) -> PhysicsWorld:
+    world = PhysicsWorld(gravity=(0.0, -10.0), name="World")
+    tree.root.add_child(world)
+    return world
+
+
+def ball(name: str = "Ball", position=(0.0, 2.0), radius: float = 0.5, **shape_kwargs):
+    body = RigidBody(position=position, name=name)
+    shape_kwargs.setdefault("mass", 1.0)
+    body.add_child(CollisionShape.circle(radius, name=f"{name}Shape", **shape_kwargs))
+    return body
+
+
+def floor(name: str = "Floor", **shape_kwargs) -> StaticBody:
+    body = StaticBody(name=name)
+    body.add_child(
+        CollisionShape.segment((-10.0, 0.0), (10.0, 0.0), 0.1, name=f"{name}Shape", **shape_kwargs)
+    )
+    return body
+
+
+def ticks(tree: SceneTree, count: int) -> None:
+    for _ in range(count):
+        tree.physics_tick()
+
+
+# --- space membership ------------------------------------------------------------------------
+
+
+def test_body_and_shape_enter_and_leave_space(world: PhysicsWorld) -> None:
+    body = RigidBody(name="Body")
+    shape = CollisionShape.box(1.0, 2.0, mass=2.0, name="Box")
+    body.add_child(shape)
+    assert body.body.space is None and shape.shape.space is None
+    world.add_child(body)
+    assert body.body in world.space.bodies
+    assert shape.shape in world.space.shapes
+    assert shape.shape.body is body.body
+    assert shape.body_node is body
+    assert body.world is world
+    # the body takes its mass from the shape
+    assert body.body.mass == pytest.approx(2.0)
+    world.remove_child(body)
+    assert list(world.space.bodies) == []
+    assert list(world.space.shapes) == []
+    assert shape.body_node is None and body.world is None
+    # and back again
+    world.add_child(body)
+    assert list(world.space.bodies) == [body.body]
+    assert list(world.space.shapes) == [shape.shape]
+
+
+def test_shape_added_to_body_already_in_tree(world: PhysicsWorld) -> None:
+    body = RigidBody(mass=1.0, moment=1.0, name="Body")
+    world.add_child(body)
+    assert list(world.space.shapes) == []
+    shape = CollisionShape.poly([(0, 0), (1, 0), (0, 1)], mass=1.0)
+    body.add_child(shape)
+    assert list(world.space.shapes) == [shape.shape]
+    body.remove_child(shape)
+    assert list(world.space.shapes) == []
+    assert list(world.space.bodies) == [body.body]
+
+
+def test_static_and_kinematic_bodies_enter_space(world: PhysicsWorld) -> None:
+    static = floor()
+    kinematic = KinematicBody(position=(1.0, 2.0), name="Platform")
+    world.add_child(static)
+    world.add_child(kinematic)
+    assert static.body.body_type == pymunk.Body.STATIC
+    assert kinematic.body.body_type == pymunk.Body.KINEMATIC
+    assert set(world.space.bodies) == {static.body, kinematic.body}
+    assert len(world.space.shapes) == 1
+
+
+def test_bodies_below_intermediate_nodes_use_nearest_world(tree: SceneTree) -> None:
+    outer = PhysicsWorld(name="Outer")
+    inner = PhysicsWorld(name="Inner")
+    group = Node("Group")
+    body = ball()
+    group.add_child(body)
+    inner.add_child(group)
+    outer.add_child(inner)
+    tree.root.add_child(outer)
+    assert body.world is inner
+    assert list(inner.space.bodies) == [body.body]
+    assert list(outer.space.bodies) == []
+
+
+def test_joint_enters_and_leaves_space(world: PhysicsWorld) -> None:
+    anchor = StaticBody(name="Anchor")
+    bob = ball("Bob", position=(1.0, 0.0))
+    joint = Joint.pivot("../Anchor", "../Bob", (0.0, 0.0), name="Hinge")
+    world.add_child(anchor)
+    world.add_child(bob)
+    world.add_child(joint)
+    assert isinstance(joint.constraint, pymunk.PivotJoint)
+    assert list(world.space.constraints) == [joint.constraint]
+    assert joint.constraint.a is anchor.body and joint.constraint.b is bob.body
+    assert not joint.constraint.collide_bodies
+    world.remove_child(joint)
+    assert list(world.space.constraints) == []
+    world.add_child(joint)
+    assert list(world.space.constraints) == [joint.constraint]
+
+
+def test_removing_world_subtree_empties_space(tree: SceneTree, world: PhysicsWorld) -> None:
+    world.add_child(floor())
+    world.add_child(ball("A", position=(0.0, 1.0)))
+    world.add_child(ball("B", position=(1.0, 0.0)))
+    world.add_child(Joint.pivot("../A", "../B", (0.5, 0.5)))
+    assert len(world.space.bodies) == 3
+    assert len(world.space.shapes) == 3
+    assert len(world.space.constraints) == 1
+    tree.root.remove_child(world)
+    assert list(world.space.bodies) == []
+    assert list(world.space.shapes) == []
+    assert list(world.space.constraints) == []
+
+
+def test_queue_free_removes_from_space(tree: SceneTree, world: PhysicsWorld) -> None:
+    body = ball()
+    world.add_child(body)
+    body.queue_free()
+    assert list(world.space.bodies) == [body.body]
+    tree.physics_tick()
+    assert list(world.space.bodies) == []
+    assert list(world.space.shapes) == []
+    assert body.is_freed()
+
+
+# --- stepping --------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("ticks_per_second", [60, 30])
+def test_body_falls_under_gravity(ticks_per_second: int) -> None:
+    tree = SceneTree(ticks_per_second)
+    world = PhysicsWorld(gravity=(0.0, -10.0))
+    tree.root.add_child(world)
+    body = ball(position=(0.0, 0.0))
+    world.add_child(body)
+    steps: list[float] = []
+    world.stepped.connect(steps.append)
+    ticks(tree, ticks_per_second)  # one simulated second
+    assert steps == [1 / ticks_per_second] * ticks_per_second
+    assert body.velocity.x == 0.0
+    assert body.velocity.y == pytest.approx(-10.0, abs=1e-9)
+    # chipmunk moves each body with the velocity it had before the step, then accelerates it:
+    # after n steps of dt, y = -g * dt**2 * n * (n - 1) / 2
+    n, dt = ticks_per_second, 1 / ticks_per_second
+    assert body.position.y == pytest.approx(-10.0 * dt * dt * n * (n - 1) / 2, abs=1e-9)
+
+
+def test_half_second_of_falling(tree: SceneTree, world: PhysicsWorld) -> None:
+    body = ball(position=(0.0, 0.0))
+    world.add_child(body)
+    ticks(tree, 30)
+    assert body.velocity.y == pytest.approx(-5.0, abs=1e-9)
+
+
+def test_world_does_not_step_while_paused(tree: SceneTree, world: PhysicsWorld) -> None:
+    body = ball(position=(0.0, 0.0))
+    world.add_child(body)
+    tree.paused = True
+    for _ in range(10):
+        tree.iteration()
+        tree.physics_tick()
+    assert body.velocity.y == 0.0 and body.position.y == 0.0
+    world.process_mode = ProcessMode.ALWAYS
+    tree.physics_tick()
+    assert body.velocity.y == pytest.approx(-10.0 / 60)
+
+
+def test_world_steps_after_physics_process(tree: SceneTree, world: PhysicsWorld) -> None:
+    seen: list[float] = []
+
+    class Pusher(Node):
+        """Sets the velocity in _physics_process; the step of the same tick uses it."""
+
+        def _physics_process(self, delta: float) -> None:
+            body = self.get_node("../World/Ball")
+            seen.append(body.position.x)
+            body.velocity = (60.0, 0.0)
+
+    world.space.gravity = (0.0, 0.0)
+    body = ball(position=(0.0, 0.0))
+    world.add_child(body)
+    tree.root.add_child(Pusher("Pusher"))  # after the world in tree order
+    tree.physics_tick()
+    assert seen == [0.0]
+    assert body.position.x == pytest.approx(1.0)
+
+
+def test_rigid_body_accessors_and_impulse(tree: SceneTree, world: PhysicsWorld) -> None:
+    world.space.gravity = (0.0, 0.0)
+    body = ball(position=(1.0, 2.0))
+    world.add_child(body)
+    assert tuple(body.position) == (1.0, 2.0)
+    body.angle = 0.5
+    body.angular_velocity = 2.0
+    assert body.body.angle == 0.5 and body.body.angular_velocity == 2.0
+    body.apply_impulse((3.0, 0.0))
+    assert tuple(body.velocity) == pytest.approx((3.0, 0.0))
+    body.position = (0.0, 0.0)
+    body.velocity = (0.0, 0.0)
+    body.apply_force((60.0, 0.0))
+    tree.physics_tick()
+    assert body.velocity.x == pytest.approx(1.0)
+
+
+# --- placement errors ------------------------------------------------------------------------
+
+
+def test_shape_outside_body_raises(world: PhysicsWorld) -> None:
+    shape = CollisionShape.circle(1.0, name="Orphan")
+    with pytest.raises(RuntimeError, match="must be a child of a body node") as info:
+        world.add_child(shape)
+    assert "Orphan" in str(info.value)
+    assert "World" in str(info.value)
+
+
+def test_shape_under_plain_node_raises(world: PhysicsWorld) -> None:
+    holder = Node("Holder")
+    holder.add_child(CollisionShape.circle(1.0))
+    with pytest.raises(RuntimeError, match="must be a child of a body node, not of <Node"):
+        world.add_child(holder)
+
+
+def test_body_outside_world_raises(tree: SceneTree) -> None:
+    with pytest.raises(RuntimeError, match="must be placed below a PhysicsWorld") as info:
+        tree.root.add_child(RigidBody(name="Lost"))
+    assert "Lost" in str(info.value)
+
+
+def test_joint_outside_world_raises(tree: SceneTree) -> None:
+    with pytest.raises(RuntimeError, match="must be placed below a PhysicsWorld"):
+        tree.root.add_child(Joint.pivot("../A", "../B", (0.0, 0.0)))
+
+
+def test_joint_without_bodies_raises_when_ready(world: PhysicsWorld) -> None:
+    world.add_child(ball("A"))
+    with pytest.raises(RuntimeError, match="no body node in the space at path '../Missing'"):
+        world.add_child(Joint.pivot("../A", "../Missing", (0.0, 0.0)))
+
+
+# --- collisions ------------------------------------------------------------------------------
+
+
+def watch(log: list, tree: SceneTree, *nodes: Node) -> None:
+    """Log every collision signal of ``nodes`` as (signal, node, other, tick)."""
+    for node in nodes:
+        for signal in ("collision_started", "collision_ended", "body_entered", "body_exited"):
+            if node.has_signal(signal):
+                node.connect(
+                    signal,
+                    lambda other, s=signal, n=node: log.append(
+                        (s, n.name, other.name, tree.physics_frames)
+                    ),
+                )
+
+
+def drop_ball(tree: SceneTree, world: PhysicsWorld, log: list, *, elasticity=0.0, sensor=False):
+    ground = floor(elasticity=elasticity, sensor=sensor)
+    falling = ball(elasticity=elasticity)
+    world.add_child(ground)
+    world.add_child(falling)
+    ground_shape, ball_shape = ground.get_child(0), falling.get_child(0)
+    watch(log, tree, ground, falling, ground_shape, ball_shape)
+    return ground, falling, ground_shape, ball_shape
+
+
+def until(tree: SceneTree, condition, limit: int = 600) -> int:
+    for _ in range(limit):
+        tree.physics_tick()
+        if condition():
+            return tree.physics_frames
+    raise AssertionError("condition never became true")
+
+
+def test_collision_started_on_both_shapes_and_bodies(
+    tree: SceneTree, world: PhysicsWorld, log: list
+) -> None:
+    drop_ball(tree, world, log)
+    contact = until(tree, lambda: bool(log))
+    # the ball (radius 0.5, starting 2 above the floor) needs about 0.5 s to touch it
+    assert 25 < contact < 40
+    assert sorted(log) == sorted([
+        ("collision_started", "BallShape", "FloorShape", contact),
+        ("collision_started", "FloorShape", "BallShape", contact),
+        ("body_entered", "Ball", "Floor", contact),
+        ("body_entered", "Floor", "Ball", contact),
+    ])
+    # resting on the floor: no more signals, the ball stays on top of it (within pymunk's
+    # collision slop of 0.1)
+    log.clear()
+    ticks(tree, 60)
+    assert log == []
+    resting = world.get_node("Ball")
+    assert 0.45 < resting.position.y <= 0.6
+    assert resting.velocity.y == pytest.approx(0.0, abs=0.05)
+
+
+def test_signal_arguments_are_the_other_nodes(tree: SceneTree, world: PhysicsWorld) -> None:
+    ground, falling, ground_shape, ball_shape = drop_ball(tree, world, [])
+    received: dict[str, Node] = {}
+    ground.body_entered.connect(lambda other: received.setdefault("floor", other))
+    falling.body_entered.connect(lambda other: received.setdefault("ball", other))
+    ground_shape.collision_started.connect(lambda other: received.setdefault("fs", other))
+    ball_shape.collision_started.connect(lambda other: received.setdefault("bs", other))
+    until(tree, lambda: len(received) == 4)
+    assert received == {"floor": falling, "ball": ground, "fs": ball_shape, "bs": ground_shape}
+
+
+def test_collision_ended_when_ball_bounces_away(
+    tree: SceneTree, world: PhysicsWorld, log: list
+) -> None:
+    _, falling, _, _ = drop_ball(tree, world, log, elasticity=1.0)
+    contact = until(tree, lambda: bool(log))
+    separation = until(tree, lambda: any(entry[0] == "collision_ended" for entry in log))
+    assert separation > contact
+    assert falling.velocity.y > 0  # it bounced up
+    ended = sorted(entry for entry in log if entry[3] == separation)
+    assert ended == sorted([
+        ("collision_ended", "BallShape", "FloorShape", separation),
+        ("collision_ended", "FloorShape", "BallShape", separation),
+        ("body_exited", "Ball", "Floor", separation),
+        ("body_exited", "Floor", "Ball", separation),
+    ])
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="BUG: CollisionShape._exit_tree forgets the shape's node before removing the shape "
+    "from the space, so the separate callback pymunk makes on removal is dropped and no "
+    "collision_ended/body_exited is emitted when a touching body leaves the tree",
+)
+def test_collision_ended_when_ball_removed(
+    tree: SceneTree, world: PhysicsWorld, log: list
+) -> None:
+    _, falling, _, _ = drop_ball(tree, world, log)
+    until(tree, lambda: bool(log))
+    ticks(tree, 5)  # resting on the floor
+    log.clear()
+    world.remove_child(falling)
+    assert sorted(entry[:3] for entry in log) == sorted([
+        ("collision_ended", "BallShape", "FloorShape"),
+        ("collision_ended", "FloorShape", "BallShape"),
+        ("body_exited", "Ball", "Floor"),
+        ("body_exited", "Floor", "Ball"),
+    ])
+
+
+def test_removal_from_collision_handler_is_deferred(
+    tree: SceneTree, world: PhysicsWorld, log: list
+) -> None:
+    ground, falling, _, _ = drop_ball(tree, world, [])
+
+    def on_entered(other: Node) -> None:
+        world.remove_child(other)  # inside the space step: deferred to the end of the tick
+        log.append(("handler", other.is_inside_tree(), other.body.space is world.space))
+
+    ground.body_entered.connect(on_entered)
+    until(tree, lambda: bool(log))
+    assert log == [("handler", True, True)]
+    assert not falling.is_inside_tree()
+    assert list(world.space.bodies) == [ground.body]
+    assert len(world.space.shapes) == 1
+
+
+def test_sensor_reports_but_does_not_stop_ball(
+    tree: SceneTree, world: PhysicsWorld, log: list
+) -> None:
+    _, falling, ground_shape, _ = drop_ball(tree, world, log, sensor=True)
+    assert ground_shape.shape.sensor
+    contact = until(tree, lambda: bool(log))
+    assert ("collision_started", "FloorShape", "BallShape", contact) in log
+    assert ("body_entered", "Ball", "Floor", contact) in log
+    until(tree, lambda: falling.position.y < -1.0, limit=120)
+    assert falling.velocity.y < -5.0  # still falling freely
+    assert ("collision_ended", "FloorShape", "BallShape") in [entry[:3] for entry in log]
+
+
+# --- joints ----------------------------------------------------------------------------------
+
+
+def pendulum(
+    joint_first: bool, origin=(0.0, 0.0)
+) -> tuple[Node, StaticBody, RigidBody, Joint]:
+    """Model/{Anchor, Bob, Hinge}: a 1 m pendulum hinged at ``origin``, starting horizontal."""
+    x, y = origin
+    model = Node("Model")
+    anchor = StaticBody(position=origin, name="Anchor")
+    bob = ball("Bob", position=(x + 1.0, y), radius=0.1)
+    hinge = Joint.pivot("../Anchor", "../Bob", origin, name="Hinge")
+    children = [hinge, anchor, bob] if joint_first else [anchor, bob, hinge]
+    for child in children:
+        model.add_child(child)
+    return model, anchor, bob, hinge
+
+
+@pytest.mark.parametrize("joint_first", [False, True])
+def test_pivot_keeps_bodies_together(
+    tree: SceneTree, world: PhysicsWorld, joint_first: bool
+) -> None:
+    model, anchor, bob, hinge = pendulum(joint_first)
+    world.add_child(model)
+    assert list(world.space.constraints) == [hinge.constraint]
+    assert hinge.constraint.a is anchor.body and hinge.constraint.b is bob.body
+    lowest = 0.0
+    for _ in range(90):
+        tree.physics_tick()
+        assert math.hypot(*bob.position) == pytest.approx(1.0, abs=0.02)
+        lowest = min(lowest, bob.position.y)
+    assert lowest < -0.9  # it swung down instead of falling away
+
+
+def test_unjointed_body_falls_away(tree: SceneTree, world: PhysicsWorld) -> None:
+    """Control for the pivot test: without the joint the bob does not stay 1 m from the hinge."""
+    model, _, bob, hinge = pendulum(joint_first=False)
+    model.remove_child(hinge)
+    world.add_child(model)
+    ticks(tree, 60)
+    assert math.hypot(*bob.position) > 2.0
+
+
+def test_pivot_between_dynamic_bodies_transfers_motion(
+    tree: SceneTree, world: PhysicsWorld
+) -> None:
+    world.space.gravity = (0.0, 0.0)
+    model = Node("Model")
+    a = ball("A", position=(0.0, 0.0))
+    b = ball("B", position=(2.0, 0.0))
+    model.add_child(Joint.pivot("../A", "../B", (1.0, 0.0), name="Link"))
+    model.add_child(a)
+    model.add_child(b)
+    world.add_child(model)
+    b.velocity = (0.0, 3.0)
+    ticks(tree, 30)
+    assert a.position.get_distance(b.position) == pytest.approx(2.0, abs=0.02)
+    assert a.position.y > 0.1  # pulled along by b
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="BUG: a Joint placed before its bodies only attaches in _ready, which runs once; "
+    "after its subtree is removed and added again the constraint never returns to the space",
+)
+def test_joint_before_bodies_reattaches_after_readding(
+    tree: SceneTree, world: PhysicsWorld
+) -> None:
+    model, _, bob, hinge = pendulum(joint_first=True)
+    world.add_child(model)
+    world.remove_child(model)
+    assert list(world.space.constraints) == []
+    world.add_child(model)
+    assert list(world.space.constraints) == [hinge.constraint]
+
+
+def test_joint_after_bodies_reattaches_after_readding(
+    tree: SceneTree, world: PhysicsWorld
+) -> None:
+    model, _, bob, hinge = pendulum(joint_first=False)
+    world.add_child(model)
+    world.remove_child(model)
+    world.add_child(model)
+    assert list(world.space.constraints) == [hinge.constraint]
+    ticks(tree, 30)
+    assert math.hypot(*bob.position) == pytest.approx(1.0, abs=0.02)
+
+
+# --- determinism -----------------------------------------------------------------------------
+
+
+def build_scene() -> tuple[SceneTree, list[RigidBody]]:
+    tree = SceneTree(60)
+    world = PhysicsWorld(gravity=(0.0, -9.81))
+    tree.root.add_child(world)
+    world.add_child(floor(elasticity=0.5, friction=0.7))
+    bodies = []
+    for index in range(6):
+        body = ball(f"Ball{index}", position=(0.3 * index - 0.7, 1.0 + 1.1 * index),
+                    radius=0.4, elasticity=0.5)
+        body.angular_velocity = 0.3 * index
+        world.add_child(body)
+        bodies.append(body)
+    box = RigidBody(position=(0.1, 9.0), angle=0.3, name="Crate")
+    box.add_child(CollisionShape.box(1.0, 0.6, density=2.0, elasticity=0.2))
+    world.add_child(box)
+    bodies.append(box)
+    model, _, bob, _ = pendulum(joint_first=True, origin=(3.0, 3.0))
+    world.add_child(model)
+    bodies.append(bob)
+    return tree, bodies
+
+
+def state(bodies: list[RigidBody]) -> list[tuple[float, ...]]:
+    return [(*b.position, *b.velocity, b.angle, b.angular_velocity) for b in bodies]
+
+
+def test_deterministic() -> None:
+    first, first_bodies = build_scene()
+    second, second_bodies = build_scene()
+    ticks(first, 150)
+    ticks(second, 150)
+    a, b = state(first_bodies), state(second_bodies)
+    assert a == b  # bit-identical, not approximately equal
+    # and the scene actually moved and collided
+    assert state(build_scene()[1]) != a
+    assert all(y > -0.5 for _, y, *_ in a[:6])

@@ -1,0 +1,373 @@
+"""End to end: a client and real servers in subprocesses, over loopback TCP."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import struct
+
+import numpy as np
+import pytest
+from conftest import Serve
+from rlenv_client import (
+    Client,
+    ConnectionLost,
+    ErrorCode,
+    RemoteError,
+    RequestTimeout,
+    ServerProcess,
+)
+
+from examples.cartpole import CartPoleAgent, controller
+from rlenv.protocol import PROTOCOL_VERSION, Connection, Request, Role, pack, unpack
+
+PUSH = np.array([0.3], dtype=np.float32)
+STILL = np.zeros(1, dtype=np.float32)
+
+
+def test_hello_describes_the_environment(client: Client) -> None:
+    assert client.hello.environment == "CartPole"
+    assert client.hello.protocol == PROTOCOL_VERSION
+    assert client.hello.physics_ticks_per_second == 60
+    assert client.hello.repeat_action == 4
+    assert client.action_space == CartPoleAgent.action_space
+    assert client.observation_space == CartPoleAgent.observation_space
+
+
+def test_reset_returns_an_observation_of_the_space(client: Client) -> None:
+    observation, info = client.reset(seed=1)
+    assert observation in client.observation_space
+    assert info == {"frames": 0}
+
+
+@pytest.mark.parametrize("repeat", [1, 4, 7])
+def test_an_action_runs_exactly_repeat_action_ticks(serve: Serve, repeat: int) -> None:
+    """The reported count is the real count: k single ticks reach the very same state."""
+    with Client(*_address(serve()), timeout=10) as stepped, \
+            Client(*_address(serve()), timeout=10) as ticked:
+        stepped.reset(seed=7)
+        ticked.reset(seed=7)
+        observation, reward, terminated, _, info = stepped.step(PUSH, repeat_action=repeat)
+        assert info["frames"] == repeat
+        assert reward == float(repeat)  # +1 per tick alive
+        assert not terminated
+        for _ in range(repeat):
+            expected, *_ = ticked.step(PUSH, repeat_action=1)
+        assert observation.tobytes() == expected.tobytes()
+
+
+def test_repeat_action_defaults_and_configuration(client: Client) -> None:
+    client.reset(seed=0)
+    assert client.step(STILL)[4]["frames"] == 4
+    assert client.step(STILL, repeat_action=2)[4]["frames"] == 2
+    assert client.step(STILL)[4]["frames"] == 4  # a per-step count does not stick
+    client.configure(repeat_action=7)
+    assert client.step(STILL)[4]["frames"] == 7
+
+
+def test_an_episode_ends_early_when_the_pole_falls(client: Client) -> None:
+    client.reset(seed=3)
+    frames = 0
+    terminated = False
+    while not terminated:
+        _, reward, terminated, truncated, info = client.step(np.ones(1, np.float32), 7)
+        frames += info["frames"]
+        assert not truncated
+    assert 0 < info["frames"] <= 7
+    assert reward == info["frames"] - 1  # the tick the pole fell earns nothing
+    with pytest.raises(RemoteError) as error:
+        client.step(PUSH)
+    assert error.value.code == ErrorCode.RESET_REQUIRED
+    assert "ended" in error.value.message
+    client.reset()
+    client.step(PUSH)
+
+
+def test_the_controller_keeps_the_pole_up(client: Client) -> None:
+    for repeat in (1, 4, 7):
+        observation, _ = client.reset(seed=repeat)
+        for _ in range(1260 // repeat):  # 21 simulated seconds
+            observation, _, terminated, _, _ = client.step(controller(observation), repeat)
+            assert not terminated
+        assert abs(observation[2]) < 0.05 and abs(observation[0]) < 1.0
+
+
+def test_wrong_actions_get_precise_errors_and_change_nothing(client: Client) -> None:
+    client.reset(seed=5)
+    client.step(PUSH)
+    before = client.observe()
+    bad_actions = {
+        "action has shape (2,), expected (1,)": np.zeros(2, np.float32),
+        "action has shape (), expected (1,)": 0.5,
+        "action[0] is nan, expected a finite number": [float("nan")],
+        "action[0] is inf, expected a finite number": [float("inf")],
+        "action[0] is 3.0, outside the bounds [-1.0, 1.0]": [3.0],
+        "action must be an array or a number, got str": "left",
+    }
+    for message, action in bad_actions.items():
+        with pytest.raises(RemoteError) as error:
+            client.step(action)
+        assert error.value.code == ErrorCode.INVALID_ACTION
+        assert error.value.message == message
+        assert not error.value.fatal
+    after = client.observe()
+    assert after["agent"].tobytes() == before["agent"].tobytes()
+    assert client.step(PUSH)[4]["frames"] == 4  # and the client goes on
+
+
+def test_requests_out_of_order_are_refused(client: Client) -> None:
+    for call in (lambda: client.step(PUSH), client.observe):
+        with pytest.raises(RemoteError) as error:
+            call()
+        assert error.value.code == ErrorCode.RESET_REQUIRED
+    client.reset()
+
+
+def test_bad_configuration_is_refused_whole(client: Client) -> None:
+    client.reset(seed=0)
+    with pytest.raises(RemoteError) as error:
+        client.configure(repeat_action=2, agent={"max_force": 5.0, "gravity": 1.0})
+    assert error.value.code == ErrorCode.INVALID_CONFIG
+    assert "'gravity'" in error.value.message and "max_force" in error.value.message
+    assert client.step(PUSH)[4]["frames"] == 4  # repeat_action=2 was not applied
+    for bad in ({"repeat_action": 0}, {"repeat_action": 1.5}, {"repeat_action": "4"}):
+        with pytest.raises(RemoteError, match="repeat_action"):
+            client.configure(**bad)
+    with pytest.raises(RemoteError, match="max_force must be a float"):
+        client.configure(agent={"max_force": "strong"})
+    client.configure(agent={"max_force": 20})  # an int may set a float
+    assert client.step(PUSH)[4]["frames"] == 4
+
+
+def test_observe_reports_agent_and_world(client: Client) -> None:
+    observation, _ = client.reset(seed=2)
+    seen = client.observe()
+    assert seen["agent"].tobytes() == observation.tobytes()
+    assert seen["world"]["cart"][0] == pytest.approx(float(observation[0]))
+    assert set(seen["world"]) == {"cart", "pole_tip"}
+
+
+def test_world_data_on_request(server: ServerProcess) -> None:
+    with Client(server.host, server.port, world_data=True) as client:
+        _, info = client.reset(seed=0)
+        assert set(info["world"]) == {"cart", "pole_tip"}
+        assert "world" in client.step(PUSH)[4]
+
+
+def test_observations_are_fresh_read_only_arrays(client: Client) -> None:
+    first, _ = client.reset(seed=0)
+    second, *_ = client.step(PUSH)
+    assert first.dtype == np.float32 and not first.flags.writeable
+    assert not np.shares_memory(first, second)
+
+
+def test_same_seed_and_actions_are_bit_identical_across_servers(serve: Serve) -> None:
+    trajectories = []
+    for _ in range(2):
+        with Client(*_address(serve()), timeout=10) as client:
+            observation, _ = client.reset(seed=1234)
+            trajectory = [observation.tobytes()]
+            for t in range(100):
+                action = np.array([np.sin(t / 7.0)], dtype=np.float32)
+                observation, _, terminated, _, _ = client.step(action, repeat_action=1 + t % 5)
+                trajectory.append(observation.tobytes())
+                if terminated:
+                    observation, _ = client.reset()
+                    trajectory.append(observation.tobytes())
+            trajectories.append(trajectory)
+    assert trajectories[0] == trajectories[1]
+
+
+def test_reset_with_a_seed_does_not_depend_on_history(client: Client) -> None:
+    def episode() -> list[bytes]:
+        observation, _ = client.reset(seed=99)
+        seen = [observation.tobytes()]
+        for _ in range(8):
+            observation, *_ = client.step(STILL, repeat_action=2)
+            seen.append(observation.tobytes())
+        return seen
+
+    first = episode()
+    client.step(PUSH)  # leave forces and solver state behind
+    assert episode() == first
+    other, _ = client.reset(seed=100)
+    assert other.tobytes() != first[0]
+
+
+def test_a_second_client_is_told_busy(server: ServerProcess, client: Client) -> None:
+    client.reset(seed=0)
+    with pytest.raises(RemoteError) as error:
+        Client(server.host, server.port, timeout=5)
+    assert error.value.code == ErrorCode.BUSY and error.value.fatal
+    assert client.step(PUSH)[4]["frames"] == 4  # the first client is undisturbed
+
+
+def test_the_next_client_is_served_after_one_leaves(server: ServerProcess) -> None:
+    for seed in range(3):
+        with Client(server.host, server.port, timeout=5) as client:
+            client.reset(seed=seed)
+            client.step(PUSH)
+
+
+def test_a_dead_server_gives_connection_lost(server: ServerProcess) -> None:
+    client = Client(server.host, server.port, timeout=10)
+    client.reset(seed=0)
+    os.killpg(server.pid, signal.SIGKILL)
+    server.process.wait()
+    with pytest.raises(ConnectionLost):
+        client.step(PUSH)
+    assert client.closed
+    with pytest.raises(ConnectionLost, match="closed"):
+        client.step(PUSH)
+
+
+def test_a_stopped_server_gives_a_timeout_and_the_connection_closes(
+    server: ServerProcess,
+) -> None:
+    client = Client(server.host, server.port, timeout=0.5)
+    client.reset(seed=0)
+    os.killpg(server.pid, signal.SIGSTOP)
+    try:
+        with pytest.raises(RequestTimeout, match="did not answer within 0.5s"):
+            client.step(PUSH)
+        assert client.closed  # a late answer can never be taken for a later request's
+    finally:
+        os.killpg(server.pid, signal.SIGCONT)
+
+
+def test_nothing_listening_gives_connection_lost() -> None:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    with pytest.raises(ConnectionLost, match="cannot connect"):
+        Client("127.0.0.1", port, timeout=2)
+
+
+def test_broken_framing_is_answered_and_the_server_keeps_serving(server: ServerProcess) -> None:
+    with socket.create_connection((server.host, server.port), timeout=5) as raw:
+        _read_frame(raw)  # the hello
+        raw.sendall(b"GET / HTTP/1.1\r\nHost: x\r\n\r\n")
+        reply = _read_frame(raw)
+        assert reply["error"]["code"] == ErrorCode.BAD_FRAME
+        assert "exceeds the limit" in reply["error"]["message"]
+        assert reply["error"]["fatal"] is True
+        assert raw.recv(1) == b""  # and the server hung up
+    with Client(server.host, server.port, timeout=5) as client:
+        client.reset(seed=0)
+        assert client.step(PUSH)[4]["frames"] == 4
+
+
+def test_bad_frames_with_intact_framing_keep_the_connection(server: ServerProcess) -> None:
+    with socket.create_connection((server.host, server.port), timeout=5) as raw:
+        _read_frame(raw)
+        for body, code, words in [
+            (b"\xc1", ErrorCode.BAD_FRAME, "not valid msgpack"),
+            (pack({"id": 1}) + b"\x00", ErrorCode.BAD_FRAME, "trailing bytes"),
+            (pack([1, 2]), ErrorCode.BAD_FRAME, "must hold a map"),
+            (pack({"id": 2, "jump": True}), ErrorCode.BAD_REQUEST, "unknown request key 'jump'"),
+            (pack({"id": 3, "reset": {"seed": -1}}), ErrorCode.BAD_REQUEST, "reset.seed"),
+        ]:
+            raw.sendall(struct.pack(">I", len(body)) + body)
+            reply = _read_frame(raw)
+            assert reply["error"]["code"] == code
+            assert words in reply["error"]["message"]
+            assert reply["error"]["fatal"] is False
+        good = Request(id=4, reset={"seed": 0}, observation={"agent": {}}).to_wire()
+        body = pack(good)
+        raw.sendall(struct.pack(">I", len(body)) + body)
+        reply = _read_frame(raw)
+        assert reply["id"] == 4 and "error" not in reply
+
+
+def test_a_client_that_leaves_mid_episode_loses_nothing_for_the_next(
+    server: ServerProcess,
+) -> None:
+    raw = socket.create_connection((server.host, server.port), timeout=5)
+    connection = Connection(Role.CLIENT)
+    connection.receive_data(raw.recv(65536))
+    connection.next_message()
+    raw.sendall(connection.send(Request(id=1, reset={}, observation={"agent": {}})))
+    raw.sendall(connection.send(Request(id=2, action=PUSH, repeat_action=7)))
+    raw.close()  # gone before the answers
+    with Client(server.host, server.port, timeout=5) as client:
+        client.reset(seed=0)
+        assert client.step(PUSH)[4]["frames"] == 4
+
+
+def test_errors_in_user_code_are_reported_and_reset_recovers(serve: Serve) -> None:
+    with Client(*_address(serve("envs:FaultyEnvironment")), timeout=10) as client:
+        observation, _ = client.reset()
+        assert observation.tolist() == [0]
+        observation, reward, _, _, info = client.step(0)
+        assert observation.tolist() == [3] and reward == 1.5 and info["frames"] == 3
+        with pytest.raises(RemoteError) as error:
+            client.step(1)
+        assert error.value.code == ErrorCode.ENVIRONMENT_ERROR
+        assert "the agent tripped over action 1" in error.value.message
+        assert "/root/Faulty/Agent" in error.value.message  # the node at fault
+        with pytest.raises(RemoteError) as error:
+            client.step(0)
+        assert error.value.code == ErrorCode.RESET_REQUIRED
+        client.reset()
+        with pytest.raises(RemoteError, match="no observation for action 2"):
+            client.step(2)
+        observation, _ = client.reset()
+        assert observation.tolist() == [0]
+        total = 0
+        terminated = False
+        while not terminated:
+            observation, _, terminated, _, info = client.step(0)
+            total += info["frames"]
+        assert total == 10 and observation.tolist() == [10]
+
+
+def test_discrete_actions_are_checked(serve: Serve) -> None:
+    with Client(*_address(serve("envs:FaultyEnvironment")), timeout=10) as client:
+        client.reset()
+        for action, message in [(3, "action is 3, outside [0, 2]"),
+                                (0.0, "action must be an integer, got float"),
+                                (True, "action must be an integer, got bool")]:
+            with pytest.raises(RemoteError) as error:
+                client.step(action)
+            assert error.value.message == message
+        client.step(np.int64(2 - 2))
+
+
+def test_server_output_is_kept_for_errors(serve: Serve) -> None:
+    from rlenv_client import ServerStartError
+
+    with pytest.raises(ServerStartError) as error:
+        serve("envs:NoSuchEnvironment")
+    assert "has no attribute 'NoSuchEnvironment'" in str(error.value)
+    with pytest.raises(ServerStartError, match="expected MODULE:CLASS"):
+        serve("envs")
+
+
+def test_closing_a_server_leaves_no_process(serve: Serve) -> None:
+    process = serve()
+    process.close()
+    assert not process.is_alive()
+    with pytest.raises(ProcessLookupError):
+        os.killpg(process.pid, 0)
+
+
+def _address(server: ServerProcess) -> tuple[str, int]:
+    return server.host, server.port
+
+
+def _read_frame(sock: socket.socket) -> dict:
+    header = _recv_exactly(sock, 4)
+    message = unpack(_recv_exactly(sock, struct.unpack(">I", header)[0]))
+    assert isinstance(message, dict)
+    return message
+
+
+def _recv_exactly(sock: socket.socket, size: int) -> bytes:
+    data = b""
+    while len(data) < size:
+        chunk = sock.recv(size - len(data))
+        assert chunk, "connection closed"
+        data += chunk
+    return data
+

@@ -109,6 +109,7 @@ class Node(SignalOwner):
         self._signals = {}
         self._process_mode = ProcessMode(process_mode)
         self._resolved_mode = ProcessMode.PAUSABLE
+        self._processes_when = _CAN_PROCESS[ProcessMode.PAUSABLE]  # indexed by tree.paused
         self._processing = _overrides(self, "_process")
         self._physics_processing = _overrides(self, "_physics_process")
         self._is_ready = False
@@ -134,7 +135,7 @@ class Node(SignalOwner):
             value = self._parent._unique_name(value)
             siblings[value] = self
         self._name = value
-        self.renamed.emit()
+        self._emit("renamed")
 
     def __repr__(self) -> str:
         where = self.get_path() if self.is_inside_tree() else self._name
@@ -319,35 +320,39 @@ class Node(SignalOwner):
         Raises:
             NodeNotFoundError: nothing at that path; the message says where the walk stopped.
         """
-        node = self.get_node_or_null(path)
+        node, stopped_at, missing = self._walk(path)
         if node is None:
-            where = self.get_path() if self._tree is not None else repr(self._name)
-            raise NodeNotFoundError(f"no node at path {path!r} from {where}")
+            where = stopped_at.get_path() if stopped_at._tree is not None else repr(stopped_at._name)
+            raise NodeNotFoundError(
+                f"no node at path {path!r}: the walk stopped at {where}, which has no {missing!r}"
+            )
         return node
 
     def get_node_or_null(self, path: str) -> Node | None:
         """Like :meth:`get_node`, but ``None`` when nothing is there."""
+        return self._walk(path)[0]
+
+    def _walk(self, path: str) -> tuple[Node | None, Node, str]:
+        """Follow ``path``: (the node or None, the last node reached, the missing step)."""
         if not path:
-            return None
-        node: Node | None = self
+            return None, self, ""
+        node: Node = self
+        names = path.split("/")
         if path.startswith("/"):
             if self._tree is None:
-                return None
-            node = None
-            names = path[1:].split("/")
-            if names[0] != self._tree.root._name:
-                return None
-            node = self._tree.root
-            names = names[1:]
-        else:
-            names = path.split("/")
+                return None, self, "/ (it is not inside a tree)"
+            root = self._tree.root
+            if names[1] != root._name:
+                return None, root, names[1]
+            node, names = root, names[2:]
         for part in names:
-            if node is None:
-                return None
             if part in ("", "."):
                 continue
-            node = node._parent if part == ".." else node._children_by_name.get(part)
-        return node
+            step = node._parent if part == ".." else node._children_by_name.get(part)
+            if step is None:
+                return None, node, part
+            node = step
+        return node, node, ""
 
     def has_node(self, path: str) -> bool:
         """Whether a node exists at ``path``."""
@@ -448,7 +453,7 @@ class Node(SignalOwner):
         """Whether this node processes now, given its resolved process mode and the pause."""
         if self._tree is None:
             return False
-        return _CAN_PROCESS[self._resolved_mode][self._tree.paused]
+        return self._processes_when[self._tree.paused]
 
     def set_process(self, enabled: bool) -> None:
         """Turn ``_process`` calls on or off (on by default when the class defines it)."""
@@ -528,28 +533,27 @@ class Node(SignalOwner):
 
     def _propagate_process_mode(self) -> None:
         for node in self.iter_subtree():
-            if node._process_mode is ProcessMode.INHERIT:
-                parent = node._parent
-                node._resolved_mode = (
-                    parent._resolved_mode if parent is not None else ProcessMode.PAUSABLE
-                )
-            else:
-                node._resolved_mode = node._process_mode
+            node._resolve_process_mode()
+
+    def _resolve_process_mode(self) -> None:
+        mode = self._process_mode
+        if mode is ProcessMode.INHERIT:
+            parent = self._parent
+            mode = parent._resolved_mode if parent is not None else ProcessMode.PAUSABLE
+        self._resolved_mode = mode
+        self._processes_when = _CAN_PROCESS[mode]
 
     def _propagate_enter_tree(self, tree: SceneTree) -> None:
         self._tree = tree
         parent = self._parent
-        if self._process_mode is ProcessMode.INHERIT:
-            self._resolved_mode = parent._resolved_mode if parent else ProcessMode.PAUSABLE
-        else:
-            self._resolved_mode = self._process_mode
+        self._resolve_process_mode()
         self.notification(NOTIFICATION_ENTER_TREE)
-        self.tree_entered.emit()
-        tree.node_added.emit(self)
+        self._emit("tree_entered")
+        tree._emit("node_added", self)
         if parent is not None:
-            parent.child_entered_tree.emit(self)
+            parent._emit("child_entered_tree", self)
         for child in list(self._children):
-            if child._parent is self:
+            if child._parent is self and child._tree is None:  # not added in _enter_tree
                 child._propagate_enter_tree(tree)
 
     def _propagate_ready(self) -> None:
@@ -560,23 +564,23 @@ class Node(SignalOwner):
             self._is_ready = True
             self._ready_requested = False
             self.notification(NOTIFICATION_READY)
-            self.ready.emit()
+            self._emit("ready")
 
     def _propagate_exit_tree(self) -> None:
         for child in reversed(list(self._children)):
             child._propagate_exit_tree()
         self.notification(NOTIFICATION_EXIT_TREE)
-        self.tree_exiting.emit()
+        self._emit("tree_exiting")
         if self._parent is not None:
-            self._parent.child_exiting_tree.emit(self)
+            self._parent._emit("child_exiting_tree", self)
         tree, self._tree = self._tree, None
         if tree is not None:
-            tree.node_removed.emit(self)
+            tree._emit("node_removed", self)
 
     def _propagate_exited(self) -> None:
         for child in reversed(self._children):
             child._propagate_exited()
-        self.tree_exited.emit()
+        self._emit("tree_exited")
 
     def _free(self) -> None:
         if self._freed:

@@ -73,7 +73,7 @@ class PhysicsWorld(Node):
 
     def _physics_step(self, delta: float) -> None:
         self.space.step(delta)
-        self.stepped.emit(delta)
+        self._emit("stepped", delta)
 
     def _on_begin(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
         self._report(arbiter, "collision_started", "body_entered")
@@ -298,9 +298,9 @@ class CollisionShape(Node):
 
     def _exit_tree(self) -> None:
         if self._world is not None:
-            self._world._shape_nodes.pop(self.shape, None)
             if self.shape.space is not None:
-                self._world.space.remove(self.shape)
+                self._world.space.remove(self.shape)  # reports the contacts that end
+            self._world._shape_nodes.pop(self.shape, None)
         self._world = None
         self.body_node = None
 
@@ -402,3 +402,4 @@ class Joint(Node):
             self._world.space.remove(self.constraint)
         self._attached = False
         self._world = None
+        self.request_ready()  # on re-entry, attach again once the bodies are back

@@ -81,6 +81,9 @@ _HEADER = struct.Struct(">I")
 _ARRAY_HEADER = struct.Struct("<BB")  # dtype string length, number of dimensions
 _MAX_NDIM = 32
 _ARRAY_KINDS = frozenset("biufc")
+_HEADER_CACHE_SIZE = 1024  # distinct (dtype, shape) pairs remembered; bounded against hostile peers
+_HEADERS: dict[tuple[np.dtype, tuple[int, ...]], bytes] = {}
+_PARSED_HEADERS: dict[bytes, tuple[np.dtype, tuple[int, ...], int, int]] = {}
 
 
 class _Sentinel:
@@ -102,33 +105,52 @@ CONNECTION_CLOSED: Final = _Sentinel("CONNECTION_CLOSED")
 
 
 def _encode_ndarray(array: np.ndarray) -> msgpack.ExtType:
-    if array.dtype.kind not in _ARRAY_KINDS:
-        raise TypeError(f"arrays of dtype {array.dtype} cannot travel on the wire")
-    if array.ndim > _MAX_NDIM:
-        raise TypeError(f"arrays of more than {_MAX_NDIM} dimensions cannot travel on the wire")
-    dtype = array.dtype.str.encode()
-    header = _ARRAY_HEADER.pack(len(dtype), array.ndim) + dtype
-    header += struct.pack(f"<{array.ndim}Q", *array.shape)
-    return msgpack.ExtType(NDARRAY_EXT, header + np.ascontiguousarray(array).tobytes())
+    key = (array.dtype, array.shape)
+    header = _HEADERS.get(key)
+    if header is None:
+        if array.dtype.kind not in _ARRAY_KINDS or array.dtype.fields is not None:
+            raise TypeError(f"arrays of dtype {array.dtype} cannot travel on the wire")
+        if array.ndim > _MAX_NDIM:
+            raise TypeError(f"arrays of more than {_MAX_NDIM} dimensions cannot travel on the wire")
+        dtype = array.dtype.str.encode()
+        header = _ARRAY_HEADER.pack(len(dtype), array.ndim) + dtype
+        header += struct.pack(f"<{array.ndim}Q", *array.shape)
+        if len(_HEADERS) < _HEADER_CACHE_SIZE:
+            _HEADERS[key] = header
+    return msgpack.ExtType(NDARRAY_EXT, header + array.tobytes())
 
 
-def _decode_ndarray(data: bytes) -> np.ndarray:
+def _parse_header(data: bytes) -> tuple[np.dtype, tuple[int, ...], int, int]:
+    """(dtype, shape, element count, header length) of an encoded array; cached by header."""
     try:
         dtype_len, ndim = _ARRAY_HEADER.unpack_from(data)
-        offset = _ARRAY_HEADER.size
-        dtype = np.dtype(data[offset : offset + dtype_len].decode("ascii"))
-        offset += dtype_len
-        if ndim > _MAX_NDIM:
-            raise ValueError(f"{ndim} dimensions is more than {_MAX_NDIM}")
-        shape = struct.unpack_from(f"<{ndim}Q", data, offset)
-        offset += 8 * ndim
+        header_len = _ARRAY_HEADER.size + dtype_len + 8 * ndim
+    except struct.error:
+        raise ValueError("malformed ndarray header: too short") from None
+    header = data[:header_len]
+    parsed = _PARSED_HEADERS.get(header)
+    if parsed is not None:
+        return parsed
+    if ndim > _MAX_NDIM:
+        raise ValueError(f"ndarray of {ndim} dimensions; at most {_MAX_NDIM} are allowed")
+    try:
+        dtype = np.dtype(data[_ARRAY_HEADER.size : _ARRAY_HEADER.size + dtype_len].decode("ascii"))
+        shape = struct.unpack_from(f"<{ndim}Q", data, _ARRAY_HEADER.size + dtype_len)
     except (struct.error, UnicodeDecodeError, TypeError, ValueError) as exc:
         raise ValueError(f"malformed ndarray header: {exc}") from None
-    if dtype.kind not in _ARRAY_KINDS or dtype.fields is not None:
+    if dtype.kind not in _ARRAY_KINDS or dtype.fields is not None or dtype.subdtype is not None:
         raise ValueError(f"ndarray dtype {dtype} is not allowed on the wire")
     count = 1
     for n in shape:
         count *= n
+    parsed = (dtype, shape, count, header_len)
+    if len(_PARSED_HEADERS) < _HEADER_CACHE_SIZE:
+        _PARSED_HEADERS[header] = parsed
+    return parsed
+
+
+def _decode_ndarray(data: bytes) -> np.ndarray:
+    dtype, shape, count, offset = _parse_header(data)
     if count * dtype.itemsize != len(data) - offset:
         raise ValueError(
             f"ndarray of shape {shape} and dtype {dtype} needs {count * dtype.itemsize} bytes, "

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from rlenv.errors import ErrorCode, RequestError
-from rlenv.node import Node
+from rlenv.node import NOTIFICATION_EXIT_TREE, Node
 
 if TYPE_CHECKING:
     from rlenv.environment import RLEnvironment
@@ -27,6 +27,8 @@ class RLNode(Node):
 
     configurable: ClassVar[tuple[str, ...]] = ()
 
+    _environment: RLEnvironment | None = None
+
     @property
     def environment(self) -> RLEnvironment:
         """The environment this node belongs to (its nearest RLEnvironment ancestor).
@@ -34,14 +36,25 @@ class RLNode(Node):
         Raises:
             RuntimeError: the node is not below an environment.
         """
-        from rlenv.environment import RLEnvironment
+        environment = self._environment
+        if environment is None:
+            from rlenv.environment import RLEnvironment
 
-        ancestor = self.parent
-        while ancestor is not None:
-            if isinstance(ancestor, RLEnvironment):
-                return ancestor
-            ancestor = ancestor.parent
-        raise RuntimeError(f"{self!r} is not below an RLEnvironment")
+            ancestor = self.parent
+            while not (ancestor is None or isinstance(ancestor, RLEnvironment)):
+                ancestor = ancestor.parent
+            if ancestor is None:
+                raise RuntimeError(f"{self!r} is not below an RLEnvironment")
+            environment = ancestor
+            if self.is_inside_tree():  # valid until the node leaves the tree
+                self._environment = environment
+        return environment
+
+    def notification(self, what: int) -> None:
+        """Deliver a lifecycle notification (and forget the cached environment on exit)."""
+        if what == NOTIFICATION_EXIT_TREE:
+            self._environment = None
+        super().notification(what)
 
     @property
     def np_random(self) -> np.random.Generator:

@@ -151,3 +151,9 @@ class SignalOwner:
     def emit_signal(self, signal: str, *args: Any) -> None:
         """Emit the signal called ``signal`` with ``args``."""
         self.get_signal(signal).emit(*args)
+
+    def _emit(self, signal: str, *args: Any) -> None:
+        """Emit a declared signal only if anything was ever connected (hot-path shortcut)."""
+        bound = self._signals.get(signal)
+        if bound is not None:
+            bound.emit(*args)

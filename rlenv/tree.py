@@ -22,7 +22,7 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
-from rlenv.node import _CAN_PROCESS, Node
+from rlenv.node import Node
 from rlenv.signals import Signal, SignalOwner
 
 __all__ = ["SceneTree"]
@@ -111,16 +111,17 @@ class SceneTree(SignalOwner):
             self._rebuild_lists()
         delta = 1.0 / self.physics_ticks_per_second
         self.physics_frames += 1
-        self.physics_frame.emit()
+        self._emit("physics_frame")
         paused = self.paused
         self._locked += 1
         node = self.root
         try:
             for node in self._physics_nodes:
-                if node._tree is not None and _can(node, paused):
+                if node._physics_processing and node._tree is not None \
+                        and node._processes_when[paused]:
                     node._physics_process(delta)
             for node in self._step_nodes:
-                if node._tree is not None and _can(node, paused):
+                if node._tree is not None and node._processes_when[paused]:
                     node._physics_step(delta)
         except Exception as error:
             error.add_note(f"raised in the physics tick of {node!r}")
@@ -134,13 +135,13 @@ class SceneTree(SignalOwner):
         if self._lists_stale:
             self._rebuild_lists()
         self.process_frames += 1
-        self.process_frame.emit()
+        self._emit("process_frame")
         paused = self.paused
         self._locked += 1
         node = self.root
         try:
             for node in self._process_nodes:
-                if node._tree is not None and _can(node, paused):
+                if node._processing and node._tree is not None and node._processes_when[paused]:
                     node._process(delta)
         except Exception as error:
             error.add_note(f"raised in the process frame of {node!r}")
@@ -179,6 +180,3 @@ class SceneTree(SignalOwner):
         self._process_nodes = [n for n in order if n._processing]
         self._lists_stale = False
 
-
-def _can(node: Node, paused: bool) -> bool:
-    return _CAN_PROCESS[node._resolved_mode][paused]

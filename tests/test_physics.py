@@ -360,12 +360,6 @@ def test_collision_ended_when_ball_bounces_away(
     ])
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="BUG: CollisionShape._exit_tree forgets the shape's node before removing the shape "
-    "from the space, so the separate callback pymunk makes on removal is dropped and no "
-    "collision_ended/body_exited is emitted when a touching body leaves the tree",
-)
 def test_collision_ended_when_ball_removed(
     tree: SceneTree, world: PhysicsWorld, log: list
 ) -> None:
@@ -472,11 +466,6 @@ def test_pivot_between_dynamic_bodies_transfers_motion(
     assert a.position.y > 0.1  # pulled along by b
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="BUG: a Joint placed before its bodies only attaches in _ready, which runs once; "
-    "after its subtree is removed and added again the constraint never returns to the space",
-)
 def test_joint_before_bodies_reattaches_after_readding(
     tree: SceneTree, world: PhysicsWorld
 ) -> None:

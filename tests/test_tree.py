@@ -314,20 +314,23 @@ def test_set_process_before_entering_tree(tree: SceneTree, log: list) -> None:
     assert log == []
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="BUG: SceneTree.process/physics_tick ignore set_process(False)/"
-    "set_physics_process(False) made earlier in the same pass (only process_mode is "
-    "rechecked per node)",
-)
-def test_set_process_false_during_pass_skips_later_node(tree: SceneTree, log: list) -> None:
+@pytest.mark.parametrize("physics", [False, True], ids=["process", "physics_process"])
+def test_disabling_processing_during_pass_skips_later_node(
+    tree: SceneTree, log: list, physics: bool
+) -> None:
     class Disabler(Node):
         def _process(self, delta: float) -> None:
             self.get_node("../Later").set_process(False)
 
+        def _physics_process(self, delta: float) -> None:
+            self.get_node("../Later").set_physics_process(False)
+
     tree.root.add_child(Disabler("Disabler"))
     tree.root.add_child(Worker("Later", log))
-    tree.process(0.1)
+    if physics:
+        tree.physics_tick()
+    else:
+        tree.process(0.1)
     assert log == []
 
 
@@ -499,6 +502,8 @@ def test_quit_makes_run_return(tree: SceneTree) -> None:
             super()._process(delta)
             if self.frames == 5:
                 self.get_tree().quit()
+            if self.frames > 50:
+                raise AssertionError("quit() did not make run() return")
 
     quitter = Quitter()
     tree.root.add_child(quitter)

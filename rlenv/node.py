@@ -322,7 +322,7 @@ class Node(SignalOwner):
         """
         node, stopped_at, missing = self._walk(path)
         if node is None:
-            where = stopped_at.get_path() if stopped_at._tree is not None else repr(stopped_at._name)
+            where = stopped_at.get_path() if stopped_at._tree else repr(stopped_at._name)
             raise NodeNotFoundError(
                 f"no node at path {path!r}: the walk stopped at {where}, which has no {missing!r}"
             )

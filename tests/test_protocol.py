@@ -67,9 +67,7 @@ def make_hello(**overrides: Any) -> Hello:
     fields: dict[str, Any] = {
         "environment": "Test-v0",
         "action_space": spaces.Box(-1.0, 1.0, (2,), np.float32),
-        "observation_space": spaces.Dict(
-            {"agent": spaces.Box(-np.inf, np.inf, (4,), np.float64)}
-        ),
+        "observation_space": spaces.Dict({"agent": spaces.Box(-np.inf, np.inf, (4,), np.float64)}),
         "agents": ("agent",),
         "physics_ticks_per_second": 120,
         "repeat_action": 2,
@@ -203,7 +201,7 @@ def test_integer_extremes_round_trip() -> None:
 def test_non_contiguous_arrays_round_trip(make: Any) -> None:
     base = np.arange(36, dtype=np.float32).reshape(6, 6) * 1.5
     original = make(base)
-    assert not original.flags.c_contiguous or original is not base
+    assert not original.flags.c_contiguous
     decoded = unpack(pack(original))
     assert decoded.shape == original.shape
     assert decoded.dtype == original.dtype
@@ -414,12 +412,12 @@ def test_ndarray_ext_helper_builds_decodable_arrays() -> None:
         ),
         pytest.param(
             _ndarray_ext(b"<f4", (1,) * 33, b"\x00" * 4),
-            "33 dimensions is more than 32",
+            "33 dimensions",
             id="33-dims",
         ),
         pytest.param(
             _ndarray_ext(b"<f4", (1,) * 255, b"\x00" * 4),
-            "255 dimensions is more than 32",
+            "255 dimensions",
             id="255-dims",
         ),
         pytest.param(
@@ -578,9 +576,7 @@ def test_client_refuses_a_first_message_that_is_not_a_hello(pair: ConnectionPair
         pytest.param(
             lambda h: h.update(action_space={"type": "Nope"}), "invalid hello", id="bad-space"
         ),
-        pytest.param(
-            lambda h: h.update(repeat_action="many"), "invalid hello", id="bad-repeat"
-        ),
+        pytest.param(lambda h: h.update(repeat_action="many"), "invalid hello", id="bad-repeat"),
         pytest.param(lambda h: h.update(agents=3), "invalid hello", id="agents-int"),
     ],
 )
@@ -1177,9 +1173,7 @@ def test_eof_before_hello_is_connection_closed(pair: ConnectionPair) -> None:
         pytest.param(pack(7), "a frame must hold a map, got int", id="int"),
         pytest.param(pack("id"), "a frame must hold a map, got str", id="str"),
         pytest.param(pack(None), "a frame must hold a map, got NoneType", id="nil"),
-        pytest.param(
-            pack(np.zeros(2)), "a frame must hold a map, got ndarray", id="array"
-        ),
+        pytest.param(pack(np.zeros(2)), "a frame must hold a map, got ndarray", id="array"),
         pytest.param(b"\xc1", "not valid msgpack", id="invalid-msgpack"),
         pytest.param(pack({"id": 1}) + b"\x00", "trailing bytes", id="trailing-bytes"),
     ],

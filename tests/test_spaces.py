@@ -69,9 +69,7 @@ def test_catalog_covers_every_supported_space_type() -> None:
     assert any(np.isinf(s.low).any() and np.isinf(s.high).any() for s in boxes)
     assert any(s.dtype.kind == "i" for s in boxes)
     assert any(isinstance(s, spaces.Discrete) and s.start != 0 for s in TESTING_SPACES)
-    assert any(
-        isinstance(s, spaces.MultiDiscrete) and (s.start != 0).any() for s in TESTING_SPACES
-    )
+    assert any(isinstance(s, spaces.MultiDiscrete) and (s.start != 0).any() for s in TESTING_SPACES)
     assert {len(s.shape) for s in TESTING_SPACES if isinstance(s, spaces.MultiBinary)} == {1, 2}
     assert any(
         isinstance(s, spaces.Tuple) and any(isinstance(i, spaces.Dict) for i in s.spaces)

@@ -332,7 +332,7 @@ class Request:
                 raise _bad_request(
                     request_id, f"'repeat_action' must be an integer >= 1, got {repeat!r:.40}"
                 )
-            if "action" not in wire:
+            if wire.get("action") is None:
                 raise _bad_request(request_id, "'repeat_action' given without an 'action'")
         return cls(
             id=request_id,

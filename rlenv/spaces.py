@@ -57,7 +57,8 @@ def _(space: spaces.MultiDiscrete) -> Spec:
 
 @space_to_spec.register
 def _(space: spaces.MultiBinary) -> Spec:
-    return {"type": "MultiBinary", "shape": list(space.shape)}
+    n = space.n
+    return {"type": "MultiBinary", "n": int(n) if np.ndim(n) == 0 else [int(k) for k in n]}
 
 
 @space_to_spec.register
@@ -82,7 +83,7 @@ _BUILDERS: dict[str, Callable[[Spec], spaces.Space]] = {
     "Box": _box,
     "Discrete": lambda spec: spaces.Discrete(spec["n"], start=spec["start"]),
     "MultiDiscrete": _multi_discrete,
-    "MultiBinary": lambda spec: spaces.MultiBinary(spec["shape"]),
+    "MultiBinary": lambda spec: spaces.MultiBinary(spec["n"]),
     "Tuple": lambda spec: spaces.Tuple([space_from_spec(s) for s in spec["spaces"]]),
     "Dict": lambda spec: spaces.Dict({k: space_from_spec(s) for k, s in spec["spaces"].items()}),
 }
@@ -94,11 +95,12 @@ def space_from_spec(spec: Spec) -> spaces.Space:
     Raises:
         ValueError: the spec is not a valid description of a supported space.
     """
-    if not isinstance(spec, Mapping) or spec.get("type") not in _BUILDERS:
+    kind = spec.get("type") if isinstance(spec, Mapping) else None
+    if not isinstance(kind, str) or kind not in _BUILDERS:
         raise ValueError(f"not a space spec: {spec!r:.200}")
     try:
-        return _BUILDERS[spec["type"]](spec)
-    except (KeyError, TypeError, ValueError) as exc:
+        return _BUILDERS[kind](spec)
+    except (AttributeError, KeyError, TypeError, ValueError) as exc:
         raise ValueError(f"invalid {spec['type']} space spec: {exc}") from exc
 
 
@@ -159,23 +161,33 @@ def _check_integers(array: np.ndarray, path: str) -> None:
 def _(space: spaces.Box, value: Any, path: str = "action") -> np.ndarray:
     array = _as_array(value, path)
     _check_shape(array, space.shape, path)
-    if space.dtype.kind in "iu" or space.dtype.kind == "b":
+    if space.dtype.kind in "biu":
         _check_integers(array, path)
+        _check_bounds(array, space, path)  # exactly, before a cast could wrap around
+        return array.astype(space.dtype, copy=False)
+    _check_finite(array, path)
+    array = array.astype(space.dtype, copy=False)
+    _check_finite(array, path, f" (too large for {space.dtype})")
+    _check_bounds(array, space, path)
+    return array
+
+
+def _check_finite(array: np.ndarray, path: str, why: str = "") -> None:
     if array.dtype.kind == "f":
         finite = np.isfinite(array)
         if not finite.all():
-            at = _first(~finite)
-            raise SpaceMismatch(f"{path}{at} is {array[~finite].flat[0]}, expected a finite number")
-    array = array.astype(space.dtype, copy=False)
+            bad = array[~finite].flat[0]
+            raise SpaceMismatch(f"{path}{_first(~finite)} is {bad}{why}, expected a finite number")
+
+
+def _check_bounds(array: np.ndarray, space: spaces.Box, path: str) -> None:
     outside = (array < space.low) | (array > space.high)
     if outside.any():
-        at = _first(outside)
         flat = int(np.flatnonzero(outside)[0])
         raise SpaceMismatch(
-            f"{path}{at} is {array.flat[flat]}, outside the bounds "
+            f"{path}{_first(outside)} is {array.flat[flat]}, outside the bounds "
             f"[{space.low.flat[flat]}, {space.high.flat[flat]}]"
         )
-    return array
 
 
 @check.register

@@ -498,24 +498,9 @@ def test_hello_reaches_the_client_intact(pair: ConnectionPair) -> None:
     assert pair.client.state is State.READY
 
 
-def _hello_params() -> list:
-    bug = pytest.mark.xfail(
-        strict=True,
-        raises=AssertionError,
-        reason="BUG: MultiBinary(n) with an int n comes back as MultiBinary([n]) (see "
-        "test_spaces.py::test_spec_round_trip), so the hello's spaces compare unequal",
-    )
-    return [
-        pytest.param(
-            s,
-            id=re.sub(r"\s+", " ", repr(s))[:50],
-            marks=bug if isinstance(s, spaces.MultiBinary) and isinstance(s.n, int) else (),
-        )
-        for s in TESTING_SPACES
-    ]
-
-
-@pytest.mark.parametrize("space", _hello_params())
+@pytest.mark.parametrize(
+    "space", [pytest.param(s, id=re.sub(r"\s+", " ", repr(s))[:50]) for s in TESTING_SPACES]
+)
 def test_hello_carries_every_catalog_space(space: spaces.Space) -> None:
     pair = ConnectionPair()
     hello = make_hello(action_space=space, observation_space=spaces.Dict({"agent": space}))
@@ -597,15 +582,6 @@ def test_hello_that_is_not_a_map_is_a_remote_protocol_error(pair: ConnectionPair
         pair.client.next_message()
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=AttributeError,
-    reason=(
-        "BUG: a hello whose Dict space spec has a non-map 'spaces' makes space_from_spec raise "
-        "AttributeError, which Hello.from_wire (catching KeyError/TypeError/ValueError) lets "
-        "escape Connection.next_message instead of a RemoteProtocolError"
-    ),
-)
 def test_hello_with_malformed_dict_space_is_a_remote_protocol_error(pair: ConnectionPair) -> None:
     wire = make_hello().to_wire()
     wire["hello"]["observation_space"] = {"type": "Dict", "spaces": ["agent"]}
@@ -968,15 +944,6 @@ def test_bad_request_error_reaches_the_client(ready: ConnectionPair) -> None:
     assert ready.client.state is State.READY
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=pytest.fail.Exception,
-    reason=(
-        "BUG: protocol.py Request.from_wire checks `'action' not in wire`, but a nil action "
-        "means 'no action' (Request.action None is absent), so {'action': nil, "
-        "'repeat_action': 2} passes validation and the repeat_action is silently ignored"
-    ),
-)
 def test_repeat_action_with_nil_action_is_a_bad_request(ready: ConnectionPair) -> None:
     error = _server_error(ready.server, {"id": 4, "action": None, "repeat_action": 2})
     assert error.code == ErrorCode.BAD_REQUEST

@@ -20,28 +20,6 @@ def _space_id(space: spaces.Space) -> str:
     return re.sub(r"\s+", " ", repr(space))[:60]
 
 
-def _is_int_multibinary(space: spaces.Space) -> bool:
-    return isinstance(space, spaces.MultiBinary) and isinstance(space.n, int)
-
-
-MULTIBINARY_N_BUG = pytest.mark.xfail(
-    strict=True,
-    raises=AssertionError,
-    reason=(
-        "BUG: spaces.py space_to_spec(MultiBinary) sends only 'shape', so MultiBinary(6) "
-        "comes back as MultiBinary([6]) whose n is (6,) instead of 6, and gymnasium "
-        "compares MultiBinary by n: the round trip is not equal"
-    ),
-)
-
-
-def _roundtrip_params() -> list:
-    return [
-        pytest.param(s, id=_space_id(s), marks=MULTIBINARY_N_BUG if _is_int_multibinary(s) else ())
-        for s in TESTING_SPACES
-    ]
-
-
 ALL_SPACES = [pytest.param(s, id=_space_id(s)) for s in TESTING_SPACES]
 
 
@@ -80,14 +58,14 @@ def test_catalog_covers_every_supported_space_type() -> None:
 # --- specs -----------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("space", _roundtrip_params())
+@pytest.mark.parametrize("space", ALL_SPACES)
 def test_spec_round_trip(space: spaces.Space) -> None:
     rebuilt = space_from_spec(space_to_spec(space))
     assert type(rebuilt) is type(space)
     assert rebuilt == space
 
 
-@pytest.mark.parametrize("space", _roundtrip_params())
+@pytest.mark.parametrize("space", ALL_SPACES)
 def test_spec_round_trip_through_msgpack(space: spaces.Space) -> None:
     rebuilt = space_from_spec(unpack(pack(space_to_spec(space))))
     assert type(rebuilt) is type(space)
@@ -197,30 +175,12 @@ def test_invalid_spec_raises_value_error(spec: object) -> None:
         space_from_spec(spec)  # type: ignore[arg-type]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=AttributeError,
-    reason=(
-        "BUG: spaces.py _BUILDERS['Dict'] calls spec['spaces'].items() and space_from_spec "
-        "only converts KeyError/TypeError/ValueError, so a Dict spec whose 'spaces' is not a "
-        "map raises AttributeError instead of ValueError"
-    ),
-)
 @pytest.mark.parametrize("inner", [[], [1, 2], 5, "abc"], ids=["empty-list", "list", "int", "str"])
 def test_dict_spec_with_non_map_spaces_raises_value_error(inner: object) -> None:
     with pytest.raises(ValueError):
         space_from_spec({"type": "Dict", "spaces": inner})
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=TypeError,
-    reason=(
-        "BUG: spaces.py space_from_spec tests `spec.get('type') not in _BUILDERS`, a dict "
-        "lookup, before its try block, so an unhashable 'type' (a list or map) raises "
-        "TypeError instead of ValueError"
-    ),
-)
 @pytest.mark.parametrize("kind", [["Box"], {"a": 1}], ids=["list", "map"])
 def test_spec_with_unhashable_type_raises_value_error(kind: object) -> None:
     with pytest.raises(ValueError):
@@ -514,15 +474,6 @@ def test_check_does_not_mutate_or_copy_a_valid_wire_array() -> None:
     assert checked is value
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=pytest.fail.Exception,
-    reason=(
-        "BUG: spaces.py check(Box) casts with array.astype(space.dtype) before the bounds "
-        "check, so integers that do not fit the Box dtype wrap around first: [300, 0] for a "
-        "uint8 Box [0, 255] is accepted as [44, 0] and [-1, 0] as [255, 0]"
-    ),
-)
 @pytest.mark.parametrize(
     ("space", "value"),
     [
@@ -541,15 +492,6 @@ def test_check_rejects_integers_that_overflow_the_box_dtype(
         check(space, value)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=pytest.fail.Exception,
-    reason=(
-        "BUG: spaces.py check(Box) tests isfinite on the incoming array but casts to the Box "
-        "dtype afterwards, so a finite float64 too large for float32 (1e300) becomes inf and "
-        "is accepted by an unbounded float32 Box, although check promises to refuse infinity"
-    ),
-)
 @pytest.mark.filterwarnings("ignore:overflow encountered in cast:RuntimeWarning")
 def test_check_rejects_float64_that_overflows_float32_box() -> None:
     space = spaces.Box(-np.inf, np.inf, (2,), np.float32)

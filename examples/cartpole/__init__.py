@@ -55,6 +55,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+import pymunk
 from gymnasium import spaces
 
 from rlenv import CollisionShape, Joint, PhysicsWorld, RigidBody, StaticBody
@@ -141,25 +142,23 @@ class CartPoleAgent(RLAgent):
         self.max_force = 10.0
         self.angle_limit = math.radians(12.0)
         self.force = 0.0
-
-    @property
-    def world(self) -> CartPoleWorld:
-        """The world whose cart this agent pushes."""
-        world = self.environment.world
-        assert isinstance(world, CartPoleWorld)
-        return world
+        self._cart: pymunk.Body | None = None
+        self._pole: pymunk.Body | None = None
+        self._track_limit = 0.0
 
     def reset(self, arguments: np.ndarray) -> None:
-        """Place the cart and the pole in the sampled initial state."""
+        """Place this episode's cart and pole in the sampled initial state."""
+        world = self.environment.world
+        assert isinstance(world, CartPoleWorld) and world.cart and world.pole
         x, velocity, angle, angular_velocity = (float(v) for v in arguments)
-        world = self.world
-        assert world.cart is not None and world.pole is not None
-        world.cart.position = (x, 0.0)
-        world.cart.velocity = (velocity, 0.0)
-        world.pole.angle = -angle  # pymunk turns a body about its centre of gravity: angle first
-        world.pole.position = (x, 0.0)
-        world.pole.angular_velocity = -angular_velocity
-        world.pole.velocity = (velocity, 0.0)
+        self._cart, self._pole = cart, pole = world.cart.body, world.pole.body
+        self._track_limit = world.track_limit
+        cart.position = (x, 0.0)
+        cart.velocity = (velocity, 0.0)
+        pole.angle = -angle  # pymunk turns a body about its centre of gravity: angle first
+        pole.position = (x, 0.0)
+        pole.angular_velocity = -angular_velocity
+        pole.velocity = (velocity, 0.0)
         self.force = 0.0
 
     def set_action(self, action: np.ndarray) -> None:
@@ -167,27 +166,26 @@ class CartPoleAgent(RLAgent):
         self.force = float(action[0]) * self.max_force
 
     def _physics_process(self, delta: float) -> None:
-        cart = self.world.cart
-        if cart is not None:
-            cart.apply_force((self.force, 0.0))
+        if self._cart is not None:  # the cart never turns: local x is world x
+            self._cart.apply_force_at_local_point((self.force, 0.0))
 
     def _after_physics_tick(self, delta: float) -> None:
-        x, _, angle, _, _ = self._state()
-        if abs(angle) > self.angle_limit or abs(x) > self.world.track_limit:
+        assert self._cart is not None and self._pole is not None
+        if abs(self._pole.angle) > self.angle_limit or \
+                abs(self._cart.position.x) > self._track_limit:
             self.set_terminated()
         else:
             self.add_reward(1.0)
 
     def get_data(self, observation_request: Mapping[str, Any]) -> np.ndarray:
         """Cart x, pole x, pole angle, cart velocity, pole angular velocity."""
-        return np.array(self._state(), dtype=np.float32)
-
-    def _state(self) -> tuple[float, float, float, float, float]:
-        cart, pole = self.world.cart, self.world.pole
+        cart, pole = self._cart, self._pole
         assert cart is not None and pole is not None
-        angle = -pole.angle
-        x_pole = pole.body.local_to_world((0.0, POLE_LENGTH / 2)).x
-        return (cart.position.x, x_pole, angle, cart.velocity.x, -pole.angular_velocity)
+        x_pole = pole.local_to_world((0.0, POLE_LENGTH / 2)).x
+        return np.array(
+            (cart.position.x, x_pole, -pole.angle, cart.velocity.x, -pole.angular_velocity),
+            dtype=np.float32,
+        )
 
 
 class CartPoleEnvironment(RLEnvironment):

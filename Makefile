@@ -17,11 +17,11 @@ demo: $(STAMP)
 	$(BIN)/rlenv demo
 
 test: $(STAMP)
-	$(BIN)/ruff check rlenv client examples tests
+	$(BIN)/ruff check rlenv client examples tests benchmarks
 	$(BIN)/python -m pytest
 
 lint: $(STAMP)
-	$(BIN)/ruff check rlenv client examples tests
+	$(BIN)/ruff check rlenv client examples tests benchmarks
 
 clean:
 	rm -rf $(VENV) build *.egg-info

@@ -58,10 +58,9 @@ def _serve(args: argparse.Namespace) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
+    from examples.cartpole import TARGET, controller
     from rlenv_client import Client
     from rlenv_client.launcher import ServerProcess
-
-    from examples.cartpole import TARGET, controller
 
     with ServerProcess(TARGET) as server, Client(server.host, server.port) as client:
         print(f"CartPole served at {server.address}; balancing with a proportional controller")

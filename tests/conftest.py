@@ -6,9 +6,9 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
-from rlenv_client import Client, ServerProcess
 
 from examples.cartpole import TARGET
+from rlenv_client import Client, ServerProcess
 
 TESTS = Path(__file__).parent
 

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 from conftest import Serve
+
 from rlenv_client import Client
 
 ROOT = Path(__file__).parent.parent

@@ -10,6 +10,9 @@ import struct
 import numpy as np
 import pytest
 from conftest import Serve
+
+from examples.cartpole import CartPoleAgent, controller
+from rlenv.protocol import PROTOCOL_VERSION, Connection, Request, Role, pack, unpack
 from rlenv_client import (
     Client,
     ConnectionLost,
@@ -18,9 +21,6 @@ from rlenv_client import (
     RequestTimeout,
     ServerProcess,
 )
-
-from examples.cartpole import CartPoleAgent, controller
-from rlenv.protocol import PROTOCOL_VERSION, Connection, Request, Role, pack, unpack
 
 PUSH = np.array([0.3], dtype=np.float32)
 STILL = np.zeros(1, dtype=np.float32)

@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from examples.cartpole import TARGET
+from rlenv.tree import SceneTree
 from rlenv_client import Client, ServerProcess
 
 TESTS = Path(__file__).parent
@@ -42,3 +43,15 @@ def client(server: ServerProcess) -> Iterator[Client]:
     """A client connected to a fresh CartPole server."""
     with Client(server.host, server.port, timeout=10) as connected:
         yield connected
+
+
+@pytest.fixture
+def tree() -> SceneTree:
+    """An empty scene tree at 60 physics ticks per second."""
+    return SceneTree(60)
+
+
+@pytest.fixture
+def log() -> list:
+    """A list that test nodes record their calls into."""
+    return []

@@ -30,16 +30,6 @@ NOTE_NAMES = {
 # --- helpers ---------------------------------------------------------------------------------
 
 
-@pytest.fixture
-def log() -> list:
-    return []
-
-
-@pytest.fixture
-def tree() -> SceneTree:
-    return SceneTree(60)
-
-
 class Rec(Node):
     """Records its lifecycle virtuals into a shared list."""
 

@@ -20,16 +20,6 @@ from rlenv.tree import SceneTree
 
 
 @pytest.fixture
-def log() -> list:
-    return []
-
-
-@pytest.fixture
-def tree() -> SceneTree:
-    return SceneTree(60)
-
-
-@pytest.fixture
 def world(tree: SceneTree) -> PhysicsWorld:
     world = PhysicsWorld(gravity=(0.0, -10.0), name="World")
     tree.root.add_child(world)

@@ -16,16 +16,6 @@ ALWAYS = ProcessMode.ALWAYS
 DISABLED = ProcessMode.DISABLED
 
 
-@pytest.fixture
-def log() -> list:
-    return []
-
-
-@pytest.fixture
-def tree() -> SceneTree:
-    return SceneTree(60)
-
-
 class Worker(Node):
     """Logs every _process, _physics_process and _physics_step call with its delta."""
 

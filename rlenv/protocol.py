@@ -495,10 +495,11 @@ class Connection:
         """Return the next whole message, :data:`NEED_DATA` or :data:`CONNECTION_CLOSED`.
 
         Raises:
-            RemoteProtocolError: the peer broke the protocol. If the framing itself is broken
-                (the stream cannot be resynchronised) the connection is ``CLOSED``; otherwise the
-                bad frame is consumed and the connection can go on. A request that could be read
-                far enough carries its id in ``error.request_id``.
+            RemoteProtocolError: the peer broke the protocol. ``error.fatal`` says the framing
+                itself is broken (the stream cannot be resynchronised): nothing more is read, and
+                this side may send one last fatal :class:`ErrorReply`. Otherwise the bad frame
+                is consumed and the connection goes on. A request that could be read far enough
+                carries its id in ``error.request_id``.
             ProtocolVersionError: the hello names another major version.
         """
         if self.state is State.CLOSED or self._broken:

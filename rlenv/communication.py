@@ -17,6 +17,7 @@ import selectors
 import socket
 import time
 from collections.abc import Callable
+from typing import Protocol
 
 from rlenv.errors import ErrorCode, LocalProtocolError, ProtocolError
 from rlenv.protocol import (
@@ -31,7 +32,7 @@ from rlenv.protocol import (
     Role,
 )
 
-__all__ = ["DEFAULT_HOST", "Communication"]
+__all__ = ["DEFAULT_HOST", "Communication", "Endpoint"]
 
 logger = logging.getLogger(__name__)
 
@@ -39,6 +40,19 @@ DEFAULT_HOST = "127.0.0.1"
 _READ_SIZE = 64 * 1024
 _WRITE_TIMEOUT = 10.0
 _PROBE_READS = 16
+
+
+class Endpoint(Protocol):
+    """What an environment needs from its transport: requests in, answers out."""
+
+    def poll(self, timeout: float | None) -> Request | None:
+        """Wait up to ``timeout`` seconds (``None``: as long as it takes) for a request."""
+
+    def send(self, message: Response | ErrorReply) -> None:
+        """Answer the request being served."""
+
+    def close(self) -> None:
+        """Release the transport."""
 
 
 class _Peer:

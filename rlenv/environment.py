@@ -26,7 +26,7 @@ import numpy as np
 from gymnasium.utils import seeding
 
 from rlenv.agent import RLAgent
-from rlenv.communication import Communication
+from rlenv.communication import Communication, Endpoint
 from rlenv.errors import ErrorCode, RequestError
 from rlenv.node import ProcessMode
 from rlenv.protocol import ErrorReply, Hello, Request, Response
@@ -41,7 +41,9 @@ logger = logging.getLogger(__name__)
 
 _CONFIG_PARTS = frozenset({"environment", "agent", "world"})
 _RESET_KEYS = frozenset({"seed", "options"})
-_OBSERVATION_PARTS = frozenset({"agent", "world"})
+_OBSERVATION_PARTS = frozenset({"agent", "world", "render"})
+_RENDER_KEYS = frozenset({"width", "height"})
+_MAX_RENDER_SIZE = 4096
 
 
 class RLEnvironment(RLNode):
@@ -60,6 +62,9 @@ class RLEnvironment(RLNode):
     Attributes:
         physics_ticks_per_second: the physics rate the environment is designed for (class
             attribute; the server builds its tree with it).
+        render_size: default (width, height) of rendered frames.
+        render_view: the world rectangle (x_min, y_min, x_max, y_max) frames show; by default
+            the bounding box of everything, frame by frame.
         agent: the agent node.
         world: the world node.
         communication: the TCP endpoint.
@@ -77,6 +82,8 @@ class RLEnvironment(RLNode):
     ENVIRONMENT_KEY: ClassVar[str] = "environment"
 
     physics_ticks_per_second: ClassVar[int] = 60
+    render_size: ClassVar[tuple[int, int]] = (600, 400)
+    render_view: ClassVar[tuple[float, float, float, float] | None] = None
     configurable: ClassVar[tuple[str, ...]] = ("repeat_action",)
 
     def __init__(self, name: str | None = None, *, repeat_action: int = 4) -> None:
@@ -84,7 +91,7 @@ class RLEnvironment(RLNode):
         self.process_mode = ProcessMode.ALWAYS
         self.agent: RLAgent | None = None
         self.world: RLEnvWorld | None = None
-        self.communication = Communication(self.hello)
+        self.communication: Endpoint = Communication(self.hello)
         self.physics_frames_timer = PhysicsFramesTimer(
             name="PhysicsFramesTimer", process_mode=ProcessMode.PAUSABLE
         )
@@ -151,6 +158,7 @@ class RLEnvironment(RLNode):
             agents=(agent.name,),
             physics_ticks_per_second=self.get_tree().physics_ticks_per_second,
             repeat_action=self.repeat_action,
+            render_modes=("rgb_array",),
         )
 
     def _on_got_connection(self, request: Request) -> None:
@@ -208,6 +216,11 @@ class RLEnvironment(RLNode):
                 observation["agent"] = agent.get_data(observation_request["agent"])
             if "world" in observation_request:
                 observation["world"] = self._require_world().get_data(observation_request["world"])
+            if "render" in observation_request:
+                size = observation_request["render"]
+                observation["render"] = self._render(
+                    size.get("width", self.render_size[0]), size.get("height", self.render_size[1])
+                )
         frames = self.get_tree().physics_frames - self._action_started_at
         response = Response(
             id=request.id,
@@ -227,12 +240,35 @@ class RLEnvironment(RLNode):
         self.communication.send(response)
         self._after_send_response()
 
+    def _render(self, width: int, height: int) -> np.ndarray:
+        """Draw the current state as a ``(height, width, 3)`` uint8 array.
+
+        By default every pymunk space below the environment is drawn, framed by
+        :attr:`render_view`; override to draw something else.
+        """
+        from rlenv.render import draw
+
+        return draw(self, width, height, self.render_view)
+
     def _after_send_response(self) -> None:
         """Called after every answer; override to clean up (e.g. recorded frames)."""
 
     def _get_info(self) -> dict[str, Any]:
         """Extra diagnostics for ``info``; override to add entries (msgpack-able values)."""
         return {}
+
+    def iterate(self) -> None:
+        """Run one turn of the tree's loop, answering errors in user code instead of dying.
+
+        An exception raised while a request is being served becomes an ``environment_error``
+        reply (see :meth:`report_error`); any other exception propagates.
+        """
+        try:
+            self.get_tree().iteration()
+        except Exception as error:
+            if not self.request_in_progress:
+                raise
+            self.report_error(error)
 
     def report_error(self, error: BaseException) -> None:
         """Answer the current request with ``environment_error`` for an exception in user code.
@@ -274,6 +310,8 @@ class RLEnvironment(RLNode):
                 raise RequestError(ErrorCode.BAD_REQUEST, "reset.options must be a map")
         if request.observation is not None:
             _check_keys(request.observation, _OBSERVATION_PARTS, "observation")
+            if "render" in request.observation:
+                _check_render(request.observation["render"])
         started = reset is not None or self._episode is not _Episode.NOT_STARTED
         if not started and (request.action is not None or request.observation is not None):
             raise RequestError(ErrorCode.RESET_REQUIRED, "no episode has started; reset first")
@@ -343,6 +381,19 @@ def _check_keys(part: Mapping[str, Any], allowed: frozenset[str], where: str) ->
             f"unknown key {sorted(map(str, unknown))[0]!r} in {where}; expected any of "
             + ", ".join(sorted(allowed)),
         )
+
+
+def _check_render(size: Any) -> None:
+    if not isinstance(size, Mapping):
+        raise RequestError(ErrorCode.BAD_REQUEST, "observation.render must be a map")
+    _check_keys(size, _RENDER_KEYS, "observation.render")
+    for key, value in size.items():
+        if type(value) is not int or not 1 <= value <= _MAX_RENDER_SIZE:
+            raise RequestError(
+                ErrorCode.BAD_REQUEST,
+                f"observation.render.{key} must be an integer in [1, {_MAX_RENDER_SIZE}], "
+                f"got {value!r:.40}",
+            )
 
 
 def _check_repeat(value: Any) -> None:

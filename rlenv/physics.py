@@ -239,6 +239,7 @@ class CollisionShape(Node):
         friction: friction coefficient.
         elasticity: bounciness, 0 to 1.
         sensor: a sensor reports contacts but does not collide (like Godot's Area2D).
+        color: RGB colour when rendered; by default it follows the body's kind.
         name: the node name.
     """
 
@@ -250,10 +251,11 @@ class CollisionShape(Node):
     def __init__(
         self, shape: pymunk.Shape, *, mass: float = 0.0, density: float = 0.0,
         friction: float = 0.5, elasticity: float = 0.0, sensor: bool = False,
-        name: str | None = None,
+        color: tuple[int, int, int] | None = None, name: str | None = None,
     ) -> None:
         super().__init__(name)
         self.shape = shape
+        self.color = color
         if mass:
             shape.mass = mass
         if density:

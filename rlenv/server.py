@@ -5,7 +5,7 @@ from __future__ import annotations
 import importlib
 import logging
 
-from rlenv.communication import DEFAULT_HOST
+from rlenv.communication import DEFAULT_HOST, Communication
 from rlenv.environment import RLEnvironment
 from rlenv.tree import SceneTree
 
@@ -58,6 +58,8 @@ class Server:
         self.tree = SceneTree(environment.physics_ticks_per_second)
         self.tree.root.add_child(environment)
         environment.hello()  # fail here, not at the first client, if the environment is incomplete
+        if not isinstance(environment.communication, Communication):
+            raise TypeError(f"{environment!r} already has an in-process endpoint")
         self.address = environment.communication.start_server(port, host)
 
     def serve_forever(self) -> None:
@@ -66,14 +68,7 @@ class Server:
         An exception raised by user code while a request is being served is answered with an
         ``environment_error`` reply and the server goes on; any other exception propagates.
         """
-        while True:
-            try:
-                self.tree.run()
-                return
-            except Exception as error:
-                if not self.environment.request_in_progress:
-                    raise
-                self.environment.report_error(error)
+        self.tree.run(self.environment.iterate)
 
     def close(self) -> None:
         """Close the endpoint (the client is disconnected)."""

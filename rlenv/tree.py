@@ -158,11 +158,16 @@ class SceneTree(SignalOwner):
             self.physics_tick()
             self.process(1.0 / self.physics_ticks_per_second)
 
-    def run(self) -> None:
-        """Iterate until :meth:`quit` is called."""
+    def run(self, iteration: Callable[[], None] | None = None) -> None:
+        """Iterate until :meth:`quit` is called.
+
+        Args:
+            iteration: what one turn of the loop runs; :meth:`iteration` by default.
+        """
+        turn = iteration or self.iteration
         self._quit_requested = False
         while not self._quit_requested:
-            self.iteration()
+            turn()
 
     def quit(self) -> None:
         """Make :meth:`run` return after the current iteration."""

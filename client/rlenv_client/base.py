@@ -1,0 +1,186 @@
+"""The client API, independent of how requests reach the environment.
+
+:class:`BaseClient` turns calls (``reset``, ``step`` ...) into :class:`rlenv.protocol.Request`
+records and responses back into gymnasium-shaped results. A subclass supplies the transport:
+:class:`~rlenv_client.client.Client` over TCP, :class:`~rlenv_client.local.LocalClient` inside
+this process. Stepping is split into :meth:`BaseClient.send_step` and
+:meth:`BaseClient.receive_step` so that a vector of clients can send every request before
+waiting for any answer.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Mapping
+from itertools import count
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from rlenv.errors import ConnectionLost, RemoteError
+from rlenv.protocol import ErrorReply, Hello, Request, Response
+from rlenv.spaces import from_wire
+
+__all__ = ["BaseClient", "StepResult"]
+
+StepResult = tuple[Any, float, bool, bool, dict[str, Any]]
+"""``(observation, reward, terminated, truncated, info)``, as gymnasium's ``step`` returns."""
+
+_AGENT_ONLY: Mapping[str, Any] = {"agent": {}}
+_AGENT_AND_WORLD: Mapping[str, Any] = {"agent": {}, "world": {}}
+
+
+class BaseClient(ABC):
+    """configure / reset / step / observe / render over some transport.
+
+    Attributes:
+        hello: everything the server said on connecting.
+        action_space: the agent's action space, as the server declared it.
+        observation_space: the agent's observation space, as the server declared it.
+        address: where the environment is, for messages.
+    """
+
+    hello: Hello
+    address: str
+
+    def __init__(self, *, world_data: bool = False) -> None:
+        self._observation_request = _AGENT_AND_WORLD if world_data else _AGENT_ONLY
+        self._ids = count(1)
+
+    def _set_hello(self, hello: Hello) -> None:
+        self.hello = hello
+        self.action_space: spaces.Space = hello.action_space
+        self.observation_space: spaces.Space = hello.observation_space
+
+    # --- the API ----------------------------------------------------------------------------
+
+    def configure(
+        self, *, agent: Mapping[str, Any] | None = None, world: Mapping[str, Any] | None = None,
+        **environment: Any,
+    ) -> None:
+        """Configure the environment (keywords), the agent and the world.
+
+        Example: ``client.configure(repeat_action=7, agent={"max_force": 20.0})``.
+
+        Raises:
+            RemoteError: ``invalid_config`` naming the key the server refused; nothing was
+                applied.
+        """
+        config: dict[str, Any] = {}
+        if environment:
+            config["environment"] = environment
+        if agent is not None:
+            config["agent"] = dict(agent)
+        if world is not None:
+            config["world"] = dict(world)
+        self._call(config=config)
+
+    def reset(
+        self, *, seed: int | None = None, options: Mapping[str, Any] | None = None
+    ) -> tuple[Any, dict[str, Any]]:
+        """Start an episode; the same seed gives the same episode.
+
+        Returns:
+            ``(observation, info)``.
+        """
+        reset: dict[str, Any] = {}
+        if seed is not None:
+            reset["seed"] = seed
+        if options is not None:
+            reset["options"] = dict(options)
+        response = self._call(reset=reset, observation=self._observation_request)
+        return self._observation(response), self._info(response)
+
+    def step(self, action: Any, repeat_action: int | None = None) -> StepResult:
+        """Run ``action`` for ``repeat_action`` physics ticks (default: the server's setting).
+
+        Returns:
+            ``(observation, reward, terminated, truncated, info)``; ``info["frames"]`` is the
+            number of ticks that ran (fewer than asked only if the episode ended).
+
+        Raises:
+            RemoteError: ``invalid_action`` (shape, dtype, bounds, NaN) or ``reset_required``;
+                the environment is unchanged and the client can go on.
+        """
+        self.send_step(action, repeat_action)
+        return self.receive_step()
+
+    def send_step(self, action: Any, repeat_action: int | None = None) -> None:
+        """Send a step request without waiting; collect the answer with :meth:`receive_step`."""
+        self._send(Request(id=next(self._ids), action=action,
+                           observation=self._observation_request, repeat_action=repeat_action))
+
+    def receive_step(self) -> StepResult:
+        """Wait for the answer to the step sent by :meth:`send_step`."""
+        response = self._receive_reply()
+        return (
+            self._observation(response),
+            response.reward,
+            response.terminated,
+            response.truncated,
+            self._info(response),
+        )
+
+    def observe(self) -> dict[str, Any]:
+        """The current observation without stepping: ``{"agent": ..., "world": ...}``."""
+        response = self._call(observation=_AGENT_AND_WORLD)
+        return {"agent": self._observation(response), "world": self._part(response, "world")}
+
+    def render(self, width: int | None = None, height: int | None = None) -> np.ndarray:
+        """Draw the environment's current state: an ``(height, width, 3)`` uint8 array.
+
+        The size defaults to the environment's ``render_size``.
+        """
+        size = {k: v for k, v in (("width", width), ("height", height)) if v is not None}
+        return np.asarray(self._part(self._call(observation={"render": size}), "render"))
+
+    @abstractmethod
+    def close(self) -> None:
+        """Release the connection (or the in-process environment); safe to repeat."""
+
+    def __enter__(self) -> BaseClient:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    # --- transport --------------------------------------------------------------------------
+
+    @abstractmethod
+    def _send(self, request: Request) -> None:
+        """Deliver ``request`` to the environment."""
+
+    @abstractmethod
+    def _receive(self) -> Response | ErrorReply:
+        """Wait for the environment's answer to the oldest request sent."""
+
+    # --- internals --------------------------------------------------------------------------
+
+    def _call(self, **parts: Any) -> Response:
+        self._send(Request(id=next(self._ids), **parts))
+        return self._receive_reply()
+
+    def _receive_reply(self) -> Response:
+        message = self._receive()
+        if isinstance(message, ErrorReply):
+            if message.fatal:
+                self.close()
+            raise RemoteError(message.code, message.message, message.fatal)
+        return message
+
+    def _observation(self, response: Response) -> Any:
+        return from_wire(self.observation_space, self._part(response, "agent"))
+
+    def _part(self, response: Response, part: str) -> Any:
+        if response.observation is None or part not in response.observation:
+            self.close()
+            raise ConnectionLost(f"{self.address} broke the protocol: no {part!r} observation")
+        return response.observation[part]
+
+    def _info(self, response: Response) -> dict[str, Any]:
+        info = dict(response.info)
+        info["frames"] = response.frames
+        if response.observation is not None and "world" in response.observation:
+            info["world"] = response.observation["world"]
+        return info

@@ -26,6 +26,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     serve.add_argument("--host", default=DEFAULT_HOST, help=f"address to bind (default "
                        f"{DEFAULT_HOST})")
     serve.add_argument("--port", type=int, default=0, help="port to bind (default 0: any free)")
+    serve.add_argument("--lifeline", type=int, default=None, metavar="FD",
+                       help="exit when this inherited pipe closes (set by ServerProcess)")
     serve.set_defaults(run=_serve)
 
     demo = commands.add_parser("demo", help="serve CartPole and balance it with a controller")
@@ -47,7 +49,7 @@ def _serve(args: argparse.Namespace) -> int:
     from rlenv.server import Server
 
     signal.signal(signal.SIGTERM, _exit_on_signal)
-    with Server(args.target, host=args.host, port=args.port) as server:
+    with Server(args.target, host=args.host, port=args.port, lifeline=args.lifeline) as server:
         host, port = server.address
         print(f"listening on {host}:{port}", flush=True)
         try:

@@ -12,6 +12,7 @@ Sockets: ``TCP_NODELAY``, one ``sendall`` per frame (header and body together), 
 from __future__ import annotations
 
 import logging
+import os
 import select
 import selectors
 import socket
@@ -80,6 +81,7 @@ class Communication:
         self._selector = selectors.DefaultSelector()
         self._listener: socket.socket | None = None
         self._peer: _Peer | None = None
+        self._lifeline: int | None = None
 
     @property
     def is_listening(self) -> bool:
@@ -118,6 +120,15 @@ class Communication:
         logger.info("listening on %s:%d", *self.address)
         return self.address
 
+    def watch_lifeline(self, fd: int) -> None:
+        """Exit (``SystemExit``) when the pipe ``fd`` reaches end of file.
+
+        ``fd`` is the read end of a pipe whose write end only the process that started this
+        server holds: end of file means that process is gone.
+        """
+        self._lifeline = fd
+        self._selector.register(fd, selectors.EVENT_READ)
+
     def poll(self, timeout: float | None) -> Request | None:
         """Wait up to ``timeout`` seconds (``None``: forever) for the next request.
 
@@ -135,6 +146,8 @@ class Communication:
                 self._read(self._peer)  # before accepting: a client may leave as another comes
             if self._listener in ready:
                 self._accept()
+            if self._lifeline is not None and self._lifeline in ready:
+                self._check_lifeline(self._lifeline)
             if deadline is not None and time.monotonic() >= deadline:
                 return self._next_request()
 
@@ -193,6 +206,11 @@ class Communication:
         self._selector.register(sock, selectors.EVENT_READ)
         logger.info("client %s connected", address_text)
         self._write(peer, peer.connection.send(self._hello()))
+
+    def _check_lifeline(self, fd: int) -> None:
+        if not os.read(fd, 4096):
+            logger.warning("the process that started this server is gone; exiting")
+            raise SystemExit(0)
 
     def _has_left(self, peer: _Peer) -> bool:
         """Whether ``peer`` closed its end; reads what it sent meanwhile (without blocking)."""

@@ -44,11 +44,13 @@ class Server:
         host: address to bind; 127.0.0.1 unless the environment must be reachable from
             other machines.
         port: port to bind; 0 picks a free one (see :attr:`address`).
+        lifeline: read end of a pipe whose write end the starting process holds; the server
+            exits when that process is gone (see ``rlenv_client.ServerProcess``).
     """
 
     def __init__(
         self, environment: RLEnvironment | type[RLEnvironment] | str, host: str = DEFAULT_HOST,
-        port: int = 0,
+        port: int = 0, lifeline: int | None = None,
     ) -> None:
         if isinstance(environment, str):
             environment = load_environment(environment)
@@ -61,6 +63,8 @@ class Server:
         if not isinstance(environment.communication, Communication):
             raise TypeError(f"{environment!r} already has an in-process endpoint")
         self.address = environment.communication.start_server(port, host)
+        if lifeline is not None:
+            environment.communication.watch_lifeline(lifeline)
 
     def serve_forever(self) -> None:
         """Run the tree until :meth:`SceneTree.quit` or an interrupt.

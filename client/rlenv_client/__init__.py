@@ -1,40 +1,47 @@
-"""rlenv_client: drive rlenv environments over TCP from any trainer.
+"""rlenv_client: drive rlenv environments from any trainer.
 
-It imports no physics and no server code: only the shared protocol, spaces and errors.
+- :class:`Client`: one environment server over TCP; :class:`LocalClient`: the same API with the
+  environment inside this process.
+- :class:`RemoteEnv` (a ``gymnasium.Env``) and :class:`RemoteVectorEnv` (a
+  ``gymnasium.vector.VectorEnv``); importing this package registers the example ids, e.g.
+  ``gymnasium.make("rlenv/CartPole-v0")``.
+- :class:`ServerProcess`: a server subprocess that leaves nothing behind.
+
+It imports no physics and no server code (only the shared protocol, spaces and errors), unless
+an environment is run in process.
 """
 
-from rlenv.errors import (
-    ConnectionLost as ConnectionLost,
-)
-from rlenv.errors import (
-    ErrorCode as ErrorCode,
-)
-from rlenv.errors import (
-    ProtocolVersionError as ProtocolVersionError,
-)
-from rlenv.errors import (
-    RemoteError as RemoteError,
-)
-from rlenv.errors import (
-    RequestTimeout as RequestTimeout,
-)
-from rlenv.errors import (
-    RlenvError as RlenvError,
-)
+from rlenv.errors import ConnectionLost as ConnectionLost
+from rlenv.errors import ErrorCode as ErrorCode
+from rlenv.errors import ProtocolVersionError as ProtocolVersionError
+from rlenv.errors import RemoteError as RemoteError
+from rlenv.errors import RequestTimeout as RequestTimeout
+from rlenv.errors import RlenvError as RlenvError
+from rlenv_client.base import BaseClient as BaseClient
+from rlenv_client.base import StepResult as StepResult
 from rlenv_client.client import Client as Client
-from rlenv_client.client import StepResult as StepResult
+from rlenv_client.env import RemoteEnv as RemoteEnv
 from rlenv_client.launcher import ServerProcess as ServerProcess
 from rlenv_client.launcher import ServerStartError as ServerStartError
+from rlenv_client.local import LocalClient as LocalClient
+from rlenv_client.registration import register_environments
+from rlenv_client.vector import RemoteVectorEnv as RemoteVectorEnv
 
 __all__ = [
+    "BaseClient",
     "Client",
     "ConnectionLost",
     "ErrorCode",
+    "LocalClient",
     "ProtocolVersionError",
+    "RemoteEnv",
     "RemoteError",
+    "RemoteVectorEnv",
     "RequestTimeout",
     "RlenvError",
     "ServerProcess",
     "ServerStartError",
     "StepResult",
 ]
+
+register_environments()

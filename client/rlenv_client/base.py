@@ -84,12 +84,23 @@ class BaseClient(ABC):
         Returns:
             ``(observation, info)``.
         """
+        self.send_reset(seed=seed, options=options)
+        return self.receive_reset()
+
+    def send_reset(
+        self, *, seed: int | None = None, options: Mapping[str, Any] | None = None
+    ) -> None:
+        """Send a reset request without waiting; collect the answer with :meth:`receive_reset`."""
         reset: dict[str, Any] = {}
         if seed is not None:
             reset["seed"] = seed
         if options is not None:
             reset["options"] = dict(options)
-        response = self._call(reset=reset, observation=self._observation_request)
+        self._send(Request(id=next(self._ids), reset=reset, observation=self._observation_request))
+
+    def receive_reset(self) -> tuple[Any, dict[str, Any]]:
+        """Wait for the answer to the reset sent by :meth:`send_reset`."""
+        response = self._receive_reply()
         return self._observation(response), self._info(response)
 
     def step(self, action: Any, repeat_action: int | None = None) -> StepResult:

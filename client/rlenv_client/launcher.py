@@ -3,7 +3,9 @@
 The server runs ``python -m rlenv serve MODULE:CLASS --port 0`` in a process group of its own.
 :class:`ServerProcess` waits for its ``listening on HOST:PORT`` line, keeps the last lines of its
 output for error messages, and on :meth:`~ServerProcess.close` (or at interpreter exit, or when
-garbage collected) ends the whole group.
+garbage collected) ends the whole group. If this process dies without any of that (SIGKILL),
+the server still exits: it holds the read end of a pipe (``--lifeline``) whose write end only
+this process holds, and the kernel closes it on death.
 """
 
 from __future__ import annotations
@@ -56,15 +58,20 @@ class ServerProcess:
         env: Mapping[str, str] | None = None,
     ) -> None:
         self.target = target
+        lifeline, self._lifeline = os.pipe()  # the server exits when this process is gone
         command = [sys.executable, "-m", "rlenv", "serve", target, "--host", host,
-                   "--port", str(port), *args]
+                   "--port", str(port), "--lifeline", str(lifeline), *args]
         self._lines: collections.deque[str] = collections.deque(maxlen=_KEPT_LINES)
         self._events: queue.Queue[str | None] = queue.Queue()
-        self.process = subprocess.Popen(
-            command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-            text=True, bufsize=1, start_new_session=True, env={**os.environ, **(env or {})},
-        )
-        self._finalizer = weakref.finalize(self, _terminate, self.process)
+        try:
+            self.process = subprocess.Popen(
+                command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                stdin=subprocess.DEVNULL, text=True, bufsize=1, start_new_session=True,
+                env={**os.environ, **(env or {})}, pass_fds=(lifeline,),
+            )
+        finally:
+            os.close(lifeline)
+        self._finalizer = weakref.finalize(self, _terminate, self.process, self._lifeline)
         threading.Thread(target=self._pump, daemon=True, name=f"rlenv-server-{self.pid}").start()
         try:
             self.host, self.port = self._wait_until_listening(startup_timeout)
@@ -96,7 +103,7 @@ class ServerProcess:
     def close(self, timeout: float = 5.0) -> None:
         """End the server's whole process group: SIGTERM, then SIGKILL after ``timeout``."""
         self._finalizer.detach()
-        _terminate(self.process, timeout)
+        _terminate(self.process, self._lifeline, timeout)
 
     def __enter__(self) -> ServerProcess:
         return self
@@ -135,7 +142,11 @@ class ServerProcess:
             return host, int(port)
 
 
-def _terminate(process: subprocess.Popen[str], timeout: float = 5.0) -> None:
+def _terminate(process: subprocess.Popen[str], lifeline: int, timeout: float = 5.0) -> None:
+    try:
+        os.close(lifeline)
+    except OSError:  # closed already
+        pass
     if process.poll() is not None:
         return
     for sig in (signal.SIGTERM, signal.SIGKILL):

@@ -9,6 +9,7 @@ or right and must keep the pole upright and the cart on its track::
     |___World (CartPoleWorld)
         |___Physics (PhysicsWorld)     rebuilt on every reset, so episodes share no state
             |___Track (StaticBody)
+            |   |___Line (CollisionShape)      a sensor: drawn, never touched
             |___Cart (RigidBody)
             |   |___Box (CollisionShape)
             |___Pole (RigidBody)
@@ -28,8 +29,8 @@ positive pushes towards +x.
 | 0     | cart position x (m)              | -4.8   | 4.8   |
 | 1     | pole centre-of-mass position x (m)| -5.8  | 5.8   |
 | 2     | pole angle (rad, + leans to +x)  | -pi    | pi    |
-| 3     | cart velocity (m/s)              | -inf   | inf   |
-| 4     | pole angular velocity (rad/s)    | -inf   | inf   |
+| 3     | cart velocity (m/s)              | -3.4e38| 3.4e38|
+| 4     | pole angular velocity (rad/s)    | -3.4e38| 3.4e38|
 
 ## Rewards
 +1 for every physics tick the pole stays up, so a step of ``repeat_action`` ticks earns up to
@@ -69,6 +70,7 @@ TARGET = "examples.cartpole:CartPoleEnvironment"
 """What ``rlenv serve`` takes to serve this environment."""
 
 POLE_LENGTH = 1.0
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
 KAPPA = 2.5
 
 
@@ -99,13 +101,18 @@ class CartPoleWorld(RLEnvWorld):
             self.remove_child(self.physics)
             self.physics.queue_free()
         physics = PhysicsWorld(damping=self.damping, name="Physics")
-        physics.add_child(StaticBody(name="Track"))
+        track = StaticBody(name="Track")
+        track.add_child(CollisionShape.segment(  # drawn, never touched
+            (-self.track_limit, -0.2), (self.track_limit, -0.2), 0.01, sensor=True,
+            color=(120, 120, 120), name="Line",
+        ))
+        physics.add_child(track)
         self.cart = RigidBody(self.cart_mass, math.inf, name="Cart")
         self.cart.add_child(CollisionShape.box(0.5, 0.25, name="Box"))
         self.pole = RigidBody(name="Pole")
         self.pole.add_child(
             CollisionShape.segment((0.0, 0.0), (0.0, POLE_LENGTH), 0.02, mass=self.pole_mass,
-                                   name="Stick")
+                                   color=(215, 120, 50), name="Stick")
         )
         physics.add_child(self.cart)
         physics.add_child(self.pole)
@@ -132,8 +139,8 @@ class CartPoleAgent(RLAgent):
     configurable = ("max_force", "angle_limit")
     action_space = spaces.Box(-1.0, 1.0, (1,), np.float32)
     observation_space = spaces.Box(
-        low=np.array([-4.8, -5.8, -math.pi, -np.inf, -np.inf], dtype=np.float32),
-        high=np.array([4.8, 5.8, math.pi, np.inf, np.inf], dtype=np.float32),
+        low=np.array([-4.8, -5.8, -math.pi, -_FLOAT32_MAX, -_FLOAT32_MAX], dtype=np.float32),
+        high=np.array([4.8, 5.8, math.pi, _FLOAT32_MAX, _FLOAT32_MAX], dtype=np.float32),
         dtype=np.float32,
     )
 
@@ -190,6 +197,8 @@ class CartPoleAgent(RLAgent):
 
 class CartPoleEnvironment(RLEnvironment):
     """The CartPole environment: an agent and a world under one node."""
+
+    render_view = (-3.0, -1.0, 3.0, 1.5)
 
     def __init__(self) -> None:
         super().__init__("CartPole", repeat_action=4)

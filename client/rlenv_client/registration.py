@@ -1,0 +1,43 @@
+"""Gymnasium ids for the shipped examples: ``gymnasium.make("rlenv/CartPole-v0")``.
+
+Registered when ``rlenv_client`` is imported (so ``gymnasium.register_envs(rlenv_client)``
+works too). The examples ship inside the distribution, so the ids work from any directory.
+Every id also has a vector entry point, so ``gymnasium.make_vec`` builds a
+:class:`~rlenv_client.vector.RemoteVectorEnv`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import gymnasium
+
+__all__ = ["ENVIRONMENTS", "register_environments"]
+
+
+@dataclass(frozen=True)
+class _Registration:
+    target: str
+    max_episode_steps: int | None
+
+
+ENVIRONMENTS = {
+    "rlenv/CartPole-v0": _Registration("examples.cartpole:CartPoleEnvironment", 500),
+}
+"""Registered ids and what they serve. CartPole never ends by itself when balanced, so it gets
+a time limit (500 steps of 4 ticks: 33 simulated seconds), as gym-kraby's TimeLimit lesson
+teaches."""
+
+
+def register_environments() -> None:
+    """Register every id in :data:`ENVIRONMENTS` with gymnasium (once)."""
+    for env_id, registration in ENVIRONMENTS.items():
+        if env_id in gymnasium.registry:
+            continue
+        gymnasium.register(
+            id=env_id,
+            entry_point="rlenv_client.env:RemoteEnv",
+            vector_entry_point="rlenv_client.vector:RemoteVectorEnv",
+            kwargs={"target": registration.target},
+            max_episode_steps=registration.max_episode_steps,
+        )

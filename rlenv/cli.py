@@ -1,4 +1,4 @@
-"""The ``rlenv`` command: ``rlenv serve MODULE:CLASS`` and ``rlenv demo``."""
+"""The ``rlenv`` command: ``rlenv serve``, ``rlenv check`` and ``rlenv demo``."""
 
 from __future__ import annotations
 
@@ -29,6 +29,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     serve.add_argument("--lifeline", type=int, default=None, metavar="FD",
                        help="exit when this inherited pipe closes (set by ServerProcess)")
     serve.set_defaults(run=_serve)
+
+    check = commands.add_parser("check", help="check a server the way trainers use it")
+    check.add_argument("target", help="HOST:PORT of a running server, or MODULE:CLASS to start")
+    check.add_argument("--timeout", type=float, default=30.0, help="seconds per answer")
+    check.set_defaults(run=_check)
 
     demo = commands.add_parser("demo", help="serve CartPole and balance it with a controller")
     demo.add_argument("--episodes", type=int, default=5, help="episodes to run (default 5)")
@@ -82,6 +87,19 @@ def _demo(args: argparse.Namespace) -> int:
             print(f"episode {episode + 1}: return {episode_return:.0f} over {frames} physics "
                   f"ticks ({seconds:.1f} s simulated, {ending})", flush=True)
     return 0
+
+
+def _check(args: argparse.Namespace) -> int:
+    from rlenv_client.checks import run_checks
+
+    results = run_checks(args.target, timeout=args.timeout)
+    width = max(len(result.name) for result in results)
+    for result in results:
+        print(f"{result.status.upper():<5} {result.name:<{width}}  {result.detail}")
+    failed = sum(result.status == "fail" for result in results)
+    passed = sum(result.status == "pass" for result in results)
+    print(f"{passed} passed, {failed} failed")
+    return 1 if failed else 0
 
 
 def _exit_on_signal(signum: int, frame: FrameType | None) -> None:

@@ -72,3 +72,19 @@ class FaultyEnvironment(RLEnvironment):
         super().__init__("Faulty", repeat_action=3)
         self.add_child(FaultyAgent())
         self.add_child(CountingWorld())
+
+
+class WrongShapeAgent(FaultyAgent):
+    """Declares a 1-element observation and returns 2 elements."""
+
+    def get_data(self, observation_request: Mapping[str, Any]) -> np.ndarray:
+        return np.zeros(2, dtype=np.int64)
+
+
+class WrongShapeEnvironment(RLEnvironment):
+    """An environment whose observations do not match its observation space."""
+
+    def __init__(self) -> None:
+        super().__init__("WrongShape")
+        self.add_child(WrongShapeAgent())
+        self.add_child(CountingWorld())

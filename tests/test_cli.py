@@ -84,3 +84,22 @@ def test_the_readme_example_environment_serves(serve: Serve, tmp_path: Path) -> 
         observation, reward, _, _, info = client.step(toward_centre, repeat_action=8)
         assert info["frames"] <= 8 and reward < 0
         assert float(np.linalg.norm(observation)) < start
+
+
+def test_check_reports_a_good_environment() -> None:
+    result = run("check", "examples.cartpole:CartPoleEnvironment")
+    assert result.returncode == 0, result.stdout + result.stderr
+    lines = result.stdout.splitlines()
+    assert lines[0].startswith("PASS  connect")
+    assert any(line.startswith("PASS  gymnasium check_env") for line in lines)
+    assert re.search(r"^\d+ passed, 0 failed$", lines[-1])
+
+
+def test_check_fails_a_broken_environment(serve: Serve) -> None:
+    server = serve("envs:WrongShapeEnvironment")
+    result = run("check", server.address)
+    assert result.returncode == 1
+    assert re.search(r"^FAIL  gymnasium check_env .*observation", result.stdout, re.M)
+    assert re.search(r"^\d+ passed, [1-9]\d* failed$", result.stdout.splitlines()[-1])
+    result = run("check", "127.0.0.1:1")
+    assert result.returncode == 1 and "FAIL  connect" in result.stdout

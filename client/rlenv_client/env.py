@@ -47,20 +47,21 @@ def connect(
 ) -> tuple[BaseClient, ServerProcess | None]:
     """Reach an environment the way :class:`RemoteEnv` does.
 
+    An ``address`` wins over a ``target``, so that a registered id (whose target is fixed) can
+    attach to a running server: ``gymnasium.make("rlenv/CartPole-v0", address="host:port")``.
+
     Returns:
         The client, and the server process it started (``None`` when it started none).
 
     Raises:
-        ValueError: not exactly one of ``target`` and ``address``, or ``in_process`` with an
-            address.
+        ValueError: neither ``target`` nor ``address``, or ``in_process`` with an address.
     """
-    if (target is None) == (address is None):
-        raise ValueError("give either target='MODULE:CLASS' or address='HOST:PORT'")
     if address is not None:
         if in_process:
             raise ValueError("in_process=True needs a target, not an address")
         return Client(*parse_address(address), timeout=timeout), None
-    assert target is not None
+    if target is None:
+        raise ValueError("give target='MODULE:CLASS' or address='HOST:PORT'")
     if in_process:
         from rlenv_client.local import LocalClient
 

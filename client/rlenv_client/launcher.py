@@ -71,8 +71,11 @@ class ServerProcess:
             )
         finally:
             os.close(lifeline)
-        self._finalizer = weakref.finalize(self, _terminate, self.process, self._lifeline)
-        threading.Thread(target=self._pump, daemon=True, name=f"rlenv-server-{self.pid}").start()
+        self._pump_thread = threading.Thread(target=self._pump, daemon=True,
+                                             name=f"rlenv-server-{self.pid}")
+        self._finalizer = weakref.finalize(self, _terminate, self.process, self._lifeline,
+                                           self._pump_thread)
+        self._pump_thread.start()
         try:
             self.host, self.port = self._wait_until_listening(startup_timeout)
         except BaseException:
@@ -103,7 +106,7 @@ class ServerProcess:
     def close(self, timeout: float = 5.0) -> None:
         """End the server's whole process group: SIGTERM, then SIGKILL after ``timeout``."""
         self._finalizer.detach()
-        _terminate(self.process, self._lifeline, timeout)
+        _terminate(self.process, self._lifeline, self._pump_thread, timeout)
 
     def __enter__(self) -> ServerProcess:
         return self
@@ -142,13 +145,21 @@ class ServerProcess:
             return host, int(port)
 
 
-def _terminate(process: subprocess.Popen[str], lifeline: int, timeout: float = 5.0) -> None:
+def _terminate(
+    process: subprocess.Popen[str], lifeline: int, pump: threading.Thread, timeout: float = 5.0
+) -> None:
     try:
         os.close(lifeline)
     except OSError:  # closed already
         pass
-    if process.poll() is not None:
-        return
+    if process.poll() is None:
+        _signal_group(process, timeout)
+    pump.join(timeout)  # the output pipe reaches its end once the group is gone
+    if process.stdout is not None and not pump.is_alive():
+        process.stdout.close()
+
+
+def _signal_group(process: subprocess.Popen[str], timeout: float) -> None:
     for sig in (signal.SIGTERM, signal.SIGKILL):
         try:
             os.killpg(process.pid, sig)

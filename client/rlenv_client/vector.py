@@ -183,6 +183,12 @@ class RemoteVectorEnv(VectorEnv):
             return None
         return tuple(client.render() for client in self.clients)
 
+    def __enter__(self) -> RemoteVectorEnv:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
     def close_extras(self, **kwargs: Any) -> None:
         """Disconnect every client and stop every server this environment started."""
         for client in self.clients:

@@ -1,0 +1,305 @@
+"""rlenv environments used as gymnasium users use environments: make, check_env, vector, render."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from conftest import Serve
+from gymnasium.utils.env_checker import check_env
+from gymnasium.vector import AutoresetMode, SyncVectorEnv
+
+import rlenv_client
+from examples.cartpole import TARGET, CartPoleAgent, controller
+from rlenv_client import RemoteEnv, RemoteVectorEnv
+from rlenv_client.registration import ENVIRONMENTS
+
+CARTPOLE = "rlenv/CartPole-v0"
+
+
+@pytest.mark.parametrize("env_id", sorted(ENVIRONMENTS))
+def test_check_env_passes_on_every_registered_id(env_id: str) -> None:
+    env = gym.make(env_id)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # a warning is a failure too
+            check_env(env.unwrapped)
+    finally:
+        env.close()
+
+
+def test_ids_carry_a_time_limit_and_the_repeat_action() -> None:
+    env = gym.make(CARTPOLE, repeat_action=3)
+    try:
+        assert env.spec is not None and env.spec.max_episode_steps == 500
+        assert isinstance(env, gym.wrappers.TimeLimit)
+        env.reset(seed=0)
+        _, reward, terminated, truncated, info = env.step(np.zeros(1, np.float32))
+        assert info["frames"] == 3  # one-argument step uses the constructor's repeat_action
+        assert type(reward) is float and type(terminated) is bool and type(truncated) is bool
+        assert env.unwrapped.metadata["render_fps"] == 20  # 60 ticks/s over 3 ticks per step
+    finally:
+        env.close()
+
+
+def test_register_envs_accepts_the_package() -> None:
+    gym.register_envs(rlenv_client)
+    assert CARTPOLE in gym.registry
+
+
+def test_spaces_come_from_the_server() -> None:
+    with RemoteEnv(TARGET) as env:
+        assert env.action_space == CartPoleAgent.action_space
+        assert env.observation_space == CartPoleAgent.observation_space
+
+
+def test_seeded_resets_reproduce_episodes_across_servers() -> None:
+    runs = []
+    for _ in range(2):
+        with RemoteEnv(TARGET) as env:
+            env.action_space.seed(5)
+            observation, _ = env.reset(seed=5)
+            seen = [observation.tobytes()]
+            for _ in range(20):
+                observation, _, terminated, *_ = env.step(env.action_space.sample())
+                seen.append(observation.tobytes())
+                if terminated:
+                    break
+            seen.append(env.reset()[0].tobytes())  # the seed's stream goes on
+            runs.append(seen)
+    assert runs[0] == runs[1]
+
+
+def test_attach_to_a_running_server_by_address(serve: Serve) -> None:
+    server = serve()
+    env = gym.make(CARTPOLE, address=server.address)
+    try:
+        observation, _ = env.reset(seed=1)
+        assert observation in env.observation_space
+    finally:
+        env.close()
+    assert server.is_alive()  # attaching never owns the server
+
+
+def test_in_process_mode_is_the_same_environment() -> None:
+    actions = [np.array([np.sin(t / 3.0)], np.float32) for t in range(40)]
+    trajectories = []
+    for in_process in (True, False):
+        with RemoteEnv(TARGET, in_process=in_process) as env:
+            observation, _ = env.reset(seed=11)
+            trajectory = [observation.tobytes()]
+            for action in actions:
+                observation, reward, terminated, _, info = env.step(action)
+                trajectory.append((observation.tobytes(), reward, terminated, info["frames"]))
+                if terminated:
+                    break
+            trajectories.append(trajectory)
+    assert trajectories[0] == trajectories[1]
+
+
+def test_in_process_errors_are_the_servers_errors() -> None:
+    with RemoteEnv(TARGET, in_process=True) as env:
+        env.reset(seed=0)
+        with pytest.raises(rlenv_client.RemoteError, match=r"shape \(2,\), expected \(1,\)"):
+            env.step(np.zeros(2, np.float32))
+        assert env.step(np.zeros(1, np.float32))[4]["frames"] == 4
+
+
+def test_vector_env_matches_gymnasium_sync_vector_env() -> None:
+    """Same seeds and actions: RemoteVectorEnv and SyncVectorEnv over in-process copies agree
+    bit for bit, resets included, in both autoreset modes."""
+    for mode in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
+        remote = RemoteVectorEnv(3, TARGET, max_episode_steps=12, autoreset_mode=mode)
+        reference = SyncVectorEnv(
+            [lambda: gym.wrappers.TimeLimit(RemoteEnv(TARGET, in_process=True), 12)] * 3,
+            autoreset_mode=mode,
+        )
+        try:
+            remote.action_space.seed(3)
+            got, _ = remote.reset(seed=21)
+            expected, _ = reference.reset(seed=21)
+            assert got.tobytes() == expected.tobytes()
+            ended = 0
+            for _ in range(60):
+                actions = remote.action_space.sample()
+                got = remote.step(actions)
+                expected = reference.step(actions)
+                for part in range(4):
+                    assert np.array_equal(got[part], expected[part]), (mode, part)
+                if mode is AutoresetMode.SAME_STEP and "final_obs" in expected[4]:
+                    mask = expected[4]["_final_obs"]
+                    assert np.array_equal(got[4]["_final_obs"], mask)
+                    for index in np.flatnonzero(mask):
+                        assert np.array_equal(got[4]["final_obs"][index],
+                                              expected[4]["final_obs"][index])
+                ended += int((got[2] | got[3]).sum())
+            assert ended > 3  # resets really happened
+        finally:
+            remote.close()
+            reference.close()
+
+
+def test_make_vec_builds_a_remote_vector_env_that_runs_long() -> None:
+    envs = gym.make_vec(CARTPOLE, num_envs=4, repeat_action=1)
+    try:
+        assert isinstance(envs.unwrapped, RemoteVectorEnv)
+        assert envs.unwrapped.max_episode_steps == 500
+        observations, _ = envs.reset(seed=0)
+        episodes = 0
+        for _ in range(2500):  # 10k environment steps
+            actions = np.stack([controller(o) for o in observations])
+            actions += envs.unwrapped.np_random.uniform(-0.6, 0.6, actions.shape).astype(np.float32)
+            observations, rewards, terminated, truncated, _ = envs.step(np.clip(actions, -1, 1))
+            assert observations.shape == (4, 5) and rewards.dtype == np.float64
+            episodes += int((terminated | truncated).sum())
+        assert episodes > 0
+    finally:
+        envs.close()
+
+
+def test_vector_reset_seeds_each_copy_differently() -> None:
+    with RemoteVectorEnv(2, TARGET, in_process=True) as envs:
+        observations, _ = envs.reset(seed=7)
+        assert observations[0].tobytes() != observations[1].tobytes()
+        again, _ = envs.reset(seed=[7, 8])
+        assert again.tobytes() == observations.tobytes()
+
+
+def test_rgb_array_frames_show_the_state() -> None:
+    env = gym.make(CARTPOLE, render_mode="rgb_array")
+    try:
+        env.reset(seed=0)
+        first = env.render()
+        assert first.shape == (400, 600, 3) and first.dtype == np.uint8
+        assert (first != 255).any(axis=2).sum() > 1000  # cart, pole and track are drawn
+        assert first.tobytes() == env.render().tobytes()  # same state, same pixels
+        env.step(np.ones(1, np.float32))
+        env.step(np.ones(1, np.float32))
+        assert env.render().tobytes() != first.tobytes()
+    finally:
+        env.close()
+    with RemoteEnv(TARGET, render_mode="rgb_array", render_size=(84, 84)) as small:
+        small.reset(seed=0)
+        assert small.render().shape == (84, 84, 3)
+
+
+def test_human_mode_without_a_display_fails_clearly(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    with pytest.raises(RuntimeError, match="needs a display"):
+        RemoteEnv(TARGET, render_mode="human")
+    env = RemoteEnv(TARGET, in_process=True)
+    assert "human" not in env.metadata["render_modes"]
+    env.close()
+
+
+def test_human_mode_shows_a_window_on_a_virtual_display(tmp_path: Path) -> None:
+    xvfb = _which("Xvfb")
+    if xvfb is None:
+        pytest.skip("Xvfb is not installed (apt-get install xvfb)")
+    display = f":{90 + os.getpid() % 100}"
+    screen = subprocess.Popen([xvfb, display, "-screen", "0", "800x600x24"],
+                              stderr=subprocess.DEVNULL)
+    try:
+        code = ("from rlenv_client import RemoteEnv; import numpy as np\n"
+                "env = RemoteEnv('examples.cartpole:CartPoleEnvironment', render_mode='human',"
+                " in_process=True)\n"
+                "env.reset(seed=0)\n"
+                "for _ in range(5): env.step(np.zeros(1, np.float32))\n"
+                "print(env._display._root.winfo_exists(), env._display._image.width())\n"
+                "env.close()\n")
+        result = _run_with_display(code, display, deadline=30)
+        assert result.stdout.split() == ["1", "600"], result.stderr
+    finally:
+        screen.terminate()
+        screen.wait()
+
+
+def test_record_video_writes_a_video_that_decodes(tmp_path: Path) -> None:
+    pytest.importorskip("moviepy")
+    imageio = pytest.importorskip("imageio.v2")
+    env = gym.wrappers.RecordVideo(
+        gym.make(CARTPOLE, render_mode="rgb_array"), str(tmp_path / "videos"),
+        episode_trigger=lambda e: True,
+        disable_logger=True,
+    )
+    try:
+        observation, _ = env.reset(seed=0)
+        for _ in range(30):
+            observation, _, terminated, truncated, _ = env.step(controller(observation))
+            if terminated or truncated:
+                break
+    finally:
+        env.close()
+    videos = sorted((tmp_path / "videos").glob("*.mp4"))
+    assert len(videos) == 1
+    with imageio.get_reader(videos[0]) as reader:
+        frames = [frame for frame in reader]
+    assert len(frames) in (30, 31)  # 31 recorded (reset + 30 steps); ffmpeg may drop the last
+    assert frames[0].shape == (400, 600, 3)
+    assert (frames[-1] < 200).any()  # not blank: the cart is drawn
+
+
+def test_no_server_outlives_close_or_a_killed_client() -> None:
+    with RemoteEnv(TARGET) as env:
+        server = env.server
+    assert server is not None and not server.is_alive()
+    code = ("from rlenv_client import RemoteVectorEnv; import time\n"
+            "envs = RemoteVectorEnv(2, 'examples.cartpole:CartPoleEnvironment')\n"
+            "print(' '.join(str(s.pid) for s in envs.servers), flush=True)\n"
+            "time.sleep(60)\n")
+    client = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    assert client.stdout is not None
+    pids = [int(pid) for pid in client.stdout.readline().split()]
+    assert len(pids) == 2
+    client.kill()
+    client.wait()
+    deadline = time.monotonic() + 20
+    while any(_running(pid) for pid in pids):
+        assert time.monotonic() < deadline, "a server outlived its killed client"
+        time.sleep(0.05)  # polling a condition with a deadline, not waiting for time to pass
+
+
+def test_a_server_that_dies_mid_episode_is_a_typed_error() -> None:
+    env = RemoteEnv(TARGET)
+    try:
+        env.reset(seed=0)
+        assert env.server is not None
+        os.killpg(env.server.pid, signal.SIGKILL)
+        with pytest.raises(rlenv_client.ConnectionLost):
+            env.step(np.zeros(1, np.float32))
+    finally:
+        env.close()
+
+
+def _running(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().split(")")[1].split()[0] != "Z"  # a zombie has exited
+    except FileNotFoundError:
+        return False
+
+
+def _which(program: str) -> str | None:
+    from shutil import which
+
+    return which(program)
+
+
+def _run_with_display(code: str, display: str, deadline: float) -> subprocess.CompletedProcess:
+    """Run ``code`` once the X server answers (polled with a deadline)."""
+    end = time.monotonic() + deadline
+    while True:
+        result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                                env={**os.environ, "DISPLAY": display}, timeout=deadline)
+        if result.returncode == 0 or "couldn't connect to display" not in result.stderr \
+                or time.monotonic() > end:
+            return result

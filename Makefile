@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint bench clean
+.PHONY: demo test sb3 lint clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -19,6 +19,13 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(BIN)/ruff check rlenv client examples tests benchmarks
 	$(BIN)/python -m pytest
+
+# Optional: Stable-Baselines3 (CPU torch first, so no CUDA build is pulled), its tests, a training run.
+sb3: $(STAMP)
+	$(BIN)/python -m pip install --quiet torch==2.13.0
+	$(BIN)/python -m pip install --quiet -e ".[test,sb3]"
+	$(BIN)/python -m pytest tests/test_sb3.py
+	$(BIN)/python -m examples.train_sb3
 
 lint: $(STAMP)
 	$(BIN)/ruff check rlenv client examples tests benchmarks

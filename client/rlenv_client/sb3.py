@@ -1,0 +1,122 @@
+"""Stable-Baselines3 ``VecEnv`` over :class:`~rlenv_client.vector.RemoteVectorEnv`.
+
+SB3 wraps single environments in its ``DummyVecEnv``, which steps them one after the other: one
+round trip per environment per step. :class:`SB3VecEnv` instead sends every sub-environment's
+request at once and waits once, and uses ``SAME_STEP`` autoreset, which is SB3's convention (the
+observation returned for a finished environment is the first of its next episode; the last one
+is in ``info["terminal_observation"]``, and ``info["TimeLimit.truncated"]`` tells truncation).
+
+Needs the optional extra: ``pip install 'rlenv[sb3]'`` (on a machine without CUDA, install a CPU
+build of torch first).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from gymnasium.vector import AutoresetMode
+from stable_baselines3.common.vec_env.base_vec_env import (
+    VecEnv,
+    VecEnvIndices,
+    VecEnvObs,
+    VecEnvStepReturn,
+)
+
+from rlenv_client.vector import RemoteVectorEnv
+
+__all__ = ["SB3VecEnv"]
+
+
+class SB3VecEnv(VecEnv):
+    """``num_envs`` rlenv environments as one SB3 vectorised environment.
+
+    Args:
+        num_envs: how many sub-environments.
+        target: the environment class as ``MODULE:CLASS``, or a registered id's target.
+        addresses: ``HOST:PORT`` of running servers instead of starting them.
+        repeat_action: physics ticks per step (the servers' default if ``None``).
+        max_episode_steps: truncate episodes after this many steps.
+        in_process: run the environments inside this process.
+        render_mode: ``"rgb_array"`` or ``None``.
+    """
+
+    def __init__(
+        self, num_envs: int = 1, target: str | None = None, *,
+        addresses: Sequence[str] | None = None, repeat_action: int | None = None,
+        max_episode_steps: int | None = None, in_process: bool = False,
+        render_mode: str | None = None,
+    ) -> None:
+        self.venv = RemoteVectorEnv(
+            num_envs, target, addresses=addresses, repeat_action=repeat_action,
+            max_episode_steps=max_episode_steps, autoreset_mode=AutoresetMode.SAME_STEP,
+            in_process=in_process, render_mode=render_mode,
+        )
+        super().__init__(self.venv.num_envs, self.venv.single_observation_space,
+                         self.venv.single_action_space)
+        self.render_mode = render_mode
+        self._actions: np.ndarray | None = None
+
+    def reset(self) -> VecEnvObs:
+        """Reset every environment, with the seeds given to :meth:`seed` if any."""
+        seeds = self._seeds if any(seed is not None for seed in self._seeds) else None
+        observations, infos = self.venv.reset(seed=seeds, options=self._options[0] or None)
+        self.reset_infos = _split_infos(infos, self.num_envs)
+        self._reset_seeds()
+        self._reset_options()
+        return observations
+
+    def step_async(self, actions: np.ndarray) -> None:
+        """Remember the actions; :meth:`step_wait` sends them all at once."""
+        self._actions = actions
+
+    def step_wait(self) -> VecEnvStepReturn:
+        """Step every environment concurrently and translate to SB3's conventions."""
+        observations, rewards, terminated, truncated, infos = self.venv.step(self._actions)
+        dones = terminated | truncated
+        per_env = _split_infos(infos, self.num_envs)
+        for index in np.flatnonzero(dones):
+            per_env[index]["terminal_observation"] = infos["final_obs"][index]
+            per_env[index]["TimeLimit.truncated"] = bool(truncated[index] and
+                                                         not terminated[index])
+        return observations, rewards.astype(np.float32), dones, per_env
+
+    def close(self) -> None:
+        """Stop every server this environment started."""
+        self.venv.close()
+
+    def get_images(self) -> Sequence[np.ndarray | None]:
+        """One frame per environment (needs ``render_mode="rgb_array"``)."""
+        frames = self.venv.render()
+        return list(frames) if frames is not None else [None] * self.num_envs
+
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        """An attribute of the vector environment, repeated for each selected index."""
+        return [getattr(self.venv, attr_name)] * len(self._get_indices(indices))
+
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        """Not supported: the environments live in other processes."""
+        raise AttributeError(f"cannot set {attr_name!r} on remote environments")
+
+    def env_method(self, method_name: str, *method_args: Any, indices: VecEnvIndices = None,
+                   **method_kwargs: Any) -> list[Any]:
+        """Not supported: the environments live in other processes."""
+        raise AttributeError(f"cannot call {method_name!r} on remote environments")
+
+    def env_is_wrapped(self, wrapper_class: type, indices: VecEnvIndices = None) -> list[bool]:
+        """The remote environments are never wrapped on this side."""
+        return [False] * len(self._get_indices(indices))
+
+
+def _split_infos(infos: dict[str, Any], num_envs: int) -> list[dict[str, Any]]:
+    """Split a batched gymnasium info dict (with ``_key`` masks) into one dict per environment."""
+    per_env: list[dict[str, Any]] = [{} for _ in range(num_envs)]
+    for key, values in infos.items():
+        if key.startswith("_") or key in ("final_obs", "final_info"):
+            continue
+        mask = infos.get(f"_{key}")
+        for index in range(num_envs):
+            if mask is None or mask[index]:
+                per_env[index][key] = values[index]
+    return per_env

@@ -1,0 +1,62 @@
+"""Stable-Baselines3, used as its users use it (runs when the optional extra is installed)."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+
+from stable_baselines3 import PPO  # noqa: E402
+from stable_baselines3.common.env_checker import check_env  # noqa: E402
+from stable_baselines3.common.env_util import make_vec_env  # noqa: E402
+from stable_baselines3.common.vec_env import VecMonitor  # noqa: E402
+
+import rlenv_client  # noqa: E402, F401  (registers the ids)
+from examples.cartpole import TARGET  # noqa: E402
+from examples.train_sb3 import evaluate  # noqa: E402
+from rlenv_client.sb3 import SB3VecEnv  # noqa: E402
+
+
+def test_sb3_check_env_passes() -> None:
+    env = gym.make("rlenv/CartPole-v0")
+    try:
+        check_env(env.unwrapped)
+    finally:
+        env.close()
+
+
+def test_sb3_vec_env_follows_sb3_conventions() -> None:
+    envs = VecMonitor(SB3VecEnv(3, TARGET, max_episode_steps=6))
+    try:
+        envs.seed(4)
+        observations = envs.reset()
+        assert observations.shape == (3, 5)
+        finished = 0
+        for _ in range(30):
+            actions = np.ones((3, 1), np.float32)
+            observations, rewards, dones, infos = envs.step(actions)
+            assert rewards.dtype == np.float32 and dones.dtype == np.bool_
+            for index in np.flatnonzero(dones):
+                info = infos[index]
+                assert info["terminal_observation"].shape == (5,)
+                assert not np.array_equal(info["terminal_observation"], observations[index])
+                assert "episode" in info  # VecMonitor saw the episode end
+                assert info["TimeLimit.truncated"] == (info["episode"]["l"] == 6)
+                finished += 1
+        assert finished >= 5
+    finally:
+        envs.close()
+
+
+def test_ppo_learns_cartpole_through_gymnasium_make() -> None:
+    envs = make_vec_env("rlenv/CartPole-v0", n_envs=4, seed=0)
+    try:
+        model = PPO("MlpPolicy", envs, seed=0, n_steps=256, batch_size=64, verbose=0)
+        before = evaluate(model, episodes=3)
+        model.learn(total_timesteps=30_000)
+        after = evaluate(model, episodes=3)
+    finally:
+        envs.close()
+    assert after > max(4 * before, 400), (before, after)

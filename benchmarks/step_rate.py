@@ -95,16 +95,23 @@ def step_rate(client: Client, steps: int, repeat: int) -> float:
     return statistics.median(rates)
 
 
+def progress(message: str) -> None:
+    """Say on stderr what is being measured (the table goes to stdout)."""
+    print(f"... {message} ({ROUNDS} rounds)", file=sys.stderr, flush=True)
+
+
 def main() -> None:
     """Print the table."""
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--steps", type=int, default=4000, help="steps per round")
     args = parser.parse_args()
+    progress("measuring the msgpack ping-pong baseline")
     baseline = ping_pong_rate(args.steps)
     rows = [("msgpack ping-pong over loopback (baseline)", baseline)]
     with ServerProcess(TARGET) as server, Client(server.host, server.port) as client:
         client.configure(world={"track_limit": 1e9}, agent={"angle_limit": 1e9})
         for repeat in (1, 4):
+            progress(f"measuring Client.step at repeat_action={repeat}")
             rows.append((f"Client.step, CartPole, repeat_action={repeat}",
                          step_rate(client, args.steps, repeat)))
     print(f"{'measurement':<48}{'steps/s':>10}{'us/step':>10}{'x baseline':>12}")

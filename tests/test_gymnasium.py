@@ -274,8 +274,10 @@ def test_a_server_that_dies_mid_episode_is_a_typed_error() -> None:
         env.reset(seed=0)
         assert env.server is not None
         os.killpg(env.server.pid, signal.SIGKILL)
-        with pytest.raises(rlenv_client.ConnectionLost):
+        with pytest.raises(rlenv_client.ConnectionLost) as error:
             env.step(np.zeros(1, np.float32))
+        assert f"exited with code {-signal.SIGKILL}" in str(error.value)
+        assert "listening on" in str(error.value)  # and what it said
     finally:
         env.close()
 
@@ -303,3 +305,13 @@ def _run_with_display(code: str, display: str, deadline: float) -> subprocess.Co
         if result.returncode == 0 or "couldn't connect to display" not in result.stderr \
                 or time.monotonic() > end:
             return result
+
+
+def test_a_vector_env_names_the_server_that_died() -> None:
+    with RemoteVectorEnv(2, TARGET) as envs:
+        envs.reset(seed=0)
+        victim = envs.servers[1]
+        os.killpg(victim.pid, signal.SIGKILL)
+        with pytest.raises(rlenv_client.ConnectionLost) as error:
+            envs.step(np.zeros((2, 1), np.float32))
+        assert f"(pid {victim.pid}) exited" in str(error.value)

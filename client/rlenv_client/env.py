@@ -13,20 +13,23 @@ reached in one of three ways:
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping, Sequence
-from typing import Any
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, TypeVar
 
 import gymnasium
 import numpy as np
 
+from rlenv.errors import ConnectionLost
 from rlenv_client.base import BaseClient, StepResult
 from rlenv_client.client import Client
 from rlenv_client.display import Display, display_available
-from rlenv_client.launcher import ServerProcess
+from rlenv_client.launcher import ServerProcess, with_server_story
 
 __all__ = ["RemoteEnv", "connect", "parse_address"]
 
 logger = logging.getLogger(__name__)
+
+T = TypeVar("T")
 
 
 def parse_address(address: str) -> tuple[str, int]:
@@ -130,14 +133,14 @@ class RemoteEnv(gymnasium.Env):
     ) -> tuple[Any, dict[str, Any]]:
         """Start an episode; ``seed`` makes it reproducible, on any server."""
         super().reset(seed=seed)
-        observation, info = self.client.reset(seed=seed, options=options)
+        observation, info = self._call(self.client.reset, seed=seed, options=options)
         if self.render_mode == "human":
             self.render()
         return observation, info
 
     def step(self, action: Any) -> StepResult:
         """Run ``action`` for ``repeat_action`` physics ticks; ``info["frames"]`` says how many."""
-        result = self.client.step(action, self.repeat_action)
+        result = self._call(self.client.step, action, self.repeat_action)
         if self.render_mode == "human":
             self.render()
         return result
@@ -148,7 +151,7 @@ class RemoteEnv(gymnasium.Env):
             gymnasium.logger.warn("render() was called with render_mode=None; nothing to draw")
             return None
         width, height = self.render_size or (None, None)
-        frame = self.client.render(width, height)
+        frame = self._call(self.client.render, width, height)
         if self.render_mode == "rgb_array":
             return frame
         if self._display is None:
@@ -164,6 +167,13 @@ class RemoteEnv(gymnasium.Env):
         self.client.close()
         if self.server is not None:
             self.server.close()
+
+    def _call(self, method: Callable[..., T], *args: Any, **kwargs: Any) -> T:
+        """Call a client method; a lost connection to a server that died says how it died."""
+        try:
+            return method(*args, **kwargs)
+        except ConnectionLost as error:
+            raise with_server_story(error, [self.server] if self.server else []) from None
 
     def __repr__(self) -> str:
         return f"<RemoteEnv {self.client.hello.environment} at {self.client.address}>"

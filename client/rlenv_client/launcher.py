@@ -20,11 +20,11 @@ import sys
 import threading
 import time
 import weakref
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 
-from rlenv.errors import RlenvError
+from rlenv.errors import ConnectionLost, RlenvError
 
-__all__ = ["ServerProcess", "ServerStartError"]
+__all__ = ["ServerProcess", "ServerStartError", "with_server_story"]
 
 logger = logging.getLogger(__name__)
 
@@ -99,6 +99,19 @@ class ServerProcess:
         """The last lines the server wrote (stdout and stderr)."""
         return "".join(self._lines)
 
+    def describe_exit(self, wait: float = 2.0) -> str | None:
+        """How the server exited, with its last output; ``None`` while it runs.
+
+        Waits up to ``wait`` seconds for a server that is dying to finish.
+        """
+        try:
+            code = self.process.wait(wait)
+        except subprocess.TimeoutExpired:
+            return None
+        self._pump_thread.join(wait)
+        return f"server {self.target} (pid {self.pid}) exited with code {code}; its last " \
+               f"output:\n{self.output}"
+
     def is_alive(self) -> bool:
         """Whether the server process is still running."""
         return self.process.poll() is None
@@ -143,6 +156,14 @@ class ServerProcess:
                 )
             host, _, port = line[len(_LISTENING):].strip().rpartition(":")
             return host, int(port)
+
+
+def with_server_story(error: ConnectionLost, servers: Iterable[ServerProcess]) -> ConnectionLost:
+    """``error``, extended with how each of ``servers`` that died exited and what it last said."""
+    stories = [story for server in servers if (story := server.describe_exit()) is not None]
+    if not stories:
+        return error
+    return ConnectionLost("\n".join([str(error), *stories]))
 
 
 def _terminate(

@@ -27,9 +27,10 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, concatenate, create_empty_array, iterate
 
+from rlenv.errors import ConnectionLost
 from rlenv_client.base import BaseClient
 from rlenv_client.env import connect
-from rlenv_client.launcher import ServerProcess
+from rlenv_client.launcher import ServerProcess, with_server_story
 
 __all__ = ["RemoteVectorEnv"]
 
@@ -106,7 +107,16 @@ class RemoteVectorEnv(VectorEnv):
 
         Raises:
             ValueError: a list of seeds of the wrong length.
+            ConnectionLost: a server went away (with how it exited, if it died).
         """
+        try:
+            return self._reset(seed, options)
+        except ConnectionLost as error:
+            raise with_server_story(error, self.servers) from None
+
+    def _reset(
+        self, seed: int | Sequence[int | None] | None, options: Mapping[str, Any] | None
+    ) -> tuple[Any, dict[str, Any]]:
         if seed is None or isinstance(seed, int):
             seeds: list[int | None] = [
                 None if seed is None else seed + i for i in range(self.num_envs)
@@ -130,7 +140,19 @@ class RemoteVectorEnv(VectorEnv):
     def step(
         self, actions: Any
     ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
-        """Step every sub-environment (resetting those that ended, per the autoreset mode)."""
+        """Step every sub-environment (resetting those that ended, per the autoreset mode).
+
+        Raises:
+            ConnectionLost: a server went away (with how it exited, if it died).
+        """
+        try:
+            return self._step(actions)
+        except ConnectionLost as error:
+            raise with_server_story(error, self.servers) from None
+
+    def _step(
+        self, actions: Any
+    ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         resetting = self._autoreset.copy() if self._mode is AutoresetMode.NEXT_STEP else \
             np.zeros(self.num_envs, dtype=np.bool_)
         for index, (client, action) in enumerate(

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import signal
 import sys
 from collections.abc import Sequence
 from types import FrameType
 
-from rlenv.communication import DEFAULT_HOST
+from rlenv.communication import DEFAULT_HOST, InsecureBindError, Limits
 
 __all__ = ["main"]
 
@@ -28,6 +29,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     serve.add_argument("--port", type=int, default=0, help="port to bind (default 0: any free)")
     serve.add_argument("--lifeline", type=int, default=None, metavar="FD",
                        help="exit when this inherited pipe closes (set by ServerProcess)")
+    serve.add_argument("--token", default=os.environ.get("RLENV_TOKEN"),
+                       help="secret clients must present (default: $RLENV_TOKEN); required to "
+                       "bind anything but loopback")
+    defaults = Limits()
+    serve.add_argument("--max-frame-size", type=int, default=defaults.max_frame_size,
+                       help=f"largest request in bytes (default {defaults.max_frame_size})")
+    serve.add_argument("--frame-deadline", type=float, default=defaults.frame_deadline,
+                       help=f"seconds a started frame may take (default {defaults.frame_deadline})")
+    serve.add_argument("--max-connections", type=int, default=defaults.max_connections,
+                       help=f"clients connected at once (default {defaults.max_connections})")
+    serve.add_argument("--idle-timeout", type=float, default=defaults.idle_timeout,
+                       help=f"seconds a client may stay silent, 0: forever (default "
+                       f"{defaults.idle_timeout})")
     serve.set_defaults(run=_serve)
 
     check = commands.add_parser("check", help="check a server the way trainers use it")
@@ -54,7 +68,15 @@ def _serve(args: argparse.Namespace) -> int:
     from rlenv.server import Server
 
     signal.signal(signal.SIGTERM, _exit_on_signal)
-    with Server(args.target, host=args.host, port=args.port, lifeline=args.lifeline) as server:
+    limits = Limits(max_frame_size=args.max_frame_size, frame_deadline=args.frame_deadline,
+                    idle_timeout=args.idle_timeout or None, max_connections=args.max_connections)
+    try:
+        server = Server(args.target, host=args.host, port=args.port, lifeline=args.lifeline,
+                        token=args.token, limits=limits)
+    except InsecureBindError as error:
+        print(f"rlenv serve: {error}", file=sys.stderr)
+        return 2
+    with server:
         host, port = server.address
         print(f"listening on {host}:{port}", flush=True)
         try:

@@ -31,7 +31,7 @@ from rlenv.errors import ErrorCode, RequestError
 from rlenv.node import ProcessMode
 from rlenv.protocol import ErrorReply, Hello, Request, Response
 from rlenv.rl_node import RLNode
-from rlenv.spaces import SpaceMismatch, check
+from rlenv.spaces import SpaceMismatch, check, find_non_finite
 from rlenv.timer import PhysicsFramesTimer
 from rlenv.world import RLEnvWorld
 
@@ -213,7 +213,13 @@ class RLEnvironment(RLNode):
         if observation_request is not None:
             observation = {}
             if "agent" in observation_request:
-                observation["agent"] = agent.get_data(observation_request["agent"])
+                observation["agent"] = data = agent.get_data(observation_request["agent"])
+                where = find_non_finite(data)
+                if where is not None:
+                    raise FloatingPointError(
+                        f"the observation of {agent.get_path()} is not finite at {where or '()'}"
+                        f": {data!r:.200}"
+                    )
             if "world" in observation_request:
                 observation["world"] = self._require_world().get_data(observation_request["world"])
             if "render" in observation_request:

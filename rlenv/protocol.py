@@ -225,6 +225,7 @@ class Hello:
     physics_ticks_per_second: int = 60
     repeat_action: int = 4
     render_modes: tuple[str, ...] = ()
+    token_required: bool = False
     protocol: tuple[int, int] = PROTOCOL_VERSION
 
     def to_wire(self) -> dict[str, Any]:
@@ -239,6 +240,7 @@ class Hello:
                 "physics_ticks_per_second": self.physics_ticks_per_second,
                 "repeat_action": self.repeat_action,
                 "render_modes": list(self.render_modes),
+                "token_required": self.token_required,
             }
         }
 
@@ -270,6 +272,7 @@ class Hello:
                 physics_ticks_per_second=int(body["physics_ticks_per_second"]),
                 repeat_action=int(body["repeat_action"]),
                 render_modes=tuple(body["render_modes"]),
+                token_required=bool(body.get("token_required", False)),
                 protocol=(int(version[0]), int(version[1])),
             )
         except (KeyError, TypeError, ValueError) as exc:
@@ -281,7 +284,8 @@ class Request:
     """One request: any of config, reset, action and observation, applied in that order.
 
     ``None`` means the part is absent. ``repeat_action`` overrides, for this action only, how
-    many physics ticks the action runs.
+    many physics ticks the action runs. ``token`` authenticates the first request to a server
+    whose hello says ``token_required``.
     """
 
     id: int
@@ -290,6 +294,7 @@ class Request:
     action: Any = None
     observation: Mapping[str, Any] | None = None
     repeat_action: int | None = None
+    token: str | None = None
 
     def to_wire(self) -> dict[str, Any]:
         """The message as a msgpack-ready map (absent parts left out)."""
@@ -304,6 +309,8 @@ class Request:
             wire["observation"] = self.observation
         if self.repeat_action is not None:
             wire["repeat_action"] = self.repeat_action
+        if self.token is not None:
+            wire["token"] = self.token
         return wire
 
     @classmethod
@@ -321,7 +328,7 @@ class Request:
             raise _bad_request(
                 request_id,
                 f"unknown request key {sorted(map(str, unknown))[0]!r}; expected any of "
-                + ", ".join(REQUEST_KEYS + ("repeat_action",)),
+                + ", ".join(REQUEST_KEYS + ("repeat_action", "token")),
             )
         for key in ("config", "reset", "observation"):
             if key in wire and not isinstance(wire[key], Mapping):
@@ -334,6 +341,9 @@ class Request:
                 )
             if wire.get("action") is None:
                 raise _bad_request(request_id, "'repeat_action' given without an 'action'")
+        token = wire.get("token")
+        if token is not None and not isinstance(token, str):
+            raise _bad_request(request_id, "'token' must be a string")
         return cls(
             id=request_id,
             config=wire.get("config"),
@@ -341,10 +351,17 @@ class Request:
             action=wire.get("action"),
             observation=wire.get("observation"),
             repeat_action=repeat,
+            token=token,
         )
 
+    def __repr__(self) -> str:  # never show a token in logs
+        parts = ", ".join(f"{name}={getattr(self, name)!r:.80}" for name in
+                          ("id", "config", "reset", "action", "observation", "repeat_action")
+                          if getattr(self, name) is not None)
+        return f"Request({parts}{', token=...' if self.token is not None else ''})"
 
-_REQUEST_WIRE_KEYS = frozenset(("id", "repeat_action") + REQUEST_KEYS)
+
+_REQUEST_WIRE_KEYS = frozenset(("id", "repeat_action", "token") + REQUEST_KEYS)
 
 
 def _bad_request(request_id: int | None, message: str) -> RemoteProtocolError:
@@ -478,6 +495,11 @@ class Connection:
     def outstanding(self) -> tuple[int, ...]:
         """Ids of the requests that have not been answered yet, oldest first."""
         return tuple(self._outstanding)
+
+    @property
+    def buffered(self) -> int:
+        """Bytes received that do not form a whole frame yet."""
+        return len(self._buffer)
 
     @property
     def peer_closed(self) -> bool:

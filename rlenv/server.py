@@ -5,7 +5,7 @@ from __future__ import annotations
 import importlib
 import logging
 
-from rlenv.communication import DEFAULT_HOST, Communication
+from rlenv.communication import DEFAULT_HOST, Communication, Limits
 from rlenv.environment import RLEnvironment
 from rlenv.tree import SceneTree
 
@@ -46,11 +46,18 @@ class Server:
         port: port to bind; 0 picks a free one (see :attr:`address`).
         lifeline: read end of a pipe whose write end the starting process holds; the server
             exits when that process is gone (see ``rlenv_client.ServerProcess``).
+        token: the secret clients must present; required to bind a non-loopback address.
+        limits: frame sizes and deadlines (see :class:`~rlenv.communication.Limits`); the
+            defaults if ``None``.
+
+    Raises:
+        InsecureBindError: a non-loopback ``host`` without a ``token``.
     """
 
     def __init__(
         self, environment: RLEnvironment | type[RLEnvironment] | str, host: str = DEFAULT_HOST,
-        port: int = 0, lifeline: int | None = None,
+        port: int = 0, lifeline: int | None = None, token: str | None = None,
+        limits: Limits | None = None,
     ) -> None:
         if isinstance(environment, str):
             environment = load_environment(environment)
@@ -60,11 +67,11 @@ class Server:
         self.tree = SceneTree(environment.physics_ticks_per_second)
         self.tree.root.add_child(environment)
         environment.hello()  # fail here, not at the first client, if the environment is incomplete
-        if not isinstance(environment.communication, Communication):
-            raise TypeError(f"{environment!r} already has an in-process endpoint")
-        self.address = environment.communication.start_server(port, host)
+        communication = Communication(environment.hello, limits=limits or Limits(), token=token)
+        environment.communication = communication
+        self.address = communication.start_server(port, host)
         if lifeline is not None:
-            environment.communication.watch_lifeline(lifeline)
+            communication.watch_lifeline(lifeline)
 
     def serve_forever(self) -> None:
         """Run the tree until :meth:`SceneTree.quit` or an interrupt.

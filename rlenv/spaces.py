@@ -17,7 +17,14 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-__all__ = ["SpaceMismatch", "check", "from_wire", "space_from_spec", "space_to_spec"]
+__all__ = [
+    "SpaceMismatch",
+    "check",
+    "find_non_finite",
+    "from_wire",
+    "space_from_spec",
+    "space_to_spec",
+]
 
 Spec = dict[str, Any]
 
@@ -289,3 +296,30 @@ def _(space: spaces.Tuple, value: Any) -> tuple[Any, ...]:
 @from_wire.register
 def _(space: spaces.Dict, value: Any) -> dict[str, Any]:
     return {k: from_wire(s, value[k]) for k, s in space.spaces.items()}
+
+
+def find_non_finite(value: Any, path: str = "") -> str | None:
+    """Where ``value`` (arrays, numbers, nested lists, tuples and maps) holds NaN or infinity.
+
+    Returns:
+        The path of the first such element, e.g. ``"[2]"`` or ``"['pos'][0]"``, or ``None``.
+    """
+    if isinstance(value, np.ndarray):
+        if value.dtype.kind in "fc":
+            finite = np.isfinite(value)
+            if not finite.all():
+                return path + (_first(~finite) or "")
+        return None
+    if isinstance(value, float | np.floating):
+        return None if np.isfinite(value) else path
+    if isinstance(value, Mapping):
+        items: Any = ((f"[{k!r}]", v) for k, v in value.items())
+    elif isinstance(value, list | tuple):
+        items = ((f"[{i}]", v) for i, v in enumerate(value))
+    else:
+        return None
+    for step, item in items:
+        found = find_non_finite(item, path + step)
+        if found is not None:
+            return found
+    return None

@@ -195,12 +195,34 @@ def test_reset_with_a_seed_does_not_depend_on_history(client: Client) -> None:
     assert other.tobytes() != first[0]
 
 
-def test_a_second_client_is_told_busy(server: ServerProcess, client: Client) -> None:
+def test_a_second_client_may_observe_but_not_control(
+    server: ServerProcess, client: Client
+) -> None:
     client.reset(seed=0)
-    with pytest.raises(RemoteError) as error:
-        Client(server.host, server.port, timeout=5)
-    assert error.value.code == ErrorCode.BUSY and error.value.fatal
-    assert client.step(PUSH)[4]["frames"] == 4  # the first client is undisturbed
+    with Client(server.host, server.port, timeout=5) as second:
+        seen = second.observe()  # observing is open to everyone
+        assert seen["agent"].tobytes() == client.observe()["agent"].tobytes()
+        for control in (lambda: second.reset(seed=1), lambda: second.step(PUSH),
+                        lambda: second.configure(repeat_action=2)):
+            with pytest.raises(RemoteError) as error:
+                control()
+            assert error.value.code == ErrorCode.BUSY and not error.value.fatal
+            assert "controlled by another client" in error.value.message
+        assert client.step(PUSH)[4]["frames"] == 4  # the controller is undisturbed
+    # control passes on when the controller leaves
+    client.close()
+    with Client(server.host, server.port, timeout=5) as third:
+        third.reset(seed=2)
+
+
+def test_connections_beyond_the_cap_are_told_busy(serve: Serve) -> None:
+    server = serve(args=["--max-connections", "2"])
+    with Client(server.host, server.port) as first, Client(server.host, server.port):
+        with pytest.raises(RemoteError) as error:
+            Client(server.host, server.port, timeout=5)
+        assert error.value.code == ErrorCode.BUSY and error.value.fatal
+        assert "2 clients connected" in error.value.message
+        first.reset(seed=0)
 
 
 def test_the_next_client_is_served_after_one_leaves(server: ServerProcess) -> None:

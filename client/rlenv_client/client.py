@@ -9,9 +9,10 @@ answer to a later request) and :class:`ConnectionLost`.
 
 from __future__ import annotations
 
+import os
 import socket
 
-from rlenv.errors import ConnectionLost, ProtocolError, RemoteError, RequestTimeout
+from rlenv.errors import ConnectionLost, ErrorCode, ProtocolError, RemoteError, RequestTimeout
 from rlenv.protocol import (
     CONNECTION_CLOSED,
     NEED_DATA,
@@ -39,17 +40,19 @@ class Client(BaseClient):
         timeout: seconds to wait for connecting and for each answer.
         world_data: also ask for the world's data on reset and step; it is returned as
             ``info["world"]``.
+        token: the secret of a server that requires one (default: ``$RLENV_TOKEN``); sent only
+            to servers that ask for it.
 
     Raises:
         ConnectionLost: the server cannot be reached, or closed the connection at once.
         RequestTimeout: the server did not say hello within ``timeout``.
-        RemoteError: the server refused the connection (e.g. ``busy``).
+        RemoteError: the server refused the connection (``busy``, ``unauthorized``).
         ProtocolVersionError: the server speaks another major protocol version.
     """
 
     def __init__(
         self, host: str = "127.0.0.1", port: int = 0, *, timeout: float = 30.0,
-        world_data: bool = False,
+        world_data: bool = False, token: str | None = None,
     ) -> None:
         super().__init__(world_data=world_data)
         self.address = f"{host}:{port}"
@@ -75,6 +78,13 @@ class Client(BaseClient):
             self.close()
             raise ConnectionLost(f"{self.address} did not start with a hello")
         self._set_hello(message)
+        if message.token_required:
+            token = token if token is not None else os.environ.get("RLENV_TOKEN")
+            if token is None:
+                self.close()
+                raise RemoteError(ErrorCode.UNAUTHORIZED, f"{self.address} requires a token: "
+                                  "pass token=... (or set RLENV_TOKEN)", fatal=True)
+            self._call(token=token)
 
     def close(self) -> None:
         """Close the connection; safe to repeat."""

@@ -47,6 +47,7 @@ def parse_address(address: str) -> tuple[str, int]:
 def connect(
     target: str | None = None, *, address: str | None = None, in_process: bool = False,
     timeout: float = 30.0, server_args: Sequence[str] = (), startup_timeout: float = 60.0,
+    token: str | None = None,
 ) -> tuple[BaseClient, ServerProcess | None]:
     """Reach an environment the way :class:`RemoteEnv` does.
 
@@ -62,7 +63,7 @@ def connect(
     if address is not None:
         if in_process:
             raise ValueError("in_process=True needs a target, not an address")
-        return Client(*parse_address(address), timeout=timeout), None
+        return Client(*parse_address(address), timeout=timeout, token=token), None
     if target is None:
         raise ValueError("give target='MODULE:CLASS' or address='HOST:PORT'")
     if in_process:
@@ -92,6 +93,7 @@ class RemoteEnv(gymnasium.Env):
         timeout: seconds to wait for each answer before :class:`RequestTimeout`.
         server_args: extra arguments for ``rlenv serve``.
         render_size: (width, height) of rendered frames; the environment's default if ``None``.
+        token: the secret of a server that requires one (default ``$RLENV_TOKEN``).
 
     Raises:
         ServerStartError: the server could not start (its output is in the message).
@@ -104,7 +106,7 @@ class RemoteEnv(gymnasium.Env):
         self, target: str | None = None, *, address: str | None = None,
         repeat_action: int | None = None, render_mode: str | None = None,
         in_process: bool = False, timeout: float = 30.0, server_args: Sequence[str] = (),
-        render_size: tuple[int, int] | None = None,
+        render_size: tuple[int, int] | None = None, token: str | None = None,
     ) -> None:
         self.metadata = {"render_modes": ["rgb_array"], "render_fps": 15}
         if display_available():
@@ -116,7 +118,7 @@ class RemoteEnv(gymnasium.Env):
             raise RuntimeError("render_mode='human' needs a display, and none is available "
                                "(DISPLAY is not set); use render_mode='rgb_array' instead")
         self.client, self.server = connect(target, address=address, in_process=in_process,
-                                           timeout=timeout, server_args=server_args)
+                                           timeout=timeout, server_args=server_args, token=token)
         hello = self.client.hello
         self.action_space = hello.action_space
         self.observation_space = hello.observation_space

@@ -50,6 +50,7 @@ class RemoteVectorEnv(VectorEnv):
         in_process: run the copies inside this process instead of servers.
         render_mode: ``"rgb_array"`` to render every copy, or ``None``.
         timeout: seconds to wait for each answer.
+        token: the secret of servers that require one (default ``$RLENV_TOKEN``).
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array"]}
@@ -60,6 +61,7 @@ class RemoteVectorEnv(VectorEnv):
         max_episode_steps: int | None = None,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         in_process: bool = False, render_mode: str | None = None, timeout: float = 30.0,
+        token: str | None = None,
     ) -> None:
         mode = AutoresetMode(autoreset_mode)
         if mode is AutoresetMode.DISABLED:
@@ -68,7 +70,7 @@ class RemoteVectorEnv(VectorEnv):
             raise ValueError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
         places: list[dict[str, Any]]
         if addresses is not None:
-            places = [{"address": address} for address in addresses]
+            places = [{"address": address, "token": token} for address in addresses]
         else:
             places = [{"target": target, "in_process": in_process}] * num_envs
         if not places:

@@ -269,7 +269,7 @@ def test_no_server_outlives_close_or_a_killed_client() -> None:
 
 
 def test_a_server_that_dies_mid_episode_is_a_typed_error() -> None:
-    env = RemoteEnv(TARGET)
+    env = RemoteEnv(TARGET, max_restarts=0)
     try:
         env.reset(seed=0)
         assert env.server is not None
@@ -308,10 +308,44 @@ def _run_with_display(code: str, display: str, deadline: float) -> subprocess.Co
 
 
 def test_a_vector_env_names_the_server_that_died() -> None:
-    with RemoteVectorEnv(2, TARGET) as envs:
+    with RemoteVectorEnv(2, TARGET, max_restarts=0) as envs:
         envs.reset(seed=0)
         victim = envs.servers[1]
         os.killpg(victim.pid, signal.SIGKILL)
         with pytest.raises(rlenv_client.ConnectionLost) as error:
             envs.step(np.zeros((2, 1), np.float32))
         assert f"(pid {victim.pid}) exited" in str(error.value)
+
+
+def test_a_lost_server_is_restarted_and_the_episode_truncated() -> None:
+    with RemoteEnv(TARGET, max_restarts=1, timeout=1.0) as env:
+        observation, _ = env.reset(seed=0)
+        observation, *_ = env.step(np.zeros(1, np.float32))
+        first = env.server
+        assert first is not None
+        os.killpg(first.pid, signal.SIGKILL)
+        after, reward, terminated, truncated, info = env.step(np.zeros(1, np.float32))
+        assert after.tobytes() == observation.tobytes()  # the last real state, nothing invented
+        assert (reward, terminated, truncated) == (0.0, False, True)
+        assert "restarted (1 of 1)" in info["server_restarted"]
+        assert env.server is not first and env.server.is_alive()
+        assert not first.is_alive()
+        again, _ = env.reset(seed=0)  # the new server gives the same episode
+        assert again.tobytes() == env.reset(seed=0)[0].tobytes()
+        os.killpg(env.server.pid, signal.SIGSTOP)  # silent: the timeout, then the budget is out
+        with pytest.raises(rlenv_client.ConnectionLost, match="did not answer"):
+            env.step(np.zeros(1, np.float32))
+
+
+def test_a_vector_env_restarts_the_lost_server_only() -> None:
+    with RemoteVectorEnv(2, TARGET, max_restarts=1) as envs:
+        envs.reset(seed=0)
+        survivor, victim = envs.servers
+        os.killpg(victim.pid, signal.SIGKILL)
+        still = np.zeros((2, 1), np.float32)
+        observations, rewards, terminated, truncated, infos = envs.step(still)
+        assert truncated.tolist() == [False, True] and not terminated.any()
+        assert rewards[1] == 0.0 and infos["_server_restarted"].tolist() == [False, True]
+        assert envs.servers[0] is survivor and envs.servers[1] is not victim
+        observations, rewards, terminated, truncated, _ = envs.step(still)
+        assert rewards[1] == 0.0 and not truncated[1]  # NEXT_STEP: the autoreset on the new one

@@ -8,74 +8,30 @@ reached in one of three ways:
 - ``RemoteEnv(address="127.0.0.1:7000")`` attaches to a running server;
 - ``RemoteEnv("examples.cartpole:CartPoleEnvironment", in_process=True)`` runs the environment
   in this process with no socket (debugging, and the baseline for remote figures).
+
+A server that RemoteEnv started and lost (killed, crashed, or silent past the timeout) is
+restarted, up to ``max_restarts`` times: the step that was interrupted returns the episode's
+last observation with reward 0 and ``truncated=True``, and ``info["server_restarted"]`` says
+why. Nothing is sent twice, so no transition is invented or duplicated; call ``reset`` next.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Mapping, Sequence
-from typing import Any, TypeVar
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import gymnasium
 import numpy as np
 
-from rlenv.errors import ConnectionLost
 from rlenv_client.base import BaseClient, StepResult
-from rlenv_client.client import Client
 from rlenv_client.display import Display, display_available
-from rlenv_client.launcher import ServerProcess, with_server_story
+from rlenv_client.launcher import ServerProcess
+from rlenv_client.session import LOST, Session
 
-__all__ = ["RemoteEnv", "connect", "parse_address"]
+__all__ = ["RemoteEnv"]
 
 logger = logging.getLogger(__name__)
-
-T = TypeVar("T")
-
-
-def parse_address(address: str) -> tuple[str, int]:
-    """Split ``"host:port"``.
-
-    Raises:
-        ValueError: ``address`` is not of that form.
-    """
-    host, _, port = address.rpartition(":")
-    if not host or not port.isdigit():
-        raise ValueError(f"expected an address of the form HOST:PORT, got {address!r}")
-    return host, int(port)
-
-
-def connect(
-    target: str | None = None, *, address: str | None = None, in_process: bool = False,
-    timeout: float = 30.0, server_args: Sequence[str] = (), startup_timeout: float = 60.0,
-    token: str | None = None,
-) -> tuple[BaseClient, ServerProcess | None]:
-    """Reach an environment the way :class:`RemoteEnv` does.
-
-    An ``address`` wins over a ``target``, so that a registered id (whose target is fixed) can
-    attach to a running server: ``gymnasium.make("rlenv/CartPole-v0", address="host:port")``.
-
-    Returns:
-        The client, and the server process it started (``None`` when it started none).
-
-    Raises:
-        ValueError: neither ``target`` nor ``address``, or ``in_process`` with an address.
-    """
-    if address is not None:
-        if in_process:
-            raise ValueError("in_process=True needs a target, not an address")
-        return Client(*parse_address(address), timeout=timeout, token=token), None
-    if target is None:
-        raise ValueError("give target='MODULE:CLASS' or address='HOST:PORT'")
-    if in_process:
-        from rlenv_client.local import LocalClient
-
-        return LocalClient(target), None
-    server = ServerProcess(target, startup_timeout=startup_timeout, args=server_args)
-    try:
-        return Client(server.host, server.port, timeout=timeout), server
-    except BaseException:
-        server.close()
-        raise
 
 
 class RemoteEnv(gymnasium.Env):
@@ -94,6 +50,7 @@ class RemoteEnv(gymnasium.Env):
         server_args: extra arguments for ``rlenv serve``.
         render_size: (width, height) of rendered frames; the environment's default if ``None``.
         token: the secret of a server that requires one (default ``$RLENV_TOKEN``).
+        max_restarts: how many times a lost server that this environment started is replaced.
 
     Raises:
         ServerStartError: the server could not start (its output is in the message).
@@ -107,6 +64,7 @@ class RemoteEnv(gymnasium.Env):
         repeat_action: int | None = None, render_mode: str | None = None,
         in_process: bool = False, timeout: float = 30.0, server_args: Sequence[str] = (),
         render_size: tuple[int, int] | None = None, token: str | None = None,
+        max_restarts: int = 3,
     ) -> None:
         self.metadata = {"render_modes": ["rgb_array"], "render_fps": 15}
         if display_available():
@@ -117,8 +75,9 @@ class RemoteEnv(gymnasium.Env):
         if render_mode == "human" and not display_available():
             raise RuntimeError("render_mode='human' needs a display, and none is available "
                                "(DISPLAY is not set); use render_mode='rgb_array' instead")
-        self.client, self.server = connect(target, address=address, in_process=in_process,
-                                           timeout=timeout, server_args=server_args, token=token)
+        self.session = Session(target, address=address, in_process=in_process,
+                               max_restarts=max_restarts, timeout=timeout,
+                               server_args=server_args, token=token)
         hello = self.client.hello
         self.action_space = hello.action_space
         self.observation_space = hello.observation_space
@@ -128,21 +87,53 @@ class RemoteEnv(gymnasium.Env):
         self.render_mode = render_mode
         self.render_size = render_size
         self._display: Display | None = None
+        self._last_observation: Any = None
         logger.info("connected to %s at %s", hello.environment, self.client.address)
+
+    @property
+    def client(self) -> BaseClient:
+        """The client of the current server (it changes when a lost server is restarted)."""
+        return self.session.client
+
+    @property
+    def server(self) -> ServerProcess | None:
+        """The server process this environment started, or ``None``."""
+        return self.session.server
+
+    def configure(self, **settings: Any) -> None:
+        """Configure the environment (see ``Client.configure``); replayed after a restart."""
+        self.session.configure(**settings)
 
     def reset(
         self, *, seed: int | None = None, options: Mapping[str, Any] | None = None
     ) -> tuple[Any, dict[str, Any]]:
         """Start an episode; ``seed`` makes it reproducible, on any server."""
         super().reset(seed=seed)
-        observation, info = self._call(self.client.reset, seed=seed, options=options)
+        try:
+            observation, info = self.client.reset(seed=seed, options=options)
+        except LOST as error:  # nothing happened yet: reset the replacement instead
+            self.session.restart(error)
+            observation, info = self.client.reset(seed=seed, options=options)
+        self._last_observation = observation
         if self.render_mode == "human":
             self.render()
         return observation, info
 
     def step(self, action: Any) -> StepResult:
-        """Run ``action`` for ``repeat_action`` physics ticks; ``info["frames"]`` says how many."""
-        result = self._call(self.client.step, action, self.repeat_action)
+        """Run ``action`` for ``repeat_action`` physics ticks; ``info["frames"]`` says how many.
+
+        Raises:
+            ConnectionLost: the server was lost and cannot be restarted (with how it exited).
+        """
+        try:
+            result = self.client.step(action, self.repeat_action)
+        except LOST as error:
+            if self._last_observation is None:
+                raise self.session.failure(error) from None
+            reason = self.session.restart(error)
+            return self._last_observation, 0.0, False, True, {"frames": 0,
+                                                              "server_restarted": reason}
+        self._last_observation = result[0]
         if self.render_mode == "human":
             self.render()
         return result
@@ -153,7 +144,10 @@ class RemoteEnv(gymnasium.Env):
             gymnasium.logger.warn("render() was called with render_mode=None; nothing to draw")
             return None
         width, height = self.render_size or (None, None)
-        frame = self._call(self.client.render, width, height)
+        try:
+            frame = self.client.render(width, height)
+        except LOST as error:
+            raise self.session.failure(error) from None
         if self.render_mode == "rgb_array":
             return frame
         if self._display is None:
@@ -166,16 +160,7 @@ class RemoteEnv(gymnasium.Env):
         if self._display is not None:
             self._display.close()
             self._display = None
-        self.client.close()
-        if self.server is not None:
-            self.server.close()
-
-    def _call(self, method: Callable[..., T], *args: Any, **kwargs: Any) -> T:
-        """Call a client method; a lost connection to a server that died says how it died."""
-        try:
-            return method(*args, **kwargs)
-        except ConnectionLost as error:
-            raise with_server_story(error, [self.server] if self.server else []) from None
+        self.session.close()
 
     def __repr__(self) -> str:
         return f"<RemoteEnv {self.client.hello.environment} at {self.client.address}>"

@@ -13,7 +13,10 @@ Autoreset follows gymnasium 1.x (:class:`gymnasium.vector.AutoresetMode`):
   observation is the reset one, and ``info["final_obs"]`` / ``info["final_info"]`` hold the
   last observation and info of the episode that ended.
 
-``max_episode_steps`` truncates each sub-environment's episodes, as ``TimeLimit`` does.
+``max_episode_steps`` truncates each sub-environment's episodes, as ``TimeLimit`` does. A lost
+server that this vector started is restarted (``max_restarts`` each): its interrupted episode
+ends as truncated with its last observation, reward 0 and ``info["server_restarted"]``, and the
+autoreset that follows starts a fresh episode on the new server.
 """
 
 from __future__ import annotations
@@ -27,10 +30,9 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, concatenate, create_empty_array, iterate
 
-from rlenv.errors import ConnectionLost
 from rlenv_client.base import BaseClient
-from rlenv_client.env import connect
 from rlenv_client.launcher import ServerProcess, with_server_story
+from rlenv_client.session import LOST, Session, as_lost
 
 __all__ = ["RemoteVectorEnv"]
 
@@ -51,6 +53,7 @@ class RemoteVectorEnv(VectorEnv):
         render_mode: ``"rgb_array"`` to render every copy, or ``None``.
         timeout: seconds to wait for each answer.
         token: the secret of servers that require one (default ``$RLENV_TOKEN``).
+        max_restarts: how many times each lost server that this vector started is replaced.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array"]}
@@ -61,7 +64,7 @@ class RemoteVectorEnv(VectorEnv):
         max_episode_steps: int | None = None,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         in_process: bool = False, render_mode: str | None = None, timeout: float = 30.0,
-        token: str | None = None,
+        token: str | None = None, max_restarts: int = 3,
     ) -> None:
         mode = AutoresetMode(autoreset_mode)
         if mode is AutoresetMode.DISABLED:
@@ -75,9 +78,8 @@ class RemoteVectorEnv(VectorEnv):
             places = [{"target": target, "in_process": in_process}] * num_envs
         if not places:
             raise ValueError("a vector environment needs at least one sub-environment")
-        self.clients: list[BaseClient] = []
-        self.servers: list[ServerProcess] = []
-        self._connect(places, timeout)
+        self.sessions: list[Session] = []
+        self._connect(places, timeout=timeout, max_restarts=max_restarts)
         hello = self.clients[0].hello
         for client in self.clients[1:]:
             if (client.action_space, client.observation_space) != (
@@ -100,6 +102,17 @@ class RemoteVectorEnv(VectorEnv):
         self.max_episode_steps = max_episode_steps
         self._autoreset = np.zeros(self.num_envs, dtype=np.bool_)
         self._steps = np.zeros(self.num_envs, dtype=np.int64)
+        self._last_observations: list[Any] = [None] * self.num_envs
+
+    @property
+    def clients(self) -> list[BaseClient]:
+        """The sub-environments' clients, in order (they change when a server is restarted)."""
+        return [session.client for session in self.sessions]
+
+    @property
+    def servers(self) -> list[ServerProcess]:
+        """The server processes this vector started."""
+        return [session.server for session in self.sessions if session.server is not None]
 
     def reset(
         self, *, seed: int | Sequence[int | None] | None = None,
@@ -113,8 +126,8 @@ class RemoteVectorEnv(VectorEnv):
         """
         try:
             return self._reset(seed, options)
-        except ConnectionLost as error:
-            raise with_server_story(error, self.servers) from None
+        except LOST as error:
+            raise with_server_story(as_lost(error), self.servers) from None
 
     def _reset(
         self, seed: int | Sequence[int | None] | None, options: Mapping[str, Any] | None
@@ -133,6 +146,7 @@ class RemoteVectorEnv(VectorEnv):
         observations, infos = [], {}
         for index, client in enumerate(self.clients):
             observation, info = client.receive_reset()
+            self._last_observations[index] = observation
             observations.append(observation)
             infos = self._add_info(infos, info, index)
         self._autoreset[:] = False
@@ -149,8 +163,8 @@ class RemoteVectorEnv(VectorEnv):
         """
         try:
             return self._step(actions)
-        except ConnectionLost as error:
-            raise with_server_story(error, self.servers) from None
+        except LOST as error:
+            raise with_server_story(as_lost(error), self.servers) from None
 
     def _step(
         self, actions: Any
@@ -170,18 +184,26 @@ class RemoteVectorEnv(VectorEnv):
         terminations = np.zeros(self.num_envs, dtype=np.bool_)
         truncations = np.zeros(self.num_envs, dtype=np.bool_)
         for index, client in enumerate(self.clients):
-            if resetting[index]:
-                observation, info = client.receive_reset()
-                self._steps[index] = 0
-            else:
-                observation, reward, terminated, truncated, info = client.receive_step()
-                self._steps[index] += 1
-                if self.max_episode_steps is not None and \
-                        self._steps[index] >= self.max_episode_steps:
-                    truncated = True
-                rewards[index], terminations[index], truncations[index] = (
-                    reward, terminated, truncated
-                )
+            try:
+                if resetting[index]:
+                    observation, info = client.receive_reset()
+                    self._steps[index] = 0
+                else:
+                    observation, reward, terminated, truncated, info = client.receive_step()
+                    self._steps[index] += 1
+                    if self.max_episode_steps is not None and \
+                            self._steps[index] >= self.max_episode_steps:
+                        truncated = True
+                    rewards[index], terminations[index], truncations[index] = (
+                        reward, terminated, truncated
+                    )
+            except LOST as error:
+                if self._last_observations[index] is None:
+                    raise
+                reason = self.sessions[index].restart(error)
+                observation, info = self._last_observations[index], {"server_restarted": reason}
+                truncations[index] = True
+            self._last_observations[index] = observation
             observations.append(observation)
             env_infos.append(info)
         ended = terminations | truncations
@@ -195,6 +217,7 @@ class RemoteVectorEnv(VectorEnv):
                 self.clients[index].send_reset()
             for index in np.flatnonzero(ended):
                 observations[index], env_infos[index] = self.clients[index].receive_reset()
+                self._last_observations[index] = observations[index]
                 self._steps[index] = 0
         for index, info in enumerate(env_infos):
             infos = self._add_info(infos, info, index)
@@ -215,10 +238,8 @@ class RemoteVectorEnv(VectorEnv):
 
     def close_extras(self, **kwargs: Any) -> None:
         """Disconnect every client and stop every server this environment started."""
-        for client in self.clients:
-            client.close()
-        for server in self.servers:
-            server.close()
+        for session in self.sessions:
+            session.close()
 
     # --- internals --------------------------------------------------------------------------
 
@@ -226,19 +247,15 @@ class RemoteVectorEnv(VectorEnv):
     def _mode(self) -> AutoresetMode:
         return self.metadata["autoreset_mode"]
 
-    def _connect(self, places: list[dict[str, Any]], timeout: float) -> None:
+    def _connect(self, places: list[dict[str, Any]], **options: Any) -> None:
         with ThreadPoolExecutor(max_workers=min(len(places), 16)) as pool:
-            futures = [pool.submit(connect, timeout=timeout, **place) for place in places]
+            futures = [pool.submit(Session, **place, **options) for place in places]
             failure: BaseException | None = None
             for future in futures:
                 try:
-                    client, server = future.result()
+                    self.sessions.append(future.result())
                 except BaseException as error:  # keep collecting, so that nothing leaks
                     failure = failure or error
-                    continue
-                self.clients.append(client)
-                if server is not None:
-                    self.servers.append(server)
         if failure is not None:
             self.close_extras()
             raise failure
@@ -246,3 +263,4 @@ class RemoteVectorEnv(VectorEnv):
     def _batch(self, observations: list[Any]) -> Any:
         out = create_empty_array(self.single_observation_space, self.num_envs)
         return concatenate(self.single_observation_space, observations, out)
+

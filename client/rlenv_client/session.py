@@ -1,0 +1,143 @@
+"""Session: one environment reached by :func:`~rlenv_client.env.connect`, restartable.
+
+A server that rlenv started itself can be restarted when it is lost (killed, crashed, stopped
+past the deadline), within a budget. The session replays the configuration sent through it, so
+the new server is set up like the old one. What happens to the interrupted episode is the
+caller's business: :class:`~rlenv_client.env.RemoteEnv` and
+:class:`~rlenv_client.vector.RemoteVectorEnv` end it as truncated, with ``info`` saying why,
+and never send a request twice (no transition is invented or duplicated).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from typing import Any
+
+from rlenv.errors import ConnectionLost, RequestTimeout
+from rlenv_client.base import BaseClient
+from rlenv_client.client import Client
+from rlenv_client.launcher import ServerProcess, with_server_story
+
+__all__ = ["LOST", "Session", "as_lost", "connect", "parse_address"]
+
+logger = logging.getLogger(__name__)
+
+LOST = (ConnectionLost, RequestTimeout)
+"""The errors that mean the server is gone or not answering."""
+
+
+def parse_address(address: str) -> tuple[str, int]:
+    """Split ``"host:port"``.
+
+    Raises:
+        ValueError: ``address`` is not of that form.
+    """
+    host, _, port = address.rpartition(":")
+    if not host or not port.isdigit():
+        raise ValueError(f"expected an address of the form HOST:PORT, got {address!r}")
+    return host, int(port)
+
+
+def connect(
+    target: str | None = None, *, address: str | None = None, in_process: bool = False,
+    timeout: float = 30.0, server_args: Sequence[str] = (), startup_timeout: float = 60.0,
+    token: str | None = None,
+) -> tuple[BaseClient, ServerProcess | None]:
+    """Reach an environment the way :class:`RemoteEnv` does.
+
+    An ``address`` wins over a ``target``, so that a registered id (whose target is fixed) can
+    attach to a running server: ``gymnasium.make("rlenv/CartPole-v0", address="host:port")``.
+
+    Returns:
+        The client, and the server process it started (``None`` when it started none).
+
+    Raises:
+        ValueError: neither ``target`` nor ``address``, or ``in_process`` with an address.
+    """
+    if address is not None:
+        if in_process:
+            raise ValueError("in_process=True needs a target, not an address")
+        return Client(*parse_address(address), timeout=timeout, token=token), None
+    if target is None:
+        raise ValueError("give target='MODULE:CLASS' or address='HOST:PORT'")
+    if in_process:
+        from rlenv_client.local import LocalClient
+
+        return LocalClient(target), None
+    server = ServerProcess(target, startup_timeout=startup_timeout, args=server_args)
+    try:
+        return Client(server.host, server.port, timeout=timeout), server
+    except BaseException:
+        server.close()
+        raise
+
+
+class Session:
+    """A client and, when rlenv started it, its server; see the module docstring.
+
+    Args:
+        target: ``MODULE:CLASS`` to serve (a server is started), or ``None`` with ``address``.
+        address: ``HOST:PORT`` of a running server.
+        in_process: run the environment in this process.
+        max_restarts: how many times a lost server that this session started may be replaced.
+        timeout: seconds to wait for each answer.
+        server_args: extra arguments for ``rlenv serve``.
+        token: the secret of a server that requires one.
+    """
+
+    def __init__(
+        self, target: str | None = None, *, address: str | None = None, in_process: bool = False,
+        max_restarts: int = 0, timeout: float = 30.0, server_args: Sequence[str] = (),
+        token: str | None = None,
+    ) -> None:
+        self._place = {"target": target, "address": address, "in_process": in_process,
+                       "timeout": timeout, "server_args": server_args, "token": token}
+        self.client, self.server = connect(**self._place)
+        self.max_restarts = max_restarts
+        self.restarts = 0
+        self._configuration: list[dict[str, Any]] = []
+
+    def configure(self, **settings: Any) -> None:
+        """Configure the environment and remember it for a restarted server."""
+        self.client.configure(**settings)
+        self._configuration.append(settings)
+
+    def can_restart(self) -> bool:
+        """Whether the server is ours and the budget allows one more restart."""
+        return self.server is not None and self.restarts < self.max_restarts
+
+    def restart(self, error: Exception) -> str:
+        """Replace the lost server with a new one; returns why, for ``info``.
+
+        Raises:
+            ConnectionLost: the budget is spent or the server is not ours (with the old server's
+                exit story).
+        """
+        story = with_server_story(as_lost(error), [self.server] if self.server else [])
+        if not self.can_restart():
+            raise story
+        self.restarts += 1
+        reason = f"server lost ({error}); restarted ({self.restarts} of {self.max_restarts})"
+        logger.warning("%s\n%s", reason, story)
+        self.close()
+        self.client, self.server = connect(**self._place)
+        for settings in self._configuration:
+            self.client.configure(**settings)
+        return reason
+
+    def failure(self, error: Exception) -> ConnectionLost:
+        """``error`` as a ConnectionLost that says how the server exited, if it did."""
+        return with_server_story(as_lost(error), [self.server] if self.server else [])
+
+    def close(self) -> None:
+        """Disconnect, and stop the server if this session started it."""
+        self.client.close()
+        if self.server is not None:
+            self.server.close(timeout=1.0)
+
+
+def as_lost(error: Exception) -> ConnectionLost:
+    """A :data:`LOST` error as a ConnectionLost (a timeout keeps its message)."""
+    return error if isinstance(error, ConnectionLost) else ConnectionLost(str(error))
+

@@ -254,11 +254,16 @@ class Communication:
     # --- internals --------------------------------------------------------------------------
 
     def _accept(self) -> None:
+        """Accept every pending connection."""
         assert self._listener is not None
-        try:
-            sock, address = self._listener.accept()
-        except (BlockingIOError, InterruptedError):
-            return
+        while True:
+            try:
+                sock, address = self._listener.accept()
+            except (BlockingIOError, InterruptedError):
+                return
+            self._admit(sock, address)
+
+    def _admit(self, sock: socket.socket, address: tuple[str, int]) -> None:
         address_text = f"{address[0]}:{address[1]}"
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         sock.settimeout(self.limits.write_timeout)

@@ -88,7 +88,7 @@ class ComplianceReport:
 def check_server(
     host: str, port: int, *, token: str | None = None, pid: int | None = None,
     random_frames: int = 200, frame_deadline: float | None = None, seed: int = 0,
-    timeout: float = 10.0,
+    timeout: float = 10.0, action: Callable[[], Any] | None = None,
 ) -> ComplianceReport:
     """Run the compliance suite against a running server (which must have no controller).
 
@@ -102,6 +102,8 @@ def check_server(
             the server drops it in time (keep it short: the probe waits for it).
         seed: seed of the random frames.
         timeout: seconds to wait for any answer.
+        action: gives the controller's actions between probes; by default samples of the
+            action space.
 
     Returns:
         The report; :attr:`ComplianceReport.passed` says whether the server complied.
@@ -111,7 +113,8 @@ def check_server(
     report = ComplianceReport()
     peak_before = _peak_rss_kib(pid)
     with Client(host, port, timeout=timeout, token=token) as controller:
-        suite = _Suite(host, port, token, timeout, controller, report, random.Random(seed))
+        suite = _Suite(host, port, token, timeout, controller, report, random.Random(seed),
+                       action)
         suite.start_episode()
         for name, probe in suite.raw_probes(random_frames):
             suite.run(name, probe)
@@ -127,7 +130,9 @@ def check_server(
 
 class _Suite:
     def __init__(self, host: str, port: int, token: str | None, timeout: float,
-                 controller: Any, report: ComplianceReport, rng: random.Random) -> None:
+                 controller: Any, report: ComplianceReport, rng: random.Random,
+                 action: Callable[[], Any] | None) -> None:
+        self.action = action
         self.address = (host, port)
         self.token = token
         self.timeout = timeout
@@ -160,6 +165,8 @@ class _Suite:
             self.start_episode()
 
     def valid_action(self) -> Any:
+        if self.action is not None:
+            return self.action()
         space = self.controller.action_space
         space.seed(self.rng.randrange(2**31))
         return space.sample()
@@ -263,7 +270,7 @@ class _Suite:
         space = self.controller.action_space
         probes = [
             ("an action of the wrong shape",
-             lambda: self.refused(np.zeros((7, 3)), ErrorCode.INVALID_ACTION, "shape")),
+             lambda: self.refused(np.zeros((7, 3)), ErrorCode.INVALID_ACTION, "action")),
             ("an action that is text",
              lambda: self.refused("jump", ErrorCode.INVALID_ACTION, "action")),
             ("an unknown configuration key",

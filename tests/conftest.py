@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
-from pathlib import Path
 
 import pytest
 
@@ -11,19 +10,16 @@ from examples.cartpole import TARGET
 from rlenv.tree import SceneTree
 from rlenv_client import Client, ServerProcess
 
-TESTS = Path(__file__).parent
-
 Serve = Callable[..., ServerProcess]
 
 
 @pytest.fixture
 def serve() -> Iterator[Serve]:
-    """Start servers for ``MODULE:CLASS`` targets (modules of tests/ importable); all are closed
-    when the test ends."""
+    """Start servers for ``MODULE:CLASS`` targets; all are closed when the test ends."""
     started: list[ServerProcess] = []
 
     def start(target: str = TARGET, **kwargs: object) -> ServerProcess:
-        process = ServerProcess(target, env={"PYTHONPATH": str(TESTS)}, **kwargs)  # type: ignore[arg-type]
+        process = ServerProcess(target, **kwargs)  # type: ignore[arg-type]
         started.append(process)
         return process
 
@@ -55,3 +51,20 @@ def tree() -> SceneTree:
 def log() -> list:
     """A list that test nodes record their calls into."""
     return []
+
+
+_FIGURES: dict[str, str] = {}
+
+
+@pytest.fixture
+def figures() -> dict[str, str]:
+    """Figures a test measured; printed at the end of the run (``name -> one line``)."""
+    return _FIGURES
+
+
+def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
+    """Print the figures the tests recorded."""
+    if _FIGURES:
+        terminalreporter.section("figures")
+        for name, line in _FIGURES.items():
+            terminalreporter.write_line(f"{name}: {line}")

@@ -96,7 +96,7 @@ def test_check_reports_a_good_environment() -> None:
 
 
 def test_check_fails_a_broken_environment(serve: Serve) -> None:
-    server = serve("envs:WrongShapeEnvironment")
+    server = serve("examples.faulty:WrongShapeEnvironment")
     result = run("check", server.address)
     assert result.returncode == 1
     assert re.search(r"^FAIL  gymnasium check_env .*observation", result.stdout, re.M)

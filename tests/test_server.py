@@ -318,7 +318,7 @@ def test_a_client_that_leaves_mid_episode_loses_nothing_for_the_next(
 
 
 def test_errors_in_user_code_are_reported_and_reset_recovers(serve: Serve) -> None:
-    with Client(*_address(serve("envs:FaultyEnvironment")), timeout=10) as client:
+    with Client(*_address(serve("examples.faulty:FaultyEnvironment")), timeout=10) as client:
         observation, _ = client.reset()
         assert observation.tolist() == [0]
         observation, reward, _, _, info = client.step(0)
@@ -345,7 +345,7 @@ def test_errors_in_user_code_are_reported_and_reset_recovers(serve: Serve) -> No
 
 
 def test_discrete_actions_are_checked(serve: Serve) -> None:
-    with Client(*_address(serve("envs:FaultyEnvironment")), timeout=10) as client:
+    with Client(*_address(serve("examples.faulty:FaultyEnvironment")), timeout=10) as client:
         client.reset()
         for action, message in [(3, "action is 3, outside [0, 2]"),
                                 (0.0, "action must be an integer, got float"),
@@ -360,7 +360,7 @@ def test_server_output_is_kept_for_errors(serve: Serve) -> None:
     from rlenv_client import ServerStartError
 
     with pytest.raises(ServerStartError) as error:
-        serve("envs:NoSuchEnvironment")
+        serve("examples.faulty:NoSuchEnvironment")
     assert "has no attribute 'NoSuchEnvironment'" in str(error.value)
     with pytest.raises(ServerStartError, match="expected MODULE:CLASS"):
         serve("envs")

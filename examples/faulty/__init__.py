@@ -1,4 +1,29 @@
-"""Environments made for tests: they misbehave on purpose."""
+"""Environments that misbehave on purpose, to see rlenv's error handling at work.
+
+Serve one and drive it: ``rlenv serve examples.faulty:FaultyEnvironment``.
+
+- :class:`FaultyEnvironment`: a Discrete(3) agent whose tick raises for action 1 and whose
+  observation raises for action 2 (each answered with an ``environment_error`` naming the node,
+  after which a reset recovers); episodes end after 10 ticks.
+- :class:`CountingEnvironment`: the observation counts the physics ticks since the reset, so a
+  client can account for every transition (the fault harness in the tests does); action 1 gives
+  a NaN observation, which the server refuses to send.
+- :class:`WrongShapeEnvironment`: observations that do not match the declared space, to see what
+  ``rlenv check`` reports.
+
+## Action Space
+``Discrete(3)`` (Faulty, WrongShape) or ``Discrete(2)`` (Counting).
+
+## Observation Space
+``Box(0, 1000, (1,), int64)`` ticks since the reset (Faulty), ``Box(0, 1e9, (1,), float64)``
+(Counting).
+
+## Rewards
+0.5 per tick (Faulty); none otherwise.
+
+## Episode End
+Faulty terminates after 10 ticks; the others never end.
+"""
 
 from __future__ import annotations
 
@@ -21,12 +46,14 @@ class CountingWorld(RLEnvWorld):
         self.ticks = 0
 
     def reset(self, options: Mapping[str, Any]) -> None:
+        """Start counting from zero."""
         self.ticks = 0
 
     def _physics_process(self, delta: float) -> None:
         self.ticks += 1
 
     def get_data(self, observation_request: Mapping[str, Any]) -> dict[str, Any]:
+        """The tick count, for displays."""
         return {"ticks": self.ticks}
 
 
@@ -41,9 +68,11 @@ class FaultyAgent(RLAgent):
         self.action = 0
 
     def reset(self, arguments: Any) -> None:
+        """Forget the last action."""
         self.action = 0
 
     def set_action(self, action: Any) -> None:
+        """Remember the action (1 and 2 misbehave)."""
         self.action = int(action)
 
     def _physics_process(self, delta: float) -> None:
@@ -58,6 +87,7 @@ class FaultyAgent(RLAgent):
             self.set_terminated()
 
     def get_data(self, observation_request: Mapping[str, Any]) -> np.ndarray:
+        """Ticks since the reset; raises for action 2."""
         if self.action == 2:
             raise ValueError("no observation for action 2")
         world = self.environment.world
@@ -78,6 +108,7 @@ class WrongShapeAgent(FaultyAgent):
     """Declares a 1-element observation and returns 2 elements."""
 
     def get_data(self, observation_request: Mapping[str, Any]) -> np.ndarray:
+        """Two elements where the space declares one."""
         return np.zeros(2, dtype=np.int64)
 
 
@@ -87,4 +118,38 @@ class WrongShapeEnvironment(RLEnvironment):
     def __init__(self) -> None:
         super().__init__("WrongShape")
         self.add_child(WrongShapeAgent())
+        self.add_child(CountingWorld())
+
+
+class TickAgent(RLAgent):
+    """Observes how many ticks ran since the reset; never terminates; NaN on action 1."""
+
+    action_space = spaces.Discrete(2)
+    observation_space = spaces.Box(0.0, 1e9, (1,), np.float64)
+
+    def __init__(self) -> None:
+        super().__init__("Agent")
+        self.action = 0
+
+    def reset(self, arguments: Any) -> None:
+        """Forget the last action."""
+        self.action = 0
+
+    def set_action(self, action: Any) -> None:
+        """Remember the action (1 makes the observation NaN)."""
+        self.action = int(action)
+
+    def get_data(self, observation_request: Mapping[str, Any]) -> np.ndarray:
+        """Ticks since the reset, or NaN after action 1."""
+        world = self.environment.world
+        assert isinstance(world, CountingWorld)
+        return np.array([np.nan if self.action == 1 else world.ticks], dtype=np.float64)
+
+
+class CountingEnvironment(RLEnvironment):
+    """Observation = physics ticks since the reset: every transition can be accounted for."""
+
+    def __init__(self) -> None:
+        super().__init__("Counting", repeat_action=50)
+        self.add_child(TickAgent())
         self.add_child(CountingWorld())

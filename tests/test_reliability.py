@@ -1,0 +1,295 @@
+"""Bad input gets a clear error and nothing is lost: hostile clients, deadlines, access, faults."""
+
+from __future__ import annotations
+
+import os
+import random
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import threading
+
+import numpy as np
+import pytest
+from conftest import Serve
+
+from rlenv.communication import Communication, Limits
+from rlenv.errors import ErrorCode
+from rlenv.protocol import Hello, unpack
+from rlenv.testing import ManualClock, check_server
+from rlenv_client import Client, ConnectionLost, RemoteEnv, RemoteError
+
+
+def test_compliance_suite_on_cartpole(serve: Serve, figures: dict[str, str]) -> None:
+    server = serve(args=["--frame-deadline", "0.5"])
+    report = check_server(server.host, server.port, pid=server.pid, frame_deadline=0.5,
+                          random_frames=300)
+    figures["compliance (CartPole)"] = report.summary()
+    assert report.passed, "\n".join(report.failures)
+    assert report.frames_tried >= 300 and report.controller_steps == report.probes
+    assert report.rss_growth_kib is not None and report.rss_growth_kib < 8 * 1024
+
+
+def test_compliance_suite_on_a_discrete_environment(
+    serve: Serve, figures: dict[str, str]
+) -> None:
+    server = serve("examples.faulty:CountingEnvironment")
+    report = check_server(server.host, server.port, random_frames=50, action=lambda: 0)
+    figures["compliance (Discrete actions)"] = report.summary()
+    assert report.passed, "\n".join(report.failures)
+
+
+def test_a_token_guards_the_server(serve: Serve, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv("RLENV_TOKEN", raising=False)
+    server = serve(args=["--token", "s3cret"])
+    with pytest.raises(RemoteError) as error:
+        Client(server.host, server.port)
+    assert error.value.code == ErrorCode.UNAUTHORIZED and "token" in error.value.message
+    with pytest.raises(RemoteError) as error:
+        Client(server.host, server.port, token="guess")
+    assert error.value.code == ErrorCode.UNAUTHORIZED and error.value.message == "wrong token"
+    with Client(server.host, server.port, token="s3cret") as client:
+        client.reset(seed=0)
+    monkeypatch.setenv("RLENV_TOKEN", "s3cret")
+    with Client(server.host, server.port) as client:
+        client.reset(seed=0)
+
+
+def test_frames_stay_small_until_authenticated(serve: Serve) -> None:
+    server = serve(args=["--token", "s3cret"])
+    with socket.create_connection((server.host, server.port), timeout=5) as raw:
+        assert unpack(_read_body(raw))["hello"]["token_required"] is True
+        raw.sendall(struct.pack(">I", 100_000) + b"\x00" * 10)
+        reply = unpack(_read_body(raw))
+        assert reply["error"]["code"] == ErrorCode.BAD_FRAME and reply["error"]["fatal"]
+        assert "exceeds the limit of 65536" in reply["error"]["message"]
+
+
+def test_binding_beyond_loopback_needs_a_token() -> None:
+    result = subprocess.run(
+        [sys.executable, "-m", "rlenv", "serve", "examples.cartpole:CartPoleEnvironment",
+         "--host", "0.0.0.0"], capture_output=True, text=True, timeout=60,
+        env={k: v for k, v in os.environ.items() if k != "RLENV_TOKEN"},
+    )
+    assert result.returncode == 2
+    assert "refusing to listen on 0.0.0.0" in result.stderr and "--token" in result.stderr
+
+
+def test_a_server_on_all_interfaces_with_a_token(serve: Serve) -> None:
+    server = serve(host="0.0.0.0", args=["--token", "t"])
+    with Client("127.0.0.1", server.port, token="t") as client:
+        client.reset(seed=0)
+
+
+def test_an_idle_client_is_dropped_with_a_reason(serve: Serve) -> None:
+    server = serve(args=["--idle-timeout", "0.3"])
+    with socket.create_connection((server.host, server.port), timeout=10) as raw:
+        _read_body(raw)  # the hello
+        reply = unpack(_read_body(raw))  # blocks until the server gives up on us
+        assert reply["error"]["code"] == ErrorCode.TIMEOUT and reply["error"]["fatal"]
+        assert "no request for 0.3 s" in reply["error"]["message"]
+    with Client(server.host, server.port) as client:  # and the next client is served
+        client.reset(seed=0)
+
+
+def test_deadlines_follow_the_injected_clock() -> None:
+    """In process, with a manual clock: no sleeping, exact deadlines."""
+    from examples.cartpole import CartPoleAgent
+
+    clock = ManualClock()
+    hello = Hello("T", CartPoleAgent.action_space, CartPoleAgent.observation_space)
+    endpoint = Communication(lambda: hello, Limits(frame_deadline=2.0, idle_timeout=5.0),
+                             clock=clock)
+    host, port = endpoint.start_server()
+    try:
+        dripping = socket.create_connection((host, port), timeout=5)
+        idle = socket.create_connection((host, port), timeout=5)
+        assert endpoint.poll(0) is None  # accepts both, sends the hellos
+        _read_body(dripping)
+        _read_body(idle)
+        dripping.sendall(b"\x00\x00\x00")
+        assert endpoint.poll(0) is None
+        clock.advance(1.9)
+        assert endpoint.poll(0) is None and endpoint.connections == 2
+        clock.advance(0.2)
+        assert endpoint.poll(0) is None and endpoint.connections == 1  # the drip is gone
+        assert unpack(_read_body(dripping))["error"]["code"] == ErrorCode.TIMEOUT
+        clock.advance(3.0)  # 5.1 s since the idle client's connection
+        assert endpoint.poll(0) is None and endpoint.connections == 0
+        assert "no request for 5.0 s" in unpack(_read_body(idle))["error"]["message"]
+    finally:
+        endpoint.close()
+
+
+def test_non_finite_observations_are_environment_errors(serve: Serve) -> None:
+    with Client(*_address(serve("examples.faulty:CountingEnvironment")), timeout=10) as client:
+        client.reset(seed=0)
+        with pytest.raises(RemoteError) as error:
+            client.step(1)
+        assert error.value.code == ErrorCode.ENVIRONMENT_ERROR
+        assert "observation of /root/Counting/Agent is not finite at [0]" in error.value.message
+        observation, _ = client.reset(seed=0)
+        assert observation.tolist() == [0.0]
+
+
+def test_kills_and_stops_at_random_points_lose_and_duplicate_nothing(
+    figures: dict[str, str],
+) -> None:
+    """A fault harness: the server is killed or stopped at random moments around steps; every
+    transition the client sees is accounted for by the tick counter in the observation."""
+    rng = random.Random(7)
+    faults = 8
+    env = RemoteEnv("examples.faulty:CountingEnvironment", max_restarts=faults, timeout=1.0)
+    transitions = lost = duplicated = survived = 0
+    try:
+        observation, _ = env.reset(seed=0)
+        for fault in range(faults):
+            server = env.server
+            assert server is not None
+            signum = signal.SIGKILL if fault % 2 == 0 else signal.SIGSTOP
+            timer = threading.Timer(rng.uniform(0.0, 0.01), _signal_group, (server.pid, signum))
+            timer.start()
+            restarted = False
+            for _ in range(200):
+                after, reward, terminated, truncated, info = env.step(0)
+                transitions += 1
+                if "server_restarted" in info:
+                    assert truncated and not terminated and reward == 0.0
+                    duplicated += int(after.tobytes() != observation.tobytes())
+                    restarted = True
+                    break
+                expected = observation[0] + info["frames"]
+                lost += int(after[0] > expected)
+                duplicated += int(after[0] < expected)
+                observation = after
+            timer.join()
+            if server.is_alive():  # the fault came after the last step we took
+                _signal_group(server.pid, signal.SIGCONT)
+                continue
+            assert restarted or not server.is_alive()
+            survived += int(restarted)
+            observation, _ = env.reset(seed=0)
+    finally:
+        env.close()
+    figures["fault harness"] = (f"{faults} faults (SIGKILL/SIGSTOP), {survived} server losses "
+                                f"survived, {transitions} transitions checked, {lost} lost, "
+                                f"{duplicated} duplicated")
+    assert lost == 0 and duplicated == 0
+    assert survived >= faults // 2
+
+
+def test_the_client_closes_rather_than_pair_a_late_answer(serve: Serve) -> None:
+    server = serve("examples.faulty:CountingEnvironment")
+    client = Client(server.host, server.port, timeout=0.3)
+    client.reset(seed=0)
+    os.killpg(server.pid, signal.SIGSTOP)
+    try:
+        with pytest.raises(Exception, match="did not answer within 0.3s"):
+            client.step(0)
+    finally:
+        os.killpg(server.pid, signal.SIGCONT)
+    with pytest.raises(ConnectionLost, match="closed"):
+        client.step(0)  # the late answer is never read
+
+
+def _signal_group(pid: int, signum: int) -> None:
+    try:
+        os.killpg(pid, signum)
+    except ProcessLookupError:
+        pass
+
+
+def _address(server: object) -> tuple[str, int]:
+    return server.host, server.port  # type: ignore[attr-defined]
+
+
+def _read_body(sock: socket.socket) -> bytes:
+    header = _recv(sock, 4)
+    return _recv(sock, struct.unpack(">I", header)[0])
+
+
+def _recv(sock: socket.socket, size: int) -> bytes:
+    data = b""
+    while len(data) < size:
+        chunk = sock.recv(size - len(data))
+        assert chunk, "closed"
+        data += chunk
+    return data
+
+
+def test_random_bytes_never_crash_the_protocol() -> None:
+    hypothesis = pytest.importorskip("hypothesis")
+    from hypothesis import strategies as st
+
+    from rlenv.errors import RemoteProtocolError
+    from rlenv.protocol import CONNECTION_CLOSED, NEED_DATA, Connection, Request, Role
+
+    @hypothesis.settings(max_examples=300, deadline=None)
+    @hypothesis.given(st.lists(st.binary(max_size=64), max_size=8))
+    def feed(chunks: list[bytes]) -> None:
+        connection = Connection(Role.SERVER, max_frame_size=1024)
+        for chunk in chunks:
+            connection.receive_data(chunk)
+            for _ in range(16):
+                try:
+                    message = connection.next_message()
+                except RemoteProtocolError as error:
+                    if error.fatal:
+                        return
+                    continue
+                if message is NEED_DATA:
+                    break
+                if message is CONNECTION_CLOSED:
+                    return
+                assert isinstance(message, Request)
+
+    feed()
+
+
+def test_random_requests_get_one_answer_each_and_the_environment_stays_sane() -> None:
+    hypothesis = pytest.importorskip("hypothesis")
+    from hypothesis import strategies as st
+
+    from rlenv_client import LocalClient
+
+    values = st.recursive(
+        st.none() | st.booleans() | st.integers(-3, 10) | st.floats(allow_nan=True)
+        | st.text(max_size=4),
+        lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=6), inner,
+                                                                     max_size=3),
+        max_leaves=6,
+    )
+    calls = st.lists(st.tuples(st.sampled_from(["reset", "step", "configure", "observe"]),
+                               values), max_size=12)
+
+    @hypothesis.settings(max_examples=150, deadline=None)
+    @hypothesis.given(calls)
+    def run(sequence: list[tuple[str, object]]) -> None:
+        with LocalClient("examples.cartpole:CartPoleEnvironment") as client:
+            for name, value in sequence:
+                try:
+                    if name == "reset":
+                        client.reset(seed=value if isinstance(value, int) and value >= 0
+                                     else None)
+                    elif name == "step":
+                        client.step(value)
+                    elif name == "configure":
+                        settings = value if isinstance(value, dict) else {"repeat_action": value}
+                        try:
+                            client.configure(**settings)
+                        except TypeError:  # agent= or world= that is not a map: refused here
+                            assert any(not isinstance(settings.get(part, {}), dict)
+                                       for part in ("agent", "world"))
+                    else:
+                        client.observe()
+                except RemoteError as error:
+                    assert error.code in set(ErrorCode) and not error.fatal
+            observation, _ = client.reset(seed=1)  # always recoverable
+            assert observation in client.observation_space
+            _, _, _, _, info = client.step(np.zeros(1, np.float32))
+            assert info["frames"] >= 1
+
+    run()
+

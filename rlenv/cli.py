@@ -47,6 +47,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     check = commands.add_parser("check", help="check a server the way trainers use it")
     check.add_argument("target", help="HOST:PORT of a running server, or MODULE:CLASS to start")
     check.add_argument("--timeout", type=float, default=30.0, help="seconds per answer")
+    check.add_argument("--compliance", action="store_true",
+                       help="also send hostile input (bad frames, a slow drip ...) and check "
+                       "that every probe gets its error while a client keeps stepping")
+    check.add_argument("--token", default=os.environ.get("RLENV_TOKEN"),
+                       help="the server's token (default: $RLENV_TOKEN)")
     check.set_defaults(run=_check)
 
     demo = commands.add_parser("demo", help="serve CartPole and balance it with a controller")
@@ -114,7 +119,8 @@ def _demo(args: argparse.Namespace) -> int:
 def _check(args: argparse.Namespace) -> int:
     from rlenv_client.checks import run_checks
 
-    results = run_checks(args.target, timeout=args.timeout)
+    results = run_checks(args.target, timeout=args.timeout, compliance=args.compliance,
+                         token=args.token)
     width = max(len(result.name) for result in results)
     for result in results:
         print(f"{result.status.upper():<5} {result.name:<{width}}  {result.detail}")

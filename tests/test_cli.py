@@ -87,11 +87,13 @@ def test_the_readme_example_environment_serves(serve: Serve, tmp_path: Path) -> 
 
 
 def test_check_reports_a_good_environment() -> None:
-    result = run("check", "examples.cartpole:CartPoleEnvironment")
+    result = run("check", "examples.cartpole:CartPoleEnvironment", "--compliance")
     assert result.returncode == 0, result.stdout + result.stderr
     lines = result.stdout.splitlines()
     assert lines[0].startswith("PASS  connect")
     assert any(line.startswith("PASS  gymnasium check_env") for line in lines)
+    assert any(line.startswith("PASS  compliance under hostile input") and "0 failures" in line
+               for line in lines)
     assert re.search(r"^\d+ passed, 0 failed$", lines[-1])
 
 

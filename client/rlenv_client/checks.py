@@ -103,16 +103,24 @@ CHECKS: list[tuple[str, Callable[[RemoteEnv], str]]] = [
 ]
 
 
-def run_checks(target: str, timeout: float = 30.0) -> list[CheckResult]:
+def run_checks(target: str, timeout: float = 30.0, compliance: bool = False,
+               token: str | None = None) -> list[CheckResult]:
     """Run every check against ``target``: ``HOST:PORT`` of a server, or ``MODULE:CLASS``.
+
+    Args:
+        target: the server to check.
+        timeout: seconds to wait for any answer.
+        compliance: also run the hostile-input compliance suite (:func:`rlenv.testing
+            .check_server`); the server must have no other controller.
+        token: the server's token, if it requires one.
 
     Returns:
         One result per check, plus a first "connect" result; if connecting fails, only that.
     """
     is_address = ":" in target and target.rsplit(":", 1)[1].isdigit()
     try:
-        env = RemoteEnv(address=target, timeout=timeout) if is_address else \
-            RemoteEnv(target, timeout=timeout)
+        env = RemoteEnv(address=target, timeout=timeout, token=token) if is_address else \
+            RemoteEnv(target, timeout=timeout, max_restarts=0)
     except Exception as error:
         return [CheckResult("connect", "fail", f"{type(error).__name__}: {error}")]
     hello = env.client.hello
@@ -126,6 +134,21 @@ def run_checks(target: str, timeout: float = 30.0) -> list[CheckResult]:
                 results.append(CheckResult(name, "skip", str(skip)))
             except Exception as error:
                 results.append(CheckResult(name, "fail", f"{type(error).__name__}: {error}"))
+        if compliance:
+            results.append(_compliance(env, token, timeout))
     finally:
         env.close()
     return results
+
+
+def _compliance(env: RemoteEnv, token: str | None, timeout: float) -> CheckResult:
+    from rlenv.testing import check_server
+
+    host, port = env.client.address.rsplit(":", 1)
+    env.client.close()  # release control: the suite brings its own controller
+    server = env.server
+    report = check_server(host, int(port), token=token, timeout=timeout,
+                          pid=server.pid if server is not None else None)
+    detail = report.summary() + "".join(f"\n      - {line}" for line in report.failures)
+    return CheckResult("compliance under hostile input", "pass" if report.passed else "fail",
+                       detail)

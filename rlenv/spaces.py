@@ -168,6 +168,8 @@ def _check_integers(array: np.ndarray, path: str) -> None:
 def _(space: spaces.Box, value: Any, path: str = "action") -> np.ndarray:
     array = _as_array(value, path)
     _check_shape(array, space.shape, path)
+    if array.dtype.kind == "b" and space.dtype.kind != "b":
+        raise SpaceMismatch(f"{path} has dtype bool, expected {space.dtype}")
     if space.dtype.kind in "biu":
         _check_integers(array, path)
         _check_bounds(array, space, path)  # exactly, before a cast could wrap around

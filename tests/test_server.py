@@ -104,6 +104,8 @@ def test_wrong_actions_get_precise_errors_and_change_nothing(client: Client) -> 
         "action[0] is inf, expected a finite number": [float("inf")],
         "action[0] is 3.0, outside the bounds [-1.0, 1.0]": [3.0],
         "action must be an array or a number, got str": "left",
+        "action has dtype bool, expected float32": np.array([True]),
+        "action must be numeric, got dtype <U1": np.array(["x"]),
     }
     for message, action in bad_actions.items():
         with pytest.raises(RemoteError) as error:

@@ -26,7 +26,14 @@ from gymnasium import spaces
 from rlenv.errors import ErrorCode, RemoteError
 from rlenv.protocol import Connection, Hello, Role, pack, unpack
 
-__all__ = ["ComplianceReport", "ManualClock", "check_server", "connection_pair"]
+__all__ = [
+    "ComplianceReport",
+    "ManualClock",
+    "check_server",
+    "connection_pair",
+    "frame",
+    "read_frame",
+]
 
 
 class ManualClock:
@@ -178,7 +185,7 @@ class _Suite:
             return lambda: self.expect_fatal(data, code, words)
 
         def answered(body: bytes, code: ErrorCode, words: str) -> Callable[[], None]:
-            return lambda: self.expect_errors([_frame(body)], code, words)
+            return lambda: self.expect_errors([frame(body)], code, words)
 
         http = b"GET / HTTP/1.1\r\nHost: localhost\r\n\r\n"
         tls = b"\x16\x03\x01\x00\xa5\x01\x00\x00\xa1\x03\x03" + bytes(range(32))
@@ -212,11 +219,11 @@ class _Suite:
 
     def connect(self) -> socket.socket:
         sock = socket.create_connection(self.address, timeout=self.timeout)
-        hello = _read_frame(sock)
+        hello = read_frame(sock)
         assert "hello" in hello, f"expected a hello, got {hello!r:.100}"
         if hello["hello"].get("token_required"):
-            sock.sendall(_frame(pack({"id": 0, "token": self.token or ""})))
-            reply = _read_frame(sock)
+            sock.sendall(frame(pack({"id": 0, "token": self.token or ""})))
+            reply = read_frame(sock)
             assert "error" not in reply, f"authentication failed: {reply!r:.200}"
         return sock
 
@@ -224,7 +231,7 @@ class _Suite:
         with self.connect() as sock:
             sock.sendall(data)
             self.report.frames_tried += 1
-            reply = _read_frame(sock)
+            reply = read_frame(sock)
             _assert_error(reply, code, words, fatal=True)
             assert _closed(sock), "the server kept a connection whose framing broke"
 
@@ -233,7 +240,7 @@ class _Suite:
             for data in frames:
                 sock.sendall(data)
                 self.report.frames_tried += 1
-                reply = _read_frame(sock)
+                reply = read_frame(sock)
                 if code is not None:
                     _assert_error(reply, code, words, fatal=False)
 
@@ -241,16 +248,16 @@ class _Suite:
         with self.connect() as sock:
             for _ in range(count):
                 body = self.rng.randbytes(self.rng.randrange(0, 256))
-                sock.sendall(_frame(body))
+                sock.sendall(frame(body))
                 self.report.frames_tried += 1
-                reply = _read_frame(sock)
+                reply = read_frame(sock)
                 assert "error" in reply or "id" in reply, f"odd reply {reply!r:.100}"
                 if reply.get("error", {}).get("fatal"):
                     return  # a frame that broke the framing ends this connection, as it must
 
     def truncated_then_gone(self) -> None:
         with self.connect() as sock:
-            sock.sendall(_frame(pack({"id": 1, "observation": {"agent": {}}}))[:-3])
+            sock.sendall(frame(pack({"id": 1, "observation": {"agent": {}}}))[:-3])
             self.report.frames_tried += 1
 
     def slow_drip(self, deadline: float) -> None:
@@ -259,7 +266,7 @@ class _Suite:
             started = time.monotonic()
             sock.sendall(b"\x00\x00")  # half a length prefix, and never the rest
             self.report.frames_tried += 1
-            reply = _read_frame(sock)
+            reply = read_frame(sock)
             waited = time.monotonic() - started
             _assert_error(reply, ErrorCode.TIMEOUT, "not completed", fatal=True)
             assert waited < deadline * 3 + 1, f"dropped only after {waited:.1f} s"
@@ -314,11 +321,17 @@ class _Suite:
             raise AssertionError(f"configuration {key!r} was accepted")
 
 
-def _frame(body: bytes) -> bytes:
+def frame(body: bytes) -> bytes:
+    """``body`` with its 4-byte length prefix: one frame, to send on a raw socket."""
     return struct.pack(">I", len(body)) + body
 
 
-def _read_frame(sock: socket.socket) -> dict[str, Any]:
+def read_frame(sock: socket.socket) -> dict[str, Any]:
+    """Read one frame from a raw socket and decode it (it must hold a map).
+
+    Raises:
+        AssertionError: the peer closed the connection first, or sent something else.
+    """
     header = _recv_exactly(sock, 4)
     message = unpack(_recv_exactly(sock, struct.unpack(">I", header)[0]))
     assert isinstance(message, dict), f"the server sent a non-map {message!r:.100}"

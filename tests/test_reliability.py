@@ -17,8 +17,8 @@ from conftest import Serve
 
 from rlenv.communication import Communication, Limits
 from rlenv.errors import ErrorCode
-from rlenv.protocol import Hello, unpack
-from rlenv.testing import ManualClock, check_server
+from rlenv.protocol import Hello
+from rlenv.testing import ManualClock, check_server, read_frame
 from rlenv_client import Client, ConnectionLost, RemoteEnv, RemoteError
 
 
@@ -60,9 +60,9 @@ def test_a_token_guards_the_server(serve: Serve, monkeypatch: pytest.MonkeyPatch
 def test_frames_stay_small_until_authenticated(serve: Serve) -> None:
     server = serve(args=["--token", "s3cret"])
     with socket.create_connection((server.host, server.port), timeout=5) as raw:
-        assert unpack(_read_body(raw))["hello"]["token_required"] is True
+        assert read_frame(raw)["hello"]["token_required"] is True
         raw.sendall(struct.pack(">I", 100_000) + b"\x00" * 10)
-        reply = unpack(_read_body(raw))
+        reply = read_frame(raw)
         assert reply["error"]["code"] == ErrorCode.BAD_FRAME and reply["error"]["fatal"]
         assert "exceeds the limit of 65536" in reply["error"]["message"]
 
@@ -86,8 +86,8 @@ def test_a_server_on_all_interfaces_with_a_token(serve: Serve) -> None:
 def test_an_idle_client_is_dropped_with_a_reason(serve: Serve) -> None:
     server = serve(args=["--idle-timeout", "0.3"])
     with socket.create_connection((server.host, server.port), timeout=10) as raw:
-        _read_body(raw)  # the hello
-        reply = unpack(_read_body(raw))  # blocks until the server gives up on us
+        read_frame(raw)  # the hello
+        reply = read_frame(raw)  # blocks until the server gives up on us
         assert reply["error"]["code"] == ErrorCode.TIMEOUT and reply["error"]["fatal"]
         assert "no request for 0.3 s" in reply["error"]["message"]
     with Client(server.host, server.port) as client:  # and the next client is served
@@ -107,18 +107,18 @@ def test_deadlines_follow_the_injected_clock() -> None:
         dripping = socket.create_connection((host, port), timeout=5)
         idle = socket.create_connection((host, port), timeout=5)
         assert endpoint.poll(0) is None  # accepts both, sends the hellos
-        _read_body(dripping)
-        _read_body(idle)
+        read_frame(dripping)
+        read_frame(idle)
         dripping.sendall(b"\x00\x00\x00")
         assert endpoint.poll(0) is None
         clock.advance(1.9)
         assert endpoint.poll(0) is None and endpoint.connections == 2
         clock.advance(0.2)
         assert endpoint.poll(0) is None and endpoint.connections == 1  # the drip is gone
-        assert unpack(_read_body(dripping))["error"]["code"] == ErrorCode.TIMEOUT
+        assert read_frame(dripping)["error"]["code"] == ErrorCode.TIMEOUT
         clock.advance(3.0)  # 5.1 s since the idle client's connection
         assert endpoint.poll(0) is None and endpoint.connections == 0
-        assert "no request for 5.0 s" in unpack(_read_body(idle))["error"]["message"]
+        assert "no request for 5.0 s" in read_frame(idle)["error"]["message"]
     finally:
         endpoint.close()
 
@@ -203,20 +203,6 @@ def _signal_group(pid: int, signum: int) -> None:
 
 def _address(server: object) -> tuple[str, int]:
     return server.host, server.port  # type: ignore[attr-defined]
-
-
-def _read_body(sock: socket.socket) -> bytes:
-    header = _recv(sock, 4)
-    return _recv(sock, struct.unpack(">I", header)[0])
-
-
-def _recv(sock: socket.socket, size: int) -> bytes:
-    data = b""
-    while len(data) < size:
-        chunk = sock.recv(size - len(data))
-        assert chunk, "closed"
-        data += chunk
-    return data
 
 
 def test_random_bytes_never_crash_the_protocol() -> None:

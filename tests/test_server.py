@@ -12,7 +12,8 @@ import pytest
 from conftest import Serve
 
 from examples.cartpole import CartPoleAgent, controller
-from rlenv.protocol import PROTOCOL_VERSION, Connection, Request, Role, pack, unpack
+from rlenv.protocol import PROTOCOL_VERSION, Connection, Request, Role, pack
+from rlenv.testing import read_frame
 from rlenv_client import (
     Client,
     ConnectionLost,
@@ -271,9 +272,9 @@ def test_nothing_listening_gives_connection_lost() -> None:
 
 def test_broken_framing_is_answered_and_the_server_keeps_serving(server: ServerProcess) -> None:
     with socket.create_connection((server.host, server.port), timeout=5) as raw:
-        _read_frame(raw)  # the hello
+        read_frame(raw)  # the hello
         raw.sendall(b"GET / HTTP/1.1\r\nHost: x\r\n\r\n")
-        reply = _read_frame(raw)
+        reply = read_frame(raw)
         assert reply["error"]["code"] == ErrorCode.BAD_FRAME
         assert "exceeds the limit" in reply["error"]["message"]
         assert reply["error"]["fatal"] is True
@@ -285,7 +286,7 @@ def test_broken_framing_is_answered_and_the_server_keeps_serving(server: ServerP
 
 def test_bad_frames_with_intact_framing_keep_the_connection(server: ServerProcess) -> None:
     with socket.create_connection((server.host, server.port), timeout=5) as raw:
-        _read_frame(raw)
+        read_frame(raw)
         for body, code, words in [
             (b"\xc1", ErrorCode.BAD_FRAME, "not valid msgpack"),
             (pack({"id": 1}) + b"\x00", ErrorCode.BAD_FRAME, "trailing bytes"),
@@ -294,14 +295,14 @@ def test_bad_frames_with_intact_framing_keep_the_connection(server: ServerProces
             (pack({"id": 3, "reset": {"seed": -1}}), ErrorCode.BAD_REQUEST, "reset.seed"),
         ]:
             raw.sendall(struct.pack(">I", len(body)) + body)
-            reply = _read_frame(raw)
+            reply = read_frame(raw)
             assert reply["error"]["code"] == code
             assert words in reply["error"]["message"]
             assert reply["error"]["fatal"] is False
         good = Request(id=4, reset={"seed": 0}, observation={"agent": {}}).to_wire()
         body = pack(good)
         raw.sendall(struct.pack(">I", len(body)) + body)
-        reply = _read_frame(raw)
+        reply = read_frame(raw)
         assert reply["id"] == 4 and "error" not in reply
 
 
@@ -380,19 +381,4 @@ def test_closing_a_server_leaves_no_process(serve: Serve) -> None:
 def _address(server: ServerProcess) -> tuple[str, int]:
     return server.host, server.port
 
-
-def _read_frame(sock: socket.socket) -> dict:
-    header = _recv_exactly(sock, 4)
-    message = unpack(_recv_exactly(sock, struct.unpack(">I", header)[0]))
-    assert isinstance(message, dict)
-    return message
-
-
-def _recv_exactly(sock: socket.socket, size: int) -> bytes:
-    data = b""
-    while len(data) < size:
-        chunk = sock.recv(size - len(data))
-        assert chunk, "connection closed"
-        data += chunk
-    return data
 

@@ -57,11 +57,8 @@ class CountingWorld(RLEnvWorld):
         return {"ticks": self.ticks}
 
 
-class FaultyAgent(RLAgent):
-    """Raises inside the tick for action 1, inside get_data for action 2; ends at tick 10."""
-
-    action_space = spaces.Discrete(3)
-    observation_space = spaces.Box(0, 1000, (1,), np.int64)
+class _ActionAgent(RLAgent):
+    """Remembers its last (discrete) action; the subclasses misbehave on some of them."""
 
     def __init__(self) -> None:
         super().__init__("Agent")
@@ -72,8 +69,15 @@ class FaultyAgent(RLAgent):
         self.action = 0
 
     def set_action(self, action: Any) -> None:
-        """Remember the action (1 and 2 misbehave)."""
+        """Remember the action."""
         self.action = int(action)
+
+
+class FaultyAgent(_ActionAgent):
+    """Raises inside the tick for action 1, inside get_data for action 2; ends at tick 10."""
+
+    action_space = spaces.Discrete(3)
+    observation_space = spaces.Box(0, 1000, (1,), np.int64)
 
     def _physics_process(self, delta: float) -> None:
         if self.action == 1:
@@ -121,23 +125,11 @@ class WrongShapeEnvironment(RLEnvironment):
         self.add_child(CountingWorld())
 
 
-class TickAgent(RLAgent):
+class TickAgent(_ActionAgent):
     """Observes how many ticks ran since the reset; never terminates; NaN on action 1."""
 
     action_space = spaces.Discrete(2)
     observation_space = spaces.Box(0.0, 1e9, (1,), np.float64)
-
-    def __init__(self) -> None:
-        super().__init__("Agent")
-        self.action = 0
-
-    def reset(self, arguments: Any) -> None:
-        """Forget the last action."""
-        self.action = 0
-
-    def set_action(self, action: Any) -> None:
-        """Remember the action (1 makes the observation NaN)."""
-        self.action = int(action)
 
     def get_data(self, observation_request: Mapping[str, Any]) -> np.ndarray:
         """Ticks since the reset, or NaN after action 1."""

@@ -1,4 +1,4 @@
-"""The ``rlenv`` command: ``rlenv serve``, ``rlenv check`` and ``rlenv demo``."""
+"""The ``rlenv`` command: ``rlenv serve``, ``check``, ``bench`` and ``demo``."""
 
 from __future__ import annotations
 
@@ -53,6 +53,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     check.add_argument("--token", default=os.environ.get("RLENV_TOKEN"),
                        help="the server's token (default: $RLENV_TOKEN)")
     check.set_defaults(run=_check)
+
+    bench = commands.add_parser("bench", help="measure rlenv against same-run baselines")
+    bench.add_argument("--rounds", type=int, default=5, help="rounds per figure (median)")
+    bench.add_argument("--steps", type=int, default=2000, help="steps per round")
+    bench.add_argument("--quick", action="store_true", help="fewer vector sizes")
+    bench.add_argument("--json", metavar="PATH", help="also write the figures as JSON")
+    bench.set_defaults(run=_bench)
 
     demo = commands.add_parser("demo", help="serve CartPole and balance it with a controller")
     demo.add_argument("--episodes", type=int, default=5, help="episodes to run (default 5)")
@@ -128,6 +135,17 @@ def _check(args: argparse.Namespace) -> int:
     passed = sum(result.status == "pass" for result in results)
     print(f"{passed} passed, {failed} failed")
     return 1 if failed else 0
+
+
+def _bench(args: argparse.Namespace) -> int:
+    from rlenv_client.bench import format_table, run_benchmarks, to_json
+
+    figures = run_benchmarks(rounds=args.rounds, steps=args.steps, quick=args.quick)
+    print(format_table(figures))
+    if args.json:
+        with open(args.json, "w") as out:
+            out.write(to_json(figures) + "\n")
+    return 0
 
 
 def _exit_on_signal(signum: int, frame: FrameType | None) -> None:

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import json
 import re
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 from conftest import Serve
 
 from rlenv_client import Client
@@ -105,3 +107,20 @@ def test_check_fails_a_broken_environment(serve: Serve) -> None:
     assert re.search(r"^\d+ passed, [1-9]\d* failed$", result.stdout.splitlines()[-1])
     result = run("check", "127.0.0.1:1")
     assert result.returncode == 1 and "FAIL  connect" in result.stdout
+
+
+def test_bench_prints_every_figure_with_its_baseline(tmp_path: Path) -> None:
+    out = tmp_path / "figures.json"
+    result = run("bench", "--rounds", "1", "--steps", "40", "--quick", "--json", str(out),
+                 timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert "... (a) msgpack ping-pong" in result.stderr  # progress on stderr
+    figures = {figure["name"]: figure for figure in json.loads(out.read_text())}
+    for name in ("msgpack ping-pong over loopback", "remote CartPole Client.step (repeat 4)",
+                 "remote 84x84x3 observation step", "gymnasium AsyncVectorEnv(8) CartPole-v1",
+                 "RemoteVectorEnv 4 servers (repeat 1)", "p99 remote step latency (repeat 4)",
+                 "one more CartPole instance in a process"):
+        assert name in figures and figures[name]["value"] > 0, name
+        assert name in result.stdout
+    step = figures["remote CartPole Client.step (repeat 4)"]
+    assert step["ratio"] == pytest.approx(step["value"] / step["baseline"])

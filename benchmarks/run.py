@@ -1,0 +1,8 @@
+"""Run rlenv's benchmarks: ``python benchmarks/run.py [--json PATH]`` (same as ``rlenv bench``)."""
+
+import sys
+
+from rlenv.cli import main
+
+if __name__ == "__main__":
+    raise SystemExit(main(["bench", *sys.argv[1:]]))

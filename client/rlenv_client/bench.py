@@ -1,0 +1,281 @@
+"""``rlenv bench``: rlenv's figures, each beside a baseline measured in the same run.
+
+Every figure is the median of several rounds and is printed with its baseline and the ratio:
+
+- (a) a bare msgpack request/response over loopback (the floor: a Python echo server);
+- (b) in-process CartPole steps (no socket) against (a);
+- (c) remote ``Client.step`` on CartPole at repeat_action 1 and 4, against (a);
+- (d) an 84x84x3 uint8 observation (``examples.pixels``) against a ping-pong carrying the same
+  bytes;
+- (e) ``RemoteVectorEnv`` throughput by number of environments (one server each);
+- (f) gymnasium's ``AsyncVectorEnv`` with 8 ``CartPole-v1`` on the same machine;
+- (g) p50 / p99 latency of a remote step against the ping-pong's;
+- (h) memory of one server process, and per extra environment instance in one process.
+
+Progress goes to stderr, the table to stdout, and everything to JSON with ``--json PATH``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import statistics
+import struct
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from rlenv.protocol import pack, unpack
+
+__all__ = ["Figure", "run_benchmarks"]
+
+CARTPOLE = "examples.cartpole:CartPoleEnvironment"
+PIXELS = "examples.pixels:PixelsEnvironment"
+
+_ECHO_SERVER = """
+import socket, struct, sys
+listener = socket.create_server(("127.0.0.1", 0))
+print(listener.getsockname()[1], flush=True)
+conn, _ = listener.accept()
+conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+reply = sys.stdin.buffer.read()
+def recv_exactly(n):
+    data = b""
+    while len(data) < n:
+        chunk = conn.recv(min(n - len(data), 65536))
+        if not chunk:
+            raise SystemExit
+        data += chunk
+    return data
+while True:
+    size = struct.unpack(">I", recv_exactly(4))[0]
+    recv_exactly(size)
+    conn.sendall(reply)
+"""
+
+
+@dataclass(frozen=True)
+class Figure:
+    """One measurement with its baseline: ``value`` and ``baseline`` in the same ``unit``."""
+
+    name: str
+    value: float
+    unit: str
+    baseline_name: str = ""
+    baseline: float | None = None
+
+    @property
+    def ratio(self) -> float | None:
+        """``value / baseline`` (higher is better for rates)."""
+        return None if not self.baseline else self.value / self.baseline
+
+
+def _progress(message: str) -> None:
+    print(f"... {message}", file=sys.stderr, flush=True)
+
+
+def _median_rate(rounds: int, steps: int, run: Callable[[int], None]) -> float:
+    rates = []
+    for _ in range(rounds):
+        start = time.perf_counter()
+        run(steps)
+        rates.append(steps / (time.perf_counter() - start))
+    return statistics.median(rates)
+
+
+def _frame(message: object) -> bytes:
+    body = pack(message)
+    return struct.pack(">I", len(body)) + body
+
+
+class _PingPong:
+    """A Python echo server answering every frame with a fixed reply (the floor)."""
+
+    def __init__(self, reply: bytes) -> None:
+        self.process = subprocess.Popen([sys.executable, "-c", _ECHO_SERVER],
+                                        stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+        assert self.process.stdin is not None and self.process.stdout is not None
+        port = int(self.process.stdout.readline())
+        self.process.stdin.write(reply)
+        self.process.stdin.close()
+        self.sock = socket.create_connection(("127.0.0.1", port))
+        self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self.reply_size = len(reply) - 4
+
+    def round_trip(self, request: bytes) -> None:
+        self.sock.sendall(request)
+        data = self.sock.recv(65536)
+        while len(data) < self.reply_size + 4:
+            data += self.sock.recv(65536)
+        unpack(data[4:])
+
+    def close(self) -> None:
+        self.sock.close()
+        self.process.kill()
+        self.process.wait()
+
+
+def _step_request(action: Any) -> bytes:
+    return _frame({"id": 1, "action": action, "observation": {"agent": {}}})
+
+
+def _step_reply(observation: Any) -> bytes:
+    return _frame({"id": 1, "observation": {"agent": observation}, "reward": 1.0,
+                   "terminated": False, "truncated": False, "info": {}, "frames": 4})
+
+
+def _ping_pong(request: bytes, reply: bytes, rounds: int, steps: int,
+               latencies: list[float] | None = None) -> float:
+    echo = _PingPong(reply)
+    try:
+        def run(n: int) -> None:
+            for _ in range(n):
+                started = time.perf_counter()
+                echo.round_trip(request)
+                if latencies is not None:
+                    latencies.append(time.perf_counter() - started)
+        return _median_rate(rounds, steps, run)
+    finally:
+        echo.close()
+
+
+def _client_steps(client: Any, action: Any, repeat: int | None, rounds: int, steps: int,
+                  latencies: list[float] | None = None) -> float:
+    client.reset(seed=0)
+
+    def run(n: int) -> None:
+        for _ in range(n):
+            started = time.perf_counter()
+            client.step(action, repeat)
+            if latencies is not None:
+                latencies.append(time.perf_counter() - started)
+    return _median_rate(rounds, steps, run)
+
+
+def _rss_kib(pid: int) -> int:
+    with open(f"/proc/{pid}/status") as status:
+        for line in status:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1])
+    raise RuntimeError("no VmRSS")
+
+
+def run_benchmarks(rounds: int = 5, steps: int = 2000, quick: bool = False) -> list[Figure]:
+    """Measure every figure (see the module docstring); ``quick`` uses fewer environments."""
+    from rlenv_client import Client, LocalClient, RemoteVectorEnv, ServerProcess
+
+    figures: list[Figure] = []
+    cartpole_action = np.zeros(1, np.float32)
+    cartpole_obs = np.zeros(5, np.float32)
+
+    _progress("(a) msgpack ping-pong over loopback, CartPole-sized frames")
+    pong_latencies: list[float] = []
+    floor = _ping_pong(_step_request(cartpole_action), _step_reply(cartpole_obs), rounds, steps,
+                       pong_latencies)
+    figures.append(Figure("msgpack ping-pong over loopback", floor, "round trips/s"))
+
+    _progress("(b) in-process CartPole")
+    with LocalClient(CARTPOLE) as local:
+        local.configure(world={"track_limit": 1e9}, agent={"angle_limit": 1e9})
+        rate = _client_steps(local, cartpole_action, 4, rounds, steps)
+    figures.append(Figure("in-process CartPole step (repeat 4)", rate, "steps/s",
+                          "msgpack ping-pong", floor))
+
+    _progress("(c, g) remote CartPole steps")
+    step_latencies: list[float] = []
+    with ServerProcess(CARTPOLE) as server, Client(server.host, server.port) as client:
+        client.configure(world={"track_limit": 1e9}, agent={"angle_limit": 1e9})
+        for repeat in (1, 4):
+            rate = _client_steps(client, cartpole_action, repeat, rounds, steps,
+                                 step_latencies if repeat == 4 else None)
+            figures.append(Figure(f"remote CartPole Client.step (repeat {repeat})", rate,
+                                  "steps/s", "msgpack ping-pong", floor))
+        cartpole_rss = _rss_kib(server.pid)
+    for quantile in (50, 99):
+        mine = float(np.percentile(step_latencies, quantile)) * 1e6
+        theirs = float(np.percentile(pong_latencies, quantile)) * 1e6
+        figures.append(Figure(f"p{quantile} remote step latency (repeat 4)", mine, "us",
+                              f"p{quantile} ping-pong", theirs))
+
+    _progress("(d) 84x84x3 uint8 observations")
+    image = np.zeros((84, 84, 3), np.uint8)
+    image_floor = _ping_pong(_step_request(0), _step_reply(image), rounds, steps // 2)
+    with ServerProcess(PIXELS) as server, Client(server.host, server.port) as client:
+        rate = _client_steps(client, 0, 1, rounds, steps // 2)
+    figures.append(Figure("remote 84x84x3 observation step", rate, "steps/s",
+                          "ping-pong carrying the same bytes", image_floor))
+
+    _progress("(f) gymnasium AsyncVectorEnv, 8 x CartPole-v1")
+    import gymnasium
+
+    async_envs = gymnasium.vector.AsyncVectorEnv([lambda: gymnasium.make("CartPole-v1")] * 8)
+    try:
+        async_envs.reset(seed=0)
+        async_envs.action_space.seed(0)
+        actions = [async_envs.action_space.sample() for _ in range(64)]
+
+        def async_run(n: int) -> None:
+            for i in range(n):
+                async_envs.step(actions[i % 64])
+        async_rate = 8 * _median_rate(rounds, steps // 4, async_run)
+    finally:
+        async_envs.close()
+    figures.append(Figure("gymnasium AsyncVectorEnv(8) CartPole-v1", async_rate, "env-steps/s"))
+
+    for count in (1, 2, 4) if quick else (1, 2, 4, 8):
+        _progress(f"(e) RemoteVectorEnv, {count} CartPole servers")
+        with RemoteVectorEnv(count, CARTPOLE, repeat_action=1) as envs:
+            envs.reset(seed=0)
+            batch = np.zeros((count, 1), np.float32)
+
+            def vector_run(n: int, envs: Any = envs, batch: np.ndarray = batch) -> None:
+                for _ in range(n):
+                    envs.step(batch)
+            rate = count * _median_rate(rounds, steps // 4, vector_run)
+        figures.append(Figure(f"RemoteVectorEnv {count} servers (repeat 1)", rate, "env-steps/s",
+                              "AsyncVectorEnv(8) CartPole-v1", async_rate))
+
+    _progress("(h) memory")
+    figures.append(Figure("one CartPole server process, resident", cartpole_rss / 1024, "MiB"))
+    figures.append(Figure("one more CartPole instance in a process", _instance_kib(), "KiB"))
+    return figures
+
+
+def _instance_kib(count: int = 50) -> float:
+    """Resident memory per extra CartPole instance, each in its own tree, in this process."""
+    from rlenv_client import LocalClient
+
+    first = LocalClient(CARTPOLE)
+    first.reset(seed=0)
+    before = _rss_kib(os.getpid())
+    extra = [LocalClient(CARTPOLE) for _ in range(count)]
+    for instance in extra:
+        instance.reset(seed=0)
+    after = _rss_kib(os.getpid())
+    for instance in [first, *extra]:
+        instance.close()
+    return (after - before) / count
+
+
+def format_table(figures: list[Figure]) -> str:
+    """The figures as a fixed-width table."""
+    lines = [f"{'measurement':<46}{'value':>14}  {'unit':<14}{'x baseline':>11}  baseline"]
+    for figure in figures:
+        ratio = "" if figure.ratio is None else f"{figure.ratio:.2f}"
+        baseline = "" if figure.baseline is None else \
+            f"{figure.baseline_name} ({figure.baseline:,.0f} {figure.unit})"
+        lines.append(f"{figure.name:<46}{figure.value:>14,.1f}  {figure.unit:<14}{ratio:>11}  "
+                     f"{baseline}")
+    return "\n".join(lines)
+
+
+def to_json(figures: list[Figure]) -> str:
+    """The figures as JSON (a list of objects, ratios included)."""
+    return json.dumps([{**asdict(figure), "ratio": figure.ratio} for figure in figures],
+                      indent=2)

@@ -44,12 +44,13 @@ class Signal:
 class BoundSignal:
     """One object's signal: its connections, and :meth:`emit` to call them in connection order."""
 
-    __slots__ = ("_connections", "name", "owner")
+    __slots__ = ("_connections", "_one_shots", "name", "owner")
 
     def __init__(self, owner: object, name: str) -> None:
         self.owner = owner
         self.name = name
         self._connections: list[tuple[Callable[..., Any], bool]] = []
+        self._one_shots = 0
 
     def connect(self, callback: Callable[..., Any], *, one_shot: bool = False) -> None:
         """Call ``callback`` on every emission (only the next one if ``one_shot``).
@@ -60,6 +61,7 @@ class BoundSignal:
         if self.is_connected(callback):
             raise ValueError(f"{callback!r} is already connected to signal {self.name!r}")
         self._connections.append((callback, one_shot))
+        self._one_shots += one_shot
 
     def disconnect(self, callback: Callable[..., Any]) -> None:
         """Stop calling ``callback``.
@@ -67,9 +69,10 @@ class BoundSignal:
         Raises:
             ValueError: ``callback`` is not connected to this signal.
         """
-        for index, (connected, _) in enumerate(self._connections):
+        for index, (connected, one_shot) in enumerate(self._connections):
             if connected == callback:
                 del self._connections[index]
+                self._one_shots -= one_shot
                 return
         raise ValueError(f"{callback!r} is not connected to signal {self.name!r}")
 
@@ -87,11 +90,14 @@ class BoundSignal:
         Callables connected or disconnected while the signal is being emitted take effect from
         the next emission.
         """
-        if not self._connections:
+        connections = self._connections
+        if not connections:
             return
-        connections = self._connections[:]
-        if any(one_shot for _, one_shot in connections):
-            self._connections = [c for c in self._connections if not c[1]]
+        if self._one_shots:
+            self._connections = [c for c in connections if not c[1]]
+            self._one_shots = 0
+        else:
+            connections = connections[:]
         for callback, _ in connections:
             callback(*args)
 

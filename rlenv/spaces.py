@@ -172,13 +172,19 @@ def _(space: spaces.Box, value: Any, path: str = "action") -> np.ndarray:
         raise SpaceMismatch(f"{path} has dtype bool, expected {space.dtype}")
     if space.dtype.kind in "biu":
         _check_integers(array, path)
-        _check_bounds(array, space, path)  # exactly, before a cast could wrap around
+        if not ((array >= space.low) & (array <= space.high)).all():
+            _check_bounds(array, space, path)  # exactly, before a cast could wrap around
         return array.astype(space.dtype, copy=False)
+    cast = array.astype(space.dtype, copy=False)
+    # The happy path in two ufuncs: NaN is never inside the bounds, and a finite sum rules out
+    # infinities that infinite bounds would let through (a huge finite sum may only overflow
+    # to inf, which sends us down the careful path).
+    if ((cast >= space.low) & (cast <= space.high)).all() and np.isfinite(cast.sum()):
+        return cast
     _check_finite(array, path)
-    array = array.astype(space.dtype, copy=False)
-    _check_finite(array, path, f" (too large for {space.dtype})")
-    _check_bounds(array, space, path)
-    return array
+    _check_finite(cast, path, f" (too large for {space.dtype})")
+    _check_bounds(cast, space, path)
+    return cast
 
 
 def _check_finite(array: np.ndarray, path: str, why: str = "") -> None:
@@ -306,7 +312,7 @@ def find_non_finite(value: Any, path: str = "") -> str | None:
     Returns:
         The path of the first such element, e.g. ``"[2]"`` or ``"['pos'][0]"``, or ``None``.
     """
-    if isinstance(value, np.ndarray):
+    if type(value) is np.ndarray:
         if value.dtype.kind in "fc":
             finite = np.isfinite(value)
             if not finite.all():

@@ -83,12 +83,13 @@ class SceneTree(SignalOwner):
             RuntimeError: deferred calls keep deferring more, without end.
         """
         queue = self._deferred
-        for _ in range(_MAX_DEFERRED_PER_FLUSH):
-            if not queue:
-                return
+        calls = 0
+        while queue:
             callback, args = queue.popleft()
             callback(*args)
-        raise RuntimeError("deferred calls keep deferring more calls; giving up")
+            calls += 1
+            if calls > _MAX_DEFERRED_PER_FLUSH:
+                raise RuntimeError("deferred calls keep deferring more calls; giving up")
 
     def get_nodes_in_group(self, group: str) -> list[Node]:
         """The nodes of the tree in ``group``, in tree order."""

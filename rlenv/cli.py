@@ -27,6 +27,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     serve.add_argument("--host", default=DEFAULT_HOST, help=f"address to bind (default "
                        f"{DEFAULT_HOST})")
     serve.add_argument("--port", type=int, default=0, help="port to bind (default 0: any free)")
+    serve.add_argument("--instances", type=int, default=1,
+                       help="independent copies of the environment to host, stepped together "
+                       "by batch requests (default 1)")
     serve.add_argument("--lifeline", type=int, default=None, metavar="FD",
                        help="exit when this inherited pipe closes (set by ServerProcess)")
     serve.add_argument("--token", default=os.environ.get("RLENV_TOKEN"),
@@ -84,7 +87,7 @@ def _serve(args: argparse.Namespace) -> int:
                     idle_timeout=args.idle_timeout or None, max_connections=args.max_connections)
     try:
         server = Server(args.target, host=args.host, port=args.port, lifeline=args.lifeline,
-                        token=args.token, limits=limits)
+                        token=args.token, limits=limits, instances=args.instances)
     except InsecureBindError as error:
         print(f"rlenv serve: {error}", file=sys.stderr)
         return 2

@@ -448,8 +448,12 @@ class Communication:
         peer.sock.close()
 
 
-def _controls(request: Request) -> bool:
+def _controls(request: Request | None) -> bool:
     """Whether ``request`` changes the environment (only its controller may send those)."""
+    if request is None:
+        return False
+    if request.batch is not None:
+        return any(_controls(part) for part in request.batch)
     return request.config is not None or request.reset is not None or request.action is not None
 
 

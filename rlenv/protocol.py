@@ -30,7 +30,7 @@ from __future__ import annotations
 import struct
 from collections import deque
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import Enum
 from typing import Any, Final
 
@@ -48,6 +48,7 @@ from rlenv.spaces import space_from_spec, space_to_spec
 
 __all__ = [
     "CONNECTION_CLOSED",
+    "BatchResponse",
     "DEFAULT_MAX_FRAME_SIZE",
     "NDARRAY_EXT",
     "NEED_DATA",
@@ -226,6 +227,7 @@ class Hello:
     repeat_action: int = 4
     render_modes: tuple[str, ...] = ()
     token_required: bool = False
+    instances: int = 1
     protocol: tuple[int, int] = PROTOCOL_VERSION
 
     def to_wire(self) -> dict[str, Any]:
@@ -241,6 +243,7 @@ class Hello:
                 "repeat_action": self.repeat_action,
                 "render_modes": list(self.render_modes),
                 "token_required": self.token_required,
+                "instances": self.instances,
             }
         }
 
@@ -273,6 +276,7 @@ class Hello:
                 repeat_action=int(body["repeat_action"]),
                 render_modes=tuple(body["render_modes"]),
                 token_required=bool(body.get("token_required", False)),
+                instances=int(body.get("instances", 1)),
                 protocol=(int(version[0]), int(version[1])),
             )
         except (KeyError, TypeError, ValueError) as exc:
@@ -285,7 +289,9 @@ class Request:
 
     ``None`` means the part is absent. ``repeat_action`` overrides, for this action only, how
     many physics ticks the action runs. ``token`` authenticates the first request to a server
-    whose hello says ``token_required``.
+    whose hello says ``token_required``. ``batch`` carries one request per environment instance
+    of a server that hosts several (``None`` leaves an instance alone); it is answered with one
+    :class:`BatchResponse`.
     """
 
     id: int
@@ -295,10 +301,18 @@ class Request:
     observation: Mapping[str, Any] | None = None
     repeat_action: int | None = None
     token: str | None = None
+    batch: tuple[Request | None, ...] | None = None
 
     def to_wire(self) -> dict[str, Any]:
         """The message as a msgpack-ready map (absent parts left out)."""
-        wire: dict[str, Any] = {"id": self.id}
+        wire = self._parts()
+        if self.batch is not None:
+            wire["batch"] = [None if part is None else part._parts() for part in self.batch]
+        wire["id"] = self.id
+        return wire
+
+    def _parts(self) -> dict[str, Any]:
+        wire: dict[str, Any] = {}
         if self.config is not None:
             wire["config"] = self.config
         if self.reset is not None:
@@ -323,36 +337,21 @@ class Request:
         request_id = wire.get("id")
         if type(request_id) is not int:
             raise _bad_request(None, f"request 'id' must be an integer, got {request_id!r:.40}")
-        unknown = wire.keys() - _REQUEST_WIRE_KEYS
-        if unknown:
-            raise _bad_request(
-                request_id,
-                f"unknown request key {sorted(map(str, unknown))[0]!r}; expected any of "
-                + ", ".join(REQUEST_KEYS + ("repeat_action", "token")),
-            )
-        for key in ("config", "reset", "observation"):
-            if key in wire and not isinstance(wire[key], Mapping):
-                raise _bad_request(request_id, f"request {key!r} must be a map")
-        repeat = wire.get("repeat_action")
-        if repeat is not None:
-            if type(repeat) is not int or repeat < 1:
-                raise _bad_request(
-                    request_id, f"'repeat_action' must be an integer >= 1, got {repeat!r:.40}"
-                )
-            if wire.get("action") is None:
-                raise _bad_request(request_id, "'repeat_action' given without an 'action'")
-        token = wire.get("token")
-        if token is not None and not isinstance(token, str):
-            raise _bad_request(request_id, "'token' must be a string")
-        return cls(
-            id=request_id,
-            config=wire.get("config"),
-            reset=wire.get("reset"),
-            action=wire.get("action"),
-            observation=wire.get("observation"),
-            repeat_action=repeat,
-            token=token,
-        )
+        request = _parse_parts(cls, request_id, wire, "")
+        batch = wire.get("batch")
+        if batch is None:
+            return request
+        if len(wire) > 2 + ("token" in wire):
+            raise _bad_request(request_id, "a 'batch' request carries nothing else but its id")
+        if not isinstance(batch, list) or not batch:
+            raise _bad_request(request_id, "'batch' must be a non-empty list of requests or nil")
+        parts = []
+        for index, part in enumerate(batch):
+            if part is not None and not isinstance(part, Mapping):
+                raise _bad_request(request_id, f"batch[{index}] must be a map or nil")
+            parts.append(None if part is None else
+                         _parse_parts(cls, request_id, part, f"batch[{index}]."))
+        return replace(request, batch=tuple(parts))
 
     def __repr__(self) -> str:  # never show a token in logs
         parts = ", ".join(f"{name}={getattr(self, name)!r:.80}" for name in
@@ -361,7 +360,44 @@ class Request:
         return f"Request({parts}{', token=...' if self.token is not None else ''})"
 
 
-_REQUEST_WIRE_KEYS = frozenset(("id", "repeat_action", "token") + REQUEST_KEYS)
+_REQUEST_WIRE_KEYS = frozenset(("id", "repeat_action", "token", "batch") + REQUEST_KEYS)
+_PART_KEYS = frozenset(("repeat_action",) + REQUEST_KEYS)
+
+
+def _parse_parts(cls: type[Request], request_id: int, wire: Mapping[str, Any],
+                 where: str) -> Request:
+    """Validate the parts of a request (or of one request of a batch)."""
+    allowed = _PART_KEYS if where else _REQUEST_WIRE_KEYS
+    unknown = wire.keys() - allowed
+    if unknown:
+        raise _bad_request(
+            request_id,
+            f"unknown request key {where}{sorted(map(str, unknown))[0]!r}; expected any of "
+            + ", ".join(REQUEST_KEYS + ("repeat_action",) + (() if where else ("token", "batch"))),
+        )
+    for key in ("config", "reset", "observation"):
+        if key in wire and not isinstance(wire[key], Mapping):
+            raise _bad_request(request_id, f"request {where}{key!r} must be a map")
+    repeat = wire.get("repeat_action")
+    if repeat is not None:
+        if type(repeat) is not int or repeat < 1:
+            raise _bad_request(
+                request_id, f"{where}'repeat_action' must be an integer >= 1, got {repeat!r:.40}"
+            )
+        if wire.get("action") is None:
+            raise _bad_request(request_id, f"{where}'repeat_action' given without an 'action'")
+    token = wire.get("token")
+    if token is not None and not isinstance(token, str):
+        raise _bad_request(request_id, "'token' must be a string")
+    return cls(
+        id=request_id,
+        config=wire.get("config"),
+        reset=wire.get("reset"),
+        action=wire.get("action"),
+        observation=wire.get("observation"),
+        repeat_action=repeat,
+        token=token,
+    )
 
 
 def _bad_request(request_id: int | None, message: str) -> RemoteProtocolError:
@@ -448,7 +484,41 @@ class ErrorReply:
             raise RemoteProtocolError(f"invalid error reply: {exc!r}") from None
 
 
-Message = Hello | Request | Response | ErrorReply
+@dataclass(frozen=True, slots=True)
+class BatchResponse:
+    """The answer to a batch request: one reply per instance (``None`` where none was asked)."""
+
+    id: int
+    replies: tuple[Response | ErrorReply | None, ...]
+
+    def to_wire(self) -> dict[str, Any]:
+        """The message as a msgpack-ready map."""
+        return {"id": self.id,
+                "batch": [None if reply is None else reply.to_wire() for reply in self.replies]}
+
+    @classmethod
+    def from_wire(cls, wire: Mapping[str, Any]) -> BatchResponse:
+        """Read a batch response map.
+
+        Raises:
+            RemoteProtocolError: a reply is malformed.
+        """
+        batch = wire["batch"]
+        if not isinstance(batch, list):
+            raise RemoteProtocolError("invalid batch response: 'batch' is not a list")
+        replies: list[Response | ErrorReply | None] = []
+        for reply in batch:
+            if reply is None:
+                replies.append(None)
+            elif not isinstance(reply, Mapping):
+                raise RemoteProtocolError("invalid batch response: a reply is not a map")
+            else:
+                replies.append(ErrorReply.from_wire(reply) if "error" in reply
+                               else Response.from_wire(reply))
+        return cls(id=wire["id"], replies=tuple(replies))
+
+
+Message = Hello | Request | Response | BatchResponse | ErrorReply
 
 
 # --- connection state machine --------------------------------------------------------------
@@ -560,7 +630,7 @@ class Connection:
             self.state = State.READY
         elif isinstance(message, Request):
             self._outstanding.append(message.id)
-        elif isinstance(message, Response | ErrorReply) and message.id is not None:
+        elif isinstance(message, Response | BatchResponse | ErrorReply) and message.id is not None:
             self._outstanding.popleft()
         if isinstance(message, ErrorReply) and message.fatal:
             self.state = State.CLOSED
@@ -609,7 +679,7 @@ class Connection:
             hello = Hello.from_wire(wire)
             self.state = State.READY
             return hello
-        response = Response.from_wire(wire)
+        response = BatchResponse.from_wire(wire) if "batch" in wire else Response.from_wire(wire)
         self._pop_outstanding(response.id)
         return response
 
@@ -630,9 +700,10 @@ class Connection:
                 raise LocalProtocolError("a server does not send requests")
             if isinstance(message, Hello) and self.state is not State.AWAIT_HELLO:
                 raise LocalProtocolError("the hello is sent once, first")
-            if isinstance(message, Response) and self.state is not State.READY:
+            if isinstance(message, Response | BatchResponse) and self.state is not State.READY:
                 raise LocalProtocolError("send the hello before any response")
-            if isinstance(message, Response | ErrorReply) and message.id is not None:
+            if isinstance(message, Response | BatchResponse | ErrorReply) and \
+                    message.id is not None:
                 if not self._outstanding or self._outstanding[0] != message.id:
                     raise LocalProtocolError(
                         f"reply to request {message.id} out of order; outstanding: "

@@ -349,3 +349,35 @@ def test_a_vector_env_restarts_the_lost_server_only() -> None:
         assert envs.servers[0] is survivor and envs.servers[1] is not victim
         observations, rewards, terminated, truncated, _ = envs.step(still)
         assert rewards[1] == 0.0 and not truncated[1]  # NEXT_STEP: the autoreset on the new one
+
+
+def test_vector_layouts_give_identical_results() -> None:
+    """Four sub-environments in one server (one batch per step) or in four servers: the same
+    seeds and actions give the same observations, resets included."""
+    runs = []
+    for per_server in (4, 1):
+        with RemoteVectorEnv(4, TARGET, instances_per_server=per_server,
+                             max_episode_steps=15) as envs:
+            assert len(envs.servers) == 4 // per_server
+            envs.action_space.seed(8)
+            seen = [envs.reset(seed=30)[0].tobytes()]
+            for _ in range(40):
+                observations, rewards, terminated, truncated, _ = envs.step(
+                    envs.action_space.sample())
+                seen.append((observations.tobytes(), rewards.tobytes(), terminated.tobytes(),
+                             truncated.tobytes()))
+            runs.append(seen)
+    assert runs[0] == runs[1]
+
+
+def test_make_vec_puts_one_server_on_each_core() -> None:
+    envs = gym.make_vec(CARTPOLE, num_envs=6)
+    try:
+        cores = os.cpu_count() or 1
+        assert len(envs.unwrapped.servers) == min(6, cores)
+        assert sum(client.hello.instances for client in envs.unwrapped.clients) == 6
+        observations, _ = envs.reset(seed=0)
+        assert observations.shape == (6, 5)
+        assert len({row.tobytes() for row in observations}) == 6  # seeded apart
+    finally:
+        envs.close()

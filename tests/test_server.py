@@ -382,3 +382,44 @@ def _address(server: ServerProcess) -> tuple[str, int]:
     return server.host, server.port
 
 
+
+
+def test_a_server_hosts_several_instances_stepped_by_one_batch(serve: Serve) -> None:
+    multi, single = serve(args=["--instances", "3"]), serve()
+    with Client(multi.host, multi.port) as many, Client(single.host, single.port) as one:
+        assert many.hello.instances == 3 and one.hello.instances == 1
+        many.send_batch([many.reset_request(seed=s) for s in (10, 11, 12)])
+        resets = [many.reset_result(reply) for reply in many.receive_batch()]
+        for seed, (observation, _) in zip((10, 11, 12), resets, strict=True):
+            assert observation.tobytes() == one.reset(seed=seed)[0].tobytes()  # same episodes
+        # one instance's bad action is that instance's error; the others step
+        many.send_batch([many.step_request(PUSH), many.step_request(np.zeros(2, np.float32)),
+                         None])
+        first, second, third = many.receive_batch()
+        assert many.step_result(first)[4]["frames"] == 4
+        with pytest.raises(RemoteError, match=r"shape \(2,\)"):
+            many.step_result(second)
+        assert third is None
+        # instances are independent trees: instance 2 did not move
+        many.send_batch([None, None, Request(id=0, observation={"agent": {}})])
+        (observation,) = [many.reset_result(r)[0] for r in many.receive_batch() if r is not None]
+        assert observation.tobytes() == resets[2][0].tobytes()
+        with pytest.raises(RemoteError, match="a batch of 4 requests for 3 instances"):
+            many.send_batch([None] * 4)
+            many.receive_batch()
+        assert many.step(PUSH)[4]["frames"] == 4  # a plain request goes to instance 0
+
+
+def test_batches_are_validated_part_by_part(server: ServerProcess) -> None:
+    with socket.create_connection((server.host, server.port), timeout=5) as raw:
+        read_frame(raw)
+        for body, words in [
+            (pack({"id": 1, "batch": []}), "non-empty list"),
+            (pack({"id": 2, "batch": [1]}), "batch[0] must be a map"),
+            (pack({"id": 3, "batch": [{"jump": 1}]}), "batch[0].'jump'"),
+            (pack({"id": 4, "batch": [None], "reset": {}}), "carries nothing else"),
+        ]:
+            raw.sendall(struct.pack(">I", len(body)) + body)
+            reply = read_frame(raw)
+            assert reply["error"]["code"] == ErrorCode.BAD_REQUEST
+            assert words in reply["error"]["message"], reply

@@ -11,7 +11,8 @@ waiting for any answer.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from itertools import count
 from typing import Any
 
@@ -19,7 +20,7 @@ import numpy as np
 from gymnasium import spaces
 
 from rlenv.errors import ConnectionLost, RemoteError
-from rlenv.protocol import ErrorReply, Hello, Request, Response
+from rlenv.protocol import BatchResponse, ErrorReply, Hello, Request, Response
 from rlenv.spaces import from_wire
 
 __all__ = ["BaseClient", "StepResult"]
@@ -91,17 +92,11 @@ class BaseClient(ABC):
         self, *, seed: int | None = None, options: Mapping[str, Any] | None = None
     ) -> None:
         """Send a reset request without waiting; collect the answer with :meth:`receive_reset`."""
-        reset: dict[str, Any] = {}
-        if seed is not None:
-            reset["seed"] = seed
-        if options is not None:
-            reset["options"] = dict(options)
-        self._send(Request(id=next(self._ids), reset=reset, observation=self._observation_request))
+        self._send(replace(self.reset_request(seed, options), id=next(self._ids)))
 
     def receive_reset(self) -> tuple[Any, dict[str, Any]]:
         """Wait for the answer to the reset sent by :meth:`send_reset`."""
-        response = self._receive_reply()
-        return self._observation(response), self._info(response)
+        return self.reset_result(self._receive_reply())
 
     def step(self, action: Any, repeat_action: int | None = None) -> StepResult:
         """Run ``action`` for ``repeat_action`` physics ticks (default: the server's setting).
@@ -124,7 +119,15 @@ class BaseClient(ABC):
 
     def receive_step(self) -> StepResult:
         """Wait for the answer to the step sent by :meth:`send_step`."""
-        response = self._receive_reply()
+        return self.step_result(self._receive_reply())
+
+    def step_result(self, reply: Response | ErrorReply) -> StepResult:
+        """A step's answer as ``(observation, reward, terminated, truncated, info)``.
+
+        Raises:
+            RemoteError: the answer is an error.
+        """
+        response = self._response(reply)
         return (
             self._observation(response),
             response.reward,
@@ -132,6 +135,63 @@ class BaseClient(ABC):
             response.truncated,
             self._info(response),
         )
+
+    def reset_result(self, reply: Response | ErrorReply) -> tuple[Any, dict[str, Any]]:
+        """A reset's answer as ``(observation, info)``.
+
+        Raises:
+            RemoteError: the answer is an error.
+        """
+        response = self._response(reply)
+        return self._observation(response), self._info(response)
+
+    def step_request(self, action: Any, repeat_action: int | None = None) -> Request:
+        """The request :meth:`send_step` sends, for a batch."""
+        return Request(id=0, action=action, observation=self._observation_request,
+                       repeat_action=repeat_action)
+
+    def reset_request(
+        self, seed: int | None = None, options: Mapping[str, Any] | None = None
+    ) -> Request:
+        """The request :meth:`send_reset` sends, for a batch."""
+        reset: dict[str, Any] = {}
+        if seed is not None:
+            reset["seed"] = seed
+        if options is not None:
+            reset["options"] = dict(options)
+        return Request(id=0, reset=reset, observation=self._observation_request)
+
+    def send_request(self, request: Request) -> None:
+        """Send a prepared request (see :meth:`step_request`); its id is assigned here."""
+        self._send(replace(request, id=next(self._ids)))
+
+    def receive_reply(self) -> Response | ErrorReply:
+        """Wait for the answer to :meth:`send_request`; an error reply is returned, not raised."""
+        message = self._receive()
+        if isinstance(message, BatchResponse):
+            self.close()
+            raise ConnectionLost(f"{self.address} answered with a batch: {message!r:.80}")
+        if isinstance(message, ErrorReply) and message.fatal:
+            self.close()
+        return message
+
+    def send_batch(self, requests: Sequence[Request | None]) -> None:
+        """Send one request per instance of a multi-instance server (``None``: skip one)."""
+        self._send(Request(id=next(self._ids), batch=tuple(requests)))
+
+    def receive_batch(self) -> tuple[Response | ErrorReply | None, ...]:
+        """Wait for the answer to :meth:`send_batch`: one reply per instance.
+
+        Raises:
+            RemoteError: the whole batch was refused.
+        """
+        message = self._receive()
+        if isinstance(message, ErrorReply):
+            self._response(message)
+        if not isinstance(message, BatchResponse):
+            self.close()
+            raise ConnectionLost(f"{self.address} answered a batch with {message!r:.80}")
+        return message.replies
 
     def observe(self) -> dict[str, Any]:
         """The current observation without stepping: ``{"agent": ..., "world": ...}``."""
@@ -143,8 +203,21 @@ class BaseClient(ABC):
 
         The size defaults to the environment's ``render_size``.
         """
+        self.send_request(self.render_request(width, height))
+        return self.render_result(self.receive_reply())
+
+    def render_request(self, width: int | None = None, height: int | None = None) -> Request:
+        """The request :meth:`render` sends, for a batch."""
         size = {k: v for k, v in (("width", width), ("height", height)) if v is not None}
-        return np.asarray(self._part(self._call(observation={"render": size}), "render"))
+        return Request(id=0, observation={"render": size})
+
+    def render_result(self, reply: Response | ErrorReply) -> np.ndarray:
+        """A render's answer as an ``(height, width, 3)`` uint8 array.
+
+        Raises:
+            RemoteError: the answer is an error.
+        """
+        return np.asarray(self._part(self._response(reply), "render"))
 
     @abstractmethod
     def close(self) -> None:
@@ -163,7 +236,7 @@ class BaseClient(ABC):
         """Deliver ``request`` to the environment."""
 
     @abstractmethod
-    def _receive(self) -> Response | ErrorReply:
+    def _receive(self) -> Response | BatchResponse | ErrorReply:
         """Wait for the environment's answer to the oldest request sent."""
 
     # --- internals --------------------------------------------------------------------------
@@ -173,7 +246,9 @@ class BaseClient(ABC):
         return self._receive_reply()
 
     def _receive_reply(self) -> Response:
-        message = self._receive()
+        return self._response(self.receive_reply())
+
+    def _response(self, message: Response | ErrorReply) -> Response:
         if isinstance(message, ErrorReply):
             if message.fatal:
                 self.close()

@@ -7,7 +7,8 @@ Every figure is the median of several rounds and is printed with its baseline an
 - (c) remote ``Client.step`` on CartPole at repeat_action 1 and 4, against (a);
 - (d) an 84x84x3 uint8 observation (``examples.pixels``) against a ping-pong carrying the same
   bytes;
-- (e) ``RemoteVectorEnv`` throughput by number of environments (one server each);
+- (e) ``RemoteVectorEnv`` throughput by number of environments and servers (instances per
+  server stepped by one batch request), against (f);
 - (f) gymnasium's ``AsyncVectorEnv`` with 8 ``CartPole-v1`` on the same machine;
 - (g) p50 / p99 latency of a remote step against the ping-pong's;
 - (h) memory of one server process, and per extra environment instance in one process.
@@ -228,18 +229,22 @@ def run_benchmarks(rounds: int = 5, steps: int = 2000, quick: bool = False) -> l
         async_envs.close()
     figures.append(Figure("gymnasium AsyncVectorEnv(8) CartPole-v1", async_rate, "env-steps/s"))
 
-    for count in (1, 2, 4) if quick else (1, 2, 4, 8):
-        _progress(f"(e) RemoteVectorEnv, {count} CartPole servers")
-        with RemoteVectorEnv(count, CARTPOLE, repeat_action=1) as envs:
+    layouts = [(4, 1), (8, 4), (64, 32)] if quick else \
+        [(1, 1), (2, 1), (4, 1), (8, 1), (8, 4), (64, 32), (64, 64)]
+    for count, per_server in layouts:
+        servers = -(-count // per_server)
+        _progress(f"(e) RemoteVectorEnv, {count} CartPoles in {servers} servers")
+        with RemoteVectorEnv(count, CARTPOLE, repeat_action=1,
+                             instances_per_server=per_server) as envs:
             envs.reset(seed=0)
             batch = np.zeros((count, 1), np.float32)
 
             def vector_run(n: int, envs: Any = envs, batch: np.ndarray = batch) -> None:
                 for _ in range(n):
                     envs.step(batch)
-            rate = count * _median_rate(rounds, steps // 4, vector_run)
-        figures.append(Figure(f"RemoteVectorEnv {count} servers (repeat 1)", rate, "env-steps/s",
-                              "AsyncVectorEnv(8) CartPole-v1", async_rate))
+            rate = count * _median_rate(rounds, max(steps // count, 20), vector_run)
+        figures.append(Figure(f"RemoteVectorEnv {count} envs, {servers} servers x {per_server}",
+                              rate, "env-steps/s", "AsyncVectorEnv(8) CartPole-v1", async_rate))
 
     _progress("(h) memory")
     figures.append(Figure("one CartPole server process, resident", cartpole_rss / 1024, "MiB"))

@@ -16,6 +16,7 @@ from rlenv.errors import ConnectionLost, ErrorCode, ProtocolError, RemoteError, 
 from rlenv.protocol import (
     CONNECTION_CLOSED,
     NEED_DATA,
+    BatchResponse,
     Connection,
     ErrorReply,
     Hello,
@@ -117,9 +118,9 @@ class Client(BaseClient):
             self.close()
             raise ConnectionLost(f"sending to {self.address} failed: {error}") from None
 
-    def _receive(self) -> Response | ErrorReply:
+    def _receive(self) -> Response | BatchResponse | ErrorReply:
         message = self._next_message()
-        if not isinstance(message, Response | ErrorReply):
+        if not isinstance(message, Response | BatchResponse | ErrorReply):
             self.close()
             raise ConnectionLost(f"{self.address} broke the protocol: {message!r:.80}")
         return message

@@ -1,8 +1,10 @@
 """RemoteVectorEnv: N environments stepped concurrently, as a ``gymnasium.vector.VectorEnv``.
 
-Every step sends all N requests first and then gathers the N answers, so the servers simulate
-in parallel while the trainer waits once. Each sub-environment is its own server process
-(started concurrently), a running server given by address, or an in-process environment.
+Every step sends all requests first and then gathers the answers, so the servers simulate in
+parallel while the trainer waits once. The N sub-environments live in servers this vector starts
+(``instances_per_server`` per server, stepped by one batch request each: by default as many
+servers as cores, each hosting its share), in running servers given by address (each hosting
+as many instances as its hello says), or in this process.
 
 Autoreset follows gymnasium 1.x (:class:`gymnasium.vector.AutoresetMode`):
 
@@ -14,14 +16,16 @@ Autoreset follows gymnasium 1.x (:class:`gymnasium.vector.AutoresetMode`):
   last observation and info of the episode that ended.
 
 ``max_episode_steps`` truncates each sub-environment's episodes, as ``TimeLimit`` does. A lost
-server that this vector started is restarted (``max_restarts`` each): its interrupted episode
-ends as truncated with its last observation, reward 0 and ``info["server_restarted"]``, and the
-autoreset that follows starts a fresh episode on the new server.
+server that this vector started is restarted (``max_restarts`` each): the interrupted episodes
+of its instances end as truncated with their last observation, reward 0 and
+``info["server_restarted"]``, and the autoreset that follows starts fresh episodes.
 """
 
 from __future__ import annotations
 
 import logging
+import math
+import os
 from collections.abc import Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
@@ -30,13 +34,23 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, concatenate, create_empty_array, iterate
 
+from rlenv.protocol import ErrorReply, Request, Response
 from rlenv_client.base import BaseClient
 from rlenv_client.launcher import ServerProcess, with_server_story
 from rlenv_client.session import LOST, Session, as_lost
 
-__all__ = ["RemoteVectorEnv"]
+__all__ = ["RemoteVectorEnv", "default_layout"]
 
 logger = logging.getLogger(__name__)
+
+Reply = Response | ErrorReply
+
+
+def default_layout(num_envs: int, cores: int | None = None) -> list[int]:
+    """Instances per server for ``num_envs`` environments: one server per core, shared fairly."""
+    servers = max(1, min(num_envs, cores or os.cpu_count() or 1))
+    share = math.ceil(num_envs / servers)
+    return [min(share, num_envs - start) for start in range(0, num_envs, share)]
 
 
 class RemoteVectorEnv(VectorEnv):
@@ -44,8 +58,9 @@ class RemoteVectorEnv(VectorEnv):
 
     Args:
         num_envs: how many sub-environments (ignored when ``addresses`` is given).
-        target: the environment class as ``MODULE:CLASS``; one server is started per copy.
-        addresses: ``HOST:PORT`` of running servers, one per sub-environment, instead.
+        target: the environment class as ``MODULE:CLASS``; servers are started for it.
+        addresses: ``HOST:PORT`` of running servers instead (each hosts the instances its hello
+            announces).
         repeat_action: physics ticks per step; the servers' default if ``None``.
         max_episode_steps: truncate episodes after this many steps (``None``: never).
         autoreset_mode: ``NEXT_STEP`` or ``SAME_STEP``.
@@ -54,6 +69,8 @@ class RemoteVectorEnv(VectorEnv):
         timeout: seconds to wait for each answer.
         token: the secret of servers that require one (default ``$RLENV_TOKEN``).
         max_restarts: how many times each lost server that this vector started is replaced.
+        instances_per_server: how many sub-environments each started server hosts; by default
+            one server per core (see :func:`default_layout`).
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array"]}
@@ -64,22 +81,22 @@ class RemoteVectorEnv(VectorEnv):
         max_episode_steps: int | None = None,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         in_process: bool = False, render_mode: str | None = None, timeout: float = 30.0,
-        token: str | None = None, max_restarts: int = 3,
+        token: str | None = None, max_restarts: int = 3, instances_per_server: int | None = None,
     ) -> None:
         mode = AutoresetMode(autoreset_mode)
         if mode is AutoresetMode.DISABLED:
             raise ValueError("RemoteVectorEnv autoresets; use NEXT_STEP or SAME_STEP")
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
-        places: list[dict[str, Any]]
-        if addresses is not None:
-            places = [{"address": address, "token": token} for address in addresses]
-        else:
-            places = [{"target": target, "in_process": in_process}] * num_envs
-        if not places:
-            raise ValueError("a vector environment needs at least one sub-environment")
+        places = self._places(num_envs, target, addresses, in_process, token,
+                              instances_per_server)
         self.sessions: list[Session] = []
         self._connect(places, timeout=timeout, max_restarts=max_restarts)
+        self._groups: list[list[int]] = []  # the sub-environments each session hosts
+        for session in self.sessions:
+            start = sum(len(group) for group in self._groups)
+            self._groups.append(list(range(start, start + session.client.hello.instances)))
+        self._owner = [number for number, group in enumerate(self._groups) for _ in group]
         hello = self.clients[0].hello
         for client in self.clients[1:]:
             if (client.action_space, client.observation_space) != (
@@ -89,7 +106,7 @@ class RemoteVectorEnv(VectorEnv):
                 raise ValueError(
                     f"{client.address} has other spaces than {self.clients[0].address}"
                 )
-        self.num_envs = len(self.clients)
+        self.num_envs = sum(len(group) for group in self._groups)
         self.single_action_space = hello.action_space
         self.single_observation_space = hello.observation_space
         self.action_space = batch_space(self.single_action_space, self.num_envs)
@@ -106,7 +123,7 @@ class RemoteVectorEnv(VectorEnv):
 
     @property
     def clients(self) -> list[BaseClient]:
-        """The sub-environments' clients, in order (they change when a server is restarted)."""
+        """One client per server (they change when a server is restarted)."""
         return [session.client for session in self.sessions]
 
     @property
@@ -124,14 +141,6 @@ class RemoteVectorEnv(VectorEnv):
             ValueError: a list of seeds of the wrong length.
             ConnectionLost: a server went away (with how it exited, if it died).
         """
-        try:
-            return self._reset(seed, options)
-        except LOST as error:
-            raise with_server_story(as_lost(error), self.servers) from None
-
-    def _reset(
-        self, seed: int | Sequence[int | None] | None, options: Mapping[str, Any] | None
-    ) -> tuple[Any, dict[str, Any]]:
         if seed is None or isinstance(seed, int):
             seeds: list[int | None] = [
                 None if seed is None else seed + i for i in range(self.num_envs)
@@ -141,11 +150,15 @@ class RemoteVectorEnv(VectorEnv):
             if len(seeds) != self.num_envs:
                 raise ValueError(f"{len(seeds)} seeds for {self.num_envs} environments")
         super().reset(seed=seed if isinstance(seed, int) else None)
-        for client, env_seed in zip(self.clients, seeds, strict=True):
-            client.send_reset(seed=env_seed, options=options)
+        try:
+            plan = [self._client_of(i).reset_request(seeds[i], options)
+                    for i in range(self.num_envs)]
+            replies = self._exchange(plan)
+        except LOST as error:
+            raise with_server_story(as_lost(error), self.servers) from None
         observations, infos = [], {}
-        for index, client in enumerate(self.clients):
-            observation, info = client.receive_reset()
+        for index, reply in enumerate(replies):
+            observation, info = self._client_of(index).reset_result(self._sure(index, reply))
             self._last_observations[index] = observation
             observations.append(observation)
             infos = self._add_info(infos, info, index)
@@ -159,50 +172,39 @@ class RemoteVectorEnv(VectorEnv):
         """Step every sub-environment (resetting those that ended, per the autoreset mode).
 
         Raises:
-            ConnectionLost: a server went away (with how it exited, if it died).
+            ConnectionLost: a server went away and cannot be restarted (with how it exited).
         """
-        try:
-            return self._step(actions)
-        except LOST as error:
-            raise with_server_story(as_lost(error), self.servers) from None
-
-    def _step(
-        self, actions: Any
-    ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         resetting = self._autoreset.copy() if self._mode is AutoresetMode.NEXT_STEP else \
             np.zeros(self.num_envs, dtype=np.bool_)
-        for index, (client, action) in enumerate(
-            zip(self.clients, iterate(self.action_space, actions), strict=True)
-        ):
-            if resetting[index]:
-                client.send_reset()
-            else:
-                client.send_step(action, self.repeat_action)
+        plan: list[Request | None] = []
+        for index, action in enumerate(iterate(self.action_space, actions)):
+            client = self._client_of(index)
+            plan.append(client.reset_request() if resetting[index] else
+                        client.step_request(action, self.repeat_action))
+        replies = self._exchange(plan, restart=True)
         observations: list[Any] = []
         env_infos: list[dict[str, Any]] = []
         rewards = np.zeros(self.num_envs, dtype=np.float64)
         terminations = np.zeros(self.num_envs, dtype=np.bool_)
         truncations = np.zeros(self.num_envs, dtype=np.bool_)
-        for index, client in enumerate(self.clients):
-            try:
-                if resetting[index]:
-                    observation, info = client.receive_reset()
-                    self._steps[index] = 0
-                else:
-                    observation, reward, terminated, truncated, info = client.receive_step()
-                    self._steps[index] += 1
-                    if self.max_episode_steps is not None and \
-                            self._steps[index] >= self.max_episode_steps:
-                        truncated = True
-                    rewards[index], terminations[index], truncations[index] = (
-                        reward, terminated, truncated
-                    )
-            except LOST as error:
-                if self._last_observations[index] is None:
-                    raise
-                reason = self.sessions[index].restart(error)
-                observation, info = self._last_observations[index], {"server_restarted": reason}
+        for index, reply in enumerate(replies):
+            client = self._client_of(index)
+            if isinstance(reply, str):  # its server was lost and restarted
+                observation, info = self._last_observations[index], {"server_restarted": reply}
                 truncations[index] = True
+            elif resetting[index]:
+                observation, info = client.reset_result(self._sure(index, reply))
+                self._steps[index] = 0
+            else:
+                observation, reward, terminated, truncated, info = client.step_result(
+                    self._sure(index, reply))
+                self._steps[index] += 1
+                if self.max_episode_steps is not None and \
+                        self._steps[index] >= self.max_episode_steps:
+                    truncated = True
+                rewards[index], terminations[index], truncations[index] = (
+                    reward, terminated, truncated
+                )
             self._last_observations[index] = observation
             observations.append(observation)
             env_infos.append(info)
@@ -214,11 +216,14 @@ class RemoteVectorEnv(VectorEnv):
                     infos, {"final_obs": observations[index], "final_info": env_infos[index]},
                     int(index),
                 )
-                self.clients[index].send_reset()
-            for index in np.flatnonzero(ended):
-                observations[index], env_infos[index] = self.clients[index].receive_reset()
-                self._last_observations[index] = observations[index]
-                self._steps[index] = 0
+            plan = [self._client_of(i).reset_request() if ended[i] else None
+                    for i in range(self.num_envs)]
+            for index, reply in enumerate(self._exchange(plan)):
+                if ended[index]:
+                    observations[index], env_infos[index] = self._client_of(index).reset_result(
+                        self._sure(index, reply))
+                    self._last_observations[index] = observations[index]
+                    self._steps[index] = 0
         for index, info in enumerate(env_infos):
             infos = self._add_info(infos, info, index)
         self._autoreset = ended
@@ -228,7 +233,10 @@ class RemoteVectorEnv(VectorEnv):
         """One frame per sub-environment (``rgb_array``)."""
         if self.render_mode is None:
             return None
-        return tuple(client.render() for client in self.clients)
+        plan: list[Request | None] = [self._client_of(i).render_request()
+                                      for i in range(self.num_envs)]
+        return tuple(self._client_of(index).render_result(self._sure(index, reply))
+                     for index, reply in enumerate(self._exchange(plan)))
 
     def __enter__(self) -> RemoteVectorEnv:
         return self
@@ -247,6 +255,25 @@ class RemoteVectorEnv(VectorEnv):
     def _mode(self) -> AutoresetMode:
         return self.metadata["autoreset_mode"]
 
+    @staticmethod
+    def _places(num_envs: int, target: str | None, addresses: Sequence[str] | None,
+                in_process: bool, token: str | None,
+                instances_per_server: int | None) -> list[dict[str, Any]]:
+        if addresses is not None:
+            places = [{"address": address, "token": token} for address in addresses]
+        elif in_process or instances_per_server == 1:
+            places = [{"target": target, "in_process": in_process}] * num_envs
+        else:
+            layout = default_layout(num_envs) if instances_per_server is None else [
+                min(instances_per_server, num_envs - start)
+                for start in range(0, num_envs, instances_per_server)
+            ]
+            places = [{"target": target, "server_args": ["--instances", str(count)]}
+                      if count > 1 else {"target": target} for count in layout]
+        if not places:
+            raise ValueError("a vector environment needs at least one sub-environment")
+        return places
+
     def _connect(self, places: list[dict[str, Any]], **options: Any) -> None:
         with ThreadPoolExecutor(max_workers=min(len(places), 16)) as pool:
             futures = [pool.submit(Session, **place, **options) for place in places]
@@ -260,7 +287,49 @@ class RemoteVectorEnv(VectorEnv):
             self.close_extras()
             raise failure
 
+    def _client_of(self, index: int) -> BaseClient:
+        return self.sessions[self._owner[index]].client
+
+    def _exchange(self, plan: list[Request | None],
+                  restart: bool = False) -> list[Reply | str | None]:
+        """Send every server its requests, then gather the replies (in sub-environment order).
+
+        A server that is lost gives, for each of its sub-environments with a request, the
+        reason it was restarted (when ``restart`` and the budget allow) instead of a reply.
+        """
+        sent = []
+        for session, group in zip(self.sessions, self._groups, strict=True):
+            parts = [plan[index] for index in group]
+            if all(part is None for part in parts):
+                sent.append(False)
+            elif len(group) > 1:
+                session.client.send_batch(parts)
+                sent.append(True)
+            else:
+                session.client.send_request(parts[0])  # type: ignore[arg-type]
+                sent.append(True)
+        replies: list[Reply | str | None] = [None] * self.num_envs
+        for session, group, was_sent in zip(self.sessions, self._groups, sent, strict=True):
+            if not was_sent:
+                continue
+            try:
+                answers = session.client.receive_batch() if len(group) > 1 else \
+                    (session.client.receive_reply(),)
+            except LOST as error:
+                if not restart or any(self._last_observations[i] is None for i in group):
+                    raise
+                reason = session.restart(error)
+                answers = tuple(reason if plan[i] is not None else None for i in group)
+            for index, answer in zip(group, answers, strict=False):
+                replies[index] = answer
+        return replies
+
+    @staticmethod
+    def _sure(index: int, reply: Reply | str | None) -> Reply:
+        if reply is None or isinstance(reply, str):
+            raise RuntimeError(f"sub-environment {index} got no reply")
+        return reply
+
     def _batch(self, observations: list[Any]) -> Any:
         out = create_empty_array(self.single_observation_space, self.num_envs)
         return concatenate(self.single_observation_space, observations, out)
-

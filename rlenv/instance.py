@@ -1,0 +1,105 @@
+"""Instance: one environment in its own scene tree, fed requests directly (no socket).
+
+The environment answers exactly as it does under a TCP endpoint (same checks, same order, same
+episode state); only the transport differs: requests are queued on an in-process endpoint and
+the tree is iterated until the answer appears. ``rlenv_client.LocalClient`` drives one instance;
+a server that hosts several instances (``rlenv serve --instances K``) drives K of them, each
+with its own tree and pymunk space, stepped together by one batch request.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+from rlenv.environment import RLEnvironment
+from rlenv.protocol import ErrorReply, Hello, Request, Response
+from rlenv.server import load_environment
+from rlenv.tree import SceneTree
+
+__all__ = ["Instance", "drive"]
+
+Reply = Response | ErrorReply
+
+
+class _DirectEndpoint:
+    """The environment's side of the in-process transport (a ``communication.Endpoint``)."""
+
+    def __init__(self) -> None:
+        self.requests: deque[Request] = deque()
+        self.replies: deque[Reply] = deque()
+
+    def poll(self, timeout: float | None) -> Request | None:
+        return self.requests.popleft() if self.requests else None
+
+    def send(self, message: Reply) -> None:
+        self.replies.append(message)
+
+    def close(self) -> None:
+        self.requests.clear()
+
+
+class Instance:
+    """An environment in a tree of its own, answering requests handed to it.
+
+    Args:
+        environment: an environment instance, its class, or ``MODULE:CLASS``.
+    """
+
+    def __init__(self, environment: RLEnvironment | type[RLEnvironment] | str) -> None:
+        if isinstance(environment, str):
+            environment = load_environment(environment)
+        if isinstance(environment, type):
+            environment = environment()
+        self.environment = environment
+        self._endpoint = _DirectEndpoint()
+        environment.communication = self._endpoint
+        self.tree = SceneTree(environment.physics_ticks_per_second)
+        self.tree.root.add_child(environment)
+        self.hello: Hello = environment.hello()
+
+    def submit(self, request: Request) -> None:
+        """Queue ``request``; its answer comes out of :meth:`turn` or :meth:`call`."""
+        self._endpoint.requests.append(request)
+
+    def turn(self) -> Reply | None:
+        """Run one turn of the tree's loop; the oldest answer, if one is ready."""
+        replies = self._endpoint.replies
+        if not replies:
+            self.environment.iterate()
+        return replies.popleft() if replies else None
+
+    def call(self, request: Request) -> Reply:
+        """Submit ``request`` and run the tree until it is answered."""
+        self.submit(request)
+        while (reply := self.turn()) is None:
+            pass
+        return reply
+
+    def close(self) -> None:
+        """Take the environment out of its tree."""
+        if self.environment.parent is not None:
+            self.tree.root.remove_child(self.environment)
+
+
+def drive(instances: list[Instance], requests: list[Request | None]) -> list[Reply | None]:
+    """Answer one request per instance (``None``: leave that instance alone).
+
+    The trees are turned in round robin, so every instance's ticks interleave. Returns the
+    answers in order.
+    """
+    replies: list[Reply | None] = [None] * len(instances)
+    waiting = []
+    for index, (instance, request) in enumerate(zip(instances, requests, strict=False)):
+        if request is not None:
+            instance.submit(request)
+            waiting.append(index)
+    while waiting:
+        still = []
+        for index in waiting:
+            reply = instances[index].turn()
+            if reply is None:
+                still.append(index)
+            else:
+                replies[index] = reply
+        waiting = still
+    return replies

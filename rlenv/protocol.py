@@ -18,6 +18,11 @@ with exactly one :class:`Response` or :class:`ErrorReply` carrying the request's
     response {"id": 7, "observation": {"agent": ...}, "reward": 1.0, "terminated": false,
               "truncated": false, "info": {...}, "frames": 4}
     error    {"id": 7, "error": {"code": "invalid_action", "message": ..., "fatal": false}}
+    batch    {"id": 8, "batch": [{"action": ...}, null, {"reset": {}}]}   # several instances
+    replies  {"id": 8, "batch": [{...response...}, null, {...response or error...}]}
+
+A server hosting several environment instances (its hello says ``instances``) takes a batch:
+one request per instance, answered by one :class:`BatchResponse` with one reply per instance.
 
 **States** (:class:`State`): a client connection starts in ``AWAIT_HELLO`` and moves to
 ``READY`` on the hello; a server connection starts in ``AWAIT_HELLO`` and moves to ``READY`` when

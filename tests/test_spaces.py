@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import re
+import warnings
 
 import numpy as np
 import pytest
@@ -551,3 +552,26 @@ def test_from_wire_of_samples_after_round_trip(space: spaces.Space) -> None:
         value = from_wire(space, unpack(pack(sample)))
         assert space.contains(value)
         _assert_same_value(value, sample)
+
+
+@pytest.mark.parametrize(
+    ("value", "where"),
+    [
+        (np.array([1.0, np.nan]), "[1]"),
+        (np.array([[1, 2], [3, np.inf]], np.float32), "[1, 1]"),
+        (np.array([3e38, 3e38], np.float32), None),  # huge but finite: no false alarm
+        (np.array([1e308, 1e308]), None),
+        (np.array([1 + 1j, complex(np.nan, 0)], np.complex64), "[1]"),
+        (np.array([1, 2], np.int64), None),
+        ({"pos": [0.5, float("-inf")]}, "['pos'][1]"),
+        ((1.0, np.float32(np.nan)), "[1]"),
+        (float("nan"), ""),
+        ("text", None),
+    ],
+)
+def test_find_non_finite_names_the_first_bad_element(value: object, where: str | None) -> None:
+    from rlenv.spaces import find_non_finite
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert find_non_finite(value) == where

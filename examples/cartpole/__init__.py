@@ -188,9 +188,10 @@ class CartPoleAgent(RLAgent):
         """Cart x, pole x, pole angle, cart velocity, pole angular velocity."""
         cart, pole = self._cart, self._pole
         assert cart is not None and pole is not None
-        x_pole = pole.local_to_world((0.0, POLE_LENGTH / 2)).x
+        angle = pole.angle
+        x_pole = pole.position.x - POLE_LENGTH / 2 * math.sin(angle)  # the pole's centre
         return np.array(
-            (cart.position.x, x_pole, -pole.angle, cart.velocity.x, -pole.angular_velocity),
+            (cart.position.x, x_pole, -angle, cart.velocity.x, -pole.angular_velocity),
             dtype=np.float32,
         )
 

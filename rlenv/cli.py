@@ -143,7 +143,9 @@ def _check(args: argparse.Namespace) -> int:
 def _bench(args: argparse.Namespace) -> int:
     from rlenv_client.bench import format_table, run_benchmarks, to_json
 
-    figures = run_benchmarks(rounds=args.rounds, steps=args.steps, quick=args.quick)
+    figures = run_benchmarks(rounds=args.rounds, steps=args.steps, quick=args.quick,
+                             progress=lambda message: print(f"... {message}", file=sys.stderr,
+                                                            flush=True))
     print(format_table(figures))
     if args.json:
         with open(args.json, "w") as out:

@@ -19,6 +19,7 @@ Progress goes to stderr, the table to stdout, and everything to JSON with ``--js
 from __future__ import annotations
 
 import json
+import logging
 import os
 import socket
 import statistics
@@ -34,7 +35,9 @@ import numpy as np
 
 from rlenv.protocol import pack, unpack
 
-__all__ = ["Figure", "run_benchmarks"]
+__all__ = ["Figure", "format_table", "run_benchmarks", "to_json"]
+
+logger = logging.getLogger(__name__)
 
 CARTPOLE = "examples.cartpole:CartPoleEnvironment"
 PIXELS = "examples.pixels:PixelsEnvironment"
@@ -42,7 +45,8 @@ PIXELS = "examples.pixels:PixelsEnvironment"
 _ECHO_SERVER = """
 import socket, struct, sys
 listener = socket.create_server(("127.0.0.1", 0))
-print(listener.getsockname()[1], flush=True)
+sys.stdout.write(f"{listener.getsockname()[1]}\n")
+sys.stdout.flush()
 conn, _ = listener.accept()
 conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
 reply = sys.stdin.buffer.read()
@@ -75,10 +79,6 @@ class Figure:
     def ratio(self) -> float | None:
         """``value / baseline`` (higher is better for rates)."""
         return None if not self.baseline else self.value / self.baseline
-
-
-def _progress(message: str) -> None:
-    print(f"... {message}", file=sys.stderr, flush=True)
 
 
 def _median_rate(rounds: int, steps: int, run: Callable[[int], None]) -> float:
@@ -167,28 +167,38 @@ def _rss_kib(pid: int) -> int:
     raise RuntimeError("no VmRSS")
 
 
-def run_benchmarks(rounds: int = 5, steps: int = 2000, quick: bool = False) -> list[Figure]:
-    """Measure every figure (see the module docstring); ``quick`` uses fewer environments."""
+def run_benchmarks(
+    rounds: int = 5, steps: int = 2000, quick: bool = False,
+    progress: Callable[[str], None] = logger.info,
+) -> list[Figure]:
+    """Measure every figure (see the module docstring).
+
+    Args:
+        rounds: rounds per figure; the median is kept.
+        steps: steps per round.
+        quick: fewer vector layouts.
+        progress: told what is being measured, before each figure.
+    """
     from rlenv_client import Client, LocalClient, RemoteVectorEnv, ServerProcess
 
     figures: list[Figure] = []
     cartpole_action = np.zeros(1, np.float32)
     cartpole_obs = np.zeros(5, np.float32)
 
-    _progress("(a) msgpack ping-pong over loopback, CartPole-sized frames")
+    progress("(a) msgpack ping-pong over loopback, CartPole-sized frames")
     pong_latencies: list[float] = []
     floor = _ping_pong(_step_request(cartpole_action), _step_reply(cartpole_obs), rounds, steps,
                        pong_latencies)
     figures.append(Figure("msgpack ping-pong over loopback", floor, "round trips/s"))
 
-    _progress("(b) in-process CartPole")
+    progress("(b) in-process CartPole")
     with LocalClient(CARTPOLE) as local:
         local.configure(world={"track_limit": 1e9}, agent={"angle_limit": 1e9})
         rate = _client_steps(local, cartpole_action, 4, rounds, steps)
     figures.append(Figure("in-process CartPole step (repeat 4)", rate, "steps/s",
                           "msgpack ping-pong", floor))
 
-    _progress("(c, g) remote CartPole steps")
+    progress("(c, g) remote CartPole steps")
     step_latencies: list[float] = []
     with ServerProcess(CARTPOLE) as server, Client(server.host, server.port) as client:
         client.configure(world={"track_limit": 1e9}, agent={"angle_limit": 1e9})
@@ -204,7 +214,7 @@ def run_benchmarks(rounds: int = 5, steps: int = 2000, quick: bool = False) -> l
         figures.append(Figure(f"p{quantile} remote step latency (repeat 4)", mine, "us",
                               f"p{quantile} ping-pong", theirs))
 
-    _progress("(d) 84x84x3 uint8 observations")
+    progress("(d) 84x84x3 uint8 observations")
     image = np.zeros((84, 84, 3), np.uint8)
     image_floor = _ping_pong(_step_request(0), _step_reply(image), rounds, steps // 2)
     with ServerProcess(PIXELS) as server, Client(server.host, server.port) as client:
@@ -212,7 +222,7 @@ def run_benchmarks(rounds: int = 5, steps: int = 2000, quick: bool = False) -> l
     figures.append(Figure("remote 84x84x3 observation step", rate, "steps/s",
                           "ping-pong carrying the same bytes", image_floor))
 
-    _progress("(f) gymnasium AsyncVectorEnv, 8 x CartPole-v1")
+    progress("(f) gymnasium AsyncVectorEnv, 8 x CartPole-v1")
     import gymnasium
 
     async_envs = gymnasium.vector.AsyncVectorEnv([lambda: gymnasium.make("CartPole-v1")] * 8)
@@ -233,7 +243,7 @@ def run_benchmarks(rounds: int = 5, steps: int = 2000, quick: bool = False) -> l
         [(1, 1), (2, 1), (4, 1), (8, 1), (8, 4), (64, 32), (64, 64)]
     for count, per_server in layouts:
         servers = -(-count // per_server)
-        _progress(f"(e) RemoteVectorEnv, {count} CartPoles in {servers} servers")
+        progress(f"(e) RemoteVectorEnv, {count} CartPoles in {servers} servers")
         with RemoteVectorEnv(count, CARTPOLE, repeat_action=1,
                              instances_per_server=per_server) as envs:
             envs.reset(seed=0)
@@ -246,7 +256,7 @@ def run_benchmarks(rounds: int = 5, steps: int = 2000, quick: bool = False) -> l
         figures.append(Figure(f"RemoteVectorEnv {count} envs, {servers} servers x {per_server}",
                               rate, "env-steps/s", "AsyncVectorEnv(8) CartPole-v1", async_rate))
 
-    _progress("(h) memory")
+    progress("(h) memory")
     figures.append(Figure("one CartPole server process, resident", cartpole_rss / 1024, "MiB"))
     figures.append(Figure("one more CartPole instance in a process", _instance_kib(), "KiB"))
     return figures

@@ -45,7 +45,7 @@ PIXELS = "examples.pixels:PixelsEnvironment"
 _ECHO_SERVER = """
 import socket, struct, sys
 listener = socket.create_server(("127.0.0.1", 0))
-sys.stdout.write(f"{listener.getsockname()[1]}\n")
+sys.stdout.write(str(listener.getsockname()[1]) + chr(10))
 sys.stdout.flush()
 conn, _ = listener.accept()
 conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)

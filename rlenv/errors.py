@@ -45,8 +45,6 @@ class ErrorCode(StrEnum):
     """The server requires a token and the first request did not carry the right one."""
     TIMEOUT = "timeout"
     """The client took too long: a frame did not complete in time, or it stayed idle."""
-    VERSION_MISMATCH = "version_mismatch"
-    """Client and server speak different major protocol versions."""
     ENVIRONMENT_ERROR = "environment_error"
     """User code inside the environment raised; the message names the node and the traceback."""
 

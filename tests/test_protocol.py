@@ -643,7 +643,7 @@ def test_error_reply_instead_of_hello_closes_the_client(pair: ConnectionPair) ->
 def test_non_fatal_error_reply_instead_of_hello_also_closes_the_client(
     pair: ConnectionPair,
 ) -> None:
-    got, closed = pair.send(pair.server, ErrorReply(None, ErrorCode.VERSION_MISMATCH, "no"))
+    got, closed = pair.send(pair.server, ErrorReply(None, ErrorCode.BUSY, "no"))
     assert isinstance(got, ErrorReply) and got.fatal is False
     assert closed is CONNECTION_CLOSED
     assert pair.client.state is State.CLOSED

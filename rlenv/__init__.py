@@ -36,6 +36,8 @@ _EXPORTS = {
     "RLEnvWorld": "rlenv.world",
     "RLEnvironment": "rlenv.environment",
     "Server": "rlenv.server",
+    "View": "rlenv.views",
+    "view": "rlenv.views",
 }
 
 __all__ = sorted(_EXPORTS)
@@ -64,4 +66,6 @@ if TYPE_CHECKING:
     from rlenv.signals import Signal as Signal
     from rlenv.timer import PhysicsFramesTimer as PhysicsFramesTimer
     from rlenv.tree import SceneTree as SceneTree
+    from rlenv.views import View as View
+    from rlenv.views import view as view
     from rlenv.world import RLEnvWorld as RLEnvWorld

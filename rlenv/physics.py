@@ -266,6 +266,33 @@ class CollisionShape(Node):
         self.body_node: PhysicsBody | None = None
         self._world: PhysicsWorld | None = None
 
+    @property
+    def friction(self) -> float:
+        """The shape's friction coefficient."""
+        return self.shape.friction
+
+    @friction.setter
+    def friction(self, value: float) -> None:
+        self.shape.friction = value
+
+    @property
+    def elasticity(self) -> float:
+        """The shape's bounciness, 0 to 1."""
+        return self.shape.elasticity
+
+    @elasticity.setter
+    def elasticity(self, value: float) -> None:
+        self.shape.elasticity = value
+
+    @property
+    def sensor(self) -> bool:
+        """Whether the shape only reports contacts instead of colliding."""
+        return self.shape.sensor
+
+    @sensor.setter
+    def sensor(self, value: bool) -> None:
+        self.shape.sensor = value
+
     @classmethod
     def circle(cls, radius: float, offset: Vec = (0.0, 0.0), **kwargs: Any) -> CollisionShape:
         """A circle of ``radius`` centred at ``offset`` in the body's frame."""

@@ -1,0 +1,184 @@
+"""Tree views: query a scene tree and read or set attributes of many nodes at once.
+
+Blueprints-style access to a built world, without keeping references by hand::
+
+    arm = view(environment)
+    arm.all.bodies                      # View[3|CartPole.all.bodies]
+    arm.all.bodies.angular_velocity     # [0.0, 0.12, -0.3]: one value per node
+    arm.all.shapes.color = (255, 0, 0)  # set on every node of the view
+    arm.all.joints["Hinge*"]            # by name pattern
+    arm.all.in_group("sensors")         # by group
+    arm.all.bodies.where(lambda b: b.position.y > 1.0)
+
+Steps chain: ``.all`` (the nodes and every node below them), ``.children``, ``.parent``, and the
+typed steps ``.bodies``, ``.shapes``, ``.joints``: the children of those kinds. So
+``.bodies.bodies`` are the bodies attached below the bodies, and ``.all.bodies`` every body in
+the subtree. Reading any other attribute returns a list with that attribute of every node, in
+tree order; assigning one sets it on every node (which must all have it).
+"""
+
+from __future__ import annotations
+
+import fnmatch
+from collections.abc import Callable, Iterable, Iterator
+from typing import Any
+
+from rlenv.node import Node
+
+__all__ = ["View", "view"]
+
+_OWN = frozenset({"_nodes", "_label"})
+
+
+class View:
+    """An ordered set of nodes (tree order, no duplicates) with chainable queries."""
+
+    __slots__ = ("_label", "_nodes")
+
+    def __init__(self, nodes: Iterable[Node], label: str = "") -> None:
+        unique: dict[int, Node] = {}
+        for node in nodes:
+            unique.setdefault(id(node), node)
+        object.__setattr__(self, "_nodes", tuple(unique.values()))
+        object.__setattr__(self, "_label", label)
+
+    # --- steps ------------------------------------------------------------------------------
+
+    @property
+    def all(self) -> View:
+        """The nodes of this view and every node below them."""
+        return self._step("all", (n for node in self._nodes for n in node.iter_subtree()))
+
+    @property
+    def children(self) -> View:
+        """The children of the nodes of this view."""
+        return self._step("children", (c for node in self._nodes for c in node.get_children()))
+
+    @property
+    def parent(self) -> View:
+        """The parents of the nodes of this view."""
+        return self._step("parent", (node.parent for node in self._nodes
+                                     if node.parent is not None))
+
+    @property
+    def bodies(self) -> View:
+        """The children of this view's nodes that are physics bodies."""
+        from rlenv.physics import PhysicsBody
+
+        return self._typed("bodies", PhysicsBody)
+
+    @property
+    def shapes(self) -> View:
+        """The children of this view's nodes that are collision shapes."""
+        from rlenv.physics import CollisionShape
+
+        return self._typed("shapes", CollisionShape)
+
+    @property
+    def joints(self) -> View:
+        """The children of this view's nodes that are joints."""
+        from rlenv.physics import Joint
+
+        return self._typed("joints", Joint)
+
+    def of_type(self, kind: type | tuple[type, ...]) -> View:
+        """The nodes of this view that are instances of ``kind``."""
+        name = kind.__name__ if isinstance(kind, type) else "|".join(k.__name__ for k in kind)
+        return self._step(f"of_type({name})", (n for n in self._nodes if isinstance(n, kind)))
+
+    def named(self, pattern: str) -> View:
+        """The nodes of this view whose name matches the glob ``pattern``."""
+        return self._step(f"[{pattern!r}]", (n for n in self._nodes
+                                             if fnmatch.fnmatchcase(n.name, pattern)))
+
+    def in_group(self, group: str) -> View:
+        """The nodes of this view in ``group``."""
+        return self._step(f"in_group({group!r})", (n for n in self._nodes if n.is_in_group(group)))
+
+    def where(self, predicate: Callable[[Any], bool]) -> View:
+        """The nodes of this view for which ``predicate(node)`` is true."""
+        return self._step("where(...)", (n for n in self._nodes if predicate(n)))
+
+    def __getitem__(self, key: int | str) -> Any:
+        """``view[3]``: the fourth node; ``view["Cart*"]``: the nodes named like that."""
+        if isinstance(key, str):
+            return self.named(key)
+        return self._nodes[key]
+
+    # --- the nodes --------------------------------------------------------------------------
+
+    @property
+    def nodes(self) -> list[Node]:
+        """The nodes, in tree order."""
+        return list(self._nodes)
+
+    def __iter__(self) -> Iterator[Node]:
+        return iter(self._nodes)
+
+    def __len__(self) -> int:
+        return len(self._nodes)
+
+    def __contains__(self, node: object) -> bool:
+        return any(node is n for n in self._nodes)
+
+    def __repr__(self) -> str:
+        return f"View[{len(self._nodes)}|{self._label}]"
+
+    # --- bulk attributes --------------------------------------------------------------------
+
+    def __getattr__(self, name: str) -> list[Any]:
+        if name.startswith("__"):
+            raise AttributeError(name)
+        missing = [n for n in self._nodes if not hasattr(n, name)]
+        if missing:
+            raise AttributeError(f"{missing[0]!r} (and {len(missing) - 1} more) in {self!r} have "
+                                 f"no attribute {name!r}")
+        return [getattr(node, name) for node in self._nodes]
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name in _OWN:
+            raise AttributeError(f"{name} is read-only")
+        missing = [n for n in self._nodes if not hasattr(n, name)]
+        if missing:
+            raise AttributeError(f"{missing[0]!r} in {self!r} has no attribute {name!r}; "
+                                 "nothing was set")
+        for node in self._nodes:
+            setattr(node, name, value)
+
+    def set(self, name: str, values: Iterable[Any]) -> None:
+        """Set ``name`` on every node, one value each (as many values as nodes).
+
+        Raises:
+            ValueError: not as many values as nodes.
+        """
+        values = list(values)
+        if len(values) != len(self._nodes):
+            raise ValueError(f"{len(values)} values for the {len(self._nodes)} nodes of {self!r}")
+        for node, value in zip(self._nodes, values, strict=True):
+            setattr(node, name, value)
+
+    # --- internals --------------------------------------------------------------------------
+
+    def _step(self, step: str, nodes: Iterable[Node]) -> View:
+        return View(_tree_order(nodes), f"{self._label}.{step}" if self._label else step)
+
+    def _typed(self, step: str, kind: type) -> View:
+        return self._step(step, (c for node in self._nodes for c in node.get_children()
+                                 if isinstance(c, kind)))
+
+
+def view(*nodes: Node) -> View:
+    """A view of ``nodes`` to start queries from, e.g. ``view(environment).all.bodies``."""
+    return View(nodes, "+".join(node.name for node in nodes))
+
+
+def _tree_order(nodes: Iterable[Node]) -> list[Node]:
+    """``nodes`` without duplicates, sorted in tree order (pre-order) when they share a tree."""
+    unique = list({id(n): n for n in nodes}.values())
+    if len(unique) < 2:
+        return unique
+    root = unique[0]
+    while root.parent is not None:
+        root = root.parent
+    rank = {id(node): index for index, node in enumerate(root.iter_subtree())}
+    return sorted(unique, key=lambda node: rank.get(id(node), len(rank)))

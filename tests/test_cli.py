@@ -44,23 +44,6 @@ def test_serve_prints_where_it_listens(serve: Serve) -> None:
     assert f"listening on {server.host}:{server.port}" in server.output
 
 
-def test_the_example_runs_as_a_module(serve: Serve) -> None:
-    process = subprocess.Popen(
-        [sys.executable, "-m", "examples.cartpole", "--port", "0"], stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT, text=True, start_new_session=True,
-    )
-    try:
-        assert process.stdout is not None
-        line = process.stdout.readline()
-        host, port = re.fullmatch(r"listening on (.+):(\d+)\n", line).groups()  # type: ignore[union-attr]
-        with Client(host, int(port), timeout=10) as client:
-            client.reset(seed=0)
-            assert client.step(np.zeros(1, np.float32))[4]["frames"] == 4
-    finally:
-        process.terminate()
-        process.wait(10)
-
-
 def test_the_client_imports_no_physics_and_no_server() -> None:
     code = ("import sys, rlenv_client; "
             "print(sorted(m for m in sys.modules if m.split('.')[0] in "

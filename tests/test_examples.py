@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from conftest import Serve
 
+from examples.reacher import reach
 from examples.seeker import greedy
 from rlenv_client import Client
 
@@ -42,7 +43,32 @@ def test_the_seeker_stands_still_without_a_push(serve: Serve) -> None:
         assert np.allclose(after[:2], observation[:2])
 
 
-@pytest.mark.parametrize("name", ["cartpole", "seeker", "pixels"])
+def test_the_reacher_reaches_and_pays_for_effort(serve: Serve) -> None:
+    server = serve("examples.reacher:ReacherEnvironment")
+    with Client(server.host, server.port, timeout=10, world_data=True) as client:
+        for seed in range(2):
+            observation, info = client.reset(seed=seed)
+            assert np.allclose(observation[4:6], info["world"]["target"], atol=1e-6)
+            assert 0.2 <= np.hypot(*observation[4:6]) <= 0.9
+            reached = 0.0
+            for _ in range(100):
+                observation, reward, terminated, truncated, _ = client.step(reach(observation))
+                reached += reward
+                assert not (terminated or truncated)
+            assert np.hypot(*observation[8:10]) < 0.05  # the fingertip is on the target
+            client.reset(seed=seed)
+            idle = sum(client.step(np.zeros(2, np.float32))[1] for _ in range(100))
+            assert reached > idle  # reaching pays, even with its control cost
+        client.configure(agent={"control_cost": 0.0})
+        client.reset(seed=0)
+        _, reward, *_ = client.step(np.ones(2, np.float32))
+        client.configure(agent={"control_cost": 10.0})
+        client.reset(seed=0)
+        _, costly, *_ = client.step(np.ones(2, np.float32))
+        assert costly < reward  # effort is charged
+
+
+@pytest.mark.parametrize("name", ["cartpole", "seeker", "pixels", "reacher"])
 def test_every_example_serves_as_a_module(name: str) -> None:
     process = subprocess.Popen(
         [sys.executable, "-m", f"examples.{name}", "--port", "0"], stdout=subprocess.PIPE,

@@ -24,6 +24,7 @@ class _Registration:
 ENVIRONMENTS = {
     "rlenv/CartPole-v0": _Registration("examples.cartpole:CartPoleEnvironment", 500),
     "rlenv/Pixels-v0": _Registration("examples.pixels:PixelsEnvironment", 1000),
+    "rlenv/Reacher-v0": _Registration("examples.reacher:ReacherEnvironment", 200),
     "rlenv/Seeker-v0": _Registration("examples.seeker:SeekerEnvironment", 250),
 }
 """Registered ids and what they serve. CartPole never ends by itself when balanced, so it gets

@@ -36,6 +36,7 @@ _EXPORTS = {
     "RLEnvWorld": "rlenv.world",
     "RLEnvironment": "rlenv.environment",
     "Server": "rlenv.server",
+    "Camera": "rlenv.camera",
     "View": "rlenv.views",
     "view": "rlenv.views",
 }
@@ -52,6 +53,7 @@ def __getattr__(name: str) -> Any:
 
 if TYPE_CHECKING:
     from rlenv.agent import RLAgent as RLAgent
+    from rlenv.camera import Camera as Camera
     from rlenv.environment import RLEnvironment as RLEnvironment
     from rlenv.node import Node as Node
     from rlenv.node import NodeNotFoundError as NodeNotFoundError

@@ -8,6 +8,7 @@ import os
 import signal
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 from types import FrameType
 
 from rlenv.communication import DEFAULT_HOST, InsecureBindError, Limits
@@ -30,6 +31,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     serve.add_argument("--instances", type=int, default=1,
                        help="independent copies of the environment to host, stepped together "
                        "by batch requests (default 1)")
+    serve.add_argument("--record-dir", type=Path, default=None, metavar="DIR",
+                       help="let clients record videos into DIR (configure record='name.mp4')")
     serve.add_argument("--lifeline", type=int, default=None, metavar="FD",
                        help="exit when this inherited pipe closes (set by ServerProcess)")
     serve.add_argument("--token", default=os.environ.get("RLENV_TOKEN"),
@@ -87,7 +90,8 @@ def _serve(args: argparse.Namespace) -> int:
                     idle_timeout=args.idle_timeout or None, max_connections=args.max_connections)
     try:
         server = Server(args.target, host=args.host, port=args.port, lifeline=args.lifeline,
-                        token=args.token, limits=limits, instances=args.instances)
+                        token=args.token, limits=limits, instances=args.instances,
+                        record_dir=args.record_dir)
     except InsecureBindError as error:
         print(f"rlenv serve: {error}", file=sys.stderr)
         return 2

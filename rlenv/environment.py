@@ -20,6 +20,7 @@ import logging
 import traceback
 from collections.abc import Mapping
 from enum import Enum
+from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
@@ -30,6 +31,7 @@ from rlenv.communication import Communication, Endpoint
 from rlenv.errors import ErrorCode, RequestError
 from rlenv.node import ProcessMode
 from rlenv.protocol import ErrorReply, Hello, Request, Response
+from rlenv.recording import VideoRecorder
 from rlenv.rl_node import RLNode
 from rlenv.spaces import SpaceMismatch, check, find_non_finite
 from rlenv.timer import PhysicsFramesTimer
@@ -65,6 +67,9 @@ class RLEnvironment(RLNode):
         render_size: default (width, height) of rendered frames.
         render_view: the world rectangle (x_min, y_min, x_max, y_max) frames show; by default
             the bounding box of everything, frame by frame.
+        record_dir: where ``configure(record="name.mp4")`` may write videos (one frame per
+            physics tick of every action, drawn by :meth:`_render`); ``None`` (the default)
+            refuses recording requests. Set by ``rlenv serve --record-dir``.
         agent: the agent node.
         world: the world node.
         communication: the TCP endpoint.
@@ -84,7 +89,7 @@ class RLEnvironment(RLNode):
     physics_ticks_per_second: ClassVar[int] = 60
     render_size: ClassVar[tuple[int, int]] = (600, 400)
     render_view: ClassVar[tuple[float, float, float, float] | None] = None
-    configurable: ClassVar[tuple[str, ...]] = ("repeat_action",)
+    configurable: ClassVar[tuple[str, ...]] = ("repeat_action", "record")
 
     def __init__(self, name: str | None = None, *, repeat_action: int = 4) -> None:
         super().__init__(name)
@@ -102,6 +107,8 @@ class RLEnvironment(RLNode):
         self._episode = _Episode.NOT_STARTED
         self._request: Request | None = None
         self._action_started_at = 0
+        self.record_dir: Path | None = None
+        self._recorder: VideoRecorder | None = None
 
     # --- Godot lifecycle --------------------------------------------------------------------
 
@@ -179,6 +186,35 @@ class RLEnvironment(RLNode):
             self._answer_error(error.code, str(error))
         except Exception as error:  # user code raised: report it, keep serving
             self.report_error(error)
+
+    def configure(self, config: Mapping[str, Any]) -> None:
+        """Apply the ``environment`` part of a configuration.
+
+        ``record`` starts (a file name) or stops (``""``) a recording; see :attr:`record_dir`.
+        """
+        settings = dict(config)
+        if "record" in settings:
+            self._record(settings.pop("record"))
+        super().configure(settings)
+
+    def check_config(self, config: Mapping[str, Any]) -> None:
+        """Check the ``environment`` part of a configuration without applying it."""
+        settings = dict(config)
+        if "record" in settings:
+            _check_recording(settings.pop("record"), self.record_dir)
+        super().check_config(settings)
+
+    def _record(self, name: str) -> None:
+        if self._recorder is not None:
+            self._recorder.close()
+            self._recorder = None
+        if name:
+            assert self.record_dir is not None
+            self._recorder = VideoRecorder(self.record_dir / name,
+                                           self.get_tree().physics_ticks_per_second)
+
+    def _exit_tree(self) -> None:
+        self._record("")
 
     def _configure(self, configuration_request: Mapping[str, Any]) -> None:
         """Apply the ``environment``, ``agent`` and ``world`` parts of a configuration."""
@@ -345,6 +381,8 @@ class RLEnvironment(RLNode):
         if self._episode is not _Episode.ACTING or agent is None:
             return
         agent._after_physics_tick(delta)
+        if self._recorder is not None:
+            self._recorder.add(self._render(*self.render_size))
         if agent.terminated or agent.truncated:
             self.physics_frames_timer.stop()
             self._finish_action()
@@ -400,6 +438,25 @@ def _check_render(size: Any) -> None:
                 f"observation.render.{key} must be an integer in [1, {_MAX_RENDER_SIZE}], "
                 f"got {value!r:.40}",
             )
+
+
+_VIDEO_SUFFIXES = frozenset({".mp4", ".webm", ".avi", ".mkv"})
+
+
+def _check_recording(name: Any, record_dir: Path | None) -> None:
+    if not isinstance(name, str):
+        raise RequestError(ErrorCode.INVALID_CONFIG, "record must be a file name (or '' to stop)")
+    if not name:
+        return
+    if record_dir is None:
+        raise RequestError(ErrorCode.INVALID_CONFIG, "recording is disabled on this server; "
+                           "start it with rlenv serve --record-dir DIR")
+    if Path(name).name != name or name.startswith("."):
+        raise RequestError(ErrorCode.INVALID_CONFIG, f"record must be a plain file name in the "
+                           f"server's record directory, got {name!r:.60}")
+    if Path(name).suffix not in _VIDEO_SUFFIXES:
+        raise RequestError(ErrorCode.INVALID_CONFIG, f"record must end with one of "
+                           f"{', '.join(sorted(_VIDEO_SUFFIXES))}, got {name!r:.60}")
 
 
 def _check_repeat(value: Any) -> None:

@@ -107,10 +107,9 @@ def _draw_shape(image: np.ndarray, shape: pymunk.Shape, color: tuple[int, int, i
                         image.shape[0])
     if cols is None or rows is None:
         return
-    xs = x0 + (np.arange(*cols) + 0.5) / scale
-    ys = y0 - (np.arange(*rows) + 0.5) / scale
-    x, y = np.meshgrid(xs, ys)
-    mask = _inside(shape, x, y, half_pixel)
+    x = (x0 + (np.arange(*cols) + 0.5) / scale)[np.newaxis, :]  # broadcast, never a grid
+    y = (y0 - (np.arange(*rows) + 0.5) / scale)[:, np.newaxis]
+    mask = np.broadcast_to(_inside(shape, x, y, half_pixel), (rows[1] - rows[0], cols[1] - cols[0]))
     image[rows[0]:rows[1], cols[0]:cols[1]][mask] = color
 
 
@@ -132,7 +131,7 @@ def _inside(shape: pymunk.Shape, x: np.ndarray, y: np.ndarray, half_pixel: float
     if isinstance(shape, pymunk.Poly):
         vertices = [body.local_to_world(v) for v in shape.get_vertices()]
         return _convex(x, y, vertices, shape.radius)
-    return np.zeros(x.shape, dtype=bool)
+    return np.zeros((1, 1), dtype=bool)
 
 
 def _capsule(x: np.ndarray, y: np.ndarray, a: Sequence[float], b: Sequence[float],
@@ -146,12 +145,12 @@ def _capsule(x: np.ndarray, y: np.ndarray, a: Sequence[float], b: Sequence[float
 
 def _convex(x: np.ndarray, y: np.ndarray, vertices: Sequence[Sequence[float]],
             radius: float) -> np.ndarray:
-    mask = np.ones(x.shape, dtype=bool)
+    mask: np.ndarray | bool = True
     count = len(vertices)
     for index in range(count):
         (ax, ay), (bx, by) = vertices[index], vertices[(index + 1) % count]
         edge_x, edge_y = bx - ax, by - ay
         length = (edge_x * edge_x + edge_y * edge_y) ** 0.5 or 1.0
         # pymunk keeps polygon vertices counter-clockwise: the inside is left of every edge
-        mask &= (edge_x * (y - ay) - edge_y * (x - ax)) / length >= -radius
-    return mask
+        mask = mask & ((edge_x * (y - ay) - edge_y * (x - ax)) / length >= -radius)
+    return np.asarray(mask)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib
 import logging
 from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 from rlenv.communication import DEFAULT_HOST, Communication, Limits
@@ -61,6 +62,7 @@ class Server:
         limits: frame sizes and deadlines (see :class:`~rlenv.communication.Limits`); the
             defaults if ``None``.
         instances: how many environment instances to host.
+        record_dir: where clients may have the environment record videos (``None``: nowhere).
 
     Raises:
         InsecureBindError: a non-loopback ``host`` without a ``token``.
@@ -69,7 +71,7 @@ class Server:
     def __init__(
         self, environment: RLEnvironment | type[RLEnvironment] | str, host: str = DEFAULT_HOST,
         port: int = 0, lifeline: int | None = None, token: str | None = None,
-        limits: Limits | None = None, instances: int = 1,
+        limits: Limits | None = None, instances: int = 1, record_dir: Path | None = None,
     ) -> None:
         if isinstance(environment, str):
             environment = load_environment(environment)
@@ -97,6 +99,8 @@ class Server:
             self.communication = Communication(environment.hello, limits=limits or Limits(),
                                                token=token)
             environment.communication = self.communication
+        for hosted in [instance.environment for instance in self.instances] or [self.environment]:
+            hosted.record_dir = record_dir
         self.address = self.communication.start_server(port, host)
         if lifeline is not None:
             self.communication.watch_lifeline(lifeline)

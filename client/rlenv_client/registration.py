@@ -26,6 +26,7 @@ ENVIRONMENTS = {
     "rlenv/Pixels-v0": _Registration("examples.pixels:PixelsEnvironment", 1000),
     "rlenv/Reacher-v0": _Registration("examples.reacher:ReacherEnvironment", 200),
     "rlenv/Seeker-v0": _Registration("examples.seeker:SeekerEnvironment", 250),
+    "rlenv/SeekerPixels-v0": _Registration("examples.seeker:SeekerPixelsEnvironment", 250),
 }
 """Registered ids and what they serve. CartPole never ends by itself when balanced, so it gets
 a time limit (500 steps of 4 ticks: 33 simulated seconds), as gym-kraby's TimeLimit lesson

@@ -9,6 +9,7 @@ connected to that signal, is rewarded and the episode ends::
     |___PhysicsFramesTimer
     |___Agent (SeekerAgent)            pushes the disc, observes, is rewarded on apple_caught
     |___World (SeekerWorld)            signal apple_caught; rebuilds its physics every reset
+        |___Eye (Camera)               only in SeekerPixels: the agent's eyes, 64x64
         |___Physics (PhysicsWorld)     no gravity (seen from above), some drag
             |___Walls (StaticBody)     four segments around the room
             |___Disc (RigidBody)       the agent's body
@@ -44,13 +45,25 @@ from gymnasium import spaces
 
 from rlenv import CollisionShape, PhysicsWorld, RigidBody, StaticBody
 from rlenv.agent import RLAgent
+from rlenv.camera import Camera
 from rlenv.environment import RLEnvironment
 from rlenv.signals import Signal
 from rlenv.world import RLEnvWorld
 
-__all__ = ["TARGET", "SeekerAgent", "SeekerEnvironment", "SeekerWorld", "greedy", "main"]
+__all__ = [
+    "PIXELS_TARGET",
+    "TARGET",
+    "PixelSeekerAgent",
+    "SeekerAgent",
+    "SeekerEnvironment",
+    "SeekerPixelsEnvironment",
+    "SeekerWorld",
+    "greedy",
+    "main",
+]
 
 TARGET = "examples.seeker:SeekerEnvironment"
+PIXELS_TARGET = "examples.seeker:SeekerPixelsEnvironment"
 HALF = 5.0  # the room spans [-HALF, HALF] in x and y
 RADIUS = 0.3
 
@@ -179,6 +192,22 @@ class SeekerAgent(RLAgent):
         return np.array((x, y, *disc.velocity, apple_x - x, apple_y - y), dtype=np.float32)
 
 
+class PixelSeekerAgent(SeekerAgent):
+    """The same seeker, seeing the room only through a 64x64 camera (``rlenv/SeekerPixels-v0``).
+
+    Its observation space is ``Box(0, 255, (64, 64, 3), uint8)``: the whole room from above,
+    the disc blue and the apple red. Actions, rewards and episode end are the seeker's.
+    """
+
+    observation_space = spaces.Box(0, 255, (64, 64, 3), np.uint8)
+
+    def get_data(self, observation_request: Mapping[str, Any]) -> np.ndarray:
+        """What the camera sees."""
+        camera = self.get_node("../World/Eye")
+        assert isinstance(camera, Camera)
+        return camera.capture()
+
+
 class SeekerEnvironment(RLEnvironment):
     """The apple seeker: an agent and a world under one node."""
 
@@ -189,6 +218,17 @@ class SeekerEnvironment(RLEnvironment):
         super().__init__("Seeker", repeat_action=4)
         self.add_child(SeekerAgent())
         self.add_child(SeekerWorld())
+
+
+class SeekerPixelsEnvironment(SeekerEnvironment):
+    """The apple seeker observed from pixels: a camera above the room feeds the agent."""
+
+    def __init__(self) -> None:
+        RLEnvironment.__init__(self, "SeekerPixels", repeat_action=4)
+        self.add_child(PixelSeekerAgent())
+        world = SeekerWorld()
+        world.add_child(Camera(view=self.render_view, size=(64, 64), name="Eye"))
+        self.add_child(world)
 
 
 def main() -> None:

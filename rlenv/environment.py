@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
+from gymnasium import spaces
 from gymnasium.utils import seeding
 
 from rlenv.agent import RLAgent
@@ -95,6 +96,7 @@ class RLEnvironment(RLNode):
         super().__init__(name)
         self.process_mode = ProcessMode.ALWAYS
         self.agent: RLAgent | None = None
+        self.agents: list[RLAgent] = []
         self.world: RLEnvWorld | None = None
         self.communication: Endpoint = Communication(self.hello)
         self.physics_frames_timer = PhysicsFramesTimer(
@@ -116,13 +118,22 @@ class RLEnvironment(RLNode):
         self.get_tree().paused = True
 
     @property
+    def multi_agent(self) -> bool:
+        """Whether the environment has several agents (spaces and outcomes keyed by name)."""
+        return len(self.agents) > 1
+
+    @property
     def request_in_progress(self) -> bool:
         """Whether a request is being served (an action may be running)."""
         return self._request is not None
 
     def _ready(self) -> None:
-        if self.agent is None:
-            self.agent = self.find_child("*", RLAgent, recursive=False)
+        if not self.agents:
+            self.agents = self.find_children("*", RLAgent, recursive=False)
+        if self.agent is None and self.agents:
+            self.agent = self.agents[0]
+        if not self.agents and self.agent is not None:
+            self.agents = [self.agent]
         if self.world is None:
             self.world = self.find_child("*", RLEnvWorld, recursive=False)
 
@@ -155,14 +166,19 @@ class RLEnvironment(RLNode):
         """
         agent = self._require_agent()
         self._require_world()
-        for attribute in ("action_space", "observation_space"):
-            if not hasattr(agent, attribute):
-                raise RuntimeError(f"{agent!r} must set {attribute} to a gymnasium space")
+        for each in self.agents:
+            for attribute in ("action_space", "observation_space"):
+                if not hasattr(each, attribute):
+                    raise RuntimeError(f"{each!r} must set {attribute} to a gymnasium space")
+        action_space, observation_space = agent.action_space, agent.observation_space
+        if self.multi_agent:  # the joint spaces, keyed by agent name
+            action_space = spaces.Dict({a.name: a.action_space for a in self.agents})
+            observation_space = spaces.Dict({a.name: a.observation_space for a in self.agents})
         return Hello(
             environment=self.name,
-            action_space=agent.action_space,
-            observation_space=agent.observation_space,
-            agents=(agent.name,),
+            action_space=action_space,
+            observation_space=observation_space,
+            agents=tuple(a.name for a in self.agents),
             physics_ticks_per_second=self.get_tree().physics_ticks_per_second,
             repeat_action=self.repeat_action,
             render_modes=("rgb_array",),
@@ -221,22 +237,29 @@ class RLEnvironment(RLNode):
         if "environment" in configuration_request:
             self.configure(configuration_request["environment"])
         if "agent" in configuration_request:
-            self._require_agent().configure(configuration_request["agent"])
+            for agent in self.agents:
+                agent.configure(configuration_request["agent"])
         if "world" in configuration_request:
             self._require_world().configure(configuration_request["world"])
 
     def _reset(self, options: Mapping[str, Any]) -> None:
-        """Start an episode: reset the world, then the agent at a sampled initial position."""
+        """Start an episode: reset the world, then each agent at a sampled initial position."""
         world = self._require_world()
         world.reset(options)
-        self._require_agent().reset(world.sample_initial_position())
+        for agent in self.agents:
+            agent.reset(world.sample_initial_position())
 
     def _step(self, action: Any, frames: int | None = None) -> None:
         """Give ``action`` to the agent and run ``frames`` ticks (default :attr:`repeat_action`).
 
         Override to add logic around an action, and call ``super()._step(action, frames)``.
         """
-        self._require_agent().set_action(action)
+        if self.multi_agent:
+            for agent in self.agents:
+                if agent.name in action:
+                    agent.set_action(action[agent.name])
+        else:
+            self._require_agent().set_action(action)
         self.get_tree().paused = False
         self.physics_frames_timer.start(frames or self.repeat_action)
 
@@ -249,13 +272,11 @@ class RLEnvironment(RLNode):
         if observation_request is not None:
             observation = {}
             if "agent" in observation_request:
-                observation["agent"] = data = agent.get_data(observation_request["agent"])
-                where = find_non_finite(data)
-                if where is not None:
-                    raise FloatingPointError(
-                        f"the observation of {agent.get_path()} is not finite at {where or '()'}"
-                        f": {data!r:.200}"
-                    )
+                asked = observation_request["agent"]
+                observation["agent"] = (
+                    {each.name: _observe(each, asked) for each in self.agents}
+                    if self.multi_agent else _observe(agent, asked)
+                )
             if "world" in observation_request:
                 observation["world"] = self._require_world().get_data(observation_request["world"])
             if "render" in observation_request:
@@ -263,17 +284,31 @@ class RLEnvironment(RLNode):
                 observation["render"] = self._render(
                     size.get("width", self.render_size[0]), size.get("height", self.render_size[1])
                 )
+        outcomes = None
+        if self.multi_agent:
+            outcomes = {each.name: {"reward": float(each.reward),
+                                    "terminated": bool(each.terminated),
+                                    "truncated": bool(each.truncated)} for each in self.agents}
+            ended = all(o["terminated"] or o["truncated"] for o in outcomes.values())
+            terminated = ended and any(o["terminated"] for o in outcomes.values())
+            truncated = ended and not terminated
+            reward = sum(o["reward"] for o in outcomes.values())
+        else:
+            reward = float(agent.reward)
+            terminated, truncated = bool(agent.terminated), bool(agent.truncated)
         frames = self.get_tree().physics_frames - self._action_started_at
         response = Response(
             id=request.id,
             observation=observation,
-            reward=float(agent.reward),
-            terminated=bool(agent.terminated),
-            truncated=bool(agent.truncated),
+            reward=reward,
+            terminated=terminated,
+            truncated=truncated,
             info=self._get_info(),
             frames=frames if request.action is not None else 0,
+            agents=outcomes,
         )
-        agent.reward = 0.0
+        for each in self.agents:
+            each.reward = 0.0
         if response.terminated or response.truncated:
             self._episode = _Episode.ENDED
         elif self._episode is _Episode.ACTING:
@@ -362,28 +397,50 @@ class RLEnvironment(RLNode):
         if reset is None and self._episode is _Episode.ENDED:
             raise RequestError(ErrorCode.RESET_REQUIRED, "the episode has ended; reset first")
         try:
+            if self.multi_agent:
+                return self._check_joint_action(request.action, fresh=reset is not None)
             return check(self._require_agent().action_space, request.action, "action")
         except SpaceMismatch as error:
             raise RequestError(ErrorCode.INVALID_ACTION, str(error)) from None
+
+    def _check_joint_action(self, action: Any, fresh: bool) -> dict[str, Any]:
+        """One action per agent still in the episode, keyed by name (PettingZoo's convention).
+
+        Actions for agents whose episode has ended are ignored, so that a client holding the
+        joint ``Dict`` action space may keep sending them.
+        """
+        if not isinstance(action, Mapping):
+            raise SpaceMismatch(f"action must be a map from agent name to action, one per "
+                                f"agent in the episode: {[a.name for a in self.agents]}")
+        live = {a.name: a for a in self.agents if fresh or not (a.terminated or a.truncated)}
+        unknown = sorted(map(str, action.keys() - {a.name for a in self.agents}))
+        if unknown:
+            raise SpaceMismatch(f"action for unknown agent {unknown[0]!r}")
+        missing = sorted(live.keys() - action.keys())
+        if missing:
+            raise SpaceMismatch(f"no action for agent {missing[0]!r}")
+        return {name: check(agent.action_space, action[name], f"action[{name!r}]")
+                for name, agent in live.items()}
 
     def _begin_episode(self, arguments: Mapping[str, Any]) -> None:
         seed = arguments.get("seed")
         if seed is not None:
             self._np_random, _ = seeding.np_random(seed)
-        agent = self._require_agent()
-        agent.reward = 0.0
-        agent.terminated = agent.truncated = False
+        self._require_agent()
+        for agent in self.agents:
+            agent.reward = 0.0
+            agent.terminated = agent.truncated = False
         self._episode = _Episode.RUNNING
         self._reset(arguments.get("options") or {})
 
     def _end_tick(self, delta: float) -> None:
-        agent = self.agent
-        if self._episode is not _Episode.ACTING or agent is None:
+        if self._episode is not _Episode.ACTING or not self.agents:
             return
-        agent._after_physics_tick(delta)
+        for agent in self.agents:
+            agent._after_physics_tick(delta)
         if self._recorder is not None:
             self._recorder.add(self._render(*self.render_size))
-        if agent.terminated or agent.truncated:
+        if all(agent.terminated or agent.truncated for agent in self.agents):
             self.physics_frames_timer.stop()
             self._finish_action()
 
@@ -415,6 +472,18 @@ class _Episode(Enum):
     RUNNING = "running"
     ACTING = "acting"
     ENDED = "ended"
+
+
+def _observe(agent: RLAgent, request: Any) -> Any:
+    """``agent``'s observation, refused when it holds NaN or infinity."""
+    data = agent.get_data(request)
+    where = find_non_finite(data)
+    if where is not None:
+        raise FloatingPointError(
+            f"the observation of {agent.get_path()} is not finite at {where or '()'}: "
+            f"{data!r:.200}"
+        )
+    return data
 
 
 def _check_keys(part: Mapping[str, Any], allowed: frozenset[str], where: str) -> None:

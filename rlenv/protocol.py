@@ -420,10 +420,12 @@ class Response:
     truncated: bool = False
     info: Mapping[str, Any] = field(default_factory=dict)
     frames: int = 0
+    agents: Mapping[str, Mapping[str, Any]] | None = None
+    """Per agent of a multi-agent environment: ``{"reward", "terminated", "truncated"}``."""
 
     def to_wire(self) -> dict[str, Any]:
         """The message as a msgpack-ready map."""
-        return {
+        wire = {
             "id": self.id,
             "observation": self.observation,
             "reward": self.reward,
@@ -432,6 +434,9 @@ class Response:
             "info": self.info,
             "frames": self.frames,
         }
+        if self.agents is not None:
+            wire["agents"] = self.agents
+        return wire
 
     @classmethod
     def from_wire(cls, wire: Mapping[str, Any]) -> Response:
@@ -449,6 +454,7 @@ class Response:
                 truncated=bool(wire["truncated"]),
                 info=wire["info"],
                 frames=int(wire["frames"]),
+                agents=wire.get("agents"),
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise RemoteProtocolError(f"invalid response: {exc!r}") from None

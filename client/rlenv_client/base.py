@@ -267,6 +267,8 @@ class BaseClient(ABC):
     def _info(self, response: Response) -> dict[str, Any]:
         info = dict(response.info)
         info["frames"] = response.frames
+        if response.agents is not None:
+            info["agents"] = response.agents
         if response.observation is not None and "world" in response.observation:
             info["world"] = response.observation["world"]
         return info

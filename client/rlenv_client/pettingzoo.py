@@ -1,0 +1,117 @@
+"""PettingZoo ``ParallelEnv`` over a multi-agent rlenv environment.
+
+A server with several agents declares ``Dict`` action and observation spaces keyed by agent
+name; this adaptor splits them back into PettingZoo's per-agent view. Agents whose episode has
+ended leave ``agents`` and take no further actions; the server checks that too.
+
+Needs the optional extra: ``pip install pettingzoo``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from pettingzoo import ParallelEnv
+
+from rlenv_client.session import Session
+
+__all__ = ["RemoteParallelEnv"]
+
+
+class RemoteParallelEnv(ParallelEnv):
+    """Any multi-agent rlenv environment as a PettingZoo parallel environment.
+
+    Args:
+        target: the environment class as ``MODULE:CLASS`` (a server is started for it).
+        address: ``HOST:PORT`` of a running server instead.
+        repeat_action: physics ticks per step; the server's default if ``None``.
+        max_cycles: truncate every agent after this many steps (``None``: never).
+        in_process: run the environment in this process.
+        render_mode: ``"rgb_array"`` or ``None``.
+        timeout: seconds to wait for each answer.
+    """
+
+    metadata = {"name": "rlenv_parallel", "render_modes": ["rgb_array"]}
+
+    def __init__(
+        self, target: str | None = None, *, address: str | None = None,
+        repeat_action: int | None = None, max_cycles: int | None = None,
+        in_process: bool = False, render_mode: str | None = None, timeout: float = 30.0,
+        server_args: Sequence[str] = (),
+    ) -> None:
+        self.session = Session(target, address=address, in_process=in_process, timeout=timeout,
+                               server_args=server_args)
+        hello = self.session.client.hello
+        self.possible_agents = list(hello.agents)
+        self.agents: list[str] = []
+        joint_actions, joint_observations = hello.action_space, hello.observation_space
+        if len(self.possible_agents) > 1:
+            if not (isinstance(joint_actions, spaces.Dict)
+                    and isinstance(joint_observations, spaces.Dict)):
+                self.session.close()
+                raise ValueError(f"{hello.environment} has {len(self.possible_agents)} agents "
+                                 "but its spaces are not keyed by agent")
+            self.action_spaces = dict(joint_actions.spaces)
+            self.observation_spaces = dict(joint_observations.spaces)
+        else:
+            name = self.possible_agents[0]
+            self.action_spaces = {name: joint_actions}
+            self.observation_spaces = {name: joint_observations}
+        self.repeat_action = repeat_action
+        self.max_cycles = max_cycles
+        self.render_mode = render_mode
+        self._cycles = 0
+
+    def observation_space(self, agent: str) -> spaces.Space:
+        """The observation space of ``agent``."""
+        return self.observation_spaces[agent]
+
+    def action_space(self, agent: str) -> spaces.Space:
+        """The action space of ``agent``."""
+        return self.action_spaces[agent]
+
+    def reset(
+        self, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
+        """Start an episode with every agent."""
+        observation, _ = self.session.client.reset(seed=seed, options=options)
+        self.agents = list(self.possible_agents)
+        self._cycles = 0
+        return self._split(observation), {agent: {} for agent in self.agents}
+
+    def step(self, actions: dict[str, Any]) -> tuple[dict[str, Any], ...]:
+        """Act for every agent still in the episode; returns PettingZoo's five dicts."""
+        live = list(self.agents)
+        joint = {agent: actions[agent] for agent in live} if len(self.possible_agents) > 1 \
+            else actions[live[0]]
+        observation, reward, terminated, truncated, info = self.session.client.step(
+            joint, self.repeat_action)
+        self._cycles += 1
+        outcomes = info.get("agents") or {live[0]: {"reward": reward, "terminated": terminated,
+                                                    "truncated": truncated}}
+        cut = self.max_cycles is not None and self._cycles >= self.max_cycles
+        observations = {agent: value for agent, value in self._split(observation).items()
+                        if agent in live}
+        rewards = {agent: float(outcomes[agent]["reward"]) for agent in live}
+        terminations = {agent: bool(outcomes[agent]["terminated"]) for agent in live}
+        truncations = {agent: bool(outcomes[agent]["truncated"]) or cut for agent in live}
+        infos: dict[str, dict[str, Any]] = {agent: {"frames": info["frames"]} for agent in live}
+        self.agents = [agent for agent in live
+                       if not (terminations[agent] or truncations[agent])]
+        return observations, rewards, terminations, truncations, infos
+
+    def render(self) -> np.ndarray | None:
+        """The current frame (``rgb_array``), or ``None``."""
+        return self.session.client.render() if self.render_mode == "rgb_array" else None
+
+    def close(self) -> None:
+        """Disconnect, and stop the server this environment started."""
+        self.session.close()
+
+    def _split(self, observation: Any) -> dict[str, Any]:
+        if len(self.possible_agents) > 1:
+            return dict(observation)
+        return {self.possible_agents[0]: observation}

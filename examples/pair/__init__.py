@@ -1,0 +1,191 @@
+"""Pair: two seekers in one room, each after its own apple (several agents in one world).
+
+Both agents live in the same pymunk space and bump into each other. Each is done when it
+catches its own apple; the episode ends when both are. Observations, rewards and terminations
+are keyed by agent name (``Red``, ``Blue``), as PettingZoo expects::
+
+    Pair (PairEnvironment)
+    |___PhysicsFramesTimer
+    |___Red (PairAgent)      |___Blue (PairAgent)
+    |___World (PairWorld)                signal caught(agent name)
+        |___Physics (PhysicsWorld)
+            |___Walls (StaticBody)
+            |___RedDisc, BlueDisc (RigidBody)
+            |___RedApple, BlueApple (StaticBody, sensor shapes)
+
+## Action Space
+Per agent ``Box(-1, 1, (2,), float32)``: the force on its disc (fraction of 20 N). The joint
+space is a ``Dict`` keyed by agent name; an agent whose episode has ended takes no action.
+
+## Observation Space
+Per agent ``Box((8,), float32)``: its disc's position and velocity, its apple relative to its
+disc, and the other disc relative to its disc.
+
+## Rewards
+Per agent: -0.01 per physics tick until it is done, +10 for catching its own apple.
+
+## Episode End
+An agent terminates when it catches its apple; the episode ends when both have
+(``rlenv/Pair-v0`` truncates after 300 steps).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import pymunk
+from gymnasium import spaces
+
+from examples.seeker import HALF, RADIUS
+from rlenv import CollisionShape, PhysicsWorld, RigidBody, StaticBody
+from rlenv.agent import RLAgent
+from rlenv.environment import RLEnvironment
+from rlenv.signals import Signal
+from rlenv.world import RLEnvWorld
+
+__all__ = ["NAMES", "TARGET", "PairAgent", "PairEnvironment", "PairWorld", "chase"]
+
+TARGET = "examples.pair:PairEnvironment"
+NAMES = ("Red", "Blue")
+_COLORS = {"Red": (200, 50, 50), "Blue": (50, 90, 200)}
+
+
+def chase(observation: np.ndarray) -> np.ndarray:
+    """Push towards one's own apple, braking a little."""
+    return np.clip(observation[4:6] - 0.5 * observation[2:4], -1, 1).astype(np.float32)
+
+
+class PairWorld(RLEnvWorld):
+    """The room, two discs and two apples; emits ``caught(name)`` when a disc gets its apple."""
+
+    caught = Signal("name")
+    """Emitted (inside the physics step) with the name of the agent that caught its apple."""
+
+    def __init__(self) -> None:
+        super().__init__("World")
+        self.physics: PhysicsWorld | None = None
+        self.discs: dict[str, RigidBody] = {}
+        self.apples: dict[str, StaticBody] = {}
+        self._placing: list[str] = []
+
+    def reset(self, options: Mapping[str, Any]) -> None:
+        """Build a fresh room with both apples placed apart."""
+        if self.physics is not None:
+            self.remove_child(self.physics)
+            self.physics.queue_free()
+        physics = PhysicsWorld(gravity=(0.0, 0.0), damping=0.5, name="Physics")
+        walls = StaticBody(name="Walls")
+        corners = [(-HALF, -HALF), (HALF, -HALF), (HALF, HALF), (-HALF, HALF)]
+        for index, (a, b) in enumerate(zip(corners, corners[1:] + corners[:1], strict=True)):
+            walls.add_child(CollisionShape.segment(a, b, 0.05, name=f"Wall{index}"))
+        physics.add_child(walls)
+        for name in NAMES:
+            disc = RigidBody(name=f"{name}Disc")
+            disc.add_child(CollisionShape.circle(RADIUS, mass=1.0, color=_COLORS[name],
+                                                 name="Body"))
+            apple = StaticBody(position=tuple(self._spot()), name=f"{name}Apple")
+            skin = CollisionShape.circle(0.25, sensor=True, color=_COLORS[name], name="Skin")
+            skin.collision_started.connect(self._touched(name))
+            apple.add_child(skin)
+            physics.add_child(disc)
+            physics.add_child(apple)
+            self.discs[name], self.apples[name] = disc, apple
+        self.physics = physics
+        self.add_child(physics)
+        self._placing = list(NAMES)
+
+    def sample_initial_position(self) -> np.ndarray:
+        """A spot for the next agent's disc, 2 m from its apple (agents are placed in order)."""
+        name = self._placing.pop(0)
+        while True:
+            spot = self._spot()
+            if np.hypot(*(spot - np.array(self.apples[name].position))) >= 2.0:
+                return spot
+
+    def _spot(self) -> np.ndarray:
+        margin = HALF - RADIUS - 0.2
+        return self.np_random.uniform(-margin, margin, size=2)
+
+    def _touched(self, name: str) -> Any:
+        def on_contact(other: CollisionShape) -> None:
+            if other.body_node is self.discs.get(name):
+                self.caught.emit(name)
+        return on_contact
+
+
+class PairAgent(RLAgent):
+    """One of the two seekers; knows its disc, its apple and the other disc."""
+
+    action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
+    observation_space = spaces.Box(
+        low=np.array([-HALF, -HALF, -50, -50] + [-2 * HALF] * 4, dtype=np.float32),
+        high=np.array([HALF, HALF, 50, 50] + [2 * HALF] * 4, dtype=np.float32),
+        dtype=np.float32,
+    )
+
+    def __init__(self, name: str) -> None:
+        super().__init__(name)
+        self.force = (0.0, 0.0)
+        self._disc: pymunk.Body | None = None
+
+    @property
+    def world(self) -> PairWorld:
+        """The shared world."""
+        world = self.get_node("../World")
+        assert isinstance(world, PairWorld)
+        return world
+
+    def _ready(self) -> None:
+        self.world.caught.connect(self._on_caught)
+
+    def reset(self, arguments: np.ndarray) -> None:
+        """Put this agent's disc at the sampled spot, at rest."""
+        self._disc = self.world.discs[self.name].body
+        self._disc.position = (float(arguments[0]), float(arguments[1]))
+        self._disc.velocity = (0.0, 0.0)
+        self.force = (0.0, 0.0)
+
+    def set_action(self, action: np.ndarray) -> None:
+        """Remember the force for the ticks of this action."""
+        self.force = (float(action[0]) * 20.0, float(action[1]) * 20.0)
+
+    def _physics_process(self, delta: float) -> None:
+        if self._disc is not None and not self.terminated:
+            self._disc.apply_force_at_world_point(self.force, self._disc.position)
+
+    def _after_physics_tick(self, delta: float) -> None:
+        if not self.terminated:
+            self.add_reward(-0.01)
+
+    def _on_caught(self, name: str) -> None:
+        if name == self.name and not self.terminated:
+            self.add_reward(10.0)
+            self.set_terminated()
+            self.force = (0.0, 0.0)
+
+    def get_data(self, observation_request: Mapping[str, Any]) -> np.ndarray:
+        """Own position and velocity, own apple and the other disc, both relative."""
+        world = self.world
+        disc = self._disc
+        assert disc is not None
+        other = next(n for n in NAMES if n != self.name)
+        x, y = disc.position
+        apple_x, apple_y = world.apples[self.name].position
+        other_x, other_y = world.discs[other].position
+        return np.array((x, y, *disc.velocity, apple_x - x, apple_y - y, other_x - x,
+                         other_y - y), dtype=np.float32)
+
+
+class PairEnvironment(RLEnvironment):
+    """Two agents, one world."""
+
+    render_view = (-HALF - 0.5, -HALF - 0.5, HALF + 0.5, HALF + 0.5)
+    render_size = (400, 400)
+
+    def __init__(self) -> None:
+        super().__init__("Pair", repeat_action=4)
+        for name in NAMES:
+            self.add_child(PairAgent(name))
+        self.add_child(PairWorld())

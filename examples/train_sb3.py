@@ -1,11 +1,12 @@
-"""Train Stable-Baselines3's PPO on rlenv's CartPole, exactly as SB3 users train any gymnasium id.
+"""Train Stable-Baselines3's PPO on an rlenv id, exactly as SB3 users train any gymnasium id.
 
     pip install 'rlenv[sb3]'      # on a machine without CUDA, install a CPU torch first
     python -m examples.train_sb3 [--timesteps 40000] [--envs 4]
+    python -m examples.train_sb3 --env rlenv/SeekerPixels-v0 --policy CnnPolicy   # from pixels
 
-The environments come from ``gymnasium.make("rlenv/CartPole-v0")`` through SB3's own
-``make_vec_env``: each one is a server subprocess, created and ended by rlenv. Prints the mean
-return of the untrained and the trained policy over the same evaluation seeds.
+The environments come from ``gymnasium.make(ENV)`` through SB3's own ``make_vec_env``: each one
+is a server subprocess, created and ended by rlenv. Prints the mean return of the untrained and
+the trained policy over the same evaluation seeds.
 """
 
 from __future__ import annotations
@@ -21,9 +22,9 @@ import rlenv_client
 ENV_ID = "rlenv/CartPole-v0"
 
 
-def evaluate(model: object, episodes: int, seed: int = 10_000) -> float:
+def evaluate(model: object, episodes: int, seed: int = 10_000, env_id: str = ENV_ID) -> float:
     """Mean return of ``model``'s deterministic policy over ``episodes`` seeded episodes."""
-    env = gym.make(ENV_ID)
+    env = gym.make(env_id)
     returns = []
     try:
         for episode in range(episodes):
@@ -50,17 +51,19 @@ def main() -> None:
     parser.add_argument("--envs", type=int, default=4)
     parser.add_argument("--episodes", type=int, default=5, help="evaluation episodes")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--env", default=ENV_ID, help=f"gymnasium id (default {ENV_ID})")
+    parser.add_argument("--policy", default="MlpPolicy", help="SB3 policy, e.g. CnnPolicy")
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
     gym.register_envs(rlenv_client)
 
-    envs = make_vec_env(ENV_ID, n_envs=args.envs, seed=args.seed)
+    envs = make_vec_env(args.env, n_envs=args.envs, seed=args.seed)
     try:
-        model = PPO("MlpPolicy", envs, seed=args.seed, verbose=0, n_steps=256, batch_size=64)
-        before = evaluate(model, args.episodes)
+        model = PPO(args.policy, envs, seed=args.seed, verbose=0, n_steps=256, batch_size=64)
+        before = evaluate(model, args.episodes, env_id=args.env)
         print(f"untrained policy: mean return {before:.0f}", flush=True)
         model.learn(total_timesteps=args.timesteps, progress_bar=False)
-        after = evaluate(model, args.episodes)
+        after = evaluate(model, args.episodes, env_id=args.env)
         print(f"after {args.timesteps} steps of PPO: mean return {after:.0f}", flush=True)
     finally:
         envs.close()

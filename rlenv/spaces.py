@@ -272,24 +272,20 @@ def _(space: spaces.Dict, value: Any, path: str = "action") -> dict[str, Any]:
 def from_wire(space: spaces.Space, value: Any) -> Any:
     """Rebuild a decoded wire value in the native form of ``space`` (no bounds checks).
 
-    Arrays that arrived as raw buffers are returned as they are (read-only, never copied).
+    Arrays come back writable, as gymnasium environments return them: an array decoded in
+    place from a frame (read-only) is copied once; anything else is converted.
     """
     return value
 
 
-@from_wire.register
-def _(space: spaces.Box, value: Any) -> np.ndarray:
-    return np.asarray(value, dtype=space.dtype)
+def _writable_array(space: spaces.Space, value: Any) -> np.ndarray:
+    array = np.asarray(value, dtype=space.dtype)
+    return array if array.flags.writeable else array.copy()
 
 
-@from_wire.register
-def _(space: spaces.MultiDiscrete, value: Any) -> np.ndarray:
-    return np.asarray(value, dtype=space.dtype)
-
-
-@from_wire.register
-def _(space: spaces.MultiBinary, value: Any) -> np.ndarray:
-    return np.asarray(value, dtype=space.dtype)
+from_wire.register(spaces.Box, _writable_array)
+from_wire.register(spaces.MultiDiscrete, _writable_array)
+from_wire.register(spaces.MultiBinary, _writable_array)
 
 
 @from_wire.register

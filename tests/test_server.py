@@ -159,10 +159,10 @@ def test_world_data_on_request(server: ServerProcess) -> None:
         assert "world" in client.step(PUSH)[4]
 
 
-def test_observations_are_fresh_read_only_arrays(client: Client) -> None:
+def test_observations_are_fresh_writable_arrays(client: Client) -> None:
     first, _ = client.reset(seed=0)
     second, *_ = client.step(PUSH)
-    assert first.dtype == np.float32 and not first.flags.writeable
+    assert first.dtype == np.float32 and first.flags.writeable
     assert not np.shares_memory(first, second)
 
 

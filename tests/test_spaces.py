@@ -538,12 +538,15 @@ def test_from_wire_scalar_box_and_discrete() -> None:
     assert isinstance(disc, np.integer) and disc == 6
 
 
-def test_from_wire_keeps_wire_arrays_without_copy() -> None:
+def test_from_wire_gives_writable_arrays_as_gymnasium_does() -> None:
     space = spaces.Box(-1.0, 1.0, (2, 2), np.float32)
     wire = unpack(pack(np.zeros((2, 2), np.float32)))
+    assert not wire.flags.writeable  # decoded in place from the frame
     value = from_wire(space, wire)
-    assert value is wire
-    assert not value.flags.writeable
+    assert value.flags.writeable and not np.shares_memory(value, wire)
+    assert np.array_equal(value, wire)
+    mine = np.ones((2, 2), np.float32)
+    assert from_wire(space, mine) is mine  # an array that is already writable is kept
 
 
 @pytest.mark.parametrize("space", ALL_SPACES)

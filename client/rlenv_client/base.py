@@ -217,7 +217,8 @@ class BaseClient(ABC):
         Raises:
             RemoteError: the answer is an error.
         """
-        return np.asarray(self._part(self._response(reply), "render"))
+        frame = np.asarray(self._part(self._response(reply), "render"))
+        return frame if frame.flags.writeable else frame.copy()
 
     @abstractmethod
     def close(self) -> None:

@@ -454,7 +454,8 @@ def _controls(request: Request | None) -> bool:
         return False
     if request.batch is not None:
         return any(_controls(part) for part in request.batch)
-    return request.config is not None or request.reset is not None or request.action is not None
+    return (request.config is not None or request.reset is not None
+            or request.action is not None or request.restore is not None)
 
 
 def _is_loopback(host: str) -> bool:

@@ -29,6 +29,7 @@ from gymnasium.utils import seeding
 
 from rlenv.agent import RLAgent
 from rlenv.communication import Communication, Endpoint
+from rlenv.episode import EpisodeLog, generator_from_state, parse_snapshot
 from rlenv.errors import ErrorCode, RequestError
 from rlenv.node import ProcessMode
 from rlenv.protocol import ErrorReply, Hello, Request, Response
@@ -111,6 +112,8 @@ class RLEnvironment(RLNode):
         self._action_started_at = 0
         self.record_dir: Path | None = None
         self._recorder: VideoRecorder | None = None
+        self._log = EpisodeLog()
+        self._replaying = False
 
     # --- Godot lifecycle --------------------------------------------------------------------
 
@@ -188,14 +191,14 @@ class RLEnvironment(RLNode):
         """Apply a request's parts in order and answer it (actions answer when they end)."""
         try:
             action = self._check_request(request)
+            if request.restore is not None:
+                self._restore(request.restore)
             if request.config is not None:
                 self._configure(request.config)
             if request.reset is not None:
                 self._begin_episode(request.reset)
             if request.action is not None:
-                self._action_started_at = self.get_tree().physics_frames
-                self._episode = _Episode.ACTING
-                self._step(action, request.repeat_action)
+                self._act(action, request.repeat_action or self.repeat_action)
                 return
             self._send_response(request.observation)
         except RequestError as error:
@@ -234,6 +237,7 @@ class RLEnvironment(RLNode):
 
     def _configure(self, configuration_request: Mapping[str, Any]) -> None:
         """Apply the ``environment``, ``agent`` and ``world`` parts of a configuration."""
+        self._log.configured(configuration_request)
         if "environment" in configuration_request:
             self.configure(configuration_request["environment"])
         if "agent" in configuration_request:
@@ -303,7 +307,8 @@ class RLEnvironment(RLNode):
             reward=reward,
             terminated=terminated,
             truncated=truncated,
-            info=self._get_info(),
+            info=self._get_info() if request.snapshot is None else
+            {**self._get_info(), "snapshot": self._log.snapshot()},
             frames=frames if request.action is not None else 0,
             agents=outcomes,
         )
@@ -362,19 +367,47 @@ class RLEnvironment(RLNode):
 
     # --- internals --------------------------------------------------------------------------
 
+    def _config_state(self) -> dict[str, dict[str, Any]]:
+        """The current value of everything a client may configure (for snapshots)."""
+        parts: dict[str, dict[str, Any]] = {}
+        for part, node in (("environment", self), ("agent", self.agent), ("world", self.world)):
+            if node is not None:
+                parts[part] = {key: getattr(node, key) for key in node.configurable
+                               if key != "record"}
+        return parts
+
+    def _check_config(self, config: Mapping[str, Any]) -> None:
+        _check_keys(config, _CONFIG_PARTS, "config")
+        for part, node in (("environment", self), ("agent", self.agent), ("world", self.world)):
+            if part in config:
+                if not isinstance(config[part], Mapping):
+                    raise RequestError(ErrorCode.BAD_REQUEST, f"config.{part} must be a map")
+                if node is not None:
+                    node.check_config(config[part])
+        if "environment" in config and "repeat_action" in config["environment"]:
+            _check_repeat(config["environment"]["repeat_action"])
+
+    def _check_action(self, action: Any, fresh: bool) -> Any:
+        if self.multi_agent:
+            return self._check_joint_action(action, fresh=fresh)
+        return check(self._require_agent().action_space, action, "action")
+
     def _check_request(self, request: Request) -> Any:
         """Check every part of ``request`` before anything is applied; return the action."""
-        config = request.config
-        if config is not None:
-            _check_keys(config, _CONFIG_PARTS, "config")
-            for part, node in (("environment", self), ("agent", self.agent), ("world", self.world)):
-                if part in config:
-                    if not isinstance(config[part], Mapping):
-                        raise RequestError(ErrorCode.BAD_REQUEST, f"config.{part} must be a map")
-                    if node is not None:
-                        node.check_config(config[part])
-            if "environment" in config and "repeat_action" in config["environment"]:
-                _check_repeat(config["environment"]["repeat_action"])
+        if (request.snapshot is not None or request.restore is not None) and (
+            request.config is not None or request.reset is not None or request.action is not None
+        ):
+            raise RequestError(ErrorCode.BAD_REQUEST, "snapshot and restore go alone (with an "
+                               "observation at most)")
+        if request.snapshot is not None and request.restore is not None:
+            raise RequestError(ErrorCode.BAD_REQUEST, "snapshot or restore, not both")
+        if request.snapshot:
+            raise RequestError(ErrorCode.BAD_REQUEST, "snapshot takes an empty map")
+        if request.snapshot is not None and not self._log.started:
+            raise RequestError(ErrorCode.RESET_REQUIRED, "no episode has started; nothing to "
+                               "snapshot")
+        if request.config is not None:
+            self._check_config(request.config)
         reset = request.reset
         if reset is not None:
             _check_keys(reset, _RESET_KEYS, "reset")
@@ -389,7 +422,8 @@ class RLEnvironment(RLNode):
             _check_keys(request.observation, _OBSERVATION_PARTS, "observation")
             if "render" in request.observation:
                 _check_render(request.observation["render"])
-        started = reset is not None or self._episode is not _Episode.NOT_STARTED
+        started = reset is not None or request.restore is not None or \
+            self._episode is not _Episode.NOT_STARTED
         if not started and (request.action is not None or request.observation is not None):
             raise RequestError(ErrorCode.RESET_REQUIRED, "no episode has started; reset first")
         if request.action is None:
@@ -397,9 +431,7 @@ class RLEnvironment(RLNode):
         if reset is None and self._episode is _Episode.ENDED:
             raise RequestError(ErrorCode.RESET_REQUIRED, "the episode has ended; reset first")
         try:
-            if self.multi_agent:
-                return self._check_joint_action(request.action, fresh=reset is not None)
-            return check(self._require_agent().action_space, request.action, "action")
+            return self._check_action(request.action, fresh=reset is not None)
         except SpaceMismatch as error:
             raise RequestError(ErrorCode.INVALID_ACTION, str(error)) from None
 
@@ -422,10 +454,11 @@ class RLEnvironment(RLNode):
         return {name: check(agent.action_space, action[name], f"action[{name!r}]")
                 for name, agent in live.items()}
 
-    def _begin_episode(self, arguments: Mapping[str, Any]) -> None:
+    def _begin_episode(self, arguments: Mapping[str, Any], reseed: bool = True) -> None:
         seed = arguments.get("seed")
-        if seed is not None:
+        if seed is not None and reseed:
             self._np_random, _ = seeding.np_random(seed)
+        self._log.begin(self._config_state(), self.np_random, arguments.get("options") or {})
         self._require_agent()
         for agent in self.agents:
             agent.reward = 0.0
@@ -446,9 +479,57 @@ class RLEnvironment(RLNode):
 
     def _finish_action(self) -> None:
         self.get_tree().paused = True
+        if self._replaying:  # restoring a snapshot: the episode moves on silently
+            ended = any(a.terminated or a.truncated for a in self.agents) if not \
+                self.multi_agent else all(a.terminated or a.truncated for a in self.agents)
+            for agent in self.agents:
+                agent.reward = 0.0
+            self._episode = _Episode.ENDED if ended else _Episode.RUNNING
+            return
         request = self._request
         if request is not None:
             self._send_response(request.observation)
+
+    def _act(self, action: Any, frames: int) -> None:
+        self._action_started_at = self.get_tree().physics_frames
+        self._episode = _Episode.ACTING
+        self._log.acted(action, frames)
+        self._step(action, frames)
+
+    def _restore(self, data: Mapping[str, Any]) -> None:
+        """Rebuild the state a snapshot describes: check everything, reset, replay."""
+        snapshot = parse_snapshot(data)
+        self._check_config(snapshot["config"])
+        actions = []
+        for index, event in enumerate(snapshot["events"]):
+            if event[0] == "config":
+                self._check_config(event[1])
+            else:
+                try:
+                    actions.append(self._check_action(event[1], fresh=True))
+                except SpaceMismatch as error:
+                    raise RequestError(ErrorCode.INVALID_ACTION,
+                                       f"restore: events[{index}]: {error}") from None
+        rng = generator_from_state(snapshot["rng"])
+        tree = self.get_tree()
+        self._replaying = True
+        try:
+            self._configure(snapshot["config"])
+            self._np_random = rng
+            self._begin_episode({"options": snapshot["options"]}, reseed=False)
+            checked = iter(actions)
+            for event in snapshot["events"]:
+                if event[0] == "config":
+                    self._configure(event[1])
+                    continue
+                if self._episode is _Episode.ENDED:
+                    raise RuntimeError("the snapshot acts after its episode ended")
+                self._act(next(checked), event[2])
+                while self._episode is _Episode.ACTING:
+                    tree.physics_tick()
+                    tree.process(tree.physics_delta)
+        finally:
+            self._replaying = False
 
     def _answer_error(self, code: ErrorCode, message: str) -> None:
         request, self._request = self._request, None

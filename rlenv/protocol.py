@@ -294,7 +294,9 @@ class Request:
 
     ``None`` means the part is absent. ``repeat_action`` overrides, for this action only, how
     many physics ticks the action runs. ``token`` authenticates the first request to a server
-    whose hello says ``token_required``. ``batch`` carries one request per environment instance
+    whose hello says ``token_required``. ``snapshot`` asks for the environment's state as data
+    (in ``info["snapshot"]``); ``restore`` rebuilds a state from such data. ``batch`` carries one
+    request per environment instance
     of a server that hosts several (``None`` leaves an instance alone); it is answered with one
     :class:`BatchResponse`.
     """
@@ -307,6 +309,8 @@ class Request:
     repeat_action: int | None = None
     token: str | None = None
     batch: tuple[Request | None, ...] | None = None
+    snapshot: Mapping[str, Any] | None = None
+    restore: Mapping[str, Any] | None = None
 
     def to_wire(self) -> dict[str, Any]:
         """The message as a msgpack-ready map (absent parts left out)."""
@@ -330,6 +334,10 @@ class Request:
             wire["repeat_action"] = self.repeat_action
         if self.token is not None:
             wire["token"] = self.token
+        if self.snapshot is not None:
+            wire["snapshot"] = self.snapshot
+        if self.restore is not None:
+            wire["restore"] = self.restore
         return wire
 
     @classmethod
@@ -365,8 +373,10 @@ class Request:
         return f"Request({parts}{', token=...' if self.token is not None else ''})"
 
 
-_REQUEST_WIRE_KEYS = frozenset(("id", "repeat_action", "token", "batch") + REQUEST_KEYS)
-_PART_KEYS = frozenset(("repeat_action",) + REQUEST_KEYS)
+_STATE_KEYS = ("snapshot", "restore")
+_REQUEST_WIRE_KEYS = frozenset(("id", "repeat_action", "token", "batch") + REQUEST_KEYS
+                               + _STATE_KEYS)
+_PART_KEYS = frozenset(("repeat_action",) + REQUEST_KEYS + _STATE_KEYS)
 
 
 def _parse_parts(cls: type[Request], request_id: int, wire: Mapping[str, Any],
@@ -378,9 +388,10 @@ def _parse_parts(cls: type[Request], request_id: int, wire: Mapping[str, Any],
         raise _bad_request(
             request_id,
             f"unknown request key {where}{sorted(map(str, unknown))[0]!r}; expected any of "
-            + ", ".join(REQUEST_KEYS + ("repeat_action",) + (() if where else ("token", "batch"))),
+            + ", ".join(REQUEST_KEYS + ("repeat_action",) + _STATE_KEYS
+                        + (() if where else ("token", "batch"))),
         )
-    for key in ("config", "reset", "observation"):
+    for key in ("config", "reset", "observation", "snapshot", "restore"):
         if key in wire and not isinstance(wire[key], Mapping):
             raise _bad_request(request_id, f"request {where}{key!r} must be a map")
     repeat = wire.get("repeat_action")
@@ -402,6 +413,8 @@ def _parse_parts(cls: type[Request], request_id: int, wire: Mapping[str, Any],
         observation=wire.get("observation"),
         repeat_action=repeat,
         token=token,
+        snapshot=wire.get("snapshot"),
+        restore=wire.get("restore"),
     )
 
 

@@ -198,6 +198,31 @@ class BaseClient(ABC):
         response = self._call(observation=_AGENT_AND_WORLD)
         return {"agent": self._observation(response), "world": self._part(response, "world")}
 
+    def snapshot(self) -> dict[str, Any]:
+        """The environment's state as data (see :mod:`rlenv.episode`), to :meth:`restore` later.
+
+        Raises:
+            RemoteError: ``reset_required`` before the first reset.
+        """
+        return dict(self._call(snapshot={}).info["snapshot"])
+
+    def restore(self, snapshot: Mapping[str, Any]) -> tuple[Any, dict[str, Any]]:
+        """Bring the environment to the state of a :meth:`snapshot`.
+
+        The snapshot may come from this server or any other serving the same environment; the
+        same actions then give the same observations, bit for bit.
+
+        Returns:
+            ``(observation, info)`` in the restored state.
+
+        Raises:
+            RemoteError: ``bad_request`` / ``invalid_action`` / ``invalid_config`` naming what
+                in the snapshot is wrong (nothing changed), or ``environment_error`` if
+                replaying it failed (reset next).
+        """
+        response = self._call(restore=snapshot, observation=self._observation_request)
+        return self._observation(response), self._info(response)
+
     def render(self, width: int | None = None, height: int | None = None) -> np.ndarray:
         """Draw the environment's current state: an ``(height, width, 3)`` uint8 array.
 

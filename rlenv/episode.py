@@ -1,0 +1,124 @@
+"""EpisodeLog: what it takes to rebuild the current state exactly, as data.
+
+rlenv simulations are deterministic, so the state of an environment is fully determined by its
+configuration when the episode began, the random generator's state at the reset, the reset's
+options, and what happened since (actions and mid-episode configuration). A snapshot is exactly
+that, as plain msgpack-able data; restoring it resets a (fresh) environment and replays the
+events, which reproduces the state bit for bit, the pymunk solver's warm-start included, and
+never executes anything it carries: the configuration goes through the same checks as a
+client's, the actions through the action space's.
+
+Snapshot format (``version`` 1)::
+
+    {"version": 1, "config": {"environment": {...}, "agent": {...}, "world": {...}},
+     "rng": "<the generator's state, as JSON>", "options": {...},
+     "events": [["config", {...}], ["action", action, frames], ...]}
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from rlenv.errors import ErrorCode, RequestError
+
+__all__ = ["MAX_EVENTS", "EpisodeLog", "generator_from_state", "parse_snapshot"]
+
+SNAPSHOT_VERSION = 1
+MAX_EVENTS = 1_000_000
+_BIT_GENERATORS = {"PCG64": np.random.PCG64}
+
+
+class EpisodeLog:
+    """Records the current episode as it happens; see the module docstring."""
+
+    def __init__(self) -> None:
+        self.config: dict[str, dict[str, Any]] = {}
+        self.rng = ""
+        self.options: Mapping[str, Any] = {}
+        self.events: list[list[Any]] = []
+        self.started = False
+
+    def begin(self, config: dict[str, dict[str, Any]], rng: np.random.Generator,
+              options: Mapping[str, Any]) -> None:
+        """A reset: remember the configuration and the generator as they are now."""
+        self.config = config
+        self.rng = json.dumps(rng.bit_generator.state)
+        self.options = dict(options)
+        self.events = []
+        self.started = True
+
+    def configured(self, config: Mapping[str, Any]) -> None:
+        """Configuration applied during the episode."""
+        if self.started:
+            self.events.append(["config", dict(config)])
+
+    def acted(self, action: Any, frames: int) -> None:
+        """An action that ran ``frames`` ticks at most."""
+        self.events.append(["action", action, frames])
+
+    def snapshot(self) -> dict[str, Any]:
+        """The episode so far, as data.
+
+        Raises:
+            RequestError: no episode has started.
+        """
+        if not self.started:
+            raise RequestError(ErrorCode.RESET_REQUIRED, "no episode has started; nothing to "
+                               "snapshot")
+        return {"version": SNAPSHOT_VERSION, "config": self.config, "rng": self.rng,
+                "options": self.options, "events": list(self.events)}
+
+
+def parse_snapshot(snapshot: Any) -> dict[str, Any]:
+    """Check a snapshot's structure (not its content, which the environment checks).
+
+    Raises:
+        RequestError: ``bad_request`` naming the field.
+    """
+    def bad(message: str) -> RequestError:
+        return RequestError(ErrorCode.BAD_REQUEST, f"restore: {message}")
+
+    if not isinstance(snapshot, Mapping):
+        raise bad("a snapshot is a map")
+    expected = {"version", "config", "rng", "options", "events"}
+    if set(snapshot) != expected:
+        raise bad(f"a snapshot has exactly the keys {sorted(expected)}")
+    if snapshot["version"] != SNAPSHOT_VERSION:
+        raise bad(f"snapshot version {snapshot['version']!r:.20} is not {SNAPSHOT_VERSION}")
+    config = snapshot["config"]
+    if not isinstance(config, Mapping) or not all(isinstance(v, Mapping) for v in config.values()):
+        raise bad("config must map parts to maps")
+    if not isinstance(snapshot["rng"], str) or not isinstance(snapshot["options"], Mapping):
+        raise bad("rng must be a string and options a map")
+    events = snapshot["events"]
+    if not isinstance(events, list) or len(events) > MAX_EVENTS:
+        raise bad(f"events must be a list of at most {MAX_EVENTS}")
+    for index, event in enumerate(events):
+        valid = isinstance(event, list) and (
+            (len(event) == 2 and event[0] == "config" and isinstance(event[1], Mapping))
+            or (len(event) == 3 and event[0] == "action" and type(event[2]) is int
+                and event[2] >= 1)
+        )
+        if not valid:
+            raise bad(f"events[{index}] must be ['config', map] or ['action', action, frames]")
+    return dict(snapshot)
+
+
+def generator_from_state(state: str) -> np.random.Generator:
+    """A generator in the state a snapshot recorded (JSON data, never code).
+
+    Raises:
+        RequestError: ``bad_request`` when the state is not a valid generator state.
+    """
+    try:
+        parsed = json.loads(state)
+        bit_generator = _BIT_GENERATORS[parsed["bit_generator"]]()
+        bit_generator.state = parsed
+    except (ValueError, TypeError, KeyError, OverflowError) as error:
+        raise RequestError(ErrorCode.BAD_REQUEST, f"restore: invalid rng state ({error})") \
+            from None
+    return np.random.Generator(bit_generator)

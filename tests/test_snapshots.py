@@ -1,0 +1,141 @@
+"""Snapshots as data: taken mid-episode, restored anywhere, stepping on bit for bit."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import numpy as np
+import pytest
+from conftest import Serve
+
+from examples.pair import NAMES, chase
+from rlenv_client import Client, ErrorCode, RemoteError
+
+CARTPOLE_ACTIONS = [np.array([0.4 * np.sin(t / 2.0)], np.float32) for t in range(60)]
+
+
+def steps(client: Client, actions: list[Any], repeat: int | None = None) -> list[tuple]:
+    seen = []
+    for action in actions:
+        observation, reward, terminated, truncated, info = client.step(action, repeat)
+        seen.append((observation.tobytes(), reward, terminated, truncated, info["frames"]))
+        if terminated or truncated:
+            break
+    return seen
+
+
+def test_a_snapshot_restored_in_another_server_steps_on_identically(serve: Serve) -> None:
+    first, second = serve(), serve()
+    with Client(first.host, first.port) as original, \
+            Client(second.host, second.port) as copy:
+        original.configure(agent={"max_force": 12.0}, repeat_action=3)
+        original.reset(seed=21)
+        steps(original, CARTPOLE_ACTIONS[:7])
+        snapshot = original.snapshot()
+        copy.configure(agent={"max_force": 1.0})  # other settings, overridden by the snapshot
+        copy.reset(seed=99)
+        steps(copy, CARTPOLE_ACTIONS[:3])
+        restored, _ = copy.restore(snapshot)
+        assert restored.tobytes() == original.observe()["agent"].tobytes()
+        assert copy.snapshot() == snapshot  # the restored state is the same state
+        assert steps(copy, CARTPOLE_ACTIONS[7:]) == steps(original, CARTPOLE_ACTIONS[7:])
+
+
+def test_a_snapshot_restored_in_the_same_server_rewinds(client: Client) -> None:
+    client.reset(seed=5)
+    steps(client, CARTPOLE_ACTIONS[:4])
+    snapshot = client.snapshot()
+    later = steps(client, CARTPOLE_ACTIONS[4:20], repeat=2)
+    client.restore(snapshot)
+    assert steps(client, CARTPOLE_ACTIONS[4:20], repeat=2) == later
+
+
+def test_snapshots_survive_mid_episode_configuration(client: Client) -> None:
+    client.reset(seed=8)
+    steps(client, CARTPOLE_ACTIONS[:3], repeat=1)
+    client.configure(agent={"max_force": 5.0})
+    steps(client, CARTPOLE_ACTIONS[3:6], repeat=1)
+    snapshot = client.snapshot()
+    assert [event[0] for event in snapshot["events"]] == ["action"] * 3 + ["config"] + \
+        ["action"] * 3
+    after = steps(client, CARTPOLE_ACTIONS[6:15], repeat=1)
+    assert len(after) == 9
+    client.configure(agent={"max_force": 10.0})
+    client.restore(snapshot)
+    assert steps(client, CARTPOLE_ACTIONS[6:15], repeat=1) == after
+
+
+def test_multi_agent_snapshots(serve: Serve) -> None:
+    first, second = serve("examples.pair:PairEnvironment"), serve("examples.pair:PairEnvironment")
+    with Client(first.host, first.port) as a, Client(second.host, second.port) as b:
+        observation, _ = a.reset(seed=2)
+        for _ in range(5):
+            observation, *_ = a.step({n: chase(observation[n]) for n in NAMES})
+        b.restore(a.snapshot())
+        for _ in range(5):
+            x, y = a.observe()["agent"], b.observe()["agent"]
+            assert all(x[n].tobytes() == y[n].tobytes() for n in NAMES)
+            actions = {n: chase(x[n]) for n in NAMES}
+            assert a.step(actions)[1] == b.step(actions)[1]
+
+
+def _tampered(snapshot: dict[str, Any], **changes: Any) -> dict[str, Any]:
+    return {**snapshot, **changes}
+
+
+def test_bad_snapshots_are_refused_and_change_nothing(client: Client) -> None:
+    client.reset(seed=1)
+    steps(client, CARTPOLE_ACTIONS[:3])
+    good = client.snapshot()
+    steps(client, CARTPOLE_ACTIONS[3:5])
+    before = client.observe()["agent"].tobytes()
+    evil_rng = json.dumps({"bit_generator": "os.system", "state": {}})
+    cases = [
+        ([1, 2, 3], ErrorCode.BAD_REQUEST, "must be a map"),
+        (_tampered(good, version=2), ErrorCode.BAD_REQUEST, "version 2"),
+        ({**good, "code": "import os"}, ErrorCode.BAD_REQUEST, "exactly the keys"),
+        (_tampered(good, rng="__import__('os')"), ErrorCode.BAD_REQUEST, "invalid rng state"),
+        (_tampered(good, rng=evil_rng), ErrorCode.BAD_REQUEST, "invalid rng state"),
+        (_tampered(good, events=[["exec", "print(1)"]]), ErrorCode.BAD_REQUEST, "events[0]"),
+        (_tampered(good, events=[["action", np.zeros(3, np.float32), 1]]),
+         ErrorCode.INVALID_ACTION, "events[0]: action has shape (3,)"),
+        (_tampered(good, events=[["action", [0.1], 0]]), ErrorCode.BAD_REQUEST, "events[0]"),
+        (_tampered(good, config={"agent": {"gravity": 1}}), ErrorCode.INVALID_CONFIG,
+         "'gravity'"),
+    ]
+    for snapshot, code, words in cases:
+        with pytest.raises(RemoteError) as error:
+            client.restore(snapshot)  # type: ignore[arg-type]
+        assert error.value.code == code, (words, error.value.message)
+        assert words in error.value.message
+        assert client.observe()["agent"].tobytes() == before  # nothing changed
+    client.restore(good)
+
+
+def test_snapshots_need_an_episode_and_go_alone(serve: Serve) -> None:
+    server = serve()
+    with Client(server.host, server.port) as client:
+        with pytest.raises(RemoteError) as error:
+            client.snapshot()
+        assert error.value.code == ErrorCode.RESET_REQUIRED
+        client.reset(seed=0)
+        from rlenv.protocol import Request
+
+        client.send_request(Request(id=0, snapshot={}, action=np.zeros(1, np.float32)))
+        with pytest.raises(RemoteError, match="go alone"):
+            client.step_result(client.receive_reply())
+
+
+def test_a_snapshot_that_outlives_its_episode_needs_a_reset(client: Client) -> None:
+    client.reset(seed=3)
+    push = np.ones(1, np.float32)
+    while not client.step(push)[2]:
+        pass
+    snapshot = client.snapshot()
+    snapshot["events"].append(["action", [0.0], 1])  # an action after the pole fell
+    with pytest.raises(RemoteError) as error:
+        client.restore(snapshot)
+    assert error.value.code == ErrorCode.ENVIRONMENT_ERROR
+    assert "after its episode ended" in error.value.message
+    client.reset(seed=3)

@@ -1,4 +1,4 @@
-"""The ``rlenv`` command: ``rlenv serve``, ``check``, ``bench`` and ``demo``."""
+"""The ``rlenv`` command: ``rlenv serve``, ``check``, ``bench``, ``replay`` and ``demo``."""
 
 from __future__ import annotations
 
@@ -66,6 +66,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     bench.add_argument("--quick", action="store_true", help="fewer vector sizes")
     bench.add_argument("--json", metavar="PATH", help="also write the figures as JSON")
     bench.set_defaults(run=_bench)
+
+    replay = commands.add_parser("replay", help="re-run a recorded episode and compare")
+    replay.add_argument("file", help="an episode file (rlenv_client.replay.RecordEpisodes)")
+    replay.add_argument("--target", help="MODULE:CLASS to serve (default: the recorded one)")
+    replay.add_argument("--address", help="HOST:PORT of a running server instead")
+    replay.set_defaults(run=_replay)
 
     demo = commands.add_parser("demo", help="serve CartPole and balance it with a controller")
     demo.add_argument("--episodes", type=int, default=5, help="episodes to run (default 5)")
@@ -155,6 +161,32 @@ def _bench(args: argparse.Namespace) -> int:
         with open(args.json, "w") as out:
             out.write(to_json(figures) + "\n")
     return 0
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from rlenv_client.replay import EpisodeFile, replay
+    from rlenv_client.session import Session
+
+    try:
+        episode = EpisodeFile.load(args.file)
+    except (OSError, ValueError) as error:
+        print(f"rlenv replay: {error}", file=sys.stderr)
+        return 2
+    target = args.target or episode.target
+    if args.address is None and target is None:
+        print("rlenv replay: the episode names no target; pass --target or --address",
+              file=sys.stderr)
+        return 2
+    session = Session(target, address=args.address)
+    try:
+        result = replay(episode, session.client)
+    finally:
+        session.close()
+    if result.divergence is None:
+        print(f"replayed {result.steps} steps of {args.file}: every observation identical")
+        return 0
+    print(f"replayed {args.file}: first divergence at {result.divergence}")
+    return 1
 
 
 def _exit_on_signal(signum: int, frame: FrameType | None) -> None:

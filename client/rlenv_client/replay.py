@@ -1,0 +1,134 @@
+"""Exact replays: record episodes as seed + configuration + actions, re-run them, compare.
+
+An episode file holds the server's snapshot of the episode (its configuration, generator state,
+reset options and every action, see :mod:`rlenv.episode`) and a digest of every observation the
+client saw. Replaying restores the start of the episode on a fresh server, sends the same
+actions, and compares each observation with the recorded digest: a deterministic environment
+gives bit-identical observations, and the first difference is reported.
+
+    env = RecordEpisodes(gymnasium.make("rlenv/CartPole-v0"), "episodes/")
+    ...                                        # episodes/episode-0001.rlenv, ... as they end
+    $ rlenv replay episodes/episode-0001.rlenv
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import gymnasium
+
+from rlenv.protocol import pack, unpack
+from rlenv_client.base import BaseClient
+
+__all__ = ["EpisodeFile", "RecordEpisodes", "ReplayResult", "digest", "replay"]
+
+_FORMAT = "rlenv-episode"
+_VERSION = 1
+
+
+def digest(observation: Any) -> str:
+    """A short fingerprint of an observation's exact bytes (dtype and shape included)."""
+    return hashlib.blake2b(pack(observation), digest_size=16).hexdigest()
+
+
+@dataclass
+class EpisodeFile:
+    """One recorded episode: the server snapshot and the digests of what the client saw."""
+
+    target: str | None
+    snapshot: dict[str, Any]
+    observations: list[str]
+
+    def save(self, path: str | Path) -> None:
+        """Write the episode to ``path``."""
+        Path(path).write_bytes(pack({"format": _FORMAT, "version": _VERSION,
+                                     "target": self.target, "snapshot": self.snapshot,
+                                     "observations": self.observations}))
+
+    @classmethod
+    def load(cls, path: str | Path) -> EpisodeFile:
+        """Read an episode written by :meth:`save`.
+
+        Raises:
+            ValueError: the file is not an rlenv episode.
+        """
+        try:
+            data = unpack(Path(path).read_bytes())
+        except Exception as error:
+            raise ValueError(f"{path} is not an rlenv episode: {error}") from None
+        if not isinstance(data, dict) or data.get("format") != _FORMAT or \
+                data.get("version") != _VERSION:
+            raise ValueError(f"{path} is not an rlenv episode (version {_VERSION})")
+        return cls(data["target"], data["snapshot"], list(data["observations"]))
+
+
+class RecordEpisodes(gymnasium.Wrapper):
+    """Write every episode of an rlenv environment to ``directory`` when it ends.
+
+    Args:
+        env: a ``gymnasium.make("rlenv/...")`` environment (or a RemoteEnv).
+        directory: where the ``episode-NNNN.rlenv`` files go.
+    """
+
+    def __init__(self, env: gymnasium.Env, directory: str | Path) -> None:
+        super().__init__(env)
+        self.directory = Path(directory)
+        self.directory.mkdir(parents=True, exist_ok=True)
+        self.episodes = 0
+        self._observations: list[str] = []
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        """Reset and start recording a new episode."""
+        observation, info = self.env.reset(**kwargs)
+        self._observations = [digest(observation)]
+        return observation, info
+
+    def step(self, action: Any) -> tuple[Any, Any, bool, bool, dict[str, Any]]:
+        """Step, remember the observation's digest, and write the episode when it ends."""
+        observation, reward, terminated, truncated, info = self.env.step(action)
+        self._observations.append(digest(observation))
+        if terminated or truncated:
+            self.episodes += 1
+            client: BaseClient = self.env.unwrapped.client  # type: ignore[attr-defined]
+            target = self.env.unwrapped.spec.kwargs.get("target") \
+                if self.env.unwrapped.spec else None  # type: ignore[union-attr]
+            EpisodeFile(target, client.snapshot(), self._observations).save(
+                self.directory / f"episode-{self.episodes:04d}.rlenv")
+        return observation, reward, terminated, truncated, info
+
+
+@dataclass(frozen=True)
+class ReplayResult:
+    """What a replay found: ``divergence`` is ``None`` when every observation matched."""
+
+    steps: int
+    divergence: str | None
+
+
+def replay(episode: EpisodeFile, client: BaseClient) -> ReplayResult:
+    """Re-run ``episode`` on ``client``'s environment and compare every observation."""
+    start = {**episode.snapshot, "events": []}
+    observation, _ = client.restore(start)
+    expected = iter(episode.observations)
+    if digest(observation) != next(expected, None):
+        return ReplayResult(0, "the first observation (after the reset) differs")
+    steps = 0
+    for event in episode.snapshot["events"]:
+        if event[0] == "config":
+            part = event[1]
+            settings = {k: v for k, v in part.get("environment", {}).items() if k != "record"}
+            client.configure(agent=part.get("agent"), world=part.get("world"), **settings)
+            continue
+        steps += 1
+        observation, *_ = client.step(event[1], event[2])
+        recorded = next(expected, None)
+        if recorded is None:
+            break
+        if digest(observation) != recorded:
+            return ReplayResult(steps, f"step {steps}: the observation differs from the "
+                                f"recording")
+    return ReplayResult(steps, None)
+

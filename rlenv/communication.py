@@ -455,7 +455,8 @@ def _controls(request: Request | None) -> bool:
     if request.batch is not None:
         return any(_controls(part) for part in request.batch)
     return (request.config is not None or request.reset is not None
-            or request.action is not None or request.restore is not None)
+            or request.action is not None or request.restore is not None
+            or (request.inspect is not None and "set" in request.inspect))
 
 
 def _is_loopback(host: str) -> bool:

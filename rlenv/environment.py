@@ -31,6 +31,7 @@ from rlenv.agent import RLAgent
 from rlenv.communication import Communication, Endpoint
 from rlenv.episode import EpisodeLog, generator_from_state, parse_snapshot
 from rlenv.errors import ErrorCode, RequestError
+from rlenv.inspector import check_inspect, get_property, set_property, tree
 from rlenv.node import ProcessMode
 from rlenv.protocol import ErrorReply, Hello, Request, Response
 from rlenv.recording import VideoRecorder
@@ -114,6 +115,7 @@ class RLEnvironment(RLNode):
         self._recorder: VideoRecorder | None = None
         self._log = EpisodeLog()
         self._replaying = False
+        self._inspection: dict[str, Any] = {}
 
     # --- Godot lifecycle --------------------------------------------------------------------
 
@@ -193,6 +195,8 @@ class RLEnvironment(RLNode):
             action = self._check_request(request)
             if request.restore is not None:
                 self._restore(request.restore)
+            if request.inspect is not None:
+                self._inspection = self._inspect(request.inspect)
             if request.config is not None:
                 self._configure(request.config)
             if request.reset is not None:
@@ -307,8 +311,7 @@ class RLEnvironment(RLNode):
             reward=reward,
             terminated=terminated,
             truncated=truncated,
-            info=self._get_info() if request.snapshot is None else
-            {**self._get_info(), "snapshot": self._log.snapshot()},
+            info=self._response_info(request),
             frames=frames if request.action is not None else 0,
             agents=outcomes,
         )
@@ -331,6 +334,38 @@ class RLEnvironment(RLNode):
         from rlenv.render import draw
 
         return draw(self, width, height, self.render_view)
+
+    def _response_info(self, request: Request) -> dict[str, Any]:
+        info = self._get_info()
+        if request.snapshot is not None:
+            info = {**info, "snapshot": self._log.snapshot()}
+        if request.inspect is not None:
+            info = {**info, **self._inspection}
+        return info
+
+    def _check_inspect(self, spec: Any) -> None:
+        operation, arguments = check_inspect(spec)
+        if operation == "get":
+            get_property(self, arguments["path"], arguments["property"])
+        elif operation == "set":
+            set_property(self, arguments["path"], arguments["property"], arguments["value"],
+                         dry_run=True)
+
+    def _inspect(self, spec: Mapping[str, Any]) -> dict[str, Any]:
+        """Answer an ``inspect`` part (see :mod:`rlenv.inspector`).
+
+        A ``set`` during an episode is logged, so that snapshots reproduce it.
+        """
+        operation, arguments = check_inspect(spec)
+        if operation == "tree":
+            return {"tree": tree(self)}
+        if operation == "get":
+            return {"value": get_property(self, arguments["path"], arguments["property"])}
+        set_property(self, arguments["path"], arguments["property"], arguments["value"])
+        if self._log.started:
+            self._log.events.append(["set", arguments["path"], arguments["property"],
+                                     arguments["value"]])
+        return {}
 
     def _after_send_response(self) -> None:
         """Called after every answer; override to clean up (e.g. recorded frames)."""
@@ -394,13 +429,17 @@ class RLEnvironment(RLNode):
 
     def _check_request(self, request: Request) -> Any:
         """Check every part of ``request`` before anything is applied; return the action."""
-        if (request.snapshot is not None or request.restore is not None) and (
+        special = [name for name in ("snapshot", "restore", "inspect")
+                   if getattr(request, name) is not None]
+        if special and (
             request.config is not None or request.reset is not None or request.action is not None
         ):
-            raise RequestError(ErrorCode.BAD_REQUEST, "snapshot and restore go alone (with an "
+            raise RequestError(ErrorCode.BAD_REQUEST, f"{special[0]} goes alone (with an "
                                "observation at most)")
-        if request.snapshot is not None and request.restore is not None:
-            raise RequestError(ErrorCode.BAD_REQUEST, "snapshot or restore, not both")
+        if len(special) > 1:
+            raise RequestError(ErrorCode.BAD_REQUEST, f"{special[0]} or {special[1]}, not both")
+        if request.inspect is not None:
+            self._check_inspect(request.inspect)
         if request.snapshot:
             raise RequestError(ErrorCode.BAD_REQUEST, "snapshot takes an empty map")
         if request.snapshot is not None and not self._log.started:
@@ -504,7 +543,7 @@ class RLEnvironment(RLNode):
         for index, event in enumerate(snapshot["events"]):
             if event[0] == "config":
                 self._check_config(event[1])
-            else:
+            elif event[0] == "action":
                 try:
                     actions.append(self._check_action(event[1], fresh=True))
                 except SpaceMismatch as error:
@@ -521,6 +560,10 @@ class RLEnvironment(RLNode):
             for event in snapshot["events"]:
                 if event[0] == "config":
                     self._configure(event[1])
+                    continue
+                if event[0] == "set":
+                    self._inspect({"set": {"path": event[1], "property": event[2],
+                                           "value": event[3]}})
                     continue
                 if self._episode is _Episode.ENDED:
                     raise RuntimeError("the snapshot acts after its episode ended")

@@ -12,7 +12,8 @@ Snapshot format (``version`` 1)::
 
     {"version": 1, "config": {"environment": {...}, "agent": {...}, "world": {...}},
      "rng": "<the generator's state, as JSON>", "options": {...},
-     "events": [["config", {...}], ["action", action, frames], ...]}
+     "events": [["config", {...}], ["action", action, frames],
+                ["set", node path, property, value], ...]}
 """
 
 from __future__ import annotations
@@ -102,9 +103,12 @@ def parse_snapshot(snapshot: Any) -> dict[str, Any]:
             (len(event) == 2 and event[0] == "config" and isinstance(event[1], Mapping))
             or (len(event) == 3 and event[0] == "action" and type(event[2]) is int
                 and event[2] >= 1)
+            or (len(event) == 4 and event[0] == "set" and isinstance(event[1], str)
+                and isinstance(event[2], str))
         )
         if not valid:
-            raise bad(f"events[{index}] must be ['config', map] or ['action', action, frames]")
+            raise bad(f"events[{index}] must be ['config', map], ['action', action, frames] "
+                      "or ['set', path, property, value]")
     return dict(snapshot)
 
 

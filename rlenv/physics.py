@@ -20,7 +20,7 @@ locked; changes to the tree made by handlers are deferred to the end of the tick
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, ClassVar
 
 import pymunk
 
@@ -54,6 +54,8 @@ class PhysicsWorld(Node):
     stepped = Signal("delta")
     """Emitted after every step of the space, with the step length."""
 
+    exported: ClassVar[tuple[str, ...]] = ("gravity", "damping")
+
     def __init__(
         self,
         gravity: Vec = (0.0, -9.81),
@@ -70,6 +72,24 @@ class PhysicsWorld(Node):
         self.space.damping = damping
         self._shape_nodes: dict[pymunk.Shape, CollisionShape] = {}
         self.space.on_collision(begin=self._on_begin, separate=self._on_separate)
+
+    @property
+    def gravity(self) -> pymunk.Vec2d:
+        """The space's gravity."""
+        return self.space.gravity
+
+    @gravity.setter
+    def gravity(self, value: Vec) -> None:
+        self.space.gravity = value
+
+    @property
+    def damping(self) -> float:
+        """The fraction of velocity bodies keep per second."""
+        return self.space.damping
+
+    @damping.setter
+    def damping(self, value: float) -> None:
+        self.space.damping = value
 
     def _physics_step(self, delta: float) -> None:
         self.space.step(delta)
@@ -116,6 +136,8 @@ class PhysicsBody(Node):
 
     body_entered = Signal("body")
     """Emitted when one of this body's shapes starts touching another body's shape."""
+
+    exported: ClassVar[tuple[str, ...]] = ("position", "velocity", "angle", "angular_velocity")
     body_exited = Signal("body")
     """Emitted when the last contact with another body ends."""
 
@@ -245,6 +267,8 @@ class CollisionShape(Node):
 
     collision_started = Signal("shape")
     """Emitted when this shape starts touching another shape."""
+
+    exported: ClassVar[tuple[str, ...]] = ("friction", "elasticity", "sensor")
     collision_ended = Signal("shape")
     """Emitted when this shape stops touching another shape."""
 

@@ -295,8 +295,9 @@ class Request:
     ``None`` means the part is absent. ``repeat_action`` overrides, for this action only, how
     many physics ticks the action runs. ``token`` authenticates the first request to a server
     whose hello says ``token_required``. ``snapshot`` asks for the environment's state as data
-    (in ``info["snapshot"]``); ``restore`` rebuilds a state from such data. ``batch`` carries one
-    request per environment instance
+    (in ``info["snapshot"]``); ``restore`` rebuilds a state from such data; ``inspect`` reads the
+    node tree or gets / sets an exported property (see :mod:`rlenv.inspector`). ``batch``
+    carries one request per environment instance
     of a server that hosts several (``None`` leaves an instance alone); it is answered with one
     :class:`BatchResponse`.
     """
@@ -311,6 +312,7 @@ class Request:
     batch: tuple[Request | None, ...] | None = None
     snapshot: Mapping[str, Any] | None = None
     restore: Mapping[str, Any] | None = None
+    inspect: Mapping[str, Any] | None = None
 
     def to_wire(self) -> dict[str, Any]:
         """The message as a msgpack-ready map (absent parts left out)."""
@@ -338,6 +340,8 @@ class Request:
             wire["snapshot"] = self.snapshot
         if self.restore is not None:
             wire["restore"] = self.restore
+        if self.inspect is not None:
+            wire["inspect"] = self.inspect
         return wire
 
     @classmethod
@@ -373,7 +377,7 @@ class Request:
         return f"Request({parts}{', token=...' if self.token is not None else ''})"
 
 
-_STATE_KEYS = ("snapshot", "restore")
+_STATE_KEYS = ("snapshot", "restore", "inspect")
 _REQUEST_WIRE_KEYS = frozenset(("id", "repeat_action", "token", "batch") + REQUEST_KEYS
                                + _STATE_KEYS)
 _PART_KEYS = frozenset(("repeat_action",) + REQUEST_KEYS + _STATE_KEYS)
@@ -391,7 +395,7 @@ def _parse_parts(cls: type[Request], request_id: int, wire: Mapping[str, Any],
             + ", ".join(REQUEST_KEYS + ("repeat_action",) + _STATE_KEYS
                         + (() if where else ("token", "batch"))),
         )
-    for key in ("config", "reset", "observation", "snapshot", "restore"):
+    for key in ("config", "reset", "observation") + _STATE_KEYS:
         if key in wire and not isinstance(wire[key], Mapping):
             raise _bad_request(request_id, f"request {where}{key!r} must be a map")
     repeat = wire.get("repeat_action")
@@ -415,6 +419,7 @@ def _parse_parts(cls: type[Request], request_id: int, wire: Mapping[str, Any],
         token=token,
         snapshot=wire.get("snapshot"),
         restore=wire.get("restore"),
+        inspect=wire.get("inspect"),
     )
 
 

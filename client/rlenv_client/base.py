@@ -223,6 +223,29 @@ class BaseClient(ABC):
         response = self._call(restore=snapshot, observation=self._observation_request)
         return self._observation(response), self._info(response)
 
+    def tree(self) -> list[dict[str, Any]]:
+        """The environment's node tree: every node's path, type and exported properties."""
+        return list(self._call(inspect={"tree": {}}).info["tree"])
+
+    def get_property(self, path: str, name: str) -> Any:
+        """The exported property ``name`` of the node at ``path``.
+
+        Paths are absolute (``/root/...``) or relative to the environment node.
+
+        Raises:
+            RemoteError: ``bad_request`` naming the missing node or property.
+        """
+        return self._call(inspect={"get": {"path": path, "property": name}}).info["value"]
+
+    def set_property(self, path: str, name: str, value: Any) -> None:
+        """Set an exported property (type-checked by the server; snapshots reproduce it).
+
+        Raises:
+            RemoteError: ``bad_request`` naming the node, property or expected type; ``busy``
+                when another client controls the environment.
+        """
+        self._call(inspect={"set": {"path": path, "property": name, "value": value}})
+
     def render(self, width: int | None = None, height: int | None = None) -> np.ndarray:
         """Draw the environment's current state: an ``(height, width, 3)`` uint8 array.
 

@@ -123,7 +123,7 @@ def test_snapshots_need_an_episode_and_go_alone(serve: Serve) -> None:
         from rlenv.protocol import Request
 
         client.send_request(Request(id=0, snapshot={}, action=np.zeros(1, np.float32)))
-        with pytest.raises(RemoteError, match="go alone"):
+        with pytest.raises(RemoteError, match="snapshot goes alone"):
             client.step_result(client.receive_reply())
 
 

@@ -31,6 +31,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     serve.add_argument("--instances", type=int, default=1,
                        help="independent copies of the environment to host, stepped together "
                        "by batch requests (default 1)")
+    serve.add_argument("--real-time", action="store_true",
+                       help="ticks follow the wall clock; actions apply when they arrive")
     serve.add_argument("--record-dir", type=Path, default=None, metavar="DIR",
                        help="let clients record videos into DIR (configure record='name.mp4')")
     serve.add_argument("--lifeline", type=int, default=None, metavar="FD",
@@ -97,7 +99,7 @@ def _serve(args: argparse.Namespace) -> int:
     try:
         server = Server(args.target, host=args.host, port=args.port, lifeline=args.lifeline,
                         token=args.token, limits=limits, instances=args.instances,
-                        record_dir=args.record_dir)
+                        record_dir=args.record_dir, real_time=args.real_time)
     except InsecureBindError as error:
         print(f"rlenv serve: {error}", file=sys.stderr)
         return 2

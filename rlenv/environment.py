@@ -92,7 +92,7 @@ class RLEnvironment(RLNode):
     physics_ticks_per_second: ClassVar[int] = 60
     render_size: ClassVar[tuple[int, int]] = (600, 400)
     render_view: ClassVar[tuple[float, float, float, float] | None] = None
-    configurable: ClassVar[tuple[str, ...]] = ("repeat_action", "record")
+    configurable: ClassVar[tuple[str, ...]] = ("repeat_action", "real_time", "record")
 
     def __init__(self, name: str | None = None, *, repeat_action: int = 4) -> None:
         super().__init__(name)
@@ -110,7 +110,11 @@ class RLEnvironment(RLNode):
         self._np_random: np.random.Generator | None = None
         self._episode = _Episode.NOT_STARTED
         self._request: Request | None = None
-        self._action_started_at = 0
+        self._ticks = 0  # ticks the episode ran since the last answer
+        self._ended_unseen = False  # real time: the episode ended between two requests
+        self._last_action_at = 0
+        self._late = False
+        self._late_actions = 0
         self.record_dir: Path | None = None
         self._recorder: VideoRecorder | None = None
         self._log = EpisodeLog()
@@ -121,6 +125,24 @@ class RLEnvironment(RLNode):
 
     def _enter_tree(self) -> None:
         self.get_tree().paused = True
+
+    @property
+    def real_time(self) -> bool:
+        """Real-time mode, blendtorch's ``real_time=True`` (lockstep, the default, when false).
+
+        Ticks follow the clock whether or not the client answered; actions apply when they
+        arrive and are answered at once with the latest state; ``info["late_actions"]`` counts
+        actions later than ``repeat_action`` ticks after the previous one. Lockstep is
+        deterministic; real time is not.
+        """
+        return self.is_inside_tree() and self.get_tree().real_time
+
+    @real_time.setter
+    def real_time(self, value: bool) -> None:
+        tree = self.get_tree()
+        tree.real_time = value
+        tree.paused = not (value and self._episode is _Episode.RUNNING and
+                           not self._ended_unseen)
 
     @property
     def multi_agent(self) -> bool:
@@ -145,13 +167,18 @@ class RLEnvironment(RLNode):
     def _process(self, delta: float) -> None:
         if self._request is not None:  # an action is running; its client waits for the answer
             return
-        request = self.communication.poll(timeout=None if self.get_tree().paused else 0.0)
+        tree = self.get_tree()
+        timeout = tree.time_to_next_tick() if tree.real_time else None if tree.paused else 0.0
+        request = self.communication.poll(timeout=timeout)
         if request is not None:
             self._request = request
             self.call_deferred(self._on_got_connection, request)
 
     def _physics_process(self, delta: float) -> None:
-        if self._episode is _Episode.ACTING:
+        if self._episode is _Episode.ACTING or (
+            self._episode is _Episode.RUNNING and self.get_tree().real_time
+            and not self._ended_unseen
+        ):
             self.call_deferred(self._end_tick, delta)  # runs after the physics stepped
 
     # --- the seed's contract ----------------------------------------------------------------
@@ -304,7 +331,7 @@ class RLEnvironment(RLNode):
         else:
             reward = float(agent.reward)
             terminated, truncated = bool(agent.terminated), bool(agent.truncated)
-        frames = self.get_tree().physics_frames - self._action_started_at
+        frames, self._ticks = self._ticks, 0
         response = Response(
             id=request.id,
             observation=observation,
@@ -337,6 +364,8 @@ class RLEnvironment(RLNode):
 
     def _response_info(self, request: Request) -> dict[str, Any]:
         info = self._get_info()
+        if self.get_tree().real_time and request.action is not None:
+            info = {**info, "late": self._late, "late_actions": self._late_actions}
         if request.snapshot is not None:
             info = {**info, "snapshot": self._log.snapshot()}
         if request.inspect is not None:
@@ -440,6 +469,10 @@ class RLEnvironment(RLNode):
             raise RequestError(ErrorCode.BAD_REQUEST, f"{special[0]} or {special[1]}, not both")
         if request.inspect is not None:
             self._check_inspect(request.inspect)
+        if (request.snapshot is not None or request.restore is not None) and \
+                self.get_tree().real_time:
+            raise RequestError(ErrorCode.BAD_REQUEST, "snapshots need lockstep mode: configure "
+                               "real_time=False first")
         if request.snapshot:
             raise RequestError(ErrorCode.BAD_REQUEST, "snapshot takes an empty map")
         if request.snapshot is not None and not self._log.started:
@@ -502,17 +535,28 @@ class RLEnvironment(RLNode):
         for agent in self.agents:
             agent.reward = 0.0
             agent.terminated = agent.truncated = False
+        tree = self.get_tree()
+        self._ended_unseen = False
+        self._late_actions = 0
+        self._last_action_at = tree.physics_frames
+        self._ticks = 0
+        tree.paused = not tree.real_time
         self._episode = _Episode.RUNNING
         self._reset(arguments.get("options") or {})
 
     def _end_tick(self, delta: float) -> None:
-        if self._episode is not _Episode.ACTING or not self.agents:
+        if not self.agents or self._episode not in (_Episode.ACTING, _Episode.RUNNING):
             return
+        self._ticks += 1
         for agent in self.agents:
             agent._after_physics_tick(delta)
         if self._recorder is not None:
             self._recorder.add(self._render(*self.render_size))
         if all(agent.terminated or agent.truncated for agent in self.agents):
+            if self._episode is _Episode.RUNNING:  # real time: stop, tell the next request
+                self.get_tree().paused = True
+                self._ended_unseen = True
+                return
             self.physics_frames_timer.stop()
             self._finish_action()
 
@@ -530,10 +574,35 @@ class RLEnvironment(RLNode):
             self._send_response(request.observation)
 
     def _act(self, action: Any, frames: int) -> None:
-        self._action_started_at = self.get_tree().physics_frames
+        tree = self.get_tree()
+        if tree.real_time:
+            self._act_now(action)
+            return
+        self._ticks = 0
         self._episode = _Episode.ACTING
         self._log.acted(action, frames)
         self._step(action, frames)
+
+    def _act_now(self, action: Any) -> None:
+        """Real time: apply the action at once and answer with the latest state.
+
+        An action arriving more than ``repeat_action`` ticks after the previous one is late; an
+        action after the episode ended (unseen by the client) is not applied.
+        """
+        tree = self.get_tree()
+        self._late = tree.physics_frames - self._last_action_at > self.repeat_action
+        self._late_actions += self._late
+        self._last_action_at = tree.physics_frames
+        if not self._ended_unseen:
+            if self.multi_agent:
+                for agent in self.agents:
+                    if agent.name in action:
+                        agent.set_action(action[agent.name])
+            else:
+                self._require_agent().set_action(action)
+        request = self._request
+        assert request is not None
+        self._send_response(request.observation)
 
     def _restore(self, data: Mapping[str, Any]) -> None:
         """Rebuild the state a snapshot describes: check everything, reset, replay."""

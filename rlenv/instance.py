@@ -9,7 +9,9 @@ with its own tree and pymunk space, stepped together by one batch request.
 
 from __future__ import annotations
 
+import time
 from collections import deque
+from collections.abc import Callable
 
 from rlenv.environment import RLEnvironment
 from rlenv.protocol import ErrorReply, Hello, Request, Response
@@ -43,9 +45,11 @@ class Instance:
 
     Args:
         environment: an environment instance, its class, or ``MODULE:CLASS``.
+        clock: the tree's clock, for real-time mode (tests pass a manual one).
     """
 
-    def __init__(self, environment: RLEnvironment | type[RLEnvironment] | str) -> None:
+    def __init__(self, environment: RLEnvironment | type[RLEnvironment] | str,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         if isinstance(environment, str):
             environment = load_environment(environment)
         if isinstance(environment, type):
@@ -53,7 +57,7 @@ class Instance:
         self.environment = environment
         self._endpoint = _DirectEndpoint()
         environment.communication = self._endpoint
-        self.tree = SceneTree(environment.physics_ticks_per_second)
+        self.tree = SceneTree(environment.physics_ticks_per_second, clock=clock)
         self.tree.root.add_child(environment)
         self.hello: Hello = environment.hello()
 

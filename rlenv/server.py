@@ -63,6 +63,7 @@ class Server:
             defaults if ``None``.
         instances: how many environment instances to host.
         record_dir: where clients may have the environment record videos (``None``: nowhere).
+        real_time: start in real-time mode (ticks follow the wall clock).
 
     Raises:
         InsecureBindError: a non-loopback ``host`` without a ``token``.
@@ -72,6 +73,7 @@ class Server:
         self, environment: RLEnvironment | type[RLEnvironment] | str, host: str = DEFAULT_HOST,
         port: int = 0, lifeline: int | None = None, token: str | None = None,
         limits: Limits | None = None, instances: int = 1, record_dir: Path | None = None,
+        real_time: bool = False,
     ) -> None:
         if isinstance(environment, str):
             environment = load_environment(environment)
@@ -101,6 +103,7 @@ class Server:
             environment.communication = self.communication
         for hosted in [instance.environment for instance in self.instances] or [self.environment]:
             hosted.record_dir = record_dir
+            hosted.real_time = real_time
         self.address = self.communication.start_server(port, host)
         if lifeline is not None:
             self.communication.watch_lifeline(lifeline)

@@ -1,6 +1,6 @@
 """SceneTree: the root node, groups, pause, deferred calls and the main loop.
 
-The loop is **lockstep**: simulated time never depends on the wall clock. One
+The loop is **lockstep** by default: simulated time never depends on the wall clock. One
 :meth:`SceneTree.iteration` runs, while the tree is not paused, one physics tick of fixed length
 ``1 / physics_ticks_per_second``:
 
@@ -14,10 +14,16 @@ deferred calls run. ``delta`` of a frame is the simulated time since the previou
 or 0 while paused. A paused tree runs no ticks, so its physics stands still; nodes that wait for
 the outside world (an environment waiting for its client) block in their ``_process`` instead of
 spinning.
+
+In **real-time** mode (:attr:`SceneTree.real_time`) ticks follow a clock instead: an iteration
+runs every tick that has come due since the last one (paused or not, as Godot does: pausable
+nodes simply skip them), then one frame whose ``delta`` is the clock time elapsed. The clock is
+injectable (``clock=``), so tests drive time by hand.
 """
 
 from __future__ import annotations
 
+import time
 from collections import deque
 from collections.abc import Callable
 from typing import Any
@@ -46,12 +52,18 @@ class SceneTree(SignalOwner):
     node_removed = Signal("node")
     """Emitted when a node leaves the tree."""
 
-    def __init__(self, physics_ticks_per_second: int = 60) -> None:
+    def __init__(
+        self, physics_ticks_per_second: int = 60, *, clock: Callable[[], float] = time.monotonic
+    ) -> None:
         if physics_ticks_per_second < 1:
             raise ValueError("physics_ticks_per_second must be at least 1")
         self._signals = {}
         self.physics_ticks_per_second = physics_ticks_per_second
         self.paused = False
+        self.clock = clock
+        self._real_time = False
+        self._next_tick_at = 0.0
+        self._last_frame_at = 0.0
         self.physics_frames = 0
         self.process_frames = 0
         self._locked = 0
@@ -151,9 +163,38 @@ class SceneTree(SignalOwner):
             self._locked -= 1
         self.flush_deferred()
 
+    @property
+    def real_time(self) -> bool:
+        """Whether ticks follow the clock (real time) instead of running on demand (lockstep)."""
+        return self._real_time
+
+    @real_time.setter
+    def real_time(self, value: bool) -> None:
+        if value and not self._real_time:
+            self._next_tick_at = self._last_frame_at = self.clock()
+        self._real_time = value
+
+    def time_to_next_tick(self) -> float | None:
+        """Seconds until the next tick is due in real time (``None`` in lockstep)."""
+        if not self._real_time:
+            return None
+        return max(0.0, self._next_tick_at - self.clock())
+
     def iteration(self) -> None:
-        """One turn of the lockstep loop: a physics tick unless paused, then a frame."""
-        if self.paused:
+        """One turn of the loop.
+
+        Lockstep: a physics tick unless paused, then a frame. Real time: every tick due by the
+        clock, then a frame.
+        """
+        if self._real_time:
+            now = self.clock()
+            delta = 1.0 / self.physics_ticks_per_second
+            while self._next_tick_at <= now:
+                self.physics_tick()
+                self._next_tick_at += delta
+            self.process(now - self._last_frame_at)
+            self._last_frame_at = now
+        elif self.paused:
             self.process(0.0)
         else:
             self.physics_tick()

@@ -15,7 +15,7 @@ def test_the_tree_lists_nodes_types_and_exported_values(client: Client) -> None:
     client.reset(seed=0)
     nodes = {node["path"]: node for node in client.tree()}
     assert nodes["/root/CartPole"]["type"] == "CartPoleEnvironment"
-    assert nodes["/root/CartPole"]["exported"] == {"repeat_action": 4}
+    assert nodes["/root/CartPole"]["exported"] == {"repeat_action": 4, "real_time": False}
     pole = nodes["/root/CartPole/World/Physics/Pole"]
     assert pole["type"] == "RigidBody"
     assert set(pole["exported"]) == {"position", "velocity", "angle", "angular_velocity"}

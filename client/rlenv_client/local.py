@@ -9,6 +9,8 @@ compared with. It imports the server runtime (and pymunk) only when created.
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from rlenv.errors import ConnectionLost
@@ -28,15 +30,17 @@ class LocalClient(BaseClient):
     Args:
         environment: an environment instance, its class, or ``MODULE:CLASS``.
         world_data: also ask for the world's data on reset and step (``info["world"]``).
+        clock: the tree's clock for real-time mode (e.g. ``rlenv.testing.ManualClock``).
     """
 
     def __init__(
-        self, environment: RLEnvironment | type[RLEnvironment] | str, *, world_data: bool = False
+        self, environment: RLEnvironment | type[RLEnvironment] | str, *, world_data: bool = False,
+        clock: Callable[[], float] | None = None,
     ) -> None:
         from rlenv.instance import Instance
 
         super().__init__(world_data=world_data)
-        self._instance: Instance | None = Instance(environment)
+        self._instance: Instance | None = Instance(environment, clock or time.monotonic)
         self.environment = self._instance.environment
         self.address = f"in-process {self.environment.name}"
         self._set_hello(self._instance.hello)

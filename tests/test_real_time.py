@@ -1,0 +1,87 @@
+"""Real-time mode: ticks follow the clock (a manual one here: no test sleeps)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import Serve
+
+from rlenv.testing import ManualClock
+from rlenv_client import Client, ErrorCode, LocalClient, RemoteError
+
+TARGET = "examples.cartpole:CartPoleEnvironment"
+STILL = np.zeros(1, np.float32)
+
+
+@pytest.fixture
+def clock() -> ManualClock:
+    return ManualClock()
+
+
+@pytest.fixture
+def live(clock: ManualClock) -> LocalClient:
+    client = LocalClient(TARGET, clock=clock)
+    client.configure(real_time=True)
+    return client
+
+
+def test_ticks_follow_the_clock_not_the_client(live: LocalClient, clock: ManualClock) -> None:
+    live.reset(seed=0)
+    _, _, _, _, info = live.step(STILL)
+    assert info["frames"] == 0 and info["late"] is False  # no time passed, no tick
+    clock.advance(0.1)  # 6 ticks at 60 per second, while the client was away
+    _, reward, _, _, info = live.step(STILL)
+    assert info["frames"] == 6 and reward == 6.0
+    assert info["late"] is True and info["late_actions"] == 1  # 6 ticks > repeat_action 4
+    clock.advance(3 / 60)
+    _, _, _, _, info = live.step(STILL)
+    assert info["frames"] == 3 and info["late"] is False and info["late_actions"] == 1
+
+
+def test_actions_apply_when_they_arrive(live: LocalClient, clock: ManualClock) -> None:
+    live.reset(seed=0)
+    live.step(np.ones(1, np.float32))  # push right from now on
+    clock.advance(0.2)
+    pushed, *_ = live.step(np.ones(1, np.float32))
+    live.reset(seed=0)
+    live.step(STILL)
+    clock.advance(0.2)
+    idle, *_ = live.step(STILL)
+    assert pushed[3] > idle[3] + 0.1  # the cart moved right faster under the push
+
+
+def test_an_episode_that_ends_between_requests_is_reported_once(
+    live: LocalClient, clock: ManualClock
+) -> None:
+    live.reset(seed=0)
+    live.step(np.ones(1, np.float32))
+    clock.advance(5.0)  # the pole falls long before this
+    _, _, terminated, _, info = live.step(np.ones(1, np.float32))
+    assert terminated and 0 < info["frames"] < 300  # it stopped when the pole fell
+    with pytest.raises(RemoteError) as error:
+        live.step(STILL)
+    assert error.value.code == ErrorCode.RESET_REQUIRED
+    live.reset(seed=1)
+
+
+def test_snapshots_need_lockstep(live: LocalClient) -> None:
+    live.reset(seed=0)
+    with pytest.raises(RemoteError, match="snapshots need lockstep"):
+        live.snapshot()
+    live.configure(real_time=False)
+    live.snapshot()
+
+
+def test_a_real_time_server_keeps_running(serve: Serve) -> None:
+    server = serve(args=["--real-time"])
+    with Client(server.host, server.port, timeout=10) as client:
+        client.reset(seed=0)
+        total = 0
+        for _ in range(50):
+            *_, terminated, _, info = client.step(STILL)
+            total += info["frames"]
+            assert "late_actions" in info
+            if terminated:
+                break
+        assert client.get_property(".", "real_time") is True
+    assert total >= 0  # however fast this machine answers, nothing waits for the client

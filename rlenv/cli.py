@@ -13,7 +13,7 @@ from types import FrameType
 
 from rlenv.communication import DEFAULT_HOST, InsecureBindError, Limits
 
-__all__ = ["main"]
+__all__ = ["main", "serve_command"]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -88,6 +88,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(level=args.log_level, stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     return args.run(args)
+
+
+def serve_command(target: str) -> int:
+    """``rlenv serve TARGET`` with this process's other arguments (for ``python -m`` examples)."""
+    return main(["serve", target, *sys.argv[1:]])
 
 
 def _serve(args: argparse.Namespace) -> int:

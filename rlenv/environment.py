@@ -289,14 +289,18 @@ class RLEnvironment(RLNode):
 
         Override to add logic around an action, and call ``super()._step(action, frames)``.
         """
+        self._give_action(action)
+        self.get_tree().paused = False
+        self.physics_frames_timer.start(frames or self.repeat_action)
+
+    def _give_action(self, action: Any) -> None:
+        """Hand the (checked) action to the agent, or to each agent named in a joint action."""
         if self.multi_agent:
             for agent in self.agents:
                 if agent.name in action:
                     agent.set_action(action[agent.name])
         else:
             self._require_agent().set_action(action)
-        self.get_tree().paused = False
-        self.physics_frames_timer.start(frames or self.repeat_action)
 
     def _send_response(self, observation_request: Mapping[str, Any] | None) -> None:
         """Gather the observation the client asked for, the reward and the flags; send them."""
@@ -594,12 +598,7 @@ class RLEnvironment(RLNode):
         self._late_actions += self._late
         self._last_action_at = tree.physics_frames
         if not self._ended_unseen:
-            if self.multi_agent:
-                for agent in self.agents:
-                    if agent.name in action:
-                        agent.set_action(action[agent.name])
-            else:
-                self._require_agent().set_action(action)
+            self._give_action(action)
         request = self._request
         assert request is not None
         self._send_response(request.observation)

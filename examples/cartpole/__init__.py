@@ -209,8 +209,6 @@ class CartPoleEnvironment(RLEnvironment):
 
 def main() -> None:
     """Serve CartPole: ``python -m examples.cartpole [--port P]``."""
-    import sys
+    from rlenv.cli import serve_command
 
-    from rlenv.cli import main as cli_main
-
-    raise SystemExit(cli_main(["serve", TARGET, *sys.argv[1:]]))
+    raise SystemExit(serve_command(TARGET))

@@ -1,7 +1,5 @@
 """``python -m examples.faulty [--host H] [--port P]`` serves the faulty environment."""
 
-import sys
+from rlenv.cli import serve_command
 
-from rlenv.cli import main
-
-raise SystemExit(main(["serve", "examples.faulty:FaultyEnvironment", *sys.argv[1:]]))
+raise SystemExit(serve_command("examples.faulty:FaultyEnvironment"))

@@ -1,8 +1,6 @@
 """``python -m examples.pair [--host H] [--port P]`` serves the two-agent pair."""
 
-import sys
-
 from examples.pair import TARGET
-from rlenv.cli import main
+from rlenv.cli import serve_command
 
-raise SystemExit(main(["serve", TARGET, *sys.argv[1:]]))
+raise SystemExit(serve_command(TARGET))

@@ -1,8 +1,6 @@
 """``python -m examples.pixels [--host H] [--port P]`` serves the pixels example."""
 
-import sys
-
 from examples.pixels import TARGET
-from rlenv.cli import main
+from rlenv.cli import serve_command
 
-raise SystemExit(main(["serve", TARGET, *sys.argv[1:]]))
+raise SystemExit(serve_command(TARGET))

@@ -210,8 +210,6 @@ class ReacherEnvironment(RLEnvironment):
 
 def main() -> None:
     """Serve the reacher: ``python -m examples.reacher [--port P]``."""
-    import sys
+    from rlenv.cli import serve_command
 
-    from rlenv.cli import main as cli_main
-
-    raise SystemExit(cli_main(["serve", TARGET, *sys.argv[1:]]))
+    raise SystemExit(serve_command(TARGET))

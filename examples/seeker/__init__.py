@@ -233,8 +233,6 @@ class SeekerPixelsEnvironment(SeekerEnvironment):
 
 def main() -> None:
     """Serve the seeker: ``python -m examples.seeker [--port P]``."""
-    import sys
+    from rlenv.cli import serve_command
 
-    from rlenv.cli import main as cli_main
-
-    raise SystemExit(cli_main(["serve", TARGET, *sys.argv[1:]]))
+    raise SystemExit(serve_command(TARGET))

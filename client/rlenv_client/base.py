@@ -121,15 +121,18 @@ class BaseClient(ABC):
         """Wait for the answer to the step sent by :meth:`send_step`."""
         return self.step_result(self._receive_reply())
 
-    def step_result(self, reply: Response | ErrorReply) -> StepResult:
+    def step_result(self, reply: Response | ErrorReply, *, native: bool = True) -> StepResult:
         """A step's answer as ``(observation, reward, terminated, truncated, info)``.
+
+        With ``native=False`` the observation is left as decoded from the wire (read-only
+        arrays, for callers that copy it anyway, such as vector environments batching it).
 
         Raises:
             RemoteError: the answer is an error.
         """
         response = self._response(reply)
         return (
-            self._observation(response),
+            self._observation(response) if native else self._part(response, "agent"),
             response.reward,
             response.terminated,
             response.truncated,

@@ -156,12 +156,13 @@ class RemoteVectorEnv(VectorEnv):
             replies = self._exchange(plan)
         except LOST as error:
             raise with_server_story(as_lost(error), self.servers) from None
-        observations, infos = [], {}
+        observations, env_infos = [], []
         for index, reply in enumerate(replies):
             observation, info = self._client_of(index).reset_result(self._sure(index, reply))
             self._last_observations[index] = observation
             observations.append(observation)
-            infos = self._add_info(infos, info, index)
+            env_infos.append(info)
+        infos = self._merge_infos({}, env_infos)
         self._autoreset[:] = False
         self._steps[:] = 0
         return self._batch(observations), infos
@@ -197,7 +198,7 @@ class RemoteVectorEnv(VectorEnv):
                 self._steps[index] = 0
             else:
                 observation, reward, terminated, truncated, info = client.step_result(
-                    self._sure(index, reply))
+                    self._sure(index, reply), native=False)  # _batch copies it
                 self._steps[index] += 1
                 if self.max_episode_steps is not None and \
                         self._steps[index] >= self.max_episode_steps:
@@ -224,8 +225,7 @@ class RemoteVectorEnv(VectorEnv):
                         self._sure(index, reply))
                     self._last_observations[index] = observations[index]
                     self._steps[index] = 0
-        for index, info in enumerate(env_infos):
-            infos = self._add_info(infos, info, index)
+        infos = self._merge_infos(infos, env_infos)
         self._autoreset = ended
         return self._batch(observations), rewards, terminations, truncations, infos
 
@@ -323,6 +323,15 @@ class RemoteVectorEnv(VectorEnv):
             for index, answer in zip(group, answers, strict=False):
                 replies[index] = answer
         return replies
+
+    def _merge_infos(self, infos: dict[str, Any], env_infos: list[dict[str, Any]]) -> dict:
+        """Gymnasium's batched infos; the common case (only ``frames``) without a loop."""
+        if not infos and all(info.keys() == {"frames"} for info in env_infos):
+            return {"frames": np.array([info["frames"] for info in env_infos], dtype=int),
+                    "_frames": np.ones(self.num_envs, dtype=np.bool_)}
+        for index, info in enumerate(env_infos):
+            infos = self._add_info(infos, info, index)
+        return infos
 
     @staticmethod
     def _sure(index: int, reply: Reply | str | None) -> Reply:

@@ -29,7 +29,7 @@ class VideoRecorder:
             import imageio.v2 as imageio
         except ImportError:
             raise RuntimeError("recording needs imageio and imageio-ffmpeg: "
-                               "pip install imageio imageio-ffmpeg") from None
+                               "pip install 'rlenv[video]'") from None
         self.path = Path(path)
         self._writer: Any = imageio.get_writer(str(path), fps=fps, macro_block_size=1)
         self.frames = 0

@@ -12,7 +12,7 @@ the physics frame by frame, as Blueprints' cameras do::
     ...
     camera.stop_recording()
 
-Recording needs ``imageio`` with its ffmpeg plugin (``pip install imageio imageio-ffmpeg``).
+Recording needs ``imageio`` with its ffmpeg plugin (``pip install 'rlenv[video]'``).
 """
 
 from __future__ import annotations

@@ -314,6 +314,11 @@ class Request:
     restore: Mapping[str, Any] | None = None
     inspect: Mapping[str, Any] | None = None
 
+    @property
+    def asks_nothing(self) -> bool:
+        """Whether no part asks anything of an environment (e.g. it only carries the token)."""
+        return all(getattr(self, name) is None for name in _ENVIRONMENT_PARTS)
+
     def to_wire(self) -> dict[str, Any]:
         """The message as a msgpack-ready map (absent parts left out)."""
         wire = self._parts()
@@ -378,6 +383,7 @@ class Request:
 
 
 _STATE_KEYS = ("snapshot", "restore", "inspect")
+_ENVIRONMENT_PARTS = REQUEST_KEYS + _STATE_KEYS
 _REQUEST_WIRE_KEYS = frozenset(("id", "repeat_action", "token", "batch") + REQUEST_KEYS
                                + _STATE_KEYS)
 _PART_KEYS = frozenset(("repeat_action",) + REQUEST_KEYS + _STATE_KEYS)

@@ -126,8 +126,7 @@ class Server:
 
     def _answer(self, request: Request, drive: Any) -> Response | BatchResponse | ErrorReply:
         if request.batch is None:
-            if request.config is None and request.reset is None and request.action is None \
-                    and request.observation is None:
+            if request.asks_nothing:
                 return Response(id=request.id)  # e.g. the token
             reply = drive(self.instances[:1], [request])[0]
             assert reply is not None

@@ -408,6 +408,12 @@ def test_a_server_hosts_several_instances_stepped_by_one_batch(serve: Serve) -> 
             many.send_batch([None] * 4)
             many.receive_batch()
         assert many.step(PUSH)[4]["frames"] == 4  # a plain request goes to instance 0
+        # so do snapshots and inspections, checked there like any other request
+        assert many.snapshot()["events"]
+        assert many.tree()[0]["path"] == "/root/CartPole"
+        with pytest.raises(RemoteError, match="inspect"):
+            many.send_request(Request(id=0, inspect={"bogus": {}}))
+            many.step_result(many.receive_reply())
 
 
 def test_batches_are_validated_part_by_part(server: ServerProcess) -> None:

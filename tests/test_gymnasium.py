@@ -315,6 +315,10 @@ def test_a_vector_env_names_the_server_that_died() -> None:
         with pytest.raises(rlenv_client.ConnectionLost) as error:
             envs.step(np.zeros((2, 1), np.float32))
         assert f"(pid {victim.pid}) exited" in str(error.value)
+        with pytest.raises(rlenv_client.ConnectionLost) as error:  # a reset, too
+            envs.reset(seed=1)
+        assert f"(pid {victim.pid}) exited" in str(error.value)
+        assert f"pid {envs.servers[0].pid}" not in str(error.value)
 
 
 def test_a_lost_server_is_restarted_and_the_episode_truncated() -> None:

@@ -114,7 +114,7 @@ class Session:
             ConnectionLost: the budget is spent or the server is not ours (with the old server's
                 exit story).
         """
-        story = with_server_story(as_lost(error), [self.server] if self.server else [])
+        story = self.failure(error)
         if not self.can_restart():
             raise story
         self.restarts += 1

@@ -36,8 +36,8 @@ from gymnasium.vector.utils import batch_space, concatenate, create_empty_array,
 
 from rlenv.protocol import ErrorReply, Request, Response
 from rlenv_client.base import BaseClient
-from rlenv_client.launcher import ServerProcess, with_server_story
-from rlenv_client.session import LOST, Session, as_lost
+from rlenv_client.launcher import ServerProcess
+from rlenv_client.session import LOST, Session
 
 __all__ = ["RemoteVectorEnv", "default_layout"]
 
@@ -150,12 +150,8 @@ class RemoteVectorEnv(VectorEnv):
             if len(seeds) != self.num_envs:
                 raise ValueError(f"{len(seeds)} seeds for {self.num_envs} environments")
         super().reset(seed=seed if isinstance(seed, int) else None)
-        try:
-            plan = [self._client_of(i).reset_request(seeds[i], options)
-                    for i in range(self.num_envs)]
-            replies = self._exchange(plan)
-        except LOST as error:
-            raise with_server_story(as_lost(error), self.servers) from None
+        plan = [self._client_of(i).reset_request(seeds[i], options) for i in range(self.num_envs)]
+        replies = self._exchange(plan)
         observations, env_infos = [], []
         for index, reply in enumerate(replies):
             observation, info = self._client_of(index).reset_result(self._sure(index, reply))
@@ -296,18 +292,24 @@ class RemoteVectorEnv(VectorEnv):
 
         A server that is lost gives, for each of its sub-environments with a request, the
         reason it was restarted (when ``restart`` and the budget allow) instead of a reply.
+
+        Raises:
+            ConnectionLost: a server was lost (and not restarted), with how it exited.
         """
         sent = []
         for session, group in zip(self.sessions, self._groups, strict=True):
             parts = [plan[index] for index in group]
             if all(part is None for part in parts):
                 sent.append(False)
-            elif len(group) > 1:
-                session.client.send_batch(parts)
-                sent.append(True)
-            else:
-                session.client.send_request(parts[0])  # type: ignore[arg-type]
-                sent.append(True)
+                continue
+            try:
+                if len(group) > 1:
+                    session.client.send_batch(parts)
+                else:
+                    session.client.send_request(parts[0])  # type: ignore[arg-type]
+            except LOST as error:
+                raise session.failure(error) from None
+            sent.append(True)
         replies: list[Reply | str | None] = [None] * self.num_envs
         for session, group, was_sent in zip(self.sessions, self._groups, sent, strict=True):
             if not was_sent:
@@ -317,7 +319,7 @@ class RemoteVectorEnv(VectorEnv):
                     (session.client.receive_reply(),)
             except LOST as error:
                 if not restart or any(self._last_observations[i] is None for i in group):
-                    raise
+                    raise session.failure(error) from None
                 reason = session.restart(error)
                 answers = tuple(reason if plan[i] is not None else None for i in group)
             for index, answer in zip(group, answers, strict=False):

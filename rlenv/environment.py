@@ -556,7 +556,7 @@ class RLEnvironment(RLNode):
             agent._after_physics_tick(delta)
         if self._recorder is not None:
             self._recorder.add(self._render(*self.render_size))
-        if all(agent.terminated or agent.truncated for agent in self.agents):
+        if self._all_ended():
             if self._episode is _Episode.RUNNING:  # real time: stop, tell the next request
                 self.get_tree().paused = True
                 self._ended_unseen = True
@@ -564,14 +564,16 @@ class RLEnvironment(RLNode):
             self.physics_frames_timer.stop()
             self._finish_action()
 
+    def _all_ended(self) -> bool:
+        """Whether every agent's episode has ended (the one agent's, with a single agent)."""
+        return all(agent.terminated or agent.truncated for agent in self.agents)
+
     def _finish_action(self) -> None:
         self.get_tree().paused = True
         if self._replaying:  # restoring a snapshot: the episode moves on silently
-            ended = any(a.terminated or a.truncated for a in self.agents) if not \
-                self.multi_agent else all(a.terminated or a.truncated for a in self.agents)
             for agent in self.agents:
                 agent.reward = 0.0
-            self._episode = _Episode.ENDED if ended else _Episode.RUNNING
+            self._episode = _Episode.ENDED if self._all_ended() else _Episode.RUNNING
             return
         request = self._request
         if request is not None:
@@ -637,8 +639,7 @@ class RLEnvironment(RLNode):
                     raise RuntimeError("the snapshot acts after its episode ended")
                 self._act(next(checked), event[2])
                 while self._episode is _Episode.ACTING:
-                    tree.physics_tick()
-                    tree.process(tree.physics_delta)
+                    tree.iteration()
         finally:
             self._replaying = False
 

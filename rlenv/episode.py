@@ -62,14 +62,8 @@ class EpisodeLog:
         self.events.append(["action", action, frames])
 
     def snapshot(self) -> dict[str, Any]:
-        """The episode so far, as data.
-
-        Raises:
-            RequestError: no episode has started.
-        """
-        if not self.started:
-            raise RequestError(ErrorCode.RESET_REQUIRED, "no episode has started; nothing to "
-                               "snapshot")
+        """The episode so far, as data (the environment refuses a snapshot before any episode)."""
+        assert self.started, "no episode has started"
         return {"version": SNAPSHOT_VERSION, "config": self.config, "rng": self.rng,
                 "options": self.options, "events": list(self.events)}
 

@@ -53,6 +53,7 @@ class Camera(Node):
         self._recorder: VideoRecorder | None = None
         self._every = 1
         self._ticks = 0
+        self.set_physics_process(False)  # ticks matter only while recording
 
     def capture(self) -> np.ndarray:
         """What the camera sees now: an ``(height, width, 3)`` uint8 array.
@@ -84,10 +85,12 @@ class Camera(Node):
         self._recorder = VideoRecorder(path, fps)
         self._every = every
         self._ticks = 0
+        self.set_physics_process(True)
 
     def stop_recording(self) -> int:
         """Stop filming and close the video; returns how many frames it holds."""
         recorder, self._recorder = self._recorder, None
+        self.set_physics_process(False)
         return recorder.close() if recorder is not None else 0
 
     @property
@@ -96,8 +99,7 @@ class Camera(Node):
         return self._recorder is not None
 
     def _physics_process(self, delta: float) -> None:
-        if self._recorder is not None:
-            self.call_deferred(self._record)  # at the end of the tick, after the physics stepped
+        self.call_deferred(self._record)  # at the end of the tick, after the physics stepped
 
     def _exit_tree(self) -> None:
         self.stop_recording()

@@ -30,12 +30,15 @@ def test_a_camera_sees_the_scene_and_films_every_nth_tick(tmp_path: Path) -> Non
         assert observation.tobytes() == camera.capture().tobytes()
         red = (observation[..., 0] > 150) & (observation[..., 1] < 100)
         assert red.sum() > 0  # the apple
+        assert not camera.is_physics_processing()  # an idle camera costs no tick
         camera.start_recording(tmp_path / "eye.mp4", every=2)
+        assert camera.is_physics_processing()
         with pytest.raises(RuntimeError, match="already recording"):
             camera.start_recording(tmp_path / "again.mp4")
         for _ in range(5):
             client.step(np.array([0.3, 0.0], np.float32))  # 5 steps x 4 ticks
         assert camera.stop_recording() == 10  # one frame every 2 ticks
+        assert not camera.is_physics_processing()
     frames = frames_in(tmp_path / "eye.mp4")
     assert len(frames) in (9, 10) and frames[0].shape == (64, 64, 3)
 

@@ -38,7 +38,7 @@ import numpy as np
 import pymunk
 from gymnasium import spaces
 
-from examples.seeker import HALF, RADIUS
+from examples.seeker import HALF, RADIUS, greedy, random_spot, room_walls
 from rlenv import CollisionShape, PhysicsWorld, RigidBody, StaticBody
 from rlenv.agent import RLAgent
 from rlenv.environment import RLEnvironment
@@ -52,9 +52,8 @@ NAMES = ("Red", "Blue")
 _COLORS = {"Red": (200, 50, 50), "Blue": (50, 90, 200)}
 
 
-def chase(observation: np.ndarray) -> np.ndarray:
-    """Push towards one's own apple, braking a little."""
-    return np.clip(observation[4:6] - 0.5 * observation[2:4], -1, 1).astype(np.float32)
+chase = greedy
+"""Push towards one's own apple, braking a little (the seeker's policy: same first 6 fields)."""
 
 
 class PairWorld(RLEnvWorld):
@@ -76,16 +75,12 @@ class PairWorld(RLEnvWorld):
             self.remove_child(self.physics)
             self.physics.queue_free()
         physics = PhysicsWorld(gravity=(0.0, 0.0), damping=0.5, name="Physics")
-        walls = StaticBody(name="Walls")
-        corners = [(-HALF, -HALF), (HALF, -HALF), (HALF, HALF), (-HALF, HALF)]
-        for index, (a, b) in enumerate(zip(corners, corners[1:] + corners[:1], strict=True)):
-            walls.add_child(CollisionShape.segment(a, b, 0.05, name=f"Wall{index}"))
-        physics.add_child(walls)
+        physics.add_child(room_walls())
         for name in NAMES:
             disc = RigidBody(name=f"{name}Disc")
             disc.add_child(CollisionShape.circle(RADIUS, mass=1.0, color=_COLORS[name],
                                                  name="Body"))
-            apple = StaticBody(position=tuple(self._spot()), name=f"{name}Apple")
+            apple = StaticBody(position=tuple(random_spot(self.np_random)), name=f"{name}Apple")
             skin = CollisionShape.circle(0.25, sensor=True, color=_COLORS[name], name="Skin")
             skin.collision_started.connect(self._touched(name))
             apple.add_child(skin)
@@ -100,13 +95,9 @@ class PairWorld(RLEnvWorld):
         """A spot for the next agent's disc, 2 m from its apple (agents are placed in order)."""
         name = self._placing.pop(0)
         while True:
-            spot = self._spot()
+            spot = random_spot(self.np_random)
             if np.hypot(*(spot - np.array(self.apples[name].position))) >= 2.0:
                 return spot
-
-    def _spot(self) -> np.ndarray:
-        margin = HALF - RADIUS - 0.2
-        return self.np_random.uniform(-margin, margin, size=2)
 
     def _touched(self, name: str) -> Any:
         def on_contact(other: CollisionShape) -> None:
@@ -128,7 +119,10 @@ class PairAgent(RLAgent):
     def __init__(self, name: str) -> None:
         super().__init__(name)
         self.force = (0.0, 0.0)
-        self._disc: pymunk.Body | None = None
+        self._other = next(other for other in NAMES if other != name)
+        self._disc: pymunk.Body | None = None  # this episode's bodies, set at reset
+        self._apple: StaticBody | None = None
+        self._other_disc: RigidBody | None = None
 
     @property
     def world(self) -> PairWorld:
@@ -142,7 +136,9 @@ class PairAgent(RLAgent):
 
     def reset(self, arguments: np.ndarray) -> None:
         """Put this agent's disc at the sampled spot, at rest."""
-        self._disc = self.world.discs[self.name].body
+        world = self.world
+        self._disc = world.discs[self.name].body
+        self._apple, self._other_disc = world.apples[self.name], world.discs[self._other]
         self._disc.position = (float(arguments[0]), float(arguments[1]))
         self._disc.velocity = (0.0, 0.0)
         self.force = (0.0, 0.0)
@@ -167,13 +163,11 @@ class PairAgent(RLAgent):
 
     def get_data(self, observation_request: Mapping[str, Any]) -> np.ndarray:
         """Own position and velocity, own apple and the other disc, both relative."""
-        world = self.world
-        disc = self._disc
-        assert disc is not None
-        other = next(n for n in NAMES if n != self.name)
+        disc, apple, other_disc = self._disc, self._apple, self._other_disc
+        assert disc is not None and apple is not None and other_disc is not None
         x, y = disc.position
-        apple_x, apple_y = world.apples[self.name].position
-        other_x, other_y = world.discs[other].position
+        apple_x, apple_y = apple.position
+        other_x, other_y = other_disc.position
         return np.array((x, y, *disc.velocity, apple_x - x, apple_y - y, other_x - x,
                          other_y - y), dtype=np.float32)
 

@@ -60,6 +60,8 @@ __all__ = [
     "SeekerWorld",
     "greedy",
     "main",
+    "random_spot",
+    "room_walls",
 ]
 
 TARGET = "examples.seeker:SeekerEnvironment"
@@ -72,6 +74,21 @@ def greedy(observation: np.ndarray) -> np.ndarray:
     """Push towards the apple, braking a little: a policy that catches it."""
     relative, velocity = observation[4:6], observation[2:4]
     return np.clip(relative - 0.5 * velocity, -1.0, 1.0).astype(np.float32)
+
+
+def room_walls(**shape_options: Any) -> StaticBody:
+    """The room's four walls: segments of one static body (``shape_options`` for each)."""
+    walls = StaticBody(name="Walls")
+    corners = [(-HALF, -HALF), (HALF, -HALF), (HALF, HALF), (-HALF, HALF)]
+    for index, (a, b) in enumerate(zip(corners, corners[1:] + corners[:1], strict=True)):
+        walls.add_child(CollisionShape.segment(a, b, 0.05, name=f"Wall{index}", **shape_options))
+    return walls
+
+
+def random_spot(rng: np.random.Generator) -> np.ndarray:
+    """A random spot in the room where a disc fits, clear of the walls."""
+    margin = HALF - RADIUS - 0.2
+    return rng.uniform(-margin, margin, size=2)
 
 
 class SeekerWorld(RLEnvWorld):
@@ -95,16 +112,11 @@ class SeekerWorld(RLEnvWorld):
             self.remove_child(self.physics)
             self.physics.queue_free()
         physics = PhysicsWorld(gravity=(0.0, 0.0), damping=self.damping, name="Physics")
-        walls = StaticBody(name="Walls")
-        corners = [(-HALF, -HALF), (HALF, -HALF), (HALF, HALF), (-HALF, HALF)]
-        for index, (a, b) in enumerate(zip(corners, corners[1:] + corners[:1], strict=True)):
-            walls.add_child(CollisionShape.segment(a, b, 0.05, elasticity=0.5,
-                                                   name=f"Wall{index}"))
-        physics.add_child(walls)
+        physics.add_child(room_walls(elasticity=0.5))
         self.disc = RigidBody(name="Disc")
         self.disc.add_child(CollisionShape.circle(RADIUS, mass=1.0, elasticity=0.5, name="Body"))
         physics.add_child(self.disc)
-        self.apple = StaticBody(position=tuple(self._random_spot()), name="Apple")
+        self.apple = StaticBody(position=tuple(random_spot(self.np_random)), name="Apple")
         self.apple.add_to_group("apples")
         skin = CollisionShape.circle(0.25, sensor=True, color=(200, 40, 40), name="Skin")
         skin.collision_started.connect(self._on_apple_touched)
@@ -117,7 +129,7 @@ class SeekerWorld(RLEnvWorld):
         """A spot for the disc at least 2 m from the apple."""
         assert self.apple is not None
         while True:
-            spot = self._random_spot()
+            spot = random_spot(self.np_random)
             if np.hypot(*(spot - np.array(self.apple.position))) >= 2.0:
                 return spot
 
@@ -125,10 +137,6 @@ class SeekerWorld(RLEnvWorld):
         """The apple's position, for displays."""
         assert self.apple is not None
         return {"apple": list(self.apple.position)}
-
-    def _random_spot(self) -> np.ndarray:
-        margin = HALF - RADIUS - 0.2
-        return self.np_random.uniform(-margin, margin, size=2)
 
     def _on_apple_touched(self, other: CollisionShape) -> None:
         if other.body_node is self.disc:

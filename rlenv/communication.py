@@ -141,11 +141,6 @@ class Communication:
         self._lifeline: int | None = None
 
     @property
-    def token_required(self) -> bool:
-        """Whether clients must authenticate with a token."""
-        return self._token is not None
-
-    @property
     def is_listening(self) -> bool:
         """Whether :meth:`start_server` was called and :meth:`close` was not."""
         return self._listener is not None
@@ -275,9 +270,9 @@ class Communication:
                     self._drop(other, "client closed the connection")
         if len(self._peers) >= self.limits.max_connections:
             logger.info("refused %s: %d clients connected", address_text, len(self._peers))
-            self._refuse(peer, ErrorCode.BUSY,
-                         f"this server already has {len(self._peers)} clients connected, its "
-                         "limit; close one or start another server")
+            self._send_to(peer, ErrorReply(
+                None, ErrorCode.BUSY, f"this server already has {len(self._peers)} clients "
+                "connected, its limit; close one or start another server", fatal=True))
             return
         self._peers[sock] = peer
         self._selector.register(sock, selectors.EVENT_READ)
@@ -287,37 +282,35 @@ class Communication:
             hello = replace(hello, token_required=True)
         self._write(peer, peer.connection.send(hello))
 
-    def _refuse(self, peer: _Peer, code: ErrorCode, message: str) -> None:
-        self._write(peer, peer.connection.send(ErrorReply(None, code, message, fatal=True)),
-                    register=False)
-        peer.sock.close()
-
     def _next_wake(self, deadline: float | None) -> float | None:
         """The earliest of the caller's deadline and every peer's frame and idle deadlines."""
         times = [] if deadline is None else [deadline]
-        for peer in self._peers.values():
-            if peer.frame_started is not None:
-                times.append(peer.frame_started + self.limits.frame_deadline)
-            elif self.limits.idle_timeout is not None:
-                times.append(peer.last_request + self.limits.idle_timeout)
+        times += [due for peer in self._peers.values()
+                  if (due := self._peer_deadline(peer)) is not None]
         return min(times, default=None)
+
+    def _peer_deadline(self, peer: _Peer) -> float | None:
+        """When ``peer`` times out: its frame's deadline while a frame arrives, else idling's."""
+        if peer.frame_started is not None:
+            return peer.frame_started + self.limits.frame_deadline
+        if self.limits.idle_timeout is not None:
+            return peer.last_request + self.limits.idle_timeout
+        return None
 
     def _enforce_deadlines(self) -> None:
         now = self._clock()
         for peer in list(self._peers.values()):
+            due = self._peer_deadline(peer)
+            if due is None or now < due:
+                continue
             if peer.frame_started is not None:
-                if now - peer.frame_started >= self.limits.frame_deadline:
-                    self._time_out(peer, f"a frame was not completed within "
-                                   f"{self.limits.frame_deadline} s ({peer.connection.buffered} "
-                                   "bytes received); is the client stalled?")
-            elif self.limits.idle_timeout is not None and \
-                    now - peer.last_request >= self.limits.idle_timeout:
-                self._time_out(peer, f"no request for {self.limits.idle_timeout} s")
-
-    def _time_out(self, peer: _Peer, message: str) -> None:
-        logger.info("client %s timed out: %s", peer.address, message)
-        self._send_to(peer, ErrorReply(None, ErrorCode.TIMEOUT, message, fatal=True))
-        self._drop(peer, "timed out")
+                message = (f"a frame was not completed within {self.limits.frame_deadline} s "
+                           f"({peer.connection.buffered} bytes received); is the client stalled?")
+            else:
+                message = f"no request for {self.limits.idle_timeout} s"
+            logger.info("client %s timed out: %s", peer.address, message)
+            self._send_to(peer, ErrorReply(None, ErrorCode.TIMEOUT, message, fatal=True),
+                          "timed out")
 
     def _check_lifeline(self, fd: int) -> None:
         if not os.read(fd, 4096):
@@ -363,9 +356,7 @@ class Communication:
                 logger.info("client %s: %s", peer.address, error)
                 peer.frame_started = None
                 self._send_to(peer, ErrorReply(error.request_id, error.code, str(error),
-                                               fatal=error.fatal))
-                if error.fatal:
-                    self._drop(peer, "broken framing")
+                                               fatal=error.fatal), "broken framing")
                 continue
             if message is NEED_DATA:
                 if peer.connection.buffered and peer.frame_started is None:
@@ -421,23 +412,22 @@ class Communication:
         peer.connection.max_frame_size = self.limits.max_frame_size
         return True
 
-    def _send_to(self, peer: _Peer, message: Response | ErrorReply) -> None:
+    def _send_to(self, peer: _Peer, message: Response | ErrorReply,
+                 why_fatal: str = "error reply closed the connection") -> None:
+        """Send ``message``; a fatal error reply then closes the connection (``why_fatal``)."""
         try:
-            data = peer.connection.send(message)
-        except LocalProtocolError as error:
+            self._write(peer, peer.connection.send(message))
+        except LocalProtocolError as error:  # e.g. the client hung up in the middle of a frame
             logger.warning("not sent to %s: %s", peer.address, error)
-            return
-        self._write(peer, data)
         if message.__class__ is ErrorReply and message.fatal:
-            self._drop(peer, "error reply closed the connection")
+            self._drop(peer, why_fatal)
 
-    def _write(self, peer: _Peer, data: bytes, register: bool = True) -> None:
+    def _write(self, peer: _Peer, data: bytes) -> None:
         try:
             peer.sock.sendall(data)
         except OSError as error:
             logger.info("client %s: send failed: %s", peer.address, error)
-            if register:
-                self._drop(peer, "send failed")
+            self._drop(peer, "send failed")
 
     def _drop(self, peer: _Peer, reason: str) -> None:
         if self._peers.pop(peer.sock, None) is not None:

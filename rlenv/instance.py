@@ -75,6 +75,10 @@ class Instance:
     def call(self, request: Request) -> Reply:
         """Submit ``request`` and run the tree until it is answered."""
         self.submit(request)
+        return self.wait()
+
+    def wait(self) -> Reply:
+        """Run the tree until the oldest submitted request is answered; that answer."""
         while (reply := self.turn()) is None:
             pass
         return reply

@@ -35,7 +35,7 @@ from __future__ import annotations
 import struct
 from collections import deque
 from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from enum import Enum
 from typing import Any, Final
 
@@ -376,9 +376,8 @@ class Request:
         return replace(request, batch=tuple(parts))
 
     def __repr__(self) -> str:  # never show a token in logs
-        parts = ", ".join(f"{name}={getattr(self, name)!r:.80}" for name in
-                          ("id", "config", "reset", "action", "observation", "repeat_action")
-                          if getattr(self, name) is not None)
+        parts = ", ".join(f"{part.name}={getattr(self, part.name)!r:.80}" for part in fields(self)
+                          if part.name != "token" and getattr(self, part.name) is not None)
         return f"Request({parts}{', token=...' if self.token is not None else ''})"
 
 

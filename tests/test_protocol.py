@@ -1235,3 +1235,9 @@ def test_malformed_reply_on_the_client_is_a_remote_protocol_error(ready: Connect
     with pytest.raises(RemoteProtocolError, match="invalid response"):
         ready.client.next_message()
     assert ready.client.outstanding == (1,)
+
+
+def test_a_request_shows_its_parts_but_never_its_token() -> None:
+    text = repr(Request(id=3, inspect={"tree": {}}, token="s3cret"))
+    assert "inspect={'tree': {}}" in text and "token=..." in text
+    assert "s3cret" not in text

@@ -92,7 +92,7 @@ class BaseClient(ABC):
         self, *, seed: int | None = None, options: Mapping[str, Any] | None = None
     ) -> None:
         """Send a reset request without waiting; collect the answer with :meth:`receive_reset`."""
-        self._send(replace(self.reset_request(seed, options), id=next(self._ids)))
+        self._send(self.reset_request(seed, options, request_id=next(self._ids)))
 
     def receive_reset(self) -> tuple[Any, dict[str, Any]]:
         """Wait for the answer to the reset sent by :meth:`send_reset`."""
@@ -114,8 +114,7 @@ class BaseClient(ABC):
 
     def send_step(self, action: Any, repeat_action: int | None = None) -> None:
         """Send a step request without waiting; collect the answer with :meth:`receive_step`."""
-        self._send(Request(id=next(self._ids), action=action,
-                           observation=self._observation_request, repeat_action=repeat_action))
+        self._send(self.step_request(action, repeat_action, request_id=next(self._ids)))
 
     def receive_step(self) -> StepResult:
         """Wait for the answer to the step sent by :meth:`send_step`."""
@@ -148,21 +147,23 @@ class BaseClient(ABC):
         response = self._response(reply)
         return self._observation(response), self._info(response)
 
-    def step_request(self, action: Any, repeat_action: int | None = None) -> Request:
-        """The request :meth:`send_step` sends, for a batch."""
-        return Request(id=0, action=action, observation=self._observation_request,
+    def step_request(self, action: Any, repeat_action: int | None = None, *,
+                     request_id: int = 0) -> Request:
+        """The request :meth:`send_step` sends, for a batch (whose parts need no id)."""
+        return Request(id=request_id, action=action, observation=self._observation_request,
                        repeat_action=repeat_action)
 
     def reset_request(
-        self, seed: int | None = None, options: Mapping[str, Any] | None = None
+        self, seed: int | None = None, options: Mapping[str, Any] | None = None, *,
+        request_id: int = 0,
     ) -> Request:
-        """The request :meth:`send_reset` sends, for a batch."""
+        """The request :meth:`send_reset` sends, for a batch (whose parts need no id)."""
         reset: dict[str, Any] = {}
         if seed is not None:
             reset["seed"] = seed
         if options is not None:
             reset["options"] = dict(options)
-        return Request(id=0, reset=reset, observation=self._observation_request)
+        return Request(id=request_id, reset=reset, observation=self._observation_request)
 
     def send_request(self, request: Request) -> None:
         """Send a prepared request (see :meth:`step_request`); its id is assigned here."""

@@ -63,6 +63,4 @@ class LocalClient(BaseClient):
         instance = self._instance
         if instance is None:
             raise ConnectionLost(f"{self.address} is closed")
-        while (reply := instance.turn()) is None:
-            pass
-        return reply
+        return instance.wait()

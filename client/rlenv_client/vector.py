@@ -93,9 +93,10 @@ class RemoteVectorEnv(VectorEnv):
         self.sessions: list[Session] = []
         self._connect(places, timeout=timeout, max_restarts=max_restarts)
         self._groups: list[list[int]] = []  # the sub-environments each session hosts
+        start = 0
         for session in self.sessions:
-            start = sum(len(group) for group in self._groups)
             self._groups.append(list(range(start, start + session.client.hello.instances)))
+            start += session.client.hello.instances
         self._owner = [number for number, group in enumerate(self._groups) for _ in group]
         hello = self.clients[0].hello
         for client in self.clients[1:]:
@@ -106,7 +107,7 @@ class RemoteVectorEnv(VectorEnv):
                 raise ValueError(
                     f"{client.address} has other spaces than {self.clients[0].address}"
                 )
-        self.num_envs = sum(len(group) for group in self._groups)
+        self.num_envs = len(self._owner)
         self.single_action_space = hello.action_space
         self.single_observation_space = hello.observation_space
         self.action_space = batch_space(self.single_action_space, self.num_envs)

@@ -9,18 +9,41 @@ with its own tree and pymunk space, stepped together by one batch request.
 
 from __future__ import annotations
 
+import importlib
 import time
 from collections import deque
 from collections.abc import Callable
 
 from rlenv.environment import RLEnvironment
 from rlenv.protocol import ErrorReply, Hello, Request, Response
-from rlenv.server import load_environment
 from rlenv.tree import SceneTree
 
-__all__ = ["Instance", "drive"]
+__all__ = ["Instance", "drive", "load_environment"]
 
 Reply = Response | ErrorReply
+
+
+def load_environment(target: str) -> type[RLEnvironment]:
+    """Import the environment class named ``MODULE:CLASS``.
+
+    Raises:
+        ValueError: ``target`` is not of the form ``MODULE:CLASS``.
+        ImportError: the module cannot be imported.
+        TypeError: the attribute is not an RLEnvironment subclass.
+    """
+    module_name, _, class_name = target.partition(":")
+    if not module_name or not class_name:
+        raise ValueError(f"expected MODULE:CLASS, e.g. examples.cartpole:CartPoleEnvironment, "
+                         f"got {target!r}")
+    module = importlib.import_module(module_name)
+    try:
+        environment_class = getattr(module, class_name)
+    except AttributeError:
+        raise ImportError(f"module {module_name!r} has no attribute {class_name!r}") from None
+    if not (isinstance(environment_class, type) and issubclass(environment_class, RLEnvironment)):
+        raise TypeError(f"{target} is not an RLEnvironment subclass")
+    return environment_class
+
 
 
 class _DirectEndpoint:

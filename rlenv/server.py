@@ -2,43 +2,19 @@
 
 from __future__ import annotations
 
-import importlib
 import logging
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 from rlenv.communication import DEFAULT_HOST, Communication, Limits
 from rlenv.environment import RLEnvironment
 from rlenv.errors import ErrorCode
+from rlenv.instance import Instance, drive, load_environment
 from rlenv.protocol import BatchResponse, ErrorReply, Request, Response
-from rlenv.tree import SceneTree
 
 __all__ = ["Server", "load_environment"]
 
 logger = logging.getLogger(__name__)
-
-
-def load_environment(target: str) -> type[RLEnvironment]:
-    """Import the environment class named ``MODULE:CLASS``.
-
-    Raises:
-        ValueError: ``target`` is not of the form ``MODULE:CLASS``.
-        ImportError: the module cannot be imported.
-        TypeError: the attribute is not an RLEnvironment subclass.
-    """
-    module_name, _, class_name = target.partition(":")
-    if not module_name or not class_name:
-        raise ValueError(f"expected MODULE:CLASS, e.g. examples.cartpole:CartPoleEnvironment, "
-                         f"got {target!r}")
-    module = importlib.import_module(module_name)
-    try:
-        environment_class = getattr(module, class_name)
-    except AttributeError:
-        raise ImportError(f"module {module_name!r} has no attribute {class_name!r}") from None
-    if not (isinstance(environment_class, type) and issubclass(environment_class, RLEnvironment)):
-        raise TypeError(f"{target} is not an RLEnvironment subclass")
-    return environment_class
 
 
 class Server:
@@ -79,31 +55,23 @@ class Server:
             environment = load_environment(environment)
         if instances < 1:
             raise ValueError("a server hosts at least one instance")
-        if instances > 1:
-            if not isinstance(environment, type):
-                raise TypeError("several instances need the environment class, not an instance")
-            from rlenv.instance import Instance
-
-            self.instances = [Instance(environment) for _ in range(instances)]
+        if instances > 1 and not isinstance(environment, type):
+            raise TypeError("several instances need the environment class, not an instance")
+        # Each Instance checks its environment's hello here, not at the first client.
+        self.instances = [Instance(environment) for _ in range(instances)]
+        self.environment = self.instances[0].environment
+        self.tree = self.instances[0].tree
+        if instances == 1:  # the environment drives the endpoint itself, as in the Godot seed
+            self.communication = Communication(self.environment.hello, limits=limits or Limits(),
+                                               token=token)
+            self.environment.communication = self.communication
+        else:
             hello = replace(self.instances[0].hello, instances=instances)
-            self.environment = self.instances[0].environment
-            self.tree = self.instances[0].tree
             self.communication = Communication(lambda: hello, limits=limits or Limits(),
                                                token=token)
-        else:
-            if isinstance(environment, type):
-                environment = environment()
-            self.instances = []
-            self.environment = environment
-            self.tree = SceneTree(environment.physics_ticks_per_second)
-            self.tree.root.add_child(environment)
-            environment.hello()  # fail here, not at the first client, if it is incomplete
-            self.communication = Communication(environment.hello, limits=limits or Limits(),
-                                               token=token)
-            environment.communication = self.communication
-        for hosted in [instance.environment for instance in self.instances] or [self.environment]:
-            hosted.record_dir = record_dir
-            hosted.real_time = real_time
+        for instance in self.instances:
+            instance.environment.record_dir = record_dir
+            instance.environment.real_time = real_time
         self.address = self.communication.start_server(port, host)
         if lifeline is not None:
             self.communication.watch_lifeline(lifeline)
@@ -114,17 +82,15 @@ class Server:
         An exception raised by user code while a request is being served is answered with an
         ``environment_error`` reply and the server goes on; any other exception propagates.
         """
-        if not self.instances:
+        if len(self.instances) == 1:
             self.tree.run(self.environment.iterate)
             return
-        from rlenv.instance import drive
-
         while True:
             request = self.communication.poll(None)
             if request is not None:
-                self.communication.send(self._answer(request, drive))
+                self.communication.send(self._answer(request))
 
-    def _answer(self, request: Request, drive: Any) -> Response | BatchResponse | ErrorReply:
+    def _answer(self, request: Request) -> Response | BatchResponse | ErrorReply:
         if request.batch is None:
             if request.asks_nothing:
                 return Response(id=request.id)  # e.g. the token

@@ -455,10 +455,14 @@ class RLEnvironment(RLNode):
         if "environment" in config and "repeat_action" in config["environment"]:
             _check_repeat(config["environment"]["repeat_action"])
 
-    def _check_action(self, action: Any, fresh: bool) -> Any:
-        if self.multi_agent:
-            return self._check_joint_action(action, fresh=fresh)
-        return check(self._require_agent().action_space, action, "action")
+    def _check_action(self, action: Any, fresh: bool, where: str = "") -> Any:
+        """``action`` in its space's native form; ``invalid_action`` (prefixed ``where``) if not."""
+        try:
+            if self.multi_agent:
+                return self._check_joint_action(action, fresh=fresh)
+            return check(self._require_agent().action_space, action, "action")
+        except SpaceMismatch as error:
+            raise RequestError(ErrorCode.INVALID_ACTION, f"{where}{error}") from None
 
     def _check_request(self, request: Request) -> Any:
         """Check every part of ``request`` before anything is applied; return the action."""
@@ -506,10 +510,7 @@ class RLEnvironment(RLNode):
             return None
         if reset is None and self._episode is _Episode.ENDED:
             raise RequestError(ErrorCode.RESET_REQUIRED, "the episode has ended; reset first")
-        try:
-            return self._check_action(request.action, fresh=reset is not None)
-        except SpaceMismatch as error:
-            raise RequestError(ErrorCode.INVALID_ACTION, str(error)) from None
+        return self._check_action(request.action, fresh=reset is not None)
 
     def _check_joint_action(self, action: Any, fresh: bool) -> dict[str, Any]:
         """One action per agent still in the episode, keyed by name (PettingZoo's convention).
@@ -614,11 +615,8 @@ class RLEnvironment(RLNode):
             if event[0] == "config":
                 self._check_config(event[1])
             elif event[0] == "action":
-                try:
-                    actions.append(self._check_action(event[1], fresh=True))
-                except SpaceMismatch as error:
-                    raise RequestError(ErrorCode.INVALID_ACTION,
-                                       f"restore: events[{index}]: {error}") from None
+                actions.append(self._check_action(event[1], fresh=True,
+                                                  where=f"restore: events[{index}]: "))
         rng = generator_from_state(snapshot["rng"])
         tree = self.get_tree()
         self._replaying = True

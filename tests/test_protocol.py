@@ -37,18 +37,14 @@ from rlenv.protocol import (
     pack,
     unpack,
 )
+from rlenv.testing import frame as raw_frame
 
 # --- helpers ---------------------------------------------------------------------------------
 
 
 def frame(obj: Any) -> bytes:
     """A frame holding ``obj`` encoded as msgpack, built by hand (no Connection checks)."""
-    body = pack(obj)
-    return struct.pack(">I", len(body)) + body
-
-
-def raw_frame(body: bytes) -> bytes:
-    return struct.pack(">I", len(body)) + body
+    return raw_frame(pack(obj))
 
 
 def drain(conn: Connection) -> list[Any]:

@@ -90,6 +90,18 @@ def _median_rate(rounds: int, steps: int, run: Callable[[int], None]) -> float:
     return statistics.median(rates)
 
 
+def _timed_rate(call: Callable[[], object], rounds: int, steps: int,
+                latencies: list[float] | None) -> float:
+    """Median calls per second of ``call``; each call's duration into ``latencies`` if given."""
+    def run(n: int) -> None:
+        for _ in range(n):
+            started = time.perf_counter()
+            call()
+            if latencies is not None:
+                latencies.append(time.perf_counter() - started)
+    return _median_rate(rounds, steps, run)
+
+
 def _frame(message: object) -> bytes:
     body = pack(message)
     return struct.pack(">I", len(body)) + body
@@ -135,13 +147,7 @@ def _ping_pong(request: bytes, reply: bytes, rounds: int, steps: int,
                latencies: list[float] | None = None) -> float:
     echo = _PingPong(reply)
     try:
-        def run(n: int) -> None:
-            for _ in range(n):
-                started = time.perf_counter()
-                echo.round_trip(request)
-                if latencies is not None:
-                    latencies.append(time.perf_counter() - started)
-        return _median_rate(rounds, steps, run)
+        return _timed_rate(lambda: echo.round_trip(request), rounds, steps, latencies)
     finally:
         echo.close()
 
@@ -149,14 +155,7 @@ def _ping_pong(request: bytes, reply: bytes, rounds: int, steps: int,
 def _client_steps(client: Any, action: Any, repeat: int | None, rounds: int, steps: int,
                   latencies: list[float] | None = None) -> float:
     client.reset(seed=0)
-
-    def run(n: int) -> None:
-        for _ in range(n):
-            started = time.perf_counter()
-            client.step(action, repeat)
-            if latencies is not None:
-                latencies.append(time.perf_counter() - started)
-    return _median_rate(rounds, steps, run)
+    return _timed_rate(lambda: client.step(action, repeat), rounds, steps, latencies)
 
 
 def _rss_kib(pid: int) -> int:

@@ -16,6 +16,7 @@ from gymnasium.utils.env_checker import check_env
 
 from rlenv.errors import ErrorCode, RemoteError
 from rlenv_client.env import RemoteEnv
+from rlenv_client.session import parse_address
 
 __all__ = ["CheckResult", "run_checks"]
 
@@ -29,11 +30,16 @@ class CheckResult:
     detail: str = ""
 
 
-def _gymnasium_check_env(env: RemoteEnv) -> str:
+def _warnings_of(call: Callable[[], object]) -> str:
+    """The distinct warnings ``call()`` raises, joined, or ``"no warnings"``."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        check_env(env, skip_render_check=True)
+        call()
     return "; ".join(sorted({str(w.message).strip() for w in caught})) or "no warnings"
+
+
+def _gymnasium_check_env(env: RemoteEnv) -> str:
+    return _warnings_of(lambda: check_env(env, skip_render_check=True))
 
 
 def _seeded_reset(env: RemoteEnv) -> str:
@@ -83,10 +89,7 @@ def _sb3_check_env(env: RemoteEnv) -> str:
         from stable_baselines3.common.env_checker import check_env as sb3_check_env
     except ImportError:
         raise _Skip("stable-baselines3 is not installed (pip install 'rlenv[sb3]')") from None
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        sb3_check_env(env, warn=True)
-    return "; ".join(sorted({str(w.message).strip() for w in caught})) or "no warnings"
+    return _warnings_of(lambda: sb3_check_env(env, warn=True))
 
 
 class _Skip(Exception):
@@ -144,10 +147,10 @@ def run_checks(target: str, timeout: float = 30.0, compliance: bool = False,
 def _compliance(env: RemoteEnv, token: str | None, timeout: float) -> CheckResult:
     from rlenv.testing import check_server
 
-    host, port = env.client.address.rsplit(":", 1)
+    host, port = parse_address(env.client.address)
     env.client.close()  # release control: the suite brings its own controller
     server = env.server
-    report = check_server(host, int(port), token=token, timeout=timeout,
+    report = check_server(host, port, token=token, timeout=timeout,
                           pid=server.pid if server is not None else None)
     detail = report.summary() + "".join(f"\n      - {line}" for line in report.failures)
     return CheckResult("compliance under hostile input", "pass" if report.passed else "fail",

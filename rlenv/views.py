@@ -173,12 +173,12 @@ def view(*nodes: Node) -> View:
 
 
 def _tree_order(nodes: Iterable[Node]) -> list[Node]:
-    """``nodes`` without duplicates, sorted in tree order (pre-order) when they share a tree."""
-    unique = list({id(n): n for n in nodes}.values())
-    if len(unique) < 2:
-        return unique
-    root = unique[0]
+    """``nodes`` sorted in tree order (pre-order) when they share a tree (View drops repeats)."""
+    found = list(nodes)
+    if len(found) < 2:
+        return found
+    root = found[0]
     while root.parent is not None:
         root = root.parent
     rank = {id(node): index for index, node in enumerate(root.iter_subtree())}
-    return sorted(unique, key=lambda node: rank.get(id(node), len(rank)))
+    return sorted(found, key=lambda node: rank.get(id(node), len(rank)))

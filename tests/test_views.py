@@ -79,3 +79,11 @@ def test_an_empty_view_is_harmless() -> None:
     empty = View([])
     assert len(empty) == 0 and empty.all.bodies.name == []
     empty.anything = 1  # sets nothing, as there is nothing
+
+
+def test_overlapping_views_hold_each_node_once_in_tree_order() -> None:
+    root, upper, lower, leaf = Node("Root"), Node("Upper"), Node("Lower"), Node("Leaf")
+    root.add_child(upper)
+    upper.add_child(lower)
+    lower.add_child(leaf)
+    assert list(view(lower, upper, lower).all) == [upper, lower, leaf]

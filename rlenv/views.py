@@ -24,6 +24,7 @@ from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
 from rlenv.node import Node
+from rlenv.physics import CollisionShape, Joint, PhysicsBody
 
 __all__ = ["View", "view"]
 
@@ -63,22 +64,16 @@ class View:
     @property
     def bodies(self) -> View:
         """The children of this view's nodes that are physics bodies."""
-        from rlenv.physics import PhysicsBody
-
         return self._typed("bodies", PhysicsBody)
 
     @property
     def shapes(self) -> View:
         """The children of this view's nodes that are collision shapes."""
-        from rlenv.physics import CollisionShape
-
         return self._typed("shapes", CollisionShape)
 
     @property
     def joints(self) -> View:
         """The children of this view's nodes that are joints."""
-        from rlenv.physics import Joint
-
         return self._typed("joints", Joint)
 
     def of_type(self, kind: type | tuple[type, ...]) -> View:

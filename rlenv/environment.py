@@ -446,11 +446,12 @@ class RLEnvironment(RLNode):
 
     def _check_config(self, config: Mapping[str, Any]) -> None:
         _check_keys(config, _CONFIG_PARTS, "config")
-        for part, node in (("environment", self), ("agent", self.agent), ("world", self.world)):
+        world = [] if self.world is None else [self.world]
+        for part, nodes in (("environment", [self]), ("agent", self.agents), ("world", world)):
             if part in config:
                 if not isinstance(config[part], Mapping):
                     raise RequestError(ErrorCode.BAD_REQUEST, f"config.{part} must be a map")
-                if node is not None:
+                for node in nodes:  # every node _configure will apply the part to
                     node.check_config(config[part])
         if "environment" in config and "repeat_action" in config["environment"]:
             _check_repeat(config["environment"]["repeat_action"])

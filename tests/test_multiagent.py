@@ -7,8 +7,9 @@ import pytest
 from conftest import Serve
 from gymnasium import spaces
 
-from examples.pair import NAMES, PairAgent, chase
-from rlenv_client import Client, ErrorCode, RemoteError
+from examples.pair import NAMES, PairAgent, PairEnvironment, PairWorld, chase
+from rlenv.environment import RLEnvironment
+from rlenv_client import Client, ErrorCode, LocalClient, RemoteError
 
 PAIR = "examples.pair:PairEnvironment"
 
@@ -89,3 +90,26 @@ def test_pettingzoo_agents_leave_when_done() -> None:
         assert sorted(finished) == sorted(NAMES)
     finally:
         env.close()
+
+
+class _TunableAgent(PairAgent):
+    configurable = ("force",)
+
+
+class _MixedPair(PairEnvironment):
+    """Red may be configured with a force, Blue may not."""
+
+    def __init__(self) -> None:
+        RLEnvironment.__init__(self, "Pair", repeat_action=4)
+        self.add_child(_TunableAgent("Red"))  # the first agent: the one a single check looked at
+        self.add_child(PairAgent("Blue"))
+        self.add_child(PairWorld())
+
+
+def test_an_agent_config_is_checked_for_every_agent_before_any_applies() -> None:
+    with LocalClient(_MixedPair) as client:
+        red = client.environment.get_node("Red")
+        with pytest.raises(RemoteError, match="PairAgent has no configurable 'force'") as error:
+            client.configure(agent={"force": (1.0, 1.0)})
+        assert error.value.code == ErrorCode.INVALID_CONFIG
+        assert red.force == (0.0, 0.0)  # refused as a whole: Red was not changed either

@@ -7,8 +7,8 @@ Prints, in one run and in-process (no sockets):
   ``space.step``, ``_after_physics_tick``; then ``get_data``), with no tree around them;
 - a full **step** through :class:`rlenv.instance.Instance` (request check, tree, timer,
   response), and its ratio to the floor;
-- the step split by turn of the tree's loop: the turn that takes the request, the ticks in
-  between, and the last tick with the response;
+- both split into a cost per tick and a cost per request, from steps of 1 and of ``REPEAT``
+  ticks (per tick = the difference over the extra ticks; per request = the rest);
 - the **codec**: encoding and decoding the request and the response with the sans-IO protocol.
 
 This is the profile behind issue 5's figures: what the framework adds to user code, per step.
@@ -56,34 +56,25 @@ def main() -> None:
     space = environment.find_children("*", PhysicsWorld)[0].space
     delta = instance.tree.physics_delta
 
-    def floor(steps: int) -> None:
-        for _ in range(steps):
-            agent.set_action(check(agent.action_space, action))
-            for _ in range(REPEAT):
-                agent._physics_process(delta)
-                space.step(delta)
-                agent._after_physics_tick(delta)
-            agent.terminated = False
-            agent.get_data(OBSERVE["agent"])
+    def floor(repeat: int) -> Callable[[int], None]:
+        def run(steps: int) -> None:
+            for _ in range(steps):
+                agent.set_action(check(agent.action_space, action))
+                for _ in range(repeat):
+                    agent._physics_process(delta)
+                    space.step(delta)
+                    agent._after_physics_tick(delta)
+                agent.terminated = False
+                agent.get_data(OBSERVE["agent"])
+        return run
 
-    def step(steps: int) -> None:
-        for index in range(steps):
-            reply = instance.call(Request(id=index, action=action, observation=OBSERVE))
-            assert not (reply.terminated or reply.truncated), "the episode must not end"
-
-    turns: list[list[float]] = []
-
-    def step_by_turn(steps: int) -> None:
-        replies = instance._endpoint.replies
-        for index in range(steps):
-            instance.submit(Request(id=index, action=action, observation=OBSERVE))
-            times = []
-            while not replies:
-                start = time.perf_counter()
-                environment.iterate()
-                times.append((time.perf_counter() - start) * 1e6)
-            turns.append(times)
-            assert not replies.popleft().terminated, "the episode must not end"
+    def step(repeat: int) -> Callable[[int], None]:
+        def run(steps: int) -> None:
+            for index in range(steps):
+                reply = instance.call(Request(id=index, action=action, observation=OBSERVE,
+                                              repeat_action=repeat))
+                assert not (reply.terminated or reply.truncated), "the episode must not end"
+        return run
 
     server, client = Connection(Role.SERVER), Connection(Role.CLIENT)
     client.receive_data(server.send(instance.hello))
@@ -98,19 +89,18 @@ def main() -> None:
             client.receive_data(server.send(reply))
             client.next_message()
 
-    floor_us = _per_step(floor)
-    step_us = _per_step(step)
+    floor_us, floor_1 = _per_step(floor(REPEAT)), _per_step(floor(1))
+    step_us, step_1 = _per_step(step(REPEAT)), _per_step(step(1))
     codec_us = _per_step(codec)
-    step_by_turn(STEPS)
-    by_turn = [statistics.median(column) for column in zip(*turns, strict=True)]
+    floor_tick, step_tick = (floor_us - floor_1) / (REPEAT - 1), (step_us - step_1) / (REPEAT - 1)
     print(f"CartPole, repeat_action={REPEAT}, microseconds per step (medians of {ROUNDS} rounds)")
     print(f"  floor (agent code + pymunk only)   {floor_us:7.1f}")
     print(f"  full step through the tree         {step_us:7.1f}   {step_us / floor_us:.2f}x floor")
     print(f"  framework overhead                 {step_us - floor_us:7.1f}")
     print(f"  codec (request + reply, both ends) {codec_us:7.1f}")
-    names = ["take request"] + [f"tick {n}" for n in range(1, len(by_turn) - 1)] + ["last tick"]
-    for name, micros in zip(names, by_turn, strict=True):
-        print(f"    turn: {name:<28} {micros:7.1f}")
+    print(f"    per tick:    floor {floor_tick:6.1f}   through the tree {step_tick:6.1f}")
+    print(f"    per request: floor {floor_1 - floor_tick:6.1f}   through the tree "
+          f"{step_1 - step_tick:6.1f}")
 
 
 if __name__ == "__main__":

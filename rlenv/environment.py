@@ -171,7 +171,6 @@ class RLEnvironment(RLNode):
         timeout = tree.time_to_next_tick() if tree.real_time else None if tree.paused else 0.0
         request = self.communication.poll(timeout=timeout)
         if request is not None:
-            self._request = request
             self.call_deferred(self._on_got_connection, request)
 
     def _physics_process(self, delta: float) -> None:
@@ -217,7 +216,19 @@ class RLEnvironment(RLNode):
         )
 
     def _on_got_connection(self, request: Request) -> None:
-        """Apply a request's parts in order and answer it (actions answer when they end)."""
+        """Answer a request that came from :attr:`communication` (outside processing passes)."""
+        self.communication.send(self.answer(request))
+
+    def answer(self, request: Request) -> Response | ErrorReply:
+        """Apply a request's parts in order and return its one answer.
+
+        A lockstep action runs its ticks here, turning the tree's loop (so ``_process`` and
+        ``_physics_process`` run as under the main loop); a real-time action applies at once.
+        A refused request changes nothing; an exception in user code becomes an
+        ``environment_error`` answer (the next action then needs a reset). Call it outside the
+        tree's processing passes (from a deferred call, or from outside the loop).
+        """
+        self._request = request
         try:
             action = self._check_request(request)
             if request.restore is not None:
@@ -230,12 +241,13 @@ class RLEnvironment(RLNode):
                 self._begin_episode(request.reset)
             if request.action is not None:
                 self._act(action, request.repeat_action or self.repeat_action)
-                return
-            self._send_response(request.observation)
+            return self._response(request)
         except RequestError as error:
-            self._answer_error(error.code, str(error))
+            return ErrorReply(request.id, error.code, str(error))
         except Exception as error:  # user code raised: report it, keep serving
-            self.report_error(error)
+            return self._environment_error(request.id, error)
+        finally:
+            self._request = None
 
     def configure(self, config: Mapping[str, Any]) -> None:
         """Apply the ``environment`` part of a configuration.
@@ -287,11 +299,16 @@ class RLEnvironment(RLNode):
     def _step(self, action: Any, frames: int | None = None) -> None:
         """Give ``action`` to the agent and run ``frames`` ticks (default :attr:`repeat_action`).
 
-        Override to add logic around an action, and call ``super()._step(action, frames)``.
+        The tree is unpaused until :attr:`physics_frames_timer` fires (or the episode ends),
+        then paused again. Override to add logic around an action and call
+        ``super()._step(action, frames)``: code after it runs once the ticks have run.
         """
         self._give_action(action)
-        self.get_tree().paused = False
+        tree = self.get_tree()
+        tree.paused = False
         self.physics_frames_timer.start(frames or self.repeat_action)
+        while self._episode is _Episode.ACTING:
+            tree.iteration()
 
     def _give_action(self, action: Any) -> None:
         """Hand the (checked) action to the agent, or to each agent named in a joint action."""
@@ -302,10 +319,9 @@ class RLEnvironment(RLNode):
         else:
             self._require_agent().set_action(action)
 
-    def _send_response(self, observation_request: Mapping[str, Any] | None) -> None:
-        """Gather the observation the client asked for, the reward and the flags; send them."""
-        request = self._request
-        assert request is not None
+    def _response(self, request: Request) -> Response:
+        """The observation ``request`` asks for, the reward and the flags since the last answer."""
+        observation_request = request.observation
         agent = self._require_agent()
         observation = None
         if observation_request is not None:
@@ -348,13 +364,9 @@ class RLEnvironment(RLNode):
         )
         for each in self.agents:
             each.reward = 0.0
-        if response.terminated or response.truncated:
+        if terminated or truncated:  # real time: the client now knows the episode ended
             self._episode = _Episode.ENDED
-        elif self._episode is _Episode.ACTING:
-            self._episode = _Episode.RUNNING
-        self._request = None
-        self.communication.send(response)
-        self._after_send_response()
+        return response
 
     def _render(self, width: int, height: int) -> np.ndarray:
         """Draw the current state as a ``(height, width, 3)`` uint8 array.
@@ -400,28 +412,12 @@ class RLEnvironment(RLNode):
                                      arguments["value"]])
         return {}
 
-    def _after_send_response(self) -> None:
-        """Called after every answer; override to clean up (e.g. recorded frames)."""
-
     def _get_info(self) -> dict[str, Any]:
         """Extra diagnostics for ``info``; override to add entries (msgpack-able values)."""
         return {}
 
-    def iterate(self) -> None:
-        """Run one turn of the tree's loop, answering errors in user code instead of dying.
-
-        An exception raised while a request is being served becomes an ``environment_error``
-        reply (see :meth:`report_error`); any other exception propagates.
-        """
-        try:
-            self.get_tree().iteration()
-        except Exception as error:
-            if not self.request_in_progress:
-                raise
-            self.report_error(error)
-
-    def report_error(self, error: BaseException) -> None:
-        """Answer the current request with ``environment_error`` for an exception in user code.
+    def _environment_error(self, request_id: int, error: BaseException) -> ErrorReply:
+        """The ``environment_error`` answer for an exception in user code.
 
         The tree is paused and the next action needs a reset first.
         """
@@ -431,7 +427,8 @@ class RLEnvironment(RLNode):
             self.get_tree().paused = True
         self._episode = _Episode.NOT_STARTED
         detail = "".join(traceback.format_exception(error)).rstrip()
-        self._answer_error(ErrorCode.ENVIRONMENT_ERROR, f"{error}; reset required\n{detail}")
+        return ErrorReply(request_id, ErrorCode.ENVIRONMENT_ERROR,
+                          f"{error}; reset required\n{detail}")
 
     # --- internals --------------------------------------------------------------------------
 
@@ -571,15 +568,12 @@ class RLEnvironment(RLNode):
         return all(agent.terminated or agent.truncated for agent in self.agents)
 
     def _finish_action(self) -> None:
+        """End the running action (its ticks ran, or the episode ended): pause."""
         self.get_tree().paused = True
+        self._episode = _Episode.ENDED if self._all_ended() else _Episode.RUNNING
         if self._replaying:  # restoring a snapshot: the episode moves on silently
             for agent in self.agents:
                 agent.reward = 0.0
-            self._episode = _Episode.ENDED if self._all_ended() else _Episode.RUNNING
-            return
-        request = self._request
-        if request is not None:
-            self._send_response(request.observation)
 
     def _act(self, action: Any, frames: int) -> None:
         tree = self.get_tree()
@@ -603,9 +597,6 @@ class RLEnvironment(RLNode):
         self._last_action_at = tree.physics_frames
         if not self._ended_unseen:
             self._give_action(action)
-        request = self._request
-        assert request is not None
-        self._send_response(request.observation)
 
     def _restore(self, data: Mapping[str, Any]) -> None:
         """Rebuild the state a snapshot describes: check everything, reset, replay."""
@@ -619,7 +610,6 @@ class RLEnvironment(RLNode):
                 actions.append(self._check_action(event[1], fresh=True,
                                                   where=f"restore: events[{index}]: "))
         rng = generator_from_state(snapshot["rng"])
-        tree = self.get_tree()
         self._replaying = True
         try:
             self._configure(snapshot["config"])
@@ -637,14 +627,8 @@ class RLEnvironment(RLNode):
                 if self._episode is _Episode.ENDED:
                     raise RuntimeError("the snapshot acts after its episode ended")
                 self._act(next(checked), event[2])
-                while self._episode is _Episode.ACTING:
-                    tree.iteration()
         finally:
             self._replaying = False
-
-    def _answer_error(self, code: ErrorCode, message: str) -> None:
-        request, self._request = self._request, None
-        self.communication.send(ErrorReply(request.id if request else None, code, message))
 
     def _require_agent(self) -> RLAgent:
         if self.agent is None:

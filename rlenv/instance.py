@@ -92,7 +92,7 @@ class Instance:
         """Run one turn of the tree's loop; the oldest answer, if one is ready."""
         replies = self._endpoint.replies
         if not replies:
-            self.environment.iterate()
+            self.tree.iteration()
         return replies.popleft() if replies else None
 
     def call(self, request: Request) -> Reply:

@@ -83,7 +83,7 @@ class Server:
         ``environment_error`` reply and the server goes on; any other exception propagates.
         """
         if len(self.instances) == 1:
-            self.tree.run(self.environment.iterate)
+            self.tree.run()
             return
         while True:
             request = self.communication.poll(None)

@@ -6,18 +6,20 @@ import os
 import signal
 import socket
 import struct
+from typing import Any
 
 import numpy as np
 import pytest
 from conftest import Serve
 
-from examples.cartpole import CartPoleAgent, controller
+from examples.cartpole import CartPoleAgent, CartPoleEnvironment, controller
 from rlenv.protocol import PROTOCOL_VERSION, Connection, Request, Role, pack
 from rlenv.testing import read_frame
 from rlenv_client import (
     Client,
     ConnectionLost,
     ErrorCode,
+    LocalClient,
     RemoteError,
     RequestTimeout,
     ServerProcess,
@@ -56,6 +58,29 @@ def test_an_action_runs_exactly_repeat_action_ticks(serve: Serve, repeat: int) -
         for _ in range(repeat):
             expected, *_ = ticked.step(PUSH, repeat_action=1)
         assert observation.tobytes() == expected.tobytes()
+
+
+class _TimedCartPole(CartPoleEnvironment):
+    """Records the tree's tick count around ``super()._step``, as an override would."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.ticks_around_steps: list[tuple[int, int]] = []
+
+    def _step(self, action: Any, frames: int | None = None) -> None:
+        before = self.get_tree().physics_frames
+        super()._step(action, frames)
+        self.ticks_around_steps.append((before, self.get_tree().physics_frames))
+
+
+def test_code_after_super_step_runs_once_the_ticks_have_run() -> None:
+    """As in the Godot seed (``yield(._step(action), "completed")``): _step returns when done."""
+    environment = _TimedCartPole()
+    with LocalClient(environment) as local:
+        local.reset(seed=3)
+        local.step(PUSH, repeat_action=5)
+        local.step(PUSH)
+    assert [after - before for before, after in environment.ticks_around_steps] == [5, 4]
 
 
 def test_repeat_action_defaults_and_configuration(client: Client) -> None:

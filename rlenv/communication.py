@@ -47,6 +47,7 @@ from rlenv.protocol import (
     Connection,
     ErrorReply,
     Hello,
+    Reply,
     Request,
     Response,
     Role,
@@ -225,7 +226,7 @@ class Communication:
             if deadline is not None and self._clock() >= deadline:
                 return self._next_request()
 
-    def send(self, message: Response | ErrorReply) -> None:
+    def send(self, message: Reply) -> None:
         """Answer the request being served, on its client's connection.
 
         A client that is gone is dropped; the answer is then discarded.
@@ -412,7 +413,7 @@ class Communication:
         peer.connection.max_frame_size = self.limits.max_frame_size
         return True
 
-    def _send_to(self, peer: _Peer, message: Response | ErrorReply,
+    def _send_to(self, peer: _Peer, message: Reply,
                  why_fatal: str = "error reply closed the connection") -> None:
         """Send ``message``; a fatal error reply then closes the connection (``why_fatal``)."""
         try:
@@ -446,6 +447,7 @@ def _controls(request: Request | None) -> bool:
         return any(_controls(part) for part in request.batch)
     return (request.config is not None or request.reset is not None
             or request.action is not None or request.restore is not None
+            or request.steps is not None
             or (request.inspect is not None and "set" in request.inspect))
 
 

@@ -21,7 +21,7 @@ import traceback
 from collections.abc import Mapping
 from enum import Enum
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 from gymnasium import spaces
@@ -40,13 +40,14 @@ from rlenv.spaces import SpaceMismatch, check, find_non_finite
 from rlenv.timer import PhysicsFramesTimer
 from rlenv.world import RLEnvWorld
 
-__all__ = ["RLEnvironment"]
+__all__ = ["Outcome", "RLEnvironment"]
 
 logger = logging.getLogger(__name__)
 
 _CONFIG_PARTS = frozenset({"environment", "agent", "world"})
 _RESET_KEYS = frozenset({"seed", "options"})
 _OBSERVATION_PARTS = frozenset({"agent", "world", "render"})
+_AGENT_ONLY: Mapping[str, Any] = {"agent": {}}
 _RENDER_KEYS = frozenset({"width", "height"})
 _MAX_RENDER_SIZE = 4096
 
@@ -320,53 +321,82 @@ class RLEnvironment(RLNode):
             self._require_agent().set_action(action)
 
     def _response(self, request: Request) -> Response:
-        """The observation ``request`` asks for, the reward and the flags since the last answer."""
-        observation_request = request.observation
-        agent = self._require_agent()
+        """The answer to ``request``: what it asks to observe and the outcome since the last."""
+        return Response(request.id, *self._outcome(request, request.observation,
+                                                   acted=request.action is not None))
+
+    def answer_part(self, request: Request, action: Any, reset: bool) -> Outcome | ErrorReply:
+        """Serve one instance's share of a ``steps`` request (see :class:`rlenv.protocol.Steps`).
+
+        Resets the episode when ``reset``, else runs ``action`` (already checked against the
+        action space, e.g. for the whole batch at once) for ``request.steps.repeat_action``
+        ticks; returns the outcome with the agent observation, or the error :meth:`answer`
+        would give.
+        """
+        assert request.steps is not None
+        self._request = request
+        try:
+            if reset:
+                self._begin_episode({})
+            else:
+                self._check_can_act(fresh=False)
+                self._act(action, request.steps.repeat_action or self.repeat_action)
+            return self._outcome(request, _AGENT_ONLY, acted=not reset)
+        except RequestError as error:
+            return ErrorReply(request.id, error.code, str(error))
+        except Exception as error:  # user code raised: report it, keep serving
+            return self._environment_error(request.id, error)
+        finally:
+            self._request = None
+
+    def _outcome(self, request: Request, observation_request: Mapping[str, Any] | None,
+                 acted: bool) -> Outcome:
+        """The observation asked for, and the rewards, flags and ticks since the last answer.
+
+        Rewards and the tick count start again from zero.
+        """
         observation = None
         if observation_request is not None:
-            observation = {}
-            if "agent" in observation_request:
-                asked = observation_request["agent"]
-                observation["agent"] = (
-                    {each.name: _observe(each, asked) for each in self.agents}
-                    if self.multi_agent else _observe(agent, asked)
-                )
-            if "world" in observation_request:
-                observation["world"] = self._require_world().get_data(observation_request["world"])
-            if "render" in observation_request:
-                size = observation_request["render"]
-                observation["render"] = self._render(
-                    size.get("width", self.render_size[0]), size.get("height", self.render_size[1])
-                )
+            observation = self._observation(observation_request)
+        agents = self.agents
         outcomes = None
-        if self.multi_agent:
+        if len(agents) > 1:
             outcomes = {each.name: {"reward": float(each.reward),
                                     "terminated": bool(each.terminated),
-                                    "truncated": bool(each.truncated)} for each in self.agents}
+                                    "truncated": bool(each.truncated)} for each in agents}
             ended = all(o["terminated"] or o["truncated"] for o in outcomes.values())
             terminated = ended and any(o["terminated"] for o in outcomes.values())
             truncated = ended and not terminated
             reward = sum(o["reward"] for o in outcomes.values())
         else:
+            agent = self._require_agent()
             reward = float(agent.reward)
             terminated, truncated = bool(agent.terminated), bool(agent.truncated)
         frames, self._ticks = self._ticks, 0
-        response = Response(
-            id=request.id,
-            observation=observation,
-            reward=reward,
-            terminated=terminated,
-            truncated=truncated,
-            info=self._response_info(request),
-            frames=frames if request.action is not None else 0,
-            agents=outcomes,
-        )
-        for each in self.agents:
+        for each in agents:
             each.reward = 0.0
         if terminated or truncated:  # real time: the client now knows the episode ended
             self._episode = _Episode.ENDED
-        return response
+        return Outcome(observation, reward, terminated, truncated,
+                       self._response_info(request, acted), frames if acted else 0, outcomes)
+
+    def _observation(self, observation_request: Mapping[str, Any]) -> dict[str, Any]:
+        """The parts of the state an ``observation`` request asks for."""
+        observation = {}
+        if "agent" in observation_request:
+            asked = observation_request["agent"]
+            observation["agent"] = (
+                {each.name: _observe(each, asked) for each in self.agents}
+                if self.multi_agent else _observe(self._require_agent(), asked)
+            )
+        if "world" in observation_request:
+            observation["world"] = self._require_world().get_data(observation_request["world"])
+        if "render" in observation_request:
+            size = observation_request["render"]
+            observation["render"] = self._render(
+                size.get("width", self.render_size[0]), size.get("height", self.render_size[1])
+            )
+        return observation
 
     def _render(self, width: int, height: int) -> np.ndarray:
         """Draw the current state as a ``(height, width, 3)`` uint8 array.
@@ -378,9 +408,9 @@ class RLEnvironment(RLNode):
 
         return draw(self, width, height, self.render_view)
 
-    def _response_info(self, request: Request) -> dict[str, Any]:
+    def _response_info(self, request: Request, acted: bool) -> dict[str, Any]:
         info = self._get_info()
-        if self.get_tree().real_time and request.action is not None:
+        if acted and self.get_tree().real_time:
             info = {**info, "late": self._late, "late_actions": self._late_actions}
         if request.snapshot is not None:
             info = {**info, "snapshot": self._log.snapshot()}
@@ -453,6 +483,23 @@ class RLEnvironment(RLNode):
         if "environment" in config and "repeat_action" in config["environment"]:
             _check_repeat(config["environment"]["repeat_action"])
 
+    def check_action(self, action: Any, where: str = "") -> Any:
+        """Check ``action`` against the action space without applying it.
+
+        A joint action (several agents) is checked for every agent still in the episode.
+
+        Returns:
+            The action in its space's native form.
+
+        Raises:
+            RequestError: ``invalid_action``, the message prefixed with ``where``.
+        """
+        return self._check_action(action, fresh=False, where=where)
+
+    def check_can_act(self) -> None:
+        """Raise ``RequestError`` (``reset_required``) before the first reset or after the end."""
+        self._check_can_act(fresh=False)
+
     def _check_action(self, action: Any, fresh: bool, where: str = "") -> Any:
         """``action`` in its space's native form; ``invalid_action`` (prefixed ``where``) if not."""
         try:
@@ -464,6 +511,10 @@ class RLEnvironment(RLNode):
 
     def _check_request(self, request: Request) -> Any:
         """Check every part of ``request`` before anything is applied; return the action."""
+        if request.batch is not None or request.steps is not None:
+            raise RequestError(ErrorCode.BAD_REQUEST, "this server hosts one environment "
+                               "instance; 'batch' and 'steps' need a server started with "
+                               "--instances K")
         special = [name for name in ("snapshot", "restore", "inspect")
                    if getattr(request, name) is not None]
         if special and (
@@ -500,15 +551,23 @@ class RLEnvironment(RLNode):
             _check_keys(request.observation, _OBSERVATION_PARTS, "observation")
             if "render" in request.observation:
                 _check_render(request.observation["render"])
-        started = reset is not None or request.restore is not None or \
-            self._episode is not _Episode.NOT_STARTED
-        if not started and (request.action is not None or request.observation is not None):
+        fresh = reset is not None or request.restore is not None
+        if not fresh and request.observation is not None and \
+                self._episode is _Episode.NOT_STARTED:
             raise RequestError(ErrorCode.RESET_REQUIRED, "no episode has started; reset first")
         if request.action is None:
             return None
-        if reset is None and self._episode is _Episode.ENDED:
+        self._check_can_act(fresh)
+        return self._check_action(request.action, fresh=fresh)
+
+    def _check_can_act(self, fresh: bool) -> None:
+        """Refuse an action before the first reset or after the end (unless ``fresh``ly reset)."""
+        if fresh:
+            return
+        if self._episode is _Episode.NOT_STARTED:
+            raise RequestError(ErrorCode.RESET_REQUIRED, "no episode has started; reset first")
+        if self._episode is _Episode.ENDED:
             raise RequestError(ErrorCode.RESET_REQUIRED, "the episode has ended; reset first")
-        return self._check_action(request.action, fresh=reset is not None)
 
     def _check_joint_action(self, action: Any, fresh: bool) -> dict[str, Any]:
         """One action per agent still in the episode, keyed by name (PettingZoo's convention).
@@ -548,7 +607,7 @@ class RLEnvironment(RLNode):
         self._reset(arguments.get("options") or {})
 
     def _end_tick(self, delta: float) -> None:
-        if not self.agents or self._episode not in (_Episode.ACTING, _Episode.RUNNING):
+        if not self.agents or self._episode not in _IN_EPISODE:
             return
         self._ticks += 1
         for agent in self.agents:
@@ -565,7 +624,10 @@ class RLEnvironment(RLNode):
 
     def _all_ended(self) -> bool:
         """Whether every agent's episode has ended (the one agent's, with a single agent)."""
-        return all(agent.terminated or agent.truncated for agent in self.agents)
+        for agent in self.agents:
+            if not (agent.terminated or agent.truncated):
+                return False
+        return True
 
     def _finish_action(self) -> None:
         """End the running action (its ticks ran, or the episode ended): pause."""
@@ -641,6 +703,21 @@ class RLEnvironment(RLNode):
         return self.world
 
 
+class Outcome(NamedTuple):
+    """What an answer reports: the observation and what happened since the previous answer.
+
+    The fields of a :class:`~rlenv.protocol.Response` after its id, in its order.
+    """
+
+    observation: dict[str, Any] | None
+    reward: float
+    terminated: bool
+    truncated: bool
+    info: dict[str, Any]
+    frames: int
+    agents: dict[str, dict[str, Any]] | None
+
+
 class _Episode(Enum):
     """Where the episode stands, as far as requests are concerned."""
 
@@ -648,6 +725,9 @@ class _Episode(Enum):
     RUNNING = "running"
     ACTING = "acting"
     ENDED = "ended"
+
+
+_IN_EPISODE = frozenset({_Episode.ACTING, _Episode.RUNNING})
 
 
 def _observe(agent: RLAgent, request: Any) -> Any:

@@ -20,9 +20,17 @@ with exactly one :class:`Response` or :class:`ErrorReply` carrying the request's
     error    {"id": 7, "error": {"code": "invalid_action", "message": ..., "fatal": false}}
     batch    {"id": 8, "batch": [{"action": ...}, null, {"reset": {}}]}   # several instances
     replies  {"id": 8, "batch": [{...response...}, null, {...response or error...}]}
+    steps    {"id": 9, "steps": {"action": <K actions>, "reset": <K bools>, "repeat_action": 4}}
+    columns  {"id": 9, "steps": {"observation": <K observations>, "reward": <K float64>,
+              "terminated": <K bools>, "truncated": <K bools>, "frames": <K int64>,
+              "info": [{...}, ...], "errors": [null, {"code": ..., "message": ...}, ...]}}
 
 A server hosting several environment instances (its hello says ``instances``) takes a batch:
 one request per instance, answered by one :class:`BatchResponse` with one reply per instance.
+It also takes :class:`Steps`, the vector environment's step in columns: every instance steps
+(or resets, where ``reset`` says so) and the answer is one :class:`StepsResponse` whose arrays
+are stacked along a first axis of length K, in gymnasium's ``batch_space`` layout, so that
+neither end handles K maps per step.
 
 **States** (:class:`State`): a client connection starts in ``AWAIT_HELLO`` and moves to
 ``READY`` on the hello; a server connection starts in ``AWAIT_HELLO`` and moves to ``READY`` when
@@ -63,10 +71,13 @@ __all__ = [
     "ErrorReply",
     "Hello",
     "Message",
+    "Reply",
     "Request",
     "Response",
     "Role",
     "State",
+    "Steps",
+    "StepsResponse",
     "pack",
     "unpack",
 ]
@@ -299,7 +310,8 @@ class Request:
     node tree or gets / sets an exported property (see :mod:`rlenv.inspector`). ``batch``
     carries one request per environment instance
     of a server that hosts several (``None`` leaves an instance alone); it is answered with one
-    :class:`BatchResponse`.
+    :class:`BatchResponse`. ``steps`` steps all of them in columns (see :class:`Steps`); it is
+    answered with one :class:`StepsResponse`.
     """
 
     id: int
@@ -313,6 +325,7 @@ class Request:
     snapshot: Mapping[str, Any] | None = None
     restore: Mapping[str, Any] | None = None
     inspect: Mapping[str, Any] | None = None
+    steps: Steps | None = None
 
     @property
     def asks_nothing(self) -> bool:
@@ -324,6 +337,8 @@ class Request:
         wire = self._parts()
         if self.batch is not None:
             wire["batch"] = [None if part is None else part._parts() for part in self.batch]
+        if self.steps is not None:
+            wire["steps"] = self.steps.to_wire()
         wire["id"] = self.id
         return wire
 
@@ -360,11 +375,15 @@ class Request:
         if type(request_id) is not int:
             raise _bad_request(None, f"request 'id' must be an integer, got {request_id!r:.40}")
         request = _parse_parts(cls, request_id, wire, "")
+        for alone in ("batch", "steps"):
+            if alone in wire and len(wire) > 2 + ("token" in wire):
+                raise _bad_request(request_id,
+                                   f"a {alone!r} request carries nothing else but its id")
+        if "steps" in wire:
+            return replace(request, steps=Steps.from_wire(request_id, wire["steps"]))
         batch = wire.get("batch")
         if batch is None:
             return request
-        if len(wire) > 2 + ("token" in wire):
-            raise _bad_request(request_id, "a 'batch' request carries nothing else but its id")
         if not isinstance(batch, list) or not batch:
             raise _bad_request(request_id, "'batch' must be a non-empty list of requests or nil")
         parts = []
@@ -383,8 +402,8 @@ class Request:
 
 _STATE_KEYS = ("snapshot", "restore", "inspect")
 _ENVIRONMENT_PARTS = REQUEST_KEYS + _STATE_KEYS
-_REQUEST_WIRE_KEYS = frozenset(("id", "repeat_action", "token", "batch") + REQUEST_KEYS
-                               + _STATE_KEYS)
+_REQUEST_WIRE_KEYS = frozenset(("id", "repeat_action", "token", "batch", "steps")
+                               + REQUEST_KEYS + _STATE_KEYS)
 _PART_KEYS = frozenset(("repeat_action",) + REQUEST_KEYS + _STATE_KEYS)
 
 
@@ -398,7 +417,7 @@ def _parse_parts(cls: type[Request], request_id: int, wire: Mapping[str, Any],
             request_id,
             f"unknown request key {where}{sorted(map(str, unknown))[0]!r}; expected any of "
             + ", ".join(REQUEST_KEYS + ("repeat_action",) + _STATE_KEYS
-                        + (() if where else ("token", "batch"))),
+                        + (() if where else ("token", "batch", "steps"))),
         )
     for key in ("config", "reset", "observation") + _STATE_KEYS:
         if key in wire and not isinstance(wire[key], Mapping):
@@ -430,6 +449,126 @@ def _parse_parts(cls: type[Request], request_id: int, wire: Mapping[str, Any],
 
 def _bad_request(request_id: int | None, message: str) -> RemoteProtocolError:
     return RemoteProtocolError(message, ErrorCode.BAD_REQUEST, request_id=request_id)
+
+
+@dataclass(frozen=True, slots=True)
+class Steps:
+    """One step of every instance of a multi-instance server, in columns.
+
+    ``action`` holds one action per instance, stacked as gymnasium's ``batch_space`` of the
+    action space lays them out (a ``(K, ...)`` array for a Box, a map of such for a Dict ...).
+    ``reset`` (K bools, or ``None`` for none) marks the instances to reset instead of step
+    (their action is ignored): gymnasium's ``NEXT_STEP`` autoreset. ``repeat_action``
+    overrides the ticks per action for this step.
+    """
+
+    action: Any
+    reset: np.ndarray | None = None
+    repeat_action: int | None = None
+
+    def to_wire(self) -> dict[str, Any]:
+        """The ``steps`` part as a msgpack-ready map."""
+        wire: dict[str, Any] = {"action": self.action}
+        if self.reset is not None:
+            wire["reset"] = self.reset
+        if self.repeat_action is not None:
+            wire["repeat_action"] = self.repeat_action
+        return wire
+
+    @classmethod
+    def from_wire(cls, request_id: int, wire: Any) -> Steps:
+        """Read and validate a ``steps`` map (the action is checked against the space later).
+
+        Raises:
+            RemoteProtocolError: ``bad_request`` naming the field.
+        """
+        if not isinstance(wire, Mapping):
+            raise _bad_request(request_id, "'steps' must be a map")
+        unknown = wire.keys() - _STEPS_KEYS
+        if unknown:
+            raise _bad_request(request_id, f"unknown key {sorted(map(str, unknown))[0]!r} in "
+                               f"steps; expected any of {', '.join(sorted(_STEPS_KEYS))}")
+        if wire.get("action") is None:
+            raise _bad_request(request_id, "'steps' needs an 'action' (one per instance)")
+        reset = wire.get("reset")
+        if reset is not None:
+            if isinstance(reset, list) and all(type(flag) is bool for flag in reset):
+                reset = np.array(reset, dtype=np.bool_)
+            if not (isinstance(reset, np.ndarray) and reset.dtype == np.bool_
+                    and reset.ndim == 1):
+                raise _bad_request(request_id, "steps.reset must be a list of booleans, one "
+                                   "per instance")
+        repeat = wire.get("repeat_action")
+        if repeat is not None and (type(repeat) is not int or repeat < 1):
+            raise _bad_request(request_id, f"steps.repeat_action must be an integer >= 1, got "
+                               f"{repeat!r:.40}")
+        return cls(action=wire["action"], reset=reset, repeat_action=repeat)
+
+
+_STEPS_KEYS = frozenset(("action", "reset", "repeat_action"))
+
+
+@dataclass(frozen=True, slots=True)
+class StepsResponse:
+    """The answer to a :class:`Steps` request: one column per field, one row per instance.
+
+    ``observation`` is stacked like ``Steps.action`` (the agent observation of every
+    instance); ``reward`` (float64), ``terminated``, ``truncated`` (bool) and ``frames``
+    (int64) are arrays of length K; ``info`` holds one map per instance (``agents`` in it for
+    a multi-agent environment). ``errors`` is ``None`` when every instance succeeded, else one
+    entry per instance: ``None`` or the :class:`ErrorReply` of an instance that failed (whose
+    row of the other columns is meaningless).
+    """
+
+    id: int
+    observation: Any
+    reward: np.ndarray
+    terminated: np.ndarray
+    truncated: np.ndarray
+    frames: np.ndarray
+    info: tuple[Mapping[str, Any], ...]
+    errors: tuple[ErrorReply | None, ...] | None = None
+
+    def to_wire(self) -> dict[str, Any]:
+        """The message as a msgpack-ready map."""
+        columns: dict[str, Any] = {
+            "observation": self.observation, "reward": self.reward,
+            "terminated": self.terminated, "truncated": self.truncated, "frames": self.frames,
+            "info": list(self.info),
+        }
+        if self.errors is not None:
+            columns["errors"] = [None if error is None else error.to_wire()["error"]
+                                 for error in self.errors]
+        return {"id": self.id, "steps": columns}
+
+    @classmethod
+    def from_wire(cls, wire: Mapping[str, Any]) -> StepsResponse:
+        """Read a steps response map.
+
+        Raises:
+            RemoteProtocolError: a column is missing or has the wrong type or length.
+        """
+        columns = wire["steps"]
+        try:
+            reward = np.asarray(columns["reward"], dtype=np.float64)
+            size = len(reward)
+            flags = [np.asarray(columns[name], dtype=np.bool_)
+                     for name in ("terminated", "truncated")]
+            frames = np.asarray(columns["frames"], dtype=np.int64)
+            info = tuple(columns["info"])
+            errors = columns.get("errors")
+            if errors is not None:
+                errors = tuple(None if error is None else
+                               ErrorReply.from_wire({"id": wire["id"], "error": error})
+                               for error in errors)
+            if any(len(column) != size for column in (*flags, frames, info, errors or info)) \
+                    or not all(isinstance(item, Mapping) for item in info):
+                raise ValueError("columns of different lengths, or an info that is not a map")
+            return cls(id=wire["id"], observation=columns["observation"], reward=reward,
+                       terminated=flags[0], truncated=flags[1], frames=frames, info=info,
+                       errors=errors)
+        except (KeyError, TypeError, ValueError, RemoteProtocolError) as exc:
+            raise RemoteProtocolError(f"invalid steps response: {exc!r}") from None
 
 
 @dataclass(frozen=True, slots=True)
@@ -552,7 +691,9 @@ class BatchResponse:
         return cls(id=wire["id"], replies=tuple(replies))
 
 
-Message = Hello | Request | Response | BatchResponse | ErrorReply
+Message = Hello | Request | Response | BatchResponse | StepsResponse | ErrorReply
+Reply = Response | BatchResponse | StepsResponse | ErrorReply
+"""Any answer a server sends to a request."""
 
 
 # --- connection state machine --------------------------------------------------------------
@@ -664,7 +805,7 @@ class Connection:
             self.state = State.READY
         elif isinstance(message, Request):
             self._outstanding.append(message.id)
-        elif isinstance(message, Response | BatchResponse | ErrorReply) and message.id is not None:
+        elif isinstance(message, Reply) and message.id is not None:
             self._outstanding.popleft()
         if isinstance(message, ErrorReply) and message.fatal:
             self.state = State.CLOSED
@@ -713,7 +854,12 @@ class Connection:
             hello = Hello.from_wire(wire)
             self.state = State.READY
             return hello
-        response = BatchResponse.from_wire(wire) if "batch" in wire else Response.from_wire(wire)
+        if "steps" in wire:
+            response: Message = StepsResponse.from_wire(wire)
+        elif "batch" in wire:
+            response = BatchResponse.from_wire(wire)
+        else:
+            response = Response.from_wire(wire)
         self._pop_outstanding(response.id)
         return response
 
@@ -734,10 +880,10 @@ class Connection:
                 raise LocalProtocolError("a server does not send requests")
             if isinstance(message, Hello) and self.state is not State.AWAIT_HELLO:
                 raise LocalProtocolError("the hello is sent once, first")
-            if isinstance(message, Response | BatchResponse) and self.state is not State.READY:
+            if isinstance(message, Reply) and not isinstance(message, ErrorReply) and \
+                    self.state is not State.READY:
                 raise LocalProtocolError("send the hello before any response")
-            if isinstance(message, Response | BatchResponse | ErrorReply) and \
-                    message.id is not None:
+            if isinstance(message, Reply) and message.id is not None:
                 if not self._outstanding or self._outstanding[0] != message.id:
                     raise LocalProtocolError(
                         f"reply to request {message.id} out of order; outstanding: "

@@ -6,11 +6,12 @@ import logging
 from dataclasses import replace
 from pathlib import Path
 
+from rlenv.columns import ColumnStepper
 from rlenv.communication import DEFAULT_HOST, Communication, Limits
 from rlenv.environment import RLEnvironment
 from rlenv.errors import ErrorCode
 from rlenv.instance import Instance, drive, load_environment
-from rlenv.protocol import BatchResponse, ErrorReply, Request, Response
+from rlenv.protocol import BatchResponse, ErrorReply, Request, Response, StepsResponse
 
 __all__ = ["Server", "load_environment"]
 
@@ -23,7 +24,8 @@ class Server:
     With ``instances=1`` (the default) the environment drives its own endpoint, as the Godot
     seed's RLEnvironment does. With more, the server hosts that many independent instances of the
     environment class (each its own tree and pymunk space) and answers a batch request (one part
-    per instance) with one batch response: one round trip steps them all. A plain request goes to
+    per instance) with one batch response, and a ``steps`` request (every instance steps, in
+    columns) with one steps response: one round trip steps them all. A plain request goes to
     instance 0.
 
     Args:
@@ -66,6 +68,7 @@ class Server:
                                                token=token)
             self.environment.communication = self.communication
         else:
+            self._columns = ColumnStepper(self.instances)
             hello = replace(self.instances[0].hello, instances=instances)
             self.communication = Communication(lambda: hello, limits=limits or Limits(),
                                                token=token)
@@ -90,7 +93,9 @@ class Server:
             if request is not None:
                 self.communication.send(self._answer(request))
 
-    def _answer(self, request: Request) -> Response | BatchResponse | ErrorReply:
+    def _answer(self, request: Request) -> Response | BatchResponse | StepsResponse | ErrorReply:
+        if request.steps is not None:
+            return self._columns.answer(request)
         if request.batch is None:
             if request.asks_nothing:
                 return Response(id=request.id)  # e.g. the token

@@ -9,6 +9,7 @@ import sys
 import time
 import warnings
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -19,6 +20,7 @@ from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 import rlenv_client
 from examples.cartpole import TARGET, CartPoleAgent, controller
+from examples.pair import TARGET as PAIR_TARGET
 from rlenv_client import RemoteEnv, RemoteVectorEnv
 from rlenv_client.registration import ENVIRONMENTS
 
@@ -341,37 +343,52 @@ def test_a_lost_server_is_restarted_and_the_episode_truncated() -> None:
             env.step(np.zeros(1, np.float32))
 
 
-def test_a_vector_env_restarts_the_lost_server_only() -> None:
-    with RemoteVectorEnv(2, TARGET, max_restarts=1) as envs:
-        envs.reset(seed=0)
+@pytest.mark.parametrize("per_server", [1, 2])
+def test_a_vector_env_restarts_the_lost_server_only(per_server: int) -> None:
+    count = 2 * per_server
+    lost = [False] * per_server + [True] * per_server
+    with RemoteVectorEnv(count, TARGET, max_restarts=1, instances_per_server=per_server) as envs:
+        first, _ = envs.reset(seed=0)
         survivor, victim = envs.servers
         os.killpg(victim.pid, signal.SIGKILL)
-        still = np.zeros((2, 1), np.float32)
+        still = np.zeros((count, 1), np.float32)
         observations, rewards, terminated, truncated, infos = envs.step(still)
-        assert truncated.tolist() == [False, True] and not terminated.any()
-        assert rewards[1] == 0.0 and infos["_server_restarted"].tolist() == [False, True]
+        assert truncated.tolist() == lost and not terminated.any()
+        assert (rewards[per_server:] == 0.0).all()
+        assert infos["_server_restarted"].tolist() == lost
+        assert observations[per_server:].tobytes() == first[per_server:].tobytes()  # the last
         assert envs.servers[0] is survivor and envs.servers[1] is not victim
         observations, rewards, terminated, truncated, _ = envs.step(still)
-        assert rewards[1] == 0.0 and not truncated[1]  # NEXT_STEP: the autoreset on the new one
+        # NEXT_STEP: the autoreset on the new server
+        assert (rewards[per_server:] == 0.0).all() and not truncated.any()
 
 
-def test_vector_layouts_give_identical_results() -> None:
-    """Four sub-environments in one server (one batch per step) or in four servers: the same
-    seeds and actions give the same observations, resets included."""
+@pytest.mark.parametrize("target", [TARGET, PAIR_TARGET], ids=["cartpole", "pair-dict-spaces"])
+def test_vector_layouts_give_identical_results(target: str) -> None:
+    """Four sub-environments in one server (one ``steps`` request per step, in columns) or in
+    four servers (plain requests): the same seeds and actions give the same observations,
+    rewards and flags, resets included; Dict spaces (two agents) too."""
     runs = []
     for per_server in (4, 1):
-        with RemoteVectorEnv(4, TARGET, instances_per_server=per_server,
+        with RemoteVectorEnv(4, target, instances_per_server=per_server,
                              max_episode_steps=15) as envs:
             assert len(envs.servers) == 4 // per_server
             envs.action_space.seed(8)
-            seen = [envs.reset(seed=30)[0].tobytes()]
+            seen = [_bytes(envs.reset(seed=30)[0])]
             for _ in range(40):
-                observations, rewards, terminated, truncated, _ = envs.step(
+                observations, rewards, terminated, truncated, infos = envs.step(
                     envs.action_space.sample())
-                seen.append((observations.tobytes(), rewards.tobytes(), terminated.tobytes(),
-                             truncated.tobytes()))
+                seen.append((_bytes(observations), rewards.tobytes(), terminated.tobytes(),
+                             truncated.tobytes(), infos["frames"].tobytes()))
             runs.append(seen)
     assert runs[0] == runs[1]
+
+
+def _bytes(batch: Any) -> bytes:
+    """A batch (an array, or a map of arrays) as bytes, to compare runs exactly."""
+    if isinstance(batch, dict):
+        return b"".join(_bytes(batch[key]) for key in sorted(batch))
+    return np.asarray(batch).tobytes()
 
 
 def test_make_vec_puts_one_server_on_each_core() -> None:

@@ -34,6 +34,8 @@ from rlenv.protocol import (
     Response,
     Role,
     State,
+    Steps,
+    StepsResponse,
     pack,
     unpack,
 )
@@ -1237,3 +1239,77 @@ def test_a_request_shows_its_parts_but_never_its_token() -> None:
     text = repr(Request(id=3, inspect={"tree": {}}, token="s3cret"))
     assert "inspect={'tree': {}}" in text and "token=..." in text
     assert "s3cret" not in text
+
+
+# --- steps: a vector step in columns ----------------------------------------------------------
+
+
+def test_steps_and_their_columns_round_trip(ready: ConnectionPair) -> None:
+    actions = np.array([[0.5], [-1.0], [0.0]], dtype=np.float32)
+    reset = np.array([False, True, False])
+    (got,) = ready.send(ready.client, Request(id=9, steps=Steps(actions, reset, 2)))
+    assert isinstance(got, Request) and got.steps is not None
+    _assert_bit_exact(got.steps.action, actions)
+    assert got.steps.reset.tolist() == [False, True, False] and got.steps.repeat_action == 2
+    answer = StepsResponse(
+        id=9, observation=np.arange(15, dtype=np.float32).reshape(3, 5),
+        reward=np.array([1.0, 0.0, 2.0]), terminated=np.array([False, False, True]),
+        truncated=np.zeros(3, np.bool_), frames=np.array([2, 0, 1]),
+        info=({}, {"seed": 1}, {}),
+        errors=(None, ErrorReply(9, "environment_error", "boom"), None),
+    )
+    (back,) = ready.send(ready.server, answer)
+    assert isinstance(back, StepsResponse) and back.id == 9
+    _assert_bit_exact(back.observation, answer.observation)
+    assert back.reward.tolist() == [1.0, 0.0, 2.0] and back.frames.tolist() == [2, 0, 1]
+    assert back.terminated.tolist() == [False, False, True] and not back.truncated.any()
+    assert back.info == ({}, {"seed": 1}, {})
+    assert back.errors == (None, ErrorReply(9, "environment_error", "boom"), None)
+    assert ready.client.outstanding == ()
+
+
+def test_a_reset_mask_may_be_a_list_of_booleans(ready: ConnectionPair) -> None:
+    ready.server.receive_data(frame({"id": 1, "steps": {"action": [0, 1], "reset": [True, False]}}))
+    (got,) = drain(ready.server)
+    assert got.steps.reset.dtype == np.bool_ and got.steps.reset.tolist() == [True, False]
+
+
+@pytest.mark.parametrize(
+    ("steps", "message"),
+    [
+        pytest.param([1, 2], "'steps' must be a map", id="not-a-map"),
+        pytest.param({"reset": [True]}, "'steps' needs an 'action'", id="no-action"),
+        pytest.param({"action": [1], "jump": 1}, "unknown key 'jump' in steps", id="unknown"),
+        pytest.param({"action": [1], "reset": [1]}, "steps.reset must be a list of booleans",
+                     id="reset-ints"),
+        pytest.param({"action": [1], "reset": "yes"}, "steps.reset must be a list of booleans",
+                     id="reset-str"),
+        pytest.param({"action": [1], "repeat_action": 0}, "steps.repeat_action must be an "
+                     "integer >= 1", id="repeat-zero"),
+    ],
+)
+def test_invalid_steps_are_bad_requests(ready: ConnectionPair, steps: Any, message: str) -> None:
+    error = _server_error(ready.server, {"id": 3, "steps": steps})
+    assert message in str(error) and error.code == ErrorCode.BAD_REQUEST
+    assert error.request_id == 3 and not error.fatal
+
+
+def test_steps_go_alone(ready: ConnectionPair) -> None:
+    error = _server_error(ready.server, {"id": 3, "steps": {"action": [1]}, "reset": {}})
+    assert "a 'steps' request carries nothing else but its id" in str(error)
+
+
+_COLUMNS = {"observation": [[0.0], [1.0]], "reward": [1.0, 2.0], "terminated": [False, True],
+            "truncated": [False, False], "frames": [4, 2], "info": [{}, {}]}
+
+
+@pytest.mark.parametrize(
+    "change",
+    [{"reward": None}, {"frames": [4]}, {"info": [{}]}, {"info": [{}, 3]},
+     {"errors": [None]}, {"errors": [None, {"code": "x"}]}, {"terminated": "no"}],
+    ids=["reward-nil", "frames-short", "info-short", "info-not-map", "errors-short",
+         "error-no-message", "flags-str"],
+)
+def test_malformed_steps_responses_are_remote_protocol_errors(change: dict) -> None:
+    with pytest.raises(RemoteProtocolError, match="invalid steps response"):
+        StepsResponse.from_wire({"id": 1, "steps": {**_COLUMNS, **change}})

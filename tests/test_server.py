@@ -441,6 +441,83 @@ def test_a_server_hosts_several_instances_stepped_by_one_batch(serve: Serve) -> 
             many.step_result(many.receive_reply())
 
 
+def test_steps_step_every_instance_in_columns_as_plain_requests_would(serve: Serve) -> None:
+    multi, single = serve(args=["--instances", "3"]), serve()
+    seeds = (20, 21, 22)
+    actions = np.array([[0.3], [-0.7], [1.0]], dtype=np.float32)
+    with Client(multi.host, multi.port) as many, Client(single.host, single.port) as one:
+        many.send_batch([many.reset_request(seed=seed) for seed in seeds])
+        many.receive_batch()
+        many.send_steps(actions, repeat_action=3)
+        columns = many.receive_steps()
+        assert columns.errors is None and columns.info == ({}, {}, {})
+        for index, seed in enumerate(seeds):  # the same as one plain request per instance
+            one.reset(seed=seed)
+            observation, reward, terminated, truncated, info = one.step(actions[index], 3)
+            assert columns.observation[index].tobytes() == observation.tobytes()
+            assert (columns.reward[index], columns.terminated[index],
+                    columns.truncated[index], columns.frames[index]) == \
+                (reward, terminated, truncated, info["frames"])
+        # reset where the mask says so (the action of that row is ignored), step the others
+        many.send_steps(actions, reset=np.array([False, True, False]))
+        mixed = many.receive_steps()
+        assert mixed.frames.tolist() == [4, 0, 4] and mixed.reward.tolist() == [4.0, 0.0, 4.0]
+
+
+def test_refused_steps_change_nothing(serve: Serve) -> None:
+    multi = serve(args=["--instances", "2"])
+    with Client(multi.host, multi.port) as many:
+        many.send_steps(np.zeros((2, 1), np.float32))
+        with pytest.raises(RemoteError, match="steps: instance 0: no episode has started"):
+            many.receive_steps()
+        many.send_steps(np.zeros((2, 1), np.float32), reset=np.ones(2, np.bool_))
+        before = many.receive_steps().observation
+        for bad, words in [
+            (np.array([[0.0], [2.0]], np.float32), r"steps.action\[1, 0\] is 2.0, outside"),
+            (np.zeros((3, 1), np.float32), r"shape \(3, 1\), expected \(2, 1\)"),
+        ]:
+            many.send_steps(bad)
+            with pytest.raises(RemoteError, match=words) as refused:
+                many.receive_steps()
+            assert refused.value.code == ErrorCode.INVALID_ACTION
+        many.send_steps(np.zeros((2, 1), np.float32), reset=np.ones(3, np.bool_))
+        with pytest.raises(RemoteError, match="steps.reset has 3 flags for 2 instances"):
+            many.receive_steps()
+        many.send_batch([Request(id=0, observation={"agent": {}})] * 2)  # nothing moved
+        after = np.stack([many.reset_result(reply)[0] for reply in many.receive_batch()])
+        assert after.tobytes() == before.tobytes()
+
+
+def test_a_failing_instance_fails_alone_in_columns(serve: Serve) -> None:
+    """Discrete actions (checked row by row); action 1 raises in the faulty agent's tick."""
+    multi = serve("examples.faulty:FaultyEnvironment", args=["--instances", "2"])
+    with Client(multi.host, multi.port) as many:
+        many.send_steps(np.zeros(2, np.int64), reset=np.ones(2, np.bool_))
+        many.receive_steps()
+        many.send_steps(np.array([0, 1]))
+        columns = many.receive_steps()
+        assert columns.errors is not None and columns.errors[0] is None
+        assert columns.errors[1].code == ErrorCode.ENVIRONMENT_ERROR
+        assert "tripped over action 1" in columns.errors[1].message
+        assert columns.observation[0].tolist() == [3] and columns.frames[0] == 3
+        many.send_steps(np.array([0, 0]))
+        with pytest.raises(RemoteError, match="steps: instance 1: no episode has started"):
+            many.receive_steps()
+        many.send_steps(np.array([0, 5]), reset=np.array([False, True]))
+        with pytest.raises(RemoteError, match=r"steps.action\[1\]: action is 5, outside"):
+            many.receive_steps()  # rows of resetting instances are checked too
+        many.send_steps(np.array([0, 0]), reset=np.array([False, True]))
+        assert many.receive_steps().observation.tolist() == [[6], [0]]
+
+
+def test_a_single_instance_server_refuses_batches_and_steps(client: Client) -> None:
+    for send in (lambda: client.send_steps(np.zeros((1, 1), np.float32)),
+                 lambda: client.send_batch([client.reset_request()])):
+        send()
+        with pytest.raises(RemoteError, match="hosts one environment instance"):
+            client.step_result(client.receive_reply())
+
+
 def test_batches_are_validated_part_by_part(server: ServerProcess) -> None:
     with socket.create_connection((server.host, server.port), timeout=5) as raw:
         read_frame(raw)

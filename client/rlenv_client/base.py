@@ -20,7 +20,16 @@ import numpy as np
 from gymnasium import spaces
 
 from rlenv.errors import ConnectionLost, RemoteError
-from rlenv.protocol import BatchResponse, ErrorReply, Hello, Request, Response
+from rlenv.protocol import (
+    BatchResponse,
+    ErrorReply,
+    Hello,
+    Reply,
+    Request,
+    Response,
+    Steps,
+    StepsResponse,
+)
 from rlenv.spaces import from_wire
 
 __all__ = ["BaseClient", "StepResult"]
@@ -197,6 +206,32 @@ class BaseClient(ABC):
             raise ConnectionLost(f"{self.address} answered a batch with {message!r:.80}")
         return message.replies
 
+    def send_steps(self, action: Any, reset: np.ndarray | None = None,
+                   repeat_action: int | None = None) -> None:
+        """Step every instance of a multi-instance server at once, in columns.
+
+        ``action`` stacks one action per instance (gymnasium's ``batch_space`` layout);
+        ``reset`` marks the instances to reset instead (their action is ignored). Collect the
+        answer with :meth:`receive_steps`.
+        """
+        self._send(Request(id=next(self._ids), steps=Steps(action, reset, repeat_action)))
+
+    def receive_steps(self) -> StepsResponse:
+        """Wait for the answer to :meth:`send_steps`.
+
+        An instance that failed has its error reply in the answer's ``errors``.
+
+        Raises:
+            RemoteError: the whole request was refused (nothing changed).
+        """
+        message = self._receive()
+        if isinstance(message, ErrorReply):
+            self._response(message)
+        if not isinstance(message, StepsResponse):
+            self.close()
+            raise ConnectionLost(f"{self.address} answered steps with {message!r:.80}")
+        return message
+
     def observe(self) -> dict[str, Any]:
         """The current observation without stepping: ``{"agent": ..., "world": ...}``."""
         response = self._call(observation=_AGENT_AND_WORLD)
@@ -289,7 +324,7 @@ class BaseClient(ABC):
         """Deliver ``request`` to the environment."""
 
     @abstractmethod
-    def _receive(self) -> Response | BatchResponse | ErrorReply:
+    def _receive(self) -> Reply:
         """Wait for the environment's answer to the oldest request sent."""
 
     # --- internals --------------------------------------------------------------------------

@@ -16,13 +16,12 @@ from rlenv.errors import ConnectionLost, ErrorCode, ProtocolError, RemoteError, 
 from rlenv.protocol import (
     CONNECTION_CLOSED,
     NEED_DATA,
-    BatchResponse,
     Connection,
     ErrorReply,
     Hello,
     Message,
+    Reply,
     Request,
-    Response,
     Role,
 )
 from rlenv_client.base import BaseClient, StepResult
@@ -118,9 +117,9 @@ class Client(BaseClient):
             self.close()
             raise ConnectionLost(f"sending to {self.address} failed: {error}") from None
 
-    def _receive(self) -> Response | BatchResponse | ErrorReply:
+    def _receive(self) -> Reply:
         message = self._next_message()
-        if not isinstance(message, Response | BatchResponse | ErrorReply):
+        if not isinstance(message, Reply):
             self.close()
             raise ConnectionLost(f"{self.address} broke the protocol: {message!r:.80}")
         return message

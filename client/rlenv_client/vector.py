@@ -32,11 +32,13 @@ from typing import Any
 
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
-from gymnasium.vector.utils import batch_space, concatenate, create_empty_array, iterate
+from gymnasium.vector.utils import batch_space, create_empty_array
 
+from rlenv.errors import RemoteError
 from rlenv.protocol import ErrorReply, Request, Response
 from rlenv_client.base import BaseClient
 from rlenv_client.launcher import ServerProcess
+from rlenv_client.rows import row, rows, set_row, set_rows
 from rlenv_client.session import LOST, Session
 
 __all__ = ["RemoteVectorEnv", "default_layout"]
@@ -92,10 +94,10 @@ class RemoteVectorEnv(VectorEnv):
                               instances_per_server)
         self.sessions: list[Session] = []
         self._connect(places, timeout=timeout, max_restarts=max_restarts)
-        self._groups: list[list[int]] = []  # the sub-environments each session hosts
+        self._groups: list[range] = []  # the sub-environments each session hosts
         start = 0
         for session in self.sessions:
-            self._groups.append(list(range(start, start + session.client.hello.instances)))
+            self._groups.append(range(start, start + session.client.hello.instances))
             start += session.client.hello.instances
         self._owner = [number for number, group in enumerate(self._groups) for _ in group]
         hello = self.clients[0].hello
@@ -120,7 +122,7 @@ class RemoteVectorEnv(VectorEnv):
         self.max_episode_steps = max_episode_steps
         self._autoreset = np.zeros(self.num_envs, dtype=np.bool_)
         self._steps = np.zeros(self.num_envs, dtype=np.int64)
-        self._last_observations: list[Any] = [None] * self.num_envs
+        self._last: Any = None  # the last batch of observations returned
 
     @property
     def clients(self) -> list[BaseClient]:
@@ -153,78 +155,125 @@ class RemoteVectorEnv(VectorEnv):
         super().reset(seed=seed if isinstance(seed, int) else None)
         plan = [self._client_of(i).reset_request(seeds[i], options) for i in range(self.num_envs)]
         replies = self._exchange(plan)
-        observations, env_infos = [], []
+        observations = create_empty_array(self.single_observation_space, self.num_envs)
+        env_infos, frames = [], np.zeros(self.num_envs, np.int64)
         for index, reply in enumerate(replies):
             observation, info = self._client_of(index).reset_result(self._sure(index, reply))
-            self._last_observations[index] = observation
-            observations.append(observation)
+            set_row(observations, index, observation)
+            frames[index] = info.pop("frames")
             env_infos.append(info)
-        infos = self._merge_infos({}, env_infos)
         self._autoreset[:] = False
         self._steps[:] = 0
-        return self._batch(observations), infos
+        self._last = observations
+        return observations, self._merge_infos({}, env_infos, frames)
 
     def step(
         self, actions: Any
     ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step every sub-environment (resetting those that ended, per the autoreset mode).
 
+        A server hosting several sub-environments gets one ``steps`` request (actions in,
+        observations, rewards and flags out, in columns); a server hosting one gets a plain
+        step or reset.
+
         Raises:
+            RemoteError: a server refused the step (e.g. ``invalid_action``) or a
+                sub-environment failed; every server was answered first.
             ConnectionLost: a server went away and cannot be restarted (with how it exited).
         """
         resetting = self._autoreset.copy() if self._mode is AutoresetMode.NEXT_STEP else \
             np.zeros(self.num_envs, dtype=np.bool_)
-        plan: list[Request | None] = []
-        for index, action in enumerate(iterate(self.action_space, actions)):
-            client = self._client_of(index)
-            plan.append(client.reset_request() if resetting[index] else
-                        client.step_request(action, self.repeat_action))
-        replies = self._exchange(plan, restart=True)
-        observations: list[Any] = []
-        env_infos: list[dict[str, Any]] = []
-        rewards = np.zeros(self.num_envs, dtype=np.float64)
-        terminations = np.zeros(self.num_envs, dtype=np.bool_)
-        truncations = np.zeros(self.num_envs, dtype=np.bool_)
-        for index, reply in enumerate(replies):
-            client = self._client_of(index)
-            if isinstance(reply, str):  # its server was lost and restarted
-                observation, info = self._last_observations[index], {"server_restarted": reply}
-                truncations[index] = True
-            elif resetting[index]:
-                observation, info = client.reset_result(self._sure(index, reply))
-                self._steps[index] = 0
-            else:
-                observation, reward, terminated, truncated, info = client.step_result(
-                    self._sure(index, reply), native=False)  # _batch copies it
-                self._steps[index] += 1
-                if self.max_episode_steps is not None and \
-                        self._steps[index] >= self.max_episode_steps:
-                    truncated = True
-                rewards[index], terminations[index], truncations[index] = (
-                    reward, terminated, truncated
-                )
-            self._last_observations[index] = observation
-            observations.append(observation)
-            env_infos.append(info)
+        observations, rewards, terminations, truncations, frames, env_infos = \
+            self._step_everywhere(actions, resetting)
+        stepped = ~resetting
+        self._steps[resetting] = 0
+        self._steps[stepped] += 1
+        if self.max_episode_steps is not None:
+            truncations |= stepped & (self._steps >= self.max_episode_steps)
         ended = terminations | truncations
         infos: dict[str, Any] = {}
         if self._mode is AutoresetMode.SAME_STEP and ended.any():
             for index in np.flatnonzero(ended):
+                final_info = {**env_infos[index], "frames": int(frames[index])}
                 infos = self._add_info(
-                    infos, {"final_obs": observations[index], "final_info": env_infos[index]},
+                    infos, {"final_obs": row(observations, index), "final_info": final_info},
                     int(index),
                 )
             plan = [self._client_of(i).reset_request() if ended[i] else None
                     for i in range(self.num_envs)]
             for index, reply in enumerate(self._exchange(plan)):
                 if ended[index]:
-                    observations[index], env_infos[index] = self._client_of(index).reset_result(
+                    observation, env_infos[index] = self._client_of(index).reset_result(
                         self._sure(index, reply))
-                    self._last_observations[index] = observations[index]
+                    set_row(observations, index, observation)
+                    frames[index] = env_infos[index].pop("frames")
                     self._steps[index] = 0
-        infos = self._merge_infos(infos, env_infos)
         self._autoreset = ended
-        return self._batch(observations), rewards, terminations, truncations, infos
+        self._last = observations
+        return observations, rewards, terminations, truncations, \
+            self._merge_infos(infos, env_infos, frames)
+
+    def _step_everywhere(self, actions: Any, resetting: np.ndarray) -> tuple[Any, ...]:
+        """Send every server its share of the step, then gather the answers into columns.
+
+        A server that is lost and restarted gives its sub-environments their last observation,
+        truncated, with ``info["server_restarted"]``.
+        """
+        for session, group in zip(self.sessions, self._groups, strict=True):
+            client = session.client
+            try:
+                if len(group) > 1:
+                    client.send_steps(rows(actions, group.start, group.stop),
+                                      resetting[group.start:group.stop], self.repeat_action)
+                else:
+                    client.send_request(client.reset_request() if resetting[group.start] else
+                                        client.step_request(row(actions, group.start),
+                                                            self.repeat_action))
+            except LOST as error:
+                raise session.failure(error) from None
+        observations = create_empty_array(self.single_observation_space, self.num_envs)
+        rewards = np.zeros(self.num_envs, np.float64)
+        terminations = np.zeros(self.num_envs, np.bool_)
+        truncations = np.zeros(self.num_envs, np.bool_)
+        frames = np.zeros(self.num_envs, np.int64)
+        env_infos: list[dict[str, Any]] = [{}] * self.num_envs
+        refused: RemoteError | None = None
+        for session, group in zip(self.sessions, self._groups, strict=True):
+            span = slice(group.start, group.stop)
+            try:
+                if len(group) > 1:
+                    answer = session.client.receive_steps()
+                    set_rows(observations, group.start, answer.observation)
+                    rewards[span], terminations[span] = answer.reward, answer.terminated
+                    truncations[span], frames[span] = answer.truncated, answer.frames
+                    env_infos[span] = answer.info
+                    for error in answer.errors or ():
+                        if error is not None and refused is None:
+                            refused = RemoteError(error.code, error.message, error.fatal)
+                else:
+                    index = group.start
+                    reply = session.client.receive_reply()
+                    if resetting[index]:
+                        observation, info = session.client.reset_result(reply)
+                    else:
+                        observation, rewards[index], terminations[index], truncations[index], \
+                            info = session.client.step_result(reply, native=False)
+                    set_row(observations, index, observation)
+                    frames[index] = info.pop("frames")
+                    env_infos[index] = info
+            except RemoteError as error:  # read every server's answer before raising
+                refused = refused or error
+            except LOST as error:
+                if self._last is None:
+                    raise session.failure(error) from None
+                reason = session.restart(error)
+                for index in group:
+                    set_row(observations, index, row(self._last, index))
+                    truncations[index] = True
+                    env_infos[index] = {"server_restarted": reason}
+        if refused is not None:
+            raise refused
+        return observations, rewards, terminations, truncations, frames, env_infos
 
     def render(self) -> tuple[np.ndarray, ...] | None:
         """One frame per sub-environment (``rgb_array``)."""
@@ -287,15 +336,11 @@ class RemoteVectorEnv(VectorEnv):
     def _client_of(self, index: int) -> BaseClient:
         return self.sessions[self._owner[index]].client
 
-    def _exchange(self, plan: list[Request | None],
-                  restart: bool = False) -> list[Reply | str | None]:
+    def _exchange(self, plan: list[Request | None]) -> list[Reply | None]:
         """Send every server its requests, then gather the replies (in sub-environment order).
 
-        A server that is lost gives, for each of its sub-environments with a request, the
-        reason it was restarted (when ``restart`` and the budget allow) instead of a reply.
-
         Raises:
-            ConnectionLost: a server was lost (and not restarted), with how it exited.
+            ConnectionLost: a server was lost, with how it exited.
         """
         sent = []
         for session, group in zip(self.sessions, self._groups, strict=True):
@@ -311,7 +356,7 @@ class RemoteVectorEnv(VectorEnv):
             except LOST as error:
                 raise session.failure(error) from None
             sent.append(True)
-        replies: list[Reply | str | None] = [None] * self.num_envs
+        replies: list[Reply | None] = [None] * self.num_envs
         for session, group, was_sent in zip(self.sessions, self._groups, sent, strict=True):
             if not was_sent:
                 continue
@@ -319,29 +364,22 @@ class RemoteVectorEnv(VectorEnv):
                 answers = session.client.receive_batch() if len(group) > 1 else \
                     (session.client.receive_reply(),)
             except LOST as error:
-                if not restart or any(self._last_observations[i] is None for i in group):
-                    raise session.failure(error) from None
-                reason = session.restart(error)
-                answers = tuple(reason if plan[i] is not None else None for i in group)
+                raise session.failure(error) from None
             for index, answer in zip(group, answers, strict=False):
                 replies[index] = answer
         return replies
 
-    def _merge_infos(self, infos: dict[str, Any], env_infos: list[dict[str, Any]]) -> dict:
-        """Gymnasium's batched infos; the common case (only ``frames``) without a loop."""
-        if not infos and all(info.keys() == {"frames"} for info in env_infos):
-            return {"frames": np.array([info["frames"] for info in env_infos], dtype=int),
-                    "_frames": np.ones(self.num_envs, dtype=np.bool_)}
+    def _merge_infos(self, infos: dict[str, Any], env_infos: list[dict[str, Any]],
+                     frames: np.ndarray) -> dict:
+        """Gymnasium's batched infos, ``frames`` included; without a loop in the common case."""
+        if not infos and not any(env_infos):
+            return {"frames": frames, "_frames": np.ones(self.num_envs, dtype=np.bool_)}
         for index, info in enumerate(env_infos):
-            infos = self._add_info(infos, info, index)
+            infos = self._add_info(infos, {**info, "frames": int(frames[index])}, index)
         return infos
 
     @staticmethod
-    def _sure(index: int, reply: Reply | str | None) -> Reply:
-        if reply is None or isinstance(reply, str):
+    def _sure(index: int, reply: Reply | None) -> Reply:
+        if reply is None:
             raise RuntimeError(f"sub-environment {index} got no reply")
         return reply
-
-    def _batch(self, observations: list[Any]) -> Any:
-        out = create_empty_array(self.single_observation_space, self.num_envs)
-        return concatenate(self.single_observation_space, observations, out)

@@ -1,0 +1,114 @@
+"""A multi-instance server's vector step in columns (see :class:`rlenv.protocol.Steps`).
+
+One ``steps`` request carries every instance's action stacked in one array (gymnasium's
+``batch_space`` layout); every instance resets or steps, in its own tree; the answer stacks the
+observations and gathers rewards, flags and tick counts into arrays. Neither end builds K
+requests or K responses per vector step, and a Box action batch is checked in one go.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.vector.utils import batch_space, concatenate, create_empty_array, iterate
+
+from rlenv.environment import Outcome
+from rlenv.errors import ErrorCode, RequestError
+from rlenv.instance import Instance
+from rlenv.protocol import ErrorReply, Request, StepsResponse
+from rlenv.spaces import SpaceMismatch, check
+
+__all__ = ["ColumnStepper"]
+
+
+class ColumnStepper:
+    """Answers ``steps`` requests for a fixed list of instances of one environment class.
+
+    Args:
+        instances: the instances, in the order of the rows.
+    """
+
+    def __init__(self, instances: list[Instance]) -> None:
+        self.instances = instances
+        hello = instances[0].hello
+        self.count = len(instances)
+        self.action_space = hello.action_space
+        self.observation_space = hello.observation_space
+        self.batched_actions = batch_space(hello.action_space, self.count)
+        self._blank = next(iter(iterate(batch_space(hello.observation_space, 1),
+                                        create_empty_array(hello.observation_space, 1))))
+
+    def answer(self, request: Request) -> StepsResponse | ErrorReply:
+        """Check the whole request, then reset or step every instance; answer in columns.
+
+        A refused request (a reset mask of the wrong length, an action outside the space, an
+        instance whose episode has not started or has ended) changes nothing. An exception in
+        user code fails that instance alone (its entry in ``errors``).
+        """
+        steps = request.steps
+        assert steps is not None
+        reset = np.zeros(self.count, np.bool_) if steps.reset is None else steps.reset
+        if len(reset) != self.count:
+            return ErrorReply(request.id, ErrorCode.BAD_REQUEST, f"steps.reset has "
+                              f"{len(reset)} flags for {self.count} instances")
+        try:
+            actions = self._check(steps.action, reset)
+        except RequestError as error:
+            return ErrorReply(request.id, error.code, str(error))
+        replies = [instance.environment.answer_part(request, action, bool(resets))
+                   for instance, action, resets in zip(self.instances, actions, reset,
+                                                       strict=True)]
+        return self._columns(request.id, replies)
+
+    def _check(self, action: Any, reset: np.ndarray) -> list[Any]:
+        """Every row of ``action`` checked (rows of resetting instances too, then ignored)."""
+        for index, instance in enumerate(self.instances):
+            if not reset[index]:
+                try:
+                    instance.environment.check_can_act()
+                except RequestError as error:
+                    raise RequestError(error.code, f"steps: instance {index}: {error}") from None
+        if isinstance(self.action_space, spaces.Box):  # the common case: one check for all
+            try:
+                return list(check(self.batched_actions, action, "steps.action"))
+            except SpaceMismatch as error:
+                raise RequestError(ErrorCode.INVALID_ACTION, str(error)) from None
+        try:
+            rows = list(iterate(self.batched_actions, action))
+        except (TypeError, ValueError, KeyError, IndexError, AttributeError) as error:
+            raise RequestError(ErrorCode.INVALID_ACTION, f"steps.action does not fit the "
+                               f"batched action space {self.batched_actions}: {error}") from None
+        if len(rows) != self.count:
+            raise RequestError(ErrorCode.INVALID_ACTION, f"steps.action holds {len(rows)} "
+                               f"actions for {self.count} instances")
+        return [instance.environment.check_action(row, where=f"steps.action[{index}]: ")
+                for index, (instance, row) in enumerate(zip(self.instances, rows, strict=True))]
+
+    def _columns(self, request_id: int, replies: list[Outcome | ErrorReply]) -> StepsResponse:
+        answered = [_FAILED if reply.__class__ is ErrorReply else reply for reply in replies]
+        observations = [self._blank if reply is _FAILED else reply.observation["agent"]
+                        for reply in answered]
+        failed = sum(reply is _FAILED for reply in answered)
+        return StepsResponse(
+            id=request_id,
+            observation=concatenate(self.observation_space, observations,
+                                    create_empty_array(self.observation_space, self.count)),
+            reward=np.array([reply.reward for reply in answered], np.float64),
+            terminated=np.array([reply.terminated for reply in answered], np.bool_),
+            truncated=np.array([reply.truncated for reply in answered], np.bool_),
+            frames=np.array([reply.frames for reply in answered], np.int64),
+            info=tuple(_info(reply) for reply in answered),
+            errors=tuple(reply if reply.__class__ is ErrorReply else None for reply in replies)
+            if failed else None,
+        )
+
+
+_FAILED = Outcome(None, 0.0, False, False, {}, 0, None)
+
+
+def _info(outcome: Outcome) -> dict[str, Any]:
+    if outcome.agents is None:
+        return outcome.info
+    return {**outcome.info, "agents": outcome.agents}

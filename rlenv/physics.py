@@ -66,12 +66,43 @@ class PhysicsWorld(Node):
         process_mode: ProcessMode = ProcessMode.INHERIT,
     ) -> None:
         super().__init__(name, process_mode=process_mode)
-        self.space = pymunk.Space()
-        self.space.gravity = gravity
-        self.space.iterations = iterations
-        self.space.damping = damping
+        self.space = self._new_space(gravity, iterations, damping)
         self._shape_nodes: dict[pymunk.Shape, CollisionShape] = {}
-        self.space.on_collision(begin=self._on_begin, separate=self._on_separate)
+
+    def _new_space(self, gravity: Vec, iterations: int, damping: float) -> pymunk.Space:
+        space = pymunk.Space()
+        space.gravity = gravity
+        space.iterations = iterations
+        space.damping = damping
+        space.on_collision(begin=self._on_begin, separate=self._on_separate)
+        return space
+
+    def restart(self) -> None:
+        """Start the simulation afresh, as a newly built subtree would: cheap episode resets.
+
+        The bodies, shapes and joints below stay (nodes, pymunk objects and their settings),
+        but move into a new space (same gravity, iterations and damping) in tree order, as
+        they would on entering it: every body back at the position and angle it was built
+        with, at rest (velocities, force and torque zero), and every joint with a fresh
+        constraint made there (joints such as ``pivot`` read the bodies' pose when made). No
+        solver state (joint impulses, cached contacts, the spatial index) survives; contacts
+        in progress end, with their signals. Place the bodies for the episode afterwards.
+        """
+        old = self.space
+        old.remove(*old.constraints, *old.shapes, *old.bodies)
+        self.space = self._new_space(old.gravity, old.iterations, old.damping)
+        joints = []
+        for node in self.iter_subtree():
+            if isinstance(node, PhysicsBody) and node.world is self:
+                node._restart()
+                self.space.add(node.body)
+            elif isinstance(node, CollisionShape) and node._world is self:
+                self.space.add(node.shape)
+            elif isinstance(node, Joint) and node._world is self and node._attached:
+                joints.append(node)
+        for joint in joints:  # once every body is back, as joints attach when ready
+            joint.constraint = None
+            joint._attach(self, required=True)
 
     @property
     def gravity(self) -> pymunk.Vec2d:
@@ -149,6 +180,7 @@ class PhysicsBody(Node):
         self.body = body
         body.position = position
         body.angle = angle
+        self._built_pose = (position, angle)
         self.world: PhysicsWorld | None = None
 
     def _enter_tree(self) -> None:
@@ -159,6 +191,17 @@ class PhysicsBody(Node):
         if self.world is not None and self.body.space is not None:
             self.world.space.remove(self.body)
         self.world = None
+
+    def _restart(self) -> None:
+        """Back to the pose the body was built with, at rest (see PhysicsWorld.restart)."""
+        body = self.body
+        body.angle = self._built_pose[1]
+        body.position = self._built_pose[0]
+        if body.body_type != pymunk.Body.STATIC:
+            body.velocity = (0.0, 0.0)
+            body.angular_velocity = 0.0
+            body.force = (0.0, 0.0)
+            body.torque = 0.0
 
     # Godot-style accessors, so tree queries can read and set state without reaching into pymunk.
 

@@ -7,7 +7,7 @@ or right and must keep the pole upright and the cart on its track::
     |___PhysicsFramesTimer
     |___Agent (CartPoleAgent)          pushes the cart, observes, is rewarded
     |___World (CartPoleWorld)
-        |___Physics (PhysicsWorld)     rebuilt on every reset, so episodes share no state
+        |___Physics (PhysicsWorld)     restarted on every reset, so episodes share no state
             |___Track (StaticBody)
             |   |___Line (CollisionShape)      a sensor: drawn, never touched
             |___Cart (RigidBody)
@@ -94,9 +94,20 @@ class CartPoleWorld(RLEnvWorld):
         self.physics: PhysicsWorld | None = None
         self.cart: RigidBody | None = None
         self.pole: RigidBody | None = None
+        self._built_for: tuple[float, float, float] | None = None
 
     def reset(self, options: Mapping[str, Any]) -> None:
-        """Replace the physics with a fresh space (no solver state survives an episode)."""
+        """Start the physics afresh: no solver state survives an episode.
+
+        The same track, cart and pole restart in a new space (cheap); they are rebuilt only
+        when their configuration changed.
+        """
+        built_for = (self.track_limit, self.cart_mass, self.pole_mass)
+        if self.physics is not None and self._built_for == built_for:
+            self.physics.damping = self.damping
+            self.physics.restart()
+            return
+        self._built_for = built_for
         if self.physics is not None:
             self.remove_child(self.physics)
             self.physics.queue_free()

@@ -97,7 +97,7 @@ def test_bench_prints_every_figure_with_its_baseline(tmp_path: Path) -> None:
     result = run("bench", "--rounds", "1", "--steps", "40", "--quick", "--json", str(out),
                  timeout=300)
     assert result.returncode == 0, result.stderr
-    assert "... (a) msgpack ping-pong" in result.stderr  # progress on stderr
+    assert "... (a, b, c, g) ping-pong" in result.stderr  # progress on stderr
     figures = {figure["name"]: figure for figure in json.loads(out.read_text())}
     for name in ("msgpack ping-pong over loopback", "remote CartPole Client.step (repeat 4)",
                  "remote 84x84x3 observation step", "gymnasium AsyncVectorEnv(8) CartPole-v1",

@@ -1,14 +1,16 @@
 """``rlenv bench``: rlenv's figures, each beside a baseline measured in the same run.
 
-Every figure is the median of several rounds and is printed with its baseline and the ratio:
+Every figure is the median of several rounds and is printed with its baseline and the ratio.
+A figure's rounds take turns with its baseline's (after a warm-up round each), so that both are
+measured under the same conditions however the machine's speed drifts during the run:
 
 - (a) a bare msgpack request/response over loopback (the floor: a Python echo server);
 - (b) in-process CartPole steps (no socket) against (a);
 - (c) remote ``Client.step`` on CartPole at repeat_action 1 and 4, against (a);
 - (d) an 84x84x3 uint8 observation (``examples.pixels``) against a ping-pong carrying the same
   bytes;
-- (e) ``RemoteVectorEnv`` throughput by number of environments and servers (instances per
-  server stepped by one batch request), against (f);
+- (e) ``RemoteVectorEnv`` throughput by number of environments and servers (the instances of
+  a server stepped by one ``steps`` request, in columns), against (f);
 - (f) gymnasium's ``AsyncVectorEnv`` with 8 ``CartPole-v1`` on the same machine;
 - (g) p50 / p99 latency of a remote step against the ping-pong's;
 - (h) memory of one server process, and per extra environment instance in one process.
@@ -18,6 +20,7 @@ Progress goes to stderr, the table to stdout, and everything to JSON with ``--js
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import os
@@ -81,25 +84,54 @@ class Figure:
         return None if not self.baseline else self.value / self.baseline
 
 
-def _median_rate(rounds: int, steps: int, run: Callable[[int], None]) -> float:
-    rates = []
-    for _ in range(rounds):
+class _Rate:
+    """One thing to measure: ``run(steps)`` does ``steps`` units of work (calls, env-steps...).
+
+    Args:
+        run: does the work.
+        steps: units per round.
+        scale: units counted per step (e.g. sub-environments per vector step).
+    """
+
+    def __init__(self, run: Callable[[int], None], steps: int, scale: int = 1) -> None:
+        self.run, self.steps, self.scale = run, steps, scale
+        self.rates: list[float] = []
+
+    def round(self) -> None:
         start = time.perf_counter()
-        run(steps)
-        rates.append(steps / (time.perf_counter() - start))
-    return statistics.median(rates)
+        self.run(self.steps)
+        self.rates.append(self.steps * self.scale / (time.perf_counter() - start))
+
+    @property
+    def median(self) -> float:
+        return statistics.median(self.rates)
 
 
-def _timed_rate(call: Callable[[], object], rounds: int, steps: int,
-                latencies: list[float] | None) -> float:
-    """Median calls per second of ``call``; each call's duration into ``latencies`` if given."""
+def _interleaved(rounds: int, *measures: _Rate) -> list[float]:
+    """The median rate of each measure, their rounds taken in turn after one warm-up round.
+
+    Taking turns puts a figure and its baseline under the same conditions, however the
+    machine's speed drifts during the run (shared virtual machines drift a lot).
+    """
+    for measure in measures:
+        measure.round()
+        measure.rates.clear()
+    for _ in range(rounds):
+        for measure in measures:
+            measure.round()
+    return [measure.median for measure in measures]
+
+
+def _calls(call: Callable[[], object], latencies: list[float] | None = None,
+           ) -> Callable[[int], None]:
+    """``run(n)`` calling ``call`` n times; each call's duration into ``latencies`` if given."""
     def run(n: int) -> None:
         for _ in range(n):
             started = time.perf_counter()
             call()
             if latencies is not None:
                 latencies.append(time.perf_counter() - started)
-    return _median_rate(rounds, steps, run)
+    return run
 
 
 def _frame(message: object) -> bytes:
@@ -133,6 +165,12 @@ class _PingPong:
         self.process.kill()
         self.process.wait()
 
+    def __enter__(self) -> _PingPong:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
 
 def _step_request(action: Any) -> bytes:
     return _frame({"id": 1, "action": action, "observation": {"agent": {}}})
@@ -141,21 +179,6 @@ def _step_request(action: Any) -> bytes:
 def _step_reply(observation: Any) -> bytes:
     return _frame({"id": 1, "observation": {"agent": observation}, "reward": 1.0,
                    "terminated": False, "truncated": False, "info": {}, "frames": 4})
-
-
-def _ping_pong(request: bytes, reply: bytes, rounds: int, steps: int,
-               latencies: list[float] | None = None) -> float:
-    echo = _PingPong(reply)
-    try:
-        return _timed_rate(lambda: echo.round_trip(request), rounds, steps, latencies)
-    finally:
-        echo.close()
-
-
-def _client_steps(client: Any, action: Any, repeat: int | None, rounds: int, steps: int,
-                  latencies: list[float] | None = None) -> float:
-    client.reset(seed=0)
-    return _timed_rate(lambda: client.step(action, repeat), rounds, steps, latencies)
 
 
 def _rss_kib(pid: int) -> int:
@@ -183,49 +206,57 @@ def run_benchmarks(
     figures: list[Figure] = []
     cartpole_action = np.zeros(1, np.float32)
     cartpole_obs = np.zeros(5, np.float32)
+    endless = {"world": {"track_limit": 1e9}, "agent": {"angle_limit": 1e9}}
 
-    progress("(a) msgpack ping-pong over loopback, CartPole-sized frames")
+    progress("(a, b, c, g) ping-pong, in-process and remote CartPole steps, in turns")
     pong_latencies: list[float] = []
-    floor = _ping_pong(_step_request(cartpole_action), _step_reply(cartpole_obs), rounds, steps,
-                       pong_latencies)
-    figures.append(Figure("msgpack ping-pong over loopback", floor, "round trips/s"))
-
-    progress("(b) in-process CartPole")
-    with LocalClient(CARTPOLE) as local:
-        local.configure(world={"track_limit": 1e9}, agent={"angle_limit": 1e9})
-        rate = _client_steps(local, cartpole_action, 4, rounds, steps)
-    figures.append(Figure("in-process CartPole step (repeat 4)", rate, "steps/s",
-                          "msgpack ping-pong", floor))
-
-    progress("(c, g) remote CartPole steps")
     step_latencies: list[float] = []
-    with ServerProcess(CARTPOLE) as server, Client(server.host, server.port) as client:
-        client.configure(world={"track_limit": 1e9}, agent={"angle_limit": 1e9})
-        for repeat in (1, 4):
-            rate = _client_steps(client, cartpole_action, repeat, rounds, steps,
-                                 step_latencies if repeat == 4 else None)
-            figures.append(Figure(f"remote CartPole Client.step (repeat {repeat})", rate,
-                                  "steps/s", "msgpack ping-pong", floor))
+    with _PingPong(_step_reply(cartpole_obs)) as echo, LocalClient(CARTPOLE) as local, \
+            ServerProcess(CARTPOLE) as server, Client(server.host, server.port) as client:
+        request = _step_request(cartpole_action)
+        for each in (local, client):
+            each.configure(**endless)
+            each.reset(seed=0)
+        floor, local_rate, *remote_rates = _interleaved(
+            rounds,
+            _Rate(_calls(lambda: echo.round_trip(request), pong_latencies), steps),
+            _Rate(_calls(lambda: local.step(cartpole_action, 4)), steps),
+            _Rate(_calls(lambda: client.step(cartpole_action, 1)), steps),
+            _Rate(_calls(lambda: client.step(cartpole_action, 4), step_latencies), steps),
+        )
         cartpole_rss = _rss_kib(server.pid)
+    figures.append(Figure("msgpack ping-pong over loopback", floor, "round trips/s"))
+    figures.append(Figure("in-process CartPole step (repeat 4)", local_rate, "steps/s",
+                          "msgpack ping-pong", floor))
+    for repeat, rate in zip((1, 4), remote_rates, strict=True):
+        figures.append(Figure(f"remote CartPole Client.step (repeat {repeat})", rate,
+                              "steps/s", "msgpack ping-pong", floor))
     for quantile in (50, 99):
         mine = float(np.percentile(step_latencies, quantile)) * 1e6
         theirs = float(np.percentile(pong_latencies, quantile)) * 1e6
         figures.append(Figure(f"p{quantile} remote step latency (repeat 4)", mine, "us",
                               f"p{quantile} ping-pong", theirs))
 
-    progress("(d) 84x84x3 uint8 observations")
+    progress("(d) 84x84x3 uint8 observations and a ping-pong of the same bytes, in turns")
     image = np.zeros((84, 84, 3), np.uint8)
-    image_floor = _ping_pong(_step_request(0), _step_reply(image), rounds, steps // 2)
-    with ServerProcess(PIXELS) as server, Client(server.host, server.port) as client:
-        rate = _client_steps(client, 0, 1, rounds, steps // 2)
+    with _PingPong(_step_reply(image)) as echo, ServerProcess(PIXELS) as server, \
+            Client(server.host, server.port) as client:
+        client.reset(seed=0)
+        request = _step_request(0)
+        image_floor, rate = _interleaved(
+            rounds, _Rate(_calls(lambda: echo.round_trip(request)), steps // 2),
+            _Rate(_calls(lambda: client.step(0, 1)), steps // 2))
     figures.append(Figure("remote 84x84x3 observation step", rate, "steps/s",
                           "ping-pong carrying the same bytes", image_floor))
 
-    progress("(f) gymnasium AsyncVectorEnv, 8 x CartPole-v1")
+    progress("(e, f) RemoteVectorEnv layouts and gymnasium's AsyncVectorEnv, in turns")
     import gymnasium
 
-    async_envs = gymnasium.vector.AsyncVectorEnv([lambda: gymnasium.make("CartPole-v1")] * 8)
-    try:
+    layouts = [(4, 1), (8, 4), (64, 32)] if quick else \
+        [(1, 1), (2, 1), (4, 1), (8, 1), (8, 4), (64, 32), (64, 64)]
+    with contextlib.ExitStack() as stack:
+        async_envs = gymnasium.vector.AsyncVectorEnv([lambda: gymnasium.make("CartPole-v1")] * 8)
+        stack.callback(async_envs.close)
         async_envs.reset(seed=0)
         async_envs.action_space.seed(0)
         actions = [async_envs.action_space.sample() for _ in range(64)]
@@ -233,25 +264,18 @@ def run_benchmarks(
         def async_run(n: int) -> None:
             for i in range(n):
                 async_envs.step(actions[i % 64])
-        async_rate = 8 * _median_rate(rounds, steps // 4, async_run)
-    finally:
-        async_envs.close()
-    figures.append(Figure("gymnasium AsyncVectorEnv(8) CartPole-v1", async_rate, "env-steps/s"))
-
-    layouts = [(4, 1), (8, 4), (64, 32)] if quick else \
-        [(1, 1), (2, 1), (4, 1), (8, 1), (8, 4), (64, 32), (64, 64)]
-    for count, per_server in layouts:
-        servers = -(-count // per_server)
-        progress(f"(e) RemoteVectorEnv, {count} CartPoles in {servers} servers")
-        with RemoteVectorEnv(count, CARTPOLE, repeat_action=1,
-                             instances_per_server=per_server) as envs:
+        measures = [_Rate(async_run, steps // 4, scale=8)]
+        for count, per_server in layouts:
+            envs = stack.enter_context(RemoteVectorEnv(count, CARTPOLE, repeat_action=1,
+                                                       instances_per_server=per_server))
             envs.reset(seed=0)
             batch = np.zeros((count, 1), np.float32)
-
-            def vector_run(n: int, envs: Any = envs, batch: np.ndarray = batch) -> None:
-                for _ in range(n):
-                    envs.step(batch)
-            rate = count * _median_rate(rounds, max(steps // count, 20), vector_run)
+            measures.append(_Rate(_calls(lambda envs=envs, batch=batch: envs.step(batch)),
+                                  max(steps // count, 20), scale=count))
+        async_rate, *vector_rates = _interleaved(rounds, *measures)
+    figures.append(Figure("gymnasium AsyncVectorEnv(8) CartPole-v1", async_rate, "env-steps/s"))
+    for (count, per_server), rate in zip(layouts, vector_rates, strict=True):
+        servers = -(-count // per_server)
         figures.append(Figure(f"RemoteVectorEnv {count} envs, {servers} servers x {per_server}",
                               rate, "env-steps/s", "AsyncVectorEnv(8) CartPole-v1", async_rate))
 

@@ -43,15 +43,21 @@ OBSERVE = {"agent": {}}
 ENDLESS = {"agent": {"angle_limit": 1e9}, "world": {"track_limit": 1e9}}
 
 
-def _per_step(run: Callable[[int], None]) -> float:
-    """Median microseconds per step of ``run(STEPS)`` over ``ROUNDS`` rounds, after a warm-up."""
-    run(STEPS // 10)
-    times = []
+def _per_step(*runs: Callable[[int], None]) -> list[float]:
+    """Median microseconds per step of each ``run(STEPS)``, their rounds taken in turns.
+
+    After a warm-up round each; taking turns puts a figure and its floor under the same
+    conditions however the machine's speed drifts.
+    """
+    for run in runs:
+        run(STEPS // 10)
+    times: list[list[float]] = [[] for _ in runs]
     for _ in range(ROUNDS):
-        start = time.perf_counter()
-        run(STEPS)
-        times.append((time.perf_counter() - start) / STEPS * 1e6)
-    return statistics.median(times)
+        for run, kept in zip(runs, times, strict=True):
+            start = time.perf_counter()
+            run(STEPS)
+            kept.append((time.perf_counter() - start) / STEPS * 1e6)
+    return [statistics.median(kept) for kept in times]
 
 
 def main() -> None:
@@ -96,12 +102,12 @@ def main() -> None:
             client.receive_data(server.send(reply))
             client.next_message()
 
-    floor_us, floor_1 = _per_step(floor(REPEAT)), _per_step(floor(1))
-    step_us, step_1 = _per_step(step(REPEAT)), _per_step(step(1))
-    codec_us = _per_step(codec)
+    floor_us, floor_1, step_us, step_1, codec_us = _per_step(
+        floor(REPEAT), floor(1), step(REPEAT), step(1), codec)
     column_us, column_floor_us, column_codec_us = _column_step()
     floor_tick, step_tick = (floor_us - floor_1) / (REPEAT - 1), (step_us - step_1) / (REPEAT - 1)
-    print(f"CartPole, repeat_action={REPEAT}, microseconds per step (medians of {ROUNDS} rounds)")
+    print(f"CartPole, repeat_action={REPEAT}, microseconds per step (medians of {ROUNDS} rounds "
+          "taken in turns)")
     print(f"  floor (agent code + pymunk only)   {floor_us:7.1f}")
     print(f"  full step through the tree         {step_us:7.1f}   {step_us / floor_us:.2f}x floor")
     print(f"  framework overhead                 {step_us - floor_us:7.1f}")
@@ -154,7 +160,8 @@ def _column_step() -> tuple[float, float, float]:
             client.receive_data(server.send(answer))
             client.next_message()
 
-    return _per_step(through), _per_step(floor), _per_step(codec)
+    through_us, floor_us, codec_us = _per_step(through, floor, codec)
+    return through_us, floor_us, codec_us
 
 
 if __name__ == "__main__":

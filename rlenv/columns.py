@@ -14,11 +14,11 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.vector.utils import batch_space, concatenate, create_empty_array, iterate
 
-from rlenv.environment import Outcome
+from rlenv.environment import Outcome, non_finite_error
 from rlenv.errors import ErrorCode, RequestError
 from rlenv.instance import Instance
 from rlenv.protocol import ErrorReply, Request, StepsResponse
-from rlenv.spaces import SpaceMismatch, check
+from rlenv.spaces import SpaceMismatch, check, find_non_finite
 
 __all__ = ["ColumnStepper"]
 
@@ -39,6 +39,9 @@ class ColumnStepper:
         self.batched_actions = batch_space(hello.action_space, self.count)
         self._blank = next(iter(iterate(batch_space(hello.observation_space, 1),
                                         create_empty_array(hello.observation_space, 1))))
+        # A float Box observation is checked for NaN and infinity once for all instances.
+        self._float_box = isinstance(hello.observation_space, spaces.Box) and \
+            hello.observation_space.dtype.kind == "f"
 
     def answer(self, request: Request) -> StepsResponse | ErrorReply:
         """Check the whole request, then reset or step every instance; answer in columns.
@@ -57,7 +60,8 @@ class ColumnStepper:
             actions = self._check(steps.action, reset)
         except RequestError as error:
             return ErrorReply(request.id, error.code, str(error))
-        replies = [instance.environment.answer_part(request, action, bool(resets))
+        replies = [instance.environment.answer_part(request, action, bool(resets),
+                                                    check_observation=not self._float_box)
                    for instance, action, resets in zip(self.instances, actions, reset,
                                                        strict=True)]
         return self._columns(request.id, replies)
@@ -90,11 +94,21 @@ class ColumnStepper:
         answered = [_FAILED if reply.__class__ is ErrorReply else reply for reply in replies]
         observations = [self._blank if reply is _FAILED else reply.observation["agent"]
                         for reply in answered]
+        stacked = concatenate(self.observation_space, observations,
+                              create_empty_array(self.observation_space, self.count))
+        if self._float_box and not np.isfinite(stacked.sum(dtype=np.float64)):
+            for index in np.flatnonzero(~np.isfinite(stacked.reshape(self.count, -1)).all(1)):
+                environment = self.instances[index].environment
+                row = stacked[index]  # in the space's dtype, as it would travel
+                assert environment.agent is not None
+                replies[index] = environment.environment_error(request_id, non_finite_error(
+                    environment.agent, row, find_non_finite(row) or ""))
+                answered[index] = _FAILED
+                stacked[index] = self._blank
         failed = sum(reply is _FAILED for reply in answered)
         return StepsResponse(
             id=request_id,
-            observation=concatenate(self.observation_space, observations,
-                                    create_empty_array(self.observation_space, self.count)),
+            observation=stacked,
             reward=np.array([reply.reward for reply in answered], np.float64),
             terminated=np.array([reply.terminated for reply in answered], np.bool_),
             truncated=np.array([reply.truncated for reply in answered], np.bool_),

@@ -40,7 +40,7 @@ from rlenv.spaces import SpaceMismatch, check, find_non_finite
 from rlenv.timer import PhysicsFramesTimer
 from rlenv.world import RLEnvWorld
 
-__all__ = ["Outcome", "RLEnvironment"]
+__all__ = ["Outcome", "RLEnvironment", "non_finite_error"]
 
 logger = logging.getLogger(__name__)
 
@@ -246,7 +246,7 @@ class RLEnvironment(RLNode):
         except RequestError as error:
             return ErrorReply(request.id, error.code, str(error))
         except Exception as error:  # user code raised: report it, keep serving
-            return self._environment_error(request.id, error)
+            return self.environment_error(request.id, error)
         finally:
             self._request = None
 
@@ -325,13 +325,16 @@ class RLEnvironment(RLNode):
         return Response(request.id, *self._outcome(request, request.observation,
                                                    acted=request.action is not None))
 
-    def answer_part(self, request: Request, action: Any, reset: bool) -> Outcome | ErrorReply:
+    def answer_part(self, request: Request, action: Any, reset: bool, *,
+                    check_observation: bool = True) -> Outcome | ErrorReply:
         """Serve one instance's share of a ``steps`` request (see :class:`rlenv.protocol.Steps`).
 
         Resets the episode when ``reset``, else runs ``action`` (already checked against the
         action space, e.g. for the whole batch at once) for ``request.steps.repeat_action``
         ticks; returns the outcome with the agent observation, or the error :meth:`answer`
-        would give.
+        would give. ``check_observation=False`` leaves the refusal of NaN and infinity to the
+        caller (who checks every instance's observation at once, and calls
+        :meth:`environment_error` with :func:`non_finite_error` for one that holds any).
         """
         assert request.steps is not None
         self._request = request
@@ -341,23 +344,24 @@ class RLEnvironment(RLNode):
             else:
                 self._check_can_act(fresh=False)
                 self._act(action, request.steps.repeat_action or self.repeat_action)
-            return self._outcome(request, _AGENT_ONLY, acted=not reset)
+            return self._outcome(request, _AGENT_ONLY, acted=not reset,
+                                 check_observation=check_observation)
         except RequestError as error:
             return ErrorReply(request.id, error.code, str(error))
         except Exception as error:  # user code raised: report it, keep serving
-            return self._environment_error(request.id, error)
+            return self.environment_error(request.id, error)
         finally:
             self._request = None
 
     def _outcome(self, request: Request, observation_request: Mapping[str, Any] | None,
-                 acted: bool) -> Outcome:
+                 acted: bool, check_observation: bool = True) -> Outcome:
         """The observation asked for, and the rewards, flags and ticks since the last answer.
 
         Rewards and the tick count start again from zero.
         """
         observation = None
         if observation_request is not None:
-            observation = self._observation(observation_request)
+            observation = self._observation(observation_request, check_observation)
         agents = self.agents
         outcomes = None
         if len(agents) > 1:
@@ -380,14 +384,18 @@ class RLEnvironment(RLNode):
         return Outcome(observation, reward, terminated, truncated,
                        self._response_info(request, acted), frames if acted else 0, outcomes)
 
-    def _observation(self, observation_request: Mapping[str, Any]) -> dict[str, Any]:
-        """The parts of the state an ``observation`` request asks for."""
+    def _observation(self, observation_request: Mapping[str, Any],
+                     check: bool = True) -> dict[str, Any]:
+        """The parts of the state an ``observation`` request asks for.
+
+        Agent observations holding NaN or infinity raise ``FloatingPointError`` (if ``check``).
+        """
         observation = {}
         if "agent" in observation_request:
             asked = observation_request["agent"]
             observation["agent"] = (
-                {each.name: _observe(each, asked) for each in self.agents}
-                if self.multi_agent else _observe(self._require_agent(), asked)
+                {each.name: _observe(each, asked, check) for each in self.agents}
+                if self.multi_agent else _observe(self._require_agent(), asked, check)
             )
         if "world" in observation_request:
             observation["world"] = self._require_world().get_data(observation_request["world"])
@@ -446,8 +454,8 @@ class RLEnvironment(RLNode):
         """Extra diagnostics for ``info``; override to add entries (msgpack-able values)."""
         return {}
 
-    def _environment_error(self, request_id: int, error: BaseException) -> ErrorReply:
-        """The ``environment_error`` answer for an exception in user code.
+    def environment_error(self, request_id: int, error: BaseException) -> ErrorReply:
+        """The ``environment_error`` answer for an exception in user code (its traceback in it).
 
         The tree is paused and the next action needs a reset first.
         """
@@ -730,16 +738,21 @@ class _Episode(Enum):
 _IN_EPISODE = frozenset({_Episode.ACTING, _Episode.RUNNING})
 
 
-def _observe(agent: RLAgent, request: Any) -> Any:
-    """``agent``'s observation, refused when it holds NaN or infinity."""
+def _observe(agent: RLAgent, request: Any, check: bool) -> Any:
+    """``agent``'s observation, refused (if ``check``) when it holds NaN or infinity."""
     data = agent.get_data(request)
-    where = find_non_finite(data)
-    if where is not None:
-        raise FloatingPointError(
-            f"the observation of {agent.get_path()} is not finite at {where or '()'}: "
-            f"{data!r:.200}"
-        )
+    if check:
+        where = find_non_finite(data)
+        if where is not None:
+            raise non_finite_error(agent, data, where)
     return data
+
+
+def non_finite_error(agent: RLAgent, data: Any, where: str) -> FloatingPointError:
+    """The error for an observation of ``agent`` holding NaN or infinity at ``where``."""
+    return FloatingPointError(
+        f"the observation of {agent.get_path()} is not finite at {where or '()'}: {data!r:.200}"
+    )
 
 
 def _check_keys(part: Mapping[str, Any], allowed: frozenset[str], where: str) -> None:

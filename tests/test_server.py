@@ -510,6 +510,25 @@ def test_a_failing_instance_fails_alone_in_columns(serve: Serve) -> None:
         assert many.receive_steps().observation.tolist() == [[6], [0]]
 
 
+def test_a_non_finite_observation_fails_its_instance_alone_in_columns(serve: Serve) -> None:
+    """Float observations are checked once for all instances; a NaN fails only its own."""
+    multi = serve("examples.faulty:CountingEnvironment", args=["--instances", "3"])
+    with Client(multi.host, multi.port) as many:
+        many.send_steps(np.zeros(3, np.int64), reset=np.ones(3, np.bool_))
+        many.receive_steps()
+        many.send_steps(np.array([0, 1, 0]), repeat_action=2)
+        columns = many.receive_steps()
+        assert columns.errors is not None and columns.errors[0] is None is columns.errors[2]
+        assert columns.errors[1].code == ErrorCode.ENVIRONMENT_ERROR
+        assert "the observation of /root/Counting/Agent is not finite at [0]" in \
+            columns.errors[1].message
+        assert columns.observation[[0, 2], 0].tolist() == [2.0, 2.0]
+        assert np.isfinite(columns.observation).all()  # the failed row is blank, not NaN
+        many.send_steps(np.zeros(3, np.int64))
+        with pytest.raises(RemoteError, match="steps: instance 1: no episode has started"):
+            many.receive_steps()
+
+
 def test_a_single_instance_server_refuses_batches_and_steps(client: Client) -> None:
     for send in (lambda: client.send_steps(np.zeros((1, 1), np.float32)),
                  lambda: client.send_batch([client.reset_request()])):

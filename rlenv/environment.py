@@ -446,8 +446,8 @@ class RLEnvironment(RLNode):
             return {"value": get_property(self, arguments["path"], arguments["property"])}
         set_property(self, arguments["path"], arguments["property"], arguments["value"])
         if self._log.started:
-            self._log.events.append(["set", arguments["path"], arguments["property"],
-                                     arguments["value"]])
+            self._log.record(["set", arguments["path"], arguments["property"],
+                              arguments["value"]])
         return {}
 
     def _get_info(self) -> dict[str, Any]:
@@ -540,9 +540,8 @@ class RLEnvironment(RLNode):
                                "real_time=False first")
         if request.snapshot:
             raise RequestError(ErrorCode.BAD_REQUEST, "snapshot takes an empty map")
-        if request.snapshot is not None and not self._log.started:
-            raise RequestError(ErrorCode.RESET_REQUIRED, "no episode has started; nothing to "
-                               "snapshot")
+        if request.snapshot is not None:
+            self._log.check_snapshot()
         if request.config is not None:
             self._check_config(request.config)
         reset = request.reset

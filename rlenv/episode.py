@@ -29,7 +29,9 @@ from rlenv.errors import ErrorCode, RequestError
 __all__ = ["MAX_EVENTS", "EpisodeLog", "generator_from_state", "parse_snapshot"]
 
 SNAPSHOT_VERSION = 1
-MAX_EVENTS = 1_000_000
+MAX_EVENTS = 100_000
+"""Most events a snapshot holds. The log of a longer episode stops there (bounded memory:
+an endless episode would otherwise grow its log forever) and its snapshots are refused."""
 _BIT_GENERATORS = {"PCG64": np.random.PCG64}
 
 
@@ -42,6 +44,7 @@ class EpisodeLog:
         self.options: Mapping[str, Any] = {}
         self.events: list[list[Any]] = []
         self.started = False
+        self.overflowed = False  # the episode has more events than a snapshot may hold
 
     def begin(self, config: dict[str, dict[str, Any]], rng: np.random.Generator,
               options: Mapping[str, Any]) -> None:
@@ -51,21 +54,47 @@ class EpisodeLog:
         self.options = dict(options)
         self.events = []
         self.started = True
+        self.overflowed = False
 
     def configured(self, config: Mapping[str, Any]) -> None:
         """Configuration applied during the episode."""
         if self.started:
-            self.events.append(["config", dict(config)])
+            self.record(["config", dict(config)])
 
     def acted(self, action: Any, frames: int) -> None:
         """An action that ran ``frames`` ticks at most."""
-        self.events.append(["action", action, frames])
+        self.record(["action", action, frames])
+
+    def record(self, event: list[Any]) -> None:
+        """Append ``event``; past :data:`MAX_EVENTS`, forget them all and remember why."""
+        if self.overflowed:
+            return
+        if len(self.events) >= MAX_EVENTS:
+            self.events = []
+            self.overflowed = True
+            return
+        self.events.append(event)
 
     def snapshot(self) -> dict[str, Any]:
-        """The episode so far, as data (the environment refuses a snapshot before any episode)."""
-        assert self.started, "no episode has started"
+        """The episode so far, as data (see :meth:`check_snapshot` for when it is refused)."""
+        self.check_snapshot()
         return {"version": SNAPSHOT_VERSION, "config": self.config, "rng": self.rng,
                 "options": self.options, "events": list(self.events)}
+
+    def check_snapshot(self) -> None:
+        """Refuse a snapshot that cannot be taken.
+
+        Raises:
+            RequestError: ``reset_required`` before any episode; ``bad_request`` when the
+                episode has more than :data:`MAX_EVENTS` events.
+        """
+        if not self.started:
+            raise RequestError(ErrorCode.RESET_REQUIRED, "no episode has started; nothing to "
+                               "snapshot")
+        if self.overflowed:
+            raise RequestError(ErrorCode.BAD_REQUEST, f"this episode is too long to snapshot: "
+                               f"more than {MAX_EVENTS:,} actions and changes since its reset "
+                               "(snapshot earlier, or reset)")
 
 
 def parse_snapshot(snapshot: Any) -> dict[str, Any]:

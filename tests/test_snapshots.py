@@ -9,8 +9,10 @@ import numpy as np
 import pytest
 from conftest import Serve
 
+from examples.cartpole import TARGET
 from examples.pair import NAMES, chase
-from rlenv_client import Client, ErrorCode, RemoteError
+from rlenv import episode
+from rlenv_client import Client, ErrorCode, LocalClient, RemoteError
 
 CARTPOLE_ACTIONS = [np.array([0.4 * np.sin(t / 2.0)], np.float32) for t in range(60)]
 
@@ -139,3 +141,25 @@ def test_a_snapshot_that_outlives_its_episode_needs_a_reset(client: Client) -> N
     assert error.value.code == ErrorCode.ENVIRONMENT_ERROR
     assert "after its episode ended" in error.value.message
     client.reset(seed=3)
+
+
+def test_the_log_of_an_endless_episode_stays_bounded(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Past MAX_EVENTS (lowered here to 5) the log forgets its events and snapshots are
+    refused, so an episode that never ends does not grow the server's memory forever."""
+    monkeypatch.setattr(episode, "MAX_EVENTS", 5)
+    with LocalClient(TARGET) as local:
+        local.configure(agent={"angle_limit": 1e9}, world={"track_limit": 1e9})  # endless
+        local.reset(seed=1)
+        for _ in range(5):
+            local.step(np.zeros(1, np.float32))
+        assert len(local.snapshot()["events"]) == 5
+        local.step(np.zeros(1, np.float32))
+        log = local.environment._log
+        assert log.overflowed and log.events == []
+        with pytest.raises(RemoteError, match="too long to snapshot: more than 5 actions") as error:
+            local.snapshot()
+        assert error.value.code == ErrorCode.BAD_REQUEST
+        local.step(np.zeros(1, np.float32))  # the episode itself goes on
+        local.reset(seed=1)
+        local.step(np.zeros(1, np.float32))
+        assert len(local.snapshot()["events"]) == 1

@@ -34,7 +34,6 @@ class ColumnStepper:
         self.instances = instances
         hello = instances[0].hello
         self.count = len(instances)
-        self.action_space = hello.action_space
         self.observation_space = hello.observation_space
         self.batched_actions = batch_space(hello.action_space, self.count)
         self._blank = next(iter(iterate(batch_space(hello.observation_space, 1),
@@ -67,28 +66,22 @@ class ColumnStepper:
         return self._columns(request.id, replies)
 
     def _check(self, action: Any, reset: np.ndarray) -> list[Any]:
-        """Every row of ``action`` checked (rows of resetting instances too, then ignored)."""
+        """One action per instance, all checked at once (resetting instances' too, ignored).
+
+        The batched space fixes the shape of every leaf, so no row can be missing or ragged.
+        """
         for index, instance in enumerate(self.instances):
             if not reset[index]:
                 try:
                     instance.environment.check_can_act()
                 except RequestError as error:
                     raise RequestError(error.code, f"steps: instance {index}: {error}") from None
-        if isinstance(self.action_space, spaces.Box):  # the common case: one check for all
-            try:
-                return list(check(self.batched_actions, action, "steps.action"))
-            except SpaceMismatch as error:
-                raise RequestError(ErrorCode.INVALID_ACTION, str(error)) from None
-        try:
-            rows = list(iterate(self.batched_actions, action))
-        except (TypeError, ValueError, KeyError, IndexError, AttributeError) as error:
-            raise RequestError(ErrorCode.INVALID_ACTION, f"steps.action does not fit the "
-                               f"batched action space {self.batched_actions}: {error}") from None
-        if len(rows) != self.count:
-            raise RequestError(ErrorCode.INVALID_ACTION, f"steps.action holds {len(rows)} "
-                               f"actions for {self.count} instances")
-        return [instance.environment.check_action(row, where=f"steps.action[{index}]: ")
-                for index, (instance, row) in enumerate(zip(self.instances, rows, strict=True))]
+        try:  # the batched space fixes every leaf's shape, so rows cannot be ragged
+            checked = check(self.batched_actions, action, "steps.action")
+        except SpaceMismatch as error:
+            raise RequestError(ErrorCode.INVALID_ACTION, str(error)) from None
+        return list(checked) if isinstance(checked, np.ndarray) else \
+            list(iterate(self.batched_actions, checked))
 
     def _columns(self, request_id: int, replies: list[Outcome | ErrorReply]) -> StepsResponse:
         answered = [_FAILED if reply.__class__ is ErrorReply else reply for reply in replies]

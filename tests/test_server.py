@@ -504,7 +504,7 @@ def test_a_failing_instance_fails_alone_in_columns(serve: Serve) -> None:
         with pytest.raises(RemoteError, match="steps: instance 1: no episode has started"):
             many.receive_steps()
         many.send_steps(np.array([0, 5]), reset=np.array([False, True]))
-        with pytest.raises(RemoteError, match=r"steps.action\[1\]: action is 5, outside"):
+        with pytest.raises(RemoteError, match=r"steps.action\[1\] is 5, outside \[0, 2\]"):
             many.receive_steps()  # rows of resetting instances are checked too
         many.send_steps(np.array([0, 0]), reset=np.array([False, True]))
         assert many.receive_steps().observation.tolist() == [[6], [0]]
@@ -527,6 +527,28 @@ def test_a_non_finite_observation_fails_its_instance_alone_in_columns(serve: Ser
         many.send_steps(np.zeros(3, np.int64))
         with pytest.raises(RemoteError, match="steps: instance 1: no episode has started"):
             many.receive_steps()
+
+
+def test_joint_actions_in_columns_are_checked_whole(serve: Serve) -> None:
+    """Dict actions (two agents): every agent's rows must be there, one per instance."""
+    multi = serve("examples.pair:PairEnvironment", args=["--instances", "2"])
+    rows = {name: np.zeros((2, 2), np.float32) for name in ("Blue", "Red")}
+    with Client(multi.host, multi.port) as many:
+        many.send_steps(rows, reset=np.ones(2, np.bool_))
+        assert many.receive_steps().errors is None
+        for bad, words in [
+            ({**rows, "Blue": np.zeros((3, 2), np.float32)},
+             r"steps.action\['Blue'\] has shape \(3, 2\), expected \(2, 2\)"),
+            ({"Blue": rows["Blue"]}, r"missing keys \['Red'\]"),
+            (np.zeros((2, 2), np.float32), r"must be a map with keys \['Blue', 'Red'\]"),
+        ]:
+            many.send_steps(bad)
+            with pytest.raises(RemoteError, match=words):
+                many.receive_steps()
+        many.send_steps(rows)
+        columns = many.receive_steps()
+        assert columns.errors is None and set(columns.observation) == {"Blue", "Red"}
+        assert all(set(info["agents"]) == {"Blue", "Red"} for info in columns.info)
 
 
 def test_a_single_instance_server_refuses_batches_and_steps(client: Client) -> None:

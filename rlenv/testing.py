@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
+from gymnasium.vector.utils import concatenate, create_empty_array
 
 from rlenv.errors import ErrorCode, RemoteError
 from rlenv.protocol import Connection, Hello, Role, pack, unpack
@@ -211,6 +212,14 @@ class _Suite:
             ("repeat_action 0",
              answered(pack({"id": 1, "action": 0, "repeat_action": 0}), ErrorCode.BAD_REQUEST,
                       "repeat_action")),
+            ("steps that are not a map",
+             answered(pack({"id": 1, "steps": [1]}), ErrorCode.BAD_REQUEST, "'steps'")),
+            ("steps without actions",
+             answered(pack({"id": 1, "steps": {"reset": [True]}}), ErrorCode.BAD_REQUEST,
+                      "'action'")),
+            ("steps with a reset mask of numbers",
+             answered(pack({"id": 1, "steps": {"action": [0], "reset": [2]}}),
+                      ErrorCode.BAD_REQUEST, "steps.reset")),
             ("deeply nested msgpack",
              answered(b"\x91" * 5000 + b"\xc0", ErrorCode.BAD_FRAME, "")),
             (f"{random_frames} random frames", lambda: self.random_frames(random_frames)),
@@ -295,7 +304,38 @@ class _Suite:
             beyond = int(space.start + space.n)
             probes.append(("an action out of range",
                            lambda: self.refused(beyond, ErrorCode.INVALID_ACTION, "outside")))
+        instances = self.controller.hello.instances
+        if instances > 1:  # the controller resets instance 0 only
+            probes += [
+                ("steps before every instance was reset",
+                 lambda: self.steps_refused(instances, None, ErrorCode.RESET_REQUIRED,
+                                            "steps: instance 1")),
+                ("steps with a reset mask of the wrong length",
+                 lambda: self.steps_refused(instances, [True] * (instances + 1),
+                                            ErrorCode.BAD_REQUEST, "flags for")),
+            ]
+        else:
+            probes.append(("steps to a single instance",
+                           lambda: self.steps_refused(1, None, ErrorCode.BAD_REQUEST,
+                                                      "one environment instance")))
         return probes
+
+    def steps_refused(self, instances: int, reset: list[bool] | None, code: ErrorCode,
+                      words: str) -> None:
+        before = self.controller.observe()["agent"]
+        space = self.controller.action_space
+        actions = concatenate(space, [self.valid_action() for _ in range(instances)],
+                              create_empty_array(space, instances))
+        self.controller.send_steps(actions, None if reset is None else np.array(reset))
+        try:
+            reply = self.controller.receive_steps()
+        except RemoteError as error:
+            assert error.code == code, f"expected {code}, got {error.code}: {error.message}"
+            assert words in error.message, f"{words!r} not in {error.message!r}"
+        else:
+            raise AssertionError(f"steps were accepted: {reply!r:.80}")
+        after = self.controller.observe()["agent"]
+        assert _same(before, after), "refused steps changed the environment"
 
     def refused(self, action: Any, code: ErrorCode, words: str) -> None:
         before = self.controller.observe()["agent"]
@@ -360,10 +400,14 @@ def _assert_error(reply: dict[str, Any], code: ErrorCode, words: str, *, fatal: 
 
 
 def _same(a: Any, b: Any) -> bool:
-    try:
-        return bool(np.array_equal(np.asarray(a), np.asarray(b)))
-    except (TypeError, ValueError):
-        return a == b
+    """Whether two observations are equal (maps and sequences of arrays, element by element)."""
+    if isinstance(a, dict) or isinstance(b, dict):
+        return isinstance(a, dict) and isinstance(b, dict) and a.keys() == b.keys() and \
+            all(_same(a[key], b[key]) for key in a)
+    if isinstance(a, tuple | list) and isinstance(b, tuple | list) and \
+            not all(np.isscalar(item) for item in (*a, *b)):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
+    return bool(np.array_equal(np.asarray(a), np.asarray(b)))
 
 
 def _peak_rss_kib(pid: int | None) -> int | None:

@@ -41,6 +41,18 @@ def test_compliance_suite_on_a_discrete_environment(
     assert report.passed, "\n".join(report.failures)
 
 
+@pytest.mark.parametrize("target", ["examples.cartpole:CartPoleEnvironment",
+                                    "examples.pair:PairEnvironment"], ids=["box", "dict"])
+def test_compliance_suite_on_a_multi_instance_server(
+    serve: Serve, figures: dict[str, str], target: str
+) -> None:
+    """The steps probes too: refused before every instance was reset, or with a short mask."""
+    server = serve(target, args=["--instances", "3"])
+    report = check_server(server.host, server.port, random_frames=50)
+    figures[f"compliance ({target.split(':')[1]} x 3 instances)"] = report.summary()
+    assert report.passed, "\n".join(report.failures)
+
+
 def test_a_token_guards_the_server(serve: Serve, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.delenv("RLENV_TOKEN", raising=False)
     server = serve(args=["--token", "s3cret"])

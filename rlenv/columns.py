@@ -36,6 +36,7 @@ class ColumnStepper:
         self.count = len(instances)
         self.observation_space = hello.observation_space
         self.batched_actions = batch_space(hello.action_space, self.count)
+        # One observation of zeros, for the rows of instances that failed.
         self._blank = next(iter(iterate(batch_space(hello.observation_space, 1),
                                         create_empty_array(hello.observation_space, 1))))
         # A float Box observation is checked for NaN and infinity once for all instances.

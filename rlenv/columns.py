@@ -52,6 +52,9 @@ class ColumnStepper:
         """
         steps = request.steps
         assert steps is not None
+        for instance in self.instances:
+            if instance.tree.real_time:  # the ticks due by the clock first, as for a request
+                instance.tree.iteration()
         reset = np.zeros(self.count, np.bool_) if steps.reset is None else steps.reset
         if len(reset) != self.count:
             return ErrorReply(request.id, ErrorCode.BAD_REQUEST, f"steps.reset has "

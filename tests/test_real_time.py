@@ -85,3 +85,24 @@ def test_a_real_time_server_keeps_running(serve: Serve) -> None:
                 break
         assert client.get_property(".", "real_time") is True
     assert total >= 0  # however fast this machine answers, nothing waits for the client
+
+
+def test_steps_in_columns_follow_the_clock_too(clock: ManualClock) -> None:
+    """A multi-instance server's steps run the ticks due by the clock first, as a plain
+    request does: the same frames, rewards and lateness."""
+    from rlenv.columns import ColumnStepper
+    from rlenv.instance import Instance
+    from rlenv.protocol import Request, Steps
+
+    instances = [Instance(TARGET, clock) for _ in range(3)]
+    for instance in instances:
+        instance.call(Request(id=1, config={"environment": {"real_time": True}}))
+        instance.call(Request(id=2, reset={"seed": 4}))
+    stepper = ColumnStepper(instances[:2])
+    clock.advance(0.1)
+    columns = stepper.answer(Request(id=3, steps=Steps(np.zeros((2, 1), np.float32))))
+    plain = instances[2].call(Request(id=3, action=STILL, observation={"agent": {}}))
+    assert plain.frames >= 6
+    assert columns.frames.tolist() == [plain.frames] * 2
+    assert columns.reward.tolist() == [plain.reward] * 2
+    assert [info["late"] for info in columns.info] == [plain.info["late"]] * 2

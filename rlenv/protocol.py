@@ -12,7 +12,7 @@ bytes) and decode with ``np.frombuffer``: no copy, read-only.
 spaces, rates). Then the client sends :class:`Request` s; the server answers each one, in order,
 with exactly one :class:`Response` or :class:`ErrorReply` carrying the request's id::
 
-    hello    {"hello": {"protocol": [1, 0], "environment": ..., "action_space": {...}, ...}}
+    hello    {"hello": {"protocol": [1, 1], "environment": ..., "action_space": {...}, ...}}
     request  {"id": 7, "config": {...}, "reset": {...}, "action": ..., "observation": {...},
               "repeat_action": 4}                      # every key but id optional
     response {"id": 7, "observation": {"agent": ...}, "reward": 1.0, "terminated": false,
@@ -66,6 +66,7 @@ __all__ = [
     "NDARRAY_EXT",
     "NEED_DATA",
     "PROTOCOL_VERSION",
+    "STEPS_SINCE",
     "REQUEST_KEYS",
     "Connection",
     "ErrorReply",
@@ -82,8 +83,12 @@ __all__ = [
     "unpack",
 ]
 
-PROTOCOL_VERSION: Final = (1, 0)
-"""(major, minor). Peers with different majors refuse each other; minors are compatible."""
+PROTOCOL_VERSION: Final = (1, 1)
+"""(major, minor). Peers with different majors refuse each other; minors are compatible, a
+newer minor only adds messages (1.1: ``steps`` requests, see :data:`STEPS_SINCE`)."""
+
+STEPS_SINCE: Final = (1, 1)
+"""The first protocol version whose multi-instance servers take ``steps`` requests."""
 
 DEFAULT_MAX_FRAME_SIZE: Final = 64 * 1024 * 1024
 """Largest frame body accepted by default, checked against the length prefix before reading."""

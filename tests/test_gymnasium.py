@@ -402,3 +402,31 @@ def test_make_vec_puts_one_server_on_each_core() -> None:
         assert len({row.tobytes() for row in observations}) == 6  # seeded apart
     finally:
         envs.close()
+
+
+def test_a_multi_instance_server_without_steps_is_refused_clearly() -> None:
+    """A server speaking protocol 1.0 (before steps) with several instances: a clear error."""
+    import socket
+    import threading
+
+    from rlenv.protocol import Connection, Hello, Role
+
+    hello = Hello("Old", CartPoleAgent.action_space, CartPoleAgent.observation_space,
+                  instances=2, protocol=(1, 0))
+    listener = socket.create_server(("127.0.0.1", 0))
+
+    def serve_hello() -> None:
+        connection, _ = listener.accept()
+        with connection:
+            connection.sendall(Connection(Role.SERVER).send(hello))
+            connection.recv(1)  # until the client hangs up
+
+    thread = threading.Thread(target=serve_hello)
+    thread.start()
+    try:
+        host, port = listener.getsockname()
+        with pytest.raises(ValueError, match="speaks rlenv protocol 1.0, which has no steps"):
+            RemoteVectorEnv(addresses=[f"{host}:{port}"])
+    finally:
+        thread.join(timeout=10)
+        listener.close()

@@ -35,7 +35,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, create_empty_array
 
 from rlenv.errors import RemoteError
-from rlenv.protocol import ErrorReply, Request, Response
+from rlenv.protocol import STEPS_SINCE, ErrorReply, Request, Response
 from rlenv_client.base import BaseClient
 from rlenv_client.launcher import ServerProcess
 from rlenv_client.rows import row, rows, set_row, set_rows
@@ -108,6 +108,15 @@ class RemoteVectorEnv(VectorEnv):
                 self.close()
                 raise ValueError(
                     f"{client.address} has other spaces than {self.clients[0].address}"
+                )
+        for client in self.clients:
+            if client.hello.instances > 1 and client.hello.protocol < STEPS_SINCE:
+                self.close()
+                raise ValueError(
+                    f"{client.address} speaks rlenv protocol {client.hello.protocol[0]}."
+                    f"{client.hello.protocol[1]}, which has no steps requests: serve it with an "
+                    f"rlenv that speaks {STEPS_SINCE[0]}.{STEPS_SINCE[1]} or later, or with one "
+                    "instance per server"
                 )
         self.num_envs = len(self._owner)
         self.single_action_space = hello.action_space

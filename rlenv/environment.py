@@ -18,10 +18,10 @@ from __future__ import annotations
 
 import logging
 import traceback
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from enum import Enum
 from pathlib import Path
-from typing import Any, ClassVar, NamedTuple
+from typing import Any, ClassVar, NamedTuple, TypeVar
 
 import numpy as np
 from gymnasium import spaces
@@ -43,6 +43,7 @@ from rlenv.world import RLEnvWorld
 __all__ = ["Outcome", "RLEnvironment", "non_finite_error"]
 
 logger = logging.getLogger(__name__)
+_T = TypeVar("_T")
 
 _CONFIG_PARTS = frozenset({"environment", "agent", "world"})
 _RESET_KEYS = frozenset({"seed", "options"})
@@ -229,20 +230,27 @@ class RLEnvironment(RLNode):
         ``environment_error`` answer (the next action then needs a reset). Call it outside the
         tree's processing passes (from a deferred call, or from outside the loop).
         """
+        return self._serve(request, lambda: self._apply(request))
+
+    def _apply(self, request: Request) -> Response:
+        action = self._check_request(request)
+        if request.restore is not None:
+            self._restore(request.restore)
+        if request.inspect is not None:
+            self._inspection = self._inspect(request.inspect)
+        if request.config is not None:
+            self._configure(request.config)
+        if request.reset is not None:
+            self._begin_episode(request.reset)
+        if request.action is not None:
+            self._act(action, request.repeat_action or self.repeat_action)
+        return self._response(request)
+
+    def _serve(self, request: Request, work: Callable[[], _T]) -> _T | ErrorReply:
+        """``work()`` while ``request`` is being served; its refusal or failure as an error."""
         self._request = request
         try:
-            action = self._check_request(request)
-            if request.restore is not None:
-                self._restore(request.restore)
-            if request.inspect is not None:
-                self._inspection = self._inspect(request.inspect)
-            if request.config is not None:
-                self._configure(request.config)
-            if request.reset is not None:
-                self._begin_episode(request.reset)
-            if request.action is not None:
-                self._act(action, request.repeat_action or self.repeat_action)
-            return self._response(request)
+            return work()
         except RequestError as error:
             return ErrorReply(request.id, error.code, str(error))
         except Exception as error:  # user code raised: report it, keep serving
@@ -336,22 +344,18 @@ class RLEnvironment(RLNode):
         caller (who checks every instance's observation at once, and calls
         :meth:`environment_error` with :func:`non_finite_error` for one that holds any).
         """
-        assert request.steps is not None
-        self._request = request
-        try:
+        steps = request.steps
+        assert steps is not None
+
+        def work() -> Outcome:
             if reset:
                 self._begin_episode({})
             else:
                 self._check_can_act(fresh=False)
-                self._act(action, request.steps.repeat_action or self.repeat_action)
+                self._act(action, steps.repeat_action or self.repeat_action)
             return self._outcome(request, _AGENT_ONLY, acted=not reset,
                                  check_observation=check_observation)
-        except RequestError as error:
-            return ErrorReply(request.id, error.code, str(error))
-        except Exception as error:  # user code raised: report it, keep serving
-            return self.environment_error(request.id, error)
-        finally:
-            self._request = None
+        return self._serve(request, work)
 
     def _outcome(self, request: Request, observation_request: Mapping[str, Any] | None,
                  acted: bool, check_observation: bool = True) -> Outcome:

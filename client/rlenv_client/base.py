@@ -14,7 +14,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from itertools import count
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from gymnasium import spaces
@@ -38,6 +38,7 @@ StepResult = tuple[Any, float, bool, bool, dict[str, Any]]
 """``(observation, reward, terminated, truncated, info)``, as gymnasium's ``step`` returns."""
 
 _AGENT_ONLY: Mapping[str, Any] = {"agent": {}}
+_Answer = TypeVar("_Answer", BatchResponse, StepsResponse)
 _AGENT_AND_WORLD: Mapping[str, Any] = {"agent": {}, "world": {}}
 
 
@@ -198,13 +199,7 @@ class BaseClient(ABC):
         Raises:
             RemoteError: the whole batch was refused.
         """
-        message = self._receive()
-        if isinstance(message, ErrorReply):
-            self._response(message)
-        if not isinstance(message, BatchResponse):
-            self.close()
-            raise ConnectionLost(f"{self.address} answered a batch with {message!r:.80}")
-        return message.replies
+        return self._receive_answer(BatchResponse, "a batch").replies
 
     def send_steps(self, action: Any, reset: np.ndarray | None = None,
                    repeat_action: int | None = None) -> None:
@@ -224,13 +219,7 @@ class BaseClient(ABC):
         Raises:
             RemoteError: the whole request was refused (nothing changed).
         """
-        message = self._receive()
-        if isinstance(message, ErrorReply):
-            self._response(message)
-        if not isinstance(message, StepsResponse):
-            self.close()
-            raise ConnectionLost(f"{self.address} answered steps with {message!r:.80}")
-        return message
+        return self._receive_answer(StepsResponse, "steps")
 
     def observe(self) -> dict[str, Any]:
         """The current observation without stepping: ``{"agent": ..., "world": ...}``."""
@@ -332,6 +321,16 @@ class BaseClient(ABC):
     def _call(self, **parts: Any) -> Response:
         self._send(Request(id=next(self._ids), **parts))
         return self._receive_reply()
+
+    def _receive_answer(self, kind: type[_Answer], asked: str) -> _Answer:
+        """The answer to a batch or steps request, ``kind``; raises a refusal of it whole."""
+        message = self._receive()
+        if isinstance(message, ErrorReply):
+            self._response(message)
+        if not isinstance(message, kind):
+            self.close()
+            raise ConnectionLost(f"{self.address} answered {asked} with {message!r:.80}")
+        return message
 
     def _receive_reply(self) -> Response:
         return self._response(self.receive_reply())

@@ -3,7 +3,8 @@
 One ``steps`` request carries every instance's action stacked in one array (gymnasium's
 ``batch_space`` layout); every instance resets or steps, in its own tree; the answer stacks the
 observations and gathers rewards, flags and tick counts into arrays. Neither end builds K
-requests or K responses per vector step, and a Box action batch is checked in one go.
+requests or K responses per vector step, and the action batch is checked in one go against
+the batched action space.
 """
 
 from __future__ import annotations

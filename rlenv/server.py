@@ -3,15 +3,12 @@
 from __future__ import annotations
 
 import logging
-from dataclasses import replace
 from pathlib import Path
 
-from rlenv.columns import ColumnStepper
 from rlenv.communication import DEFAULT_HOST, Communication, Limits
 from rlenv.environment import RLEnvironment
-from rlenv.errors import ErrorCode
-from rlenv.instance import Instance, drive, load_environment
-from rlenv.protocol import BatchResponse, ErrorReply, Request, Response, StepsResponse
+from rlenv.group import InstanceGroup
+from rlenv.instance import Instance, load_environment
 
 __all__ = ["Server", "load_environment"]
 
@@ -60,18 +57,20 @@ class Server:
         if instances > 1 and not isinstance(environment, type):
             raise TypeError("several instances need the environment class, not an instance")
         # Each Instance checks its environment's hello here, not at the first client.
-        self.instances = [Instance(environment) for _ in range(instances)]
+        self._group: InstanceGroup | None = None
+        if instances == 1:  # the environment drives the endpoint itself, as in the Godot seed
+            self.instances = [Instance(environment)]
+            self.communication = Communication(self.instances[0].environment.hello,
+                                               limits=limits or Limits(), token=token)
+            self.instances[0].environment.communication = self.communication
+        else:
+            assert isinstance(environment, type)
+            group = self._group = InstanceGroup(environment, instances)
+            self.instances = group.instances
+            self.communication = Communication(lambda: group.hello, limits=limits or Limits(),
+                                               token=token)
         self.environment = self.instances[0].environment
         self.tree = self.instances[0].tree
-        if instances == 1:  # the environment drives the endpoint itself, as in the Godot seed
-            self.communication = Communication(self.environment.hello, limits=limits or Limits(),
-                                               token=token)
-            self.environment.communication = self.communication
-        else:
-            self._columns = ColumnStepper(self.instances)
-            hello = replace(self.instances[0].hello, instances=instances)
-            self.communication = Communication(lambda: hello, limits=limits or Limits(),
-                                               token=token)
         for instance in self.instances:
             instance.environment.record_dir = record_dir
             instance.environment.real_time = real_time
@@ -85,28 +84,13 @@ class Server:
         An exception raised by user code while a request is being served is answered with an
         ``environment_error`` reply and the server goes on; any other exception propagates.
         """
-        if len(self.instances) == 1:
+        if self._group is None:
             self.tree.run()
             return
         while True:
             request = self.communication.poll(None)
             if request is not None:
-                self.communication.send(self._answer(request))
-
-    def _answer(self, request: Request) -> Response | BatchResponse | StepsResponse | ErrorReply:
-        if request.steps is not None:
-            return self._columns.answer(request)
-        if request.batch is None:
-            if request.asks_nothing:
-                return Response(id=request.id)  # e.g. the token
-            reply = drive(self.instances[:1], [request])[0]
-            assert reply is not None
-            return reply
-        if len(request.batch) > len(self.instances):
-            return ErrorReply(request.id, ErrorCode.BAD_REQUEST,
-                              f"a batch of {len(request.batch)} requests for "
-                              f"{len(self.instances)} instances")
-        return BatchResponse(request.id, tuple(drive(self.instances, list(request.batch))))
+                self.communication.send(self._group.answer(request))
 
     def close(self) -> None:
         """Close the endpoint (every client is disconnected)."""

@@ -365,14 +365,15 @@ def test_a_vector_env_restarts_the_lost_server_only(per_server: int) -> None:
 
 @pytest.mark.parametrize("target", [TARGET, PAIR_TARGET], ids=["cartpole", "pair-dict-spaces"])
 def test_vector_layouts_give_identical_results(target: str) -> None:
-    """Four sub-environments in one server (one ``steps`` request per step, in columns) or in
-    four servers (plain requests): the same seeds and actions give the same observations,
-    rewards and flags, resets included; Dict spaces (two agents) too."""
+    """Four sub-environments in one server (one ``steps`` request per step, in columns), in
+    four servers (plain requests) or in this process (in columns, no socket): the same seeds
+    and actions give the same observations, rewards and flags, resets included; Dict spaces
+    (two agents) too."""
     runs = []
-    for per_server in (4, 1):
-        with RemoteVectorEnv(4, target, instances_per_server=per_server,
-                             max_episode_steps=15) as envs:
-            assert len(envs.servers) == 4 // per_server
+    for servers, layout in [(1, {"instances_per_server": 4}), (4, {"instances_per_server": 1}),
+                            (0, {"in_process": True})]:
+        with RemoteVectorEnv(4, target, max_episode_steps=15, **layout) as envs:
+            assert len(envs.servers) == servers and len(envs.sessions) == max(servers, 1)
             envs.action_space.seed(8)
             seen = [_bytes(envs.reset(seed=30)[0])]
             for _ in range(40):
@@ -381,7 +382,7 @@ def test_vector_layouts_give_identical_results(target: str) -> None:
                 seen.append((_bytes(observations), rewards.tobytes(), terminated.tobytes(),
                              truncated.tobytes(), infos["frames"].tobytes()))
             runs.append(seen)
-    assert runs[0] == runs[1]
+    assert runs[0] == runs[1] == runs[2]
 
 
 def _bytes(batch: Any) -> bytes:

@@ -42,12 +42,15 @@ def parse_address(address: str) -> tuple[str, int]:
 def connect(
     target: str | None = None, *, address: str | None = None, in_process: bool = False,
     timeout: float = 30.0, server_args: Sequence[str] = (), startup_timeout: float = 60.0,
-    token: str | None = None,
+    token: str | None = None, instances: int = 1,
 ) -> tuple[BaseClient, ServerProcess | None]:
     """Reach an environment the way :class:`RemoteEnv` does.
 
     An ``address`` wins over a ``target``, so that a registered id (whose target is fixed) can
     attach to a running server: ``gymnasium.make("rlenv/CartPole-v0", address="host:port")``.
+
+    ``instances`` > 1 holds that many instances of the target behind the client (a server
+    started with ``--instances``, or in this process).
 
     Returns:
         The client, and the server process it started (``None`` when it started none).
@@ -64,7 +67,9 @@ def connect(
     if in_process:
         from rlenv_client.local import LocalClient
 
-        return LocalClient(target), None
+        return LocalClient(target, instances=instances), None
+    if instances > 1:
+        server_args = [*server_args, "--instances", str(instances)]
     server = ServerProcess(target, startup_timeout=startup_timeout, args=server_args)
     try:
         return Client(server.host, server.port, timeout=timeout), server
@@ -84,15 +89,17 @@ class Session:
         timeout: seconds to wait for each answer.
         server_args: extra arguments for ``rlenv serve``.
         token: the secret of a server that requires one.
+        instances: how many instances of the target the server (or this process) holds.
     """
 
     def __init__(
         self, target: str | None = None, *, address: str | None = None, in_process: bool = False,
         max_restarts: int = 0, timeout: float = 30.0, server_args: Sequence[str] = (),
-        token: str | None = None,
+        token: str | None = None, instances: int = 1,
     ) -> None:
         self._place = {"target": target, "address": address, "in_process": in_process,
-                       "timeout": timeout, "server_args": server_args, "token": token}
+                       "timeout": timeout, "server_args": server_args, "token": token,
+                       "instances": instances}
         self.client, self.server = connect(**self._place)
         self.max_restarts = max_restarts
         self.restarts = 0

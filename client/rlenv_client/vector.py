@@ -66,7 +66,8 @@ class RemoteVectorEnv(VectorEnv):
         repeat_action: physics ticks per step; the servers' default if ``None``.
         max_episode_steps: truncate episodes after this many steps (``None``: never).
         autoreset_mode: ``NEXT_STEP`` or ``SAME_STEP``.
-        in_process: run the copies inside this process instead of servers.
+        in_process: run the copies inside this process instead of servers (by default all of
+            them in one group, stepped in columns as a multi-instance server steps them).
         render_mode: ``"rgb_array"`` to render every copy, or ``None``.
         timeout: seconds to wait for each answer.
         token: the secret of servers that require one (default ``$RLENV_TOKEN``).
@@ -316,15 +317,14 @@ class RemoteVectorEnv(VectorEnv):
                 instances_per_server: int | None) -> list[dict[str, Any]]:
         if addresses is not None:
             places = [{"address": address, "token": token} for address in addresses]
-        elif in_process or instances_per_server == 1:
-            places = [{"target": target, "in_process": in_process}] * num_envs
         else:
-            layout = default_layout(num_envs) if instances_per_server is None else [
-                min(instances_per_server, num_envs - start)
-                for start in range(0, num_envs, instances_per_server)
-            ]
-            places = [{"target": target, "server_args": ["--instances", str(count)]}
-                      if count > 1 else {"target": target} for count in layout]
+            if instances_per_server is not None:
+                layout = [min(instances_per_server, num_envs - start)
+                          for start in range(0, num_envs, instances_per_server)]
+            else:  # in this process: all in one group; else one server per core
+                layout = [num_envs] if in_process else default_layout(num_envs)
+            places = [{"target": target, "in_process": in_process, "instances": count}
+                      for count in layout]
         if not places:
             raise ValueError("a vector environment needs at least one sub-environment")
         return places

@@ -176,7 +176,11 @@ def _(space: spaces.Box, value: Any, path: str = "action") -> np.ndarray:
         if not ((array >= space.low) & (array <= space.high)).all():
             _check_bounds(array, space, path)  # exactly, before a cast could wrap around
         return array.astype(space.dtype, copy=False)
-    cast = array.astype(space.dtype, copy=False)
+    if array.dtype == space.dtype:
+        cast = array
+    else:  # a value too large for the space's dtype becomes inf, refused below with its reason
+        with np.errstate(over="ignore"):
+            cast = array.astype(space.dtype)
     # The happy path in two ufuncs: NaN is never inside the bounds, and a finite sum rules out
     # infinities that infinite bounds would let through (a huge finite sum may only overflow
     # to inf, which sends us down the careful path).

@@ -113,24 +113,12 @@ class Instance:
 
 
 def drive(instances: list[Instance], requests: list[Request | None]) -> list[Reply | None]:
-    """Answer one request per instance (``None``: leave that instance alone).
+    """Answer one request per instance (``None``: leave that instance alone), in order.
 
-    The trees are turned in round robin, so every instance's ticks interleave. Returns the
-    answers in order.
+    Returns one answer per instance (``None`` where none was asked).
     """
     replies: list[Reply | None] = [None] * len(instances)
-    waiting = []
     for index, (instance, request) in enumerate(zip(instances, requests, strict=False)):
         if request is not None:
-            instance.submit(request)
-            waiting.append(index)
-    while waiting:
-        still = []
-        for index in waiting:
-            reply = instances[index].turn()
-            if reply is None:
-                still.append(index)
-            else:
-                replies[index] = reply
-        waiting = still
+            replies[index] = instance.call(request)
     return replies

@@ -3,8 +3,9 @@
 The environment answers exactly as it does under a TCP endpoint (same checks, same order, same
 episode state); only the transport differs: requests are queued on an in-process endpoint and
 the tree is iterated until the answer appears. ``rlenv_client.LocalClient`` drives one instance;
-a server that hosts several instances (``rlenv serve --instances K``) drives K of them, each
-with its own tree and pymunk space, stepped together by one batch request.
+a server that hosts several instances (``rlenv serve --instances K``, :mod:`rlenv.group`)
+drives K of them, each with its own tree and pymunk space, stepped together by one batch or
+``steps`` request.
 """
 
 from __future__ import annotations

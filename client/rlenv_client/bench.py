@@ -11,7 +11,8 @@ measured under the same conditions however the machine's speed drifts during the
   bytes;
 - (e) ``RemoteVectorEnv`` throughput by number of environments and servers (the instances of
   a server stepped by one ``steps`` request, in columns), against (f);
-- (f) gymnasium's ``AsyncVectorEnv`` with 8 ``CartPole-v1`` on the same machine;
+- (f) gymnasium's ``AsyncVectorEnv`` with 8 ``CartPole-v1`` on the same machine (and 64
+  CartPoles in this process, ``in_process=True``, against it too);
 - (g) p50 / p99 latency of a remote step against the ping-pong's;
 - (h) memory of one server process, and per extra environment instance in one process.
 
@@ -252,8 +253,12 @@ def run_benchmarks(
     progress("(e, f) RemoteVectorEnv layouts and gymnasium's AsyncVectorEnv, in turns")
     import gymnasium
 
-    layouts = [(4, 1), (8, 4), (64, 32)] if quick else \
+    served = [(4, 1), (8, 4), (64, 32)] if quick else \
         [(1, 1), (2, 1), (4, 1), (8, 1), (8, 4), (64, 32), (64, 64)]
+    layouts: list[tuple[str, int, dict[str, Any]]] = [
+        (f"{count} envs, {-(-count // per_server)} servers x {per_server}", count,
+         {"instances_per_server": per_server}) for count, per_server in served
+    ] + [("64 envs in this process", 64, {"in_process": True})]
     with contextlib.ExitStack() as stack:
         async_envs = gymnasium.vector.AsyncVectorEnv([lambda: gymnasium.make("CartPole-v1")] * 8)
         stack.callback(async_envs.close)
@@ -265,19 +270,18 @@ def run_benchmarks(
             for i in range(n):
                 async_envs.step(actions[i % 64])
         measures = [_Rate(async_run, steps // 4, scale=8)]
-        for count, per_server in layouts:
+        for _, count, layout in layouts:
             envs = stack.enter_context(RemoteVectorEnv(count, CARTPOLE, repeat_action=1,
-                                                       instances_per_server=per_server))
+                                                       **layout))
             envs.reset(seed=0)
             batch = np.zeros((count, 1), np.float32)
             measures.append(_Rate(_calls(lambda envs=envs, batch=batch: envs.step(batch)),
                                   max(steps // count, 20), scale=count))
         async_rate, *vector_rates = _interleaved(rounds, *measures)
     figures.append(Figure("gymnasium AsyncVectorEnv(8) CartPole-v1", async_rate, "env-steps/s"))
-    for (count, per_server), rate in zip(layouts, vector_rates, strict=True):
-        servers = -(-count // per_server)
-        figures.append(Figure(f"RemoteVectorEnv {count} envs, {servers} servers x {per_server}",
-                              rate, "env-steps/s", "AsyncVectorEnv(8) CartPole-v1", async_rate))
+    for (name, _, _), rate in zip(layouts, vector_rates, strict=True):
+        figures.append(Figure(f"RemoteVectorEnv {name}", rate, "env-steps/s",
+                              "AsyncVectorEnv(8) CartPole-v1", async_rate))
 
     progress("(h) memory")
     figures.append(Figure("one CartPole server process, resident", cartpole_rss / 1024, "MiB"))

@@ -351,7 +351,7 @@ class RLEnvironment(RLNode):
             if reset:
                 self._begin_episode({})
             else:
-                self._check_can_act(fresh=False)
+                self.check_can_act()
                 self._act(action, steps.repeat_action or self.repeat_action)
             return self._outcome(request, _AGENT_ONLY, acted=not reset,
                                  check_observation=check_observation)
@@ -510,7 +510,10 @@ class RLEnvironment(RLNode):
 
     def check_can_act(self) -> None:
         """Raise ``RequestError`` (``reset_required``) before the first reset or after the end."""
-        self._check_can_act(fresh=False)
+        if self._episode is _Episode.NOT_STARTED:
+            raise RequestError(ErrorCode.RESET_REQUIRED, "no episode has started; reset first")
+        if self._episode is _Episode.ENDED:
+            raise RequestError(ErrorCode.RESET_REQUIRED, "the episode has ended; reset first")
 
     def _check_action(self, action: Any, fresh: bool, where: str = "") -> Any:
         """``action`` in its space's native form; ``invalid_action`` (prefixed ``where``) if not."""
@@ -568,17 +571,9 @@ class RLEnvironment(RLNode):
             raise RequestError(ErrorCode.RESET_REQUIRED, "no episode has started; reset first")
         if request.action is None:
             return None
-        self._check_can_act(fresh)
+        if not fresh:
+            self.check_can_act()
         return self._check_action(request.action, fresh=fresh)
-
-    def _check_can_act(self, fresh: bool) -> None:
-        """Refuse an action before the first reset or after the end (unless ``fresh``ly reset)."""
-        if fresh:
-            return
-        if self._episode is _Episode.NOT_STARTED:
-            raise RequestError(ErrorCode.RESET_REQUIRED, "no episode has started; reset first")
-        if self._episode is _Episode.ENDED:
-            raise RequestError(ErrorCode.RESET_REQUIRED, "the episode has ended; reset first")
 
     def _check_joint_action(self, action: Any, fresh: bool) -> dict[str, Any]:
         """One action per agent still in the episode, keyed by name (PettingZoo's convention).

@@ -322,32 +322,32 @@ class _Suite:
 
     def steps_refused(self, instances: int, reset: list[bool] | None, code: ErrorCode,
                       words: str) -> None:
-        before = self.controller.observe()["agent"]
         space = self.controller.action_space
         actions = concatenate(space, [self.valid_action() for _ in range(instances)],
                               create_empty_array(space, instances))
-        self.controller.send_steps(actions, None if reset is None else np.array(reset))
-        try:
-            reply = self.controller.receive_steps()
-        except RemoteError as error:
-            assert error.code == code, f"expected {code}, got {error.code}: {error.message}"
-            assert words in error.message, f"{words!r} not in {error.message!r}"
-        else:
-            raise AssertionError(f"steps were accepted: {reply!r:.80}")
-        after = self.controller.observe()["agent"]
-        assert _same(before, after), "refused steps changed the environment"
+
+        def attempt() -> object:
+            self.controller.send_steps(actions, None if reset is None else np.array(reset))
+            return self.controller.receive_steps()
+        self.refused_unchanged(attempt, code, words, "the steps")
 
     def refused(self, action: Any, code: ErrorCode, words: str) -> None:
+        self.refused_unchanged(lambda: self.controller.step(action), code, words,
+                               f"the action {action!r:.60}")
+
+    def refused_unchanged(self, attempt: Callable[[], object], code: ErrorCode, words: str,
+                          what: str) -> None:
+        """``attempt()`` must be refused (``code``, ``words`` in the message), changing nothing."""
         before = self.controller.observe()["agent"]
         try:
-            self.controller.step(action)
+            answer = attempt()
         except RemoteError as error:
             assert error.code == code, f"expected {code}, got {error.code}: {error.message}"
             assert words in error.message, f"{words!r} not in {error.message!r}"
         else:
-            raise AssertionError(f"the action {action!r:.60} was accepted")
+            raise AssertionError(f"{what} was accepted: {answer!r:.80}")
         after = self.controller.observe()["agent"]
-        assert _same(before, after), "a refused action changed the environment"
+        assert _same(before, after), f"{what} was refused but changed the environment"
 
     def refused_config(self, code: ErrorCode, key: str) -> None:
         try:

@@ -4,9 +4,10 @@ Layout (one concept per module):
 
 - ``node``, ``signals``, ``tree``, ``timer``: the Godot-style scene tree runtime;
 - ``physics``: pymunk world, body, shape and joint nodes;
-- ``agent``, ``world``, ``environment`` (with ``rl_node``): the RL nodes users subclass;
+- ``rl_nodes``: the RL nodes users subclass (environment, agent, world);
 - ``protocol`` (sans-IO), ``spaces``, ``errors``: the wire, shared with ``rlenv_client``;
-- ``communication``, ``server``, ``cli``: serving an environment.
+- ``serving`` (the request path: endpoint, host, parts, instance), ``server``, ``cli``: serving
+  an environment.
 
 Names are imported lazily, so that ``import rlenv.protocol`` (what the client does) loads
 neither the runtime nor pymunk.
@@ -32,9 +33,9 @@ _EXPORTS = {
     "KinematicBody": "rlenv.physics",
     "CollisionShape": "rlenv.physics",
     "Joint": "rlenv.physics",
-    "RLAgent": "rlenv.agent",
-    "RLEnvWorld": "rlenv.world",
-    "RLEnvironment": "rlenv.environment",
+    "RLAgent": "rlenv.rl_nodes",
+    "RLEnvWorld": "rlenv.rl_nodes",
+    "RLEnvironment": "rlenv.rl_nodes",
     "Server": "rlenv.server",
     "Camera": "rlenv.camera",
     "View": "rlenv.views",
@@ -52,9 +53,7 @@ def __getattr__(name: str) -> Any:
 
 
 if TYPE_CHECKING:
-    from rlenv.agent import RLAgent as RLAgent
     from rlenv.camera import Camera as Camera
-    from rlenv.environment import RLEnvironment as RLEnvironment
     from rlenv.node import Node as Node
     from rlenv.node import NodeNotFoundError as NodeNotFoundError
     from rlenv.node import ProcessMode as ProcessMode
@@ -64,10 +63,12 @@ if TYPE_CHECKING:
     from rlenv.physics import PhysicsWorld as PhysicsWorld
     from rlenv.physics import RigidBody as RigidBody
     from rlenv.physics import StaticBody as StaticBody
+    from rlenv.rl_nodes import RLAgent as RLAgent
+    from rlenv.rl_nodes import RLEnvironment as RLEnvironment
+    from rlenv.rl_nodes import RLEnvWorld as RLEnvWorld
     from rlenv.server import Server as Server
     from rlenv.signals import Signal as Signal
     from rlenv.timer import PhysicsFramesTimer as PhysicsFramesTimer
     from rlenv.tree import SceneTree as SceneTree
     from rlenv.views import View as View
     from rlenv.views import view as view
-    from rlenv.world import RLEnvWorld as RLEnvWorld

@@ -11,7 +11,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from types import FrameType
 
-from rlenv.communication import DEFAULT_HOST, InsecureBindError, Limits
+from rlenv.serving.endpoint import DEFAULT_HOST, InsecureBindError, Limits
 
 __all__ = ["main", "serve_command"]
 

@@ -13,7 +13,10 @@ it is inside a :class:`~rlenv.tree.SceneTree` it receives, as in Godot:
 
 Every lifecycle event also reaches ``_notification(what)`` (one of the ``NOTIFICATION_*``
 constants), for code that prefers a single dispatcher. Per-tick processing calls only the
-virtuals, to keep the hot path short.
+virtuals, to keep the hot path short: the tree calls them from its *tick plan*, lists of the bound
+methods that can run, which the node keeps up to date by telling its tree (``_plan_changed``)
+whenever its place in the tree, ``set_process``, ``set_physics_process`` or its process mode
+changes.
 
 While the tree runs a processing pass, ``add_child``, ``remove_child`` and ``queue_free`` on
 nodes inside the tree are deferred to the end of the pass, like pymunk's locked space; deferred
@@ -205,7 +208,7 @@ class Node(SignalOwner):
         node.notification(NOTIFICATION_PARENTED)
         if self._tree is not None:
             node._propagate_enter_tree(self._tree)
-            self._tree._structure_changed()
+            self._tree._plan_changed()
             node._propagate_ready()
 
     def remove_child(self, node: Node) -> None:
@@ -228,7 +231,7 @@ class Node(SignalOwner):
         node._parent = None
         node.notification(NOTIFICATION_UNPARENTED)
         if tree is not None:
-            tree._structure_changed()
+            tree._plan_changed()
             node._propagate_exited()
 
     def move_child(self, node: Node, to_index: int) -> None:
@@ -245,7 +248,7 @@ class Node(SignalOwner):
         self._children.insert(to_index if to_index >= 0 else len(self._children) + 1 + to_index,
                               node)
         if self._tree is not None:
-            self._tree._structure_changed()
+            self._tree._plan_changed()
 
     def queue_free(self) -> None:
         """Free this node and its children at the end of the current frame; safe to repeat."""
@@ -440,14 +443,22 @@ class Node(SignalOwner):
 
     @property
     def process_mode(self) -> ProcessMode:
-        """When this node processes; INHERIT follows the parent."""
+        """When this node processes; INHERIT follows the parent.
+
+        A change during a pass that stops nodes skips them in the rest of the pass; one that lets
+        them run takes effect from the next pass.
+        """
         return self._process_mode
 
     @process_mode.setter
     def process_mode(self, mode: ProcessMode) -> None:
-        self._process_mode = ProcessMode(mode)
+        mode = ProcessMode(mode)
+        if mode is self._process_mode:
+            return
+        self._process_mode = mode
         if self._tree is not None:
             self._propagate_process_mode()
+            self._tree._plan_changed()
 
     def can_process(self) -> bool:
         """Whether this node processes now, given its resolved process mode and the pause."""
@@ -456,20 +467,32 @@ class Node(SignalOwner):
         return self._processes_when[self._tree.paused]
 
     def set_process(self, enabled: bool) -> None:
-        """Turn ``_process`` calls on or off (on by default when the class defines it)."""
-        self._processing = enabled
-        if self._tree is not None:
-            self._tree._structure_changed()
+        """Turn ``_process`` calls on or off (on by default when the class defines it).
+
+        Turning them off during a pass skips this node in the rest of the pass; turning them on
+        takes effect from the next pass.
+        """
+        enabled = bool(enabled)
+        if enabled is not self._processing:
+            self._processing = enabled
+            if self._tree is not None:
+                self._tree._plan_changed()
 
     def is_processing(self) -> bool:
         """Whether ``_process`` is called for this node."""
         return self._processing
 
     def set_physics_process(self, enabled: bool) -> None:
-        """Turn ``_physics_process`` calls on or off (on by default when the class defines it)."""
-        self._physics_processing = enabled
-        if self._tree is not None:
-            self._tree._structure_changed()
+        """Turn ``_physics_process`` calls on or off (on by default when the class defines it).
+
+        Turning them off during a tick skips this node in the rest of the tick; turning them on
+        takes effect from the next tick.
+        """
+        enabled = bool(enabled)
+        if enabled is not self._physics_processing:
+            self._physics_processing = enabled
+            if self._tree is not None:
+                self._tree._plan_changed()
 
     def is_physics_processing(self) -> bool:
         """Whether ``_physics_process`` is called for this node."""
@@ -508,8 +531,9 @@ class Node(SignalOwner):
     # --- internals --------------------------------------------------------------------------
 
     def _deferred(self, method: Callable[..., Any], *args: Any) -> bool:
+        """Defer ``method(*args)`` if the tree is in a processing pass; whether it was deferred."""
         tree = self._tree
-        if tree is not None and tree._locked:
+        if tree is not None and tree._running is not None:
             tree.call_deferred(method, *args)
             return True
         return False

@@ -1,44 +1,46 @@
-"""Host an environment: build its tree, open its endpoint, run the loop."""
+"""Host an environment: build its instances, open its endpoint, run the loop."""
 
 from __future__ import annotations
 
 import logging
 from pathlib import Path
 
-from rlenv.communication import DEFAULT_HOST, Communication, Limits
-from rlenv.environment import RLEnvironment
-from rlenv.group import InstanceGroup
-from rlenv.instance import Instance, load_environment
+from rlenv.rl_nodes import RLEnvironment
+from rlenv.serving.endpoint import DEFAULT_HOST, Endpoint, Limits
+from rlenv.serving.host import Host
 
-__all__ = ["Server", "load_environment"]
+__all__ = ["Server"]
 
 logger = logging.getLogger(__name__)
 
 
 class Server:
-    """Environments in scene trees, listening for their client.
+    """Environments in scene trees, listening for their clients.
 
-    With ``instances=1`` (the default) the environment drives its own endpoint, as the Godot
-    seed's RLEnvironment does. With more, the server hosts that many independent instances of the
-    environment class (each its own tree and pymunk space) and answers a batch request (one part
-    per instance) with one batch response, and a ``steps`` request (every instance steps, in
-    columns) with one steps response: one round trip steps them all. A plain request goes to
-    instance 0.
+    The server hosts ``instances`` independent copies of the environment (each its own tree
+    and pymunk space) behind one socket: a plain request goes to the first, a ``batch`` carries
+    one request per instance, and a ``steps`` request steps them all in columns (see
+    :mod:`rlenv.serving.host`).
 
     Args:
-        environment: an environment instance, its class, or ``MODULE:CLASS`` (a class or
-            ``MODULE:CLASS`` when ``instances`` > 1).
+        environment: the environment class, ``MODULE:CLASS``, or (for one instance) an
+            environment object.
         host: address to bind; 127.0.0.1 unless the environment must be reachable from
             other machines.
         port: port to bind; 0 picks a free one (see :attr:`address`).
         lifeline: read end of a pipe whose write end the starting process holds; the server
             exits when that process is gone (see ``rlenv_client.ServerProcess``).
         token: the secret clients must present; required to bind a non-loopback address.
-        limits: frame sizes and deadlines (see :class:`~rlenv.communication.Limits`); the
+        limits: frame sizes and deadlines (see :class:`~rlenv.serving.endpoint.Limits`); the
             defaults if ``None``.
         instances: how many environment instances to host.
         record_dir: where clients may have the environment record videos (``None``: nowhere).
         real_time: start in real-time mode (ticks follow the wall clock).
+
+    Attributes:
+        host: the instances and how requests reach them.
+        endpoint: the sockets.
+        address: the (host, port) the server listens on.
 
     Raises:
         InsecureBindError: a non-loopback ``host`` without a ``token``.
@@ -50,51 +52,24 @@ class Server:
         limits: Limits | None = None, instances: int = 1, record_dir: Path | None = None,
         real_time: bool = False,
     ) -> None:
-        if isinstance(environment, str):
-            environment = load_environment(environment)
-        if instances < 1:
-            raise ValueError("a server hosts at least one instance")
-        if instances > 1 and not isinstance(environment, type):
-            raise TypeError("several instances need the environment class, not an instance")
-        # Each Instance checks its environment's hello here, not at the first client.
-        self._group: InstanceGroup | None = None
-        if instances == 1:  # the environment drives the endpoint itself, as in the Godot seed
-            self.instances = [Instance(environment)]
-            self.communication = Communication(self.instances[0].environment.hello,
-                                               limits=limits or Limits(), token=token)
-            self.instances[0].environment.communication = self.communication
-        else:
-            assert isinstance(environment, type)
-            group = self._group = InstanceGroup(environment, instances)
-            self.instances = group.instances
-            self.communication = Communication(lambda: group.hello, limits=limits or Limits(),
-                                               token=token)
-        self.environment = self.instances[0].environment
-        self.tree = self.instances[0].tree
-        for instance in self.instances:
-            instance.environment.record_dir = record_dir
-            instance.environment.real_time = real_time
-        self.address = self.communication.start_server(port, host)
+        self.host = Host(environment, instances, record_dir=record_dir, real_time=real_time)
+        self.endpoint = Endpoint(self.host.hello, limits or Limits(), token)
+        self.address = self.endpoint.start_server(port, host)
         if lifeline is not None:
-            self.communication.watch_lifeline(lifeline)
+            self.endpoint.watch_lifeline(lifeline)
 
     def serve_forever(self) -> None:
-        """Serve until :meth:`SceneTree.quit` (one instance) or an interrupt.
+        """Serve until interrupted.
 
         An exception raised by user code while a request is being served is answered with an
         ``environment_error`` reply and the server goes on; any other exception propagates.
         """
-        if self._group is None:
-            self.tree.run()
-            return
-        while True:
-            request = self.communication.poll(None)
-            if request is not None:
-                self.communication.send(self._group.answer(request))
+        self.host.serve_forever(self.endpoint)
 
     def close(self) -> None:
-        """Close the endpoint (every client is disconnected)."""
-        self.communication.close()
+        """Close the endpoint (every client is disconnected) and the instances."""
+        self.endpoint.close()
+        self.host.close()
 
     def __enter__(self) -> Server:
         return self

@@ -42,14 +42,20 @@ class Signal:
 
 
 class BoundSignal:
-    """One object's signal: its connections, and :meth:`emit` to call them in connection order."""
+    """One object's signal: its connections, and :meth:`emit` to call them in connection order.
+
+    The connections are an immutable tuple, replaced (never changed in place) by
+    :meth:`connect`, :meth:`disconnect` and the firing of one-shot connections: an emission goes
+    through the tuple that was current when it started, without copying it, and a change made
+    while it runs applies from the next emission.
+    """
 
     __slots__ = ("_connections", "_one_shots", "name", "owner")
 
     def __init__(self, owner: object, name: str) -> None:
         self.owner = owner
         self.name = name
-        self._connections: list[tuple[Callable[..., Any], bool]] = []
+        self._connections: tuple[tuple[Callable[..., Any], bool], ...] = ()
         self._one_shots = 0
 
     def connect(self, callback: Callable[..., Any], *, one_shot: bool = False) -> None:
@@ -60,7 +66,7 @@ class BoundSignal:
         """
         if self.is_connected(callback):
             raise ValueError(f"{callback!r} is already connected to signal {self.name!r}")
-        self._connections.append((callback, one_shot))
+        self._connections += ((callback, one_shot),)
         self._one_shots += one_shot
 
     def disconnect(self, callback: Callable[..., Any]) -> None:
@@ -69,9 +75,10 @@ class BoundSignal:
         Raises:
             ValueError: ``callback`` is not connected to this signal.
         """
-        for index, (connected, one_shot) in enumerate(self._connections):
+        connections = self._connections
+        for index, (connected, one_shot) in enumerate(connections):
             if connected == callback:
-                del self._connections[index]
+                self._connections = connections[:index] + connections[index + 1 :]
                 self._one_shots -= one_shot
                 return
         raise ValueError(f"{callback!r} is not connected to signal {self.name!r}")
@@ -91,13 +98,9 @@ class BoundSignal:
         the next emission.
         """
         connections = self._connections
-        if not connections:
-            return
         if self._one_shots:
-            self._connections = [c for c in connections if not c[1]]
+            self._connections = tuple(c for c in connections if not c[1])
             self._one_shots = 0
-        else:
-            connections = connections[:]
         for callback, _ in connections:
             callback(*args)
 

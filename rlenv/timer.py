@@ -78,17 +78,22 @@ class PhysicsFramesTimer(Node):
         return self.wait_frames - self._elapsed if self._running else 0
 
     def _physics_process(self, delta: float) -> None:
-        if not self._running:
-            return
-        self._elapsed += 1
-        if self._elapsed >= self.wait_frames:
-            if self.one_shot:
-                self._running = False
-            else:
-                self._elapsed = 0
-            self.get_tree().call_deferred(self._fire, self._generation)
+        """Count the tick; the hot path is one test while stopped, a count and a test running."""
+        if self._running:
+            self._elapsed += 1
+            if self._elapsed >= self.wait_frames:
+                self._complete_wait()
+
+    def _complete_wait(self) -> None:
+        """Stop or start over, and fire at the end of the tick unless stopped or restarted."""
+        if self.one_shot:
+            self._running = False
+        else:
+            self._elapsed = 0
+        self.call_deferred(self._fire, self._generation)
 
     def _fire(self, generation: int) -> None:
+        """Emit ``timeout`` unless :meth:`start` or :meth:`stop` was called since it was due."""
         if generation == self._generation:
             self.timeout.emit()
 

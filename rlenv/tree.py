@@ -7,7 +7,8 @@ The loop is **lockstep** by default: simulated time never depends on the wall cl
 1. ``physics_frame`` is emitted;
 2. ``_physics_process(delta)`` runs on every node that can process, in tree order;
 3. ``_physics_step(delta)`` runs on every simulating node (pymunk spaces step here);
-4. deferred calls run;
+4. :attr:`SceneTree.on_physics_tick_end` is called, when set;
+5. deferred calls run;
 
 and then one frame: ``process_frame`` is emitted, ``_process(delta)`` runs in tree order, and
 deferred calls run. ``delta`` of a frame is the simulated time since the previous frame: one tick,
@@ -19,6 +20,15 @@ In **real-time** mode (:attr:`SceneTree.real_time`) ticks follow a clock instead
 runs every tick that has come due since the last one (paused or not, as Godot does: pausable
 nodes simply skip them), then one frame whose ``delta`` is the clock time elapsed. The clock is
 injectable (``clock=``), so tests drive time by hand.
+
+**The tick plan.** A pass checks nothing per node: the tree keeps, for each value of
+:attr:`SceneTree.paused`, the lists of bound methods its passes call (``_physics_process``,
+``_physics_step`` and ``_process`` of the nodes that can run in that state, in tree order), and a
+pass just calls them. Whatever the plan depends on (adding, removing or moving a node,
+``set_process``, ``set_physics_process``, a process mode) marks both plans stale, and the next pass
+builds the one it needs; pausing and unpausing only switch plans. A change that stops a node
+*during* a pass still applies to the rest of that pass: the node's remaining calls in the pass are
+replaced by no-ops. A change that lets a node run takes effect from the next pass.
 """
 
 from __future__ import annotations
@@ -41,6 +51,7 @@ class SceneTree(SignalOwner):
 
     Args:
         physics_ticks_per_second: the fixed physics rate; one tick lasts its inverse.
+        clock: the clock real-time mode follows, in seconds.
     """
 
     physics_frame = Signal()
@@ -52,35 +63,68 @@ class SceneTree(SignalOwner):
     node_removed = Signal("node")
     """Emitted when a node leaves the tree."""
 
+    on_physics_tick_end: Callable[[float], None] | None = None
+    """Called with the tick's ``delta`` at the end of every physics tick, when set.
+
+    It runs after every ``_physics_step`` (so the physics spaces have stepped) and before the
+    deferred calls of the tick, outside the processing pass: structure changes made in it are
+    immediate. An environment reads the rewards of the tick here.
+    """
+
     def __init__(
         self, physics_ticks_per_second: int = 60, *, clock: Callable[[], float] = time.monotonic
     ) -> None:
-        if physics_ticks_per_second < 1:
-            raise ValueError("physics_ticks_per_second must be at least 1")
         self._signals = {}
         self.physics_ticks_per_second = physics_ticks_per_second
-        self.paused = False
+        self._paused = False
         self.clock = clock
+        self.on_physics_tick_end = None
         self._real_time = False
         self._next_tick_at = 0.0
         self._last_frame_at = 0.0
         self.physics_frames = 0
         self.process_frames = 0
-        self._locked = 0
         self._deferred: deque[tuple[Callable[..., Any], tuple[Any, ...]]] = deque()
-        self._lists_stale = True
-        self._physics_nodes: list[Node] = []
-        self._step_nodes: list[Node] = []
-        self._process_nodes: list[Node] = []
+        self._plans: list[_TickPlan | None] = [None, None]  # indexed by paused; None when stale
+        self._plan: _TickPlan | None = None  # the plan for the current value of paused
+        self._running: _TickPlan | None = None  # the plan of the pass under way
         self._quit_requested = False
         self.root = Node("root")
         self.root._propagate_enter_tree(self)
         self.root._propagate_ready()
 
     @property
+    def physics_ticks_per_second(self) -> int:
+        """The fixed physics rate.
+
+        Raises:
+            ValueError: on setting a rate smaller than 1.
+        """
+        return self._physics_ticks_per_second
+
+    @physics_ticks_per_second.setter
+    def physics_ticks_per_second(self, value: int) -> None:
+        if value < 1:
+            raise ValueError("physics_ticks_per_second must be at least 1")
+        self._physics_ticks_per_second = value
+        self._physics_delta = 1.0 / value
+
+    @property
     def physics_delta(self) -> float:
         """The fixed length of one physics tick, in simulated seconds."""
-        return 1.0 / self.physics_ticks_per_second
+        return self._physics_delta
+
+    @property
+    def paused(self) -> bool:
+        """Whether the tree is paused: pausable nodes do not process, and lockstep runs no ticks."""
+        return self._paused
+
+    @paused.setter
+    def paused(self, value: bool) -> None:
+        paused = bool(value)
+        if paused is not self._paused:
+            self._paused = paused
+            self._plan = self._plans[paused]  # each value has its own plan: no rebuild
 
     # --- deferred calls, groups -------------------------------------------------------------
 
@@ -120,48 +164,44 @@ class SceneTree(SignalOwner):
 
     def physics_tick(self) -> None:
         """Run one physics tick (see the module docstring), paused or not."""
-        if self._lists_stale:
-            self._rebuild_lists()
-        delta = 1.0 / self.physics_ticks_per_second
+        delta = self._physics_delta
         self.physics_frames += 1
-        self._emit("physics_frame")
-        paused = self.paused
-        self._locked += 1
-        node = self.root
+        if self._signals:
+            self._emit("physics_frame")
+        plan = self._plan or self._build_plan()
+        outer, self._running = self._running, plan  # passes may nest
         try:
-            for node in self._physics_nodes:
-                if node._physics_processing and node._tree is not None \
-                        and node._processes_when[paused]:
-                    node._physics_process(delta)
-            for node in self._step_nodes:
-                if node._tree is not None and node._processes_when[paused]:
-                    node._physics_step(delta)
+            for call in plan.physics:
+                call(delta)
+            for call in plan.steps:
+                call(delta)
         except Exception as error:
-            error.add_note(f"raised in the physics tick of {node!r}")
+            error.add_note(f"raised in the physics tick of {_owner(call)!r}")
             raise
         finally:
-            self._locked -= 1
-        self.flush_deferred()
+            self._running = outer
+        if self.on_physics_tick_end is not None:
+            self.on_physics_tick_end(delta)
+        if self._deferred:
+            self.flush_deferred()
 
     def process(self, delta: float) -> None:
         """Run one frame of ``_process(delta)`` calls, then the deferred calls."""
-        if self._lists_stale:
-            self._rebuild_lists()
         self.process_frames += 1
-        self._emit("process_frame")
-        paused = self.paused
-        self._locked += 1
-        node = self.root
+        if self._signals:
+            self._emit("process_frame")
+        plan = self._plan or self._build_plan()
+        outer, self._running = self._running, plan  # passes may nest
         try:
-            for node in self._process_nodes:
-                if node._processing and node._tree is not None and node._processes_when[paused]:
-                    node._process(delta)
+            for call in plan.process:
+                call(delta)
         except Exception as error:
-            error.add_note(f"raised in the process frame of {node!r}")
+            error.add_note(f"raised in the process frame of {_owner(call)!r}")
             raise
         finally:
-            self._locked -= 1
-        self.flush_deferred()
+            self._running = outer
+        if self._deferred:
+            self.flush_deferred()
 
     @property
     def real_time(self) -> bool:
@@ -187,18 +227,12 @@ class SceneTree(SignalOwner):
         clock, then a frame.
         """
         if self._real_time:
-            now = self.clock()
-            delta = 1.0 / self.physics_ticks_per_second
-            while self._next_tick_at <= now:
-                self.physics_tick()
-                self._next_tick_at += delta
-            self.process(now - self._last_frame_at)
-            self._last_frame_at = now
-        elif self.paused:
+            self._real_time_iteration()
+        elif self._paused:
             self.process(0.0)
         else:
             self.physics_tick()
-            self.process(1.0 / self.physics_ticks_per_second)
+            self.process(self._physics_delta)
 
     def run(self, iteration: Callable[[], None] | None = None) -> None:
         """Iterate until :meth:`quit` is called.
@@ -217,13 +251,82 @@ class SceneTree(SignalOwner):
 
     # --- internals --------------------------------------------------------------------------
 
-    def _structure_changed(self) -> None:
-        self._lists_stale = True
+    def _real_time_iteration(self) -> None:
+        """Every tick due by the clock, then a frame of the clock time elapsed."""
+        now = self.clock()
+        while self._next_tick_at <= now:
+            self.physics_tick()
+            self._next_tick_at += self._physics_delta
+        self.process(now - self._last_frame_at)
+        self._last_frame_at = now
 
-    def _rebuild_lists(self) -> None:
-        order = list(self.root.iter_subtree())
-        self._physics_nodes = [n for n in order if n._physics_processing]
-        self._step_nodes = [n for n in order if type(n)._physics_step is not Node._physics_step]
-        self._process_nodes = [n for n in order if n._processing]
-        self._lists_stale = False
+    def _plan_changed(self) -> None:
+        """Mark the plans stale; nodes that can no longer run skip the rest of the pass."""
+        self._plans = [None, None]
+        self._plan = None
+        if self._running is not None:
+            self._running.skip_stopped()
 
+    def _build_plan(self) -> _TickPlan:
+        """Build and keep the plan for the current value of :attr:`paused`."""
+        plan = self._plans[self._paused] = self._plan = _TickPlan(self.root, self._paused)
+        return plan
+
+
+class _TickPlan:
+    """What the passes call while the tree's ``paused`` is ``paused``: bound methods, in tree order.
+
+    Args:
+        root: the root of the tree.
+        paused: the value of ``paused`` the plan is for.
+
+    Attributes:
+        physics: ``_physics_process`` of the nodes that physics-process and can run.
+        steps: ``_physics_step`` of the simulating nodes that can run.
+        process: ``_process`` of the nodes that process and can run.
+    """
+
+    __slots__ = ("_physics_nodes", "_process_nodes", "_step_nodes", "paused", "physics",
+                 "process", "steps")
+
+    def __init__(self, root: Node, paused: bool) -> None:
+        order = [node for node in root.iter_subtree() if node._processes_when[paused]]
+        self.paused = paused
+        self._physics_nodes = [node for node in order if node._physics_processing]
+        self._step_nodes = [node for node in order if _simulates(node)]
+        self._process_nodes = [node for node in order if node._processing]
+        self.physics = [node._physics_process for node in self._physics_nodes]
+        self.steps = [node._physics_step for node in self._step_nodes]
+        self.process = [node._process for node in self._process_nodes]
+
+    def skip_stopped(self) -> None:
+        """Turn into no-ops the calls of nodes that can no longer run (a change mid-pass)."""
+        paused = self.paused
+        _skip_unless(self.physics, self._physics_nodes,
+                     lambda node: node._physics_processing and node._processes_when[paused])
+        _skip_unless(self.steps, self._step_nodes, lambda node: node._processes_when[paused])
+        _skip_unless(self.process, self._process_nodes,
+                     lambda node: node._processing and node._processes_when[paused])
+
+
+def _skip_unless(
+    calls: list[Callable[[float], None]], nodes: list[Node], can_run: Callable[[Node], bool]
+) -> None:
+    """Replace by a no-op each call whose node (``nodes``, index for index) cannot run."""
+    for index, node in enumerate(nodes):
+        if not can_run(node):
+            calls[index] = _skipped
+
+
+def _simulates(node: Node) -> bool:
+    """Whether ``node`` overrides ``_physics_step``."""
+    return type(node)._physics_step is not Node._physics_step
+
+
+def _skipped(delta: float) -> None:
+    """Stands in for the call of a node that was stopped during the pass."""
+
+
+def _owner(call: Callable[[float], None]) -> object:
+    """The node a planned call belongs to (the bound method's ``__self__``)."""
+    return getattr(call, "__self__", call)

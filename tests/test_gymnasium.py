@@ -21,7 +21,7 @@ from gymnasium.vector import AutoresetMode, SyncVectorEnv
 import rlenv_client
 from examples.cartpole import TARGET, CartPoleAgent, controller
 from examples.pair import TARGET as PAIR_TARGET
-from rlenv_client import RemoteEnv, RemoteVectorEnv
+from rlenv_client import ProtocolVersionError, RemoteEnv, RemoteVectorEnv
 from rlenv_client.registration import ENVIRONMENTS
 
 CARTPOLE = "rlenv/CartPole-v0"
@@ -405,8 +405,8 @@ def test_make_vec_puts_one_server_on_each_core() -> None:
         envs.close()
 
 
-def test_a_multi_instance_server_without_steps_is_refused_clearly() -> None:
-    """A server speaking protocol 1.0 (before steps) with several instances: a clear error."""
+def test_a_server_of_an_older_protocol_is_refused_clearly() -> None:
+    """A server speaking protocol 1.x (arrays as ext types, no host of one): a clear error."""
     import socket
     import threading
 
@@ -426,7 +426,8 @@ def test_a_multi_instance_server_without_steps_is_refused_clearly() -> None:
     thread.start()
     try:
         host, port = listener.getsockname()
-        with pytest.raises(ValueError, match="speaks rlenv protocol 1.0, which has no steps"):
+        with pytest.raises(ProtocolVersionError,
+                           match=r"server speaks rlenv protocol 1.0, this client speaks 2.0"):
             RemoteVectorEnv(addresses=[f"{host}:{port}"])
     finally:
         thread.join(timeout=10)

@@ -44,10 +44,12 @@ def test_bad_inspection_gets_precise_errors_and_changes_nothing(client: Client) 
     for call, words in [
         (lambda: client.get_property("World/Nowhere", "angle"), "no node at path 'World/Nowhere'"),
         (lambda: client.get_property(POLE, "mass"), "exports no 'mass'; it exports position"),
-        (lambda: client.set_property(POLE, "angle", "steep"), "RigidBody.angle must be like"),
-        (lambda: client.set_property(POLE, "position", [1.0, 2.0, 3.0]), "must be like"),
-        (lambda: client.set_property(POLE, "angle", True), "must be like"),
-        (lambda: client.set_property("World/Physics/Pole/Stick", "sensor", 1), "must be like"),
+        (lambda: client.set_property(POLE, "angle", "steep"), "RigidBody.angle must be a float"),
+        (lambda: client.set_property(POLE, "position", [1.0, 2.0, 3.0]),
+         "must be a list of 2 numbers like"),
+        (lambda: client.set_property(POLE, "angle", True), "must be a float like"),
+        (lambda: client.set_property("World/Physics/Pole/Stick", "sensor", 1),
+         "must be a bool like"),
         (lambda: client._call(inspect={"delete": {}}), "inspect must be one of"),
         (lambda: client._call(inspect={"get": {"path": POLE}}), "takes exactly"),
     ]:

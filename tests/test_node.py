@@ -591,6 +591,47 @@ def test_disconnect_during_emit_takes_effect_next_emission(log: list) -> None:
     assert log == ["first", "second", "first"]
 
 
+def test_reentrant_emit_sees_changes_made_by_the_outer_emission(log: list) -> None:
+    emitter = Emitter()
+
+    def late() -> None:
+        log.append("late")
+
+    def first() -> None:
+        log.append("first")
+        if not emitter.pinged.is_connected(late):
+            emitter.pinged.connect(late)
+            emitter.pinged.disconnect(second)
+            emitter.pinged.emit()  # a new emission: sees late, not second
+
+    def second() -> None:
+        log.append("second")
+
+    emitter.pinged.connect(first)
+    emitter.pinged.connect(second)
+    emitter.pinged.emit()
+    assert log == ["first", "first", "late", "second"]
+
+
+def test_one_shot_connected_during_emit_fires_once_from_next_emission(log: list) -> None:
+    emitter = Emitter()
+
+    def once() -> None:
+        log.append("once")
+
+    def first() -> None:
+        log.append("first")
+        if len(log) == 1:
+            emitter.pinged.connect(once, one_shot=True)
+
+    emitter.pinged.connect(first)
+    emitter.pinged.emit()
+    emitter.pinged.emit()
+    emitter.pinged.emit()
+    assert log == ["first", "first", "once", "first"]
+    assert emitter.pinged.get_connections() == [first]
+
+
 def test_user_signals(log: list) -> None:
     node = Node("N")
     assert not node.has_signal("scored")

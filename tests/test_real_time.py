@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from conftest import Serve
 
+from rlenv.protocol import Request
 from rlenv.testing import ManualClock
 from rlenv_client import Client, ErrorCode, LocalClient, RemoteError
 
@@ -88,21 +89,21 @@ def test_a_real_time_server_keeps_running(serve: Serve) -> None:
 
 
 def test_steps_in_columns_follow_the_clock_too(clock: ManualClock) -> None:
-    """A multi-instance server's steps run the ticks due by the clock first, as a plain
-    request does: the same frames, rewards and lateness."""
-    from rlenv.columns import ColumnStepper
-    from rlenv.instance import Instance
-    from rlenv.protocol import Request, Steps
-
-    instances = [Instance(TARGET, clock) for _ in range(3)]
-    for instance in instances:
-        instance.call(Request(id=1, config={"environment": {"real_time": True}}))
-        instance.call(Request(id=2, reset={"seed": 4}))
-    stepper = ColumnStepper(instances[:2])
-    clock.advance(0.1)
-    columns = stepper.answer(Request(id=3, steps=Steps(np.zeros((2, 1), np.float32))))
-    plain = instances[2].call(Request(id=3, action=STILL, observation={"agent": {}}))
-    assert plain.frames >= 6
-    assert columns.frames.tolist() == [plain.frames] * 2
-    assert columns.reward.tolist() == [plain.reward] * 2
-    assert [info["late"] for info in columns.info] == [plain.info["late"]] * 2
+    """Steps run the ticks due by the clock first, as a plain request does: the same frames,
+    rewards and lateness."""
+    with LocalClient(TARGET, clock=clock, instances=2) as many, \
+            LocalClient(TARGET, clock=clock) as one:
+        one.configure(real_time=True)
+        real_time = Request(0, {"config": {"environment": {"real_time": True}}})
+        for request in (real_time, many.reset_request(seed=4)):
+            many.send_batch([request] * 2)
+            many.receive_batch()
+        one.reset(seed=4)
+        clock.advance(0.1)
+        many.send_steps(np.zeros((2, 1), np.float32))
+        columns = many.receive_steps()
+        _, reward, _, _, info = one.step(STILL)
+    assert info["frames"] >= 6
+    assert columns.frames.tolist() == [info["frames"]] * 2
+    assert columns.reward.tolist() == [reward] * 2
+    assert [each["late"] for each in columns.info] == [info["late"]] * 2

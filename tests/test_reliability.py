@@ -15,11 +15,12 @@ import numpy as np
 import pytest
 from conftest import Serve
 
-from rlenv.communication import Communication, Limits
 from rlenv.errors import ErrorCode
 from rlenv.protocol import Hello
-from rlenv.testing import ManualClock, check_server, read_frame
+from rlenv.serving.endpoint import Endpoint, Limits
+from rlenv.testing import ManualClock, read_frame
 from rlenv_client import Client, ConnectionLost, RemoteEnv, RemoteError
+from rlenv_client.compliance import check_server
 
 
 def test_compliance_suite_on_cartpole(serve: Serve, figures: dict[str, str]) -> None:
@@ -112,24 +113,23 @@ def test_deadlines_follow_the_injected_clock() -> None:
 
     clock = ManualClock()
     hello = Hello("T", CartPoleAgent.action_space, CartPoleAgent.observation_space)
-    endpoint = Communication(lambda: hello, Limits(frame_deadline=2.0, idle_timeout=5.0),
-                             clock=clock)
+    endpoint = Endpoint(hello, Limits(frame_deadline=2.0, idle_timeout=5.0), clock=clock)
     host, port = endpoint.start_server()
     try:
         dripping = socket.create_connection((host, port), timeout=5)
         idle = socket.create_connection((host, port), timeout=5)
-        assert endpoint.poll(0) is None  # accepts both, sends the hellos
+        assert endpoint.receive(0) is None  # accepts both, sends the hellos
         read_frame(dripping)
         read_frame(idle)
         dripping.sendall(b"\x00\x00\x00")
-        assert endpoint.poll(0) is None
+        assert endpoint.receive(0) is None
         clock.advance(1.9)
-        assert endpoint.poll(0) is None and endpoint.connections == 2
+        assert endpoint.receive(0) is None and endpoint.connections == 2
         clock.advance(0.2)
-        assert endpoint.poll(0) is None and endpoint.connections == 1  # the drip is gone
+        assert endpoint.receive(0) is None and endpoint.connections == 1  # the drip is gone
         assert read_frame(dripping)["error"]["code"] == ErrorCode.TIMEOUT
         clock.advance(3.0)  # 5.1 s since the idle client's connection
-        assert endpoint.poll(0) is None and endpoint.connections == 0
+        assert endpoint.receive(0) is None and endpoint.connections == 0
         assert "no request for 5.0 s" in read_frame(idle)["error"]["message"]
     finally:
         endpoint.close()

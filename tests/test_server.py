@@ -324,7 +324,7 @@ def test_bad_frames_with_intact_framing_keep_the_connection(server: ServerProces
             assert reply["error"]["code"] == code
             assert words in reply["error"]["message"]
             assert reply["error"]["fatal"] is False
-        good = Request(id=4, reset={"seed": 0}, observation={"agent": {}}).to_wire()
+        good = Request(4, {"reset": {"seed": 0}, "observation": {"agent": {}}}).to_wire()
         body = pack(good)
         raw.sendall(struct.pack(">I", len(body)) + body)
         reply = read_frame(raw)
@@ -338,8 +338,8 @@ def test_a_client_that_leaves_mid_episode_loses_nothing_for_the_next(
     connection = Connection(Role.CLIENT)
     connection.receive_data(raw.recv(65536))
     connection.next_message()
-    raw.sendall(connection.send(Request(id=1, reset={}, observation={"agent": {}})))
-    raw.sendall(connection.send(Request(id=2, action=PUSH, repeat_action=7)))
+    raw.sendall(connection.send(Request(1, {"reset": {}, "observation": {"agent": {}}})))
+    raw.sendall(connection.send(Request(2, {"action": PUSH, "repeat_action": 7})))
     raw.close()  # gone before the answers
     with Client(server.host, server.port, timeout=5) as client:
         client.reset(seed=0)
@@ -426,7 +426,7 @@ def test_a_server_hosts_several_instances_stepped_by_one_batch(serve: Serve) -> 
             many.step_result(second)
         assert third is None
         # instances are independent trees: instance 2 did not move
-        many.send_batch([None, None, Request(id=0, observation={"agent": {}})])
+        many.send_batch([None, None, Request(0, {"observation": {"agent": {}}})])
         (observation,) = [many.reset_result(r)[0] for r in many.receive_batch() if r is not None]
         assert observation.tobytes() == resets[2][0].tobytes()
         with pytest.raises(RemoteError, match="a batch of 4 requests for 3 instances"):
@@ -437,7 +437,7 @@ def test_a_server_hosts_several_instances_stepped_by_one_batch(serve: Serve) -> 
         assert many.snapshot()["events"]
         assert many.tree()[0]["path"] == "/root/CartPole"
         with pytest.raises(RemoteError, match="inspect"):
-            many.send_request(Request(id=0, inspect={"bogus": {}}))
+            many.send_request(Request(0, {"inspect": {"bogus": {}}}))
             many.step_result(many.receive_reply())
 
 
@@ -483,7 +483,7 @@ def test_refused_steps_change_nothing(serve: Serve) -> None:
         many.send_steps(np.zeros((2, 1), np.float32), reset=np.ones(3, np.bool_))
         with pytest.raises(RemoteError, match="steps.reset has 3 flags for 2 instances"):
             many.receive_steps()
-        many.send_batch([Request(id=0, observation={"agent": {}})] * 2)  # nothing moved
+        many.send_batch([Request(0, {"observation": {"agent": {}}})] * 2)  # nothing moved
         after = np.stack([many.reset_result(reply)[0] for reply in many.receive_batch()])
         assert after.tobytes() == before.tobytes()
 
@@ -551,12 +551,24 @@ def test_joint_actions_in_columns_are_checked_whole(serve: Serve) -> None:
         assert all(set(info["agents"]) == {"Blue", "Red"} for info in columns.info)
 
 
-def test_a_single_instance_server_refuses_batches_and_steps(client: Client) -> None:
-    for send in (lambda: client.send_steps(np.zeros((1, 1), np.float32)),
-                 lambda: client.send_batch([client.reset_request()])):
-        send()
-        with pytest.raises(RemoteError, match="hosts one environment instance"):
-            client.step_result(client.receive_reply())
+def test_a_single_instance_server_takes_batches_and_steps_as_a_host_of_one(
+    serve: Serve,
+) -> None:
+    """No request form depends on how many instances a server hosts."""
+    with Client(*_address(serve()), timeout=10) as steps, \
+            Client(*_address(serve()), timeout=10) as plain:
+        steps.send_batch([steps.reset_request(seed=3)])
+        (reply,) = steps.receive_batch()
+        observation, _ = plain.reset(seed=3)
+        assert steps.reset_result(reply)[0].tobytes() == observation.tobytes()
+        for _ in range(3):
+            steps.send_steps(PUSH[np.newaxis], repeat_action=2)
+            columns = steps.receive_steps()
+            observation, reward, terminated, _, info = plain.step(PUSH, 2)
+            assert columns.observation.shape == (1, 5) and columns.errors is None
+            assert columns.observation[0].tobytes() == observation.tobytes()
+            assert (columns.reward[0], columns.terminated[0], columns.frames[0]) == \
+                (reward, terminated, info["frames"])
 
 
 def test_batches_are_validated_part_by_part(server: ServerProcess) -> None:

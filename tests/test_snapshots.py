@@ -11,7 +11,7 @@ from conftest import Serve
 
 from examples.cartpole import TARGET
 from examples.pair import NAMES, chase
-from rlenv import episode
+from rlenv.serving import snapshots
 from rlenv_client import Client, ErrorCode, LocalClient, RemoteError
 
 CARTPOLE_ACTIONS = [np.array([0.4 * np.sin(t / 2.0)], np.float32) for t in range(60)]
@@ -124,7 +124,7 @@ def test_snapshots_need_an_episode_and_go_alone(serve: Serve) -> None:
         client.reset(seed=0)
         from rlenv.protocol import Request
 
-        client.send_request(Request(id=0, snapshot={}, action=np.zeros(1, np.float32)))
+        client.send_request(Request(0, {"snapshot": {}, "action": np.zeros(1, np.float32)}))
         with pytest.raises(RemoteError, match="snapshot goes alone"):
             client.step_result(client.receive_reply())
 
@@ -146,7 +146,7 @@ def test_a_snapshot_that_outlives_its_episode_needs_a_reset(client: Client) -> N
 def test_the_log_of_an_endless_episode_stays_bounded(monkeypatch: pytest.MonkeyPatch) -> None:
     """Past MAX_EVENTS (lowered here to 5) the log forgets its events and snapshots are
     refused, so an episode that never ends does not grow the server's memory forever."""
-    monkeypatch.setattr(episode, "MAX_EVENTS", 5)
+    monkeypatch.setattr(snapshots, "MAX_EVENTS", 5)
     with LocalClient(TARGET) as local:
         local.configure(agent={"angle_limit": 1e9}, world={"track_limit": 1e9})  # endless
         local.reset(seed=1)
@@ -154,7 +154,7 @@ def test_the_log_of_an_endless_episode_stays_bounded(monkeypatch: pytest.MonkeyP
             local.step(np.zeros(1, np.float32))
         assert len(local.snapshot()["events"]) == 5
         local.step(np.zeros(1, np.float32))
-        log = local.environment._log
+        log = local.host.instances[0].log
         assert log.overflowed and log.events == []
         with pytest.raises(RemoteError, match="too long to snapshot: more than 5 actions") as error:
             local.snapshot()

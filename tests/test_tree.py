@@ -366,6 +366,202 @@ def test_nodes_not_overriding_virtuals_are_not_called(
     assert called == []
 
 
+@pytest.mark.parametrize("physics", [False, True], ids=["process", "physics_process"])
+def test_enabling_processing_during_pass_applies_from_next_pass(
+    tree: SceneTree, log: list, physics: bool
+) -> None:
+    class Enabler(Node):
+        def _process(self, delta: float) -> None:
+            self.get_node("../Later").set_process(True)
+
+        def _physics_process(self, delta: float) -> None:
+            self.get_node("../Later").set_physics_process(True)
+
+    later = Worker("Later", log)
+    later.set_process(False)
+    later.set_physics_process(False)
+    tree.root.add_child(Enabler("Enabler"))
+    tree.root.add_child(later)
+    run = tree.physics_tick if physics else lambda: tree.process(0.1)
+    run()
+    assert log == []
+    run()
+    assert kinds(log, "physics" if physics else "process") == ["Later"]
+
+
+def test_process_mode_change_during_tick_skips_later_process_and_step(
+    tree: SceneTree, log: list
+) -> None:
+    class Disabler(Node):
+        def _physics_process(self, delta: float) -> None:
+            self.get_node("../Later").process_mode = DISABLED
+
+    tree.root.add_child(Stepper("Before", log))
+    tree.root.add_child(Disabler("Disabler"))
+    tree.root.add_child(Stepper("Later", log))
+    tree.physics_tick()
+    assert [entry[:2] for entry in log] == [("physics", "Before"), ("step", "Before")]
+
+
+def test_process_mode_enabled_during_pass_applies_from_next_pass(
+    tree: SceneTree, log: list
+) -> None:
+    class Enabler(Node):
+        def _process(self, delta: float) -> None:
+            self.get_node("../Later").process_mode = ALWAYS
+
+    tree.root.add_child(Enabler("Enabler"))
+    tree.root.add_child(Worker("Later", log, process_mode=DISABLED))
+    tree.process(0.1)
+    assert log == []
+    tree.process(0.1)
+    assert kinds(log, "process") == ["Later"]
+
+
+def test_pausing_during_pass_applies_from_next_pass(tree: SceneTree, log: list) -> None:
+    class Pauser(Node):
+        def _process(self, delta: float) -> None:
+            self.get_tree().paused = True
+
+    tree.root.add_child(Pauser("Pauser", process_mode=ALWAYS))
+    tree.root.add_child(Worker("Later", log))
+    tree.process(0.1)
+    assert kinds(log, "process") == ["Later"]
+    tree.process(0.1)
+    assert kinds(log, "process") == ["Later"]
+
+
+def test_structure_changes_in_frame_signal_apply_to_that_pass(tree: SceneTree, log: list) -> None:
+    leaving = Worker("Leaving", log)
+    tree.root.add_child(leaving)
+    tree.iteration()  # the plan includes Leaving
+    log.clear()
+
+    def swap() -> None:
+        if leaving.is_inside_tree():
+            tree.root.remove_child(leaving)
+            tree.root.add_child(Worker("Arriving", log))
+
+    tree.physics_frame.connect(swap)
+    tree.physics_tick()
+    assert kinds(log, "physics") == ["Arriving"]
+
+
+def test_paused_is_a_bool(tree: SceneTree) -> None:
+    assert tree.paused is False
+    tree.paused = 1
+    assert tree.paused is True
+    tree.paused = []
+    assert tree.paused is False
+
+
+def test_pausing_reuses_the_plans(
+    tree: SceneTree, log: list, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    built: list[bool] = []
+
+    class CountedPlan(rlenv.tree._TickPlan):
+        def __init__(self, root: Node, paused: bool) -> None:
+            built.append(paused)
+            super().__init__(root, paused)
+
+    monkeypatch.setattr(rlenv.tree, "_TickPlan", CountedPlan)
+    node = Worker("W", log, process_mode=ALWAYS)
+    tree.root.add_child(node)
+    for _ in range(3):
+        tree.paused = False
+        tree.iteration()
+        tree.paused = True
+        tree.iteration()
+    assert built == [False, True]
+    node.set_process(True)  # unchanged: the plans stay valid
+    node.process_mode = ALWAYS
+    tree.iteration()
+    assert built == [False, True]
+    node.set_process(False)
+    tree.iteration()
+    tree.paused = False
+    tree.iteration()
+    assert built == [False, True, True, False]
+    assert kinds(log, "process") == ["W"] * 7
+
+
+def test_physics_ticks_per_second_can_change(tree: SceneTree, log: list) -> None:
+    tree.root.add_child(Worker("W", log))
+    tree.physics_ticks_per_second = 20
+    assert tree.physics_delta == 1 / 20
+    tree.iteration()
+    assert [entry[2] for entry in log] == [1 / 20, 1 / 20]
+    with pytest.raises(ValueError, match="at least 1"):
+        tree.physics_ticks_per_second = 0
+    assert tree.physics_ticks_per_second == 20
+
+
+# --- on_physics_tick_end ---------------------------------------------------------------------
+
+
+def test_tick_end_runs_after_steps_and_before_deferred_calls(tree: SceneTree, log: list) -> None:
+    class Deferrer(Stepper):
+        def _physics_process(self, delta: float) -> None:
+            super()._physics_process(delta)
+            self.call_deferred(log.append, ("deferred", self.name))
+
+    tree.root.add_child(Deferrer("A", log))
+    tree.root.add_child(Stepper("B", log))
+    tree.on_physics_tick_end = lambda delta: log.append(("tick end", "tree", delta))
+    tree.iteration()
+    assert log == [
+        ("physics", "A", 1 / 60), ("physics", "B", 1 / 60),
+        ("step", "A", 1 / 60), ("step", "B", 1 / 60),
+        ("tick end", "tree", 1 / 60),
+        ("deferred", "A"),
+        ("process", "A", 1 / 60), ("process", "B", 1 / 60),
+    ]
+
+
+def test_tick_end_runs_before_a_timeout(tree: SceneTree, log: list) -> None:
+    timer = PhysicsFramesTimer(1)
+    tree.root.add_child(timer)
+    record_timeouts(tree, log, timer)
+    tree.on_physics_tick_end = lambda delta: log.append(("tick end", tree.physics_frames))
+    timer.start()
+    tree.physics_tick()
+    assert log == [("tick end", 1), ("timeout", 1)]
+
+
+def test_tick_end_runs_on_every_tick_paused_or_not(tree: SceneTree, log: list) -> None:
+    tree.on_physics_tick_end = log.append
+    tree.paused = True
+    tree.iteration()  # a paused lockstep iteration runs no tick
+    assert log == []
+    tree.physics_tick()
+    tree.paused = False
+    tree.iteration()
+    assert log == [1 / 60, 1 / 60]
+    tree.on_physics_tick_end = None
+    tree.iteration()
+    assert len(log) == 2
+
+
+def test_structure_changes_in_tick_end_are_immediate(tree: SceneTree, log: list) -> None:
+    old = Worker("Old", log)
+    tree.root.add_child(old)
+    seen: list[tuple[bool, bool]] = []
+
+    def swap(delta: float) -> None:
+        if old.is_inside_tree():
+            tree.root.remove_child(old)
+            new = Worker("New", log)
+            tree.root.add_child(new)
+            seen.append((old.is_inside_tree(), new.is_inside_tree()))
+
+    tree.on_physics_tick_end = swap
+    tree.iteration()
+    assert seen == [(False, True)]
+    assert kinds(log, "physics") == ["Old"]
+    assert kinds(log, "process") == ["New"]
+
+
 # --- deferred calls --------------------------------------------------------------------------
 
 

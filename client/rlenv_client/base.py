@@ -1,23 +1,26 @@
 """The client API, independent of how requests reach the environment.
 
 :class:`BaseClient` turns calls (``reset``, ``step`` ...) into :class:`rlenv.protocol.Request`
-records and responses back into gymnasium-shaped results. A subclass supplies the transport:
+records and answers back into gymnasium-shaped results. A subclass supplies the transport:
 :class:`~rlenv_client.client.Client` over TCP, :class:`~rlenv_client.local.LocalClient` inside
 this process. Stepping is split into :meth:`BaseClient.send_step` and
 :meth:`BaseClient.receive_step` so that a vector of clients can send every request before
 waiting for any answer.
+
+Values of the declared spaces travel in their packed form (:mod:`rlenv.spaces`): the codecs
+that pack actions and unpack observations are prepared once, from the hello.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
-from dataclasses import replace
 from itertools import count
 from typing import Any, TypeVar
 
 import numpy as np
 from gymnasium import spaces
+from gymnasium.vector.utils import batch_space
 
 from rlenv.errors import ConnectionLost, RemoteError
 from rlenv.protocol import (
@@ -27,10 +30,9 @@ from rlenv.protocol import (
     Reply,
     Request,
     Response,
-    Steps,
     StepsResponse,
 )
-from rlenv.spaces import from_wire
+from rlenv.spaces import Codec, codec_for
 
 __all__ = ["BaseClient", "StepResult"]
 
@@ -38,8 +40,8 @@ StepResult = tuple[Any, float, bool, bool, dict[str, Any]]
 """``(observation, reward, terminated, truncated, info)``, as gymnasium's ``step`` returns."""
 
 _AGENT_ONLY: Mapping[str, Any] = {"agent": {}}
-_Answer = TypeVar("_Answer", BatchResponse, StepsResponse)
 _AGENT_AND_WORLD: Mapping[str, Any] = {"agent": {}, "world": {}}
+_Answer = TypeVar("_Answer", BatchResponse, StepsResponse)
 
 
 class BaseClient(ABC):
@@ -63,6 +65,9 @@ class BaseClient(ABC):
         self.hello = hello
         self.action_space: spaces.Space = hello.action_space
         self.observation_space: spaces.Space = hello.observation_space
+        self._actions: Codec = codec_for(hello.action_space)
+        self._observations: Codec = codec_for(hello.observation_space)
+        self._columns: tuple[Codec, Codec] | None = None  # (actions, observations) of K
 
     # --- the API ----------------------------------------------------------------------------
 
@@ -106,7 +111,7 @@ class BaseClient(ABC):
 
     def receive_reset(self) -> tuple[Any, dict[str, Any]]:
         """Wait for the answer to the reset sent by :meth:`send_reset`."""
-        return self.reset_result(self._receive_reply())
+        return self.reset_result(self._receive())  # type: ignore[arg-type]
 
     def step(self, action: Any, repeat_action: int | None = None) -> StepResult:
         """Run ``action`` for ``repeat_action`` physics ticks (default: the server's setting).
@@ -119,8 +124,8 @@ class BaseClient(ABC):
             RemoteError: ``invalid_action`` (shape, dtype, bounds, NaN) or ``reset_required``;
                 the environment is unchanged and the client can go on.
         """
-        self.send_step(action, repeat_action)
-        return self.receive_step()
+        self._send(self.step_request(action, repeat_action, request_id=next(self._ids)))
+        return self.step_result(self._receive())  # type: ignore[arg-type]
 
     def send_step(self, action: Any, repeat_action: int | None = None) -> None:
         """Send a step request without waiting; collect the answer with :meth:`receive_step`."""
@@ -128,25 +133,20 @@ class BaseClient(ABC):
 
     def receive_step(self) -> StepResult:
         """Wait for the answer to the step sent by :meth:`send_step`."""
-        return self.step_result(self._receive_reply())
+        return self.step_result(self._receive())  # type: ignore[arg-type]
 
-    def step_result(self, reply: Response | ErrorReply, *, native: bool = True) -> StepResult:
+    def step_result(self, reply: Response | ErrorReply, *, writable: bool = True) -> StepResult:
         """A step's answer as ``(observation, reward, terminated, truncated, info)``.
 
-        With ``native=False`` the observation is left as decoded from the wire (read-only
-        arrays, for callers that copy it anyway, such as vector environments batching it).
+        With ``writable=False`` arrays of the observation may be read-only views of the
+        received bytes (for callers that copy them anyway, such as vector environments).
 
         Raises:
             RemoteError: the answer is an error.
         """
         response = self._response(reply)
-        return (
-            self._observation(response) if native else self._part(response, "agent"),
-            response.reward,
-            response.terminated,
-            response.truncated,
-            self._info(response),
-        )
+        return (self._observation(response, writable), response.reward, response.terminated,
+                response.truncated, self._info(response))
 
     def reset_result(self, reply: Response | ErrorReply) -> tuple[Any, dict[str, Any]]:
         """A reset's answer as ``(observation, info)``.
@@ -160,8 +160,11 @@ class BaseClient(ABC):
     def step_request(self, action: Any, repeat_action: int | None = None, *,
                      request_id: int = 0) -> Request:
         """The request :meth:`send_step` sends, for a batch (whose parts need no id)."""
-        return Request(id=request_id, action=action, observation=self._observation_request,
-                       repeat_action=repeat_action)
+        parts = {"action": self._actions.pack_exact(action),
+                 "observation": self._observation_request}
+        if repeat_action is not None:
+            parts["repeat_action"] = repeat_action
+        return Request(request_id, parts)
 
     def reset_request(
         self, seed: int | None = None, options: Mapping[str, Any] | None = None, *,
@@ -173,25 +176,26 @@ class BaseClient(ABC):
             reset["seed"] = seed
         if options is not None:
             reset["options"] = dict(options)
-        return Request(id=request_id, reset=reset, observation=self._observation_request)
+        return Request(request_id, {"reset": reset, "observation": self._observation_request})
 
     def send_request(self, request: Request) -> None:
         """Send a prepared request (see :meth:`step_request`); its id is assigned here."""
-        self._send(replace(request, id=next(self._ids)))
+        self._send(Request(next(self._ids), request.parts, request.token))
 
     def receive_reply(self) -> Response | ErrorReply:
         """Wait for the answer to :meth:`send_request`; an error reply is returned, not raised."""
         message = self._receive()
-        if isinstance(message, BatchResponse):
+        if message.__class__ is not Response and message.__class__ is not ErrorReply:
             self.close()
-            raise ConnectionLost(f"{self.address} answered with a batch: {message!r:.80}")
-        if isinstance(message, ErrorReply) and message.fatal:
+            raise ConnectionLost(f"{self.address} answered a request with {message!r:.80}")
+        if message.__class__ is ErrorReply and message.fatal:  # type: ignore[union-attr]
             self.close()
-        return message
+        return message  # type: ignore[return-value]
 
     def send_batch(self, requests: Sequence[Request | None]) -> None:
-        """Send one request per instance of a multi-instance server (``None``: skip one)."""
-        self._send(Request(id=next(self._ids), batch=tuple(requests)))
+        """Send one request per instance of the server (``None``: skip one)."""
+        self._send(Request(next(self._ids), {"batch": [
+            None if request is None else request.parts for request in requests]}))
 
     def receive_batch(self) -> tuple[Response | ErrorReply | None, ...]:
         """Wait for the answer to :meth:`send_batch`: one reply per instance.
@@ -203,23 +207,38 @@ class BaseClient(ABC):
 
     def send_steps(self, action: Any, reset: np.ndarray | None = None,
                    repeat_action: int | None = None) -> None:
-        """Step every instance of a multi-instance server at once, in columns.
+        """Step every instance of the server at once, in columns.
 
         ``action`` stacks one action per instance (gymnasium's ``batch_space`` layout);
         ``reset`` marks the instances to reset instead (their action is ignored). Collect the
         answer with :meth:`receive_steps`.
         """
-        self._send(Request(id=next(self._ids), steps=Steps(action, reset, repeat_action)))
+        actions, _ = self._column_codecs()
+        steps: dict[str, Any] = {"action": actions.pack_exact(action)}
+        if reset is not None:
+            steps["reset"] = np.asarray(reset, np.bool_).tobytes() if \
+                isinstance(reset, np.ndarray) else reset
+        if repeat_action is not None:
+            steps["repeat_action"] = repeat_action
+        self._send(Request(next(self._ids), {"steps": steps}))
 
     def receive_steps(self) -> StepsResponse:
         """Wait for the answer to :meth:`send_steps`.
 
-        An instance that failed has its error reply in the answer's ``errors``.
+        Its ``observation`` is the batch of observations (arrays may be read-only views of the
+        received bytes); an instance that failed has its error reply in ``errors``.
 
         Raises:
             RemoteError: the whole request was refused (nothing changed).
         """
-        return self._receive_answer(StepsResponse, "steps")
+        answer = self._receive_answer(StepsResponse, "steps")
+        _, observations = self._column_codecs()
+        try:
+            answer.observation = observations.unpack(answer.observation, writable=False)
+        except (KeyError, TypeError, ValueError) as error:
+            self.close()
+            raise ConnectionLost(f"{self.address} broke the protocol: {error}") from None
+        return answer
 
     def observe(self) -> dict[str, Any]:
         """The current observation without stepping: ``{"agent": ..., "world": ...}``."""
@@ -227,7 +246,9 @@ class BaseClient(ABC):
         return {"agent": self._observation(response), "world": self._part(response, "world")}
 
     def snapshot(self) -> dict[str, Any]:
-        """The environment's state as data (see :mod:`rlenv.episode`), to :meth:`restore` later.
+        """The environment's state as data (see :mod:`rlenv.serving.snapshots`).
+
+        Restore it later with :meth:`restore`.
 
         Raises:
             RemoteError: ``reset_required`` before the first reset.
@@ -285,7 +306,7 @@ class BaseClient(ABC):
     def render_request(self, width: int | None = None, height: int | None = None) -> Request:
         """The request :meth:`render` sends, for a batch."""
         size = {k: v for k, v in (("width", width), ("height", height)) if v is not None}
-        return Request(id=0, observation={"render": size})
+        return Request(0, {"observation": {"render": size}})
 
     def render_result(self, reply: Response | ErrorReply) -> np.ndarray:
         """A render's answer as an ``(height, width, 3)`` uint8 array.
@@ -319,43 +340,57 @@ class BaseClient(ABC):
     # --- internals --------------------------------------------------------------------------
 
     def _call(self, **parts: Any) -> Response:
-        self._send(Request(id=next(self._ids), **parts))
-        return self._receive_reply()
+        self._send(Request(next(self._ids), parts))
+        return self._response(self.receive_reply())
+
+    def _column_codecs(self) -> tuple[Codec, Codec]:
+        """The codecs of K actions and K observations (K: the server's instances)."""
+        if self._columns is None:
+            count = self.hello.instances
+            self._columns = (codec_for(batch_space(self.action_space, count)),
+                             codec_for(batch_space(self.observation_space, count)))
+        return self._columns
 
     def _receive_answer(self, kind: type[_Answer], asked: str) -> _Answer:
         """The answer to a batch or steps request, ``kind``; raises a refusal of it whole."""
         message = self._receive()
-        if isinstance(message, ErrorReply):
-            self._response(message)
-        if not isinstance(message, kind):
+        if message.__class__ is ErrorReply:
+            self._response(message)  # type: ignore[arg-type]
+        if message.__class__ is not kind:
             self.close()
             raise ConnectionLost(f"{self.address} answered {asked} with {message!r:.80}")
-        return message
-
-    def _receive_reply(self) -> Response:
-        return self._response(self.receive_reply())
+        return message  # type: ignore[return-value]
 
     def _response(self, message: Response | ErrorReply) -> Response:
-        if isinstance(message, ErrorReply):
-            if message.fatal:
+        if message.__class__ is ErrorReply:
+            if message.fatal:  # type: ignore[union-attr]
                 self.close()
-            raise RemoteError(message.code, message.message, message.fatal)
-        return message
+            raise RemoteError(message.code, message.message, message.fatal)  # type: ignore[union-attr]
+        if message.__class__ is not Response:
+            self.close()
+            raise ConnectionLost(f"{self.address} answered a request with {message!r:.80}")
+        return message  # type: ignore[return-value]
 
-    def _observation(self, response: Response) -> Any:
-        return from_wire(self.observation_space, self._part(response, "agent"))
+    def _observation(self, response: Response, writable: bool = True) -> Any:
+        try:
+            return self._observations.unpack(self._part(response, "agent"), writable)
+        except (KeyError, TypeError, ValueError) as error:
+            self.close()
+            raise ConnectionLost(f"{self.address} broke the protocol: {error}") from None
 
     def _part(self, response: Response, part: str) -> Any:
-        if response.observation is None or part not in response.observation:
+        observation = response.observation
+        if observation is None or part not in observation:
             self.close()
             raise ConnectionLost(f"{self.address} broke the protocol: no {part!r} observation")
-        return response.observation[part]
+        return observation[part]
 
     def _info(self, response: Response) -> dict[str, Any]:
         info = dict(response.info)
         info["frames"] = response.frames
         if response.agents is not None:
             info["agents"] = response.agents
-        if response.observation is not None and "world" in response.observation:
-            info["world"] = response.observation["world"]
+        observation = response.observation
+        if observation is not None and "world" in observation:
+            info["world"] = observation["world"]
         return info

@@ -4,15 +4,22 @@ Every figure is the median of several rounds and is printed with its baseline an
 A figure's rounds take turns with its baseline's (after a warm-up round each), so that both are
 measured under the same conditions however the machine's speed drifts during the run:
 
-- (a) a bare msgpack request/response over loopback (the floor: a Python echo server);
+- (r) the hand-written CartPole server (``examples.handwritten``: the same pymunk CartPole, a
+  blocking socket loop, ``msgpack``) driven by a raw client at repeat_action 4, against (a):
+  the floor of a remote step, doing the same work as rlenv's CartPole and nothing more;
+- (a) a bare msgpack request/response over loopback (a Python echo server; arrays as raw
+  bytes);
 - (b) in-process CartPole steps (no socket) against (a);
-- (c) remote ``Client.step`` on CartPole at repeat_action 1 and 4, against (a);
+- (c) remote ``Client.step`` on CartPole at repeat_action 4 against (r), and at 1 against (a);
 - (d) an 84x84x3 uint8 observation (``examples.pixels``) against a ping-pong carrying the same
   bytes;
 - (e) ``RemoteVectorEnv`` throughput by number of environments and servers (the instances of
   a server stepped by one ``steps`` request, in columns), against (f);
 - (f) gymnasium's ``AsyncVectorEnv`` with 8 ``CartPole-v1`` on the same machine (and 64
   CartPoles in this process, ``in_process=True``, against it too);
+- (i) ``gymnasium.make_vec("rlenv/CartPole-v0", num_envs=64)`` with its default options (the
+  default layout and repeat_action 4, episodes ending and autoresetting) on random actions,
+  against (f);
 - (g) p50 / p99 latency of a remote step against the ping-pong's;
 - (h) memory of one server process, and per extra environment instance in one process.
 
@@ -22,6 +29,7 @@ Progress goes to stderr, the table to stdout, and everything to JSON with ``--js
 from __future__ import annotations
 
 import contextlib
+import itertools
 import json
 import logging
 import os
@@ -35,9 +43,8 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any
 
+import msgpack
 import numpy as np
-
-from rlenv.protocol import pack, unpack
 
 __all__ = ["Figure", "format_table", "run_benchmarks", "to_json"]
 
@@ -45,6 +52,10 @@ logger = logging.getLogger(__name__)
 
 CARTPOLE = "examples.cartpole:CartPoleEnvironment"
 PIXELS = "examples.pixels:PixelsEnvironment"
+HAND_WRITTEN = "examples.handwritten"
+"""The module of the hand-written CartPole server (run with ``python -m``)."""
+ENDLESS = {"world": {"track_limit": 1e9}, "agent": {"angle_limit": 1e9}}
+"""CartPole's configuration for the bench: one episode for the whole run, no resets."""
 
 _ECHO_SERVER = """
 import socket, struct, sys
@@ -136,8 +147,20 @@ def _calls(call: Callable[[], object], latencies: list[float] | None = None,
 
 
 def _frame(message: object) -> bytes:
-    body = pack(message)
+    """``message`` packed by msgpack, behind its 4-byte big-endian length."""
+    body = msgpack.packb(message)
     return struct.pack(">I", len(body)) + body
+
+
+def _receive_frame(sock: socket.socket) -> bytes:
+    """The body of the next frame on ``sock``: recv until the whole frame is in."""
+    data = sock.recv(65536)
+    while len(data) < 4 or len(data) < 4 + struct.unpack_from(">I", data)[0]:
+        chunk = sock.recv(65536)
+        if not chunk:
+            raise ConnectionError("the server closed the connection")
+        data += chunk
+    return data[4:]
 
 
 class _PingPong:
@@ -159,7 +182,7 @@ class _PingPong:
         data = self.sock.recv(65536)
         while len(data) < self.reply_size + 4:
             data += self.sock.recv(65536)
-        unpack(data[4:])
+        msgpack.unpackb(data[4:])
 
     def close(self) -> None:
         self.sock.close()
@@ -173,12 +196,64 @@ class _PingPong:
         self.close()
 
 
-def _step_request(action: Any) -> bytes:
+class _HandWritten:
+    """The hand-written CartPole server in a subprocess, and a raw client to it.
+
+    The client does what any client must and no more: pack the request, one ``sendall``,
+    receive the whole answer, unpack it, copy the observation out of its bytes.
+    """
+
+    def __init__(self) -> None:
+        self.process = subprocess.Popen([sys.executable, "-m", HAND_WRITTEN],
+                                        stdout=subprocess.PIPE, text=True)
+        try:
+            assert self.process.stdout is not None
+            line = self.process.stdout.readline()
+            if not line.startswith("listening on "):
+                raise RuntimeError(f"{HAND_WRITTEN} did not start: {line!r}")
+            host, _, port = line.removeprefix("listening on ").strip().rpartition(":")
+            self.sock = socket.create_connection((host, int(port)))
+        except BaseException:
+            self.process.kill()
+            self.process.wait()
+            raise
+        self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self.ids = itertools.count(1)
+
+    def call(self, request: dict[str, Any]) -> dict[str, Any]:
+        """Send ``request`` (its ``id`` added) and return the answer."""
+        self.sock.sendall(_frame({"id": next(self.ids), **request}))
+        return msgpack.unpackb(_receive_frame(self.sock))
+
+    def step(self, action: np.ndarray, repeat_action: int = 4) -> tuple[Any, ...]:
+        """One step: ``(observation, reward, terminated, truncated, info)``."""
+        reply = self.call({"action": action.tobytes(), "repeat_action": repeat_action})
+        observation = np.frombuffer(reply["observation"], np.float32).copy()
+        return observation, reply["reward"], reply["terminated"], reply["truncated"], \
+            reply["info"]
+
+    def close(self) -> None:
+        self.sock.close()
+        self.process.kill()
+        self.process.wait()
+
+    def __enter__(self) -> _HandWritten:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+
+def _step_request(action: np.ndarray | int) -> bytes:
+    """A step request as rlenv's client sends one; arrays as raw bytes."""
+    if isinstance(action, np.ndarray):
+        action = action.tobytes()
     return _frame({"id": 1, "action": action, "observation": {"agent": {}}})
 
 
-def _step_reply(observation: Any) -> bytes:
-    return _frame({"id": 1, "observation": {"agent": observation}, "reward": 1.0,
+def _step_reply(observation: np.ndarray) -> bytes:
+    """A step answer as rlenv's server sends one, the observation as raw bytes."""
+    return _frame({"id": 1, "observation": {"agent": observation.tobytes()}, "reward": 1.0,
                    "terminated": False, "truncated": False, "info": {}, "frames": 4})
 
 
@@ -202,56 +277,83 @@ def run_benchmarks(
         quick: fewer vector layouts.
         progress: told what is being measured, before each figure.
     """
-    from rlenv_client import Client, LocalClient, RemoteVectorEnv, ServerProcess
+    progress("(a, b, c, g) ping-pong, (r) hand-written server, in-process and remote CartPole "
+             "steps, in turns")
+    figures, cartpole_rss = _single_steps(rounds, steps)
+    progress("(d) 84x84x3 uint8 observations and a ping-pong of the same bytes, in turns")
+    figures.append(_image_steps(rounds, steps // 2))
+    progress("(e, f, i) RemoteVectorEnv layouts, make_vec and gymnasium's AsyncVectorEnv, "
+             "in turns")
+    figures += _vectors(rounds, steps, quick)
+    progress("(h) memory")
+    figures.append(Figure("one CartPole server process, resident", cartpole_rss / 1024, "MiB"))
+    figures.append(Figure("one more CartPole instance in a process", _instance_kib(), "KiB"))
+    return figures
 
-    figures: list[Figure] = []
-    cartpole_action = np.zeros(1, np.float32)
-    cartpole_obs = np.zeros(5, np.float32)
-    endless = {"world": {"track_limit": 1e9}, "agent": {"angle_limit": 1e9}}
 
-    progress("(a, b, c, g) ping-pong, in-process and remote CartPole steps, in turns")
+def _single_steps(rounds: int, steps: int) -> tuple[list[Figure], int]:
+    """Figures (r, a, b, c, g), and the CartPole server's resident KiB."""
+    from rlenv_client import Client, LocalClient, ServerProcess
+
+    action = np.zeros(1, np.float32)
     pong_latencies: list[float] = []
     step_latencies: list[float] = []
-    with _PingPong(_step_reply(cartpole_obs)) as echo, LocalClient(CARTPOLE) as local, \
-            ServerProcess(CARTPOLE) as server, Client(server.host, server.port) as client:
-        request = _step_request(cartpole_action)
+    with _PingPong(_step_reply(np.zeros(5, np.float32))) as echo, _HandWritten() as raw, \
+            LocalClient(CARTPOLE) as local, ServerProcess(CARTPOLE) as server, \
+            Client(server.host, server.port) as client:
+        request = _step_request(action)
+        raw.call({"config": ENDLESS, "reset": {"seed": 0}})
         for each in (local, client):
-            each.configure(**endless)
+            each.configure(**ENDLESS)
             each.reset(seed=0)
-        floor, local_rate, *remote_rates = _interleaved(
+        floor, hand_written, local_rate, remote_1, remote_4 = _interleaved(
             rounds,
             _Rate(_calls(lambda: echo.round_trip(request), pong_latencies), steps),
-            _Rate(_calls(lambda: local.step(cartpole_action, 4)), steps),
-            _Rate(_calls(lambda: client.step(cartpole_action, 1)), steps),
-            _Rate(_calls(lambda: client.step(cartpole_action, 4), step_latencies), steps),
+            _Rate(_calls(lambda: raw.step(action, 4)), steps),
+            _Rate(_calls(lambda: local.step(action, 4)), steps),
+            _Rate(_calls(lambda: client.step(action, 1)), steps),
+            _Rate(_calls(lambda: client.step(action, 4), step_latencies), steps),
         )
         cartpole_rss = _rss_kib(server.pid)
-    figures.append(Figure("msgpack ping-pong over loopback", floor, "round trips/s"))
-    figures.append(Figure("in-process CartPole step (repeat 4)", local_rate, "steps/s",
-                          "msgpack ping-pong", floor))
-    for repeat, rate in zip((1, 4), remote_rates, strict=True):
-        figures.append(Figure(f"remote CartPole Client.step (repeat {repeat})", rate,
-                              "steps/s", "msgpack ping-pong", floor))
+    pong = "msgpack ping-pong"
+    figures = [
+        Figure("hand-written CartPole server, raw client (repeat 4)", hand_written, "steps/s",
+               pong, floor),
+        Figure("msgpack ping-pong over loopback", floor, "round trips/s"),
+        Figure("in-process CartPole step (repeat 4)", local_rate, "steps/s", pong, floor),
+        Figure("remote CartPole Client.step (repeat 1)", remote_1, "steps/s", pong, floor),
+        Figure("remote CartPole Client.step (repeat 4)", remote_4, "steps/s",
+               "hand-written server (repeat 4)", hand_written),
+    ]
     for quantile in (50, 99):
         mine = float(np.percentile(step_latencies, quantile)) * 1e6
         theirs = float(np.percentile(pong_latencies, quantile)) * 1e6
         figures.append(Figure(f"p{quantile} remote step latency (repeat 4)", mine, "us",
                               f"p{quantile} ping-pong", theirs))
+    return figures, cartpole_rss
 
-    progress("(d) 84x84x3 uint8 observations and a ping-pong of the same bytes, in turns")
+
+def _image_steps(rounds: int, steps: int) -> Figure:
+    """Figure (d)."""
+    from rlenv_client import Client, ServerProcess
+
     image = np.zeros((84, 84, 3), np.uint8)
     with _PingPong(_step_reply(image)) as echo, ServerProcess(PIXELS) as server, \
             Client(server.host, server.port) as client:
         client.reset(seed=0)
         request = _step_request(0)
         image_floor, rate = _interleaved(
-            rounds, _Rate(_calls(lambda: echo.round_trip(request)), steps // 2),
-            _Rate(_calls(lambda: client.step(0, 1)), steps // 2))
-    figures.append(Figure("remote 84x84x3 observation step", rate, "steps/s",
-                          "ping-pong carrying the same bytes", image_floor))
+            rounds, _Rate(_calls(lambda: echo.round_trip(request)), steps),
+            _Rate(_calls(lambda: client.step(0, 1)), steps))
+    return Figure("remote 84x84x3 observation step", rate, "steps/s",
+                  "ping-pong carrying the same bytes", image_floor)
 
-    progress("(e, f) RemoteVectorEnv layouts and gymnasium's AsyncVectorEnv, in turns")
+
+def _vectors(rounds: int, steps: int, quick: bool) -> list[Figure]:
+    """Figures (e, f, i)."""
     import gymnasium
+
+    from rlenv_client import RemoteVectorEnv
 
     served = [(4, 1), (8, 4), (64, 32)] if quick else \
         [(1, 1), (2, 1), (4, 1), (8, 1), (8, 4), (64, 32), (64, 64)]
@@ -262,14 +364,10 @@ def run_benchmarks(
     with contextlib.ExitStack() as stack:
         async_envs = gymnasium.vector.AsyncVectorEnv([lambda: gymnasium.make("CartPole-v1")] * 8)
         stack.callback(async_envs.close)
-        async_envs.reset(seed=0)
-        async_envs.action_space.seed(0)
-        actions = [async_envs.action_space.sample() for _ in range(64)]
-
-        def async_run(n: int) -> None:
-            for i in range(n):
-                async_envs.step(actions[i % 64])
-        measures = [_Rate(async_run, steps // 4, scale=8)]
+        measures = [_Rate(_random_steps(async_envs), steps // 4, scale=8)]
+        made = gymnasium.make_vec("rlenv/CartPole-v0", num_envs=64)
+        stack.callback(made.close)
+        measures.append(_Rate(_random_steps(made), max(steps // 64, 20), scale=64))
         for _, count, layout in layouts:
             envs = stack.enter_context(RemoteVectorEnv(count, CARTPOLE, repeat_action=1,
                                                        **layout))
@@ -277,16 +375,29 @@ def run_benchmarks(
             batch = np.zeros((count, 1), np.float32)
             measures.append(_Rate(_calls(lambda envs=envs, batch=batch: envs.step(batch)),
                                   max(steps // count, 20), scale=count))
-        async_rate, *vector_rates = _interleaved(rounds, *measures)
-    figures.append(Figure("gymnasium AsyncVectorEnv(8) CartPole-v1", async_rate, "env-steps/s"))
+        async_rate, made_rate, *vector_rates = _interleaved(rounds, *measures)
+    theirs = "AsyncVectorEnv(8) CartPole-v1"
+    figures = [
+        Figure(f"gymnasium {theirs}", async_rate, "env-steps/s"),
+        Figure("gymnasium.make_vec('rlenv/CartPole-v0', num_envs=64)", made_rate, "env-steps/s",
+               theirs, async_rate),
+    ]
     for (name, _, _), rate in zip(layouts, vector_rates, strict=True):
-        figures.append(Figure(f"RemoteVectorEnv {name}", rate, "env-steps/s",
-                              "AsyncVectorEnv(8) CartPole-v1", async_rate))
-
-    progress("(h) memory")
-    figures.append(Figure("one CartPole server process, resident", cartpole_rss / 1024, "MiB"))
-    figures.append(Figure("one more CartPole instance in a process", _instance_kib(), "KiB"))
+        figures.append(Figure(f"RemoteVectorEnv {name}", rate, "env-steps/s", theirs,
+                              async_rate))
     return figures
+
+
+def _random_steps(envs: Any, batches: int = 64) -> Callable[[int], None]:
+    """``run(n)``: ``n`` steps of the vector ``envs`` (reset with seed 0) on random actions."""
+    envs.reset(seed=0)
+    envs.action_space.seed(0)
+    actions = [envs.action_space.sample() for _ in range(batches)]
+
+    def run(n: int) -> None:
+        for i in range(n):
+            envs.step(actions[i % batches])
+    return run
 
 
 def _instance_kib(count: int = 50) -> float:
@@ -307,13 +418,14 @@ def _instance_kib(count: int = 50) -> float:
 
 def format_table(figures: list[Figure]) -> str:
     """The figures as a fixed-width table."""
-    lines = [f"{'measurement':<46}{'value':>14}  {'unit':<14}{'x baseline':>11}  baseline"]
+    width = max([len("measurement"), *(len(figure.name) for figure in figures)]) + 2
+    lines = [f"{'measurement':<{width}}{'value':>14}  {'unit':<14}{'x baseline':>11}  baseline"]
     for figure in figures:
         ratio = "" if figure.ratio is None else f"{figure.ratio:.2f}"
         baseline = "" if figure.baseline is None else \
             f"{figure.baseline_name} ({figure.baseline:,.0f} {figure.unit})"
-        lines.append(f"{figure.name:<46}{figure.value:>14,.1f}  {figure.unit:<14}{ratio:>11}  "
-                     f"{baseline}")
+        lines.append(f"{figure.name:<{width}}{figure.value:>14,.1f}  {figure.unit:<14}"
+                     f"{ratio:>11}  {baseline}")
     return "\n".join(lines)
 
 

@@ -113,8 +113,8 @@ def run_checks(target: str, timeout: float = 30.0, compliance: bool = False,
     Args:
         target: the server to check.
         timeout: seconds to wait for any answer.
-        compliance: also run the hostile-input compliance suite (:func:`rlenv.testing
-            .check_server`); the server must have no other controller.
+        compliance: also run the hostile-input compliance suite (:func:`rlenv_client
+            .compliance.check_server`); the server must have no other controller.
         token: the server's token, if it requires one.
 
     Returns:
@@ -145,7 +145,7 @@ def run_checks(target: str, timeout: float = 30.0, compliance: bool = False,
 
 
 def _compliance(env: RemoteEnv, token: str | None, timeout: float) -> CheckResult:
-    from rlenv.testing import check_server
+    from rlenv_client.compliance import check_server
 
     host, port = parse_address(env.client.address)
     env.client.close()  # release control: the suite brings its own controller

@@ -1,16 +1,20 @@
 """Client: drive one rlenv environment over TCP.
 
 A blocking socket pumps bytes into a sans-IO :class:`rlenv.protocol.Connection`; everything about
-the protocol is decided there. Every failure surfaces as a typed error: :class:`RemoteError`
-(the server refused a request, with its code and message), :class:`RequestTimeout` (no answer
-within the deadline; the connection is closed so that a late answer can never be taken for the
-answer to a later request) and :class:`ConnectionLost`.
+the protocol is decided there. The socket's timeouts are enforced by the kernel
+(``SO_RCVTIMEO`` / ``SO_SNDTIMEO``, see :mod:`rlenv.sockets`), so no system call is added to a
+step. Every failure surfaces as a typed error: :class:`RemoteError` (the server refused a
+request, with its code and message), :class:`RequestTimeout` (no answer within the deadline;
+the connection is closed so that a late answer can never be taken for the answer to a later
+request) and :class:`ConnectionLost`.
 """
 
 from __future__ import annotations
 
 import os
 import socket
+import time
+from typing import NoReturn
 
 from rlenv.errors import ConnectionLost, ErrorCode, ProtocolError, RemoteError, RequestTimeout
 from rlenv.protocol import (
@@ -24,6 +28,7 @@ from rlenv.protocol import (
     Request,
     Role,
 )
+from rlenv.sockets import configure_socket
 from rlenv_client.base import BaseClient, StepResult
 
 __all__ = ["Client", "StepResult"]
@@ -65,7 +70,7 @@ class Client(BaseClient):
                 from None
         except OSError as error:
             raise ConnectionLost(f"cannot connect to {self.address}: {error}") from None
-        self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        configure_socket(self._sock, timeout, timeout)
         try:
             message = self._next_message()
         except BaseException:
@@ -84,7 +89,8 @@ class Client(BaseClient):
                 self.close()
                 raise RemoteError(ErrorCode.UNAUTHORIZED, f"{self.address} requires a token: "
                                   "pass token=... (or set RLENV_TOKEN)", fatal=True)
-            self._call(token=token)
+            self._send(Request(next(self._ids), token=token))
+            self._response(self.receive_reply())
 
     def close(self) -> None:
         """Close the connection; safe to repeat."""
@@ -113,19 +119,24 @@ class Client(BaseClient):
         data = self._connection.send(request)
         try:
             sock.sendall(data)
+        except BlockingIOError:
+            self.close()
+            raise RequestTimeout(f"sending to {self.address} took longer than {self.timeout}s; "
+                                 "connection closed") from None
         except OSError as error:
             self.close()
             raise ConnectionLost(f"sending to {self.address} failed: {error}") from None
 
     def _receive(self) -> Reply:
         message = self._next_message()
-        if not isinstance(message, Reply):
+        if message.__class__ is Hello or message.__class__ is Request:
             self.close()
             raise ConnectionLost(f"{self.address} broke the protocol: {message!r:.80}")
-        return message
+        return message  # type: ignore[return-value]
 
     def _next_message(self) -> Message:
         connection = self._connection
+        deadline = None
         while True:
             try:
                 message = connection.next_message()
@@ -133,6 +144,10 @@ class Client(BaseClient):
                 self.close()
                 raise ConnectionLost(f"{self.address} broke the protocol: {error}") from None
             if message is NEED_DATA:
+                if deadline is None:
+                    deadline = time.monotonic() + self.timeout
+                elif time.monotonic() > deadline:  # a server that trickles bytes
+                    self._timed_out()
                 connection.receive_data(self._recv())
                 continue
             if message is CONNECTION_CLOSED:
@@ -146,11 +161,13 @@ class Client(BaseClient):
             raise ConnectionLost(f"the connection to {self.address} is closed")
         try:
             return sock.recv(_READ_SIZE)
-        except TimeoutError:
-            self.close()
-            raise RequestTimeout(
-                f"{self.address} did not answer within {self.timeout}s; connection closed"
-            ) from None
+        except BlockingIOError:
+            self._timed_out()
         except OSError as error:
             self.close()
             raise ConnectionLost(f"receiving from {self.address} failed: {error}") from None
+
+    def _timed_out(self) -> NoReturn:
+        self.close()
+        raise RequestTimeout(
+            f"{self.address} did not answer within {self.timeout}s; connection closed")

@@ -1,12 +1,12 @@
 """LocalClient: the same client API, with the environment inside this process and no socket.
 
-The environment runs in its own :class:`~rlenv.tree.SceneTree` exactly as under ``rlenv serve``:
-requests go through the same ``RLEnvironment`` code (checks, order, repeat_action, episode
-state), only the transport differs (see :class:`rlenv.instance.Instance`). Use it to debug an
-environment with a debugger and breakpoints, and as the baseline that remote figures are
-compared with. It imports the server runtime (and pymunk) only when created. With
-``instances=K`` it holds K instances as ``rlenv serve --instances K`` does (batch and ``steps``
-requests; :class:`~rlenv_client.vector.RemoteVectorEnv` uses it for ``in_process=True``).
+The environment runs exactly as under ``rlenv serve``: requests enter the same
+:class:`~rlenv.serving.host.Host` by the same door (checks, order, repeat_action, episode
+state, values in packed form); only the transport differs. Use it to debug an environment with
+a debugger and breakpoints, and as the baseline that remote figures are compared with. It
+imports the server runtime (and pymunk) only when created. With ``instances=K`` it holds K
+instances as ``rlenv serve --instances K`` does (:class:`~rlenv_client.vector.RemoteVectorEnv`
+uses it for ``in_process=True``).
 """
 
 from __future__ import annotations
@@ -21,9 +21,8 @@ from rlenv.protocol import Reply, Request
 from rlenv_client.base import BaseClient
 
 if TYPE_CHECKING:
-    from rlenv.environment import RLEnvironment
-    from rlenv.group import InstanceGroup
-    from rlenv.instance import Instance
+    from rlenv.rl_nodes import RLEnvironment
+    from rlenv.serving.host import Host
 
 __all__ = ["LocalClient"]
 
@@ -34,55 +33,43 @@ class LocalClient(BaseClient):
     Args:
         environment: an environment instance, its class, or ``MODULE:CLASS``.
         world_data: also ask for the world's data on reset and step (``info["world"]``).
-        clock: the tree's clock for real-time mode (e.g. ``rlenv.testing.ManualClock``).
-        instances: how many instances of the environment class to hold (see the module
-            docstring); a plain request goes to the first.
+        clock: the trees' clock for real-time mode (e.g. ``rlenv.testing.ManualClock``).
+        instances: how many instances of the environment class to hold; a plain request goes
+            to the first.
+
+    Attributes:
+        host: the instances and how requests reach them (``None`` once closed).
+        environment: the first instance's environment node.
     """
 
     def __init__(
         self, environment: RLEnvironment | type[RLEnvironment] | str, *, world_data: bool = False,
         clock: Callable[[], float] | None = None, instances: int = 1,
     ) -> None:
-        from rlenv.group import InstanceGroup
-        from rlenv.instance import Instance
+        from rlenv.serving.host import Host
 
         super().__init__(world_data=world_data)
-        self._instance: Instance | None = None
-        self._group: InstanceGroup | None = None
-        self._replies: deque[Reply] = deque()  # the group's answers, until received
-        if instances == 1:  # as a single-instance server: no batch, no steps
-            self._instance = Instance(environment, clock or time.monotonic)
-            self.environment = self._instance.environment
-            self._set_hello(self._instance.hello)
-        else:
-            if not isinstance(environment, type | str):
-                raise TypeError("several instances need the environment class, not an instance")
-            self._group = InstanceGroup(environment, instances, clock or time.monotonic)
-            self.environment = self._group.instances[0].environment
-            self._set_hello(self._group.hello)
+        self.host: Host | None = Host(environment, instances, clock=clock or time.monotonic)
+        self._replies: deque[Reply] = deque()  # answers not received yet
+        self.environment = self.host.instances[0].environment
+        self._set_hello(self.host.hello)
         self.address = f"in-process {self.environment.name}"
 
     def close(self) -> None:
         """Take the environments out of their trees; safe to repeat."""
-        for holder in (self._instance, self._group):
-            if holder is not None:
-                holder.close()
-        self._instance = self._group = None
+        if self.host is not None:
+            self.host.close()
+            self.host = None
 
     def __enter__(self) -> LocalClient:
         return self
 
     def _send(self, request: Request) -> None:
-        if self._group is not None:
-            self._replies.append(self._group.answer(request))
-        elif self._instance is not None:
-            self._instance.submit(request)
-        else:
+        if self.host is None:
             raise ConnectionLost(f"{self.address} is closed")
+        self._replies.append(self.host.answer(request))
 
     def _receive(self) -> Reply:
-        if self._group is not None:
-            return self._replies.popleft()
-        if self._instance is None:
+        if not self._replies:
             raise ConnectionLost(f"{self.address} is closed")
-        return self._instance.wait()
+        return self._replies.popleft()

@@ -2,9 +2,11 @@
 
 Every step sends all requests first and then gathers the answers, so the servers simulate in
 parallel while the trainer waits once. The N sub-environments live in servers this vector starts
-(``instances_per_server`` per server, stepped by one batch request each: by default as many
-servers as cores, each hosting its share), in running servers given by address (each hosting
-as many instances as its hello says), or in this process.
+(``instances_per_server`` per server: by default as many servers as cores, each hosting its
+share), in running servers given by address (each hosting as many instances as its hello
+says), or in this process. Every server gets one ``steps`` request per step (its instances'
+actions in, observations, rewards and flags out, in columns) and one ``batch`` per reset or
+render, however many instances it hosts.
 
 Autoreset follows gymnasium 1.x (:class:`gymnasium.vector.AutoresetMode`):
 
@@ -35,7 +37,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, create_empty_array
 
 from rlenv.errors import RemoteError
-from rlenv.protocol import STEPS_SINCE, ErrorReply, Request, Response
+from rlenv.protocol import ErrorReply, Request, Response
 from rlenv_client.base import BaseClient
 from rlenv_client.launcher import ServerProcess
 from rlenv_client.rows import row, rows, set_row, set_rows
@@ -110,15 +112,6 @@ class RemoteVectorEnv(VectorEnv):
                 raise ValueError(
                     f"{client.address} has other spaces than {self.clients[0].address}"
                 )
-        for client in self.clients:
-            if client.hello.instances > 1 and client.hello.protocol < STEPS_SINCE:
-                self.close()
-                raise ValueError(
-                    f"{client.address} speaks rlenv protocol {client.hello.protocol[0]}."
-                    f"{client.hello.protocol[1]}, which has no steps requests: serve it with an "
-                    f"rlenv that speaks {STEPS_SINCE[0]}.{STEPS_SINCE[1]} or later, or with one "
-                    "instance per server"
-                )
         self.num_envs = len(self._owner)
         self.single_action_space = hello.action_space
         self.single_observation_space = hello.observation_space
@@ -182,9 +175,8 @@ class RemoteVectorEnv(VectorEnv):
     ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step every sub-environment (resetting those that ended, per the autoreset mode).
 
-        A server hosting several sub-environments gets one ``steps`` request (actions in,
-        observations, rewards and flags out, in columns); a server hosting one gets a plain
-        step or reset.
+        Every server gets one ``steps`` request (actions in, observations, rewards and flags
+        out, in columns).
 
         Raises:
             RemoteError: a server refused the step (e.g. ``invalid_action``) or a
@@ -230,15 +222,9 @@ class RemoteVectorEnv(VectorEnv):
         truncated, with ``info["server_restarted"]``.
         """
         for session, group in zip(self.sessions, self._groups, strict=True):
-            client = session.client
             try:
-                if len(group) > 1:
-                    client.send_steps(rows(actions, group.start, group.stop),
-                                      resetting[group.start:group.stop], self.repeat_action)
-                else:
-                    client.send_request(client.reset_request() if resetting[group.start] else
-                                        client.step_request(row(actions, group.start),
-                                                            self.repeat_action))
+                session.client.send_steps(rows(actions, group.start, group.stop),
+                                          resetting[group.start:group.stop], self.repeat_action)
             except LOST as error:
                 raise session.failure(error) from None
         observations = create_empty_array(self.single_observation_space, self.num_envs)
@@ -251,26 +237,14 @@ class RemoteVectorEnv(VectorEnv):
         for session, group in zip(self.sessions, self._groups, strict=True):
             span = slice(group.start, group.stop)
             try:
-                if len(group) > 1:
-                    answer = session.client.receive_steps()
-                    set_rows(observations, group.start, answer.observation)
-                    rewards[span], terminations[span] = answer.reward, answer.terminated
-                    truncations[span], frames[span] = answer.truncated, answer.frames
-                    env_infos[span] = answer.info
-                    for error in answer.errors or ():
-                        if error is not None and refused is None:
-                            refused = RemoteError(error.code, error.message, error.fatal)
-                else:
-                    index = group.start
-                    reply = session.client.receive_reply()
-                    if resetting[index]:
-                        observation, info = session.client.reset_result(reply)
-                    else:
-                        observation, rewards[index], terminations[index], truncations[index], \
-                            info = session.client.step_result(reply, native=False)
-                    set_row(observations, index, observation)
-                    frames[index] = info.pop("frames")
-                    env_infos[index] = info
+                answer = session.client.receive_steps()
+                set_rows(observations, group.start, answer.observation)
+                rewards[span], terminations[span] = answer.reward, answer.terminated
+                truncations[span], frames[span] = answer.truncated, answer.frames
+                env_infos[span] = answer.info
+                for error in answer.errors or ():
+                    if error is not None and refused is None:
+                        refused = RemoteError(error.code, error.message, error.fatal)
             except RemoteError as error:  # read every server's answer before raising
                 refused = refused or error
             except LOST as error:
@@ -358,10 +332,7 @@ class RemoteVectorEnv(VectorEnv):
                 sent.append(False)
                 continue
             try:
-                if len(group) > 1:
-                    session.client.send_batch(parts)
-                else:
-                    session.client.send_request(parts[0])  # type: ignore[arg-type]
+                session.client.send_batch(parts)
             except LOST as error:
                 raise session.failure(error) from None
             sent.append(True)
@@ -370,8 +341,7 @@ class RemoteVectorEnv(VectorEnv):
             if not was_sent:
                 continue
             try:
-                answers = session.client.receive_batch() if len(group) > 1 else \
-                    (session.client.receive_reply(),)
+                answers = session.client.receive_batch()
             except LOST as error:
                 raise session.failure(error) from None
             for index, answer in zip(group, answers, strict=False):

@@ -60,9 +60,7 @@ import pymunk
 from gymnasium import spaces
 
 from rlenv import CollisionShape, Joint, PhysicsWorld, RigidBody, StaticBody
-from rlenv.agent import RLAgent
-from rlenv.environment import RLEnvironment
-from rlenv.world import RLEnvWorld
+from rlenv.rl_nodes import RLAgent, RLEnvironment, RLEnvWorld
 
 __all__ = ["TARGET", "CartPoleAgent", "CartPoleEnvironment", "CartPoleWorld", "controller", "main"]
 

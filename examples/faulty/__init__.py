@@ -33,9 +33,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from rlenv.agent import RLAgent
-from rlenv.environment import RLEnvironment
-from rlenv.world import RLEnvWorld
+from rlenv.rl_nodes import RLAgent, RLEnvironment, RLEnvWorld
 
 
 class CountingWorld(RLEnvWorld):

@@ -40,10 +40,8 @@ from gymnasium import spaces
 
 from examples.seeker import HALF, RADIUS, greedy, random_spot, room_walls
 from rlenv import CollisionShape, PhysicsWorld, RigidBody, StaticBody
-from rlenv.agent import RLAgent
-from rlenv.environment import RLEnvironment
+from rlenv.rl_nodes import RLAgent, RLEnvironment, RLEnvWorld
 from rlenv.signals import Signal
-from rlenv.world import RLEnvWorld
 
 __all__ = ["NAMES", "TARGET", "PairAgent", "PairEnvironment", "PairWorld", "chase"]
 

@@ -25,9 +25,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from rlenv.agent import RLAgent
-from rlenv.environment import RLEnvironment
-from rlenv.world import RLEnvWorld
+from rlenv.rl_nodes import RLAgent, RLEnvironment, RLEnvWorld
 
 __all__ = ["TARGET", "PixelsEnvironment"]
 

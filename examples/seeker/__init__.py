@@ -44,11 +44,9 @@ import pymunk
 from gymnasium import spaces
 
 from rlenv import CollisionShape, PhysicsWorld, RigidBody, StaticBody
-from rlenv.agent import RLAgent
 from rlenv.camera import Camera
-from rlenv.environment import RLEnvironment
+from rlenv.rl_nodes import RLAgent, RLEnvironment, RLEnvWorld
 from rlenv.signals import Signal
-from rlenv.world import RLEnvWorld
 
 __all__ = [
     "PIXELS_TARGET",

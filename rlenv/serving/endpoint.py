@@ -1,13 +1,14 @@
-"""The environment's TCP endpoint: socket I/O only; the protocol lives in :mod:`rlenv.protocol`.
+"""The server's TCP endpoint: socket I/O only; the protocol lives in :mod:`rlenv.protocol`.
 
 An environment server is a network service and is treated like one:
 
 - **One controller, several connections.** Up to :attr:`Limits.max_connections` clients may be
   connected; each is answered on its own connection, in arrival order, so a misbehaving client
-  never disturbs another. The first client to send a request that changes the environment
-  (``config``, ``reset`` or ``action``) controls it until it disconnects; such a request from
-  anyone else gets a ``busy`` error reply (observing is open to all). A connection beyond the
-  cap is told ``busy`` and closed, never silently queued.
+  never disturbs another. The first client whose accepted request changes the environment
+  controls it until it disconnects (:meth:`Endpoint.take_control`; which requests change it is
+  the host's call, and a refused request takes no control); such a request from anyone else
+  gets a ``busy`` error reply. A connection beyond the cap is told ``busy`` and closed, never
+  silently queued.
 - **Limits before allocation.** A frame's length is checked before its body is read: at most
   :attr:`Limits.max_unauthenticated_frame_size` bytes until the client has authenticated (or
   when no token is needed, until its first request), :attr:`Limits.max_frame_size` after.
@@ -19,10 +20,13 @@ An environment server is a network service and is treated like one:
   without a token. With a token, the client's first request must carry it (compared in constant
   time), or the connection is refused.
 
-A client that breaks the framing, times out or fails to authenticate gets one fatal error reply
-and is disconnected; a client that sends a bad but well-framed request gets an error reply and
-stays. Either way the endpoint keeps serving. Sockets: ``TCP_NODELAY``, one ``sendall`` per frame,
-reads of at most 64 KiB, blocking waits in ``select`` (never busy-waiting).
+**The hot path.** While the controller keeps sending, the endpoint blocks in ``recv`` on the
+controller's socket alone (one system call per request, no selector); the others (new
+connections, observers, the lifeline, deadlines) are looked after every
+:data:`HOUSEKEEPING_INTERVAL` seconds, and at once whenever the controller pauses that long.
+Sockets stay in blocking mode; the kernel enforces their timeouts (``SO_RCVTIMEO``,
+``SO_SNDTIMEO``), so Python never polls before a read or a write. Frames are sent with one
+``sendall`` (``TCP_NODELAY``), read at most 64 KiB at a time.
 """
 
 from __future__ import annotations
@@ -37,7 +41,6 @@ import socket
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Protocol
 
 from rlenv.errors import ErrorCode, LocalProtocolError, ProtocolError
 from rlenv.protocol import (
@@ -49,15 +52,18 @@ from rlenv.protocol import (
     Hello,
     Reply,
     Request,
-    Response,
     Role,
 )
+from rlenv.sockets import configure_socket
 
-__all__ = ["DEFAULT_HOST", "Communication", "Endpoint", "InsecureBindError", "Limits"]
+__all__ = ["DEFAULT_HOST", "HOUSEKEEPING_INTERVAL", "Endpoint", "InsecureBindError", "Limits",
+           "Peer"]
 
 logger = logging.getLogger(__name__)
 
 DEFAULT_HOST = "127.0.0.1"
+HOUSEKEEPING_INTERVAL = 0.01
+"""Seconds between looks at everything but the controller while the controller is busy."""
 _READ_SIZE = 64 * 1024
 _PROBE_READS = 16
 
@@ -87,22 +93,11 @@ class InsecureBindError(RuntimeError):
     """Binding an address other than loopback was asked for without a token."""
 
 
-class Endpoint(Protocol):
-    """What an environment needs from its transport: requests in, answers out."""
+class Peer:
+    """One connected client, as the endpoint sees it."""
 
-    def poll(self, timeout: float | None) -> Request | None:
-        """Wait up to ``timeout`` seconds (``None``: as long as it takes) for a request."""
-
-    def send(self, message: Response | ErrorReply) -> None:
-        """Answer the request being served."""
-
-    def close(self) -> None:
-        """Release the transport."""
-
-
-class _Peer:
-    __slots__ = ("address", "authenticated", "connection", "frame_started", "last_request",
-                 "sock")
+    __slots__ = ("active", "address", "authenticated", "connection", "frame_started",
+                 "last_request", "sock")
 
     def __init__(self, sock: socket.socket, address: str, max_frame_size: int,
                  now: float) -> None:
@@ -112,13 +107,14 @@ class _Peer:
         self.authenticated = False
         self.last_request = now
         self.frame_started: float | None = None
+        self.active = False  # sending requests back to back: worth blocking on alone
 
 
-class Communication:
-    """Accepts the controlling client and moves frames between it and the environment.
+class Endpoint:
+    """Accepts clients and moves frames between them and the host.
 
     Args:
-        hello: builds the hello sent to each client that connects.
+        hello: what each client is told on connecting.
         limits: sizes and deadlines; see :class:`Limits` (its defaults if ``None``).
         token: the secret the client's first request must carry (``None``: no token needed,
             only allowed on loopback addresses).
@@ -126,25 +122,21 @@ class Communication:
     """
 
     def __init__(
-        self, hello: Callable[[], Hello], limits: Limits | None = None,
-        token: str | None = None, clock: Callable[[], float] = time.monotonic,
+        self, hello: Hello, limits: Limits | None = None, token: str | None = None,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
-        self._hello = hello
+        self._hello = replace(hello, token_required=True) if token is not None else hello
         self.limits = limits or Limits()
         self._token = token
         self._clock = clock
         self._selector = selectors.DefaultSelector()
         self._listener: socket.socket | None = None
-        self._peers: dict[socket.socket, _Peer] = {}
-        self._controller: _Peer | None = None
-        self._serving: _Peer | None = None  # whose request the environment is answering
+        self._peers: dict[socket.socket, Peer] = {}
+        self._order: list[Peer] = []  # the peers, in turn order
+        self._controller: Peer | None = None
         self._turn = 0  # round robin over peers with buffered requests
         self._lifeline: int | None = None
-
-    @property
-    def is_listening(self) -> bool:
-        """Whether :meth:`start_server` was called and :meth:`close` was not."""
-        return self._listener is not None
+        self._housekeeping_at = 0.0
 
     @property
     def address(self) -> tuple[str, int]:
@@ -157,11 +149,6 @@ class Communication:
             raise RuntimeError("the server is not listening; call start_server first")
         host, port = self._listener.getsockname()[:2]
         return host, port
-
-    @property
-    def client_address(self) -> str | None:
-        """``host:port`` of the controlling client, or ``None``."""
-        return self._controller.address if self._controller is not None else None
 
     @property
     def connections(self) -> int:
@@ -200,42 +187,54 @@ class Communication:
         self._lifeline = fd
         self._selector.register(fd, selectors.EVENT_READ)
 
-    def poll(self, timeout: float | None) -> Request | None:
-        """Wait up to ``timeout`` seconds (``None``: forever) for the next request.
+    def receive(self, timeout: float | None) -> tuple[Peer, Request] | None:
+        """Wait up to ``timeout`` seconds (``None``: as long as it takes) for the next request.
 
-        Accepts connections, answers framing errors, bad requests, timeouts and failed
-        authentication itself, and returns the first valid request of the controlling client,
-        or ``None`` when the time is up.
+        Accepts connections, answers framing errors, bad envelopes, timeouts and failed
+        authentication itself, and returns the next request to answer with its peer, or
+        ``None`` when the time is up.
         """
         deadline = None if timeout is None else self._clock() + timeout
         while True:
-            request = self._next_request()
-            if request is not None:
-                return request
-            now = self._clock()
-            wake = self._next_wake(deadline)
-            ready = {key.fileobj for key, _ in
-                     self._selector.select(None if wake is None else max(0.0, wake - now))}
-            for sock in [sock for sock in self._peers if sock in ready]:
-                self._read(self._peers[sock])  # before accepting: a client may leave as one comes
-            if self._listener in ready:
-                self._accept()
-            if self._lifeline is not None and self._lifeline in ready:
-                self._check_lifeline(self._lifeline)
-            self._enforce_deadlines()
+            got = self._next_request()
+            if got is not None:
+                return got
+            controller = self._controller
+            if deadline is None and controller is not None and controller.active and \
+                    self._clock() < self._housekeeping_at:
+                self._read(controller, block=True)
+                continue
+            self._wait(deadline)
             if deadline is not None and self._clock() >= deadline:
                 return self._next_request()
 
-    def send(self, message: Reply) -> None:
-        """Answer the request being served, on its client's connection.
+    def reply(self, peer: Peer, message: Reply) -> None:
+        """Send ``peer`` the answer to its oldest request (dropped if the client is gone)."""
+        if peer.sock in self._peers:
+            self._send(peer, message)
 
-        A client that is gone is dropped; the answer is then discarded.
+    def take_control(self, peer: Peer, request_id: int) -> bool:
+        """Let ``peer``'s request change the environment, if ``peer`` may.
+
+        The first client to ask controls the environment until it leaves; anyone else is
+        answered ``busy`` (and this returns False).
         """
-        peer = self._serving
-        if peer is None or peer.sock not in self._peers:
-            logger.debug("no client to send %r to", message)
-            return
-        self._send_to(peer, message)
+        controller = self._controller
+        if controller is peer:
+            return True
+        if controller is not None and self._has_left(controller):
+            self._drop(controller, "client closed the connection")
+            controller = None
+        if controller is None:
+            self._controller = peer
+            logger.info("client %s controls the environment", peer.address)
+            return True
+        self._send(peer, ErrorReply(
+            request_id, ErrorCode.BUSY,
+            f"this environment is controlled by another client ({controller.address}); only "
+            "observing is open to others. Start another server for another trainer",
+        ))
+        return False
 
     def close(self) -> None:
         """Disconnect every client and stop listening."""
@@ -247,7 +246,56 @@ class Communication:
             self._listener = None
         self._selector.close()
 
-    # --- internals --------------------------------------------------------------------------
+    # --- waiting ----------------------------------------------------------------------------
+
+    def _wait(self, deadline: float | None) -> None:
+        """Block until a socket is readable or the next deadline (ours or a peer's); act on it."""
+        now = self._clock()
+        wake = self._next_deadline()
+        if deadline is not None:
+            wake = deadline if wake is None else min(wake, deadline)
+        self._look_around(None if wake is None else max(0.0, wake - now))
+
+    def _look_around(self, timeout: float | None) -> None:
+        """Everything but the controller's fast path: reads, accepts, the lifeline, deadlines."""
+        ready = {key.fileobj for key, _ in self._selector.select(timeout)}
+        for peer in [peer for peer in self._order if peer.sock in ready]:
+            self._read(peer, block=False)  # before accepting: a client may leave as one comes
+        if self._listener in ready:
+            self._accept()
+        if self._lifeline is not None and self._lifeline in ready:
+            self._check_lifeline(self._lifeline)
+        self._enforce_deadlines()
+        self._housekeeping_at = self._clock() + HOUSEKEEPING_INTERVAL
+
+    def _next_deadline(self) -> float | None:
+        """When the earliest peer times out (a frame's deadline, or its idle timeout)."""
+        return min((due for peer in self._order if (due := self._due(peer)) is not None),
+                   default=None)
+
+    def _due(self, peer: Peer) -> float | None:
+        if peer.frame_started is not None:
+            return peer.frame_started + self.limits.frame_deadline
+        if self.limits.idle_timeout is not None:
+            return peer.last_request + self.limits.idle_timeout
+        return None
+
+    def _enforce_deadlines(self) -> None:
+        now = self._clock()
+        for peer in list(self._order):
+            due = self._due(peer)
+            if due is None or now < due:
+                continue
+            if peer.frame_started is not None:
+                message = (f"a frame was not completed within {self.limits.frame_deadline} s "
+                           f"({peer.connection.buffered} bytes received); is the client stalled?")
+            else:
+                message = f"no request for {self.limits.idle_timeout} s"
+            logger.info("client %s timed out: %s", peer.address, message)
+            self._send(peer, ErrorReply(None, ErrorCode.TIMEOUT, message, fatal=True),
+                       "timed out")
+
+    # --- connections ------------------------------------------------------------------------
 
     def _accept(self) -> None:
         """Accept every pending connection."""
@@ -257,145 +305,100 @@ class Communication:
                 sock, address = self._listener.accept()
             except (BlockingIOError, InterruptedError):
                 return
-            self._admit(sock, address)
+            self._admit(sock, f"{address[0]}:{address[1]}")
 
-    def _admit(self, sock: socket.socket, address: tuple[str, int]) -> None:
-        address_text = f"{address[0]}:{address[1]}"
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        sock.settimeout(self.limits.write_timeout)
-        peer = _Peer(sock, address_text, self.limits.max_unauthenticated_frame_size,
-                     self._clock())
+    def _admit(self, sock: socket.socket, address: str) -> None:
+        configure_socket(sock, HOUSEKEEPING_INTERVAL, self.limits.write_timeout)
+        peer = Peer(sock, address, self.limits.max_unauthenticated_frame_size, self._clock())
         if len(self._peers) >= self.limits.max_connections:
-            for other in list(self._peers.values()):
+            for other in list(self._order):
                 if self._has_left(other):
                     self._drop(other, "client closed the connection")
         if len(self._peers) >= self.limits.max_connections:
-            logger.info("refused %s: %d clients connected", address_text, len(self._peers))
-            self._send_to(peer, ErrorReply(
+            logger.info("refused %s: %d clients connected", address, len(self._peers))
+            self._send(peer, ErrorReply(
                 None, ErrorCode.BUSY, f"this server already has {len(self._peers)} clients "
                 "connected, its limit; close one or start another server", fatal=True))
             return
         self._peers[sock] = peer
+        self._order.append(peer)
         self._selector.register(sock, selectors.EVENT_READ)
-        logger.info("client %s connected", address_text)
-        hello = self._hello()
-        if self._token is not None:
-            hello = replace(hello, token_required=True)
-        self._write(peer, peer.connection.send(hello))
-
-    def _next_wake(self, deadline: float | None) -> float | None:
-        """The earliest of the caller's deadline and every peer's frame and idle deadlines."""
-        times = [] if deadline is None else [deadline]
-        times += [due for peer in self._peers.values()
-                  if (due := self._peer_deadline(peer)) is not None]
-        return min(times, default=None)
-
-    def _peer_deadline(self, peer: _Peer) -> float | None:
-        """When ``peer`` times out: its frame's deadline while a frame arrives, else idling's."""
-        if peer.frame_started is not None:
-            return peer.frame_started + self.limits.frame_deadline
-        if self.limits.idle_timeout is not None:
-            return peer.last_request + self.limits.idle_timeout
-        return None
-
-    def _enforce_deadlines(self) -> None:
-        now = self._clock()
-        for peer in list(self._peers.values()):
-            due = self._peer_deadline(peer)
-            if due is None or now < due:
-                continue
-            if peer.frame_started is not None:
-                message = (f"a frame was not completed within {self.limits.frame_deadline} s "
-                           f"({peer.connection.buffered} bytes received); is the client stalled?")
-            else:
-                message = f"no request for {self.limits.idle_timeout} s"
-            logger.info("client %s timed out: %s", peer.address, message)
-            self._send_to(peer, ErrorReply(None, ErrorCode.TIMEOUT, message, fatal=True),
-                          "timed out")
+        logger.info("client %s connected", address)
+        self._write(peer, peer.connection.send(self._hello))
 
     def _check_lifeline(self, fd: int) -> None:
         if not os.read(fd, 4096):
             logger.warning("the process that started this server is gone; exiting")
             raise SystemExit(0)
 
-    def _has_left(self, peer: _Peer) -> bool:
+    def _has_left(self, peer: Peer) -> bool:
         """Whether ``peer`` closed its end; reads what it sent meanwhile (without blocking)."""
         for _ in range(_PROBE_READS):
             if peer.connection.peer_closed or not select.select([peer.sock], [], [], 0)[0]:
                 break
-            self._read(peer)
+            self._read(peer, block=False)
         return peer.connection.peer_closed
 
-    def _read(self, peer: _Peer) -> None:
+    def _read(self, peer: Peer, block: bool) -> None:
+        """One read from ``peer``; blocking reads give up after the housekeeping interval."""
         try:
-            data = peer.sock.recv(_READ_SIZE)
-        except (BlockingIOError, InterruptedError, TimeoutError):
+            data = peer.sock.recv(_READ_SIZE) if block else \
+                peer.sock.recv(_READ_SIZE, socket.MSG_DONTWAIT)
+        except (BlockingIOError, InterruptedError):
+            peer.active = False  # it paused: look after everything else from now on
             return
         except OSError as error:
             logger.info("client %s: %s", peer.address, error)
             data = b""
+        peer.active = True
         peer.connection.receive_data(data)
 
-    def _next_request(self) -> Request | None:
+    # --- requests ---------------------------------------------------------------------------
+
+    def _next_request(self) -> tuple[Peer, Request] | None:
         """The next valid request of any peer, taking peers in turn."""
-        peers = list(self._peers.values())
-        for offset in range(len(peers)):
-            peer = peers[(self._turn + offset) % len(peers)]
+        peers = self._order[:]  # answering may drop a peer
+        count = len(peers)
+        for offset in range(count):
+            index = (self._turn + offset) % count
+            peer = peers[index]
             request = self._request_from(peer)
             if request is not None:
-                self._turn = (self._turn + offset + 1) % len(peers)
-                self._serving = peer
-                return request
+                self._turn = index + 1
+                return peer, request
         return None
 
-    def _request_from(self, peer: _Peer) -> Request | None:
+    def _request_from(self, peer: Peer) -> Request | None:
         """``peer``'s next valid request; answers its bad frames and refusals on the way."""
+        connection = peer.connection
         while peer.sock in self._peers:
             try:
-                message = peer.connection.next_message()
+                message = connection.next_message()
             except ProtocolError as error:
                 logger.info("client %s: %s", peer.address, error)
                 peer.frame_started = None
-                self._send_to(peer, ErrorReply(error.request_id, error.code, str(error),
-                                               fatal=error.fatal), "broken framing")
+                if connection.peer_closed:  # it hung up in the middle of a frame
+                    self._drop(peer, "client closed the connection mid-frame")
+                    return None
+                self._send(peer, ErrorReply(error.request_id, error.code, str(error),
+                                            fatal=error.fatal), "broken framing")
                 continue
             if message is NEED_DATA:
-                if peer.connection.buffered and peer.frame_started is None:
+                if connection.buffered and peer.frame_started is None:
                     peer.frame_started = self._clock()
                 return None
             if message is CONNECTION_CLOSED:
                 self._drop(peer, "client closed the connection")
                 return None
-            assert isinstance(message, Request)
+            assert message.__class__ is Request
             peer.frame_started = None
             peer.last_request = self._clock()
-            if not peer.authenticated and not self._authenticate(peer, message):
+            if not peer.authenticated and not self._authenticate(peer, message):  # type: ignore[arg-type]
                 continue
-            if _controls(message) and not self._take_control(peer, message):
-                continue
-            return message
+            return message  # type: ignore[return-value]
         return None
 
-    def _take_control(self, peer: _Peer, request: Request) -> bool:
-        """Make ``peer`` the controller if nobody is; otherwise answer ``busy``."""
-        controller = self._controller
-        if controller is not None and controller is not peer and self._has_left(controller):
-            self._drop(controller, "client closed the connection")
-            controller = None
-        if controller is None:
-            self._controller = peer
-            logger.info("client %s controls the environment", peer.address)
-            return True
-        if controller is peer:
-            return True
-        self._send_to(peer, ErrorReply(
-            request.id, ErrorCode.BUSY,
-            f"this environment is controlled by another client ({controller.address}); only "
-            "observing is open to others. Start another server for another trainer",
-        ))
-        return False
-
-    def _authenticate(self, peer: _Peer, request: Request) -> bool:
+    def _authenticate(self, peer: Peer, request: Request) -> bool:
         """Check the first request's token; on success lift the frame size limit."""
         if self._token is not None and not (
             request.token is not None
@@ -403,7 +406,7 @@ class Communication:
         ):
             logger.warning("client %s: refused, %s token", peer.address,
                            "no" if request.token is None else "wrong")
-            self._send_to(peer, ErrorReply(
+            self._send(peer, ErrorReply(
                 request.id, ErrorCode.UNAUTHORIZED,
                 "this server requires a token: pass token=... to the client (or set RLENV_TOKEN)"
                 if request.token is None else "wrong token", fatal=True,
@@ -413,42 +416,33 @@ class Communication:
         peer.connection.max_frame_size = self.limits.max_frame_size
         return True
 
-    def _send_to(self, peer: _Peer, message: Reply,
-                 why_fatal: str = "error reply closed the connection") -> None:
+    # --- writing ----------------------------------------------------------------------------
+
+    def _send(self, peer: Peer, message: Reply,
+              why_fatal: str = "error reply closed the connection") -> None:
         """Send ``message``; a fatal error reply then closes the connection (``why_fatal``)."""
         try:
             self._write(peer, peer.connection.send(message))
         except LocalProtocolError as error:  # e.g. the client hung up in the middle of a frame
             logger.warning("not sent to %s: %s", peer.address, error)
-        if message.__class__ is ErrorReply and message.fatal:
+        if message.__class__ is ErrorReply and message.fatal:  # type: ignore[union-attr]
             self._drop(peer, why_fatal)
 
-    def _write(self, peer: _Peer, data: bytes) -> None:
+    def _write(self, peer: Peer, data: bytes) -> None:
         try:
             peer.sock.sendall(data)
         except OSError as error:
             logger.info("client %s: send failed: %s", peer.address, error)
             self._drop(peer, "send failed")
 
-    def _drop(self, peer: _Peer, reason: str) -> None:
+    def _drop(self, peer: Peer, reason: str) -> None:
         if self._peers.pop(peer.sock, None) is not None:
             self._selector.unregister(peer.sock)
+            self._order.remove(peer)
             logger.info("client %s disconnected: %s", peer.address, reason)
         if self._controller is peer:
             self._controller = None
         peer.sock.close()
-
-
-def _controls(request: Request | None) -> bool:
-    """Whether ``request`` changes the environment (only its controller may send those)."""
-    if request is None:
-        return False
-    if request.batch is not None:
-        return any(_controls(part) for part in request.batch)
-    return (request.config is not None or request.reset is not None
-            or request.action is not None or request.restore is not None
-            or request.steps is not None
-            or (request.inspect is not None and "set" in request.inspect))
 
 
 def _is_loopback(host: str) -> bool:

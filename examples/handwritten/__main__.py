@@ -1,0 +1,5 @@
+"""``python -m examples.handwritten`` serves the hand-written CartPole to one client."""
+
+from examples.handwritten import main
+
+main()

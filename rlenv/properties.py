@@ -1,0 +1,76 @@
+"""Properties that clients may read and set: which a node has, and what value may replace one.
+
+A node class lists what a client may read and set in ``exported`` (as Godot's ``@export``) and
+what a client may configure in ``configurable`` (RL nodes). A value sent by a client replaces the
+current one only if it is of the same sort (:func:`conform`): nothing else, and never code, is
+accepted. Configuration (:class:`~rlenv.rl_nodes.RLNode`) and the remote inspector
+(:mod:`rlenv.serving.inspector`) share these rules.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from rlenv.node import Node
+
+__all__ = ["conform", "exported_of", "to_wire"]
+
+
+def exported_of(node: Node) -> tuple[str, ...]:
+    """The properties ``node`` exports: its class's ``exported`` and ``configurable``."""
+    names = (*getattr(type(node), "exported", ()), *getattr(type(node), "configurable", ()))
+    return tuple(name for name in dict.fromkeys(names) if hasattr(node, name))
+
+
+def conform(current: Any, value: Any) -> Any:
+    """``value``, made like ``current``, to replace it.
+
+    A bool takes a bool; an int an int; a float any number (as a float); a vector (a tuple,
+    such as pymunk's ``Vec2d``) a list or tuple of as many numbers (as floats); ``None`` takes
+    anything; anything else a value of its own type.
+
+    Raises:
+        TypeError: ``value`` is not like ``current``.
+    """
+    number = isinstance(value, int | float) and not isinstance(value, bool)
+    if isinstance(current, bool | np.bool_):
+        if isinstance(value, bool):
+            return value
+    elif isinstance(current, float | np.floating):
+        if number:
+            return float(value)
+    elif isinstance(current, int | np.integer):
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+    elif isinstance(current, tuple):
+        if isinstance(value, list | tuple) and len(value) == len(current) and all(
+            isinstance(item, int | float) and not isinstance(item, bool) for item in value
+        ):
+            return tuple(float(item) for item in value)
+    elif current is None or isinstance(value, type(current)):
+        return value
+    raise TypeError(f"must be {_sort_of(current)} like {to_wire(current)!r:.40}, got "
+                    f"{value!r:.60}")
+
+
+def _sort_of(value: Any) -> str:
+    if isinstance(value, bool | np.bool_):
+        return "a bool"
+    if isinstance(value, float | np.floating):
+        return "a float"
+    if isinstance(value, int | np.integer):
+        return "an int"
+    if isinstance(value, tuple):
+        return f"a list of {len(value)} numbers"
+    return f"a {type(value).__name__}"
+
+
+def to_wire(value: Any) -> Any:
+    """A property's value as plain data (vectors as lists, numpy scalars as numbers)."""
+    if isinstance(value, tuple):  # pymunk Vec2d is a tuple
+        return [to_wire(item) for item in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value

@@ -1,0 +1,171 @@
+"""Bytes: frames, msgpack, and numpy arrays inside msgpack.
+
+A **frame** is a 4-byte big-endian length followed by that many bytes holding exactly one msgpack
+object. numpy arrays whose dtype and shape are not known in advance (rendered frames, world
+data, info) travel as msgpack ext type :data:`NDARRAY_EXT` (dtype, shape, raw bytes) and decode
+with ``np.frombuffer``: no copy, read-only. Values of the spaces a hello declares travel more
+cheaply still, as raw bytes in their space's dtype (see :mod:`rlenv.spaces`). Nothing is ever
+pickled.
+"""
+
+from __future__ import annotations
+
+import struct
+from typing import Any, Final
+
+import msgpack
+import numpy as np
+
+from rlenv.errors import RemoteProtocolError
+
+__all__ = [
+    "DEFAULT_MAX_FRAME_SIZE",
+    "HEADER",
+    "NDARRAY_EXT",
+    "frame",
+    "pack",
+    "unpack",
+]
+
+DEFAULT_MAX_FRAME_SIZE: Final = 64 * 1024 * 1024
+"""Largest frame body accepted by default, checked against the length prefix before reading."""
+
+NDARRAY_EXT: Final = 1
+"""msgpack ext type code of a numpy array."""
+
+HEADER: Final = struct.Struct(">I")
+"""The length prefix of a frame."""
+
+_ARRAY_HEADER = struct.Struct("<BB")  # dtype string length, number of dimensions
+_MAX_NDIM = 32
+_ARRAY_KINDS = frozenset("biufc")
+_CACHE_SIZE = 1024  # distinct (dtype, shape) pairs remembered; bounded against hostile peers
+_ENCODED_HEADERS: dict[tuple[np.dtype, tuple[int, ...]], bytes] = {}
+_DECODED_HEADERS: dict[bytes, tuple[np.dtype, tuple[int, ...], int, int]] = {}
+
+
+def encode_ndarray(array: np.ndarray) -> msgpack.ExtType:
+    """``array`` as the ndarray ext type: dtype string, shape, then the elements in C order.
+
+    Raises:
+        TypeError: the dtype (object, structured, datetime...) or the rank cannot travel.
+    """
+    key = (array.dtype, array.shape)
+    header = _ENCODED_HEADERS.get(key)
+    if header is None:
+        if array.dtype.kind not in _ARRAY_KINDS or array.dtype.fields is not None:
+            raise TypeError(f"arrays of dtype {array.dtype} cannot travel on the wire")
+        if array.ndim > _MAX_NDIM:
+            raise TypeError(f"arrays of more than {_MAX_NDIM} dimensions cannot travel on the wire")
+        dtype = array.dtype.str.encode()
+        header = _ARRAY_HEADER.pack(len(dtype), array.ndim) + dtype
+        header += struct.pack(f"<{array.ndim}Q", *array.shape)
+        if len(_ENCODED_HEADERS) < _CACHE_SIZE:
+            _ENCODED_HEADERS[key] = header
+    return msgpack.ExtType(NDARRAY_EXT, header + array.tobytes())
+
+
+def decode_ndarray(data: bytes) -> np.ndarray:
+    """The read-only array an ndarray ext payload holds (a view of ``data``).
+
+    Raises:
+        ValueError: a malformed header, a dtype that may not travel, or a size mismatch.
+    """
+    dtype, shape, count, offset = _parse_header(data)
+    if count * dtype.itemsize != len(data) - offset:
+        raise ValueError(
+            f"ndarray of shape {shape} and dtype {dtype} needs {count * dtype.itemsize} bytes, "
+            f"the frame holds {len(data) - offset}"
+        )
+    return np.frombuffer(data, dtype=dtype, count=count, offset=offset).reshape(shape)
+
+
+def _parse_header(data: bytes) -> tuple[np.dtype, tuple[int, ...], int, int]:
+    """(dtype, shape, element count, header length) of an encoded array; cached by header."""
+    try:
+        dtype_len, ndim = _ARRAY_HEADER.unpack_from(data)
+        header_len = _ARRAY_HEADER.size + dtype_len + 8 * ndim
+    except struct.error:
+        raise ValueError("malformed ndarray header: too short") from None
+    header = data[:header_len]
+    parsed = _DECODED_HEADERS.get(header)
+    if parsed is not None:
+        return parsed
+    if ndim > _MAX_NDIM:
+        raise ValueError(f"ndarray of {ndim} dimensions; at most {_MAX_NDIM} are allowed")
+    try:
+        dtype = np.dtype(data[_ARRAY_HEADER.size : _ARRAY_HEADER.size + dtype_len].decode("ascii"))
+        shape = struct.unpack_from(f"<{ndim}Q", data, _ARRAY_HEADER.size + dtype_len)
+    except (struct.error, UnicodeDecodeError, TypeError, ValueError) as exc:
+        raise ValueError(f"malformed ndarray header: {exc}") from None
+    if dtype.kind not in _ARRAY_KINDS or dtype.fields is not None or dtype.subdtype is not None:
+        raise ValueError(f"ndarray dtype {dtype} is not allowed on the wire")
+    count = 1
+    for n in shape:
+        count *= n
+    parsed = (dtype, shape, count, header_len)
+    if len(_DECODED_HEADERS) < _CACHE_SIZE:
+        _DECODED_HEADERS[header] = parsed
+    return parsed
+
+
+def _default(obj: Any) -> Any:
+    if isinstance(obj, np.ndarray):
+        return encode_ndarray(obj)
+    if isinstance(obj, np.generic):
+        return obj.item()
+    raise TypeError(f"objects of type {type(obj).__name__} cannot travel on the wire")
+
+
+def _ext_hook(code: int, data: bytes) -> Any:
+    if code != NDARRAY_EXT:
+        raise ValueError(f"unknown msgpack ext type {code}")
+    return decode_ndarray(data)
+
+
+_packer = msgpack.Packer(default=_default, use_bin_type=True, autoreset=True)
+
+
+def pack(obj: Any) -> bytes:
+    """Encode ``obj`` as msgpack, numpy arrays and scalars included (no framing).
+
+    Raises:
+        TypeError: ``obj`` holds something that cannot travel on the wire.
+    """
+    return _packer.pack(obj)
+
+
+def frame(obj: Any) -> bytes:
+    """``obj`` encoded as one whole frame: length prefix, then the msgpack body.
+
+    Raises:
+        TypeError: ``obj`` holds something that cannot travel on the wire.
+    """
+    body = _packer.pack(obj)
+    return HEADER.pack(len(body)) + body
+
+
+def unpack(body: bytes | memoryview, max_size: int = DEFAULT_MAX_FRAME_SIZE) -> Any:
+    """Decode one msgpack object that fills ``body`` exactly.
+
+    Raises:
+        RemoteProtocolError: invalid msgpack, trailing bytes, a foreign ext type, a malformed
+            array, or a container larger than ``max_size`` allows.
+    """
+    try:
+        return msgpack.unpackb(
+            body,
+            ext_hook=_ext_hook,
+            raw=False,
+            strict_map_key=True,
+            max_str_len=max_size,
+            max_bin_len=max_size,
+            max_array_len=max_size,
+            max_map_len=max_size,
+            max_ext_len=max_size,
+        )
+    except msgpack.ExtraData:
+        raise RemoteProtocolError("trailing bytes after the message in the frame") from None
+    except (ValueError, TypeError, msgpack.UnpackException, RecursionError) as exc:
+        detail = str(exc) or type(exc).__name__
+        raise RemoteProtocolError(f"frame is not valid msgpack: {detail}") from None

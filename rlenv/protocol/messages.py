@@ -1,0 +1,358 @@
+"""Messages: what travels in a frame, as typed records with ``to_wire`` / ``from_wire``.
+
+::
+
+    hello    {"hello": {"protocol": [2, 0], "environment": ..., "action_space": {...}, ...}}
+    request  {"id": 7, "token": "...", <parts>}     parts: config, reset, action, observation...
+    response {"id": 7, "observation": {"agent": ...}, "reward": 1.0, "terminated": false,
+              "truncated": false, "info": {...}, "frames": 4}
+    error    {"id": 7, "error": {"code": "invalid_action", "message": ..., "fatal": false}}
+    batch    {"id": 8, "batch": [{...response or error...}, null, ...]}
+    steps    {"id": 9, "steps": {"observation": ..., "reward": <K f8>, "terminated": <K b1>,
+              "truncated": <K b1>, "frames": <K i8>, "info": [{...}, ...], "errors": [...]}}
+
+A request is an envelope (``id``, and ``token`` where the server asks for one) around **parts**.
+The protocol leaves the parts to the server, which checks and applies each one by the record
+of its kind (:mod:`rlenv.serving.parts`); :class:`Request` carries them as a map. Replies are
+built by the server directly as these records and read back by the client with validation.
+
+Columns of a steps reply (rewards, flags, tick counts) travel as raw little-endian bytes, one
+value per instance; observations travel in their space's packed form (:mod:`rlenv.spaces`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, Final
+
+import numpy as np
+from gymnasium import spaces
+
+from rlenv.errors import ErrorCode, ProtocolVersionError, RemoteProtocolError
+from rlenv.spaces import space_from_spec, space_to_spec
+
+__all__ = [
+    "PROTOCOL_VERSION",
+    "BatchResponse",
+    "ErrorReply",
+    "Hello",
+    "Message",
+    "Reply",
+    "Request",
+    "Response",
+    "StepsResponse",
+]
+
+PROTOCOL_VERSION: Final = (2, 0)
+"""(major, minor). Peers with different majors refuse each other; a newer minor only adds."""
+
+_REWARD = np.dtype("<f8")
+_FRAMES = np.dtype("<i8")
+_FLAG = np.dtype("|u1")
+
+
+@dataclass(slots=True)
+class Hello:
+    """What the server says first: who it is, what its spaces are, how many instances."""
+
+    environment: str
+    action_space: spaces.Space
+    observation_space: spaces.Space
+    agents: tuple[str, ...] = ("agent",)
+    physics_ticks_per_second: int = 60
+    repeat_action: int = 4
+    render_modes: tuple[str, ...] = ()
+    token_required: bool = False
+    instances: int = 1
+    protocol: tuple[int, int] = PROTOCOL_VERSION
+
+    def to_wire(self) -> dict[str, Any]:
+        """The message as a msgpack-ready map."""
+        return {
+            "hello": {
+                "protocol": list(self.protocol),
+                "environment": self.environment,
+                "action_space": space_to_spec(self.action_space),
+                "observation_space": space_to_spec(self.observation_space),
+                "agents": list(self.agents),
+                "physics_ticks_per_second": self.physics_ticks_per_second,
+                "repeat_action": self.repeat_action,
+                "render_modes": list(self.render_modes),
+                "token_required": self.token_required,
+                "instances": self.instances,
+            }
+        }
+
+    @classmethod
+    def from_wire(cls, wire: Mapping[str, Any]) -> Hello:
+        """Read a hello map.
+
+        Raises:
+            ProtocolVersionError: the server speaks another major version.
+            RemoteProtocolError: the map is not a valid hello.
+        """
+        body = wire["hello"]
+        if not isinstance(body, Mapping):
+            raise RemoteProtocolError("hello must be a map")
+        version = body.get("protocol")
+        if not (isinstance(version, list) and len(version) == 2):
+            raise RemoteProtocolError(f"hello carries no protocol version: {version!r:.80}")
+        if version[0] != PROTOCOL_VERSION[0]:
+            raise ProtocolVersionError(
+                f"server speaks rlenv protocol {version[0]}.{version[1]}, this client speaks "
+                f"{PROTOCOL_VERSION[0]}.{PROTOCOL_VERSION[1]}; install matching versions"
+            )
+        try:
+            return cls(
+                environment=str(body["environment"]),
+                action_space=space_from_spec(body["action_space"]),
+                observation_space=space_from_spec(body["observation_space"]),
+                agents=tuple(body["agents"]),
+                physics_ticks_per_second=int(body["physics_ticks_per_second"]),
+                repeat_action=int(body["repeat_action"]),
+                render_modes=tuple(body["render_modes"]),
+                token_required=bool(body.get("token_required", False)),
+                instances=int(body.get("instances", 1)),
+                protocol=(int(version[0]), int(version[1])),
+            )
+        except (KeyError, TypeError, ValueError) as exc:
+            raise RemoteProtocolError(f"invalid hello: {exc!r}") from None
+
+
+@dataclass(slots=True)
+class Request:
+    """One request: its id, its parts (a map from part name to value) and maybe a token.
+
+    The server applies the parts it knows in its own order and refuses unknown ones; see
+    ``docs/protocol.md`` for the parts and :mod:`rlenv.serving.parts` for how each is served.
+    """
+
+    id: int
+    parts: dict[str, Any] = field(default_factory=dict)
+    token: str | None = None
+
+    def to_wire(self) -> dict[str, Any]:
+        """The message as a msgpack-ready map."""
+        wire = {"id": self.id, **self.parts}
+        if self.token is not None:
+            wire["token"] = self.token
+        return wire
+
+    @classmethod
+    def from_wire(cls, wire: dict[str, Any]) -> Request:
+        """Read a request map (which it takes apart: the map becomes the parts).
+
+        Raises:
+            RemoteProtocolError: ``bad_request``: no integer id, or a token that is not a
+                string (with the id, when it could be read).
+        """
+        request_id = wire.pop("id", None)
+        if type(request_id) is not int:
+            raise RemoteProtocolError(f"request 'id' must be an integer, got {request_id!r:.40}",
+                                      ErrorCode.BAD_REQUEST)
+        token = wire.pop("token", None)
+        if token is not None and type(token) is not str:
+            raise RemoteProtocolError("'token' must be a string", ErrorCode.BAD_REQUEST,
+                                      request_id=request_id)
+        return cls(request_id, wire, token)
+
+    def __repr__(self) -> str:  # never show a token in logs
+        parts = ", ".join(f"{name}={value!r:.80}" for name, value in self.parts.items())
+        token = ", token=..." if self.token is not None else ""
+        return f"Request(id={self.id}{', ' if parts else ''}{parts}{token})"
+
+
+@dataclass(slots=True)
+class Response:
+    """The answer to a request that succeeded.
+
+    ``observation`` maps what was asked (``agent``, ``world``, ``render``) to its value; the
+    agent observation is in its space's packed form. ``reward`` is the sum over the ticks since
+    the previous answer, ``frames`` how many ticks ran. ``agents`` holds, for several agents,
+    each one's ``{"reward", "terminated", "truncated"}``.
+    """
+
+    id: int
+    observation: dict[str, Any] | None = None
+    reward: float = 0.0
+    terminated: bool = False
+    truncated: bool = False
+    info: dict[str, Any] = field(default_factory=dict)
+    frames: int = 0
+    agents: dict[str, dict[str, Any]] | None = None
+
+    def to_wire(self) -> dict[str, Any]:
+        """The message as a msgpack-ready map."""
+        wire = {"id": self.id, "observation": self.observation, "reward": self.reward,
+                "terminated": self.terminated, "truncated": self.truncated, "info": self.info,
+                "frames": self.frames}
+        if self.agents is not None:
+            wire["agents"] = self.agents
+        return wire
+
+    @classmethod
+    def from_wire(cls, wire: Mapping[str, Any]) -> Response:
+        """Read a response map.
+
+        Raises:
+            RemoteProtocolError: a field is missing or has the wrong type.
+        """
+        try:
+            observation, reward, info, frames = (wire["observation"], wire["reward"],
+                                                 wire["info"], wire["frames"])
+            terminated, truncated, agents = wire["terminated"], wire["truncated"], \
+                wire.get("agents")
+        except KeyError as missing:
+            raise RemoteProtocolError(f"invalid response: no {missing}") from None
+        if not (type(reward) is float or type(reward) is int) or type(frames) is not int or \
+                type(terminated) is not bool or type(truncated) is not bool or \
+                type(info) is not dict or not (observation is None or type(observation) is dict) \
+                or not (agents is None or type(agents) is dict):
+            raise RemoteProtocolError(f"invalid response: a field has the wrong type: "
+                                      f"{dict(wire)!r:.200}")
+        return cls(wire["id"], observation, float(reward), terminated, truncated, info, frames,
+                   agents)
+
+
+@dataclass(slots=True)
+class ErrorReply:
+    """The answer to a request that failed, or a refusal of the connection (``id`` None)."""
+
+    id: int | None
+    code: str
+    message: str
+    fatal: bool = False
+
+    def to_wire(self) -> dict[str, Any]:
+        """The message as a msgpack-ready map."""
+        return {"id": self.id,
+                "error": {"code": str(self.code), "message": self.message, "fatal": self.fatal}}
+
+    @classmethod
+    def from_wire(cls, wire: Mapping[str, Any]) -> ErrorReply:
+        """Read an error reply map.
+
+        Raises:
+            RemoteProtocolError: a field is missing or has the wrong type.
+        """
+        try:
+            error = wire["error"]
+            return cls(id=wire.get("id"), code=str(error["code"]), message=str(error["message"]),
+                       fatal=bool(error.get("fatal", False)))
+        except (KeyError, TypeError) as exc:
+            raise RemoteProtocolError(f"invalid error reply: {exc!r}") from None
+
+
+@dataclass(slots=True)
+class BatchResponse:
+    """The answer to a batch request: one reply per instance (``None`` where none was asked)."""
+
+    id: int
+    replies: tuple[Response | ErrorReply | None, ...]
+
+    def to_wire(self) -> dict[str, Any]:
+        """The message as a msgpack-ready map."""
+        return {"id": self.id,
+                "batch": [None if reply is None else reply.to_wire() for reply in self.replies]}
+
+    @classmethod
+    def from_wire(cls, wire: Mapping[str, Any]) -> BatchResponse:
+        """Read a batch response map.
+
+        Raises:
+            RemoteProtocolError: a reply is malformed.
+        """
+        batch = wire["batch"]
+        if not isinstance(batch, list):
+            raise RemoteProtocolError("invalid batch response: 'batch' is not a list")
+        replies: list[Response | ErrorReply | None] = []
+        for reply in batch:
+            if reply is None:
+                replies.append(None)
+            elif not isinstance(reply, Mapping):
+                raise RemoteProtocolError("invalid batch response: a reply is not a map")
+            else:
+                replies.append(ErrorReply.from_wire(reply) if "error" in reply
+                               else Response.from_wire(reply))
+        return cls(id=wire["id"], replies=tuple(replies))
+
+
+@dataclass(slots=True)
+class StepsResponse:
+    """The answer to a ``steps`` request: one column per field, one row per instance.
+
+    ``observation`` stacks every instance's agent observation, in the packed form of the batched
+    observation space (gymnasium's ``batch_space`` layout); ``reward`` (float64),
+    ``terminated``, ``truncated`` (bool) and ``frames`` (int64) are arrays of length K; ``info``
+    holds one map per instance (``agents`` in it for several agents). ``errors`` is ``None``
+    when every instance succeeded, else one entry per instance: ``None`` or the
+    :class:`ErrorReply` of an instance that failed (its row of the other columns is
+    meaningless).
+    """
+
+    id: int
+    observation: Any
+    reward: np.ndarray
+    terminated: np.ndarray
+    truncated: np.ndarray
+    frames: np.ndarray
+    info: tuple[dict[str, Any], ...]
+    errors: tuple[ErrorReply | None, ...] | None = None
+
+    def to_wire(self) -> dict[str, Any]:
+        """The message as a msgpack-ready map (the numeric columns as raw bytes)."""
+        columns: dict[str, Any] = {
+            "observation": self.observation,
+            "reward": np.asarray(self.reward, _REWARD).tobytes(),
+            "terminated": np.asarray(self.terminated, _FLAG).tobytes(),
+            "truncated": np.asarray(self.truncated, _FLAG).tobytes(),
+            "frames": np.asarray(self.frames, _FRAMES).tobytes(),
+            "info": list(self.info),
+        }
+        if self.errors is not None:
+            columns["errors"] = [None if error is None else error.to_wire()["error"]
+                                 for error in self.errors]
+        return {"id": self.id, "steps": columns}
+
+    @classmethod
+    def from_wire(cls, wire: Mapping[str, Any]) -> StepsResponse:
+        """Read a steps response map.
+
+        Raises:
+            RemoteProtocolError: a column is missing or has the wrong type or length.
+        """
+        columns = wire["steps"]
+        try:
+            info = columns["info"]
+            size = len(info)
+            reward = _column(columns["reward"], _REWARD, size)
+            terminated, truncated = (_column(columns[name], _FLAG, size).astype(np.bool_)
+                                     for name in ("terminated", "truncated"))
+            frames = _column(columns["frames"], _FRAMES, size)
+            errors = columns.get("errors")
+            if errors is not None:
+                if len(errors) != size:
+                    raise ValueError(f"{len(errors)} errors for {size} instances")
+                errors = tuple(None if error is None else
+                               ErrorReply.from_wire({"id": wire["id"], "error": error})
+                               for error in errors)
+            if not all(type(item) is dict for item in info):
+                raise ValueError("an info that is not a map")
+            return cls(id=wire["id"], observation=columns["observation"], reward=reward,
+                       terminated=terminated, truncated=truncated, frames=frames,
+                       info=tuple(info), errors=errors)
+        except (KeyError, TypeError, ValueError, RemoteProtocolError) as exc:
+            raise RemoteProtocolError(f"invalid steps response: {exc!r}") from None
+
+
+def _column(data: Any, dtype: np.dtype, size: int) -> np.ndarray:
+    """One numeric column of a steps reply, ``size`` values of ``dtype`` as raw bytes."""
+    if type(data) is not bytes or len(data) != size * dtype.itemsize:
+        raise ValueError(f"a column must be {size} values of {dtype.str} as raw bytes")
+    return np.frombuffer(data, dtype)
+
+
+Message = Hello | Request | Response | BatchResponse | StepsResponse | ErrorReply
+Reply = Response | BatchResponse | StepsResponse | ErrorReply
+"""Any answer a server sends to a request."""

@@ -1,0 +1,313 @@
+"""The nodes users subclass to make an environment, holding only what users implement.
+
+The tree of an environment follows the Godot seed::
+
+    Environment (RLEnvironment)
+    |___PhysicsFramesTimer
+    |___Agent (RLAgent)            acts, observes, is rewarded
+    |___World (RLEnvWorld)         everything else
+
+How requests are served (checks, episode state, snapshots, inspection) lives in
+:mod:`rlenv.serving`, beside these classes, never inside them: a subclass may name its
+attributes and methods freely (only the documented hooks, with a leading underscore as in
+Godot, are called by rlenv). The four classes live in one module because each refers to the
+others (an agent reaches its environment, the environment its agents).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+
+from rlenv.errors import ErrorCode, RequestError
+from rlenv.node import NOTIFICATION_EXIT_TREE, Node
+from rlenv.properties import conform
+from rlenv.render import draw
+from rlenv.timer import PhysicsFramesTimer
+
+__all__ = ["RLAgent", "RLEnvWorld", "RLEnvironment", "RLNode"]
+
+
+class RLNode(Node):
+    """What agents, worlds and environments share: client configuration, the episode's RNG.
+
+    Attributes:
+        configurable: names of the attributes a client may set through ``configure``. The
+            default :meth:`configure` sets them, keeping each attribute's type (an int may set a
+            float), and refuses any other key.
+    """
+
+    configurable: ClassVar[tuple[str, ...]] = ()
+
+    __environment: RLEnvironment | None = None
+
+    @property
+    def environment(self) -> RLEnvironment:
+        """The environment this node belongs to (its nearest RLEnvironment, itself included).
+
+        Raises:
+            RuntimeError: the node is not below an environment.
+        """
+        environment = self.__environment
+        if environment is None:
+            node: Node | None = self
+            while not (node is None or isinstance(node, RLEnvironment)):
+                node = node.parent
+            if node is None:
+                raise RuntimeError(f"{self!r} is not below an RLEnvironment")
+            environment = node
+            if self.is_inside_tree():  # valid until the node leaves the tree
+                self.__environment = environment
+        return environment
+
+    def notification(self, what: int) -> None:
+        """Deliver a lifecycle notification (and forget the cached environment on exit)."""
+        if what == NOTIFICATION_EXIT_TREE:
+            self.__environment = None
+        super().notification(what)
+
+    @property
+    def np_random(self) -> np.random.Generator:
+        """The episode's random generator, seeded by ``reset(seed=...)``.
+
+        Use it for all randomness, so that episodes are reproducible.
+        """
+        return self.environment.np_random
+
+    def configure(self, config: Mapping[str, Any]) -> None:
+        """Apply a configuration sent by the client.
+
+        Raises:
+            RequestError: ``invalid_config``, naming the key, for a key not in
+                :attr:`configurable` or a value of the wrong type.
+        """
+        for key, value in config.items():
+            setattr(self, key, self._configured(key, value))
+
+    def check_config(self, config: Mapping[str, Any]) -> None:
+        """Check a configuration without applying it (the same rules as :meth:`configure`).
+
+        Raises:
+            RequestError: as :meth:`configure` would.
+        """
+        for key, value in config.items():
+            self._configured(key, value)
+
+    def _configured(self, key: Any, value: Any) -> Any:
+        owner = type(self).__name__
+        if key not in self.configurable:
+            accepted = ", ".join(map(str, self.configurable)) or "nothing"
+            raise RequestError(ErrorCode.INVALID_CONFIG,
+                               f"{owner} has no configurable {key!r}; it accepts {accepted}")
+        try:
+            return conform(getattr(self, key), value)
+        except TypeError as error:
+            raise RequestError(ErrorCode.INVALID_CONFIG, f"{owner}.{key} {error}") from None
+
+
+class RLAgent(RLNode):
+    """Override to define what the agent can do and see, and how it is rewarded.
+
+    Set :attr:`action_space` and :attr:`observation_space` (gymnasium spaces) as class attributes
+    or in ``__init__``. Apply the action in ``_physics_process`` (before the physics steps) and
+    report the outcome of each tick in ``_after_physics_tick`` (after it stepped) with
+    :meth:`add_reward`, :meth:`set_terminated` and :meth:`set_truncated` (bevy_rl's
+    ``set_reward`` / ``set_terminated``); signal handlers may report too. The environment sums
+    the rewards of the ticks, answers the client, and stops the action early when the episode
+    ends.
+
+    Attributes:
+        reward: reward accumulated since the last answer to the client.
+        terminated: the episode reached a terminal state of the task.
+        truncated: the episode was cut short by something outside the task (a time limit).
+    """
+
+    action_space: spaces.Space
+    observation_space: spaces.Space
+
+    def __init__(self, name: str | None = None) -> None:
+        super().__init__(name)
+        self.reward = 0.0
+        self.terminated = False
+        self.truncated = False
+
+    def set_action(self, action: Any) -> None:
+        """Receive the client's action, already checked against :attr:`action_space`."""
+        raise NotImplementedError(f"{type(self).__name__} must implement set_action")
+
+    def reset(self, arguments: Any) -> None:
+        """Put the agent in its initial state.
+
+        ``arguments`` is what the environment's ``_reset`` passes: by default the world's
+        ``sample_initial_position()``.
+        """
+
+    def get_data(self, observation_request: Mapping[str, Any]) -> Any:
+        """Return the observation, a member of :attr:`observation_space`."""
+        raise NotImplementedError(f"{type(self).__name__} must implement get_data")
+
+    def _after_physics_tick(self, delta: float) -> None:
+        """Called at the end of every physics tick of an action, after the physics stepped.
+
+        Read the new state here, add rewards and set terminated or truncated.
+        """
+
+    def add_reward(self, reward: float) -> None:
+        """Add ``reward`` to the reward of the current step."""
+        self.reward += reward
+
+    def set_reward(self, reward: float) -> None:
+        """Replace the reward of the current step with ``reward``."""
+        self.reward = reward
+
+    def set_terminated(self, terminated: bool = True) -> None:
+        """Mark the episode as ended by the task (the pole fell, the goal was reached)."""
+        self.terminated = terminated
+
+    def set_truncated(self, truncated: bool = True) -> None:
+        """Mark the episode as cut short for a reason outside the task (a time limit)."""
+        self.truncated = truncated
+
+
+class RLEnvWorld(RLNode):
+    """Override to build, reset and describe the world the agent lives in."""
+
+    def reset(self, options: Mapping[str, Any]) -> None:
+        """Put the world in its initial state; ``options`` are the client's reset options."""
+
+    def get_data(self, observation_request: Mapping[str, Any]) -> Any:
+        """Return world data the client asked for (not part of the agent's observation)."""
+        return {}
+
+    def sample_initial_position(self) -> Any:
+        """Draw the agent's initial state (use :attr:`np_random`); passed to ``agent.reset``."""
+        return None
+
+
+class RLEnvironment(RLNode):
+    """Override to build an environment; give it an :class:`RLAgent` and an :class:`RLEnvWorld`.
+
+    Build the children in ``__init__`` (or ``_ready``). By default ``_ready`` takes the
+    RLAgent children as :attr:`agents` (the first is :attr:`agent`) and the first RLEnvWorld
+    child as :attr:`world`; override it to choose others. The hooks, all optional:
+    :meth:`_reset` (how an episode starts), :meth:`_step` (logic around an action: call
+    ``super()._step``), :meth:`_get_info` (entries for ``info``) and :meth:`_render` (frames).
+
+    Args:
+        name: the node name; also the environment name the client sees.
+        repeat_action: physics ticks an action runs by default; clients may configure it.
+
+    Attributes:
+        physics_ticks_per_second: the physics rate the environment is designed for (class
+            attribute; the server builds its tree with it).
+        render_size: default (width, height) of rendered frames.
+        render_view: the world rectangle (x_min, y_min, x_max, y_max) frames show; by default
+            the bounding box of everything, frame by frame.
+        configurable: what clients may configure (besides ``real_time`` and ``record``, which
+            the server handles).
+        exported: what clients may read remotely (besides :attr:`configurable`).
+        agent: the agent node (the first of :attr:`agents`).
+        agents: every agent; several make the spaces ``Dict`` s keyed by agent name.
+        world: the world node.
+        physics_frames_timer: counts the ticks of the running action.
+        repeat_action: ticks an action runs unless the request says otherwise.
+    """
+
+    physics_ticks_per_second: ClassVar[int] = 60
+    render_size: ClassVar[tuple[int, int]] = (600, 400)
+    render_view: ClassVar[tuple[float, float, float, float] | None] = None
+    configurable: ClassVar[tuple[str, ...]] = ("repeat_action",)
+    exported: ClassVar[tuple[str, ...]] = ("real_time",)
+
+    def __init__(self, name: str | None = None, *, repeat_action: int = 4) -> None:
+        super().__init__(name)
+        self.agent: RLAgent | None = None
+        self.agents: list[RLAgent] = []
+        self.world: RLEnvWorld | None = None
+        self.physics_frames_timer = PhysicsFramesTimer(name="PhysicsFramesTimer")
+        self.add_child(self.physics_frames_timer)
+        self.repeat_action = repeat_action
+        self.__np_random: np.random.Generator | None = None
+
+    @property
+    def np_random(self) -> np.random.Generator:
+        """The episode's random generator (seeded from entropy until a seed is given)."""
+        if self.__np_random is None:
+            self.__np_random, _ = seeding.np_random(None)
+        return self.__np_random
+
+    @np_random.setter
+    def np_random(self, generator: np.random.Generator) -> None:
+        self.__np_random = generator
+
+    @property
+    def real_time(self) -> bool:
+        """Whether the environment runs in real time (ticks follow the clock) or in lockstep."""
+        return self.is_inside_tree() and self.get_tree().real_time
+
+    @property
+    def multi_agent(self) -> bool:
+        """Whether the environment has several agents (spaces and outcomes keyed by name)."""
+        return len(self.agents) > 1
+
+    def _ready(self) -> None:
+        if not self.agents:
+            self.agents = self.find_children("*", RLAgent, recursive=False)
+        if self.agent is None and self.agents:
+            self.agent = self.agents[0]
+        if not self.agents and self.agent is not None:
+            self.agents = [self.agent]
+        if self.world is None:
+            self.world = self.find_child("*", RLEnvWorld, recursive=False)
+
+    # --- hooks --------------------------------------------------------------------------------
+
+    def _reset(self, options: Mapping[str, Any]) -> None:
+        """Start an episode: reset the world, then each agent at a sampled initial position."""
+        world = self.world
+        assert world is not None
+        world.reset(options)
+        for agent in self.agents:
+            agent.reset(world.sample_initial_position())
+
+    def _step(self, action: Any, frames: int | None = None) -> None:
+        """Give ``action`` to the agents and run ``frames`` ticks (default :attr:`repeat_action`).
+
+        The tree is unpaused until :attr:`physics_frames_timer` stops (after ``frames`` ticks,
+        or earlier when the episode ends), then paused again. Override to add logic around an
+        action and call ``super()._step(action, frames)``: code after it runs once the ticks
+        have run (the seed's ``yield(._step(action), "completed")``).
+
+        ``action`` is checked already: one agent's action, or with several agents a map from
+        agent name to action for the agents still in the episode.
+        """
+        if self.multi_agent:
+            for agent in self.agents:
+                if agent.name in action:
+                    agent.set_action(action[agent.name])
+        else:
+            assert self.agent is not None
+            self.agent.set_action(action)
+        tree = self.get_tree()
+        timer = self.physics_frames_timer
+        timer.start(frames or self.repeat_action)
+        tree.paused = False
+        while not timer.is_stopped():
+            tree.iteration()
+        tree.paused = True
+
+    def _get_info(self) -> dict[str, Any]:
+        """Extra diagnostics for ``info``; override to add entries (msgpack-able values)."""
+        return {}
+
+    def _render(self, width: int, height: int) -> np.ndarray:
+        """Draw the current state as a ``(height, width, 3)`` uint8 array.
+
+        By default every pymunk space below the environment is drawn, framed by
+        :attr:`render_view`; override to draw something else.
+        """
+        return draw(self, width, height, self.render_view)

@@ -1,0 +1,165 @@
+"""Host: K instances of one environment, answering requests as one server (K >= 1).
+
+One instance is a host of one: nothing asks "single or several?". A request enters by one
+door, :meth:`Host.answer`, whatever carried it (a socket, or this process for
+``rlenv_client.LocalClient``):
+
+- a plain request goes to instance 0;
+- ``batch`` carries one request per instance, each answered on its own;
+- ``steps`` steps every instance in columns.
+
+Each is checked whole by the records of :mod:`rlenv.serving.parts`, then served by
+:meth:`Instance.serve <rlenv.serving.instance.Instance.serve>`. The host also owns the loop
+(:meth:`Host.serve_forever`): in lockstep it waits for requests and the tree stands still; in
+real time it wakes when an instance's next tick is due, and runs every tick that came due
+before it answers.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from gymnasium.vector.utils import batch_space
+
+from rlenv.errors import RequestError
+from rlenv.protocol import ErrorReply, Hello, Reply, Request, Response
+from rlenv.rl_nodes import RLEnvironment
+from rlenv.serving.columns import Columns
+from rlenv.serving.endpoint import Endpoint
+from rlenv.serving.instance import Instance, load_environment
+from rlenv.serving.parts import HostPart, host_part_of, plan_for, takes_control
+from rlenv.spaces import compile_check
+
+__all__ = ["Host", "Prepared"]
+
+
+class Prepared:
+    """A request whose every part was checked, ready to run.
+
+    Attributes:
+        request: the request.
+        part: the part that addresses every instance (``batch``, ``steps``), or ``None`` for a
+            request to the first instance.
+        checked: what the checks made of it (a plan, for one instance).
+    """
+
+    __slots__ = ("checked", "part", "request")
+
+    def __init__(self, request: Request, part: HostPart | None, checked: Any) -> None:
+        self.request, self.part, self.checked = request, part, checked
+
+    @property
+    def takes_control(self) -> bool:
+        """Whether the request changes the environment (only its controller may send it)."""
+        return takes_control(self.request.parts)
+
+
+class Host:
+    """``count`` instances of an environment, each in its own tree, answering as one.
+
+    Args:
+        environment: the environment class, ``MODULE:CLASS``, or (for one instance) an
+            environment object.
+        count: how many instances.
+        clock: the trees' clock, for real-time mode.
+        record_dir: where clients may have the environments record videos.
+        real_time: start in real-time mode.
+
+    Raises:
+        ValueError: ``count`` is smaller than 1.
+        TypeError: several instances of an environment object.
+        RuntimeError: the environment has no agent, world or spaces.
+    """
+
+    def __init__(self, environment: RLEnvironment | type[RLEnvironment] | str, count: int = 1,
+                 *, clock: Callable[[], float] = time.monotonic,
+                 record_dir: Path | None = None, real_time: bool = False) -> None:
+        if isinstance(environment, str):
+            environment = load_environment(environment)
+        if count < 1:
+            raise ValueError("a host holds at least one instance")
+        if count > 1 and not isinstance(environment, type):
+            raise TypeError("several instances need the environment class, not an instance")
+        self.instances = [Instance(environment, clock, record_dir) for _ in range(count)]
+        first = self.instances[0]
+        self.hello = Hello(
+            environment=first.environment.name,
+            action_space=first.action_space,
+            observation_space=first.observation_space,
+            agents=tuple(agent.name for agent in first.agents),
+            physics_ticks_per_second=first.tree.physics_ticks_per_second,
+            repeat_action=first.environment.repeat_action,
+            render_modes=("rgb_array",),
+            instances=count,
+        )
+        self.steps_action_space = batch_space(first.action_space, count)
+        self.steps_action = compile_check(self.steps_action_space, "steps.action")
+        self.columns = Columns(first.observation_space)
+        if real_time:
+            for instance in self.instances:
+                instance.set_real_time(True)
+
+    def answer(self, request: Request) -> Reply:
+        """The one answer to ``request`` (plain, batch or steps); a refusal changes nothing."""
+        prepared = self.prepare(request)
+        return prepared if prepared.__class__ is ErrorReply else self.run(prepared)  # type: ignore[return-value,arg-type]
+
+    def prepare(self, request: Request) -> Prepared | ErrorReply:
+        """Check every part of ``request`` before anything moves; its refusal, if refused.
+
+        Instances in real time first run the ticks that came due, so that the checks see the
+        current state.
+        """
+        for instance in self.instances:
+            instance.catch_up()
+        parts = request.parts
+        try:
+            host_part = host_part_of(parts)
+            if host_part is None:
+                return Prepared(request, None, plan_for(self.instances[0], parts))
+            return Prepared(request, host_part, host_part.check(self, request))
+        except RequestError as error:
+            return ErrorReply(request.id, error.code, str(error))
+
+    def run(self, prepared: Prepared) -> Reply:
+        """Serve a checked request; its answer."""
+        request = prepared.request
+        if prepared.part is not None:
+            return prepared.part.run(self, request, prepared.checked)
+        if not request.parts:
+            return Response(request.id)  # nothing asked (the token, say)
+        return self.instances[0].serve(prepared.checked, request.id)
+
+    def time_to_next_tick(self) -> float | None:
+        """Seconds until the next tick of an instance in real time (``None``: none is)."""
+        due = [wait for instance in self.instances
+               if (wait := instance.time_to_next_tick()) is not None]
+        return min(due, default=None)
+
+    def serve_forever(self, endpoint: Endpoint) -> None:
+        """Answer the endpoint's requests until interrupted; in real time, tick meanwhile.
+
+        A request is checked first: a refusal is answered and changes nothing, control
+        included. A request that changes the environment then needs its client to control it
+        (the endpoint answers ``busy`` otherwise).
+        """
+        while True:
+            got = endpoint.receive(self.time_to_next_tick())
+            if got is None:
+                for instance in self.instances:
+                    instance.catch_up()
+                continue
+            peer, request = got
+            prepared = self.prepare(request)
+            if prepared.__class__ is ErrorReply:
+                endpoint.reply(peer, prepared)  # type: ignore[arg-type]
+            elif not prepared.takes_control or endpoint.take_control(peer, request.id):  # type: ignore[union-attr]
+                endpoint.reply(peer, self.run(prepared))  # type: ignore[arg-type]
+
+    def close(self) -> None:
+        """Take every environment out of its tree."""
+        for instance in self.instances:
+            instance.close()

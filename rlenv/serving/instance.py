@@ -1,0 +1,515 @@
+"""Instance: one environment in a scene tree of its own, and the state of its episode.
+
+The host (:mod:`rlenv.serving.host`) hands an instance each request as a **plan**: the request's
+parts, already checked, in the order they apply (:mod:`rlenv.serving.parts` makes plans). One
+call serves a plan, whatever carried the request (a socket or this process, alone, in a batch
+or in a column step): :meth:`Instance.serve`. The parts use the primitives below (begin an
+episode, act, observe...), which keep the episode's state:
+
+- **not started** until the first reset; **running** between actions; **acting** while an
+  action's ticks run; **ended** once every agent terminated or was truncated (a step is then
+  refused until the next reset);
+- an action (lockstep) hands the checked action to the environment's ``_step``, which unpauses
+  the tree for ``repeat_action`` ticks. At the end of every tick, after pymunk stepped, the
+  instance calls each agent's ``_after_physics_tick`` (the tree's ``on_physics_tick_end``) and
+  stops the action early when the episode ends;
+- in real time the tree ticks by the clock between requests, an action applies at once, and an
+  episode that ends between two requests pauses the tree until the next one learns of it.
+
+Every answer reports what happened since the previous one: summed rewards, flags and ticks.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import time
+import traceback
+from collections.abc import Callable, Mapping
+from enum import Enum
+from pathlib import Path
+from typing import Any
+
+from gymnasium import spaces
+from gymnasium.utils import seeding
+
+from rlenv.errors import ErrorCode, RequestError
+from rlenv.protocol import ErrorReply, Response
+from rlenv.recording import VideoRecorder
+from rlenv.rl_nodes import RLAgent, RLEnvironment
+from rlenv.serving.snapshots import EpisodeLog
+from rlenv.spaces import Codec, SpaceMismatch, codec_for, compile_check, find_non_finite
+from rlenv.tree import SceneTree
+
+__all__ = ["Episode", "Instance", "load_environment"]
+
+logger = logging.getLogger(__name__)
+
+_VIDEO_SUFFIXES = frozenset({".mp4", ".webm", ".avi", ".mkv"})
+
+
+def load_environment(target: str) -> type[RLEnvironment]:
+    """Import the environment class named ``MODULE:CLASS``.
+
+    Raises:
+        ValueError: ``target`` is not of the form ``MODULE:CLASS``.
+        ImportError: the module cannot be imported.
+        TypeError: the attribute is not an RLEnvironment subclass.
+    """
+    module_name, _, class_name = target.partition(":")
+    if not module_name or not class_name:
+        raise ValueError(f"expected MODULE:CLASS, e.g. examples.cartpole:CartPoleEnvironment, "
+                         f"got {target!r}")
+    module = importlib.import_module(module_name)
+    try:
+        environment_class = getattr(module, class_name)
+    except AttributeError:
+        raise ImportError(f"module {module_name!r} has no attribute {class_name!r}") from None
+    if not (isinstance(environment_class, type) and issubclass(environment_class, RLEnvironment)):
+        raise TypeError(f"{target} is not an RLEnvironment subclass")
+    return environment_class
+
+
+class Episode(Enum):
+    """Where the episode stands, as far as requests are concerned."""
+
+    NOT_STARTED = "not started"
+    RUNNING = "running"
+    ACTING = "acting"
+    ENDED = "ended"
+
+
+class Answer:
+    """What the parts of a request add to its answer while they apply."""
+
+    __slots__ = ("acted", "info", "observation")
+
+    def __init__(self) -> None:
+        self.observation: dict[str, Any] | None = None
+        self.info: dict[str, Any] | None = None  # entries beside the environment's own
+        self.acted = False
+
+
+Plan = tuple[tuple[Any, Any], ...]
+"""A checked request: (part, checked value) pairs in the order they apply."""
+
+
+class Instance:
+    """An environment in a tree of its own, answering the plans handed to it.
+
+    Args:
+        environment: an environment instance, its class, or ``MODULE:CLASS``.
+        clock: the tree's clock, for real-time mode (tests pass a manual one).
+        record_dir: where clients may have the environment record videos (``None``: nowhere).
+
+    Raises:
+        RuntimeError: the environment has no agent, no world, or an agent without spaces.
+    """
+
+    def __init__(self, environment: RLEnvironment | type[RLEnvironment] | str,
+                 clock: Callable[[], float] = time.monotonic,
+                 record_dir: Path | None = None) -> None:
+        if isinstance(environment, str):
+            environment = load_environment(environment)
+        if isinstance(environment, type):
+            environment = environment()
+        self.environment = environment
+        self.tree = SceneTree(environment.physics_ticks_per_second, clock=clock)
+        self.tree.root.add_child(environment)
+        self.tree.paused = True
+        self.tree.on_physics_tick_end = self._end_tick
+        self.agents: list[RLAgent] = _agents_of(environment)
+        self.multi_agent = len(self.agents) > 1
+        if self.multi_agent:  # the joint spaces, keyed by agent name
+            self.action_space: spaces.Space = spaces.Dict(
+                {a.name: a.action_space for a in self.agents})
+            self.observation_space: spaces.Space = spaces.Dict(
+                {a.name: a.observation_space for a in self.agents})
+        else:
+            self.action_space = self.agents[0].action_space
+            self.observation_space = self.agents[0].observation_space
+        self._check_actions = {a.name: compile_check(a.action_space, f"action[{a.name!r}]")
+                               for a in self.agents}
+        self._check_action = compile_check(self.action_space, "action")
+        self._observers: list[tuple[RLAgent, Codec]] = [
+            (agent, codec_for(agent.observation_space)) for agent in self.agents]
+        self.record_dir = record_dir
+        self.state = Episode.NOT_STARTED
+        self.log = EpisodeLog()
+        self.replaying = False  # restoring a snapshot: the episode moves on silently
+        self._recorder: VideoRecorder | None = None
+        self._ticks = 0  # ticks the episode ran since the last answer
+        self._ended_unseen = False  # real time: the episode ended between two requests
+        self._last_action_at = 0
+        self._late = False
+        self._late_actions = 0
+
+    # --- one way in -------------------------------------------------------------------------
+
+    def serve(self, plan: Plan, reply_id: int) -> Response | ErrorReply:
+        """Apply a checked request (see :mod:`rlenv.serving.parts`) and return its answer.
+
+        An exception in user code becomes an ``environment_error`` answer (the next action then
+        needs a reset); a refusal found while applying becomes its error answer.
+        """
+        answer = Answer()
+        try:
+            for part, value in plan:
+                part.apply(self, value, answer)
+            return self._response(reply_id, answer)
+        except RequestError as error:
+            return ErrorReply(reply_id, error.code, str(error))
+        except Exception as error:  # user code raised: report it, keep serving
+            return self.environment_error(reply_id, error)
+
+    def catch_up(self) -> None:
+        """In real time, run the ticks that came due by the clock (and a frame)."""
+        if self.tree.real_time:
+            self.tree.iteration()
+
+    def time_to_next_tick(self) -> float | None:
+        """Seconds until this instance's next tick is due (``None`` in lockstep)."""
+        return self.tree.time_to_next_tick()
+
+    def close(self) -> None:
+        """Stop any recording and take the environment out of its tree."""
+        self._set_recording("")
+        if self.environment.parent is not None:
+            self.tree.root.remove_child(self.environment)
+
+    # --- configuration ----------------------------------------------------------------------
+
+    def check_config(self, config: Mapping[str, Any]) -> None:
+        """Check a ``config`` part (every node it applies to) without applying it.
+
+        Raises:
+            RequestError: ``bad_request`` (its shape) or ``invalid_config`` naming the key.
+        """
+        _check_keys(config, _CONFIG_PARTS, "config")
+        for part, nodes in self._configured_nodes().items():
+            if part not in config:
+                continue
+            settings = config[part]
+            if not isinstance(settings, Mapping):
+                raise RequestError(ErrorCode.BAD_REQUEST, f"config.{part} must be a map")
+            if part == "environment":
+                settings = self._check_environment_settings(settings)
+            for node in nodes:
+                node.check_config(settings)
+
+    def configure(self, config: Mapping[str, Any]) -> None:
+        """Apply a checked ``config`` part (logged for snapshots during an episode)."""
+        self.log.configured(config)
+        for part, nodes in self._configured_nodes().items():
+            if part not in config:
+                continue
+            settings = config[part]
+            if part == "environment":
+                settings = self._apply_environment_settings(settings)
+            for node in nodes:
+                node.configure(settings)
+
+    def config_state(self) -> dict[str, dict[str, Any]]:
+        """The current value of everything a client may configure (for snapshots)."""
+        return {part: {key: getattr(nodes[0], key) for key in nodes[0].configurable}
+                for part, nodes in self._configured_nodes().items()}
+
+    def _configured_nodes(self) -> dict[str, list[Any]]:
+        world = self.environment.world
+        parts: dict[str, list[Any]] = {"environment": [self.environment], "agent": self.agents}
+        if world is not None:
+            parts["world"] = [world]
+        return parts
+
+    def _check_environment_settings(self, settings: Mapping[str, Any]) -> dict[str, Any]:
+        """Check what the server handles itself (real_time, record); the rest is the node's."""
+        rest = dict(settings)
+        if "real_time" in rest and type(rest.pop("real_time")) is not bool:
+            raise RequestError(ErrorCode.INVALID_CONFIG, "real_time must be a bool")
+        if "record" in rest:
+            _check_recording(rest.pop("record"), self.record_dir)
+        if "repeat_action" in rest:
+            repeat = rest["repeat_action"]
+            if type(repeat) is not int or repeat < 1:
+                raise RequestError(ErrorCode.INVALID_CONFIG, f"repeat_action must be an "
+                                   f"integer >= 1, got {repeat!r:.40}")
+        return rest
+
+    def _apply_environment_settings(self, settings: Mapping[str, Any]) -> dict[str, Any]:
+        rest = dict(settings)
+        if "real_time" in rest:
+            self.set_real_time(rest.pop("real_time"))
+        if "record" in rest:
+            self._set_recording(rest.pop("record"))
+        return rest
+
+    def set_real_time(self, value: bool) -> None:
+        """Switch between real time (ticks follow the clock) and lockstep."""
+        self.tree.real_time = value
+        self.tree.paused = not (value and self.state is Episode.RUNNING and
+                                not self._ended_unseen)
+
+    def _set_recording(self, name: str) -> None:
+        if self._recorder is not None:
+            self._recorder.close()
+            self._recorder = None
+        if name:
+            assert self.record_dir is not None
+            self._recorder = VideoRecorder(self.record_dir / name,
+                                           self.tree.physics_ticks_per_second)
+
+    # --- episodes ---------------------------------------------------------------------------
+
+    def begin_episode(self, seed: int | None, options: Mapping[str, Any]) -> None:
+        """Reset: seed the generator (if ``seed`` is given), then start a new episode."""
+        environment = self.environment
+        if seed is not None:
+            environment.np_random, _ = seeding.np_random(seed)
+        self.log.begin(self.config_state(), environment.np_random, options)
+        for agent in self.agents:
+            agent.reward = 0.0
+            agent.terminated = agent.truncated = False
+        tree = self.tree
+        self._ended_unseen = False
+        self._late_actions = 0
+        self._last_action_at = tree.physics_frames
+        self._ticks = 0
+        tree.paused = not tree.real_time
+        self.state = Episode.RUNNING
+        environment._reset(options)
+
+    def check_can_act(self) -> None:
+        """Refuse a step before the first reset or after the episode ended.
+
+        Raises:
+            RequestError: ``reset_required``.
+        """
+        if self.state is Episode.NOT_STARTED:
+            raise RequestError(ErrorCode.RESET_REQUIRED, "no episode has started; reset first")
+        if self.state is Episode.ENDED:
+            raise RequestError(ErrorCode.RESET_REQUIRED, "the episode has ended; reset first")
+
+    def checked_action(self, action: Any, fresh: bool, where: str = "") -> Any:
+        """``action`` in its space's native form.
+
+        With several agents, the action is a map from agent name to action for every agent
+        still in the episode (every agent when ``fresh``: a reset comes first); actions for
+        agents whose episode ended are ignored, so that a client holding the joint ``Dict``
+        action space may keep sending them (PettingZoo's convention).
+
+        Raises:
+            RequestError: ``invalid_action``, the message prefixed with ``where``.
+        """
+        try:
+            if not self.multi_agent:
+                return self._check_action(action)
+            if not isinstance(action, Mapping):
+                raise SpaceMismatch(f"action must be a map from agent name to action, one per "
+                                    f"agent in the episode: {[a.name for a in self.agents]}")
+            unknown = sorted(map(str, action.keys() - self._check_actions.keys()))
+            if unknown:
+                raise SpaceMismatch(f"action for unknown agent {unknown[0]!r}")
+            live = [a.name for a in self.agents if fresh or not (a.terminated or a.truncated)]
+            missing = sorted(set(live) - action.keys())
+            if missing:
+                raise SpaceMismatch(f"no action for agent {missing[0]!r}")
+            return {name: self._check_actions[name](action[name]) for name in live}
+        except SpaceMismatch as error:
+            raise RequestError(ErrorCode.INVALID_ACTION, f"{where}{error}") from None
+
+    def act(self, action: Any, frames: int) -> None:
+        """Run a checked action for ``frames`` ticks (lockstep), or apply it now (real time)."""
+        tree = self.tree
+        if tree.real_time:
+            self._act_now(action)
+            return
+        self._ticks = 0
+        self.state = Episode.ACTING
+        self.log.acted(action, frames)
+        self.environment._step(action, frames)
+        tree.paused = True
+        self.state = Episode.ENDED if self._all_ended() else Episode.RUNNING
+        if self.replaying:
+            for agent in self.agents:
+                agent.reward = 0.0
+
+    def _act_now(self, action: Any) -> None:
+        """Real time: give the action at once; the answer carries the latest state.
+
+        An action arriving more than ``repeat_action`` ticks after the previous one is late; an
+        action after the episode ended (unseen by the client) is not applied.
+        """
+        tree = self.tree
+        self._late = tree.physics_frames - self._last_action_at > self.environment.repeat_action
+        self._late_actions += self._late
+        self._last_action_at = tree.physics_frames
+        if self._ended_unseen:
+            return
+        if self.multi_agent:
+            for agent in self.agents:
+                if agent.name in action:
+                    agent.set_action(action[agent.name])
+        else:
+            self.agents[0].set_action(action)
+
+    def _end_tick(self, delta: float) -> None:
+        """The end of a tick (after pymunk stepped): rewards, flags, the end of the episode."""
+        state = self.state
+        if state is not Episode.ACTING and not (
+                state is Episode.RUNNING and self.tree.real_time and not self._ended_unseen):
+            return
+        self._ticks += 1
+        agents = self.agents
+        for agent in agents:
+            agent._after_physics_tick(delta)
+        if self._recorder is not None:
+            environment = self.environment
+            self._recorder.add(environment._render(*environment.render_size))
+        for agent in agents:
+            if not (agent.terminated or agent.truncated):
+                return
+        if state is Episode.RUNNING:  # real time: stop, tell the next request
+            self.tree.paused = True
+            self._ended_unseen = True
+        else:
+            self.environment.physics_frames_timer.stop()
+
+    def _all_ended(self) -> bool:
+        """Whether every agent's episode has ended (the one agent's, with a single agent)."""
+        return all(agent.terminated or agent.truncated for agent in self.agents)
+
+    # --- answers ----------------------------------------------------------------------------
+
+    def observe(self, request: Mapping[str, Any]) -> dict[str, Any]:
+        """The parts of the state an ``observation`` part asks for.
+
+        The agent observation is in its space's packed form.
+
+        Raises:
+            ValueError: an agent's observation does not fit its space or is not finite (the
+                environment's fault: answered as ``environment_error``).
+        """
+        observation = {}
+        if "agent" in request:
+            observation["agent"] = self.agent_observation(request["agent"])
+        if "world" in request:
+            world = self.environment.world
+            assert world is not None
+            observation["world"] = world.get_data(request["world"])
+        if "render" in request:
+            size = request["render"]
+            width, height = self.environment.render_size
+            observation["render"] = self.environment._render(size.get("width", width),
+                                                             size.get("height", height))
+        return observation
+
+    def agent_observation(self, request: Any) -> Any:
+        """Every agent's observation in packed form (keyed by name with several agents)."""
+        if not self.multi_agent:
+            agent, codec = self._observers[0]
+            return _packed_observation(agent, codec, request)
+        return {agent.name: _packed_observation(agent, codec, request)
+                for agent, codec in self._observers}
+
+    def _response(self, reply_id: int, answer: Answer) -> Response:
+        """The answer: what was observed, and the rewards, flags and ticks since the last one.
+
+        Rewards and the tick count start again from zero.
+        """
+        agents = self.agents
+        outcomes = None
+        if self.multi_agent:
+            outcomes = {each.name: {"reward": float(each.reward),
+                                    "terminated": bool(each.terminated),
+                                    "truncated": bool(each.truncated)} for each in agents}
+            ended = all(o["terminated"] or o["truncated"] for o in outcomes.values())
+            terminated = ended and any(o["terminated"] for o in outcomes.values())
+            truncated = ended and not terminated
+            reward = sum(o["reward"] for o in outcomes.values())
+            for each in agents:
+                each.reward = 0.0
+        else:
+            agent = agents[0]
+            reward = float(agent.reward)
+            terminated, truncated = bool(agent.terminated), bool(agent.truncated)
+            agent.reward = 0.0
+        frames, self._ticks = self._ticks, 0
+        if terminated or truncated:  # real time: the client now knows the episode ended
+            self.state = Episode.ENDED
+        info = self.environment._get_info()
+        if answer.acted and self.tree.real_time:
+            info = {**info, "late": self._late, "late_actions": self._late_actions}
+        if answer.info:
+            info = {**info, **answer.info}
+        return Response(reply_id, answer.observation, reward, terminated, truncated, info,
+                        frames if answer.acted else 0, outcomes)
+
+    def environment_error(self, reply_id: int, error: BaseException) -> ErrorReply:
+        """The ``environment_error`` answer for an exception in user code (its traceback in it).
+
+        The tree is paused and the next action needs a reset first.
+        """
+        logger.error("environment error", exc_info=error)
+        self.environment.physics_frames_timer.stop()
+        self.tree.paused = True
+        self.state = Episode.NOT_STARTED
+        detail = "".join(traceback.format_exception(error)).rstrip()
+        return ErrorReply(reply_id, ErrorCode.ENVIRONMENT_ERROR,
+                          f"{error}; reset required\n{detail}")
+
+
+def _agents_of(environment: RLEnvironment) -> list[RLAgent]:
+    """The environment's agents, each with its spaces; and it must have a world."""
+    if not environment.agents:
+        raise RuntimeError(f"{environment!r} has no agent: add an RLAgent child or set "
+                           "self.agent")
+    if environment.world is None:
+        raise RuntimeError(f"{environment!r} has no world: add an RLEnvWorld child or set "
+                           "self.world")
+    for agent in environment.agents:
+        for attribute in ("action_space", "observation_space"):
+            if not isinstance(getattr(agent, attribute, None), spaces.Space):
+                raise RuntimeError(f"{agent!r} must set {attribute} to a gymnasium space")
+    return list(environment.agents)
+
+
+def _packed_observation(agent: RLAgent, codec: Codec, request: Any) -> Any:
+    data = agent.get_data(request)
+    try:
+        return codec.pack(data)
+    except SpaceMismatch as error:
+        where = find_non_finite(data)
+        if where is not None:
+            raise FloatingPointError(f"the observation of {agent.get_path()} is not finite at "
+                                     f"{where or '()'}: {data!r:.200}") from None
+        raise ValueError(f"the observation of {agent.get_path()} does not fit its space "
+                         f"{agent.observation_space}: it {error}") from None
+
+
+_CONFIG_PARTS = frozenset({"environment", "agent", "world"})
+
+
+def _check_keys(part: Mapping[str, Any], allowed: frozenset[str], where: str) -> None:
+    unknown = part.keys() - allowed
+    if unknown:
+        raise RequestError(
+            ErrorCode.BAD_REQUEST,
+            f"unknown key {sorted(map(str, unknown))[0]!r} in {where}; expected any of "
+            + ", ".join(sorted(allowed)),
+        )
+
+
+def _check_recording(name: Any, record_dir: Path | None) -> None:
+    if not isinstance(name, str):
+        raise RequestError(ErrorCode.INVALID_CONFIG, "record must be a file name (or '' to stop)")
+    if not name:
+        return
+    if record_dir is None:
+        raise RequestError(ErrorCode.INVALID_CONFIG, "recording is disabled on this server; "
+                           "start it with rlenv serve --record-dir DIR")
+    if Path(name).name != name or name.startswith("."):
+        raise RequestError(ErrorCode.INVALID_CONFIG, f"record must be a plain file name in the "
+                           f"server's record directory, got {name!r:.60}")
+    if Path(name).suffix not in _VIDEO_SUFFIXES:
+        raise RequestError(ErrorCode.INVALID_CONFIG, f"record must end with one of "
+                           f"{', '.join(sorted(_VIDEO_SUFFIXES))}, got {name!r:.60}")

@@ -1,0 +1,515 @@
+"""The request parts: one record per kind, registered in one table, :data:`PARTS`.
+
+A request is a map of parts (``config``, ``reset``, ``action`` ...). Each kind of part is one
+record that says
+
+- whether it **takes control** of the environment (only the controlling client may send it);
+- how it is **checked** against an instance, before anything is applied: every part of a
+  request is checked first, so a refused request changes nothing;
+- how it is **applied**, in the table's order (``config`` before ``reset`` before ``action``...).
+
+Most parts concern one instance (:class:`Part`); ``batch`` and ``steps`` address every instance
+of the host at once (:class:`HostPart`) and go alone. To add a kind of request: write its record
+here, add it to :data:`PARTS`, and give the client a method that sends it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any, ClassVar
+
+import numpy as np
+from gymnasium.vector.utils import iterate
+
+from rlenv.errors import ErrorCode, RequestError
+from rlenv.protocol import BatchResponse, ErrorReply, Reply, Request
+from rlenv.serving import inspector
+from rlenv.serving.instance import Answer, Episode, Instance, Plan
+from rlenv.serving.snapshots import generator_from_state, parse_snapshot
+from rlenv.spaces import SpaceMismatch
+
+if TYPE_CHECKING:
+    from rlenv.serving.host import Host
+
+__all__ = ["PARTS", "HostPart", "Part", "plan_for", "takes_control"]
+
+_MAX_RENDER_SIZE = 4096
+AGENT_ONLY: Mapping[str, Any] = {"agent": {}}
+
+
+def _bad(message: str) -> RequestError:
+    return RequestError(ErrorCode.BAD_REQUEST, message)
+
+
+def _check_keys(value: Mapping[str, Any], allowed: frozenset[str], where: str) -> None:
+    unknown = value.keys() - allowed
+    if unknown:
+        raise _bad(f"unknown key {sorted(map(str, unknown))[0]!r} in {where}; expected any of "
+                   + ", ".join(sorted(allowed)))
+
+
+def _map(value: Any, name: str, where: str) -> Mapping[str, Any]:
+    if not isinstance(value, Mapping):
+        raise _bad(f"request {where}{name!r} must be a map")
+    return value
+
+
+def _fresh(parts: Mapping[str, Any]) -> bool:
+    """Whether the request starts an episode before it acts or observes."""
+    return "reset" in parts or "restore" in parts
+
+
+class Part:
+    """One kind of part of a request to one instance.
+
+    Attributes:
+        name: the part's key in a request.
+        takes_control: whether it changes the environment (only its controller may send it).
+        alone: whether it goes alone (with an ``observation`` at most).
+        applies: whether it does anything of its own once checked (``repeat_action`` only
+            modifies ``action``).
+    """
+
+    name: ClassVar[str]
+    takes_control: ClassVar[bool] = False
+    alone: ClassVar[bool] = False
+    applies: ClassVar[bool] = True
+
+    def controls(self, value: Any) -> bool:
+        """Whether this part, with this value, takes control."""
+        return self.takes_control
+
+    def check(self, instance: Instance, parts: Mapping[str, Any], where: str) -> Any:
+        """Check the part (``parts[self.name]``) against ``instance``; the value to apply.
+
+        Raises:
+            RequestError: the refusal, naming the field (prefixed with ``where``).
+        """
+        raise NotImplementedError
+
+    def apply(self, instance: Instance, value: Any, answer: Answer) -> None:
+        """Apply the checked value to ``instance``; add what the answer reports to ``answer``."""
+
+
+class Config(Part):
+    """``{"environment": {...}, "agent": {...}, "world": {...}}``: settings of each node."""
+
+    name = "config"
+    takes_control = True
+
+    def check(self, instance: Instance, parts: Mapping[str, Any], where: str) -> Any:
+        config = _map(parts["config"], "config", where)
+        instance.check_config(config)
+        return config
+
+    def apply(self, instance: Instance, value: Any, answer: Answer) -> None:
+        instance.configure(value)
+
+
+class Reset(Part):
+    """``{"seed": int >= 0, "options": {...}}``, both optional: start an episode."""
+
+    name = "reset"
+    takes_control = True
+    _KEYS = frozenset({"seed", "options"})
+
+    def check(self, instance: Instance, parts: Mapping[str, Any], where: str) -> Any:
+        reset = _map(parts["reset"], "reset", where)
+        _check_keys(reset, self._KEYS, "reset")
+        seed, options = reset.get("seed"), reset.get("options")
+        if seed is not None and (type(seed) is not int or seed < 0):
+            raise _bad(f"reset.seed must be an integer >= 0, got {seed!r:.40}")
+        if options is not None and not isinstance(options, Mapping):
+            raise _bad("reset.options must be a map")
+        return seed, options or {}
+
+    def apply(self, instance: Instance, value: Any, answer: Answer) -> None:
+        instance.begin_episode(*value)
+
+
+class Action(Part):
+    """A member of the action space: run it for ``repeat_action`` ticks."""
+
+    name = "action"
+    takes_control = True
+
+    def controls(self, value: Any) -> bool:
+        return value is not None  # nil: no action
+
+    def check(self, instance: Instance, parts: Mapping[str, Any], where: str) -> Any:
+        action = parts["action"]
+        if action is None:  # nil: no action
+            return None
+        fresh = _fresh(parts)
+        if not fresh:
+            instance.check_can_act()
+        return instance.checked_action(action, fresh), parts.get("repeat_action")
+
+    def apply(self, instance: Instance, value: Any, answer: Answer) -> None:
+        if value is not None:
+            action, repeat = value
+            instance.act(action, repeat or instance.environment.repeat_action)
+            answer.acted = True
+
+
+class RepeatAction(Part):
+    """How many ticks this request's action runs (instead of the configured number)."""
+
+    name = "repeat_action"
+    applies = False
+
+    def check(self, instance: Instance, parts: Mapping[str, Any], where: str) -> Any:
+        repeat = parts["repeat_action"]
+        if type(repeat) is not int or repeat < 1:
+            raise _bad(f"{where}'repeat_action' must be an integer >= 1, got {repeat!r:.40}")
+        if parts.get("action") is None:
+            raise _bad(f"{where}'repeat_action' given without an 'action'")
+        return repeat
+
+
+class Observation(Part):
+    """``{"agent": {}, "world": {}, "render": {"width", "height"}}``, any of them."""
+
+    name = "observation"
+    _KEYS = frozenset({"agent", "world", "render"})
+    _RENDER_KEYS = frozenset({"width", "height"})
+
+    def check(self, instance: Instance, parts: Mapping[str, Any], where: str) -> Any:
+        observation = parts["observation"]
+        if observation != AGENT_ONLY:
+            observation = _map(observation, "observation", where)
+            _check_keys(observation, self._KEYS, "observation")
+            if "render" in observation:
+                self._check_render(observation["render"])
+        if instance.state is Episode.NOT_STARTED and not _fresh(parts):
+            raise RequestError(ErrorCode.RESET_REQUIRED, "no episode has started; reset first")
+        return observation
+
+    def _check_render(self, size: Any) -> None:
+        if not isinstance(size, Mapping):
+            raise _bad("observation.render must be a map")
+        _check_keys(size, self._RENDER_KEYS, "observation.render")
+        for key, value in size.items():
+            if type(value) is not int or not 1 <= value <= _MAX_RENDER_SIZE:
+                raise _bad(f"observation.render.{key} must be an integer in "
+                           f"[1, {_MAX_RENDER_SIZE}], got {value!r:.40}")
+
+    def apply(self, instance: Instance, value: Any, answer: Answer) -> None:
+        answer.observation = instance.observe(value)
+
+
+class Snapshot(Part):
+    """``{}``: the episode so far as data (see :mod:`rlenv.serving.snapshots`)."""
+
+    name = "snapshot"
+    alone = True
+
+    def check(self, instance: Instance, parts: Mapping[str, Any], where: str) -> Any:
+        if _map(parts["snapshot"], "snapshot", where):
+            raise _bad("snapshot takes an empty map")
+        _need_lockstep(instance)
+        instance.log.check_snapshot()
+
+    def apply(self, instance: Instance, value: Any, answer: Answer) -> None:
+        answer.info = {"snapshot": instance.log.snapshot()}
+
+
+class Restore(Part):
+    """A snapshot: check everything in it, then reset and replay it."""
+
+    name = "restore"
+    takes_control = True
+    alone = True
+
+    def check(self, instance: Instance, parts: Mapping[str, Any], where: str) -> Any:
+        snapshot = parse_snapshot(_map(parts["restore"], "restore", where))
+        _need_lockstep(instance)
+        instance.check_config(snapshot["config"])
+        actions = []
+        for index, event in enumerate(snapshot["events"]):
+            if event[0] == "config":
+                instance.check_config(event[1])
+            elif event[0] == "action":
+                actions.append(instance.checked_action(event[1], fresh=True,
+                                                       where=f"restore: events[{index}]: "))
+        return snapshot, actions, generator_from_state(snapshot["rng"])
+
+    def apply(self, instance: Instance, value: Any, answer: Answer) -> None:
+        snapshot, actions, rng = value
+        instance.replaying = True
+        try:
+            instance.configure(snapshot["config"])
+            instance.environment.np_random = rng
+            instance.begin_episode(None, snapshot["options"])
+            checked = iter(actions)
+            for event in snapshot["events"]:
+                if event[0] == "config":
+                    instance.configure(event[1])
+                elif event[0] == "set":
+                    _set_property(instance, *event[1:])
+                else:
+                    if instance.state is Episode.ENDED:
+                        raise RuntimeError("the snapshot acts after its episode ended")
+                    instance.act(next(checked), event[2])
+        finally:
+            instance.replaying = False
+
+
+class Inspect(Part):
+    """``{"tree": {}}``, ``{"get": {path, property}}`` or ``{"set": {path, property, value}}``."""
+
+    name = "inspect"
+    alone = True
+
+    def controls(self, value: Any) -> bool:
+        return isinstance(value, Mapping) and "set" in value
+
+    def check(self, instance: Instance, parts: Mapping[str, Any], where: str) -> Any:
+        operation, arguments = inspector.check_inspect(parts["inspect"])
+        if operation == "get":
+            inspector.get_property(instance.environment, arguments["path"],
+                                   arguments["property"])
+        elif operation == "set":
+            inspector.set_property(instance.environment, arguments["path"],
+                                   arguments["property"], arguments["value"], dry_run=True)
+        return operation, arguments
+
+    def apply(self, instance: Instance, value: Any, answer: Answer) -> None:
+        operation, arguments = value
+        environment = instance.environment
+        if operation == "tree":
+            answer.info = {"tree": inspector.tree(environment)}
+        elif operation == "get":
+            answer.info = {"value": inspector.get_property(environment, arguments["path"],
+                                                           arguments["property"])}
+        else:
+            _set_property(instance, arguments["path"], arguments["property"], arguments["value"])
+
+
+def _set_property(instance: Instance, path: str, name: str, value: Any) -> None:
+    """Set an exported property; during an episode it is logged, so that snapshots keep it."""
+    inspector.set_property(instance.environment, path, name, value)
+    if instance.log.started:
+        instance.log.record(["set", path, name, value])
+
+
+def _need_lockstep(instance: Instance) -> None:
+    if instance.tree.real_time:
+        raise _bad("snapshots need lockstep mode: configure real_time=False first")
+
+
+# --- parts that address every instance --------------------------------------------------------
+
+
+class HostPart:
+    """One kind of part that addresses every instance of the host; it goes alone.
+
+    Attributes:
+        name: the part's key in a request.
+    """
+
+    name: ClassVar[str]
+
+    def controls(self, value: Any) -> bool:
+        """Whether this part, with this value, takes control."""
+        return True
+
+    def check(self, host: Host, request: Request) -> Any:
+        """Check the whole request before any instance moves; what :meth:`run` needs.
+
+        Raises:
+            RequestError: the refusal of the whole request.
+        """
+        raise NotImplementedError
+
+    def run(self, host: Host, request: Request, checked: Any) -> Reply:
+        """Serve every instance its share of a checked request; the one answer."""
+        raise NotImplementedError
+
+
+class Batch(HostPart):
+    """One request per instance (``nil`` leaves one alone), each answered on its own."""
+
+    name = "batch"
+
+    def controls(self, value: Any) -> bool:
+        return isinstance(value, list) and any(
+            isinstance(part, Mapping) and takes_control(part) for part in value)
+
+    def check(self, host: Host, request: Request) -> Any:
+        batch = request.parts["batch"]
+        count = len(host.instances)
+        if not isinstance(batch, list) or not batch:
+            raise _bad("'batch' must be a non-empty list of requests or nil")
+        if len(batch) > count:
+            raise _bad(f"a batch of {len(batch)} requests for {count} instances")
+        for index, parts in enumerate(batch):
+            if parts is not None:
+                if not isinstance(parts, Mapping):
+                    raise _bad(f"batch[{index}] must be a map or nil")
+                _parts_of(tuple(parts), f"batch[{index}].")
+        return [None if parts is None else _plan_or_refusal(instance, parts, request.id)
+                for instance, parts in zip(host.instances, batch, strict=False)]
+
+    def run(self, host: Host, request: Request, checked: Any) -> Reply:
+        return BatchResponse(request.id, tuple(
+            plan if plan is None or plan.__class__ is ErrorReply else instance.serve(plan,
+                                                                                    request.id)
+            for instance, plan in zip(host.instances, checked, strict=False)))
+
+
+def _plan_or_refusal(instance: Instance, parts: Mapping[str, Any],
+                     reply_id: int) -> Plan | ErrorReply:
+    try:
+        return plan_for(instance, parts)
+    except RequestError as error:
+        return ErrorReply(reply_id, error.code, str(error))
+
+
+class Steps(HostPart):
+    """Every instance steps (or resets, where the mask says so), in columns.
+
+    ``{"action": <K actions>, "reset": <K bools>, "repeat_action": r}``; the actions stack as
+    gymnasium's ``batch_space`` lays them out, in packed form or as arrays. Everything is
+    checked before any instance moves; an instance whose user code raises fails alone.
+    """
+
+    name = "steps"
+    _KEYS = frozenset({"action", "reset", "repeat_action"})
+
+    def check(self, host: Host, request: Request) -> Any:
+        steps = request.parts["steps"]
+        if not isinstance(steps, Mapping):
+            raise _bad("'steps' must be a map")
+        _check_keys(steps, self._KEYS, "steps")
+        if steps.get("action") is None:
+            raise _bad("'steps' needs an 'action' (one per instance)")
+        count = len(host.instances)
+        reset = _reset_mask(steps.get("reset"), count)
+        repeat = steps.get("repeat_action")
+        if repeat is not None and (type(repeat) is not int or repeat < 1):
+            raise _bad(f"steps.repeat_action must be an integer >= 1, got {repeat!r:.40}")
+        for index, instance in enumerate(host.instances):
+            if not reset[index]:
+                try:
+                    instance.check_can_act()
+                except RequestError as error:
+                    raise RequestError(error.code, f"steps: instance {index}: {error}") from None
+        try:
+            checked = host.steps_action(steps["action"])
+        except SpaceMismatch as error:
+            raise RequestError(ErrorCode.INVALID_ACTION, str(error)) from None
+        rows = list(checked) if checked.__class__ is np.ndarray else \
+            list(iterate(host.steps_action_space, checked))
+        return [_RESET_PLAN if resets else ((_ACTION, (row, repeat)), (_OBSERVATION, AGENT_ONLY))
+                for row, resets in zip(rows, reset, strict=True)]
+
+    def run(self, host: Host, request: Request, checked: Any) -> Reply:
+        return host.columns.stack(request.id, [
+            instance.serve(plan, request.id)
+            for instance, plan in zip(host.instances, checked, strict=True)])
+
+
+def _reset_mask(mask: Any, count: int) -> list[bool]:
+    """The ``reset`` flags of a steps request: a list of booleans, bytes of 0/1, or an array."""
+    if mask is None:
+        return [False] * count
+    if isinstance(mask, bytes | np.ndarray):
+        array = np.frombuffer(mask, np.uint8) if isinstance(mask, bytes) else mask
+        if array.ndim == 1 and (array.dtype == np.bool_ or (
+                array.dtype == np.uint8 and bool(np.all(array <= 1)))):
+            mask = array.astype(bool).tolist()
+    if not (isinstance(mask, list) and all(type(flag) is bool for flag in mask)):
+        raise _bad("steps.reset must be a list of booleans, one per instance")
+    if len(mask) != count:
+        raise _bad(f"steps.reset has {len(mask)} flags for {count} instances")
+    return mask
+
+
+# --- the table --------------------------------------------------------------------------------
+
+PARTS: dict[str, Part | HostPart] = {
+    part.name: part for part in (
+        Restore(), Inspect(), Snapshot(), Config(), Reset(), RepeatAction(), Action(),
+        Observation(), Batch(), Steps())
+}
+"""Every kind of request part, in the order they apply."""
+
+_ORDER = {name: index for index, name in enumerate(PARTS)}
+_ACTION, _OBSERVATION, _RESET = PARTS["action"], PARTS["observation"], PARTS["reset"]
+_RESET_PLAN: Plan = ((_RESET, (None, {})), (_OBSERVATION, AGENT_ONLY))
+_INSTANCE_KEYS = ", ".join(name for name, part in PARTS.items() if isinstance(part, Part))
+_REQUEST_KEYS = ", ".join([_INSTANCE_KEYS, "token"] + [
+    name for name, part in PARTS.items() if isinstance(part, HostPart)])
+_MAX_CACHED = 512
+_cache: dict[tuple[str, ...], tuple[Part, ...]] = {}
+
+
+def _parts_of(keys: tuple[str, ...], where: str = "") -> tuple[Part, ...]:
+    """The records of a request's keys, in the order they apply, once the combination is valid.
+
+    Raises:
+        RequestError: ``bad_request``: an unknown key, a host part inside a batch, or a part
+            that goes alone in company.
+    """
+    known = _cache.get(keys) if not where else None
+    if known is not None:
+        return known
+    records = []
+    for key in keys:
+        record = PARTS.get(key)
+        if record is None or (where and isinstance(record, HostPart)):
+            expected = _INSTANCE_KEYS if where else _REQUEST_KEYS
+            raise _bad(f"unknown request key {where}{str(key)!r}; expected any of {expected}")
+        records.append(record)
+    host_parts = [r.name for r in records if isinstance(r, HostPart)]
+    if host_parts and len(records) > 1:
+        raise _bad(f"a {host_parts[0]!r} request carries nothing else but its id")
+    alone = [r.name for r in records if isinstance(r, Part) and r.alone]
+    if len(alone) > 1:
+        raise _bad(f"{alone[0]} or {alone[1]}, not both")
+    if alone and any(r.name not in (alone[0], "observation") for r in records):
+        raise _bad(f"{alone[0]} goes alone (with an observation at most)")
+    ordered = tuple(sorted(records, key=lambda r: _ORDER[r.name]))
+    if not where and len(_cache) < _MAX_CACHED:
+        _cache[keys] = ordered  # type: ignore[assignment]
+    return ordered  # type: ignore[return-value]
+
+
+def plan_for(instance: Instance, parts: Mapping[str, Any], where: str = "") -> Plan:
+    """Check every part of a request to ``instance``; the plan that applies them.
+
+    Raises:
+        RequestError: the request is refused (nothing was applied).
+    """
+    plan = []
+    for record in _parts_of(tuple(parts), where):
+        value = record.check(instance, parts, where)
+        if record.applies:
+            plan.append((record, value))
+    return tuple(plan)
+
+
+def host_part_of(parts: Mapping[str, Any]) -> HostPart | None:
+    """The part of a request that addresses every instance (``batch``, ``steps``), if any.
+
+    Raises:
+        RequestError: ``bad_request``: such a part in company (it goes alone).
+    """
+    for key in parts:
+        record = PARTS.get(key)
+        if isinstance(record, HostPart):
+            if len(parts) > 1:
+                raise _bad(f"a {key!r} request carries nothing else but its id")
+            return record
+    return None
+
+
+def takes_control(parts: Mapping[str, Any]) -> bool:
+    """Whether a request with these parts changes the environment (see :class:`Part`)."""
+    for key, value in parts.items():
+        record = PARTS.get(key)
+        if record is not None and record.controls(value):
+            return True
+    return False
+

@@ -1,21 +1,18 @@
 """Where a CartPole step's time goes: ``python benchmarks/overhead.py``.
 
-Prints, in one run and in-process (no sockets):
+Prints, in one run, each figure beside its floor (rounds taken in turns, medians and minimums):
 
-- the **floor**: the agent's own code and the pymunk step called directly, in the order the
-  tree calls them (check the action, set it, then per tick ``_physics_process``,
-  ``space.step``, ``_after_physics_tick``; then ``get_data``), with no tree around them;
-- a full **step** through :class:`rlenv.instance.Instance` (request check, tree, timer,
-  response), and its ratio to the floor;
-- both split into a cost per tick and a cost per request, from steps of 1 and of ``REPEAT``
-  ticks (per tick = the difference over the extra ticks; per request = the rest);
-- the **codec**: encoding and decoding the request and the response with the sans-IO protocol;
-- a **column step** (``steps`` request) of ``INSTANCES`` instances at repeat_action 1, as a
-  multi-instance server answers it, per instance, against its floor (the same agent code and
-  pymunk steps for every instance, called directly), and the codec of that request and answer
-  per instance.
-
-This is the profile behind issue 5's figures: what the framework adds to user code, per step.
+- **framework per tick and per request**, in this process: a step through the host's one door
+  (:meth:`rlenv.serving.host.Host.answer`: checks, plan, tree, timer, answer) against the
+  floor: what a hand-written server does for the same step (decode the action from its bytes,
+  the agent's ``set_action``, per tick ``_physics_process``, ``space.step`` and
+  ``_after_physics_tick``, then ``get_data`` and the observation's bytes), at repeat_action 1
+  and ``REPEAT``; per tick is the slope over the extra ticks, per request the rest;
+- **the codec, both ends**: the client building the step request and its frame, the server
+  reading it, the server's answer as a frame, the client reading it into gymnasium's 5-tuple;
+  against plain msgpack doing the same with ``tobytes`` / ``frombuffer``;
+- a **column step** (``steps`` request) of ``INSTANCES`` instances at repeat_action 1, per
+  instance, against the same floor for every instance.
 """
 
 from __future__ import annotations
@@ -24,27 +21,27 @@ import statistics
 import time
 from collections.abc import Callable
 
+import msgpack
 import numpy as np
 
 from examples.cartpole import CartPoleEnvironment
-from rlenv.columns import ColumnStepper
-from rlenv.instance import Instance
 from rlenv.physics import PhysicsWorld
-from rlenv.protocol import Connection, Request, Role, Steps
-from rlenv.spaces import check
+from rlenv.protocol import Connection, Request, Role
+from rlenv.serving.host import Host
+from rlenv_client.base import BaseClient
 
 STEPS = 20_000
-ROUNDS = 3
+ROUNDS = 5
 REPEAT = 4
 INSTANCES = 32
-OBSERVE = {"agent": {}}
 # No push and a pole allowed to swing all the way round: one episode for the whole run, so
 # every figure is a step and none a reset.
 ENDLESS = {"agent": {"angle_limit": 1e9}, "world": {"track_limit": 1e9}}
+ACTION = np.zeros(1, np.float32)
 
 
-def _per_step(*runs: Callable[[int], None]) -> list[float]:
-    """Median microseconds per step of each ``run(STEPS)``, their rounds taken in turns.
+def _per_step(*runs: Callable[[int], None]) -> list[tuple[float, float]]:
+    """(median, min) microseconds per step of each ``run(STEPS)``, rounds taken in turns.
 
     After a warm-up round each; taking turns puts a figure and its floor under the same
     conditions however the machine's speed drifts.
@@ -57,111 +54,146 @@ def _per_step(*runs: Callable[[int], None]) -> list[float]:
             start = time.perf_counter()
             run(STEPS)
             kept.append((time.perf_counter() - start) / STEPS * 1e6)
-    return [statistics.median(kept) for kept in times]
+    return [(statistics.median(kept), min(kept)) for kept in times]
 
 
-def main() -> None:
-    instance = Instance(CartPoleEnvironment)
-    instance.call(Request(id=1, config=ENDLESS, reset={"seed": 1}))
-    action = np.zeros(1, np.float32)
-    environment = instance.environment
-    agent = environment.agent
-    space = environment.find_children("*", PhysicsWorld)[0].space
-    delta = instance.tree.physics_delta
+def _host(count: int = 1) -> Host:
+    host = Host(CartPoleEnvironment, count)
+    host.answer(Request(1, {"batch": [{"config": ENDLESS, "reset": {"seed": seed}}
+                                      for seed in range(count)]}))
+    return host
 
-    def floor(repeat: int) -> Callable[[int], None]:
-        def run(steps: int) -> None:
-            for _ in range(steps):
-                agent.set_action(check(agent.action_space, action))
+
+def _floor(host: Host, repeat: int) -> Callable[[int], None]:
+    """A hand-written server's work for ``steps`` steps of every instance of ``host``."""
+    parts = []
+    for instance in host.instances:
+        world = instance.environment.find_children("*", PhysicsWorld)[0]
+        parts.append((instance.agents[0], world.space))
+    delta = host.instances[0].tree.physics_delta
+    packed = ACTION.tobytes()
+
+    def run(steps: int) -> None:
+        for _ in range(steps // len(parts)):
+            for agent, space in parts:
+                agent.set_action(np.frombuffer(packed, np.float32))
                 for _ in range(repeat):
                     agent._physics_process(delta)
                     space.step(delta)
                     agent._after_physics_tick(delta)
-                agent.terminated = False
-                agent.get_data(OBSERVE["agent"])
-        return run
+                agent.reward = 0.0
+                agent.get_data({}).tobytes()
+    return run
 
-    def step(repeat: int) -> Callable[[int], None]:
-        def run(steps: int) -> None:
-            for index in range(steps):
-                reply = instance.call(Request(id=index, action=action, observation=OBSERVE,
-                                              repeat_action=repeat))
-                assert not (reply.terminated or reply.truncated), "the episode must not end"
-        return run
 
-    server, client = Connection(Role.SERVER), Connection(Role.CLIENT)
-    client.receive_data(server.send(instance.hello))
-    client.next_message()
-    request = Request(id=2, action=action, observation=OBSERVE)
-    reply = instance.call(request)
+def _through(host: Host, repeat: int) -> Callable[[int], None]:
+    """Steps through the host's door, as a server answers them (no socket, no codec)."""
+    request = Request(2, {"action": ACTION.tobytes(), "observation": {"agent": {}},
+                          "repeat_action": repeat})
 
-    def codec(steps: int) -> None:
+    def run(steps: int) -> None:
         for _ in range(steps):
-            server.receive_data(client.send(request))
-            server.next_message()
+            reply = host.answer(request)
+        assert not (reply.terminated or reply.truncated), "the episode must not end"
+    return run
+
+
+def _codecs(host: Host) -> tuple[Callable[[int], None], Callable[[int], None]]:
+    """rlenv's codec at both ends of a step, and plain msgpack doing the same work."""
+    server, client = Connection(Role.SERVER), Connection(Role.CLIENT)
+    client.receive_data(server.send(host.hello))
+    client.next_message()
+    endpoint = _Client(host)
+    reply = host.answer(endpoint.step_request(ACTION, REPEAT, request_id=1))
+
+    def ours(steps: int) -> None:
+        for index in range(steps):
+            server.receive_data(client.send(endpoint.step_request(ACTION, REPEAT,
+                                                                  request_id=index)))
+            request = server.next_message()
+            reply.id = request.id  # type: ignore[union-attr]
             client.receive_data(server.send(reply))
-            client.next_message()
+            endpoint.step_result(client.next_message())  # type: ignore[arg-type]
 
-    floor_us, floor_1, step_us, step_1, codec_us = _per_step(
-        floor(REPEAT), floor(1), step(REPEAT), step(1), codec)
-    column_us, column_floor_us, column_codec_us = _column_step()
-    floor_tick, step_tick = (floor_us - floor_1) / (REPEAT - 1), (step_us - step_1) / (REPEAT - 1)
-    print(f"CartPole, repeat_action={REPEAT}, microseconds per step (medians of {ROUNDS} rounds "
+    observation = np.zeros(5, np.float32)
+    agent = {"agent": {}}
+
+    def plain(steps: int) -> None:
+        for index in range(steps):
+            request = msgpack.unpackb(msgpack.packb(
+                {"id": index, "action": ACTION.tobytes(), "observation": agent,
+                 "repeat_action": REPEAT}))
+            np.frombuffer(request["action"], np.float32)
+            answer = msgpack.unpackb(msgpack.packb(
+                {"id": request["id"], "observation": {"agent": observation.tobytes()},
+                 "reward": 4.0, "terminated": False, "truncated": False, "info": {},
+                 "frames": REPEAT}))
+            np.frombuffer(answer["observation"]["agent"], np.float32).copy()
+    return ours, plain
+
+
+class _Client(BaseClient):
+    """The client API with no transport: its request building and answer reading only."""
+
+    def __init__(self, host: Host) -> None:
+        super().__init__()
+        self._set_hello(host.hello)
+        self.address = "nowhere"
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+    def _send(self, request: Request) -> None:
+        raise NotImplementedError
+
+    def _receive(self) -> None:  # type: ignore[override]
+        raise NotImplementedError
+
+
+def main() -> None:
+    """Measure and print every figure."""
+    host = _host()
+    (floor_n, floor_n_min), (floor_1, floor_1_min), (step_n, step_n_min), (step_1, step_1_min) = \
+        _per_step(_floor(host, REPEAT), _floor(host, 1), _through(host, REPEAT),
+                  _through(host, 1))
+    tick = (step_n - step_1 - floor_n + floor_1) / (REPEAT - 1)
+    request = (step_1 - floor_1) - tick
+    ours, plain = _codecs(host)
+    (codec, codec_min), (bare, bare_min) = _per_step(ours, plain)
+    print(f"CartPole in this process, microseconds per step (median and min of {ROUNDS} rounds "
           "taken in turns)")
-    print(f"  floor (agent code + pymunk only)   {floor_us:7.1f}")
-    print(f"  full step through the tree         {step_us:7.1f}   {step_us / floor_us:.2f}x floor")
-    print(f"  framework overhead                 {step_us - floor_us:7.1f}")
-    print(f"  codec (request + reply, both ends) {codec_us:7.1f}")
-    print(f"    per tick:    floor {floor_tick:6.1f}   through the tree {step_tick:6.1f}")
-    print(f"    per request: floor {floor_1 - floor_tick:6.1f}   through the tree "
-          f"{step_1 - step_tick:6.1f}")
-    print(f"column step of {INSTANCES} instances, repeat_action=1, microseconds per instance")
-    print(f"  floor (agent code + pymunk only)   {column_floor_us:7.1f}")
-    print(f"  through the trees (ColumnStepper)  {column_us:7.1f}   "
-          f"{column_us / column_floor_us:.2f}x floor")
-    print(f"  codec (request + answer, both ends) {column_codec_us:6.1f}")
+    print(f"  floor, repeat {REPEAT} (a hand-written server's work)   {floor_n:7.2f}  "
+          f"(min {floor_n_min:.2f})")
+    print(f"  through the host, repeat {REPEAT}                       {step_n:7.2f}  "
+          f"(min {step_n_min:.2f})   {step_n / floor_n:.2f}x floor")
+    print(f"  floor, repeat 1                                    {floor_1:7.2f}  "
+          f"(min {floor_1_min:.2f})")
+    print(f"  through the host, repeat 1                          {step_1:7.2f}  "
+          f"(min {step_1_min:.2f})   {step_1 / floor_1:.2f}x floor")
+    print(f"  framework per tick (above the floor's tick)         {tick:7.2f}")
+    print(f"  framework per request (above the floor's request)   {request:7.2f}")
+    print(f"  codec, both ends of a step                          {codec:7.2f}  "
+          f"(min {codec_min:.2f})   {codec / bare:.2f}x plain msgpack ({bare:.2f})")
+    columns, columns_floor = _column_step()
+    print(f"column step of {INSTANCES} instances, repeat_action 1, microseconds per instance")
+    print(f"  floor                                               {columns_floor[0]:7.2f}  "
+          f"(min {columns_floor[1]:.2f})")
+    print(f"  through the host (steps request)                    {columns[0]:7.2f}  "
+          f"(min {columns[1]:.2f})   {columns[0] / columns_floor[0]:.2f}x floor")
 
 
-def _column_step() -> tuple[float, float, float]:
-    """Per instance: a steps request through a ColumnStepper, its floor, and its codec."""
-    instances = [Instance(CartPoleEnvironment) for _ in range(INSTANCES)]
-    for seed, instance in enumerate(instances):
-        instance.call(Request(id=1, config=ENDLESS, reset={"seed": seed}))
-    stepper = ColumnStepper(instances)
-    request = Request(id=2, steps=Steps(np.zeros((INSTANCES, 1), np.float32), None, 1))
-    action = np.zeros(1, np.float32)
-    parts = [(instance.environment.agent,
-              instance.environment.find_children("*", PhysicsWorld)[0].space)
-             for instance in instances]
-    delta = instances[0].tree.physics_delta
-
-    def floor(steps: int) -> None:
-        for _ in range(steps // INSTANCES):
-            for agent, space in parts:
-                agent.set_action(check(agent.action_space, action))
-                agent._physics_process(delta)
-                space.step(delta)
-                agent._after_physics_tick(delta)
-                agent.get_data(OBSERVE["agent"])
+def _column_step() -> tuple[tuple[float, float], tuple[float, float]]:
+    """Per instance: a steps request through the host, and its floor."""
+    host = _host(INSTANCES)
+    request = Request(2, {"steps": {"action": np.zeros((INSTANCES, 1), np.float32).tobytes(),
+                                    "repeat_action": 1}})
 
     def through(steps: int) -> None:
         for _ in range(steps // INSTANCES):
-            stepper.answer(request)
+            host.answer(request)
 
-    server, client = Connection(Role.SERVER), Connection(Role.CLIENT)
-    client.receive_data(server.send(instances[0].hello))
-    client.next_message()
-    answer = stepper.answer(request)
-
-    def codec(steps: int) -> None:
-        for _ in range(steps // INSTANCES):
-            server.receive_data(client.send(request))
-            server.next_message()
-            client.receive_data(server.send(answer))
-            client.next_message()
-
-    through_us, floor_us, codec_us = _per_step(through, floor, codec)
-    return through_us, floor_us, codec_us
+    through_us, floor_us = _per_step(through, _floor(host, 1))
+    return through_us, floor_us
 
 
 if __name__ == "__main__":

@@ -124,7 +124,8 @@ class PhysicsWorld(Node):
 
     def _physics_step(self, delta: float) -> None:
         self.space.step(delta)
-        self._emit("stepped", delta)
+        if self._signals:  # someone asked for a signal of this node
+            self._emit("stepped", delta)
 
     def _on_begin(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
         self._report(arbiter, "collision_started", "body_entered")

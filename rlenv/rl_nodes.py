@@ -285,13 +285,13 @@ class RLEnvironment(RLNode):
         ``action`` is checked already: one agent's action, or with several agents a map from
         agent name to action for the agents still in the episode.
         """
-        if self.multi_agent:
-            for agent in self.agents:
+        agents = self.agents
+        if len(agents) == 1:
+            agents[0].set_action(action)
+        else:
+            for agent in agents:
                 if agent.name in action:
                     agent.set_action(action[agent.name])
-        else:
-            assert self.agent is not None
-            self.agent.set_action(action)
         tree = self.get_tree()
         timer = self.physics_frames_timer
         timer.start(frames or self.repeat_action)

@@ -264,8 +264,9 @@ class _Box(_ArrayKind):
         # NaN is never inside the bounds, and a finite sum rules out infinities that infinite
         # bounds would let through (a huge finite sum may only overflow to inf, which sends us
         # down the careful path).
-        if ((cast >= space.low) & (cast <= space.high)).all() and np.isfinite(cast.sum()):
-            return cast
+        with np.errstate(over="ignore", invalid="ignore"):  # the careful path says why
+            if ((cast >= space.low) & (cast <= space.high)).all() and np.isfinite(cast.sum()):
+                return cast
         _check_finite(array, path)
         _check_finite(cast, path, f" (too large for {space.dtype})")
         _check_bounds(cast, space.low, space.high, path)
@@ -333,6 +334,10 @@ class _ArrayCodec(Codec):
         self.size = int(np.prod(shape, dtype=np.int64))
         self.nbytes = self.size * dtype.itemsize
         self.floats = dtype.kind in "fc"
+        # Small arrays of narrow floats: their sum in double precision cannot overflow, so it
+        # is finite exactly when every element is (one Python sum, no numpy reduction).
+        self.narrow = dtype.kind == "f" and dtype.itemsize <= 4 and self.size <= _SMALL
+        self.flat = len(shape) == 1  # frombuffer's own shape
 
     def pack(self, value: Any) -> bytes:
         if value.__class__ is np.ndarray and value.dtype == self.dtype and \
@@ -341,12 +346,14 @@ class _ArrayCodec(Codec):
         else:
             try:
                 array = np.asarray(value, dtype=self.dtype)
-            except (TypeError, ValueError) as exc:
+            except (TypeError, ValueError, OverflowError) as exc:
                 raise SpaceMismatch(f"is not an array of {self.dtype}: {exc}") from None
             if array.shape != self.shape:
                 raise SpaceMismatch(f"has shape {array.shape}, its space declares {self.shape}")
-        if self.floats and not _all_finite(array, self.size):
-            raise SpaceMismatch(f"{find_non_finite(array) or '()'} is not finite")
+        if self.floats and not (self.narrow and math.isfinite(sum(array.reshape(-1).tolist()))
+                                or find_non_finite(array) is None):
+            where = find_non_finite(array)
+            raise SpaceMismatch(f"{where} is not finite" if where else "is not finite")
         return array.tobytes()
 
     def pack_exact(self, value: Any) -> Any:
@@ -357,19 +364,13 @@ class _ArrayCodec(Codec):
 
     def unpack(self, wire: Any, writable: bool = True) -> np.ndarray:
         if wire.__class__ is bytes and len(wire) == self.nbytes:
-            array = np.frombuffer(wire, self.dtype).reshape(self.shape)
-            return array.copy() if writable else array
+            array = np.frombuffer(bytearray(wire) if writable else wire, self.dtype)
+            return array if self.flat else array.reshape(self.shape)
         array = np.asarray(wire, dtype=self.dtype)
         return array.copy() if writable and not array.flags.writeable else array
 
     def join(self, packed: list[Any]) -> bytes:
         return b"".join(packed)
-
-
-def _all_finite(array: np.ndarray, size: int) -> bool:
-    if size <= _SMALL and array.dtype.kind == "f":  # in double precision: cannot overflow
-        return math.isfinite(sum(array.reshape(-1).tolist()))
-    return find_non_finite(array) is None
 
 
 # --- Discrete -------------------------------------------------------------------------------

@@ -52,7 +52,9 @@ class PhysicsFramesTimer(Node):
             ValueError: ``frames`` is smaller than 1.
         """
         if frames is not None:
-            self.wait_frames = _check_frames(frames)
+            if type(frames) is not int or frames < 1:
+                _check_frames(frames)  # raises
+            self.wait_frames = frames
         self._elapsed = 0
         self._running = True
         self._generation += 1
@@ -85,12 +87,17 @@ class PhysicsFramesTimer(Node):
                 self._complete_wait()
 
     def _complete_wait(self) -> None:
-        """Stop or start over, and fire at the end of the tick unless stopped or restarted."""
+        """Stop or start over, and fire at the end of the tick unless stopped or restarted.
+
+        Nothing is deferred when nobody ever asked for the ``timeout`` signal (its first use,
+        to connect to it, creates it).
+        """
         if self.one_shot:
             self._running = False
         else:
             self._elapsed = 0
-        self.call_deferred(self._fire, self._generation)
+        if "timeout" in self._signals:
+            self.call_deferred(self._fire, self._generation)
 
     def _fire(self, generation: int) -> None:
         """Emit ``timeout`` unless :meth:`start` or :meth:`stop` was called since it was due."""

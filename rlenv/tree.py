@@ -232,7 +232,11 @@ class SceneTree(SignalOwner):
             self.process(0.0)
         else:
             self.physics_tick()
-            self.process(self._physics_delta)
+            plan = self._plan
+            if plan is None or plan.process or self._signals or self._deferred:
+                self.process(self._physics_delta)
+            else:  # nothing to call: the frame is only counted
+                self.process_frames += 1
 
     def run(self, iteration: Callable[[], None] | None = None) -> None:
         """Iterate until :meth:`quit` is called.

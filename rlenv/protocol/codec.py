@@ -145,25 +145,19 @@ def frame(obj: Any) -> bytes:
     return HEADER.pack(len(body)) + body
 
 
-def unpack(body: bytes | memoryview, max_size: int = DEFAULT_MAX_FRAME_SIZE) -> Any:
+def unpack(body: bytes | memoryview) -> Any:
     """Decode one msgpack object that fills ``body`` exactly.
 
+    Strings are UTF-8 and map keys strings or numbers (msgpack's defaults); no container may
+    declare more elements or bytes than ``body`` holds (msgpack bounds each by the body's
+    length, so a frame cannot make the decoder allocate more than the frame limit allows).
+
     Raises:
-        RemoteProtocolError: invalid msgpack, trailing bytes, a foreign ext type, a malformed
-            array, or a container larger than ``max_size`` allows.
+        RemoteProtocolError: invalid msgpack, trailing bytes, a foreign ext type or a
+            malformed array.
     """
     try:
-        return msgpack.unpackb(
-            body,
-            ext_hook=_ext_hook,
-            raw=False,
-            strict_map_key=True,
-            max_str_len=max_size,
-            max_bin_len=max_size,
-            max_array_len=max_size,
-            max_map_len=max_size,
-            max_ext_len=max_size,
-        )
+        return msgpack.unpackb(body, ext_hook=_ext_hook)
     except msgpack.ExtraData:
         raise RemoteProtocolError("trailing bytes after the message in the frame") from None
     except (ValueError, TypeError, msgpack.UnpackException, RecursionError) as exc:

@@ -14,7 +14,7 @@ replies pair with requests: exactly one per request, in order.
 from __future__ import annotations
 
 from collections import deque
-from enum import Enum
+from enum import StrEnum
 from typing import Any, Final
 
 from rlenv.errors import LocalProtocolError, RemoteProtocolError
@@ -48,22 +48,24 @@ CONNECTION_CLOSED: Final = _Sentinel("CONNECTION_CLOSED")
 """Returned by :meth:`Connection.next_message` once the peer closed the stream cleanly."""
 
 
-class Role(Enum):
+class Role(StrEnum):
     """Which end of the connection a :class:`Connection` plays."""
 
     CLIENT = "client"
     SERVER = "server"
 
 
-class State(Enum):
+class State(StrEnum):
     """Where a connection stands."""
 
     AWAIT_HELLO = "await_hello"
     READY = "ready"
+    BROKEN = "broken"
+    """The framing broke: nothing more is read; a server may send one last fatal error."""
     CLOSED = "closed"
 
 
-class Event(Enum):
+class Event(StrEnum):
     """What happens on a connection: a message sent or received, or the stream breaking."""
 
     SEND_HELLO = "send hello"
@@ -74,11 +76,12 @@ class Event(Enum):
     RECEIVE_REPLY = "receive reply"
     SEND_FATAL_ERROR = "send fatal error"
     RECEIVE_FATAL_ERROR = "receive fatal error"
-    END = "end of stream or broken framing"
+    BREAK = "receive a broken frame"
+    END = "reach the end of the stream"
 
 
 _CLIENT, _SERVER = Role.CLIENT, Role.SERVER
-_AWAIT, _READY, _CLOSED = State.AWAIT_HELLO, State.READY, State.CLOSED
+_AWAIT, _READY, _BROKEN, _CLOSED = State.AWAIT_HELLO, State.READY, State.BROKEN, State.CLOSED
 
 TRANSITIONS: Final[dict[tuple[Role, State, Event], State]] = {
     # The server speaks first: a hello, or a fatal error refusing the connection (busy).
@@ -95,25 +98,43 @@ TRANSITIONS: Final[dict[tuple[Role, State, Event], State]] = {
     # A fatal error ends the conversation (broken framing, timeouts, failed authentication).
     (_SERVER, _READY, Event.SEND_FATAL_ERROR): _CLOSED,
     (_CLIENT, _READY, Event.RECEIVE_FATAL_ERROR): _CLOSED,
-    # So does the end of the stream, in any state.
-    **{(role, state, Event.END): _CLOSED for role in Role for state in State},
+    # A frame that breaks the framing (its length over the limit) ends reading; the server
+    # still says why, in one last fatal error.
+    (_SERVER, _AWAIT, Event.BREAK): _BROKEN,
+    (_SERVER, _READY, Event.BREAK): _BROKEN,
+    (_SERVER, _BROKEN, Event.SEND_FATAL_ERROR): _CLOSED,  # the client reads it READY
+    (_CLIENT, _AWAIT, Event.BREAK): _CLOSED,
+    (_CLIENT, _READY, Event.BREAK): _CLOSED,
+    # The end of the stream ends everything, in any state (a client is never BROKEN).
+    **{(role, state, Event.END): _CLOSED for role in Role for state in State
+       if (role, state) != (_CLIENT, _BROKEN)},
 }
 """(role, state, event) -> the next state. Nothing else may happen."""
 
-_REPLIES = (Response, BatchResponse, StepsResponse, ErrorReply)
+_COPIED = 64 * 1024  # frames up to this size are sliced out of the buffer, larger ones viewed
 
+_SENT: Final[dict[type, Event]] = {
+    Hello: Event.SEND_HELLO, Request: Event.SEND_REQUEST, Response: Event.SEND_REPLY,
+    BatchResponse: Event.SEND_REPLY, StepsResponse: Event.SEND_REPLY,
+    ErrorReply: Event.SEND_REPLY,
+}
+_NEXT: Final[dict[tuple[Role, State], dict[Event, State]]] = {
+    (role, state): {event: after for (r, s, event), after in TRANSITIONS.items()
+                    if (r, s) == (role, state)}
+    for role in Role for state in State
+}
+"""The table, by (role, state): what may happen next, and where it leads."""
 
-def _sent(message: Message) -> Event:
-    kind = type(message)
-    if kind is Hello:
-        return Event.SEND_HELLO
-    if kind is Request:
-        return Event.SEND_REQUEST
-    if kind is ErrorReply and message.fatal:  # type: ignore[union-attr]
-        return Event.SEND_FATAL_ERROR
-    if kind in _REPLIES:
-        return Event.SEND_REPLY
-    raise LocalProtocolError(f"not a message: {message!r:.60}")
+# The members used on every message, as module constants (an enum member's lookup is slow).
+_SEND_HELLO = Event.SEND_HELLO
+_RECEIVE_HELLO = Event.RECEIVE_HELLO
+_SEND_REQUEST = Event.SEND_REQUEST
+_RECEIVE_REQUEST = Event.RECEIVE_REQUEST
+_SEND_REPLY = Event.SEND_REPLY
+_RECEIVE_REPLY = Event.RECEIVE_REPLY
+_SEND_FATAL_ERROR = Event.SEND_FATAL_ERROR
+_RECEIVE_FATAL_ERROR = Event.RECEIVE_FATAL_ERROR
+_BREAK = Event.BREAK
 
 
 class Connection:
@@ -131,10 +152,10 @@ class Connection:
     def __init__(self, role: Role, max_frame_size: int = DEFAULT_MAX_FRAME_SIZE) -> None:
         self.role = role
         self.max_frame_size = max_frame_size
-        self.state = State.AWAIT_HELLO
+        self.state = _AWAIT
+        self._next = _NEXT[(role, self.state)]
         self._buffer: bytes | bytearray = b""
         self._eof = False
-        self._broken = False  # the framing broke: nothing more is read (one reply may go out)
         self._outstanding: deque[int] = deque()
 
     @property
@@ -174,83 +195,21 @@ class Connection:
                 carries its id in ``error.request_id``.
             ProtocolVersionError: the hello names another major version.
         """
-        if self.state is State.CLOSED or self._broken:
+        state = self.state
+        if state is _CLOSED or state is _BROKEN:
+            if state is _BROKEN and self._eof:
+                self._enter(_CLOSED)
             return CONNECTION_CLOSED
         body = self._next_frame()
         if body.__class__ is _Sentinel:
             return body  # type: ignore[return-value]
-        wire = unpack(body, self.max_frame_size)
+        wire = unpack(body)
         if wire.__class__ is not dict:
             raise RemoteProtocolError(f"a frame must hold a map, got {type(wire).__name__}")
-        if self.role is Role.SERVER:
-            return self._request(wire)
-        return self._reply(wire)
-
-    def send(self, message: Message) -> bytes:
-        """Return the frame that carries ``message``.
-
-        Raises:
-            LocalProtocolError: this side may not send ``message`` now, or it is larger than
-                the protocol's frame limit.
-            TypeError: the message holds a value that cannot travel on the wire.
-        """
-        event = _sent(message)
-        state = self._next_state(event, LocalProtocolError)
-        reply_id = getattr(message, "id", None)
-        if event is not Event.SEND_HELLO and event is not Event.SEND_REQUEST and \
-                reply_id is not None:
-            if not self._outstanding or self._outstanding[0] != reply_id:
-                raise LocalProtocolError(f"reply to request {reply_id} out of order; "
-                                         f"outstanding: {list(self._outstanding)}")
-        body = pack(message.to_wire())
-        if len(body) > DEFAULT_MAX_FRAME_SIZE:
-            raise LocalProtocolError(f"message of {len(body)} bytes exceeds the frame limit of "
-                                     f"{DEFAULT_MAX_FRAME_SIZE}")
-        if event is Event.SEND_REQUEST:
-            self._outstanding.append(reply_id)  # type: ignore[arg-type]
-        elif reply_id is not None and event is not Event.SEND_HELLO:
-            self._outstanding.popleft()
-        self.state = state
-        return HEADER.pack(len(body)) + body
-
-    # --- internals --------------------------------------------------------------------------
-
-    def _next_state(self, event: Event, error: type[Exception]) -> State:
-        state = TRANSITIONS.get((self.role, self.state, event))
-        if state is None:
-            raise error(f"a {self.role.value} may not {event.value} in state "
-                        f"{self.state.value}")
-        return state
-
-    def _next_frame(self) -> bytes | memoryview | _Sentinel:
-        buffer = self._buffer
-        buffered = len(buffer)
-        if buffered >= HEADER.size:
-            (length,) = HEADER.unpack_from(buffer)
-            if length > self.max_frame_size:
-                self._broken = True
-                raise RemoteProtocolError(
-                    f"frame length {length} exceeds the limit of {self.max_frame_size} bytes "
-                    "(is the peer speaking the rlenv protocol?)", fatal=True)
-            end = HEADER.size + length
-            if buffered == end:
-                self._buffer = b""
-                return memoryview(buffer)[HEADER.size:]
-            if buffered > end:
-                body = bytes(buffer[HEADER.size:end])
-                self._buffer = buffer[end:]
-                return body
-        if not self._eof:
-            return NEED_DATA
-        self.state = State.CLOSED
-        if buffered:
-            raise RemoteProtocolError(
-                f"connection closed in the middle of a frame ({buffered} bytes buffered)",
-                fatal=True)
-        return CONNECTION_CLOSED
-
-    def _request(self, wire: dict[str, Any]) -> Request:
-        self._next_state(Event.RECEIVE_REQUEST, RemoteProtocolError)
+        if self.role is not _SERVER:
+            return self._reply(wire)
+        if _RECEIVE_REQUEST not in self._next:
+            raise self._refusal(_RECEIVE_REQUEST, RemoteProtocolError)
         try:
             request = Request.from_wire(wire)
         except RemoteProtocolError as error:
@@ -260,29 +219,105 @@ class Connection:
         self._outstanding.append(request.id)
         return request
 
+    def send(self, message: Message) -> bytes:
+        """Return the frame that carries ``message``.
+
+        Raises:
+            LocalProtocolError: this side may not send ``message`` now, or it is larger than
+                the protocol's frame limit.
+            TypeError: the message holds a value that cannot travel on the wire.
+        """
+        kind = message.__class__
+        event = _SENT.get(kind)
+        if event is None:
+            raise LocalProtocolError(f"not a message: {message!r:.60}")
+        if kind is ErrorReply and message.fatal:  # type: ignore[union-attr]
+            event = _SEND_FATAL_ERROR
+        state = self._next.get(event)
+        if state is None:
+            raise self._refusal(event, LocalProtocolError)
+        outstanding = self._outstanding
+        reply_id = None if kind is Hello or kind is Request else message.id  # type: ignore[union-attr]
+        if reply_id is not None and (not outstanding or outstanding[0] != reply_id):
+            raise LocalProtocolError(f"reply to request {reply_id} out of order; "
+                                     f"outstanding: {list(outstanding)}")
+        body = pack(message.to_wire())
+        if len(body) > DEFAULT_MAX_FRAME_SIZE:
+            raise LocalProtocolError(f"message of {len(body)} bytes exceeds the frame limit of "
+                                     f"{DEFAULT_MAX_FRAME_SIZE}")
+        if kind is Request:
+            outstanding.append(message.id)  # type: ignore[union-attr]
+        elif reply_id is not None:
+            outstanding.popleft()
+        if state is not self.state:
+            self._enter(state)
+        return HEADER.pack(len(body)) + body
+
+    # --- internals --------------------------------------------------------------------------
+
+    def _refusal(self, event: Event, error: type[Exception]) -> Exception:
+        """``error`` saying that ``event`` may not happen now (see :data:`TRANSITIONS`)."""
+        return error(f"a {self.role.value} may not {event.value} in state {self.state.value}")
+
+    def _enter(self, state: State) -> None:
+        self.state = state
+        self._next = _NEXT[(self.role, state)]
+
+    def _next_frame(self) -> bytes | memoryview | _Sentinel:
+        buffer = self._buffer
+        buffered = len(buffer)
+        if buffered >= HEADER.size:
+            (length,) = HEADER.unpack_from(buffer)
+            if length > self.max_frame_size:
+                self._enter(self._next.get(_BREAK, _CLOSED))
+                raise RemoteProtocolError(
+                    f"frame length {length} exceeds the limit of {self.max_frame_size} bytes "
+                    "(is the peer speaking the rlenv protocol?)", fatal=True)
+            end = HEADER.size + length
+            if buffered == end:  # the usual case: one whole frame per read
+                self._buffer = b""
+                return buffer[HEADER.size:] if length <= _COPIED else \
+                    memoryview(buffer)[HEADER.size:]
+            if buffered > end:
+                body = bytes(buffer[HEADER.size:end])
+                self._buffer = buffer[end:]
+                return body
+        if not self._eof:
+            return NEED_DATA
+        self._enter(_CLOSED)
+        if buffered:
+            raise RemoteProtocolError(
+                f"connection closed in the middle of a frame ({buffered} bytes buffered)",
+                fatal=True)
+        return CONNECTION_CLOSED
+
     def _reply(self, wire: dict[str, Any]) -> Message:
         if "error" in wire:
             reply: Message = ErrorReply.from_wire(wire)
-            event = Event.RECEIVE_FATAL_ERROR if reply.fatal else Event.RECEIVE_REPLY
-        elif self.state is State.AWAIT_HELLO:
+            event = _RECEIVE_FATAL_ERROR if reply.fatal else _RECEIVE_REPLY
+        elif self.state is _AWAIT:
             if "hello" not in wire:
-                self.state = State.CLOSED
+                self._enter(_CLOSED)
                 raise RemoteProtocolError("the server did not start with a hello", fatal=True)
-            reply, event = Hello.from_wire(wire), Event.RECEIVE_HELLO
+            reply, event = Hello.from_wire(wire), _RECEIVE_HELLO
         elif "steps" in wire:
-            reply, event = StepsResponse.from_wire(wire), Event.RECEIVE_REPLY
+            reply, event = StepsResponse.from_wire(wire), _RECEIVE_REPLY
         elif "batch" in wire:
-            reply, event = BatchResponse.from_wire(wire), Event.RECEIVE_REPLY
+            reply, event = BatchResponse.from_wire(wire), _RECEIVE_REPLY
         else:
-            reply, event = Response.from_wire(wire), Event.RECEIVE_REPLY
-        state = self._next_state(event, RemoteProtocolError)
-        reply_id = getattr(reply, "id", None)
-        if event is not Event.RECEIVE_HELLO and reply_id is not None:
-            if not self._outstanding or self._outstanding[0] != reply_id:
-                self.state = State.CLOSED
-                expected = self._outstanding[0] if self._outstanding else "none"
+            reply, event = Response.from_wire(wire), _RECEIVE_REPLY
+        state = self._next.get(event)
+        if state is None:
+            raise self._refusal(event, RemoteProtocolError)
+        reply_id = None if event is _RECEIVE_HELLO else reply.id  # type: ignore[union-attr]
+        if reply_id is not None:
+            outstanding = self._outstanding
+            if not outstanding or outstanding[0] != reply_id:
+                self._enter(_CLOSED)
+                expected = outstanding[0] if outstanding else "none"
                 raise RemoteProtocolError(f"reply to request {reply_id}, expected {expected}",
                                           fatal=True)
-            self._outstanding.popleft()
-        self.state = state
+            outstanding.popleft()
+        if state is not self.state:
+            self._enter(state)
         return reply

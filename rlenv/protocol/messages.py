@@ -199,20 +199,29 @@ class Response:
             RemoteProtocolError: a field is missing or has the wrong type.
         """
         try:
-            observation, reward, info, frames = (wire["observation"], wire["reward"],
-                                                 wire["info"], wire["frames"])
-            terminated, truncated, agents = wire["terminated"], wire["truncated"], \
-                wire.get("agents")
+            reply_id, reward, frames = wire["id"], wire["reward"], wire["frames"]
+            terminated, truncated = wire["terminated"], wire["truncated"]
+            observation, info, agents = wire["observation"], wire["info"], wire.get("agents")
         except KeyError as missing:
             raise RemoteProtocolError(f"invalid response: no {missing}") from None
-        if not (type(reward) is float or type(reward) is int) or type(frames) is not int or \
-                type(terminated) is not bool or type(truncated) is not bool or \
-                type(info) is not dict or not (observation is None or type(observation) is dict) \
-                or not (agents is None or type(agents) is dict):
-            raise RemoteProtocolError(f"invalid response: a field has the wrong type: "
-                                      f"{dict(wire)!r:.200}")
-        return cls(wire["id"], observation, float(reward), terminated, truncated, info, frames,
-                   agents)
+        if reward.__class__ is not float:
+            if reward.__class__ is not int:
+                raise _wrong("reward", reward)
+            reward = float(reward)
+        if frames.__class__ is not int:
+            raise _wrong("frames", frames)
+        if terminated.__class__ is not bool or truncated.__class__ is not bool:
+            raise _wrong("terminated and truncated", (terminated, truncated))
+        if info.__class__ is not dict:
+            raise _wrong("info", info)
+        if not (observation is None or observation.__class__ is dict) or \
+                not (agents is None or agents.__class__ is dict):
+            raise _wrong("observation and agents", (observation, agents))
+        return cls(reply_id, observation, reward, terminated, truncated, info, frames, agents)
+
+
+def _wrong(field: str, value: Any) -> RemoteProtocolError:
+    return RemoteProtocolError(f"invalid response: {field} of the wrong type: {value!r:.100}")
 
 
 @dataclass(slots=True)
@@ -263,9 +272,9 @@ class BatchResponse:
         Raises:
             RemoteProtocolError: a reply is malformed.
         """
-        batch = wire["batch"]
-        if not isinstance(batch, list):
-            raise RemoteProtocolError("invalid batch response: 'batch' is not a list")
+        batch, reply_id = wire["batch"], wire.get("id")
+        if not isinstance(batch, list) or type(reply_id) is not int:
+            raise RemoteProtocolError("invalid batch response: 'batch' is not a list, or no id")
         replies: list[Response | ErrorReply | None] = []
         for reply in batch:
             if reply is None:
@@ -275,7 +284,7 @@ class BatchResponse:
             else:
                 replies.append(ErrorReply.from_wire(reply) if "error" in reply
                                else Response.from_wire(reply))
-        return cls(id=wire["id"], replies=tuple(replies))
+        return cls(id=reply_id, replies=tuple(replies))
 
 
 @dataclass(slots=True)

@@ -213,6 +213,10 @@ class Endpoint:
         if peer.sock in self._peers:
             self._send(peer, message)
 
+    def controls(self, peer: Peer) -> bool:
+        """Whether ``peer`` controls the environment."""
+        return peer is self._controller
+
     def take_control(self, peer: Peer, request_id: int) -> bool:
         """Let ``peer``'s request change the environment, if ``peer`` may.
 

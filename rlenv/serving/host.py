@@ -29,8 +29,8 @@ from rlenv.protocol import ErrorReply, Hello, Reply, Request, Response
 from rlenv.rl_nodes import RLEnvironment
 from rlenv.serving.columns import Columns
 from rlenv.serving.endpoint import Endpoint
-from rlenv.serving.instance import Instance, load_environment
-from rlenv.serving.parts import HostPart, host_part_of, plan_for, takes_control
+from rlenv.serving.instance import Instance, failure, load_environment
+from rlenv.serving.parts import HostPart, plan_for, shape_of, takes_control
 from rlenv.spaces import compile_check
 
 __all__ = ["Host", "Prepared"]
@@ -101,6 +101,7 @@ class Host:
         if real_time:
             for instance in self.instances:
                 instance.set_real_time(True)
+        self._clocked = self._in_real_time()
 
     def answer(self, request: Request) -> Reply:
         """The one answer to ``request`` (plain, batch or steps); a refusal changes nothing."""
@@ -113,31 +114,41 @@ class Host:
         Instances in real time first run the ticks that came due, so that the checks see the
         current state.
         """
-        for instance in self.instances:
+        for instance in self._clocked:
             instance.catch_up()
         parts = request.parts
         try:
-            host_part = host_part_of(parts)
+            shape = shape_of(parts)
+            host_part = shape.host_part
             if host_part is None:
-                return Prepared(request, None, plan_for(self.instances[0], parts))
+                return Prepared(request, None, plan_for(self.instances[0], parts, shape))
             return Prepared(request, host_part, host_part.check(self, request))
         except RequestError as error:
             return ErrorReply(request.id, error.code, str(error))
+        except Exception as error:  # user code (a check_config of its own) raised
+            return failure(request.id, error, "raised while checking the request; nothing "
+                           "was applied")
 
     def run(self, prepared: Prepared) -> Reply:
         """Serve a checked request; its answer."""
         request = prepared.request
+        parts = request.parts
         if prepared.part is not None:
-            return prepared.part.run(self, request, prepared.checked)
-        if not request.parts:
+            reply = prepared.part.run(self, request, prepared.checked)
+        elif not parts:
             return Response(request.id)  # nothing asked (the token, say)
-        return self.instances[0].serve(prepared.checked, request.id)
+        else:
+            reply = self.instances[0].serve(prepared.checked, request.id)
+        if "config" in parts or "batch" in parts:  # the parts that may switch real time
+            self._clocked = self._in_real_time()
+        return reply
 
     def time_to_next_tick(self) -> float | None:
         """Seconds until the next tick of an instance in real time (``None``: none is)."""
-        due = [wait for instance in self.instances
-               if (wait := instance.time_to_next_tick()) is not None]
-        return min(due, default=None)
+        return min((instance.time_to_next_tick() for instance in self._clocked), default=None)
+
+    def _in_real_time(self) -> list[Instance]:
+        return [instance for instance in self.instances if instance.tree.real_time]
 
     def serve_forever(self, endpoint: Endpoint) -> None:
         """Answer the endpoint's requests until interrupted; in real time, tick meanwhile.
@@ -149,14 +160,15 @@ class Host:
         while True:
             got = endpoint.receive(self.time_to_next_tick())
             if got is None:
-                for instance in self.instances:
+                for instance in self._clocked:
                     instance.catch_up()
                 continue
             peer, request = got
             prepared = self.prepare(request)
             if prepared.__class__ is ErrorReply:
                 endpoint.reply(peer, prepared)  # type: ignore[arg-type]
-            elif not prepared.takes_control or endpoint.take_control(peer, request.id):  # type: ignore[union-attr]
+            elif endpoint.controls(peer) or not prepared.takes_control or \
+                    endpoint.take_control(peer, request.id):  # type: ignore[union-attr]
                 endpoint.reply(peer, self.run(prepared))  # type: ignore[arg-type]
 
     def close(self) -> None:

@@ -41,7 +41,7 @@ from rlenv.serving.snapshots import EpisodeLog
 from rlenv.spaces import Codec, SpaceMismatch, codec_for, compile_check, find_non_finite
 from rlenv.tree import SceneTree
 
-__all__ = ["Episode", "Instance", "load_environment"]
+__all__ = ["Episode", "Instance", "failure", "load_environment"]
 
 logger = logging.getLogger(__name__)
 
@@ -328,7 +328,12 @@ class Instance:
         self.log.acted(action, frames)
         self.environment._step(action, frames)
         tree.paused = True
-        self.state = Episode.ENDED if self._all_ended() else Episode.RUNNING
+        self.state = Episode.RUNNING
+        for agent in self.agents:
+            if not (agent.terminated or agent.truncated):
+                break
+        else:
+            self.state = Episode.ENDED
         if self.replaying:
             for agent in self.agents:
                 agent.reward = 0.0
@@ -374,16 +379,13 @@ class Instance:
         else:
             self.environment.physics_frames_timer.stop()
 
-    def _all_ended(self) -> bool:
-        """Whether every agent's episode has ended (the one agent's, with a single agent)."""
-        return all(agent.terminated or agent.truncated for agent in self.agents)
-
     # --- answers ----------------------------------------------------------------------------
 
     def observe(self, request: Mapping[str, Any]) -> dict[str, Any]:
         """The parts of the state an ``observation`` part asks for.
 
-        The agent observation is in its space's packed form.
+        The agent observation is in its space's packed form (keyed by agent name with several
+        agents).
 
         Raises:
             ValueError: an agent's observation does not fit its space or is not finite (the
@@ -391,7 +393,13 @@ class Instance:
         """
         observation = {}
         if "agent" in request:
-            observation["agent"] = self.agent_observation(request["agent"])
+            asked = request["agent"]
+            if self.multi_agent:
+                observation["agent"] = {agent.name: _packed_observation(agent, codec, asked)
+                                        for agent, codec in self._observers}
+            else:
+                agent, codec = self._observers[0]
+                observation["agent"] = _packed_observation(agent, codec, asked)
         if "world" in request:
             world = self.environment.world
             assert world is not None
@@ -402,14 +410,6 @@ class Instance:
             observation["render"] = self.environment._render(size.get("width", width),
                                                              size.get("height", height))
         return observation
-
-    def agent_observation(self, request: Any) -> Any:
-        """Every agent's observation in packed form (keyed by name with several agents)."""
-        if not self.multi_agent:
-            agent, codec = self._observers[0]
-            return _packed_observation(agent, codec, request)
-        return {agent.name: _packed_observation(agent, codec, request)
-                for agent, codec in self._observers}
 
     def _response(self, reply_id: int, answer: Answer) -> Response:
         """The answer: what was observed, and the rewards, flags and ticks since the last one.
@@ -449,13 +449,17 @@ class Instance:
 
         The tree is paused and the next action needs a reset first.
         """
-        logger.error("environment error", exc_info=error)
         self.environment.physics_frames_timer.stop()
         self.tree.paused = True
         self.state = Episode.NOT_STARTED
-        detail = "".join(traceback.format_exception(error)).rstrip()
-        return ErrorReply(reply_id, ErrorCode.ENVIRONMENT_ERROR,
-                          f"{error}; reset required\n{detail}")
+        return failure(reply_id, error, "reset required")
+
+
+def failure(reply_id: int | None, error: BaseException, consequence: str) -> ErrorReply:
+    """The ``environment_error`` answer for an exception in user code, with its traceback."""
+    logger.error("environment error", exc_info=error)
+    detail = "".join(traceback.format_exception(error)).rstrip()
+    return ErrorReply(reply_id, ErrorCode.ENVIRONMENT_ERROR, f"{error}; {consequence}\n{detail}")
 
 
 def _agents_of(environment: RLEnvironment) -> list[RLAgent]:

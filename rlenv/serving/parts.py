@@ -31,7 +31,7 @@ from rlenv.spaces import SpaceMismatch
 if TYPE_CHECKING:
     from rlenv.serving.host import Host
 
-__all__ = ["PARTS", "HostPart", "Part", "plan_for", "takes_control"]
+__all__ = ["PARTS", "HostPart", "Part", "Shape", "plan_for", "shape_of", "takes_control"]
 
 _MAX_RENDER_SIZE = 4096
 AGENT_ONLY: Mapping[str, Any] = {"agent": {}}
@@ -54,11 +54,6 @@ def _map(value: Any, name: str, where: str) -> Mapping[str, Any]:
     return value
 
 
-def _fresh(parts: Mapping[str, Any]) -> bool:
-    """Whether the request starts an episode before it acts or observes."""
-    return "reset" in parts or "restore" in parts
-
-
 class Part:
     """One kind of part of a request to one instance.
 
@@ -79,8 +74,11 @@ class Part:
         """Whether this part, with this value, takes control."""
         return self.takes_control
 
-    def check(self, instance: Instance, parts: Mapping[str, Any], where: str) -> Any:
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
+              where: str) -> Any:
         """Check the part (``parts[self.name]``) against ``instance``; the value to apply.
+
+        ``fresh`` says whether the request starts an episode first (``reset``, ``restore``).
 
         Raises:
             RequestError: the refusal, naming the field (prefixed with ``where``).
@@ -97,7 +95,8 @@ class Config(Part):
     name = "config"
     takes_control = True
 
-    def check(self, instance: Instance, parts: Mapping[str, Any], where: str) -> Any:
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
+              where: str) -> Any:
         config = _map(parts["config"], "config", where)
         instance.check_config(config)
         return config
@@ -113,7 +112,8 @@ class Reset(Part):
     takes_control = True
     _KEYS = frozenset({"seed", "options"})
 
-    def check(self, instance: Instance, parts: Mapping[str, Any], where: str) -> Any:
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
+              where: str) -> Any:
         reset = _map(parts["reset"], "reset", where)
         _check_keys(reset, self._KEYS, "reset")
         seed, options = reset.get("seed"), reset.get("options")
@@ -136,11 +136,11 @@ class Action(Part):
     def controls(self, value: Any) -> bool:
         return value is not None  # nil: no action
 
-    def check(self, instance: Instance, parts: Mapping[str, Any], where: str) -> Any:
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
+              where: str) -> Any:
         action = parts["action"]
         if action is None:  # nil: no action
             return None
-        fresh = _fresh(parts)
         if not fresh:
             instance.check_can_act()
         return instance.checked_action(action, fresh), parts.get("repeat_action")
@@ -158,7 +158,8 @@ class RepeatAction(Part):
     name = "repeat_action"
     applies = False
 
-    def check(self, instance: Instance, parts: Mapping[str, Any], where: str) -> Any:
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
+              where: str) -> Any:
         repeat = parts["repeat_action"]
         if type(repeat) is not int or repeat < 1:
             raise _bad(f"{where}'repeat_action' must be an integer >= 1, got {repeat!r:.40}")
@@ -174,14 +175,19 @@ class Observation(Part):
     _KEYS = frozenset({"agent", "world", "render"})
     _RENDER_KEYS = frozenset({"width", "height"})
 
-    def check(self, instance: Instance, parts: Mapping[str, Any], where: str) -> Any:
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
+              where: str) -> Any:
         observation = parts["observation"]
-        if observation != AGENT_ONLY:
+        if observation.__class__ is not dict:
             observation = _map(observation, "observation", where)
+        if not observation.keys() <= self._KEYS:
             _check_keys(observation, self._KEYS, "observation")
-            if "render" in observation:
-                self._check_render(observation["render"])
-        if instance.state is Episode.NOT_STARTED and not _fresh(parts):
+        for key in ("agent", "world"):
+            if key in observation and observation[key].__class__ is not dict:
+                _map(observation[key], f"observation.{key}", where)
+        if "render" in observation:
+            self._check_render(observation["render"])
+        if instance.state is Episode.NOT_STARTED and not fresh:
             raise RequestError(ErrorCode.RESET_REQUIRED, "no episode has started; reset first")
         return observation
 
@@ -204,7 +210,8 @@ class Snapshot(Part):
     name = "snapshot"
     alone = True
 
-    def check(self, instance: Instance, parts: Mapping[str, Any], where: str) -> Any:
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
+              where: str) -> Any:
         if _map(parts["snapshot"], "snapshot", where):
             raise _bad("snapshot takes an empty map")
         _need_lockstep(instance)
@@ -221,7 +228,8 @@ class Restore(Part):
     takes_control = True
     alone = True
 
-    def check(self, instance: Instance, parts: Mapping[str, Any], where: str) -> Any:
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
+              where: str) -> Any:
         snapshot = parse_snapshot(_map(parts["restore"], "restore", where))
         _need_lockstep(instance)
         instance.check_config(snapshot["config"])
@@ -264,7 +272,8 @@ class Inspect(Part):
     def controls(self, value: Any) -> bool:
         return isinstance(value, Mapping) and "set" in value
 
-    def check(self, instance: Instance, parts: Mapping[str, Any], where: str) -> Any:
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
+              where: str) -> Any:
         operation, arguments = inspector.check_inspect(parts["inspect"])
         if operation == "get":
             inspector.get_property(instance.environment, arguments["path"],
@@ -347,9 +356,10 @@ class Batch(HostPart):
             if parts is not None:
                 if not isinstance(parts, Mapping):
                     raise _bad(f"batch[{index}] must be a map or nil")
-                _parts_of(tuple(parts), f"batch[{index}].")
-        return [None if parts is None else _plan_or_refusal(instance, parts, request.id)
-                for instance, parts in zip(host.instances, batch, strict=False)]
+        shapes = [None if parts is None else shape_of(parts, f"batch[{index}].")
+                  for index, parts in enumerate(batch)]
+        return [None if shape is None else _plan_or_refusal(instance, parts, shape, request.id)
+                for instance, parts, shape in zip(host.instances, batch, shapes, strict=False)]
 
     def run(self, host: Host, request: Request, checked: Any) -> Reply:
         return BatchResponse(request.id, tuple(
@@ -358,10 +368,10 @@ class Batch(HostPart):
             for instance, plan in zip(host.instances, checked, strict=False)))
 
 
-def _plan_or_refusal(instance: Instance, parts: Mapping[str, Any],
+def _plan_or_refusal(instance: Instance, parts: Mapping[str, Any], shape: Shape,
                      reply_id: int) -> Plan | ErrorReply:
     try:
-        return plan_for(instance, parts)
+        return plan_for(instance, parts, shape)
     except RequestError as error:
         return ErrorReply(reply_id, error.code, str(error))
 
@@ -441,68 +451,76 @@ _RESET_PLAN: Plan = ((_RESET, (None, {})), (_OBSERVATION, AGENT_ONLY))
 _INSTANCE_KEYS = ", ".join(name for name, part in PARTS.items() if isinstance(part, Part))
 _REQUEST_KEYS = ", ".join([_INSTANCE_KEYS, "token"] + [
     name for name, part in PARTS.items() if isinstance(part, HostPart)])
-_MAX_CACHED = 512
-_cache: dict[tuple[str, ...], tuple[Part, ...]] = {}
+_MAX_SHAPES = 512
 
 
-def _parts_of(keys: tuple[str, ...], where: str = "") -> tuple[Part, ...]:
-    """The records of a request's keys, in the order they apply, once the combination is valid.
+class Shape:
+    """What a request's keys say, once their combination is known to be valid (cached).
+
+    Attributes:
+        host_part: the part that addresses every instance (``batch``, ``steps``), or ``None``.
+        parts: the parts to one instance, in the order they apply.
+        fresh: whether the request starts an episode (``reset`` or ``restore``) before it
+            acts or observes.
+    """
+
+    __slots__ = ("fresh", "host_part", "parts")
+
+    def __init__(self, keys: tuple[str, ...], where: str) -> None:
+        records = []
+        for key in keys:
+            record = PARTS.get(key)
+            if record is None or (where and isinstance(record, HostPart)):
+                expected = _INSTANCE_KEYS if where else _REQUEST_KEYS
+                raise _bad(f"unknown request key {where}{str(key)!r}; expected any of "
+                           f"{expected}")
+            records.append(record)
+        host_parts = [r for r in records if isinstance(r, HostPart)]
+        if host_parts and len(records) > 1:
+            raise _bad(f"a {host_parts[0].name!r} request carries nothing else but its id")
+        alone = [r.name for r in records if isinstance(r, Part) and r.alone]
+        if len(alone) > 1:
+            raise _bad(f"{alone[0]} or {alone[1]}, not both")
+        if alone and any(r.name not in (alone[0], "observation") for r in records):
+            raise _bad(f"{alone[0]} goes alone (with an observation at most)")
+        self.host_part: HostPart | None = host_parts[0] if host_parts else None
+        self.parts: tuple[Part, ...] = tuple(sorted(
+            (r for r in records if isinstance(r, Part)), key=lambda r: _ORDER[r.name]))
+        self.fresh = "reset" in keys or "restore" in keys
+
+
+_shapes: dict[tuple[str, ...], Shape] = {}
+
+
+def shape_of(parts: Mapping[str, Any], where: str = "") -> Shape:
+    """The :class:`Shape` of a request with these parts (``where`` names a batch's slot).
 
     Raises:
-        RequestError: ``bad_request``: an unknown key, a host part inside a batch, or a part
-            that goes alone in company.
+        RequestError: ``bad_request``: an unknown key, a part that goes alone in company.
     """
-    known = _cache.get(keys) if not where else None
-    if known is not None:
-        return known
-    records = []
-    for key in keys:
-        record = PARTS.get(key)
-        if record is None or (where and isinstance(record, HostPart)):
-            expected = _INSTANCE_KEYS if where else _REQUEST_KEYS
-            raise _bad(f"unknown request key {where}{str(key)!r}; expected any of {expected}")
-        records.append(record)
-    host_parts = [r.name for r in records if isinstance(r, HostPart)]
-    if host_parts and len(records) > 1:
-        raise _bad(f"a {host_parts[0]!r} request carries nothing else but its id")
-    alone = [r.name for r in records if isinstance(r, Part) and r.alone]
-    if len(alone) > 1:
-        raise _bad(f"{alone[0]} or {alone[1]}, not both")
-    if alone and any(r.name not in (alone[0], "observation") for r in records):
-        raise _bad(f"{alone[0]} goes alone (with an observation at most)")
-    ordered = tuple(sorted(records, key=lambda r: _ORDER[r.name]))
-    if not where and len(_cache) < _MAX_CACHED:
-        _cache[keys] = ordered  # type: ignore[assignment]
-    return ordered  # type: ignore[return-value]
+    keys = tuple(parts)
+    shape = _shapes.get(keys) if not where else None
+    if shape is None:
+        shape = Shape(keys, where)
+        if not where and len(_shapes) < _MAX_SHAPES:
+            _shapes[keys] = shape
+    return shape
 
 
-def plan_for(instance: Instance, parts: Mapping[str, Any], where: str = "") -> Plan:
+def plan_for(instance: Instance, parts: Mapping[str, Any], shape: Shape,
+             where: str = "") -> Plan:
     """Check every part of a request to ``instance``; the plan that applies them.
 
     Raises:
         RequestError: the request is refused (nothing was applied).
     """
     plan = []
-    for record in _parts_of(tuple(parts), where):
-        value = record.check(instance, parts, where)
+    fresh = shape.fresh
+    for record in shape.parts:
+        value = record.check(instance, parts, fresh, where)
         if record.applies:
             plan.append((record, value))
     return tuple(plan)
-
-
-def host_part_of(parts: Mapping[str, Any]) -> HostPart | None:
-    """The part of a request that addresses every instance (``batch``, ``steps``), if any.
-
-    Raises:
-        RequestError: ``bad_request``: such a part in company (it goes alone).
-    """
-    for key in parts:
-        record = PARTS.get(key)
-        if isinstance(record, HostPart):
-            if len(parts) > 1:
-                raise _bad(f"a {key!r} request carries nothing else but its id")
-            return record
-    return None
 
 
 def takes_control(parts: Mapping[str, Any]) -> bool:
@@ -512,4 +530,3 @@ def takes_control(parts: Mapping[str, Any]) -> bool:
         if record is not None and record.controls(value):
             return True
     return False
-

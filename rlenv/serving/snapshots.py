@@ -63,7 +63,10 @@ class EpisodeLog:
 
     def acted(self, action: Any, frames: int) -> None:
         """An action that ran ``frames`` ticks at most."""
-        self.record(["action", action, frames])
+        if len(self.events) < MAX_EVENTS:  # the common case of record()
+            self.events.append(["action", action, frames])
+        else:
+            self.record(["action", action, frames])
 
     def record(self, event: list[Any]) -> None:
         """Append ``event``; past :data:`MAX_EVENTS`, forget them all and remember why."""

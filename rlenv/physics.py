@@ -91,15 +91,16 @@ class PhysicsWorld(Node):
         old = self.space
         old.remove(*old.constraints, *old.shapes, *old.bodies)
         self.space = self._new_space(old.gravity, old.iterations, old.damping)
-        joints = []
+        bodies, shapes, joints = [], [], []
         for node in self.iter_subtree():
             if isinstance(node, PhysicsBody) and node.world is self:
                 node._restart()
-                self.space.add(node.body)
+                bodies.append(node.body)
             elif isinstance(node, CollisionShape) and node._world is self:
-                self.space.add(node.shape)
+                shapes.append(node.shape)
             elif isinstance(node, Joint) and node._world is self and node._attached:
                 joints.append(node)
+        self.space.add(*bodies, *shapes)  # in tree order, as they entered
         for joint in joints:  # once every body is back, as joints attach when ready
             joint.constraint = None
             joint._attach(self, required=True)

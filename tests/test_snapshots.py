@@ -160,6 +160,7 @@ def test_the_log_of_an_endless_episode_stays_bounded(monkeypatch: pytest.MonkeyP
             local.snapshot()
         assert error.value.code == ErrorCode.BAD_REQUEST
         local.step(np.zeros(1, np.float32))  # the episode itself goes on
+        assert log.events == []  # and its log stays empty
         local.reset(seed=1)
         local.step(np.zeros(1, np.float32))
         assert len(local.snapshot()["events"]) == 1

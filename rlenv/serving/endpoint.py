@@ -137,6 +137,7 @@ class Endpoint:
         self._turn = 0  # round robin over peers with buffered requests
         self._lifeline: int | None = None
         self._housekeeping_at = 0.0
+        self._backlog = False  # frames may be buffered on other peers than the controller
 
     @property
     def address(self) -> tuple[str, int]:
@@ -196,13 +197,18 @@ class Endpoint:
         """
         deadline = None if timeout is None else self._clock() + timeout
         while True:
-            got = self._next_request()
-            if got is not None:
-                return got
+            if self._backlog:  # frames read while looking around: served in turn first
+                got = self._next_request()
+                if got is not None:
+                    return got
             controller = self._controller
             if deadline is None and controller is not None and controller.active and \
                     self._clock() < self._housekeeping_at:
-                self._read(controller, block=True)
+                if not controller.connection.buffered:  # nothing pipelined: wait for it
+                    self._read(controller, block=True)
+                request = self._request_from(controller)
+                if request is not None:
+                    return controller, request
                 continue
             self._wait(deadline)
             if deadline is not None and self._clock() >= deadline:
@@ -356,6 +362,8 @@ class Endpoint:
             data = b""
         peer.active = True
         peer.connection.receive_data(data)
+        if not block:  # a look around: whatever came is served in turn, before blocking again
+            self._backlog = True
 
     # --- requests ---------------------------------------------------------------------------
 
@@ -370,6 +378,7 @@ class Endpoint:
             if request is not None:
                 self._turn = index + 1
                 return peer, request
+        self._backlog = False  # every buffered request has been taken
         return None
 
     def _request_from(self, peer: Peer) -> Request | None:
@@ -426,9 +435,13 @@ class Endpoint:
               why_fatal: str = "error reply closed the connection") -> None:
         """Send ``message``; a fatal error reply then closes the connection (``why_fatal``)."""
         try:
-            self._write(peer, peer.connection.send(message))
+            peer.sock.sendall(peer.connection.send(message))
         except LocalProtocolError as error:  # e.g. the client hung up in the middle of a frame
             logger.warning("not sent to %s: %s", peer.address, error)
+        except OSError as error:
+            logger.info("client %s: send failed: %s", peer.address, error)
+            self._drop(peer, "send failed")
+            return
         if message.__class__ is ErrorReply and message.fatal:  # type: ignore[union-attr]
             self._drop(peer, why_fatal)
 

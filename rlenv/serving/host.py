@@ -145,7 +145,9 @@ class Host:
 
     def time_to_next_tick(self) -> float | None:
         """Seconds until the next tick of an instance in real time (``None``: none is)."""
-        return min((instance.time_to_next_tick() for instance in self._clocked), default=None)
+        if not self._clocked:
+            return None
+        return min(instance.time_to_next_tick() for instance in self._clocked)
 
     def _in_real_time(self) -> list[Instance]:
         return [instance for instance in self.instances if instance.tree.real_time]
@@ -158,7 +160,7 @@ class Host:
         (the endpoint answers ``busy`` otherwise).
         """
         while True:
-            got = endpoint.receive(self.time_to_next_tick())
+            got = endpoint.receive(self.time_to_next_tick() if self._clocked else None)
             if got is None:
                 for instance in self._clocked:
                     instance.catch_up()

@@ -40,7 +40,7 @@ class EpisodeLog:
 
     def __init__(self) -> None:
         self.config: dict[str, dict[str, Any]] = {}
-        self.rng = ""
+        self._rng_state: dict[str, Any] = {}
         self.options: Mapping[str, Any] = {}
         self.events: list[list[Any]] = []
         self.started = False
@@ -50,7 +50,7 @@ class EpisodeLog:
               options: Mapping[str, Any]) -> None:
         """A reset: remember the configuration and the generator as they are now."""
         self.config = config
-        self.rng = json.dumps(rng.bit_generator.state)
+        self._rng_state = rng.bit_generator.state  # as JSON only when a snapshot asks
         self.options = dict(options)
         self.events = []
         self.started = True
@@ -63,7 +63,7 @@ class EpisodeLog:
 
     def acted(self, action: Any, frames: int) -> None:
         """An action that ran ``frames`` ticks at most."""
-        if len(self.events) < MAX_EVENTS:  # the common case of record()
+        if len(self.events) < MAX_EVENTS and not self.overflowed:  # record()'s common case
             self.events.append(["action", action, frames])
         else:
             self.record(["action", action, frames])
@@ -81,8 +81,9 @@ class EpisodeLog:
     def snapshot(self) -> dict[str, Any]:
         """The episode so far, as data (see :meth:`check_snapshot` for when it is refused)."""
         self.check_snapshot()
-        return {"version": SNAPSHOT_VERSION, "config": self.config, "rng": self.rng,
-                "options": self.options, "events": list(self.events)}
+        return {"version": SNAPSHOT_VERSION, "config": self.config,
+                "rng": json.dumps(self._rng_state), "options": self.options,
+                "events": list(self.events)}
 
     def check_snapshot(self) -> None:
         """Refuse a snapshot that cannot be taken.

@@ -296,8 +296,7 @@ class RLEnvironment(RLNode):
         timer = self.physics_frames_timer
         timer.start(frames or self.repeat_action)
         tree.paused = False
-        while not timer.is_stopped():
-            tree.iteration()
+        tree.iterate_until(timer.is_stopped)
         tree.paused = True
 
     def _get_info(self) -> dict[str, Any]:

@@ -182,6 +182,7 @@ class _ArrayKind(SpaceKind):
         nbytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
         in_bounds = _bounds_test(*self.bounds(space), dtype)
         careful = self.check
+        flat = len(shape) == 1  # frombuffer's own shape
 
         def check_value(value: Any) -> Any:
             kind = value.__class__
@@ -189,7 +190,9 @@ class _ArrayKind(SpaceKind):
                 if len(value) != nbytes:
                     raise SpaceMismatch(f"{path} is {len(value)} bytes, expected {nbytes}: the "
                                         f"packed form of shape {shape} and dtype {dtype}")
-                value = np.frombuffer(value, dtype).reshape(shape)
+                value = np.frombuffer(value, dtype)
+                if not flat:
+                    value = value.reshape(shape)
             elif not (kind is np.ndarray and value.dtype == dtype and value.shape == shape):
                 return careful(space, value, path)
             if in_bounds(value):

@@ -231,12 +231,33 @@ class SceneTree(SignalOwner):
         elif self._paused:
             self.process(0.0)
         else:
-            self.physics_tick()
+            self._lockstep_iteration()
+
+    def iterate_until(self, done: Callable[[], bool]) -> None:
+        """Turn the loop until ``done()`` says so (asked before each turn).
+
+        The same as ``while not done(): tree.iteration()``, with one call less per turn in
+        lockstep (an environment runs an action's ticks this way).
+        """
+        while not done():
+            if self._real_time or self._paused:
+                self.iteration()
+                continue
+            self.physics_tick()  # what _lockstep_iteration does, inlined on the hot path
             plan = self._plan
             if plan is None or plan.process or self._signals or self._deferred:
                 self.process(self._physics_delta)
-            else:  # nothing to call: the frame is only counted
+            else:
                 self.process_frames += 1
+
+    def _lockstep_iteration(self) -> None:
+        """A physics tick, then a frame (only counted when it has nothing to call)."""
+        self.physics_tick()
+        plan = self._plan
+        if plan is None or plan.process or self._signals or self._deferred:
+            self.process(self._physics_delta)
+        else:
+            self.process_frames += 1
 
     def run(self, iteration: Callable[[], None] | None = None) -> None:
         """Iterate until :meth:`quit` is called.

@@ -144,9 +144,9 @@ class BaseClient(ABC):
         Raises:
             RemoteError: the answer is an error.
         """
-        response = self._response(reply)
-        return (self._observation(response, writable), response.reward, response.terminated,
-                response.truncated, self._info(response))
+        response = reply if reply.__class__ is Response else self._response(reply)
+        return (self._observation(response, writable), response.reward,  # type: ignore[union-attr]
+                response.terminated, response.truncated, self._info(response))  # type: ignore[union-attr,arg-type]
 
     def reset_result(self, reply: Response | ErrorReply) -> tuple[Any, dict[str, Any]]:
         """A reset's answer as ``(observation, info)``.
@@ -372,8 +372,11 @@ class BaseClient(ABC):
         return message  # type: ignore[return-value]
 
     def _observation(self, response: Response, writable: bool = True) -> Any:
+        observation = response.observation
+        if observation is None or "agent" not in observation:
+            self._part(response, "agent")  # raises
         try:
-            return self._observations.unpack(self._part(response, "agent"), writable)
+            return self._observations.unpack(observation["agent"], writable)  # type: ignore[index]
         except (KeyError, TypeError, ValueError) as error:
             self.close()
             raise ConnectionLost(f"{self.address} broke the protocol: {error}") from None

@@ -136,6 +136,8 @@ class Client(BaseClient):
 
     def _next_message(self) -> Message:
         connection = self._connection
+        if not connection.buffered:  # the usual case: wait for the answer right away
+            connection.receive_data(self._recv())
         deadline = None
         while True:
             try:

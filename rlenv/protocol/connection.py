@@ -112,6 +112,9 @@ TRANSITIONS: Final[dict[tuple[Role, State, Event], State]] = {
 """(role, state, event) -> the next state. Nothing else may happen."""
 
 _COPIED = 64 * 1024  # frames up to this size are sliced out of the buffer, larger ones viewed
+_PREFIX = HEADER.size
+_read_prefix = HEADER.unpack_from
+_write_prefix = HEADER.pack
 
 _SENT: Final[dict[type, Event]] = {
     Hello: Event.SEND_HELLO, Request: Event.SEND_REQUEST, Response: Event.SEND_REPLY,
@@ -251,7 +254,7 @@ class Connection:
             outstanding.popleft()
         if state is not self.state:
             self._enter(state)
-        return HEADER.pack(len(body)) + body
+        return _write_prefix(len(body)) + body
 
     # --- internals --------------------------------------------------------------------------
 
@@ -266,20 +269,19 @@ class Connection:
     def _next_frame(self) -> bytes | memoryview | _Sentinel:
         buffer = self._buffer
         buffered = len(buffer)
-        if buffered >= HEADER.size:
-            (length,) = HEADER.unpack_from(buffer)
+        if buffered >= _PREFIX:
+            (length,) = _read_prefix(buffer)
             if length > self.max_frame_size:
                 self._enter(self._next.get(_BREAK, _CLOSED))
                 raise RemoteProtocolError(
                     f"frame length {length} exceeds the limit of {self.max_frame_size} bytes "
                     "(is the peer speaking the rlenv protocol?)", fatal=True)
-            end = HEADER.size + length
+            end = _PREFIX + length
             if buffered == end:  # the usual case: one whole frame per read
                 self._buffer = b""
-                return buffer[HEADER.size:] if length <= _COPIED else \
-                    memoryview(buffer)[HEADER.size:]
+                return buffer[_PREFIX:] if length <= _COPIED else memoryview(buffer)[_PREFIX:]
             if buffered > end:
-                body = bytes(buffer[HEADER.size:end])
+                body = bytes(buffer[_PREFIX:end])
                 self._buffer = buffer[end:]
                 return body
         if not self._eof:

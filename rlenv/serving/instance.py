@@ -90,7 +90,7 @@ class Answer:
         self.acted = False
 
 
-Plan = tuple[tuple[Any, Any], ...]
+Plan = list[tuple[Any, Any]]
 """A checked request: (part, checked value) pairs in the order they apply."""
 
 

@@ -35,6 +35,7 @@ __all__ = ["PARTS", "HostPart", "Part", "Shape", "plan_for", "shape_of", "takes_
 
 _MAX_RENDER_SIZE = 4096
 AGENT_ONLY: Mapping[str, Any] = {"agent": {}}
+_RUNNING = Episode.RUNNING
 
 
 def _bad(message: str) -> RequestError:
@@ -141,8 +142,8 @@ class Action(Part):
         action = parts["action"]
         if action is None:  # nil: no action
             return None
-        if not fresh:
-            instance.check_can_act()
+        if not fresh and instance.state is not _RUNNING:
+            instance.check_can_act()  # refuses
         return instance.checked_action(action, fresh), parts.get("repeat_action")
 
     def apply(self, instance: Instance, value: Any, answer: Answer) -> None:
@@ -411,7 +412,7 @@ class Steps(HostPart):
             raise RequestError(ErrorCode.INVALID_ACTION, str(error)) from None
         rows = list(checked) if checked.__class__ is np.ndarray else \
             list(iterate(host.steps_action_space, checked))
-        return [_RESET_PLAN if resets else ((_ACTION, (row, repeat)), (_OBSERVATION, AGENT_ONLY))
+        return [_RESET_PLAN if resets else [(_ACTION, (row, repeat)), (_OBSERVATION, AGENT_ONLY)]
                 for row, resets in zip(rows, reset, strict=True)]
 
     def run(self, host: Host, request: Request, checked: Any) -> Reply:
@@ -447,7 +448,7 @@ PARTS: dict[str, Part | HostPart] = {
 
 _ORDER = {name: index for index, name in enumerate(PARTS)}
 _ACTION, _OBSERVATION, _RESET = PARTS["action"], PARTS["observation"], PARTS["reset"]
-_RESET_PLAN: Plan = ((_RESET, (None, {})), (_OBSERVATION, AGENT_ONLY))
+_RESET_PLAN: Plan = [(_RESET, (None, {})), (_OBSERVATION, AGENT_ONLY)]
 _INSTANCE_KEYS = ", ".join(name for name, part in PARTS.items() if isinstance(part, Part))
 _REQUEST_KEYS = ", ".join([_INSTANCE_KEYS, "token"] + [
     name for name, part in PARTS.items() if isinstance(part, HostPart)])
@@ -520,7 +521,7 @@ def plan_for(instance: Instance, parts: Mapping[str, Any], shape: Shape,
         value = record.check(instance, parts, fresh, where)
         if record.applies:
             plan.append((record, value))
-    return tuple(plan)
+    return plan
 
 
 def takes_control(parts: Mapping[str, Any]) -> bool:

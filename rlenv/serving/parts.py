@@ -15,21 +15,20 @@ here, add it to :data:`PARTS`, and give the client a method that sends it.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any, ClassVar
+from collections.abc import Callable, Mapping
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
+from gymnasium import spaces
 from gymnasium.vector.utils import iterate
 
 from rlenv.errors import ErrorCode, RequestError
 from rlenv.protocol import BatchResponse, ErrorReply, Reply, Request
 from rlenv.serving import inspector
+from rlenv.serving.columns import Columns
 from rlenv.serving.instance import Answer, Episode, Instance, Plan
 from rlenv.serving.snapshots import generator_from_state, parse_snapshot
 from rlenv.spaces import SpaceMismatch
-
-if TYPE_CHECKING:
-    from rlenv.serving.host import Host
 
 __all__ = ["PARTS", "HostPart", "Part", "Shape", "plan_for", "shape_of", "takes_control"]
 
@@ -309,6 +308,15 @@ def _need_lockstep(instance: Instance) -> None:
 
 
 # --- parts that address every instance --------------------------------------------------------
+
+
+class Host(Protocol):
+    """What the parts that address every instance need of the host (:mod:`.host`)."""
+
+    instances: list[Instance]
+    steps_action_space: spaces.Space
+    steps_action: Callable[[Any], Any]
+    columns: Columns
 
 
 class HostPart:

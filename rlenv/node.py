@@ -472,11 +472,7 @@ class Node(SignalOwner):
         Turning them off during a pass skips this node in the rest of the pass; turning them on
         takes effect from the next pass.
         """
-        enabled = bool(enabled)
-        if enabled is not self._processing:
-            self._processing = enabled
-            if self._tree is not None:
-                self._tree._plan_changed()
+        self._set_flag("_processing", enabled)
 
     def is_processing(self) -> bool:
         """Whether ``_process`` is called for this node."""
@@ -488,15 +484,19 @@ class Node(SignalOwner):
         Turning them off during a tick skips this node in the rest of the tick; turning them on
         takes effect from the next tick.
         """
-        enabled = bool(enabled)
-        if enabled is not self._physics_processing:
-            self._physics_processing = enabled
-            if self._tree is not None:
-                self._tree._plan_changed()
+        self._set_flag("_physics_processing", enabled)
 
     def is_physics_processing(self) -> bool:
         """Whether ``_physics_process`` is called for this node."""
         return self._physics_processing
+
+    def _set_flag(self, flag: str, enabled: bool) -> None:
+        """Set a processing flag; a change makes the tree's plans stale."""
+        enabled = bool(enabled)
+        if enabled is not getattr(self, flag):
+            setattr(self, flag, enabled)
+            if self._tree is not None:
+                self._tree._plan_changed()
 
     def notification(self, what: int) -> None:
         """Deliver a lifecycle notification: the matching virtual first, then ``_notification``."""

@@ -581,16 +581,20 @@ def _kind(space: spaces.Space) -> SpaceKind | None:
     return kind
 
 
+def _supported(space: spaces.Space) -> SpaceKind:
+    kind = _kind(space)
+    if kind is None:
+        raise TypeError(f"{type(space).__name__} spaces are not supported on the wire")
+    return kind
+
+
 def space_to_spec(space: spaces.Space) -> Spec:
     """Describe ``space`` as a plain map that msgpack can carry.
 
     Raises:
         TypeError: the space type cannot travel on the wire.
     """
-    kind = _kind(space)
-    if kind is None:
-        raise TypeError(f"{type(space).__name__} spaces are not supported on the wire")
-    return kind.to_spec(space)
+    return _supported(space).to_spec(space)
 
 
 def space_from_spec(spec: Spec) -> spaces.Space:
@@ -650,10 +654,7 @@ def codec_for(space: spaces.Space) -> Codec:
     Raises:
         TypeError: the space type cannot travel on the wire.
     """
-    kind = _kind(space)
-    if kind is None:
-        raise TypeError(f"{type(space).__name__} spaces are not supported on the wire")
-    return kind.codec(space)
+    return _supported(space).codec(space)
 
 
 _WIDE = {"f": np.float64, "c": np.complex128}

@@ -41,7 +41,7 @@ from rlenv.serving.snapshots import EpisodeLog
 from rlenv.spaces import Codec, SpaceMismatch, codec_for, compile_check, find_non_finite
 from rlenv.tree import SceneTree
 
-__all__ = ["Episode", "Instance", "failure", "load_environment"]
+__all__ = ["Episode", "Instance", "check_keys", "failure", "load_environment"]
 
 logger = logging.getLogger(__name__)
 
@@ -185,7 +185,7 @@ class Instance:
         Raises:
             RequestError: ``bad_request`` (its shape) or ``invalid_config`` naming the key.
         """
-        _check_keys(config, _CONFIG_PARTS, "config")
+        check_keys(config, _CONFIG_PARTS, "config")
         for part, nodes in self._configured_nodes().items():
             if part not in config:
                 continue
@@ -493,7 +493,8 @@ def _packed_observation(agent: RLAgent, codec: Codec, request: Any) -> Any:
 _CONFIG_PARTS = frozenset({"environment", "agent", "world"})
 
 
-def _check_keys(part: Mapping[str, Any], allowed: frozenset[str], where: str) -> None:
+def check_keys(part: Mapping[str, Any], allowed: frozenset[str], where: str) -> None:
+    """Refuse (``bad_request``) a key of ``part`` that is not ``allowed``, naming them all."""
     unknown = part.keys() - allowed
     if unknown:
         raise RequestError(

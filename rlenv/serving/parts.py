@@ -26,7 +26,7 @@ from rlenv.errors import ErrorCode, RequestError
 from rlenv.protocol import BatchResponse, ErrorReply, Reply, Request
 from rlenv.serving import inspector
 from rlenv.serving.columns import Columns
-from rlenv.serving.instance import Answer, Episode, Instance, Plan
+from rlenv.serving.instance import Answer, Episode, Instance, Plan, check_keys
 from rlenv.serving.snapshots import generator_from_state, parse_snapshot
 from rlenv.spaces import SpaceMismatch
 
@@ -39,13 +39,6 @@ _RUNNING = Episode.RUNNING
 
 def _bad(message: str) -> RequestError:
     return RequestError(ErrorCode.BAD_REQUEST, message)
-
-
-def _check_keys(value: Mapping[str, Any], allowed: frozenset[str], where: str) -> None:
-    unknown = value.keys() - allowed
-    if unknown:
-        raise _bad(f"unknown key {sorted(map(str, unknown))[0]!r} in {where}; expected any of "
-                   + ", ".join(sorted(allowed)))
 
 
 def _map(value: Any, name: str, where: str) -> Mapping[str, Any]:
@@ -115,7 +108,7 @@ class Reset(Part):
     def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
               where: str) -> Any:
         reset = _map(parts["reset"], "reset", where)
-        _check_keys(reset, self._KEYS, "reset")
+        check_keys(reset, self._KEYS, "reset")
         seed, options = reset.get("seed"), reset.get("options")
         if seed is not None and (type(seed) is not int or seed < 0):
             raise _bad(f"reset.seed must be an integer >= 0, got {seed!r:.40}")
@@ -181,7 +174,7 @@ class Observation(Part):
         if observation.__class__ is not dict:
             observation = _map(observation, "observation", where)
         if not observation.keys() <= self._KEYS:
-            _check_keys(observation, self._KEYS, "observation")
+            check_keys(observation, self._KEYS, "observation")
         for key in ("agent", "world"):
             if key in observation and observation[key].__class__ is not dict:
                 _map(observation[key], f"observation.{key}", where)
@@ -194,7 +187,7 @@ class Observation(Part):
     def _check_render(self, size: Any) -> None:
         if not isinstance(size, Mapping):
             raise _bad("observation.render must be a map")
-        _check_keys(size, self._RENDER_KEYS, "observation.render")
+        check_keys(size, self._RENDER_KEYS, "observation.render")
         for key, value in size.items():
             if type(value) is not int or not 1 <= value <= _MAX_RENDER_SIZE:
                 raise _bad(f"observation.render.{key} must be an integer in "
@@ -400,7 +393,7 @@ class Steps(HostPart):
         steps = request.parts["steps"]
         if not isinstance(steps, Mapping):
             raise _bad("'steps' must be a map")
-        _check_keys(steps, self._KEYS, "steps")
+        check_keys(steps, self._KEYS, "steps")
         if steps.get("action") is None:
             raise _bad("'steps' needs an 'action' (one per instance)")
         count = len(host.instances)

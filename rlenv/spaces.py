@@ -383,10 +383,11 @@ class _Discrete(SpaceKind):
     space_class = spaces.Discrete
 
     def to_spec(self, space: spaces.Discrete) -> Spec:
-        return {"type": "Discrete", "n": int(space.n), "start": int(space.start)}
+        return {"type": "Discrete", "n": int(space.n), "start": int(space.start),
+                "dtype": space.dtype.str}
 
     def from_spec(self, spec: Spec) -> spaces.Discrete:
-        return spaces.Discrete(spec["n"], start=spec["start"])
+        return spaces.Discrete(spec["n"], start=spec["start"], dtype=np.dtype(spec["dtype"]))
 
     def check(self, space: spaces.Discrete, value: Any, path: str) -> np.integer:
         if isinstance(value, np.ndarray) and value.shape == ():
@@ -409,16 +410,17 @@ class _Discrete(SpaceKind):
         return check_value
 
     def codec(self, space: spaces.Discrete) -> Codec:
-        return _IntegerCodec(space.dtype.type)
+        return _IntegerCodec(space.dtype)
 
 
 class _IntegerCodec(Codec):
-    """Integers as msgpack integers; K of them as raw int64 bytes (a MultiDiscrete batch)."""
+    """Integers as msgpack integers; K of them as raw bytes of the space's dtype.
 
-    _BATCH = np.dtype("<i8")
+    (gymnasium's ``batch_space`` of a Discrete is a MultiDiscrete of that dtype.)
+    """
 
-    def __init__(self, native: type[np.integer]) -> None:
-        self.native = native
+    def __init__(self, dtype: np.dtype) -> None:
+        self.dtype, self.native = dtype, dtype.type
 
     def pack(self, value: Any) -> int:
         if isinstance(value, bool | np.bool_) or not isinstance(value, int | np.integer) and \
@@ -436,7 +438,7 @@ class _IntegerCodec(Codec):
         return self.native(wire)
 
     def join(self, packed: list[Any]) -> bytes:
-        return np.array(packed, self._BATCH).tobytes()
+        return np.array(packed, self.dtype).tobytes()
 
 
 # --- Tuple and Dict ---------------------------------------------------------------------------

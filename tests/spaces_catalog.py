@@ -23,6 +23,7 @@ TESTING_SPACES: list[spaces.Space] = [
     # Discrete
     spaces.Discrete(5),
     spaces.Discrete(3, start=-1),
+    spaces.Discrete(4, dtype=np.int32),
     # MultiDiscrete
     spaces.MultiDiscrete([3, 4, 2]),
     spaces.MultiDiscrete(np.array([5, 2]), start=np.array([-2, 10])),

@@ -107,3 +107,16 @@ def test_steps_in_columns_follow_the_clock_too(clock: ManualClock) -> None:
     assert columns.frames.tolist() == [info["frames"]] * 2
     assert columns.reward.tolist() == [reward] * 2
     assert [each["late"] for each in columns.info] == [info["late"]] * 2
+
+
+def test_every_answer_reports_the_ticks_since_the_previous_one(
+    live: LocalClient, clock: ManualClock
+) -> None:
+    """An observation answers for the ticks it saw too, so no tick goes unaccounted."""
+    live.reset(seed=0)
+    clock.advance(0.1)  # 6 ticks
+    observation = live._call(observation={"agent": {}})
+    assert observation.frames == 6 and observation.reward == 6.0
+    clock.advance(3 / 60)
+    _, reward, _, _, info = live.step(STILL)
+    assert info["frames"] == 3 and reward == 3.0

@@ -16,7 +16,7 @@ import pytest
 from conftest import Serve
 
 from rlenv.errors import ErrorCode
-from rlenv.protocol import Hello
+from rlenv.protocol import ErrorReply, Hello
 from rlenv.serving.endpoint import Endpoint, Limits
 from rlenv.testing import ManualClock, read_frame
 from rlenv_client import Client, ConnectionLost, RemoteEnv, RemoteError
@@ -291,3 +291,30 @@ def test_random_requests_get_one_answer_each_and_the_environment_stays_sane() ->
 
     run()
 
+
+
+def test_an_answer_that_cannot_travel_is_an_environment_error(serve: Serve) -> None:
+    """The client learns why instead of waiting; the server and the connection go on."""
+    with Client(*_address(serve("examples.faulty:UnsendableEnvironment")), timeout=10) as client:
+        client.reset(seed=0)
+        with pytest.raises(RemoteError, match="the answer could not be sent") as error:
+            client.step(1)
+        assert error.value.code == ErrorCode.ENVIRONMENT_ERROR and "set" in error.value.message
+        observation, *_ = client.step(0)
+        assert observation.tolist() == [2]
+
+
+def test_a_refused_request_takes_no_control(serve: Serve) -> None:
+    """Whole or in a batch's slot: another client may still take control afterwards."""
+    server = serve()
+    with Client(server.host, server.port, timeout=10) as first, \
+            Client(server.host, server.port, timeout=10) as second:
+        with pytest.raises(RemoteError, match="reset.seed"):
+            first.reset(seed=-1)
+        first.send_batch([first.reset_request(seed=-1)])
+        (refused,) = first.receive_batch()
+        assert isinstance(refused, ErrorReply) and refused.code == ErrorCode.BAD_REQUEST
+        second.reset(seed=1)  # not busy: the refusals took nothing
+        with pytest.raises(RemoteError) as busy:
+            first.reset(seed=1)
+        assert busy.value.code == ErrorCode.BUSY

@@ -164,3 +164,37 @@ def test_the_log_of_an_endless_episode_stays_bounded(monkeypatch: pytest.MonkeyP
         local.reset(seed=1)
         local.step(np.zeros(1, np.float32))
         assert len(local.snapshot()["events"]) == 1
+
+
+def test_a_snapshot_taken_after_one_agent_ended_restores() -> None:
+    """The log holds the actions of the agents still in the episode; the replay takes them."""
+    still = np.zeros(2, np.float32)
+    with LocalClient("examples.pair:PairEnvironment") as local, \
+            LocalClient("examples.pair:PairEnvironment") as other:
+        observation, _ = local.reset(seed=2)
+        info: dict[str, Any] = {"agents": {"Blue": {"terminated": False}}}
+        for _ in range(300):  # Blue chases its apple, Red stands still
+            if info["agents"]["Blue"]["terminated"]:
+                break
+            observation, _, _, _, info = local.step({"Blue": chase(observation["Blue"]),
+                                                     "Red": still})
+        assert info["agents"]["Blue"]["terminated"] and not info["agents"]["Red"]["terminated"]
+        red_only = {"Red": still}
+        local.step(red_only)
+        snapshot = local.snapshot()
+        assert "Blue" not in snapshot["events"][-1][1]
+        other.restore(snapshot)
+        for _ in range(3):
+            mine, theirs = local.step(red_only), other.step(red_only)
+            assert all(mine[0][n].tobytes() == theirs[0][n].tobytes() for n in NAMES)
+            assert mine[1:4] == theirs[1:4]
+
+
+def test_a_snapshot_asking_for_real_time_is_refused(client: Client) -> None:
+    client.reset(seed=2)
+    snapshot = client.snapshot()
+    snapshot["config"]["environment"]["real_time"] = True
+    with pytest.raises(RemoteError, match="replay in lockstep") as error:
+        client.restore(snapshot)
+    assert error.value.code == ErrorCode.BAD_REQUEST
+    assert client.get_property(".", "real_time") is False

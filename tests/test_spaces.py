@@ -112,7 +112,8 @@ def test_box_spec_keeps_infinite_bounds_and_dtype() -> None:
 
 def test_spec_is_plain_data() -> None:
     spec = space_to_spec(spaces.Dict({"a": spaces.Discrete(3, start=2)}))
-    assert spec == {"type": "Dict", "spaces": {"a": {"type": "Discrete", "n": 3, "start": 2}}}
+    assert spec == {"type": "Dict", "spaces": {"a": {"type": "Discrete", "n": 3, "start": 2,
+                                                     "dtype": "<i8"}}}
     assert type(spec["spaces"]["a"]["n"]) is int
 
 
@@ -120,6 +121,7 @@ def test_different_spaces_give_different_specs() -> None:
     a = space_from_spec(space_to_spec(spaces.Discrete(3)))
     b = space_from_spec(space_to_spec(spaces.Discrete(3, start=1)))
     assert a != b
+    assert space_from_spec(space_to_spec(spaces.Discrete(3, dtype=np.int32))).dtype == np.int32
     c = space_from_spec(space_to_spec(spaces.Box(0.0, 1.0, (2,), np.float32)))
     d = space_from_spec(space_to_spec(spaces.Box(0.0, 1.0, (2,), np.float64)))
     assert c != d

@@ -10,13 +10,15 @@ Serve one and drive it: ``rlenv serve examples.faulty:FaultyEnvironment``.
   a NaN observation, which the server refuses to send.
 - :class:`WrongShapeEnvironment`: observations that do not match the declared space, to see what
   ``rlenv check`` reports.
+- :class:`UnsendableEnvironment`: after action 1, ``info`` holds a value msgpack cannot carry;
+  the server answers with an ``environment_error`` instead.
 
 ## Action Space
-``Discrete(3)`` (Faulty, WrongShape) or ``Discrete(2)`` (Counting).
+``Discrete(3)`` (Faulty, WrongShape) or ``Discrete(2)`` (Counting, Unsendable).
 
 ## Observation Space
-``Box(0, 1000, (1,), int64)`` ticks since the reset (Faulty), ``Box(0, 1e9, (1,), float64)``
-(Counting).
+``Box(0, 1000, (1,), int64)`` ticks since the reset (Faulty, Unsendable),
+``Box(0, 1e9, (1,), float64)`` (Counting).
 
 ## Rewards
 0.5 per tick (Faulty); none otherwise.
@@ -70,6 +72,13 @@ class _ActionAgent(RLAgent):
         """Remember the action."""
         self.action = int(action)
 
+    @property
+    def ticks(self) -> int:
+        """The ticks the counting world processed since the reset."""
+        world = self.environment.world
+        assert isinstance(world, CountingWorld)
+        return world.ticks
+
 
 class FaultyAgent(_ActionAgent):
     """Raises inside the tick for action 1, inside get_data for action 2; ends at tick 10."""
@@ -83,18 +92,14 @@ class FaultyAgent(_ActionAgent):
 
     def _after_physics_tick(self, delta: float) -> None:
         self.add_reward(0.5)
-        world = self.environment.world
-        assert isinstance(world, CountingWorld)
-        if world.ticks >= 10:
+        if self.ticks >= 10:
             self.set_terminated()
 
     def get_data(self, observation_request: Mapping[str, Any]) -> np.ndarray:
         """Ticks since the reset; raises for action 2."""
         if self.action == 2:
             raise ValueError("no observation for action 2")
-        world = self.environment.world
-        assert isinstance(world, CountingWorld)
-        return np.array([world.ticks], dtype=np.int64)
+        return np.array([self.ticks], dtype=np.int64)
 
 
 class FaultyEnvironment(RLEnvironment):
@@ -131,9 +136,7 @@ class TickAgent(_ActionAgent):
 
     def get_data(self, observation_request: Mapping[str, Any]) -> np.ndarray:
         """Ticks since the reset, or NaN after action 1."""
-        world = self.environment.world
-        assert isinstance(world, CountingWorld)
-        return np.array([np.nan if self.action == 1 else world.ticks], dtype=np.float64)
+        return np.array([np.nan if self.action == 1 else self.ticks], dtype=np.float64)
 
 
 class CountingEnvironment(RLEnvironment):
@@ -143,3 +146,28 @@ class CountingEnvironment(RLEnvironment):
         super().__init__("Counting", repeat_action=50)
         self.add_child(TickAgent())
         self.add_child(CountingWorld())
+
+
+class UnsendableAgent(_ActionAgent):
+    """Two actions: 0 behaves, 1 makes the environment's info unsendable."""
+
+    action_space = spaces.Discrete(2)
+    observation_space = spaces.Box(0, 1000, (1,), np.int64)
+
+    def get_data(self, observation_request: Mapping[str, Any]) -> np.ndarray:
+        """Ticks since the reset."""
+        return np.array([self.ticks], dtype=np.int64)
+
+
+class UnsendableEnvironment(RLEnvironment):
+    """A counting world whose ``info`` holds a set (msgpack has none) after action 1."""
+
+    def __init__(self) -> None:
+        super().__init__("Unsendable", repeat_action=1)
+        self.add_child(UnsendableAgent())
+        self.add_child(CountingWorld())
+
+    def _get_info(self) -> dict[str, Any]:
+        """A set after action 1, which cannot travel; nothing otherwise."""
+        assert isinstance(self.agent, UnsendableAgent)
+        return {"odd": {1, 2}} if self.agent.action == 1 else {}

@@ -148,7 +148,8 @@ def frame(obj: Any) -> bytes:
 def unpack(body: bytes | memoryview) -> Any:
     """Decode one msgpack object that fills ``body`` exactly.
 
-    Strings are UTF-8 and map keys strings or numbers (msgpack's defaults); no container may
+    Strings are UTF-8 and map keys strings (msgpack's defaults: a frame with other keys is
+    refused); no container may
     declare more elements or bytes than ``body`` holds (msgpack bounds each by the body's
     length, so a frame cannot make the decoder allocate more than the frame limit allows).
 

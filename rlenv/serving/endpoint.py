@@ -435,8 +435,19 @@ class Endpoint:
               why_fatal: str = "error reply closed the connection") -> None:
         """Send ``message``; a fatal error reply then closes the connection (``why_fatal``)."""
         try:
-            peer.sock.sendall(peer.connection.send(message))
-        except LocalProtocolError as error:  # e.g. the client hung up in the middle of a frame
+            try:
+                data = peer.connection.send(message)
+            except (TypeError, LocalProtocolError) as error:
+                if message.__class__ is ErrorReply or message.id is None:
+                    raise
+                # A value in the answer that cannot travel, or an answer over the frame
+                # limit: the client learns why instead of waiting for an answer.
+                logger.error("answer to %s not sent: %s", peer.address, error)
+                data = peer.connection.send(ErrorReply(
+                    message.id, ErrorCode.ENVIRONMENT_ERROR,
+                    f"the answer could not be sent: {error}"))
+            peer.sock.sendall(data)
+        except (TypeError, LocalProtocolError) as error:
             logger.warning("not sent to %s: %s", peer.address, error)
         except OSError as error:
             logger.info("client %s: send failed: %s", peer.address, error)

@@ -54,6 +54,8 @@ class Prepared:
     @property
     def takes_control(self) -> bool:
         """Whether the request changes the environment (only its controller may send it)."""
+        if self.part is not None:
+            return self.part.takes_control(self.request, self.checked)
         return takes_control(self.request.parts)
 
 
@@ -139,7 +141,7 @@ class Host:
             return Response(request.id)  # nothing asked (the token, say)
         else:
             reply = self.instances[0].serve(prepared.checked, request.id)
-        if "config" in parts or "batch" in parts:  # the parts that may switch real time
+        if "config" in parts or "batch" in parts or "restore" in parts:  # may switch real time
             self._clocked = self._in_real_time()
         return reply
 

@@ -289,13 +289,15 @@ class Instance:
         if self.state is Episode.ENDED:
             raise RequestError(ErrorCode.RESET_REQUIRED, "the episode has ended; reset first")
 
-    def checked_action(self, action: Any, fresh: bool, where: str = "") -> Any:
+    def checked_action(self, action: Any, fresh: bool, where: str = "",
+                       replayed: bool = False) -> Any:
         """``action`` in its space's native form.
 
         With several agents, the action is a map from agent name to action for every agent
         still in the episode (every agent when ``fresh``: a reset comes first); actions for
         agents whose episode ended are ignored, so that a client holding the joint ``Dict``
-        action space may keep sending them (PettingZoo's convention).
+        action space may keep sending them (PettingZoo's convention). A ``replayed`` action
+        (from a snapshot's log) holds the agents that were still in the episode: any of them.
 
         Raises:
             RequestError: ``invalid_action``, the message prefixed with ``where``.
@@ -309,7 +311,10 @@ class Instance:
             unknown = sorted(map(str, action.keys() - self._check_actions.keys()))
             if unknown:
                 raise SpaceMismatch(f"action for unknown agent {unknown[0]!r}")
-            live = [a.name for a in self.agents if fresh or not (a.terminated or a.truncated)]
+            if replayed:
+                live = [a.name for a in self.agents if a.name in action]
+            else:
+                live = [a.name for a in self.agents if fresh or not (a.terminated or a.truncated)]
             missing = sorted(set(live) - action.keys())
             if missing:
                 raise SpaceMismatch(f"no action for agent {missing[0]!r}")
@@ -442,7 +447,7 @@ class Instance:
         if answer.info:
             info = {**info, **answer.info}
         return Response(reply_id, answer.observation, reward, terminated, truncated, info,
-                        frames if answer.acted else 0, outcomes)
+                        frames, outcomes)
 
     def environment_error(self, reply_id: int, error: BaseException) -> ErrorReply:
         """The ``environment_error`` answer for an exception in user code (its traceback in it).

@@ -225,13 +225,17 @@ class Restore(Part):
               where: str) -> Any:
         snapshot = parse_snapshot(_map(parts["restore"], "restore", where))
         _need_lockstep(instance)
+        for config in [snapshot["config"]] + [e[1] for e in snapshot["events"] if e[0] == "config"]:
+            settings = config.get("environment")
+            if isinstance(settings, Mapping) and settings.get("real_time"):
+                raise _bad("restore: snapshots replay in lockstep; this one asks for real time")
         instance.check_config(snapshot["config"])
         actions = []
         for index, event in enumerate(snapshot["events"]):
             if event[0] == "config":
                 instance.check_config(event[1])
             elif event[0] == "action":
-                actions.append(instance.checked_action(event[1], fresh=True,
+                actions.append(instance.checked_action(event[1], fresh=True, replayed=True,
                                                        where=f"restore: events[{index}]: "))
         return snapshot, actions, generator_from_state(snapshot["rng"])
 
@@ -325,6 +329,10 @@ class HostPart:
         """Whether this part, with this value, takes control."""
         return True
 
+    def takes_control(self, request: Request, checked: Any) -> bool:
+        """Whether the checked request takes control (refused parts of it take none)."""
+        return self.controls(request.parts[self.name])
+
     def check(self, host: Host, request: Request) -> Any:
         """Check the whole request before any instance moves; what :meth:`run` needs.
 
@@ -346,6 +354,10 @@ class Batch(HostPart):
     def controls(self, value: Any) -> bool:
         return isinstance(value, list) and any(
             isinstance(part, Mapping) and takes_control(part) for part in value)
+
+    def takes_control(self, request: Request, checked: Any) -> bool:
+        return any(plan.__class__ is list and takes_control(parts)
+                   for parts, plan in zip(request.parts["batch"], checked, strict=False))
 
     def check(self, host: Host, request: Request) -> Any:
         batch = request.parts["batch"]

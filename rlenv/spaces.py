@@ -217,7 +217,7 @@ def _bounds_test(low: np.ndarray, high: np.ndarray, dtype: np.dtype) -> Callable
         lo, hi = lows[0], highs[0]
 
         def one(array: np.ndarray) -> bool:
-            (v,) = array.reshape(-1).tolist()
+            v = array.item()
             return lo <= v <= hi and not (test_finite and not math.isfinite(v))
         return one
     if len(lows) <= _SMALL:
@@ -337,8 +337,7 @@ class _ArrayCodec(Codec):
         self.size = int(np.prod(shape, dtype=np.int64))
         self.nbytes = self.size * dtype.itemsize
         self.floats = dtype.kind in "fc"
-        # Small arrays of narrow floats: their sum in double precision cannot overflow, so it
-        # is finite exactly when every element is (one Python sum, no numpy reduction).
+        # Small arrays of narrow floats are checked by one Python sum, no numpy reduction.
         self.narrow = dtype.kind == "f" and dtype.itemsize <= 4 and self.size <= _SMALL
         self.flat = len(shape) == 1  # frombuffer's own shape
 
@@ -353,10 +352,15 @@ class _ArrayCodec(Codec):
                 raise SpaceMismatch(f"is not an array of {self.dtype}: {exc}") from None
             if array.shape != self.shape:
                 raise SpaceMismatch(f"has shape {array.shape}, its space declares {self.shape}")
-        if self.floats and not (self.narrow and math.isfinite(sum(array.reshape(-1).tolist()))
-                                or find_non_finite(array) is None):
-            where = find_non_finite(array)
-            raise SpaceMismatch(f"{where} is not finite" if where else "is not finite")
+        if self.floats:
+            if self.narrow:  # a double-precision sum of narrow floats cannot overflow
+                flat = array if self.flat else array.reshape(-1)
+                finite = math.isfinite(sum(flat.tolist()))
+            else:
+                finite = find_non_finite(array) is None
+            if not finite:
+                where = find_non_finite(array)
+                raise SpaceMismatch(f"{where} is not finite" if where else "is not finite")
         return array.tobytes()
 
     def pack_exact(self, value: Any) -> Any:

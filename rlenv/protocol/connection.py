@@ -294,8 +294,11 @@ class Connection:
         return CONNECTION_CLOSED
 
     def _reply(self, wire: dict[str, Any]) -> Message:
-        if "error" in wire:
-            reply: Message = ErrorReply.from_wire(wire)
+        if "reward" in wire and self.state is _READY:  # a response: the usual case
+            reply: Message = Response.from_wire(wire)
+            event = _RECEIVE_REPLY
+        elif "error" in wire:
+            reply = ErrorReply.from_wire(wire)
             event = _RECEIVE_FATAL_ERROR if reply.fatal else _RECEIVE_REPLY
         elif self.state is _AWAIT:
             if "hello" not in wire:

@@ -6,8 +6,9 @@ Prints, in one run, each figure beside its floor (rounds taken in turns, medians
   (:meth:`rlenv.serving.host.Host.answer`: checks, plan, tree, timer, answer) against the
   floor: what a hand-written server does for the same step (decode the action from its bytes,
   the agent's ``set_action``, per tick ``_physics_process``, ``space.step`` and
-  ``_after_physics_tick``, then ``get_data`` and the observation's bytes), at repeat_action 1
-  and ``REPEAT``; per tick is the slope over the extra ticks, per request the rest;
+  ``_after_physics_tick``, then ``get_data`` and the observation's bytes), at repeat_action 1,
+  ``REPEAT`` and ``LONG``; per tick is the slope over the extra ticks of ``LONG``, per request
+  the rest at repeat 1;
 - **the codec, both ends**: the client building the step request and its frame, the server
   reading it, the server's answer as a frame, the client reading it into gymnasium's 5-tuple;
   against plain msgpack doing the same with ``tobytes`` / ``frombuffer``;
@@ -33,6 +34,7 @@ from rlenv_client.base import BaseClient
 STEPS = 20_000
 ROUNDS = 7
 REPEAT = 4
+LONG = 12  # the repeat whose extra ticks give the cost per tick
 INSTANCES = 32
 # No push and a pole allowed to swing all the way round: one episode for the whole run, so
 # every figure is a step and none a reset.
@@ -153,37 +155,33 @@ class _Client(BaseClient):
 def main() -> None:
     """Measure and print every figure."""
     host = _host()
-    (floor_n, floor_n_min), (floor_1, floor_1_min), (step_n, step_n_min), (step_1, step_1_min) = \
-        _per_step(_floor(host, REPEAT), _floor(host, 1), _through(host, REPEAT),
-                  _through(host, 1))
-    tick = (step_n - step_1 - floor_n + floor_1) / (REPEAT - 1)
-    request = (step_1 - floor_1) - tick
-    tick_min = (step_n_min - step_1_min - floor_n_min + floor_1_min) / (REPEAT - 1)
-    request_min = (step_1_min - floor_1_min) - tick_min
-    ours, plain = _codecs(host)
-    (codec, codec_min), (bare, bare_min) = _per_step(ours, plain)
+    repeats = (1, REPEAT, LONG)
+    measured = _per_step(*(_floor(host, n) for n in repeats), *(_through(host, n) for n in repeats))
+    floors, steps = dict(zip(repeats, measured[:3], strict=True)), \
+        dict(zip(repeats, measured[3:], strict=True))
     print(f"CartPole in this process, microseconds per step (median and min of {ROUNDS} rounds "
           "taken in turns)")
-    print(f"  floor, repeat {REPEAT} (a hand-written server's work)   {floor_n:7.2f}  "
-          f"(min {floor_n_min:.2f})")
-    print(f"  through the host, repeat {REPEAT}                       {step_n:7.2f}  "
-          f"(min {step_n_min:.2f})   {step_n / floor_n:.2f}x floor")
-    print(f"  floor, repeat 1                                    {floor_1:7.2f}  "
-          f"(min {floor_1_min:.2f})")
-    print(f"  through the host, repeat 1                          {step_1:7.2f}  "
-          f"(min {step_1_min:.2f})   {step_1 / floor_1:.2f}x floor")
-    print(f"  framework per tick (above the floor's tick)         {tick:7.2f}  "
-          f"(from the minimums {tick_min:.2f})")
-    print(f"  framework per request (above the floor's request)   {request:7.2f}  "
-          f"(from the minimums {request_min:.2f})")
-    print(f"  codec, both ends of a step                          {codec:7.2f}  "
-          f"(min {codec_min:.2f})   {codec / bare:.2f}x plain msgpack ({bare:.2f})")
+    for n in repeats:
+        (floor, floor_min), (step, step_min) = floors[n], steps[n]
+        print(f"  repeat {n:<2}  floor (a hand-written server's work) {floor:7.2f} (min "
+              f"{floor_min:.2f})   through the host {step:7.2f} (min {step_min:.2f})   "
+              f"{step / floor:.2f}x floor")
+    for which, label in ((0, "medians"), (1, "minimums")):
+        # Per tick: the slope over the extra ticks of LONG; per request: the rest at repeat 1.
+        tick = (steps[LONG][which] - steps[1][which] - floors[LONG][which] + floors[1][which]) \
+            / (LONG - 1)
+        request = steps[1][which] - floors[1][which] - tick
+        print(f"  framework above the floor, from the {label:8}: {tick:5.2f} per tick, "
+              f"{request:5.2f} per request")
+    ours, plain = _codecs(host)
+    (codec, codec_min), (bare, bare_min) = _per_step(ours, plain)
+    print(f"  codec, both ends of a step: {codec:.2f} (min {codec_min:.2f}), "
+          f"{codec / bare:.2f}x plain msgpack ({bare:.2f}, min {bare_min:.2f})")
     columns, columns_floor = _column_step()
     print(f"column step of {INSTANCES} instances, repeat_action 1, microseconds per instance")
-    print(f"  floor                                               {columns_floor[0]:7.2f}  "
-          f"(min {columns_floor[1]:.2f})")
-    print(f"  through the host (steps request)                    {columns[0]:7.2f}  "
-          f"(min {columns[1]:.2f})   {columns[0] / columns_floor[0]:.2f}x floor")
+    print(f"  floor {columns_floor[0]:.2f} (min {columns_floor[1]:.2f})   through the host "
+          f"(steps request) {columns[0]:.2f} (min {columns[1]:.2f})   "
+          f"{columns[0] / columns_floor[0]:.2f}x floor")
 
 
 def _column_step() -> tuple[tuple[float, float], tuple[float, float]]:

@@ -12,22 +12,81 @@ median of the per-round ratios.
 
 The work differs by design: rlenv's CartPole has a continuous action (a Gaussian policy) and
 runs 4 pymunk ticks per step, CartPole-v1 a discrete one and one Euler step. The figure says how
-much of a trainer's time the environment costs, not how fast two equal simulations run.
+much of a trainer's time the environment costs, not how fast two equal simulations run. A third
+model trains on the hand-written CartPole server (``examples.handwritten``: the same pymunk
+work, a raw msgpack client in a ``gymnasium.Env``): the floor of any environment served over a
+socket on the same machine, so that rlenv's ratio can be read against it.
 Threads: torch's default (``torch.set_num_threads`` is not called).
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
+import socket
 import statistics
+import struct
+import subprocess
+import sys
 import time
 from typing import Any
 
 import gymnasium as gym
+import msgpack
+import numpy as np
 
 import rlenv_client  # noqa: F401  (registers rlenv/CartPole-v0)
+from examples.cartpole import CartPoleAgent
 
-ENVIRONMENTS = ("rlenv/CartPole-v0", "CartPole-v1")
+ENVIRONMENTS = ("rlenv/CartPole-v0", "CartPole-v1", "handwritten/CartPole-v0")
+_PREFIX = struct.Struct(">I")
+
+
+class HandWrittenCartPole(gym.Env):
+    """The hand-written CartPole server (``python -m examples.handwritten``) as a gymnasium env.
+
+    A raw client: one msgpack frame out, one in, the observation copied out of its bytes.
+    """
+
+    action_space = CartPoleAgent.action_space
+    observation_space = CartPoleAgent.observation_space
+
+    def __init__(self) -> None:
+        self.process = subprocess.Popen([sys.executable, "-m", "examples.handwritten"],
+                                        stdout=subprocess.PIPE, text=True)
+        assert self.process.stdout is not None
+        host, _, port = self.process.stdout.readline().split()[-1].rpartition(":")
+        self.sock = socket.create_connection((host, int(port)))
+        self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self.ids = itertools.count(1)
+
+    def _call(self, request: dict[str, Any]) -> dict[str, Any]:
+        body = msgpack.packb({"id": next(self.ids), **request})
+        self.sock.sendall(_PREFIX.pack(len(body)) + body)
+        data = self.sock.recv(65536)
+        while len(data) < 4 or len(data) < 4 + _PREFIX.unpack_from(data)[0]:
+            data += self.sock.recv(65536)
+        return msgpack.unpackb(data[4:])
+
+    def reset(self, *, seed: int | None = None,
+              options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        reply = self._call({"reset": {} if seed is None else {"seed": seed}})
+        return np.frombuffer(reply["observation"], np.float32).copy(), {}
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        reply = self._call({"action": np.asarray(action, np.float32).tobytes(),
+                            "repeat_action": 4})
+        return (np.frombuffer(reply["observation"], np.float32).copy(), reply["reward"],
+                reply["terminated"], reply["truncated"], {"frames": reply["frames"]})
+
+    def close(self) -> None:
+        self.sock.close()
+        self.process.kill()
+        self.process.wait()
+
+
+gym.register("handwritten/CartPole-v0", entry_point=HandWrittenCartPole, max_episode_steps=500)
 
 
 def make_model(env_id: str) -> Any:
@@ -66,17 +125,20 @@ def measure(rounds: int, steps: int) -> tuple[dict[str, list[float]], int]:
 
 def report(rates: dict[str, list[float]], steps: int) -> str:
     """The table: min and median steps/s of each environment, and the ratios."""
-    ours, theirs = (rates[env_id] for env_id in ENVIRONMENTS)
+    ours, native, floor = (rates[env_id] for env_id in ENVIRONMENTS)
     lines = [f"SB3 PPO, default hyperparameters, 1 env, learn({steps}) per round, "
              f"{len(ours)} rounds in turns",
-             f"{'environment':<22}{'min steps/s':>14}{'median steps/s':>17}"]
+             f"{'environment':<26}{'min steps/s':>14}{'median steps/s':>17}"]
     for env_id in ENVIRONMENTS:
-        lines.append(f"{env_id:<22}{min(rates[env_id]):>14,.0f}"
+        lines.append(f"{env_id:<26}{min(rates[env_id]):>14,.0f}"
                      f"{statistics.median(rates[env_id]):>17,.0f}")
-    per_round = [mine / base for mine, base in zip(ours, theirs, strict=True)]
-    lines.append(f"ratio rlenv / gymnasium: of the medians "
-                 f"{statistics.median(ours) / statistics.median(theirs):.3f}; per round min "
-                 f"{min(per_round):.3f}, median {statistics.median(per_round):.3f}")
+    for name, mine, base in (("rlenv / gymnasium", ours, native),
+                             ("hand-written / gymnasium", floor, native),
+                             ("rlenv / hand-written", ours, floor)):
+        per_round = [a / b for a, b in zip(mine, base, strict=True)]
+        lines.append(f"ratio {name}: of the medians "
+                     f"{statistics.median(mine) / statistics.median(base):.3f}; per round min "
+                     f"{min(per_round):.3f}, median {statistics.median(per_round):.3f}")
     return "\n".join(lines)
 
 

@@ -27,8 +27,9 @@ REPEAT = 4
 class RawClient:
     """``python -m examples.handwritten`` in a subprocess, and a raw msgpack client to it."""
 
-    def __init__(self) -> None:
-        self.process = subprocess.Popen([sys.executable, "-m", "examples.handwritten"],
+    def __init__(self, instances: int = 1) -> None:
+        self.process = subprocess.Popen([sys.executable, "-m", "examples.handwritten",
+                                         str(instances)],
                                         stdout=subprocess.PIPE, text=True)
         assert self.process.stdout is not None
         line = self.process.stdout.readline()
@@ -193,3 +194,38 @@ def _compare(rlenv: Any, hand_written: Any, seed: int,
         ended_now = bool(got["terminated"])
         ended += ended_now
     return ended
+
+
+def test_hand_written_columns_step_each_cartpole_as_alone() -> None:
+    """``python -m examples.handwritten 3``: one request steps or resets three CartPoles, each
+    exactly as a lone CartPole given its column of the request."""
+    from examples.handwritten import CartPole
+
+    alone = [CartPole() for _ in range(3)]
+    for seed, cartpole in enumerate(alone):
+        cartpole.reset(seed)
+    raw = RawClient(3)
+    try:
+        resets, ended = [False, False, False], 0
+        for number, action in enumerate(_actions(4)[:60]):
+            actions = np.array([action[0], -action[0], 0.5 * action[0]], np.float32)
+            reply = raw.call(action=actions.tobytes(), reset=resets, repeat_action=REPEAT)
+            observations = reply["observation"].reshape(3, 5)
+            rewards = np.frombuffer(reply["reward"], np.float64)
+            frames = np.frombuffer(reply["frames"], np.int64)
+            for index, cartpole in enumerate(alone):
+                if resets[index]:
+                    cartpole.reset()
+                    expected = {"reward": 0.0, "terminated": False, "frames": 0}
+                else:
+                    expected = cartpole.answer({"id": number, "action": actions[index:index + 1]
+                                                .tobytes(), "repeat_action": REPEAT})
+                assert observations[index].tobytes() == cartpole.observe(), (number, index)
+                assert (rewards[index], bool(reply["terminated"][index]), frames[index]) == \
+                    (expected["reward"], expected["terminated"], expected["frames"])
+            resets = [bool(fell) for fell in reply["terminated"]]
+            ended += sum(resets)
+        assert ended >= 3  # columns were reset, and stepped again
+    finally:
+        raw.close()
+    assert raw.process.returncode == 0

@@ -101,7 +101,9 @@ def test_bench_prints_every_figure_with_its_baseline(tmp_path: Path) -> None:
     figures = {figure["name"]: figure for figure in json.loads(out.read_text())}
     for name in ("msgpack ping-pong over loopback", "remote CartPole Client.step (repeat 4)",
                  "remote 84x84x3 observation step", "gymnasium AsyncVectorEnv(8) CartPole-v1",
-                 "RemoteVectorEnv 64 envs, 2 servers x 32", "p99 remote step latency (repeat 4)",
+                 "RemoteVectorEnv 64 envs, 2 servers x 32 (repeat 1, zero actions)",
+                 "make_vec('rlenv/CartPole-v0', 64) against the floor",
+                 "p99 remote step latency (repeat 4)",
                  "one more CartPole instance in a process"):
         assert name in figures and figures[name]["value"] > 0, name
         assert name in result.stdout

@@ -19,7 +19,9 @@ measured under the same conditions however the machine's speed drifts during the
   CartPoles in this process, ``in_process=True``, against it too);
 - (i) ``gymnasium.make_vec("rlenv/CartPole-v0", num_envs=64)`` with its default options (the
   default layout and repeat_action 4, episodes ending and autoresetting) on random actions,
-  against (f);
+  against (f), and against (j): the hand-written servers (``python -m examples.handwritten 32``,
+  one per core, a raw client sending every server its column of actions and reset flags) doing
+  the same work: the floor of a vector step;
 - (g) p50 / p99 latency of a remote step against the ping-pong's;
 - (h) memory of one server process, and per extra environment instance in one process.
 
@@ -203,8 +205,8 @@ class _HandWritten:
     receive the whole answer, unpack it, copy the observation out of its bytes.
     """
 
-    def __init__(self) -> None:
-        self.process = subprocess.Popen([sys.executable, "-m", HAND_WRITTEN],
+    def __init__(self, instances: int = 1) -> None:
+        self.process = subprocess.Popen([sys.executable, "-m", HAND_WRITTEN, str(instances)],
                                         stdout=subprocess.PIPE, text=True)
         try:
             assert self.process.stdout is not None
@@ -242,6 +244,44 @@ class _HandWritten:
 
     def __exit__(self, *exc_info: object) -> None:
         self.close()
+
+
+class _HandWrittenVector:
+    """``servers`` hand-written servers of ``instances`` CartPoles each, stepped in columns.
+
+    What a vector of hand-written servers does and no more: send every server its actions and
+    reset flags, then gather the observations into one batch; a CartPole whose pole fell is
+    reset on its next step (gymnasium's ``NEXT_STEP`` autoreset).
+    """
+
+    def __init__(self, servers: int, instances: int) -> None:
+        self.instances = instances
+        self.servers: list[_HandWritten] = []
+        try:
+            for _ in range(servers):
+                self.servers.append(_HandWritten(instances))
+        except BaseException:
+            self.close()
+            raise
+        self.resets = [[False] * instances for _ in self.servers]
+        self.observations = np.zeros((servers * instances, 5), np.float32)
+
+    def step(self, actions: np.ndarray) -> None:
+        """One vector step of ``actions`` (one float32 per CartPole)."""
+        count = self.instances
+        for index, server in enumerate(self.servers):
+            server.sock.sendall(_frame({"id": 1, "action": actions[index * count:(index + 1) *
+                                                                   count].tobytes(),
+                                        "reset": self.resets[index], "repeat_action": 4}))
+        for index, server in enumerate(self.servers):
+            reply = msgpack.unpackb(_receive_frame(server.sock))
+            self.observations[index * count:(index + 1) * count] = \
+                np.frombuffer(reply["observation"], np.float32).reshape(count, 5)
+            self.resets[index] = [bool(fell) for fell in reply["terminated"]]
+
+    def close(self) -> None:
+        for server in self.servers:
+            server.close()
 
 
 def _step_request(action: np.ndarray | int) -> bytes:
@@ -350,11 +390,35 @@ def _image_steps(rounds: int, steps: int) -> Figure:
 
 
 def _vectors(rounds: int, steps: int, quick: bool) -> list[Figure]:
-    """Figures (e, f, i)."""
+    """Figures (e, f, i, j): make_vec and its floor first, alone with AsyncVectorEnv."""
     import gymnasium
 
     from rlenv_client import RemoteVectorEnv
+    from rlenv_client.vector import default_layout
 
+    theirs = "AsyncVectorEnv(8) CartPole-v1"
+    layout = default_layout(64)
+    floor_name = f"hand-written {len(layout)} servers x {layout[0]} CartPoles"
+    batches = max(steps // 16, 50)  # vector steps per round: enough for episodes to end
+    with contextlib.ExitStack() as stack:
+        async_envs = gymnasium.vector.AsyncVectorEnv([lambda: gymnasium.make("CartPole-v1")] * 8)
+        stack.callback(async_envs.close)
+        made = gymnasium.make_vec("rlenv/CartPole-v0", num_envs=64)
+        stack.callback(made.close)
+        floor = _HandWrittenVector(len(layout), layout[0])  # as make_vec lays them out
+        stack.callback(floor.close)
+        async_rate, made_rate, floor_rate = _interleaved(
+            rounds, _Rate(_random_steps(async_envs), batches * 8, scale=8),
+            _Rate(_random_steps(made), batches, scale=64),
+            _Rate(_random_steps_of(floor.step, made), batches, scale=64))
+    figures = [
+        Figure(f"gymnasium {theirs}", async_rate, "env-steps/s"),
+        Figure(f"{floor_name}, raw client", floor_rate, "env-steps/s", theirs, async_rate),
+        Figure("gymnasium.make_vec('rlenv/CartPole-v0', num_envs=64)", made_rate, "env-steps/s",
+               theirs, async_rate),
+        Figure("make_vec('rlenv/CartPole-v0', 64) against the floor", made_rate, "env-steps/s",
+               floor_name, floor_rate),
+    ]
     served = [(4, 1), (8, 4), (64, 32)] if quick else \
         [(1, 1), (2, 1), (4, 1), (8, 1), (8, 4), (64, 32), (64, 64)]
     layouts: list[tuple[str, int, dict[str, Any]]] = [
@@ -365,38 +429,35 @@ def _vectors(rounds: int, steps: int, quick: bool) -> list[Figure]:
         async_envs = gymnasium.vector.AsyncVectorEnv([lambda: gymnasium.make("CartPole-v1")] * 8)
         stack.callback(async_envs.close)
         measures = [_Rate(_random_steps(async_envs), steps // 4, scale=8)]
-        made = gymnasium.make_vec("rlenv/CartPole-v0", num_envs=64)
-        stack.callback(made.close)
-        measures.append(_Rate(_random_steps(made), max(steps // 64, 20), scale=64))
-        for _, count, layout in layouts:
+        for _, count, place in layouts:
             envs = stack.enter_context(RemoteVectorEnv(count, CARTPOLE, repeat_action=1,
-                                                       **layout))
+                                                       **place))
             envs.reset(seed=0)
             batch = np.zeros((count, 1), np.float32)
             measures.append(_Rate(_calls(lambda envs=envs, batch=batch: envs.step(batch)),
                                   max(steps // count, 20), scale=count))
-        async_rate, made_rate, *vector_rates = _interleaved(rounds, *measures)
-    theirs = "AsyncVectorEnv(8) CartPole-v1"
-    figures = [
-        Figure(f"gymnasium {theirs}", async_rate, "env-steps/s"),
-        Figure("gymnasium.make_vec('rlenv/CartPole-v0', num_envs=64)", made_rate, "env-steps/s",
-               theirs, async_rate),
-    ]
+        async_rate, *vector_rates = _interleaved(rounds, *measures)
     for (name, _, _), rate in zip(layouts, vector_rates, strict=True):
-        figures.append(Figure(f"RemoteVectorEnv {name}", rate, "env-steps/s", theirs,
-                              async_rate))
+        figures.append(Figure(f"RemoteVectorEnv {name} (repeat 1, zero actions)", rate,
+                              "env-steps/s", theirs, async_rate))
     return figures
 
 
 def _random_steps(envs: Any, batches: int = 64) -> Callable[[int], None]:
     """``run(n)``: ``n`` steps of the vector ``envs`` (reset with seed 0) on random actions."""
     envs.reset(seed=0)
+    return _random_steps_of(envs.step, envs, batches)
+
+
+def _random_steps_of(step: Callable[[Any], object], envs: Any,
+                     batches: int = 64) -> Callable[[int], None]:
+    """``run(n)``: ``n`` calls of ``step`` with random actions of the vector ``envs``."""
     envs.action_space.seed(0)
     actions = [envs.action_space.sample() for _ in range(batches)]
 
     def run(n: int) -> None:
         for i in range(n):
-            envs.step(actions[i % batches])
+            step(actions[i % batches])
     return run
 
 

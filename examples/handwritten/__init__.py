@@ -14,8 +14,9 @@ The answer holds ``id``, ``observation`` (5 float32 as raw bytes), ``reward``, `
 
 What rlenv adds to this is everything else: checked requests and actions, errors that name
 what is wrong, spaces, several clients, multi-instance servers, snapshots, inspection,
-rendering, recording, real time. Run ``python -m examples.handwritten``: it prints
-``listening on HOST:PORT`` and exits when its client disconnects.
+rendering, recording, real time. Run ``python -m examples.handwritten [K]``: it prints
+``listening on HOST:PORT`` and exits when its client disconnects; with K, it serves K CartPoles
+stepped in columns (:class:`CartPoles`), the floor of a vector step.
 """
 
 from __future__ import annotations
@@ -23,13 +24,14 @@ from __future__ import annotations
 import math
 import socket
 import struct
+import sys
 from typing import Any
 
 import msgpack
 import numpy as np
 import pymunk
 
-__all__ = ["CartPole", "main", "serve"]
+__all__ = ["CartPole", "CartPoles", "main", "serve"]
 
 TICK = 1.0 / 60
 MAX_FORCE = 10.0
@@ -112,23 +114,59 @@ def _receive(conn: socket.socket, size: int) -> bytes | None:
     return data
 
 
-def serve(listener: socket.socket) -> None:
-    """Answer one client's requests until it disconnects."""
+class CartPoles:
+    """K CartPoles answering one request in columns: the floor of a vector step.
+
+    A request holds ``action`` (K float32 as raw bytes) and ``reset`` (K booleans: reset these
+    instead of stepping them); the answer holds K observations, rewards (float64), flags (one
+    byte each) and tick counts (int64), each column as raw bytes.
+    """
+
+    def __init__(self, count: int) -> None:
+        self.poles = [CartPole() for _ in range(count)]
+        for seed, pole in enumerate(self.poles):
+            pole.reset(seed)
+
+    def answer(self, request: dict[str, Any]) -> dict[str, Any]:
+        """Reset or step every CartPole; the columns."""
+        actions, resets = request["action"], request["reset"]
+        observations, rewards, fell, frames = [], [], [], []
+        for index, (pole, reset) in enumerate(zip(self.poles, resets, strict=True)):
+            if reset:
+                pole.reset()
+                outcome = (0.0, False, 0)
+            else:
+                outcome = pole.step(actions[4 * index:4 * index + 4], request["repeat_action"])
+            observations.append(pole.observe())
+            rewards.append(outcome[0])
+            fell.append(outcome[1])
+            frames.append(outcome[2])
+        return {"id": request["id"], "observation": b"".join(observations),
+                "reward": np.array(rewards).tobytes(), "terminated": bytes(fell),
+                "frames": np.array(frames).tobytes()}
+
+
+def serve(listener: socket.socket, instances: int = 1) -> None:
+    """Answer one client's requests until it disconnects (K CartPoles in columns if K > 1)."""
     conn, _ = listener.accept()
     conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-    cartpole = CartPole()
+    served = CartPole() if instances == 1 else CartPoles(instances)
     with conn:
         while (header := _receive(conn, 4)) is not None:
             body = _receive(conn, struct.unpack(">I", header)[0])
             if body is None:
                 return
-            reply = msgpack.packb(cartpole.answer(msgpack.unpackb(body)))
+            reply = msgpack.packb(served.answer(msgpack.unpackb(body)))
             conn.sendall(struct.pack(">I", len(reply)) + reply)
 
 
 def main() -> None:
-    """Listen on 127.0.0.1 (a free port), say where, serve one client."""
+    """Listen on 127.0.0.1 (a free port), say where, serve one client.
+
+    ``python -m examples.handwritten K`` serves K CartPoles in columns.
+    """
+    instances = int(sys.argv[1]) if len(sys.argv) > 1 else 1
     with socket.create_server(("127.0.0.1", 0)) as listener:
         host, port = listener.getsockname()[:2]
         print(f"listening on {host}:{port}", flush=True)
-        serve(listener)
+        serve(listener, instances)

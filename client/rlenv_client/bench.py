@@ -461,20 +461,26 @@ def _random_steps_of(step: Callable[[Any], object], envs: Any,
     return run
 
 
-def _instance_kib(count: int = 50) -> float:
-    """Resident memory per extra CartPole instance, each in its own tree, in this process."""
-    from rlenv_client import LocalClient
+_INSTANCE_MEMORY = """
+import os, sys
+from rlenv_client import LocalClient
+from rlenv_client.bench import _rss_kib
+first = LocalClient(sys.argv[1])
+first.reset(seed=0)
+before = _rss_kib(os.getpid())
+extra = [LocalClient(sys.argv[1]) for _ in range(int(sys.argv[2]))]
+for instance in extra:
+    instance.reset(seed=0)
+print((_rss_kib(os.getpid()) - before) / len(extra))
+"""
 
-    first = LocalClient(CARTPOLE)
-    first.reset(seed=0)
-    before = _rss_kib(os.getpid())
-    extra = [LocalClient(CARTPOLE) for _ in range(count)]
-    for instance in extra:
-        instance.reset(seed=0)
-    after = _rss_kib(os.getpid())
-    for instance in [first, *extra]:
-        instance.close()
-    return (after - before) / count
+
+def _instance_kib(count: int = 50) -> float:
+    """Resident memory per extra CartPole instance, each in its own tree, in a fresh process
+    (in this one, memory freed by the other figures would hold them)."""
+    output = subprocess.run([sys.executable, "-c", _INSTANCE_MEMORY, CARTPOLE, str(count)],
+                            capture_output=True, text=True, check=True, timeout=120).stdout
+    return float(output)
 
 
 def format_table(figures: list[Figure]) -> str:

@@ -22,68 +22,41 @@ Threads: torch's default (``torch.set_num_threads`` is not called).
 from __future__ import annotations
 
 import argparse
-import itertools
-import socket
 import statistics
-import struct
-import subprocess
-import sys
 import time
 from typing import Any
 
 import gymnasium as gym
-import msgpack
 import numpy as np
 
 import rlenv_client  # noqa: F401  (registers rlenv/CartPole-v0)
 from examples.cartpole import CartPoleAgent
+from rlenv_client.bench import HandWrittenServer
 
 ENVIRONMENTS = ("rlenv/CartPole-v0", "CartPole-v1", "handwritten/CartPole-v0")
-_PREFIX = struct.Struct(">I")
 
 
 class HandWrittenCartPole(gym.Env):
-    """The hand-written CartPole server (``python -m examples.handwritten``) as a gymnasium env.
-
-    A raw client: one msgpack frame out, one in, the observation copied out of its bytes.
-    """
+    """The hand-written CartPole server (``python -m examples.handwritten``) as a gymnasium env,
+    behind the raw client ``rlenv bench`` measures it with."""
 
     action_space = CartPoleAgent.action_space
     observation_space = CartPoleAgent.observation_space
 
     def __init__(self) -> None:
-        self.process = subprocess.Popen([sys.executable, "-m", "examples.handwritten"],
-                                        stdout=subprocess.PIPE, text=True)
-        assert self.process.stdout is not None
-        host, _, port = self.process.stdout.readline().split()[-1].rpartition(":")
-        self.sock = socket.create_connection((host, int(port)))
-        self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        self.ids = itertools.count(1)
-
-    def _call(self, request: dict[str, Any]) -> dict[str, Any]:
-        body = msgpack.packb({"id": next(self.ids), **request})
-        self.sock.sendall(_PREFIX.pack(len(body)) + body)
-        data = self.sock.recv(65536)
-        while len(data) < 4 or len(data) < 4 + _PREFIX.unpack_from(data)[0]:
-            data += self.sock.recv(65536)
-        return msgpack.unpackb(data[4:])
+        self.server = HandWrittenServer()
 
     def reset(self, *, seed: int | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
-        reply = self._call({"reset": {} if seed is None else {"seed": seed}})
+        reply = self.server.call({"reset": {} if seed is None else {"seed": seed}})
         return np.frombuffer(reply["observation"], np.float32).copy(), {}
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        reply = self._call({"action": np.asarray(action, np.float32).tobytes(),
-                            "repeat_action": 4})
-        return (np.frombuffer(reply["observation"], np.float32).copy(), reply["reward"],
-                reply["terminated"], reply["truncated"], {"frames": reply["frames"]})
+        return self.server.step(np.asarray(action, np.float32))
 
     def close(self) -> None:
-        self.sock.close()
-        self.process.kill()
-        self.process.wait()
+        self.server.close()
 
 
 gym.register("handwritten/CartPole-v0", entry_point=HandWrittenCartPole, max_episode_steps=500)

@@ -34,7 +34,6 @@ import contextlib
 import itertools
 import json
 import logging
-import os
 import socket
 import statistics
 import struct
@@ -48,7 +47,7 @@ from typing import Any
 import msgpack
 import numpy as np
 
-__all__ = ["Figure", "format_table", "run_benchmarks", "to_json"]
+__all__ = ["Figure", "HandWrittenServer", "format_table", "run_benchmarks", "to_json"]
 
 logger = logging.getLogger(__name__)
 
@@ -198,7 +197,7 @@ class _PingPong:
         self.close()
 
 
-class _HandWritten:
+class HandWrittenServer:
     """The hand-written CartPole server in a subprocess, and a raw client to it.
 
     The client does what any client must and no more: pack the request, one ``sendall``,
@@ -235,11 +234,12 @@ class _HandWritten:
             reply["info"]
 
     def close(self) -> None:
+        """Close the connection and stop the server."""
         self.sock.close()
         self.process.kill()
         self.process.wait()
 
-    def __enter__(self) -> _HandWritten:
+    def __enter__(self) -> HandWrittenServer:
         return self
 
     def __exit__(self, *exc_info: object) -> None:
@@ -256,10 +256,10 @@ class _HandWrittenVector:
 
     def __init__(self, servers: int, instances: int) -> None:
         self.instances = instances
-        self.servers: list[_HandWritten] = []
+        self.servers: list[HandWrittenServer] = []
         try:
             for _ in range(servers):
-                self.servers.append(_HandWritten(instances))
+                self.servers.append(HandWrittenServer(instances))
         except BaseException:
             self.close()
             raise
@@ -338,7 +338,7 @@ def _single_steps(rounds: int, steps: int) -> tuple[list[Figure], int]:
     action = np.zeros(1, np.float32)
     pong_latencies: list[float] = []
     step_latencies: list[float] = []
-    with _PingPong(_step_reply(np.zeros(5, np.float32))) as echo, _HandWritten() as raw, \
+    with _PingPong(_step_reply(np.zeros(5, np.float32))) as echo, HandWrittenServer() as raw, \
             LocalClient(CARTPOLE) as local, ServerProcess(CARTPOLE) as server, \
             Client(server.host, server.port) as client:
         request = _step_request(action)
@@ -476,8 +476,10 @@ print((_rss_kib(os.getpid()) - before) / len(extra))
 
 
 def _instance_kib(count: int = 50) -> float:
-    """Resident memory per extra CartPole instance, each in its own tree, in a fresh process
-    (in this one, memory freed by the other figures would hold them)."""
+    """Resident memory per extra CartPole instance, each in its own tree.
+
+    Measured in a fresh process: in this one, memory freed by the other figures would hold them.
+    """
     output = subprocess.run([sys.executable, "-c", _INSTANCE_MEMORY, CARTPOLE, str(count)],
                             capture_output=True, text=True, check=True, timeout=120).stdout
     return float(output)

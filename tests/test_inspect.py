@@ -83,3 +83,95 @@ def test_snapshots_reproduce_properties_set_during_the_episode(serve: Serve) -> 
         for _ in range(5):
             x, y = a.step(np.zeros(1, np.float32), 1), b.step(np.zeros(1, np.float32), 1)
             assert x[0].tobytes() == y[0].tobytes()
+
+
+def _trajectory(client: Client, steps: int = 6) -> list[bytes]:
+    pushes = np.linspace(-1.0, 1.0, steps, dtype=np.float32).reshape(steps, 1)
+    return [client.step(push, 2)[0].tobytes() for push in pushes]
+
+
+def test_a_reset_undoes_every_set_so_a_seed_gives_one_episode(serve: Serve) -> None:
+    """Sets last for their episode: the same seed gives the same episode on any server,
+    whatever was set before, and a snapshot taken after the reset restores that episode."""
+    first, second = serve(), serve()
+    with Client(first.host, first.port) as a, Client(second.host, second.port) as b:
+        b.reset(seed=9)
+        expected = _trajectory(b)
+        a.reset(seed=0)
+        a.set_property("World/Physics", "gravity", [0, -1])  # in an earlier episode
+        a.reset(seed=9)
+        assert a.get_property("World/Physics", "gravity") == [0.0, -9.81]
+        a.set_property("World/Physics", "gravity", [0, -1])  # during one
+        a.set_property("World/Physics", "gravity", [0, -2])
+        a.set_property("Agent", "max_force", 3.0)
+        a.reset(seed=9)
+        assert a.get_property("World/Physics", "gravity") == [0.0, -9.81]
+        assert a.get_property("Agent", "max_force") == 10.0
+        snapshot = a.snapshot()
+        assert _trajectory(a) == expected
+        b.restore(snapshot)
+        assert _trajectory(b) == expected
+
+
+def test_a_configured_property_outlives_a_set_of_it(client: Client) -> None:
+    """``config`` persists across resets; a set of a configured property lasts one episode."""
+    client.configure(agent={"max_force": 5.0})
+    client.reset(seed=0)
+    client.set_property("Agent", "max_force", 2.0)
+    client.reset(seed=0)
+    assert client.get_property("Agent", "max_force") == 5.0
+    client.set_property("Agent", "max_force", 2.0)
+    client.configure(agent={"max_force": 7.0})  # the configuration's from now on
+    client.reset(seed=0)
+    assert client.get_property("Agent", "max_force") == 7.0
+
+
+def test_restoring_a_snapshot_with_sets_twice_gives_one_trajectory(client: Client) -> None:
+    client.reset(seed=2)
+    client.step(np.full(1, 0.3, np.float32), 2)
+    client.set_property("World/Physics", "gravity", [0, -1])
+    client.step(np.full(1, -0.3, np.float32), 2)
+    snapshot = client.snapshot()
+    original = _trajectory(client)
+    client.restore(snapshot)
+    first = _trajectory(client)
+    client.set_property("World/Physics", "gravity", [0, -30])  # what the next restore must undo
+    client.restore(snapshot)
+    assert _trajectory(client) == first == original
+
+
+def test_a_restore_whose_set_is_refused_changes_nothing(client: Client) -> None:
+    client.reset(seed=1)
+    client.step(np.zeros(1, np.float32), 2)
+    snapshot = client.snapshot()
+    before = client.observe()["agent"].tobytes()
+    bad = {**snapshot, "events": [*snapshot["events"],
+                                  ["set", "World/Physics", "gravity", "down"]]}
+    with pytest.raises(RemoteError) as error:
+        client.restore(bad)
+    assert error.value.code == ErrorCode.BAD_REQUEST
+    assert "restore: events[1]: inspect: PhysicsWorld.gravity must be a list" in \
+        error.value.message
+    assert client.observe()["agent"].tobytes() == before
+    client.step(np.zeros(1, np.float32), 2)  # the episode goes on
+
+
+def test_a_set_refused_during_the_replay_needs_a_reset(client: Client) -> None:
+    """A node the episode builds is checked when the replay sets it: too late to change
+    nothing, so the answer says the episode needs a reset."""
+    client.reset(seed=1)
+    snapshot = client.snapshot()
+    client._call(inspect={"set": {"path": "World/Physics", "property": "gravity",
+                                  "value": [0, 0]}})
+    bad = {**snapshot, "events": [["set", "World/Physics/Spawned", "angle", 1.0]]}
+    with pytest.raises(RemoteError) as error:
+        client.restore(bad)
+    assert error.value.code == ErrorCode.BAD_REQUEST
+    assert error.value.message.startswith(
+        "restore: events[0]: inspect: no node at path 'World/Physics/Spawned'")
+    assert error.value.message.endswith("reset required")
+    with pytest.raises(RemoteError) as refused:
+        client.step(np.zeros(1, np.float32))
+    assert refused.value.code == ErrorCode.RESET_REQUIRED
+    client.reset(seed=1)
+    assert client.get_property("World/Physics", "gravity") == [0.0, -9.81]

@@ -385,12 +385,18 @@ def test_ndarray_ext_helper_builds_decodable_arrays() -> None:
         pytest.param(
             msgpack.packb({"a": 1}) + msgpack.packb({"b": 2}), "trailing bytes", id="two-maps"
         ),
-        pytest.param(
-            msgpack.packb(msgpack.ExtType(5, b"abc")), "unknown msgpack ext type 5", id="ext-5"
-        ),
+        pytest.param(msgpack.packb(msgpack.ExtType(5, b"abc")),
+                     "ext type 5 is not allowed: the only ext type is 1", id="ext-5"),
+        pytest.param(msgpack.packb({"reset": {"options": {"at": msgpack.Timestamp(1)}}}),
+                     "ext type -1 (msgpack's timestamp) is not allowed", id="timestamp-32"),
+        pytest.param(b"\x91\xd7\xff" + bytes(8),
+                     "ext type -1 (msgpack's timestamp) is not allowed", id="timestamp-64"),
+        pytest.param(b"\x91\xc7\x0c\xff" + bytes(12),
+                     "ext type -1 (msgpack's timestamp) is not allowed", id="timestamp-96"),
+        pytest.param(b"\x91\xd4\xff\x00", "invalid timestamp data", id="timestamp-invalid"),
         pytest.param(
             msgpack.packb({"x": msgpack.ExtType(42, b"")}),
-            "unknown msgpack ext type 42",
+            "ext type 42 is not allowed: the only ext type is 1",
             id="ext-42-nested",
         ),
         pytest.param(msgpack.packb({1: 2}), "frame is not valid msgpack", id="int-map-key"),
@@ -1298,9 +1304,32 @@ def test_send_that_fails_to_encode_changes_nothing(ready: Pair) -> None:
     assert got.id == 1
 
 
+def test_a_client_learns_the_servers_frame_limit_from_the_hello(pair: Pair) -> None:
+    hello = pair.handshake(make_hello(limits={"max_frame_size": 1000, "idle_timeout": None}))
+    assert hello.protocol == (2, 1)
+    assert hello.limits == {"max_frame_size": 1000, "idle_timeout": None}
+    assert pair.client.max_send_size == 1000
+    with pytest.raises(LocalProtocolError, match="exceeds the peer's frame limit of 1000"):
+        pair.client.send(Request(1, {"reset": {"options": {"blob": b"x" * 1000}}}))
+    assert pair.client.outstanding == ()
+    (request,) = pair.send(pair.client, Request(1, {"reset": {"options": {"blob": b"x" * 900}}}))
+    assert request.id == 1
+
+
+def test_a_hello_without_limits_leaves_the_protocols(pair: Pair) -> None:
+    """A 2.0 server announces no limits: the client keeps the protocol's."""
+    wire = make_hello().to_wire()
+    del wire["hello"]["limits"]
+    wire["hello"]["protocol"] = [2, 0]
+    pair.client.receive_data(frame(wire))
+    (hello,) = drain(pair.client)
+    assert hello.limits == {} and hello.protocol == (2, 0)
+    assert pair.client.max_send_size == DEFAULT_MAX_FRAME_SIZE
+
+
 def test_send_larger_than_the_protocol_frame_limit_is_refused(ready: Pair) -> None:
     ready.send(ready.client, Request(id=1))
-    with pytest.raises(LocalProtocolError, match=f"exceeds the frame limit of "
+    with pytest.raises(LocalProtocolError, match=f"exceeds the peer's frame limit of "
                                                  f"{DEFAULT_MAX_FRAME_SIZE}"):
         ready.server.send(Response(id=1, info={"blob": b"x" * DEFAULT_MAX_FRAME_SIZE}))
     assert ready.server.outstanding == (1,)
@@ -1526,8 +1555,13 @@ def test_eof_before_hello_is_connection_closed(pair: Pair) -> None:
         pytest.param(pack(np.zeros(2)), "a frame must hold a map, got ndarray", id="array"),
         pytest.param(b"\xc1", "not valid msgpack", id="invalid-msgpack"),
         pytest.param(pack({"id": 1}) + b"\x00", "trailing bytes", id="trailing-bytes"),
-        pytest.param(pack({"id": msgpack.ExtType(9, b"")}), "unknown msgpack ext type 9",
-                     id="foreign-ext"),
+        pytest.param(pack({"id": msgpack.ExtType(9, b"")}),
+                     "ext type 9 is not allowed: the only ext type is 1", id="foreign-ext"),
+        pytest.param(pack({"id": 1, "reset": {"options": {"at": [msgpack.Timestamp(0, 5)]}}}),
+                     "ext type -1 (msgpack's timestamp) is not allowed", id="timestamp"),
+        pytest.param(pack({"id": 1, "reset": {"options": {"at": msgpack.Timestamp(0, 5),
+                                                          "big": bytes(1 << 20)}}}),
+                     "ext type -1 (msgpack's timestamp) is not allowed", id="timestamp-big"),
     ],
 )
 def test_bad_frame_body_is_an_error_and_the_server_goes_on(

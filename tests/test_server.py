@@ -13,6 +13,7 @@ import pytest
 from conftest import Serve
 
 from examples.cartpole import CartPoleAgent, CartPoleEnvironment, controller
+from rlenv.errors import LocalProtocolError
 from rlenv.protocol import PROTOCOL_VERSION, Connection, Request, Role, pack
 from rlenv.testing import read_frame
 from rlenv_client import (
@@ -36,6 +37,23 @@ def test_hello_describes_the_environment(client: Client) -> None:
     assert client.hello.repeat_action == 4
     assert client.action_space == CartPoleAgent.action_space
     assert client.observation_space == CartPoleAgent.observation_space
+    assert client.hello.limits == {
+        "max_frame_size": 64 * 1024 * 1024, "max_first_frame_size": 64 * 1024,
+        "max_reply_size": 64 * 1024 * 1024, "frame_deadline": 10.0, "idle_timeout": 3600.0,
+        "write_timeout": 10.0, "max_connections": 8}
+
+
+def test_the_hello_announces_the_limits_the_server_was_started_with(serve: Serve) -> None:
+    server = serve(args=["--max-frame-size", "5000", "--idle-timeout", "0",
+                         "--max-connections", "3", "--frame-deadline", "2.5"])
+    with Client(server.host, server.port) as client:
+        limits = client.hello.limits
+        assert (limits["max_frame_size"], limits["idle_timeout"], limits["max_connections"],
+                limits["frame_deadline"]) == (5000, None, 3, 2.5)
+        client.reset(seed=0)
+        with pytest.raises(LocalProtocolError, match="exceeds the peer's frame limit of 5000"):
+            client.reset(options={"blob": b"x" * 5000})  # refused before it is sent
+        client.step(PUSH)  # nothing was sent: the connection goes on
 
 
 def test_reset_returns_an_observation_of_the_space(client: Client) -> None:
@@ -584,3 +602,60 @@ def test_batches_are_validated_part_by_part(server: ServerProcess) -> None:
             reply = read_frame(raw)
             assert reply["error"]["code"] == ErrorCode.BAD_REQUEST
             assert words in reply["error"]["message"], reply
+
+
+def test_the_token_is_checked_on_every_request_until_one_carries_it(serve: Serve) -> None:
+    """Frames that are no request do not count: a client whose first frame carried the token
+    but was malformed is asked for it again, not shut out; the first request read decides."""
+    server = serve(args=["--token", "s3cret"])
+
+    def call(raw: socket.socket, body: dict[str, Any]) -> dict[str, Any]:
+        data = pack(body)
+        raw.sendall(struct.pack(">I", len(data)) + data)
+        return read_frame(raw)
+
+    with socket.create_connection((server.host, server.port), timeout=10) as raw:
+        assert read_frame(raw)["hello"]["token_required"] is True
+        for malformed, code in [({"id": "one", "token": "s3cret"}, ErrorCode.BAD_REQUEST),
+                                ({"id": 1, "token": 7}, ErrorCode.BAD_REQUEST)]:
+            reply = call(raw, malformed)
+            assert reply["error"]["code"] == code and not reply["error"]["fatal"], reply
+        raw.sendall(struct.pack(">I", 1) + b"\xc1")  # not even msgpack
+        assert read_frame(raw)["error"]["code"] == ErrorCode.BAD_FRAME
+        reply = call(raw, {"id": 2, "token": "s3cret", "reset": {"seed": 0}})
+        assert reply["id"] == 2 and reply["frames"] == 0
+        assert call(raw, {"id": 3, "action": b"\x00" * 4})["frames"] == 4  # no token needed now
+    with socket.create_connection((server.host, server.port), timeout=10) as raw:
+        read_frame(raw)
+        reply = call(raw, {"id": 1, "reset": {}})  # a request read without the token
+        assert reply["error"]["code"] == ErrorCode.UNAUTHORIZED and reply["error"]["fatal"]
+        assert raw.recv(1) == b""
+
+
+@pytest.mark.parametrize("reset_by", ["steps", "batch"])
+def test_a_row_that_failed_counts_its_ticks_afresh_after_its_reset(
+    serve: Serve, reset_by: str
+) -> None:
+    """Row 1 raises in the middle of a step; after its reset, it counts ticks and rewards
+    exactly like its neighbours, whichever way it was reset."""
+    server = serve("examples.faulty:FaultyEnvironment", args=["--instances", "3"])
+    with Client(server.host, server.port) as client:
+        client.send_steps(np.zeros(3, np.int64), reset=np.ones(3, bool), repeat_action=3)
+        client.receive_steps()
+        client.send_steps(np.array([0, 1, 0]), repeat_action=3)
+        failed = client.receive_steps()
+        assert failed.errors is not None and failed.errors[1].code == ErrorCode.ENVIRONMENT_ERROR
+        if reset_by == "steps":
+            client.send_steps(np.zeros(3, np.int64), reset=np.array([False, True, False]),
+                              repeat_action=3)
+            client.receive_steps()
+        else:
+            client.send_batch([None, Request(0, {"reset": {}})])
+            client.receive_batch()
+        client.send_steps(np.zeros(3, np.int64), repeat_action=3)
+        answer = client.receive_steps()
+        assert answer.errors is None
+        assert answer.frames.tolist() == [3, 3, 3]
+        assert answer.reward.tolist() == [1.5, 1.5, 1.5]
+        neighbours = 9 if reset_by == "steps" else 6  # ticks since their reset
+        assert answer.observation.ravel().tolist() == [neighbours, 3, neighbours]

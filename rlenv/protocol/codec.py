@@ -120,7 +120,7 @@ def _default(obj: Any) -> Any:
 
 def _ext_hook(code: int, data: bytes) -> Any:
     if code != NDARRAY_EXT:
-        raise ValueError(f"unknown msgpack ext type {code}")
+        raise ValueError(_foreign_ext(code))
     return decode_ndarray(data)
 
 
@@ -143,22 +143,46 @@ def frame(obj: Any) -> bytes:
     return HEADER.pack(len(body)) + body
 
 
-def unpack(body: bytes | memoryview) -> Any:
+def unpack(body: bytes | bytearray | memoryview) -> Any:
     """Decode one msgpack object that fills ``body`` exactly.
 
     Strings are UTF-8 and map keys strings (msgpack's defaults: a frame with other keys is
-    refused); no container may
-    declare more elements or bytes than ``body`` holds (msgpack bounds each by the body's
-    length, so a frame cannot make the decoder allocate more than the frame limit allows).
+    refused); no container may declare more elements or bytes than ``body`` holds (msgpack
+    bounds each by the body's length, so a frame cannot make the decoder allocate more than the
+    frame limit allows). The only ext type is :data:`NDARRAY_EXT`: msgpack decodes its own
+    timestamp type (-1) without asking the hook, so a decoded frame that may hold one (its
+    type byte, 0xff, is in it) is searched for it.
 
     Raises:
-        RemoteProtocolError: invalid msgpack, trailing bytes, a foreign ext type or a
-            malformed array.
+        RemoteProtocolError: invalid msgpack, trailing bytes, a foreign ext type (timestamps
+            included) or a malformed array.
     """
     try:
-        return msgpack.unpackb(body, ext_hook=_ext_hook)
+        value = msgpack.unpackb(body, ext_hook=_ext_hook)
     except msgpack.ExtraData:
         raise RemoteProtocolError("trailing bytes after the message in the frame") from None
     except (ValueError, TypeError, msgpack.UnpackException, RecursionError) as exc:
         detail = str(exc) or type(exc).__name__
         raise RemoteProtocolError(f"frame is not valid msgpack: {detail}") from None
+    if (body.__class__ is memoryview or b"\xff" in body) and _holds_timestamp(value):
+        raise RemoteProtocolError(f"frame is not valid msgpack: {_foreign_ext(-1)}")
+    return value
+
+
+def _holds_timestamp(value: Any) -> bool:
+    """Whether ``value`` holds a ``msgpack.Timestamp`` at any depth."""
+    pending = [value]
+    while pending:
+        item = pending.pop()
+        if item.__class__ is dict:
+            pending.extend(item.values())
+        elif item.__class__ is list:
+            pending.extend(item)
+        elif item.__class__ is msgpack.Timestamp:
+            return True
+    return False
+
+
+def _foreign_ext(code: int) -> str:
+    name = " (msgpack's timestamp)" if code == -1 else ""
+    return f"ext type {code}{name} is not allowed: the only ext type is {NDARRAY_EXT} (arrays)"

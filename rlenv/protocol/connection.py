@@ -150,11 +150,16 @@ class Connection:
         role: which end this is.
         max_frame_size: largest frame body accepted; a larger length prefix is refused before
             any of the body is buffered.
+
+    Attributes:
+        max_send_size: largest frame body the peer accepts: the protocol's limit, until a
+            client learns the server's from its hello.
     """
 
     def __init__(self, role: Role, max_frame_size: int = DEFAULT_MAX_FRAME_SIZE) -> None:
         self.role = role
         self.max_frame_size = max_frame_size
+        self.max_send_size = DEFAULT_MAX_FRAME_SIZE
         self.state = _AWAIT
         self._next = _NEXT[(role, self.state)]
         self._buffer: bytes | bytearray = b""
@@ -245,9 +250,9 @@ class Connection:
             raise LocalProtocolError(f"reply to request {reply_id} out of order; "
                                      f"outstanding: {list(outstanding)}")
         body = pack(message.to_wire())
-        if len(body) > DEFAULT_MAX_FRAME_SIZE:
-            raise LocalProtocolError(f"message of {len(body)} bytes exceeds the frame limit of "
-                                     f"{DEFAULT_MAX_FRAME_SIZE}")
+        if len(body) > self.max_send_size:
+            raise LocalProtocolError(f"message of {len(body)} bytes exceeds the peer's frame "
+                                     f"limit of {self.max_send_size}")
         if kind is Request:
             outstanding.append(message.id)  # type: ignore[union-attr]
         elif reply_id is not None:
@@ -305,6 +310,9 @@ class Connection:
                 self._enter(_CLOSED)
                 raise RemoteProtocolError("the server did not start with a hello", fatal=True)
             reply, event = Hello.from_wire(wire), _RECEIVE_HELLO
+            limit = reply.limits.get("max_frame_size")
+            if limit.__class__ is int and 0 < limit < DEFAULT_MAX_FRAME_SIZE:
+                self.max_send_size = limit
         elif "steps" in wire:
             reply, event = StepsResponse.from_wire(wire), _RECEIVE_REPLY
         elif "batch" in wire:

@@ -2,7 +2,7 @@
 
 ::
 
-    hello    {"hello": {"protocol": [2, 0], "environment": ..., "action_space": {...}, ...}}
+    hello    {"hello": {"protocol": [2, 1], "environment": ..., "action_space": {...}, ...}}
     request  {"id": 7, "token": "...", <parts>}     parts: config, reset, action, observation...
     response {"id": 7, "observation": {"agent": ...}, "reward": 1.0, "terminated": false,
               "truncated": false, "info": {...}, "frames": 4}
@@ -44,7 +44,7 @@ __all__ = [
     "StepsResponse",
 ]
 
-PROTOCOL_VERSION: Final = (2, 0)
+PROTOCOL_VERSION: Final = (2, 1)
 """(major, minor). Peers with different majors refuse each other; a newer minor only adds."""
 
 _REWARD = np.dtype("<f8")
@@ -54,7 +54,14 @@ _FLAG = np.dtype("|u1")
 
 @dataclass(slots=True)
 class Hello:
-    """What the server says first: who it is, what its spaces are, how many instances."""
+    """What the server says first: who it is, what its spaces are, how many instances.
+
+    ``limits`` (protocol 2.1) holds the server's sizes and deadlines: ``max_frame_size`` (the
+    largest request frame), ``max_first_frame_size`` (the same, until the first request),
+    ``max_reply_size`` (the largest frame it sends), ``frame_deadline``, ``idle_timeout``
+    (``None``: never) and ``write_timeout`` in seconds, and ``max_connections``. Empty from a
+    2.0 server.
+    """
 
     environment: str
     action_space: spaces.Space
@@ -65,6 +72,7 @@ class Hello:
     render_modes: tuple[str, ...] = ()
     token_required: bool = False
     instances: int = 1
+    limits: dict[str, Any] = field(default_factory=dict)
     protocol: tuple[int, int] = PROTOCOL_VERSION
 
     def to_wire(self) -> dict[str, Any]:
@@ -81,6 +89,7 @@ class Hello:
                 "render_modes": list(self.render_modes),
                 "token_required": self.token_required,
                 "instances": self.instances,
+                "limits": self.limits,
             }
         }
 
@@ -114,6 +123,7 @@ class Hello:
                 render_modes=tuple(body["render_modes"]),
                 token_required=bool(body.get("token_required", False)),
                 instances=int(body.get("instances", 1)),
+                limits=dict(body.get("limits", {})),
                 protocol=(int(version[0]), int(version[1])),
             )
         except (KeyError, TypeError, ValueError) as exc:

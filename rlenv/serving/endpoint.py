@@ -41,6 +41,7 @@ import socket
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Any
 
 from rlenv.errors import ErrorCode, LocalProtocolError, ProtocolError
 from rlenv.protocol import (
@@ -88,6 +89,14 @@ class Limits:
     write_timeout: float = 10.0
     max_connections: int = 8
 
+    def to_wire(self) -> dict[str, Any]:
+        """The limits as the hello announces them (see :class:`rlenv.protocol.Hello`)."""
+        return {"max_frame_size": self.max_frame_size,
+                "max_first_frame_size": self.max_unauthenticated_frame_size,
+                "max_reply_size": DEFAULT_MAX_FRAME_SIZE,
+                "frame_deadline": self.frame_deadline, "idle_timeout": self.idle_timeout,
+                "write_timeout": self.write_timeout, "max_connections": self.max_connections}
+
 
 class InsecureBindError(RuntimeError):
     """Binding an address other than loopback was asked for without a token."""
@@ -125,8 +134,9 @@ class Endpoint:
         self, hello: Hello, limits: Limits | None = None, token: str | None = None,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
-        self._hello = replace(hello, token_required=True) if token is not None else hello
         self.limits = limits or Limits()
+        self._hello = replace(hello, token_required=hello.token_required or token is not None,
+                              limits=self.limits.to_wire())
         self._token = token
         self._clock = clock
         self._selector = selectors.DefaultSelector()

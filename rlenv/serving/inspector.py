@@ -13,6 +13,7 @@ accepted.
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Mapping
 from typing import Any
 
@@ -70,10 +71,12 @@ def get_property(root: Node, path: Any, name: Any) -> Any:
     return to_wire(getattr(node, _exported(node, name)))
 
 
-def set_property(root: Node, path: Any, name: Any, value: Any, *, dry_run: bool = False) -> None:
+def set_property(root: Node, path: Any, name: Any, value: Any, *,
+                 dry_run: bool = False) -> tuple[Node, str, Any]:
     """Set the exported property ``name`` of the node at ``path`` to ``value`` (type-checked).
 
-    With ``dry_run`` everything is checked and nothing is set.
+    With ``dry_run`` everything is checked and nothing is set. Returns the node, the property's
+    name and the value it had before (a deep copy: a setter may change it in place).
 
     Raises:
         RequestError: ``bad_request`` naming the node, the property and the expected type.
@@ -89,8 +92,11 @@ def set_property(root: Node, path: Any, name: Any, value: Any, *, dry_run: bool 
     except TypeError as error:
         raise RequestError(ErrorCode.BAD_REQUEST,
                            f"inspect: {type(node).__name__}.{prop} {error}") from None
+    previous = getattr(node, prop)
     if not dry_run:
+        previous = copy.deepcopy(previous)
         setattr(node, prop, conformed)
+    return node, prop, previous
 
 
 def _exported(node: Node, name: Any) -> str:

@@ -37,6 +37,8 @@ from rlenv.errors import ErrorCode, RequestError
 from rlenv.protocol import ErrorReply, Response
 from rlenv.recording import VideoRecorder
 from rlenv.rl_nodes import RLAgent, RLEnvironment
+from rlenv.node import Node
+from rlenv.serving import inspector
 from rlenv.serving.snapshots import EpisodeLog
 from rlenv.spaces import Codec, SpaceMismatch, codec_for, compile_check, find_non_finite
 from rlenv.tree import SceneTree
@@ -136,6 +138,7 @@ class Instance:
         self.record_dir = record_dir
         self.state = Episode.NOT_STARTED
         self.log = EpisodeLog()
+        self._before_sets: dict[tuple[Node, str], Any] = {}  # what inspect sets replaced
         self.replaying = False  # restoring a snapshot: the episode moves on silently
         self._recorder: VideoRecorder | None = None
         self._ticks = 0  # ticks the episode ran since the last answer
@@ -198,7 +201,11 @@ class Instance:
                 node.check_config(settings)
 
     def configure(self, config: Mapping[str, Any]) -> None:
-        """Apply a checked ``config`` part (logged for snapshots during an episode)."""
+        """Apply a checked ``config`` part (logged for snapshots during an episode).
+
+        A configured property is the configuration's from then on: a reset keeps it, even if
+        ``inspect`` set it earlier in the episode.
+        """
         self.log.configured(config)
         for part, nodes in self._configured_nodes().items():
             if part not in config:
@@ -208,6 +215,8 @@ class Instance:
                 settings = self._apply_environment_settings(settings)
             for node in nodes:
                 node.configure(settings)
+                for key in settings:
+                    self._before_sets.pop((node, key), None)
 
     def config_state(self) -> dict[str, dict[str, Any]]:
         """The current value of everything a client may configure (for snapshots)."""
@@ -260,9 +269,24 @@ class Instance:
 
     # --- episodes ---------------------------------------------------------------------------
 
+    def set_property(self, path: str, name: str, value: Any) -> None:
+        """Set an exported property (``inspect`` ``set``), for this episode.
+
+        During an episode the change is logged, so that snapshots replay it; the next reset
+        gives the property back the value it had before it was first set, so that the same
+        seed gives the same episode whatever was set before.
+        """
+        node, name, previous = inspector.set_property(self.environment, path, name, value)
+        self._before_sets.setdefault((node, name), previous)
+        if self.log.started:
+            self.log.record(["set", path, name, value])
+
     def begin_episode(self, seed: int | None, options: Mapping[str, Any]) -> None:
-        """Reset: seed the generator (if ``seed`` is given), then start a new episode."""
+        """Reset: undo ``inspect`` sets, seed the generator (if given), start a new episode."""
         environment = self.environment
+        for (node, name), value in reversed(self._before_sets.items()):
+            setattr(node, name, value)
+        self._before_sets.clear()
         if seed is not None:
             environment.np_random, _ = seeding.np_random(seed)
         self.log.begin(self.config_state(), environment.np_random, options)
@@ -454,10 +478,14 @@ class Instance:
 
         The tree is paused and the next action needs a reset first.
         """
+        self.abandon_episode()
+        return failure(reply_id, error, "reset required")
+
+    def abandon_episode(self) -> None:
+        """Stop the episode where it is: the tree paused, the next action needs a reset."""
         self.environment.physics_frames_timer.stop()
         self.tree.paused = True
         self.state = Episode.NOT_STARTED
-        return failure(reply_id, error, "reset required")
 
 
 def failure(reply_id: int | None, error: BaseException, consequence: str) -> ErrorReply:

@@ -232,11 +232,16 @@ class Restore(Part):
         instance.check_config(snapshot["config"])
         actions = []
         for index, event in enumerate(snapshot["events"]):
+            where = f"restore: events[{index}]: "
             if event[0] == "config":
                 instance.check_config(event[1])
             elif event[0] == "action":
                 actions.append(instance.checked_action(event[1], fresh=True, replayed=True,
-                                                       where=f"restore: events[{index}]: "))
+                                                       where=where))
+            elif instance.environment.get_node_or_null(event[1]) is not None:
+                # A node the episode builds later is checked when the replay sets it.
+                _prefixed(where, inspector.set_property, instance.environment, *event[1:],
+                          dry_run=True)
         return snapshot, actions, generator_from_state(snapshot["rng"])
 
     def apply(self, instance: Instance, value: Any, answer: Answer) -> None:
@@ -247,17 +252,28 @@ class Restore(Part):
             instance.environment.np_random = rng
             instance.begin_episode(None, snapshot["options"])
             checked = iter(actions)
-            for event in snapshot["events"]:
+            for index, event in enumerate(snapshot["events"]):
                 if event[0] == "config":
                     instance.configure(event[1])
                 elif event[0] == "set":
-                    _set_property(instance, *event[1:])
+                    _prefixed(f"restore: events[{index}]: ", instance.set_property, *event[1:])
                 else:
                     if instance.state is Episode.ENDED:
                         raise RuntimeError("the snapshot acts after its episode ended")
                     instance.act(next(checked), event[2])
+        except RequestError as error:  # a set the replay refused: the episode is half restored
+            instance.abandon_episode()
+            raise RequestError(error.code, f"{error}; reset required") from None
         finally:
             instance.replaying = False
+
+
+def _prefixed(where: str, call: Callable[..., Any], *args: Any, **kwargs: Any) -> None:
+    """``call``; a refusal it raises names ``where`` first."""
+    try:
+        call(*args, **kwargs)
+    except RequestError as error:
+        raise RequestError(error.code, f"{where}{error}") from None
 
 
 class Inspect(Part):
@@ -289,14 +305,7 @@ class Inspect(Part):
             answer.info = {"value": inspector.get_property(environment, arguments["path"],
                                                            arguments["property"])}
         else:
-            _set_property(instance, arguments["path"], arguments["property"], arguments["value"])
-
-
-def _set_property(instance: Instance, path: str, name: str, value: Any) -> None:
-    """Set an exported property; during an episode it is logged, so that snapshots keep it."""
-    inspector.set_property(instance.environment, path, name, value)
-    if instance.log.started:
-        instance.log.record(["set", path, name, value])
+            instance.set_property(arguments["path"], arguments["property"], arguments["value"])
 
 
 def _need_lockstep(instance: Instance) -> None:

@@ -34,10 +34,10 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 
 from rlenv.errors import ErrorCode, RequestError
+from rlenv.node import Node
 from rlenv.protocol import ErrorReply, Response
 from rlenv.recording import VideoRecorder
 from rlenv.rl_nodes import RLAgent, RLEnvironment
-from rlenv.node import Node
 from rlenv.serving import inspector
 from rlenv.serving.snapshots import EpisodeLog
 from rlenv.spaces import Codec, SpaceMismatch, codec_for, compile_check, find_non_finite

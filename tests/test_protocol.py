@@ -425,6 +425,12 @@ def test_ndarray_ext_helper_builds_decodable_arrays() -> None:
             "ndarray dtype object is not allowed on the wire",
             id="object-dtype-short",
         ),
+        pytest.param(_ndarray_ext(b"float32", (2,), b"\x00" * 8),
+                     "ndarray dtype 'float32' is not written as numpy's dtype.str ('<f4')",
+                     id="dtype-name"),
+        pytest.param(_ndarray_ext(b"<u1", (2,), b"\x00" * 2),
+                     "ndarray dtype '<u1' is not written as numpy's dtype.str ('|u1')",
+                     id="dtype-byte-order-of-a-byte"),
         pytest.param(
             _ndarray_ext(b"V8", (1,), b"\x00" * 8),
             "ndarray dtype |V8 is not allowed on the wire",
@@ -491,7 +497,7 @@ def test_ndarray_ext_helper_builds_decodable_arrays() -> None:
             id="huge-empty-shape",
         ),
         pytest.param(
-            _ndarray_ext(b"<u1", (2**32, 2**32), b"\x00"),
+            _ndarray_ext(b"|u1", (2**32, 2**32), b"\x00"),
             "needs",
             id="huge-shape",
         ),

@@ -95,12 +95,16 @@ def _parse_header(data: bytes) -> tuple[np.dtype, tuple[int, ...], int, int]:
     if ndim > _MAX_NDIM:
         raise ValueError(f"ndarray of {ndim} dimensions; at most {_MAX_NDIM} are allowed")
     try:
-        dtype = np.dtype(data[_ARRAY_HEADER.size : _ARRAY_HEADER.size + dtype_len].decode("ascii"))
+        text = data[_ARRAY_HEADER.size : _ARRAY_HEADER.size + dtype_len].decode("ascii")
+        dtype = np.dtype(text)
         shape = struct.unpack_from(f"<{ndim}Q", data, _ARRAY_HEADER.size + dtype_len)
     except (struct.error, UnicodeDecodeError, TypeError, ValueError) as exc:
         raise ValueError(f"malformed ndarray header: {exc}") from None
     if dtype.kind not in _ARRAY_KINDS or dtype.fields is not None or dtype.subdtype is not None:
         raise ValueError(f"ndarray dtype {dtype} is not allowed on the wire")
+    if dtype.str != text:
+        raise ValueError(f"ndarray dtype {text!r:.40} is not written as numpy's dtype.str "
+                         f"({dtype.str!r})")
     count = 1
     for n in shape:
         count *= n

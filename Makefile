@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test sb3 lint clean
+.PHONY: demo test sb3 lint vectors clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -29,6 +29,10 @@ sb3: $(STAMP)
 
 lint: $(STAMP)
 	$(BIN)/ruff check rlenv client examples tests benchmarks
+
+# Regenerate the protocol test vectors (docs/protocol/vectors/) by driving real servers.
+vectors: $(STAMP)
+	$(BIN)/python -m tests.protocol_vectors
 
 clean:
 	rm -rf $(VENV) build *.egg-info

@@ -173,5 +173,6 @@ def test_a_set_refused_during_the_replay_needs_a_reset(client: Client) -> None:
     with pytest.raises(RemoteError) as refused:
         client.step(np.zeros(1, np.float32))
     assert refused.value.code == ErrorCode.RESET_REQUIRED
+    assert refused.value.message == "a restore failed part way; reset first"
     client.reset(seed=1)
     assert client.get_property("World/Physics", "gravity") == [0.0, -9.81]

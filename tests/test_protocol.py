@@ -377,7 +377,10 @@ def test_ndarray_ext_helper_builds_decodable_arrays() -> None:
 @pytest.mark.parametrize(
     ("body", "message"),
     [
-        pytest.param(b"\xc1", "frame is not valid msgpack", id="reserved-byte"),
+        pytest.param(b"\xc1", "frame is not valid msgpack: a byte that begins no msgpack "
+                     "value (such as 0xc1, never used)", id="reserved-byte"),
+        pytest.param(b"\x91" * 5000 + b"\x00", "frame is not valid msgpack: containers "
+                     "nested deeper than the decoder allows", id="too-deep"),
         pytest.param(b"", "frame is not valid msgpack", id="empty"),
         pytest.param(b"\x92\x01", "frame is not valid msgpack", id="truncated-array"),
         pytest.param(b"\xa5abc", "frame is not valid msgpack", id="truncated-str"),

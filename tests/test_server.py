@@ -378,6 +378,8 @@ def test_errors_in_user_code_are_reported_and_reset_recovers(serve: Serve) -> No
         with pytest.raises(RemoteError) as error:
             client.step(0)
         assert error.value.code == ErrorCode.RESET_REQUIRED
+        assert error.value.message == \
+            "the episode was stopped by an environment_error; reset first"
         client.reset()
         with pytest.raises(RemoteError, match="no observation for action 2"):
             client.step(2)
@@ -519,7 +521,8 @@ def test_a_failing_instance_fails_alone_in_columns(serve: Serve) -> None:
         assert "tripped over action 1" in columns.errors[1].message
         assert columns.observation[0].tolist() == [3] and columns.frames[0] == 3
         many.send_steps(np.array([0, 0]))
-        with pytest.raises(RemoteError, match="steps: instance 1: no episode has started"):
+        with pytest.raises(RemoteError, match="steps: instance 1: the episode was stopped by an "
+                                                "environment_error"):
             many.receive_steps()
         many.send_steps(np.array([0, 5]), reset=np.array([False, True]))
         with pytest.raises(RemoteError, match=r"steps.action\[1\] is 5, outside \[0, 2\]"):
@@ -543,7 +546,8 @@ def test_a_non_finite_observation_fails_its_instance_alone_in_columns(serve: Ser
         assert columns.observation[[0, 2], 0].tolist() == [2.0, 2.0]
         assert np.isfinite(columns.observation).all()  # the failed row is blank, not NaN
         many.send_steps(np.zeros(3, np.int64))
-        with pytest.raises(RemoteError, match="steps: instance 1: no episode has started"):
+        with pytest.raises(RemoteError, match="steps: instance 1: the episode was stopped by an "
+                                                "environment_error"):
             many.receive_steps()
 
 

@@ -198,3 +198,14 @@ def test_a_snapshot_asking_for_real_time_is_refused(client: Client) -> None:
         client.restore(snapshot)
     assert error.value.code == ErrorCode.BAD_REQUEST
     assert client.get_property(".", "real_time") is False
+
+
+def test_a_restore_answers_no_ticks_of_its_replay(client: Client) -> None:
+    """The answer to a restore reports the request's own ticks, none: not the replay's."""
+    client.reset(seed=0)
+    client.step(np.zeros(1, np.float32), 2)
+    client.step(np.zeros(1, np.float32), 4)
+    snapshot = client.snapshot()
+    answer = client._call(restore=snapshot)
+    assert (answer.frames, answer.reward) == (0, 0.0)
+    assert client.step(np.zeros(1, np.float32), 3)[4]["frames"] == 3

@@ -166,11 +166,17 @@ def unpack(body: bytes | bytearray | memoryview) -> Any:
     except msgpack.ExtraData:
         raise RemoteProtocolError("trailing bytes after the message in the frame") from None
     except (ValueError, TypeError, msgpack.UnpackException, RecursionError) as exc:
-        detail = str(exc) or type(exc).__name__
+        detail = str(exc) or _UNNAMED_ERRORS.get(type(exc), type(exc).__name__)
         raise RemoteProtocolError(f"frame is not valid msgpack: {detail}") from None
     if (body.__class__ is memoryview or b"\xff" in body) and _holds_timestamp(value):
         raise RemoteProtocolError(f"frame is not valid msgpack: {_foreign_ext(-1)}")
     return value
+
+
+_UNNAMED_ERRORS = {  # msgpack's errors that come without a message
+    msgpack.FormatError: "a byte that begins no msgpack value (such as 0xc1, never used)",
+    msgpack.StackError: "containers nested deeper than the decoder allows",
+}
 
 
 def _holds_timestamp(value: Any) -> bool:

@@ -137,6 +137,7 @@ class Instance:
             (agent, codec_for(agent.observation_space)) for agent in self.agents]
         self.record_dir = record_dir
         self.state = Episode.NOT_STARTED
+        self._no_episode = "no episode has started; reset first"  # why, when NOT_STARTED
         self.log = EpisodeLog()
         self._before_sets: dict[tuple[Node, str], Any] = {}  # what inspect sets replaced
         self.replaying = False  # restoring a snapshot: the episode moves on silently
@@ -309,7 +310,7 @@ class Instance:
             RequestError: ``reset_required``.
         """
         if self.state is Episode.NOT_STARTED:
-            raise RequestError(ErrorCode.RESET_REQUIRED, "no episode has started; reset first")
+            self.refuse_without_episode()
         if self.state is Episode.ENDED:
             raise RequestError(ErrorCode.RESET_REQUIRED, "the episode has ended; reset first")
 
@@ -363,7 +364,8 @@ class Instance:
                 break
         else:
             self.state = Episode.ENDED
-        if self.replaying:
+        if self.replaying:  # the restore's answer reports none of the replay's ticks
+            self._ticks = 0
             for agent in self.agents:
                 agent.reward = 0.0
 
@@ -478,14 +480,26 @@ class Instance:
 
         The tree is paused and the next action needs a reset first.
         """
-        self.abandon_episode()
+        self.abandon_episode("the episode was stopped by an environment_error")
         return failure(reply_id, error, "reset required")
 
-    def abandon_episode(self) -> None:
-        """Stop the episode where it is: the tree paused, the next action needs a reset."""
+    def abandon_episode(self, why: str) -> None:
+        """Stop the episode where it is: the tree paused, the next action needs a reset.
+
+        Refusals for want of an episode then say ``why``.
+        """
         self.environment.physics_frames_timer.stop()
         self.tree.paused = True
         self.state = Episode.NOT_STARTED
+        self._no_episode = f"{why}; reset first"
+
+    def refuse_without_episode(self) -> None:
+        """Refuse what needs an episode, saying why there is none.
+
+        Raises:
+            RequestError: ``reset_required``.
+        """
+        raise RequestError(ErrorCode.RESET_REQUIRED, self._no_episode)
 
 
 def failure(reply_id: int | None, error: BaseException, consequence: str) -> ErrorReply:

@@ -181,7 +181,7 @@ class Observation(Part):
         if "render" in observation:
             self._check_render(observation["render"])
         if instance.state is Episode.NOT_STARTED and not fresh:
-            raise RequestError(ErrorCode.RESET_REQUIRED, "no episode has started; reset first")
+            instance.refuse_without_episode()
         return observation
 
     def _check_render(self, size: Any) -> None:
@@ -262,7 +262,7 @@ class Restore(Part):
                         raise RuntimeError("the snapshot acts after its episode ended")
                     instance.act(next(checked), event[2])
         except RequestError as error:  # a set the replay refused: the episode is half restored
-            instance.abandon_episode()
+            instance.abandon_episode("a restore failed part way")
             raise RequestError(error.code, f"{error}; reset required") from None
         finally:
             instance.replaying = False

@@ -17,7 +17,7 @@ from typing import Any
 from rlenv.protocol import Connection, Hello, Role, unpack
 from rlenv.protocol.codec import HEADER
 
-__all__ = ["ManualClock", "connection_pair", "frame", "read_frame"]
+__all__ = ["ManualClock", "connection_pair", "frame", "read_body", "read_frame"]
 
 
 class ManualClock:
@@ -54,10 +54,19 @@ def read_frame(sock: socket.socket) -> dict[str, Any]:
     Raises:
         AssertionError: the peer closed the connection first, or sent something else.
     """
-    (length,) = HEADER.unpack(_recv_exactly(sock, HEADER.size))
-    message = unpack(_recv_exactly(sock, length))
+    message = unpack(read_body(sock))
     assert isinstance(message, dict), f"the server sent a non-map {message!r:.100}"
     return message
+
+
+def read_body(sock: socket.socket) -> bytes:
+    """Read one frame from a raw socket; its body, undecoded.
+
+    Raises:
+        AssertionError: the peer closed the connection first.
+    """
+    (length,) = HEADER.unpack(_recv_exactly(sock, HEADER.size))
+    return _recv_exactly(sock, length)
 
 
 def _recv_exactly(sock: socket.socket, size: int) -> bytes:

@@ -158,6 +158,13 @@ class Client(BaseClient):
             return message  # type: ignore[return-value]
 
     def _recv(self) -> bytes:
+        """What the socket has now (waiting up to the timeout): every received byte, once.
+
+        All the client reads comes through here, in order, the hello included: a subclass may
+        override it to watch the byte stream, calling this one for the bytes (the compliance
+        suite's :class:`~rlenv_client.compliance.harness.TappedClient` does). It is on every
+        step's path: keep an override cheap.
+        """
         sock = self._sock
         if sock is None:
             raise ConnectionLost(f"the connection to {self.address} is closed")

@@ -168,7 +168,7 @@ def unpack(body: bytes | bytearray | memoryview) -> Any:
     except (ValueError, TypeError, msgpack.UnpackException, RecursionError) as exc:
         detail = str(exc) or _UNNAMED_ERRORS.get(type(exc), type(exc).__name__)
         raise RemoteProtocolError(f"frame is not valid msgpack: {detail}") from None
-    if (body.__class__ is memoryview or b"\xff" in body) and _holds_timestamp(value):
+    if (body.__class__ is memoryview or 0xFF in body) and _holds_timestamp(value):
         raise RemoteProtocolError(f"frame is not valid msgpack: {_foreign_ext(-1)}")
     return value
 

@@ -16,11 +16,13 @@ def test_the_tree_lists_nodes_types_and_exported_values(client: Client) -> None:
     nodes = {node["path"]: node for node in client.tree()}
     assert nodes["/root/CartPole"]["type"] == "CartPoleEnvironment"
     assert nodes["/root/CartPole"]["exported"] == {"repeat_action": 4, "real_time": False}
+    assert nodes["/root/CartPole"]["read_only"] == ["real_time"]  # set by config only
     pole = nodes["/root/CartPole/World/Physics/Pole"]
     assert pole["type"] == "RigidBody"
     assert set(pole["exported"]) == {"position", "velocity", "angle", "angular_velocity"}
     assert nodes["/root/CartPole/World/Physics"]["exported"]["gravity"] == [0.0, -9.81]
     assert nodes["/root/CartPole/Agent"]["exported"]["max_force"] == 10.0
+    assert pole["read_only"] == []
 
 
 def test_get_and_set_reach_the_simulation(client: Client) -> None:

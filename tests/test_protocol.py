@@ -431,6 +431,8 @@ def test_ndarray_ext_helper_builds_decodable_arrays() -> None:
         pytest.param(_ndarray_ext(b"float32", (2,), b"\x00" * 8),
                      "ndarray dtype 'float32' is not written as numpy's dtype.str ('<f4')",
                      id="dtype-name"),
+        pytest.param(_ndarray_ext(b"<f16", (1,), b"\x00" * 16),
+                     "ndarray dtype float128 is not allowed on the wire", id="long-double"),
         pytest.param(_ndarray_ext(b"<u1", (2,), b"\x00" * 2),
                      "ndarray dtype '<u1' is not written as numpy's dtype.str ('|u1')",
                      id="dtype-byte-order-of-a-byte"),
@@ -1332,7 +1334,7 @@ def test_a_hello_without_limits_leaves_the_protocols(pair: Pair) -> None:
     wire["hello"]["protocol"] = [2, 0]
     pair.client.receive_data(frame(wire))
     (hello,) = drain(pair.client)
-    assert hello.limits == {} and hello.protocol == (2, 0)
+    assert hello.limits == {} and hello.protocol == (2, 0) and hello.render_size is None
     assert pair.client.max_send_size == DEFAULT_MAX_FRAME_SIZE
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 from conftest import Serve
@@ -120,3 +122,38 @@ def test_every_answer_reports_the_ticks_since_the_previous_one(
     clock.advance(3 / 60)
     _, reward, _, _, info = live.step(STILL)
     assert info["frames"] == 3 and reward == 3.0
+
+
+def test_an_answer_to_an_observer_leaves_the_ticks_to_the_controller(clock: ManualClock) -> None:
+    """What the host runs for a client that does not control the environment reports no
+    reward nor ticks: they stay for the controller's next answer, none lost, none twice."""
+    from rlenv.serving.host import Host
+
+    host = Host(TARGET, clock=clock, real_time=True)
+    host.answer(Request(1, {"reset": {"seed": 0}}))
+    clock.advance(0.1)  # 6 ticks
+    for request_id in (2, 3):
+        prepared = host.prepare(Request(request_id, {"observation": {"agent": {}}}))
+        observed = host.run(prepared, reports=False)  # type: ignore[arg-type]
+        assert (observed.frames, observed.reward) == (0, 0.0)  # type: ignore[union-attr]
+    clock.advance(2 / 60)
+    answer = host.answer(Request(4, {"observation": {"agent": {}}}))
+    assert (answer.frames, answer.reward) == (8, 8.0)  # type: ignore[union-attr]
+    host.close()
+
+
+def test_observers_of_a_real_time_server_take_no_ticks_from_the_controller(
+    serve: Serve
+) -> None:
+    server = serve(args=["--real-time"])
+    with Client(server.host, server.port, timeout=10) as controller, \
+            Client(server.host, server.port, timeout=10) as observer:
+        start, _ = controller.reset(seed=0)
+        observed, deadline = start, time.monotonic() + 10
+        while observed.tobytes() == start.tobytes():  # until the server ticked (no sleep)
+            assert time.monotonic() < deadline, "the real-time server never ticked"
+            answer = observer._call(observation={"agent": {}})
+            assert (answer.frames, answer.reward) == (0, 0.0)
+            observed = observer._observation(answer)
+        answer = controller._call(observation={"agent": {}})
+        assert answer.frames >= 1 and answer.reward > 0

@@ -35,6 +35,7 @@ def test_hello_describes_the_environment(client: Client) -> None:
     assert client.hello.protocol == PROTOCOL_VERSION
     assert client.hello.physics_ticks_per_second == 60
     assert client.hello.repeat_action == 4
+    assert client.hello.render_size == (600, 400)  # width, height
     assert client.action_space == CartPoleAgent.action_space
     assert client.observation_space == CartPoleAgent.observation_space
     assert client.hello.limits == {
@@ -50,6 +51,14 @@ def test_the_hello_announces_the_limits_the_server_was_started_with(serve: Serve
         limits = client.hello.limits
         assert (limits["max_frame_size"], limits["idle_timeout"], limits["max_connections"],
                 limits["frame_deadline"]) == (5000, None, 3, 2.5)
+        assert limits["max_first_frame_size"] == 5000  # never more than max_frame_size
+    with socket.create_connection((server.host, server.port), timeout=10) as raw:
+        read_frame(raw)
+        raw.sendall(struct.pack(">I", 5001) + b"\x00")  # a first frame over the limit
+        error = read_frame(raw)["error"]
+        assert (error["code"], error["fatal"]) == (ErrorCode.BAD_FRAME, True)
+        assert "exceeds the limit of 5000" in error["message"]
+    with Client(server.host, server.port) as client:
         client.reset(seed=0)
         with pytest.raises(LocalProtocolError, match="exceeds the peer's frame limit of 5000"):
             client.reset(options={"blob": b"x" * 5000})  # refused before it is sent
@@ -663,3 +672,25 @@ def test_a_row_that_failed_counts_its_ticks_afresh_after_its_reset(
         assert answer.reward.tolist() == [1.5, 1.5, 1.5]
         neighbours = 9 if reset_by == "steps" else 6  # ticks since their reset
         assert answer.observation.ravel().tolist() == [neighbours, 3, neighbours]
+
+
+def test_a_failed_request_leaves_no_ticks_nor_reward_to_later_answers(serve: Serve) -> None:
+    """An action that fails after 3 ticks: its ticks and reward belong to no answer, and its
+    episode cannot be snapshotted (restoring it would fail the same way)."""
+    server = serve("examples.faulty:FaultyEnvironment")
+    with Client(server.host, server.port) as client, \
+            Client(server.host, server.port) as observer:
+        client.reset(seed=0)
+        with pytest.raises(RemoteError) as error:
+            client._call(action=2, observation={"agent": {}})  # fails when observed
+        assert error.value.code == ErrorCode.ENVIRONMENT_ERROR
+        for answer in (client._call(action=None), client._call(config={}),
+                       observer._call(inspect={"tree": {}})):
+            assert (answer.frames, answer.reward) == (0, 0.0)
+        with pytest.raises(RemoteError) as refused:
+            client.snapshot()
+        assert refused.value.code == ErrorCode.RESET_REQUIRED
+        assert refused.value.message == \
+            "the episode was stopped by an environment_error; reset first"
+        client.reset(seed=0)
+        assert client.step(0)[4]["frames"] == 3

@@ -39,7 +39,7 @@ HEADER: Final = struct.Struct(">I")
 
 _ARRAY_HEADER = struct.Struct("<BB")  # dtype string length, number of dimensions
 _MAX_NDIM = 32
-_ARRAY_KINDS = frozenset("biufc")
+_ITEM_SIZES = {"b": (1,), "i": (1, 2, 4, 8), "u": (1, 2, 4, 8), "f": (2, 4, 8), "c": (8, 16)}
 _CACHE_SIZE = 1024  # distinct (dtype, shape) pairs remembered; bounded against hostile peers
 _ENCODED_HEADERS: dict[tuple[np.dtype, tuple[int, ...]], bytes] = {}
 _DECODED_HEADERS: dict[bytes, tuple[np.dtype, tuple[int, ...], int, int]] = {}
@@ -54,7 +54,8 @@ def encode_ndarray(array: np.ndarray) -> msgpack.ExtType:
     key = (array.dtype, array.shape)
     header = _ENCODED_HEADERS.get(key)
     if header is None:
-        if array.dtype.kind not in _ARRAY_KINDS or array.dtype.fields is not None:
+        if array.dtype.itemsize not in _ITEM_SIZES.get(array.dtype.kind, ()) or \
+                array.dtype.fields is not None:
             raise TypeError(f"arrays of dtype {array.dtype} cannot travel on the wire")
         if array.ndim > _MAX_NDIM:
             raise TypeError(f"arrays of more than {_MAX_NDIM} dimensions cannot travel on the wire")
@@ -100,7 +101,8 @@ def _parse_header(data: bytes) -> tuple[np.dtype, tuple[int, ...], int, int]:
         shape = struct.unpack_from(f"<{ndim}Q", data, _ARRAY_HEADER.size + dtype_len)
     except (struct.error, UnicodeDecodeError, TypeError, ValueError) as exc:
         raise ValueError(f"malformed ndarray header: {exc}") from None
-    if dtype.kind not in _ARRAY_KINDS or dtype.fields is not None or dtype.subdtype is not None:
+    if dtype.itemsize not in _ITEM_SIZES.get(dtype.kind, ()) or dtype.fields is not None or \
+            dtype.subdtype is not None:
         raise ValueError(f"ndarray dtype {dtype} is not allowed on the wire")
     if dtype.str != text:
         raise ValueError(f"ndarray dtype {text!r:.40} is not written as numpy's dtype.str "

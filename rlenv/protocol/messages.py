@@ -56,6 +56,7 @@ _FLAG = np.dtype("|u1")
 class Hello:
     """What the server says first: who it is, what its spaces are, how many instances.
 
+    ``render_size`` (protocol 2.1) is the (width, height) of a render that asks for no size.
     ``limits`` (protocol 2.1) holds the server's sizes and deadlines: ``max_frame_size`` (the
     largest request frame), ``max_first_frame_size`` (the same, until the first request),
     ``max_reply_size`` (the largest frame it sends), ``frame_deadline``, ``idle_timeout``
@@ -70,6 +71,7 @@ class Hello:
     physics_ticks_per_second: int = 60
     repeat_action: int = 4
     render_modes: tuple[str, ...] = ()
+    render_size: tuple[int, int] | None = None
     token_required: bool = False
     instances: int = 1
     limits: dict[str, Any] = field(default_factory=dict)
@@ -87,6 +89,7 @@ class Hello:
                 "physics_ticks_per_second": self.physics_ticks_per_second,
                 "repeat_action": self.repeat_action,
                 "render_modes": list(self.render_modes),
+                "render_size": None if self.render_size is None else list(self.render_size),
                 "token_required": self.token_required,
                 "instances": self.instances,
                 "limits": self.limits,
@@ -121,6 +124,7 @@ class Hello:
                 physics_ticks_per_second=int(body["physics_ticks_per_second"]),
                 repeat_action=int(body["repeat_action"]),
                 render_modes=tuple(body["render_modes"]),
+                render_size=_size(body.get("render_size")),
                 token_required=bool(body.get("token_required", False)),
                 instances=int(body.get("instances", 1)),
                 limits=dict(body.get("limits", {})),
@@ -128,6 +132,14 @@ class Hello:
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise RemoteProtocolError(f"invalid hello: {exc!r}") from None
+
+
+def _size(value: Any) -> tuple[int, int] | None:
+    """A hello's render size: ``[width, height]``, or nil (absent from 2.0 servers)."""
+    if value is None:
+        return None
+    width, height = value
+    return int(width), int(height)
 
 
 @dataclass(slots=True)

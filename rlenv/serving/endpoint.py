@@ -75,7 +75,8 @@ class Limits:
 
     Attributes:
         max_frame_size: largest request frame once the client is authenticated.
-        max_unauthenticated_frame_size: largest frame before that (the first request).
+        max_unauthenticated_frame_size: largest frame before that (the first request); never
+            more than ``max_frame_size`` (see :attr:`max_first_frame_size`).
         frame_deadline: seconds within which a frame, once started, must be complete.
         idle_timeout: seconds a client may stay silent between requests (``None``: forever).
         write_timeout: seconds a reply may take to be written.
@@ -89,10 +90,15 @@ class Limits:
     write_timeout: float = 10.0
     max_connections: int = 8
 
+    @property
+    def max_first_frame_size(self) -> int:
+        """The largest frame before the first request: the smaller of the two limits."""
+        return min(self.max_unauthenticated_frame_size, self.max_frame_size)
+
     def to_wire(self) -> dict[str, Any]:
         """The limits as the hello announces them (see :class:`rlenv.protocol.Hello`)."""
         return {"max_frame_size": self.max_frame_size,
-                "max_first_frame_size": self.max_unauthenticated_frame_size,
+                "max_first_frame_size": self.max_first_frame_size,
                 "max_reply_size": DEFAULT_MAX_FRAME_SIZE,
                 "frame_deadline": self.frame_deadline, "idle_timeout": self.idle_timeout,
                 "write_timeout": self.write_timeout, "max_connections": self.max_connections}
@@ -329,7 +335,7 @@ class Endpoint:
 
     def _admit(self, sock: socket.socket, address: str) -> None:
         configure_socket(sock, HOUSEKEEPING_INTERVAL, self.limits.write_timeout)
-        peer = Peer(sock, address, self.limits.max_unauthenticated_frame_size, self._clock())
+        peer = Peer(sock, address, self.limits.max_first_frame_size, self._clock())
         if len(self._peers) >= self.limits.max_connections:
             for other in list(self._order):
                 if self._has_left(other):

@@ -95,6 +95,7 @@ class Host:
             physics_ticks_per_second=first.tree.physics_ticks_per_second,
             repeat_action=first.environment.repeat_action,
             render_modes=("rgb_array",),
+            render_size=first.environment.render_size,
             instances=count,
         )
         self.steps_action_space = batch_space(first.action_space, count)
@@ -131,16 +132,20 @@ class Host:
             return failure(request.id, error, "raised while checking the request; nothing "
                            "was applied")
 
-    def run(self, prepared: Prepared) -> Reply:
-        """Serve a checked request; its answer."""
+    def run(self, prepared: Prepared, reports: bool = True) -> Reply:
+        """Serve a checked request; its answer.
+
+        Unless it ``reports`` (it goes to a client that does not control the environment), the
+        answer carries no reward nor ticks: they stay for the controller's next answer.
+        """
         request = prepared.request
         parts = request.parts
         if prepared.part is not None:
-            reply = prepared.part.run(self, request, prepared.checked)
+            reply = prepared.part.run(self, request, prepared.checked, reports)
         elif not parts:
             return Response(request.id)  # nothing asked (the token, say)
         else:
-            reply = self.instances[0].serve(prepared.checked, request.id)
+            reply = self.instances[0].serve(prepared.checked, request.id, reports)
         if "config" in parts or "batch" in parts or "restore" in parts:  # may switch real time
             self._clocked = self._in_real_time()
         return reply
@@ -171,8 +176,11 @@ class Host:
             prepared = self.prepare(request)
             if prepared.__class__ is ErrorReply:
                 endpoint.reply(peer, prepared)  # type: ignore[arg-type]
-            elif endpoint.controls(peer) or not prepared.takes_control or \
-                    endpoint.take_control(peer, request.id):  # type: ignore[union-attr]
+            elif endpoint.controls(peer):
+                endpoint.reply(peer, self.run(prepared))  # type: ignore[arg-type]
+            elif not prepared.takes_control:  # type: ignore[union-attr]
+                endpoint.reply(peer, self.run(prepared, reports=False))  # type: ignore[arg-type]
+            elif endpoint.take_control(peer, request.id):
                 endpoint.reply(peer, self.run(prepared))  # type: ignore[arg-type]
 
     def close(self) -> None:

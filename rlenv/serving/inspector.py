@@ -2,7 +2,7 @@
 
 A request's ``inspect`` part asks for one of::
 
-    {"tree": {}}                                       every node: path, type, exported values
+    {"tree": {}}                          every node: path, type, exported values, read-only ones
     {"get": {"path": "/root/CartPole/World/...", "property": "angle"}}
     {"set": {"path": ..., "property": ..., "value": ...}}
 
@@ -45,9 +45,13 @@ def check_inspect(spec: Any) -> tuple[str, Mapping[str, Any]]:
 
 
 def tree(root: Node) -> list[dict[str, Any]]:
-    """Every node at or below ``root``, in tree order, with its exported values."""
+    """Every node at or below ``root``, in tree order, with its exported values.
+
+    ``read_only`` names the exported properties that ``set`` may not change.
+    """
     return [{"path": node.get_path(), "type": type(node).__name__,
-             "exported": {name: to_wire(getattr(node, name)) for name in exported_of(node)}}
+             "exported": {name: to_wire(getattr(node, name)) for name in exported_of(node)},
+             "read_only": [name for name in exported_of(node) if _read_only(node, name)]}
             for node in root.iter_subtree()]
 
 
@@ -83,8 +87,7 @@ def set_property(root: Node, path: Any, name: Any, value: Any, *,
     """
     node = node_at(root, path)
     prop = _exported(node, name)
-    attribute = getattr(type(node), prop, None)
-    if isinstance(attribute, property) and attribute.fset is None:
+    if _read_only(node, prop):
         raise RequestError(ErrorCode.BAD_REQUEST,
                            f"inspect: {type(node).__name__}.{prop} is read-only")
     try:
@@ -97,6 +100,11 @@ def set_property(root: Node, path: Any, name: Any, value: Any, *,
         previous = copy.deepcopy(previous)
         setattr(node, prop, conformed)
     return node, prop, previous
+
+
+def _read_only(node: Node, name: str) -> bool:
+    attribute = getattr(type(node), name, None)
+    return isinstance(attribute, property) and attribute.fset is None
 
 
 def _exported(node: Node, name: Any) -> str:

@@ -150,17 +150,19 @@ class Instance:
 
     # --- one way in -------------------------------------------------------------------------
 
-    def serve(self, plan: Plan, reply_id: int) -> Response | ErrorReply:
+    def serve(self, plan: Plan, reply_id: int, reports: bool = True) -> Response | ErrorReply:
         """Apply a checked request (see :mod:`rlenv.serving.parts`) and return its answer.
 
         An exception in user code becomes an ``environment_error`` answer (the next action then
-        needs a reset); a refusal found while applying becomes its error answer.
+        needs a reset); a refusal found while applying becomes its error answer. Unless it
+        ``reports`` (an answer to a client that does not control the environment), the answer
+        carries no reward nor ticks and leaves them for the controller's next answer.
         """
         answer = Answer()
         try:
             for part, value in plan:
                 part.apply(self, value, answer)
-            return self._response(reply_id, answer)
+            return self._response(reply_id, answer, reports)
         except RequestError as error:
             return ErrorReply(reply_id, error.code, str(error))
         except Exception as error:  # user code raised: report it, keep serving
@@ -442,29 +444,33 @@ class Instance:
                                                              size.get("height", height))
         return observation
 
-    def _response(self, reply_id: int, answer: Answer) -> Response:
-        """The answer: what was observed, and the rewards, flags and ticks since the last one.
+    def _response(self, reply_id: int, answer: Answer, reports: bool) -> Response:
+        """The answer: what was observed, the flags, and the rewards and ticks since the last.
 
-        Rewards and the tick count start again from zero.
+        Only an answer that ``reports`` them counts them, and starts them again from zero.
         """
         agents = self.agents
         outcomes = None
         if self.multi_agent:
-            outcomes = {each.name: {"reward": float(each.reward),
+            outcomes = {each.name: {"reward": float(each.reward) if reports else 0.0,
                                     "terminated": bool(each.terminated),
                                     "truncated": bool(each.truncated)} for each in agents}
             ended = all(o["terminated"] or o["truncated"] for o in outcomes.values())
             terminated = ended and any(o["terminated"] for o in outcomes.values())
             truncated = ended and not terminated
             reward = sum(o["reward"] for o in outcomes.values())
-            for each in agents:
-                each.reward = 0.0
+            if reports:
+                for each in agents:
+                    each.reward = 0.0
         else:
             agent = agents[0]
-            reward = float(agent.reward)
+            reward = float(agent.reward) if reports else 0.0
             terminated, truncated = bool(agent.terminated), bool(agent.truncated)
-            agent.reward = 0.0
-        frames, self._ticks = self._ticks, 0
+            if reports:
+                agent.reward = 0.0
+        frames = 0
+        if reports:
+            frames, self._ticks = self._ticks, 0
         if terminated or truncated:  # real time: the client now knows the episode ended
             self.state = Episode.ENDED
         info = self.environment._get_info()
@@ -492,6 +498,9 @@ class Instance:
         self.tree.paused = True
         self.state = Episode.NOT_STARTED
         self._no_episode = f"{why}; reset first"
+        self._ticks = 0  # the failed request's ticks and rewards are no one's
+        for agent in self.agents:
+            agent.reward = 0.0
 
     def refuse_without_episode(self) -> None:
         """Refuse what needs an episode, saying why there is none.

@@ -209,6 +209,8 @@ class Snapshot(Part):
             raise _bad("snapshot takes an empty map")
         _need_lockstep(instance)
         instance.log.check_snapshot()
+        if instance.state is Episode.NOT_STARTED:  # stopped by an error
+            instance.refuse_without_episode()
 
     def apply(self, instance: Instance, value: Any, answer: Answer) -> None:
         answer.info = {"snapshot": instance.log.snapshot()}
@@ -350,8 +352,11 @@ class HostPart:
         """
         raise NotImplementedError
 
-    def run(self, host: Host, request: Request, checked: Any) -> Reply:
-        """Serve every instance its share of a checked request; the one answer."""
+    def run(self, host: Host, request: Request, checked: Any, reports: bool) -> Reply:
+        """Serve every instance its share of a checked request; the one answer.
+
+        See :meth:`Instance.serve` for ``reports``.
+        """
         raise NotImplementedError
 
 
@@ -384,10 +389,10 @@ class Batch(HostPart):
         return [None if shape is None else _plan_or_refusal(instance, parts, shape, request.id)
                 for instance, parts, shape in zip(host.instances, batch, shapes, strict=False)]
 
-    def run(self, host: Host, request: Request, checked: Any) -> Reply:
+    def run(self, host: Host, request: Request, checked: Any, reports: bool) -> Reply:
         return BatchResponse(request.id, tuple(
-            plan if plan is None or plan.__class__ is ErrorReply else instance.serve(plan,
-                                                                                    request.id)
+            plan if plan is None or plan.__class__ is ErrorReply else
+            instance.serve(plan, request.id, reports)
             for instance, plan in zip(host.instances, checked, strict=False)))
 
 
@@ -437,9 +442,9 @@ class Steps(HostPart):
         return [_RESET_PLAN if resets else [(_ACTION, (row, repeat)), (_OBSERVATION, AGENT_ONLY)]
                 for row, resets in zip(rows, reset, strict=True)]
 
-    def run(self, host: Host, request: Request, checked: Any) -> Reply:
+    def run(self, host: Host, request: Request, checked: Any, reports: bool) -> Reply:
         return host.columns.stack(request.id, [
-            instance.serve(plan, request.id)
+            instance.serve(plan, request.id, reports)
             for instance, plan in zip(host.instances, checked, strict=True)])
 
 

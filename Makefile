@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test sb3 lint vectors clean
+.PHONY: demo test test-ray sb3 rllib lint vectors clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -19,6 +19,11 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(BIN)/ruff check rlenv client examples tests benchmarks
 	$(BIN)/python -m pytest
+
+# Optional: servers on Ray (the ray extra) and their tests: one node, then a fake cluster.
+test-ray: $(STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[test,ray]"
+	$(BIN)/python -m pytest -m ray
 
 # Optional: Stable-Baselines3 (CPU torch first, so no CUDA build is pulled), its tests, a training run.
 sb3: $(STAMP)

@@ -49,7 +49,8 @@ class SB3VecEnv(VecEnv):
         render_mode: str | None = None,
     ) -> None:
         self.venv = RemoteVectorEnv(
-            num_envs, target, addresses=addresses, repeat_action=repeat_action,
+            None if addresses is not None else num_envs, target, addresses=addresses,
+            repeat_action=repeat_action,
             max_episode_steps=max_episode_steps, autoreset_mode=AutoresetMode.SAME_STEP,
             in_process=in_process, render_mode=render_mode,
         )

@@ -12,19 +12,44 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, Protocol
 
 from rlenv.errors import ConnectionLost, RequestTimeout
 from rlenv_client.base import BaseClient
 from rlenv_client.client import Client
 from rlenv_client.launcher import ServerProcess, with_server_story
 
-__all__ = ["LOST", "Session", "as_lost", "connect", "parse_address"]
+__all__ = ["LOST", "ServerLost", "ServerSource", "Session", "as_lost", "connect", "parse_address"]
 
 logger = logging.getLogger(__name__)
 
 LOST = (ConnectionLost, RequestTimeout)
 """The errors that mean the server is gone or not answering."""
+
+
+class ServerLost(ConnectionLost):
+    """A server of a :class:`ServerSource` was lost more often than the restart budget allows."""
+
+
+class ServerSource(Protocol):
+    """Servers that something else runs and restarts (:class:`rlenv_client.ray.RayServerPool`).
+
+    A session asks for a server's address every time it connects, never caching it: a server
+    may come back elsewhere.
+    """
+
+    token: str
+    instances_per_server: int
+
+    @property
+    def servers(self) -> int:
+        """How many servers."""
+
+    def address(self, index: int, timeout: float = ...) -> str:
+        """``HOST:PORT`` of server ``index`` now; waits while it comes back."""
+
+    def describe(self, index: int) -> str:
+        """Which server ``index`` is, and where, for error messages."""
 
 
 def parse_address(address: str) -> tuple[str, int]:
@@ -42,7 +67,8 @@ def parse_address(address: str) -> tuple[str, int]:
 def connect(
     target: str | None = None, *, address: str | None = None, in_process: bool = False,
     timeout: float = 30.0, server_args: Sequence[str] = (), startup_timeout: float = 60.0,
-    token: str | None = None, instances: int = 1,
+    token: str | None = None, instances: int = 1, pool: ServerSource | None = None,
+    index: int = 0,
 ) -> tuple[BaseClient, ServerProcess | None]:
     """Reach an environment the way :class:`RemoteEnv` does.
 
@@ -50,7 +76,8 @@ def connect(
     attach to a running server: ``gymnasium.make("rlenv/CartPole-v0", address="host:port")``.
 
     ``instances`` > 1 holds that many instances of the target behind the client (a server
-    started with ``--instances``, or in this process).
+    started with ``--instances``, or in this process). A ``pool`` wins over both: the client
+    connects to its server ``index``, wherever that is now.
 
     Returns:
         The client, and the server process it started (``None`` when it started none).
@@ -58,6 +85,9 @@ def connect(
     Raises:
         ValueError: neither ``target`` nor ``address``, or ``in_process`` with an address.
     """
+    if pool is not None:
+        host, port = parse_address(pool.address(index))
+        return Client(host, port, timeout=timeout, token=pool.token), None
     if address is not None:
         if in_process:
             raise ValueError("in_process=True needs a target, not an address")
@@ -90,16 +120,21 @@ class Session:
         server_args: extra arguments for ``rlenv serve``.
         token: the secret of a server that requires one.
         instances: how many instances of the target the server (or this process) holds.
+        pool: servers run by someone else (a Ray pool), of which this session uses server
+            ``index``; a lost one is reconnected wherever the pool says it is now.
+        index: which server of ``pool``.
     """
 
     def __init__(
         self, target: str | None = None, *, address: str | None = None, in_process: bool = False,
         max_restarts: int = 0, timeout: float = 30.0, server_args: Sequence[str] = (),
-        token: str | None = None, instances: int = 1,
+        token: str | None = None, instances: int = 1, pool: ServerSource | None = None,
+        index: int = 0,
     ) -> None:
         self._place = {"target": target, "address": address, "in_process": in_process,
                        "timeout": timeout, "server_args": server_args, "token": token,
-                       "instances": instances}
+                       "instances": instances, "pool": pool, "index": index}
+        self._pool = pool
         self.client, self.server = connect(**self._place)
         self.max_restarts = max_restarts
         self.restarts = 0
@@ -111,8 +146,9 @@ class Session:
         self._configuration.append(settings)
 
     def can_restart(self) -> bool:
-        """Whether the server is ours and the budget allows one more restart."""
-        return self.server is not None and self.restarts < self.max_restarts
+        """Whether the server is ours (or a pool's) and the budget allows one more restart."""
+        return (self.server is not None or self._pool is not None) and \
+            self.restarts < self.max_restarts
 
     def restart(self, error: Exception) -> str:
         """Replace the lost server with a new one; returns why, for ``info``.
@@ -123,6 +159,10 @@ class Session:
         """
         story = self.failure(error)
         if not self.can_restart():
+            if self._pool is not None:
+                raise ServerLost(f"{self._pool.describe(self._place['index'])} lost ({error}) "
+                                 f"after {self.restarts} restarts; max_restarts is "
+                                 f"{self.max_restarts}") from None
             raise story
         self.restarts += 1
         reason = f"server lost ({error}); restarted ({self.restarts} of {self.max_restarts})"

@@ -4,9 +4,10 @@ Every step sends all requests first and then gathers the answers, so the servers
 parallel while the trainer waits once. The N sub-environments live in servers this vector starts
 (``instances_per_server`` per server: by default as many servers as cores, each hosting its
 share), in running servers given by address (each hosting as many instances as its hello
-says), or in this process. Every server gets one ``steps`` request per step (its instances'
-actions in, observations, rewards and flags out, in columns) and one ``batch`` per reset or
-render, however many instances it hosts.
+says), in the servers of a Ray pool (:mod:`rlenv_client.ray`), or in this process. Every
+server gets one ``steps`` request per step (its instances' actions in, observations, rewards
+and flags out, in columns) and one ``batch`` per reset or render, however many instances it
+hosts.
 
 Autoreset follows gymnasium 1.x (:class:`gymnasium.vector.AutoresetMode`):
 
@@ -18,7 +19,8 @@ Autoreset follows gymnasium 1.x (:class:`gymnasium.vector.AutoresetMode`):
   last observation and info of the episode that ended.
 
 ``max_episode_steps`` truncates each sub-environment's episodes, as ``TimeLimit`` does. A lost
-server that this vector started is restarted (``max_restarts`` each): the interrupted episodes
+server that this vector started is restarted (``max_restarts`` each), and one of a pool is
+found again wherever the pool brought it back: the interrupted episodes
 of its instances end as truncated with their last observation, reward 0 and
 ``info["server_restarted"]``, and the autoreset that follows starts fresh episodes.
 """
@@ -41,7 +43,7 @@ from rlenv.protocol import ErrorReply, Request, Response
 from rlenv_client.base import BaseClient
 from rlenv_client.launcher import ServerProcess
 from rlenv_client.rows import row, rows, set_row, set_rows
-from rlenv_client.session import LOST, Session
+from rlenv_client.session import LOST, ServerSource, Session
 
 __all__ = ["RemoteVectorEnv", "default_layout"]
 
@@ -61,10 +63,13 @@ class RemoteVectorEnv(VectorEnv):
     """``num_envs`` copies of one rlenv environment, stepped concurrently.
 
     Args:
-        num_envs: how many sub-environments (ignored when ``addresses`` is given).
+        num_envs: how many sub-environments (1 by default). With ``addresses`` or ``pool``, as
+            many as their servers host (checked when given).
         target: the environment class as ``MODULE:CLASS``; servers are started for it.
         addresses: ``HOST:PORT`` of running servers instead (each hosts the instances its hello
             announces).
+        pool: the servers of a :class:`~rlenv_client.ray.RayServerPool` (or of a lease of
+            one) instead: every one of them, each asked for its address on every connection.
         repeat_action: physics ticks per step; the servers' default if ``None``.
         max_episode_steps: truncate episodes after this many steps (``None``: never).
         autoreset_mode: ``NEXT_STEP`` or ``SAME_STEP``.
@@ -81,8 +86,9 @@ class RemoteVectorEnv(VectorEnv):
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array"]}
 
     def __init__(
-        self, num_envs: int = 1, target: str | None = None, *,
-        addresses: Sequence[str] | None = None, repeat_action: int | None = None,
+        self, num_envs: int | None = None, target: str | None = None, *,
+        addresses: Sequence[str] | None = None, pool: ServerSource | None = None,
+        repeat_action: int | None = None,
         max_episode_steps: int | None = None,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         in_process: bool = False, render_mode: str | None = None, timeout: float = 30.0,
@@ -93,7 +99,7 @@ class RemoteVectorEnv(VectorEnv):
             raise ValueError("RemoteVectorEnv autoresets; use NEXT_STEP or SAME_STEP")
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
-        places = self._places(num_envs, target, addresses, in_process, token,
+        places = self._places(num_envs, target, addresses, pool, in_process, token,
                               instances_per_server)
         self.sessions: list[Session] = []
         self._connect(places, timeout=timeout, max_restarts=max_restarts)
@@ -112,6 +118,11 @@ class RemoteVectorEnv(VectorEnv):
                 raise ValueError(
                     f"{client.address} has other spaces than {self.clients[0].address}"
                 )
+        if num_envs is not None and (addresses is not None or pool is not None) and \
+                num_envs != len(self._owner):
+            self.close()
+            raise ValueError(f"num_envs={num_envs}, but the servers given host "
+                             f"{len(self._owner)} sub-environments")
         self.num_envs = len(self._owner)
         self.single_action_space = hello.action_space
         self.single_observation_space = hello.observation_space
@@ -286,12 +297,16 @@ class RemoteVectorEnv(VectorEnv):
         return self.metadata["autoreset_mode"]
 
     @staticmethod
-    def _places(num_envs: int, target: str | None, addresses: Sequence[str] | None,
-                in_process: bool, token: str | None,
+    def _places(num_envs: int | None, target: str | None, addresses: Sequence[str] | None,
+                pool: ServerSource | None, in_process: bool, token: str | None,
                 instances_per_server: int | None) -> list[dict[str, Any]]:
-        if addresses is not None:
+        if pool is not None:
+            places: list[dict[str, Any]] = [{"pool": pool, "index": index}
+                                            for index in range(pool.servers)]
+        elif addresses is not None:
             places = [{"address": address, "token": token} for address in addresses]
         else:
+            num_envs = 1 if num_envs is None else num_envs
             if instances_per_server is not None:
                 layout = [min(instances_per_server, num_envs - start)
                           for start in range(0, num_envs, instances_per_server)]

@@ -25,6 +25,13 @@ test-ray: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e ".[test,ray]"
 	$(BIN)/python -m pytest -m ray
 
+# Optional: RLlib (CPU torch first), its tests, and PPO trained on CartPole to a mean return of 400.
+rllib: $(STAMP)
+	$(BIN)/python -m pip install --quiet torch==2.13.0
+	$(BIN)/python -m pip install --quiet -e ".[test,rllib]"
+	$(BIN)/python -m pytest -m ray tests/test_rllib.py
+	$(BIN)/python -m examples.train_rllib
+
 # Optional: Stable-Baselines3 (CPU torch first, so no CUDA build is pulled), its tests, a training run.
 sb3: $(STAMP)
 	$(BIN)/python -m pip install --quiet torch==2.13.0

@@ -284,6 +284,8 @@ class _MultiDiscrete(_ArrayKind):
                 "start": space.start}
 
     def from_spec(self, spec: Spec) -> spaces.MultiDiscrete:
+        if not (np.asarray(spec["nvec"]) > 0).all():
+            raise ValueError(f"nvec (counts) must be positive, got {spec['nvec']!r:.80}")
         return spaces.MultiDiscrete(spec["nvec"], dtype=np.dtype(spec["dtype"]),
                                     start=spec["start"])
 
@@ -615,7 +617,8 @@ def space_from_spec(spec: Spec) -> spaces.Space:
         raise ValueError(f"not a space spec: {spec!r:.200}")
     try:
         return kind.from_spec(spec)
-    except (AttributeError, KeyError, TypeError, ValueError) as exc:
+    except (AttributeError, KeyError, TypeError, ValueError, AssertionError) as exc:
+        # (gymnasium checks some arguments with assert)
         raise ValueError(f"invalid {name} space spec: {exc}") from exc
 
 

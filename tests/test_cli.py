@@ -44,11 +44,11 @@ def test_serve_prints_where_it_listens(serve: Serve) -> None:
     assert f"listening on {server.host}:{server.port}" in server.output
 
 
-def test_the_client_imports_no_physics_and_no_server() -> None:
-    code = ("import sys, rlenv_client; "
+def test_the_client_imports_no_physics_no_server_and_no_ray() -> None:
+    code = ("import sys, rlenv_client, rlenv_client.rllib; "
             "print(sorted(m for m in sys.modules if m.split('.')[0] in "
-            "('pymunk', 'examples') or m in ('rlenv.node', 'rlenv.environment', "
-            "'rlenv.communication')))")
+            "('pymunk', 'examples', 'ray', 'torch') or m in ('rlenv.node', "
+            "'rlenv.rl_nodes', 'rlenv.serving')))")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                             timeout=60, check=True)
     assert result.stdout.strip() == "[]"

@@ -1,4 +1,5 @@
-"""Draw pymunk scenes into RGB arrays with numpy alone: no display, no drawing library.
+"""Draw pymunk scenes: into RGB arrays with numpy alone (no display, no drawing library), or as
+vector draw lists for a viewer to draw (the inspector's canvas).
 
 Every shape is rasterised inside its own bounding box by a vectorised inside-test on the pixel
 centres (circles by distance, segments as capsules, convex polygons by half-planes), so a frame
@@ -10,6 +11,7 @@ from its body's kind.
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
+from typing import Any
 
 import numpy as np
 import pymunk
@@ -17,7 +19,7 @@ import pymunk
 from rlenv.node import Node
 from rlenv.physics import CollisionShape, PhysicsWorld
 
-__all__ = ["BACKGROUND", "View", "draw", "fit_view"]
+__all__ = ["BACKGROUND", "View", "draw", "draw_list", "fit_view"]
 
 View = tuple[float, float, float, float]
 """A world rectangle: (x_min, y_min, x_max, y_max)."""
@@ -55,6 +57,42 @@ def draw(
     for shape, color in shapes:
         _draw_shape(image, shape, color, x0, y0, scale)
     return image
+
+
+def draw_list(root: Node, view: View | None = None) -> dict[str, Any]:
+    """Every shape of every PhysicsWorld at or below ``root``, as plain data to draw.
+
+    ``{"view": [x_min, y_min, x_max, y_max], "shapes": [...]}`` (world coordinates, y up); each
+    shape is a list, its kind first, then its colour as ``0xRRGGBB``:
+    ``["circle", color, x, y, radius, angle]``, ``["segment", color, ax, ay, bx, by, radius]``
+    or ``["polygon", color, radius, [x0, y0, x1, y1, ...]]``. A few bytes per shape: viewers
+    draw it at any size (the same colours as :func:`draw`).
+
+    Args:
+        root: the node whose physics to describe (usually the environment).
+        view: the world rectangle to show; by default the bounding box of every shape.
+    """
+    shapes = list(_shapes(root))
+    if view is None:
+        view = fit_view([shape for shape, _ in shapes])
+    return {"view": list(view), "shapes": [
+        item for shape, color in shapes if (item := _described(shape, color)) is not None]}
+
+
+def _described(shape: pymunk.Shape, color: tuple[int, int, int]) -> list[Any] | None:
+    body = shape.body
+    rgb = color[0] << 16 | color[1] << 8 | color[2]
+    if isinstance(shape, pymunk.Circle):
+        x, y = body.local_to_world(shape.offset)
+        return ["circle", rgb, x, y, shape.radius, body.angle]
+    if isinstance(shape, pymunk.Segment):
+        (ax, ay), (bx, by) = body.local_to_world(shape.a), body.local_to_world(shape.b)
+        return ["segment", rgb, ax, ay, bx, by, shape.radius]
+    if isinstance(shape, pymunk.Poly):
+        return ["polygon", rgb, shape.radius, [
+            coordinate for vertex in shape.get_vertices()
+            for coordinate in body.local_to_world(vertex)]]
+    return None
 
 
 def fit_view(shapes: Sequence[pymunk.Shape], margin: float = 0.1) -> View:

@@ -26,7 +26,7 @@ from gymnasium.utils import seeding
 from rlenv.errors import ErrorCode, RequestError
 from rlenv.node import NOTIFICATION_EXIT_TREE, Node
 from rlenv.properties import conform
-from rlenv.render import draw
+from rlenv.render import draw, draw_list
 from rlenv.timer import PhysicsFramesTimer
 
 __all__ = ["RLAgent", "RLEnvWorld", "RLEnvironment", "RLNode"]
@@ -195,7 +195,8 @@ class RLEnvironment(RLNode):
     RLAgent children as :attr:`agents` (the first is :attr:`agent`) and the first RLEnvWorld
     child as :attr:`world`; override it to choose others. The hooks, all optional:
     :meth:`_reset` (how an episode starts), :meth:`_step` (logic around an action: call
-    ``super()._step``), :meth:`_get_info` (entries for ``info``) and :meth:`_render` (frames).
+    ``super()._step``), :meth:`_get_info` (entries for ``info``), :meth:`_render` (frames) and
+    :meth:`_draw` (vector draw lists).
 
     Args:
         name: the node name; also the environment name the client sees.
@@ -310,3 +311,12 @@ class RLEnvironment(RLNode):
         :attr:`render_view`; override to draw something else.
         """
         return draw(self, width, height, self.render_view)
+
+    def _draw(self) -> dict[str, Any]:
+        """The current state as a vector draw list, for viewers (the inspector's canvas).
+
+        By default every pymunk shape below the environment, framed by :attr:`render_view`
+        (see :func:`rlenv.render.draw_list` for the format); override to describe something
+        else.
+        """
+        return draw_list(self, self.render_view)

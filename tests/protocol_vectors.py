@@ -512,6 +512,39 @@ def _inspect(recording: Recording) -> None:
                  "a set lasts one episode", "the value from before the set again")
 
 
+@scenario("inspector.json", "An inspector beside the controller: draw lists, statistics, edits "
+          "(protocol 2.2)")
+def _inspector(recording: Recording) -> None:
+    controller = recording.connect()
+    controller.hello()
+    controller.request({"id": 1, "reset": {"seed": 0}}, "the controller starts an episode")
+    controller.request({"id": 2, "action": f4(0.0)}, "and steps once", "reward 4.0, frames 4")
+    inspector = recording.connect()
+    inspector.hello()
+    inspector.request({"id": 1, "observation": {"draw": {}}}, "the scene as a draw list",
+                      "observation.draw: the view, then segment (track), polygon (cart), "
+                      "segment (pole); colours 0xRRGGBB")
+    inspector.request({"id": 2, "inspect": {"node": {"path": "World"}}}, "one node",
+                      "info.node: the world, with its config section and configurable names")
+    inspector.request({"id": 3, "inspect": {"set": {"path": "World/Physics/Pole",
+                                                    "property": "angular_velocity",
+                                                    "value": 1.0}}},
+                      "an edit for this episode: no control taken", "an empty answer")
+    inspector.request({"id": 4, "inspect": {"configure": {"world": {"gravity": [0.0, -5.0]}}}},
+                      "an edit of a setting: it lasts across episodes", "an empty answer")
+    controller.request({"id": 3, "action": f4(0.0)}, "the controller steps on, in the edited "
+                       "world", "its reward is its own (the inspector's answers carried 0.0)")
+    controller.request({"id": 4, "snapshot": {}}, "the controller's snapshot",
+                       "events: both actions, the set and the config, in order")
+    controller.request({"id": 5, "reset": {"seed": 1}}, "a new episode ends the first (its "
+                       "return is the controller's rewards)")
+    inspector.request({"id": 5, "inspect": {"stats": {}}}, "the episodes so far",
+                      "info.stats: episode 0 ended by a reset after 2 actions; the new one "
+                      "under way")
+    inspector.request({"id": 6, "inspect": {"stats": {"since": 1}}},
+                      "only the episodes numbered 1 and later", "none yet")
+
+
 @scenario("empty_request.json", "An empty request and a nil action", shared=True)
 def _empty(recording: Recording) -> None:
     link = recording.connect()

@@ -54,22 +54,65 @@ def test_bad_inspection_gets_precise_errors_and_changes_nothing(client: Client) 
          "must be a bool like"),
         (lambda: client._call(inspect={"delete": {}}), "inspect must be one of"),
         (lambda: client._call(inspect={"get": {"path": POLE}}), "takes exactly"),
+        (lambda: client._call(inspect={"stats": {"since": -1}}), "since must be an integer"),
+        (lambda: client._call(inspect={"stats": {"from": 1}}), "takes exactly"),
+        (lambda: client._call(inspect={"node": {}}), "takes exactly"),
+        (lambda: client._call(inspect={"configure": {"robot": {}}}), "takes exactly"),
+        (lambda: client._call(observation={"draw": {"width": 3}}), "draw takes an empty map"),
     ]:
         with pytest.raises(RemoteError) as error:
             call()
         assert error.value.code == ErrorCode.BAD_REQUEST
         assert words in error.value.message
+    with pytest.raises(RemoteError, match="max_force must be a float") as error:
+        client.inspect_configure(agent={"max_force": "x"})
+    assert error.value.code == ErrorCode.INVALID_CONFIG
     assert client.observe()["agent"].tobytes() == before
 
 
-def test_only_the_controller_sets(server: object, client: Client) -> None:
+def test_an_observer_edits_while_the_controller_steps(server: object, client: Client) -> None:
     client.reset(seed=0)
     with Client(server.host, server.port) as other:  # type: ignore[attr-defined]
-        assert isinstance(other.get_property(POLE, "angle"), float)  # reading is open
+        assert isinstance(other.get_property(POLE, "angle"), float)
         assert len(other.tree()) > 5
-        with pytest.raises(RemoteError) as error:
-            other.set_property(POLE, "angle", 0.5)
+        other.set_property(POLE, "angular_velocity", 2.5)  # an inspector's edit
+        other.inspect_configure(world={"gravity": [0.0, -20.0]})
+        with pytest.raises(RemoteError) as error:  # stepping stays the controller's
+            other.reset(seed=1)
         assert error.value.code == ErrorCode.BUSY
+    assert client.observe()["agent"][4] == pytest.approx(-2.5)
+    events = client.snapshot()["events"]
+    assert events[-2:] == [["set", POLE, "angular_velocity", 2.5],
+                           ["config", {"world": {"gravity": [0.0, -20.0]}}]]
+    observation, _ = client.reset(seed=0)  # the set lasted its episode; the setting stays
+    assert abs(observation[4]) < 0.05  # a fresh start, not the set
+    assert client.get_property("World/Physics", "gravity") == [0.0, -20.0]
+    assert client.snapshot()["config"]["world"]["gravity"] == [0.0, -20.0]
+
+
+def test_a_setting_changed_by_an_inspector_changes_the_physics_at_once(client: Client) -> None:
+    client.reset(seed=0)
+    client.inspect_configure(world={"gravity": [0.0, 0.0]})
+    for name in ("Cart", "Pole"):
+        client.set_property(f"World/Physics/{name}", "velocity", [0.0, 0.0])
+    client.set_property(POLE, "angular_velocity", 0.0)
+    before = client.observe()["agent"]
+    after, *_ = client.step(np.zeros(1, np.float32))
+    assert after[2] == pytest.approx(before[2], abs=1e-6)  # no gravity: the pole stays put
+
+
+def test_node_gives_one_entry_of_the_tree(client: Client) -> None:
+    client.reset(seed=0)
+    tree = {node["path"]: node for node in client.tree()}
+    for path in ("World", "Agent", "", "World/Physics/Pole"):
+        entry = client.node(path or "/root/CartPole")
+        assert entry == tree[entry["path"]]
+    assert client.node("World")["config"] == "world"
+    assert "gravity" in client.node("World")["configurable"]
+    assert client.node("Agent")["config"] == "agent"
+    assert "config" not in client.node("World/Physics")  # a set lasts one episode there
+    with pytest.raises(RemoteError, match="no node at path 'Nowhere'"):
+        client.node("Nowhere")
 
 
 def test_snapshots_reproduce_properties_set_during_the_episode(serve: Serve) -> None:

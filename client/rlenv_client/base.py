@@ -83,14 +83,22 @@ class BaseClient(ABC):
             RemoteError: ``invalid_config`` naming the key the server refused; nothing was
                 applied.
         """
-        config: dict[str, Any] = {}
-        if environment:
-            config["environment"] = environment
-        if agent is not None:
-            config["agent"] = dict(agent)
-        if world is not None:
-            config["world"] = dict(world)
-        self._call(config=config)
+        self._call(config=_config(environment, agent, world))
+
+    def inspect_configure(
+        self, *, agent: Mapping[str, Any] | None = None, world: Mapping[str, Any] | None = None,
+        **environment: Any,
+    ) -> None:
+        """Change settings as :meth:`configure` does, as an inspector: from any client.
+
+        The server applies it between two of the controller's requests, keeps it across
+        episodes and logs it for snapshots; it takes no control (protocol 2.2).
+
+        Raises:
+            RemoteError: ``invalid_config`` naming the key the server refused; nothing was
+                applied.
+        """
+        self._call(inspect={"configure": _config(environment, agent, world)})
 
     def reset(
         self, *, seed: int | None = None, options: Mapping[str, Any] | None = None
@@ -286,14 +294,37 @@ class BaseClient(ABC):
         """
         return self._call(inspect={"get": {"path": path, "property": name}}).info["value"]
 
-    def set_property(self, path: str, name: str, value: Any) -> None:
-        """Set an exported property (type-checked by the server; snapshots reproduce it).
+    def node(self, path: str) -> dict[str, Any]:
+        """One node of :meth:`tree`: its path, type and exported properties.
 
         Raises:
-            RemoteError: ``bad_request`` naming the node, property or expected type; ``busy``
-                when another client controls the environment.
+            RemoteError: ``bad_request`` naming the missing node.
+        """
+        return dict(self._call(inspect={"node": {"path": path}}).info["node"])
+
+    def set_property(self, path: str, name: str, value: Any) -> None:
+        """Set an exported property for this episode (type-checked; snapshots reproduce it).
+
+        Any client may, whoever controls the environment (an inspector's edit); the next
+        reset gives the property back its value from before the episode's first set.
+
+        Raises:
+            RemoteError: ``bad_request`` naming the node, property or expected type.
         """
         self._call(inspect={"set": {"path": path, "property": name, "value": value}})
+
+    def stats(self, since: int = 0) -> dict[str, Any]:
+        """The controller's episodes as the server counted them (see
+        :mod:`rlenv.serving.stats`): those numbered ``since`` and later, and totals."""
+        return dict(self._call(inspect={"stats": {"since": since}}).info["stats"])
+
+    def draw(self) -> dict[str, Any]:
+        """The scene as a vector draw list (see :func:`rlenv.render.draw_list`).
+
+        Raises:
+            RemoteError: ``reset_required`` before the first reset.
+        """
+        return dict(self._part(self._call(observation={"draw": {}}), "draw"))
 
     def render(self, width: int | None = None, height: int | None = None) -> np.ndarray:
         """Draw the environment's current state: an ``(height, width, 3)`` uint8 array.
@@ -397,3 +428,16 @@ class BaseClient(ABC):
         if observation is not None and "world" in observation:
             info["world"] = observation["world"]
         return info
+
+
+def _config(environment: Mapping[str, Any], agent: Mapping[str, Any] | None,
+            world: Mapping[str, Any] | None) -> dict[str, Any]:
+    """A ``config`` part from :meth:`BaseClient.configure`'s arguments."""
+    config: dict[str, Any] = {}
+    if environment:
+        config["environment"] = dict(environment)
+    if agent is not None:
+        config["agent"] = dict(agent)
+    if world is not None:
+        config["world"] = dict(world)
+    return config

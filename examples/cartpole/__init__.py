@@ -42,7 +42,9 @@ Terminated when the pole leans more than 12 degrees or the cart leaves the track
 
 ## Physics
 pymunk at 60 ticks per second; the space keeps ``damping`` (0.3) of every velocity per second,
-like the default damping of Blender's rigid bodies in the seed's scene.
+like the default damping of Blender's rigid bodies in the seed's scene. The world's
+configurable ``gravity`` (default (0, -9.81) m/s²) applies at once when changed, and to every
+later episode.
 
 ## Starting State
 Cart position and velocity, pole angle and angular velocity each uniform in [-0.05, 0.05],
@@ -68,6 +70,7 @@ TARGET = "examples.cartpole:CartPoleEnvironment"
 """What ``rlenv serve`` takes to serve this environment."""
 
 POLE_LENGTH = 1.0
+GRAVITY = (0.0, -9.81)
 _FLOAT32_MAX = float(np.finfo(np.float32).max)
 KAPPA = 2.5
 
@@ -81,7 +84,7 @@ def controller(observation: np.ndarray) -> np.ndarray:
 class CartPoleWorld(RLEnvWorld):
     """The track, the cart and the pole, rebuilt from scratch at every reset."""
 
-    configurable = ("track_limit", "pole_mass", "cart_mass", "damping")
+    configurable = ("track_limit", "pole_mass", "cart_mass", "damping", "gravity")
 
     def __init__(self, name: str = "World") -> None:
         super().__init__(name)
@@ -89,6 +92,7 @@ class CartPoleWorld(RLEnvWorld):
         self.cart_mass = 1.0
         self.pole_mass = 0.1
         self.damping = 0.3
+        self._gravity = GRAVITY
         self.physics: PhysicsWorld | None = None
         self.cart: RigidBody | None = None
         self.pole: RigidBody | None = None
@@ -103,13 +107,14 @@ class CartPoleWorld(RLEnvWorld):
         built_for = (self.track_limit, self.cart_mass, self.pole_mass)
         if self.physics is not None and self._built_for == built_for:
             self.physics.damping = self.damping
+            self.physics.gravity = self._gravity
             self.physics.restart()
             return
         self._built_for = built_for
         if self.physics is not None:
             self.remove_child(self.physics)
             self.physics.queue_free()
-        physics = PhysicsWorld(damping=self.damping, name="Physics")
+        physics = PhysicsWorld(gravity=self._gravity, damping=self.damping, name="Physics")
         track = StaticBody(name="Track")
         track.add_child(CollisionShape.segment(  # drawn, never touched
             (-self.track_limit, -0.2), (self.track_limit, -0.2), 0.01, sensor=True,
@@ -130,6 +135,17 @@ class CartPoleWorld(RLEnvWorld):
         physics.add_child(Joint.pivot("../Cart", "../Pole", (0.0, 0.0), name="Hinge"))
         self.physics = physics
         self.add_child(physics)
+
+    @property
+    def gravity(self) -> tuple[float, float]:
+        """The gravity (m/s²); a change applies at once, and to every later episode."""
+        return self._gravity
+
+    @gravity.setter
+    def gravity(self, value: tuple[float, float]) -> None:
+        self._gravity = (float(value[0]), float(value[1]))
+        if self.physics is not None:
+            self.physics.gravity = self._gravity
 
     def sample_initial_position(self) -> np.ndarray:
         """Cart x, cart velocity, pole angle and pole angular velocity, each in +-0.05."""

@@ -83,5 +83,15 @@ class PixelsEnvironment(RLEnvironment):
 
     def __init__(self) -> None:
         super().__init__("Pixels", repeat_action=1)
-        self.add_child(Dot())
+        self.dot = Dot()
+        self.add_child(self.dot)
         self.add_child(Screen())
+
+    def _draw(self) -> dict[str, Any]:
+        """The screen and the dot as a draw list (there is no pymunk space to describe)."""
+        def square(row: float, column: float, half: float) -> list[float]:
+            y, x = SIZE - row, column  # rows grow downwards, y upwards
+            return [x - half, y - half, x + half, y - half, x + half, y + half, x - half, y + half]
+        return {"view": [0, 0, SIZE, SIZE], "shapes": [
+            ["polygon", 0x000000, 0.0, square(SIZE / 2, SIZE / 2, SIZE / 2)],
+            ["polygon", 0xFFFFFF, 0.0, square(self.dot.row + 0.5, self.dot.column + 0.5, 1.5)]]}

@@ -1,14 +1,20 @@
-"""Remote introspection: the node tree and exported properties, as data (Godot's remote inspector).
+"""Remote introspection: the node tree, exported properties and episode statistics, as data
+(Godot's remote inspector).
 
 A request's ``inspect`` part asks for one of::
 
     {"tree": {}}                          every node: path, type, exported values, read-only ones
+    {"node": {"path": ...}}               one node, as in the tree
     {"get": {"path": "/root/CartPole/World/...", "property": "angle"}}
-    {"set": {"path": ..., "property": ..., "value": ...}}
+    {"set": {"path": ..., "property": ..., "value": ...}}      for this episode
+    {"configure": {"agent": {...}, ...}}  as a ``config`` part: kept across episodes
+    {"stats": {"since": n}}               episodes finished (numbered n and later), totals
 
-Paths are absolute or relative to the environment. Which properties a node exports and what
-value may replace one is :mod:`rlenv.properties`' business: nothing else, and never code, is
-accepted.
+None of them takes control: an observer (a person's inspector) may change the environment while
+its controller trains, between two of the controller's requests (at a tick boundary); every
+change is logged for snapshots like the controller's own. Paths are absolute or relative to the
+environment. Which properties a node exports and what value may replace one is
+:mod:`rlenv.properties`' business: nothing else, and never code, is accepted.
 """
 
 from __future__ import annotations
@@ -20,11 +26,21 @@ from typing import Any
 from rlenv.errors import ErrorCode, RequestError
 from rlenv.node import Node
 from rlenv.properties import conform, exported_of, to_wire
+from rlenv.rl_nodes import RLEnvironment
 
-__all__ = ["check_inspect", "get_property", "node_at", "set_property", "tree"]
+__all__ = ["check_inspect", "get_property", "node_at", "node_entry", "node_of", "set_property",
+           "tree"]
 
-_ARGUMENTS = {"tree": frozenset(), "get": frozenset({"path", "property"}),
-              "set": frozenset({"path", "property", "value"})}
+_PATH = frozenset({"path"})
+_ARGUMENTS: dict[str, tuple[frozenset[str], frozenset[str]]] = {  # required, optional
+    "tree": (frozenset(), frozenset()), "node": (_PATH, frozenset()),
+    "get": (frozenset({"path", "property"}), frozenset()),
+    "set": (frozenset({"path", "property", "value"}), frozenset()),
+    "configure": (frozenset(), frozenset({"environment", "agent", "world"})),
+    "stats": (frozenset(), frozenset({"since"})),
+}
+_USAGE = ("inspect must be one of {'tree': {}}, {'node': {path}}, {'get': {path, property}}, "
+          "{'set': {path, property, value}}, {'configure': <config>} or {'stats': {since}}")
 
 
 def check_inspect(spec: Any) -> tuple[str, Mapping[str, Any]]:
@@ -34,25 +50,56 @@ def check_inspect(spec: Any) -> tuple[str, Mapping[str, Any]]:
         RequestError: ``bad_request``.
     """
     if not isinstance(spec, Mapping) or len(spec) != 1 or next(iter(spec)) not in _ARGUMENTS:
-        raise RequestError(ErrorCode.BAD_REQUEST, "inspect must be one of {'tree': {}}, "
-                           "{'get': {path, property}} or {'set': {path, property, value}}")
+        raise RequestError(ErrorCode.BAD_REQUEST, _USAGE)
     operation, arguments = next(iter(spec.items()))
-    expected = _ARGUMENTS[operation]
-    if not isinstance(arguments, Mapping) or set(arguments) != expected:
+    required, optional = _ARGUMENTS[operation]
+    if not isinstance(arguments, Mapping) or not required <= arguments.keys() <= \
+            required | optional:
+        expected = sorted(required) + [f"{name} (optional)" for name in sorted(optional)]
         raise RequestError(ErrorCode.BAD_REQUEST, f"inspect.{operation} takes exactly "
-                           f"{sorted(expected) or 'an empty map'}")
+                           f"{expected or 'an empty map'}")
+    since = arguments.get("since", 0)
+    if type(since) is not int or since < 0:
+        raise RequestError(ErrorCode.BAD_REQUEST,
+                           f"inspect.stats.since must be an integer >= 0, got {since!r:.40}")
     return operation, arguments
 
 
-def tree(root: Node) -> list[dict[str, Any]]:
-    """Every node at or below ``root``, in tree order, with its exported values.
+def tree(environment: RLEnvironment) -> list[dict[str, Any]]:
+    """Every node at or below ``environment``, in tree order (see :func:`node_entry`)."""
+    sections = _config_sections(environment)
+    return [node_entry(node, sections.get(id(node))) for node in environment.iter_subtree()]
 
-    ``read_only`` names the exported properties that ``set`` may not change.
+
+def node_entry(node: Node, section: str | None = None) -> dict[str, Any]:
+    """A node as data: path, type, exported values, the read-only ones among them.
+
+    The nodes a ``config`` reaches (the environment, its agents, its world) also say which
+    ``section`` of a config reaches them (``config``) and what it may change
+    (``configurable``): a change there lasts across episodes, a ``set`` for one.
     """
-    return [{"path": node.get_path(), "type": type(node).__name__,
-             "exported": {name: to_wire(getattr(node, name)) for name in exported_of(node)},
-             "read_only": [name for name in exported_of(node) if _read_only(node, name)]}
-            for node in root.iter_subtree()]
+    names = exported_of(node)
+    entry = {"path": node.get_path(), "type": type(node).__name__,
+             "exported": {name: to_wire(getattr(node, name)) for name in names},
+             "read_only": [name for name in names if _read_only(node, name)]}
+    if section is not None:
+        entry["config"] = section
+        entry["configurable"] = list(getattr(node, "configurable", ()))
+    return entry
+
+
+def node_of(environment: RLEnvironment, path: Any) -> dict[str, Any]:
+    """The entry (:func:`node_entry`) of the node at ``path``."""
+    node = node_at(environment, path)
+    return node_entry(node, _config_sections(environment).get(id(node)))
+
+
+def _config_sections(environment: RLEnvironment) -> dict[int, str]:
+    sections = {id(environment): "environment"}
+    sections.update((id(agent), "agent") for agent in environment.agents)
+    if environment.world is not None:
+        sections[id(environment.world)] = "world"
+    return sections
 
 
 def node_at(root: Node, path: Any) -> Node:

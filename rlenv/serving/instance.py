@@ -40,6 +40,7 @@ from rlenv.recording import VideoRecorder
 from rlenv.rl_nodes import RLAgent, RLEnvironment
 from rlenv.serving import inspector
 from rlenv.serving.snapshots import EpisodeLog
+from rlenv.serving.stats import EpisodeStats
 from rlenv.spaces import Codec, SpaceMismatch, codec_for, compile_check, find_non_finite
 from rlenv.tree import SceneTree
 
@@ -139,6 +140,7 @@ class Instance:
         self.state = Episode.NOT_STARTED
         self._no_episode = "no episode has started; reset first"  # why, when NOT_STARTED
         self.log = EpisodeLog()
+        self.stats = EpisodeStats([a.name for a in self.agents] if self.multi_agent else None)
         self._before_sets: dict[tuple[Node, str], Any] = {}  # what inspect sets replaced
         self.replaying = False  # restoring a snapshot: the episode moves on silently
         self._recorder: VideoRecorder | None = None
@@ -293,6 +295,7 @@ class Instance:
         if seed is not None:
             environment.np_random, _ = seeding.np_random(seed)
         self.log.begin(self.config_state(), environment.np_random, options)
+        self.stats.begin()
         for agent in self.agents:
             agent.reward = 0.0
             agent.terminated = agent.truncated = False
@@ -442,6 +445,8 @@ class Instance:
             width, height = self.environment.render_size
             observation["render"] = self.environment._render(size.get("width", width),
                                                              size.get("height", height))
+        if "draw" in request:
+            observation["draw"] = self.environment._draw()
         return observation
 
     def _response(self, reply_id: int, answer: Answer, reports: bool) -> Response:
@@ -471,6 +476,13 @@ class Instance:
         frames = 0
         if reports:
             frames, self._ticks = self._ticks, 0
+            if outcomes is None:
+                self.stats.reported(reward, frames, answer.acted)
+            else:
+                self.stats.reported_agents({name: o["reward"] for name, o in outcomes.items()},
+                                           frames, answer.acted)
+            if terminated or truncated:
+                self.stats.end("terminated" if terminated else "truncated")
         if terminated or truncated:  # real time: the client now knows the episode ended
             self.state = Episode.ENDED
         info = self.environment._get_info()
@@ -498,6 +510,7 @@ class Instance:
         self.tree.paused = True
         self.state = Episode.NOT_STARTED
         self._no_episode = f"{why}; reset first"
+        self.stats.end("error")
         self._ticks = 0  # the failed request's ticks and rewards are no one's
         for agent in self.agents:
             agent.reward = 0.0

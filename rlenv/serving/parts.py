@@ -162,10 +162,10 @@ class RepeatAction(Part):
 
 
 class Observation(Part):
-    """``{"agent": {}, "world": {}, "render": {"width", "height"}}``, any of them."""
+    """``{"agent": {}, "world": {}, "render": {"width", "height"}, "draw": {}}``, any of them."""
 
     name = "observation"
-    _KEYS = frozenset({"agent", "world", "render"})
+    _KEYS = frozenset({"agent", "world", "render", "draw"})
     _RENDER_KEYS = frozenset({"width", "height"})
 
     def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
@@ -180,6 +180,8 @@ class Observation(Part):
                 _map(observation[key], f"observation.{key}", where)
         if "render" in observation:
             self._check_render(observation["render"])
+        if "draw" in observation and _map(observation["draw"], "observation.draw", where):
+            raise _bad("observation.draw takes an empty map")
         if instance.state is Episode.NOT_STARTED and not fresh:
             instance.refuse_without_episode()
         return observation
@@ -279,23 +281,29 @@ def _prefixed(where: str, call: Callable[..., Any], *args: Any, **kwargs: Any) -
 
 
 class Inspect(Part):
-    """``{"tree": {}}``, ``{"get": {path, property}}`` or ``{"set": {path, property, value}}``."""
+    """An inspector's request (:mod:`rlenv.serving.inspector`): read the tree, a node, a
+    property or the statistics, or change a property or a setting.
+
+    It never takes control: a change from an observer applies between two of the controller's
+    requests, at a tick boundary, and is logged as the controller's own would be.
+    """
 
     name = "inspect"
     alone = True
 
-    def controls(self, value: Any) -> bool:
-        return isinstance(value, Mapping) and "set" in value
-
     def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
               where: str) -> Any:
         operation, arguments = inspector.check_inspect(parts["inspect"])
+        environment = instance.environment
         if operation == "get":
-            inspector.get_property(instance.environment, arguments["path"],
-                                   arguments["property"])
+            inspector.get_property(environment, arguments["path"], arguments["property"])
+        elif operation == "node":
+            inspector.node_at(environment, arguments["path"])
         elif operation == "set":
-            inspector.set_property(instance.environment, arguments["path"],
-                                   arguments["property"], arguments["value"], dry_run=True)
+            inspector.set_property(environment, arguments["path"], arguments["property"],
+                                   arguments["value"], dry_run=True)
+        elif operation == "configure":
+            instance.check_config(arguments)
         return operation, arguments
 
     def apply(self, instance: Instance, value: Any, answer: Answer) -> None:
@@ -303,11 +311,17 @@ class Inspect(Part):
         environment = instance.environment
         if operation == "tree":
             answer.info = {"tree": inspector.tree(environment)}
+        elif operation == "node":
+            answer.info = {"node": inspector.node_of(environment, arguments["path"])}
         elif operation == "get":
             answer.info = {"value": inspector.get_property(environment, arguments["path"],
                                                            arguments["property"])}
-        else:
+        elif operation == "set":
             instance.set_property(arguments["path"], arguments["property"], arguments["value"])
+        elif operation == "configure":
+            instance.configure(arguments)
+        else:
+            answer.info = {"stats": instance.stats.since(arguments.get("since", 0))}
 
 
 def _need_lockstep(instance: Instance) -> None:

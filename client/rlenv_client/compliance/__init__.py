@@ -10,10 +10,10 @@ dm_env_rpc's ``compliance`` and trio's ``check_two_way_stream``). ``rlenv check 
 
 Then the promises of the protocol contract (``docs/protocol.md``), each a probe whose failure
 line says what was expected and what came back: a refused request takes no control and, while
-the controller holds control, other clients may look but not change; a set lasts for its
-episode, so ``reset(seed)`` and a snapshot replay bit for bit after one; a snapshot restored
-twice replays its episode each time; no ext type but 1 travels either way; the token is checked
-on the first request, not the first frame. A probe that cannot apply to the server (no token
+the controller holds control, other clients may look and edit (``inspect``) but not step; a set
+lasts for its episode, so ``reset(seed)`` and a snapshot replay bit for bit after one; a
+snapshot restored twice replays its episode each time; no ext type but 1 travels either way;
+the token is checked on the first request, not the first frame. A probe that cannot apply to the server (no token
 given, no writable property) is reported skipped, with why.
 
 Here is the public API, :class:`ComplianceReport` and :func:`check_server`, which runs the

@@ -165,17 +165,22 @@ class ContractProbes:
                 raise
 
     def open_to_all_while_controlled(self) -> None:
-        """Only the controller changes the environment; everyone may look at it.
+        """Only the controller steps the environment; everyone may look at it, and edit it.
 
         Another client's reset and action get a non-fatal ``busy`` and change nothing; its
         observation, snapshot, inspect tree and get, ``action: nil`` and an id-only request
-        are answered.
+        are answered; so is its ``inspect set`` (an inspector's edit, protocol 2.2), which the
+        controller's snapshot then records.
         """
         problems = []
         own = self.answer({"observation": {"agent": {}}}).observation
         tree = self.controller.tree()
         readable = next(((node["path"], name) for node in tree
                          for name in node.get("exported") or ()), None)
+        writable = next(([node["path"], name, value] for node in tree
+                         for name, value in (node.get("exported") or {}).items()
+                         if name not in node.get("read_only", ()) and type(value) is float),
+                        None)
         with self.harness.client() as other:
             for what, parts in (("reset(seed=1)", {"reset": {"seed": 1}}),
                                 ("action", other.step_request(self.harness.valid_action()).parts)):
@@ -198,6 +203,10 @@ class ContractProbes:
             if readable is not None:
                 answered.append((f"inspect get of {readable[0]}:{readable[1]}", {"inspect": {
                     "get": {"path": readable[0], "property": readable[1]}}}))
+            if writable is not None:  # set to the value it has: logged, changes nothing
+                path, name, value = writable
+                answered.append((f"inspect set of {path}:{name}", {"inspect": {
+                    "set": {"path": path, "property": name, "value": value}}}))
             for what, parts in answered:
                 other.send_request(Request(0, parts))
                 reply = other.receive_reply()
@@ -207,6 +216,12 @@ class ContractProbes:
                 elif what == "observation" and pack(reply.observation) != pack(own):
                     problems.append("another client's observation differs from the "
                                     "controller's: the refused requests changed the environment")
+        if writable is not None and not problems:
+            events = self.controller.snapshot()["events"]
+            if not events or list(events[-1]) != ["set", *writable]:
+                problems.append(f"another client's inspect set of {writable[0]}:{writable[1]} "
+                                f"is not the last event of the controller's snapshot: "
+                                f"{events[-1:]!r:.120}")
         assert not problems, "; ".join(problems)
 
 

@@ -1,4 +1,4 @@
-"""The ``rlenv`` command: ``rlenv serve``, ``check``, ``bench``, ``replay`` and ``demo``."""
+"""The ``rlenv`` command: ``serve``, ``inspect``, ``check``, ``bench``, ``replay``, ``demo``."""
 
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ import argparse
 import logging
 import os
 import signal
+import subprocess
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -50,7 +51,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     serve.add_argument("--idle-timeout", type=float, default=defaults.idle_timeout,
                        help=f"seconds a client may stay silent, 0: forever (default "
                        f"{defaults.idle_timeout})")
+    serve.add_argument("--inspect", action="store_true",
+                       help="also start the live inspector (rlenv inspect) on this server and "
+                       "print its page's address")
     serve.set_defaults(run=_serve)
+
+    inspect = commands.add_parser(
+        "inspect", help="watch running servers in the browser (a page on 127.0.0.1)")
+    inspect.add_argument("addresses", nargs="+", metavar="HOST:PORT",
+                         help="the environment servers to watch")
+    inspect.add_argument("--token", default=None, help="the servers' token (default: "
+                         "$RLENV_TOKEN, which keeps it out of the process list)")
+    inspect.add_argument("--port", type=int, default=0,
+                         help="the page's port on 127.0.0.1 (default 0: a free one)")
+    inspect.add_argument("--follow-stdin", action="store_true",
+                         help="read new address lists (JSON) from standard input; exit when it "
+                         "closes (set by rlenv_client.inspector.Inspector)")
+    inspect.set_defaults(run=_inspect)
 
     check = commands.add_parser("check", help="check a server the way trainers use it")
     check.add_argument("target", help="HOST:PORT of a running server, or MODULE:CLASS to start")
@@ -111,11 +128,36 @@ def _serve(args: argparse.Namespace) -> int:
     with server:
         host, port = server.address
         print(f"listening on {host}:{port}", flush=True)
+        inspector = _start_inspector(host, port, args.token) if args.inspect else None
         try:
             server.serve_forever()
         except KeyboardInterrupt:
             pass
+        finally:
+            if inspector is not None:
+                inspector.stdin.close()  # type: ignore[union-attr]  # it exits at EOF
+                inspector.wait()
     return 0
+
+
+def _start_inspector(host: str, port: int, token: str | None) -> subprocess.Popen[bytes]:
+    """``rlenv inspect`` on this server, in a process of its own (it prints its address).
+
+    This process only holds the pipe whose end stops it: the server gains no HTTP code and no
+    thread.
+    """
+    env = dict(os.environ)
+    if token is not None:
+        env["RLENV_TOKEN"] = token
+    address = f"{'127.0.0.1' if host in ('0.0.0.0', '') else host}:{port}"
+    return subprocess.Popen([sys.executable, "-m", "rlenv_client.inspector", address,
+                             "--follow-stdin"], stdin=subprocess.PIPE, env=env)
+
+
+def _inspect(args: argparse.Namespace) -> int:
+    from rlenv_client.inspector import run
+
+    return run(args)
 
 
 def _demo(args: argparse.Namespace) -> int:

@@ -1,5 +1,7 @@
-"""Draw pymunk scenes: into RGB arrays with numpy alone (no display, no drawing library), or as
-vector draw lists for a viewer to draw (the inspector's canvas).
+"""Draw pymunk scenes: into RGB arrays, or as vector draw lists for viewers.
+
+RGB arrays are drawn with numpy alone (no display, no drawing library); draw lists are the
+shapes as data, for a viewer to draw at any size (the inspector's canvas).
 
 Every shape is rasterised inside its own bounding box by a vectorised inside-test on the pixel
 centres (circles by distance, segments as capsules, convex polygons by half-planes), so a frame

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Iterator
 
 import pytest
@@ -11,6 +12,14 @@ from rlenv.tree import SceneTree
 from rlenv_client import Client, ServerProcess
 
 Serve = Callable[..., ServerProcess]
+
+
+def wait_until(condition: Callable[[], bool], message: str, seconds: float = 30.0) -> None:
+    """Poll ``condition`` until it holds (no fixed sleep)."""
+    deadline = time.monotonic() + seconds
+    while not condition():
+        assert time.monotonic() < deadline, message
+        time.sleep(0.05)
 
 
 @pytest.fixture

@@ -1,21 +1,10 @@
-"""What the Ray tests share: polling with a deadline, and the processes of a pool."""
+"""What the Ray tests share: the processes of a pool."""
 
 from __future__ import annotations
-
-import time
-from collections.abc import Callable
 
 import ray
 
 from rlenv_client.ray import RayServerPool
-
-
-def wait_until(condition: Callable[[], bool], message: str, seconds: float = 30.0) -> None:
-    """Poll ``condition`` until it holds (no fixed sleep)."""
-    deadline = time.monotonic() + seconds
-    while not condition():
-        assert time.monotonic() < deadline, message
-        time.sleep(0.05)
 
 
 def alive(pid: int) -> bool:

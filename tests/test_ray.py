@@ -13,7 +13,8 @@ import pytest
 
 ray = pytest.importorskip("ray")
 
-from ray_pools import alive, server_pids, wait_until  # noqa: E402
+from conftest import wait_until  # noqa: E402
+from ray_pools import alive, server_pids  # noqa: E402
 
 from rlenv_client import RemoteVectorEnv  # noqa: E402
 from rlenv_client.ray import RayServerPool, ServerLost  # noqa: E402

@@ -15,7 +15,8 @@ import pytest
 ray = pytest.importorskip("ray")
 cluster_utils = pytest.importorskip("ray.cluster_utils")
 
-from ray_pools import alive, server_pids, wait_until  # noqa: E402
+from conftest import wait_until  # noqa: E402
+from ray_pools import alive, server_pids  # noqa: E402
 
 from rlenv_client import RemoteVectorEnv  # noqa: E402
 from rlenv_client.ray import RayServerPool  # noqa: E402

@@ -314,8 +314,10 @@ class BaseClient(ABC):
         self._call(inspect={"set": {"path": path, "property": name, "value": value}})
 
     def stats(self, since: int = 0) -> dict[str, Any]:
-        """The controller's episodes as the server counted them (see
-        :mod:`rlenv.serving.stats`): those numbered ``since`` and later, and totals."""
+        """The controller's episodes as the server counted them, numbered ``since`` and later.
+
+        See :mod:`rlenv.serving.stats` (totals, the episode under way).
+        """
         return dict(self._call(inspect={"stats": {"since": since}}).info["stats"])
 
     def draw(self) -> dict[str, Any]:

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium
 import numpy as np
@@ -28,6 +28,9 @@ from rlenv_client.base import BaseClient, StepResult
 from rlenv_client.display import Display, display_available
 from rlenv_client.launcher import ServerProcess
 from rlenv_client.session import LOST, Session
+
+if TYPE_CHECKING:
+    from rlenv_client.inspector import Inspector
 
 __all__ = ["RemoteEnv"]
 
@@ -51,6 +54,9 @@ class RemoteEnv(gymnasium.Env):
         render_size: (width, height) of rendered frames; the environment's default if ``None``.
         token: the secret of a server that requires one (default ``$RLENV_TOKEN``).
         max_restarts: how many times a lost server that this environment started is replaced.
+        inspector: also start the live inspector (:mod:`rlenv_client.inspector`) on the
+            server: its page's address is printed on standard error and kept in
+            ``inspector.url``.
 
     Raises:
         ServerStartError: the server could not start (its output is in the message).
@@ -64,7 +70,7 @@ class RemoteEnv(gymnasium.Env):
         repeat_action: int | None = None, render_mode: str | None = None,
         in_process: bool = False, timeout: float = 30.0, server_args: Sequence[str] = (),
         render_size: tuple[int, int] | None = None, token: str | None = None,
-        max_restarts: int = 3,
+        max_restarts: int = 3, inspector: bool = False,
     ) -> None:
         self.metadata = {"render_modes": ["rgb_array"], "render_fps": 15}
         if display_available():
@@ -88,6 +94,15 @@ class RemoteEnv(gymnasium.Env):
         self.render_size = render_size
         self._display: Display | None = None
         self._last_observation: Any = None
+        self.inspector: Inspector | None = None
+        if inspector:
+            from rlenv_client.inspector import inspect_sessions
+
+            try:
+                self.inspector = inspect_sessions([self.session])
+            except BaseException:
+                self.session.close()
+                raise
         logger.info("connected to %s at %s", hello.environment, self.client.address)
 
     @property
@@ -160,6 +175,9 @@ class RemoteEnv(gymnasium.Env):
         if self._display is not None:
             self._display.close()
             self._display = None
+        if self.inspector is not None:
+            self.inspector.close()
+            self.inspector = None
         self.session.close()
 
     def __repr__(self) -> str:

@@ -11,7 +11,7 @@ and never send a request twice (no transition is invented or duplicated).
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
 from rlenv.errors import ConnectionLost, RequestTimeout
@@ -138,6 +138,7 @@ class Session:
         self.client, self.server = connect(**self._place)
         self.max_restarts = max_restarts
         self.restarts = 0
+        self.on_restart: Callable[[], None] | None = None  # told once a restart reconnected
         self._configuration: list[dict[str, Any]] = []
 
     def configure(self, **settings: Any) -> None:
@@ -171,7 +172,14 @@ class Session:
         self.client, self.server = connect(**self._place)
         for settings in self._configuration:
             self.client.configure(**settings)
+        if self.on_restart is not None:
+            self.on_restart()
         return reason
+
+    @property
+    def token(self) -> str | None:
+        """The secret this session's servers need (``None``: none, or ``$RLENV_TOKEN``)."""
+        return self._pool.token if self._pool is not None else self._place["token"]
 
     def failure(self, error: Exception) -> ConnectionLost:
         """``error`` as a ConnectionLost that says how the server exited, if it did."""

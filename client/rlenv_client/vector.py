@@ -32,7 +32,7 @@ import math
 import os
 from collections.abc import Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
@@ -44,6 +44,9 @@ from rlenv_client.base import BaseClient
 from rlenv_client.launcher import ServerProcess
 from rlenv_client.rows import row, rows, set_row, set_rows
 from rlenv_client.session import LOST, ServerSource, Session
+
+if TYPE_CHECKING:
+    from rlenv_client.inspector import Inspector
 
 __all__ = ["RemoteVectorEnv", "default_layout"]
 
@@ -81,6 +84,9 @@ class RemoteVectorEnv(VectorEnv):
         max_restarts: how many times each lost server that this vector started is replaced.
         instances_per_server: how many sub-environments each started server hosts; by default
             one server per core (see :func:`default_layout`).
+        inspector: also start the live inspector (:mod:`rlenv_client.inspector`) on every
+            server: its page's address is printed on standard error and kept in
+            ``inspector.url``.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array"]}
@@ -93,6 +99,7 @@ class RemoteVectorEnv(VectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         in_process: bool = False, render_mode: str | None = None, timeout: float = 30.0,
         token: str | None = None, max_restarts: int = 3, instances_per_server: int | None = None,
+        inspector: bool = False,
     ) -> None:
         mode = AutoresetMode(autoreset_mode)
         if mode is AutoresetMode.DISABLED:
@@ -137,6 +144,15 @@ class RemoteVectorEnv(VectorEnv):
         self._autoreset = np.zeros(self.num_envs, dtype=np.bool_)
         self._steps = np.zeros(self.num_envs, dtype=np.int64)
         self._last: Any = None  # the last batch of observations returned
+        self.inspector: Inspector | None = None
+        if inspector:
+            from rlenv_client.inspector import inspect_sessions
+
+            try:
+                self.inspector = inspect_sessions(self.sessions)
+            except BaseException:
+                self.close()
+                raise
 
     @property
     def clients(self) -> list[BaseClient]:
@@ -287,6 +303,9 @@ class RemoteVectorEnv(VectorEnv):
 
     def close_extras(self, **kwargs: Any) -> None:
         """Disconnect every client and stop every server this environment started."""
+        if getattr(self, "inspector", None) is not None:
+            self.inspector.close()  # type: ignore[union-attr]
+            self.inspector = None
         for session in self.sessions:
             session.close()
 

@@ -1,5 +1,4 @@
-"""Remote introspection: the node tree, exported properties and episode statistics, as data
-(Godot's remote inspector).
+"""Remote introspection (Godot's remote inspector): the node tree, properties, statistics.
 
 A request's ``inspect`` part asks for one of::
 

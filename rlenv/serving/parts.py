@@ -281,8 +281,10 @@ def _prefixed(where: str, call: Callable[..., Any], *args: Any, **kwargs: Any) -
 
 
 class Inspect(Part):
-    """An inspector's request (:mod:`rlenv.serving.inspector`): read the tree, a node, a
-    property or the statistics, or change a property or a setting.
+    """An inspector's request (:mod:`rlenv.serving.inspector`): read, or change a property.
+
+    It reads the tree, a node, a property or the statistics, or changes a property or a
+    setting.
 
     It never takes control: a change from an observer applies between two of the controller's
     requests, at a tick boundary, and is logged as the controller's own would be.

@@ -13,8 +13,8 @@ line says what was expected and what came back: a refused request takes no contr
 the controller holds control, other clients may look and edit (``inspect``) but not step; a set
 lasts for its episode, so ``reset(seed)`` and a snapshot replay bit for bit after one; a
 snapshot restored twice replays its episode each time; no ext type but 1 travels either way;
-the token is checked on the first request, not the first frame. A probe that cannot apply to the server (no token
-given, no writable property) is reported skipped, with why.
+the token is checked on the first request, not the first frame. A probe that cannot apply to
+the server (no token given, no writable property) is reported skipped, with why.
 
 Here is the public API, :class:`ComplianceReport` and :func:`check_server`, which runs the
 probes in a fixed order (the random frames, actions and seeds follow from ``seed``). The rest:

@@ -1,0 +1,178 @@
+"""The live inspector: a page in the browser showing servers while a trainer drives them.
+
+``rlenv inspect HOST:PORT [HOST:PORT ...]`` (or :class:`Inspector` from Python) starts a small
+web server on 127.0.0.1 that is an *observer* client of each environment server over the
+ordinary protocol, so the environment servers gain no HTTP code and no thread. The page draws
+the scene from vector draw lists (up to ~30 frames a second, dropped when the browser is slow),
+lists the node tree (every second) and the selected node's properties (several times a second,
+editable: a setting lasts, any other property lasts its episode), shows camera observations as
+images and plots the episodes' returns and lengths, steps per second and restarts.
+
+- :mod:`~rlenv_client.inspector.watch`: the observer connections (what the page can ask);
+- :mod:`~rlenv_client.inspector.web`: the HTTP server and its safety rules;
+- ``static/``: the page (one HTML file, its script and its style; no build step).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import threading
+from collections.abc import Sequence
+from typing import IO, TYPE_CHECKING
+
+from rlenv_client.client import Client
+from rlenv_client.inspector.watch import InspectorError, Watcher
+from rlenv_client.inspector.web import InspectorServer
+
+if TYPE_CHECKING:
+    from rlenv_client.session import Session
+
+__all__ = ["Inspector", "InspectorError", "InspectorServer", "Watcher", "inspect_sessions",
+           "run"]
+
+_READY = "inspector on "
+
+
+class Inspector:
+    """``rlenv inspect`` in a subprocess, watching ``addresses``; its page is at :attr:`url`.
+
+    The subprocess holds the token (passed in its environment, never on its command line) and
+    exits when this object is closed or this process dies (its standard input closes).
+
+    Args:
+        addresses: ``HOST:PORT`` of each server to watch.
+        token: the servers' secret, if they need one (default ``$RLENV_TOKEN``).
+        port: the page's port on 127.0.0.1 (0: a free one).
+        timeout: seconds to wait for the subprocess to say where its page is.
+
+    Raises:
+        RuntimeError: the subprocess did not start (with what it printed).
+    """
+
+    def __init__(self, addresses: Sequence[str], token: str | None = None, port: int = 0,
+                 timeout: float = 30.0) -> None:
+        env = dict(os.environ)
+        if token is not None:
+            env["RLENV_TOKEN"] = token
+        self._process = subprocess.Popen(
+            [sys.executable, "-m", "rlenv_client.inspector", *addresses, "--port", str(port),
+             "--follow-stdin"],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+            env=env, start_new_session=True)
+        assert self._process.stdout is not None
+        self.url = _read_url(self._process.stdout, timeout, self._process)
+        self._lines = threading.Thread(target=_drain, args=(self._process.stdout,), daemon=True)
+        self._lines.start()
+
+    def follow(self, addresses: Sequence[str]) -> None:
+        """Watch these addresses from now on (a restarted server's new address, say)."""
+        assert self._process.stdin is not None
+        self._process.stdin.write(json.dumps(list(addresses)) + "\n")
+        self._process.stdin.flush()
+
+    def close(self) -> None:
+        """Stop the subprocess (closing its standard input ends it); safe to repeat."""
+        if self._process.stdin is not None and not self._process.stdin.closed:
+            self._process.stdin.close()
+        try:
+            self._process.wait(5.0)
+        except subprocess.TimeoutExpired:
+            self._process.kill()
+            self._process.wait()
+
+    def __enter__(self) -> Inspector:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"<Inspector {self.url} pid={self._process.pid}>"
+
+
+def inspect_sessions(sessions: Sequence[Session]) -> Inspector:
+    """An :class:`Inspector` watching the servers of ``sessions``, following their restarts.
+
+    Its page's address is printed on standard error (nothing is opened by itself).
+
+    Raises:
+        ValueError: a session runs its environment in this process (there is no server).
+    """
+    clients = [session.client for session in sessions]
+    if not all(isinstance(client, Client) for client in clients):
+        raise ValueError("the inspector watches served environments: in_process=True has no "
+                         "server to watch")
+    inspector = Inspector([client.address for client in clients],  # type: ignore[attr-defined]
+                          token=sessions[0].token)
+
+    def follow() -> None:
+        inspector.follow([session.client.address for session in sessions])  # type: ignore
+
+    for session in sessions:
+        session.on_restart = follow
+    print(f"rlenv inspector: {inspector.url}", file=sys.stderr, flush=True)
+    return inspector
+
+
+def _read_url(stdout: IO[str], timeout: float, process: subprocess.Popen[str]) -> str:
+    """The URL the subprocess prints first (a reader thread bounds the wait)."""
+    said: list[str] = []
+    reader = threading.Thread(target=_until_ready, args=(stdout, said), daemon=True)
+    reader.start()
+    reader.join(timeout)
+    if said and said[-1].startswith(_READY):
+        return said[-1][len(_READY):].strip()
+    process.kill()
+    process.wait()
+    raise RuntimeError("rlenv inspect did not start: " + "".join(said).strip())
+
+
+def _until_ready(stdout: IO[str], lines: list[str]) -> None:
+    for line in stdout:
+        lines.append(line)
+        if line.startswith(_READY):
+            return
+
+
+def _drain(stdout: IO[str]) -> None:
+    for line in stdout:
+        sys.stderr.write(line)
+
+
+def run(args: argparse.Namespace) -> int:
+    """``rlenv inspect`` (its arguments: :mod:`rlenv.cli`): serve the page.
+
+    Until interrupted, or until standard input closes with ``--follow-stdin``.
+    """
+    try:
+        watcher = Watcher(args.addresses, token=args.token or os.environ.get("RLENV_TOKEN"))
+    except ValueError as error:
+        print(f"rlenv inspect: {error}", file=sys.stderr)
+        return 2
+    server = InspectorServer(watcher, port=args.port)
+    print(f"{_READY}{server.url}", flush=True)
+    if args.follow_stdin:
+        threading.Thread(target=_follow, args=(server,), daemon=True).start()
+    try:
+        server.serve_forever()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.server_close()
+        watcher.close()
+    return 0
+
+
+def _follow(server: InspectorServer) -> None:
+    """Address lists from standard input; at its end, stop the server."""
+    for line in sys.stdin:
+        try:
+            addresses = json.loads(line)
+            server.watcher.follow(addresses)
+        except (ValueError, TypeError) as error:
+            print(f"rlenv inspect: ignored {line.strip()!r:.80}: {error}", file=sys.stderr)
+    server.shutdown()

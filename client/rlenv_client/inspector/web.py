@@ -1,0 +1,241 @@
+"""The inspector's web server: the page, and the JSON it polls, on 127.0.0.1 only.
+
+Safe by default, as a local debugging server must be:
+
+- it binds 127.0.0.1 (reach it from elsewhere through an SSH tunnel);
+- every URL starts with a random per-run key (``http://127.0.0.1:PORT/KEY/``): without it,
+  403;
+- a request whose ``Host`` is not ``127.0.0.1``, ``localhost`` or ``[::1]`` (with this port),
+  or whose ``Origin``, when sent, is not this server's, gets 403: a page on another site, or a
+  DNS name rebound to 127.0.0.1, can neither read nor change anything;
+- changes only by ``POST`` with a JSON body (which a cross-site form cannot send without a
+  preflight that is never granted); no CORS header is ever sent;
+- the environment servers' token stays in :class:`~rlenv_client.inspector.watch.Watcher`; no
+  response carries it.
+
+Routes (below the key): ``/`` the page, ``/static/NAME`` its script and style, and the API:
+``GET api/servers``, ``api/frame``, ``api/tree``, ``api/node``, ``api/stats``,
+``api/snapshot`` (``?server=S&instance=I``, and ``path`` or ``since``) and ``POST api/edit``
+(``{"server", "instance", "path", "property", "value"}``).
+"""
+
+from __future__ import annotations
+
+import hmac
+import json
+import logging
+import secrets
+import threading
+from collections.abc import Callable
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from importlib import resources
+from typing import Any
+from urllib.parse import parse_qs, urlsplit
+
+from rlenv_client.inspector.watch import InspectorError, Watcher
+
+__all__ = ["InspectorServer"]
+
+logger = logging.getLogger(__name__)
+
+LOCAL_HOSTS = ("127.0.0.1", "localhost", "[::1]")
+_MAX_BODY = 64 * 1024
+_STATIC = {"inspector.js": "text/javascript; charset=utf-8",
+           "inspector.css": "text/css; charset=utf-8",
+           "index.html": "text/html; charset=utf-8"}
+_HEADERS = {
+    "Cache-Control": "no-store",
+    "X-Content-Type-Options": "nosniff",
+    "X-Frame-Options": "DENY",
+    "Referrer-Policy": "no-referrer",
+    "Cross-Origin-Resource-Policy": "same-origin",
+    "Content-Security-Policy": "default-src 'none'; script-src 'self'; style-src 'self'; "
+                               "img-src 'self' data:; connect-src 'self'; base-uri 'none'; "
+                               "form-action 'none'; frame-ancestors 'none'",
+}
+
+
+class InspectorServer(ThreadingHTTPServer):
+    """Serves the inspector's page and API for ``watcher`` on ``127.0.0.1:port``.
+
+    Args:
+        watcher: the observer connections to the environment servers.
+        port: the port to bind (0: a free one).
+        key: the URL key (default: a fresh random one).
+    """
+
+    daemon_threads = True
+
+    def __init__(self, watcher: Watcher, port: int = 0, key: str | None = None) -> None:
+        super().__init__(("127.0.0.1", port), _Handler)
+        self.watcher = watcher
+        self.key = key or secrets.token_urlsafe(18)
+        port = self.server_address[1]
+        self.allowed_hosts = frozenset(
+            name for host in LOCAL_HOSTS for name in (host, f"{host}:{port}"))
+        self.allowed_origins = frozenset(f"http://{host}:{port}" for host in LOCAL_HOSTS)
+        self._thread: threading.Thread | None = None
+
+    @property
+    def url(self) -> str:
+        """The page's address, key included."""
+        return f"http://127.0.0.1:{self.server_address[1]}/{self.key}/"
+
+    def start(self) -> None:
+        """Serve in a background thread (see :meth:`close`)."""
+        self._thread = threading.Thread(target=self.serve_forever, name="rlenv-inspector",
+                                        daemon=True)
+        self._thread.start()
+
+    def close(self) -> None:
+        """Stop serving, and close the watcher's connections."""
+        if self._thread is not None:
+            self.shutdown()
+            self._thread.join()
+            self._thread = None
+        self.server_close()
+        self.watcher.close()
+
+
+def _number(query: dict[str, list[str]], name: str, default: int = 0) -> int:
+    values = query.get(name)
+    if not values:
+        return default
+    try:
+        number = int(values[0])
+    except ValueError:
+        raise InspectorError(400, f"{name} must be an integer, got {values[0]!r:.40}") from None
+    if number < 0:
+        raise InspectorError(400, f"{name} must be >= 0, got {number}")
+    return number
+
+
+def _text(query: dict[str, list[str]], name: str) -> str:
+    values = query.get(name)
+    if not values:
+        raise InspectorError(400, f"missing {name}")
+    return values[0]
+
+
+_GETS: dict[str, Callable[[Watcher, dict[str, list[str]]], Any]] = {
+    "api/servers": lambda watcher, q: watcher.servers(),
+    "api/frame": lambda watcher, q: watcher.frame(_number(q, "server"), _number(q, "instance")),
+    "api/tree": lambda watcher, q: watcher.tree(_number(q, "server"), _number(q, "instance")),
+    "api/node": lambda watcher, q: watcher.node(_number(q, "server"), _number(q, "instance"),
+                                                _text(q, "path")),
+    "api/stats": lambda watcher, q: watcher.stats(_number(q, "server"), _number(q, "instance"),
+                                                  _number(q, "since")),
+    "api/snapshot": lambda watcher, q: watcher.snapshot(_number(q, "server"),
+                                                        _number(q, "instance")),
+}
+
+
+class _Handler(BaseHTTPRequestHandler):
+    server: InspectorServer
+    protocol_version = "HTTP/1.1"  # the page polls over kept-alive connections
+    server_version = "rlenv-inspector"
+    sys_version = ""
+
+    def do_GET(self) -> None:  # noqa: N802 (http.server's naming)
+        route = self._route()
+        if route is None:
+            return
+        path, query = route
+        if path in ("", "index.html"):
+            self._send_static("index.html")
+        elif path.startswith("static/") and path[len("static/"):] in _STATIC:
+            self._send_static(path[len("static/"):])
+        elif path in _GETS:
+            self._answer(lambda: _GETS[path](self.server.watcher, query))
+        else:
+            self._send_json(404, {"error": f"no such page: {path!r:.60}"})
+
+    def do_POST(self) -> None:  # noqa: N802
+        route = self._route()
+        if route is None:
+            return
+        path, _ = route
+        if path != "api/edit":
+            self._send_json(404, {"error": f"nothing to post to at {path!r:.60}"})
+            return
+        if self.headers.get_content_type() != "application/json":
+            self._send_json(415, {"error": "an edit is a JSON body (Content-Type: "
+                                           "application/json)"})
+            return
+        self._answer(self._edit)
+
+    def do_OPTIONS(self) -> None:  # noqa: N802: no preflight is ever granted (no CORS)
+        self._send_json(405, {"error": "no cross-origin requests"})
+
+    do_PUT = do_DELETE = do_PATCH = do_OPTIONS  # noqa: N815
+
+    def _route(self) -> tuple[str, dict[str, list[str]]] | None:
+        """The path below the key and the query, or ``None`` once a refusal is sent."""
+        host = self.headers.get("Host", "")
+        if host not in self.server.allowed_hosts:
+            self._send_json(403, {"error": "refused: the Host header must be 127.0.0.1, "
+                                           "localhost or [::1] with this port"})
+            return None
+        origin = self.headers.get("Origin")
+        if origin is not None and origin not in self.server.allowed_origins:
+            self._send_json(403, {"error": "refused: a request from another origin"})
+            return None
+        url = urlsplit(self.path)
+        key, _, rest = url.path.lstrip("/").partition("/")
+        if not hmac.compare_digest(key.encode(), self.server.key.encode()):
+            self._send_json(403, {"error": "refused: the URL lacks this inspector's key "
+                                           "(use the address it printed)"})
+            return None
+        return rest, parse_qs(url.query)
+
+    def _edit(self) -> Any:
+        length = int(self.headers.get("Content-Length") or 0)
+        if not 0 < length <= _MAX_BODY:
+            raise InspectorError(400, f"an edit's body must be 1 to {_MAX_BODY} bytes")
+        try:
+            edit = json.loads(self.rfile.read(length))
+        except ValueError as error:
+            raise InspectorError(400, f"an edit's body is not JSON: {error}") from None
+        expected = {"server", "instance", "path", "property", "value"}
+        if not isinstance(edit, dict) or set(edit) != expected:
+            raise InspectorError(400, f"an edit is a map of exactly {sorted(expected)}")
+        for name in ("server", "instance"):
+            if type(edit[name]) is not int or edit[name] < 0:
+                raise InspectorError(400, f"{name} must be an integer >= 0")
+        for name in ("path", "property"):
+            if not isinstance(edit[name], str):
+                raise InspectorError(400, f"{name} must be a string")
+        scope = self.server.watcher.edit(edit["server"], edit["instance"], edit["path"],
+                                         edit["property"], edit["value"])
+        return {"scope": scope}
+
+    def _answer(self, compute: Callable[[], Any]) -> None:
+        try:
+            self._send_json(200, compute())
+        except InspectorError as error:
+            self._send_json(error.status, {"error": str(error)})
+
+    def _send_static(self, name: str) -> None:
+        body = resources.files("rlenv_client.inspector").joinpath("static", name).read_bytes()
+        self._send(200, _STATIC[name], body)
+
+    def _send_json(self, status: int, value: Any) -> None:
+        try:
+            body = json.dumps(value, separators=(",", ":"), allow_nan=False).encode()
+        except ValueError as error:  # a NaN in a scene that blew up, say
+            status, body = 500, json.dumps({"error": f"cannot show this: {error}"}).encode()
+        self._send(status, "application/json", body)
+
+    def _send(self, status: int, content_type: str, body: bytes) -> None:
+        if status >= 400 and self.command == "POST":  # its body may be unread: start afresh
+            self.close_connection = True
+        self.send_response(status)
+        self.send_header("Content-Type", content_type)
+        self.send_header("Content-Length", str(len(body)))
+        for name, value in _HEADERS.items():
+            self.send_header(name, value)
+        self.end_headers()
+        self.wfile.write(body)
+
+    def log_message(self, format: str, *args: Any) -> None:  # noqa: A002 (http.server's name)
+        logger.debug("%s %s", self.address_string(), format % args)

@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-ray sb3 rllib lint vectors clean
+.PHONY: demo test test-ray test-browser screenshot sb3 rllib lint vectors clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -24,6 +24,16 @@ test: $(STAMP)
 test-ray: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e ".[test,ray]"
 	$(BIN)/python -m pytest -m ray
+
+# Optional: the inspector's page in headless Chromium (skipped, saying why, without one; .ci/run
+# installs Debian's chromium first), and what watching costs a trainer.
+test-browser: $(STAMP)
+	$(BIN)/python -m pytest -m browser
+
+# The README's picture of the inspector: its page beside a training loop, saved by the browser test.
+screenshot: $(STAMP)
+	RLENV_SCREENSHOT=docs/images/inspector.png $(BIN)/python -m pytest -m browser -q \
+		tests/test_inspector_browser.py -k training
 
 # Optional: RLlib (CPU torch first), its tests, and PPO trained on CartPole to a mean return of 400.
 rllib: $(STAMP)

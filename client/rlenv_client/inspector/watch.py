@@ -18,6 +18,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
+from gymnasium import spaces
 
 from rlenv.errors import RemoteError
 from rlenv.protocol import ErrorReply, Request, Response
@@ -90,8 +91,8 @@ class Watcher:
             else:
                 hello = client.hello
                 entry.update(environment=hello.environment, instances=hello.instances,
-                             agents=list(hello.agents), action_space=str(hello.action_space),
-                             observation_space=str(hello.observation_space),
+                             agents=list(hello.agents), action_space=_short(hello.action_space),
+                             observation_space=_short(hello.observation_space),
                              ticks_per_second=hello.physics_ticks_per_second,
                              protocol=".".join(map(str, hello.protocol)))
             described.append(entry)
@@ -241,6 +242,18 @@ class Watcher:
             watched.client.close()
             watched.client = None
         watched.lost_at, watched.error = time.monotonic(), why
+
+
+def _short(space: spaces.Space) -> str:
+    """A space in a few words: ``Box(5,) float32``, ``Discrete(5)``, ``Dict(a: ..., b: ...)``."""
+    if isinstance(space, spaces.Box):
+        return f"Box{space.shape} {space.dtype}"
+    if isinstance(space, spaces.Dict):
+        return "Dict(" + ", ".join(f"{key}: {_short(inner)}"
+                                   for key, inner in space.spaces.items()) + ")"
+    if isinstance(space, spaces.Tuple):
+        return "Tuple(" + ", ".join(_short(inner) for inner in space.spaces) + ")"
+    return str(space)
 
 
 def _shown(observation: Any) -> dict[str, Any]:

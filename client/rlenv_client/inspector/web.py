@@ -87,6 +87,10 @@ class InspectorServer(ThreadingHTTPServer):
                                         daemon=True)
         self._thread.start()
 
+    def handle_error(self, request: Any, client_address: Any) -> None:
+        """A browser that went away mid-answer is no error of ours: log it quietly."""
+        logger.debug("the page at %s went away", client_address, exc_info=True)
+
     def close(self) -> None:
         """Stop serving, and close the watcher's connections."""
         if self._thread is not None:
@@ -133,10 +137,11 @@ _GETS: dict[str, Callable[[Watcher, dict[str, list[str]]], Any]] = {
 class _Handler(BaseHTTPRequestHandler):
     server: InspectorServer
     protocol_version = "HTTP/1.1"  # the page polls over kept-alive connections
+    disable_nagle_algorithm = True  # headers and body go in two writes: never wait for an ACK
     server_version = "rlenv-inspector"
     sys_version = ""
 
-    def do_GET(self) -> None:  # noqa: N802 (http.server's naming)
+    def do_GET(self) -> None:  # noqa: N802
         route = self._route()
         if route is None:
             return

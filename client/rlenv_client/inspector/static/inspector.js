@@ -315,6 +315,7 @@ async function refreshStats() {
     returns.push({name: agent, points: state.episodes.map((e, i) => [x[i], e.returns ? e.returns[agent] : NaN])});
   }
   plot($("plot-return"), "return per episode", returns);
+  $("plot-return").dataset.episodes = state.next;
   plot($("plot-length"), "length per episode (steps)",
        [{name: "length", points: state.episodes.map((e, i) => [x[i], e.length])}]);
   const t0 = state.speed.length ? state.speed[0][0] : 0;

@@ -1,0 +1,125 @@
+"""The inspector's page in a real browser (headless Chromium) beside a training loop.
+
+Marker ``browser``: ``make test-browser`` runs it (``.ci/run`` installs Debian's chromium, best
+effort); without a browser it is skipped, saying why. ``RLENV_SCREENSHOT=PATH`` also saves the
+page as a PNG (the README's picture).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Iterator
+from pathlib import Path
+from urllib.parse import urlsplit
+
+import pytest
+from browser import Browser, find_chromium
+from conftest import wait_until
+from inspector_http import Trainer
+
+from rlenv_client import Client
+from rlenv_client.inspector import Inspector
+from rlenv_client.launcher import ServerProcess
+
+pytestmark = pytest.mark.browser
+CHROMIUM = find_chromium()
+REBOUND = "rebound.example"  # a DNS name the browser resolves to 127.0.0.1
+
+
+@pytest.fixture
+def browser() -> Iterator[Browser]:
+    if CHROMIUM is None:
+        pytest.skip("no Chromium found (apt-get install chromium; .ci/run tries it): the "
+                    "browser tests need one, the HTTP-level ones (test_inspector.py) do not")
+    with Browser(CHROMIUM, host_rules=f"MAP {REBOUND} 127.0.0.1") as opened:
+        yield opened
+
+
+def test_the_page_shows_a_training_run_and_edits_it(server: ServerProcess,
+                                                    browser: Browser) -> None:
+    with Trainer(server.host, server.port) as trainer, \
+            Inspector([f"{server.host}:{server.port}"]) as inspector, \
+            Client(server.host, server.port) as observer:
+        wait_until(lambda: trainer.episodes > 1, "the trainer did not start")
+        browser.open(inspector.url)
+        # the scene: drawn, and redrawn differently as the cart moves
+        browser.wait_for("window.inspector && window.inspector.frames > 3", "no frame drawn")
+        first = browser.evaluate("document.getElementById('scene').toDataURL()")
+        frames = browser.evaluate("window.inspector.frames")
+        browser.wait_for(f"window.inspector.frames > {frames + 5}", "the frames stopped")
+        second = browser.evaluate("document.getElementById('scene').toDataURL()")
+        assert first != second
+        painted = browser.evaluate("""(() => {
+            const c = document.getElementById('scene');
+            const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+            let n = 0; for (let i = 0; i < d.length; i += 4) n += d[i] < 250 || d[i+2] < 250;
+            return n; })()""")
+        assert painted > 500  # the track, the cart and the pole, not a blank canvas
+        # the tree
+        paths = browser.wait_for("""(() => { const p = [...document.querySelectorAll('#tree li')]
+            .map(li => li.dataset.path); return p.length > 5 && p; })()""", "no tree")
+        for name in ("Agent", "World", "World/Physics/Cart", "World/Physics/Pole"):
+            assert f"/root/CartPole/{name}" in paths
+        # a property edit: World's gravity, a setting
+        browser.evaluate("document.querySelector('#tree li[data-path=\"/root/CartPole/World\"]')"
+                         ".click()")
+        browser.wait_for("!!document.querySelector('#properties input[name=gravity]')",
+                         "World's properties did not show")
+        browser.wait_for("document.querySelector('#properties input[name=gravity]').value"
+                         " === '[0,-9.81]'", "gravity is not shown")
+        browser.evaluate("""(() => { const input =
+            document.querySelector('#properties input[name=gravity]');
+            input.focus(); input.value = '[0, -3.5]';
+            input.dispatchEvent(new Event('change')); })()""")
+        note = browser.wait_for("(() => { const t = document.getElementById('edit-status')"
+                                ".textContent; return t.includes('gravity') && t; })()",
+                                "the edit was not answered")
+        assert "kept across episodes" in note
+        assert observer.get_property("World/Physics", "gravity") == [0.0, -3.5]
+        before = trainer.episodes
+        wait_until(lambda: trainer.episodes > before, "the trainer did not reset")
+        assert observer.snapshot()["config"]["world"]["gravity"] == [0.0, -3.5]
+        # a refused edit shows the server's message
+        browser.evaluate("""(() => { const input =
+            document.querySelector('#properties input[name=damping]');
+            input.focus(); input.value = '"thick"';
+            input.dispatchEvent(new Event('change')); })()""")
+        refused = browser.wait_for("(() => { const t = document.getElementById('edit-status')"
+                                   ".textContent; return t.startsWith('refused') && t; })()",
+                                   "the refusal was not shown")
+        assert "CartPoleWorld.damping must be a float" in refused
+        # the return plot grows
+        plot = "document.getElementById('plot-return').dataset"
+        assert int(browser.wait_for(f"{plot}.points", "no return plotted")) > 0
+        episodes = int(browser.evaluate(f"{plot}.episodes"))
+        browser.wait_for(f"{plot}.episodes > {episodes}", "the return plot did not grow")
+        if os.environ.get("RLENV_SCREENSHOT"):
+            Path(os.environ["RLENV_SCREENSHOT"]).write_bytes(browser.screenshot())
+        assert browser.screenshot().startswith(b"\x89PNG")
+        assert trainer.error is None
+
+
+def test_the_browser_cannot_reach_it_from_elsewhere(server: ServerProcess,
+                                                    browser: Browser) -> None:
+    with Inspector([f"{server.host}:{server.port}"]) as inspector, \
+            Client(server.host, server.port) as controller:
+        controller.reset(seed=0)
+        parts = urlsplit(inspector.url)
+        body = "document.body.innerText"
+        # DNS rebinding: a foreign name that resolves to 127.0.0.1
+        browser.open(f"http://{REBOUND}:{parts.port}{parts.path}")
+        assert "Host header" in browser.wait_for(body, "no answer to a rebound name")
+        # the address without its key
+        browser.open(f"http://127.0.0.1:{parts.port}/")
+        assert "key" in browser.wait_for(body, "no answer without the key")
+        # a page of another origin posting an edit
+        browser.open(f"http://{REBOUND}:{parts.port}/elsewhere")
+        browser.wait_for(body, "the other origin's page did not load")
+        edit = json.dumps({"server": 0, "instance": 0, "path": "World", "property": "damping",
+                           "value": 0.9})
+        outcome = browser.evaluate(f"""fetch({json.dumps(inspector.url + 'api/edit')}, {{
+            method: 'POST', mode: 'no-cors', headers: {{'Content-Type': 'text/plain'}},
+            body: {json.dumps(edit)}}}).then(() => 'sent', (e) => 'failed: ' + e)""")
+        assert outcome in ("sent", "failed: TypeError: Failed to fetch")
+        assert controller.get_property("World", "damping") == 0.3  # unchanged

@@ -208,6 +208,33 @@ def test_camera_observations_come_as_images(serve: Serve) -> None:
     assert [shape[0] for shape in frame["draw"]["shapes"]] == ["polygon", "polygon"]
 
 
+@pytest.mark.parametrize("target", [
+    "examples.cartpole:CartPoleEnvironment", "examples.seeker:SeekerEnvironment",
+    "examples.seeker:SeekerPixelsEnvironment", "examples.reacher:ReacherEnvironment",
+    "examples.pair:PairEnvironment", "examples.pixels:PixelsEnvironment"])
+def test_every_example_can_be_watched(serve: Serve, target: str) -> None:
+    server = serve(target)
+    inspector = InspectorServer(Watcher([f"{server.host}:{server.port}"]))
+    inspector.start()
+    try:
+        with Client(server.host, server.port) as controller:
+            controller.reset(seed=0)
+            controller.step(controller.action_space.sample())
+            frame = fetch(inspector.url, "api/frame")[2]
+            tree = fetch(inspector.url, "api/tree")[2]
+            stats = fetch(inspector.url, "api/stats")[2]
+    finally:
+        inspector.close()
+    assert frame["draw"]["shapes"]
+    assert set(frame["observation"]) == set(controller.hello.agents)
+    for shown in frame["observation"].values():
+        assert "image" in shown or "numbers" in shown or "parts" in shown
+    assert tree[0]["path"] == f"/root/{controller.hello.environment}"
+    assert stats["current"]["length"] == 1
+    if len(controller.hello.agents) > 1:
+        assert set(stats["current"]["returns"]) == set(controller.hello.agents)
+
+
 def test_rlenv_inspect_prints_its_page_and_ends_with_its_parent(server: ServerProcess) -> None:
     with Inspector([f"{server.host}:{server.port}"]) as inspector:
         assert inspector.url.startswith("http://127.0.0.1:")

@@ -15,7 +15,7 @@ from urllib.parse import urlsplit
 
 import pytest
 from browser import Browser, find_chromium
-from conftest import wait_until
+from conftest import Serve, wait_until
 from inspector_http import Trainer
 
 from rlenv_client import Client
@@ -98,6 +98,21 @@ def test_the_page_shows_a_training_run_and_edits_it(server: ServerProcess,
             Path(os.environ["RLENV_SCREENSHOT"]).write_bytes(browser.screenshot())
         assert browser.screenshot().startswith(b"\x89PNG")
         assert trainer.error is None
+
+
+def test_a_camera_observation_is_shown_as_an_image(serve: Serve, browser: Browser) -> None:
+    server = serve("examples.pixels:PixelsEnvironment")
+    with Inspector([f"{server.host}:{server.port}"]) as inspector, \
+            Client(server.host, server.port) as controller:
+        controller.reset(seed=0)
+        browser.open(inspector.url)
+        size = browser.wait_for("""(() => { const c = document.querySelector(
+            '#observations canvas'); return c && [c.width, c.height]; })()""", "no image shown")
+        assert size == [84, 84]
+        white = browser.evaluate("""(() => { const c = document.querySelector(
+            '#observations canvas'); const d = c.getContext('2d').getImageData(0, 0, 84, 84).data;
+            let n = 0; for (let i = 0; i < d.length; i += 4) n += d[i] === 255; return n; })()""")
+        assert white == 9  # the 3x3 dot on the black screen
 
 
 def test_the_browser_cannot_reach_it_from_elsewhere(server: ServerProcess,

@@ -9,7 +9,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
-import rlenv_client  # noqa: F401  (registers the ids)
+import rlenv_client  # registers the ids
 from examples.cartpole import controller
 from rlenv_client.replay import EpisodeFile, RecordEpisodes
 
@@ -70,3 +70,29 @@ def test_replay_refuses_what_is_not_an_episode(tmp_path: Path) -> None:
     result = run_replay(junk)
     assert result.returncode == 2 and "not an rlenv episode" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_an_inspectors_edits_are_replayed(tmp_path: Path) -> None:
+    env = RecordEpisodes(gym.make("rlenv/CartPole-v0", repeat_action=2), tmp_path)
+    try:
+        address = env.unwrapped.client.address
+        host, _, port = address.rpartition(":")
+        observation, _ = env.reset(seed=7)
+        with rlenv_client.Client(host, int(port)) as inspector:  # an observer, beside
+            for t in range(600):  # until the episode ends (the time limit at the latest)
+                if t == 5:
+                    inspector.set_property("World/Physics/Pole", "angular_velocity", 1.5)
+                if t == 10:
+                    inspector.inspect_configure(world={"gravity": [0.0, -4.0]})
+                action = np.clip(controller(observation), -1, 1).astype(np.float32)
+                observation, _, terminated, truncated, _ = env.step(action)
+                if terminated or truncated:
+                    break
+    finally:
+        env.close()
+    path = sorted(tmp_path.glob("*.rlenv"))[0]
+    kinds = [event[0] for event in EpisodeFile.load(path).snapshot["events"]]
+    assert "set" in kinds and "config" in kinds
+    result = run_replay(path)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "every observation identical" in result.stdout

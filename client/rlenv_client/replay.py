@@ -122,6 +122,9 @@ def replay(episode: EpisodeFile, client: BaseClient) -> ReplayResult:
             settings = {k: v for k, v in part.get("environment", {}).items() if k != "record"}
             client.configure(agent=part.get("agent"), world=part.get("world"), **settings)
             continue
+        if event[0] == "set":  # a property set during the episode (an inspector's, say)
+            client.set_property(*event[1:])
+            continue
         steps += 1
         observation, *_ = client.step(event[1], event[2])
         recorded = next(expected, None)

@@ -5,6 +5,7 @@ The browser itself is driven in ``test_inspector_browser.py`` (marker ``browser`
 
 from __future__ import annotations
 
+import select
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -16,7 +17,7 @@ from conftest import Serve, wait_until
 from inspector_http import Trainer, fetch
 
 from rlenv_client import Client, RemoteEnv
-from rlenv_client.inspector import Inspector, InspectorServer, Watcher
+from rlenv_client.inspector import Inspector, InspectorError, InspectorServer, Watcher
 from rlenv_client.launcher import ServerProcess
 
 POLE = "/root/CartPole/World/Physics/Pole"
@@ -287,3 +288,37 @@ def _refused(url: str) -> bool:
     except OSError:
         return True
     return False
+
+
+def test_restarts_count_new_processes_not_idle_reconnections(serve: Serve) -> None:
+    first = serve(args=["--idle-timeout", "0.3"])
+    watcher = Watcher([f"{first.host}:{first.port}"])
+    try:
+        with Client(first.host, first.port) as controller:
+            controller.reset(seed=0)
+            for _ in range(3):
+                controller.step(np.zeros(1, np.float32))
+            assert watcher.stats(0, 0, 0)["restarts"] == 0
+            connection = watcher._servers[0].client
+            assert connection is not None and connection._sock is not None
+            idle = connection._sock
+            wait_until(lambda: select.select([idle], [], [], 0)[0] != [],
+                       "the server kept an idle connection")
+            wait_until(lambda: _answers(watcher), "the inspector did not reconnect")
+            assert watcher.stats(0, 0, 0)["restarts"] == 0  # the same server: no restart
+        port = first.port
+        first.close()
+        wait_until(lambda: not _answers(watcher), "the server did not go away")
+        serve(port=port)  # a new process at the same address
+        wait_until(lambda: _answers(watcher), "the inspector did not reach the new server")
+        assert watcher.stats(0, 0, 0)["restarts"] == 1
+    finally:
+        watcher.close()
+
+
+def _answers(watcher: Watcher) -> bool:
+    try:
+        watcher.stats(0, 0, 0)
+    except InspectorError:
+        return False
+    return True

@@ -5,8 +5,9 @@ stays here, never in the page). It only sends what observers may send: ``observa
 (``draw``, ``agent``), ``snapshot`` and ``inspect``, so it never takes control; the trainer's
 steps go on, and a change it makes applies between two of them. Every call is answered from a
 fresh request (nothing is cached, so a slow page drops frames, never queues them); a lost
-server is reconnected on the next call (or at its new address, see :meth:`Watcher.follow`), and
-counted as a restart.
+connection is reconnected on the next call (or at a new address, see :meth:`Watcher.follow`).
+A server counts as restarted when it moved to a new address, or when after a reconnection its
+step count went back (another process: an idle connection the server closed is not a restart).
 """
 
 from __future__ import annotations
@@ -53,6 +54,8 @@ class _Watched:
         self.lock = threading.Lock()
         self.restarts = 0
         self.ever_connected = False
+        self.reconnected = False  # since the last statistics: were they another process's?
+        self.steps = 0  # the step count the last statistics gave
         self.lost_at = -_RETRY_AFTER
         self.error = ""
 
@@ -139,7 +142,11 @@ class Watcher:
         """The server's episode statistics (see ``inspect stats``), and this server's restarts."""
         stats = dict(self._ask(server, instance, {"inspect": {"stats": {"since": since}}})
                      .info["stats"])
-        stats["restarts"] = self._servers[server].restarts
+        watched = self._servers[server]
+        if watched.reconnected and stats["steps"] < watched.steps:
+            watched.restarts += 1  # a new process at the same address
+        watched.reconnected, watched.steps = False, stats["steps"]
+        stats["restarts"] = watched.restarts
         stats["time"] = time.monotonic()
         return stats
 
@@ -163,6 +170,9 @@ class Watcher:
                     with watched.lock:
                         self._drop(watched, "moved")
                         watched.address = address
+                        watched.restarts += 1
+                        watched.ever_connected = watched.reconnected = False
+                        watched.steps = 0
 
     def close(self) -> None:
         """Close every connection."""
@@ -231,8 +241,7 @@ class Watcher:
         except LOST as error:
             watched.lost_at, watched.error = now, str(error)
             raise InspectorError(503, f"{watched.address} is unreachable: {error}") from None
-        if watched.ever_connected:
-            watched.restarts += 1
+        watched.reconnected = watched.ever_connected
         watched.ever_connected = True
         return watched.client
 

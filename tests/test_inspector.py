@@ -48,6 +48,8 @@ def test_the_page_and_its_assets_come_with_safe_headers(page: str) -> None:
     assert "script-src 'self'" in headers["content-security-policy"]
     assert headers["x-frame-options"] == "DENY" and headers["referrer-policy"] == "no-referrer"
     assert not [name for name in headers if name.startswith("access-control")]
+    status, headers, _ = fetch(page.rstrip("/"))
+    assert status == 308 and headers["location"] == urlsplit(page).path
 
 
 def test_foreign_hosts_origins_and_missing_keys_are_refused(page: str) -> None:

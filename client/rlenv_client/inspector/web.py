@@ -146,7 +146,12 @@ class _Handler(BaseHTTPRequestHandler):
         if route is None:
             return
         path, query = route
-        if path in ("", "index.html"):
+        if path == "" and not self.path.split("?")[0].endswith("/"):
+            self.send_response(308)  # the page's relative URLs need the trailing slash
+            self.send_header("Location", f"/{self.server.key}/")
+            self.send_header("Content-Length", "0")
+            self.end_headers()
+        elif path in ("", "index.html"):
             self._send_static("index.html")
         elif path.startswith("static/") and path[len("static/"):] in _STATIC:
             self._send_static(path[len("static/"):])
@@ -169,7 +174,7 @@ class _Handler(BaseHTTPRequestHandler):
             return
         self._answer(self._edit)
 
-    def do_OPTIONS(self) -> None:  # noqa: N802: no preflight is ever granted (no CORS)
+    def do_OPTIONS(self) -> None:  # noqa: N802  (no preflight is ever granted: no CORS)
         self._send_json(405, {"error": "no cross-origin requests"})
 
     do_PUT = do_DELETE = do_PATCH = do_OPTIONS  # noqa: N815

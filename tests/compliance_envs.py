@@ -4,6 +4,8 @@
   of episodes that the observation shows, so the same seed never gives the same episode twice,
   and neither a reset after a set nor a restore replays a trajectory. It exports a writable
   float (``Agent:gain``), so the suite's set and restore probes run, and must fail.
+- :class:`GainPairEnvironment`: the Pair environment whose two agents each have a setting, for
+  the inspector's per-agent edits.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import numpy as np
 from gymnasium import spaces
 
 from examples.faulty import CountingWorld
+from examples.pair import NAMES, PairAgent, PairEnvironment, PairWorld
 from rlenv.rl_nodes import RLAgent, RLEnvironment
 
 
@@ -51,3 +54,23 @@ class DriftingEnvironment(RLEnvironment):
         super().__init__("Drifting", repeat_action=2)
         self.add_child(DriftingAgent())
         self.add_child(CountingWorld())
+
+
+class GainAgent(PairAgent):
+    """A Pair agent with a setting of its own (``gain``), for per-agent edits."""
+
+    configurable = ("gain",)
+
+    def __init__(self, name: str) -> None:
+        super().__init__(name)
+        self.gain = 1.0
+
+
+class GainPairEnvironment(PairEnvironment):
+    """The Pair environment with :class:`GainAgent` s: several agents, each configurable."""
+
+    def __init__(self) -> None:
+        RLEnvironment.__init__(self, "Pair", repeat_action=4)
+        for name in NAMES:
+            self.add_child(GainAgent(name))
+        self.add_child(PairWorld())

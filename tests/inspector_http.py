@@ -29,7 +29,7 @@ def fetch(url: str, path: str = "", *, method: str = "GET", body: Any = None,
         data = raw if raw is not None else (None if body is None else json.dumps(body).encode())
         if data is not None:
             sent.setdefault("Content-Type", "application/json")
-            sent["Content-Length"] = str(len(data))
+            sent.setdefault("Content-Length", str(len(data)))
         for name, value in sent.items():
             connection.putheader(name, value)
         connection.endheaders(data)

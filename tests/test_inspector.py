@@ -5,10 +5,13 @@ The browser itself is driven in ``test_inspector_browser.py`` (marker ``browser`
 
 from __future__ import annotations
 
+import json
 import select
 import subprocess
 import sys
 from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
 from urllib.parse import urlsplit
 
 import numpy as np
@@ -21,15 +24,25 @@ from rlenv_client.inspector import Inspector, InspectorError, InspectorServer, W
 from rlenv_client.launcher import ServerProcess
 
 POLE = "/root/CartPole/World/Physics/Pole"
+TESTS = Path(__file__).resolve().parent
+
+
+@contextmanager
+def watching(server: ServerProcess, token: str | None = None) -> Iterator[str]:
+    """The URL of an inspector in this process watching ``server`` (closed afterwards)."""
+    inspector = InspectorServer(Watcher([f"{server.host}:{server.port}"], token=token))
+    inspector.start()
+    try:
+        yield inspector.url
+    finally:
+        inspector.close()
 
 
 @pytest.fixture
 def page(server: ServerProcess) -> Iterator[str]:
     """The URL of an inspector (in this process) watching the CartPole ``server``."""
-    inspector = InspectorServer(Watcher([f"{server.host}:{server.port}"]))
-    inspector.start()
-    yield inspector.url
-    inspector.close()
+    with watching(server) as url:
+        yield url
 
 
 def _port(url: str) -> int:
@@ -106,6 +119,12 @@ def test_malformed_edits_get_precise_errors(page: str, client: Client) -> None:
     edit = {"server": 0, "instance": 0, "path": POLE, "property": "angle", "value": "steep"}
     status, _, body = fetch(page, "api/edit", method="POST", body=edit)
     assert status == 422 and "RigidBody.angle must be a float" in body["error"]
+    status, _, body = fetch(page, "api/edit", method="POST", raw=json.dumps(
+        {**edit, "value": float("nan")}).encode())
+    assert status == 400 and "NaN is not a value an edit may carry" in body["error"]
+    status, _, body = fetch(page, "api/edit", method="POST", raw=b"{}",
+                            headers={"Content-Length": "abc"})
+    assert status == 400 and "Content-Length" in body["error"]
     edit = {**edit, "server": 3}
     assert fetch(page, "api/edit", method="POST", body=edit)[0] == 404
     assert fetch(page, "api/node?path=Nowhere")[2]["error"].endswith("no node at path 'Nowhere'")
@@ -151,61 +170,44 @@ def test_it_watches_a_trainer_and_edits_between_its_steps(server: ServerProcess,
 def test_the_token_stays_out_of_the_page(serve: Serve) -> None:
     token = "s3cret-token-for-the-inspector-test"
     server = serve(args=["--token", token])
-    inspector = InspectorServer(Watcher([f"{server.host}:{server.port}"], token=token))
-    inspector.start()
-    try:
-        with Client(server.host, server.port, token=token) as controller:
-            controller.reset(seed=0)
-            controller.step(np.zeros(1, np.float32))
-            bodies = [fetch(inspector.url, path)[2] for path in (
-                "", "static/inspector.js", "api/servers", "api/frame", "api/tree",
-                "api/node?path=World", "api/stats", "api/snapshot")]
-        assert all(token not in str(body) for body in bodies)
-        assert "error" not in bodies[2][0] and bodies[3]["draw"]["shapes"]
-    finally:
-        inspector.close()
-    without = InspectorServer(Watcher([f"{server.host}:{server.port}"], token=""))
-    without.start()
-    try:
-        status, _, body = fetch(without.url, "api/servers")
-        assert "unauthorized" in body[0]["error"]
-    finally:
-        without.close()
+    with watching(server, token) as url, \
+            Client(server.host, server.port, token=token) as controller:
+        controller.reset(seed=0)
+        controller.step(np.zeros(1, np.float32))
+        bodies = [fetch(url, path)[2] for path in (
+            "", "static/inspector.js", "api/servers", "api/frame", "api/tree",
+            "api/node?path=World", "api/stats", "api/snapshot")]
+    assert all(token not in str(body) for body in bodies)
+    assert "error" not in bodies[2][0] and bodies[3]["draw"]["shapes"]
+    with watching(server, token="") as url:
+        assert "unauthorized" in fetch(url, "api/servers")[2][0]["error"]
 
 
 def test_several_instances_are_chosen_one_by_one(serve: Serve) -> None:
     server = serve(args=["--instances", "2"])
-    inspector = InspectorServer(Watcher([f"{server.host}:{server.port}"]))
-    inspector.start()
-    try:
+    with watching(server) as url:
         with Client(server.host, server.port) as controller:
             controller.send_batch([controller.reset_request(1), controller.reset_request(2)])
             controller.receive_batch()
-            assert fetch(inspector.url, "api/servers")[2][0]["instances"] == 2
-            first = fetch(inspector.url, "api/frame?instance=0")[2]
-            second = fetch(inspector.url, "api/frame?instance=1")[2]
+            assert fetch(url, "api/servers")[2][0]["instances"] == 2
+            first = fetch(url, "api/frame?instance=0")[2]
+            second = fetch(url, "api/frame?instance=1")[2]
             assert first["observation"] != second["observation"]  # other seeds
-            assert fetch(inspector.url, "api/frame?instance=2")[0] == 404
+            assert fetch(url, "api/frame?instance=2")[0] == 404
             edit = {"server": 0, "instance": 1, "path": "Agent", "property": "max_force",
                     "value": 3.0}
-            fetch(inspector.url, "api/edit", method="POST", body=edit)
-            forces = [fetch(inspector.url, f"api/node?path=Agent&instance={i}")[2]["exported"]
+            fetch(url, "api/edit", method="POST", body=edit)
+            forces = [fetch(url, f"api/node?path=Agent&instance={i}")[2]["exported"]
                       ["max_force"] for i in (0, 1)]
             assert forces == [10.0, 3.0]
-    finally:
-        inspector.close()
 
 
 def test_camera_observations_come_as_images(serve: Serve) -> None:
     server = serve("examples.pixels:PixelsEnvironment")
-    inspector = InspectorServer(Watcher([f"{server.host}:{server.port}"]))
-    inspector.start()
-    try:
+    with watching(server) as url:
         with Client(server.host, server.port) as controller:
             controller.reset(seed=0)
-            frame = fetch(inspector.url, "api/frame")[2]
-    finally:
-        inspector.close()
+            frame = fetch(url, "api/frame")[2]
     image = frame["observation"]["Agent"]["image"]
     assert (image["width"], image["height"], image["channels"]) == (84, 84, 3)
     assert [shape[0] for shape in frame["draw"]["shapes"]] == ["polygon", "polygon"]
@@ -217,17 +219,13 @@ def test_camera_observations_come_as_images(serve: Serve) -> None:
     "examples.pair:PairEnvironment", "examples.pixels:PixelsEnvironment"])
 def test_every_example_can_be_watched(serve: Serve, target: str) -> None:
     server = serve(target)
-    inspector = InspectorServer(Watcher([f"{server.host}:{server.port}"]))
-    inspector.start()
-    try:
+    with watching(server) as url:
         with Client(server.host, server.port) as controller:
             controller.reset(seed=0)
             controller.step(controller.action_space.sample())
-            frame = fetch(inspector.url, "api/frame")[2]
-            tree = fetch(inspector.url, "api/tree")[2]
-            stats = fetch(inspector.url, "api/stats")[2]
-    finally:
-        inspector.close()
+            frame = fetch(url, "api/frame")[2]
+            tree = fetch(url, "api/tree")[2]
+            stats = fetch(url, "api/stats")[2]
     assert frame["draw"]["shapes"]
     assert set(frame["observation"]) == set(controller.hello.agents)
     for shown in frame["observation"].values():
@@ -236,6 +234,28 @@ def test_every_example_can_be_watched(serve: Serve, target: str) -> None:
     assert stats["current"]["length"] == 1
     if len(controller.hello.agents) > 1:
         assert set(stats["current"]["returns"]) == set(controller.hello.agents)
+
+
+def test_an_agents_setting_is_its_own_among_several(serve: Serve) -> None:
+    server = serve("compliance_envs:GainPairEnvironment", env={"PYTHONPATH": str(TESTS)})
+    with watching(server) as url:
+        with Client(server.host, server.port) as controller:
+            controller.reset(seed=0)
+            red = fetch(url, "api/node?path=Red")[2]
+            assert red["configurable"] == ["gain"] and red["settings"] == []  # not all agents'
+            edit = {"server": 0, "instance": 0, "path": "Red", "property": "gain", "value": 5.0}
+            assert fetch(url, "api/edit", method="POST", body=edit)[2] == {
+                "scope": "episode"}
+            gains = [controller.get_property(name, "gain") for name in ("Red", "Blue")]
+    assert gains == [5.0, 1.0]
+
+
+def test_a_dead_inspector_never_stops_the_training(server: ServerProcess) -> None:
+    inspector = Inspector([f"{server.host}:{server.port}"])
+    inspector._process.kill()
+    inspector._process.wait()
+    inspector.follow(["127.0.0.1:1"])  # a restart reported to it: let go, no error
+    inspector.close()
 
 
 def test_rlenv_inspect_prints_its_page_and_ends_with_its_parent(server: ServerProcess) -> None:

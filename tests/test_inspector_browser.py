@@ -115,6 +115,28 @@ def test_a_camera_observation_is_shown_as_an_image(serve: Serve, browser: Browse
         assert white == 9  # the 3x3 dot on the black screen
 
 
+def test_properties_stay_shown_across_clicks_and_instances(serve: Serve,
+                                                          browser: Browser) -> None:
+    server = serve(args=["--instances", "2"])
+    with Inspector([f"{server.host}:{server.port}"]) as inspector, \
+            Client(server.host, server.port) as controller:
+        controller.send_batch([controller.reset_request(1), controller.reset_request(2)])
+        controller.receive_batch()
+        browser.open(inspector.url)
+        rows = "document.querySelectorAll('#properties tbody tr').length"
+        world = "document.querySelector('#tree li[data-path=\"/root/CartPole/World\"]')"
+        browser.wait_for(f"!!{world}", "no tree")
+        browser.evaluate(f"{world}.click()")
+        assert browser.wait_for(rows, "no properties") == 5
+        browser.evaluate(f"{world}.click()")  # the same node again
+        assert browser.wait_for(rows, "the properties went blank after a second click") == 5
+        browser.evaluate("""(() => { const select = document.getElementById('target');
+            select.value = '0/1'; select.dispatchEvent(new Event('change')); })()""")
+        browser.wait_for(f"!!{world}", "no tree for instance 1")
+        browser.evaluate(f"{world}.click()")
+        assert browser.wait_for(rows, "the properties went blank on instance 1") == 5
+
+
 def test_the_browser_cannot_reach_it_from_elsewhere(server: ServerProcess,
                                                     browser: Browser) -> None:
     with Inspector([f"{server.host}:{server.port}"]) as inspector, \

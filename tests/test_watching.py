@@ -117,3 +117,20 @@ def test_stats_keep_returns_per_agent(serve: Serve) -> None:
         current = client.stats()["current"]
     assert current["returns"] == pytest.approx(seen)
     assert current["return"] == pytest.approx(sum(seen.values()))
+
+
+def test_an_observers_failing_request_leaves_the_episode_to_its_controller(
+        serve: Serve) -> None:
+    server = serve("examples.faulty:FaultyEnvironment")
+    with Client(server.host, server.port) as controller, \
+            Client(server.host, server.port) as inspector:
+        controller.reset(seed=0)
+        controller.step(0)
+        with pytest.raises(RemoteError, match="cannot draw; the episode goes on") as error:
+            inspector.draw()
+        assert error.value.code == ErrorCode.ENVIRONMENT_ERROR and not error.value.fatal
+        _, reward, *_ = controller.step(0)  # the episode is still the controller's
+        assert reward == 1.5  # 3 ticks of 0.5
+        with pytest.raises(RemoteError, match="cannot draw; reset required"):
+            controller.draw()  # the controller's own failure ends its episode, as before
+        assert controller.stats()["errors"] == 1

@@ -4,7 +4,7 @@ Serve one and drive it: ``rlenv serve examples.faulty:FaultyEnvironment``.
 
 - :class:`FaultyEnvironment`: a Discrete(3) agent whose tick raises for action 1 and whose
   observation raises for action 2 (each answered with an ``environment_error`` naming the node,
-  after which a reset recovers); episodes end after 10 ticks.
+  after which a reset recovers); episodes end after 10 ticks. Its ``_draw`` always raises.
 - :class:`CountingEnvironment`: the observation counts the physics ticks since the reset, so a
   client can account for every transition (the fault harness in the tests does); action 1 gives
   a NaN observation, which the server refuses to send.
@@ -109,6 +109,10 @@ class FaultyEnvironment(RLEnvironment):
         super().__init__("Faulty", repeat_action=3)
         self.add_child(FaultyAgent())
         self.add_child(CountingWorld())
+
+    def _draw(self) -> dict[str, Any]:
+        """Raises: an inspector's failing request must not end the controller's episode."""
+        raise RuntimeError("this environment cannot draw")
 
 
 class WrongShapeAgent(FaultyAgent):

@@ -158,7 +158,9 @@ class Instance:
         An exception in user code becomes an ``environment_error`` answer (the next action then
         needs a reset); a refusal found while applying becomes its error answer. Unless it
         ``reports`` (an answer to a client that does not control the environment), the answer
-        carries no reward nor ticks and leaves them for the controller's next answer.
+        carries no reward nor ticks and leaves them for the controller's next answer, and a
+        failure of user code it met (a ``_draw`` of an inspector's, say) leaves the episode to
+        its controller.
         """
         answer = Answer()
         try:
@@ -168,6 +170,8 @@ class Instance:
         except RequestError as error:
             return ErrorReply(reply_id, error.code, str(error))
         except Exception as error:  # user code raised: report it, keep serving
+            if not reports:
+                return failure(reply_id, error, "the episode goes on (its controller's)")
             return self.environment_error(reply_id, error)
 
     def catch_up(self) -> None:

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import os
 import subprocess
 import sys
@@ -33,6 +34,8 @@ if TYPE_CHECKING:
 
 __all__ = ["Inspector", "InspectorError", "InspectorServer", "Watcher", "inspect_sessions",
            "run"]
+
+logger = logging.getLogger(__name__)
 
 _READY = "inspector on "
 
@@ -69,15 +72,25 @@ class Inspector:
         self._lines.start()
 
     def follow(self, addresses: Sequence[str]) -> None:
-        """Watch these addresses from now on (a restarted server's new address, say)."""
-        assert self._process.stdin is not None
-        self._process.stdin.write(json.dumps(list(addresses)) + "\n")
-        self._process.stdin.flush()
+        """Watch these addresses from now on (a restarted server's new address, say).
+
+        An inspector that is gone is let go: watching never stops the training it watches.
+        """
+        stdin = self._process.stdin
+        assert stdin is not None
+        try:
+            stdin.write(json.dumps(list(addresses)) + "\n")
+            stdin.flush()
+        except OSError as error:  # it died (killed, say)
+            logger.warning("the inspector at %s is gone (%s); training goes on", self.url, error)
 
     def close(self) -> None:
         """Stop the subprocess (closing its standard input ends it); safe to repeat."""
         if self._process.stdin is not None and not self._process.stdin.closed:
-            self._process.stdin.close()
+            try:
+                self._process.stdin.close()
+            except OSError:  # it was gone: the pipe had unflushed lines
+                pass
         try:
             self._process.wait(5.0)
         except subprocess.TimeoutExpired:

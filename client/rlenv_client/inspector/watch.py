@@ -54,8 +54,8 @@ class _Watched:
         self.lock = threading.Lock()
         self.restarts = 0
         self.ever_connected = False
-        self.reconnected = False  # since the last statistics: were they another process's?
-        self.steps = 0  # the step count the last statistics gave
+        self.reconnected: set[int] = set()  # instances whose statistics may be another process's
+        self.steps: dict[int, int] = {}  # per instance, the step count its last statistics gave
         self.lost_at = -_RETRY_AFTER
         self.error = ""
 
@@ -112,16 +112,23 @@ class Watcher:
             raise InspectorError(503, str(error)) from None
         shown = {name: _shown(unpacked[name]) for name in agents} if len(agents) > 1 else \
             {agents[0] if agents else "agent": _shown(unpacked)}
-        return {"draw": (reply.observation or {}).get("draw"), "observation": shown}
+        return {"draw": to_json((reply.observation or {}).get("draw")), "observation": shown}
 
     def tree(self, server: int, instance: int) -> list[dict[str, Any]]:
         """The node tree (see ``inspect tree``)."""
-        return list(self._ask(server, instance, {"inspect": {"tree": {}}}).info["tree"])
+        return list(to_json(self._ask(server, instance, {"inspect": {"tree": {}}}).info["tree"]))
 
     def node(self, server: int, instance: int, path: str) -> dict[str, Any]:
-        """One node, with its exported values."""
-        return dict(self._ask(server, instance, {"inspect": {"node": {"path": path}}})
-                    .info["node"])
+        """One node, with its exported values.
+
+        ``settings`` names those an edit keeps across episodes: its configurable ones, unless it
+        is one agent of several (a setting of the agent section would change every agent).
+        """
+        node = dict(to_json(self._ask(server, instance, {"inspect": {"node": {"path": path}}})
+                            .info["node"]))
+        shared = node.get("config") == "agent" and len(self._client(server).hello.agents) > 1
+        node["settings"] = [] if shared else list(node.get("configurable", ()))
+        return node
 
     def edit(self, server: int, instance: int, path: str, name: str, value: Any) -> str:
         """Change a property; returns which kind of change it was.
@@ -130,7 +137,7 @@ class Watcher:
         property, else ``episode`` (a ``set``, until the next reset).
         """
         node = self.node(server, instance, path)
-        if name in node.get("configurable", ()):
+        if name in node["settings"]:
             self._ask(server, instance,
                       {"inspect": {"configure": {node["config"]: {name: value}}}})
             return "setting"
@@ -143,10 +150,13 @@ class Watcher:
         stats = dict(self._ask(server, instance, {"inspect": {"stats": {"since": since}}})
                      .info["stats"])
         watched = self._servers[server]
-        if watched.reconnected and stats["steps"] < watched.steps:
-            watched.restarts += 1  # a new process at the same address
-        watched.reconnected, watched.steps = False, stats["steps"]
-        stats["restarts"] = watched.restarts
+        with watched.lock:
+            if instance in watched.reconnected and stats["steps"] < watched.steps[instance]:
+                watched.restarts += 1  # a new process at the same address
+                watched.reconnected.clear()
+            watched.reconnected.discard(instance)
+            watched.steps[instance] = stats["steps"]
+            stats["restarts"] = watched.restarts
         stats["time"] = time.monotonic()
         return stats
 
@@ -171,8 +181,9 @@ class Watcher:
                         self._drop(watched, "moved")
                         watched.address = address
                         watched.restarts += 1
-                        watched.ever_connected = watched.reconnected = False
-                        watched.steps = 0
+                        watched.ever_connected = False
+                        watched.reconnected.clear()
+                        watched.steps.clear()
 
     def close(self) -> None:
         """Close every connection."""
@@ -241,7 +252,8 @@ class Watcher:
         except LOST as error:
             watched.lost_at, watched.error = now, str(error)
             raise InspectorError(503, f"{watched.address} is unreachable: {error}") from None
-        watched.reconnected = watched.ever_connected
+        if watched.ever_connected:
+            watched.reconnected = set(watched.steps)
         watched.ever_connected = True
         return watched.client
 

@@ -109,9 +109,13 @@ def _number(query: dict[str, list[str]], name: str, default: int = 0) -> int:
         number = int(values[0])
     except ValueError:
         raise InspectorError(400, f"{name} must be an integer, got {values[0]!r:.40}") from None
-    if number < 0:
-        raise InspectorError(400, f"{name} must be >= 0, got {number}")
+    if not 0 <= number < 2**31:
+        raise InspectorError(400, f"{name} must be in [0, 2**31), got {number}")
     return number
+
+
+def _no_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not a value an edit may carry")
 
 
 def _text(query: dict[str, list[str]], name: str) -> str:
@@ -137,6 +141,7 @@ _GETS: dict[str, Callable[[Watcher, dict[str, list[str]]], Any]] = {
 class _Handler(BaseHTTPRequestHandler):
     server: InspectorServer
     protocol_version = "HTTP/1.1"  # the page polls over kept-alive connections
+    timeout = 60  # seconds a connection may stay silent, or a body take to arrive
     disable_nagle_algorithm = True  # headers and body go in two writes: never wait for an ACK
     server_version = "rlenv-inspector"
     sys_version = ""
@@ -199,11 +204,12 @@ class _Handler(BaseHTTPRequestHandler):
         return rest, parse_qs(url.query)
 
     def _edit(self) -> Any:
-        length = int(self.headers.get("Content-Length") or 0)
-        if not 0 < length <= _MAX_BODY:
-            raise InspectorError(400, f"an edit's body must be 1 to {_MAX_BODY} bytes")
+        length = self.headers.get("Content-Length", "")
+        if not length.isdigit() or not 0 < int(length) <= _MAX_BODY:
+            raise InspectorError(400, f"an edit's body must be 1 to {_MAX_BODY} bytes, with its "
+                                      "Content-Length")
         try:
-            edit = json.loads(self.rfile.read(length))
+            edit = json.loads(self.rfile.read(int(length)), parse_constant=_no_constant)
         except ValueError as error:
             raise InspectorError(400, f"an edit's body is not JSON: {error}") from None
         expected = {"server", "instance", "path", "property", "value"}
@@ -224,6 +230,9 @@ class _Handler(BaseHTTPRequestHandler):
             self._send_json(200, compute())
         except InspectorError as error:
             self._send_json(error.status, {"error": str(error)})
+        except Exception as error:  # our bug: the page says so, the server goes on
+            logger.exception("inspector request %s failed", self.path)
+            self._send_json(500, {"error": f"the inspector failed: {error!r:.200}"})
 
     def _send_static(self, name: str) -> None:
         body = resources.files("rlenv_client.inspector").joinpath("static", name).read_bytes()

@@ -70,13 +70,23 @@ async function refreshServers() {
 function choose(value) {
   [state.server, state.instance] = value.split("/").map(Number);
   state.path = null;
+  forgetEpisodes();
+  state.generation++;
+  clearProperties();
+  $("selected").textContent = "";
+}
+
+function forgetEpisodes() {
   state.episodes = [];
   state.next = 0;
   state.speed = [];
   state.lastTotals = null;
-  state.generation++;
-  $("properties").tBodies[0].replaceChildren();
-  $("selected").textContent = "";
+}
+
+function clearProperties() {
+  const body = $("properties").tBodies[0];
+  body.replaceChildren();
+  delete body.dataset.signature;
 }
 
 // --- the scene -----------------------------------------------------------------------------
@@ -190,7 +200,9 @@ async function refreshFrame() {
 // --- the tree and the selected node ----------------------------------------------------------
 
 async function refreshTree() {
+  const generation = state.generation;
   const nodes = await api("tree");
+  if (generation !== state.generation) return;
   const list = $("tree");
   const signature = nodes.map((n) => n.path).join("|");
   if (list.dataset.signature !== signature) {
@@ -216,16 +228,16 @@ async function refreshTree() {
 function select(path) {
   state.path = path;
   $("selected").textContent = path;
-  $("properties").tBodies[0].replaceChildren();
+  clearProperties();
   for (const item of $("tree").children) item.classList.toggle("selected", item.dataset.path === path);
   refreshNode().catch((error) => showStatus(error.message, true));
 }
 
 async function refreshNode() {
   if (state.path === null) return;
-  const path = state.path;
+  const [path, generation] = [state.path, state.generation];
   const node = await api("node", {path});
-  if (path !== state.path) return;
+  if (path !== state.path || generation !== state.generation) return;
   const body = $("properties").tBodies[0];
   const names = Object.keys(node.exported);
   if (body.dataset.signature !== path + names.join("|")) {
@@ -253,7 +265,7 @@ function propertyRow(node, name) {
   const badge = document.createElement("td");
   badge.className = "badge";
   badge.textContent = input.readOnly ? "read-only" :
-    (node.configurable || []).includes(name) ? "setting" : "episode";
+    node.settings.includes(name) ? "setting" : "episode";
   row.append(label, cell, badge);
   return row;
 }
@@ -293,13 +305,20 @@ async function takeSnapshot() {
 
 async function refreshStats() {
   const generation = state.generation;
-  const stats = await api("stats", {since: state.next});
+  let stats = await api("stats", {since: state.next});
   if (generation !== state.generation) return;
+  const last = state.lastTotals;
+  if (last && (stats.next < state.next || stats.restarts !== last.restarts)) {
+    forgetEpisodes();  // another server process: its episodes are numbered afresh
+    stats = await api("stats", {since: 0});
+    if (generation !== state.generation) return;
+  }
   state.episodes = state.episodes.concat(stats.episodes).slice(-PLOTTED);
   state.next = stats.next;
-  const last = state.lastTotals;
-  if (last && stats.time > last.time && stats.steps >= last.steps) {
-    state.speed = state.speed.concat([[stats.time, (stats.steps - last.steps) / (stats.time - last.time)]]).slice(-PLOTTED);
+  const previous = state.lastTotals;
+  if (previous && stats.time > previous.time && stats.steps >= previous.steps) {
+    const speed = (stats.steps - previous.steps) / (stats.time - previous.time);
+    state.speed = state.speed.concat([[stats.time, speed]]).slice(-PLOTTED);
   }
   state.lastTotals = stats;
   const current = stats.current;

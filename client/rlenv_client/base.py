@@ -165,6 +165,14 @@ class BaseClient(ABC):
         response = self._response(reply)
         return self._observation(response), self._info(response)
 
+    def observation_result(self, reply: Response | ErrorReply) -> Any:
+        """An answer's agent observation, unpacked (arrays may be read-only views).
+
+        Raises:
+            RemoteError: the answer is an error.
+        """
+        return self._observation(self._response(reply), writable=False)
+
     def step_request(self, action: Any, repeat_action: int | None = None, *,
                      request_id: int = 0) -> Request:
         """The request :meth:`send_step` sends, for a batch (whose parts need no id)."""

@@ -107,7 +107,7 @@ class Watcher:
         client = self._client(server)
         agents = client.hello.agents
         try:
-            unpacked = client._observation(reply, writable=False)
+            unpacked = client.observation_result(reply)
         except LOST as error:
             raise InspectorError(503, str(error)) from None
         shown = {name: _shown(unpacked[name]) for name in agents} if len(agents) > 1 else \

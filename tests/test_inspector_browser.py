@@ -68,26 +68,14 @@ def test_the_page_shows_a_training_run_and_edits_it(server: ServerProcess,
                          "World's properties did not show")
         browser.wait_for("document.querySelector('#properties input[name=gravity]').value"
                          " === '[0,-9.81]'", "gravity is not shown")
-        browser.evaluate("""(() => { const input =
-            document.querySelector('#properties input[name=gravity]');
-            input.focus(); input.value = '[0, -3.5]';
-            input.dispatchEvent(new Event('change')); })()""")
-        note = browser.wait_for("(() => { const t = document.getElementById('edit-status')"
-                                ".textContent; return t.includes('gravity') && t; })()",
-                                "the edit was not answered")
+        note = type_into(browser, "gravity", "[0, -3.5]", "t.includes('gravity')")
         assert "kept across episodes" in note
         assert observer.get_property("World/Physics", "gravity") == [0.0, -3.5]
         before = trainer.episodes
         wait_until(lambda: trainer.episodes > before, "the trainer did not reset")
         assert observer.snapshot()["config"]["world"]["gravity"] == [0.0, -3.5]
         # a refused edit shows the server's message
-        browser.evaluate("""(() => { const input =
-            document.querySelector('#properties input[name=damping]');
-            input.focus(); input.value = '"thick"';
-            input.dispatchEvent(new Event('change')); })()""")
-        refused = browser.wait_for("(() => { const t = document.getElementById('edit-status')"
-                                   ".textContent; return t.startsWith('refused') && t; })()",
-                                   "the refusal was not shown")
+        refused = type_into(browser, "damping", '"thick"', "t.startsWith('refused')")
         assert "CartPoleWorld.damping must be a float" in refused
         # the return plot grows
         plot = "document.getElementById('plot-return').dataset"
@@ -98,6 +86,19 @@ def test_the_page_shows_a_training_run_and_edits_it(server: ServerProcess,
             Path(os.environ["RLENV_SCREENSHOT"]).write_bytes(browser.screenshot())
         assert browser.screenshot().startswith(b"\x89PNG")
         assert trainer.error is None
+
+
+def type_into(browser: Browser, name: str, text: str, answered: str) -> str:
+    """Type ``text`` into the property ``name`` as a person would (then change); the edit
+    status the page shows once ``answered`` (a JavaScript test of its text ``t``) holds.
+    """
+    browser.evaluate(f"""(() => {{ const input =
+        document.querySelector('#properties input[name={name}]');
+        input.focus(); input.value = {json.dumps(text)};
+        input.dispatchEvent(new Event('change')); }})()""")
+    return str(browser.wait_for(f"(() => {{ const t = document.getElementById('edit-status')"
+                                f".textContent; return ({answered}) && t; }})()",
+                                f"the edit of {name} was not answered"))
 
 
 def test_a_camera_observation_is_shown_as_an_image(serve: Serve, browser: Browser) -> None:

@@ -101,6 +101,8 @@ class RemoteVectorEnv(VectorEnv):
         token: str | None = None, max_restarts: int = 3, instances_per_server: int | None = None,
         inspector: bool = False,
     ) -> None:
+        self.sessions: list[Session] = []  # first: closing a half-built vector closes these
+        self.inspector: Inspector | None = None
         mode = AutoresetMode(autoreset_mode)
         if mode is AutoresetMode.DISABLED:
             raise ValueError("RemoteVectorEnv autoresets; use NEXT_STEP or SAME_STEP")
@@ -108,7 +110,6 @@ class RemoteVectorEnv(VectorEnv):
             raise ValueError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
         places = self._places(num_envs, target, addresses, pool, in_process, token,
                               instances_per_server)
-        self.sessions: list[Session] = []
         self._connect(places, timeout=timeout, max_restarts=max_restarts)
         self._groups: list[range] = []  # the sub-environments each session hosts
         start = 0
@@ -144,7 +145,6 @@ class RemoteVectorEnv(VectorEnv):
         self._autoreset = np.zeros(self.num_envs, dtype=np.bool_)
         self._steps = np.zeros(self.num_envs, dtype=np.int64)
         self._last: Any = None  # the last batch of observations returned
-        self.inspector: Inspector | None = None
         if inspector:
             from rlenv_client.inspector import inspect_sessions
 
@@ -303,8 +303,8 @@ class RemoteVectorEnv(VectorEnv):
 
     def close_extras(self, **kwargs: Any) -> None:
         """Disconnect every client and stop every server this environment started."""
-        if getattr(self, "inspector", None) is not None:
-            self.inspector.close()  # type: ignore[union-attr]
+        if self.inspector is not None:
+            self.inspector.close()
             self.inspector = None
         for session in self.sessions:
             session.close()

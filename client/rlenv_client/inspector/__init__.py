@@ -110,7 +110,8 @@ class Inspector:
 def inspect_sessions(sessions: Sequence[Session]) -> Inspector:
     """An :class:`Inspector` watching the servers of ``sessions``, following their restarts.
 
-    Its page's address is printed on standard error (nothing is opened by itself).
+    Its page's address is logged as a warning, so that it shows on standard error without
+    any logging set up (nothing is opened by itself).
 
     Raises:
         ValueError: a session runs its environment in this process (there is no server).
@@ -127,7 +128,7 @@ def inspect_sessions(sessions: Sequence[Session]) -> Inspector:
 
     for session in sessions:
         session.on_restart = follow
-    print(f"rlenv inspector: {inspector.url}", file=sys.stderr, flush=True)
+    logger.warning("rlenv inspector: %s", inspector.url)
     return inspector
 
 
@@ -162,7 +163,7 @@ def run(args: argparse.Namespace) -> int:
     Until interrupted, or until standard input closes with ``--follow-stdin``.
     """
     try:
-        watcher = Watcher(args.addresses, token=args.token or os.environ.get("RLENV_TOKEN"))
+        watcher = Watcher(args.addresses, token=args.token)  # None: $RLENV_TOKEN
     except ValueError as error:
         print(f"rlenv inspect: {error}", file=sys.stderr)
         return 2
@@ -187,5 +188,5 @@ def _follow(server: InspectorServer) -> None:
             addresses = json.loads(line)
             server.watcher.follow(addresses)
         except (ValueError, TypeError) as error:
-            print(f"rlenv inspect: ignored {line.strip()!r:.80}: {error}", file=sys.stderr)
+            logger.warning("rlenv inspect: ignored %.80r: %s", line.strip(), error)
     server.shutdown()

@@ -53,7 +53,6 @@ class _Watched:
         self.client: Client | None = None
         self.lock = threading.Lock()
         self.restarts = 0
-        self.ever_connected = False
         self.reconnected: set[int] = set()  # instances whose statistics may be another process's
         self.steps: dict[int, int] = {}  # per instance, the step count its last statistics gave
         self.lost_at = -_RETRY_AFTER
@@ -83,8 +82,7 @@ class Watcher:
     def servers(self) -> list[dict[str, Any]]:
         """Every server: its address, environment, spaces, instances and restarts."""
         described = []
-        for index in range(len(self._servers)):
-            watched = self._servers[index]
+        for index, watched in enumerate(self._servers):
             entry: dict[str, Any] = {"index": index, "address": watched.address,
                                      "restarts": watched.restarts}
             try:
@@ -181,7 +179,6 @@ class Watcher:
                         self._drop(watched, "moved")
                         watched.address = address
                         watched.restarts += 1
-                        watched.ever_connected = False
                         watched.reconnected.clear()
                         watched.steps.clear()
 
@@ -189,9 +186,7 @@ class Watcher:
         """Close every connection."""
         for watched in self._servers:
             with watched.lock:
-                if watched.client is not None:
-                    watched.client.close()
-                    watched.client = None
+                self._drop(watched, "closed")
 
     # --- connections ------------------------------------------------------------------------
 
@@ -252,9 +247,7 @@ class Watcher:
         except LOST as error:
             watched.lost_at, watched.error = now, str(error)
             raise InspectorError(503, f"{watched.address} is unreachable: {error}") from None
-        if watched.ever_connected:
-            watched.reconnected = set(watched.steps)
-        watched.ever_connected = True
+        watched.reconnected = set(watched.steps)  # the instances seen before: still the same?
         return watched.client
 
     @staticmethod

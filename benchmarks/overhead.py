@@ -26,8 +26,8 @@ import msgpack
 import numpy as np
 
 from examples.cartpole import CartPoleEnvironment
-from rlenv.physics import PhysicsWorld
 from rlenv.protocol import Connection, Request, Role
+from rlenv.scene2d.physics import PhysicsWorld
 from rlenv.serving.host import Host
 from rlenv_client.base import BaseClient
 

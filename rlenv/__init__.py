@@ -1,13 +1,15 @@
 """rlenv: turn a Python simulation into a reinforcement-learning environment served over TCP.
 
-Layout (one concept per module):
+Layout (the design card's, one concept per module):
 
 - ``node``, ``signals``, ``tree``, ``timer``: the Godot-style scene tree runtime;
-- ``physics``: pymunk world, body, shape and joint nodes;
-- ``rl_nodes``: the RL nodes users subclass (environment, agent, world);
-- ``protocol`` (sans-IO), ``spaces``, ``errors``: the wire, shared with ``rlenv_client``;
-- ``serving`` (the request path: endpoint, host, parts, instance), ``server``, ``cli``: serving
-  an environment.
+- ``environment``, ``agent``, ``world`` (and their base ``rl_node``): what users subclass;
+- ``communication``: an environment's link to its clients (``start_server``);
+- ``cli``: the ``rlenv`` command; ``testing``: fakes and clocks for tests;
+- ``scene2d/``: the 2D scene: pymunk physics nodes, drawing, cameras, tree views;
+- ``protocol/``: the wire (sans-IO codec, messages, connection; spaces, errors), shared with
+  ``rlenv_client``;
+- ``serving/``: the path a request takes through a server (endpoint, host, parts, instance).
 
 Names are imported lazily, so that ``import rlenv.protocol`` (what the client does) loads
 neither the runtime nor pymunk.
@@ -27,19 +29,19 @@ _EXPORTS = {
     "Signal": "rlenv.signals",
     "SceneTree": "rlenv.tree",
     "PhysicsFramesTimer": "rlenv.timer",
-    "PhysicsWorld": "rlenv.physics",
-    "RigidBody": "rlenv.physics",
-    "StaticBody": "rlenv.physics",
-    "KinematicBody": "rlenv.physics",
-    "CollisionShape": "rlenv.physics",
-    "Joint": "rlenv.physics",
-    "RLAgent": "rlenv.rl_nodes",
-    "RLEnvWorld": "rlenv.rl_nodes",
-    "RLEnvironment": "rlenv.rl_nodes",
-    "Server": "rlenv.server",
-    "Camera": "rlenv.camera",
-    "View": "rlenv.views",
-    "view": "rlenv.views",
+    "PhysicsWorld": "rlenv.scene2d.physics",
+    "RigidBody": "rlenv.scene2d.physics",
+    "StaticBody": "rlenv.scene2d.physics",
+    "KinematicBody": "rlenv.scene2d.physics",
+    "CollisionShape": "rlenv.scene2d.physics",
+    "Joint": "rlenv.scene2d.physics",
+    "RLAgent": "rlenv.agent",
+    "RLEnvWorld": "rlenv.world",
+    "RLEnvironment": "rlenv.environment",
+    "Server": "rlenv.serving.server",
+    "Camera": "rlenv.scene2d.camera",
+    "View": "rlenv.scene2d.views",
+    "view": "rlenv.scene2d.views",
 }
 
 __all__ = sorted(_EXPORTS)
@@ -53,22 +55,22 @@ def __getattr__(name: str) -> Any:
 
 
 if TYPE_CHECKING:
-    from rlenv.camera import Camera as Camera
+    from rlenv.agent import RLAgent as RLAgent
+    from rlenv.environment import RLEnvironment as RLEnvironment
     from rlenv.node import Node as Node
     from rlenv.node import NodeNotFoundError as NodeNotFoundError
     from rlenv.node import ProcessMode as ProcessMode
-    from rlenv.physics import CollisionShape as CollisionShape
-    from rlenv.physics import Joint as Joint
-    from rlenv.physics import KinematicBody as KinematicBody
-    from rlenv.physics import PhysicsWorld as PhysicsWorld
-    from rlenv.physics import RigidBody as RigidBody
-    from rlenv.physics import StaticBody as StaticBody
-    from rlenv.rl_nodes import RLAgent as RLAgent
-    from rlenv.rl_nodes import RLEnvironment as RLEnvironment
-    from rlenv.rl_nodes import RLEnvWorld as RLEnvWorld
-    from rlenv.server import Server as Server
+    from rlenv.scene2d.camera import Camera as Camera
+    from rlenv.scene2d.physics import CollisionShape as CollisionShape
+    from rlenv.scene2d.physics import Joint as Joint
+    from rlenv.scene2d.physics import KinematicBody as KinematicBody
+    from rlenv.scene2d.physics import PhysicsWorld as PhysicsWorld
+    from rlenv.scene2d.physics import RigidBody as RigidBody
+    from rlenv.scene2d.physics import StaticBody as StaticBody
+    from rlenv.scene2d.views import View as View
+    from rlenv.scene2d.views import view as view
+    from rlenv.serving.server import Server as Server
     from rlenv.signals import Signal as Signal
     from rlenv.timer import PhysicsFramesTimer as PhysicsFramesTimer
     from rlenv.tree import SceneTree as SceneTree
-    from rlenv.views import View as View
-    from rlenv.views import view as view
+    from rlenv.world import RLEnvWorld as RLEnvWorld

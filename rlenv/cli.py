@@ -113,7 +113,7 @@ def serve_command(target: str) -> int:
 
 
 def _serve(args: argparse.Namespace) -> int:
-    from rlenv.server import Server
+    from rlenv.serving.server import Server
 
     signal.signal(signal.SIGTERM, _exit_on_signal)
     limits = Limits(max_frame_size=args.max_frame_size, frame_deadline=args.frame_deadline,

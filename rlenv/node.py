@@ -8,7 +8,7 @@ it is inside a :class:`~rlenv.tree.SceneTree` it receives, as in Godot:
 - ``_physics_process(delta)`` every physics tick and ``_process(delta)`` every frame, in tree
   order, when its process mode lets it (see :class:`ProcessMode`);
 - ``_physics_step(delta)`` after every node's ``_physics_process`` of the tick, for nodes that
-  simulate something (a :class:`~rlenv.physics.PhysicsWorld` steps its pymunk space here);
+  simulate something (a :class:`~rlenv.scene2d.physics.PhysicsWorld` steps its pymunk space here);
 - ``_exit_tree()`` when it leaves, children before parent (last child first).
 
 Every lifecycle event also reaches ``_notification(what)`` (one of the ``NOTIFICATION_*``

@@ -18,7 +18,8 @@ from gymnasium import spaces
 
 from examples.faulty import CountingWorld
 from examples.pair import NAMES, PairAgent, PairEnvironment, PairWorld
-from rlenv.rl_nodes import RLAgent, RLEnvironment
+from rlenv.agent import RLAgent
+from rlenv.environment import RLEnvironment
 
 
 class DriftingAgent(RLAgent):

@@ -8,7 +8,7 @@ each refusal is followed by proof that the server still serves.
 Modes:
 
 - ``client [SENT]``: :class:`rlenv_client.Client` with token ``SENT`` (``-``: none), then reset
-  and step; a refusal is reported as the :class:`~rlenv.errors.RemoteError`'s fields.
+  and step; a refusal is reported as the :class:`~rlenv.protocol.errors.RemoteError`'s fields.
 - ``request SENT``: raw TCP: read the hello, send a reset request carrying token ``SENT``
   (``-``: none), read the reply and whether the server then closed the connection.
 - ``non-request-token``: raw TCP: send a map carrying the right token but no ``id`` (not a
@@ -33,7 +33,7 @@ from typing import Any
 import msgpack
 import numpy as np
 
-from rlenv.errors import RemoteError
+from rlenv.protocol.errors import RemoteError
 from rlenv_client import Client
 
 TIMEOUT = 5.0

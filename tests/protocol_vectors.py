@@ -33,8 +33,8 @@ import msgpack
 import numpy as np
 from gymnasium import spaces
 
+from rlenv import RLAgent, RLEnvironment, RLEnvWorld
 from rlenv.protocol.codec import HEADER, NDARRAY_EXT, decode_ndarray, encode_ndarray, pack
-from rlenv.rl_nodes import RLAgent, RLEnvironment, RLEnvWorld
 from rlenv_client import ServerProcess
 
 __all__ = [

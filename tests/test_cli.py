@@ -48,7 +48,8 @@ def test_the_client_imports_no_physics_no_server_and_no_ray() -> None:
     code = ("import sys, rlenv_client, rlenv_client.rllib; "
             "print(sorted(m for m in sys.modules if m.split('.')[0] in "
             "('pymunk', 'examples', 'ray', 'torch') or m in ('rlenv.node', "
-            "'rlenv.rl_nodes', 'rlenv.serving')))")
+            "'rlenv.environment', 'rlenv.agent', 'rlenv.world', 'rlenv.rl_node', "
+            "'rlenv.serving', 'rlenv.scene2d')))")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                             timeout=60, check=True)
     assert result.stdout.strip() == "[]"

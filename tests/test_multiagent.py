@@ -8,7 +8,7 @@ from conftest import Serve
 from gymnasium import spaces
 
 from examples.pair import NAMES, PairAgent, PairEnvironment, PairWorld, chase
-from rlenv.rl_nodes import RLEnvironment
+from rlenv.environment import RLEnvironment
 from rlenv_client import Client, ErrorCode, LocalClient, RemoteError
 
 PAIR = "examples.pair:PairEnvironment"

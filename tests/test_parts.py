@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from examples.cartpole import TARGET, CartPoleEnvironment
-from rlenv.errors import ErrorCode
 from rlenv.protocol import BatchResponse, ErrorReply, Reply, Request, Response, StepsResponse, pack
+from rlenv.protocol.errors import ErrorCode
 from rlenv.serving.host import Host
 from rlenv.serving.parts import PARTS, takes_control
 from rlenv_client import LocalClient, RemoteError

@@ -8,7 +8,7 @@ import pymunk
 import pytest
 
 from rlenv.node import Node, ProcessMode
-from rlenv.physics import (
+from rlenv.scene2d.physics import (
     CollisionShape,
     Joint,
     KinematicBody,

@@ -21,12 +21,6 @@ from gymnasium.vector.utils import batch_space
 from spaces_catalog import TESTING_SPACES
 
 import rlenv.protocol
-from rlenv.errors import (
-    ErrorCode,
-    LocalProtocolError,
-    ProtocolVersionError,
-    RemoteProtocolError,
-)
 from rlenv.protocol import (
     CONNECTION_CLOSED,
     DEFAULT_MAX_FRAME_SIZE,
@@ -47,7 +41,13 @@ from rlenv.protocol import (
     unpack,
 )
 from rlenv.protocol.connection import TRANSITIONS, Event
-from rlenv.spaces import codec_for
+from rlenv.protocol.errors import (
+    ErrorCode,
+    LocalProtocolError,
+    ProtocolVersionError,
+    RemoteProtocolError,
+)
+from rlenv.protocol.spaces import codec_for
 from rlenv.testing import connection_pair
 from rlenv.testing import frame as raw_frame
 

@@ -26,8 +26,8 @@ from protocol_vectors import (
     to_tagged,
 )
 
-from rlenv.errors import ErrorCode, RemoteProtocolError
 from rlenv.protocol.codec import HEADER, unpack
+from rlenv.protocol.errors import ErrorCode, RemoteProtocolError
 
 FILES = sorted(path.name for path in VECTORS_DIR.glob("*.json"))
 Exchange = dict[str, Any]

@@ -9,7 +9,7 @@ import pytest
 from conftest import Serve
 
 from examples.seeker import PIXELS_TARGET
-from rlenv.camera import Camera
+from rlenv.scene2d.camera import Camera
 from rlenv_client import Client, ErrorCode, LocalClient, RemoteError
 
 imageio = pytest.importorskip("imageio.v2")

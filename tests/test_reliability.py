@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 from conftest import Serve
 
-from rlenv.errors import ErrorCode
 from rlenv.protocol import ErrorReply, Hello
+from rlenv.protocol.errors import ErrorCode
 from rlenv.serving.endpoint import Endpoint, Limits
 from rlenv.testing import ManualClock, read_frame
 from rlenv_client import Client, ConnectionLost, RemoteEnv, RemoteError
@@ -221,8 +221,8 @@ def test_random_bytes_never_crash_the_protocol() -> None:
     hypothesis = pytest.importorskip("hypothesis")
     from hypothesis import strategies as st
 
-    from rlenv.errors import RemoteProtocolError
     from rlenv.protocol import CONNECTION_CLOSED, NEED_DATA, Connection, Request, Role
+    from rlenv.protocol.errors import RemoteProtocolError
 
     @hypothesis.settings(max_examples=300, deadline=None)
     @hypothesis.given(st.lists(st.binary(max_size=64), max_size=8))

@@ -13,8 +13,8 @@ import pytest
 from conftest import Serve
 
 from examples.cartpole import CartPoleAgent, CartPoleEnvironment, controller
-from rlenv.errors import LocalProtocolError
 from rlenv.protocol import PROTOCOL_VERSION, Connection, Request, Role, pack
+from rlenv.protocol.errors import LocalProtocolError
 from rlenv.testing import read_frame
 from rlenv_client import (
     Client,

@@ -1,4 +1,4 @@
-"""Tests of rlenv.spaces: space specs, checking values, and the packed form of values.
+"""Tests of rlenv.protocol.spaces: space specs, checking values, and the packed form of values.
 
 Most tests run over every space of the catalog (``tests/spaces_catalog.py``). The compiled
 checker is held to the careful :func:`check`: the same verdicts, the same messages, equal values.
@@ -20,7 +20,7 @@ from gymnasium.vector.utils import batch_space, concatenate, create_empty_array
 from spaces_catalog import TESTING_SPACES
 
 from rlenv.protocol import pack, unpack
-from rlenv.spaces import (
+from rlenv.protocol.spaces import (
     SpaceMismatch,
     check,
     codec_for,

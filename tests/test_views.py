@@ -5,9 +5,9 @@ from __future__ import annotations
 import pytest
 
 from rlenv.node import Node
-from rlenv.physics import CollisionShape, Joint, PhysicsWorld, RigidBody, StaticBody
+from rlenv.scene2d.physics import CollisionShape, Joint, PhysicsWorld, RigidBody, StaticBody
+from rlenv.scene2d.views import View, view
 from rlenv.tree import SceneTree
-from rlenv.views import View, view
 
 
 @pytest.fixture

@@ -11,12 +11,12 @@ It imports no physics and no server code (only the shared protocol, spaces and e
 an environment is run in process.
 """
 
-from rlenv.errors import ConnectionLost as ConnectionLost
-from rlenv.errors import ErrorCode as ErrorCode
-from rlenv.errors import ProtocolVersionError as ProtocolVersionError
-from rlenv.errors import RemoteError as RemoteError
-from rlenv.errors import RequestTimeout as RequestTimeout
-from rlenv.errors import RlenvError as RlenvError
+from rlenv.protocol.errors import ConnectionLost as ConnectionLost
+from rlenv.protocol.errors import ErrorCode as ErrorCode
+from rlenv.protocol.errors import ProtocolVersionError as ProtocolVersionError
+from rlenv.protocol.errors import RemoteError as RemoteError
+from rlenv.protocol.errors import RequestTimeout as RequestTimeout
+from rlenv.protocol.errors import RlenvError as RlenvError
 from rlenv_client.base import BaseClient as BaseClient
 from rlenv_client.base import StepResult as StepResult
 from rlenv_client.client import Client as Client

@@ -7,7 +7,7 @@ this process. Stepping is split into :meth:`BaseClient.send_step` and
 :meth:`BaseClient.receive_step` so that a vector of clients can send every request before
 waiting for any answer.
 
-Values of the declared spaces travel in their packed form (:mod:`rlenv.spaces`): the codecs
+Values of the declared spaces travel in their packed form (:mod:`rlenv.protocol.spaces`): the codecs
 that pack actions and unpack observations are prepared once, from the hello.
 """
 
@@ -22,7 +22,6 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.vector.utils import batch_space
 
-from rlenv.errors import ConnectionLost, RemoteError
 from rlenv.protocol import (
     BatchResponse,
     ErrorReply,
@@ -32,7 +31,8 @@ from rlenv.protocol import (
     Response,
     StepsResponse,
 )
-from rlenv.spaces import Codec, codec_for
+from rlenv.protocol.errors import ConnectionLost, RemoteError
+from rlenv.protocol.spaces import Codec, codec_for
 
 __all__ = ["BaseClient", "StepResult"]
 
@@ -329,7 +329,7 @@ class BaseClient(ABC):
         return dict(self._call(inspect={"stats": {"since": since}}).info["stats"])
 
     def draw(self) -> dict[str, Any]:
-        """The scene as a vector draw list (see :func:`rlenv.render.draw_list`).
+        """The scene as a vector draw list (see :func:`rlenv.scene2d.render.draw_list`).
 
         Raises:
             RemoteError: ``reset_required`` before the first reset.

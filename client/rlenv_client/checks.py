@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from gymnasium.utils.env_checker import check_env
 
-from rlenv.errors import ErrorCode, RemoteError
+from rlenv.protocol.errors import ErrorCode, RemoteError
 from rlenv_client.env import RemoteEnv
 from rlenv_client.session import parse_address
 

@@ -2,8 +2,8 @@
 
 A blocking socket pumps bytes into a sans-IO :class:`rlenv.protocol.Connection`; everything about
 the protocol is decided there. The socket's timeouts are enforced by the kernel
-(``SO_RCVTIMEO`` / ``SO_SNDTIMEO``, see :mod:`rlenv.sockets`), so no system call is added to a
-step. Every failure surfaces as a typed error: :class:`RemoteError` (the server refused a
+(``SO_RCVTIMEO`` / ``SO_SNDTIMEO``, see :mod:`rlenv.protocol.sockets`), so no system call is
+added to a step. Every failure surfaces as a typed error: :class:`RemoteError` (the server refused a
 request, with its code and message), :class:`RequestTimeout` (no answer within the deadline;
 the connection is closed so that a late answer can never be taken for the answer to a later
 request) and :class:`ConnectionLost`.
@@ -16,7 +16,6 @@ import socket
 import time
 from typing import NoReturn
 
-from rlenv.errors import ConnectionLost, ErrorCode, ProtocolError, RemoteError, RequestTimeout
 from rlenv.protocol import (
     CONNECTION_CLOSED,
     NEED_DATA,
@@ -28,7 +27,14 @@ from rlenv.protocol import (
     Request,
     Role,
 )
-from rlenv.sockets import configure_socket
+from rlenv.protocol.errors import (
+    ConnectionLost,
+    ErrorCode,
+    ProtocolError,
+    RemoteError,
+    RequestTimeout,
+)
+from rlenv.protocol.sockets import configure_socket
 from rlenv_client.base import BaseClient, StepResult
 
 __all__ = ["Client", "StepResult"]

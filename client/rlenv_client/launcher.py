@@ -22,7 +22,7 @@ import time
 import weakref
 from collections.abc import Iterable, Mapping, Sequence
 
-from rlenv.errors import ConnectionLost, RlenvError
+from rlenv.protocol.errors import ConnectionLost, RlenvError
 
 __all__ = ["ServerProcess", "ServerStartError", "with_server_story"]
 

@@ -16,12 +16,12 @@ from collections import deque
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
-from rlenv.errors import ConnectionLost
 from rlenv.protocol import Reply, Request
+from rlenv.protocol.errors import ConnectionLost
 from rlenv_client.base import BaseClient
 
 if TYPE_CHECKING:
-    from rlenv.rl_nodes import RLEnvironment
+    from rlenv.environment import RLEnvironment
     from rlenv.serving.host import Host
 
 __all__ = ["LocalClient"]

@@ -69,9 +69,9 @@ How RLlib 2.60 calls the creator, and why these settings (read in ``ray/rllib/en
   is found again wherever Ray brought it back): only the episodes on that server end, as
   truncated, with ``info["server_restarted"]``, and no sampled data is dropped. Past that
   budget, with ``max_restarts=0``, or for servers given by ``addresses``, ``step`` raises
-  :class:`~rlenv.errors.ConnectionLost` (an ``Exception``; ``ServerLost`` for a pool), which
-  RLlib handles as above: the vector is closed (its servers end, or its lease is released) and
-  the creator builds a new one.
+  :class:`~rlenv.protocol.errors.ConnectionLost` (an ``Exception``; ``ServerLost`` for a pool),
+  which RLlib handles as above: the vector is closed (its servers end, or its lease is
+  released) and the creator builds a new one.
 
 Servers from a pool: with ``pool="NAME"`` (in :func:`register` or the env config) each vector
 leases ``pool_servers`` (default 1) servers from the named

@@ -1,9 +1,9 @@
 """Rows of batched values: one sub-environment's share of gymnasium's ``batch_space`` layout.
 
 A batch of a Box, Discrete, MultiDiscrete or MultiBinary space (every space the protocol
-carries, see :mod:`rlenv.spaces`) is one array whose first axis runs over sub-environments; a
-batch of a Dict or Tuple space is a map or tuple of such batches. These helpers cut and fill
-such batches without going through one value per sub-environment.
+carries, see :mod:`rlenv.protocol.spaces`) is one array whose first axis runs over
+sub-environments; a batch of a Dict or Tuple space is a map or tuple of such batches. These
+helpers cut and fill such batches without going through one value per sub-environment.
 """
 
 from __future__ import annotations

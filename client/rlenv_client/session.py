@@ -14,7 +14,7 @@ import logging
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
-from rlenv.errors import ConnectionLost, RequestTimeout
+from rlenv.protocol.errors import ConnectionLost, RequestTimeout
 from rlenv_client.base import BaseClient
 from rlenv_client.client import Client
 from rlenv_client.launcher import ServerProcess, with_server_story

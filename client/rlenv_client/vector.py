@@ -38,8 +38,8 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, create_empty_array
 
-from rlenv.errors import RemoteError
 from rlenv.protocol import ErrorReply, Request, Response
+from rlenv.protocol.errors import RemoteError
 from rlenv_client.base import BaseClient
 from rlenv_client.launcher import ServerProcess
 from rlenv_client.rows import row, rows, set_row, set_rows

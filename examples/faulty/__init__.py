@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from rlenv.rl_nodes import RLAgent, RLEnvironment, RLEnvWorld
+from rlenv import RLAgent, RLEnvironment, RLEnvWorld
 
 
 class CountingWorld(RLEnvWorld):

@@ -39,8 +39,15 @@ import pymunk
 from gymnasium import spaces
 
 from examples.seeker import HALF, RADIUS, greedy, random_spot, room_walls
-from rlenv import CollisionShape, PhysicsWorld, RigidBody, StaticBody
-from rlenv.rl_nodes import RLAgent, RLEnvironment, RLEnvWorld
+from rlenv import (
+    CollisionShape,
+    PhysicsWorld,
+    RigidBody,
+    RLAgent,
+    RLEnvironment,
+    RLEnvWorld,
+    StaticBody,
+)
 from rlenv.signals import Signal
 
 __all__ = ["NAMES", "TARGET", "PairAgent", "PairEnvironment", "PairWorld", "chase"]

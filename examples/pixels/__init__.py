@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from rlenv.rl_nodes import RLAgent, RLEnvironment, RLEnvWorld
+from rlenv import RLAgent, RLEnvironment, RLEnvWorld
 
 __all__ = ["TARGET", "PixelsEnvironment"]
 

@@ -46,8 +46,16 @@ import numpy as np
 import pymunk
 from gymnasium import spaces
 
-from rlenv import CollisionShape, Joint, PhysicsWorld, RigidBody, StaticBody
-from rlenv.rl_nodes import RLAgent, RLEnvironment, RLEnvWorld
+from rlenv import (
+    CollisionShape,
+    Joint,
+    PhysicsWorld,
+    RigidBody,
+    RLAgent,
+    RLEnvironment,
+    RLEnvWorld,
+    StaticBody,
+)
 
 __all__ = ["TARGET", "ReacherAgent", "ReacherEnvironment", "ReacherWorld", "main", "reach"]
 

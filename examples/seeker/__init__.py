@@ -43,9 +43,16 @@ import numpy as np
 import pymunk
 from gymnasium import spaces
 
-from rlenv import CollisionShape, PhysicsWorld, RigidBody, StaticBody
-from rlenv.camera import Camera
-from rlenv.rl_nodes import RLAgent, RLEnvironment, RLEnvWorld
+from rlenv import (
+    CollisionShape,
+    PhysicsWorld,
+    RigidBody,
+    RLAgent,
+    RLEnvironment,
+    RLEnvWorld,
+    StaticBody,
+)
+from rlenv.scene2d.camera import Camera
 from rlenv.signals import Signal
 
 __all__ = [

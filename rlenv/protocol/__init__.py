@@ -11,7 +11,7 @@ Three layers, one module each:
   transitions in one table.
 
 What a request's parts mean is the server's business (:mod:`rlenv.serving.parts`); how values
-of a space travel is :mod:`rlenv.spaces`'. ``docs/protocol.md`` is the spec for other
+of a space travel is :mod:`rlenv.protocol.spaces`'. ``docs/protocol.md`` is the spec for other
 languages. Importing this package loads neither the runtime nor pymunk.
 """
 

@@ -4,8 +4,8 @@ A **frame** is a 4-byte big-endian length followed by that many bytes holding ex
 object. numpy arrays whose dtype and shape are not known in advance (rendered frames, world
 data, info) travel as msgpack ext type :data:`NDARRAY_EXT` (dtype, shape, raw bytes) and decode
 with ``np.frombuffer``: no copy, read-only. Values of the spaces a hello declares travel more
-cheaply still, as raw bytes in their space's dtype (see :mod:`rlenv.spaces`). Nothing is ever
-pickled.
+cheaply still, as raw bytes in their space's dtype (see :mod:`rlenv.protocol.spaces`).
+Nothing is ever pickled.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from typing import Any, Final
 import msgpack
 import numpy as np
 
-from rlenv.errors import RemoteProtocolError
+from rlenv.protocol.errors import RemoteProtocolError
 
 __all__ = [
     "DEFAULT_MAX_FRAME_SIZE",

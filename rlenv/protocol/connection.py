@@ -6,9 +6,9 @@ socket and a :class:`Connection`.
 
 The states and what moves a connection between them, for each role, are one table,
 :data:`TRANSITIONS`. A message that has no entry for the current state is refused: sending it
-raises :class:`~rlenv.errors.LocalProtocolError` (a bug on this side), receiving it raises
-:class:`~rlenv.errors.RemoteProtocolError` (the peer broke the protocol). Besides the table,
-replies pair with requests: exactly one per request, in order.
+raises :class:`~rlenv.protocol.errors.LocalProtocolError` (a bug on this side), receiving it
+raises :class:`~rlenv.protocol.errors.RemoteProtocolError` (the peer broke the protocol).
+Besides the table, replies pair with requests: exactly one per request, in order.
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ from collections import deque
 from enum import StrEnum
 from typing import Any, Final
 
-from rlenv.errors import LocalProtocolError, RemoteProtocolError
 from rlenv.protocol.codec import DEFAULT_MAX_FRAME_SIZE, HEADER, pack, unpack
+from rlenv.protocol.errors import LocalProtocolError, RemoteProtocolError
 from rlenv.protocol.messages import (
     BatchResponse,
     ErrorReply,

@@ -17,7 +17,7 @@ of its kind (:mod:`rlenv.serving.parts`); :class:`Request` carries them as a map
 built by the server directly as these records and read back by the client with validation.
 
 Columns of a steps reply (rewards, flags, tick counts) travel as raw little-endian bytes, one
-value per instance; observations travel in their space's packed form (:mod:`rlenv.spaces`).
+value per instance; observations travel in their space's packed form (:mod:`rlenv.protocol.spaces`).
 """
 
 from __future__ import annotations
@@ -29,8 +29,8 @@ from typing import Any, Final
 import numpy as np
 from gymnasium import spaces
 
-from rlenv.errors import ErrorCode, ProtocolVersionError, RemoteProtocolError
-from rlenv.spaces import space_from_spec, space_to_spec
+from rlenv.protocol.errors import ErrorCode, ProtocolVersionError, RemoteProtocolError
+from rlenv.protocol.spaces import space_from_spec, space_to_spec
 
 __all__ = [
     "PROTOCOL_VERSION",

@@ -14,7 +14,7 @@ from gymnasium import spaces
 from gymnasium.vector.utils import batch_space, create_empty_array, iterate
 
 from rlenv.protocol import ErrorReply, Response, StepsResponse
-from rlenv.spaces import codec_for
+from rlenv.protocol.spaces import codec_for
 
 __all__ = ["Columns"]
 

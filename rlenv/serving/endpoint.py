@@ -43,7 +43,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
-from rlenv.errors import ErrorCode, LocalProtocolError, ProtocolError
 from rlenv.protocol import (
     CONNECTION_CLOSED,
     DEFAULT_MAX_FRAME_SIZE,
@@ -55,7 +54,8 @@ from rlenv.protocol import (
     Request,
     Role,
 )
-from rlenv.sockets import configure_socket
+from rlenv.protocol.errors import ErrorCode, LocalProtocolError, ProtocolError
+from rlenv.protocol.sockets import configure_socket
 
 __all__ = ["DEFAULT_HOST", "HOUSEKEEPING_INTERVAL", "Endpoint", "InsecureBindError", "Limits",
            "Peer"]

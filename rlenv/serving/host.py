@@ -24,14 +24,14 @@ from typing import Any
 
 from gymnasium.vector.utils import batch_space
 
-from rlenv.errors import RequestError
+from rlenv.environment import RLEnvironment
 from rlenv.protocol import ErrorReply, Hello, Reply, Request, Response
-from rlenv.rl_nodes import RLEnvironment
+from rlenv.protocol.errors import RequestError
+from rlenv.protocol.spaces import compile_check
 from rlenv.serving.columns import Columns
 from rlenv.serving.endpoint import Endpoint
 from rlenv.serving.instance import Instance, failure, load_environment
 from rlenv.serving.parts import HostPart, plan_for, shape_of, takes_control
-from rlenv.spaces import compile_check
 
 __all__ = ["Host", "Prepared"]
 

@@ -13,7 +13,7 @@ None of them takes control: an observer (a person's inspector) may change the en
 its controller trains, between two of the controller's requests (at a tick boundary); every
 change is logged for snapshots like the controller's own. Paths are absolute or relative to the
 environment. Which properties a node exports and what value may replace one is
-:mod:`rlenv.properties`' business: nothing else, and never code, is accepted.
+:mod:`rlenv.serving.properties`' business: nothing else, and never code, is accepted.
 """
 
 from __future__ import annotations
@@ -22,10 +22,10 @@ import copy
 from collections.abc import Mapping
 from typing import Any
 
-from rlenv.errors import ErrorCode, RequestError
+from rlenv.environment import RLEnvironment
 from rlenv.node import Node
-from rlenv.properties import conform, exported_of, to_wire
-from rlenv.rl_nodes import RLEnvironment
+from rlenv.protocol.errors import ErrorCode, RequestError
+from rlenv.serving.properties import conform, exported_of, to_wire
 
 __all__ = ["check_inspect", "get_property", "node_at", "node_entry", "node_of", "set_property",
            "tree"]

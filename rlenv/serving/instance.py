@@ -33,15 +33,16 @@ from typing import Any
 from gymnasium import spaces
 from gymnasium.utils import seeding
 
-from rlenv.errors import ErrorCode, RequestError
+from rlenv.agent import RLAgent
+from rlenv.environment import RLEnvironment
 from rlenv.node import Node
 from rlenv.protocol import ErrorReply, Response
-from rlenv.recording import VideoRecorder
-from rlenv.rl_nodes import RLAgent, RLEnvironment
+from rlenv.protocol.errors import ErrorCode, RequestError
+from rlenv.protocol.spaces import Codec, SpaceMismatch, codec_for, compile_check, find_non_finite
+from rlenv.scene2d.recording import VideoRecorder
 from rlenv.serving import inspector
 from rlenv.serving.snapshots import EpisodeLog
 from rlenv.serving.stats import EpisodeStats
-from rlenv.spaces import Codec, SpaceMismatch, codec_for, compile_check, find_non_finite
 from rlenv.tree import SceneTree
 
 __all__ = ["Episode", "Instance", "check_keys", "failure", "load_environment"]

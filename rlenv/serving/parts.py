@@ -22,13 +22,13 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.vector.utils import iterate
 
-from rlenv.errors import ErrorCode, RequestError
 from rlenv.protocol import BatchResponse, ErrorReply, Reply, Request
+from rlenv.protocol.errors import ErrorCode, RequestError
+from rlenv.protocol.spaces import SpaceMismatch
 from rlenv.serving import inspector
 from rlenv.serving.columns import Columns
 from rlenv.serving.instance import Answer, Episode, Instance, Plan, check_keys
 from rlenv.serving.snapshots import generator_from_state, parse_snapshot
-from rlenv.spaces import SpaceMismatch
 
 __all__ = ["PARTS", "HostPart", "Part", "Shape", "plan_for", "shape_of", "takes_control"]
 

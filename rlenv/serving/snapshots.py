@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from rlenv.errors import ErrorCode, RequestError
+from rlenv.protocol.errors import ErrorCode, RequestError
 
 __all__ = ["MAX_EVENTS", "EpisodeLog", "generator_from_state", "parse_snapshot"]
 

@@ -32,8 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from rlenv.errors import ErrorCode, RemoteError
 from rlenv.protocol import ErrorReply, Request, Response, pack
+from rlenv.protocol.errors import ErrorCode, RemoteError
 from rlenv.testing import frame
 from rlenv_client.compliance.harness import (
     Harness,

@@ -18,9 +18,9 @@ from typing import TYPE_CHECKING, Any
 
 import msgpack
 
-from rlenv.errors import ErrorCode, RemoteError
 from rlenv.protocol import pack
 from rlenv.protocol.codec import HEADER, NDARRAY_EXT
+from rlenv.protocol.errors import ErrorCode, RemoteError
 from rlenv.testing import frame, read_body
 from rlenv_client.client import Client
 

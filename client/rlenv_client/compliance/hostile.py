@@ -17,8 +17,8 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.vector.utils import concatenate, create_empty_array
 
-from rlenv.errors import ErrorCode, RemoteError
 from rlenv.protocol import pack
+from rlenv.protocol.errors import ErrorCode, RemoteError
 from rlenv.testing import frame
 from rlenv_client.compliance.harness import Harness, Probes, assert_error, connection_closed
 

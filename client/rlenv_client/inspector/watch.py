@@ -21,8 +21,8 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from rlenv.errors import RemoteError
 from rlenv.protocol import ErrorReply, Request, Response
+from rlenv.protocol.errors import RemoteError
 from rlenv_client.client import Client
 from rlenv_client.session import LOST, parse_address
 

@@ -6,7 +6,7 @@ shapes as data, for a viewer to draw at any size (the inspector's canvas).
 Every shape is rasterised inside its own bounding box by a vectorised inside-test on the pixel
 centres (circles by distance, segments as capsules, convex polygons by half-planes), so a frame
 of a small scene costs well under a millisecond and the same state always gives the same bytes on
-every machine. Colours come from each :class:`~rlenv.physics.CollisionShape`'s ``color``, or
+every machine. Colours come from each :class:`~rlenv.scene2d.physics.CollisionShape`'s ``color``, or
 from its body's kind.
 """
 
@@ -19,7 +19,7 @@ import numpy as np
 import pymunk
 
 from rlenv.node import Node
-from rlenv.physics import CollisionShape, PhysicsWorld
+from rlenv.scene2d.physics import CollisionShape, PhysicsWorld
 
 __all__ = ["BACKGROUND", "View", "draw", "draw_list", "fit_view"]
 

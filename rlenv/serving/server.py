@@ -5,7 +5,7 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-from rlenv.rl_nodes import RLEnvironment
+from rlenv.environment import RLEnvironment
 from rlenv.serving.endpoint import DEFAULT_HOST, Endpoint, Limits
 from rlenv.serving.host import Host
 

@@ -1,7 +1,7 @@
 """Camera: a node that sees the pymunk scene around it as RGB arrays, and can film it.
 
 A camera draws every pymunk space in the subtree of its parent (place it next to what it should
-see), headless, with :func:`rlenv.render.draw`. Use :meth:`Camera.capture` as (part of) an
+see), headless, with :func:`rlenv.scene2d.render.draw`. Use :meth:`Camera.capture` as (part of) an
 agent's observation, and :meth:`Camera.start_recording` / :meth:`Camera.stop_recording` to film
 the physics frame by frame, as Blueprints' cameras do::
 
@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from rlenv.node import Node
-from rlenv.recording import VideoRecorder
-from rlenv.render import BACKGROUND, View, draw
+from rlenv.scene2d.recording import VideoRecorder
+from rlenv.scene2d.render import BACKGROUND, View, draw
 
 __all__ = ["Camera"]
 

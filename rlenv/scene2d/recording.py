@@ -1,6 +1,6 @@
 """VideoRecorder: frames in, a video file out (through imageio and its ffmpeg plugin).
 
-Used by :class:`~rlenv.camera.Camera` and by environments recording themselves on a client's
+Used by :class:`~rlenv.scene2d.camera.Camera` and by environments recording themselves on a client's
 request (``configure(record="episode.mp4")`` on a server started with ``--record-dir``).
 """
 

@@ -3,7 +3,7 @@
 A node class lists what a client may read and set in ``exported`` (as Godot's ``@export``) and
 what a client may configure in ``configurable`` (RL nodes). A value sent by a client replaces the
 current one only if it is of the same sort (:func:`conform`): nothing else, and never code, is
-accepted. Configuration (:class:`~rlenv.rl_nodes.RLNode`) and the remote inspector
+accepted. Configuration (:class:`~rlenv.rl_node.RLNode`) and the remote inspector
 (:mod:`rlenv.serving.inspector`) share these rules.
 """
 

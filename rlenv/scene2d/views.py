@@ -24,7 +24,7 @@ from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
 from rlenv.node import Node
-from rlenv.physics import CollisionShape, Joint, PhysicsBody
+from rlenv.scene2d.physics import CollisionShape, Joint, PhysicsBody
 
 __all__ = ["View", "view"]
 

@@ -4,7 +4,8 @@ Layout (the design card's, one concept per module):
 
 - ``node``, ``signals``, ``tree``, ``timer``: the Godot-style scene tree runtime;
 - ``environment``, ``agent``, ``world`` (and their base ``rl_node``): what users subclass;
-- ``communication``: an environment's link to its clients (``start_server``);
+- ``communication``: an environment's link to its clients (``start_server``; ``run`` hosts
+  an environment itself, in ``serving/self_hosting.py``);
 - ``cli``: the ``rlenv`` command; ``testing``: fakes and clocks for tests;
 - ``scene2d/``: the 2D scene: pymunk physics nodes, drawing, cameras, tree views;
 - ``protocol/``: the wire (sans-IO codec, messages, connection; spaces, errors), shared with
@@ -39,6 +40,8 @@ _EXPORTS = {
     "RLEnvWorld": "rlenv.world",
     "RLEnvironment": "rlenv.environment",
     "Server": "rlenv.serving.server",
+    "Communication": "rlenv.communication",
+    "run": "rlenv.serving.self_hosting",
     "Camera": "rlenv.scene2d.camera",
     "View": "rlenv.scene2d.views",
     "view": "rlenv.scene2d.views",
@@ -56,6 +59,7 @@ def __getattr__(name: str) -> Any:
 
 if TYPE_CHECKING:
     from rlenv.agent import RLAgent as RLAgent
+    from rlenv.communication import Communication as Communication
     from rlenv.environment import RLEnvironment as RLEnvironment
     from rlenv.node import Node as Node
     from rlenv.node import NodeNotFoundError as NodeNotFoundError
@@ -69,6 +73,7 @@ if TYPE_CHECKING:
     from rlenv.scene2d.physics import StaticBody as StaticBody
     from rlenv.scene2d.views import View as View
     from rlenv.scene2d.views import view as view
+    from rlenv.serving.self_hosting import run as run
     from rlenv.serving.server import Server as Server
     from rlenv.signals import Signal as Signal
     from rlenv.timer import PhysicsFramesTimer as PhysicsFramesTimer

@@ -12,9 +12,12 @@ from collections.abc import Sequence
 from pathlib import Path
 from types import FrameType
 
-from rlenv.serving.endpoint import DEFAULT_HOST, InsecureBindError, Limits
+from rlenv.protocol.errors import RlenvError
+from rlenv.serving.endpoint import DEFAULT_HOST, Limits
 
 __all__ = ["main", "serve_command"]
+
+logger = logging.getLogger(__name__)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -28,7 +31,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     serve.add_argument("target", help="the environment class, as MODULE:CLASS")
     serve.add_argument("--host", default=DEFAULT_HOST, help=f"address to bind (default "
                        f"{DEFAULT_HOST})")
-    serve.add_argument("--port", type=int, default=0, help="port to bind (default 0: any free)")
+    serve.add_argument("--port", type=_port, default=0, help="port to bind (default 0: any free)")
     serve.add_argument("--instances", type=int, default=1,
                        help="independent copies of the environment to host, stepped together "
                        "by batch requests (default 1)")
@@ -62,7 +65,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                          help="the environment servers to watch")
     inspect.add_argument("--token", default=None, help="the servers' token (default: "
                          "$RLENV_TOKEN, which keeps it out of the process list)")
-    inspect.add_argument("--port", type=int, default=0,
+    inspect.add_argument("--port", type=_port, default=0,
                          help="the page's port on 127.0.0.1 (default 0: a free one)")
     inspect.add_argument("--follow-stdin", action="store_true",
                          help="read new address lists (JSON) from standard input; exit when it "
@@ -104,7 +107,38 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=args.log_level, stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    return args.run(args)
+    if os.getcwd() not in sys.path and "" not in sys.path:
+        sys.path.insert(0, os.getcwd())  # MODULE:CLASS from here, as ``python -m`` finds it
+    try:
+        return args.run(args)
+    except KeyboardInterrupt:
+        return 130
+    except Exception as error:  # one clear line; the traceback with --log-level DEBUG
+        logger.debug("rlenv %s failed", args.command, exc_info=error)
+        print(f"rlenv {args.command}: {_in_words(error)}", file=sys.stderr)
+        return 2
+
+
+def _in_words(error: Exception) -> str:
+    """What went wrong, for a person: the message first (with a hint where one helps)."""
+    if isinstance(error, ModuleNotFoundError):
+        return (f"{error}: run rlenv from the folder that holds the module, or put that folder "
+                "on PYTHONPATH")
+    if isinstance(error, OSError | ValueError | ImportError | RuntimeError | RlenvError) and \
+            str(error):
+        return str(error)
+    return f"{type(error).__name__}: {error}" if str(error) else type(error).__name__
+
+
+def _port(text: str) -> int:
+    """A port number from the command line (argparse says which argument, if not)."""
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a port number") from None
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"{port} is not a port: ports run from 0 to 65535")
+    return port
 
 
 def serve_command(target: str) -> int:
@@ -118,13 +152,9 @@ def _serve(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, _exit_on_signal)
     limits = Limits(max_frame_size=args.max_frame_size, frame_deadline=args.frame_deadline,
                     idle_timeout=args.idle_timeout or None, max_connections=args.max_connections)
-    try:
-        server = Server(args.target, host=args.host, port=args.port, lifeline=args.lifeline,
-                        token=args.token, limits=limits, instances=args.instances,
-                        record_dir=args.record_dir, real_time=args.real_time)
-    except InsecureBindError as error:
-        print(f"rlenv serve: {error}", file=sys.stderr)
-        return 2
+    server = Server(args.target, host=args.host, port=args.port, lifeline=args.lifeline,
+                    token=args.token, limits=limits, instances=args.instances,
+                    record_dir=args.record_dir, real_time=args.real_time)
     with server:
         host, port = server.address
         print(f"listening on {host}:{port}", flush=True)

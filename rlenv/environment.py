@@ -22,6 +22,7 @@ import numpy as np
 from gymnasium.utils import seeding
 
 from rlenv.agent import RLAgent
+from rlenv.communication import Communication
 from rlenv.rl_node import RLNode
 from rlenv.scene2d.render import draw, draw_list
 from rlenv.timer import PhysicsFramesTimer
@@ -35,10 +36,16 @@ class RLEnvironment(RLNode):
 
     Build the children in ``__init__`` (or ``_ready``). By default ``_ready`` takes the
     RLAgent children as :attr:`agents` (the first is :attr:`agent`) and the first RLEnvWorld
-    child as :attr:`world`; override it to choose others. The hooks, all optional:
-    :meth:`_reset` (how an episode starts), :meth:`_step` (logic around an action: call
-    ``super()._step``), :meth:`_get_info` (entries for ``info``), :meth:`_render` (frames) and
-    :meth:`_draw` (vector draw lists).
+    child as :attr:`world`; override it to choose others (and, to host the environment
+    yourself with :func:`rlenv.run`, call ``self.communication.start_server(port, host)``, as
+    in the Godot seed).
+
+    The hooks, all optional, are the seed's. Each request goes to :meth:`_on_got_connection`,
+    which by default dispatches it: :meth:`_configure` (a ``config``), :meth:`_reset` (how an
+    episode starts), :meth:`_step` (logic around an action: call ``super()._step``), then
+    :meth:`_send_response` (the answer); once it went out, :meth:`_after_send_response`. An
+    override calls ``super()`` to keep the default behaviour. Besides: :meth:`_get_info`
+    (entries for ``info``), :meth:`_render` (frames) and :meth:`_draw` (vector draw lists).
 
     Args:
         name: the node name; also the environment name the client sees.
@@ -57,8 +64,20 @@ class RLEnvironment(RLNode):
         agents: every agent; several make the spaces ``Dict`` s keyed by agent name.
         world: the world node.
         physics_frames_timer: counts the ticks of the running action.
+        communication: the environment's server (:class:`~rlenv.communication.Communication`).
         repeat_action: ticks an action runs unless the request says otherwise.
+        CONFIG_KEY, RESET_KEY, ACTION_KEY, OBSERVATION_KEY: the keys of a request's parts.
+        WORLD_KEY, AGENT_KEY, ENVIRONMENT_KEY: the keys of a ``config`` part and of an
+            ``observation`` part.
     """
+
+    CONFIG_KEY: ClassVar[str] = "config"
+    RESET_KEY: ClassVar[str] = "reset"
+    ACTION_KEY: ClassVar[str] = "action"
+    OBSERVATION_KEY: ClassVar[str] = "observation"
+    WORLD_KEY: ClassVar[str] = "world"
+    AGENT_KEY: ClassVar[str] = "agent"
+    ENVIRONMENT_KEY: ClassVar[str] = "environment"
 
     physics_ticks_per_second: ClassVar[int] = 60
     render_size: ClassVar[tuple[int, int]] = (600, 400)
@@ -74,6 +93,7 @@ class RLEnvironment(RLNode):
         self.world: RLEnvWorld | None = None
         self.physics_frames_timer = PhysicsFramesTimer(name="PhysicsFramesTimer")
         self.add_child(self.physics_frames_timer)
+        self.communication = Communication()
         self.repeat_action = repeat_action
         self.__np_random: np.random.Generator | None = None
 
@@ -109,6 +129,55 @@ class RLEnvironment(RLNode):
             self.world = self.find_child("*", RLEnvWorld, recursive=False)
 
     # --- hooks --------------------------------------------------------------------------------
+
+    def _on_got_connection(self, request: dict[str, Any]) -> None:
+        """Handle one request from a client: every request comes here, once.
+
+        ``request`` maps each part to its value, checked already (a refused request never
+        comes here), in the order they apply: :attr:`CONFIG_KEY` (a map of
+        :attr:`ENVIRONMENT_KEY` / :attr:`AGENT_KEY` / :attr:`WORLD_KEY` settings),
+        :attr:`RESET_KEY` (``{"seed": int or None, "options": map}``), ``"repeat_action"``
+        (ticks for this action), :attr:`ACTION_KEY` (the action, in its space's form) and
+        :attr:`OBSERVATION_KEY` (what to observe); the protocol's other parts (``snapshot``,
+        ``restore``, ``inspect``) carry the server's checked form: pass them on as they are.
+
+        By default it dispatches them: :meth:`_configure`, a new episode (:meth:`_reset`),
+        :meth:`_step`, then :meth:`_send_response` with the observation part (``None`` when
+        the request asked for none: every request gets exactly one answer). Override it to
+        look at or change requests, and call ``super()._on_got_connection(request)``.
+        """
+        self.communication.dispatch(request)
+
+    def _configure(self, configuration_request: Mapping[str, Any]) -> None:
+        """Apply a ``config`` part (checked already) to the environment, agents and world.
+
+        The part holds the settings of the environment (:attr:`ENVIRONMENT_KEY`:
+        ``repeat_action``, ``real_time``, ``record`` and its :attr:`configurable` attributes),
+        of every agent (:attr:`AGENT_KEY`) and of the world (:attr:`WORLD_KEY`). Settings
+        last across episodes. Override to react to a configuration, and call
+        ``super()._configure(configuration_request)``.
+        """
+        self.communication.configure(configuration_request)
+
+    def _send_response(self, observation_request: Mapping[str, Any] | None) -> None:
+        """Gather the answer to the request being served, from agents and world, and send it.
+
+        The answer holds what ``observation_request`` asks for (:attr:`AGENT_KEY`,
+        :attr:`WORLD_KEY`, ``render``, ``draw``; ``None`` when the request asked for no
+        observation), the rewards and ticks since the previous answer, the episode's flags and
+        :meth:`_get_info`.
+
+        Called once per request. Override to add to it, and call
+        ``super()._send_response(observation_request)``.
+        """
+        self.communication.send_response(observation_request)
+
+    def _after_send_response(self) -> None:
+        """Called once the answer to a request went out (to clear recorded frames, say).
+
+        An exception here ends the episode: the next action is refused with
+        ``reset_required``, saying why.
+        """
 
     def _reset(self, options: Mapping[str, Any]) -> None:
         """Start an episode: reset the world, then each agent at a sampled initial position."""

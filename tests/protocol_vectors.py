@@ -275,7 +275,7 @@ class Recording:
         if len(data) >= HEADER.size and HEADER.unpack_from(data)[0] == len(body):
             try:
                 exchange["value"] = to_tagged(decode_value(body))
-            except ValueError:
+            except (ValueError, TypeError):  # not msgpack, or no JSON form (a bin key, a NaN)
                 pass
             else:
                 if encode_value(exchange["value"]) != body:
@@ -627,7 +627,15 @@ def _bad_frame(recording: Recording) -> None:
     link.request({"id": 7, "action": msgpack.ExtType(NDARRAY_EXT, other_spelling)},
                  "an ext type 1 array whose dtype is not spelled as numpy's dtype.str (=f4, "
                  "not <f4)")
-    link.request({"id": 8}, "the connection goes on", "an empty response")
+    for raw, note in [
+        (pack({"id": 9, b"reset": {}}), "a bin map key (b'reset'): every map key is a str"),
+        (pack({b"id": 10}), "a bin key where the id belongs"),
+        (pack({"id": 11, "reset": {"seed": 0, "options": {b"k": 1}}}),
+         "a bin map key deep inside a part (reset.options)"),
+    ]:
+        link.send(raw=HEADER.pack(len(raw)) + raw, note=note)
+        link.receive("bad_frame with id nil: the frame could not be read as a request")
+    link.request({"id": 12}, "the connection goes on", "an empty response")
     too_long = recording.connect()
     too_long.hello()
     too_long.send(raw=HEADER.pack(64 * 1024 + 1),
@@ -649,6 +657,11 @@ def _bad_request(recording: Recording) -> None:
     link.request({"id": 6, "snapshot": {}, "reset": {}}, "parts that may not go together")
     link.request({"id": 7, "repeat_action": 2}, "repeat_action without an action")
     link.request({"id": 8, "token": 8}, "a token that is not a string")
+    raw = pack({"id": 9, "inspect": {"set": {"path": "World", "property": "damping",
+                                             "value": math.inf}}})
+    link.send(raw=HEADER.pack(len(raw)) + raw,
+              note="inspect set of a value that is not finite (infinity)")
+    link.receive("refused like a value of the wrong sort")
 
 
 @scenario("error_invalid_action.json", "invalid_action: actions outside the action space")
@@ -676,6 +689,12 @@ def _invalid_config(recording: Recording) -> None:
                  "repeat_action below 1")
     link.request({"id": 4, "config": {"physics": {}}},
                  "a map of the wrong shape is a bad_request instead")
+    for request_id, value, name in [(5, math.nan, "NaN"), (6, math.inf, "infinity")]:
+        raw = pack({"id": request_id, "config": {"world": {"gravity": [0.0, value]}}})
+        link.send(raw=HEADER.pack(len(raw)) + raw,
+                  note=f"a setting holding {name} (gravity [0, {name}]): a configuration "
+                       "outlives resets, so it is refused")
+        link.receive("invalid_config naming the key")
 
 
 @scenario("error_reset_required.json", "reset_required: no episode running")

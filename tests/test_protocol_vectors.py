@@ -83,13 +83,17 @@ def test_files_are_written_as_the_generator_writes_them(name: str) -> None:
 def test_a_frame_decodes_to_its_value(name: str, index: int, exchange: Exchange) -> None:
     """(a) The prefix gives the body's length, and the body decodes to ``value``."""
     body, prefix_matches = _body(exchange)
-    if "value" not in exchange:  # a broken frame a client sent on purpose
+    if "value" not in exchange:  # a frame a client sent on purpose, broken or with no JSON form
         assert exchange["from"] == "client"
         if prefix_matches:
-            with pytest.raises(ValueError):
-                decode_value(body)
-            with pytest.raises(RemoteProtocolError):
-                unpack(body)
+            try:
+                decoded = decode_value(body)
+            except ValueError:  # not msgpack: the server's codec refuses it too
+                with pytest.raises(RemoteProtocolError):
+                    unpack(body)
+            else:  # msgpack with a bin map key or a NaN, which the notation has no form for
+                with pytest.raises(TypeError):
+                    to_tagged(decoded)
         return
     assert prefix_matches
     value = exchange["value"]

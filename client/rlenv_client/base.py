@@ -9,10 +9,15 @@ waiting for any answer.
 
 Values of the declared spaces travel in their packed form (:mod:`rlenv.protocol.spaces`): the codecs
 that pack actions and unpack observations are prepared once, from the hello.
+
+A client waits for one answer at a time: the answer to the request it sent last. An answer to
+an earlier request, whose caller gave up on it (a ``KeyboardInterrupt`` while it waited, as in
+a notebook), is read when it comes and dropped, never taken for the answer to a later request.
 """
 
 from __future__ import annotations
 
+import logging
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
 from itertools import count
@@ -35,6 +40,8 @@ from rlenv.protocol.errors import ConnectionLost, RemoteError
 from rlenv.protocol.spaces import Codec, codec_for
 
 __all__ = ["BaseClient", "StepResult"]
+
+logger = logging.getLogger(__name__)
 
 StepResult = tuple[Any, float, bool, bool, dict[str, Any]]
 """``(observation, reward, terminated, truncated, info)``, as gymnasium's ``step`` returns."""
@@ -60,6 +67,7 @@ class BaseClient(ABC):
     def __init__(self, *, world_data: bool = False) -> None:
         self._observation_request = _AGENT_AND_WORLD if world_data else _AGENT_ONLY
         self._ids = count(1)
+        self._awaited = 0  # the id of the request sent last: the answer to wait for
 
     def _set_hello(self, hello: Hello) -> None:
         self.hello = hello
@@ -115,11 +123,11 @@ class BaseClient(ABC):
         self, *, seed: int | None = None, options: Mapping[str, Any] | None = None
     ) -> None:
         """Send a reset request without waiting; collect the answer with :meth:`receive_reset`."""
-        self._send(self.reset_request(seed, options, request_id=next(self._ids)))
+        self._post(self.reset_request(seed, options, request_id=next(self._ids)))
 
     def receive_reset(self) -> tuple[Any, dict[str, Any]]:
         """Wait for the answer to the reset sent by :meth:`send_reset`."""
-        return self.reset_result(self._receive())  # type: ignore[arg-type]
+        return self.reset_result(self._reply())  # type: ignore[arg-type]
 
     def step(self, action: Any, repeat_action: int | None = None) -> StepResult:
         """Run ``action`` for ``repeat_action`` physics ticks (default: the server's setting).
@@ -129,19 +137,41 @@ class BaseClient(ABC):
             number of ticks that ran (fewer than asked only if the episode ended).
 
         Raises:
+            TypeError: ``action`` is ``None`` (to read the state without acting: :meth:`poll`).
             RemoteError: ``invalid_action`` (shape, dtype, bounds, NaN) or ``reset_required``;
                 the environment is unchanged and the client can go on.
         """
-        self._send(self.step_request(action, repeat_action, request_id=next(self._ids)))
-        return self.step_result(self._receive())  # type: ignore[arg-type]
+        self.send_step(action, repeat_action)
+        return self.receive_step()
 
     def send_step(self, action: Any, repeat_action: int | None = None) -> None:
-        """Send a step request without waiting; collect the answer with :meth:`receive_step`."""
-        self._send(self.step_request(action, repeat_action, request_id=next(self._ids)))
+        """Send a step request without waiting; collect the answer with :meth:`receive_step`.
+
+        Raises:
+            TypeError: ``action`` is ``None``.
+        """
+        if action is None:
+            raise TypeError("step() needs an action, got None; to read the episode's state "
+                            "without acting, call poll()")
+        self._post(self.step_request(action, repeat_action, request_id=next(self._ids)))
 
     def receive_step(self) -> StepResult:
         """Wait for the answer to the step sent by :meth:`send_step`."""
-        return self.step_result(self._receive())  # type: ignore[arg-type]
+        return self.step_result(self._reply())  # type: ignore[arg-type]
+
+    def poll(self) -> StepResult:
+        """The episode's state without acting, as :meth:`step` returns it.
+
+        The reward and ticks are those since the previous answer (in real time the world
+        moves on its own; in lockstep nothing ran, so they are 0), the flags say whether the
+        episode ended. It sends the protocol's ``action: nil``.
+
+        Raises:
+            RemoteError: ``reset_required`` before the first reset.
+        """
+        self._post(Request(next(self._ids), {"action": None,
+                                            "observation": self._observation_request}))
+        return self.step_result(self._reply())  # type: ignore[arg-type]
 
     def step_result(self, reply: Response | ErrorReply, *, writable: bool = True) -> StepResult:
         """A step's answer as ``(observation, reward, terminated, truncated, info)``.
@@ -196,11 +226,11 @@ class BaseClient(ABC):
 
     def send_request(self, request: Request) -> None:
         """Send a prepared request (see :meth:`step_request`); its id is assigned here."""
-        self._send(Request(next(self._ids), request.parts, request.token))
+        self._post(Request(next(self._ids), request.parts, request.token))
 
     def receive_reply(self) -> Response | ErrorReply:
         """Wait for the answer to :meth:`send_request`; an error reply is returned, not raised."""
-        message = self._receive()
+        message = self._reply()
         if message.__class__ is not Response and message.__class__ is not ErrorReply:
             self.close()
             raise ConnectionLost(f"{self.address} answered a request with {message!r:.80}")
@@ -210,7 +240,7 @@ class BaseClient(ABC):
 
     def send_batch(self, requests: Sequence[Request | None]) -> None:
         """Send one request per instance of the server (``None``: skip one)."""
-        self._send(Request(next(self._ids), {"batch": [
+        self._post(Request(next(self._ids), {"batch": [
             None if request is None else request.parts for request in requests]}))
 
     def receive_batch(self) -> tuple[Response | ErrorReply | None, ...]:
@@ -236,7 +266,7 @@ class BaseClient(ABC):
                 isinstance(reset, np.ndarray) else reset
         if repeat_action is not None:
             steps["repeat_action"] = repeat_action
-        self._send(Request(next(self._ids), {"steps": steps}))
+        self._post(Request(next(self._ids), {"steps": steps}))
 
     def receive_steps(self) -> StepsResponse:
         """Wait for the answer to :meth:`send_steps`.
@@ -376,13 +406,32 @@ class BaseClient(ABC):
 
     @abstractmethod
     def _receive(self) -> Reply:
-        """Wait for the environment's answer to the oldest request sent."""
+        """Wait for the environment's next answer (to the oldest request not answered yet)."""
 
     # --- internals --------------------------------------------------------------------------
 
     def _call(self, **parts: Any) -> Response:
-        self._send(Request(next(self._ids), parts))
+        self._post(Request(next(self._ids), parts))
         return self._response(self.receive_reply())
+
+    def _post(self, request: Request) -> None:
+        """Send ``request``; its answer is the one to wait for from now on."""
+        self._awaited = request.id
+        self._send(request)
+
+    def _reply(self) -> Reply:
+        """The answer to the request sent last; answers to earlier ones are dropped.
+
+        Their callers gave up on them (interrupted while waiting), so they belong to no one;
+        an unsolicited error (id ``None``: a timeout, say) is returned as it is.
+        """
+        while True:
+            message = self._receive()
+            reply_id = message.id
+            if reply_id is None or reply_id >= self._awaited:
+                return message
+            logger.info("%s: dropped the answer to request %d, whose caller gave up on it",
+                        self.address, reply_id)
 
     def _column_codecs(self) -> tuple[Codec, Codec]:
         """The codecs of K actions and K observations (K: the server's instances)."""
@@ -394,7 +443,7 @@ class BaseClient(ABC):
 
     def _receive_answer(self, kind: type[_Answer], asked: str) -> _Answer:
         """The answer to a batch or steps request, ``kind``; raises a refusal of it whole."""
-        message = self._receive()
+        message = self._reply()
         if message.__class__ is ErrorReply:
             self._response(message)  # type: ignore[arg-type]
         if message.__class__ is not kind:

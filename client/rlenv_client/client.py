@@ -68,6 +68,7 @@ class Client(BaseClient):
         super().__init__(world_data=world_data)
         self.address = f"{host}:{port}"
         self.timeout = timeout
+        self._closed_because = ""  # what closed the connection, when it was no error of its own
         self._connection = Connection(Role.CLIENT)
         try:
             self._sock: socket.socket | None = socket.create_connection((host, port), timeout)
@@ -95,7 +96,7 @@ class Client(BaseClient):
                 self.close()
                 raise RemoteError(ErrorCode.UNAUTHORIZED, f"{self.address} requires a token: "
                                   "pass token=... (or set RLENV_TOKEN)", fatal=True)
-            self._send(Request(next(self._ids), token=token))
+            self._post(Request(next(self._ids), token=token))
             self._response(self.receive_reply())
 
     def close(self) -> None:
@@ -121,7 +122,8 @@ class Client(BaseClient):
     def _send(self, request: Request) -> None:
         sock = self._sock
         if sock is None:
-            raise ConnectionLost(f"the connection to {self.address} is closed")
+            raise ConnectionLost(f"the connection to {self.address} is closed"
+                                 f"{self._closed_because}")
         data = self._connection.send(request)
         try:
             sock.sendall(data)
@@ -132,6 +134,11 @@ class Client(BaseClient):
         except OSError as error:
             self.close()
             raise ConnectionLost(f"sending to {self.address} failed: {error}") from None
+        except BaseException as error:  # interrupted (KeyboardInterrupt): the frame may be cut
+            self.close()
+            self._closed_because = (f": a request was interrupted ({type(error).__name__}) "
+                                    "while it was being sent; connect again")
+            raise
 
     def _receive(self) -> Reply:
         message = self._next_message()
@@ -173,7 +180,8 @@ class Client(BaseClient):
         """
         sock = self._sock
         if sock is None:
-            raise ConnectionLost(f"the connection to {self.address} is closed")
+            raise ConnectionLost(f"the connection to {self.address} is closed"
+                                 f"{self._closed_because}")
         try:
             return sock.recv(_READ_SIZE)
         except BlockingIOError:

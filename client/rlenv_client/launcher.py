@@ -30,6 +30,7 @@ logger = logging.getLogger(__name__)
 
 _LISTENING = "listening on "
 _KEPT_LINES = 200
+_FAILED = "rlenv serve: "  # how rlenv serve says, in one line, why it could not start
 
 
 class ServerStartError(RlenvError):
@@ -150,10 +151,13 @@ class ServerProcess:
                 ) from None
             if line is None:
                 code = self.process.wait()
-                raise ServerStartError(
-                    f"server {self.target} exited with code {code} before listening; its "
-                    f"output:\n{self.output}"
-                )
+                self._pump_thread.join(1.0)
+                reasons = [line[len(_FAILED):].strip() for line in self._lines
+                           if line.startswith(_FAILED)]
+                first = f"could not start: {reasons[-1]}" if reasons else \
+                    "exited before listening"
+                raise ServerStartError(f"server {self.target} {first}\n(exit code {code}; its "
+                                       f"output:\n{self.output.rstrip()})")
             host, _, port = line[len(_LISTENING):].strip().rpartition(":")
             return host, int(port)
 

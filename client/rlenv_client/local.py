@@ -65,9 +65,16 @@ class LocalClient(BaseClient):
         return self
 
     def _send(self, request: Request) -> None:
-        if self.host is None:
+        host = self.host
+        if host is None:
             raise ConnectionLost(f"{self.address} is closed")
-        self._replies.append(self.host.answer(request))
+        try:
+            reply = host.answer(request)
+        except BaseException as error:  # interrupted (KeyboardInterrupt) half way
+            host.abandon(f"a request was interrupted ({type(error).__name__}) while the "
+                         "environment served it")
+            raise
+        self._replies.append(reply)
 
     def _receive(self) -> Reply:
         if not self._replies:

@@ -8,12 +8,40 @@ helpers cut and fill such batches without going through one value per sub-enviro
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
+from gymnasium import spaces
 
-__all__ = ["row", "rows", "set_row", "set_rows"]
+__all__ = ["check_shape", "row", "rows", "set_row", "set_rows"]
+
+
+def check_shape(batched: spaces.Space, batch: Any, name: str) -> None:
+    """Check that ``batch`` has the layout and array shapes of the batched space ``batched``.
+
+    Only the structure and shapes: dtypes and bounds are the servers' to check.
+
+    Raises:
+        ValueError: naming ``name`` (and where in it), its shape and the expected one.
+    """
+    if isinstance(batched, spaces.Dict):
+        if not isinstance(batch, Mapping) or set(batch) != set(batched.spaces):
+            raise ValueError(f"{name} must be a map with the keys {sorted(batched.spaces)}")
+        for key, space in batched.spaces.items():
+            check_shape(space, batch[key], f"{name}[{key!r}]")
+    elif isinstance(batched, spaces.Tuple):
+        if not isinstance(batch, tuple | list) or len(batch) != len(batched.spaces):
+            raise ValueError(f"{name} must be a tuple of {len(batched.spaces)} batches")
+        for index, space in enumerate(batched.spaces):
+            check_shape(space, batch[index], f"{name}[{index}]")
+    else:
+        try:
+            shape = np.shape(batch)
+        except ValueError:  # ragged nested lists
+            raise ValueError(f"{name} is not an array of shape {batched.shape}") from None
+        if shape != batched.shape:
+            raise ValueError(f"{name} has shape {shape}, expected {batched.shape}")
 
 
 def rows(batch: Any, start: int, stop: int) -> Any:

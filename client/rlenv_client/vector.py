@@ -23,6 +23,12 @@ server that this vector started is restarted (``max_restarts`` each), and one of
 found again wherever the pool brought it back: the interrupted episodes
 of its instances end as truncated with their last observation, reward 0 and
 ``info["server_restarted"]``, and the autoreset that follows starts fresh episodes.
+
+A step or reset interrupted half way (a ``KeyboardInterrupt`` in a notebook) leaves servers
+that stepped without the vector seeing it: the next step then sends nothing and ends every
+episode as truncated, with the last observations returned, reward 0 and
+``info["interrupted"]``; the autoreset that follows starts fresh episodes (the answers the
+interrupted step left behind are dropped, never taken for later ones).
 """
 
 from __future__ import annotations
@@ -30,8 +36,9 @@ from __future__ import annotations
 import logging
 import math
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -42,7 +49,7 @@ from rlenv.protocol import ErrorReply, Request, Response
 from rlenv.protocol.errors import RemoteError
 from rlenv_client.base import BaseClient
 from rlenv_client.launcher import ServerProcess
-from rlenv_client.rows import row, rows, set_row, set_rows
+from rlenv_client.rows import check_shape, row, rows, set_row, set_rows
 from rlenv_client.session import LOST, ServerSource, Session
 
 if TYPE_CHECKING:
@@ -145,6 +152,7 @@ class RemoteVectorEnv(VectorEnv):
         self._autoreset = np.zeros(self.num_envs, dtype=np.bool_)
         self._steps = np.zeros(self.num_envs, dtype=np.int64)
         self._last: Any = None  # the last batch of observations returned
+        self._interrupted: str | None = None  # what interrupted the last step or reset
         if inspector:
             from rlenv_client.inspector import inspect_sessions
 
@@ -174,6 +182,12 @@ class RemoteVectorEnv(VectorEnv):
             ValueError: a list of seeds of the wrong length.
             ConnectionLost: a server went away (with how it exited, if it died).
         """
+        with self._noting_interruptions():
+            self._interrupted = None
+            return self._reset(seed, options)
+
+    def _reset(self, seed: int | Sequence[int | None] | None,
+               options: Mapping[str, Any] | None) -> tuple[Any, dict[str, Any]]:
         if seed is None or isinstance(seed, int):
             seeds: list[int | None] = [
                 None if seed is None else seed + i for i in range(self.num_envs)
@@ -206,10 +220,22 @@ class RemoteVectorEnv(VectorEnv):
         out, in columns).
 
         Raises:
+            TypeError: ``actions`` is ``None``.
+            ValueError: ``actions`` does not hold one action per sub-environment (its shape
+                and the expected one are named); nothing was sent.
             RemoteError: a server refused the step (e.g. ``invalid_action``) or a
                 sub-environment failed; every server was answered first.
             ConnectionLost: a server went away and cannot be restarted (with how it exited).
         """
+        if actions is None:
+            raise TypeError(f"step() needs an action for each of the {self.num_envs} "
+                            "sub-environments, got None")
+        check_shape(self.action_space, actions, "actions")
+        with self._noting_interruptions():
+            return self._step(actions)
+
+    def _step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray,
+                                             dict[str, Any]]:
         resetting = self._autoreset.copy() if self._mode is AutoresetMode.NEXT_STEP else \
             np.zeros(self.num_envs, dtype=np.bool_)
         observations, rewards, terminations, truncations, frames, env_infos = \
@@ -246,8 +272,11 @@ class RemoteVectorEnv(VectorEnv):
         """Send every server its share of the step, then gather the answers into columns.
 
         A server that is lost and restarted gives its sub-environments their last observation,
-        truncated, with ``info["server_restarted"]``.
+        truncated, with ``info["server_restarted"]``; after an interrupted step or reset, every
+        sub-environment does so, with ``info["interrupted"]``, and nothing is sent.
         """
+        if self._interrupted is not None:
+            return self._after_interruption()
         for session, group in zip(self.sessions, self._groups, strict=True):
             try:
                 session.client.send_steps(rows(actions, group.start, group.stop),
@@ -285,6 +314,28 @@ class RemoteVectorEnv(VectorEnv):
         if refused is not None:
             raise refused
         return observations, rewards, terminations, truncations, frames, env_infos
+
+    def _after_interruption(self) -> tuple[Any, ...]:
+        """The step after an interrupted one: every episode ends, truncated (see the module)."""
+        why = f"the previous step or reset was interrupted ({self._interrupted})"
+        self._interrupted = None
+        if self._last is None:
+            raise RuntimeError(f"{why} before any observation: call reset()")
+        observations = create_empty_array(self.single_observation_space, self.num_envs)
+        set_rows(observations, 0, self._last)
+        return (observations, np.zeros(self.num_envs, np.float64),
+                np.zeros(self.num_envs, np.bool_), np.ones(self.num_envs, np.bool_),
+                np.zeros(self.num_envs, np.int64), [{"interrupted": why}] * self.num_envs)
+
+    @contextmanager
+    def _noting_interruptions(self) -> Iterator[None]:
+        """Remember an interruption (not an error) that escapes the block, for the next step."""
+        try:
+            yield
+        except BaseException as error:
+            if not isinstance(error, Exception):
+                self._interrupted = type(error).__name__
+            raise
 
     def render(self) -> tuple[np.ndarray, ...] | None:
         """One frame per sub-environment (``rgb_array``)."""

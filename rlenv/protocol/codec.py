@@ -23,6 +23,7 @@ __all__ = [
     "DEFAULT_MAX_FRAME_SIZE",
     "HEADER",
     "NDARRAY_EXT",
+    "find_non_text_key",
     "frame",
     "pack",
     "unpack",
@@ -149,22 +150,25 @@ def frame(obj: Any) -> bytes:
     return HEADER.pack(len(body)) + body
 
 
-def unpack(body: bytes | bytearray | memoryview) -> Any:
+def unpack(body: bytes | bytearray | memoryview, *, text_keys: bool = True) -> Any:
     """Decode one msgpack object that fills ``body`` exactly.
 
-    Strings are UTF-8 and map keys strings (msgpack's defaults: a frame with other keys is
-    refused); no container may declare more elements or bytes than ``body`` holds (msgpack
+    Strings are UTF-8, and every map key at every depth must be a str: msgpack refuses
+    integer, float, nil and ext keys itself, and with ``text_keys`` (the default) a bin key is
+    refused too (a client reading a server it trusts may skip that check: rlenv servers never
+    send one). No container may declare more elements or bytes than ``body`` holds (msgpack
     bounds each by the body's length, so a frame cannot make the decoder allocate more than the
     frame limit allows). The only ext type is :data:`NDARRAY_EXT`: msgpack decodes its own
     timestamp type (-1) without asking the hook, so a decoded frame that may hold one (its
     type byte, 0xff, is in it) is searched for it.
 
     Raises:
-        RemoteProtocolError: invalid msgpack, trailing bytes, a foreign ext type (timestamps
-            included) or a malformed array.
+        RemoteProtocolError: invalid msgpack, a map key that is not a str, trailing bytes, a
+            foreign ext type (timestamps included) or a malformed array.
     """
     try:
-        value = msgpack.unpackb(body, ext_hook=_ext_hook)
+        value = msgpack.unpackb(body, ext_hook=_ext_hook,
+                                object_hook=_text_keys if text_keys else None)
     except msgpack.ExtraData:
         raise RemoteProtocolError("trailing bytes after the message in the frame") from None
     except (ValueError, TypeError, msgpack.UnpackException, RecursionError) as exc:
@@ -173,6 +177,40 @@ def unpack(body: bytes | bytearray | memoryview) -> Any:
     if (body.__class__ is memoryview or 0xFF in body) and _holds_timestamp(value):
         raise RemoteProtocolError(f"frame is not valid msgpack: {_foreign_ext(-1)}")
     return value
+
+
+def _text_keys(mapping: dict[Any, Any]) -> dict[Any, Any]:
+    """``mapping``, once every key is known to be a str (msgpack's ``object_hook``)."""
+    for key in mapping:
+        if key.__class__ is not str:
+            raise ValueError(_not_text(key))
+    return mapping
+
+
+def find_non_text_key(value: Any) -> str | None:
+    """Why ``value`` cannot travel as rlenv data: a map key that is not a str, at any depth.
+
+    Returns:
+        ``None`` when every map key (in maps, lists and tuples, nested) is a str; else a
+        message naming the first other key.
+    """
+    pending = [value]
+    while pending:
+        item = pending.pop()
+        if isinstance(item, dict):
+            for key, entry in item.items():
+                if key.__class__ is not str:
+                    return _not_text(key)
+                if isinstance(entry, dict | list | tuple):
+                    pending.append(entry)
+        elif isinstance(item, list | tuple):
+            pending.extend(entry for entry in item if isinstance(entry, dict | list | tuple))
+    return None
+
+
+def _not_text(key: Any) -> str:
+    kind = "bin" if isinstance(key, bytes | bytearray) else type(key).__name__
+    return f"map key {key!r:.40} is {kind}, not a str: every map key must be a str"
 
 
 _UNNAMED_ERRORS = {  # msgpack's errors that come without a message

@@ -31,6 +31,7 @@ Sockets stay in blocking mode; the kernel enforces their timeouts (``SO_RCVTIMEO
 
 from __future__ import annotations
 
+import errno
 import hmac
 import ipaddress
 import logging
@@ -129,7 +130,8 @@ class Endpoint:
     """Accepts clients and moves frames between them and the host.
 
     Args:
-        hello: what each client is told on connecting.
+        hello: what each client is told on connecting (``None``: set :attr:`hello` before
+            serving; a self-hosting environment binds before its hello is known).
         limits: sizes and deadlines; see :class:`Limits` (its defaults if ``None``).
         token: the secret the client's first request must carry (``None``: no token needed,
             only allowed on loopback addresses).
@@ -137,13 +139,14 @@ class Endpoint:
     """
 
     def __init__(
-        self, hello: Hello, limits: Limits | None = None, token: str | None = None,
+        self, hello: Hello | None, limits: Limits | None = None, token: str | None = None,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.limits = limits or Limits()
-        self._hello = replace(hello, token_required=hello.token_required or token is not None,
-                              limits=self.limits.to_wire())
         self._token = token
+        self._hello: Hello | None = None
+        if hello is not None:
+            self.hello = hello
         self._clock = clock
         self._selector = selectors.DefaultSelector()
         self._listener: socket.socket | None = None
@@ -154,6 +157,16 @@ class Endpoint:
         self._lifeline: int | None = None
         self._housekeeping_at = 0.0
         self._backlog = False  # frames may be buffered on other peers than the controller
+
+    @property
+    def hello(self) -> Hello | None:
+        """What each client is told on connecting (with the token rule and the limits)."""
+        return self._hello
+
+    @hello.setter
+    def hello(self, hello: Hello) -> None:
+        self._hello = replace(hello, token_required=hello.token_required or
+                              self._token is not None, limits=self.limits.to_wire())
 
     @property
     def address(self) -> tuple[str, int]:
@@ -176,18 +189,25 @@ class Endpoint:
         """Listen on ``host:port`` (port 0 picks a free port) and return the bound address.
 
         Raises:
+            ValueError: ``port`` is not in 0..65535.
             InsecureBindError: ``host`` is not a loopback address and no token is set.
-            OSError: the address cannot be bound.
+            OSError: the address cannot be bound; the message says why first ("port 4000 is
+                in use on 127.0.0.1 ...").
         """
         if self._listener is not None:
             raise RuntimeError(f"already listening on {self.address}")
+        if type(port) is not int or not 0 <= port <= 65535:
+            raise ValueError(f"port must be an integer from 0 to 65535, got {port!r:.40}")
         if self._token is None and not _is_loopback(host):
             raise InsecureBindError(
                 f"refusing to listen on {host}: anyone who can reach it could drive this "
                 "environment. Set a token (rlenv serve --token, or RLENV_TOKEN) that clients "
                 "must present, or bind 127.0.0.1"
             )
-        listener = socket.create_server((host, port), backlog=16)
+        try:
+            listener = socket.create_server((host, port), backlog=16)
+        except OSError as error:
+            raise _bind_error(error, host, port) from None
         listener.setblocking(False)
         self._listener = listener
         self._selector.register(listener, selectors.EVENT_READ)
@@ -350,6 +370,7 @@ class Endpoint:
         self._order.append(peer)
         self._selector.register(sock, selectors.EVENT_READ)
         logger.info("client %s connected", address)
+        assert self._hello is not None, "set the endpoint's hello before serving"
         self._write(peer, peer.connection.send(self._hello))
 
     def _check_lifeline(self, fd: int) -> None:
@@ -487,6 +508,25 @@ class Endpoint:
         if self._controller is peer:
             self._controller = None
         peer.sock.close()
+
+
+def _bind_error(error: OSError, host: str, port: int) -> OSError:
+    """``error`` (from binding ``host:port``) with its cause said first, in words."""
+    reasons = {
+        errno.EADDRINUSE: f"port {port} is in use on {host} (by another server?): choose "
+                          "another port, or 0 for a free one",
+        errno.EADDRNOTAVAIL: f"{host} is not an address of this machine",
+        errno.EACCES: f"port {port} on {host} needs privileges: choose a port above 1023",
+    }
+    reason = reasons.get(error.errno) if error.errno is not None else None
+    if reason is None:
+        if isinstance(error, socket.gaierror):
+            reason = f"cannot resolve the host {host!r}: {error.strerror}"
+        else:
+            reason = f"cannot listen on {host}:{port}: {error.strerror or error}"
+    clear = OSError(reason)
+    clear.errno = error.errno
+    return clear
 
 
 def _is_loopback(host: str) -> bool:

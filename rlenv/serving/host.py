@@ -29,9 +29,9 @@ from rlenv.protocol import ErrorReply, Hello, Reply, Request, Response
 from rlenv.protocol.errors import RequestError
 from rlenv.protocol.spaces import compile_check
 from rlenv.serving.columns import Columns
-from rlenv.serving.endpoint import Endpoint
-from rlenv.serving.instance import Instance, failure, load_environment
-from rlenv.serving.parts import HostPart, plan_for, shape_of, takes_control
+from rlenv.serving.endpoint import Endpoint, Peer
+from rlenv.serving.instance import Episode, Instance, failure, load_environment
+from rlenv.serving.parts import HostPart, dispatch, plan_for, shape_of, takes_control
 
 __all__ = ["Host", "Prepared"]
 
@@ -85,7 +85,8 @@ class Host:
             raise ValueError("a host holds at least one instance")
         if count > 1 and not isinstance(environment, type):
             raise TypeError("several instances need the environment class, not an instance")
-        self.instances = [Instance(environment, clock, record_dir) for _ in range(count)]
+        self.instances = [Instance(environment, dispatch, clock, record_dir)
+                          for _ in range(count)]
         first = self.instances[0]
         self.hello = Hello(
             environment=first.environment.name,
@@ -105,11 +106,20 @@ class Host:
             for instance in self.instances:
                 instance.set_real_time(True)
         self._clocked = self._in_real_time()
+        self._after_send_hooks = any(instance.has_after_send for instance in self.instances)
 
     def answer(self, request: Request) -> Reply:
-        """The one answer to ``request`` (plain, batch or steps); a refusal changes nothing."""
+        """The one answer to ``request`` (plain, batch or steps); a refusal changes nothing.
+
+        The answer counts as sent once returned (the environments' ``_after_send_response``
+        has run).
+        """
         prepared = self.prepare(request)
-        return prepared if prepared.__class__ is ErrorReply else self.run(prepared)  # type: ignore[return-value,arg-type]
+        if prepared.__class__ is ErrorReply:
+            return prepared  # type: ignore[return-value]
+        reply = self.run(prepared)  # type: ignore[arg-type]
+        self.after_send(prepared)  # type: ignore[arg-type]
+        return reply
 
     def prepare(self, request: Request) -> Prepared | ErrorReply:
         """Check every part of ``request`` before anything moves; its refusal, if refused.
@@ -150,6 +160,27 @@ class Host:
             self._clocked = self._in_real_time()
         return reply
 
+    def after_send(self, prepared: Prepared) -> None:
+        """Tell the environments that served ``prepared`` that its answer went out."""
+        if not self._after_send_hooks:
+            return
+        part = prepared.part
+        if part is None:
+            self.instances[0].after_send()
+            return
+        for instance, plan in zip(self.instances, prepared.checked, strict=False):
+            if plan.__class__ is dict:  # it served (a batch's refusal or gap did not)
+                instance.after_send()
+
+    def abandon(self, why: str) -> None:
+        """End every instance's episode where it stands (a request was cut short half way).
+
+        The next action is refused with ``reset_required``, saying ``why``.
+        """
+        for instance in self.instances:
+            if instance.state is not Episode.NOT_STARTED:
+                instance.abandon_episode(why)
+
     def time_to_next_tick(self) -> float | None:
         """Seconds until the next tick of an instance in real time (``None``: none is)."""
         if not self._clocked:
@@ -160,28 +191,37 @@ class Host:
         return [instance for instance in self.instances if instance.tree.real_time]
 
     def serve_forever(self, endpoint: Endpoint) -> None:
-        """Answer the endpoint's requests until interrupted; in real time, tick meanwhile.
-
-        A request is checked first: a refusal is answered and changes nothing, control
-        included. A request that changes the environment then needs its client to control it
-        (the endpoint answers ``busy`` otherwise).
-        """
+        """Answer the endpoint's requests until interrupted; in real time, tick meanwhile."""
         while True:
             got = endpoint.receive(self.time_to_next_tick() if self._clocked else None)
             if got is None:
                 for instance in self._clocked:
                     instance.catch_up()
                 continue
-            peer, request = got
-            prepared = self.prepare(request)
-            if prepared.__class__ is ErrorReply:
-                endpoint.reply(peer, prepared)  # type: ignore[arg-type]
-            elif endpoint.controls(peer):
-                endpoint.reply(peer, self.run(prepared))  # type: ignore[arg-type]
-            elif not prepared.takes_control:  # type: ignore[union-attr]
-                endpoint.reply(peer, self.run(prepared, reports=False))  # type: ignore[arg-type]
-            elif endpoint.take_control(peer, request.id):
-                endpoint.reply(peer, self.run(prepared))  # type: ignore[arg-type]
+            self.handle(endpoint, *got)
+
+    def handle(self, endpoint: Endpoint, peer: Peer, request: Request) -> None:
+        """Answer one request that came through ``endpoint``.
+
+        A request is checked first: a refusal is answered and changes nothing, control
+        included. A request that changes the environment then needs its client to control it
+        (the endpoint answers ``busy`` otherwise). Once the answer went out, the environments
+        that served it hear of it (``_after_send_response``).
+        """
+        prepared = self.prepare(request)
+        if prepared.__class__ is ErrorReply:
+            endpoint.reply(peer, prepared)  # type: ignore[arg-type]
+            return
+        assert isinstance(prepared, Prepared)
+        if endpoint.controls(peer):
+            endpoint.reply(peer, self.run(prepared))
+        elif not prepared.takes_control:
+            endpoint.reply(peer, self.run(prepared, reports=False))
+        elif endpoint.take_control(peer, request.id):
+            endpoint.reply(peer, self.run(prepared))
+        else:
+            return
+        self.after_send(prepared)
 
     def close(self) -> None:
         """Take every environment out of its tree."""

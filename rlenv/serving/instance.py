@@ -1,10 +1,14 @@
 """Instance: one environment in a scene tree of its own, and the state of its episode.
 
-The host (:mod:`rlenv.serving.host`) hands an instance each request as a **plan**: the request's
-parts, already checked, in the order they apply (:mod:`rlenv.serving.parts` makes plans). One
-call serves a plan, whatever carried the request (a socket or this process, alone, in a batch
-or in a column step): :meth:`Instance.serve`. The parts use the primitives below (begin an
-episode, act, observe...), which keep the episode's state:
+The host (:mod:`rlenv.serving.host`) hands an instance each request as a **plan**: a map from
+each part of the request to its checked value, in the order they apply (:mod:`rlenv.serving.parts`
+makes plans). One call serves a plan, whatever carried the request (a socket or this process,
+alone, in a batch or in a column step): :meth:`Instance.serve`. It goes through the
+environment's hooks, the Godot seed's: ``_on_got_connection(request)`` dispatches the parts
+(``_configure``, ``_reset``, ``_step``), and ``_send_response`` gathers the answer; a hook that
+is not overridden is not called at all (its default is what runs instead), so it costs nothing.
+The parts use the primitives below (begin an episode, act, observe...), which keep the
+episode's state:
 
 - **not started** until the first reset; **running** between actions; **acting** while an
   action's ticks run; **ended** once every agent terminated or was truncated (a step is then
@@ -37,6 +41,7 @@ from rlenv.agent import RLAgent
 from rlenv.environment import RLEnvironment
 from rlenv.node import Node
 from rlenv.protocol import ErrorReply, Response
+from rlenv.protocol.codec import find_non_text_key
 from rlenv.protocol.errors import ErrorCode, RequestError
 from rlenv.protocol.spaces import Codec, SpaceMismatch, codec_for, compile_check, find_non_finite
 from rlenv.scene2d.recording import VideoRecorder
@@ -84,18 +89,25 @@ class Episode(Enum):
 
 
 class Answer:
-    """What the parts of a request add to its answer while they apply."""
+    """The answer to the request being served, as its parts and hooks build it."""
 
-    __slots__ = ("acted", "info", "observation")
+    __slots__ = ("acted", "config_before", "info", "reply", "reply_id", "reports")
 
-    def __init__(self) -> None:
-        self.observation: dict[str, Any] | None = None
+    def __init__(self, reply_id: int, reports: bool) -> None:
+        self.reply_id = reply_id
+        self.reports = reports  # it goes to the controller: rewards and ticks are its
         self.info: dict[str, Any] | None = None  # entries beside the environment's own
         self.acted = False
+        self.config_before: dict[str, dict[str, Any]] | None = None  # to undo on failure
+        self.reply: Response | None = None
 
 
-Plan = list[tuple[Any, Any]]
-"""A checked request: (part, checked value) pairs in the order they apply."""
+Plan = Mapping[str, Any]
+"""A checked request to one instance: each part's name and checked value, in the order they
+apply (what ``RLEnvironment._on_got_connection`` receives)."""
+
+Dispatch = Callable[["Instance", Plan], None]
+"""Applies every part of a plan to an instance, in order (:func:`rlenv.serving.parts.dispatch`)."""
 
 
 class Instance:
@@ -103,6 +115,8 @@ class Instance:
 
     Args:
         environment: an environment instance, its class, or ``MODULE:CLASS``.
+        dispatch: applies a plan's parts in order (the host passes
+            :func:`rlenv.serving.parts.dispatch`).
         clock: the tree's clock, for real-time mode (tests pass a manual one).
         record_dir: where clients may have the environment record videos (``None``: nowhere).
 
@@ -111,13 +125,22 @@ class Instance:
     """
 
     def __init__(self, environment: RLEnvironment | type[RLEnvironment] | str,
-                 clock: Callable[[], float] = time.monotonic,
+                 dispatch: Dispatch, clock: Callable[[], float] = time.monotonic,
                  record_dir: Path | None = None) -> None:
         if isinstance(environment, str):
             environment = load_environment(environment)
         if isinstance(environment, type):
             environment = environment()
         self.environment = environment
+        self._dispatch = dispatch
+        self.answer: Answer | None = None  # the answer to the request being served
+        hooks = {name for name in _HOOKS
+                 if getattr(type(environment), name) is not getattr(RLEnvironment, name)}
+        self._dispatches_itself = "_on_got_connection" in hooks
+        self._configures_itself = "_configure" in hooks
+        self._responds_itself = "_send_response" in hooks
+        self.has_after_send = "_after_send_response" in hooks
+        environment.communication.bind(self)
         self.tree = SceneTree(environment.physics_ticks_per_second, clock=clock)
         self.tree.root.add_child(environment)
         self.tree.paused = True
@@ -153,27 +176,82 @@ class Instance:
 
     # --- one way in -------------------------------------------------------------------------
 
-    def serve(self, plan: Plan, reply_id: int, reports: bool = True) -> Response | ErrorReply:
-        """Apply a checked request (see :mod:`rlenv.serving.parts`) and return its answer.
+    def serve(self, request: Plan, reply_id: int, reports: bool = True) -> Response | ErrorReply:
+        """Serve a checked request (see :mod:`rlenv.serving.parts`) and return its answer.
 
-        An exception in user code becomes an ``environment_error`` answer (the next action then
-        needs a reset); a refusal found while applying becomes its error answer. Unless it
-        ``reports`` (an answer to a client that does not control the environment), the answer
-        carries no reward nor ticks and leaves them for the controller's next answer, and a
-        failure of user code it met (a ``_draw`` of an inspector's, say) leaves the episode to
-        its controller.
+        The request goes to the environment's ``_on_got_connection``. An exception in user code
+        becomes an ``environment_error`` answer (the next action then needs a reset); a refusal
+        found while applying becomes its error answer; either way a configuration the request
+        applied is undone. Unless it ``reports`` (an answer to a client that does not control
+        the environment), the answer carries no reward nor ticks and leaves them for the
+        controller's next answer, and a failure of user code it met (a ``_draw`` of an
+        inspector's, say) leaves the episode to its controller.
         """
-        answer = Answer()
+        answer = self.answer = Answer(reply_id, reports)
         try:
-            for part, value in plan:
-                part.apply(self, value, answer)
-            return self._response(reply_id, answer, reports)
+            if self._dispatches_itself:
+                self.environment._on_got_connection(dict(request))
+            else:
+                self.dispatch(request)
+            if answer.reply is None:
+                raise RuntimeError(f"{type(self.environment).__name__}._on_got_connection sent "
+                                   "no answer: call super()._on_got_connection(request)")
+            return answer.reply
         except RequestError as error:
+            self._undo_configuration(answer)
             return ErrorReply(reply_id, error.code, str(error))
         except Exception as error:  # user code raised: report it, keep serving
+            self._undo_configuration(answer)
             if not reports:
                 return failure(reply_id, error, "the episode goes on (its controller's)")
             return self.environment_error(reply_id, error)
+        finally:
+            self.answer = None
+
+    def dispatch(self, request: Plan) -> None:
+        """Apply every part of ``request`` in order, then answer it if no part did.
+
+        What ``RLEnvironment._on_got_connection`` does by default.
+        """
+        self._dispatch(self, request)
+        if "observation" not in request:
+            self.send_response(None)
+
+    def send_response(self, observation_request: Mapping[str, Any] | None) -> None:
+        """The environment's ``_send_response`` (the answer, with what is asked observed)."""
+        if self._responds_itself:
+            self.environment._send_response(observation_request)
+        else:
+            self.respond(observation_request)
+
+    def respond(self, observation_request: Mapping[str, Any] | None) -> None:
+        """Build the answer to the request being served (what ``_send_response`` does).
+
+        Raises:
+            RuntimeError: no request is being served, or it was answered already.
+        """
+        answer = self.answer
+        if answer is None:
+            raise RuntimeError("an answer can only be sent while a request is served")
+        if answer.reply is not None:
+            raise RuntimeError("a request gets one answer: _send_response ran twice")
+        observation = None if observation_request is None else self.observe(observation_request)
+        answer.reply = self._response(answer, observation)
+
+    def after_send(self) -> None:
+        """The answer went out: the environment's ``_after_send_response``.
+
+        An exception in it is logged and ends the episode (the next action is refused with
+        ``reset_required``, saying why).
+        """
+        if not self.has_after_send:
+            return
+        try:
+            self.environment._after_send_response()
+        except Exception as error:
+            logger.error("_after_send_response raised", exc_info=error)
+            self.abandon_episode(f"the episode was stopped: _after_send_response raised "
+                                 f"{type(error).__name__}: {error}")
 
     def catch_up(self) -> None:
         """In real time, run the ticks that came due by the clock (and a frame)."""
@@ -211,12 +289,26 @@ class Instance:
                 node.check_config(settings)
 
     def configure(self, config: Mapping[str, Any]) -> None:
-        """Apply a checked ``config`` part (logged for snapshots during an episode).
+        """Apply a checked ``config`` part through the environment's ``_configure``.
+
+        The configuration it replaces is kept until the request is answered (a request that
+        fails changes no setting); once applied it is logged for snapshots during an episode.
+        """
+        answer = self.answer
+        if answer is not None and answer.config_before is None:
+            answer.config_before = self.config_state()
+        if self._configures_itself:
+            self.environment._configure(config)
+        else:
+            self.apply_config(config)
+        self.log.configured(config)
+
+    def apply_config(self, config: Mapping[str, Any]) -> None:
+        """Apply a checked ``config`` part to its nodes (what ``_configure`` does by default).
 
         A configured property is the configuration's from then on: a reset keeps it, even if
         ``inspect`` set it earlier in the episode.
         """
-        self.log.configured(config)
         for part, nodes in self._configured_nodes().items():
             if part not in config:
                 continue
@@ -227,6 +319,18 @@ class Instance:
                 node.configure(settings)
                 for key in settings:
                     self._before_sets.pop((node, key), None)
+
+    def _undo_configuration(self, answer: Answer) -> None:
+        """Put back the settings a failed request changed (as they were before it)."""
+        if answer.config_before is None:
+            return
+        for part, nodes in self._configured_nodes().items():
+            for node in nodes:
+                try:
+                    node.configure(answer.config_before[part])
+                except Exception as error:  # user code: what it keeps is its own
+                    logger.error("could not undo the configuration of %s", node.get_path(),
+                                 exc_info=error)
 
     def config_state(self) -> dict[str, dict[str, Any]]:
         """The current value of everything a client may configure (for snapshots)."""
@@ -444,21 +548,25 @@ class Instance:
         if "world" in request:
             world = self.environment.world
             assert world is not None
-            observation["world"] = world.get_data(request["world"])
+            data = observation["world"] = world.get_data(request["world"])
+            _check_text_keys(data, f"{type(world).__name__}.get_data() returned")
         if "render" in request:
             size = request["render"]
             width, height = self.environment.render_size
             observation["render"] = self.environment._render(size.get("width", width),
                                                              size.get("height", height))
         if "draw" in request:
-            observation["draw"] = self.environment._draw()
+            drawn = observation["draw"] = self.environment._draw()
+            _check_text_keys(drawn, "_draw() returned")
         return observation
 
-    def _response(self, reply_id: int, answer: Answer, reports: bool) -> Response:
+    def _response(self, answer: Answer, observation: dict[str, Any] | None) -> Response:
         """The answer: what was observed, the flags, and the rewards and ticks since the last.
 
         Only an answer that ``reports`` them counts them, and starts them again from zero.
+        ``info`` holds the environment's ``_get_info()`` while an episode exists.
         """
+        reports = answer.reports
         agents = self.agents
         outcomes = None
         if self.multi_agent:
@@ -490,12 +598,17 @@ class Instance:
                 self.stats.end("terminated" if terminated else "truncated")
         if terminated or truncated:  # real time: the client now knows the episode ended
             self.state = Episode.ENDED
-        info = self.environment._get_info()
+        info: dict[str, Any] = {}
+        if self.state is not Episode.NOT_STARTED:
+            info = self.environment._get_info()
+            if info:
+                _check_text_keys(info, "_get_info() returned")
         if answer.acted and self.tree.real_time:
             info = {**info, "late": self._late, "late_actions": self._late_actions}
         if answer.info:
+            _check_text_keys(answer.info, "the answer holds")
             info = {**info, **answer.info}
-        return Response(reply_id, answer.observation, reward, terminated, truncated, info,
+        return Response(answer.reply_id, observation, reward, terminated, truncated, info,
                         frames, outcomes)
 
     def environment_error(self, reply_id: int, error: BaseException) -> ErrorReply:
@@ -536,8 +649,25 @@ def failure(reply_id: int | None, error: BaseException, consequence: str) -> Err
     return ErrorReply(reply_id, ErrorCode.ENVIRONMENT_ERROR, f"{error}; {consequence}\n{detail}")
 
 
+def _check_text_keys(value: Any, what: str) -> None:
+    """Refuse data whose maps have a key that is not a str (clients refuse such a frame).
+
+    Raises:
+        ValueError: naming ``what`` and the key (the environment's fault: an
+            ``environment_error``).
+    """
+    problem = find_non_text_key(value)
+    if problem is not None:
+        raise ValueError(f"{what} data that cannot travel: {problem}")
+
+
 def _agents_of(environment: RLEnvironment) -> list[RLAgent]:
-    """The environment's agents, each with its spaces; and it must have a world."""
+    """The environment's agents, each with its spaces; and it must have a world.
+
+    An ``_ready`` that sets only ``self.agent`` (the seed's way) has that one agent.
+    """
+    if not environment.agents and environment.agent is not None:
+        environment.agents = [environment.agent]
     if not environment.agents:
         raise RuntimeError(f"{environment!r} has no agent: add an RLAgent child or set "
                            "self.agent")
@@ -565,6 +695,7 @@ def _packed_observation(agent: RLAgent, codec: Codec, request: Any) -> Any:
 
 
 _CONFIG_PARTS = frozenset({"environment", "agent", "world"})
+_HOOKS = ("_on_got_connection", "_configure", "_send_response", "_after_send_response")
 
 
 def check_keys(part: Mapping[str, Any], allowed: frozenset[str], where: str) -> None:

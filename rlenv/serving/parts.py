@@ -30,7 +30,8 @@ from rlenv.serving.columns import Columns
 from rlenv.serving.instance import Answer, Episode, Instance, Plan, check_keys
 from rlenv.serving.snapshots import generator_from_state, parse_snapshot
 
-__all__ = ["PARTS", "HostPart", "Part", "Shape", "plan_for", "shape_of", "takes_control"]
+__all__ = ["PARTS", "HostPart", "Part", "Shape", "dispatch", "plan_for", "shape_of",
+           "takes_control"]
 
 _MAX_RENDER_SIZE = 4096
 AGENT_ONLY: Mapping[str, Any] = {"agent": {}}
@@ -54,14 +55,11 @@ class Part:
         name: the part's key in a request.
         takes_control: whether it changes the environment (only its controller may send it).
         alone: whether it goes alone (with an ``observation`` at most).
-        applies: whether it does anything of its own once checked (``repeat_action`` only
-            modifies ``action``).
     """
 
     name: ClassVar[str]
     takes_control: ClassVar[bool] = False
     alone: ClassVar[bool] = False
-    applies: ClassVar[bool] = True
 
     def controls(self, value: Any) -> bool:
         """Whether this part, with this value, takes control."""
@@ -78,8 +76,11 @@ class Part:
         """
         raise NotImplementedError
 
-    def apply(self, instance: Instance, value: Any, answer: Answer) -> None:
-        """Apply the checked value to ``instance``; add what the answer reports to ``answer``."""
+    def apply(self, instance: Instance, value: Any, request: Plan) -> None:
+        """Apply the checked value to ``instance`` (its ``answer`` collects what to report).
+
+        ``request`` is the whole plan (an ``action`` reads its ``repeat_action``).
+        """
 
 
 class Config(Part):
@@ -94,7 +95,7 @@ class Config(Part):
         instance.check_config(config)
         return config
 
-    def apply(self, instance: Instance, value: Any, answer: Answer) -> None:
+    def apply(self, instance: Instance, value: Any, request: Plan) -> None:
         instance.configure(value)
 
 
@@ -114,10 +115,10 @@ class Reset(Part):
             raise _bad(f"reset.seed must be an integer >= 0, got {seed!r:.40}")
         if options is not None and not isinstance(options, Mapping):
             raise _bad("reset.options must be a map")
-        return seed, options or {}
+        return {"seed": seed, "options": options or {}}
 
-    def apply(self, instance: Instance, value: Any, answer: Answer) -> None:
-        instance.begin_episode(*value)
+    def apply(self, instance: Instance, value: Any, request: Plan) -> None:
+        instance.begin_episode(value["seed"], value["options"])
 
 
 class Action(Part):
@@ -136,20 +137,19 @@ class Action(Part):
             return None
         if not fresh and instance.state is not _RUNNING:
             instance.check_can_act()  # refuses
-        return instance.checked_action(action, fresh), parts.get("repeat_action")
+        return instance.checked_action(action, fresh)
 
-    def apply(self, instance: Instance, value: Any, answer: Answer) -> None:
+    def apply(self, instance: Instance, value: Any, request: Plan) -> None:
         if value is not None:
-            action, repeat = value
-            instance.act(action, repeat or instance.environment.repeat_action)
-            answer.acted = True
+            instance.act(value, request.get("repeat_action") or
+                         instance.environment.repeat_action)
+            instance.answer.acted = True  # type: ignore[union-attr]
 
 
 class RepeatAction(Part):
     """How many ticks this request's action runs (instead of the configured number)."""
 
     name = "repeat_action"
-    applies = False
 
     def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
               where: str) -> Any:
@@ -195,8 +195,8 @@ class Observation(Part):
                 raise _bad(f"observation.render.{key} must be an integer in "
                            f"[1, {_MAX_RENDER_SIZE}], got {value!r:.40}")
 
-    def apply(self, instance: Instance, value: Any, answer: Answer) -> None:
-        answer.observation = instance.observe(value)
+    def apply(self, instance: Instance, value: Any, request: Plan) -> None:
+        instance.send_response(value)
 
 
 class Snapshot(Part):
@@ -214,8 +214,8 @@ class Snapshot(Part):
         if instance.state is Episode.NOT_STARTED:  # stopped by an error
             instance.refuse_without_episode()
 
-    def apply(self, instance: Instance, value: Any, answer: Answer) -> None:
-        answer.info = {"snapshot": instance.log.snapshot()}
+    def apply(self, instance: Instance, value: Any, request: Plan) -> None:
+        instance.answer.info = {"snapshot": instance.log.snapshot()}  # type: ignore[union-attr]
 
 
 class Restore(Part):
@@ -248,7 +248,7 @@ class Restore(Part):
                           dry_run=True)
         return snapshot, actions, generator_from_state(snapshot["rng"])
 
-    def apply(self, instance: Instance, value: Any, answer: Answer) -> None:
+    def apply(self, instance: Instance, value: Any, request: Plan) -> None:
         snapshot, actions, rng = value
         instance.replaying = True
         try:
@@ -308,9 +308,10 @@ class Inspect(Part):
             instance.check_config(arguments)
         return operation, arguments
 
-    def apply(self, instance: Instance, value: Any, answer: Answer) -> None:
+    def apply(self, instance: Instance, value: Any, request: Plan) -> None:
         operation, arguments = value
         environment = instance.environment
+        answer: Answer = instance.answer  # type: ignore[assignment]
         if operation == "tree":
             answer.info = {"tree": inspector.tree(environment)}
         elif operation == "node":
@@ -386,7 +387,7 @@ class Batch(HostPart):
             isinstance(part, Mapping) and takes_control(part) for part in value)
 
     def takes_control(self, request: Request, checked: Any) -> bool:
-        return any(plan.__class__ is list and takes_control(parts)
+        return any(plan.__class__ is dict and takes_control(parts)
                    for parts, plan in zip(request.parts["batch"], checked, strict=False))
 
     def check(self, host: Host, request: Request) -> Any:
@@ -455,7 +456,9 @@ class Steps(HostPart):
             raise RequestError(ErrorCode.INVALID_ACTION, str(error)) from None
         rows = list(checked) if checked.__class__ is np.ndarray else \
             list(iterate(host.steps_action_space, checked))
-        return [_RESET_PLAN if resets else [(_ACTION, (row, repeat)), (_OBSERVATION, AGENT_ONLY)]
+        return [{"reset": {"seed": None, "options": {}}, "observation": AGENT_ONLY} if resets
+                else {"action": row, "observation": AGENT_ONLY} if repeat is None
+                else {"repeat_action": repeat, "action": row, "observation": AGENT_ONLY}
                 for row, resets in zip(rows, reset, strict=True)]
 
     def run(self, host: Host, request: Request, checked: Any, reports: bool) -> Reply:
@@ -490,8 +493,6 @@ PARTS: dict[str, Part | HostPart] = {
 """Every kind of request part, in the order they apply."""
 
 _ORDER = {name: index for index, name in enumerate(PARTS)}
-_ACTION, _OBSERVATION, _RESET = PARTS["action"], PARTS["observation"], PARTS["reset"]
-_RESET_PLAN: Plan = [(_RESET, (None, {})), (_OBSERVATION, AGENT_ONLY)]
 _INSTANCE_KEYS = ", ".join(name for name, part in PARTS.items() if isinstance(part, Part))
 _REQUEST_KEYS = ", ".join([_INSTANCE_KEYS, "token"] + [
     name for name, part in PARTS.items() if isinstance(part, HostPart)])
@@ -558,13 +559,25 @@ def plan_for(instance: Instance, parts: Mapping[str, Any], shape: Shape,
     Raises:
         RequestError: the request is refused (nothing was applied).
     """
-    plan = []
     fresh = shape.fresh
-    for record in shape.parts:
-        value = record.check(instance, parts, fresh, where)
-        if record.applies:
-            plan.append((record, value))
-    return plan
+    return {record.name: record.check(instance, parts, fresh, where) for record in shape.parts}
+
+
+def dispatch(instance: Instance, request: Plan) -> None:
+    """Apply every part of a checked request to ``instance``, in the request's order.
+
+    ``RLEnvironment._on_got_connection`` does this by default (through its communication).
+
+    Raises:
+        RuntimeError: the request names a part that does not exist (an override of
+            ``_on_got_connection`` added it).
+    """
+    for name, value in request.items():
+        record = PARTS.get(name)
+        if record is None or not isinstance(record, Part):
+            raise RuntimeError(f"_on_got_connection passed on a request with an unknown part "
+                               f"{name!r:.40}")
+        record.apply(instance, value, request)
 
 
 def takes_control(parts: Mapping[str, Any]) -> bool:

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from rlenv.node import Node
+from rlenv.protocol.spaces import find_non_finite
 
 __all__ = ["conform", "exported_of", "to_wire"]
 
@@ -29,11 +30,16 @@ def conform(current: Any, value: Any) -> Any:
 
     A bool takes a bool; an int an int; a float any number (as a float); a vector (a tuple,
     such as pymunk's ``Vec2d``) a list or tuple of as many numbers (as floats); ``None`` takes
-    anything; anything else a value of its own type.
+    anything; anything else a value of its own type. Nothing that holds NaN or infinity is
+    taken: a setting outlives the episode, and every later one would fail.
 
     Raises:
-        TypeError: ``value`` is not like ``current``.
+        TypeError: ``value`` is not like ``current``, or is not finite.
     """
+    where = find_non_finite(value)
+    if where is not None:
+        raise TypeError(f"must be finite, got {value!r:.60}" +
+                        (f" (not finite at {where})" if where else ""))
     number = isinstance(value, int | float) and not isinstance(value, bool)
     if isinstance(current, bool | np.bool_):
         if isinstance(value, bool):

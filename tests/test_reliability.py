@@ -16,9 +16,10 @@ import pytest
 from conftest import Serve
 
 from rlenv.protocol import ErrorReply, Hello
+from rlenv.protocol.codec import pack
 from rlenv.protocol.errors import ErrorCode
 from rlenv.serving.endpoint import Endpoint, Limits
-from rlenv.testing import ManualClock, read_frame
+from rlenv.testing import ManualClock, frame, read_frame
 from rlenv_client import Client, ConnectionLost, RemoteEnv, RemoteError
 from rlenv_client.compliance import check_server
 
@@ -318,3 +319,20 @@ def test_a_refused_request_takes_no_control(serve: Serve) -> None:
         with pytest.raises(RemoteError) as busy:
             first.reset(seed=1)
         assert busy.value.code == ErrorCode.BUSY
+
+
+def test_requests_pipelined_behind_a_slow_one_are_all_answered(serve: Serve) -> None:
+    """Frames that came in one read wait in the connection's buffer, not in the socket: they
+    are served even when the first takes longer than the housekeeping interval."""
+    server = serve("examples.faulty:CountingEnvironment")
+    with socket.create_connection(_address(server), timeout=10) as sock:
+        read_frame(sock)  # the hello
+        for attempt in range(5):
+            sock.sendall(frame(pack({"id": 3 * attempt + 1, "reset": {"seed": 0}})))
+            assert read_frame(sock)["id"] == 3 * attempt + 1
+            slow = pack({"id": 3 * attempt + 2, "action": 0, "repeat_action": 20_000,
+                         "observation": {"agent": {}}})
+            quick = pack({"id": 3 * attempt + 3, "observation": {"agent": {}}})
+            sock.sendall(frame(slow) + frame(quick))  # one write: they arrive together
+            assert read_frame(sock)["frames"] == 20_000
+            assert read_frame(sock)["id"] == 3 * attempt + 3

@@ -244,6 +244,8 @@ class Endpoint:
                     self._read(controller, block=True)
                 request = self._request_from(controller)
                 if request is not None:
+                    if controller.connection.buffered:  # pipelined: more may be whole already
+                        self._backlog = True
                     return controller, request
                 continue
             self._wait(deadline)

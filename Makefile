@@ -42,11 +42,13 @@ rllib: $(STAMP)
 	$(BIN)/python -m pytest -m ray tests/test_rllib.py
 	$(BIN)/python -m examples.train_rllib
 
-# Optional: Stable-Baselines3 (CPU torch first, so no CUDA build is pulled), its tests, a training run.
+# Optional: Stable-Baselines3, its tests, a training run (about 90 s). torch 2.13.0 first: a CPU
+# build where its wheel is at hand (this project's machines); elsewhere install a CPU torch
+# first (see the README), or pip pulls a CUDA build.
 sb3: $(STAMP)
 	$(BIN)/python -m pip install --quiet torch==2.13.0
 	$(BIN)/python -m pip install --quiet -e ".[test,sb3]"
-	$(BIN)/python -m pytest tests/test_sb3.py
+	$(BIN)/python -m pytest tests/test_sb3.py tests/test_interruptions.py -k "sb3 or SB3"
 	$(BIN)/python -m examples.train_sb3
 
 lint: $(STAMP)

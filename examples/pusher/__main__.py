@@ -1,0 +1,5 @@
+"""``python -m examples.pusher [PORT]``: the pusher hosts itself, as a Godot project does."""
+
+from examples.pusher import main
+
+main()

@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-ray test-browser screenshot sb3 rllib lint vectors clean
+.PHONY: demo test test-ray test-browser screenshot sb3 rllib docs lint vectors clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -17,7 +17,7 @@ demo: $(STAMP)
 	$(BIN)/rlenv demo
 
 test: $(STAMP)
-	$(BIN)/ruff check rlenv client examples tests benchmarks
+	$(BIN)/ruff check rlenv client examples tests benchmarks docs
 	$(BIN)/python -m pytest
 
 # Optional: servers on Ray (the ray extra) and their tests: one node, then a fake cluster.
@@ -51,12 +51,19 @@ sb3: $(STAMP)
 	$(BIN)/python -m pytest tests/test_sb3.py tests/test_interruptions.py -k "sb3 or SB3"
 	$(BIN)/python -m examples.train_sb3
 
+# Optional: the documentation site, with the API reference made from the docstrings (the docs
+# extra): its tests (a strict build, the reference covers what users touch), then site/index.html.
+docs: $(STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[test,docs]"
+	$(BIN)/python -m pytest -m docs tests/test_docs.py
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --quiet
+
 lint: $(STAMP)
-	$(BIN)/ruff check rlenv client examples tests benchmarks
+	$(BIN)/ruff check rlenv client examples tests benchmarks docs
 
 # Regenerate the protocol test vectors (docs/protocol/vectors/) by driving real servers.
 vectors: $(STAMP)
 	$(BIN)/python -m tests.protocol_vectors
 
 clean:
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) build site *.egg-info

@@ -23,8 +23,18 @@ class RLAgent(RLNode):
     the rewards of the ticks, answers the client, and stops the action early when the episode
     ends.
 
+    The order within one request: the server checks the action against
+    :attr:`action_space`, calls :meth:`set_action`, then runs the action's ticks; each tick
+    runs every ``_physics_process`` (apply the action here), steps the physics, then calls
+    :meth:`_after_physics_tick`. After the last tick (or the tick in which the episode ended),
+    :meth:`get_data` gives the observation sent back with the summed reward. A reset sets
+    :attr:`reward` to 0 and both flags to false, then calls :meth:`reset`.
+
     Attributes:
-        reward: reward accumulated since the last answer to the client.
+        action_space: the gymnasium space of the actions (sent to clients in the hello).
+        observation_space: the gymnasium space of :meth:`get_data`'s observations.
+        reward: reward accumulated since the last answer to the client (set back to 0 after
+            each answer).
         terminated: the episode reached a terminal state of the task.
         truncated: the episode was cut short by something outside the task (a time limit).
     """
@@ -39,24 +49,44 @@ class RLAgent(RLNode):
         self.truncated = False
 
     def set_action(self, action: Any) -> None:
-        """Receive the client's action, already checked against :attr:`action_space`."""
+        """Receive the client's action, already checked against :attr:`action_space`.
+
+        Called once per action, before its ticks run: store it, and apply it in
+        ``_physics_process`` on every tick (forces are cleared after each physics step).
+        """
         raise NotImplementedError(f"{type(self).__name__} must implement set_action")
 
     def reset(self, arguments: Any) -> None:
-        """Put the agent in its initial state.
+        """Put the agent in its initial state, at the start of every episode.
 
-        ``arguments`` is what the environment's ``_reset`` passes: by default the world's
-        ``sample_initial_position()``.
+        Args:
+            arguments: what the environment's ``_reset`` passes: by default the world's
+                :meth:`~rlenv.world.RLEnvWorld.sample_initial_position`, drawn after the
+                world's own ``reset``.
         """
 
     def get_data(self, observation_request: Mapping[str, Any]) -> Any:
-        """Return the observation, a member of :attr:`observation_space`."""
+        """Return the observation, a member of :attr:`observation_space`.
+
+        Called after a reset and after each action's ticks (and whenever a client observes).
+        The server refuses an observation that does not fit the space or is not finite (an
+        ``environment_error`` naming this agent).
+
+        Args:
+            observation_request: the client's request for the agent's observation, ``{}``
+                unless a custom client asks for more.
+        """
         raise NotImplementedError(f"{type(self).__name__} must implement get_data")
 
     def _after_physics_tick(self, delta: float) -> None:
         """Called at the end of every physics tick of an action, after the physics stepped.
 
-        Read the new state here, add rewards and set terminated or truncated.
+        Read the new state here, add rewards and set terminated or truncated: once an agent's
+        episode ended, the action stops at the end of this tick (``info["frames"]`` counts the
+        ticks that ran).
+
+        Args:
+            delta: the tick's length, in seconds.
         """
 
     def add_reward(self, reward: float) -> None:

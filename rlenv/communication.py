@@ -14,12 +14,14 @@ path as ``rlenv serve`` (the serving host of :mod:`rlenv.serving`: checks, episo
 snapshots, one answer per request).
 
 When something else hosts the environment (``rlenv serve``, ``ServerProcess``, a vector
-environment, a Ray pool, ``LocalClient``), the host's address wins: :meth:`start_server` binds
-nothing more and logs what was asked. There is only ever one server, the host's.
+environment, a Ray pool, ``LocalClient``), the host's address wins:
+:meth:`Communication.start_server` binds nothing more and logs what was asked. There is only
+ever one server, the host's.
 
 The communication is also how an environment's default hooks reach the serving path
-(:meth:`dispatch`, :meth:`configure`, :meth:`send_response`): an override of a hook calls
-``super()``, which calls these.
+(:meth:`Communication.dispatch`, :meth:`Communication.configure`,
+:meth:`Communication.send_response`): an override of a hook calls ``super()``, which calls
+these.
 """
 
 from __future__ import annotations

@@ -81,26 +81,36 @@ class NodeNotFoundError(LookupError):
 class Node(SignalOwner):
     """A named node with children, groups, signals and the Godot lifecycle.
 
+    Subclass it and override the virtuals (``_ready``, ``_physics_process`` ...) to give a node
+    behaviour; declare :class:`~rlenv.signals.Signal` class attributes for what it announces.
+    A node outside a :class:`~rlenv.tree.SceneTree` is only a structure: it processes nothing
+    until it is added below the tree's :attr:`~rlenv.tree.SceneTree.root` (an environment's
+    tree is built by the server).
+
     Args:
         name: the node's name; defaults to the class name. Made unique among its siblings when
-            it is added (``Name``, ``Name2``, ``Name3`` ...).
+            it is added (``Name``, ``Name2``, ``Name3`` ...). It may not contain
+            ``/ : @ % . "`` nor be ``.`` or ``..``.
         process_mode: when the node processes; see :class:`ProcessMode`.
+
+    Raises:
+        ValueError: an invalid ``name``.
     """
 
     tree_entered = Signal()
-    """Emitted after the node entered the tree (after ``_enter_tree``)."""
+    """``tree_entered()``: the node entered the tree (emitted after ``_enter_tree``)."""
     ready = Signal()
-    """Emitted after ``_ready``."""
+    """``ready()``: the node is ready (emitted after ``_ready``)."""
     tree_exiting = Signal()
-    """Emitted when the node is about to leave the tree (after ``_exit_tree``)."""
+    """``tree_exiting()``: the node is about to leave the tree (emitted after ``_exit_tree``)."""
     tree_exited = Signal()
-    """Emitted after the node left the tree."""
+    """``tree_exited()``: the node left the tree."""
     child_entered_tree = Signal("node")
-    """Emitted when a child entered the tree."""
+    """``child_entered_tree(node)``: the child ``node`` entered the tree."""
     child_exiting_tree = Signal("node")
-    """Emitted when a child is about to leave the tree."""
+    """``child_exiting_tree(node)``: the child ``node`` is about to leave the tree."""
     renamed = Signal()
-    """Emitted after the node's name changed."""
+    """``renamed()``: the node's name changed."""
 
     def __init__(self, name: str | None = None, *, process_mode: ProcessMode = ProcessMode.INHERIT):
         self._name = _check_name(name if name is not None else type(self).__name__)
@@ -520,13 +530,27 @@ class Node(SignalOwner):
         """Called when the node leaves the tree, after its children did."""
 
     def _process(self, delta: float) -> None:
-        """Called every frame with the simulated time since the last frame."""
+        """Called every frame with the simulated time since the last frame, in seconds.
+
+        In lockstep a frame follows each physics tick (``delta`` is one tick) and frames run
+        while the tree is paused too (``delta`` 0). Override it, and it is called while
+        :meth:`can_process` and :meth:`is_processing`.
+        """
 
     def _physics_process(self, delta: float) -> None:
-        """Called every physics tick with the fixed tick length."""
+        """Called every physics tick with the fixed tick length, in seconds (1/60 by default).
+
+        Runs before the physics spaces step in the same tick: apply forces and set velocities
+        here. Override it, and it is called while :meth:`can_process` and
+        :meth:`is_physics_processing`.
+        """
 
     def _physics_step(self, delta: float) -> None:
-        """Called every physics tick after every ``_physics_process``; advance a simulation."""
+        """Called every physics tick after every ``_physics_process``; advance a simulation.
+
+        :class:`~rlenv.scene2d.physics.PhysicsWorld` steps its pymunk space here; few other
+        nodes need it.
+        """
 
     # --- internals --------------------------------------------------------------------------
 

@@ -8,6 +8,10 @@ through an instance, as in Godot 4::
 
     apple.caught.connect(on_caught)     # on_caught(by) is called by ...
     apple.caught.emit(agent)
+
+A connected callable is called with exactly the arguments the signal is emitted with, in the
+order they are declared (``Signal("by")``: one argument). The built-in nodes document their
+signals in the same form, e.g. ``body_entered(body)`` on a physics body.
 """
 
 from __future__ import annotations
@@ -22,7 +26,12 @@ class Signal:
     """Declares a signal on a class; reading it from an instance gives a :class:`BoundSignal`.
 
     Args:
-        *arguments: names of the arguments the signal is emitted with.
+        *arguments: names of the arguments the signal is emitted with (documentation and
+            introspection: emitting does not check them).
+
+    Attributes:
+        arguments: the argument names.
+        name: the attribute name the signal was declared under.
     """
 
     def __init__(self, *arguments: str) -> None:
@@ -109,7 +118,7 @@ class BoundSignal:
 
 
 class SignalOwner:
-    """Mixin for classes that declare :class:`Signal` s: lookup by name, and user signals.
+    """Mixin for classes that declare signals (:class:`Signal`): lookup by name, user signals.
 
     Subclasses set ``self._signals = {}`` in their ``__init__``.
     """

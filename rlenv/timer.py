@@ -15,17 +15,32 @@ __all__ = ["PhysicsFramesTimer"]
 
 
 class PhysicsFramesTimer(Node):
-    """Fires ``timeout`` after ``wait_frames`` physics ticks.
+    """Fires ``timeout`` after ``wait_frames`` physics ticks (Godot's Timer, counting ticks).
+
+    It counts only inside a tree, and only the ticks it processes in (see ``process_mode``).
+    Starting it is explicit: call :meth:`start`::
+
+        timer = PhysicsFramesTimer(30, name="Cooldown")   # half a second at 60 ticks/s
+        self.add_child(timer)
+        timer.start().timeout.connect(self.on_cooldown_over)
 
     Args:
-        wait_frames: ticks to wait after :meth:`start`.
+        wait_frames: ticks to wait after :meth:`start` (at least 1).
         one_shot: stop after firing once; otherwise start over and fire every ``wait_frames``.
         name: the node name.
         process_mode: when the timer counts; by default it follows its parent.
+
+    Attributes:
+        wait_frames: ticks to wait; :meth:`start` may replace it.
+        one_shot: whether it stops after firing once.
+
+    Raises:
+        ValueError: ``wait_frames`` is smaller than 1.
     """
 
     timeout = Signal()
-    """Emitted at the end of the tick that completes the wait."""
+    """``timeout()``: emitted at the end of the tick that completes the wait, as a deferred call
+    (after the physics stepped), unless the timer was stopped or restarted in between."""
 
     def __init__(
         self,

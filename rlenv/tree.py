@@ -49,19 +49,31 @@ _MAX_DEFERRED_PER_FLUSH = 1_000_000
 class SceneTree(SignalOwner):
     """Owns the root node and runs the main loop.
 
+    A server builds one tree per environment instance, with the environment's
+    ``physics_ticks_per_second``, and adds the environment below :attr:`root`; build one
+    yourself to run nodes without a server (tests, tools).
+
     Args:
-        physics_ticks_per_second: the fixed physics rate; one tick lasts its inverse.
-        clock: the clock real-time mode follows, in seconds.
+        physics_ticks_per_second: the fixed physics rate; one tick lasts its inverse, in
+            simulated seconds.
+        clock: the clock real-time mode follows: a callable returning seconds
+            (``time.monotonic``; ``rlenv.testing.ManualClock`` in tests).
+
+    Attributes:
+        root: the root node, named ``root``: absolute paths start with ``/root/``.
+        physics_frames: physics ticks run so far.
+        process_frames: frames run so far.
+        clock: the clock real-time mode follows.
     """
 
     physics_frame = Signal()
-    """Emitted at the start of every physics tick."""
+    """``physics_frame()``: emitted at the start of every physics tick."""
     process_frame = Signal()
-    """Emitted at the start of every frame."""
+    """``process_frame()``: emitted at the start of every frame."""
     node_added = Signal("node")
-    """Emitted when a node enters the tree."""
+    """``node_added(node)``: ``node`` entered the tree."""
     node_removed = Signal("node")
-    """Emitted when a node leaves the tree."""
+    """``node_removed(node)``: ``node`` left the tree."""
 
     on_physics_tick_end: Callable[[float], None] | None = None
     """Called with the tick's ``delta`` at the end of every physics tick, when set.
@@ -95,7 +107,7 @@ class SceneTree(SignalOwner):
 
     @property
     def physics_ticks_per_second(self) -> int:
-        """The fixed physics rate.
+        """The fixed physics rate, in ticks per simulated second (60 by default).
 
         Raises:
             ValueError: on setting a rate smaller than 1.

@@ -40,6 +40,14 @@ class ServerStartError(RlenvError):
 class ServerProcess:
     """A server subprocess for the environment ``target`` (``MODULE:CLASS``).
 
+    It runs ``rlenv serve`` in its own process group and returns once the server listens. The
+    server exits when this process is gone (a lifeline pipe), and :meth:`close` (or leaving a
+    ``with`` block, or garbage collection) ends its whole process group::
+
+        with ServerProcess("examples.cartpole:CartPoleEnvironment") as server:
+            with Client(server.host, server.port) as client:
+                client.reset(seed=0)
+
     Args:
         target: the environment class, as ``MODULE:CLASS``.
         host: address for the server to bind.
@@ -47,6 +55,12 @@ class ServerProcess:
         startup_timeout: seconds to wait for the server to listen.
         args: extra command-line arguments for ``rlenv serve``.
         env: extra environment variables for the server (e.g. ``PYTHONPATH``).
+
+    Attributes:
+        target: the environment class it serves.
+        host: the address the server listens on.
+        port: the port the server listens on (the free one it picked for ``port=0``).
+        process: the ``subprocess.Popen`` of the server.
 
     Raises:
         ServerStartError: the server died or did not listen in time; the message holds its

@@ -32,6 +32,7 @@ class RemoteParallelEnv(ParallelEnv):
         in_process: run the environment in this process.
         render_mode: ``"rgb_array"`` or ``None``.
         timeout: seconds to wait for each answer.
+        server_args: extra arguments for ``rlenv serve``.
     """
 
     metadata = {"name": "rlenv_parallel", "render_modes": ["rgb_array"]}

@@ -1,10 +1,11 @@
 """Exact replays: record episodes as seed + configuration + actions, re-run them, compare.
 
 An episode file holds the server's snapshot of the episode (its configuration, generator state,
-reset options and every action, see :mod:`rlenv.episode`) and a digest of every observation the
-client saw. Replaying restores the start of the episode on a fresh server, sends the same
-actions, and compares each observation with the recorded digest: a deterministic environment
-gives bit-identical observations, and the first difference is reported.
+reset options and every action, see :mod:`rlenv.serving.snapshots`) and a digest of every
+observation the client saw. Replaying restores the start of the episode on a fresh server,
+sends the same actions, and compares each observation with the recorded digest: a
+deterministic environment gives bit-identical observations, and the first difference is
+reported.
 
     env = RecordEpisodes(gymnasium.make("rlenv/CartPole-v0"), "episodes/")
     ...                                        # episodes/episode-0001.rlenv, ... as they end

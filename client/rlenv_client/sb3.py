@@ -60,7 +60,7 @@ class SB3VecEnv(VecEnv):
         self._actions: np.ndarray | None = None
 
     def reset(self) -> VecEnvObs:
-        """Reset every environment, with the seeds given to :meth:`seed` if any."""
+        """Reset every environment, with the seeds given to SB3's ``VecEnv.seed()`` if any."""
         seeds = self._seeds if any(seed is not None for seed in self._seeds) else None
         observations, infos = self.venv.reset(seed=seeds, options=self._options[0] or None)
         self.reset_infos = _split_infos(infos, self.num_envs)

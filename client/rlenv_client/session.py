@@ -1,4 +1,4 @@
-"""Session: one environment reached by :func:`~rlenv_client.env.connect`, restartable.
+"""Session: one environment reached by :func:`connect`, restartable.
 
 A server that rlenv started itself can be restarted when it is lost (killed, crashed, stopped
 past the deadline), within a budget. The session replays the configuration sent through it, so

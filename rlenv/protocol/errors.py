@@ -103,6 +103,9 @@ class RequestError(RlenvError):
 class RemoteError(RlenvError):
     """The server answered a request with an error reply.
 
+    Unless ``fatal``, the connection stays open and the client can go on: a refused request
+    changed nothing (after an ``environment_error`` while acting, reset first).
+
     Attributes:
         code: the server's error code (an :class:`ErrorCode` value when known).
         message: the server's explanation.
@@ -117,8 +120,12 @@ class RemoteError(RlenvError):
 
 
 class ConnectionLost(RlenvError, ConnectionError):
-    """The connection to the peer closed or broke."""
+    """The connection to the peer closed or broke (also a ``ConnectionError``)."""
 
 
 class RequestTimeout(RlenvError, TimeoutError):
-    """The peer did not answer within the deadline; the connection was closed."""
+    """The peer did not answer within the deadline; the connection was closed.
+
+    Also a ``TimeoutError``. Closing it means a late answer is never taken for the answer to a
+    later request: connect again to go on.
+    """

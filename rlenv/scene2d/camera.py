@@ -31,13 +31,24 @@ __all__ = ["Camera"]
 class Camera(Node):
     """Sees the scene below its parent.
 
+    Frames show the world with y up: row 0 of the array is the top (``y_max``) of the view. The
+    view is fitted into the frame keeping its aspect ratio, centred.
+
     Args:
-        view: the world rectangle (x_min, y_min, x_max, y_max) it sees; the bounding box of
-            everything when ``None``. When following, only its size matters.
+        view: the world rectangle (x_min, y_min, x_max, y_max) it sees, in world coordinates;
+            the bounding box of every shape, frame by frame, when ``None``. When following,
+            only its width and height matter.
         size: (width, height) of its frames, in pixels.
-        follow: path (relative to the camera) of a node with a ``position`` to keep centred.
-        background: RGB colour of empty space.
+        follow: path (relative to the camera, e.g. ``../Ball``) of a node with a ``position``
+            (a body) to keep centred.
+        background: RGB colour (0-255 each) of empty space.
         name: the node name.
+
+    Attributes:
+        view: the world rectangle it sees (see above); may be changed at any time.
+        size: (width, height) of its frames, in pixels.
+        follow: the path of the node it keeps centred, or ``None``.
+        background: RGB colour of empty space.
     """
 
     def __init__(
@@ -56,7 +67,7 @@ class Camera(Node):
         self.set_physics_process(False)  # ticks matter only while recording
 
     def capture(self) -> np.ndarray:
-        """What the camera sees now: an ``(height, width, 3)`` uint8 array.
+        """What the camera sees now: an ``(height, width, 3)`` uint8 RGB array (row 0 at the top).
 
         Raises:
             RuntimeError: the camera has no parent to look at.

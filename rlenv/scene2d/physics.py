@@ -12,9 +12,22 @@ that space when they enter the tree and take them out when they leave::
     |   |___Stick (CollisionShape)
     |___Hinge (Joint: PivotJoint between Cart and Pole)
 
-Collisions are reported as signals: every shape's ``collision_started`` / ``collision_ended``
-and every body's ``body_entered`` / ``body_exited``, emitted from inside the step (the space is
-locked; changes to the tree made by handlers are deferred to the end of the tick).
+Collisions are reported as signals: every shape's ``collision_started(shape)`` /
+``collision_ended(shape)`` and every body's ``body_entered(body)`` / ``body_exited(body)``, with
+the other shape or body node as the argument. They are emitted from inside the step (the space
+is locked; changes to the tree made by handlers are deferred to the end of the tick).
+
+**Units.** pymunk has none of its own: any consistent set works. rlenv's defaults read as SI
+units (gravity ``(0, -9.81)`` in metres per second squared, y up; ``delta`` in seconds), and
+the examples use metres, kilograms and seconds: then forces are in newtons, impulses in
+newton-seconds, torques in newton-metres. Angles are in radians, counter-clockwise (with y up).
+
+**Frames.** A point or vector is either in *world* coordinates or in a *body's* own frame,
+whose origin is the body's :attr:`~PhysicsBody.position` and whose axes turn with its
+:attr:`~PhysicsBody.angle`. Shape geometry (``offset``, box, segment and polygon points) and
+joint anchors other than :meth:`Joint.pivot`'s are in the body's frame; positions, velocities,
+gravity, forces and impulses are in world coordinates. Values read back are
+``pymunk.Vec2d`` (a tuple of two floats with vector arithmetic); any ``(x, y)`` pair sets them.
 """
 
 from __future__ import annotations
@@ -43,16 +56,24 @@ Vec = tuple[float, float]
 class PhysicsWorld(Node):
     """Owns a ``pymunk.Space`` and steps it once per physics tick.
 
+    The space steps by the tree's fixed ``delta`` in ``_physics_step``, after every node's
+    ``_physics_process`` of the tick (so forces applied there act in this tick's step). Bodies,
+    shapes and joints anywhere below the world join its space (the nearest world above them).
+
     Args:
-        gravity: the space's gravity.
+        gravity: the space's gravity, a world vector (acceleration, e.g. metres per second
+            squared: the default pulls down along y).
         iterations: solver iterations per step (pymunk's default is 10).
-        damping: fraction of velocity kept per second (1 keeps all).
+        damping: fraction of velocity kept per second (1 keeps all; 0.9 loses 10% a second).
         name: the node name.
         process_mode: when the space steps; by default it follows its parent.
+
+    Attributes:
+        space: the ``pymunk.Space``; :meth:`restart` replaces it with a new one.
     """
 
     stepped = Signal("delta")
-    """Emitted after every step of the space, with the step length."""
+    """``stepped(delta)``: emitted after every step of the space (``delta``: its length, s)."""
 
     exported: ClassVar[tuple[str, ...]] = ("gravity", "damping")
 
@@ -107,7 +128,7 @@ class PhysicsWorld(Node):
 
     @property
     def gravity(self) -> pymunk.Vec2d:
-        """The space's gravity."""
+        """The space's gravity, a world vector; clients may read and set it (exported)."""
         return self.space.gravity
 
     @gravity.setter
@@ -116,7 +137,7 @@ class PhysicsWorld(Node):
 
     @property
     def damping(self) -> float:
-        """The fraction of velocity bodies keep per second."""
+        """The fraction of velocity bodies keep per second; exported."""
         return self.space.damping
 
     @damping.setter
@@ -160,19 +181,39 @@ def _world_of(node: Node) -> PhysicsWorld:
 class PhysicsBody(Node):
     """A node holding one ``pymunk.Body``, in the space of the nearest PhysicsWorld above it.
 
+    The base of :class:`RigidBody`, :class:`StaticBody` and :class:`KinematicBody`: build those.
+    The body joins the space when the node enters the tree (it must be below a
+    :class:`PhysicsWorld`) and leaves it when the node leaves. Its shapes are its
+    :class:`CollisionShape` children. Its state (:attr:`position`, :attr:`velocity`,
+    :attr:`angle`, :attr:`angular_velocity`) is exported: clients may read and set it.
+
     Args:
         body: the pymunk body this node owns.
-        position: initial position of the body.
-        angle: initial angle of the body, in radians.
+        position: initial position of the body's origin, in world coordinates.
+        angle: initial angle of the body, in radians, counter-clockwise.
         name: the node name.
+
+    Attributes:
+        body: the ``pymunk.Body``, for what these properties do not cover.
+        world: the :class:`PhysicsWorld` whose space holds the body (``None`` outside a tree).
     """
 
     body_entered = Signal("body")
-    """Emitted when one of this body's shapes starts touching another body's shape."""
+    """``body_entered(body)``: a shape of this body started touching a shape of ``body``, the
+    other body node.
+
+    Emitted once per pair of shapes that touch (two of this body's shapes touching ``body``
+    emit it twice), for sensors too, and on both bodies: the other one emits it with this one.
+    """
 
     exported: ClassVar[tuple[str, ...]] = ("position", "velocity", "angle", "angular_velocity")
     body_exited = Signal("body")
-    """Emitted when the last contact with another body ends."""
+    """``body_exited(body)``: a shape of this body stopped touching a shape of ``body``.
+
+    Emitted once per pair of shapes, like :attr:`body_entered`: when one of several contacts
+    with ``body`` ends, the others go on. Also emitted when a shape in contact leaves the space
+    (it left the tree, or :meth:`PhysicsWorld.restart`).
+    """
 
     def __init__(
         self, body: pymunk.Body, *, position: Vec = (0.0, 0.0), angle: float = 0.0,
@@ -209,7 +250,11 @@ class PhysicsBody(Node):
 
     @property
     def position(self) -> pymunk.Vec2d:
-        """The body's position."""
+        """Where the body's origin is, in world coordinates.
+
+        The origin is the point its shapes' geometry is measured from; the body turns about its
+        centre of gravity, which is the origin only when its shapes' mass is centred on it.
+        """
         return self.body.position
 
     @position.setter
@@ -218,7 +263,7 @@ class PhysicsBody(Node):
 
     @property
     def velocity(self) -> pymunk.Vec2d:
-        """The body's linear velocity."""
+        """The body's linear velocity, in world coordinates (units per second)."""
         return self.body.velocity
 
     @velocity.setter
@@ -227,7 +272,7 @@ class PhysicsBody(Node):
 
     @property
     def angle(self) -> float:
-        """The body's angle, in radians."""
+        """The body's angle, in radians, counter-clockwise (at 0 its axes are the world's)."""
         return self.body.angle
 
     @angle.setter
@@ -236,7 +281,7 @@ class PhysicsBody(Node):
 
     @property
     def angular_velocity(self) -> float:
-        """The body's angular velocity, in radians per second."""
+        """The body's angular velocity, in radians per second, counter-clockwise."""
         return self.body.angular_velocity
 
     @angular_velocity.setter
@@ -245,16 +290,23 @@ class PhysicsBody(Node):
 
 
 class RigidBody(PhysicsBody):
-    """A dynamic body moved by forces, gravity and contacts.
+    """A dynamic body moved by forces, gravity and contacts (Godot's RigidBody2D).
 
-    With the default ``mass=0`` the body takes its mass and moment from the ``mass`` or
-    ``density`` of its :class:`CollisionShape` children, as pymunk recommends.
+    Give it mass in one of two ways. As pymunk recommends, leave ``mass`` and ``moment`` at 0
+    and give its :class:`CollisionShape` children a ``mass`` or ``density``: the body's mass,
+    moment of inertia and centre of gravity are then computed from its shapes. Or give the body
+    ``mass`` and ``moment`` and its shapes none (a shape with a mass or density replaces both,
+    as in pymunk); ``moment=math.inf`` makes a body that never rotates (the CartPole cart).
+
+    Push it with :meth:`apply_force` every tick (in ``_physics_process``), kick it with
+    :meth:`apply_impulse`, or set its :attr:`~PhysicsBody.velocity` directly.
 
     Args:
-        mass: the body's mass, or 0 to sum its shapes'.
-        moment: the moment of inertia, or 0 to sum its shapes'; ``float("inf")`` never rotates.
-        position: initial position.
-        angle: initial angle, in radians.
+        mass: the body's mass, when its shapes have none.
+        moment: its moment of inertia (mass times length squared), when its shapes have no
+            mass; ``math.inf`` never rotates.
+        position: initial position of its origin, in world coordinates.
+        angle: initial angle, in radians, counter-clockwise.
         name: the node name.
     """
 
@@ -265,16 +317,42 @@ class RigidBody(PhysicsBody):
         super().__init__(pymunk.Body(mass, moment), position=position, angle=angle, name=name)
 
     def apply_force(self, force: Vec, at: Vec = (0.0, 0.0)) -> None:
-        """Apply ``force`` (world frame) at the local point ``at`` for the coming step."""
+        """Push the body with ``force`` during the coming step of the space.
+
+        Forces add up until the space steps, and pymunk clears them after every step: apply
+        a steady force again every tick, in ``_physics_process`` (which runs before the step).
+        A force away from the centre of gravity also turns the body.
+
+        Args:
+            force: the force, in world coordinates (e.g. newtons): ``(0, 10)`` pushes up
+                whatever the body's angle.
+            at: where it acts, a point in the body's own frame (it turns with the body); the
+                body's origin by default.
+        """
         self.body.apply_force_at_world_point(force, self.body.local_to_world(at))
 
     def apply_impulse(self, impulse: Vec, at: Vec = (0.0, 0.0)) -> None:
-        """Apply ``impulse`` (world frame) at the local point ``at`` now."""
+        """Change the body's velocity at once by ``impulse`` (divided by its mass).
+
+        Args:
+            impulse: the impulse, in world coordinates (force times time, e.g. newton-seconds).
+            at: where it acts, a point in the body's own frame; the body's origin by default.
+        """
         self.body.apply_impulse_at_world_point(impulse, self.body.local_to_world(at))
 
 
 class StaticBody(PhysicsBody):
-    """A body that never moves (walls, floors, tracks); its shapes collide with dynamic bodies."""
+    """A body that never moves: walls, floors, tracks (Godot's StaticBody2D).
+
+    Gravity, forces and contacts do not move it: rigid bodies collide with its shapes as with
+    something infinitely heavy. Place it with ``position`` and ``angle`` when building it. Its
+    ``body_entered`` / ``body_exited`` signals report what touches it.
+
+    Args:
+        position: where its origin is, in world coordinates.
+        angle: its angle, in radians, counter-clockwise.
+        name: the node name.
+    """
 
     def __init__(
         self, *, position: Vec = (0.0, 0.0), angle: float = 0.0, name: str | None = None
@@ -284,7 +362,17 @@ class StaticBody(PhysicsBody):
 
 
 class KinematicBody(PhysicsBody):
-    """A body moved only by setting its velocity; it pushes dynamic bodies but feels nothing."""
+    """A body moved only by its own velocity: platforms, doors, scripted movers.
+
+    It keeps the :attr:`~PhysicsBody.velocity` and :attr:`~PhysicsBody.angular_velocity` you
+    set (gravity, forces and contacts do not change them) and pushes rigid bodies as if it were
+    infinitely heavy.
+
+    Args:
+        position: initial position of its origin, in world coordinates.
+        angle: initial angle, in radians, counter-clockwise.
+        name: the node name.
+    """
 
     def __init__(
         self, *, position: Vec = (0.0, 0.0), angle: float = 0.0, name: str | None = None
@@ -294,28 +382,48 @@ class KinematicBody(PhysicsBody):
 
 
 class CollisionShape(Node):
-    """A pymunk shape attached to the body node it is a child of.
+    """A pymunk shape attached to the body node it is a child of (Godot's CollisionShape2D).
 
-    Build one with a constructor such as :meth:`circle`, :meth:`box`, :meth:`segment` or
-    :meth:`poly`, or pass any ``pymunk.Shape`` made with ``body=None``.
+    Build one with :meth:`circle`, :meth:`box`, :meth:`segment` or :meth:`poly`, which take the
+    geometry in the body's own frame plus this constructor's keywords, or pass any
+    ``pymunk.Shape`` made with ``body=None``::
+
+        cart.add_child(CollisionShape.box(0.5, 0.3, mass=1.0, friction=0.8, name="Box"))
+        floor.add_child(CollisionShape.segment((-5, 0), (5, 0), radius=0.02))
+
+    The shape joins the space when the node enters the tree, on its parent's body (the parent
+    must be a :class:`RigidBody`, :class:`StaticBody` or :class:`KinematicBody`). Its
+    :attr:`friction`, :attr:`elasticity` and :attr:`sensor` are exported: clients may read and
+    set them.
 
     Args:
         shape: the pymunk shape, created without a body.
-        mass: the shape's mass (gives the body mass and moment when the body's mass is 0).
-        density: the shape's density, as an alternative to ``mass``.
-        friction: friction coefficient.
-        elasticity: bounciness, 0 to 1.
-        sensor: a sensor reports contacts but does not collide (like Godot's Area2D).
-        color: RGB colour when rendered; by default it follows the body's kind.
+        mass: the shape's mass; a shape with a mass or density sets its body's mass, moment
+            and centre of gravity (summed over the body's shapes).
+        density: mass per unit of area, instead of ``mass``.
+        friction: friction coefficient (a contact's friction is the product of its two
+            shapes'); 0 is frictionless.
+        elasticity: bounciness, 0 (none) to 1 (a perfect bounce); a contact's elasticity is the
+            product of its two shapes'.
+        sensor: a sensor reports contacts (its signals and its body's) but does not collide,
+            like Godot's Area2D.
+        color: RGB colour (0-255 each) when rendered; by default the colour of the body's kind.
         name: the node name.
+
+    Attributes:
+        shape: the ``pymunk.Shape``.
+        color: the colour it is drawn in, or ``None`` for its body's kind's.
+        body_node: the body node it is attached to (``None`` outside a tree).
     """
 
     collision_started = Signal("shape")
-    """Emitted when this shape starts touching another shape."""
+    """``collision_started(shape)``: this shape started touching ``shape``, the other
+    CollisionShape node (sensors included; emitted on both shapes)."""
 
     exported: ClassVar[tuple[str, ...]] = ("friction", "elasticity", "sensor")
     collision_ended = Signal("shape")
-    """Emitted when this shape stops touching another shape."""
+    """``collision_ended(shape)``: this shape stopped touching ``shape`` (or one of the two left
+    the space)."""
 
     def __init__(
         self, shape: pymunk.Shape, *, mass: float = 0.0, density: float = 0.0,
@@ -337,7 +445,7 @@ class CollisionShape(Node):
 
     @property
     def friction(self) -> float:
-        """The shape's friction coefficient."""
+        """The shape's friction coefficient (a contact uses the product of both shapes')."""
         return self.shape.friction
 
     @friction.setter
@@ -346,7 +454,7 @@ class CollisionShape(Node):
 
     @property
     def elasticity(self) -> float:
-        """The shape's bounciness, 0 to 1."""
+        """The shape's bounciness, 0 to 1 (a contact uses the product of both shapes')."""
         return self.shape.elasticity
 
     @elasticity.setter
@@ -364,24 +472,62 @@ class CollisionShape(Node):
 
     @classmethod
     def circle(cls, radius: float, offset: Vec = (0.0, 0.0), **kwargs: Any) -> CollisionShape:
-        """A circle of ``radius`` centred at ``offset`` in the body's frame."""
+        """A circle (Godot's CircleShape2D), e.g. ``CollisionShape.circle(0.1, mass=1.0)``.
+
+        Args:
+            radius: its radius (e.g. metres).
+            offset: its centre, in the body's frame; the body's origin by default.
+            **kwargs: the constructor's keywords: ``mass``, ``density``, ``friction``,
+                ``elasticity``, ``sensor``, ``color``, ``name``.
+        """
         return cls(pymunk.Circle(None, radius, offset), **kwargs)
 
     @classmethod
     def box(
         cls, width: float, height: float, radius: float = 0.0, **kwargs: Any
     ) -> CollisionShape:
-        """A ``width`` x ``height`` box centred on the body."""
+        """A rectangle centred on the body's origin, aligned with its axes (RectangleShape2D).
+
+        Example: ``CollisionShape.box(0.5, 0.3, mass=1.0)``. For a box off the origin, use
+        :meth:`poly` with its four corners.
+
+        Args:
+            width: its size along the body's x axis (e.g. metres).
+            height: its size along the body's y axis.
+            radius: rounds the corners: the box grows by ``radius`` on every side.
+            **kwargs: the constructor's keywords: ``mass``, ``density``, ``friction``,
+                ``elasticity``, ``sensor``, ``color``, ``name``.
+        """
         return cls(pymunk.Poly.create_box(None, (width, height), radius), **kwargs)
 
     @classmethod
     def segment(cls, a: Vec, b: Vec, radius: float = 0.0, **kwargs: Any) -> CollisionShape:
-        """A segment from ``a`` to ``b`` (body frame), ``radius`` thick."""
+        """A line from ``a`` to ``b``, with round ends (SegmentShape2D): floors, walls, rods.
+
+        Example: ``CollisionShape.segment((-5, 0), (5, 0), radius=0.02)`` on a
+        :class:`StaticBody`.
+
+        Args:
+            a: one end, in the body's frame.
+            b: the other end, in the body's frame.
+            radius: its thickness: every point within ``radius`` of the line belongs to it
+                (0 is infinitely thin, which fast bodies may pass through).
+            **kwargs: the constructor's keywords: ``mass``, ``density``, ``friction``,
+                ``elasticity``, ``sensor``, ``color``, ``name``.
+        """
         return cls(pymunk.Segment(None, a, b, radius), **kwargs)
 
     @classmethod
     def poly(cls, vertices: Sequence[Vec], radius: float = 0.0, **kwargs: Any) -> CollisionShape:
-        """A convex polygon through ``vertices`` (body frame)."""
+        """A convex polygon (ConvexPolygonShape2D): the convex hull of ``vertices``.
+
+        Args:
+            vertices: its corners, in the body's frame, in any order (pymunk takes their convex
+                hull, so a concave outline needs several shapes).
+            radius: rounds the corners: the polygon grows by ``radius`` on every side.
+            **kwargs: the constructor's keywords: ``mass``, ``density``, ``friction``,
+                ``elasticity``, ``sensor``, ``color``, ``name``.
+        """
         return cls(pymunk.Poly(None, vertices, radius=radius), **kwargs)
 
     def _enter_tree(self) -> None:
@@ -409,18 +555,27 @@ ConstraintFactory = Callable[[pymunk.Body, pymunk.Body], pymunk.Constraint]
 class Joint(Node):
     """A pymunk constraint between the bodies of two body nodes, named by path (Godot's Joint2D).
 
-    The paths are resolved relative to the joint when it enters the tree (a body that has not
-    entered yet is looked up again when the joint becomes ready). Use a constructor such as
+    The paths are relative to the joint (``../Cart`` for a sibling of the joint) and are
+    resolved when it enters the tree; a body that has not entered yet is looked up again when
+    the joint becomes ready, and then it must be there. The constraint is made at that moment,
+    from the bodies' poses then: build and place the bodies first. Use a constructor such as
     :meth:`pivot`, :meth:`groove`, :meth:`motor` or :meth:`spring`, or pass a factory that builds
-    any pymunk constraint from the two bodies.
+    any pymunk constraint from the two bodies::
+
+        physics.add_child(Joint.pivot("../Cart", "../Pole", (0.0, 0.0), name="Hinge"))
 
     Args:
-        node_a: path to the first body node.
-        node_b: path to the second body node.
-        make: builds the constraint from the two ``pymunk.Body`` objects.
+        node_a: path to the first body node (body a).
+        node_b: path to the second body node (body b).
+        make: builds the constraint from the two ``pymunk.Body`` objects, a's first.
         collide_bodies: whether the two bodies still collide with each other.
-        max_force: the most force the constraint may apply.
+        max_force: the most force the constraint may apply (for a motor, the most torque).
         name: the node name.
+
+    Attributes:
+        node_a: the path to body a.
+        node_b: the path to body b.
+        constraint: the ``pymunk.Constraint`` once made (``None`` before).
     """
 
     def __init__(
@@ -439,7 +594,15 @@ class Joint(Node):
 
     @classmethod
     def pivot(cls, node_a: str, node_b: str, anchor: Vec, **kwargs: Any) -> Joint:
-        """A hinge at the world point ``anchor``."""
+        """A hinge: the two bodies turn freely about a shared point (PinJoint2D).
+
+        Args:
+            node_a: path to body a.
+            node_b: path to body b.
+            anchor: the hinge, in world coordinates when the joint attaches (it then moves
+                with the bodies).
+            **kwargs: ``collide_bodies``, ``max_force``, ``name``.
+        """
         return cls(node_a, node_b, lambda a, b: pymunk.PivotJoint(a, b, anchor), **kwargs)
 
     @classmethod
@@ -447,7 +610,16 @@ class Joint(Node):
         cls, node_a: str, node_b: str, groove_a: Vec, groove_b: Vec, anchor_b: Vec = (0.0, 0.0),
         **kwargs: Any,
     ) -> Joint:
-        """Keeps ``anchor_b`` of body b on the groove ``groove_a``-``groove_b`` of body a."""
+        """A slot: the point ``anchor_b`` of body b slides along a groove of body a (GrooveJoint2D).
+
+        Args:
+            node_a: path to body a, which holds the groove.
+            node_b: path to body b.
+            groove_a: one end of the groove, in body a's frame.
+            groove_b: the other end, in body a's frame.
+            anchor_b: the point of body b held on the groove, in body b's frame.
+            **kwargs: ``collide_bodies``, ``max_force``, ``name``.
+        """
         return cls(
             node_a, node_b, lambda a, b: pymunk.GrooveJoint(a, b, groove_a, groove_b, anchor_b),
             **kwargs,
@@ -455,7 +627,18 @@ class Joint(Node):
 
     @classmethod
     def motor(cls, node_a: str, node_b: str, rate: float = 0.0, **kwargs: Any) -> Joint:
-        """Drives the relative angular velocity of the two bodies to ``rate``."""
+        """A motor: keeps ``a.angular_velocity - b.angular_velocity`` at ``rate``.
+
+        As pymunk's SimpleMotor: with a static body a, body b turns at ``-rate``. Limit its
+        torque with ``max_force`` (unlimited by default), and usually add a :meth:`pivot`.
+
+        Args:
+            node_a: path to body a.
+            node_b: path to body b.
+            rate: the relative angular velocity, in radians per second; change it later
+                through :attr:`constraint` (its ``rate``).
+            **kwargs: ``collide_bodies``, ``max_force``, ``name``.
+        """
         return cls(node_a, node_b, lambda a, b: pymunk.SimpleMotor(a, b, rate), **kwargs)
 
     @classmethod
@@ -463,7 +646,18 @@ class Joint(Node):
         cls, node_a: str, node_b: str, anchor_a: Vec, anchor_b: Vec, rest_length: float,
         stiffness: float, damping: float, **kwargs: Any,
     ) -> Joint:
-        """A damped spring between two local anchors."""
+        """A damped spring between a point of each body (DampedSpringJoint2D).
+
+        Args:
+            node_a: path to body a.
+            node_b: path to body b.
+            anchor_a: where it is fixed on body a, in body a's frame.
+            anchor_b: where it is fixed on body b, in body b's frame.
+            rest_length: the length at which it pulls and pushes with no force.
+            stiffness: force per unit of stretch (e.g. newtons per metre).
+            damping: force per unit of stretching speed (e.g. newton-seconds per metre).
+            **kwargs: ``collide_bodies``, ``max_force``, ``name``.
+        """
         return cls(
             node_a, node_b,
             lambda a, b: pymunk.DampedSpring(a, b, anchor_a, anchor_b, rest_length, stiffness,

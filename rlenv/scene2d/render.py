@@ -27,6 +27,7 @@ View = tuple[float, float, float, float]
 """A world rectangle: (x_min, y_min, x_max, y_max)."""
 
 BACKGROUND = (255, 255, 255)
+"""The default colour of empty space: white."""
 _COLORS = {
     pymunk.Body.DYNAMIC: (66, 110, 180),
     pymunk.Body.KINEMATIC: (200, 140, 40),
@@ -42,13 +43,20 @@ def draw(
 ) -> np.ndarray:
     """Draw every PhysicsWorld at or below ``root`` into a ``(height, width, 3)`` uint8 array.
 
+    The world is drawn with y up (row 0 is the top of the view), each shape in its
+    CollisionShape's ``color`` or its body's kind's (dynamic blue, kinematic orange, static
+    grey, sensors green).
+
     Args:
         root: the node whose physics to draw (usually the environment).
         width: image width in pixels.
         height: image height in pixels.
-        view: the world rectangle to show (stretched to keep the aspect ratio); by default the
-            bounding box of every shape.
+        view: the world rectangle to show, fitted into the image keeping its aspect ratio and
+            centred; by default the bounding box of every shape.
         background: the RGB colour of empty space.
+
+    Returns:
+        The RGB image.
     """
     shapes = list(_shapes(root))
     image = np.empty((height, width, 3), dtype=np.uint8)
@@ -73,6 +81,9 @@ def draw_list(root: Node, view: View | None = None) -> dict[str, Any]:
     Args:
         root: the node whose physics to describe (usually the environment).
         view: the world rectangle to show; by default the bounding box of every shape.
+
+    Returns:
+        The draw list, msgpack- and JSON-ready.
     """
     shapes = list(_shapes(root))
     if view is None:

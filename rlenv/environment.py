@@ -61,7 +61,7 @@ class RLEnvironment(RLNode):
             the server handles).
         exported: what clients may read remotely (besides :attr:`configurable`).
         agent: the agent node (the first of :attr:`agents`).
-        agents: every agent; several make the spaces ``Dict`` s keyed by agent name.
+        agents: every agent; several make the spaces ``Dict`` spaces keyed by agent name.
         world: the world node.
         physics_frames_timer: counts the ticks of the running action.
         communication: the environment's server (:class:`~rlenv.communication.Communication`).

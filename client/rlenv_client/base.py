@@ -55,10 +55,12 @@ class BaseClient(ABC):
     """configure / reset / step / observe / render over some transport.
 
     Attributes:
-        hello: everything the server said on connecting.
-        action_space: the agent's action space, as the server declared it.
-        observation_space: the agent's observation space, as the server declared it.
-        address: where the environment is, for messages.
+        hello (Hello): everything the server said on connecting.
+        action_space (gymnasium.spaces.Space): the agent's action space, as the server
+            declared it.
+        observation_space (gymnasium.spaces.Space): the agent's observation space, as the
+            server declared it.
+        address (str): where the environment is, for messages.
     """
 
     hello: Hello

@@ -272,6 +272,10 @@ def test_random_requests_get_one_answer_each_and_the_environment_stays_sane() ->
                     if name == "reset":
                         client.reset(seed=value if isinstance(value, int) and value >= 0
                                      else None)
+                    elif name == "step" and value is None:
+                        with pytest.raises(TypeError, match="call poll"):
+                            client.step(value)
+                        client.poll()
                     elif name == "step":
                         client.step(value)
                     elif name == "configure":

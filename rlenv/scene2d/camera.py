@@ -18,6 +18,7 @@ Recording needs ``imageio`` with its ffmpeg plugin (``pip install 'rlenv[video]'
 from __future__ import annotations
 
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
@@ -39,6 +40,8 @@ class Camera(Node):
         background: RGB colour of empty space.
         name: the node name.
     """
+
+    _TREE_STATE: ClassVar[frozenset[str]] = Node._TREE_STATE | {"_recorder"}
 
     def __init__(
         self, view: View | None = None, size: tuple[int, int] = (84, 84), *,
@@ -97,6 +100,10 @@ class Camera(Node):
     def recording(self) -> bool:
         """Whether the camera is filming."""
         return self._recorder is not None
+
+    def _duplicated(self, original: Node) -> None:
+        self._recorder = None  # a copy does not film (nor write into the original's file)
+        self.set_physics_process(False)
 
     def _physics_process(self, delta: float) -> None:
         self.call_deferred(self._record)  # at the end of the tick, after the physics stepped

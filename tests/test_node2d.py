@@ -7,6 +7,7 @@ import math
 import pytest
 
 from rlenv import (
+    Camera,
     CollisionShape,
     Joint,
     Marker2D,
@@ -193,3 +194,14 @@ def test_a_pivot_anchor_is_in_the_frame_of_its_joint(world: PhysicsWorld) -> Non
     assert isinstance(hinge, Joint)
     assert close(anchor.body.local_to_world(hinge.constraint.anchor_a), (4.0, 0.0))  # type: ignore[union-attr]
     assert close(bob.body.local_to_world(hinge.constraint.anchor_b), (4.0, 0.0))  # type: ignore[union-attr]
+
+
+def test_a_camera_follows_a_body_where_it_is_in_the_world(world: PhysicsWorld) -> None:
+    frame = Node2D("Frame", position=(10.0, 0.0))
+    target = StaticBody(name="Target", position=(1.0, 0.0))
+    target.add_child(CollisionShape.circle(0.3, color=(250, 0, 0)))
+    frame.add_child(target)
+    world.add_child(frame)
+    camera = Camera(view=(-1.0, -1.0, 1.0, 1.0), size=(9, 9), follow="../Frame/Target")
+    world.add_child(camera)
+    assert tuple(camera.capture()[4, 4]) == (250, 0, 0)  # centred on (11, 0), not on (1, 0)

@@ -23,6 +23,7 @@ from typing import ClassVar
 import numpy as np
 
 from rlenv.node import Node
+from rlenv.scene2d.node2d import Node2D
 from rlenv.scene2d.recording import VideoRecorder
 from rlenv.scene2d.render import BACKGROUND, View, draw
 
@@ -122,7 +123,10 @@ class Camera(Node):
         if self.follow is None:
             return self.view
         target = self.get_node(self.follow)
-        x, y = target.position  # type: ignore[attr-defined]
+        if isinstance(target, Node2D):  # where it is in the world, whatever frame it is in
+            x, y = target.global_position
+        else:
+            x, y = target.position  # type: ignore[attr-defined]
         left, bottom, right, top = self.view or (-1.0, -1.0, 1.0, 1.0)
         half_width, half_height = (right - left) / 2, (top - bottom) / 2
         return (x - half_width, y - half_height, x + half_width, y + half_height)

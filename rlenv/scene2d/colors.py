@@ -13,12 +13,12 @@ from __future__ import annotations
 
 import math
 import operator
-from collections.abc import Sequence
+from collections.abc import Iterable
 
 __all__ = ["CSS_COLORS", "RGB", "Color", "gradient", "to_rgb"]
 
 RGB = tuple[int, int, int]
-Color = str | Sequence[int]
+Color = str | Iterable[int]
 """A CSS colour name, ``"#rrggbb"`` / ``"#rgb"``, or three integers in [0, 255]."""
 
 CSS_COLORS: dict[str, int] = {
@@ -81,9 +81,13 @@ def to_rgb(color: Color) -> RGB:
     """
     if isinstance(color, str):
         return _parse(color)
-    if isinstance(color, Sequence) and len(color) == 3:
+    try:
+        channels = tuple(color)  # a tuple, a list, a numpy array...
+    except TypeError:
+        channels = ()
+    if len(channels) == 3:
         try:
-            rgb = tuple(operator.index(channel) for channel in color)
+            rgb = tuple(operator.index(channel) for channel in channels)
         except TypeError:
             raise TypeError(f"a colour's channels are integers, got {color!r:.60}") from None
         if not all(0 <= channel <= 255 for channel in rgb):

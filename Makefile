@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-ray test-browser screenshot sb3 rllib docs lint vectors clean
+.PHONY: demo test test-ray test-browser screenshot plinko-picture sb3 rllib docs lint vectors clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -34,6 +34,10 @@ test-browser: $(STAMP)
 screenshot: $(STAMP)
 	RLENV_SCREENSHOT=docs/images/inspector.png $(BIN)/python -m pytest -m browser -q \
 		tests/test_inspector_browser.py -k training
+
+# The picture in docs/procedural.md: two Plinko levels drawn by rlenv's own renderer.
+plinko-picture: $(STAMP)
+	$(BIN)/python -m examples.plinko.picture docs/images/plinko-levels.png
 
 # Optional: RLlib (CPU torch first), its tests, and PPO trained on CartPole to a mean return of 400.
 rllib: $(STAMP)

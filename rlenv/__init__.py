@@ -7,7 +7,8 @@ Layout (the design card's, one concept per module):
 - ``communication``: an environment's link to its clients (``start_server``; ``run`` hosts
   an environment itself, in ``serving/self_hosting.py``);
 - ``cli``: the ``rlenv`` command; ``testing``: fakes and clocks for tests;
-- ``scene2d/``: the 2D scene: pymunk physics nodes, drawing, cameras, tree views;
+- ``scene2d/``: the 2D scene: Node2D and Marker2D, pymunk physics nodes, drawing, cameras,
+  tree views, procedural building (lattices, gradients, packed scenes);
 - ``protocol/``: the wire (sans-IO codec, messages, connection; spaces, errors), shared with
   ``rlenv_client``;
 - ``serving/``: the path a request takes through a server (endpoint, host, parts, instance).
@@ -45,6 +46,11 @@ _EXPORTS = {
     "Camera": "rlenv.scene2d.camera",
     "View": "rlenv.scene2d.views",
     "view": "rlenv.scene2d.views",
+    "Node2D": "rlenv.scene2d.node2d",
+    "Marker2D": "rlenv.scene2d.marker2d",
+    "PackedScene": "rlenv.scene2d.packed_scene",
+    "PackedSceneError": "rlenv.scene2d.packed_scene",
+    "gradient": "rlenv.scene2d.colors",
 }
 
 __all__ = sorted(_EXPORTS)
@@ -65,6 +71,11 @@ if TYPE_CHECKING:
     from rlenv.node import NodeNotFoundError as NodeNotFoundError
     from rlenv.node import ProcessMode as ProcessMode
     from rlenv.scene2d.camera import Camera as Camera
+    from rlenv.scene2d.colors import gradient as gradient
+    from rlenv.scene2d.marker2d import Marker2D as Marker2D
+    from rlenv.scene2d.node2d import Node2D as Node2D
+    from rlenv.scene2d.packed_scene import PackedScene as PackedScene
+    from rlenv.scene2d.packed_scene import PackedSceneError as PackedSceneError
     from rlenv.scene2d.physics import CollisionShape as CollisionShape
     from rlenv.scene2d.physics import Joint as Joint
     from rlenv.scene2d.physics import KinematicBody as KinematicBody

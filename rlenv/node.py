@@ -28,11 +28,12 @@ from __future__ import annotations
 import fnmatch
 from collections.abc import Callable, Iterator
 from enum import IntEnum
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
 from rlenv.signals import Signal, SignalOwner
 
 if TYPE_CHECKING:
+    from rlenv.scene2d.views import View
     from rlenv.tree import SceneTree
 
 __all__ = [
@@ -111,6 +112,14 @@ class Node(SignalOwner):
     """``child_exiting_tree(node)``: the child ``node`` is about to leave the tree."""
     renamed = Signal()
     """``renamed()``: the node's name changed."""
+
+    _TREE_STATE: ClassVar[frozenset[str]] = frozenset({
+        "_parent", "_children", "_children_by_name", "_tree", "_signals", "_resolved_mode",
+        "_processes_when", "_is_ready", "_ready_requested", "_queued_for_deletion", "_freed",
+    })
+    """Attributes that belong to the node's place in a tree, not to the node: a duplicate and
+    a packed scene rebuild them rather than copy them. Subclasses add theirs (a physics
+    body's space, say)."""
 
     def __init__(self, name: str | None = None, *, process_mode: ProcessMode = ProcessMode.INHERIT):
         self._name = _check_name(name if name is not None else type(self).__name__)
@@ -294,6 +303,63 @@ class Node(SignalOwner):
             node = stack.pop()
             yield node
             stack.extend(reversed(node._children))
+
+    def duplicate(self: N) -> N:
+        """A copy of this node and everything below it, outside any tree (Godot's duplicate).
+
+        The copies have the same classes, names, groups and process modes. Every other
+        attribute is copied deeply, never shared, except references to nodes: a reference to
+        a node of the subtree points to its copy, one to a node outside stays as it is.
+        Signal connections follow the same rule: a copy's connection to a method of a node of
+        the subtree calls that node's copy; one to anything else (a method of an outside node,
+        a function) is kept as it is. Physics nodes get their own pymunk bodies, shapes,
+        constraints and spaces, and a joint between copied bodies joins the copies once in a
+        tree. A body copy is placed where its original is now (relative to its parent), and
+        built where it enters its space.
+
+        Raises:
+            ValueError: the node was freed.
+        """
+        from rlenv.duplication import duplicate_subtree
+
+        return duplicate_subtree(self)
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> Node:
+        """``copy.deepcopy``: the :meth:`duplicate` of the node.
+
+        Inside a duplicate, a node outside the duplicated subtree is kept, not copied.
+        """
+        from rlenv.duplication import copied_node
+
+        return copied_node(self, memo)
+
+    @property
+    def placeholders(self) -> View:
+        """The :class:`~rlenv.scene2d.marker2d.Marker2D` nodes below this one, in tree order.
+
+        Mounting points (Blueprints' placeholders): ``table.placeholders.named("leg*")
+        .attach(leg)`` puts a copy of ``leg`` on every marker named like that.
+        """
+        from rlenv.scene2d.marker2d import Marker2D
+        from rlenv.scene2d.views import View
+
+        return View([node for node in self.iter_subtree()
+                     if node is not self and isinstance(node, Marker2D)],
+                    f"{self._name}.placeholders")
+
+    def _duplicate_resources(self, memo: dict[int, Any]) -> None:
+        """Hook of :meth:`duplicate`: copies of what this node owns outside Python, into ``memo``.
+
+        Called before the attributes are copied, for objects the copy module must not copy (a
+        pymunk body): ``memo[id(original)] = copy``.
+        """
+
+    def _duplicated(self, original: Node) -> None:
+        """Hook of :meth:`duplicate`, on the copy of ``original``: set what is not copied.
+
+        The copy's attributes are copied, except those of :attr:`_TREE_STATE`: set them to their
+        values outside a tree.
+        """
 
     # --- paths and lookup -------------------------------------------------------------------
 

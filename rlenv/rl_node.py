@@ -33,6 +33,7 @@ class RLNode(Node):
 
     configurable: ClassVar[tuple[str, ...]] = ()
     _IS_ENVIRONMENT: ClassVar[bool] = False  # True on RLEnvironment only
+    _TREE_STATE = Node._TREE_STATE | {"_RLNode__environment"}  # a cache, valid in a tree
 
     __environment: RLEnvironment | None = None
 

@@ -25,6 +25,7 @@ ENVIRONMENTS = {
     "rlenv/CartPole-v0": _Registration("examples.cartpole:CartPoleEnvironment", 500),
     "rlenv/Pair-v0": _Registration("examples.pair:PairEnvironment", 300),
     "rlenv/Pixels-v0": _Registration("examples.pixels:PixelsEnvironment", 1000),
+    "rlenv/Plinko-v0": _Registration("examples.plinko:PlinkoEnvironment", 100),
     "rlenv/Reacher-v0": _Registration("examples.reacher:ReacherEnvironment", 200),
     "rlenv/Seeker-v0": _Registration("examples.seeker:SeekerEnvironment", 250),
     "rlenv/SeekerPixels-v0": _Registration("examples.seeker:SeekerPixelsEnvironment", 250),

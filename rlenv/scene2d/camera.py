@@ -18,10 +18,12 @@ Recording needs ``imageio`` with its ffmpeg plugin (``pip install 'rlenv[video]'
 from __future__ import annotations
 
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
 from rlenv.node import Node
+from rlenv.scene2d.node2d import Node2D
 from rlenv.scene2d.recording import VideoRecorder
 from rlenv.scene2d.render import BACKGROUND, View, draw
 
@@ -50,6 +52,8 @@ class Camera(Node):
         follow: the path of the node it keeps centred, or ``None``.
         background: RGB colour of empty space.
     """
+
+    _TREE_STATE: ClassVar[frozenset[str]] = Node._TREE_STATE | {"_recorder"}
 
     def __init__(
         self, view: View | None = None, size: tuple[int, int] = (84, 84), *,
@@ -109,6 +113,10 @@ class Camera(Node):
         """Whether the camera is filming."""
         return self._recorder is not None
 
+    def _duplicated(self, original: Node) -> None:
+        self._recorder = None  # a copy does not film (nor write into the original's file)
+        self.set_physics_process(False)
+
     def _physics_process(self, delta: float) -> None:
         self.call_deferred(self._record)  # at the end of the tick, after the physics stepped
 
@@ -126,7 +134,10 @@ class Camera(Node):
         if self.follow is None:
             return self.view
         target = self.get_node(self.follow)
-        x, y = target.position  # type: ignore[attr-defined]
+        if isinstance(target, Node2D):  # where it is in the world, whatever frame it is in
+            x, y = target.global_position
+        else:
+            x, y = target.position  # type: ignore[attr-defined]
         left, bottom, right, top = self.view or (-1.0, -1.0, 1.0, 1.0)
         half_width, half_height = (right - left) / 2, (top - bottom) / 2
         return (x - half_width, y - half_height, x + half_width, y + half_height)

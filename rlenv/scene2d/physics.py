@@ -17,17 +17,25 @@ Collisions are reported as signals: every shape's ``collision_started(shape)`` /
 the other shape or body node as the argument. They are emitted from inside the step (the space
 is locked; changes to the tree made by handlers are deferred to the end of the tick).
 
+Bodies are :class:`~rlenv.scene2d.node2d.Node2D` s: a body below a Node2D frame enters its space
+at the pose composed from the frames above it (under plain nodes, its pose is the world's), and
+its ``position`` and ``rotation`` read back relative to that frame. Every node here can be
+copied (:meth:`~rlenv.node.Node.duplicate`: a copy owns its own pymunk objects) and packed
+(:class:`~rlenv.scene2d.packed_scene.PackedScene`).
+
 **Units.** pymunk has none of its own: any consistent set works. rlenv's defaults read as SI
 units (gravity ``(0, -9.81)`` in metres per second squared, y up; ``delta`` in seconds), and
 the examples use metres, kilograms and seconds: then forces are in newtons, impulses in
 newton-seconds, torques in newton-metres. Angles are in radians, counter-clockwise (with y up).
 
-**Frames.** A point or vector is either in *world* coordinates or in a *body's* own frame,
-whose origin is the body's :attr:`~PhysicsBody.position` and whose axes turn with its
-:attr:`~PhysicsBody.angle`. Shape geometry (``offset``, box, segment and polygon points) and
-joint anchors other than :meth:`Joint.pivot`'s are in the body's frame; positions, velocities,
-gravity, forces and impulses are in world coordinates. Values read back are
-``pymunk.Vec2d`` (a tuple of two floats with vector arithmetic); any ``(x, y)`` pair sets them.
+**Frames.** A point or vector is either in *world* coordinates, in a *body's* own frame, whose
+origin is the body's position and whose axes turn with its angle, or relative to a Node2D.
+Shape geometry (``offset``, box, segment and polygon points) and joint anchors other than
+:meth:`Joint.pivot`'s are in the body's frame; a body's :attr:`~PhysicsBody.position` and
+:attr:`~PhysicsBody.rotation` are relative to its nearest Node2D ancestor (world coordinates
+without one); velocities, gravity, forces and impulses are in world coordinates. Values read
+back are ``pymunk.Vec2d`` (a tuple of two floats with vector arithmetic); any ``(x, y)`` pair
+sets them.
 """
 
 from __future__ import annotations
@@ -36,8 +44,12 @@ from collections.abc import Callable, Sequence
 from typing import Any, ClassVar
 
 import pymunk
+from pymunk import Vec2d
 
 from rlenv.node import Node, ProcessMode
+from rlenv.scene2d.colors import RGB, Color, to_rgb
+from rlenv.scene2d.node2d import Node2D, Pose, compose, frame_of, relative_pose
+from rlenv.scene2d.pymunk_data import ConstraintRecipe, copy_body, copy_shape
 from rlenv.signals import Signal
 
 __all__ = [
@@ -76,6 +88,7 @@ class PhysicsWorld(Node):
     """``stepped(delta)``: emitted after every step of the space (``delta``: its length, s)."""
 
     exported: ClassVar[tuple[str, ...]] = ("gravity", "damping")
+    _TREE_STATE = Node._TREE_STATE | {"_shape_nodes"}
 
     def __init__(
         self,
@@ -103,8 +116,9 @@ class PhysicsWorld(Node):
 
         The bodies, shapes and joints below stay (nodes, pymunk objects and their settings),
         but move into a new space (same gravity, iterations and damping) in tree order, as
-        they would on entering it: every body back at the position and angle it was built
-        with, at rest (velocities, force and torque zero), and every joint with a fresh
+        they would on entering it: every body back at the pose it entered its space with
+        (composed through its Node2D frames, so each copy of a lattice goes back to its own
+        place), at rest (velocities, force and torque zero), and every joint with a fresh
         constraint made there (joints such as ``pivot`` read the bodies' pose when made). No
         solver state (joint impulses, cached contacts, the spatial index) survives; contacts
         in progress end, with their signals. Place the bodies for the episode afterwards.
@@ -125,6 +139,18 @@ class PhysicsWorld(Node):
         for joint in joints:  # once every body is back, as joints attach when ready
             joint.constraint = None
             joint._attach(self, required=True)
+
+    @property
+    def iterations(self) -> int:
+        """Solver iterations per step."""
+        return self.space.iterations
+
+    def _duplicate_resources(self, memo: dict[int, Any]) -> None:
+        space = self.space
+        memo[id(space)] = self._new_space(space.gravity, space.iterations, space.damping)
+
+    def _duplicated(self, original: Node) -> None:
+        self._shape_nodes = {}
 
     @property
     def gravity(self) -> pymunk.Vec2d:
@@ -178,8 +204,16 @@ def _world_of(node: Node) -> PhysicsWorld:
     raise RuntimeError(f"{node!r} must be placed below a PhysicsWorld")
 
 
-class PhysicsBody(Node):
-    """A node holding one ``pymunk.Body``, in the space of the nearest PhysicsWorld above it.
+class PhysicsBody(Node2D):
+    """A Node2D holding one ``pymunk.Body``, in the space of the nearest PhysicsWorld above it.
+
+    Outside a space the node keeps its pose (local, as any Node2D's; the pymunk body's own
+    pose is only meaningful in a space). When it enters the tree, its body is placed at the
+    pose composed from its Node2D ancestors (the world's pose when it has none), which is also
+    the pose :meth:`PhysicsWorld.restart` puts it back to;
+    from then on the simulation moves it, and :attr:`position` and :attr:`rotation` read and
+    set the body's pose relative to the frame above. When it leaves, it keeps the pose it had,
+    relative to that frame.
 
     The base of :class:`RigidBody`, :class:`StaticBody` and :class:`KinematicBody`: build those.
     The body joins the space when the node enters the tree (it must be below a
@@ -189,8 +223,11 @@ class PhysicsBody(Node):
 
     Args:
         body: the pymunk body this node owns.
-        position: initial position of the body's origin, in world coordinates.
-        angle: initial angle of the body, in radians, counter-clockwise.
+        position: initial position of the body's origin, relative to the nearest Node2D
+            ancestor (in world coordinates without one).
+        angle: initial angle in radians, counter-clockwise (the same as ``rotation``; give one
+            of them).
+        rotation: initial rotation in radians, relative to that frame.
         name: the node name.
 
     Attributes:
@@ -207,6 +244,7 @@ class PhysicsBody(Node):
     """
 
     exported: ClassVar[tuple[str, ...]] = ("position", "velocity", "angle", "angular_velocity")
+    _TREE_STATE = Node2D._TREE_STATE | {"world", "_frame", "_built_pose", "_frame_pose"}
     body_exited = Signal("body")
     """``body_exited(body)``: a shape of this body stopped touching a shape of ``body``.
 
@@ -217,49 +255,157 @@ class PhysicsBody(Node):
 
     def __init__(
         self, body: pymunk.Body, *, position: Vec = (0.0, 0.0), angle: float = 0.0,
-        name: str | None = None,
+        rotation: float = 0.0, name: str | None = None,
     ) -> None:
-        super().__init__(name)
+        if angle and rotation:
+            raise ValueError("give the body's rotation or its angle (the same thing), not both")
+        super().__init__(name, position=position, rotation=rotation or angle)
         self.body = body
-        body.position = position
-        body.angle = angle
-        self._built_pose = (position, angle)
+        body.position = self._position
+        body.angle = self._rotation
         self.world: PhysicsWorld | None = None
+        self._frame: Node2D | None = None  # the nearest Node2D ancestor, while in a space
+        self._built_pose: Pose | None = None  # where it entered its space
+        self._frame_pose: Pose | None = None  # where its frame was then
+
+    @property
+    def _in_space(self) -> bool:
+        return self.world is not None
 
     def _enter_tree(self) -> None:
-        self.world = _world_of(self)
-        self.world.space.add(self.body)
+        world = _world_of(self)
+        frame = self._frame = frame_of(self)
+        x, y = self._position
+        angle = self._rotation
+        if frame is not None:
+            self._frame_pose = frame._global_pose()
+            x, y, angle = compose(self._frame_pose, x, y, angle)
+        self._built_pose = (x, y, angle)
+        self._set_body_pose(x, y, angle)
+        self.world = world
+        world.space.add(self.body)
 
     def _exit_tree(self) -> None:
-        if self.world is not None and self.body.space is not None:
-            self.world.space.remove(self.body)
+        if self.world is not None:
+            x, y, angle = self._local_pose()
+            self._position = Vec2d(x, y)
+            self._rotation = angle
+            if self.body.space is not None:
+                self.world.space.remove(self.body)
         self.world = None
+        self._frame = None
+        self._frame_pose = None
 
     def _restart(self) -> None:
         """Back to the pose the body was built with, at rest (see PhysicsWorld.restart)."""
         body = self.body
-        body.angle = self._built_pose[1]
-        body.position = self._built_pose[0]
+        assert self._built_pose is not None
+        x, y, angle = self._built_pose
+        self._set_body_pose(x, y, angle)
         if body.body_type != pymunk.Body.STATIC:
             body.velocity = (0.0, 0.0)
             body.angular_velocity = 0.0
             body.force = (0.0, 0.0)
             body.torque = 0.0
 
+    def _set_body_pose(self, x: float, y: float, angle: float) -> None:
+        """Angle first: pymunk turns a body about its centre of gravity, then places it."""
+        body = self.body
+        if body.angle != angle:
+            body.angle = angle
+        body.position = (x, y)
+
+    # --- Node2D in a space: the body is the pose -----------------------------------------------
+
+    def _global_pose(self) -> Pose:
+        if self.world is None:
+            return super()._global_pose()
+        x, y = self.body.position
+        return (x, y, self.body.angle)
+
+    def _local_pose(self) -> Pose:
+        """The pose in the frame (in a space), exactly as placed while neither has moved."""
+        body = self.body
+        x, y = body.position
+        pose = (x, y, body.angle)
+        frame = self._frame
+        if frame is None:
+            return pose
+        frame_pose = frame._global_pose()
+        if pose == self._built_pose and frame_pose == self._frame_pose:
+            return (self._position.x, self._position.y, self._rotation)
+        return relative_pose(frame_pose, pose)
+
+    def _store_pose(self, x: float, y: float, rotation: float) -> None:
+        if self.world is None:  # outside a space the node keeps its pose, placed on entry
+            super()._store_pose(x, y, rotation)
+            return
+        if self._frame is not None:
+            x, y, rotation = compose(self._frame._global_pose(), x, y, rotation)
+        self._place((x, y, rotation))
+
+    def _place(self, pose: Pose) -> None:
+        """Put the body at ``pose`` (in the world) now, its velocities kept."""
+        self._set_body_pose(*pose)
+        body = self.body
+        if body.body_type == pymunk.Body.STATIC and body.space is not None:
+            body.space.reindex_shapes_for_body(body)  # pymunk's rule for moved static bodies
+
+    def _duplicate_resources(self, memo: dict[int, Any]) -> None:
+        memo[id(self.body)] = copy_body(self.body)
+
+    def _duplicated(self, original: Node) -> None:
+        assert isinstance(original, PhysicsBody)
+        if original.world is not None:  # where the original is now, relative to its frame
+            x, y, angle = original._local_pose()
+            self._position = Vec2d(x, y)
+            self._rotation = angle
+        self.world = None
+        self._frame = None
+        self._built_pose = None
+        self._frame_pose = None
+
     # Godot-style accessors, so tree queries can read and set state without reaching into pymunk.
 
     @property
-    def position(self) -> pymunk.Vec2d:
-        """Where the body's origin is, in world coordinates.
+    def position(self) -> Vec2d:
+        """Where the body's origin is, relative to the nearest Node2D ancestor.
 
-        The origin is the point its shapes' geometry is measured from; the body turns about its
-        centre of gravity, which is the origin only when its shapes' mass is centred on it.
+        In world coordinates without one. The origin is the point its shapes' geometry is
+        measured from.
         """
-        return self.body.position
+        if self.world is None:
+            return self._position
+        if self._frame is None:
+            return self.body.position
+        x, y, _ = self._local_pose()
+        return Vec2d(x, y)
 
     @position.setter
     def position(self, value: Vec) -> None:
-        self.body.position = value
+        Node2D.position.fset(self, value)  # type: ignore[attr-defined]
+
+    @property
+    def rotation(self) -> float:
+        """The rotation in radians, relative to the nearest Node2D ancestor."""
+        if self.world is None:
+            return self._rotation
+        if self._frame is None:
+            return self.body.angle
+        return self._local_pose()[2]
+
+    @rotation.setter
+    def rotation(self, value: float) -> None:
+        Node2D.rotation.fset(self, value)  # type: ignore[attr-defined]
+
+    @property
+    def angle(self) -> float:
+        """The body's angle in radians: its :attr:`rotation`."""
+        return self.rotation
+
+    @angle.setter
+    def angle(self, value: float) -> None:
+        self.rotation = value
 
     @property
     def velocity(self) -> pymunk.Vec2d:
@@ -271,15 +417,6 @@ class PhysicsBody(Node):
         self.body.velocity = value
 
     @property
-    def angle(self) -> float:
-        """The body's angle, in radians, counter-clockwise (at 0 its axes are the world's)."""
-        return self.body.angle
-
-    @angle.setter
-    def angle(self, value: float) -> None:
-        self.body.angle = value
-
-    @property
     def angular_velocity(self) -> float:
         """The body's angular velocity, in radians per second, counter-clockwise."""
         return self.body.angular_velocity
@@ -287,6 +424,20 @@ class PhysicsBody(Node):
     @angular_velocity.setter
     def angular_velocity(self, value: float) -> None:
         self.body.angular_velocity = value
+
+    @property
+    def color(self) -> RGB | None:
+        """The colour of the body's first collision shape; setting it colours all of them."""
+        for child in self._children:
+            if isinstance(child, CollisionShape):
+                return child.color
+        return None
+
+    @color.setter
+    def color(self, value: Color | None) -> None:
+        for child in self._children:
+            if isinstance(child, CollisionShape):
+                child.color = value
 
 
 class RigidBody(PhysicsBody):
@@ -302,19 +453,22 @@ class RigidBody(PhysicsBody):
     :meth:`apply_impulse`, or set its :attr:`~PhysicsBody.velocity` directly.
 
     Args:
-        mass: the body's mass, when its shapes have none.
-        moment: its moment of inertia (mass times length squared), when its shapes have no
-            mass; ``math.inf`` never rotates.
-        position: initial position of its origin, in world coordinates.
-        angle: initial angle, in radians, counter-clockwise.
+        mass: the body's mass, or 0 to sum its shapes' (as pymunk recommends).
+        moment: its moment of inertia (mass times length squared), or 0 to sum its shapes';
+            ``math.inf`` never rotates.
+        position: initial position of its origin, relative to the nearest Node2D ancestor (in
+            world coordinates without one).
+        angle: initial angle, in radians, counter-clockwise (or ``rotation``: the same).
+        rotation: initial rotation, in radians.
         name: the node name.
     """
 
     def __init__(
         self, mass: float = 0.0, moment: float = 0.0, *, position: Vec = (0.0, 0.0),
-        angle: float = 0.0, name: str | None = None,
+        angle: float = 0.0, rotation: float = 0.0, name: str | None = None,
     ) -> None:
-        super().__init__(pymunk.Body(mass, moment), position=position, angle=angle, name=name)
+        super().__init__(pymunk.Body(mass, moment), position=position, angle=angle,
+                         rotation=rotation, name=name)
 
     def apply_force(self, force: Vec, at: Vec = (0.0, 0.0)) -> None:
         """Push the body with ``force`` during the coming step of the space.
@@ -345,20 +499,23 @@ class StaticBody(PhysicsBody):
     """A body that never moves: walls, floors, tracks (Godot's StaticBody2D).
 
     Gravity, forces and contacts do not move it: rigid bodies collide with its shapes as with
-    something infinitely heavy. Place it with ``position`` and ``angle`` when building it. Its
-    ``body_entered`` / ``body_exited`` signals report what touches it.
+    something infinitely heavy. Place it with ``position`` and ``rotation`` when building it.
+    Its ``body_entered`` / ``body_exited`` signals report what touches it.
 
     Args:
-        position: where its origin is, in world coordinates.
-        angle: its angle, in radians, counter-clockwise.
+        position: where its origin is, relative to the nearest Node2D ancestor (in world
+            coordinates without one).
+        angle: its angle, in radians, counter-clockwise (or ``rotation``: the same).
+        rotation: its rotation, in radians.
         name: the node name.
     """
 
     def __init__(
-        self, *, position: Vec = (0.0, 0.0), angle: float = 0.0, name: str | None = None
+        self, *, position: Vec = (0.0, 0.0), angle: float = 0.0, rotation: float = 0.0,
+        name: str | None = None,
     ) -> None:
         super().__init__(pymunk.Body(body_type=pymunk.Body.STATIC), position=position,
-                         angle=angle, name=name)
+                         angle=angle, rotation=rotation, name=name)
 
 
 class KinematicBody(PhysicsBody):
@@ -369,16 +526,19 @@ class KinematicBody(PhysicsBody):
     infinitely heavy.
 
     Args:
-        position: initial position of its origin, in world coordinates.
-        angle: initial angle, in radians, counter-clockwise.
+        position: initial position of its origin, relative to the nearest Node2D ancestor (in
+            world coordinates without one).
+        angle: initial angle, in radians, counter-clockwise (or ``rotation``: the same).
+        rotation: initial rotation, in radians.
         name: the node name.
     """
 
     def __init__(
-        self, *, position: Vec = (0.0, 0.0), angle: float = 0.0, name: str | None = None
+        self, *, position: Vec = (0.0, 0.0), angle: float = 0.0, rotation: float = 0.0,
+        name: str | None = None,
     ) -> None:
         super().__init__(pymunk.Body(body_type=pymunk.Body.KINEMATIC), position=position,
-                         angle=angle, name=name)
+                         angle=angle, rotation=rotation, name=name)
 
 
 class CollisionShape(Node):
@@ -407,7 +567,8 @@ class CollisionShape(Node):
             product of its two shapes'.
         sensor: a sensor reports contacts (its signals and its body's) but does not collide,
             like Godot's Area2D.
-        color: RGB colour (0-255 each) when rendered; by default the colour of the body's kind.
+        color: its colour when rendered (a CSS name, ``"#rrggbb"`` or an RGB triple, 0-255
+            each); by default the colour of the body's kind.
         name: the node name.
 
     Attributes:
@@ -421,6 +582,7 @@ class CollisionShape(Node):
     CollisionShape node (sensors included; emitted on both shapes)."""
 
     exported: ClassVar[tuple[str, ...]] = ("friction", "elasticity", "sensor")
+    _TREE_STATE = Node._TREE_STATE | {"body_node", "_world"}
     collision_ended = Signal("shape")
     """``collision_ended(shape)``: this shape stopped touching ``shape`` (or one of the two left
     the space)."""
@@ -428,7 +590,7 @@ class CollisionShape(Node):
     def __init__(
         self, shape: pymunk.Shape, *, mass: float = 0.0, density: float = 0.0,
         friction: float = 0.5, elasticity: float = 0.0, sensor: bool = False,
-        color: tuple[int, int, int] | None = None, name: str | None = None,
+        color: Color | None = None, name: str | None = None,
     ) -> None:
         super().__init__(name)
         self.shape = shape
@@ -442,6 +604,26 @@ class CollisionShape(Node):
         shape.sensor = sensor
         self.body_node: PhysicsBody | None = None
         self._world: PhysicsWorld | None = None
+
+    @property
+    def color(self) -> RGB | None:
+        """The RGB colour the shape is drawn in (``None``: its body's kind decides).
+
+        Set it to a CSS name, ``"#rrggbb"`` or an RGB triple (see :func:`~rlenv.scene2d
+        .colors.to_rgb`); it reads back as an RGB triple.
+        """
+        return self._color
+
+    @color.setter
+    def color(self, value: Color | None) -> None:
+        self._color = None if value is None else to_rgb(value)
+
+    def _duplicate_resources(self, memo: dict[int, Any]) -> None:
+        memo[id(self.shape)] = copy_shape(self.shape)
+
+    def _duplicated(self, original: Node) -> None:
+        self.body_node = None
+        self._world = None
 
     @property
     def friction(self) -> float:
@@ -557,17 +739,20 @@ class Joint(Node):
 
     The paths are relative to the joint (``../Cart`` for a sibling of the joint) and are
     resolved when it enters the tree; a body that has not entered yet is looked up again when
-    the joint becomes ready, and then it must be there. The constraint is made at that moment,
-    from the bodies' poses then: build and place the bodies first. Use a constructor such as
-    :meth:`pivot`, :meth:`groove`, :meth:`motor` or :meth:`spring`, or pass a factory that builds
-    any pymunk constraint from the two bodies::
+    the joint becomes ready, and then it must be there. So a copy of a subtree holding a joint
+    and its bodies joins the copied bodies. The constraint is made at that moment, from the
+    bodies' poses then: build and place the bodies first. Use a constructor such as
+    :meth:`pivot`, :meth:`groove`, :meth:`motor` or :meth:`spring` (their constraints are data:
+    they can be packed in a :class:`~rlenv.scene2d.packed_scene.PackedScene`), or pass a
+    factory that builds any pymunk constraint from the two bodies::
 
         physics.add_child(Joint.pivot("../Cart", "../Pole", (0.0, 0.0), name="Hinge"))
 
     Args:
         node_a: path to the first body node (body a).
         node_b: path to the second body node (body b).
-        make: builds the constraint from the two ``pymunk.Body`` objects, a's first.
+        make: builds the constraint from the two ``pymunk.Body`` objects, a's first (a
+            :class:`~rlenv.scene2d.pymunk_data.ConstraintRecipe`, or any callable).
         collide_bodies: whether the two bodies still collide with each other.
         max_force: the most force the constraint may apply (for a motor, the most torque).
         name: the node name.
@@ -577,6 +762,8 @@ class Joint(Node):
         node_b: the path to body b.
         constraint: the ``pymunk.Constraint`` once made (``None`` before).
     """
+
+    _TREE_STATE = Node._TREE_STATE | {"constraint", "_world", "_attached"}
 
     def __init__(
         self, node_a: str, node_b: str, make: ConstraintFactory, *,
@@ -599,11 +786,12 @@ class Joint(Node):
         Args:
             node_a: path to body a.
             node_b: path to body b.
-            anchor: the hinge, in world coordinates when the joint attaches (it then moves
-                with the bodies).
+            anchor: the hinge, a point in the frame of the joint's nearest Node2D ancestor (in
+                world coordinates without one) when the joint attaches; it then moves with the
+                bodies.
             **kwargs: ``collide_bodies``, ``max_force``, ``name``.
         """
-        return cls(node_a, node_b, lambda a, b: pymunk.PivotJoint(a, b, anchor), **kwargs)
+        return cls(node_a, node_b, ConstraintRecipe("pivot", anchor=anchor), **kwargs)
 
     @classmethod
     def groove(
@@ -620,10 +808,9 @@ class Joint(Node):
             anchor_b: the point of body b held on the groove, in body b's frame.
             **kwargs: ``collide_bodies``, ``max_force``, ``name``.
         """
-        return cls(
-            node_a, node_b, lambda a, b: pymunk.GrooveJoint(a, b, groove_a, groove_b, anchor_b),
-            **kwargs,
-        )
+        recipe = ConstraintRecipe("groove", groove_a=groove_a, groove_b=groove_b,
+                                  anchor_b=anchor_b)
+        return cls(node_a, node_b, recipe, **kwargs)
 
     @classmethod
     def motor(cls, node_a: str, node_b: str, rate: float = 0.0, **kwargs: Any) -> Joint:
@@ -639,7 +826,7 @@ class Joint(Node):
                 through :attr:`constraint` (its ``rate``).
             **kwargs: ``collide_bodies``, ``max_force``, ``name``.
         """
-        return cls(node_a, node_b, lambda a, b: pymunk.SimpleMotor(a, b, rate), **kwargs)
+        return cls(node_a, node_b, ConstraintRecipe("motor", rate=rate), **kwargs)
 
     @classmethod
     def spring(
@@ -658,12 +845,19 @@ class Joint(Node):
             damping: force per unit of stretching speed (e.g. newton-seconds per metre).
             **kwargs: ``collide_bodies``, ``max_force``, ``name``.
         """
-        return cls(
-            node_a, node_b,
-            lambda a, b: pymunk.DampedSpring(a, b, anchor_a, anchor_b, rest_length, stiffness,
-                                             damping),
-            **kwargs,
-        )
+        recipe = ConstraintRecipe("spring", anchor_a=anchor_a, anchor_b=anchor_b,
+                                  rest_length=rest_length, stiffness=stiffness, damping=damping)
+        return cls(node_a, node_b, recipe, **kwargs)
+
+    @property
+    def recipe(self) -> ConstraintRecipe | None:
+        """The constraint as data, when the joint was made from one (``None``: a factory)."""
+        return self._make if isinstance(self._make, ConstraintRecipe) else None
+
+    def _duplicated(self, original: Node) -> None:
+        self.constraint = None
+        self._world = None
+        self._attached = False
 
     def _enter_tree(self) -> None:
         self._world = _world_of(self)
@@ -683,7 +877,13 @@ class Joint(Node):
                 return
             bodies.append(node.body)
         if self.constraint is None:
-            self.constraint = self._make(bodies[0], bodies[1])
+            make = self._make
+            if isinstance(make, ConstraintRecipe):
+                frame = frame_of(self)
+                self.constraint = make.build(bodies[0], bodies[1],
+                                             None if frame is None else frame._global_pose())
+            else:
+                self.constraint = make(bodies[0], bodies[1])
             self.constraint.collide_bodies = self._collide_bodies
             self.constraint.max_force = self._max_force
         world.space.add(self.constraint)

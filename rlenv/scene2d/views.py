@@ -9,12 +9,15 @@ Blueprints-style access to a built world, without keeping references by hand::
     arm.all.joints["Hinge*"]            # by name pattern
     arm.all.in_group("sensors")         # by group
     arm.all.bodies.where(lambda b: b.position.y > 1.0)
+    row.shapes.set("color", gradient("purple", "blue", n_steps=20))   # one value per node
+    table.placeholders.named("leg*").attach(leg)   # a copy of leg on every leg marker
 
 Steps chain: ``.all`` (the nodes and every node below them), ``.children``, ``.parent``, and the
 typed steps ``.bodies``, ``.shapes``, ``.joints``: the children of those kinds. So
 ``.bodies.bodies`` are the bodies attached below the bodies, and ``.all.bodies`` every body in
-the subtree. Reading any other attribute returns a list with that attribute of every node, in
-tree order; assigning one sets it on every node (which must all have it).
+the subtree; ``.placeholders`` are the Marker2D nodes anywhere below. Reading any other
+attribute returns a list with that attribute of every node, in tree order; assigning one sets
+it on every node (which must all have it).
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
 from rlenv.node import Node
+from rlenv.scene2d.marker2d import Marker2D
 from rlenv.scene2d.physics import CollisionShape, Joint, PhysicsBody
 
 __all__ = ["View", "view"]
@@ -75,6 +79,12 @@ class View:
     def joints(self) -> View:
         """The children of this view's nodes that are joints."""
         return self._typed("joints", Joint)
+
+    @property
+    def placeholders(self) -> View:
+        """The Marker2D nodes below the nodes of this view (their mounting points)."""
+        return self._step("placeholders", (n for node in self._nodes for n in node.iter_subtree()
+                                           if n is not node and isinstance(n, Marker2D)))
 
     def of_type(self, kind: type | tuple[type, ...]) -> View:
         """The nodes of this view that are instances of ``kind``."""
@@ -152,6 +162,23 @@ class View:
         for node, value in zip(self._nodes, values, strict=True):
             setattr(node, name, value)
 
+    def attach(self, node: Node) -> View:
+        """Put a :meth:`~rlenv.node.Node.duplicate` of ``node`` on every marker of this view.
+
+        Returns:
+            A View of the copies, one per marker, in the order of the markers.
+
+        Raises:
+            TypeError: a node of the view is not a :class:`~rlenv.scene2d.marker2d.Marker2D`
+                (nothing was attached).
+        """
+        strangers = [n for n in self._nodes if not isinstance(n, Marker2D)]
+        if strangers:
+            raise TypeError(f"{strangers[0]!r} in {self!r} is not a Marker2D: attach puts "
+                            "copies on markers only; nothing was attached")
+        return View([marker.attach(node) for marker in self._nodes],  # type: ignore[attr-defined]
+                    f"{self._label}.attach({node.name})")
+
     # --- internals --------------------------------------------------------------------------
 
     def _step(self, step: str, nodes: Iterable[Node]) -> View:
@@ -168,12 +195,38 @@ def view(*nodes: Node) -> View:
 
 
 def _tree_order(nodes: Iterable[Node]) -> list[Node]:
-    """``nodes`` sorted in tree order (pre-order) when they share a tree (View drops repeats)."""
+    """``nodes`` sorted in tree order (pre-order) when they share a tree (View drops repeats).
+
+    Each node's key is its path of child indices from the top of its tree, so the cost grows
+    with the nodes and their depth, not with the size of the tree around them.
+    """
     found = list(nodes)
     if len(found) < 2:
         return found
-    root = found[0]
-    while root.parent is not None:
-        root = root.parent
-    rank = {id(node): index for index, node in enumerate(root.iter_subtree())}
-    return sorted(found, key=lambda node: rank.get(id(node), len(rank)))
+    keys: dict[int, tuple[int, ...]] = {}  # node id -> its path, shared by its descendants
+    indices: dict[int, dict[int, int]] = {}  # parent id -> {child id: index}
+
+    def key(node: Node) -> tuple[int, ...]:
+        chain = []  # the node and its ancestors whose path is not known yet, upwards
+        while id(node) not in keys:
+            chain.append(node)
+            if node.parent is None:
+                keys[id(node)] = (id(node),)  # nodes of different trees stay apart
+                chain.pop()
+                break
+            node = node.parent
+        path = keys[id(node)]
+        for step in reversed(chain):
+            parent = step.parent
+            assert parent is not None
+            index = indices.get(id(parent))
+            if index is None:
+                index = indices[id(parent)] = {id(child): position for position, child
+                                               in enumerate(parent._children)}
+            path = keys[id(step)] = (*path, index[id(step)])
+        return path
+
+    roots: dict[int, int] = {}
+    for node in found:
+        roots.setdefault(key(node)[0], len(roots))
+    return sorted(found, key=lambda node: (roots[keys[id(node)][0]], keys[id(node)][1:]))

@@ -1,0 +1,154 @@
+"""Plinko: a new level from the seed at every reset, the same on any server, over sockets."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import msgpack
+import numpy as np
+import pytest
+from conftest import Serve
+
+from examples.plinko import TARGET, PlinkoEnvironment, follow
+from rlenv_client import Client, ErrorCode, LocalClient, RemoteError
+
+STILL = np.zeros(1, np.float32)
+
+
+def play(client: Client | LocalClient, steps: int = 200, **reset: Any) -> list[Any]:
+    """Reset, then follow the ball until the episode ends: every observation's bytes."""
+    observation, info = client.reset(**reset)
+    seen: list[Any] = [observation.tobytes(), info["world"]["level"]]
+    for _ in range(steps):
+        observation, reward, terminated, truncated, _ = client.step(follow(observation))
+        seen.append((observation.tobytes(), reward, terminated, truncated))
+        if terminated or truncated:
+            break
+    return seen
+
+
+def colors_of(level: dict[str, Any]) -> set[tuple[int, ...]]:
+    found = set()
+    stack = [level["root"]]
+    while stack:
+        entry = stack.pop()
+        stack.extend(entry.get("children", []))
+        color = entry.get("properties", {}).get("color")
+        if color is not None:
+            found.add(tuple(color))
+    return found
+
+
+def test_the_seed_makes_the_level_on_any_server(serve: Serve) -> None:
+    first, second = serve(TARGET), serve(TARGET)
+    with Client(first.host, first.port, timeout=20, world_data=True) as a, \
+            Client(second.host, second.port, timeout=20, world_data=True) as b:
+        b.reset(seed=11)  # another history first: it must not matter
+        play(b, steps=5)
+        run = play(a, seed=5)
+        assert play(b, seed=5) == run
+        assert len(run) > 10 and run[-1][2]  # the ball fell through and the episode ended
+        level = a.get_property("World", "level")
+        assert b.get_property("World", "level") == level
+        assert level["root"]["class"] == "Node2D"
+        assert {"Peg", "Marker2D", "Divider", "BinFloor"} <= {
+            entry["class"] for entry in _entries(level["root"])}
+        other = play(a, seed=6)
+        assert other[1] != run[1]  # another level (its data's digest)
+        assert a.get_property("World", "level") != level
+        assert other[0] != run[0]
+
+
+def test_a_snapshot_restores_exactly_on_the_other_server(serve: Serve) -> None:
+    first, second = serve(TARGET), serve(TARGET)
+    with Client(first.host, first.port, timeout=20) as a, \
+            Client(second.host, second.port, timeout=20) as b:
+        a.configure(world={"difficulty": 0.8})
+        observation, _ = a.reset(seed=5)
+        for _ in range(6):
+            observation, *_ = a.step(follow(observation))
+        snapshot = a.snapshot()
+        b.reset(seed=2)
+        restored, _ = b.restore(snapshot)
+        assert restored.tobytes() == observation.tobytes()
+        assert b.snapshot() == snapshot
+        assert b.get_property("World", "level") == a.get_property("World", "level")
+        for _ in range(30):
+            one = a.step(follow(observation))
+            two = b.step(follow(observation))
+            assert one[0].tobytes() == two[0].tobytes() and one[1:4] == two[1:4]
+            observation = one[0]
+            if one[2]:
+                break
+
+
+def test_a_frame_shows_the_level_colours(serve: Serve) -> None:
+    server = serve(TARGET)
+    with Client(server.host, server.port, timeout=20) as client:
+        client.reset(seed=5)
+        frame = client.render()
+        level = client.get_property("World", "level")
+        colors = colors_of(level)
+        assert len(colors) >= 6  # rows of pegs and bins, each coloured from a gradient
+        pixels = {tuple(p) for p in frame.reshape(-1, 3)}
+        assert colors <= pixels, colors - pixels
+        client.reset(seed=6)
+        assert not np.array_equal(client.render(), frame)
+
+
+def test_a_given_level_is_played(serve: Serve) -> None:
+    first, second = serve(TARGET), serve(TARGET)
+    with Client(first.host, first.port, timeout=20, world_data=True) as a, \
+            Client(second.host, second.port, timeout=20, world_data=True) as b:
+        run = play(a, seed=5)
+        level = msgpack.unpackb(msgpack.packb(a.get_property("World", "level")))
+        # the ball is drawn before the level: the same seed on the given level is the same run
+        assert play(b, seed=5, options={"level": level}) == run
+        again = play(b, seed=9, options={"level": level})
+        assert again[1] == run[1] and again[0] != run[0]  # same level, another ball
+
+
+def test_a_level_naming_a_foreign_class_is_refused_and_the_server_serves_on(
+    serve: Serve,
+) -> None:
+    server = serve(TARGET)
+    with Client(server.host, server.port, timeout=20) as client:
+        client.reset(seed=5)
+        level = client.get_property("World", "level")
+        level["root"]["children"][0]["children"][0]["class"] = "Evil"
+        with pytest.raises(RemoteError) as refused:
+            client.reset(seed=5, options={"level": level})
+        assert refused.value.code == ErrorCode.ENVIRONMENT_ERROR
+        assert "class 'Evil' is not allowed" in refused.value.message
+        with pytest.raises(RemoteError) as bad:
+            client.configure(world={"difficulty": 1.5})
+        assert bad.value.code == ErrorCode.INVALID_CONFIG and "[0, 1]" in bad.value.message
+        observation, _ = client.reset(seed=5)
+        client.step(follow(observation))
+
+
+def test_difficulty_changes_the_levels_and_following_the_ball_pays() -> None:
+    with LocalClient(PlinkoEnvironment, world_data=True) as client:
+        pegs = {}
+        for difficulty in (0.0, 1.0):
+            client.configure(world={"difficulty": difficulty})
+            pegs[difficulty] = [client.reset(seed=seed)[1]["world"]["pegs"]
+                                for seed in range(5)]
+        assert max(pegs[0.0]) < min(pegs[1.0])
+        caught = {"follow": 0.0, "still": 0.0}
+        for seed in range(10):
+            caught["follow"] += sum(step[1] for step in play(client, seed=seed)[2:])
+            observation, _ = client.reset(seed=seed)
+            for _ in range(200):
+                observation, reward, terminated, *_ = client.step(STILL)
+                caught["still"] += reward
+                if terminated:
+                    break
+        assert caught["follow"] >= 8 > 5 >= caught["still"]
+
+
+def _entries(entry: dict[str, Any]) -> list[dict[str, Any]]:
+    found = [entry]
+    for child in entry.get("children", []):
+        found += _entries(child)
+    return found

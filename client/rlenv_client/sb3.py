@@ -73,11 +73,18 @@ class SB3VecEnv(VecEnv):
         self._actions = actions
 
     def step_wait(self) -> VecEnvStepReturn:
-        """Step every environment concurrently and translate to SB3's conventions."""
+        """Step every environment concurrently and translate to SB3's conventions.
+
+        A finished environment's info is that of its episode's last step (with
+        ``server_restarted`` or ``interrupted`` when that is how it ended), as SB3's own
+        vectors give it.
+        """
         observations, rewards, terminated, truncated, infos = self.venv.step(self._actions)
         dones = terminated | truncated
         per_env = _split_infos(infos, self.num_envs)
+        final = _split_infos(infos.get("final_info", {}), self.num_envs)
         for index in np.flatnonzero(dones):
+            per_env[index] = {**per_env[index], **final[index]}  # the last step's, as SB3 has it
             per_env[index]["terminal_observation"] = infos["final_obs"][index]
             per_env[index]["TimeLimit.truncated"] = bool(truncated[index] and
                                                          not terminated[index])

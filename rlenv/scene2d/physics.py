@@ -48,6 +48,7 @@ from pymunk import Vec2d
 
 from rlenv.node import Node, ProcessMode
 from rlenv.scene2d.colors import RGB, Color, to_rgb
+from rlenv.scene2d.fresh import place_at_rest, refresh_constraint
 from rlenv.scene2d.node2d import Node2D, Pose, compose, frame_of, relative_pose
 from rlenv.scene2d.pymunk_data import ConstraintRecipe, copy_body, copy_shape
 from rlenv.signals import Signal
@@ -137,8 +138,7 @@ class PhysicsWorld(Node):
                 joints.append(node)
         self.space.add(*bodies, *shapes)  # in tree order, as they entered
         for joint in joints:  # once every body is back, as joints attach when ready
-            joint.constraint = None
-            joint._attach(self, required=True)
+            joint._reattach(self)
 
     @property
     def iterations(self) -> int:
@@ -298,15 +298,8 @@ class PhysicsBody(Node2D):
 
     def _restart(self) -> None:
         """Back to the pose the body was built with, at rest (see PhysicsWorld.restart)."""
-        body = self.body
         assert self._built_pose is not None
-        x, y, angle = self._built_pose
-        self._set_body_pose(x, y, angle)
-        if body.body_type != pymunk.Body.STATIC:
-            body.velocity = (0.0, 0.0)
-            body.angular_velocity = 0.0
-            body.force = (0.0, 0.0)
-            body.torque = 0.0
+        place_at_rest(self.body, *self._built_pose)
 
     def _set_body_pose(self, x: float, y: float, angle: float) -> None:
         """Angle first: pymunk turns a body about its centre of gravity, then places it."""
@@ -888,6 +881,21 @@ class Joint(Node):
             self.constraint.max_force = self._max_force
         world.space.add(self.constraint)
         self._attached = True
+
+    def _reattach(self, world: PhysicsWorld) -> None:
+        """Join ``world``'s new space again, fresh (see :meth:`PhysicsWorld.restart`).
+
+        The constraint is set up again in place, as when it was made, when its bodies are
+        those in the space and its kind allows; otherwise a new one is made, as on attaching.
+        """
+        constraint = self.constraint
+        space = world.space
+        if constraint is not None and constraint.a.space is space and \
+                constraint.b.space is space and refresh_constraint(constraint):
+            space.add(constraint)
+            return
+        self.constraint = None
+        self._attach(world, required=True)
 
     def _exit_tree(self) -> None:
         if self._world is not None and self._attached:

@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-ray test-browser screenshot plinko-picture sb3 rllib docs lint vectors clean
+.PHONY: demo test test-ray test-browser screenshot plinko-picture sb3 rllib cleanrl docs lint vectors clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -62,6 +62,38 @@ docs: $(STAMP)
 	$(BIN)/python -m pytest -m docs tests/test_docs.py
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --quiet
 
+# Optional: CleanRL's ppo.py, unmodified, on gymnasium's CartPole-v1 and on rlenv/CartPole-v1,
+# their learning curves side by side (benchmarks/cleanrl_curves.py; about 10 minutes a seed).
+# ppo.py is not part of rlenv: pass CLEANRL_PPO=path/to/cleanrl/ppo.py, or where the network
+# reaches GitHub the target downloads it at a pinned commit and checks its sha256. Its venv,
+# .venv-cleanrl, gets the CPU torch first (so no CUDA build is pulled), then rlenv, tyro and
+# tensorboard. CLEANRL_STEPS=N shortens the runs; CLEANRL_SEEDS="1 2" runs more seeds.
+CLEANRL_VENV := .venv-cleanrl
+CLEANRL_COMMIT := fe8d8a03c41a7ef5b523e2e354bd01c363e786bb
+CLEANRL_SHA256 := d8dfbb7ac0b21e747b77d6e6673e566db4d6cdacc83bcebcd19cf87ad0e459ae
+CLEANRL_PPO ?= $(CLEANRL_VENV)/ppo.py
+CLEANRL_STEPS ?= 500000
+CLEANRL_SEEDS ?= 1
+
+$(CLEANRL_VENV)/.installed: pyproject.toml
+	$(PYTHON) -m venv $(CLEANRL_VENV)
+	$(CLEANRL_VENV)/bin/python -m pip install --quiet --upgrade pip
+	$(CLEANRL_VENV)/bin/python -m pip install --quiet torch==2.13.0
+	$(CLEANRL_VENV)/bin/python -m pip install --quiet -e . tyro tensorboard
+	touch $@
+
+$(CLEANRL_VENV)/ppo.py: | $(CLEANRL_VENV)/.installed
+	curl -fsSL -o $@.part \
+		https://raw.githubusercontent.com/vwxyzjn/cleanrl/$(CLEANRL_COMMIT)/cleanrl/ppo.py \
+		|| { rm -f $@.part; echo "cannot download ppo.py here: fetch cleanrl/ppo.py from" \
+		"vwxyzjn/cleanrl and run make cleanrl CLEANRL_PPO=path/to/ppo.py"; exit 1; }
+	echo "$(CLEANRL_SHA256)  $@.part" | sha256sum --check --quiet
+	mv $@.part $@
+
+cleanrl: $(CLEANRL_VENV)/.installed $(CLEANRL_PPO)
+	$(CLEANRL_VENV)/bin/python benchmarks/cleanrl_curves.py $(CLEANRL_PPO) \
+		--total-timesteps $(CLEANRL_STEPS) --seeds $(CLEANRL_SEEDS)
+
 lint: $(STAMP)
 	$(BIN)/ruff check rlenv client examples tests benchmarks docs
 
@@ -70,4 +102,4 @@ vectors: $(STAMP)
 	$(BIN)/python -m tests.protocol_vectors
 
 clean:
-	rm -rf $(VENV) build site *.egg-info
+	rm -rf $(VENV) $(CLEANRL_VENV) build site *.egg-info

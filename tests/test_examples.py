@@ -68,7 +68,8 @@ def test_the_reacher_reaches_and_pays_for_effort(serve: Serve) -> None:
         assert costly < reward  # effort is charged
 
 
-@pytest.mark.parametrize("name", ["cartpole", "seeker", "pixels", "reacher", "pair", "plinko"])
+@pytest.mark.parametrize("name", ["cartpole", "classic_cartpole", "seeker", "pixels", "reacher",
+                                  "pair", "plinko"])
 def test_every_example_serves_as_a_module(name: str) -> None:
     process = subprocess.Popen(
         [sys.executable, "-m", f"examples.{name}", "--port", "0"], stdout=subprocess.PIPE,

@@ -19,6 +19,7 @@ import pytest
 from conftest import Serve, wait_until
 from inspector_http import Trainer, fetch
 
+from examples.cartpole import controller
 from rlenv_client import Client, RemoteEnv
 from rlenv_client.inspector import Inspector, InspectorError, InspectorServer, Watcher
 from rlenv_client.launcher import ServerProcess
@@ -250,12 +251,38 @@ def test_an_agents_setting_is_its_own_among_several(serve: Serve) -> None:
     assert gains == [5.0, 1.0]
 
 
-def test_a_dead_inspector_never_stops_the_training(server: ServerProcess) -> None:
-    inspector = Inspector([f"{server.host}:{server.port}"])
-    inspector._process.kill()
-    inspector._process.wait()
-    inspector.follow(["127.0.0.1:1"])  # a restart reported to it: let go, no error
-    inspector.close()
+def test_a_dead_inspector_never_stops_the_training() -> None:
+    env = RemoteEnv("examples.cartpole:CartPoleEnvironment", inspector=True, max_restarts=1)
+    try:
+        assert env.inspector is not None and env.server is not None
+        url, process = env.inspector.url, env.inspector._process
+        env.reset(seed=0)
+        assert fetch(url, "api/servers")[2][0]["environment"] == "CartPole"  # connected
+        process.kill()  # while it watches: its observer connection drops mid-episode
+        process.wait()
+
+        def train(steps: int) -> float:
+            observation, _ = env.reset(seed=1)
+            total = 0.0
+            for _ in range(steps):
+                observation, reward, terminated, truncated, info = env.step(
+                    controller(observation))
+                assert info["frames"] == 4 and not truncated
+                total += reward
+                if terminated:
+                    observation, _ = env.reset()
+            return total
+
+        assert train(100) == 400.0  # the controller balances the pole: +1 for every tick
+        first = env.server.pid
+        env.server.process.kill()  # the restart is reported to the dead inspector ...
+        *_, truncated, info = env.step(np.zeros(1, np.float32))
+        assert truncated and "server_restarted" in info
+        assert env.server.pid != first
+        assert train(100) == 400.0  # ... which lets it go: the training goes on
+    finally:
+        env.close()  # closing what is left of the inspector raises nothing either
+    assert process.returncode is not None
 
 
 def test_rlenv_inspect_prints_its_page_and_ends_with_its_parent(server: ServerProcess) -> None:

@@ -91,10 +91,25 @@ def test_binding_beyond_loopback_needs_a_token() -> None:
     assert "refusing to listen on 0.0.0.0" in result.stderr and "--token" in result.stderr
 
 
-def test_a_server_on_all_interfaces_with_a_token(serve: Serve) -> None:
-    server = serve(host="0.0.0.0", args=["--token", "t"])
-    with Client("127.0.0.1", server.port, token="t") as client:
-        client.reset(seed=0)
+def test_a_server_on_all_interfaces_with_a_token(serve: Serve,
+                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv("RLENV_TOKEN", raising=False)
+    loopback_only = serve()
+    with pytest.raises(ConnectionLost):  # 127.0.0.2 does not reach a server on 127.0.0.1 ...
+        Client("127.0.0.2", loopback_only.port, timeout=5)
+    server = serve(host="0.0.0.0", args=["--token", "t0ken"])
+    assert server.host == "0.0.0.0"
+    for address in ("127.0.0.1", "127.0.0.2"):  # ... but one on every interface
+        with pytest.raises(RemoteError) as missing:
+            Client(address, server.port, timeout=5)
+        assert missing.value.code == ErrorCode.UNAUTHORIZED and "token" in missing.value.message
+        with pytest.raises(RemoteError) as wrong:
+            Client(address, server.port, token="t0ke", timeout=5)
+        assert wrong.value.code == ErrorCode.UNAUTHORIZED and wrong.value.message == "wrong token"
+        with Client(address, server.port, token="t0ken", timeout=5) as client:
+            client.reset(seed=0)
+            _, reward, *_ = client.step(np.zeros(1, np.float32))
+            assert reward == 4.0
 
 
 def test_an_idle_client_is_dropped_with_a_reason(serve: Serve) -> None:

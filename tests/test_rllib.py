@@ -253,8 +253,40 @@ def test_lost_server_is_restarted_by_the_vector(no_leftovers: str) -> None:
         algo.stop()
 
 
-def test_connection_lost_is_an_exception_rllib_catches() -> None:
-    assert issubclass(ConnectionLost, Exception)  # EnvRunner._try_env_step: except Exception
+def test_connection_lost_is_an_exception_rllib_catches(no_leftovers: str,
+                                                       caplog: pytest.LogCaptureFixture) -> None:
+    """A server lost more often than max_restarts: step raises ConnectionLost, which RLlib's
+    EnvRunner._try_env_step catches (``except Exception``), then it builds the vector anew."""
+    from ray.rllib.env.env_runner import ENV_STEP_FAILURE
+    from ray.rllib.env.single_agent_env_runner import SingleAgentEnvRunner
+
+    name = register(TARGET, name="rlenv-one-restart", max_episode_steps=500)
+    runner = SingleAgentEnvRunner(config=small_ppo(name, num_env_runners=0, num_envs=1,
+                                                   max_restarts=1))
+    try:
+        runner.sample(num_timesteps=20, random_actions=True)
+        actions = np.zeros((1, 1), np.float32)
+        vector = runner.env.unwrapped
+        lost = vector.servers[0].pid
+        os.killpg(lost, signal.SIGKILL)  # within the budget: the vector restarts it
+        wait_gone({lost})
+        *_, truncated, infos = runner._try_env_step(actions)
+        assert truncated.tolist() == [True] and "server_restarted" in infos[0]
+        assert runner.env.unwrapped is vector
+        lost = vector.servers[0].pid
+        os.killpg(lost, signal.SIGKILL)  # past it: ConnectionLost, and RLlib catches it
+        wait_gone({lost})
+        with caplog.at_level("ERROR"):
+            assert runner._try_env_step(actions) == ENV_STEP_FAILURE
+        [failure] = [record for record in caplog.records if record.exc_info]
+        assert failure.exc_info is not None and failure.exc_info[0] is ConnectionLost
+        assert f"(pid {lost}) exited with code -9" in str(failure.exc_info[1])  # which, how
+        fresh = runner.env.unwrapped
+        assert fresh is not vector and vector.closed
+        assert tagged_servers(no_leftovers) == {server.pid for server in fresh.servers}
+        runner.sample(num_timesteps=20, random_actions=True)  # and sampling goes on
+    finally:
+        runner.stop()
 
 
 # --- servers leased from a pool ------------------------------------------------------------

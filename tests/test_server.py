@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from conftest import Serve
 
-from examples.cartpole import CartPoleAgent, CartPoleEnvironment, controller
+from examples.cartpole import TARGET, CartPoleAgent, CartPoleEnvironment, controller
 from rlenv.protocol import PROTOCOL_VERSION, Connection, Request, Role, pack
 from rlenv.protocol.errors import LocalProtocolError
 from rlenv.testing import read_frame
@@ -365,12 +365,24 @@ def test_a_client_that_leaves_mid_episode_loses_nothing_for_the_next(
     connection = Connection(Role.CLIENT)
     connection.receive_data(raw.recv(65536))
     connection.next_message()
-    raw.sendall(connection.send(Request(1, {"reset": {}, "observation": {"agent": {}}})))
+    raw.sendall(connection.send(Request(1, {"reset": {"seed": 3},
+                                            "observation": {"agent": {}}})))
     raw.sendall(connection.send(Request(2, {"action": PUSH, "repeat_action": 7})))
     raw.close()  # gone before the answers
+    with LocalClient(TARGET) as reference:  # the same requests, answered
+        reference.reset(seed=3)
+        left_at = reference.step(PUSH, 7)[0]
+        reference.reset(seed=0)
+        fresh = reference.step(PUSH)[0]
     with Client(server.host, server.port, timeout=5) as client:
+        stats = client.stats()  # before anything else: both requests ran whole
+        assert (stats["steps"], stats["ticks"], stats["errors"]) == (1, 7, 0)
+        assert stats["current"] == {"return": 7.0, "length": 1, "ticks": 7}
+        assert client.observe()["agent"].tobytes() == left_at.tobytes()  # where it left off
         client.reset(seed=0)
-        assert client.step(PUSH)[4]["frames"] == 4
+        observation, _, _, _, info = client.step(PUSH)
+        assert info["frames"] == 4  # its repeat_action was for its request only
+        assert observation.tobytes() == fresh.tobytes()  # a new episode like any other
 
 
 def test_errors_in_user_code_are_reported_and_reset_recovers(serve: Serve) -> None:

@@ -23,6 +23,7 @@ class _Registration:
 
 ENVIRONMENTS = {
     "rlenv/CartPole-v0": _Registration("examples.cartpole:CartPoleEnvironment", 500),
+    "rlenv/CartPole-v1": _Registration("examples.classic_cartpole:ClassicCartPoleEnvironment", 500),
     "rlenv/Pair-v0": _Registration("examples.pair:PairEnvironment", 300),
     "rlenv/Pixels-v0": _Registration("examples.pixels:PixelsEnvironment", 1000),
     "rlenv/Plinko-v0": _Registration("examples.plinko:PlinkoEnvironment", 100),
@@ -32,7 +33,8 @@ ENVIRONMENTS = {
 }
 """Registered ids and what they serve. CartPole never ends by itself when balanced, so it gets
 a time limit (500 steps of 4 ticks: 33 simulated seconds), as gym-kraby's TimeLimit lesson
-teaches."""
+teaches. ``rlenv/CartPole-v1`` is gymnasium's ``CartPole-v1`` (its spaces, rewards, thresholds
+and 500-step limit) on rlenv's physics, for scripts written for gymnasium's."""
 
 
 def register_environments() -> None:

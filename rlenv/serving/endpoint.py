@@ -58,7 +58,7 @@ from rlenv.protocol.errors import ErrorCode, LocalProtocolError, ProtocolError
 from rlenv.protocol.sockets import configure_socket
 
 __all__ = ["DEFAULT_HOST", "HOUSEKEEPING_INTERVAL", "Endpoint", "InsecureBindError", "Limits",
-           "Peer"]
+           "Peer", "is_loopback"]
 
 logger = logging.getLogger(__name__)
 
@@ -181,7 +181,7 @@ class Endpoint:
         """
         if self._listener is not None:
             raise RuntimeError(f"already listening on {self.address}")
-        if self._token is None and not _is_loopback(host):
+        if self._token is None and not is_loopback(host):
             raise InsecureBindError(
                 f"refusing to listen on {host}: anyone who can reach it could drive this "
                 "environment. Set a token (rlenv serve --token, or RLENV_TOKEN) that clients "
@@ -489,7 +489,8 @@ class Endpoint:
         peer.sock.close()
 
 
-def _is_loopback(host: str) -> bool:
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` (an address, or ``localhost``) is a loopback address."""
     if host == "localhost":
         return True
     try:

@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-ray test-browser screenshot sb3 rllib lint vectors clean
+.PHONY: demo test test-ray test-browser screenshot sb3 rllib bench-http lint vectors clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -48,6 +48,11 @@ sb3: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e ".[test,sb3]"
 	$(BIN)/python -m pytest tests/test_sb3.py
 	$(BIN)/python -m examples.train_sb3
+
+# Optional: a step through the HTTP gateway (rlenv http, the http extra) against a TCP step.
+bench-http: $(STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[http]"
+	$(BIN)/python benchmarks/http_step.py --implementations
 
 lint: $(STAMP)
 	$(BIN)/ruff check rlenv client examples tests benchmarks

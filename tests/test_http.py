@@ -119,6 +119,10 @@ def test_spaces_come_with_their_json_schema(gateway: Gateway) -> None:
         jsonschema.validate(sample, action["schema"])
     with pytest.raises(jsonschema.ValidationError):
         jsonschema.validate([2.0], action["schema"])
+    contains = f"/v1/envs/{session}/action_space/contains"
+    assert gateway.post(contains, {"action": [0.5]}) == {"member": True}
+    refused = gateway.post(contains, {"action": [2.0]})
+    assert refused["member"] is False and "outside the bounds" in refused["reason"]
     jsonschema.validate(gateway.post(f"/v1/envs/{session}/reset")["observation"],
                         observation["schema"])
 
@@ -201,6 +205,7 @@ def test_openapi_is_generated_from_the_routes(gateway: Gateway) -> None:
         "/v1/envs/{id}/reset": {"post"}, "/v1/envs/{id}/step": {"post"},
         "/v1/envs/{id}/render": {"get"}, "/v1/envs/{id}/action_space": {"get"},
         "/v1/envs/{id}/observation_space": {"get"}, "/v1/envs/{id}/action_space/sample": {"post"},
+        "/v1/envs/{id}/action_space/contains": {"post"},
         "/v1/envs/{id}/snapshot": {"get"}, "/v1/envs/{id}/restore": {"post"},
         "/v1/envs/{id}/ws": {"get"}, "/v1/envs/{id}/events": {"get"}, "/v1": {"get"},
         "/state": {"get"}, "/visual_observations": {"get"}, "/reset": {"get", "post"},

@@ -14,6 +14,7 @@ from http_gateway import decode_png
 from spaces_catalog import TESTING_SPACES
 
 from rlenv.http.json_spaces import (
+    action_decoder,
     dumps,
     is_image,
     json_schema,
@@ -79,6 +80,23 @@ def test_values_json_lacks_are_converted() -> None:
         "nan": "NaN", "arrays": [1.0, "Infinity"], "scalar": 0.5, "bytes": "AAE=",
         "3": [2, True], "none": None}
     assert dumps({"plain": [1, 2.5]}) == b'{"plain":[1,2.5]}'
+
+
+def test_json_actions_become_arrays_only_when_the_check_would_convert_them() -> None:
+    decode = action_decoder(spaces.Box(-1.0, 1.0, (2,), np.float32))
+    decoded = decode([0.5, -1])
+    assert decoded.dtype == np.float32 and decoded.tolist() == [0.5, -1.0]
+    for unchanged in ([0.5], [True, 0.5], ["0.5", 0.5], [1e300, 0.0], "left", None):
+        assert decode(unchanged) is unchanged  # for the environment to refuse precisely
+    grid = action_decoder(spaces.Box(-1.0, 1.0, (2, 2), np.float64))
+    assert grid([[0, 1], [1, 0]]).dtype == np.float64
+    assert grid([[0, 1], [1]]) == [[0, 1], [1]]
+    joint = action_decoder(spaces.Dict({"a": spaces.Box(-1.0, 1.0, (1,), np.float32),
+                                        "b": spaces.Discrete(2)}))
+    decoded = joint({"a": [0.25], "b": 1})
+    assert decoded["a"].dtype == np.float32 and decoded["b"] == 1
+    integers = action_decoder(spaces.Box(0, 255, (1,), np.uint8))
+    assert integers([300]) == [300]  # never cast where a cast could wrap
 
 
 def test_space_descriptions_that_are_not_spaces_are_refused() -> None:

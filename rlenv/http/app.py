@@ -28,7 +28,7 @@ from starlette.responses import Response
 from starlette.routing import BaseRoute, Route, WebSocketRoute
 
 from rlenv.http.bevy import bevy_endpoints
-from rlenv.http.endpoints import Answer, Endpoint
+from rlenv.http.endpoints import Answer, Endpoint, JSONRoute
 from rlenv.http.guard import Guard
 from rlenv.http.json_spaces import dumps
 from rlenv.http.openapi import openapi_document
@@ -184,8 +184,11 @@ def _routes(endpoints: list[Endpoint]) -> list[BaseRoute]:
             routes.append(WebSocketRoute(path, methods["WEBSOCKET"].handler))
         elif len(methods) == 1:
             (method, endpoint), = methods.items()
-            routes.append(Route(path, endpoint.handler, methods=[method]))
+            handler = JSONRoute(endpoint.handler, body_required=endpoint.body_required) \
+                if endpoint.json else endpoint.handler
+            routes.append(Route(path, handler, methods=[method]))
         else:
+            assert not any(e.json for e in methods.values()), f"{path}: JSON routes go alone"
             routes.append(Route(path, _dispatch(methods), methods=list(methods)))
     return routes
 

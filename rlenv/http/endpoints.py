@@ -8,7 +8,7 @@ never disagree.
 from __future__ import annotations
 
 import json
-from collections.abc import Awaitable, Callable, Mapping
+from collections.abc import Awaitable, Callable, Mapping, MutableMapping
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -19,10 +19,12 @@ from rlenv.http.json_spaces import dumps
 from rlenv.http.problems import COMMON_HEADERS, Problem
 from rlenv.protocol.errors import ErrorCode
 
-__all__ = ["JSON", "Answer", "Endpoint", "Parameter", "json_response", "object_body",
-           "read_json"]
+__all__ = ["JSON", "Answer", "Endpoint", "JSONRoute", "Parameter", "json_response",
+           "object_body", "read_json"]
 
 JSON = "application/json"
+_JSON_HEADERS = [(b"content-type", JSON.encode()),
+                 *((k.lower().encode(), v.encode()) for k, v in COMMON_HEADERS.items())]
 
 
 class Answer(NamedTuple):
@@ -49,7 +51,8 @@ class Endpoint:
     Attributes:
         method: ``GET``, ``POST``, ``DELETE``, or ``WEBSOCKET``.
         path: Starlette's path, with ``{id}`` parameters.
-        handler: ``async (Request) -> Response`` (a WebSocket's: ``async (WebSocket)``).
+        handler: ``async (Request) -> Response``; with ``json``, ``async (path_params,
+            body) -> value`` (see :class:`JSONRoute`); a WebSocket's ``async (WebSocket)``.
         operation: the operation's id.
         summary: one line.
         tag: its group (``sessions``, ``streams``, ``bevy_rl``, ``gateway``).
@@ -60,6 +63,8 @@ class Endpoint:
             :data:`rlenv.http.problems.PROBLEMS`), besides those every route may.
         query: its query parameters.
         description: more, for OpenAPI.
+        json: the handler takes the path parameters and the JSON body and returns the JSON
+            answer (served by a :class:`JSONRoute`: the hot routes).
     """
 
     method: str
@@ -74,6 +79,40 @@ class Endpoint:
     problems: tuple[str, ...] = ()
     query: tuple[Parameter, ...] = ()
     description: str = ""
+    json: bool = False
+
+
+class JSONRoute:
+    """A route as a bare ASGI application: path parameters and JSON body in, a JSON value out.
+
+    The hot routes (a step, a reset) use it: no request or response objects, one prepared
+    list of headers. Problems it raises are answered like any route's.
+
+    Args:
+        handler: ``async (path_params, body) -> value``; ``body`` is the parsed JSON, or
+            ``None`` when there is none and it is not required.
+        body_required: refuse a request without a body (400).
+    """
+
+    def __init__(self, handler: Callable[[dict[str, str], Any], Awaitable[Any]], *,
+                 body_required: bool) -> None:
+        self.handler = handler
+        self.body_required = body_required
+
+    async def __call__(self, scope: MutableMapping[str, Any],
+                       receive: Callable[[], Awaitable[MutableMapping[str, Any]]],
+                       send: Callable[[MutableMapping[str, Any]], Awaitable[None]]) -> None:
+        """Serve one request."""
+        message = await receive()
+        body = message.get("body", b"")
+        while message.get("more_body"):
+            message = await receive()
+            body += message.get("body", b"")
+        answer = dumps(await self.handler(scope["path_params"], _parse(
+            body, self.body_required, f"{scope['method']} {scope['path']}")))
+        await send({"type": "http.response.start", "status": 200,
+                    "headers": [*_JSON_HEADERS, (b"content-length", b"%d" % len(answer))]})
+        await send({"type": "http.response.body", "body": answer})
 
 
 def json_response(value: Any, status: int = 200,
@@ -88,21 +127,26 @@ def _no_constant(name: str) -> Any:
     raise ValueError(f"{name} is not JSON")
 
 
+_decode = json.JSONDecoder(parse_constant=_no_constant).decode
+
+
 async def read_json(request: Request, *, required: bool = True) -> Any:
     """The request's JSON body (``None`` when empty and not ``required``).
 
     Raises:
         Problem: ``bad_request`` (400): no body, or not JSON (NaN and Infinity are not).
     """
-    body = await request.body()
+    return _parse(await request.body(), required, f"{request.method} {request.url.path}")
+
+
+def _parse(body: bytes, required: bool, route: str) -> Any:
     if not body.strip():
         if required:
-            raise Problem(ErrorCode.BAD_REQUEST, f"{request.method} {request.url.path} needs a "
-                                                 "JSON body")
+            raise Problem(ErrorCode.BAD_REQUEST, f"{route} needs a JSON body")
         return None
     try:
-        return json.loads(body, parse_constant=_no_constant)
-    except (ValueError, RecursionError) as error:
+        return _decode(body.decode())
+    except (ValueError, RecursionError) as error:  # UnicodeDecodeError is a ValueError
         raise Problem(ErrorCode.BAD_REQUEST, f"the body is not JSON: {error}") from None
 
 

@@ -29,6 +29,7 @@ Receive = Callable[[], Awaitable[Message]]
 Send = Callable[[Message], Awaitable[None]]
 ASGIApp = Callable[[Scope, Receive, Send], Awaitable[None]]
 
+_REMEMBERED = 256  # (Host, Origin) pairs whose verdict is kept
 _CLOSE = {"Connection": "close"}  # an unread body is never taken for the next request
 
 
@@ -48,6 +49,7 @@ class Guard:
         self._origins = origins
         self._token = None if token is None else token.encode()
         self._max_body = max_body
+        self._refusals: dict[tuple[bytes | None, bytes | None], str | None] = {}
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         """Serve ``scope`` if it passes, else answer its problem."""
@@ -60,9 +62,9 @@ class Guard:
         chunked = False
         for name, value in scope["headers"]:
             if name == b"host":
-                host = value.decode("latin-1")
+                host = value
             elif name == b"origin":
-                origin = value.decode("latin-1")
+                origin = value
             elif name == b"authorization":
                 authorization = value
             elif name == b"content-length":
@@ -77,9 +79,17 @@ class Guard:
             receive = self._counted(receive)
         await self.app(scope, receive, send)
 
-    def _problem(self, host: str | None, origin: str | None, authorization: bytes,
+    def _problem(self, host: bytes | None, origin: bytes | None, authorization: bytes,
                  length: bytes) -> Problem | None:
-        refusal = self._origins.refusal(host, origin)
+        try:
+            refusal = self._refusals[host, origin]
+        except KeyError:
+            refusal = self._origins.refusal(
+                None if host is None else host.decode("latin-1"),
+                None if origin is None else origin.decode("latin-1"))
+            if len(self._refusals) >= _REMEMBERED:  # bounded against a flood of names
+                self._refusals.clear()
+            self._refusals[host, origin] = refusal
         if refusal is not None:
             return Problem("forbidden", refusal)
         if self._token is not None:

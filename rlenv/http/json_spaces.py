@@ -10,7 +10,8 @@
 - **Images** travel as base64 PNG strings, never as nested lists: an image is a uint8 array of
   shape ``(height, width, channels)`` with 1, 3 or 4 channels, wherever it appears (an image
   observation space's schema says so; actions are always lists).
-- :func:`value_encoder` prepares, once per space, what turns its values into JSON values;
+- :func:`value_encoder` prepares, once per space, what turns its values into JSON values
+  (:func:`action_decoder` what turns JSON actions into what the environment checks fastest);
   :func:`to_json` converts anything else (``info``, snapshots): numpy arrays to lists, numpy
   scalars to numbers, bytes to base64, and non-finite floats (which JSON lacks) to the strings
   ``"NaN"``, ``"Infinity"`` and ``"-Infinity"``, as protobuf's JSON mapping does.
@@ -31,8 +32,8 @@ from gymnasium import spaces
 from rlenv.http.png import encode_png
 from rlenv.protocol.spaces import space_from_spec, space_to_spec
 
-__all__ = ["dumps", "is_image", "json_schema", "space_from_json", "space_to_json", "to_json",
-           "value_encoder"]
+__all__ = ["action_decoder", "dumps", "is_image", "json_schema", "space_from_json",
+           "space_to_json", "to_json", "value_encoder"]
 
 _PER_ELEMENT = 64
 """1-D arrays up to this size get per-element bounds in their schema; larger ones, and arrays
@@ -232,6 +233,65 @@ def value_encoder(space: spaces.Space, *, images: bool = True) -> Callable[[Any]
         fields = {k: value_encoder(s, images=images) for k, s in space.spaces.items()}
         return lambda value: {k: encode(value[k]) for k, encode in fields.items()}
     return to_json
+
+
+def action_decoder(space: spaces.Space) -> Callable[[Any], Any]:
+    """A function from JSON actions to what the environment checks fastest, prepared once.
+
+    A JSON list of numbers for a float Box becomes an array of the space's dtype and shape
+    (what the protocol's compiled check takes at once), as the environment's own careful check
+    would convert it; anything else (another shape, booleans, text, numbers too large for the
+    dtype, integer spaces, whose casts could wrap) is passed as it is, for the environment to
+    refuse with its precise message. Dict and Tuple actions are decoded item by item.
+    """
+    if isinstance(space, spaces.Box) and space.dtype.kind == "f":
+        return _float_array_decoder(space.dtype, space.shape)
+    if isinstance(space, spaces.Dict):
+        fields = {k: action_decoder(s) for k, s in space.spaces.items()}
+
+        def decode_dict(value: Any) -> Any:
+            if value.__class__ is not dict:
+                return value
+            return {k: fields[k](v) if k in fields else v for k, v in value.items()}
+        return decode_dict
+    if isinstance(space, spaces.Tuple):
+        items = [action_decoder(s) for s in space.spaces]
+
+        def decode_tuple(value: Any) -> Any:
+            if value.__class__ is not list or len(value) != len(items):
+                return value
+            return [decode(v) for decode, v in zip(items, value, strict=True)]
+        return decode_tuple
+    return _unchanged
+
+
+def _float_array_decoder(dtype: np.dtype, shape: tuple[int, ...]) -> Callable[[Any], Any]:
+    limit = float(np.finfo(dtype).max)
+    flat = len(shape) == 1
+
+    def number(item: Any) -> bool:  # finite in dtype (JSON has no NaN; "1e999" parses as inf)
+        return (item.__class__ is float or item.__class__ is int) and -limit <= item <= limit
+
+    def decode(value: Any) -> Any:
+        if value.__class__ is not list:
+            return value
+        if flat:
+            if len(value) == shape[0] and all(number(item) for item in value):
+                return np.array(value, dtype)
+            return value
+        try:
+            array = np.asarray(value)
+        except ValueError:  # ragged
+            return value
+        if array.dtype.kind not in "iuf" or array.shape != shape or \
+                not (np.abs(array) <= limit).all():
+            return value
+        return array.astype(dtype)
+    return decode
+
+
+def _unchanged(value: Any) -> Any:
+    return value
 
 
 def _array_to_list(value: Any) -> Any:

@@ -15,6 +15,7 @@ GET         /v1/envs/{id}/render                  ``image/png`` (or raw bytes)
 GET         /v1/envs/{id}/action_space            ``{"space", "schema"}``
 GET         /v1/envs/{id}/observation_space       ``{"space", "schema"}``
 POST        /v1/envs/{id}/action_space/sample     ``{"action"}``
+POST        /v1/envs/{id}/action_space/contains   ``{"member"}`` (and ``"reason"`` when not)
 GET         /v1/envs/{id}/snapshot                ``{"snapshot"}``
 POST        /v1/envs/{id}/restore                 ``{"observation", "info"}``
 GET         /v1                                   versions and capabilities
@@ -26,6 +27,7 @@ Every refusal is a problem (:mod:`rlenv.http.problems`).
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 from starlette.requests import Request
@@ -43,6 +45,7 @@ from rlenv.http.json_spaces import json_schema, space_to_json
 from rlenv.http.png import encode_png
 from rlenv.http.problems import COMMON_HEADERS, Problem
 from rlenv.protocol.errors import ErrorCode
+from rlenv.protocol.spaces import SpaceMismatch, check
 
 if TYPE_CHECKING:
     from rlenv.http.app import Gateway
@@ -66,20 +69,20 @@ def session_endpoints(gateway: Gateway) -> list[Endpoint]:
     """The ``/v1`` routes, served from ``gateway``'s sessions (the hot ones first)."""
     sessions = gateway.sessions
 
-    def session_of(request: Request) -> Session:
-        session = sessions.get(request.path_params["id"])
+    def session_at(path: Mapping[str, str]) -> Session:
+        session = sessions.get(path["id"])
         session.touch()
         return session
 
-    async def step(request: Request) -> Response:
-        session = session_of(request)
-        body = object_body(await read_json(request), _STEP_KEYS, _ACTION)
-        return json_response(await session.step(body["action"], body.get("repeat_action")))
+    async def step(path: Mapping[str, str], body: Any) -> Any:
+        session = session_at(path)
+        body = object_body(body, _STEP_KEYS, _ACTION)
+        return await session.step(body["action"], body.get("repeat_action"))
 
-    async def reset(request: Request) -> Response:
-        session = session_of(request)
-        body = object_body(await read_json(request, required=False), _RESET_KEYS)
-        return json_response(await session.reset(body.get("seed"), body.get("options")))
+    async def reset(path: Mapping[str, str], body: Any) -> Any:
+        session = session_at(path)
+        body = object_body(body, _RESET_KEYS)
+        return await session.reset(body.get("seed"), body.get("options"))
 
     async def create(request: Request) -> Response:
         body = object_body(await read_json(request, required=False), _CREATE_KEYS)
@@ -99,14 +102,14 @@ def session_endpoints(gateway: Gateway) -> list[Endpoint]:
         return json_response({"envs": [session.describe() for session in sessions.all()]})
 
     async def get_session(request: Request) -> Response:
-        return json_response(session_of(request).describe())
+        return json_response(session_at(request.path_params).describe())
 
     async def delete_session(request: Request) -> Response:
         await sessions.delete(request.path_params["id"])
         return Response(status_code=204, headers=COMMON_HEADERS)
 
     async def render(request: Request) -> Response:
-        session = session_of(request)
+        session = session_at(request.path_params)
         width, height = _size(request, "width"), _size(request, "height")
         frame = await session.render(width, height)
         if _RAW in request.headers.get("accept", ""):
@@ -117,22 +120,31 @@ def session_endpoints(gateway: Gateway) -> list[Endpoint]:
         return Response(png, headers=COMMON_HEADERS, media_type="image/png")
 
     async def action_space(request: Request) -> Response:
-        space = session_of(request).client.action_space
+        space = session_at(request.path_params).client.action_space
         return json_response({"space": space_to_json(space),
                               "schema": json_schema(space, images=False)})
 
     async def observation_space(request: Request) -> Response:
-        space = session_of(request).client.observation_space
+        space = session_at(request.path_params).client.observation_space
         return json_response({"space": space_to_json(space), "schema": json_schema(space)})
 
     async def sample(request: Request) -> Response:
-        return json_response({"action": session_of(request).sample()})
+        return json_response({"action": session_at(request.path_params).sample()})
+
+    async def contains(request: Request) -> Response:
+        session = session_at(request.path_params)
+        body = object_body(await read_json(request), _ACTION, _ACTION)
+        try:
+            check(session.client.action_space, body["action"])
+        except SpaceMismatch as mismatch:
+            return json_response({"member": False, "reason": str(mismatch)})
+        return json_response({"member": True})
 
     async def snapshot(request: Request) -> Response:
-        return json_response({"snapshot": await session_of(request).snapshot()})
+        return json_response({"snapshot": await session_at(request.path_params).snapshot()})
 
     async def restore(request: Request) -> Response:
-        session = session_of(request)
+        session = session_at(request.path_params)
         body = object_body(await read_json(request), _RESTORE_KEYS, _RESTORE_KEYS)
         return json_response(await session.restore(body["snapshot"]))
 
@@ -144,14 +156,14 @@ def session_endpoints(gateway: Gateway) -> list[Endpoint]:
         Endpoint("POST", f"{one}/step", step, "step", "Act for repeat_action physics ticks",
                  "sessions", {200: Answer("the transition; info.frames: the ticks that ran",
                                           "Step")},
-                 body="StepBody", body_required=True,
+                 body="StepBody", body_required=True, json=True,
                  problems=(*_CALL, ErrorCode.BAD_REQUEST, ErrorCode.RESET_REQUIRED,
                            ErrorCode.INVALID_ACTION, ErrorCode.BUSY),
                  description="A step before a reset, or after the episode ended, is refused "
                              "(409); an action outside the space too (422), naming the field."),
         Endpoint("POST", f"{one}/reset", reset, "reset", "Start an episode (seed 0 is a seed)",
                  "sessions", {200: Answer("the first observation", "Reset")}, body="ResetBody",
-                 problems=(*_CALL, ErrorCode.BAD_REQUEST, ErrorCode.BUSY)),
+                 json=True, problems=(*_CALL, ErrorCode.BAD_REQUEST, ErrorCode.BUSY)),
         Endpoint("POST", "/v1/envs", create, "create_session", "Create a session", "sessions",
                  {201: Answer("the session's id and spaces", "Created")}, body="CreateBody",
                  problems=(ErrorCode.BAD_REQUEST, "session_limit", "environment_error",
@@ -186,6 +198,10 @@ def session_endpoints(gateway: Gateway) -> list[Endpoint]:
         Endpoint("POST", f"{one}/action_space/sample", sample, "sample_action",
                  "A random action", "sessions", {200: Answer("an action", "Sample")},
                  problems=_ENV),
+        Endpoint("POST", f"{one}/action_space/contains", contains, "action_space_contains",
+                 "Whether an action belongs to the action space (checked as a step would)",
+                 "sessions", {200: Answer("member, and the reason when not", "Contains")},
+                 body="Sample", body_required=True, problems=_ENV),
         Endpoint("GET", f"{one}/snapshot", snapshot, "snapshot",
                  "The state as data, to restore here or in another session", "sessions",
                  {200: Answer("the snapshot", "SnapshotBody")},
@@ -271,6 +287,8 @@ def component_schemas(observation: dict[str, Any], action: dict[str, Any]) -> di
             "schema": {"type": "object", "description": "a JSON Schema (2020-12)"}}},
         "Sample": {"type": "object", "required": ["action"], "properties": {
             "action": {"$ref": "#/components/schemas/Action"}}},
+        "Contains": {"type": "object", "required": ["member"], "properties": {
+            "member": {"type": "boolean"}, "reason": {"type": "string"}}},
         "SnapshotBody": {"type": "object", "required": ["snapshot"], "properties": {
             "snapshot": {"type": "object", "description": "the state as data: configuration, "
                                                           "generator, actions since the reset"}}},

@@ -36,7 +36,13 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from rlenv.http.json_spaces import dumps, space_to_json, to_json, value_encoder
+from rlenv.http.json_spaces import (
+    action_decoder,
+    dumps,
+    space_to_json,
+    to_json,
+    value_encoder,
+)
 from rlenv.http.problems import Problem, from_remote_error
 from rlenv.http.runners import InlineRunner
 from rlenv.http.targets import Catalog, Entry, Opened
@@ -89,6 +95,7 @@ class Session:
         self._watchers: set[asyncio.Queue[bytes | None]] = set()
         self._encode_observation = value_encoder(self.client.observation_space)
         self._encode_action = value_encoder(self.client.action_space, images=False)
+        self._decode_action = action_decoder(self.client.action_space)
 
     def touch(self) -> None:
         """A request addressed the session: it is not idle."""
@@ -142,6 +149,7 @@ class Session:
         """
         if self.status is Status.ENDED and self.failure is None:
             raise Problem(ErrorCode.RESET_REQUIRED, f"the episode {self._ending}: reset first")
+        action = self._decode_action(action)
         observation, reward, terminated, truncated, info = await self.call(
             lambda: self.client.step(action, repeat_action))
         self.step_index += 1

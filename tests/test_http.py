@@ -10,6 +10,7 @@ import base64
 import http.client
 import json
 import re
+import socket
 import urllib.parse
 from collections.abc import Iterator
 
@@ -345,6 +346,23 @@ def test_sigterm_ends_it_with_streams_open() -> None:
             assert started.process.returncode is not None
         finally:
             stream.close()
+
+
+def test_an_answer_leaves_in_one_write(gateway: Gateway) -> None:
+    """Head and body in one segment: the first read of a kept-alive connection has it all."""
+    session = gateway.session(**ENDLESS)
+    gateway.post(f"/v1/envs/{session}/reset")
+    body = json.dumps({"action": [0.0]}).encode()
+    request = (f"POST /v1/envs/{session}/step HTTP/1.1\r\nHost: {gateway.host}:{gateway.port}"
+               f"\r\nContent-Length: {len(body)}\r\n\r\n").encode() + body
+    with socket.create_connection((gateway.host, gateway.port), timeout=30) as connection:
+        connection.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        for _ in range(30):
+            connection.sendall(request)
+            answer = connection.recv(65536)
+            head, _, rest = answer.partition(b"\r\n\r\n")
+            length = int(re.search(rb"content-length: (\d+)", head.lower()).group(1))
+            assert head.startswith(b"HTTP/1.1 200") and len(rest) == length, answer
 
 
 def test_the_command_says_where_it_listens() -> None:

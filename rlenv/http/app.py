@@ -38,6 +38,7 @@ from rlenv.http.runners import install_alarm
 from rlenv.http.sessions import Sessions
 from rlenv.http.streams import stream_endpoints
 from rlenv.http.targets import Catalog
+from rlenv.http.writes import one_write_protocol
 from rlenv.protocol import PROTOCOL_VERSION, Hello
 from rlenv.serving.endpoint import DEFAULT_HOST, InsecureBindError, is_loopback
 from rlenv_client.origins import OriginPolicy, host_names
@@ -278,8 +279,8 @@ def serve(settings: Settings, *, ready: Callable[[str], None] | None = None,
     settings = replace(settings, port=sock.getsockname()[1])
     app = create_app(settings, hello)
     config = uvicorn.Config(
-        app, loop=loop, http=http, lifespan="on", log_config=None, access_log=False,
-        proxy_headers=False, server_header=False, ws_max_size=settings.max_body,
+        app, loop=loop, http=one_write_protocol(http), lifespan="on", log_config=None,
+        access_log=False, proxy_headers=False, server_header=False, ws_max_size=settings.max_body,
         ws_per_message_deflate=False, timeout_keep_alive=15, timeout_graceful_shutdown=3)
     server = _Server(config, app.state.gateway)
     if ready is not None:

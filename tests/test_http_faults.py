@@ -168,6 +168,20 @@ def test_an_environment_whose_server_dies_is_502_and_the_others_go_on() -> None:
         dying.close()
 
 
+def test_an_environment_that_calls_exit_ends_its_session_not_the_gateway() -> None:
+    hosting = Gateway("examples.faulty:DyingEnvironment")
+    try:
+        exiting, fine = hosting.session(), hosting.session()
+        for session in (exiting, fine):
+            hosting.post(f"/v1/envs/{session}/reset")
+        exited = hosting.request("POST", f"/v1/envs/{exiting}/step", {"action": 2})
+        assert "SystemExit" in assert_problem(exited, 502, "environment_lost")["detail"]
+        assert hosting.get(f"/v1/envs/{exiting}")["status"] == "lost"
+        assert hosting.post(f"/v1/envs/{fine}/step", {"action": 0})["observation"] == [1]
+    finally:
+        hosting.close()
+
+
 def test_a_relayed_server_that_dies_is_502(serve: Serve) -> None:
     server = serve()
     relay = Gateway(server.address)

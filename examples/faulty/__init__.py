@@ -15,10 +15,10 @@ Serve one and drive it: ``rlenv serve examples.faulty:FaultyEnvironment``.
 - :class:`SlowEnvironment`: action 1 makes its tick sleep for an hour (a hung environment:
   what deadlines are for); action 0 behaves.
 - :class:`DyingEnvironment`: action 1 ends its process at once (``os._exit``), as a crash in
-  native code would; action 0 behaves.
+  native code would; action 2 calls ``sys.exit``; action 0 behaves.
 
 ## Action Space
-``Discrete(3)`` (Faulty, WrongShape) or ``Discrete(2)`` (Counting, Unsendable, Slow, Dying).
+``Discrete(3)`` (Faulty, WrongShape, Dying) or ``Discrete(2)`` (Counting, Unsendable, Slow).
 
 ## Observation Space
 ``Box(0, 1000, (1,), int64)`` ticks since the reset (Faulty, Unsendable, Slow, Dying),
@@ -34,6 +34,7 @@ Faulty terminates after 10 ticks; the others never end.
 from __future__ import annotations
 
 import os
+import sys
 import time
 from collections.abc import Mapping
 from typing import Any
@@ -201,11 +202,15 @@ class SlowEnvironment(RLEnvironment):
 
 
 class DyingAgent(UnsendableAgent):
-    """Ends the whole process inside the tick after action 1."""
+    """Ends the whole process inside the tick after action 1; calls ``sys.exit`` after 2."""
+
+    action_space = spaces.Discrete(3)
 
     def _physics_process(self, delta: float) -> None:
         if self.action == 1:
             os._exit(70)  # no cleanup, no answer: as a segfault in native code would
+        if self.action == 2:
+            sys.exit(3)
 
 
 class DyingEnvironment(RLEnvironment):

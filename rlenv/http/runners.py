@@ -8,7 +8,8 @@ Two runners, measured in ``benchmarks/http_step.py``:
   (``SIGALRM``): past it, the environment's code is interrupted by :class:`_Interrupted` (a
   ``BaseException``, so that the environment's own ``except Exception`` cannot swallow it) and
   the call raises :class:`EnvironmentTimeout`. Code stuck in native code without returning to
-  Python cannot be interrupted: serve such an environment with ``--isolate``.
+  Python cannot be interrupted: serve such an environment with ``--isolate``. Its code calling
+  ``sys.exit`` ends its session (``ConnectionLost``), never the gateway.
 - :class:`ThreadRunner` (relays: sessions whose environment is another process): a call runs
   on the session's own thread, one at a time, so that the event loop goes on serving the
   other sessions while a blocking client waits for its server; the client's own timeout ends
@@ -26,6 +27,8 @@ from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from types import FrameType
 from typing import Protocol, TypeVar
+
+from rlenv.protocol.errors import ConnectionLost
 
 __all__ = ["EnvironmentTimeout", "InlineRunner", "Runner", "ThreadRunner", "install_alarm"]
 
@@ -110,6 +113,9 @@ class InlineRunner:
         except _Interrupted:
             raise EnvironmentTimeout(
                 f"the environment did not answer within {timeout or self.timeout:g} s") from None
+        except (SystemExit, KeyboardInterrupt) as error:  # its code tried to end the process
+            raise ConnectionLost(f"the environment tried to end the gateway's process "
+                                 f"({error!r}); it did not") from None
 
     def close(self) -> None:
         """Nothing to release."""

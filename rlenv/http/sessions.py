@@ -345,19 +345,19 @@ class Sessions:
                           f"this gateway holds at most {self.max_sessions} sessions; delete "
                           "one, or retry once an idle one is reaped",
                           headers={"Retry-After": str(self.retry_after())})
-        self._opening += 1
+        self._opening += 1  # counted from now on: concurrent creations respect the limit
         try:
-            opened = await self.catalog.open(entry)
+            session = Session(session_id or secrets.token_hex(8), entry,
+                              await self.catalog.open(entry), self._clock)
+            if settings:
+                try:
+                    await session.configure(settings)
+                except BaseException:
+                    await session.close()
+                    raise
+            self._sessions[session.id] = session
         finally:
             self._opening -= 1
-        session = Session(session_id or secrets.token_hex(8), entry, opened, self._clock)
-        if settings:
-            try:
-                await session.configure(settings)
-            except BaseException:
-                await session.close()
-                raise
-        self._sessions[session.id] = session
         logger.info("session %s created on %s", session.id, env_id)
         return session
 
@@ -393,9 +393,9 @@ class Sessions:
         return idle
 
     async def close_all(self) -> None:
-        """Close every session (the gateway is stopping)."""
-        while self._sessions:
-            await self.delete(next(iter(self._sessions)))
+        """Close every session at once (the gateway is stopping)."""
+        closing, self._sessions = list(self._sessions.values()), {}
+        await asyncio.gather(*(session.close() for session in closing))
 
     def end_watches(self) -> None:
         """Tell every watcher of every session that the gateway is stopping."""

@@ -286,15 +286,18 @@ def test_the_websocket_carries_typed_messages(gateway: Gateway) -> None:
         step = json.loads(websocket.recv(timeout=10))
         assert step["type"] == "step" and step["info"]["frames"] == 2
         for bad, status in (("not json", 400), (json.dumps({"type": "jump"}), 400),
+                            (json.dumps({"type": "step", "action": [float("nan")]}), 400),
                             (json.dumps({"type": "step", "action": [9.0]}), 422)):
             websocket.send(bad)
             error = json.loads(websocket.recv(timeout=10))
             assert error["type"] == "error" and error["problem"]["status"] == status
         websocket.send(json.dumps({"type": "step", "action": [0.5]}))  # it goes on
         assert json.loads(websocket.recv(timeout=10))["type"] == "step"
+        websocket.send(json.dumps({"type": "step", "action": [0.5]}).encode())  # binary
+        assert json.loads(websocket.recv(timeout=10))["info"]["frames"] == 4
         websocket.send(json.dumps({"type": "close"}))
         assert json.loads(websocket.recv(timeout=10)) == {"type": "close"}
-    assert gateway.get(f"/v1/envs/{session}")["step"] == 2  # the session stays
+    assert gateway.get(f"/v1/envs/{session}")["step"] == 3  # the session stays
     with pytest.raises(InvalidStatus) as refused:
         connect(f"ws://{gateway.host}:{gateway.port}/v1/envs/nope/ws").close()
     assert refused.value.response.status_code == 404

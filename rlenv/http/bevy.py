@@ -21,13 +21,12 @@ and a step never waits beyond the gateway's deadline. Additions: ``seed`` on ``/
 from __future__ import annotations
 
 import asyncio
-import json
 from typing import TYPE_CHECKING, Any
 
 from starlette.requests import Request
 from starlette.responses import Response
 
-from rlenv.http.endpoints import Answer, Endpoint, Parameter, json_response
+from rlenv.http.endpoints import Answer, Endpoint, Parameter, json_response, parse_json
 from rlenv.http.png import encode_png
 from rlenv.http.problems import COMMON_HEADERS, Problem
 from rlenv.protocol.errors import ErrorCode
@@ -131,24 +130,13 @@ def _action(payload: str | None, agents: tuple[str, ...]) -> Any:
              f"({len(agents)}: {list(agents)})")
     if payload is None:
         raise Problem(ErrorCode.BAD_REQUEST, f"GET /step needs ?payload= (URL-encoded): {shape}")
-    try:
-        entries = json.loads(payload, parse_constant=_refuse)
-    except ValueError as error:
-        raise Problem(ErrorCode.BAD_REQUEST, f"the payload is not JSON ({error}); expected "
-                                             f"{shape}") from None
+    entries = parse_json(payload, f"the payload (expected {shape})")
     if type(entries) is not list or len(entries) != len(agents) or \
             not all(type(entry) is dict and "action" in entry for entry in entries):
         raise Problem(ErrorCode.BAD_REQUEST, f"the payload must be {shape}")
-    actions = []
-    for index, entry in enumerate(entries):
-        text = entry["action"]
-        if isinstance(text, str):
-            try:
-                text = json.loads(text, parse_constant=_refuse)
-            except ValueError as error:
-                raise Problem(ErrorCode.BAD_REQUEST, f"payload[{index}].action is not JSON "
-                                                     f"text: {error}") from None
-        actions.append(text)
+    actions = [parse_json(entry["action"], f"payload[{index}].action")
+               if isinstance(entry["action"], str) else entry["action"]
+               for index, entry in enumerate(entries)]
     if len(agents) == 1:
         return actions[0]
     return {name: action for name, action in zip(agents, actions, strict=True)
@@ -161,6 +149,3 @@ def _agent_state(outcome: Any) -> dict[str, Any]:
     return {"reward": float(outcome.get("reward", 0.0)),
             "is_terminated": bool(outcome.get("terminated") or outcome.get("truncated"))}
 
-
-def _refuse(name: str) -> Any:
-    raise ValueError(f"{name} is not JSON")

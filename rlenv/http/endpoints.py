@@ -20,7 +20,7 @@ from rlenv.http.problems import COMMON_HEADERS, Problem
 from rlenv.protocol.errors import ErrorCode
 
 __all__ = ["JSON", "Answer", "Endpoint", "JSONRoute", "Parameter", "json_response",
-           "object_body", "read_json"]
+           "object_body", "parse_json", "read_json"]
 
 JSON = "application/json"
 _JSON_HEADERS = [(b"content-type", JSON.encode()),
@@ -144,10 +144,19 @@ def _parse(body: bytes, required: bool, route: str) -> Any:
         if required:
             raise Problem(ErrorCode.BAD_REQUEST, f"{route} needs a JSON body")
         return None
+    return parse_json(body)
+
+
+def parse_json(text: str | bytes, what: str = "the body") -> Any:
+    """``text`` (UTF-8 when bytes) as a JSON value.
+
+    Raises:
+        Problem: ``bad_request`` naming ``what``: not JSON (NaN and Infinity are not).
+    """
     try:
-        return _decode(body.decode())
+        return _decode(text if isinstance(text, str) else text.decode())
     except (ValueError, RecursionError) as error:  # UnicodeDecodeError is a ValueError
-        raise Problem(ErrorCode.BAD_REQUEST, f"the body is not JSON: {error}") from None
+        raise Problem(ErrorCode.BAD_REQUEST, f"{what} is not JSON: {error}") from None
 
 
 def object_body(value: Any, allowed: frozenset[str], required: frozenset[str] = frozenset(),

@@ -19,7 +19,6 @@ fails; the stream ends when the session is deleted or the gateway stops.
 from __future__ import annotations
 
 import asyncio
-import json
 from collections.abc import AsyncIterator
 from typing import TYPE_CHECKING, Any
 
@@ -27,7 +26,7 @@ from starlette.requests import Request
 from starlette.responses import Response, StreamingResponse
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
-from rlenv.http.endpoints import Answer, Endpoint, object_body
+from rlenv.http.endpoints import Answer, Endpoint, object_body, parse_json
 from rlenv.http.json_spaces import dumps
 from rlenv.http.problems import COMMON_HEADERS, Problem
 from rlenv.protocol.errors import ErrorCode
@@ -58,18 +57,22 @@ def stream_endpoints(gateway: Gateway) -> list[Endpoint]:
             return
         await websocket.accept()
         session.websockets += 1
+        receive, send = websocket.receive, websocket.send
         try:
             while True:
-                text = await websocket.receive_text()
-                try:
-                    answer = await _answer(sessions.get(session_id), text)
+                message = await receive()
+                if message["type"] == "websocket.disconnect":
+                    return
+                try:  # a text frame, or a binary one holding UTF-8 JSON
+                    answer = await _answer(sessions.get(session_id), message.get("text") or
+                                           message.get("bytes") or b"")
                 except Problem as problem:
                     answer = {"type": "error", "problem": problem.to_json(websocket.url.path)}
-                await websocket.send_text(dumps(answer).decode())
+                await send({"type": "websocket.send", "text": dumps(answer).decode()})
                 if answer["type"] == "close":
                     await websocket.close(1000)
                     return
-        except WebSocketDisconnect:
+        except WebSocketDisconnect:  # gone while its answer was on the way
             return
         finally:
             session.websockets -= 1
@@ -100,12 +103,9 @@ def stream_endpoints(gateway: Gateway) -> list[Endpoint]:
     ]
 
 
-async def _answer(session: Session, text: str) -> dict[str, Any]:
+async def _answer(session: Session, text: str | bytes) -> dict[str, Any]:
     """The answer to one WebSocket message."""
-    try:
-        message = json.loads(text)
-    except ValueError as error:
-        raise Problem(ErrorCode.BAD_REQUEST, f"the message is not JSON: {error}") from None
+    message = parse_json(text, "the message")
     kind = message.get("type") if type(message) is dict else None
     if kind not in _MESSAGE_KEYS:
         raise Problem(ErrorCode.BAD_REQUEST, "a message is a JSON object whose type is 'reset', "

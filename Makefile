@@ -5,7 +5,8 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-ray test-browser screenshot plinko-picture sb3 rllib cleanrl docs lint vectors clean
+.PHONY: demo test test-ray test-browser screenshot plinko-picture sb3 rllib cleanrl bench-http docs lint vectors\
+	clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -93,6 +94,11 @@ $(CLEANRL_VENV)/ppo.py: | $(CLEANRL_VENV)/.installed
 cleanrl: $(CLEANRL_VENV)/.installed $(CLEANRL_PPO)
 	$(CLEANRL_VENV)/bin/python benchmarks/cleanrl_curves.py $(CLEANRL_PPO) \
 		--total-timesteps $(CLEANRL_STEPS) --seeds $(CLEANRL_SEEDS)
+
+# Optional: a step through the HTTP gateway (rlenv http, the http extra) against a TCP step.
+bench-http: $(STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[http]"
+	$(BIN)/python benchmarks/http_step.py --implementations
 
 lint: $(STAMP)
 	$(BIN)/ruff check rlenv client examples tests benchmarks docs

@@ -59,6 +59,34 @@ def main(argv: Sequence[str] | None = None) -> int:
                        "print its page's address")
     serve.set_defaults(run=_serve)
 
+    http = commands.add_parser(
+        "http", help="serve environments over HTTP/JSON (needs the http extra)",
+        description="An HTTP/JSON gateway: sessions under /v1/envs, bevy_rl's routes on TARGET, "
+        "a WebSocket and server-sent events per session, GET /openapi.json. See docs/http.md.")
+    http.add_argument("target", nargs="?", default=None,
+                      help="the environment class (MODULE:CLASS) or a running server "
+                      "(HOST:PORT); sessions may also use the registered ids")
+    http.add_argument("--host", default=DEFAULT_HOST,
+                      help=f"address to bind (default {DEFAULT_HOST})")
+    http.add_argument("--port", type=_port, default=8000, help="port to bind (default 8000; 0: "
+                      "any free)")
+    http.add_argument("--token", default=os.environ.get("RLENV_TOKEN"),
+                      help="bearer token every request must carry (default: $RLENV_TOKEN); "
+                      "required to bind anything but loopback")
+    http.add_argument("--isolate", action="store_true",
+                      help="run each session's environment in a server subprocess of its own "
+                      "(a crash or a hang takes only its session: 502, 504)")
+    http.add_argument("--timeout", type=float, default=30.0,
+                      help="seconds an environment may take to answer (default 30; then 504)")
+    http.add_argument("--max-sessions", type=int, default=32,
+                      help="sessions at once (default 32; then 503)")
+    http.add_argument("--max-body", type=int, default=1 << 20,
+                      help="largest request body in bytes (default 1 MiB; then 413)")
+    http.add_argument("--idle-timeout", type=float, default=600.0,
+                      help="seconds after which a session without requests is closed (default "
+                      "600; 0: never)")
+    http.set_defaults(run=_http)
+
     inspect = commands.add_parser(
         "inspect", help="watch running servers in the browser (a page on 127.0.0.1)")
     inspect.add_argument("addresses", nargs="+", metavar="HOST:PORT",
@@ -182,6 +210,21 @@ def _start_inspector(host: str, port: int, token: str | None) -> subprocess.Pope
     address = f"{'127.0.0.1' if host in ('0.0.0.0', '') else host}:{port}"
     return subprocess.Popen([sys.executable, "-m", "rlenv_client.inspector", address,
                              "--follow-stdin"], stdin=subprocess.PIPE, env=env)
+
+
+def _http(args: argparse.Namespace) -> int:
+    try:
+        from rlenv.http.app import Settings, serve
+    except ImportError as error:
+        print(f"rlenv http: {error.name or error} is missing; install the http extra: "
+              "pip install 'rlenv[http]'", file=sys.stderr)
+        return 2
+    settings = Settings(target=args.target, host=args.host, port=args.port, token=args.token,
+                        isolate=args.isolate, timeout=args.timeout,
+                        max_sessions=args.max_sessions, max_body=args.max_body,
+                        idle_timeout=args.idle_timeout or None)
+    serve(settings, ready=lambda url: print(f"listening on {url}", flush=True))
+    return 0
 
 
 def _inspect(args: argparse.Namespace) -> int:

@@ -12,12 +12,16 @@ Serve one and drive it: ``rlenv serve examples.faulty:FaultyEnvironment``.
   ``rlenv check`` reports.
 - :class:`UnsendableEnvironment`: after action 1, ``info`` holds a value msgpack cannot carry;
   the server answers with an ``environment_error`` instead.
+- :class:`SlowEnvironment`: action 1 makes its tick sleep for an hour (a hung environment:
+  what deadlines are for); action 0 behaves.
+- :class:`DyingEnvironment`: action 1 ends its process at once (``os._exit``), as a crash in
+  native code would; action 2 calls ``sys.exit``; action 0 behaves.
 
 ## Action Space
-``Discrete(3)`` (Faulty, WrongShape) or ``Discrete(2)`` (Counting, Unsendable).
+``Discrete(3)`` (Faulty, WrongShape, Dying) or ``Discrete(2)`` (Counting, Unsendable, Slow).
 
 ## Observation Space
-``Box(0, 1000, (1,), int64)`` ticks since the reset (Faulty, Unsendable),
+``Box(0, 1000, (1,), int64)`` ticks since the reset (Faulty, Unsendable, Slow, Dying),
 ``Box(0, 1e9, (1,), float64)`` (Counting).
 
 ## Rewards
@@ -29,6 +33,9 @@ Faulty terminates after 10 ticks; the others never end.
 
 from __future__ import annotations
 
+import os
+import sys
+import time
 from collections.abc import Mapping
 from typing import Any
 
@@ -175,3 +182,41 @@ class UnsendableEnvironment(RLEnvironment):
         """A set after action 1, which cannot travel; nothing otherwise."""
         assert isinstance(self.agent, UnsendableAgent)
         return {"odd": {1, 2}} if self.agent.action == 1 else {}
+
+
+class SlowAgent(UnsendableAgent):
+    """Sleeps for an hour inside the tick after action 1."""
+
+    def _physics_process(self, delta: float) -> None:
+        if self.action == 1:
+            time.sleep(3600)
+
+
+class SlowEnvironment(RLEnvironment):
+    """A counting world whose agent hangs on action 1 (see :class:`SlowAgent`)."""
+
+    def __init__(self) -> None:
+        super().__init__("Slow", repeat_action=1)
+        self.add_child(SlowAgent())
+        self.add_child(CountingWorld())
+
+
+class DyingAgent(UnsendableAgent):
+    """Ends the whole process inside the tick after action 1; calls ``sys.exit`` after 2."""
+
+    action_space = spaces.Discrete(3)
+
+    def _physics_process(self, delta: float) -> None:
+        if self.action == 1:
+            os._exit(70)  # no cleanup, no answer: as a segfault in native code would
+        if self.action == 2:
+            sys.exit(3)
+
+
+class DyingEnvironment(RLEnvironment):
+    """A counting world whose agent kills its process on action 1 (see :class:`DyingAgent`)."""
+
+    def __init__(self) -> None:
+        super().__init__("Dying", repeat_action=1)
+        self.add_child(DyingAgent())
+        self.add_child(CountingWorld())

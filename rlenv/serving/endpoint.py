@@ -59,7 +59,7 @@ from rlenv.protocol.errors import ErrorCode, LocalProtocolError, ProtocolError
 from rlenv.protocol.sockets import configure_socket
 
 __all__ = ["DEFAULT_HOST", "HOUSEKEEPING_INTERVAL", "Endpoint", "InsecureBindError", "Limits",
-           "Peer"]
+           "Peer", "is_loopback"]
 
 logger = logging.getLogger(__name__)
 
@@ -198,7 +198,7 @@ class Endpoint:
             raise RuntimeError(f"already listening on {self.address}")
         if type(port) is not int or not 0 <= port <= 65535:
             raise ValueError(f"port must be an integer from 0 to 65535, got {port!r:.40}")
-        if self._token is None and not _is_loopback(host):
+        if self._token is None and not is_loopback(host):
             raise InsecureBindError(
                 f"refusing to listen on {host}: anyone who can reach it could drive this "
                 "environment. Set a token (rlenv serve --token, or RLENV_TOKEN) that clients "
@@ -531,7 +531,8 @@ def _bind_error(error: OSError, host: str, port: int) -> OSError:
     return clear
 
 
-def _is_loopback(host: str) -> bool:
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` (an address, or ``localhost``) is a loopback address."""
     if host == "localhost":
         return True
     try:

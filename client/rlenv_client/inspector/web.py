@@ -33,12 +33,12 @@ from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 from rlenv_client.inspector.watch import InspectorError, Watcher
+from rlenv_client.origins import OriginPolicy
 
 __all__ = ["InspectorServer"]
 
 logger = logging.getLogger(__name__)
 
-LOCAL_HOSTS = ("127.0.0.1", "localhost", "[::1]")
 _MAX_BODY = 64 * 1024
 _STATIC = {"inspector.js": "text/javascript; charset=utf-8",
            "inspector.css": "text/css; charset=utf-8",
@@ -70,10 +70,7 @@ class InspectorServer(ThreadingHTTPServer):
         super().__init__(("127.0.0.1", port), _Handler)
         self.watcher = watcher
         self.key = key or secrets.token_urlsafe(18)
-        port = self.server_address[1]
-        self.allowed_hosts = frozenset(
-            name for host in LOCAL_HOSTS for name in (host, f"{host}:{port}"))
-        self.allowed_origins = frozenset(f"http://{host}:{port}" for host in LOCAL_HOSTS)
+        self.origins = OriginPolicy(self.server_address[1])
         self._thread: threading.Thread | None = None
 
     @property
@@ -186,14 +183,10 @@ class _Handler(BaseHTTPRequestHandler):
 
     def _route(self) -> tuple[str, dict[str, list[str]]] | None:
         """The path below the key and the query, or ``None`` once a refusal is sent."""
-        host = self.headers.get("Host", "")
-        if host not in self.server.allowed_hosts:
-            self._send_json(403, {"error": "refused: the Host header must be 127.0.0.1, "
-                                           "localhost or [::1] with this port"})
-            return None
-        origin = self.headers.get("Origin")
-        if origin is not None and origin not in self.server.allowed_origins:
-            self._send_json(403, {"error": "refused: a request from another origin"})
+        refusal = self.server.origins.refusal(self.headers.get("Host", ""),
+                                              self.headers.get("Origin"))
+        if refusal is not None:
+            self._send_json(403, {"error": refusal})
             return None
         url = urlsplit(self.path)
         key, _, rest = url.path.lstrip("/").partition("/")

@@ -1,0 +1,23 @@
+"""An HTTP/JSON gateway to rlenv environments: ``rlenv http [TARGET]`` (the ``http`` extra).
+
+A program in any language, or curl, drives environments without a msgpack client:
+gym-http-api's sessions under ``/v1/envs``, bevy_rl's routes on the command line's TARGET, a
+WebSocket and server-sent events per session, RFC 9457 problems for every error, and an
+OpenAPI 3.1 document generated from the route table. ``docs/http.md`` is the guide.
+
+One module per job (importing this package imports none of them, nor Starlette):
+
+- :mod:`~rlenv.http.app`: the Starlette application and uvicorn's server (``serve``);
+  :mod:`~rlenv.http.writes`: one write per response;
+- :mod:`~rlenv.http.guard`: Host, Origin, token and body size, checked before any route;
+- :mod:`~rlenv.http.endpoints`: the route record, JSON bodies in and out;
+- :mod:`~rlenv.http.routes`: the ``/v1`` session API; :mod:`~rlenv.http.bevy`: bevy_rl's
+  routes; :mod:`~rlenv.http.streams`: the WebSocket and the event stream;
+- :mod:`~rlenv.http.openapi`: the OpenAPI document from the route table;
+- :mod:`~rlenv.http.sessions`: sessions, limits, the idle reaper;
+- :mod:`~rlenv.http.targets`: what an ``env_id`` names and where its environment runs;
+- :mod:`~rlenv.http.runners`: how a call reaches an environment, under a deadline;
+- :mod:`~rlenv.http.problems`: errors as problem details;
+- :mod:`~rlenv.http.json_spaces`: spaces, JSON Schemas and values as JSON;
+  :mod:`~rlenv.http.png`: PNG images.
+"""

@@ -1,0 +1,403 @@
+"""Sessions: one environment each, gym-http-api style, with limits and an idle reaper.
+
+A :class:`Session` holds a client of its environment (any
+:class:`~rlenv_client.base.BaseClient`: a :class:`~rlenv_client.local.LocalClient` in this
+process, or a TCP :class:`~rlenv_client.client.Client` of a server) and the
+:class:`~rlenv.http.runners.Runner` that calls it under a deadline. Its answers are JSON values
+(:mod:`rlenv.http.json_spaces`); its refusals are problems (:class:`~rlenv.http.problems.Problem`).
+
+A session's ``status``:
+
+- ``ready``: created, no episode yet; ``running``: an episode is under way; ``ended``: the
+  episode terminated or was truncated (a step is refused until a reset);
+- ``timed_out`` (504) and ``lost`` (502, its server died): the session is over and says so
+  in every answer until it is deleted; its environment is released at once, and the other
+  sessions go on.
+
+Watchers follow a session's transitions through :meth:`Session.watch` (server-sent events:
+``id`` is the step's index in the episode, 0 for a reset); a watcher that falls behind loses
+the oldest events, never slows the session.
+
+:class:`Sessions` is the table: at most ``max_sessions`` (``session_limit``, 503 with
+``Retry-After``: when the first idle session will be reaped), and sessions idle for
+``idle_timeout`` seconds are closed by :meth:`Sessions.reap`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import secrets
+import time
+from collections.abc import Callable, Mapping
+from enum import StrEnum
+from typing import Any, TypeVar
+
+import numpy as np
+
+from rlenv.http.json_spaces import (
+    action_decoder,
+    dumps,
+    space_to_json,
+    to_json,
+    value_encoder,
+)
+from rlenv.http.problems import Problem, from_remote_error
+from rlenv.http.runners import InlineRunner
+from rlenv.http.targets import Catalog, Entry, Opened
+from rlenv.protocol.errors import ConnectionLost, ErrorCode, RemoteError
+
+__all__ = ["Session", "Sessions", "Status"]
+
+logger = logging.getLogger(__name__)
+
+_T = TypeVar("_T")
+_WATCH_BACKLOG = 64  # events a watcher may fall behind before the oldest are dropped
+
+
+class Status(StrEnum):
+    """Where a session stands (see the module docstring)."""
+
+    READY = "ready"
+    RUNNING = "running"
+    ENDED = "ended"
+    TIMED_OUT = "timed_out"
+    LOST = "lost"
+
+
+class Session:
+    """One environment, driven through its client; see the module docstring.
+
+    Args:
+        session_id: the session's id in URLs.
+        entry: what ``env_id`` it was created with.
+        opened: its environment (client and runner).
+        clock: monotonic seconds, for idleness.
+    """
+
+    def __init__(self, session_id: str, entry: Entry, opened: Opened,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.id = session_id
+        self.env_id = entry.env_id
+        self.max_episode_steps = entry.max_episode_steps
+        self.client = opened.client
+        self._opened: Opened | None = opened
+        self._clock = clock
+        self.last_used = clock()
+        self.created = time.time()
+        self.status = Status.READY
+        self.episode = 0
+        self.step_index = 0
+        self.failure: Problem | None = None
+        self.websockets = 0  # open WebSocket conversations: the session is in use
+        self._ending = ""
+        self._watchers: set[asyncio.Queue[bytes | None]] = set()
+        self._encode_observation = value_encoder(self.client.observation_space)
+        self._encode_action = value_encoder(self.client.action_space, images=False)
+        self._decode_action = action_decoder(self.client.action_space)
+
+    def touch(self) -> None:
+        """A request addressed the session: it is not idle."""
+        self.last_used = self._clock()
+
+    @property
+    def agents(self) -> tuple[str, ...]:
+        """The environment's agents, in order."""
+        return self.client.hello.agents
+
+    def describe(self) -> dict[str, Any]:
+        """The session as ``GET /v1/envs/{id}`` shows it."""
+        described: dict[str, Any] = {
+            "id": self.id, "env_id": self.env_id, "status": self.status.value,
+            "episode": self.episode, "step": self.step_index, "agents": list(self.agents),
+            "idle_seconds": round(self._clock() - self.last_used, 3),
+            "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(self.created))}
+        if self.max_episode_steps is not None:
+            described["max_episode_steps"] = self.max_episode_steps
+        if self.failure is not None:
+            described["problem"] = self.failure.to_json()
+        return described
+
+    def spaces(self) -> dict[str, Any]:
+        """The action and observation spaces, as JSON (:func:`space_to_json`)."""
+        return {"action_space": space_to_json(self.client.action_space),
+                "observation_space": space_to_json(self.client.observation_space)}
+
+    # --- what clients ask -------------------------------------------------------------------
+
+    async def configure(self, settings: Mapping[str, Any]) -> None:
+        """Configure the environment as ``BaseClient.configure(**settings)`` does."""
+        await self.call(lambda: self.client.configure(**settings))
+
+    async def reset(self, seed: int | None = None,
+                    options: Mapping[str, Any] | None = None) -> dict[str, Any]:
+        """Start an episode: ``{"observation", "info"}`` (seed 0 is a seed)."""
+        observation, info = await self.call(
+            lambda: self.client.reset(seed=seed, options=options))
+        self._begin(0)
+        answer = {"observation": self._encode_observation(observation), "info": to_json(info)}
+        self._publish("reset", answer)
+        return answer
+
+    async def step(self, action: Any, repeat_action: int | None = None) -> dict[str, Any]:
+        """Act: ``{"observation", "reward", "terminated", "truncated", "info"}``.
+
+        Raises:
+            Problem: ``reset_required`` once the episode ended (or before a reset, as the
+                environment says), ``invalid_action``, ``bad_request``, and the session's own.
+        """
+        if self.status is Status.ENDED and self.failure is None:
+            raise Problem(ErrorCode.RESET_REQUIRED, f"the episode {self._ending}: reset first")
+        action = self._decode_action(action)
+        observation, reward, terminated, truncated, info = await self.call(
+            lambda: self.client.step(action, repeat_action))
+        self.step_index += 1
+        if self.max_episode_steps is not None and self.step_index >= self.max_episode_steps \
+                and not terminated:
+            truncated = True
+        if terminated or truncated:
+            self.status = Status.ENDED
+            self._ending = "terminated" if terminated else (
+                "was truncated" if self.max_episode_steps is None or
+                self.step_index < self.max_episode_steps else
+                f"reached its time limit of {self.max_episode_steps} steps")
+        answer = {"observation": self._encode_observation(observation), "reward": float(reward),
+                  "terminated": bool(terminated), "truncated": bool(truncated),
+                  "info": to_json(info)}
+        self._publish("step", answer)
+        return answer
+
+    async def observe(self) -> Any:
+        """The agent's current observation, as JSON, without stepping."""
+        observed = await self.call(self.client.observe)
+        return self._encode_observation(observed["agent"])
+
+    async def render(self, width: int | None = None, height: int | None = None) -> np.ndarray:
+        """A frame: ``(height, width, 3)`` uint8."""
+        return await self.call(lambda: self.client.render(width, height))
+
+    async def snapshot(self) -> Any:
+        """The state as data (``BaseClient.snapshot``), as JSON."""
+        return to_json(await self.call(self.client.snapshot))
+
+    async def restore(self, snapshot: Mapping[str, Any]) -> dict[str, Any]:
+        """Bring the environment to a snapshot's state: ``{"observation", "info"}``."""
+        observation, info = await self.call(lambda: self.client.restore(snapshot))
+        events = snapshot.get("events")
+        self._begin(sum(1 for event in events if event and event[0] == "action")
+                    if isinstance(events, list) else 0)
+        answer = {"observation": self._encode_observation(observation), "info": to_json(info)}
+        self._publish("restore", answer)
+        return answer
+
+    def sample(self) -> Any:
+        """A random action of the action space, as JSON."""
+        return self._encode_action(self.client.action_space.sample())
+
+    # --- the environment's calls, failures --------------------------------------------------
+
+    async def call(self, function: Callable[[], _T]) -> _T:
+        """``function()`` (a call to :attr:`client`) through the runner, failures as problems.
+
+        Raises:
+            Problem: the environment's refusal (its code), or the session's failure:
+                ``timeout`` (504) or ``environment_lost`` (502), this time and every next.
+        """
+        if self.failure is not None or self._opened is None:
+            failure = self.failure or Problem("environment_lost", "the session is closed")
+            raise Problem(failure.code, failure.detail)
+        self.last_used = self._clock()
+        try:
+            return await self._opened.runner.call(function)
+        except RemoteError as error:
+            if error.fatal:
+                raise await self._fail(Status.LOST, "environment_lost",
+                                       f"the environment's server closed the connection: "
+                                       f"{error}") from None
+            raise from_remote_error(error) from None
+        except TimeoutError as error:
+            raise await self._fail(Status.TIMED_OUT, ErrorCode.TIMEOUT, str(error)) from None
+        except ConnectionLost as error:
+            raise await self._fail(Status.LOST, "environment_lost",
+                                   f"the environment's server died: {error}") from None
+
+    async def _fail(self, status: Status, code: str, why: str) -> Problem:
+        """Mark the session over (it says so until deleted) and release its environment."""
+        self.status = status
+        self.failure = Problem(code, f"{why}; this session is over: DELETE it and create "
+                                     "another (the others go on)")
+        logger.warning("session %s (%s): %s", self.id, self.env_id, why)
+        self._publish("status", self.describe())
+        await self.close(keep_watchers=True)
+        return Problem(code, self.failure.detail)
+
+    async def close(self, keep_watchers: bool = False) -> None:
+        """Release the environment (and its server subprocess); safe to repeat."""
+        opened, self._opened = self._opened, None
+        if not keep_watchers:
+            self.end_watches()
+        if opened is None:
+            return
+        try:
+            if isinstance(opened.runner, InlineRunner):
+                opened.close()  # an in-process environment: its tree, on the loop's thread
+            else:
+                await asyncio.get_running_loop().run_in_executor(None, opened.close)
+        except Exception:  # a half-interrupted environment may fail to close: it is gone anyway
+            logger.warning("session %s: closing its environment failed", self.id,
+                           exc_info=True)
+
+    # --- watchers ---------------------------------------------------------------------------
+
+    def watch(self) -> asyncio.Queue[bytes | None]:
+        """A queue of server-sent events (bytes), ``None`` when the session ends."""
+        queue: asyncio.Queue[bytes | None] = asyncio.Queue(_WATCH_BACKLOG)
+        self._watchers.add(queue)
+        return queue
+
+    def unwatch(self, queue: asyncio.Queue[bytes | None]) -> None:
+        """Stop filling ``queue``."""
+        self._watchers.discard(queue)
+
+    def end_watches(self) -> None:
+        """Tell every watcher the session ended."""
+        for queue in self._watchers:
+            _offer(queue, None)
+        self._watchers.clear()
+
+    def _begin(self, step: int) -> None:
+        self.episode += 1
+        self.step_index = step
+        self.status = Status.RUNNING
+
+    def _publish(self, event: str, data: dict[str, Any]) -> None:
+        if not self._watchers:
+            return
+        body = dumps({"episode": self.episode, "step": self.step_index, **data})
+        message = b"id: %d\nevent: %s\ndata: %s\n\n" % (self.step_index, event.encode(), body)
+        for queue in self._watchers:
+            _offer(queue, message)
+
+
+def _offer(queue: asyncio.Queue[bytes | None], item: bytes | None) -> None:
+    """Put ``item``, dropping the oldest event of a full queue (a watcher never blocks)."""
+    if queue.full():
+        queue.get_nowait()
+    queue.put_nowait(item)
+
+
+class Sessions:
+    """The sessions, by id; see the module docstring.
+
+    Args:
+        catalog: the ``env_id`` values served and how they open.
+        max_sessions: sessions at once.
+        idle_timeout: seconds without a request after which a session is closed (``None``:
+            never).
+        clock: monotonic seconds.
+    """
+
+    def __init__(self, catalog: Catalog, *, max_sessions: int = 32,
+                 idle_timeout: float | None = 600.0,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.catalog = catalog
+        self.max_sessions = max_sessions
+        self.idle_timeout = idle_timeout
+        self._clock = clock
+        self._sessions: dict[str, Session] = {}
+        self._opening = 0
+
+    def __len__(self) -> int:
+        return len(self._sessions)
+
+    def all(self) -> list[Session]:
+        """Every session, oldest first."""
+        return list(self._sessions.values())
+
+    def get(self, session_id: str) -> Session:
+        """The session ``session_id``.
+
+        Raises:
+            Problem: ``unknown_session`` (404).
+        """
+        session = self._sessions.get(session_id)
+        if session is None:
+            raise Problem("unknown_session", f"no session {session_id!r:.80} (deleted, reaped "
+                                             "after being idle, or never created)")
+        return session
+
+    def find(self, session_id: str) -> Session | None:
+        """The session ``session_id``, or ``None``."""
+        return self._sessions.get(session_id)
+
+    async def create(self, env_id: object, settings: Mapping[str, Any] | None = None,
+                     session_id: str | None = None) -> Session:
+        """Open a session on ``env_id``, configured with ``settings`` (``kwargs``).
+
+        Raises:
+            Problem: ``bad_request`` (unknown ``env_id``), ``session_limit`` (503 with
+                ``Retry-After``), and the environment's failures to open or configure.
+        """
+        entry = self.catalog.entry(env_id)
+        if len(self._sessions) + self._opening >= self.max_sessions:
+            raise Problem("session_limit",
+                          f"this gateway holds at most {self.max_sessions} sessions; delete "
+                          "one, or retry once an idle one is reaped",
+                          headers={"Retry-After": str(self.retry_after())})
+        self._opening += 1  # counted from now on: concurrent creations respect the limit
+        try:
+            session = Session(session_id or secrets.token_hex(8), entry,
+                              await self.catalog.open(entry), self._clock)
+            if settings:
+                try:
+                    await session.configure(settings)
+                except BaseException:
+                    await session.close()
+                    raise
+            self._sessions[session.id] = session
+        finally:
+            self._opening -= 1
+        logger.info("session %s created on %s", session.id, env_id)
+        return session
+
+    async def delete(self, session_id: str) -> None:
+        """Close and forget the session.
+
+        Raises:
+            Problem: ``unknown_session``.
+        """
+        session = self.get(session_id)
+        del self._sessions[session_id]
+        await session.close()
+
+    def retry_after(self) -> int:
+        """Seconds until the first idle session is reaped (at least 1)."""
+        if self.idle_timeout is None or not self._sessions:
+            return 1
+        now = self._clock()
+        soonest = min(session.last_used + self.idle_timeout - now
+                      for session in self._sessions.values())
+        return max(1, math.ceil(soonest))
+
+    async def reap(self) -> list[str]:
+        """Close the sessions idle for longer than ``idle_timeout``; returns their ids."""
+        if self.idle_timeout is None:
+            return []
+        deadline = self._clock() - self.idle_timeout
+        idle = [s.id for s in self._sessions.values()
+                if s.last_used < deadline and not s.websockets]
+        for session_id in idle:
+            logger.info("session %s reaped after %.0f s idle", session_id, self.idle_timeout)
+            await self.delete(session_id)
+        return idle
+
+    async def close_all(self) -> None:
+        """Close every session at once (the gateway is stopping)."""
+        closing, self._sessions = list(self._sessions.values()), {}
+        await asyncio.gather(*(session.close() for session in closing))
+
+    def end_watches(self) -> None:
+        """Tell every watcher of every session that the gateway is stopping."""
+        for session in self._sessions.values():
+            session.end_watches()

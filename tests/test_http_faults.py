@@ -1,0 +1,309 @@
+"""The HTTP gateway's error statuses and safety rules, through real ``rlenv http`` subprocesses.
+
+Every status of the issue: 400, 404, 409, 422, 503 with Retry-After, 504 (an environment that
+hangs: in the gateway's process, and isolated), 502 (an environment whose server dies: isolated,
+and a relayed server); each as an RFC 9457 problem, and each followed by a request that is
+served. Then Host, Origin, the token, body limits, idle sessions, garbage on the socket.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+
+import pytest
+from conftest import Serve, wait_until
+from http_gateway import Gateway, assert_problem
+
+CARTPOLE = "examples.cartpole:CartPoleEnvironment"
+
+
+@pytest.fixture(scope="module")
+def gateway() -> Iterator[Gateway]:
+    started = Gateway(CARTPOLE, "--max-body", "4096")
+    yield started
+    started.close()
+
+
+def test_bad_bodies_are_400(gateway: Gateway) -> None:
+    session = gateway.session()
+    step = f"/v1/envs/{session}/step"
+    assert "not JSON" in assert_problem(gateway.request("POST", step, raw=b'{"action": '),
+                                        400, "bad_request")["detail"]
+    assert_problem(gateway.request("POST", step, raw=b'{"action": [NaN]}'), 400, "bad_request")
+    assert_problem(gateway.request("POST", step), 400, "bad_request")  # no body
+    assert_problem(gateway.request("POST", step, [0.5]), 400, "bad_request")
+    unknown = gateway.request("POST", step, {"action": [0.5], "repeat": 2})
+    assert "'repeat'" in assert_problem(unknown, 400, "bad_request")["detail"]
+    assert_problem(gateway.request("POST", step, {"repeat_action": 2}), 400, "bad_request")
+    gateway.post(f"/v1/envs/{session}/reset")
+    assert_problem(gateway.request("POST", step, {"action": [0.5], "repeat_action": 0}), 400,
+                   "bad_request")
+    assert_problem(gateway.request("POST", f"/v1/envs/{session}/reset", {"seed": -1}), 400,
+                   "bad_request")
+    assert_problem(gateway.request("POST", f"/v1/envs/{session}/reset", {"seed": True}), 400,
+                   "bad_request")
+    unknown_id = gateway.request("POST", "/v1/envs", {"env_id": "os:system"})
+    assert "rlenv/CartPole-v0" in assert_problem(unknown_id, 400, "bad_request")["detail"]
+    assert gateway.post(step, {"action": [0.5]})["info"]["frames"] == 4  # served after all that
+
+
+def test_unknown_sessions_and_routes_are_404_and_methods_405(gateway: Gateway) -> None:
+    for method, path in (("GET", "/v1/envs/nope"), ("POST", "/v1/envs/nope/step"),
+                         ("POST", "/v1/envs/nope/reset"), ("GET", "/v1/envs/nope/render"),
+                         ("GET", "/v1/envs/nope/action_space"),
+                         ("POST", "/v1/envs/nope/action_space/sample")):
+        assert_problem(gateway.request(method, path, {"action": [0.0]}), 404, "unknown_session")
+    assert_problem(gateway.request("GET", "/no/such/route"), 404, "not_found")
+    wrong = gateway.request("PUT", "/v1/envs")
+    assert_problem(wrong, 405, "method_not_allowed")
+    assert set(wrong.headers["allow"].replace(" ", "").split(",")) >= {"GET", "POST"}
+    assert "access-control-allow-origin" not in wrong.headers  # never CORS
+    assert_problem(gateway.request("OPTIONS", "/v1/envs"), 405, "method_not_allowed")
+
+
+def test_steps_before_a_reset_and_after_the_end_are_409(gateway: Gateway) -> None:
+    session = gateway.session()
+    early = gateway.request("POST", f"/v1/envs/{session}/step", {"action": [0.0]})
+    assert "reset" in assert_problem(early, 409, "reset_required")["detail"]
+    gateway.post(f"/v1/envs/{session}/reset", {"seed": 0})
+    for _ in range(500):
+        if gateway.post(f"/v1/envs/{session}/step", {"action": [1.0]})["terminated"]:
+            break
+    assert gateway.get(f"/v1/envs/{session}")["status"] == "ended"
+    late = gateway.request("POST", f"/v1/envs/{session}/step", {"action": [0.0]})
+    assert "terminated" in assert_problem(late, 409, "reset_required")["detail"]
+    gateway.post(f"/v1/envs/{session}/reset")
+    assert gateway.get(f"/v1/envs/{session}")["status"] == "running"
+
+
+def test_actions_outside_the_space_are_422(gateway: Gateway) -> None:
+    session = gateway.session()
+    gateway.post(f"/v1/envs/{session}/reset", {"seed": 0})
+    for action, words in (([2.0], "outside the bounds"), ([0.1, 0.2], "shape"),
+                          ("left", "array"), ([None], "")):
+        reply = gateway.request("POST", f"/v1/envs/{session}/step", {"action": action})
+        assert words in assert_problem(reply, 422, "invalid_action")["detail"]
+    assert gateway.get(f"/v1/envs/{session}")["step"] == 0  # a refused action changed nothing
+    gateway.post(f"/v1/envs/{session}/step", {"action": [0.0]})
+
+
+def test_the_session_limit_is_503_with_retry_after() -> None:
+    limited = Gateway(CARTPOLE, "--max-sessions", "2", "--idle-timeout", "120")
+    try:
+        first, _ = limited.session(), limited.session()
+        full = limited.request("POST", "/v1/envs", {})
+        assert_problem(full, 503, "session_limit")
+        assert 1 <= int(full.headers["retry-after"]) <= 120
+        assert limited.request("DELETE", f"/v1/envs/{first}").status == 204
+        limited.session()
+    finally:
+        limited.close()
+
+
+def test_idle_sessions_are_reaped() -> None:
+    reaping = Gateway(CARTPOLE, "--idle-timeout", "0.5")
+    try:
+        session = reaping.session()
+        wait_until(lambda: not reaping.get("/v1/envs")["envs"], "the idle session stayed",
+                   seconds=20)
+        assert_problem(reaping.request("GET", f"/v1/envs/{session}"), 404, "unknown_session")
+    finally:
+        reaping.close()
+
+
+def test_an_environment_that_hangs_is_504_and_the_others_go_on() -> None:
+    slow = Gateway("examples.faulty:SlowEnvironment", "--timeout", "0.5")
+    try:
+        hung, fine = slow.session(), slow.session()
+        for session in (hung, fine):
+            slow.post(f"/v1/envs/{session}/reset", {"seed": 0})
+        started = time.monotonic()
+        timed_out = slow.request("POST", f"/v1/envs/{hung}/step", {"action": 1})
+        assert_problem(timed_out, 504, "timeout")
+        assert time.monotonic() - started < 30
+        described = slow.get(f"/v1/envs/{hung}")
+        assert described["status"] == "timed_out" and described["problem"]["status"] == 504
+        assert_problem(slow.request("POST", f"/v1/envs/{hung}/step", {"action": 0}), 504,
+                       "timeout")  # the session says so until it is deleted
+        assert slow.post(f"/v1/envs/{fine}/step", {"action": 0})["observation"] == [1]
+        assert slow.request("DELETE", f"/v1/envs/{hung}").status == 204
+    finally:
+        slow.close()
+
+
+def test_an_isolated_environment_that_hangs_is_504() -> None:
+    slow = Gateway("examples.faulty:SlowEnvironment", "--isolate", "--timeout", "1")
+    try:
+        hung, fine = slow.session(), slow.session()
+        for session in (hung, fine):
+            slow.post(f"/v1/envs/{session}/reset", {"seed": 0})
+        assert_problem(slow.request("POST", f"/v1/envs/{hung}/step", {"action": 1}), 504,
+                       "timeout")
+        assert slow.get(f"/v1/envs/{hung}")["status"] == "timed_out"
+        assert slow.post(f"/v1/envs/{fine}/step", {"action": 0})["observation"] == [1]
+        assert slow.get("/v1")["hosting"] == "isolated"
+    finally:
+        slow.close()
+
+
+def test_an_environment_whose_server_dies_is_502_and_the_others_go_on() -> None:
+    dying = Gateway("examples.faulty:DyingEnvironment", "--isolate", "--timeout", "10")
+    try:
+        lost, fine = dying.session(), dying.session()
+        for session in (lost, fine):
+            dying.post(f"/v1/envs/{session}/reset", {"seed": 0})
+        assert_problem(dying.request("POST", f"/v1/envs/{lost}/step", {"action": 1}), 502,
+                       "environment_lost")
+        described = dying.get(f"/v1/envs/{lost}")
+        assert described["status"] == "lost" and described["problem"]["status"] == 502
+        assert_problem(dying.request("POST", f"/v1/envs/{lost}/reset"), 502, "environment_lost")
+        assert dying.post(f"/v1/envs/{fine}/step", {"action": 0})["observation"] == [1]
+        assert {s["status"] for s in dying.get("/v1/envs")["envs"]} == {"lost", "running"}
+    finally:
+        dying.close()
+
+
+def test_an_environment_that_calls_exit_ends_its_session_not_the_gateway() -> None:
+    hosting = Gateway("examples.faulty:DyingEnvironment")
+    try:
+        exiting, fine = hosting.session(), hosting.session()
+        for session in (exiting, fine):
+            hosting.post(f"/v1/envs/{session}/reset")
+        exited = hosting.request("POST", f"/v1/envs/{exiting}/step", {"action": 2})
+        assert "SystemExit" in assert_problem(exited, 502, "environment_lost")["detail"]
+        assert hosting.get(f"/v1/envs/{exiting}")["status"] == "lost"
+        assert hosting.post(f"/v1/envs/{fine}/step", {"action": 0})["observation"] == [1]
+    finally:
+        hosting.close()
+
+
+def test_a_relayed_server_that_dies_is_502(serve: Serve) -> None:
+    server = serve()
+    relay = Gateway(server.address)
+    try:
+        session = relay.session()
+        assert relay.post(f"/v1/envs/{session}/reset", {"seed": 3})["observation"]
+        assert relay.post(f"/v1/envs/{session}/step", {"action": [0.0]})["info"]["frames"] == 4
+        second = relay.session()  # the server's one environment has one controller
+        assert_problem(relay.request("POST", f"/v1/envs/{second}/reset"), 409, "busy")
+        server.close()
+        assert_problem(relay.request("POST", f"/v1/envs/{session}/step", {"action": [0.0]}),
+                       502, "environment_lost")
+        assert relay.get(f"/v1/envs/{session}")["status"] == "lost"
+        assert relay.get("/v1")["target"] == server.address
+    finally:
+        relay.close()
+
+
+def test_an_environment_that_raises_is_500_and_recovers() -> None:
+    faulty = Gateway("examples.faulty:FaultyEnvironment")
+    try:
+        session = faulty.session()
+        faulty.post(f"/v1/envs/{session}/reset")
+        raised = faulty.request("POST", f"/v1/envs/{session}/step", {"action": 1})
+        assert "tripped over action 1" in assert_problem(raised, 500,
+                                                         "environment_error")["detail"]
+        faulty.post(f"/v1/envs/{session}/reset")
+        assert faulty.post(f"/v1/envs/{session}/step", {"action": 0})["info"]["frames"] == 3
+    finally:
+        faulty.close()
+
+
+def test_foreign_hosts_and_origins_are_403(gateway: Gateway) -> None:
+    port = gateway.port
+    for headers in ({"Host": "attacker.example"}, {"Host": f"attacker.example:{port}"},
+                    {"Host": f"127.0.0.1.attacker.example:{port}"}, {"Host": "127.0.0.1:1"},
+                    {"Origin": "http://attacker.example"},
+                    {"Origin": f"http://127.0.0.1:{port + 1}"}):
+        refused = gateway.request("GET", "/v1/envs", headers=headers)
+        assert "refused" in assert_problem(refused, 403, "forbidden")["detail"]
+    for host in (f"localhost:{port}", f"127.0.0.1:{port}", f"[::1]:{port}"):
+        assert gateway.request("GET", "/v1", headers={"Host": host}).status == 200
+    assert gateway.request("GET", "/v1", headers={"Origin": f"http://localhost:{port}"}).status \
+        == 200
+    with pytest.raises(Exception, match="403"):
+        from websockets.sync.client import connect
+
+        connect(f"ws://{gateway.host}:{port}/v1/envs/{gateway.session()}/ws",
+                origin="http://attacker.example").close()  # type: ignore[arg-type]
+
+
+def test_bodies_are_limited(gateway: Gateway) -> None:
+    session = gateway.session()
+    large = gateway.request("POST", f"/v1/envs/{session}/step", raw=b" " * 5000)
+    assert_problem(large, 413, "payload_too_large")
+    connection = socket.create_connection((gateway.host, gateway.port))
+    try:  # a chunked body that grows past the limit
+        connection.sendall(f"POST /v1/envs/{session}/step HTTP/1.1\r\nHost: {gateway.host}:"
+                           f"{gateway.port}\r\nTransfer-Encoding: chunked\r\n\r\n".encode())
+        for _ in range(3):
+            connection.sendall(b"800\r\n" + b" " * 2048 + b"\r\n")
+        connection.sendall(b"0\r\n\r\n")
+        answer = _read_all(connection)
+        assert answer.startswith(b"HTTP/1.1 413") and b"payload_too_large" in answer
+    finally:
+        connection.close()
+    gateway.post(f"/v1/envs/{session}/reset")
+
+
+def test_garbage_on_the_socket_never_stops_it(gateway: Gateway) -> None:
+    for garbage in (b"GARBAGE\r\n\r\n", b"\x16\x03\x01\x02\x00\x01\x00\x01\xfc\x03\x03",
+                    b"GET / HTTP/1.1\r\nHost: " + b"x" * 100_000 + b"\r\n\r\n",
+                    b"POST /v1/envs HTTP/1.1\r\nContent-Length: 10\r\n\r\n{"):
+        connection = socket.create_connection((gateway.host, gateway.port), timeout=30)
+        try:
+            connection.sendall(garbage)
+            connection.shutdown(socket.SHUT_WR)
+            _read_all(connection)
+        finally:
+            connection.close()
+    assert gateway.get("/v1")["versions"] == ["v1"]
+
+
+def _read_all(connection: socket.socket) -> bytes:
+    connection.settimeout(30)
+    data = b""
+    while chunk := connection.recv(65536):
+        data += chunk
+    return data
+
+
+def test_binding_beyond_loopback_needs_a_token() -> None:
+    result = subprocess.run(
+        [sys.executable, "-m", "rlenv", "http", CARTPOLE, "--host", "0.0.0.0", "--port", "0"],
+        capture_output=True, text=True, timeout=60,
+        env={k: v for k, v in os.environ.items() if k != "RLENV_TOKEN"})
+    assert result.returncode == 2
+    assert "refusing to listen on 0.0.0.0" in result.stderr and "RLENV_TOKEN" in result.stderr
+
+
+def test_a_token_is_required_when_set() -> None:
+    guarded = Gateway(CARTPOLE, "--host", "0.0.0.0", env={"RLENV_TOKEN": "s3cret"})
+    try:
+        assert guarded.url.startswith("http://0.0.0.0:")
+        port = guarded.port
+        guarded.host = "127.0.0.1"
+        missing = guarded.request("GET", "/v1/envs", headers={"Host": f"127.0.0.1:{port}"})
+        assert_problem(missing, 401, "unauthorized")
+        assert missing.headers["www-authenticate"].startswith("Bearer")
+        wrong = guarded.request("GET", "/v1/envs", headers={"Authorization": "Bearer nope"})
+        assert assert_problem(wrong, 401, "unauthorized")["detail"] == "wrong token"
+        good = {"Authorization": "Bearer s3cret", "Host": f"some.name:{port}"}
+        assert guarded.request("GET", "/v1", headers=good).json()["token_required"] is True
+        assert "s3cret" not in guarded.request("GET", "/openapi.json", headers=good).body.decode()
+        foreign = guarded.request("GET", "/v1", headers={**good, "Origin": "http://evil.test"})
+        assert_problem(foreign, 403, "forbidden")
+    finally:
+        guarded.close()
+
+
+def test_an_unknown_target_is_refused_at_start() -> None:
+    result = subprocess.run(
+        [sys.executable, "-m", "rlenv", "http", "examples.cartpole:NoSuchEnvironment",
+         "--port", "0"], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and "NoSuchEnvironment" in result.stderr

@@ -101,6 +101,9 @@ class SceneTree(SignalOwner):
         self._plan: _TickPlan | None = None  # the plan for the current value of paused
         self._running: _TickPlan | None = None  # the plan of the pass under way
         self._quit_requested = False
+        # Changes whenever a node is added, removed or moved (and when what runs changes): what
+        # is derived from the tree's structure may be kept while it stays the same.
+        self.structure_version = 0
         self.root = Node("root")
         self.root._propagate_enter_tree(self)
         self.root._propagate_ready()
@@ -299,6 +302,7 @@ class SceneTree(SignalOwner):
 
     def _plan_changed(self) -> None:
         """Mark the plans stale; nodes that can no longer run skip the rest of the pass."""
+        self.structure_version += 1
         self._plans = [None, None]
         self._plan = None
         if self._running is not None:

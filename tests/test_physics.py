@@ -586,3 +586,37 @@ def test_a_restart_refreshes_each_kind_of_joint_in_place(kind: str) -> None:
     ticks(tree, 120)
     ticks(fresh_tree, 120)
     assert state(bodies) == state(fresh_bodies)  # bit-identical, not approximately equal
+
+
+@pytest.mark.parametrize("kind", ["pivot", "groove", "motor", "spring"])
+def test_a_space_without_contacts_restarts_in_place_exactly(kind: str) -> None:
+    """The same space, emptied and renumbered, runs every episode bit-identical to a new
+    scene's, however long the episodes before it ran."""
+    tree, bodies, _ = jointed_scene(kind)
+    world = tree.root.get_child(0)
+    spaces = []
+    for episode, length in enumerate([40, 7, 120, 1, 60]):
+        world.restart()
+        spaces.append(world.space)
+        fresh_tree, fresh_bodies, _ = jointed_scene(kind)
+        for ticks_so_far in range(length):
+            tree.physics_tick()
+            fresh_tree.physics_tick()
+            assert state(bodies) == state(fresh_bodies), (episode, ticks_so_far)
+    assert all(space is spaces[0] for space in spaces[1:])  # the first restart made a new one
+
+
+def test_a_space_that_saw_contacts_or_changed_restarts_as_a_new_one() -> None:
+    tree, bodies = build_scene()  # balls on a floor: contacts cached in Chipmunk's tables
+    world = tree.root.get_child(0)
+    world.restart()
+    first = world.space
+    ticks(tree, 60)
+    world.restart()
+    assert world.space is not first  # contacts began since the previous restart
+    second = world.space
+    world.restart()  # nothing ran: nothing touched, nothing moved in the tree
+    assert world.space is second
+    world.add_child(ball("Late", position=(4.0, 4.0), radius=0.2))
+    world.restart()
+    assert world.space is not second  # the tree below changed

@@ -23,7 +23,7 @@ from typing import Any
 import pymunk
 from pymunk._chipmunk_cffi import ffi, lib
 
-__all__ = ["place_at_rest", "refresh_constraint"]
+__all__ = ["place_at_rest", "refresh_constraint", "renumber"]
 
 _STATIC = pymunk.Body.STATIC
 _ZERO = (0.0, 0.0)
@@ -104,3 +104,16 @@ def refresh_constraint(constraint: pymunk.Constraint) -> bool:
     lib.cpConstraintSetPreSolveFunc(pointer, pre_solve)
     lib.cpConstraintSetPostSolveFunc(pointer, post_solve)
     return True
+
+
+def renumber(space: pymunk.Space) -> None:
+    """Set an emptied space's counters back as a new space has them.
+
+    Shape ids (Chipmunk numbers shapes as they are added, and orders collision pairs by them),
+    the step counter and the previous step's length (warm starts scale by it) start at zero.
+    Only counters: a space whose hash tables grew (with contacts cached, say) is not new.
+    """
+    pointer = space._space
+    lib.cpSpaceSetShapeIDCounter(pointer, 0)
+    lib.cpSpaceSetTimestamp(pointer, 0)
+    lib.cpSpaceSetCurrentTimeStep(pointer, 0.0)

@@ -40,6 +40,7 @@ sets them.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from typing import Any, ClassVar
 
@@ -48,7 +49,7 @@ from pymunk import Vec2d
 
 from rlenv.node import Node, ProcessMode
 from rlenv.scene2d.colors import RGB, Color, to_rgb
-from rlenv.scene2d.fresh import place_at_rest, refresh_constraint
+from rlenv.scene2d.fresh import place_at_rest, refresh_constraint, renumber
 from rlenv.scene2d.node2d import Node2D, Pose, compose, frame_of, relative_pose
 from rlenv.scene2d.pymunk_data import ConstraintRecipe, copy_body, copy_shape
 from rlenv.signals import Signal
@@ -89,7 +90,7 @@ class PhysicsWorld(Node):
     """``stepped(delta)``: emitted after every step of the space (``delta``: its length, s)."""
 
     exported: ClassVar[tuple[str, ...]] = ("gravity", "damping")
-    _TREE_STATE = Node._TREE_STATE | {"_shape_nodes"}
+    _TREE_STATE = Node._TREE_STATE | {"_shape_nodes", "_kept_members", "_touched"}
 
     def __init__(
         self,
@@ -103,6 +104,9 @@ class PhysicsWorld(Node):
         super().__init__(name, process_mode=process_mode)
         self.space = self._new_space(gravity, iterations, damping)
         self._shape_nodes: dict[pymunk.Shape, CollisionShape] = {}
+        self._kept_members: tuple[int | None, list[PhysicsBody], list[CollisionShape],
+                                  list[Joint]] | None = None  # see _members
+        self._touched = False  # a contact began since the space was made or restarted
 
     def _new_space(self, gravity: Vec, iterations: int, damping: float) -> pymunk.Space:
         space = pymunk.Space()
@@ -116,29 +120,55 @@ class PhysicsWorld(Node):
         """Start the simulation afresh, as a newly built subtree would: cheap episode resets.
 
         The bodies, shapes and joints below stay (nodes, pymunk objects and their settings),
-        but move into a new space (same gravity, iterations and damping) in tree order, as
-        they would on entering it: every body back at the pose it entered its space with
+        but start again in a space as new (same gravity, iterations and damping), in tree order,
+        as they would on entering it: every body back at the pose it entered its space with
         (composed through its Node2D frames, so each copy of a lattice goes back to its own
-        place), at rest (velocities, force and torque zero), and every joint with a fresh
-        constraint made there (joints such as ``pivot`` read the bodies' pose when made). No
-        solver state (joint impulses, cached contacts, the spatial index) survives; contacts
-        in progress end, with their signals. Place the bodies for the episode afterwards.
+        place), at rest (velocities, force and torque zero), and every joint's constraint as
+        when it was made (joints such as ``pivot`` read the bodies' pose when made). No solver
+        state (joint impulses, cached contacts, the spatial index) survives; contacts in
+        progress end, with their signals. Place the bodies for the episode afterwards.
+
+        The space is a new one, unless it can be made exactly as new in place: the same
+        bodies, shapes and joints as at the previous restart (the tree below unchanged), no
+        contact since then (Chipmunk's contact cache never grew), no collision handler but
+        rlenv's and no sleeping; then it is emptied and its counters set back (cheaper).
         """
         old = self.space
+        bodies, shapes, joints, unchanged = self._members()
         old.remove(*old.constraints, *old.shapes, *old.bodies)
-        self.space = self._new_space(old.gravity, old.iterations, old.damping)
+        if unchanged and not self._touched and len(old._handlers) == 1 and \
+                old.sleep_time_threshold == math.inf:
+            renumber(old)
+        else:
+            self.space = self._new_space(old.gravity, old.iterations, old.damping)
+        self._touched = False
+        for body in bodies:
+            body._restart()
+        self.space.add(*[body.body for body in bodies], *[shape.shape for shape in shapes])
+        for joint in joints:  # once every body is back, as joints attach when ready
+            joint._reattach(self)
+
+    def _members(self) -> tuple[list[PhysicsBody], list[CollisionShape], list[Joint], bool]:
+        """The bodies, shapes and joints in this world's space, in tree order.
+
+        Kept while the tree's structure stays the same; the last item says whether it did since
+        the previous call.
+        """
+        tree = self._tree
+        version = None if tree is None else tree.structure_version
+        members = self._kept_members
+        if members is not None and version is not None and members[0] == version:
+            return members[1], members[2], members[3], True
         bodies, shapes, joints = [], [], []
         for node in self.iter_subtree():
             if isinstance(node, PhysicsBody) and node.world is self:
-                node._restart()
-                bodies.append(node.body)
+                bodies.append(node)
             elif isinstance(node, CollisionShape) and node._world is self:
-                shapes.append(node.shape)
+                shapes.append(node)
             elif isinstance(node, Joint) and node._world is self and node._attached:
                 joints.append(node)
-        self.space.add(*bodies, *shapes)  # in tree order, as they entered
-        for joint in joints:  # once every body is back, as joints attach when ready
-            joint._reattach(self)
+        self._kept_members = (version, bodies, shapes, joints)
+        return bodies, shapes, joints, False
 
     @property
     def iterations(self) -> int:
@@ -151,6 +181,8 @@ class PhysicsWorld(Node):
 
     def _duplicated(self, original: Node) -> None:
         self._shape_nodes = {}
+        self._kept_members = None
+        self._touched = False
 
     @property
     def gravity(self) -> pymunk.Vec2d:
@@ -176,6 +208,7 @@ class PhysicsWorld(Node):
             self._emit("stepped", delta)
 
     def _on_begin(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
+        self._touched = True
         self._report(arbiter, "collision_started", "body_entered")
 
     def _on_separate(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:

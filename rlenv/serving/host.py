@@ -31,6 +31,7 @@ from rlenv.protocol.spaces import compile_check
 from rlenv.serving.columns import Columns
 from rlenv.serving.endpoint import Endpoint, Peer
 from rlenv.serving.instance import Episode, Instance, failure, load_environment
+from rlenv.serving.lean import LeanSteps
 from rlenv.serving.parts import HostPart, dispatch, plan_for, shape_of, takes_control
 
 __all__ = ["Host", "Prepared"]
@@ -102,6 +103,7 @@ class Host:
         self.steps_action_space = batch_space(first.action_space, count)
         self.steps_action = compile_check(self.steps_action_space, "steps.action")
         self.columns = Columns(first.observation_space)
+        self.lean = LeanSteps(self.instances) if LeanSteps.serves(self.instances) else None
         if real_time:
             for instance in self.instances:
                 instance.set_real_time(True)

@@ -50,7 +50,8 @@ from rlenv.serving.snapshots import EpisodeLog
 from rlenv.serving.stats import EpisodeStats
 from rlenv.tree import SceneTree
 
-__all__ = ["Episode", "Instance", "check_keys", "failure", "load_environment"]
+__all__ = ["Episode", "Instance", "check_keys", "check_text_keys", "failure", "load_environment",
+           "packed_observation"]
 
 logger = logging.getLogger(__name__)
 
@@ -136,9 +137,9 @@ class Instance:
         self.answer: Answer | None = None  # the answer to the request being served
         hooks = {name for name in _HOOKS
                  if getattr(type(environment), name) is not getattr(RLEnvironment, name)}
-        self._dispatches_itself = "_on_got_connection" in hooks
-        self._configures_itself = "_configure" in hooks
-        self._responds_itself = "_send_response" in hooks
+        self.dispatches_itself = "_on_got_connection" in hooks
+        self.configures_itself = "_configure" in hooks
+        self.responds_itself = "_send_response" in hooks
         self.has_after_send = "_after_send_response" in hooks
         environment.communication.bind(self)
         self.tree = SceneTree(environment.physics_ticks_per_second, clock=clock)
@@ -189,7 +190,7 @@ class Instance:
         """
         answer = self.answer = Answer(reply_id, reports)
         try:
-            if self._dispatches_itself:
+            if self.dispatches_itself:
                 self.environment._on_got_connection(dict(request))
             else:
                 self.dispatch(request)
@@ -219,7 +220,7 @@ class Instance:
 
     def send_response(self, observation_request: Mapping[str, Any] | None) -> None:
         """The environment's ``_send_response`` (the answer, with what is asked observed)."""
-        if self._responds_itself:
+        if self.responds_itself:
             self.environment._send_response(observation_request)
         else:
             self.respond(observation_request)
@@ -297,7 +298,7 @@ class Instance:
         answer = self.answer
         if answer is not None and answer.config_before is None:
             answer.config_before = self.config_state()
-        if self._configures_itself:
+        if self.configures_itself:
             self.environment._configure(config)
         else:
             self.apply_config(config)
@@ -540,16 +541,16 @@ class Instance:
         if "agent" in request:
             asked = request["agent"]
             if self.multi_agent:
-                observation["agent"] = {agent.name: _packed_observation(agent, codec, asked)
+                observation["agent"] = {agent.name: packed_observation(agent, codec, asked)
                                         for agent, codec in self._observers}
             else:
                 agent, codec = self._observers[0]
-                observation["agent"] = _packed_observation(agent, codec, asked)
+                observation["agent"] = packed_observation(agent, codec, asked)
         if "world" in request:
             world = self.environment.world
             assert world is not None
             data = observation["world"] = world.get_data(request["world"])
-            _check_text_keys(data, f"{type(world).__name__}.get_data() returned")
+            check_text_keys(data, f"{type(world).__name__}.get_data() returned")
         if "render" in request:
             size = request["render"]
             width, height = self.environment.render_size
@@ -557,7 +558,7 @@ class Instance:
                                                              size.get("height", height))
         if "draw" in request:
             drawn = observation["draw"] = self.environment._draw()
-            _check_text_keys(drawn, "_draw() returned")
+            check_text_keys(drawn, "_draw() returned")
         return observation
 
     def _response(self, answer: Answer, observation: dict[str, Any] | None) -> Response:
@@ -588,7 +589,7 @@ class Instance:
                 agent.reward = 0.0
         frames = 0
         if reports:
-            frames, self._ticks = self._ticks, 0
+            frames = self.take_ticks()
             if outcomes is None:
                 self.stats.reported(reward, frames, answer.acted)
             else:
@@ -602,14 +603,19 @@ class Instance:
         if self.state is not Episode.NOT_STARTED:
             info = self.environment._get_info()
             if info:
-                _check_text_keys(info, "_get_info() returned")
+                check_text_keys(info, "_get_info() returned")
         if answer.acted and self.tree.real_time:
             info = {**info, "late": self._late, "late_actions": self._late_actions}
         if answer.info:
-            _check_text_keys(answer.info, "the answer holds")
+            check_text_keys(answer.info, "the answer holds")
             info = {**info, **answer.info}
         return Response(answer.reply_id, observation, reward, terminated, truncated, info,
                         frames, outcomes)
+
+    def take_ticks(self) -> int:
+        """The ticks run since the last answer that reported them; counting starts again."""
+        ticks, self._ticks = self._ticks, 0
+        return ticks
 
     def environment_error(self, reply_id: int, error: BaseException) -> ErrorReply:
         """The ``environment_error`` answer for an exception in user code (its traceback in it).
@@ -649,7 +655,7 @@ def failure(reply_id: int | None, error: BaseException, consequence: str) -> Err
     return ErrorReply(reply_id, ErrorCode.ENVIRONMENT_ERROR, f"{error}; {consequence}\n{detail}")
 
 
-def _check_text_keys(value: Any, what: str) -> None:
+def check_text_keys(value: Any, what: str) -> None:
     """Refuse data whose maps have a key that is not a str (clients refuse such a frame).
 
     Raises:
@@ -681,7 +687,13 @@ def _agents_of(environment: RLEnvironment) -> list[RLAgent]:
     return list(environment.agents)
 
 
-def _packed_observation(agent: RLAgent, codec: Codec, request: Any) -> Any:
+def packed_observation(agent: RLAgent, codec: Codec, request: Any) -> Any:
+    """The agent's observation (``get_data(request)``) packed by ``codec``.
+
+    Raises:
+        FloatingPointError: it holds NaN or infinity (saying where).
+        ValueError: it does not fit the agent's observation space.
+    """
     data = agent.get_data(request)
     try:
         return codec.pack(data)

@@ -28,6 +28,7 @@ from rlenv.protocol.spaces import SpaceMismatch
 from rlenv.serving import inspector
 from rlenv.serving.columns import Columns
 from rlenv.serving.instance import Answer, Episode, Instance, Plan, check_keys
+from rlenv.serving.lean import LeanSteps
 from rlenv.serving.snapshots import generator_from_state, parse_snapshot
 
 __all__ = ["PARTS", "HostPart", "Part", "Shape", "dispatch", "plan_for", "shape_of",
@@ -342,6 +343,7 @@ class Host(Protocol):
     steps_action_space: spaces.Space
     steps_action: Callable[[Any], Any]
     columns: Columns
+    lean: LeanSteps | None
 
 
 class HostPart:
@@ -462,6 +464,9 @@ class Steps(HostPart):
                 for row, resets in zip(rows, reset, strict=True)]
 
     def run(self, host: Host, request: Request, checked: Any, reports: bool) -> Reply:
+        lean = host.lean
+        if lean is not None and reports and not any(i.tree.real_time for i in host.instances):
+            return lean.run(request.id, checked)
         return host.columns.stack(request.id, [
             instance.serve(plan, request.id, reports)
             for instance, plan in zip(host.instances, checked, strict=True)])

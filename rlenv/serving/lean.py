@@ -1,0 +1,153 @@
+"""The lean path of a ``steps`` request: K instances stepped straight into columns.
+
+The general path serves each instance's share of a ``steps`` request as any request (its plan
+through the environment's hooks, an answer of its own), then :class:`~rlenv.serving.columns.
+Columns` stacks the K answers. When nothing can tell the difference, :class:`LeanSteps` does the
+same work without the K answers: each instance acts (or resets) through the same primitives,
+its agent's observation is written into one preallocated column, the column is checked for NaN
+and infinity once, and rewards, flags and tick counts go straight into their arrays.
+
+It serves a host when every instance has one agent whose observation space packs as raw bytes
+(Box, MultiDiscrete, MultiBinary) and whose environment overrides neither
+``_on_got_connection`` nor ``_send_response`` (the hooks the general path calls per request),
+and while no instance runs in real time. Everything an instance does is as on the general path,
+and so is every answer (``tests/test_lean_steps.py`` compares them bit for bit, failures
+included).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from rlenv.environment import RLEnvironment
+from rlenv.protocol import ErrorReply, StepsResponse
+from rlenv.protocol.spaces import codec_for, find_non_finite
+from rlenv.serving.instance import Episode, Instance, check_text_keys, packed_observation
+
+__all__ = ["LeanSteps"]
+
+_AGENT_ONLY: Mapping[str, Any] = {"agent": {}}
+_EMPTY: dict[str, Any] = {}
+_PACKED_AS_BYTES = (spaces.Box, spaces.MultiDiscrete, spaces.MultiBinary)
+
+
+class LeanSteps:
+    """Steps a host's instances in columns (see the module docstring).
+
+    Args:
+        instances: the host's instances, in the order of the rows.
+    """
+
+    def __init__(self, instances: Sequence[Instance]) -> None:
+        self.instances = list(instances)
+        space = instances[0].observation_space
+        self.shape: tuple[int, ...] = space.shape
+        self.dtype: np.dtype = space.dtype  # type: ignore[assignment]
+        self._codec = codec_for(space)
+        self._column = np.zeros((len(instances), *self.shape), self.dtype)
+        self._floats = self.dtype.kind in "fc"
+        self._narrow = self.dtype.kind == "f" and self.dtype.itemsize <= 4
+        self._infos = [type(i.environment)._get_info is not RLEnvironment._get_info
+                       for i in instances]
+
+    @staticmethod
+    def serves(instances: Sequence[Instance]) -> bool:
+        """Whether the lean path can serve these instances (in lockstep)."""
+        return all(not instance.multi_agent and not instance.dispatches_itself and
+                   not instance.responds_itself and
+                   isinstance(instance.observation_space, _PACKED_AS_BYTES)
+                   for instance in instances)
+
+    def run(self, reply_id: int, plans: Sequence[Mapping[str, Any]]) -> StepsResponse:
+        """Serve every instance its checked plan (an action, or a reset); the one answer."""
+        count = len(plans)
+        column = self._column
+        data: list[Any] = [None] * count
+        acted = [False] * count
+        errors: list[ErrorReply | None] | None = None
+        for row, (instance, plan) in enumerate(zip(self.instances, plans, strict=True)):
+            try:
+                if "reset" in plan:
+                    instance.begin_episode(None, plan["reset"]["options"])
+                else:
+                    instance.act(plan["action"], plan.get("repeat_action") or
+                                 instance.environment.repeat_action)
+                    acted[row] = True
+                agent = instance.agents[0]
+                value = data[row] = agent.get_data(_AGENT_ONLY)
+                if value.__class__ is np.ndarray and value.dtype == self.dtype and \
+                        value.shape == self.shape:
+                    column[row] = value
+                else:  # the general path's conversion and refusals
+                    packed = packed_observation(agent, self._codec, _AGENT_ONLY)
+                    column[row] = np.frombuffer(packed, self.dtype).reshape(self.shape)
+            except Exception as error:  # user code raised: this row fails alone
+                errors = errors or [None] * count
+                errors[row] = instance.environment_error(reply_id, error)
+                column[row] = 0
+        if self._floats:
+            errors = self._refuse_non_finite(reply_id, column, data, errors)
+        reward = np.zeros(count, np.float64)
+        terminated = np.zeros(count, np.bool_)
+        truncated = np.zeros(count, np.bool_)
+        frames = np.zeros(count, np.int64)
+        infos: list[dict[str, Any]] = [_EMPTY] * count
+        for row, instance in enumerate(self.instances):
+            if errors is not None and errors[row] is not None:
+                continue
+            try:
+                reward[row], terminated[row], truncated[row], frames[row], infos[row] = \
+                    self._outcome(instance, acted[row], self._infos[row])
+            except Exception as error:  # _get_info raised, or holds what cannot travel
+                errors = errors or [None] * count
+                errors[row] = instance.environment_error(reply_id, error)
+                column[row] = 0
+                reward[row] = frames[row] = terminated[row] = truncated[row] = 0
+        return StepsResponse(reply_id, column.tobytes(), reward, terminated, truncated, frames,
+                             tuple(infos), None if errors is None else tuple(errors))
+
+    def _refuse_non_finite(self, reply_id: int, column: np.ndarray, data: list[Any],
+                           errors: list[ErrorReply | None] | None,
+                           ) -> list[ErrorReply | None] | None:
+        """Fail the rows whose observation holds NaN or infinity, as the general path does."""
+        total = column.sum(dtype=np.float64) if self._narrow else None
+        if total is not None and np.isfinite(total):
+            return errors
+        rows = np.isfinite(column.reshape(len(column), -1)).all(axis=1)
+        for row in np.flatnonzero(~rows):
+            instance = self.instances[row]
+            if errors is not None and errors[row] is not None:
+                continue
+            where = find_non_finite(data[row])
+            error = FloatingPointError(
+                f"the observation of {instance.agents[0].get_path()} is not finite at "
+                f"{where or '()'}: {data[row]!r:.200}")
+            errors = errors or [None] * len(column)
+            errors[row] = instance.environment_error(reply_id, error)
+            column[row] = 0
+        return errors
+
+    @staticmethod
+    def _outcome(instance: Instance, acted: bool,
+                 has_info: bool) -> tuple[float, bool, bool, int, dict[str, Any]]:
+        """What the instance reports (as its answer would): reward, flags, ticks, info."""
+        agent = instance.agents[0]
+        reward = float(agent.reward)
+        agent.reward = 0.0
+        terminated, truncated = bool(agent.terminated), bool(agent.truncated)
+        frames = instance.take_ticks()
+        stats = instance.stats
+        stats.reported(reward, frames, acted)
+        if terminated or truncated:
+            stats.end("terminated" if terminated else "truncated")
+            instance.state = Episode.ENDED
+        info = _EMPTY
+        if has_info:
+            info = instance.environment._get_info()
+            if info:
+                check_text_keys(info, "_get_info() returned")
+        return reward, terminated, truncated, frames, info

@@ -22,6 +22,7 @@ import os
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
@@ -37,9 +38,11 @@ ENDLESS = {"world": {"track_limit": 1e9}, "agent": {"angle_limit": 1e9}}
 @contextmanager
 def served(python: str, *args: str) -> Iterator[tuple[str, int]]:
     """``rlenv serve CARTPOLE`` run by ``python``; its (address, pid)."""
+    # From a folder of no checkout's: ``python -m`` puts the working directory first on the
+    # path, which would run this checkout's rlenv with the other's interpreter.
     process = subprocess.Popen([python, "-m", "rlenv", "serve", CARTPOLE, "--port", "0", *args],
                                stdout=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
-                               start_new_session=True)
+                               start_new_session=True, cwd=tempfile.gettempdir())
     try:
         line = process.stdout.readline()  # type: ignore[union-attr]
         assert line.startswith("listening on "), line

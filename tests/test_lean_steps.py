@@ -16,7 +16,6 @@ import pytest
 
 from examples.cartpole import CartPoleEnvironment
 from examples.faulty import CountingEnvironment, FaultyEnvironment, WrongShapeEnvironment
-from rlenv.serving.lean import LeanSteps
 from rlenv_client import LocalClient
 
 K = 6

@@ -34,7 +34,7 @@ from rlenv.protocol.errors import (
     RemoteError,
     RequestTimeout,
 )
-from rlenv.protocol.sockets import configure_socket
+from rlenv.protocol.sockets import AnswerWaiter, configure_socket
 from rlenv_client.base import BaseClient, StepResult
 
 __all__ = ["Client", "StepResult"]
@@ -69,6 +69,7 @@ class Client(BaseClient):
         self.address = f"{host}:{port}"
         self.timeout = timeout
         self._closed_because = ""  # what closed the connection, when it was no error of its own
+        self._waiter = AnswerWaiter()
         self._connection = Connection(Role.CLIENT)
         try:
             self._sock: socket.socket | None = socket.create_connection((host, port), timeout)
@@ -127,6 +128,7 @@ class Client(BaseClient):
         data = self._connection.send(request)
         try:
             sock.sendall(data)
+            self._waiter.sent()
         except BlockingIOError:
             self.close()
             raise RequestTimeout(f"sending to {self.address} took longer than {self.timeout}s; "
@@ -183,7 +185,7 @@ class Client(BaseClient):
             raise ConnectionLost(f"the connection to {self.address} is closed"
                                  f"{self._closed_because}")
         try:
-            return sock.recv(_READ_SIZE)
+            return self._waiter.recv(sock, _READ_SIZE)
         except BlockingIOError:
             self._timed_out()
         except OSError as error:

@@ -56,7 +56,7 @@ from rlenv.protocol import (
     Role,
 )
 from rlenv.protocol.errors import ErrorCode, LocalProtocolError, ProtocolError
-from rlenv.protocol.sockets import configure_socket
+from rlenv.protocol.sockets import AnswerWaiter, configure_socket
 
 __all__ = ["DEFAULT_HOST", "HOUSEKEEPING_INTERVAL", "Endpoint", "InsecureBindError", "Limits",
            "Peer", "is_loopback"]
@@ -113,7 +113,7 @@ class Peer:
     """One connected client, as the endpoint sees it."""
 
     __slots__ = ("active", "address", "authenticated", "connection", "frame_started",
-                 "last_request", "sock")
+                 "last_request", "sock", "waiter")
 
     def __init__(self, sock: socket.socket, address: str, max_frame_size: int,
                  now: float) -> None:
@@ -124,6 +124,7 @@ class Peer:
         self.last_request = now
         self.frame_started: float | None = None
         self.active = False  # sending requests back to back: worth blocking on alone
+        self.waiter = AnswerWaiter()  # its next request, spun for when it comes quickly
 
 
 class Endpoint:
@@ -391,7 +392,7 @@ class Endpoint:
     def _read(self, peer: Peer, block: bool) -> None:
         """One read from ``peer``; blocking reads give up after the housekeeping interval."""
         try:
-            data = peer.sock.recv(_READ_SIZE) if block else \
+            data = peer.waiter.recv(peer.sock, _READ_SIZE) if block else \
                 peer.sock.recv(_READ_SIZE, socket.MSG_DONTWAIT)
         except (BlockingIOError, InterruptedError):
             peer.active = False  # it paused: look after everything else from now on
@@ -486,6 +487,7 @@ class Endpoint:
                     message.id, ErrorCode.ENVIRONMENT_ERROR,
                     f"the answer could not be sent: {error}"))
             peer.sock.sendall(data)
+            peer.waiter.sent()
         except (TypeError, LocalProtocolError) as error:
             logger.warning("not sent to %s: %s", peer.address, error)
         except OSError as error:

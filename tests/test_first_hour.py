@@ -68,7 +68,7 @@ def test_the_server_sends_no_map_key_that_is_not_a_str(lander: Client) -> None:
     lander.reset(seed=0)
     with _raw(lander) as sock:  # what a strict client reads: only str keys, at every depth
         sock.sendall(frame(pack({"id": 1, "snapshot": {}})))
-        unpack(read_body(sock), text_keys=True)
+        unpack(read_body(sock), strict=True)
 
 
 # --- settings that are not finite are refused -----------------------------------------------

@@ -150,17 +150,18 @@ def frame(obj: Any) -> bytes:
     return HEADER.pack(len(body)) + body
 
 
-def unpack(body: bytes | bytearray | memoryview, *, text_keys: bool = True) -> Any:
+def unpack(body: bytes | bytearray | memoryview, *, strict: bool = True) -> Any:
     """Decode one msgpack object that fills ``body`` exactly.
 
     Strings are UTF-8, and every map key at every depth must be a str: msgpack refuses
-    integer, float, nil and ext keys itself, and with ``text_keys`` (the default) a bin key is
-    refused too (a client reading a server it trusts may skip that check: rlenv servers never
-    send one). No container may declare more elements or bytes than ``body`` holds (msgpack
+    integer, float, nil and ext keys itself, and when ``strict`` (the default) a bin key is
+    refused too. No container may declare more elements or bytes than ``body`` holds (msgpack
     bounds each by the body's length, so a frame cannot make the decoder allocate more than the
-    frame limit allows). The only ext type is :data:`NDARRAY_EXT`: msgpack decodes its own
-    timestamp type (-1) without asking the hook, so a decoded frame that may hold one (its
-    type byte, 0xff, is in it) is searched for it.
+    frame limit allows). The only ext type is :data:`NDARRAY_EXT`; any other is refused, and
+    when ``strict`` so is msgpack's timestamp type (-1), which msgpack decodes without asking
+    the hook: a decoded frame that may hold one (its type byte, 0xff, is in it) is searched for
+    it. A client reading a server may skip the strict checks (rlenv servers never send either),
+    which keeps the search off a path where packed floats make 0xff bytes common.
 
     Raises:
         RemoteProtocolError: invalid msgpack, a map key that is not a str, trailing bytes, a
@@ -168,13 +169,13 @@ def unpack(body: bytes | bytearray | memoryview, *, text_keys: bool = True) -> A
     """
     try:
         value = msgpack.unpackb(body, ext_hook=_ext_hook,
-                                object_hook=_text_keys if text_keys else None)
+                                object_hook=_text_keys if strict else None)
     except msgpack.ExtraData:
         raise RemoteProtocolError("trailing bytes after the message in the frame") from None
     except (ValueError, TypeError, msgpack.UnpackException, RecursionError) as exc:
         detail = str(exc) or _UNNAMED_ERRORS.get(type(exc), type(exc).__name__)
         raise RemoteProtocolError(f"frame is not valid msgpack: {detail}") from None
-    if (body.__class__ is memoryview or 0xFF in body) and _holds_timestamp(value):
+    if strict and (body.__class__ is memoryview or 0xFF in body) and _holds_timestamp(value):
         raise RemoteProtocolError(f"frame is not valid msgpack: {_foreign_ext(-1)}")
     return value
 

@@ -211,7 +211,7 @@ class Connection:
         body = self._next_frame()
         if body.__class__ is _Sentinel:
             return body  # type: ignore[return-value]
-        wire = unpack(body, text_keys=self.role is _SERVER)
+        wire = unpack(body, strict=self.role is _SERVER)
         if wire.__class__ is not dict:
             raise RemoteProtocolError(f"a frame must hold a map, got {type(wire).__name__}")
         if self.role is not _SERVER:

@@ -28,7 +28,7 @@ from rlenv.scene2d.render import draw, draw_list
 from rlenv.timer import PhysicsFramesTimer
 from rlenv.world import RLEnvWorld
 
-__all__ = ["RLEnvironment"]
+__all__ = ["RLEnvironment", "give_action"]
 
 
 class RLEnvironment(RLNode):
@@ -198,13 +198,7 @@ class RLEnvironment(RLNode):
         ``action`` is checked already: one agent's action, or with several agents a map from
         agent name to action for the agents still in the episode.
         """
-        agents = self.agents
-        if len(agents) == 1:
-            agents[0].set_action(action)
-        else:
-            for agent in agents:
-                if agent.name in action:
-                    agent.set_action(action[agent.name])
+        give_action(self.agents, action)
         tree = self.get_tree()
         timer = self.physics_frames_timer
         timer.start(frames or self.repeat_action)
@@ -232,3 +226,13 @@ class RLEnvironment(RLNode):
         else.
         """
         return draw_list(self, self.render_view)
+
+
+def give_action(agents: list[RLAgent], action: Any) -> None:
+    """Hand a checked action to the agents: the one agent's, or each its own from the map."""
+    if len(agents) == 1:
+        agents[0].set_action(action)
+        return
+    for agent in agents:
+        if agent.name in action:
+            agent.set_action(action[agent.name])

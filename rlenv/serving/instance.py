@@ -38,24 +38,21 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 
 from rlenv.agent import RLAgent
-from rlenv.environment import RLEnvironment
+from rlenv.environment import RLEnvironment, give_action
 from rlenv.node import Node
 from rlenv.protocol import ErrorReply, Response
-from rlenv.protocol.codec import find_non_text_key
 from rlenv.protocol.errors import ErrorCode, RequestError
-from rlenv.protocol.spaces import Codec, SpaceMismatch, codec_for, compile_check, find_non_finite
-from rlenv.scene2d.recording import VideoRecorder
 from rlenv.serving import inspector
+from rlenv.serving.actions import ActionCheck
+from rlenv.serving.observing import Observer, check_text_keys
+from rlenv.serving.settings import Settings
 from rlenv.serving.snapshots import EpisodeLog
 from rlenv.serving.stats import EpisodeStats
 from rlenv.tree import SceneTree
 
-__all__ = ["Episode", "Instance", "check_keys", "check_text_keys", "failure", "load_environment",
-           "packed_observation"]
+__all__ = ["Answer", "Episode", "Instance", "Plan", "failure", "load_environment"]
 
 logger = logging.getLogger(__name__)
-
-_VIDEO_SUFFIXES = frozenset({".mp4", ".webm", ".avi", ".mkv"})
 
 
 def load_environment(target: str) -> type[RLEnvironment]:
@@ -148,27 +145,17 @@ class Instance:
         self.tree.on_physics_tick_end = self._end_tick
         self.agents: list[RLAgent] = _agents_of(environment)
         self.multi_agent = len(self.agents) > 1
-        if self.multi_agent:  # the joint spaces, keyed by agent name
-            self.action_space: spaces.Space = spaces.Dict(
-                {a.name: a.action_space for a in self.agents})
-            self.observation_space: spaces.Space = spaces.Dict(
-                {a.name: a.observation_space for a in self.agents})
-        else:
-            self.action_space = self.agents[0].action_space
-            self.observation_space = self.agents[0].observation_space
-        self._check_actions = {a.name: compile_check(a.action_space, f"action[{a.name!r}]")
-                               for a in self.agents}
-        self._check_action = compile_check(self.action_space, "action")
-        self._observers: list[tuple[RLAgent, Codec]] = [
-            (agent, codec_for(agent.observation_space)) for agent in self.agents]
-        self.record_dir = record_dir
+        self.action_space = _joint_space(self.agents, "action_space")
+        self.observation_space = _joint_space(self.agents, "observation_space")
+        self.checked_action = ActionCheck(self.agents, self.action_space)
+        self.observe = Observer(environment, self.agents).observe
+        self.settings = Settings(self, record_dir)
         self.state = Episode.NOT_STARTED
         self._no_episode = "no episode has started; reset first"  # why, when NOT_STARTED
         self.log = EpisodeLog()
         self.stats = EpisodeStats([a.name for a in self.agents] if self.multi_agent else None)
         self._before_sets: dict[tuple[Node, str], Any] = {}  # what inspect sets replaced
         self.replaying = False  # restoring a snapshot: the episode moves on silently
-        self._recorder: VideoRecorder | None = None
         self._ticks = 0  # ticks the episode ran since the last answer
         self._ended_unseen = False  # real time: the episode ended between two requests
         self._last_action_at = 0
@@ -199,10 +186,10 @@ class Instance:
                                    "no answer: call super()._on_got_connection(request)")
             return answer.reply
         except RequestError as error:
-            self._undo_configuration(answer)
+            self.settings.undo(answer)
             return ErrorReply(reply_id, error.code, str(error))
         except Exception as error:  # user code raised: report it, keep serving
-            self._undo_configuration(answer)
+            self.settings.undo(answer)
             if not reports:
                 return failure(reply_id, error, "the episode goes on (its controller's)")
             return self.environment_error(reply_id, error)
@@ -265,122 +252,25 @@ class Instance:
 
     def close(self) -> None:
         """Stop any recording and take the environment out of its tree."""
-        self._set_recording("")
+        self.settings.record("")
         if self.environment.parent is not None:
             self.tree.root.remove_child(self.environment)
 
     # --- configuration ----------------------------------------------------------------------
 
-    def check_config(self, config: Mapping[str, Any]) -> None:
-        """Check a ``config`` part (every node it applies to) without applying it.
-
-        Raises:
-            RequestError: ``bad_request`` (its shape) or ``invalid_config`` naming the key.
-        """
-        check_keys(config, _CONFIG_PARTS, "config")
-        for part, nodes in self._configured_nodes().items():
-            if part not in config:
-                continue
-            settings = config[part]
-            if not isinstance(settings, Mapping):
-                raise RequestError(ErrorCode.BAD_REQUEST, f"config.{part} must be a map")
-            if part == "environment":
-                settings = self._check_environment_settings(settings)
-            for node in nodes:
-                node.check_config(settings)
-
-    def configure(self, config: Mapping[str, Any]) -> None:
-        """Apply a checked ``config`` part through the environment's ``_configure``.
-
-        The configuration it replaces is kept until the request is answered (a request that
-        fails changes no setting); once applied it is logged for snapshots during an episode.
-        """
-        answer = self.answer
-        if answer is not None and answer.config_before is None:
-            answer.config_before = self.config_state()
-        if self.configures_itself:
-            self.environment._configure(config)
-        else:
-            self.apply_config(config)
-        self.log.configured(config)
-
     def apply_config(self, config: Mapping[str, Any]) -> None:
-        """Apply a checked ``config`` part to its nodes (what ``_configure`` does by default).
+        """Apply a checked ``config`` part to its nodes (what ``_configure`` does by default)."""
+        self.settings.apply(config)
 
-        A configured property is the configuration's from then on: a reset keeps it, even if
-        ``inspect`` set it earlier in the episode.
-        """
-        for part, nodes in self._configured_nodes().items():
-            if part not in config:
-                continue
-            settings = config[part]
-            if part == "environment":
-                settings = self._apply_environment_settings(settings)
-            for node in nodes:
-                node.configure(settings)
-                for key in settings:
-                    self._before_sets.pop((node, key), None)
-
-    def _undo_configuration(self, answer: Answer) -> None:
-        """Put back the settings a failed request changed (as they were before it)."""
-        if answer.config_before is None:
-            return
-        for part, nodes in self._configured_nodes().items():
-            for node in nodes:
-                try:
-                    node.configure(answer.config_before[part])
-                except Exception as error:  # user code: what it keeps is its own
-                    logger.error("could not undo the configuration of %s", node.get_path(),
-                                 exc_info=error)
-
-    def config_state(self) -> dict[str, dict[str, Any]]:
-        """The current value of everything a client may configure (for snapshots)."""
-        return {part: {key: getattr(nodes[0], key) for key in nodes[0].configurable}
-                for part, nodes in self._configured_nodes().items()}
-
-    def _configured_nodes(self) -> dict[str, list[Any]]:
-        world = self.environment.world
-        parts: dict[str, list[Any]] = {"environment": [self.environment], "agent": self.agents}
-        if world is not None:
-            parts["world"] = [world]
-        return parts
-
-    def _check_environment_settings(self, settings: Mapping[str, Any]) -> dict[str, Any]:
-        """Check what the server handles itself (real_time, record); the rest is the node's."""
-        rest = dict(settings)
-        if "real_time" in rest and type(rest.pop("real_time")) is not bool:
-            raise RequestError(ErrorCode.INVALID_CONFIG, "real_time must be a bool")
-        if "record" in rest:
-            _check_recording(rest.pop("record"), self.record_dir)
-        if "repeat_action" in rest:
-            repeat = rest["repeat_action"]
-            if type(repeat) is not int or repeat < 1:
-                raise RequestError(ErrorCode.INVALID_CONFIG, f"repeat_action must be an "
-                                   f"integer >= 1, got {repeat!r:.40}")
-        return rest
-
-    def _apply_environment_settings(self, settings: Mapping[str, Any]) -> dict[str, Any]:
-        rest = dict(settings)
-        if "real_time" in rest:
-            self.set_real_time(rest.pop("real_time"))
-        if "record" in rest:
-            self._set_recording(rest.pop("record"))
-        return rest
+    def forget_set(self, node: Node, name: str) -> None:
+        """A configuration now owns ``node``'s ``name``: a reset no longer undoes its set."""
+        self._before_sets.pop((node, name), None)
 
     def set_real_time(self, value: bool) -> None:
         """Switch between real time (ticks follow the clock) and lockstep."""
         self.tree.real_time = value
         self.tree.paused = not (value and self.state is Episode.RUNNING and
                                 not self._ended_unseen)
-
-    def _set_recording(self, name: str) -> None:
-        if self._recorder is not None:
-            self._recorder.close()
-            self._recorder = None
-        if name:
-            assert self.record_dir is not None
-            self._recorder = VideoRecorder(self.record_dir / name,
-                                           self.tree.physics_ticks_per_second)
 
     # --- episodes ---------------------------------------------------------------------------
 
@@ -404,7 +294,7 @@ class Instance:
         self._before_sets.clear()
         if seed is not None:
             environment.np_random, _ = seeding.np_random(seed)
-        self.log.begin(self.config_state(), environment.np_random, options)
+        self.log.begin(self.settings.state(), environment.np_random, options)
         self.stats.begin()
         for agent in self.agents:
             agent.reward = 0.0
@@ -428,39 +318,6 @@ class Instance:
             self.refuse_without_episode()
         if self.state is Episode.ENDED:
             raise RequestError(ErrorCode.RESET_REQUIRED, "the episode has ended; reset first")
-
-    def checked_action(self, action: Any, fresh: bool, where: str = "",
-                       replayed: bool = False) -> Any:
-        """``action`` in its space's native form.
-
-        With several agents, the action is a map from agent name to action for every agent
-        still in the episode (every agent when ``fresh``: a reset comes first); actions for
-        agents whose episode ended are ignored, so that a client holding the joint ``Dict``
-        action space may keep sending them (PettingZoo's convention). A ``replayed`` action
-        (from a snapshot's log) holds the agents that were still in the episode: any of them.
-
-        Raises:
-            RequestError: ``invalid_action``, the message prefixed with ``where``.
-        """
-        try:
-            if not self.multi_agent:
-                return self._check_action(action)
-            if not isinstance(action, Mapping):
-                raise SpaceMismatch(f"action must be a map from agent name to action, one per "
-                                    f"agent in the episode: {[a.name for a in self.agents]}")
-            unknown = sorted(map(str, action.keys() - self._check_actions.keys()))
-            if unknown:
-                raise SpaceMismatch(f"action for unknown agent {unknown[0]!r}")
-            if replayed:
-                live = [a.name for a in self.agents if a.name in action]
-            else:
-                live = [a.name for a in self.agents if fresh or not (a.terminated or a.truncated)]
-            missing = sorted(set(live) - action.keys())
-            if missing:
-                raise SpaceMismatch(f"no action for agent {missing[0]!r}")
-            return {name: self._check_actions[name](action[name]) for name in live}
-        except SpaceMismatch as error:
-            raise RequestError(ErrorCode.INVALID_ACTION, f"{where}{error}") from None
 
     def act(self, action: Any, frames: int) -> None:
         """Run a checked action for ``frames`` ticks (lockstep), or apply it now (real time)."""
@@ -494,14 +351,8 @@ class Instance:
         self._late = tree.physics_frames - self._last_action_at > self.environment.repeat_action
         self._late_actions += self._late
         self._last_action_at = tree.physics_frames
-        if self._ended_unseen:
-            return
-        if self.multi_agent:
-            for agent in self.agents:
-                if agent.name in action:
-                    agent.set_action(action[agent.name])
-        else:
-            self.agents[0].set_action(action)
+        if not self._ended_unseen:
+            give_action(self.agents, action)
 
     def _end_tick(self, delta: float) -> None:
         """The end of a tick (after pymunk stepped): rewards, flags, the end of the episode."""
@@ -513,9 +364,10 @@ class Instance:
         agents = self.agents
         for agent in agents:
             agent._after_physics_tick(delta)
-        if self._recorder is not None:
+        recorder = self.settings.recorder
+        if recorder is not None:
             environment = self.environment
-            self._recorder.add(environment._render(*environment.render_size))
+            recorder.add(environment._render(*environment.render_size))
         for agent in agents:
             if not (agent.terminated or agent.truncated):
                 return
@@ -527,95 +379,48 @@ class Instance:
 
     # --- answers ----------------------------------------------------------------------------
 
-    def observe(self, request: Mapping[str, Any]) -> dict[str, Any]:
-        """The parts of the state an ``observation`` part asks for.
-
-        The agent observation is in its space's packed form (keyed by agent name with several
-        agents).
-
-        Raises:
-            ValueError: an agent's observation does not fit its space or is not finite (the
-                environment's fault: answered as ``environment_error``).
-        """
-        observation = {}
-        if "agent" in request:
-            asked = request["agent"]
-            if self.multi_agent:
-                observation["agent"] = {agent.name: packed_observation(agent, codec, asked)
-                                        for agent, codec in self._observers}
-            else:
-                agent, codec = self._observers[0]
-                observation["agent"] = packed_observation(agent, codec, asked)
-        if "world" in request:
-            world = self.environment.world
-            assert world is not None
-            data = observation["world"] = world.get_data(request["world"])
-            check_text_keys(data, f"{type(world).__name__}.get_data() returned")
-        if "render" in request:
-            size = request["render"]
-            width, height = self.environment.render_size
-            observation["render"] = self.environment._render(size.get("width", width),
-                                                             size.get("height", height))
-        if "draw" in request:
-            drawn = observation["draw"] = self.environment._draw()
-            check_text_keys(drawn, "_draw() returned")
-        return observation
-
     def _response(self, answer: Answer, observation: dict[str, Any] | None) -> Response:
-        """The answer: what was observed, the flags, and the rewards and ticks since the last.
+        """The answer: what was observed, the flags, and the rewards and ticks since the last."""
+        reward, terminated, truncated, frames, outcomes = self.report(answer.reports,
+                                                                      answer.acted)
+        return Response(answer.reply_id, observation, reward, terminated, truncated,
+                        self.info(answer.acted, answer.info), frames, outcomes)
 
-        Only an answer that ``reports`` them counts them, and starts them again from zero.
-        ``info`` holds the environment's ``_get_info()`` while an episode exists.
+    def report(self, reports: bool, acted: bool) -> tuple[float, bool, bool, int, Any]:
+        """What an answer reports: reward, flags, ticks, and each agent's with several.
+
+        Only an answer that ``reports`` them (to the controller) counts the rewards and ticks
+        since the previous such answer, and starts them again from zero.
         """
-        reports = answer.reports
-        agents = self.agents
-        outcomes = None
-        if self.multi_agent:
-            outcomes = {each.name: {"reward": float(each.reward) if reports else 0.0,
-                                    "terminated": bool(each.terminated),
-                                    "truncated": bool(each.truncated)} for each in agents}
-            ended = all(o["terminated"] or o["truncated"] for o in outcomes.values())
-            terminated = ended and any(o["terminated"] for o in outcomes.values())
-            truncated = ended and not terminated
-            reward = sum(o["reward"] for o in outcomes.values())
-            if reports:
-                for each in agents:
-                    each.reward = 0.0
-        else:
-            agent = agents[0]
-            reward = float(agent.reward) if reports else 0.0
-            terminated, truncated = bool(agent.terminated), bool(agent.truncated)
-            if reports:
-                agent.reward = 0.0
+        reward, terminated, truncated, outcomes = _outcome(self.agents, self.multi_agent,
+                                                           reports)
         frames = 0
         if reports:
-            frames = self.take_ticks()
+            frames, self._ticks = self._ticks, 0
             if outcomes is None:
-                self.stats.reported(reward, frames, answer.acted)
+                self.stats.reported(reward, frames, acted)
             else:
                 self.stats.reported_agents({name: o["reward"] for name, o in outcomes.items()},
-                                           frames, answer.acted)
+                                           frames, acted)
             if terminated or truncated:
                 self.stats.end("terminated" if terminated else "truncated")
         if terminated or truncated:  # real time: the client now knows the episode ended
             self.state = Episode.ENDED
+        return reward, terminated, truncated, frames, outcomes
+
+    def info(self, acted: bool, extra: dict[str, Any] | None) -> dict[str, Any]:
+        """An answer's ``info``: ``_get_info()`` while an episode exists, real time's, ``extra``."""
         info: dict[str, Any] = {}
         if self.state is not Episode.NOT_STARTED:
             info = self.environment._get_info()
             if info:
                 check_text_keys(info, "_get_info() returned")
-        if answer.acted and self.tree.real_time:
+        if acted and self.tree.real_time:
             info = {**info, "late": self._late, "late_actions": self._late_actions}
-        if answer.info:
-            check_text_keys(answer.info, "the answer holds")
-            info = {**info, **answer.info}
-        return Response(answer.reply_id, observation, reward, terminated, truncated, info,
-                        frames, outcomes)
-
-    def take_ticks(self) -> int:
-        """The ticks run since the last answer that reported them; counting starts again."""
-        ticks, self._ticks = self._ticks, 0
-        return ticks
+        if extra:
+            check_text_keys(extra, "the answer holds")
+            info = {**info, **extra}
+        return info
 
     def environment_error(self, reply_id: int, error: BaseException) -> ErrorReply:
         """The ``environment_error`` answer for an exception in user code (its traceback in it).
@@ -655,16 +460,32 @@ def failure(reply_id: int | None, error: BaseException, consequence: str) -> Err
     return ErrorReply(reply_id, ErrorCode.ENVIRONMENT_ERROR, f"{error}; {consequence}\n{detail}")
 
 
-def check_text_keys(value: Any, what: str) -> None:
-    """Refuse data whose maps have a key that is not a str (clients refuse such a frame).
+def _outcome(agents: list[RLAgent], several: bool,
+             reports: bool) -> tuple[float, bool, bool, dict[str, dict[str, Any]] | None]:
+    """The agents' reward (reset to zero if it ``reports`` it) and flags, and each one's."""
+    if not several:
+        agent = agents[0]
+        reward = float(agent.reward) if reports else 0.0
+        if reports:
+            agent.reward = 0.0
+        return reward, bool(agent.terminated), bool(agent.truncated), None
+    outcomes = {each.name: {"reward": float(each.reward) if reports else 0.0,
+                            "terminated": bool(each.terminated),
+                            "truncated": bool(each.truncated)} for each in agents}
+    ended = all(o["terminated"] or o["truncated"] for o in outcomes.values())
+    terminated = ended and any(o["terminated"] for o in outcomes.values())
+    if reports:
+        for each in agents:
+            each.reward = 0.0
+    return (sum(o["reward"] for o in outcomes.values()), terminated, ended and not terminated,
+            outcomes)
 
-    Raises:
-        ValueError: naming ``what`` and the key (the environment's fault: an
-            ``environment_error``).
-    """
-    problem = find_non_text_key(value)
-    if problem is not None:
-        raise ValueError(f"{what} data that cannot travel: {problem}")
+
+def _joint_space(agents: list[RLAgent], which: str) -> spaces.Space:
+    """The agents' ``which`` space: the agent's own, or a ``Dict`` keyed by agent name."""
+    if len(agents) == 1:
+        return getattr(agents[0], which)
+    return spaces.Dict({agent.name: getattr(agent, which) for agent in agents})
 
 
 def _agents_of(environment: RLEnvironment) -> list[RLAgent]:
@@ -687,51 +508,4 @@ def _agents_of(environment: RLEnvironment) -> list[RLAgent]:
     return list(environment.agents)
 
 
-def packed_observation(agent: RLAgent, codec: Codec, request: Any) -> Any:
-    """The agent's observation (``get_data(request)``) packed by ``codec``.
-
-    Raises:
-        FloatingPointError: it holds NaN or infinity (saying where).
-        ValueError: it does not fit the agent's observation space.
-    """
-    data = agent.get_data(request)
-    try:
-        return codec.pack(data)
-    except SpaceMismatch as error:
-        where = find_non_finite(data)
-        if where is not None:
-            raise FloatingPointError(f"the observation of {agent.get_path()} is not finite at "
-                                     f"{where or '()'}: {data!r:.200}") from None
-        raise ValueError(f"the observation of {agent.get_path()} does not fit its space "
-                         f"{agent.observation_space}: it {error}") from None
-
-
-_CONFIG_PARTS = frozenset({"environment", "agent", "world"})
 _HOOKS = ("_on_got_connection", "_configure", "_send_response", "_after_send_response")
-
-
-def check_keys(part: Mapping[str, Any], allowed: frozenset[str], where: str) -> None:
-    """Refuse (``bad_request``) a key of ``part`` that is not ``allowed``, naming them all."""
-    unknown = part.keys() - allowed
-    if unknown:
-        raise RequestError(
-            ErrorCode.BAD_REQUEST,
-            f"unknown key {sorted(map(str, unknown))[0]!r} in {where}; expected any of "
-            + ", ".join(sorted(allowed)),
-        )
-
-
-def _check_recording(name: Any, record_dir: Path | None) -> None:
-    if not isinstance(name, str):
-        raise RequestError(ErrorCode.INVALID_CONFIG, "record must be a file name (or '' to stop)")
-    if not name:
-        return
-    if record_dir is None:
-        raise RequestError(ErrorCode.INVALID_CONFIG, "recording is disabled on this server; "
-                           "start it with rlenv serve --record-dir DIR")
-    if Path(name).name != name or name.startswith("."):
-        raise RequestError(ErrorCode.INVALID_CONFIG, f"record must be a plain file name in the "
-                           f"server's record directory, got {name!r:.60}")
-    if Path(name).suffix not in _VIDEO_SUFFIXES:
-        raise RequestError(ErrorCode.INVALID_CONFIG, f"record must end with one of "
-                           f"{', '.join(sorted(_VIDEO_SUFFIXES))}, got {name!r:.60}")

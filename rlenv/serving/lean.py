@@ -26,7 +26,8 @@ from gymnasium import spaces
 from rlenv.environment import RLEnvironment
 from rlenv.protocol import ErrorReply, StepsResponse
 from rlenv.protocol.spaces import codec_for, find_non_finite
-from rlenv.serving.instance import Episode, Instance, check_text_keys, packed_observation
+from rlenv.serving.instance import Instance
+from rlenv.serving.observing import packed_observation
 
 __all__ = ["LeanSteps"]
 
@@ -135,19 +136,6 @@ class LeanSteps:
     def _outcome(instance: Instance, acted: bool,
                  has_info: bool) -> tuple[float, bool, bool, int, dict[str, Any]]:
         """What the instance reports (as its answer would): reward, flags, ticks, info."""
-        agent = instance.agents[0]
-        reward = float(agent.reward)
-        agent.reward = 0.0
-        terminated, truncated = bool(agent.terminated), bool(agent.truncated)
-        frames = instance.take_ticks()
-        stats = instance.stats
-        stats.reported(reward, frames, acted)
-        if terminated or truncated:
-            stats.end("terminated" if terminated else "truncated")
-            instance.state = Episode.ENDED
-        info = _EMPTY
-        if has_info:
-            info = instance.environment._get_info()
-            if info:
-                check_text_keys(info, "_get_info() returned")
-        return reward, terminated, truncated, frames, info
+        reward, terminated, truncated, frames, _ = instance.report(True, acted)
+        return reward, terminated, truncated, frames, \
+            instance.info(acted, None) if has_info else _EMPTY

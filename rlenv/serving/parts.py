@@ -27,8 +27,9 @@ from rlenv.protocol.errors import ErrorCode, RequestError
 from rlenv.protocol.spaces import SpaceMismatch
 from rlenv.serving import inspector
 from rlenv.serving.columns import Columns
-from rlenv.serving.instance import Answer, Episode, Instance, Plan, check_keys
+from rlenv.serving.instance import Answer, Episode, Instance, Plan
 from rlenv.serving.lean import LeanSteps
+from rlenv.serving.settings import check_keys
 from rlenv.serving.snapshots import generator_from_state, parse_snapshot
 
 __all__ = ["PARTS", "HostPart", "Part", "Shape", "dispatch", "plan_for", "shape_of",
@@ -93,11 +94,11 @@ class Config(Part):
     def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
               where: str) -> Any:
         config = _map(parts["config"], "config", where)
-        instance.check_config(config)
+        instance.settings.check(config)
         return config
 
     def apply(self, instance: Instance, value: Any, request: Plan) -> None:
-        instance.configure(value)
+        instance.settings.configure(value)
 
 
 class Reset(Part):
@@ -234,12 +235,12 @@ class Restore(Part):
             settings = config.get("environment")
             if isinstance(settings, Mapping) and settings.get("real_time"):
                 raise _bad("restore: snapshots replay in lockstep; this one asks for real time")
-        instance.check_config(snapshot["config"])
+        instance.settings.check(snapshot["config"])
         actions = []
         for index, event in enumerate(snapshot["events"]):
             where = f"restore: events[{index}]: "
             if event[0] == "config":
-                instance.check_config(event[1])
+                instance.settings.check(event[1])
             elif event[0] == "action":
                 actions.append(instance.checked_action(event[1], fresh=True, replayed=True,
                                                        where=where))
@@ -253,13 +254,13 @@ class Restore(Part):
         snapshot, actions, rng = value
         instance.replaying = True
         try:
-            instance.configure(snapshot["config"])
+            instance.settings.configure(snapshot["config"])
             instance.environment.np_random = rng
             instance.begin_episode(None, snapshot["options"])
             checked = iter(actions)
             for index, event in enumerate(snapshot["events"]):
                 if event[0] == "config":
-                    instance.configure(event[1])
+                    instance.settings.configure(event[1])
                 elif event[0] == "set":
                     _prefixed(f"restore: events[{index}]: ", instance.set_property, *event[1:])
                 else:
@@ -306,7 +307,7 @@ class Inspect(Part):
             inspector.set_property(environment, arguments["path"], arguments["property"],
                                    arguments["value"], dry_run=True)
         elif operation == "configure":
-            instance.check_config(arguments)
+            instance.settings.check(arguments)
         return operation, arguments
 
     def apply(self, instance: Instance, value: Any, request: Plan) -> None:
@@ -323,7 +324,7 @@ class Inspect(Part):
         elif operation == "set":
             instance.set_property(arguments["path"], arguments["property"], arguments["value"])
         elif operation == "configure":
-            instance.configure(arguments)
+            instance.settings.configure(arguments)
         else:
             answer.info = {"stats": instance.stats.since(arguments.get("since", 0))}
 

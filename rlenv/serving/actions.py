@@ -1,0 +1,68 @@
+"""Actions: a client's action checked against one instance's action space, or refused.
+
+With one agent, the action is a member of its space. With several, it is a map from agent
+name to action for every agent still in the episode (every agent when the request starts an
+episode first); actions for agents whose episode ended are ignored, so that a client holding
+the joint ``Dict`` action space may keep sending them (PettingZoo's convention).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from gymnasium import spaces
+
+from rlenv.agent import RLAgent
+from rlenv.protocol.errors import ErrorCode, RequestError
+from rlenv.protocol.spaces import SpaceMismatch, compile_check
+
+__all__ = ["ActionCheck"]
+
+
+class ActionCheck:
+    """Checks actions for one instance's agents, with checkers compiled once.
+
+    Args:
+        agents: the instance's agents.
+        space: their joint action space (the agent's own with one agent).
+    """
+
+    def __init__(self, agents: Sequence[RLAgent], space: spaces.Space) -> None:
+        self._agents = list(agents)
+        self._several = len(agents) > 1
+        self._one = compile_check(space, "action")
+        self._each = {a.name: compile_check(a.action_space, f"action[{a.name!r}]")
+                      for a in agents}
+
+    def __call__(self, action: Any, fresh: bool, where: str = "",
+                 replayed: bool = False) -> Any:
+        """``action`` in its space's native form.
+
+        ``fresh``: the request starts an episode first (every agent takes an action). A
+        ``replayed`` action (from a snapshot's log) holds the agents that were still in the
+        episode: any of them.
+
+        Raises:
+            RequestError: ``invalid_action``, the message prefixed with ``where``.
+        """
+        try:
+            if not self._several:
+                return self._one(action)
+            agents = self._agents
+            if not isinstance(action, Mapping):
+                raise SpaceMismatch(f"action must be a map from agent name to action, one per "
+                                    f"agent in the episode: {[a.name for a in agents]}")
+            unknown = sorted(map(str, action.keys() - self._each.keys()))
+            if unknown:
+                raise SpaceMismatch(f"action for unknown agent {unknown[0]!r}")
+            if replayed:
+                live = [a.name for a in agents if a.name in action]
+            else:
+                live = [a.name for a in agents if fresh or not (a.terminated or a.truncated)]
+            missing = sorted(set(live) - action.keys())
+            if missing:
+                raise SpaceMismatch(f"no action for agent {missing[0]!r}")
+            return {name: self._each[name](action[name]) for name in live}
+        except SpaceMismatch as error:
+            raise RequestError(ErrorCode.INVALID_ACTION, f"{where}{error}") from None

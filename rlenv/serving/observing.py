@@ -1,0 +1,96 @@
+"""Observing: what an ``observation`` part asks for, gathered from the environment's nodes.
+
+The agent's observation is packed by its space's codec (refused when it does not fit or holds
+NaN or infinity); world data, draw lists and frames come from the environment as they are,
+checked to be data a client can read (every map key a str).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from rlenv.agent import RLAgent
+from rlenv.environment import RLEnvironment
+from rlenv.protocol.codec import find_non_text_key
+from rlenv.protocol.spaces import Codec, SpaceMismatch, codec_for, find_non_finite
+
+__all__ = ["Observer", "check_text_keys", "packed_observation"]
+
+
+class Observer:
+    """Gathers observations of one environment for its answers.
+
+    Args:
+        environment: the environment observed.
+        agents: its agents; with several, agent observations are keyed by agent name.
+    """
+
+    def __init__(self, environment: RLEnvironment, agents: Sequence[RLAgent]) -> None:
+        self.environment = environment
+        self._agents = [(agent, codec_for(agent.observation_space)) for agent in agents]
+        self._several = len(agents) > 1
+
+    def observe(self, request: Mapping[str, Any]) -> dict[str, Any]:
+        """The parts of the state an ``observation`` part asks for.
+
+        Raises:
+            ValueError: an agent's observation does not fit its space or is not finite, or data
+                holds a map key that is not a str (the environment's fault: answered as
+                ``environment_error``).
+        """
+        observation = {}
+        environment = self.environment
+        if "agent" in request:
+            asked = request["agent"]
+            if self._several:
+                observation["agent"] = {agent.name: packed_observation(agent, codec, asked)
+                                        for agent, codec in self._agents}
+            else:
+                agent, codec = self._agents[0]
+                observation["agent"] = packed_observation(agent, codec, asked)
+        if "world" in request:
+            world = environment.world
+            assert world is not None
+            data = observation["world"] = world.get_data(request["world"])
+            check_text_keys(data, f"{type(world).__name__}.get_data() returned")
+        if "render" in request:
+            size = request["render"]
+            width, height = environment.render_size
+            observation["render"] = environment._render(size.get("width", width),
+                                                        size.get("height", height))
+        if "draw" in request:
+            drawn = observation["draw"] = environment._draw()
+            check_text_keys(drawn, "_draw() returned")
+        return observation
+
+
+def packed_observation(agent: RLAgent, codec: Codec, request: Any) -> Any:
+    """The agent's observation (``get_data(request)``) packed by ``codec``.
+
+    Raises:
+        FloatingPointError: it holds NaN or infinity (saying where).
+        ValueError: it does not fit the agent's observation space.
+    """
+    data = agent.get_data(request)
+    try:
+        return codec.pack(data)
+    except SpaceMismatch as error:
+        where = find_non_finite(data)
+        if where is not None:
+            raise FloatingPointError(f"the observation of {agent.get_path()} is not finite at "
+                                     f"{where or '()'}: {data!r:.200}") from None
+        raise ValueError(f"the observation of {agent.get_path()} does not fit its space "
+                         f"{agent.observation_space}: it {error}") from None
+
+
+def check_text_keys(value: Any, what: str) -> None:
+    """Refuse data whose maps have a key that is not a str (clients refuse such a frame).
+
+    Raises:
+        ValueError: naming ``what`` and the key (the environment's fault: an
+            ``environment_error``).
+    """
+    problem = find_non_text_key(value)
+    if problem is not None:
+        raise ValueError(f"{what} data that cannot travel: {problem}")

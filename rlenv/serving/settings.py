@@ -1,0 +1,181 @@
+"""Settings: what clients configure on one instance, and what the server handles itself.
+
+A ``config`` part maps ``environment``, ``agent`` (every agent) and ``world`` to settings of
+those nodes (their ``configurable`` attributes). :class:`Settings` checks one whole before
+anything is applied, applies it through the environment's ``_configure`` hook (by default to
+each node), logs it for snapshots, and puts the previous values back when the request that
+applied it fails. ``real_time`` and ``record`` are the server's own settings of the
+environment: the instance switches real time; :class:`Settings` keeps the video recorder.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from rlenv.protocol.errors import ErrorCode, RequestError
+from rlenv.scene2d.recording import VideoRecorder
+
+if TYPE_CHECKING:
+    from rlenv.serving.instance import Answer, Instance
+
+__all__ = ["Settings", "check_keys"]
+
+logger = logging.getLogger(__name__)
+
+_PARTS = frozenset({"environment", "agent", "world"})
+_VIDEO_SUFFIXES = frozenset({".mp4", ".webm", ".avi", ".mkv"})
+
+
+class Settings:
+    """The configuration of one instance (see the module docstring).
+
+    Args:
+        instance: the instance whose environment, agents and world are configured.
+        record_dir: where clients may have the environment record videos (``None``: nowhere).
+
+    Attributes:
+        recorder: the video being recorded (``configure(record=...)``), one frame per tick.
+    """
+
+    def __init__(self, instance: Instance, record_dir: Path | None) -> None:
+        self._instance = instance
+        self.record_dir = record_dir
+        self.recorder: VideoRecorder | None = None
+
+    def check(self, config: Mapping[str, Any]) -> None:
+        """Check a ``config`` part (every node it applies to) without applying it.
+
+        Raises:
+            RequestError: ``bad_request`` (its shape) or ``invalid_config`` naming the key.
+        """
+        check_keys(config, _PARTS, "config")
+        for part, nodes in self._nodes().items():
+            if part not in config:
+                continue
+            settings = config[part]
+            if not isinstance(settings, Mapping):
+                raise RequestError(ErrorCode.BAD_REQUEST, f"config.{part} must be a map")
+            if part == "environment":
+                settings = self._check_environment(settings)
+            for node in nodes:
+                node.check_config(settings)
+
+    def configure(self, config: Mapping[str, Any]) -> None:
+        """Apply a checked ``config`` part through the environment's ``_configure``.
+
+        The configuration it replaces is kept until the request is answered (a request that
+        fails changes no setting); once applied it is logged for snapshots during an episode.
+        """
+        instance = self._instance
+        answer = instance.answer
+        if answer is not None and answer.config_before is None:
+            answer.config_before = self.state()
+        if instance.configures_itself:
+            instance.environment._configure(config)
+        else:
+            self.apply(config)
+        instance.log.configured(config)
+
+    def apply(self, config: Mapping[str, Any]) -> None:
+        """Apply a checked ``config`` part to its nodes (what ``_configure`` does by default).
+
+        A configured property is the configuration's from then on: a reset keeps it, even if
+        ``inspect`` set it earlier in the episode.
+        """
+        for part, nodes in self._nodes().items():
+            if part not in config:
+                continue
+            settings = config[part]
+            if part == "environment":
+                settings = self._apply_environment(settings)
+            for node in nodes:
+                node.configure(settings)
+                for key in settings:
+                    self._instance.forget_set(node, key)
+
+    def undo(self, answer: Answer) -> None:
+        """Put back the settings a failed request changed (as they were before it)."""
+        if answer.config_before is None:
+            return
+        for part, nodes in self._nodes().items():
+            for node in nodes:
+                try:
+                    node.configure(answer.config_before[part])
+                except Exception as error:  # user code: what it keeps is its own
+                    logger.error("could not undo the configuration of %s", node.get_path(),
+                                 exc_info=error)
+
+    def state(self) -> dict[str, dict[str, Any]]:
+        """The current value of everything a client may configure (for snapshots)."""
+        return {part: {key: getattr(nodes[0], key) for key in nodes[0].configurable}
+                for part, nodes in self._nodes().items()}
+
+    def record(self, name: str) -> None:
+        """Record the environment's frames into ``name`` in the record directory (``""``: stop)."""
+        if self.recorder is not None:
+            self.recorder.close()
+            self.recorder = None
+        if name:
+            assert self.record_dir is not None
+            self.recorder = VideoRecorder(self.record_dir / name,
+                                          self._instance.tree.physics_ticks_per_second)
+
+    def _nodes(self) -> dict[str, list[Any]]:
+        instance = self._instance
+        environment = instance.environment
+        parts: dict[str, list[Any]] = {"environment": [environment], "agent": instance.agents}
+        if environment.world is not None:
+            parts["world"] = [environment.world]
+        return parts
+
+    def _check_environment(self, settings: Mapping[str, Any]) -> dict[str, Any]:
+        """Check what the server handles itself (real_time, record); the rest is the node's."""
+        rest = dict(settings)
+        if "real_time" in rest and type(rest.pop("real_time")) is not bool:
+            raise RequestError(ErrorCode.INVALID_CONFIG, "real_time must be a bool")
+        if "record" in rest:
+            _check_recording(rest.pop("record"), self.record_dir)
+        if "repeat_action" in rest:
+            repeat = rest["repeat_action"]
+            if type(repeat) is not int or repeat < 1:
+                raise RequestError(ErrorCode.INVALID_CONFIG, f"repeat_action must be an "
+                                   f"integer >= 1, got {repeat!r:.40}")
+        return rest
+
+    def _apply_environment(self, settings: Mapping[str, Any]) -> dict[str, Any]:
+        rest = dict(settings)
+        if "real_time" in rest:
+            self._instance.set_real_time(rest.pop("real_time"))
+        if "record" in rest:
+            self.record(rest.pop("record"))
+        return rest
+
+
+def check_keys(part: Mapping[str, Any], allowed: frozenset[str], where: str) -> None:
+    """Refuse (``bad_request``) a key of ``part`` that is not ``allowed``, naming them all."""
+    unknown = part.keys() - allowed
+    if unknown:
+        raise RequestError(
+            ErrorCode.BAD_REQUEST,
+            f"unknown key {sorted(map(str, unknown))[0]!r} in {where}; expected any of "
+            + ", ".join(sorted(allowed)),
+        )
+
+
+def _check_recording(name: Any, record_dir: Path | None) -> None:
+    if not isinstance(name, str):
+        raise RequestError(ErrorCode.INVALID_CONFIG, "record must be a file name (or '' to stop)")
+    if not name:
+        return
+    if record_dir is None:
+        raise RequestError(ErrorCode.INVALID_CONFIG, "recording is disabled on this server; "
+                           "start it with rlenv serve --record-dir DIR")
+    if Path(name).name != name or name.startswith("."):
+        raise RequestError(ErrorCode.INVALID_CONFIG, f"record must be a plain file name in the "
+                           f"server's record directory, got {name!r:.60}")
+    if Path(name).suffix not in _VIDEO_SUFFIXES:
+        raise RequestError(ErrorCode.INVALID_CONFIG, f"record must end with one of "
+                           f"{', '.join(sorted(_VIDEO_SUFFIXES))}, got {name!r:.60}")

@@ -6,7 +6,7 @@ import socket
 
 import pytest
 
-from rlenv.protocol.sockets import SPIN_WINDOW, AnswerWaiter, configure_socket
+from rlenv.protocol.sockets import REQUEST_SPIN_WINDOW, SPIN_WINDOW, AnswerWaiter, configure_socket
 from rlenv.testing import ManualClock
 
 
@@ -57,3 +57,14 @@ def test_a_closed_peer_reads_as_the_end_of_the_stream(pair) -> None:
     waiter.sent()
     theirs.close()
     assert waiter.recv(ours, 64) == b""
+
+
+def test_a_servers_window_is_its_own(pair) -> None:
+    ours, theirs = pair
+    clock = ManualClock()
+    waiter = AnswerWaiter(clock, window=REQUEST_SPIN_WINDOW)
+    waiter.sent()
+    theirs.sendall(b"next request")
+    clock.advance(REQUEST_SPIN_WINDOW / 2)  # slower than a client's window, quick for a server
+    assert REQUEST_SPIN_WINDOW / 2 > SPIN_WINDOW
+    assert waiter.recv(ours, 64) == b"next request" and waiter.quick

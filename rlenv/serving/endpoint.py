@@ -56,7 +56,7 @@ from rlenv.protocol import (
     Role,
 )
 from rlenv.protocol.errors import ErrorCode, LocalProtocolError, ProtocolError
-from rlenv.protocol.sockets import AnswerWaiter, configure_socket
+from rlenv.protocol.sockets import REQUEST_SPIN_WINDOW, AnswerWaiter, configure_socket
 
 __all__ = ["DEFAULT_HOST", "HOUSEKEEPING_INTERVAL", "Endpoint", "InsecureBindError", "Limits",
            "Peer", "is_loopback"]
@@ -124,7 +124,7 @@ class Peer:
         self.last_request = now
         self.frame_started: float | None = None
         self.active = False  # sending requests back to back: worth blocking on alone
-        self.waiter = AnswerWaiter()  # its next request, spun for when it comes quickly
+        self.waiter = AnswerWaiter(window=REQUEST_SPIN_WINDOW)  # its next request
 
 
 class Endpoint:

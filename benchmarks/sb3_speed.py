@@ -15,8 +15,11 @@ runs 4 pymunk ticks per step, CartPole-v1 a discrete one and one Euler step. The
 much of a trainer's time the environment costs, not how fast two equal simulations run. A third
 model trains on the hand-written CartPole server (``examples.handwritten``: the same pymunk
 work, a raw msgpack client in a ``gymnasium.Env``): the floor of any environment served over a
-socket on the same machine, so that rlenv's ratio can be read against it.
-Threads: torch's default (``torch.set_num_threads`` is not called).
+socket on the same machine, so that rlenv's ratio can be read against it. A fourth trains on
+``rlenv/CartPole-v1``, gymnasium's interface served by rlenv (a discrete action, one pymunk tick
+per step): like for like with CartPole-v1 but for the physics engine and the socket.
+Threads: torch's default (``torch.set_num_threads`` is not called); on a 2-core machine, run
+with ``OMP_NUM_THREADS=1`` too, since torch's spinning threads take the servers' core.
 """
 
 from __future__ import annotations
@@ -33,7 +36,8 @@ import rlenv_client  # noqa: F401  (registers rlenv/CartPole-v0)
 from examples.cartpole import CartPoleAgent
 from rlenv_client.bench import HandWrittenServer
 
-ENVIRONMENTS = ("rlenv/CartPole-v0", "CartPole-v1", "handwritten/CartPole-v0")
+ENVIRONMENTS = ("rlenv/CartPole-v0", "CartPole-v1", "handwritten/CartPole-v0",
+                "rlenv/CartPole-v1")
 
 
 class HandWrittenCartPole(gym.Env):
@@ -98,7 +102,7 @@ def measure(rounds: int, steps: int) -> tuple[dict[str, list[float]], int]:
 
 def report(rates: dict[str, list[float]], steps: int) -> str:
     """The table: min and median steps/s of each environment, and the ratios."""
-    ours, native, floor = (rates[env_id] for env_id in ENVIRONMENTS)
+    ours, native, floor, like = (rates[env_id] for env_id in ENVIRONMENTS)
     lines = [f"SB3 PPO, default hyperparameters, 1 env, learn({steps}) per round, "
              f"{len(ours)} rounds in turns",
              f"{'environment':<26}{'min steps/s':>14}{'median steps/s':>17}"]
@@ -107,7 +111,8 @@ def report(rates: dict[str, list[float]], steps: int) -> str:
                      f"{statistics.median(rates[env_id]):>17,.0f}")
     for name, mine, base in (("rlenv / gymnasium", ours, native),
                              ("hand-written / gymnasium", floor, native),
-                             ("rlenv / hand-written", ours, floor)):
+                             ("rlenv / hand-written", ours, floor),
+                             ("rlenv/CartPole-v1 / gymnasium", like, native)):
         per_round = [a / b for a, b in zip(mine, base, strict=True)]
         lines.append(f"ratio {name}: of the medians "
                      f"{statistics.median(mine) / statistics.median(base):.3f}; per round min "

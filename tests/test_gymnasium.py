@@ -465,3 +465,12 @@ def test_a_server_of_an_older_protocol_is_refused_clearly() -> None:
     finally:
         thread.join(timeout=10)
         listener.close()
+
+
+def test_cartpole_v0_is_not_called_an_outdated_cartpole_v1() -> None:
+    """v0 and v1 are two environments: gymnasium's 'out of date' warning would mislead."""
+    code = ("import gymnasium as gym, rlenv_client\n"
+            "gym.make('rlenv/CartPole-v0', in_process=True).close()\n")
+    result = subprocess.run([sys.executable, "-W", "error::DeprecationWarning", "-c", code],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr

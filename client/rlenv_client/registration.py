@@ -8,6 +8,7 @@ Every id also has a vector entry point, so ``gymnasium.make_vec`` builds a
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import gymnasium
@@ -38,7 +39,14 @@ and 500-step limit) on rlenv's physics, for scripts written for gymnasium's."""
 
 
 def register_environments() -> None:
-    """Register every id in :data:`ENVIRONMENTS` with gymnasium (once)."""
+    """Register every id in :data:`ENVIRONMENTS` with gymnasium (once).
+
+    gymnasium takes a lower version of a name for an outdated one and warns on every ``make``;
+    ``rlenv/CartPole-v0`` is not an older ``rlenv/CartPole-v1`` but another environment (a
+    continuous push, 4 ticks a step), so that one warning is silenced.
+    """
+    warnings.filterwarnings("ignore", message=r".*The environment rlenv/CartPole-v0 is out of "
+                            r"date", category=DeprecationWarning)
     for env_id, registration in ENVIRONMENTS.items():
         if env_id in gymnasium.registry:
             continue

@@ -21,7 +21,8 @@ from collections.abc import Callable
 from types import FrameType
 from typing import TYPE_CHECKING
 
-from rlenv.serving.endpoint import Endpoint, Limits
+from rlenv.protocol import Request
+from rlenv.serving.endpoint import Endpoint, Limits, Peer
 from rlenv.serving.host import Host
 
 if TYPE_CHECKING:
@@ -65,11 +66,11 @@ class SelfHosting:
         got = self.endpoint.receive(host.time_to_next_tick())
         if got is not None:
             self._serving = True
-            host.instances[0].tree.call_deferred(self._serve, *got)
+            host.instances[0].tree.call_deferred(self._serve, host, *got)
 
-    def _serve(self, *got: object) -> None:
+    def _serve(self, host: Host, peer: Peer, request: Request) -> None:
         try:
-            self.host.handle(self.endpoint, *got)  # type: ignore[union-attr,arg-type]
+            host.handle(self.endpoint, peer, request)
         finally:
             self._serving = False
 

@@ -228,9 +228,11 @@ def _http(args: argparse.Namespace) -> int:
 
 
 def _inspect(args: argparse.Namespace) -> int:
-    from rlenv_client.inspector import run
+    from rlenv_client.inspector import serve
 
-    return run(args)
+    serve(args.addresses, token=args.token, port=args.port, follow_stdin=args.follow_stdin,
+          ready=lambda line: print(line, flush=True))
+    return 0
 
 
 def _demo(args: argparse.Namespace) -> int:

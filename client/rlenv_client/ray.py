@@ -39,9 +39,9 @@ never on a command line.
 
 from __future__ import annotations
 
+import logging
 import os
 import secrets
-import sys
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -54,6 +54,8 @@ from rlenv_client.launcher import ServerProcess
 from rlenv_client.session import ServerLost
 
 __all__ = ["PoolLease", "RayServerPool", "ServerLost"]
+
+logger = logging.getLogger(__name__)
 
 _REGISTRY = "rlenv-pool:{}"  # the name of a named pool's registry actor
 
@@ -183,7 +185,7 @@ class RayServerPool(_Servers):
         server_args: more ``rlenv serve`` arguments.
         name: makes the pool leasable from other processes (:meth:`lease`).
         startup_timeout: seconds for the servers to come up.
-        progress: told how many servers are up while they come up (default: a line on stderr).
+        progress: told how many servers are up while they come up (default: logged at INFO).
 
     Raises:
         TimeoutError: the cluster could not place or start the servers in time (everything
@@ -200,7 +202,7 @@ class RayServerPool(_Servers):
             raise ValueError("a pool needs at least one server of at least one instance")
         self.target = target
         self.name = name
-        tell = progress or _progress_line
+        tell = progress or logger.info
         token = secrets.token_urlsafe(24)
         self._group = placement_group([{"CPU": cpus_per_server}] * servers, strategy=strategy)
         self._registry: Any = None
@@ -297,7 +299,3 @@ class PoolLease(_Servers):
 
     def __exit__(self, *exc_info: object) -> None:
         self.release()
-
-
-def _progress_line(message: str) -> None:
-    print(message, file=sys.stderr, flush=True)

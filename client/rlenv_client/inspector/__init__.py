@@ -15,14 +15,13 @@ images and plots the episodes' returns and lengths, steps per second and restart
 
 from __future__ import annotations
 
-import argparse
 import json
 import logging
 import os
 import subprocess
 import sys
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import IO, TYPE_CHECKING
 
 from rlenv_client.client import Client
@@ -157,19 +156,20 @@ def _drain(stdout: IO[str]) -> None:
         sys.stderr.write(line)
 
 
-def run(args: argparse.Namespace) -> int:
-    """``rlenv inspect`` (its arguments: :mod:`rlenv.cli`): serve the page.
+def serve(addresses: Sequence[str], *, token: str | None, port: int, follow_stdin: bool,
+          ready: Callable[[str], None]) -> None:
+    """Serve the page (``rlenv inspect``); ``ready(line)`` once it listens, with its address.
 
-    Until interrupted, or until standard input closes with ``--follow-stdin``.
+    Until interrupted, or until standard input closes with ``follow_stdin`` (address lists,
+    one JSON list a line, are followed meanwhile). ``token`` ``None``: ``$RLENV_TOKEN``.
+
+    Raises:
+        ValueError: an address is not ``HOST:PORT``.
     """
-    try:
-        watcher = Watcher(args.addresses, token=args.token)  # None: $RLENV_TOKEN
-    except ValueError as error:
-        print(f"rlenv inspect: {error}", file=sys.stderr)
-        return 2
-    server = InspectorServer(watcher, port=args.port)
-    print(f"{_READY}{server.url}", flush=True)
-    if args.follow_stdin:
+    watcher = Watcher(addresses, token=token)
+    server = InspectorServer(watcher, port=port)
+    ready(f"{_READY}{server.url}")
+    if follow_stdin:
         threading.Thread(target=_follow, args=(server,), daemon=True).start()
     try:
         server.serve_forever()
@@ -178,7 +178,6 @@ def run(args: argparse.Namespace) -> int:
     finally:
         server.server_close()
         watcher.close()
-    return 0
 
 
 def _follow(server: InspectorServer) -> None:

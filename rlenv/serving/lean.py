@@ -25,9 +25,9 @@ from gymnasium import spaces
 
 from rlenv.environment import RLEnvironment
 from rlenv.protocol import ErrorReply, StepsResponse
-from rlenv.protocol.spaces import codec_for, find_non_finite
+from rlenv.protocol.spaces import codec_for
 from rlenv.serving.instance import Instance
-from rlenv.serving.observing import packed_observation
+from rlenv.serving.observing import non_finite_observation, packed_observation
 
 __all__ = ["LeanSteps"]
 
@@ -123,10 +123,8 @@ class LeanSteps:
             instance = self.instances[row]
             if errors is not None and errors[row] is not None:
                 continue
-            where = find_non_finite(data[row])
-            error = FloatingPointError(
-                f"the observation of {instance.agents[0].get_path()} is not finite at "
-                f"{where or '()'}: {data[row]!r:.200}")
+            error = non_finite_observation(instance.agents[0], data[row])
+            assert error is not None  # written as it came: no conversion made it so
             errors = errors or [None] * len(column)
             errors[row] = instance.environment_error(reply_id, error)
             column[row] = 0

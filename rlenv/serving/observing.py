@@ -15,7 +15,7 @@ from rlenv.environment import RLEnvironment
 from rlenv.protocol.codec import find_non_text_key
 from rlenv.protocol.spaces import Codec, SpaceMismatch, codec_for, find_non_finite
 
-__all__ = ["Observer", "check_text_keys", "packed_observation"]
+__all__ = ["Observer", "check_text_keys", "non_finite_observation", "packed_observation"]
 
 
 class Observer:
@@ -76,12 +76,23 @@ def packed_observation(agent: RLAgent, codec: Codec, request: Any) -> Any:
     try:
         return codec.pack(data)
     except SpaceMismatch as error:
-        where = find_non_finite(data)
-        if where is not None:
-            raise FloatingPointError(f"the observation of {agent.get_path()} is not finite at "
-                                     f"{where or '()'}: {data!r:.200}") from None
+        not_finite = non_finite_observation(agent, data)
+        if not_finite is not None:
+            raise not_finite from None
         raise ValueError(f"the observation of {agent.get_path()} does not fit its space "
                          f"{agent.observation_space}: it {error}") from None
+
+
+def non_finite_observation(agent: RLAgent, data: Any) -> FloatingPointError | None:
+    """The error for ``agent``'s observation ``data`` holding NaN or infinity, saying where.
+
+    ``None`` when it holds neither.
+    """
+    where = find_non_finite(data)
+    if where is None:
+        return None
+    return FloatingPointError(f"the observation of {agent.get_path()} is not finite at "
+                              f"{where or '()'}: {data!r:.200}")
 
 
 def check_text_keys(value: Any, what: str) -> None:

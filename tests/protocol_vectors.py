@@ -664,6 +664,22 @@ def _bad_request(recording: Recording) -> None:
     link.receive("refused like a value of the wrong sort")
 
 
+@scenario("shared_memory.json", "shared_memory (protocol 2.3): requests for a lane the server "
+          "refuses, on the socket", shared=True)
+def _shared_memory(recording: Recording) -> None:
+    link = recording.connect()
+    link.hello()
+    key = bytes(range(16))
+    link.request({"id": 1, "shared_memory": {"address": "/run/docker.sock", "key": key}},
+                 "an address that is not a lane's name", "only 'rlenv-lane-' and 32 hex digits")
+    link.request({"id": 2, "shared_memory": {"address": "rlenv-lane-" + "0" * 32,
+                                             "key": b"short"}}, "a key of another size")
+    link.request({"id": 3, "shared_memory": {"address": "rlenv-lane-" + "0" * 32, "key": key}},
+                 "no client listens on that name", "the lane cannot be reached")
+    link.request({"id": 4, "shared_memory": {"address": "rlenv-lane-" + "0" * 32, "key": key},
+                  "reset": {}}, "with another part", "it goes alone")
+
+
 @scenario("error_invalid_action.json", "invalid_action: actions outside the action space")
 def _invalid_action(recording: Recording) -> None:
     link = recording.connect()

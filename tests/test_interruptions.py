@@ -2,7 +2,8 @@
 
 Each test runs a client process (``tests/interrupted.py``) against real servers, holds one
 answer back by stopping a server (SIGSTOP) once the request sits in that server's receive
-queue, sends the client a real SIGINT, and lets the server go on. The client catches the
+queue (or, through a shared-memory lane, once the client sleeps waiting for the answer), sends
+the client a real SIGINT, and lets the server go on. The client catches the
 ``KeyboardInterrupt`` as a notebook does and makes its next calls: each must get its own answer
 (the observations count the ticks since the reset, so a stale answer would show), never the
 interrupted request's.
@@ -27,6 +28,7 @@ from rlenv_client import ServerProcess
 TESTS = Path(__file__).resolve().parent
 COUNTING = "examples.faulty:CountingEnvironment"
 DEADLINE = 20.0
+TRANSPORTS = pytest.mark.parametrize("transport", ["socket", "lane"])
 
 
 @contextmanager
@@ -54,6 +56,15 @@ def queued_bytes(port: int) -> int:
     return total
 
 
+_POLL = "7"  # the poll system call's number on x86-64 (a lane's client sleeps in it)
+
+
+def sleeps_in_poll(pid: int) -> bool:
+    """Whether the process's main thread is blocked in ``poll`` (what a lane's client waits in)."""
+    with open(f"/proc/{pid}/syscall") as call:
+        return call.read().split()[0] == _POLL
+
+
 def until(condition: object, what: str) -> None:
     deadline = time.monotonic() + DEADLINE
     while not condition():  # type: ignore[operator]
@@ -62,11 +73,16 @@ def until(condition: object, what: str) -> None:
         time.sleep(0.002)  # a polling interval, not a wait for something to happen
 
 
-def interrupt(path: str, addresses: Sequence[str], held: ServerProcess) -> dict:
-    """Run the client process; interrupt its call that ``held`` (stopped) must answer."""
+def interrupt(path: str, addresses: Sequence[str], held: ServerProcess, transport: str) -> dict:
+    """Run the client process; interrupt its call that ``held`` (stopped) must answer.
+
+    ``transport`` is ``socket`` (``RLENV_SHARED_MEMORY=0``) or ``lane`` (the default).
+    """
+    environment = {**os.environ, "RLENV_SHARED_MEMORY": "0" if transport == "socket" else "1"}
     process = subprocess.Popen(
         [sys.executable, str(TESTS / "interrupted.py"), path, *addresses],
-        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env=environment)
     try:
         assert process.stdout.readline().strip() == "ready", process.stderr.read()
         os.kill(held.pid, signal.SIGSTOP)
@@ -74,7 +90,11 @@ def interrupt(path: str, addresses: Sequence[str], held: ServerProcess) -> dict:
         process.stdin.write("go\n")
         process.stdin.flush()
         assert process.stdout.readline().strip() == "waiting"
-        until(lambda: queued_bytes(held.port) > queued, "the request to reach the server")
+        if transport == "socket":
+            until(lambda: queued_bytes(held.port) > queued, "the request to reach the server")
+        else:  # the request is in memory once sent; the client then sleeps on the doorbell
+            until(lambda: all(sleeps_in_poll(process.pid) for _ in range(3)),
+                  "the client to wait for the held answer")
         process.send_signal(signal.SIGINT)
         assert process.stdout.readline().strip() == "interrupted"
         os.kill(held.pid, signal.SIGCONT)  # the held answer comes now, before the next ones
@@ -87,26 +107,29 @@ def interrupt(path: str, addresses: Sequence[str], held: ServerProcess) -> dict:
     return json.loads(out.strip().splitlines()[-1])
 
 
-def test_the_client_drops_the_interrupted_answer() -> None:
+@TRANSPORTS
+def test_the_client_drops_the_interrupted_answer(transport: str) -> None:
     with servers(1) as (server,):
-        result = interrupt("client", [server.address], server)
+        result = interrupt("client", [server.address], server, transport)
     assert result["interrupted"] == "KeyboardInterrupt"
     assert result["reset"] == [0.0] and result["reset_frames"] == 0  # not the held step's 12
     assert result["step"] == [2.0] and result["step_frames"] == 2
 
 
-def test_remote_env_stays_in_step() -> None:
+@TRANSPORTS
+def test_remote_env_stays_in_step(transport: str) -> None:
     with servers(1) as (server,):
-        result = interrupt("env", [server.address], server)
+        result = interrupt("env", [server.address], server, transport)
     assert result["interrupted"] == "KeyboardInterrupt"
     assert result["reset"] == [0.0]
     assert result["step"] == [4.0] and result["step_frames"] == 4
     assert not result["restarted"]
 
 
-def test_the_vector_ends_the_interrupted_episodes_and_goes_on() -> None:
+@TRANSPORTS
+def test_the_vector_ends_the_interrupted_episodes_and_goes_on(transport: str) -> None:
     with servers(2) as (first, second):
-        result = interrupt("vector", [first.address, second.address], second)
+        result = interrupt("vector", [first.address, second.address], second, transport)
     assert result["interrupted"] == "KeyboardInterrupt"
     assert result["after"] == [[4.0], [4.0]]  # the last observations the trainer saw
     assert result["truncated"] == [True, True]
@@ -116,10 +139,11 @@ def test_the_vector_ends_the_interrupted_episodes_and_goes_on() -> None:
     assert result["stepped"] == [[4.0], [4.0]]
 
 
-def test_sb3_vec_env_ends_the_interrupted_episodes_and_goes_on() -> None:
+@TRANSPORTS
+def test_sb3_vec_env_ends_the_interrupted_episodes_and_goes_on(transport: str) -> None:
     pytest.importorskip("stable_baselines3")
     with servers(2) as (first, second):
-        result = interrupt("sb3", [first.address, second.address], second)
+        result = interrupt("sb3", [first.address, second.address], second, transport)
     assert result["interrupted"] == "KeyboardInterrupt"
     assert result["dones"] == [True, True]
     assert all(why and "interrupted" in why for why in result["why"])
@@ -129,7 +153,7 @@ def test_sb3_vec_env_ends_the_interrupted_episodes_and_goes_on() -> None:
 
 def test_the_inspectors_watcher_pairs_each_answer_with_its_request() -> None:
     with servers(1) as (server,):
-        result = interrupt("watcher", [server.address], server)
+        result = interrupt("watcher", [server.address], server, "socket")  # no lane: observers
     assert result["interrupted"] == "KeyboardInterrupt"
     assert {"episodes", "steps", "current"} <= set(result["stats_keys"])  # not the snapshot
     assert result["node_path"].endswith("/World")

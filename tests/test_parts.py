@@ -183,7 +183,7 @@ def test_unknown_keys_are_refused_listing_the_expected_keys(
     parts: dict[Any, Any], fragment: str
 ) -> None:
     reply = assert_refused(parts, ErrorCode.BAD_REQUEST, fragment)
-    assert _expected_keys(reply.message) == set(PARTS) | {"token"}
+    assert _expected_keys(reply.message) == set(PARTS) | {"token", "shared_memory"}
 
 
 def test_unknown_key_in_a_batch_slot_lists_the_keys_of_one_instance() -> None:

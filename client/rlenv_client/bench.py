@@ -10,7 +10,9 @@ measured under the same conditions however the machine's speed drifts during the
 - (a) a bare msgpack request/response over loopback (a Python echo server; arrays as raw
   bytes);
 - (b) in-process CartPole steps (no socket) against (a);
-- (c) remote ``Client.step`` on CartPole at repeat_action 4 against (r), and at 1 against (a);
+- (c) remote ``Client.step`` on CartPole at repeat_action 4 against (r), and at 1 against (a):
+  through a shared-memory lane (the default on one machine), and on the socket alone
+  (``shared_memory=False``) against (r) and against the lane;
 - (d) an 84x84x3 uint8 observation (``examples.pixels``) against a ping-pong carrying the same
   bytes;
 - (e) ``RemoteVectorEnv`` throughput by number of environments and servers (the instances of
@@ -21,7 +23,8 @@ measured under the same conditions however the machine's speed drifts during the
   default layout and repeat_action 4, episodes ending and autoresetting) on random actions,
   against (f), and against (j): the hand-written servers (``python -m examples.handwritten 32``,
   one per core, a raw client sending every server its column of actions and reset flags) doing
-  the same work: the floor of a vector step;
+  the same work: the floor of a vector step; and the same ``make_vec`` on sockets alone
+  (``shared_memory=False``), against the lanes;
 - (g) p50 / p99 latency of a remote step against the ping-pong's;
 - (h) memory of one server process, and per extra environment instance in one process.
 
@@ -340,19 +343,21 @@ def _single_steps(rounds: int, steps: int) -> tuple[list[Figure], int]:
     step_latencies: list[float] = []
     with _PingPong(_step_reply(np.zeros(5, np.float32))) as echo, HandWrittenServer() as raw, \
             LocalClient(CARTPOLE) as local, ServerProcess(CARTPOLE) as server, \
-            Client(server.host, server.port) as client:
+            Client(server.host, server.port) as client, ServerProcess(CARTPOLE) as other, \
+            Client(other.host, other.port, shared_memory=False) as socket_client:
         request = _step_request(action)
         raw.call({"config": ENDLESS, "reset": {"seed": 0}})
-        for each in (local, client):
+        for each in (local, client, socket_client):
             each.configure(**ENDLESS)
             each.reset(seed=0)
-        floor, hand_written, local_rate, remote_1, remote_4 = _interleaved(
+        floor, hand_written, local_rate, remote_1, remote_4, socket_4 = _interleaved(
             rounds,
             _Rate(_calls(lambda: echo.round_trip(request), pong_latencies), steps),
             _Rate(_calls(lambda: raw.step(action, 4)), steps),
             _Rate(_calls(lambda: local.step(action, 4)), steps),
             _Rate(_calls(lambda: client.step(action, 1)), steps),
             _Rate(_calls(lambda: client.step(action, 4), step_latencies), steps),
+            _Rate(_calls(lambda: socket_client.step(action, 4)), steps),
         )
         cartpole_rss = _rss_kib(server.pid)
     pong = "msgpack ping-pong"
@@ -364,6 +369,10 @@ def _single_steps(rounds: int, steps: int) -> tuple[list[Figure], int]:
         Figure("remote CartPole Client.step (repeat 1)", remote_1, "steps/s", pong, floor),
         Figure("remote CartPole Client.step (repeat 4)", remote_4, "steps/s",
                "hand-written server (repeat 4)", hand_written),
+        Figure("remote CartPole Client.step on the socket alone (repeat 4)", socket_4,
+               "steps/s", "hand-written server (repeat 4)", hand_written),
+        Figure("Client.step through shared memory against the socket", remote_4, "steps/s",
+               "the socket alone", socket_4),
     ]
     for quantile in (50, 99):
         mine = float(np.percentile(step_latencies, quantile)) * 1e6
@@ -405,12 +414,15 @@ def _vectors(rounds: int, steps: int, quick: bool) -> list[Figure]:
         stack.callback(async_envs.close)
         made = gymnasium.make_vec("rlenv/CartPole-v0", num_envs=64)
         stack.callback(made.close)
+        on_sockets = gymnasium.make_vec("rlenv/CartPole-v0", num_envs=64, shared_memory=False)
+        stack.callback(on_sockets.close)
         floor = _HandWrittenVector(len(layout), layout[0])  # as make_vec lays them out
         stack.callback(floor.close)
-        async_rate, made_rate, floor_rate = _interleaved(
+        async_rate, made_rate, floor_rate, sockets_rate = _interleaved(
             rounds, _Rate(_random_steps(async_envs), batches * 8, scale=8),
             _Rate(_random_steps(made), batches, scale=64),
-            _Rate(_random_steps_of(floor.step, made), batches, scale=64))
+            _Rate(_random_steps_of(floor.step, made), batches, scale=64),
+            _Rate(_random_steps(on_sockets), batches, scale=64))
     figures = [
         Figure(f"gymnasium {theirs}", async_rate, "env-steps/s"),
         Figure(f"{floor_name}, raw client", floor_rate, "env-steps/s", theirs, async_rate),
@@ -418,13 +430,19 @@ def _vectors(rounds: int, steps: int, quick: bool) -> list[Figure]:
                theirs, async_rate),
         Figure("make_vec('rlenv/CartPole-v0', 64) against the floor", made_rate, "env-steps/s",
                floor_name, floor_rate),
+        Figure("make_vec('rlenv/CartPole-v0', 64) on sockets alone", sockets_rate,
+               "env-steps/s", theirs, async_rate),
+        Figure("make_vec(64) through shared memory against sockets", made_rate, "env-steps/s",
+               "sockets alone", sockets_rate),
     ]
     served = [(4, 1), (8, 4), (64, 32)] if quick else \
         [(1, 1), (2, 1), (4, 1), (8, 1), (8, 4), (64, 32), (64, 64)]
     layouts: list[tuple[str, int, dict[str, Any]]] = [
         (f"{count} envs, {-(-count // per_server)} servers x {per_server}", count,
          {"instances_per_server": per_server}) for count, per_server in served
-    ] + [("64 envs in this process", 64, {"in_process": True})]
+    ] + [("8 envs, 2 servers x 4, sockets alone", 8,
+          {"instances_per_server": 4, "shared_memory": False}),
+         ("64 envs in this process", 64, {"in_process": True})]
     with contextlib.ExitStack() as stack:
         async_envs = gymnasium.vector.AsyncVectorEnv([lambda: gymnasium.make("CartPole-v1")] * 8)
         stack.callback(async_envs.close)

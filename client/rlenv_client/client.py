@@ -7,10 +7,18 @@ added to a step. Every failure surfaces as a typed error: :class:`RemoteError` (
 request, with its code and message), :class:`RequestTimeout` (no answer within the deadline;
 the connection is closed so that a late answer can never be taken for the answer to a later
 request) and :class:`ConnectionLost`.
+
+A client on the same machine as its server moves its steps to a **shared-memory lane**
+(protocol 2.3, :mod:`rlenv.protocol.lanes`) when both ends can: a plain step and a ``steps``
+request then travel through fixed slots of memory both map, with no msgpack and no TCP; every
+other request, and any answer that does not fit the slots (an error, an ``info``), goes on the
+socket as before. Nothing else changes: the same requests, the same answers, the same errors.
+``shared_memory=False`` (or ``RLENV_SHARED_MEMORY=0``) keeps everything on the socket.
 """
 
 from __future__ import annotations
 
+import logging
 import os
 import socket
 import time
@@ -30,16 +38,22 @@ from rlenv.protocol import (
 from rlenv.protocol.errors import (
     ConnectionLost,
     ErrorCode,
+    LocalProtocolError,
     ProtocolError,
     RemoteError,
     RequestTimeout,
 )
-from rlenv.protocol.sockets import AnswerWaiter, configure_socket
+from rlenv.protocol.lanes import Lane, LaneClosed, accept_lane, listen_for_lane, wait_for
+from rlenv.protocol.shared_memory import lane_unavailable
+from rlenv.protocol.sockets import AnswerWaiter, configure_socket, is_loopback
 from rlenv_client.base import BaseClient, StepResult
 
 __all__ = ["Client", "StepResult"]
 
+logger = logging.getLogger(__name__)
+
 _READ_SIZE = 64 * 1024
+_LANES_SINCE = (2, 3)
 
 
 class Client(BaseClient):
@@ -53,17 +67,24 @@ class Client(BaseClient):
             ``info["world"]``.
         token: the secret of a server that requires one (default: ``$RLENV_TOKEN``); sent only
             to servers that ask for it.
+        shared_memory: step through a shared-memory lane (see the module docstring): ``None``
+            (the default) when the server is on this machine and can (else silently not, and
+            never with ``RLENV_SHARED_MEMORY=0``), ``True`` always (else an error says why),
+            ``False`` never.
 
     Raises:
         ConnectionLost: the server cannot be reached, or closed the connection at once.
         RequestTimeout: the server did not say hello within ``timeout``.
-        RemoteError: the server refused the connection (``busy``, ``unauthorized``).
+        RemoteError: the server refused the connection (``busy``, ``unauthorized``), or the
+            lane asked for with ``shared_memory=True`` (``bad_request``, saying why).
         ProtocolVersionError: the server speaks another major protocol version.
+        ValueError: ``shared_memory=True``, but no lane is possible here (the message says
+            why).
     """
 
     def __init__(
         self, host: str = "127.0.0.1", port: int = 0, *, timeout: float = 30.0,
-        world_data: bool = False, token: str | None = None,
+        world_data: bool = False, token: str | None = None, shared_memory: bool | None = None,
     ) -> None:
         super().__init__(world_data=world_data)
         self.address = f"{host}:{port}"
@@ -71,6 +92,9 @@ class Client(BaseClient):
         self._closed_because = ""  # what closed the connection, when it was no error of its own
         self._waiter = AnswerWaiter()
         self._connection = Connection(Role.CLIENT)
+        self._lane: Lane | None = None
+        self._lane_kind = 0  # the kind of the request sent by the lane, until it is answered
+        self._lane_answers = 0  # the lane's answer sequence number last read
         try:
             self._sock: socket.socket | None = socket.create_connection((host, port), timeout)
         except TimeoutError:
@@ -99,9 +123,57 @@ class Client(BaseClient):
                                   "pass token=... (or set RLENV_TOKEN)", fatal=True)
             self._post(Request(next(self._ids), token=token))
             self._response(self.receive_reply())
+        if shared_memory is not False:
+            try:
+                self._open_lane(host, required=shared_memory is True)
+            except BaseException:
+                self.close()
+                raise
+
+    @property
+    def shared_memory(self) -> bool:
+        """Whether steps go through a shared-memory lane (see the module docstring)."""
+        return self._lane is not None
+
+    def _open_lane(self, host: str, required: bool) -> None:
+        """Ask the server for a lane; without one, steps stay on the socket (unless required)."""
+        hello = self.hello
+        why = lane_unavailable(hello)
+        if not is_loopback(host):
+            why = f"the server is at {host}, not on this machine"
+        elif hello.protocol < _LANES_SINCE:
+            why = "the server speaks protocol {}.{} (lanes came with 2.3)".format(*hello.protocol)
+        elif not required and os.environ.get("RLENV_SHARED_MEMORY") == "0":
+            why = "RLENV_SHARED_MEMORY=0"
+        if why is not None:
+            if required:
+                raise ValueError(f"shared_memory=True, but {why}")
+            logger.debug("%s: steps go on the socket: %s", self.address, why)
+            return
+        listener, name, key = listen_for_lane()
+        try:
+            try:
+                self._call(shared_memory={"address": name, "key": key})
+            except RemoteError as error:
+                if required:
+                    raise
+                logger.info("%s: steps go on the socket: %s", self.address, error)
+                return
+            assert self._sock is not None
+            try:
+                self._lane = accept_lane(listener, key, hello, self._sock, self.timeout)
+            except OSError as error:
+                self.close()
+                raise ConnectionLost(f"{self.address} did not open the shared-memory lane it "
+                                     f"offered: {error}") from None
+        finally:
+            listener.close()
 
     def close(self) -> None:
-        """Close the connection; safe to repeat."""
+        """Close the connection (and the lane); safe to repeat."""
+        if self._lane is not None:
+            self._lane.close()
+            self._lane = None
         if self._sock is not None:
             self._sock.close()
             self._sock = None
@@ -125,6 +197,16 @@ class Client(BaseClient):
         if sock is None:
             raise ConnectionLost(f"the connection to {self.address} is closed"
                                  f"{self._closed_because}")
+        lane = self._lane
+        if lane is not None:
+            self._settle()
+            kind = lane.slots.write_request(request)
+            if kind:
+                self._connection.note_request(request.id)
+                self._lane_kind = kind
+                lane.ring()
+                self._waiter.sent()
+                return
         data = self._connection.send(request)
         try:
             sock.sendall(data)
@@ -143,11 +225,59 @@ class Client(BaseClient):
             raise
 
     def _receive(self) -> Reply:
+        kind = self._lane_kind
+        if kind and not self._connection.buffered and self._answered_by_lane():
+            self._lane_kind = 0
+            assert self._lane is not None
+            slots = self._lane.slots
+            self._lane_answers = slots.answer_sequence
+            reply = slots.read_answer(kind)
+            try:
+                self._connection.note_reply(reply.id)  # type: ignore[arg-type]
+            except LocalProtocolError as error:
+                self.close()
+                raise ConnectionLost(f"{self.address} broke the protocol: {error}") from None
+            return reply
         message = self._next_message()
         if message.__class__ is Hello or message.__class__ is Request:
             self.close()
             raise ConnectionLost(f"{self.address} broke the protocol: {message!r:.80}")
+        if kind and message.id is not None:  # type: ignore[union-attr]
+            self._lane_kind = 0  # the lane's request was answered on the socket
         return message  # type: ignore[return-value]
+
+    def _answered_by_lane(self) -> bool:
+        """Wait for the answer to the lane's request; whether it is in the slots.
+
+        Otherwise the socket has bytes: an answer that did not fit, an error, or the end.
+        """
+        lane, sock = self._lane, self._sock
+        if lane is None or sock is None:
+            raise ConnectionLost(f"the connection to {self.address} is closed"
+                                 f"{self._closed_because}")
+        slots = lane.slots
+        try:
+            return wait_for(lambda: slots.answer_sequence != self._lane_answers, lane, sock,
+                            self._waiter, self.timeout)
+        except BlockingIOError:
+            self._timed_out()
+        except LaneClosed:
+            self.close()
+            raise ConnectionLost(f"{self.address} closed the connection") from None
+        except OSError as error:
+            self.close()
+            raise ConnectionLost(f"receiving from {self.address} failed: {error}") from None
+
+    def _settle(self) -> None:
+        """Receive (and drop) the answers still owed, so that requests stay in order.
+
+        Only an interrupted wait leaves any: the lane and the socket are two ways in, and the
+        server must not take a later request before an earlier one.
+        """
+        while self._connection.outstanding:
+            message = self._receive()
+            logger.info("%s: dropped the answer to request %s, whose caller gave up on it",
+                        self.address, message.id)
 
     def _next_message(self) -> Message:
         connection = self._connection

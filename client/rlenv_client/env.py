@@ -57,6 +57,8 @@ class RemoteEnv(gymnasium.Env):
         inspector: also start the live inspector (:mod:`rlenv_client.inspector`) on the
             server: its page's address is printed on standard error and kept in
             ``inspector.url``.
+        shared_memory: step through a shared-memory lane when the server is on this
+            machine (see :class:`~rlenv_client.client.Client`): by default when it can.
 
     Raises:
         ServerStartError: the server could not start (its output is in the message).
@@ -70,7 +72,7 @@ class RemoteEnv(gymnasium.Env):
         repeat_action: int | None = None, render_mode: str | None = None,
         in_process: bool = False, timeout: float = 30.0, server_args: Sequence[str] = (),
         render_size: tuple[int, int] | None = None, token: str | None = None,
-        max_restarts: int = 3, inspector: bool = False,
+        max_restarts: int = 3, inspector: bool = False, shared_memory: bool | None = None,
     ) -> None:
         self.metadata = {"render_modes": ["rgb_array"], "render_fps": 15}
         if display_available():
@@ -83,7 +85,8 @@ class RemoteEnv(gymnasium.Env):
                                "(DISPLAY is not set); use render_mode='rgb_array' instead")
         self.session = Session(target, address=address, in_process=in_process,
                                max_restarts=max_restarts, timeout=timeout,
-                               server_args=server_args, token=token)
+                               server_args=server_args, token=token,
+                               shared_memory=shared_memory)
         hello = self.client.hello
         self.action_space = hello.action_space
         self.observation_space = hello.observation_space

@@ -68,7 +68,7 @@ def connect(
     target: str | None = None, *, address: str | None = None, in_process: bool = False,
     timeout: float = 30.0, server_args: Sequence[str] = (), startup_timeout: float = 60.0,
     token: str | None = None, instances: int = 1, pool: ServerSource | None = None,
-    index: int = 0,
+    index: int = 0, shared_memory: bool | None = None,
 ) -> tuple[BaseClient, ServerProcess | None]:
     """Reach an environment the way :class:`RemoteEnv` does.
 
@@ -77,7 +77,8 @@ def connect(
 
     ``instances`` > 1 holds that many instances of the target behind the client (a server
     started with ``--instances``, or in this process). A ``pool`` wins over both: the client
-    connects to its server ``index``, wherever that is now.
+    connects to its server ``index``, wherever that is now. ``shared_memory`` is
+    :class:`~rlenv_client.client.Client`'s (a lane for steps to a server on this machine).
 
     Returns:
         The client, and the server process it started (``None`` when it started none).
@@ -87,11 +88,13 @@ def connect(
     """
     if pool is not None:
         host, port = parse_address(pool.address(index))
-        return Client(host, port, timeout=timeout, token=pool.token), None
+        return Client(host, port, timeout=timeout, token=pool.token,
+                      shared_memory=shared_memory), None
     if address is not None:
         if in_process:
             raise ValueError("in_process=True needs a target, not an address")
-        return Client(*parse_address(address), timeout=timeout, token=token), None
+        return Client(*parse_address(address), timeout=timeout, token=token,
+                      shared_memory=shared_memory), None
     if target is None:
         raise ValueError("give target='MODULE:CLASS' or address='HOST:PORT'")
     if in_process:
@@ -102,7 +105,8 @@ def connect(
         server_args = [*server_args, "--instances", str(instances)]
     server = ServerProcess(target, startup_timeout=startup_timeout, args=server_args)
     try:
-        return Client(server.host, server.port, timeout=timeout), server
+        return Client(server.host, server.port, timeout=timeout,
+                      shared_memory=shared_memory), server
     except BaseException:
         server.close()
         raise
@@ -123,17 +127,20 @@ class Session:
         pool: servers run by someone else (a Ray pool), of which this session uses server
             ``index``; a lost one is reconnected wherever the pool says it is now.
         index: which server of ``pool``.
+        shared_memory: step through a shared-memory lane (see
+            :class:`~rlenv_client.client.Client`).
     """
 
     def __init__(
         self, target: str | None = None, *, address: str | None = None, in_process: bool = False,
         max_restarts: int = 0, timeout: float = 30.0, server_args: Sequence[str] = (),
         token: str | None = None, instances: int = 1, pool: ServerSource | None = None,
-        index: int = 0,
+        index: int = 0, shared_memory: bool | None = None,
     ) -> None:
         self._place = {"target": target, "address": address, "in_process": in_process,
                        "timeout": timeout, "server_args": server_args, "token": token,
-                       "instances": instances, "pool": pool, "index": index}
+                       "instances": instances, "pool": pool, "index": index,
+                       "shared_memory": shared_memory}
         self._pool = pool
         self.client, self.server = connect(**self._place)
         self.max_restarts = max_restarts

@@ -94,6 +94,8 @@ class RemoteVectorEnv(VectorEnv):
         inspector: also start the live inspector (:mod:`rlenv_client.inspector`) on every
             server: its page's address is printed on standard error and kept in
             ``inspector.url``.
+        shared_memory: step servers on this machine through shared-memory lanes (see
+            :class:`~rlenv_client.client.Client`): by default wherever they can.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array"]}
@@ -106,7 +108,7 @@ class RemoteVectorEnv(VectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         in_process: bool = False, render_mode: str | None = None, timeout: float = 30.0,
         token: str | None = None, max_restarts: int = 3, instances_per_server: int | None = None,
-        inspector: bool = False,
+        inspector: bool = False, shared_memory: bool | None = None,
     ) -> None:
         self.sessions: list[Session] = []  # first: closing a half-built vector closes these
         self.inspector: Inspector | None = None
@@ -117,7 +119,8 @@ class RemoteVectorEnv(VectorEnv):
             raise ValueError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
         places = self._places(num_envs, target, addresses, pool, in_process, token,
                               instances_per_server)
-        self._connect(places, timeout=timeout, max_restarts=max_restarts)
+        self._connect(places, timeout=timeout, max_restarts=max_restarts,
+                      shared_memory=shared_memory)
         self._groups: list[range] = []  # the sub-environments each session hosts
         start = 0
         for session in self.sessions:

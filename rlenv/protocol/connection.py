@@ -261,6 +261,31 @@ class Connection:
             self._enter(state)
         return _write_prefix(len(body)) + body
 
+    def note_request(self, request_id: int) -> None:
+        """A request went by the shared-memory lane (:mod:`rlenv.protocol.lanes`) instead.
+
+        Its answer is awaited in turn, whichever way it comes back.
+
+        Raises:
+            LocalProtocolError: the connection is not ready for requests.
+        """
+        if self.state is not _READY:
+            raise LocalProtocolError(f"no request may go while the connection is "
+                                     f"{self.state.value}")
+        self._outstanding.append(request_id)
+
+    def note_reply(self, reply_id: int) -> None:
+        """The answer to the oldest request came (or went) by the shared-memory lane.
+
+        Raises:
+            LocalProtocolError: it is not the oldest request's answer.
+        """
+        outstanding = self._outstanding
+        if not outstanding or outstanding[0] != reply_id:
+            raise LocalProtocolError(f"reply to request {reply_id} out of order; "
+                                     f"outstanding: {list(outstanding)}")
+        outstanding.popleft()
+
     # --- internals --------------------------------------------------------------------------
 
     def _refusal(self, event: Event, error: type[Exception]) -> Exception:

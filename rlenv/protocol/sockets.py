@@ -19,13 +19,14 @@ client windows made vectors slower.
 
 from __future__ import annotations
 
+import ipaddress
 import os
 import socket
 import struct
 import time
 from collections.abc import Callable
 
-__all__ = ["REQUEST_SPIN_WINDOW", "SPIN_WINDOW", "AnswerWaiter", "configure_socket"]
+__all__ = ["REQUEST_SPIN_WINDOW", "SPIN_WINDOW", "AnswerWaiter", "configure_socket", "is_loopback"]
 
 SPIN_WINDOW = 100e-6
 """Seconds after a request within which a client spins for its answer (if the last came so)."""
@@ -47,23 +48,25 @@ class AnswerWaiter:
         window: seconds after :meth:`sent` within which an answer counts as quick.
 
     Attributes:
+        clock: as given.
         quick: the last answer came within ``window`` of its question, so the next one is
             spun for.
+        since: when the other end was last asked (:meth:`sent`).
         window: as given.
     """
 
-    __slots__ = ("_now", "_since", "quick", "window")
+    __slots__ = ("clock", "quick", "since", "window")
 
     def __init__(self, clock: Callable[[], float] = time.perf_counter,
                  window: float = SPIN_WINDOW) -> None:
-        self._now = clock
+        self.clock = clock
         self.window = window
         self.quick = False
-        self._since = 0.0
+        self.since = 0.0
 
     def sent(self) -> None:
         """The other end was just asked: its answer is awaited from now."""
-        self._since = self._now()
+        self.since = self.clock()
 
     def recv(self, sock: socket.socket, size: int) -> bytes:
         """What ``sock`` has next, at most ``size`` bytes (blocking, with its kernel timeout).
@@ -72,9 +75,9 @@ class AnswerWaiter:
             BlockingIOError: the socket's receive timeout passed.
             OSError: the connection failed.
         """
-        now = self._now
+        now = self.clock
         if self.quick:
-            deadline = self._since + self.window
+            deadline = self.since + self.window
             while now() < deadline:
                 try:
                     return sock.recv(size, _DONTWAIT)
@@ -83,7 +86,7 @@ class AnswerWaiter:
         try:
             return sock.recv(size)
         finally:  # a timeout or an error counts as a slow answer
-            self.quick = now() - self._since < self.window
+            self.quick = now() - self.since < self.window
 
 
 def configure_socket(sock: socket.socket, receive_timeout: float, send_timeout: float) -> None:
@@ -103,3 +106,13 @@ def configure_socket(sock: socket.socket, receive_timeout: float, send_timeout: 
         if whole == 0 and micros == 0:
             micros = 1  # zero would mean "wait forever"
         sock.setsockopt(socket.SOL_SOCKET, option, struct.pack("ll", whole, micros))
+
+
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` (an address, or ``localhost``) is a loopback address."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False

@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import errno
 import hmac
-import ipaddress
 import logging
 import os
 import select
@@ -53,10 +52,17 @@ from rlenv.protocol import (
     Hello,
     Reply,
     Request,
+    Response,
     Role,
 )
 from rlenv.protocol.errors import ErrorCode, LocalProtocolError, ProtocolError
-from rlenv.protocol.sockets import REQUEST_SPIN_WINDOW, AnswerWaiter, configure_socket
+from rlenv.protocol.lanes import Lane, LaneClosed, open_lane, wait_for
+from rlenv.protocol.sockets import (
+    REQUEST_SPIN_WINDOW,
+    AnswerWaiter,
+    configure_socket,
+    is_loopback,
+)
 
 __all__ = ["DEFAULT_HOST", "HOUSEKEEPING_INTERVAL", "Endpoint", "InsecureBindError", "Limits",
            "Peer", "is_loopback"]
@@ -110,10 +116,15 @@ class InsecureBindError(RuntimeError):
 
 
 class Peer:
-    """One connected client, as the endpoint sees it."""
+    """One connected client, as the endpoint sees it.
+
+    Attributes:
+        lane: its shared-memory lane (:mod:`rlenv.protocol.lanes`), if it asked for one.
+        lane_kind: the kind of the request taken from the lane and not answered yet (0: none).
+    """
 
     __slots__ = ("active", "address", "authenticated", "connection", "frame_started",
-                 "last_request", "sock", "waiter")
+                 "lane", "lane_kind", "lane_seen", "last_request", "sock", "waiter")
 
     def __init__(self, sock: socket.socket, address: str, max_frame_size: int,
                  now: float) -> None:
@@ -125,6 +136,13 @@ class Peer:
         self.frame_started: float | None = None
         self.active = False  # sending requests back to back: worth blocking on alone
         self.waiter = AnswerWaiter(window=REQUEST_SPIN_WINDOW)  # its next request
+        self.lane: Lane | None = None
+        self.lane_kind = 0
+        self.lane_seen = 0  # the lane's request sequence number last taken
+
+    def lane_ready(self) -> bool:
+        """Whether the lane holds a request not taken yet."""
+        return self.lane is not None and self.lane.slots.request_sequence != self.lane_seen
 
 
 class Endpoint:
@@ -241,8 +259,8 @@ class Endpoint:
             controller = self._controller
             if deadline is None and controller is not None and controller.active and \
                     self._clock() < self._housekeeping_at:
-                if not controller.connection.buffered:  # nothing pipelined: wait for it
-                    self._read(controller, block=True)
+                if not controller.connection.buffered and not controller.lane_ready():
+                    self._read(controller, block=True)  # nothing pipelined: wait for it
                 request = self._request_from(controller)
                 if request is not None:
                     if controller.connection.buffered:  # pipelined: more may be whole already
@@ -308,6 +326,9 @@ class Endpoint:
     def _look_around(self, timeout: float | None) -> None:
         """Everything but the controller's fast path: reads, accepts, the lifeline, deadlines."""
         ready = {key.fileobj for key, _ in self._selector.select(timeout)}
+        for peer in [peer for peer in self._order if peer.lane is not None and
+                     peer.lane.doorbell in ready]:
+            self._ring_heard(peer)
         for peer in [peer for peer in self._order if peer.sock in ready]:
             self._read(peer, block=False)  # before accepting: a client may leave as one comes
         if self._listener in ready:
@@ -390,12 +411,26 @@ class Endpoint:
         return peer.connection.peer_closed
 
     def _read(self, peer: Peer, block: bool) -> None:
-        """One read from ``peer``; blocking reads give up after the housekeeping interval."""
+        """One read from ``peer``; blocking reads give up after the housekeeping interval.
+
+        A blocking read of a peer with a lane also ends when a request comes on the lane.
+        """
         try:
-            data = peer.waiter.recv(peer.sock, _READ_SIZE) if block else \
-                peer.sock.recv(_READ_SIZE, socket.MSG_DONTWAIT)
+            if not block:
+                data = peer.sock.recv(_READ_SIZE, socket.MSG_DONTWAIT)
+            elif peer.lane is None:
+                data = peer.waiter.recv(peer.sock, _READ_SIZE)
+            elif wait_for(peer.lane_ready, peer.lane, peer.sock, peer.waiter,
+                          HOUSEKEEPING_INTERVAL):
+                peer.active = True  # a request on the lane
+                return
+            else:
+                data = peer.sock.recv(_READ_SIZE, socket.MSG_DONTWAIT)
         except (BlockingIOError, InterruptedError):
             peer.active = False  # it paused: look after everything else from now on
+            return
+        except LaneClosed as error:
+            self._close_lane(peer, str(error))
             return
         except OSError as error:
             logger.info("client %s: %s", peer.address, error)
@@ -423,6 +458,8 @@ class Endpoint:
 
     def _request_from(self, peer: Peer) -> Request | None:
         """``peer``'s next valid request; answers its bad frames and refusals on the way."""
+        if peer.lane_ready():
+            return self._lane_request(peer)
         connection = peer.connection
         while peer.sock in self._peers:
             try:
@@ -448,8 +485,77 @@ class Endpoint:
             peer.last_request = self._clock()
             if not peer.authenticated and not self._authenticate(peer, message):  # type: ignore[arg-type]
                 continue
+            if "shared_memory" in message.parts:  # type: ignore[union-attr]
+                self._open_lane(peer, message)  # type: ignore[arg-type]
+                continue
             return message  # type: ignore[return-value]
         return None
+
+    # --- shared-memory lanes ----------------------------------------------------------------
+
+    def _open_lane(self, peer: Peer, request: Request) -> None:
+        """Answer a ``shared_memory`` request: hand the client a lane, or say why not."""
+        value = request.parts["shared_memory"]
+        host = peer.sock.getpeername()[0]
+        why = None
+        if len(request.parts) != 1:
+            why = "'shared_memory' goes alone in a request"
+        elif not isinstance(value, dict):
+            why = "'shared_memory' must be a map with 'address' and 'key'"
+        elif not is_loopback(host):
+            why = f"shared memory is for clients on this machine; this one is at {host}"
+        elif peer.lane is not None:
+            why = "this connection has a shared-memory lane already"
+        if why is None:
+            assert self._hello is not None
+            try:
+                peer.lane = open_lane(value.get("address"), value.get("key"), self._hello,
+                                      peer.sock)
+            except ValueError as error:
+                why = str(error)
+            except OSError as error:
+                why = f"the client's lane socket cannot be reached: {error}"
+        if why is not None:
+            self._send(peer, ErrorReply(request.id, ErrorCode.BAD_REQUEST, why))
+            return
+        assert peer.lane is not None
+        peer.lane_seen = peer.lane.slots.request_sequence
+        self._selector.register(peer.lane.doorbell, selectors.EVENT_READ)
+        logger.info("client %s steps through shared memory", peer.address)
+        self._send(peer, Response(request.id, info={
+            "shared_memory": peer.lane.slots.layout.to_wire()}))
+
+    def _lane_request(self, peer: Peer) -> Request:
+        """Take the request waiting on ``peer``'s lane."""
+        lane = peer.lane
+        assert lane is not None
+        slots = lane.slots
+        peer.lane_seen = slots.request_sequence  # first: the client wrote it last
+        request = slots.read_request()
+        peer.lane_kind = slots.request_kind
+        peer.connection.note_request(request.id)
+        peer.last_request = self._clock()
+        return request
+
+    def _ring_heard(self, peer: Peer) -> None:
+        """``peer``'s doorbell rang while the endpoint looked around: serve its lane in turn."""
+        assert peer.lane is not None
+        try:
+            peer.lane.drain()
+        except LaneClosed as error:
+            self._close_lane(peer, str(error))
+            return
+        if peer.lane_ready():
+            self._backlog = True
+
+    def _close_lane(self, peer: Peer, reason: str) -> None:
+        lane = peer.lane
+        if lane is None:
+            return
+        peer.lane = None
+        self._selector.unregister(lane.doorbell)
+        lane.close()
+        logger.info("client %s: shared-memory lane closed: %s", peer.address, reason)
 
     def _authenticate(self, peer: Peer, request: Request) -> bool:
         """Check the first request's token; on success lift the frame size limit."""
@@ -474,6 +580,15 @@ class Endpoint:
     def _send(self, peer: Peer, message: Reply,
               why_fatal: str = "error reply closed the connection") -> None:
         """Send ``message``; a fatal error reply then closes the connection (``why_fatal``)."""
+        kind = peer.lane_kind
+        if kind and message.id is not None:  # the answer to the lane's request
+            peer.lane_kind = 0
+            lane = peer.lane
+            if lane is not None and lane.slots.write_answer(message, kind):
+                peer.connection.note_reply(message.id)
+                lane.ring()
+                peer.waiter.sent()
+                return
         try:
             try:
                 data = peer.connection.send(message)
@@ -505,6 +620,7 @@ class Endpoint:
             self._drop(peer, "send failed")
 
     def _drop(self, peer: Peer, reason: str) -> None:
+        self._close_lane(peer, reason)
         if self._peers.pop(peer.sock, None) is not None:
             self._selector.unregister(peer.sock)
             self._order.remove(peer)
@@ -531,13 +647,3 @@ def _bind_error(error: OSError, host: str, port: int) -> OSError:
     clear = OSError(reason)
     clear.errno = error.errno
     return clear
-
-
-def is_loopback(host: str) -> bool:
-    """Whether ``host`` (an address, or ``localhost``) is a loopback address."""
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False

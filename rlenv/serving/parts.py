@@ -500,7 +500,7 @@ PARTS: dict[str, Part | HostPart] = {
 
 _ORDER = {name: index for index, name in enumerate(PARTS)}
 _INSTANCE_KEYS = ", ".join(name for name, part in PARTS.items() if isinstance(part, Part))
-_REQUEST_KEYS = ", ".join([_INSTANCE_KEYS, "token"] + [
+_REQUEST_KEYS = ", ".join([_INSTANCE_KEYS, "token", "shared_memory"] + [
     name for name, part in PARTS.items() if isinstance(part, HostPart)])
 _MAX_SHAPES = 512
 

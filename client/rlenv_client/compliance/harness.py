@@ -111,6 +111,7 @@ class TappedClient(Client):
 
     def __init__(self, tap: ReplyTap, where: str, host: str, port: int, **kwargs: Any) -> None:
         self._tap, self._where, self._stream = tap, where, bytearray()
+        kwargs.setdefault("shared_memory", False)  # every answer on the wire, for the tap
         super().__init__(host, port, **kwargs)
 
     def _recv(self) -> bytes:

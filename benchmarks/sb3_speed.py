@@ -17,7 +17,10 @@ model trains on the hand-written CartPole server (``examples.handwritten``: the 
 work, a raw msgpack client in a ``gymnasium.Env``): the floor of any environment served over a
 socket on the same machine, so that rlenv's ratio can be read against it. A fourth trains on
 ``rlenv/CartPole-v1``, gymnasium's interface served by rlenv (a discrete action, one pymunk tick
-per step): like for like with CartPole-v1 but for the physics engine and the socket.
+per step): like for like with CartPole-v1 but for the physics engine and the socket. rlenv's
+environments step through a shared-memory lane (the default on one machine); a fifth model
+trains on ``rlenv/CartPole-v0`` on the socket alone (``shared_memory=False``), to show what the
+lane gives.
 Threads: torch's default (``torch.set_num_threads`` is not called); on a 2-core machine, run
 with ``OMP_NUM_THREADS=1`` too, since torch's spinning threads take the servers' core.
 """
@@ -36,8 +39,11 @@ import rlenv_client  # noqa: F401  (registers rlenv/CartPole-v0)
 from examples.cartpole import CartPoleAgent
 from rlenv_client.bench import HandWrittenServer
 
+ON_SOCKET = "rlenv/CartPole-v0 on the socket"
 ENVIRONMENTS = ("rlenv/CartPole-v0", "CartPole-v1", "handwritten/CartPole-v0",
-                "rlenv/CartPole-v1")
+                "rlenv/CartPole-v1", ON_SOCKET)
+MADE_AS = {ON_SOCKET: ("rlenv/CartPole-v0", {"shared_memory": False})}
+"""How an environment of :data:`ENVIRONMENTS` is made, when not by its name alone."""
 
 
 class HandWrittenCartPole(gym.Env):
@@ -66,11 +72,12 @@ class HandWrittenCartPole(gym.Env):
 gym.register("handwritten/CartPole-v0", entry_point=HandWrittenCartPole, max_episode_steps=500)
 
 
-def make_model(env_id: str) -> Any:
-    """A PPO model with default hyperparameters on one ``gym.make(env_id)``."""
+def make_model(name: str) -> Any:
+    """A PPO model with default hyperparameters on one environment of :data:`ENVIRONMENTS`."""
     from stable_baselines3 import PPO
 
-    return PPO("MlpPolicy", gym.make(env_id), seed=0, verbose=0)
+    env_id, kwargs = MADE_AS.get(name, (name, {}))
+    return PPO("MlpPolicy", gym.make(env_id, **kwargs), seed=0, verbose=0)
 
 
 def learn_rate(model: Any, steps: int) -> float:
@@ -102,17 +109,19 @@ def measure(rounds: int, steps: int) -> tuple[dict[str, list[float]], int]:
 
 def report(rates: dict[str, list[float]], steps: int) -> str:
     """The table: min and median steps/s of each environment, and the ratios."""
-    ours, native, floor, like = (rates[env_id] for env_id in ENVIRONMENTS)
+    ours, native, floor, like, socket = (rates[env_id] for env_id in ENVIRONMENTS)
     lines = [f"SB3 PPO, default hyperparameters, 1 env, learn({steps}) per round, "
              f"{len(ours)} rounds in turns",
-             f"{'environment':<26}{'min steps/s':>14}{'median steps/s':>17}"]
+             f"{'environment':<32}{'min steps/s':>14}{'median steps/s':>17}"]
     for env_id in ENVIRONMENTS:
-        lines.append(f"{env_id:<26}{min(rates[env_id]):>14,.0f}"
+        lines.append(f"{env_id:<32}{min(rates[env_id]):>14,.0f}"
                      f"{statistics.median(rates[env_id]):>17,.0f}")
     for name, mine, base in (("rlenv / gymnasium", ours, native),
                              ("hand-written / gymnasium", floor, native),
                              ("rlenv / hand-written", ours, floor),
-                             ("rlenv/CartPole-v1 / gymnasium", like, native)):
+                             ("rlenv/CartPole-v1 / gymnasium", like, native),
+                             ("rlenv on the socket / gymnasium", socket, native),
+                             ("rlenv through shared memory / on the socket", ours, socket)):
         per_round = [a / b for a, b in zip(mine, base, strict=True)]
         lines.append(f"ratio {name}: of the medians "
                      f"{statistics.median(mine) / statistics.median(base):.3f}; per round min "

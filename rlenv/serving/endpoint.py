@@ -535,6 +535,7 @@ class Endpoint:
         peer.lane_kind = slots.request_kind
         peer.connection.note_request(request.id)
         peer.last_request = self._clock()
+        peer.active = True  # sending requests back to back: wait on its lane and socket alone
         return request
 
     def _ring_heard(self, peer: Peer) -> None:

@@ -225,20 +225,20 @@ def layouts(stack: ExitStack, num_envs: int, locals_: list[int]) -> dict[str, Ro
     return found
 
 
-def compare(title: str, rounds_of: dict[str, Round], rounds: int, seconds: float) -> None:
+def compare(num_envs: int, rounds_of: dict[str, Round], rounds: int, seconds: float) -> None:
     """Warm up each layout, size its rounds, run them in turns, print the figures."""
     sizes = {}
     for name, round_ in rounds_of.items():
         round_(20)
         speed, _, _ = round_(50)
-        num_envs = int(title.split()[0])
         sizes[name] = max(20, int(speed * seconds / num_envs))
     results: dict[str, list[tuple[float, float, float]]] = {name: [] for name in rounds_of}
     for _ in range(rounds):
         for name, round_ in rounds_of.items():
             results[name].append(round_(sizes[name]))
-    print(f"\n{title}: env-steps/s min, median; CPU us per env-step (medians): servers, this "
-          f"process; cores busy; speed / first layout's, min and median of the rounds' ratios")
+    print(f"\n{num_envs} CartPoles, repeat {REPEAT}: env-steps/s min, median; CPU us per "
+          "env-step (medians): servers, this process; cores busy; speed / first layout's, "
+          "min and median of the rounds' ratios")
     baseline = results[next(iter(results))]
     for name, values in results.items():
         speeds = [v[0] for v in values]
@@ -263,8 +263,7 @@ def main() -> None:
     for num_envs in arguments.envs:
         with ExitStack() as stack:
             found = layouts(stack, num_envs, splits.get(num_envs, [num_envs // 8 or 1]))
-            compare(f"{num_envs} CartPoles, repeat {REPEAT}", found, arguments.rounds,
-                    arguments.seconds)
+            compare(num_envs, found, arguments.rounds, arguments.seconds)
 
 
 if __name__ == "__main__":

@@ -496,7 +496,10 @@ class Endpoint:
     def _open_lane(self, peer: Peer, request: Request) -> None:
         """Answer a ``shared_memory`` request: hand the client a lane, or say why not."""
         value = request.parts["shared_memory"]
-        host = peer.sock.getpeername()[0]
+        try:
+            host = peer.sock.getpeername()[0]
+        except OSError:  # it left meanwhile: the refusal's send drops it
+            host = "an address no longer connected"
         why = None
         if len(request.parts) != 1:
             why = "'shared_memory' goes alone in a request"

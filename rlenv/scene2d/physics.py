@@ -50,7 +50,7 @@ from pymunk._chipmunk_cffi import lib
 
 from rlenv.node import Node, ProcessMode
 from rlenv.scene2d.colors import RGB, Color, to_rgb
-from rlenv.scene2d.fresh import place_at_rest, refresh_constraint, renumber
+from rlenv.scene2d.fresh import place_at_rest, refill, refresh_constraint, renumber
 from rlenv.scene2d.node2d import Node2D, Pose, compose, frame_of, relative_pose
 from rlenv.scene2d.pymunk_data import ConstraintRecipe, copy_body, copy_shape
 from rlenv.signals import Signal
@@ -137,13 +137,19 @@ class PhysicsWorld(Node):
         """
         old = self.space
         bodies, shapes, joints, unchanged = self._members()
+        in_place = unchanged and not self._touched and len(old._handlers) == 1 and \
+            old.sleep_time_threshold == math.inf
+        self._touched = False
+        if in_place and refill(old, [body.body for body in bodies],
+                               [shape.shape for shape in shapes],
+                               [joint.constraint for joint in joints],
+                               [body._built_pose for body in bodies]):
+            return
         old.remove(*old.constraints, *old.shapes, *old.bodies)
-        if unchanged and not self._touched and len(old._handlers) == 1 and \
-                old.sleep_time_threshold == math.inf:
+        if in_place:
             renumber(old)
         else:
             self.space = self._new_space(old.gravity, old.iterations, old.damping)
-        self._touched = False
         for body in bodies:
             body._restart()
         self.space.add(*[body.body for body in bodies], *[shape.shape for shape in shapes])

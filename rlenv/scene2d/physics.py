@@ -256,7 +256,8 @@ def step_space(space: pymunk.Space, delta: float) -> None:
     try:
         space._locked = True
         _cp_space_step(space._space, delta)
-        space._removed_shapes.clear()
+        if space._removed_shapes:  # shapes removed since the last step, kept alive through it
+            space._removed_shapes.clear()
     finally:
         space._locked = False
     if space._add_later or space._remove_later or space._post_step_callbacks:

@@ -396,6 +396,17 @@ _STEP = [[0.1], [-0.1]]  # one action per instance, for two
                      id="reset-2d"),
         pytest.param({"action": _STEP, "reset": [True]}, ErrorCode.BAD_REQUEST,
                      "steps.reset has 1 flags for 2 instances", id="reset-short"),
+        pytest.param({"action": _STEP, "reset": b"\x01"}, ErrorCode.BAD_REQUEST,
+                     "steps.reset has 1 flags for 2 instances", id="reset-bytes-short"),
+        pytest.param({"action": _STEP, "reset": np.zeros(3, np.uint8)}, ErrorCode.BAD_REQUEST,
+                     "steps.reset has 3 flags for 2 instances", id="reset-array-long"),
+        pytest.param({"action": _STEP, "reset": np.array([0, 2], np.uint8)},
+                     ErrorCode.BAD_REQUEST, "steps.reset must be a list of booleans",
+                     id="reset-array-2"),
+        pytest.param({"action": _STEP, "reset": np.zeros(2, np.int64)}, ErrorCode.BAD_REQUEST,
+                     "steps.reset must be a list of booleans", id="reset-array-int64"),
+        pytest.param({"action": _STEP, "reset": bytearray(2)}, ErrorCode.BAD_REQUEST,
+                     "steps.reset must be a list of booleans", id="reset-bytearray"),
         pytest.param({"action": _STEP, "repeat_action": 0}, ErrorCode.BAD_REQUEST,
                      "steps.repeat_action must be an integer >= 1", id="repeat-zero"),
         pytest.param({"action": _STEP, "repeat_action": 1.0}, ErrorCode.BAD_REQUEST,
@@ -413,6 +424,20 @@ def test_malformed_steps_are_refused(steps: Any, code: ErrorCode, fragment: str)
 def test_steps_before_a_reset_are_refused_naming_the_instance() -> None:
     assert_refused({"steps": {"action": _STEP}}, ErrorCode.RESET_REQUIRED, "steps: instance 0",
                    count=2, started=False)
+
+
+def test_steps_after_an_episode_ended_are_refused_naming_the_instance() -> None:
+    host = Host(TARGET, 2)
+    _start(host)
+    ended = _ask(host, {"batch": [None, {"config": {"agent": {"angle_limit": 0.0}},
+                                         "action": [0.1]}]})
+    assert isinstance(ended, BatchResponse) and ended.replies[1].terminated
+    reply = _ask(host, {"steps": {"action": _STEP}})
+    assert isinstance(reply, ErrorReply) and reply.code == ErrorCode.RESET_REQUIRED
+    assert reply.message == "steps: instance 1: the episode has ended; reset first"
+    reply = _ask(host, {"steps": {"action": _STEP, "reset": b"\x00\x01"}})
+    assert isinstance(reply, StepsResponse) and reply.errors is None
+    assert reply.frames.tolist() == [4, 0]
 
 
 @pytest.mark.parametrize(

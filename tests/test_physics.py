@@ -620,3 +620,45 @@ def test_a_space_that_saw_contacts_or_changed_restarts_as_a_new_one() -> None:
     world.add_child(ball("Late", position=(4.0, 4.0), radius=0.2))
     world.restart()
     assert world.space is not second  # the tree below changed
+
+
+def test_a_restart_in_place_leaves_pymunk_s_records_as_a_new_space_has_them() -> None:
+    """Emptied and refilled with Chipmunk's calls alone, the space lists its bodies, shapes and
+    constraints as pymunk lists a new space's (in tree order), and checks its bodies again."""
+    tree, bodies, joint = jointed_scene("groove")
+    world = tree.root.get_child(0)
+    assert isinstance(world, PhysicsWorld)
+    fresh_tree, _, _ = jointed_scene("groove")
+    fresh = fresh_tree.root.get_child(0).space
+    names = {id(node.body): node.name for node in world.iter_subtree()
+             if isinstance(node, StaticBody | RigidBody)}
+    fresh_names = {id(node.body): node.name for node in fresh_tree.root.get_child(0).iter_subtree()
+                   if isinstance(node, StaticBody | RigidBody)}
+    for _ in range(3):
+        ticks(tree, 20)
+        world.restart()
+        space = world.space
+        assert [names[id(b)] for b in space.bodies] == [fresh_names[id(b)] for b in fresh.bodies]
+        assert [names[id(s.body)] for s in space.shapes] == \
+            [fresh_names[id(s.body)] for s in fresh.shapes]
+        assert list(space.constraints) == [joint.constraint]
+        assert all(body.space is space for body in space.bodies)
+        assert set(space._bodies_to_check) == set(space.bodies)  # checked at the next step
+
+
+def test_a_restart_takes_out_what_was_added_to_the_space_by_hand() -> None:
+    tree, bodies, _ = jointed_scene("pivot")
+    world = tree.root.get_child(0)
+    world.restart()
+    world.restart()
+    space = world.space
+    extra = pymunk.Body(1.0, 1.0)
+    space.add(extra, pymunk.Circle(extra, 0.1))
+    ticks(tree, 5)
+    world.restart()
+    assert extra.space is None
+    assert list(world.space.bodies) == [node.body for node in (world.get_node("Base"), *bodies)]
+    fresh_tree, fresh_bodies, _ = jointed_scene("pivot")
+    ticks(tree, 60)
+    ticks(fresh_tree, 60)
+    assert state(bodies) == state(fresh_bodies)

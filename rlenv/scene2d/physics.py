@@ -46,10 +46,11 @@ from typing import Any, ClassVar
 
 import pymunk
 from pymunk import Vec2d
+from pymunk._chipmunk_cffi import lib
 
 from rlenv.node import Node, ProcessMode
 from rlenv.scene2d.colors import RGB, Color, to_rgb
-from rlenv.scene2d.fresh import place_at_rest, refresh_constraint, renumber
+from rlenv.scene2d.fresh import place_at_rest, refill, refresh_constraint, renumber
 from rlenv.scene2d.node2d import Node2D, Pose, compose, frame_of, relative_pose
 from rlenv.scene2d.pymunk_data import ConstraintRecipe, copy_body, copy_shape
 from rlenv.signals import Signal
@@ -62,6 +63,7 @@ __all__ = [
     "PhysicsWorld",
     "RigidBody",
     "StaticBody",
+    "step_space",
 ]
 
 Vec = tuple[float, float]
@@ -135,13 +137,19 @@ class PhysicsWorld(Node):
         """
         old = self.space
         bodies, shapes, joints, unchanged = self._members()
+        in_place = unchanged and not self._touched and len(old._handlers) == 1 and \
+            old.sleep_time_threshold == math.inf
+        self._touched = False
+        if in_place and refill(old, [body.body for body in bodies],
+                               [shape.shape for shape in shapes],
+                               [joint.constraint for joint in joints],
+                               [body._built_pose for body in bodies]):
+            return
         old.remove(*old.constraints, *old.shapes, *old.bodies)
-        if unchanged and not self._touched and len(old._handlers) == 1 and \
-                old.sleep_time_threshold == math.inf:
+        if in_place:
             renumber(old)
         else:
             self.space = self._new_space(old.gravity, old.iterations, old.damping)
-        self._touched = False
         for body in bodies:
             body._restart()
         self.space.add(*[body.body for body in bodies], *[shape.shape for shape in shapes])
@@ -203,7 +211,7 @@ class PhysicsWorld(Node):
         self.space.damping = value
 
     def _physics_step(self, delta: float) -> None:
-        self.space.step(delta)
+        step_space(self.space, delta)
         if self._signals:  # someone asked for a signal of this node
             self._emit("stepped", delta)
 
@@ -226,6 +234,51 @@ class PhysicsWorld(Node):
         if body_a is not None and body_b is not None and body_a is not body_b:
             body_a.get_signal(body_signal).emit(body_b)
             body_b.get_signal(body_signal).emit(body_a)
+
+
+_cp_space_step = lib.cpSpaceStep
+
+
+def step_space(space: pymunk.Space, delta: float) -> None:
+    """``space.step(delta)``, without pymunk's Python work around Chipmunk's step when it has none.
+
+    ``Space.step`` checks the bodies added since the last step, then steps (Chipmunk's
+    ``cpSpaceStep``) with the space locked, and then adds and removes what callbacks asked for
+    during the step and runs the post-step callbacks. With nothing to check before the step,
+    this calls Chipmunk's step itself, and does the work after it only when there is some: the
+    same step (``tests/test_step_space.py`` compares them bit for bit, with collision handlers that
+    add and remove in their callbacks), with a tenth of the Python work of ``Space.step`` when
+    nothing is pending (measured: 0.07 against 0.63 us around a 1 us CartPole step). A threaded
+    space, or bodies to check, take ``Space.step`` itself.
+    """
+    if space._bodies_to_check or space.threaded:
+        space.step(delta)
+        return
+    try:
+        space._locked = True
+        _cp_space_step(space._space, delta)
+        if space._removed_shapes:  # shapes removed since the last step, kept alive through it
+            space._removed_shapes.clear()
+    finally:
+        space._locked = False
+    if space._add_later or space._remove_later or space._post_step_callbacks:
+        _after_step(space)
+
+
+def _after_step(space: pymunk.Space) -> None:
+    """What ``Space.step`` does after Chipmunk's step: the deferred adds, removals, callbacks."""
+    space.add(*space._add_later)
+    space._add_later.clear()
+    removed = set()
+    while space._remove_later:
+        item, _ = space._remove_later.popitem()
+        if item not in removed:
+            removed.add(item)
+            space._remove(item)
+    callbacks = space._post_step_callbacks
+    for key in callbacks:
+        callbacks[key](space)
+    callbacks.clear()
 
 
 def _world_of(node: Node) -> PhysicsWorld:

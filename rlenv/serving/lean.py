@@ -66,7 +66,7 @@ class LeanSteps:
     def run(self, reply_id: int, plans: Sequence[Mapping[str, Any]]) -> StepsResponse:
         """Serve every instance its checked plan (an action, or a reset); the one answer."""
         count = len(plans)
-        column = self._column
+        column, dtype, shape = self._column, self.dtype, self.shape
         data: list[Any] = [None] * count
         acted = [False] * count
         errors: list[ErrorReply | None] | None = None
@@ -80,36 +80,42 @@ class LeanSteps:
                     acted[row] = True
                 agent = instance.agents[0]
                 value = data[row] = agent.get_data(_AGENT_ONLY)
-                if value.__class__ is np.ndarray and value.dtype == self.dtype and \
-                        value.shape == self.shape:
+                if value.__class__ is np.ndarray and (value.dtype is dtype or
+                                                      value.dtype == dtype) and \
+                        value.shape == shape:
                     column[row] = value
                 else:  # the general path's conversion and refusals
                     packed = packed_observation(agent, self._codec, _AGENT_ONLY)
-                    column[row] = np.frombuffer(packed, self.dtype).reshape(self.shape)
+                    column[row] = np.frombuffer(packed, dtype).reshape(shape)
             except Exception as error:  # user code raised: this row fails alone
                 errors = errors or [None] * count
                 errors[row] = instance.environment_error(reply_id, error)
                 column[row] = 0
         if self._floats:
             errors = self._refuse_non_finite(reply_id, column, data, errors)
-        reward = np.zeros(count, np.float64)
-        terminated = np.zeros(count, np.bool_)
-        truncated = np.zeros(count, np.bool_)
-        frames = np.zeros(count, np.int64)
+        reward = [0.0] * count
+        terminated = [False] * count
+        truncated = [False] * count
+        frames = [0] * count
         infos: list[dict[str, Any]] = [_EMPTY] * count
-        for row, instance in enumerate(self.instances):
+        for row, (instance, has_info) in enumerate(zip(self.instances, self._infos,
+                                                       strict=True)):
             if errors is not None and errors[row] is not None:
                 continue
             try:
-                reward[row], terminated[row], truncated[row], frames[row], infos[row] = \
-                    self._outcome(instance, acted[row], self._infos[row])
+                reward[row], terminated[row], truncated[row], frames[row], _ = \
+                    instance.report(True, acted[row])
+                if has_info:
+                    infos[row] = instance.info(acted[row], None)
             except Exception as error:  # _get_info raised, or holds what cannot travel
                 errors = errors or [None] * count
                 errors[row] = instance.environment_error(reply_id, error)
                 column[row] = 0
-                reward[row] = frames[row] = terminated[row] = truncated[row] = 0
-        return StepsResponse(reply_id, column.tobytes(), reward, terminated, truncated, frames,
-                             tuple(infos), None if errors is None else tuple(errors))
+                reward[row], terminated[row], truncated[row], frames[row] = 0.0, False, False, 0
+        return StepsResponse(reply_id, column.tobytes(), np.array(reward, np.float64),
+                             np.array(terminated, np.bool_), np.array(truncated, np.bool_),
+                             np.array(frames, np.int64), tuple(infos),
+                             None if errors is None else tuple(errors))
 
     def _refuse_non_finite(self, reply_id: int, column: np.ndarray, data: list[Any],
                            errors: list[ErrorReply | None] | None,
@@ -129,11 +135,3 @@ class LeanSteps:
             errors[row] = instance.environment_error(reply_id, error)
             column[row] = 0
         return errors
-
-    @staticmethod
-    def _outcome(instance: Instance, acted: bool,
-                 has_info: bool) -> tuple[float, bool, bool, int, dict[str, Any]]:
-        """What the instance reports (as its answer would): reward, flags, ticks, info."""
-        reward, terminated, truncated, frames, _ = instance.report(True, acted)
-        return reward, terminated, truncated, frames, \
-            instance.info(acted, None) if has_info else _EMPTY

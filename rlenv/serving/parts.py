@@ -447,8 +447,8 @@ class Steps(HostPart):
         repeat = steps.get("repeat_action")
         if repeat is not None and (type(repeat) is not int or repeat < 1):
             raise _bad(f"steps.repeat_action must be an integer >= 1, got {repeat!r:.40}")
-        for index, instance in enumerate(host.instances):
-            if not reset[index]:
+        for index, (instance, resets) in enumerate(zip(host.instances, reset, strict=True)):
+            if not resets and instance.state is not _RUNNING:  # running: it can act
                 try:
                     instance.check_can_act()
                 except RequestError as error:
@@ -477,16 +477,21 @@ def _reset_mask(mask: Any, count: int) -> list[bool]:
     """The ``reset`` flags of a steps request: a list of booleans, bytes of 0/1, or an array."""
     if mask is None:
         return [False] * count
-    if isinstance(mask, bytes | np.ndarray):
-        array = np.frombuffer(mask, np.uint8) if isinstance(mask, bytes) else mask
-        if array.ndim == 1 and (array.dtype == np.bool_ or (
-                array.dtype == np.uint8 and bool(np.all(array <= 1)))):
-            mask = array.astype(bool).tolist()
-    if not (isinstance(mask, list) and all(type(flag) is bool for flag in mask)):
+    flags = None
+    if isinstance(mask, bytes):
+        if not mask.translate(None, b"\x00\x01"):  # every byte is 0 or 1
+            flags = list(map(bool, mask))
+    elif isinstance(mask, np.ndarray):
+        if mask.ndim == 1 and (mask.dtype == np.bool_ or (
+                mask.dtype == np.uint8 and bool(np.all(mask <= 1)))):
+            flags = mask.astype(bool).tolist()
+    elif isinstance(mask, list) and all(type(flag) is bool for flag in mask):
+        flags = mask
+    if flags is None:
         raise _bad("steps.reset must be a list of booleans, one per instance")
-    if len(mask) != count:
-        raise _bad(f"steps.reset has {len(mask)} flags for {count} instances")
-    return mask
+    if len(flags) != count:
+        raise _bad(f"steps.reset has {len(flags)} flags for {count} instances")
+    return flags
 
 
 # --- the table --------------------------------------------------------------------------------

@@ -17,20 +17,16 @@ Anything else travels on the socket as before; so does an answer that does not f
 they were. The block is laid out by :class:`Layout`, from the hello alone, so both ends compute
 the same offsets:
 
-==========  ============================================================================
-offset      what
-==========  ============================================================================
-0           request header, 4 little-endian int64: sequence, id, kind, repeat_action
-64          answer header, 4 little-endian int64: sequence, id, 0, 0
-128         actions: K packed actions (a step uses the first); Discrete ones in the dtype
-...         reset flags: K bytes of 0 or 1 (steps)
-...         observations: K packed observations
-...         rewards (K float64), frames (K int64), terminated, truncated (K bytes each)
-==========  ============================================================================
+- at 0, the request's header: 4 little-endian int64, sequence, id, kind, repeat_action;
+- at 64, the answer's header: 4 little-endian int64, sequence, id, 0, 0;
+- at 128, the actions: K packed actions (a step uses the first; Discrete ones in the dtype);
+- then the reset flags (K bytes of 0 or 1, for steps), the observations (K packed ones), the
+  rewards (K float64), frames (K int64), terminated and truncated flags (K bytes each).
 
-Each region starts on a multiple of 8 bytes. A writer fills its slots first and its sequence
-number last; the reader reads the sequence first. The lane is only offered where stores
-become visible to other cores in program order (x86-64): see :func:`lane_unavailable`.
+Every region but the two flag columns starts on a multiple of 8 bytes. A writer fills its slots
+first and its sequence number last; the reader reads the sequence first. The lane is only
+offered where stores become visible to other cores in program order (x86-64): see
+:func:`lane_unavailable`.
 """
 
 from __future__ import annotations

@@ -450,3 +450,20 @@ def test_no_file_is_left_in_dev_shm(serve: Serve) -> None:
         client.reset(seed=0)
         client.step(np.zeros(1, np.float32))
         assert set(os.listdir("/dev/shm")) == before
+
+
+def test_slots_of_an_unknown_kind_are_refused_on_the_socket(serve: Serve) -> None:
+    server = serve()
+    with Client(server.host, server.port, shared_memory=True) as client:
+        client.reset(seed=0)
+        lane = client._lane  # what a client of another language could write by mistake
+        assert lane is not None
+        header = memoryview(lane.memory)[:32].cast("q")
+        header[1], header[2] = 99, 7  # id 99, kind 7
+        header[0] += 1
+        client._connection.note_request(99)
+        lane.ring()
+        reply = client._receive()
+        del header
+        assert reply.code == "bad_request" and "kind 7" in reply.message  # type: ignore[union-attr]
+        assert client.step(np.zeros(1, np.float32))[-1]["frames"] == 4  # the lane goes on

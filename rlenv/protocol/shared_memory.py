@@ -244,9 +244,17 @@ class Slots:
         return repeat if repeat.__class__ is int and 1 <= repeat < 2 ** 62 else -1
 
     def read_request(self) -> Request:
-        """The request the client wrote last, as it would have come off the socket."""
+        """The request the client wrote last, as it would have come off the socket.
+
+        Raises:
+            ValueError: its kind is neither :data:`STEP` nor :data:`STEPS` (the message says
+                so; the request's id is :attr:`request_id`).
+        """
         header = self._request
         request_id, kind, repeat = header[1], header[2], header[3]
+        if kind != STEP and kind != STEPS:
+            raise ValueError(f"the lane's request {request_id} is of kind {kind}; a lane carries "
+                             f"kinds {STEP} (step) and {STEPS} (steps)")
         size = self.layout.action_size
         if kind == STEP:
             action: Any = bytes(self._actions[:size])
@@ -260,6 +268,11 @@ class Slots:
         if repeat:
             steps["repeat_action"] = repeat
         return Request(request_id, {"steps": steps})
+
+    @property
+    def request_id(self) -> int:
+        """The id of the request written last."""
+        return self._request[1]
 
     @property
     def request_kind(self) -> int:

@@ -25,7 +25,10 @@ controller's socket alone (one system call per request, no selector); the others
 connections, observers, the lifeline, deadlines) are looked after every
 :data:`HOUSEKEEPING_INTERVAL` seconds, and at once whenever the controller pauses that long.
 Sockets stay in blocking mode; the kernel enforces their timeouts (``SO_RCVTIMEO``,
-``SO_SNDTIMEO``), so Python never polls before a read or a write. Frames are sent with one
+``SO_SNDTIMEO``), so Python never polls before a read or a write. A controller with a
+shared-memory lane (:mod:`rlenv.protocol.lanes`) is waited for on its lane and its socket
+together; requests taken from a lane go through the same door, and their answers back into the
+lane when they fit (else on the socket). Frames are sent with one
 ``sendall`` (``TCP_NODELAY``), read at most 64 KiB at a time.
 """
 
@@ -459,7 +462,9 @@ class Endpoint:
     def _request_from(self, peer: Peer) -> Request | None:
         """``peer``'s next valid request; answers its bad frames and refusals on the way."""
         if peer.lane_ready():
-            return self._lane_request(peer)
+            request = self._lane_request(peer)
+            if request is not None:
+                return request
         connection = peer.connection
         while peer.sock in self._peers:
             try:
@@ -528,16 +533,28 @@ class Endpoint:
         self._send(peer, Response(request.id, info={
             "shared_memory": peer.lane.slots.layout.to_wire()}))
 
-    def _lane_request(self, peer: Peer) -> Request:
-        """Take the request waiting on ``peer``'s lane."""
+    def _lane_request(self, peer: Peer) -> Request | None:
+        """Take the request waiting on ``peer``'s lane.
+
+        ``None`` when it was refused (answered on the socket), or when the connection takes no
+        more requests (the lane is closed).
+        """
         lane = peer.lane
         assert lane is not None
         slots = lane.slots
         peer.lane_seen = slots.request_sequence  # first: the client wrote it last
-        request = slots.read_request()
-        peer.lane_kind = slots.request_kind
-        peer.connection.note_request(request.id)
         peer.last_request = self._clock()
+        try:
+            peer.connection.note_request(slots.request_id)
+        except LocalProtocolError as error:
+            self._close_lane(peer, str(error))
+            return None
+        try:
+            request = slots.read_request()
+        except ValueError as error:  # slots no client of ours writes: refused on the socket
+            self._send(peer, ErrorReply(slots.request_id, ErrorCode.BAD_REQUEST, str(error)))
+            return None
+        peer.lane_kind = slots.request_kind
         peer.active = True  # sending requests back to back: wait on its lane and socket alone
         return request
 

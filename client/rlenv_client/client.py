@@ -80,6 +80,7 @@ class Client(BaseClient):
         ProtocolVersionError: the server speaks another major protocol version.
         ValueError: ``shared_memory=True``, but no lane is possible here (the message says
             why).
+        OSError: ``shared_memory=True``, but this process cannot listen on a Unix socket.
     """
 
     def __init__(
@@ -150,7 +151,13 @@ class Client(BaseClient):
                 raise ValueError(f"shared_memory=True, but {why}")
             logger.debug("%s: steps go on the socket: %s", self.address, why)
             return
-        listener, name, key = listen_for_lane()
+        try:
+            listener, name, key = listen_for_lane()
+        except OSError as error:  # no Unix sockets here (a sandbox, say)
+            if required:
+                raise
+            logger.info("%s: steps go on the socket: %s", self.address, error)
+            return
         try:
             try:
                 self._call(shared_memory={"address": name, "key": key})
@@ -162,10 +169,12 @@ class Client(BaseClient):
             assert self._sock is not None
             try:
                 self._lane = accept_lane(listener, key, hello, self._sock, self.timeout)
-            except OSError as error:
-                self.close()
-                raise ConnectionLost(f"{self.address} did not open the shared-memory lane it "
-                                     f"offered: {error}") from None
+            except OSError as error:  # the server's end closes when it finds ours gone
+                if required:
+                    raise ConnectionLost(f"{self.address} did not open the shared-memory lane "
+                                         f"it offered: {error}") from None
+                logger.warning("%s: the shared-memory lane failed (%s); steps go on the "
+                               "socket", self.address, error)
         finally:
             listener.close()
 

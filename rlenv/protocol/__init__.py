@@ -11,8 +11,11 @@ Three layers, one module each:
   transitions in one table.
 
 What a request's parts mean is the server's business (:mod:`rlenv.serving.parts`); how values
-of a space travel is :mod:`rlenv.protocol.spaces`'. ``docs/protocol.md`` is the spec for other
-languages. Importing this package loads neither the runtime nor pymunk.
+of a space travel is :mod:`rlenv.protocol.spaces`'. A client on the server's machine may carry
+its steps through shared memory instead (protocol 2.3): :mod:`~rlenv.protocol.shared_memory`
+says which requests and answers fit the slots, :mod:`~rlenv.protocol.lanes` does the I/O.
+``docs/protocol.md`` is the spec for other languages. Importing this package loads neither the
+runtime nor pymunk.
 """
 
 from rlenv.protocol.codec import DEFAULT_MAX_FRAME_SIZE as DEFAULT_MAX_FRAME_SIZE

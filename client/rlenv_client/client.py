@@ -266,7 +266,7 @@ class Client(BaseClient):
                                  f"{self._closed_because}")
         slots = lane.slots
         try:
-            return wait_for(lambda: slots.answer_sequence != self._lane_answers, lane, sock,
+            return wait_for(lambda: slots.answer_sequence != self._lane_answers, lane,
                             self._waiter, self.timeout)
         except BlockingIOError:
             self._timed_out()

@@ -43,7 +43,6 @@ KEY_SIZE = 16
 _DONTWAIT = socket.MSG_DONTWAIT
 _PEEK = socket.MSG_PEEK | socket.MSG_DONTWAIT
 _RING = b"\x01"
-_yield = os.sched_yield
 
 
 class LaneClosed(ConnectionError):
@@ -62,7 +61,7 @@ class Lane:
 
     def __init__(self, memory: mmap.mmap, doorbell: socket.socket, slots: Slots,
                  sock: socket.socket) -> None:
-        self.memory, self.doorbell, self.slots = memory, doorbell, slots
+        self.memory, self.doorbell, self.slots, self.sock = memory, doorbell, slots, sock
         self.doorbell.setblocking(False)
         self._poll = select.poll()
         self._poll.register(doorbell, select.POLLIN)
@@ -73,9 +72,7 @@ class Lane:
         """Wake the other end, if it sleeps (a full doorbell means it has bytes already)."""
         try:
             self.doorbell.send(_RING, _DONTWAIT)
-        except (BlockingIOError, InterruptedError):
-            pass
-        except OSError:  # the other end is gone: waiting on the lane says so
+        except OSError:  # full (BlockingIOError), or the other end is gone: waiting says so
             pass
 
     def sleep(self, timeout: float | None) -> bool:
@@ -116,12 +113,12 @@ class Lane:
         self.memory.close()
 
 
-def wait_for(ready: Callable[[], bool], lane: Lane, sock: socket.socket, waiter: AnswerWaiter,
+def wait_for(ready: Callable[[], bool], lane: Lane, waiter: AnswerWaiter,
              timeout: float | None) -> bool:
-    """Wait until ``ready()`` (what was awaited is in the slots) or ``sock`` has bytes.
+    """Wait until ``ready()`` (what was awaited is in the slots) or the lane's socket has bytes.
 
-    Spins first, as :meth:`AnswerWaiter.recv` does (if the last answer came quickly), looking
-    at the slots and the socket in turn; then sleeps on both.
+    Spins first (:meth:`AnswerWaiter.spin`), looking at the slots and the socket in turn; then
+    sleeps on both.
 
     Returns:
         True once ``ready()``; False when the socket has bytes to read (or reached its end).
@@ -131,18 +128,22 @@ def wait_for(ready: Callable[[], bool], lane: Lane, sock: socket.socket, waiter:
         LaneClosed: the other end closed the lane.
         OSError: the socket failed.
     """
+    sock = lane.sock
+
+    def attempt() -> bool | None:
+        if ready():
+            return True
+        try:
+            sock.recv(1, _PEEK)
+            return False
+        except BlockingIOError:
+            return None
+
     now = waiter.clock
     try:
-        if waiter.quick:
-            deadline = waiter.since + waiter.window
-            while now() < deadline:
-                if ready():
-                    return True
-                try:
-                    sock.recv(1, _PEEK)
-                    return False
-                except BlockingIOError:
-                    _yield()
+        got = waiter.spin(attempt)
+        if got is not None:
+            return got
         end = None if timeout is None else now() + timeout
         while not ready():
             left = None if end is None else end - now()
@@ -152,7 +153,7 @@ def wait_for(ready: Callable[[], bool], lane: Lane, sock: socket.socket, waiter:
                 return False
         return True
     finally:  # a timeout or an error counts as a slow answer
-        waiter.quick = now() - waiter.since < waiter.window
+        waiter.ended()
 
 
 def listen_for_lane() -> tuple[socket.socket, str, bytes]:

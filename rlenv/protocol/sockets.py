@@ -25,6 +25,7 @@ import socket
 import struct
 import time
 from collections.abc import Callable
+from typing import TypeVar
 
 __all__ = ["REQUEST_SPIN_WINDOW", "SPIN_WINDOW", "AnswerWaiter", "configure_socket", "is_loopback"]
 
@@ -36,12 +37,15 @@ REQUEST_SPIN_WINDOW = 1e-3
 
 _DONTWAIT = socket.MSG_DONTWAIT
 _yield = os.sched_yield
+_Got = TypeVar("_Got")
 
 
 class AnswerWaiter:
     """Reads a socket's next bytes, spinning first when they came quickly the last time.
 
-    Call :meth:`sent` when the other end was asked something, then :meth:`recv`.
+    Call :meth:`sent` when the other end was asked something, then :meth:`recv`; a waiter
+    that watches more than a socket (:func:`rlenv.protocol.lanes.wait_for`) calls :meth:`spin`,
+    then blocks its own way, then :meth:`ended`.
 
     Args:
         clock: monotonic time in seconds (tests pass their own).
@@ -68,6 +72,27 @@ class AnswerWaiter:
         """The other end was just asked: its answer is awaited from now."""
         self.since = self.clock()
 
+    def spin(self, attempt: Callable[[], _Got | None]) -> _Got | None:
+        """Call ``attempt`` until it gives something, while the answer may still come quickly.
+
+        Only when the last answer was quick, and only until ``window`` after :meth:`sent`,
+        yielding the core between attempts; ``None`` if nothing came in that time.
+        """
+        if not self.quick:
+            return None
+        now = self.clock
+        deadline = self.since + self.window
+        while now() < deadline:
+            got = attempt()
+            if got is not None:
+                return got
+            _yield()  # a process waiting for this core runs first
+        return None
+
+    def ended(self) -> None:
+        """The wait ended (answered, timed out or failed): note whether it was quick."""
+        self.quick = self.clock() - self.since < self.window
+
     def recv(self, sock: socket.socket, size: int) -> bytes:
         """What ``sock`` has next, at most ``size`` bytes (blocking, with its kernel timeout).
 
@@ -75,18 +100,19 @@ class AnswerWaiter:
             BlockingIOError: the socket's receive timeout passed.
             OSError: the connection failed.
         """
-        now = self.clock
-        if self.quick:
-            deadline = self.since + self.window
-            while now() < deadline:
-                try:
-                    return sock.recv(size, _DONTWAIT)
-                except BlockingIOError:
-                    _yield()  # a process waiting for this core runs first
         try:
-            return sock.recv(size)
+            data = self.spin(lambda: _received_now(sock, size))
+            return sock.recv(size) if data is None else data
         finally:  # a timeout or an error counts as a slow answer
-            self.quick = now() - self.since < self.window
+            self.ended()
+
+
+def _received_now(sock: socket.socket, size: int) -> bytes | None:
+    """What ``sock`` has now (``b""``: it reached its end), or ``None`` if nothing yet."""
+    try:
+        return sock.recv(size, _DONTWAIT)
+    except BlockingIOError:
+        return None
 
 
 def configure_socket(sock: socket.socket, receive_timeout: float, send_timeout: float) -> None:

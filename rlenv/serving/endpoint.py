@@ -423,8 +423,7 @@ class Endpoint:
                 data = peer.sock.recv(_READ_SIZE, socket.MSG_DONTWAIT)
             elif peer.lane is None:
                 data = peer.waiter.recv(peer.sock, _READ_SIZE)
-            elif wait_for(peer.lane_ready, peer.lane, peer.sock, peer.waiter,
-                          HOUSEKEEPING_INTERVAL):
+            elif wait_for(peer.lane_ready, peer.lane, peer.waiter, HOUSEKEEPING_INTERVAL):
                 peer.active = True  # a request on the lane
                 return
             else:

@@ -68,7 +68,7 @@ from rlenv.protocol.sockets import (
 )
 
 __all__ = ["DEFAULT_HOST", "HOUSEKEEPING_INTERVAL", "Endpoint", "InsecureBindError", "Limits",
-           "Peer", "is_loopback"]
+           "Peer"]
 
 logger = logging.getLogger(__name__)
 

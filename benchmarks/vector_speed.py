@@ -26,6 +26,7 @@ import time
 from collections.abc import Callable
 from contextlib import ExitStack
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 from typing import Any
 
 import gymnasium as gym
@@ -96,12 +97,10 @@ def subjects(stack: ExitStack) -> list[Subject]:
     layout = default_layout(64)
     floor = _HandWrittenVector(len(layout), layout[0])
     stack.callback(floor.close)
-    space = gym.vector.utils.batch_space(gym.spaces.Box(-1, 1, (1,), np.float32), 64)
-
-    class _Actions:  # what _random_steps_of needs of a vector: its action space
-        action_space = space
+    actions = SimpleNamespace(action_space=gym.vector.utils.batch_space(
+        gym.spaces.Box(-1, 1, (1,), np.float32), 64))  # all _random_steps_of asks of a vector
     measured.append(Subject(f"hand-written {len(layout)} x {layout[0]}",
-                            _random_steps_of(floor.step, _Actions), 64,
+                            _random_steps_of(floor.step, actions), 64,
                             [server.process.pid for server in floor.servers]))
     return measured
 

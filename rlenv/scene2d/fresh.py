@@ -90,20 +90,29 @@ def refresh_constraint(constraint: pymunk.Constraint) -> bool:
     if init is None:
         return False
     pointer = constraint._constraint
-    max_force = lib.cpConstraintGetMaxForce(pointer)
-    error_bias = lib.cpConstraintGetErrorBias(pointer)
-    max_bias = lib.cpConstraintGetMaxBias(pointer)
-    collide = lib.cpConstraintGetCollideBodies(pointer)
-    pre_solve = lib.cpConstraintGetPreSolveFunc(pointer)
-    post_solve = lib.cpConstraintGetPostSolveFunc(pointer)
+    settings = _settings(pointer)
     init(pointer, lib.cpConstraintGetBodyA(pointer), lib.cpConstraintGetBodyB(pointer))
-    lib.cpConstraintSetMaxForce(pointer, max_force)
-    lib.cpConstraintSetErrorBias(pointer, error_bias)
-    lib.cpConstraintSetMaxBias(pointer, max_bias)
-    lib.cpConstraintSetCollideBodies(pointer, collide)
-    lib.cpConstraintSetPreSolveFunc(pointer, pre_solve)
-    lib.cpConstraintSetPostSolveFunc(pointer, post_solve)
+    if settings != _DEFAULTS:  # put back what the init set back to Chipmunk's defaults
+        for put, value, default in zip(_SETTERS, settings, _DEFAULTS, strict=True):
+            if value != default:
+                put(pointer, value)
     return True
+
+
+_SETTERS = (lib.cpConstraintSetMaxForce, lib.cpConstraintSetErrorBias,
+            lib.cpConstraintSetMaxBias, lib.cpConstraintSetCollideBodies,
+            lib.cpConstraintSetPreSolveFunc, lib.cpConstraintSetPostSolveFunc)
+
+
+def _settings(pointer: Any) -> tuple[Any, ...]:
+    """What ``cpConstraintInit`` sets back to its defaults, in the order of :data:`_SETTERS`."""
+    return (lib.cpConstraintGetMaxForce(pointer), lib.cpConstraintGetErrorBias(pointer),
+            lib.cpConstraintGetMaxBias(pointer), lib.cpConstraintGetCollideBodies(pointer),
+            lib.cpConstraintGetPreSolveFunc(pointer), lib.cpConstraintGetPostSolveFunc(pointer))
+
+
+_DEFAULTS = _settings(pymunk.SimpleMotor(pymunk.Body(), pymunk.Body(), 0.0)._constraint)
+"""The settings ``cpConstraintInit`` gives every constraint, read from a new one."""
 
 
 def renumber(space: pymunk.Space) -> None:

@@ -230,6 +230,26 @@ def test_rigid_body_accessors_and_impulse(tree: SceneTree, world: PhysicsWorld) 
     assert body.velocity.x == pytest.approx(1.0)
 
 
+
+
+def test_godot_s_names_read_and_push_the_body(tree: SceneTree, world: PhysicsWorld) -> None:
+    world.space.gravity = (0.0, 0.0)
+    body = RigidBody(name="Lopsided")  # its centre of gravity is off its origin
+    body.add_child(CollisionShape.circle(0.5, offset=(1.0, 0.0), mass=2.0))
+    world.add_child(body)
+    body.rotation = 0.25
+    body.linear_velocity = (1.5, -2.0)
+    assert body.velocity == body.body.velocity == body.linear_velocity == (1.5, -2.0)
+    assert type(body.position) is type(body.linear_velocity) is pymunk.Vec2d
+    assert body.position == body.body.position and body.rotation == body.body.angle == 0.25
+    body.linear_velocity = (0.0, 0.0)
+    body.apply_central_force((60.0, 30.0))
+    tree.physics_tick()
+    assert body.angular_velocity == 0.0  # at the centre of gravity: it does not turn the body
+    assert tuple(body.linear_velocity) == pytest.approx((0.5, 0.25))  # F / m for one 1/60 s tick
+    body.apply_force((60.0, 30.0))  # at its origin, off its centre of gravity: it turns it
+    tree.physics_tick()
+    assert body.angular_velocity != 0.0
 # --- placement errors ------------------------------------------------------------------------
 
 

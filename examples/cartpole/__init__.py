@@ -58,7 +58,6 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-import pymunk
 from gymnasium import spaces
 
 from rlenv import (
@@ -182,8 +181,8 @@ class CartPoleAgent(RLAgent):
         self.max_force = 10.0
         self.angle_limit = math.radians(12.0)
         self.force = 0.0
-        self._cart: pymunk.Body | None = None
-        self._pole: pymunk.Body | None = None
+        self._cart: RigidBody | None = None
+        self._pole: RigidBody | None = None
         self._track_limit = 0.0
 
     def reset(self, arguments: np.ndarray) -> None:
@@ -191,8 +190,9 @@ class CartPoleAgent(RLAgent):
         world = self.environment.world
         assert isinstance(world, CartPoleWorld) and world.cart and world.pole
         x, velocity, angle, angular_velocity = (float(v) for v in arguments)
-        self._cart, self._pole = cart, pole = world.cart.body, world.pole.body
+        self._cart, self._pole = world.cart, world.pole
         self._track_limit = world.track_limit
+        cart, pole = world.cart.body, world.pole.body  # placed on the pymunk bodies
         cart.position = (x, 0.0)
         cart.velocity = (velocity, 0.0)
         pole.angle = -angle  # pymunk turns a body about its centre of gravity: angle first
@@ -206,12 +206,12 @@ class CartPoleAgent(RLAgent):
         self.force = float(action[0]) * self.max_force
 
     def _physics_process(self, delta: float) -> None:
-        if self._cart is not None:  # the cart never turns: local x is world x
-            self._cart.apply_force_at_local_point((self.force, 0.0))
+        if self._cart is not None:
+            self._cart.apply_central_force((self.force, 0.0))
 
     def _after_physics_tick(self, delta: float) -> None:
         assert self._cart is not None and self._pole is not None
-        if abs(self._pole.angle) > self.angle_limit or \
+        if abs(self._pole.rotation) > self.angle_limit or \
                 abs(self._cart.position.x) > self._track_limit:
             self.set_terminated()
         else:
@@ -221,10 +221,10 @@ class CartPoleAgent(RLAgent):
         """Cart x, pole x, pole angle, cart velocity, pole angular velocity."""
         cart, pole = self._cart, self._pole
         assert cart is not None and pole is not None
-        angle = pole.angle
+        angle = pole.rotation
         x_pole = pole.position.x - POLE_LENGTH / 2 * math.sin(angle)  # the pole's centre
         return np.array(
-            (cart.position.x, x_pole, -angle, cart.velocity.x, -pole.angular_velocity),
+            (cart.position.x, x_pole, -angle, cart.linear_velocity.x, -pole.angular_velocity),
             dtype=np.float32,
         )
 

@@ -237,6 +237,15 @@ class PhysicsWorld(Node):
 
 
 _cp_space_step = lib.cpSpaceStep
+# Chipmunk's getters straight, for the accessors read every tick (pymunk's own cost twice as much).
+_body_position = lib.cpBodyGetPosition
+_body_angle = lib.cpBodyGetAngle
+_body_velocity = lib.cpBodyGetVelocity
+_body_angular_velocity = lib.cpBodyGetAngularVelocity
+_center_of_gravity = lib.cpBodyGetCenterOfGravity
+_local_to_world = lib.cpBodyLocalToWorld
+_apply_force_at_world_point = lib.cpBodyApplyForceAtWorldPoint
+_vec2d = tuple.__new__  # a Vec2d from a tuple, without its Python-level __new__
 
 
 def step_space(space: pymunk.Space, delta: float) -> None:
@@ -453,10 +462,11 @@ class PhysicsBody(Node2D):
         In world coordinates without one. The origin is the point its shapes' geometry is
         measured from.
         """
+        if self._frame is None and self.world is not None:  # the body's pose is the pose
+            position = _body_position(self.body._body)
+            return _vec2d(Vec2d, (position.x, position.y))
         if self.world is None:
             return self._position
-        if self._frame is None:
-            return self.body.position
         x, y, _ = self._local_pose()
         return Vec2d(x, y)
 
@@ -467,10 +477,10 @@ class PhysicsBody(Node2D):
     @property
     def rotation(self) -> float:
         """The rotation in radians, relative to the nearest Node2D ancestor."""
+        if self._frame is None and self.world is not None:
+            return _body_angle(self.body._body)
         if self.world is None:
             return self._rotation
-        if self._frame is None:
-            return self.body.angle
         return self._local_pose()[2]
 
     @rotation.setter
@@ -489,16 +499,26 @@ class PhysicsBody(Node2D):
     @property
     def velocity(self) -> pymunk.Vec2d:
         """The body's linear velocity, in world coordinates (units per second)."""
-        return self.body.velocity
+        velocity = _body_velocity(self.body._body)
+        return _vec2d(Vec2d, (velocity.x, velocity.y))
 
     @velocity.setter
     def velocity(self, value: Vec) -> None:
         self.body.velocity = value
 
     @property
+    def linear_velocity(self) -> pymunk.Vec2d:
+        """Godot's name for :attr:`velocity` (RigidBody2D's), the same property."""
+        return self.velocity
+
+    @linear_velocity.setter
+    def linear_velocity(self, value: Vec) -> None:
+        self.velocity = value
+
+    @property
     def angular_velocity(self) -> float:
         """The body's angular velocity, in radians per second, counter-clockwise."""
-        return self.body.angular_velocity
+        return _body_angular_velocity(self.body._body)
 
     @angular_velocity.setter
     def angular_velocity(self, value: float) -> None:
@@ -528,8 +548,9 @@ class RigidBody(PhysicsBody):
     ``mass`` and ``moment`` and its shapes none (a shape with a mass or density replaces both,
     as in pymunk); ``moment=math.inf`` makes a body that never rotates (the CartPole cart).
 
-    Push it with :meth:`apply_force` every tick (in ``_physics_process``), kick it with
-    :meth:`apply_impulse`, or set its :attr:`~PhysicsBody.velocity` directly.
+    Push it with :meth:`apply_central_force` or :meth:`apply_force` every tick (in
+    ``_physics_process``), kick it with :meth:`apply_impulse`, or set its
+    :attr:`~PhysicsBody.linear_velocity` directly.
 
     Args:
         mass: the body's mass, or 0 to sum its shapes' (as pymunk recommends).
@@ -563,6 +584,19 @@ class RigidBody(PhysicsBody):
                 body's origin by default.
         """
         self.body.apply_force_at_world_point(force, self.body.local_to_world(at))
+
+    def apply_central_force(self, force: Vec) -> None:
+        """Push the body with ``force`` at its centre of gravity: it does not turn the body.
+
+        Godot's ``apply_central_force``. As with :meth:`apply_force`, pymunk clears forces
+        after every step: apply it again every tick.
+
+        Args:
+            force: the force, in world coordinates.
+        """
+        body = self.body._body
+        _apply_force_at_world_point(body, force,
+                                    _local_to_world(body, _center_of_gravity(body)))
 
     def apply_impulse(self, impulse: Vec, at: Vec = (0.0, 0.0)) -> None:
         """Change the body's velocity at once by ``impulse`` (divided by its mass).

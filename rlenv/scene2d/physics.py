@@ -237,7 +237,7 @@ class PhysicsWorld(Node):
 
 
 _cp_space_step = lib.cpSpaceStep
-# Chipmunk's getters straight, for the accessors read every tick (pymunk's own cost twice as much).
+# Chipmunk's functions straight, for the accessors read every tick (pymunk's properties cost more).
 _body_position = lib.cpBodyGetPosition
 _body_angle = lib.cpBodyGetAngle
 _body_velocity = lib.cpBodyGetVelocity

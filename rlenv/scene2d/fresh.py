@@ -23,7 +23,7 @@ from typing import Any
 import pymunk
 from pymunk._chipmunk_cffi import ffi, lib
 
-__all__ = ["place_at_rest", "refill", "refresh_constraint", "renumber"]
+__all__ = ["Refill", "place_at_rest", "refresh_constraint", "renumber"]
 
 _STATIC = pymunk.Body.STATIC
 _ZERO = (0.0, 0.0)
@@ -34,7 +34,10 @@ def place_at_rest(body: pymunk.Body, x: float, y: float, angle: float) -> None:
 
     The angle first: Chipmunk turns a body about its centre of gravity, then places it.
     """
-    pointer = body._body
+    _place_at_rest(body._body, x, y, angle)
+
+
+def _place_at_rest(pointer: Any, x: float, y: float, angle: float) -> None:
     if lib.cpBodyGetAngle(pointer) != angle:
         lib.cpBodySetAngle(pointer, angle)
     lib.cpBodySetPosition(pointer, (x, y))
@@ -89,14 +92,17 @@ def refresh_constraint(constraint: pymunk.Constraint) -> bool:
     init = _INIT.get(type(constraint))
     if init is None:
         return False
-    pointer = constraint._constraint
+    _refresh(constraint._constraint, init)
+    return True
+
+
+def _refresh(pointer: Any, init: Callable[[Any, Any, Any], None]) -> None:
     settings = _settings(pointer)
     init(pointer, lib.cpConstraintGetBodyA(pointer), lib.cpConstraintGetBodyB(pointer))
     if settings != _DEFAULTS:  # put back what the init set back to Chipmunk's defaults
         for put, value, default in zip(_SETTERS, settings, _DEFAULTS, strict=True):
             if value != default:
                 put(pointer, value)
-    return True
 
 
 _SETTERS = (lib.cpConstraintSetMaxForce, lib.cpConstraintSetErrorBias,
@@ -128,44 +134,60 @@ def renumber(space: pymunk.Space) -> None:
     lib.cpSpaceSetCurrentTimeStep(pointer, 0.0)
 
 
-def refill(space: pymunk.Space, bodies: list[pymunk.Body], shapes: list[pymunk.Shape],
-           constraints: list[pymunk.Constraint], poses: list[tuple[float, float, float]]) -> bool:
-    """Empty ``space`` and put the same objects back as new, at Chipmunk's speed.
+class Refill:
+    """A space's objects, ready to be put back into it as new, again and again, at Chipmunk's speed.
 
-    What ``space.remove`` of everything, :func:`renumber`, :func:`place_at_rest` of each body
-    at its pose, ``space.add`` of the bodies and shapes, then :func:`refresh_constraint` and
-    ``space.add`` of each constraint do, in that order, with Chipmunk's calls alone: pymunk's
-    own records of what the space holds would come out as they are, so they are left alone
-    (the bodies are given to pymunk's check before the next step, as ``space.add`` does).
+    :meth:`into` does what ``space.remove`` of everything, :func:`renumber`,
+    :func:`place_at_rest` of each body at its pose, ``space.add`` of the bodies and shapes,
+    then :func:`refresh_constraint` and ``space.add`` of each constraint do, in that order, with
+    Chipmunk's calls alone: pymunk's own records of what the space holds would come out as
+    they are, so they are left alone (the bodies are given to pymunk's check before the next
+    step, as ``space.add`` does). The bodies themselves stay in the space: without sleeping,
+    taking one out and back leaves it in the same place of Chipmunk's lists, and placing it
+    wakes it as adding it would. What does not change between restarts (the objects' Chipmunk
+    pointers, how to refresh each constraint, the poses) is looked up once, here.
 
-    It applies when the space holds exactly these objects, in this order (pymunk's order of
-    its bodies, shapes and constraints, which ``space.bodies`` and the others list), and every
-    constraint is of a kind :func:`refresh_constraint` knows and joins bodies in the space.
-    Returns ``False``, changing nothing, otherwise (the caller then goes the long way).
+    Args:
+        bodies: the space's bodies, in pymunk's order (``space.bodies``).
+        shapes: its shapes, in pymunk's order.
+        constraints: its constraints, in pymunk's order.
+        poses: where each body goes back to: ``(x, y, angle)``.
     """
-    if list(space._bodies) != bodies or list(space._shapes) != shapes or \
-            list(space._constraints) != constraints:
-        return False
-    for constraint in constraints:
-        if type(constraint) not in _INIT or constraint.a.space is not space or \
-                constraint.b.space is not space:
+
+    def __init__(self, bodies: list[pymunk.Body], shapes: list[pymunk.Shape],
+                 constraints: list[pymunk.Constraint],
+                 poses: list[tuple[float, float, float]]) -> None:
+        self.bodies, self.shapes, self.constraints = bodies, shapes, constraints
+        self._places = [(body._body, *pose) for body, pose in zip(bodies, poses, strict=True)]
+        self._shapes = [shape._shape for shape in shapes]
+        known = all(type(c) in _INIT and c.a in bodies and c.b in bodies for c in constraints)
+        self._constraints = [(c._constraint, _INIT[type(c)]) for c in constraints] \
+            if known else None
+
+    def into(self, space: pymunk.Space) -> bool:
+        """Empty ``space`` of these objects and put them back as new.
+
+        It applies when the space holds exactly these objects, in this order, and every
+        constraint is of a kind :func:`refresh_constraint` knows and joins two of these bodies.
+        Returns ``False``, changing nothing, otherwise (the caller then goes the long way).
+        """
+        constraints = self._constraints
+        if constraints is None or list(space._bodies) != self.bodies or \
+                list(space._shapes) != self.shapes or \
+                list(space._constraints) != self.constraints:
             return False
-    pointer = space._space
-    for constraint in constraints:
-        lib.cpSpaceRemoveConstraint(pointer, constraint._constraint)
-    for shape in shapes:
-        lib.cpSpaceRemoveShape(pointer, shape._shape)
-    for body in bodies:
-        lib.cpSpaceRemoveBody(pointer, body._body)
-    renumber(space)
-    for body, (x, y, angle) in zip(bodies, poses, strict=True):
-        place_at_rest(body, x, y, angle)
-    for body in bodies:
-        lib.cpSpaceAddBody(pointer, body._body)
-    for shape in shapes:
-        lib.cpSpaceAddShape(pointer, shape._shape)
-    for constraint in constraints:
-        refresh_constraint(constraint)
-        lib.cpSpaceAddConstraint(pointer, constraint._constraint)
-    space._bodies_to_check.update(bodies)
-    return True
+        pointer = space._space
+        for constraint, _ in constraints:
+            lib.cpSpaceRemoveConstraint(pointer, constraint)
+        for shape in self._shapes:
+            lib.cpSpaceRemoveShape(pointer, shape)
+        renumber(space)
+        for place in self._places:
+            _place_at_rest(*place)
+        for shape in self._shapes:
+            lib.cpSpaceAddShape(pointer, shape)
+        for constraint, init in constraints:
+            _refresh(constraint, init)
+            lib.cpSpaceAddConstraint(pointer, constraint)
+        space._bodies_to_check.update(self.bodies)
+        return True

@@ -50,7 +50,7 @@ from pymunk._chipmunk_cffi import lib
 
 from rlenv.node import Node, ProcessMode
 from rlenv.scene2d.colors import RGB, Color, to_rgb
-from rlenv.scene2d.fresh import place_at_rest, refill, refresh_constraint, renumber
+from rlenv.scene2d.fresh import Refill, place_at_rest, refresh_constraint, renumber
 from rlenv.scene2d.node2d import Node2D, Pose, compose, frame_of, relative_pose
 from rlenv.scene2d.pymunk_data import ConstraintRecipe, copy_body, copy_shape
 from rlenv.signals import Signal
@@ -107,7 +107,7 @@ class PhysicsWorld(Node):
         self.space = self._new_space(gravity, iterations, damping)
         self._shape_nodes: dict[pymunk.Shape, CollisionShape] = {}
         self._kept_members: tuple[int | None, list[PhysicsBody], list[CollisionShape],
-                                  list[Joint]] | None = None  # see _members
+                                  list[Joint], Refill] | None = None  # see _members
         self._touched = False  # a contact began since the space was made or restarted
 
     def _new_space(self, gravity: Vec, iterations: int, damping: float) -> pymunk.Space:
@@ -136,14 +136,11 @@ class PhysicsWorld(Node):
         rlenv's and no sleeping; then it is emptied and its counters set back (cheaper).
         """
         old = self.space
-        bodies, shapes, joints, unchanged = self._members()
+        bodies, shapes, joints, refill, unchanged = self._members()
         in_place = unchanged and not self._touched and len(old._handlers) == 1 and \
             old.sleep_time_threshold == math.inf
         self._touched = False
-        if in_place and refill(old, [body.body for body in bodies],
-                               [shape.shape for shape in shapes],
-                               [joint.constraint for joint in joints],
-                               [body._built_pose for body in bodies]):
+        if in_place and refill.into(old):
             return
         old.remove(*old.constraints, *old.shapes, *old.bodies)
         if in_place:
@@ -156,8 +153,9 @@ class PhysicsWorld(Node):
         for joint in joints:  # once every body is back, as joints attach when ready
             joint._reattach(self)
 
-    def _members(self) -> tuple[list[PhysicsBody], list[CollisionShape], list[Joint], bool]:
-        """The bodies, shapes and joints in this world's space, in tree order.
+    def _members(self) -> tuple[list[PhysicsBody], list[CollisionShape], list[Joint], Refill,
+                                bool]:
+        """The bodies, shapes and joints in this world's space, in tree order, and their Refill.
 
         Kept while the tree's structure stays the same; the last item says whether it did since
         the previous call.
@@ -166,7 +164,7 @@ class PhysicsWorld(Node):
         version = None if tree is None else tree.structure_version
         members = self._kept_members
         if members is not None and version is not None and members[0] == version:
-            return members[1], members[2], members[3], True
+            return members[1], members[2], members[3], members[4], True
         bodies, shapes, joints = [], [], []
         for node in self.iter_subtree():
             if isinstance(node, PhysicsBody) and node.world is self:
@@ -175,8 +173,11 @@ class PhysicsWorld(Node):
                 shapes.append(node)
             elif isinstance(node, Joint) and node._world is self and node._attached:
                 joints.append(node)
-        self._kept_members = (version, bodies, shapes, joints)
-        return bodies, shapes, joints, False
+        refill = Refill([body.body for body in bodies], [shape.shape for shape in shapes],
+                        [joint.constraint for joint in joints],
+                        [body._built_pose for body in bodies])
+        self._kept_members = (version, bodies, shapes, joints, refill)
+        return bodies, shapes, joints, refill, False
 
     @property
     def iterations(self) -> int:

@@ -243,6 +243,8 @@ _body_position = lib.cpBodyGetPosition
 _body_angle = lib.cpBodyGetAngle
 _body_velocity = lib.cpBodyGetVelocity
 _body_angular_velocity = lib.cpBodyGetAngularVelocity
+_set_body_velocity = lib.cpBodySetVelocity
+_set_body_angular_velocity = lib.cpBodySetAngularVelocity
 _center_of_gravity = lib.cpBodyGetCenterOfGravity
 _local_to_world = lib.cpBodyLocalToWorld
 _apply_force_at_world_point = lib.cpBodyApplyForceAtWorldPoint
@@ -505,7 +507,8 @@ class PhysicsBody(Node2D):
 
     @velocity.setter
     def velocity(self, value: Vec) -> None:
-        self.body.velocity = value
+        x, y = value
+        _set_body_velocity(self.body._body, (x, y))
 
     @property
     def linear_velocity(self) -> pymunk.Vec2d:
@@ -523,7 +526,7 @@ class PhysicsBody(Node2D):
 
     @angular_velocity.setter
     def angular_velocity(self, value: float) -> None:
-        self.body.angular_velocity = value
+        _set_body_angular_velocity(self.body._body, value)
 
     @property
     def color(self) -> RGB | None:

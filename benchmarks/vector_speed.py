@@ -33,7 +33,7 @@ import gymnasium as gym
 import numpy as np
 
 import rlenv_client  # noqa: F401  (registers rlenv/CartPole-v0)
-from rlenv_client.bench import _HandWrittenVector, _random_steps, _random_steps_of
+from rlenv_client.bench import HandWrittenVector, random_steps, random_steps_of
 from rlenv_client.vector import default_layout
 
 _TICKS = os.sysconf("SC_CLK_TCK")
@@ -79,7 +79,7 @@ class Subject:
 def _made(stack: ExitStack, envs: int, **kwargs: Any) -> tuple[Callable[[int], None], list[int]]:
     made = gym.make_vec("rlenv/CartPole-v0", num_envs=envs, **kwargs)
     stack.callback(made.close)
-    return _random_steps(made), [server.pid for server in made.unwrapped.servers]
+    return random_steps(made), [server.pid for server in made.unwrapped.servers]
 
 
 def subjects(stack: ExitStack) -> list[Subject]:
@@ -92,15 +92,15 @@ def subjects(stack: ExitStack) -> list[Subject]:
             measured.append(Subject(f"make_vec({envs}), {how}", step, envs, pids))
     async_envs = gym.vector.AsyncVectorEnv([lambda: gym.make("CartPole-v1")] * 8)
     stack.callback(async_envs.close)
-    measured.append(Subject("AsyncVectorEnv(8) CartPole-v1", _random_steps(async_envs), 8,
+    measured.append(Subject("AsyncVectorEnv(8) CartPole-v1", random_steps(async_envs), 8,
                             [process.pid for process in async_envs.processes]))
     layout = default_layout(64)
-    floor = _HandWrittenVector(len(layout), layout[0])
+    floor = HandWrittenVector(len(layout), layout[0])
     stack.callback(floor.close)
     actions = SimpleNamespace(action_space=gym.vector.utils.batch_space(
-        gym.spaces.Box(-1, 1, (1,), np.float32), 64))  # all _random_steps_of asks of a vector
+        gym.spaces.Box(-1, 1, (1,), np.float32), 64))  # all random_steps_of asks of a vector
     measured.append(Subject(f"hand-written {len(layout)} x {layout[0]}",
-                            _random_steps_of(floor.step, actions), 64,
+                            random_steps_of(floor.step, actions), 64,
                             [server.process.pid for server in floor.servers]))
     return measured
 

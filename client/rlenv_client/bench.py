@@ -50,7 +50,8 @@ from typing import Any
 import msgpack
 import numpy as np
 
-__all__ = ["Figure", "HandWrittenServer", "format_table", "run_benchmarks", "to_json"]
+__all__ = ["Figure", "HandWrittenServer", "HandWrittenVector", "format_table", "random_steps",
+           "random_steps_of", "run_benchmarks", "to_json"]
 
 logger = logging.getLogger(__name__)
 
@@ -249,12 +250,13 @@ class HandWrittenServer:
         self.close()
 
 
-class _HandWrittenVector:
+class HandWrittenVector:
     """``servers`` hand-written servers of ``instances`` CartPoles each, stepped in columns.
 
     What a vector of hand-written servers does and no more: send every server its actions and
     reset flags, then gather the observations into one batch; a CartPole whose pole fell is
-    reset on its next step (gymnasium's ``NEXT_STEP`` autoreset).
+    reset on its next step (gymnasium's ``NEXT_STEP`` autoreset). The floor of ``rlenv bench``
+    and ``benchmarks/vector_speed.py``.
     """
 
     def __init__(self, servers: int, instances: int) -> None:
@@ -283,6 +285,7 @@ class _HandWrittenVector:
             self.resets[index] = [bool(fell) for fell in reply["terminated"]]
 
     def close(self) -> None:
+        """Stop every server."""
         for server in self.servers:
             server.close()
 
@@ -416,13 +419,13 @@ def _vectors(rounds: int, steps: int, quick: bool) -> list[Figure]:
         stack.callback(made.close)
         on_sockets = gymnasium.make_vec("rlenv/CartPole-v0", num_envs=64, shared_memory=False)
         stack.callback(on_sockets.close)
-        floor = _HandWrittenVector(len(layout), layout[0])  # as make_vec lays them out
+        floor = HandWrittenVector(len(layout), layout[0])  # as make_vec lays them out
         stack.callback(floor.close)
         async_rate, made_rate, floor_rate, sockets_rate = _interleaved(
-            rounds, _Rate(_random_steps(async_envs), batches * 8, scale=8),
-            _Rate(_random_steps(made), batches, scale=64),
-            _Rate(_random_steps_of(floor.step, made), batches, scale=64),
-            _Rate(_random_steps(on_sockets), batches, scale=64))
+            rounds, _Rate(random_steps(async_envs), batches * 8, scale=8),
+            _Rate(random_steps(made), batches, scale=64),
+            _Rate(random_steps_of(floor.step, made), batches, scale=64),
+            _Rate(random_steps(on_sockets), batches, scale=64))
     figures = [
         Figure(f"gymnasium {theirs}", async_rate, "env-steps/s"),
         Figure(f"{floor_name}, raw client", floor_rate, "env-steps/s", theirs, async_rate),
@@ -446,7 +449,7 @@ def _vectors(rounds: int, steps: int, quick: bool) -> list[Figure]:
     with contextlib.ExitStack() as stack:
         async_envs = gymnasium.vector.AsyncVectorEnv([lambda: gymnasium.make("CartPole-v1")] * 8)
         stack.callback(async_envs.close)
-        measures = [_Rate(_random_steps(async_envs), steps // 4, scale=8)]
+        measures = [_Rate(random_steps(async_envs), steps // 4, scale=8)]
         for _, count, place in layouts:
             envs = stack.enter_context(RemoteVectorEnv(count, CARTPOLE, repeat_action=1,
                                                        **place))
@@ -461,13 +464,13 @@ def _vectors(rounds: int, steps: int, quick: bool) -> list[Figure]:
     return figures
 
 
-def _random_steps(envs: Any, batches: int = 64) -> Callable[[int], None]:
+def random_steps(envs: Any, batches: int = 64) -> Callable[[int], None]:
     """``run(n)``: ``n`` steps of the vector ``envs`` (reset with seed 0) on random actions."""
     envs.reset(seed=0)
-    return _random_steps_of(envs.step, envs, batches)
+    return random_steps_of(envs.step, envs, batches)
 
 
-def _random_steps_of(step: Callable[[Any], object], envs: Any,
+def random_steps_of(step: Callable[[Any], object], envs: Any,
                      batches: int = 64) -> Callable[[int], None]:
     """``run(n)``: ``n`` calls of ``step`` with random actions of the vector ``envs``."""
     envs.action_space.seed(0)

@@ -510,14 +510,7 @@ class PhysicsBody(Node2D):
         x, y = value
         _set_body_velocity(self.body._body, (x, y))
 
-    @property
-    def linear_velocity(self) -> pymunk.Vec2d:
-        """Godot's name for :attr:`velocity` (RigidBody2D's), the same property."""
-        return self.velocity
-
-    @linear_velocity.setter
-    def linear_velocity(self, value: Vec) -> None:
-        self.velocity = value
+    linear_velocity = velocity  # Godot's name (RigidBody2D's): the same property
 
     @property
     def angular_velocity(self) -> float:

@@ -260,16 +260,20 @@ class SceneTree(SignalOwner):
                 continue
             self.physics_tick()  # what _lockstep_iteration does, inlined on the hot path
             plan = self._plan
-            if plan is None or plan.process or self._signals or self._deferred:
+            if plan is None or plan.process or self._signals:
                 self.process(self._physics_delta)
             else:
                 self.process_frames += 1
 
     def _lockstep_iteration(self) -> None:
-        """A physics tick, then a frame (only counted when it has nothing to call)."""
+        """A physics tick, then a frame (only counted when it has nothing to call).
+
+        The tick ran its deferred calls, so a frame has something to call only with ``_process``
+        calls in the plan or a signal connected.
+        """
         self.physics_tick()
         plan = self._plan
-        if plan is None or plan.process or self._signals or self._deferred:
+        if plan is None or plan.process or self._signals:
             self.process(self._physics_delta)
         else:
             self.process_frames += 1

@@ -189,7 +189,7 @@ class CartPoleAgent(RLAgent):
         """Place this episode's cart and pole in the sampled initial state."""
         world = self.environment.world
         assert isinstance(world, CartPoleWorld) and world.cart and world.pole
-        x, velocity, angle, angular_velocity = (float(v) for v in arguments)
+        x, velocity, angle, angular_velocity = arguments.tolist()
         self._cart, self._pole = world.cart, world.pole
         self._track_limit = world.track_limit
         cart, pole = world.cart.body, world.pole.body  # placed on the pymunk bodies

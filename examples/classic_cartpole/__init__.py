@@ -117,7 +117,7 @@ class ClassicCartPoleAgent(CartPoleAgent):
         """Place the cart and pole; the pole's centre moves with its rotation about the hinge."""
         super().reset(arguments)
         assert self._pole is not None
-        _, velocity, angle, angular_velocity = (float(v) for v in arguments)
+        _, velocity, angle, angular_velocity = arguments.tolist()
         half = POLE_LENGTH / 2
         self._pole.velocity = (velocity + half * angular_velocity * math.cos(angle),
                                -half * angular_velocity * math.sin(angle))

@@ -230,8 +230,6 @@ def test_rigid_body_accessors_and_impulse(tree: SceneTree, world: PhysicsWorld) 
     assert body.velocity.x == pytest.approx(1.0)
 
 
-
-
 def test_godot_s_names_read_and_push_the_body(tree: SceneTree, world: PhysicsWorld) -> None:
     world.space.gravity = (0.0, 0.0)
     body = RigidBody(name="Lopsided")  # its centre of gravity is off its origin
@@ -250,6 +248,8 @@ def test_godot_s_names_read_and_push_the_body(tree: SceneTree, world: PhysicsWor
     body.apply_force((60.0, 30.0))  # at its origin, off its centre of gravity: it turns it
     tree.physics_tick()
     assert body.angular_velocity != 0.0
+
+
 # --- placement errors ------------------------------------------------------------------------
 
 

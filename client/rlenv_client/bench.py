@@ -471,7 +471,7 @@ def random_steps(envs: Any, batches: int = 64) -> Callable[[int], None]:
 
 
 def random_steps_of(step: Callable[[Any], object], envs: Any,
-                     batches: int = 64) -> Callable[[int], None]:
+                    batches: int = 64) -> Callable[[int], None]:
     """``run(n)``: ``n`` calls of ``step`` with random actions of the vector ``envs``."""
     envs.action_space.seed(0)
     actions = [envs.action_space.sample() for _ in range(batches)]

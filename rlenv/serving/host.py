@@ -170,9 +170,8 @@ class Host:
         if part is None:
             self.instances[0].after_send()
             return
-        for instance, plan in zip(self.instances, prepared.checked, strict=False):
-            if plan.__class__ is dict:  # it served (a batch's refusal or gap did not)
-                instance.after_send()
+        for instance in part.served(self, prepared.checked):
+            instance.after_send()
 
     def abandon(self, why: str) -> None:
         """End every instance's episode where it stands (a request was cut short half way).

@@ -18,7 +18,7 @@ included).
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from gymnasium import spaces
@@ -28,6 +28,9 @@ from rlenv.protocol import ErrorReply, StepsResponse
 from rlenv.protocol.spaces import codec_for
 from rlenv.serving.instance import Instance
 from rlenv.serving.observing import non_finite_observation, packed_observation
+
+if TYPE_CHECKING:
+    from rlenv.serving.parts import StepsPlan
 
 __all__ = ["LeanSteps"]
 
@@ -63,20 +66,21 @@ class LeanSteps:
                    isinstance(instance.observation_space, _PACKED_AS_BYTES)
                    for instance in instances)
 
-    def run(self, reply_id: int, plans: Sequence[Mapping[str, Any]]) -> StepsResponse:
-        """Serve every instance its checked plan (an action, or a reset); the one answer."""
-        count = len(plans)
+    def run(self, reply_id: int, plan: StepsPlan) -> StepsResponse:
+        """Serve every instance its row of the checked plan (an action, or a reset); the answer."""
+        count = len(plan.resets)
         column, dtype, shape = self._column, self.dtype, self.shape
         data: list[Any] = [None] * count
         acted = [False] * count
         errors: list[ErrorReply | None] | None = None
-        for row, (instance, plan) in enumerate(zip(self.instances, plans, strict=True)):
+        repeat = plan.repeat
+        for row, (instance, action, resets) in enumerate(zip(self.instances, plan.actions,
+                                                             plan.resets, strict=True)):
             try:
-                if "reset" in plan:
-                    instance.begin_episode(None, plan["reset"]["options"])
+                if resets:
+                    instance.begin_episode(None, {})  # its own: user code may keep it
                 else:
-                    instance.act(plan["action"], plan.get("repeat_action") or
-                                 instance.environment.repeat_action)
+                    instance.act(action, repeat or instance.environment.repeat_action)
                     acted[row] = True
                 agent = instance.agents[0]
                 value = data[row] = agent.get_data(_AGENT_ONLY)

@@ -379,6 +379,10 @@ class HostPart:
         """
         raise NotImplementedError
 
+    def served(self, host: Host, checked: Any) -> list[Instance]:
+        """The instances a checked request is served to (those to tell of its answer)."""
+        raise NotImplementedError
+
 
 class Batch(HostPart):
     """One request per instance (``nil`` leaves one alone), each answered on its own."""
@@ -409,6 +413,10 @@ class Batch(HostPart):
         return [None if shape is None else _plan_or_refusal(instance, parts, shape, request.id)
                 for instance, parts, shape in zip(host.instances, batch, shapes, strict=False)]
 
+    def served(self, host: Host, checked: Any) -> list[Instance]:
+        return [instance for instance, plan in zip(host.instances, checked, strict=False)
+                if plan.__class__ is dict]  # a refusal or a gap served nothing
+
     def run(self, host: Host, request: Request, checked: Any, reports: bool) -> Reply:
         return BatchResponse(request.id, tuple(
             plan if plan is None or plan.__class__ is ErrorReply else
@@ -422,6 +430,29 @@ def _plan_or_refusal(instance: Instance, parts: Mapping[str, Any], shape: Shape,
         return plan_for(instance, parts, shape)
     except RequestError as error:
         return ErrorReply(reply_id, error.code, str(error))
+
+
+class StepsPlan:
+    """A checked ``steps`` request, in columns: what each instance does, and for how long.
+
+    Attributes:
+        actions: each instance's checked action (its row of the batch); ignored where it resets.
+        resets: whether each instance resets instead of acting.
+        repeat: ``repeat_action`` for every acting instance, or ``None`` for each one's own.
+    """
+
+    __slots__ = ("actions", "repeat", "resets")
+
+    def __init__(self, actions: list[Any], resets: list[bool], repeat: int | None) -> None:
+        self.actions, self.resets, self.repeat = actions, resets, repeat
+
+    def plans(self) -> list[Plan]:
+        """Each instance's plan, as a request to it alone would have it."""
+        repeat = self.repeat
+        return [{"reset": {"seed": None, "options": {}}, "observation": AGENT_ONLY} if resets
+                else {"action": action, "observation": AGENT_ONLY} if repeat is None
+                else {"repeat_action": repeat, "action": action, "observation": AGENT_ONLY}
+                for action, resets in zip(self.actions, self.resets, strict=True)]
 
 
 class Steps(HostPart):
@@ -457,12 +488,12 @@ class Steps(HostPart):
             checked = host.steps_action(steps["action"])
         except SpaceMismatch as error:
             raise RequestError(ErrorCode.INVALID_ACTION, str(error)) from None
-        rows = list(checked) if checked.__class__ is np.ndarray else \
+        actions = list(checked) if checked.__class__ is np.ndarray else \
             list(iterate(host.steps_action_space, checked))
-        return [{"reset": {"seed": None, "options": {}}, "observation": AGENT_ONLY} if resets
-                else {"action": row, "observation": AGENT_ONLY} if repeat is None
-                else {"repeat_action": repeat, "action": row, "observation": AGENT_ONLY}
-                for row, resets in zip(rows, reset, strict=True)]
+        return StepsPlan(actions, reset, repeat)
+
+    def served(self, host: Host, checked: Any) -> list[Instance]:
+        return host.instances
 
     def run(self, host: Host, request: Request, checked: Any, reports: bool) -> Reply:
         lean = host.lean
@@ -470,7 +501,7 @@ class Steps(HostPart):
             return lean.run(request.id, checked)
         return host.columns.stack(request.id, [
             instance.serve(plan, request.id, reports)
-            for instance, plan in zip(host.instances, checked, strict=True)])
+            for instance, plan in zip(host.instances, checked.plans(), strict=True)])
 
 
 def _reset_mask(mask: Any, count: int) -> list[bool]:

@@ -48,27 +48,25 @@ def _place_at_rest(pointer: Any, x: float, y: float, angle: float) -> None:
         lib.cpBodySetTorque(pointer, 0.0)
 
 
-def _pivot(pointer: Any, a: Any, b: Any) -> None:
-    joint = ffi.cast("cpPivotJoint *", pointer)
+# Each sets a constraint's struct up again: its pointer, the same cast to its kind, its bodies.
+def _pivot(pointer: Any, joint: Any, a: Any, b: Any) -> None:
     lib.cpPivotJointInit(joint, a, b, lib.cpPivotJointGetAnchorA(pointer),
                          lib.cpPivotJointGetAnchorB(pointer))
 
 
-def _groove(pointer: Any, a: Any, b: Any) -> None:
-    joint = ffi.cast("cpGrooveJoint *", pointer)
+def _groove(pointer: Any, joint: Any, a: Any, b: Any) -> None:
     lib.cpGrooveJointInit(joint, a, b, lib.cpGrooveJointGetGrooveA(pointer),
                           lib.cpGrooveJointGetGrooveB(pointer),
                           lib.cpGrooveJointGetAnchorB(pointer))
 
 
-def _motor(pointer: Any, a: Any, b: Any) -> None:
-    lib.cpSimpleMotorInit(ffi.cast("cpSimpleMotor *", pointer), a, b,
-                          lib.cpSimpleMotorGetRate(pointer))
+def _motor(pointer: Any, joint: Any, a: Any, b: Any) -> None:
+    lib.cpSimpleMotorInit(joint, a, b, lib.cpSimpleMotorGetRate(pointer))
 
 
-def _spring(pointer: Any, a: Any, b: Any) -> None:
+def _spring(pointer: Any, joint: Any, a: Any, b: Any) -> None:
     force = lib.cpDampedSpringGetSpringForceFunc(pointer)
-    lib.cpDampedSpringInit(ffi.cast("cpDampedSpring *", pointer), a, b,
+    lib.cpDampedSpringInit(joint, a, b,
                            lib.cpDampedSpringGetAnchorA(pointer),
                            lib.cpDampedSpringGetAnchorB(pointer),
                            lib.cpDampedSpringGetRestLength(pointer),
@@ -77,9 +75,12 @@ def _spring(pointer: Any, a: Any, b: Any) -> None:
     lib.cpDampedSpringSetSpringForceFunc(pointer, force)
 
 
-_INIT: dict[type, Callable[[Any, Any, Any], None]] = {
-    pymunk.PivotJoint: _pivot, pymunk.GrooveJoint: _groove, pymunk.SimpleMotor: _motor,
-    pymunk.DampedSpring: _spring,
+_Init = Callable[[Any, Any, Any, Any], None]
+_INIT: dict[type, tuple[str, _Init]] = {
+    pymunk.PivotJoint: ("cpPivotJoint *", _pivot),
+    pymunk.GrooveJoint: ("cpGrooveJoint *", _groove),
+    pymunk.SimpleMotor: ("cpSimpleMotor *", _motor),
+    pymunk.DampedSpring: ("cpDampedSpring *", _spring),
 }
 
 
@@ -89,16 +90,26 @@ def refresh_constraint(constraint: pymunk.Constraint) -> bool:
     It must be in no space. Returns ``False``, changing nothing, for a kind of constraint this
     does not know (the caller then makes a new one).
     """
-    init = _INIT.get(type(constraint))
-    if init is None:
+    refresh = _refresher(constraint)
+    if refresh is None:
         return False
-    _refresh(constraint._constraint, init)
+    _refresh(*refresh)
     return True
 
 
-def _refresh(pointer: Any, init: Callable[[Any, Any, Any], None]) -> None:
+def _refresher(constraint: pymunk.Constraint) -> tuple[Any, Any, Any, Any, _Init] | None:
+    """What :func:`_refresh` takes to refresh ``constraint`` (``None``: a kind it does not know)."""
+    known = _INIT.get(type(constraint))
+    if known is None:
+        return None
+    kind, init = known
+    pointer = constraint._constraint
+    return (pointer, ffi.cast(kind, pointer), constraint.a._body, constraint.b._body, init)
+
+
+def _refresh(pointer: Any, joint: Any, a: Any, b: Any, init: _Init) -> None:
     settings = _settings(pointer)
-    init(pointer, lib.cpConstraintGetBodyA(pointer), lib.cpConstraintGetBodyB(pointer))
+    init(pointer, joint, a, b)
     if settings != _DEFAULTS:  # put back what the init set back to Chipmunk's defaults
         for put, value, default in zip(_SETTERS, settings, _DEFAULTS, strict=True):
             if value != default:
@@ -160,9 +171,9 @@ class Refill:
         self.bodies, self.shapes, self.constraints = bodies, shapes, constraints
         self._places = [(body._body, *pose) for body, pose in zip(bodies, poses, strict=True)]
         self._shapes = [shape._shape for shape in shapes]
-        known = all(type(c) in _INIT and c.a in bodies and c.b in bodies for c in constraints)
-        self._constraints = [(c._constraint, _INIT[type(c)]) for c in constraints] \
-            if known else None
+        refreshers = [_refresher(c) if c.a in bodies and c.b in bodies else None
+                      for c in constraints]
+        self._constraints = None if None in refreshers else refreshers
 
     def into(self, space: pymunk.Space) -> bool:
         """Empty ``space`` of these objects and put them back as new.
@@ -177,7 +188,7 @@ class Refill:
                 list(space._constraints) != self.constraints:
             return False
         pointer = space._space
-        for constraint, _ in constraints:
+        for constraint, *_ in constraints:
             lib.cpSpaceRemoveConstraint(pointer, constraint)
         for shape in self._shapes:
             lib.cpSpaceRemoveShape(pointer, shape)
@@ -186,8 +197,8 @@ class Refill:
             _place_at_rest(*place)
         for shape in self._shapes:
             lib.cpSpaceAddShape(pointer, shape)
-        for constraint, init in constraints:
-            _refresh(constraint, init)
-            lib.cpSpaceAddConstraint(pointer, constraint)
+        for refresh in constraints:
+            _refresh(*refresh)
+            lib.cpSpaceAddConstraint(pointer, refresh[0])
         space._bodies_to_check.update(self.bodies)
         return True

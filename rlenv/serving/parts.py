@@ -32,7 +32,7 @@ from rlenv.serving.lean import LeanSteps
 from rlenv.serving.settings import check_keys
 from rlenv.serving.snapshots import generator_from_state, parse_snapshot
 
-__all__ = ["PARTS", "HostPart", "Part", "Shape", "dispatch", "plan_for", "shape_of",
+__all__ = ["PARTS", "HostPart", "Part", "Shape", "StepsPlan", "dispatch", "plan_for", "shape_of",
            "takes_control"]
 
 _MAX_RENDER_SIZE = 4096

@@ -418,6 +418,40 @@ def test_vector_layouts_give_identical_results(target: str) -> None:
     assert runs[0] == runs[1] == runs[2]
 
 
+def test_a_vector_awaits_first_the_server_that_answers_last(serve: Serve) -> None:
+    """A step's answers are awaited last-first, so that the trainer sleeps once per step
+    rather than waking for each (on a small machine it shares a core with a server): with a
+    slow server (32 CartPoles) and a quick one (1), the slow one comes to be awaited first."""
+    slow, quick = serve(TARGET, args=("--instances", "32")), serve(TARGET)
+    with RemoteVectorEnv(addresses=[f"{slow.host}:{slow.port}",
+                                    f"{quick.host}:{quick.port}"]) as envs:
+        assert envs._gather_order == [1, 0]  # at first the last server is the last rung
+        envs.reset(seed=0)
+        for _ in range(20):  # the first step shows it, unless the quick server was held up
+            envs.step(np.zeros((33, 1), np.float32))
+            if envs._gather_order == [0, 1]:
+                break
+        assert envs._gather_order == [0, 1]
+
+
+def test_a_refused_vector_step_raises_the_first_servers_refusal() -> None:
+    """Whatever order the answers are awaited in, the error raised is the first server's."""
+    with RemoteVectorEnv(4, TARGET, instances_per_server=2) as envs:
+        envs.reset(seed=0)
+        actions = np.zeros((4, 1), np.float32)
+        actions[1], actions[2] = 5.0, 7.0  # server 0's second instance, server 1's first
+        for order in ([0, 1], [1, 0]):
+            envs._gather_order = order
+            with pytest.raises(rlenv_client.RemoteError, match=r"action\[1, 0\] is 5.0"):
+                envs.step(actions)
+        envs.step(np.zeros((4, 1), np.float32))  # nothing moved: the next step is served
+
+
+def test_max_episode_steps_below_one_is_refused() -> None:
+    with pytest.raises(ValueError, match="max_episode_steps must be at least 1, got 0"):
+        RemoteVectorEnv(2, TARGET, in_process=True, max_episode_steps=0)
+
+
 def _bytes(batch: Any) -> bytes:
     """A batch (an array, or a map of arrays) as bytes, to compare runs exactly."""
     if isinstance(batch, dict):

@@ -13,7 +13,7 @@ import threading
 
 import numpy as np
 import pytest
-from conftest import Serve
+from conftest import Serve, wait_until
 
 from rlenv.protocol import ErrorReply, Hello
 from rlenv.protocol.codec import pack
@@ -355,3 +355,19 @@ def test_requests_pipelined_behind_a_slow_one_are_all_answered(serve: Serve) -> 
             sock.sendall(frame(slow) + frame(quick))  # one write: they arrive together
             assert read_frame(sock)["frames"] == 20_000
             assert read_frame(sock)["id"] == 3 * attempt + 3
+
+
+@pytest.mark.parametrize("shared_memory", [None, False], ids=["lane", "socket"])
+def test_answer_arrived_says_whether_receiving_would_wait(serve: Serve,
+                                                          shared_memory: bool | None) -> None:
+    """A hint a vector uses to await its slowest server first: false while the server works
+    (here: forever, its tick hangs), true once the answer is there to take."""
+    server = serve("examples.faulty:SlowEnvironment")
+    with Client(server.host, server.port, shared_memory=shared_memory, timeout=60) as client:
+        assert client.shared_memory is (shared_memory is None)
+        client.reset(seed=0)
+        client.send_step(0)
+        wait_until(client.answer_arrived, "the answer to a quick step never arrived")
+        assert client.receive_step()[4]["frames"] == 1
+        client.send_step(1)  # the tick sleeps for an hour
+        assert not client.answer_arrived()

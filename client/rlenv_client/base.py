@@ -410,6 +410,14 @@ class BaseClient(ABC):
     def _receive(self) -> Reply:
         """Wait for the environment's next answer (to the oldest request not answered yet)."""
 
+    def answer_arrived(self) -> bool:
+        """Whether the next answer has arrived: receiving it would not wait (a hint).
+
+        In process, every answer is made as its request is sent, so this is always true. A
+        vector uses it to wait first for the server that answers last.
+        """
+        return True
+
     # --- internals --------------------------------------------------------------------------
 
     def _call(self, **parts: Any) -> Response:

@@ -53,6 +53,7 @@ __all__ = ["Client", "StepResult"]
 logger = logging.getLogger(__name__)
 
 _READ_SIZE = 64 * 1024
+_PEEK = socket.MSG_PEEK | socket.MSG_DONTWAIT
 _LANES_SINCE = (2, 3)
 
 
@@ -254,6 +255,27 @@ class Client(BaseClient):
         if kind and message.id is not None:  # type: ignore[union-attr]
             self._lane_kind = 0  # the lane's request was answered on the socket
         return message  # type: ignore[return-value]
+
+    def answer_arrived(self) -> bool:
+        """Whether the next answer has arrived: receiving it would not wait (a hint).
+
+        True when the lane's slots hold an answer, or the socket has bytes (perhaps only the
+        start of a frame) or reached its end; false while the server is still at work.
+        """
+        lane = self._lane
+        if self._lane_kind and lane is not None and \
+                lane.slots.answer_sequence != self._lane_answers:
+            return True
+        sock = self._sock
+        if self._connection.buffered or sock is None:
+            return True
+        try:
+            sock.recv(1, _PEEK)
+        except BlockingIOError:
+            return False
+        except OSError:  # receiving says what failed, at once
+            pass
+        return True
 
     def _answered_by_lane(self) -> bool:
         """Wait for the answer to the lane's request; whether it is in the slots.

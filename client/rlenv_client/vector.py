@@ -81,7 +81,7 @@ class RemoteVectorEnv(VectorEnv):
         pool: the servers of a :class:`~rlenv_client.ray.RayServerPool` (or of a lease of
             one) instead: every one of them, each asked for its address on every connection.
         repeat_action: physics ticks per step; the servers' default if ``None``.
-        max_episode_steps: truncate episodes after this many steps (``None``: never).
+        max_episode_steps: truncate episodes after this many steps (at least 1; ``None``: never).
         autoreset_mode: ``NEXT_STEP`` or ``SAME_STEP``.
         in_process: run the copies inside this process instead of servers (by default all of
             them in one group, stepped in columns as a multi-instance server steps them).
@@ -115,6 +115,8 @@ class RemoteVectorEnv(VectorEnv):
         mode = AutoresetMode(autoreset_mode)
         if mode is AutoresetMode.DISABLED:
             raise ValueError("RemoteVectorEnv autoresets; use NEXT_STEP or SAME_STEP")
+        if max_episode_steps is not None and max_episode_steps < 1:
+            raise ValueError(f"max_episode_steps must be at least 1, got {max_episode_steps}")
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
         places = self._places(num_envs, target, addresses, pool, in_process, token,
@@ -127,6 +129,10 @@ class RemoteVectorEnv(VectorEnv):
             self._groups.append(range(start, start + session.client.hello.instances))
             start += session.client.hello.instances
         self._owner = [number for number, group in enumerate(self._groups) for _ in group]
+        # The order in which a step's answers are awaited: the server that answered last comes
+        # first, so that this process sleeps until all have answered rather than waking for
+        # each (on a small machine, it shares a core with a server it would slow down).
+        self._gather_order = list(range(len(self.sessions)))[::-1]
         hello = self.clients[0].hello
         for client in self.clients[1:]:
             if (client.action_space, client.observation_space) != (
@@ -239,15 +245,15 @@ class RemoteVectorEnv(VectorEnv):
 
     def _step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray,
                                              dict[str, Any]]:
-        resetting = self._autoreset.copy() if self._mode is AutoresetMode.NEXT_STEP else \
+        resetting = self._autoreset if self._mode is AutoresetMode.NEXT_STEP else \
             np.zeros(self.num_envs, dtype=np.bool_)
         observations, rewards, terminations, truncations, frames, env_infos = \
             self._step_everywhere(actions, resetting)
-        stepped = ~resetting
-        self._steps[resetting] = 0
-        self._steps[stepped] += 1
+        steps = self._steps
+        steps += 1
+        steps[resetting] = 0  # these started an episode instead
         if self.max_episode_steps is not None:
-            truncations |= stepped & (self._steps >= self.max_episode_steps)
+            truncations |= steps >= self.max_episode_steps
         ended = terminations | truncations
         infos: dict[str, Any] = {}
         if self._mode is AutoresetMode.SAME_STEP and ended.any():
@@ -292,8 +298,14 @@ class RemoteVectorEnv(VectorEnv):
         truncations = np.zeros(self.num_envs, np.bool_)
         frames = np.zeros(self.num_envs, np.int64)
         env_infos: list[dict[str, Any]] = [{}] * self.num_envs
-        refused: RemoteError | None = None
-        for session, group in zip(self.sessions, self._groups, strict=True):
+        refusals: dict[int, RemoteError] = {}  # by server: the first one's is raised
+        order = self._gather_order
+        late: list[int] = []
+        for turn, number in enumerate(order):
+            if turn == 1:  # the first awaited answered: are any of the others still at work?
+                late = [other for other in order[1:]
+                        if not self.sessions[other].client.answer_arrived()]
+            session, group = self.sessions[number], self._groups[number]
             span = slice(group.start, group.stop)
             try:
                 answer = session.client.receive_steps()
@@ -302,10 +314,11 @@ class RemoteVectorEnv(VectorEnv):
                 truncations[span], frames[span] = answer.truncated, answer.frames
                 env_infos[span] = answer.info
                 for error in answer.errors or ():
-                    if error is not None and refused is None:
-                        refused = RemoteError(error.code, error.message, error.fatal)
+                    if error is not None:
+                        refusals.setdefault(number, RemoteError(error.code, error.message,
+                                                                error.fatal))
             except RemoteError as error:  # read every server's answer before raising
-                refused = refused or error
+                refusals[number] = error
             except LOST as error:
                 if self._last is None:
                     raise session.failure(error) from None
@@ -314,8 +327,10 @@ class RemoteVectorEnv(VectorEnv):
                     set_row(observations, index, row(self._last, index))
                     truncations[index] = True
                     env_infos[index] = {"server_restarted": reason}
-        if refused is not None:
-            raise refused
+        if late:  # it answered after the one awaited first: await it first next time
+            self._gather_order = [late[-1], *(n for n in order if n != late[-1])]
+        if refusals:
+            raise refusals[min(refusals)]
         return observations, rewards, terminations, truncations, frames, env_infos
 
     def _after_interruption(self) -> tuple[Any, ...]:

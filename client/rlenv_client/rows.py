@@ -14,7 +14,9 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-__all__ = ["check_shape", "row", "rows", "set_row", "set_rows"]
+__all__ = ["check_shape", "empty_like", "row", "rows", "set_row", "set_rows"]
+
+_ARRAYS = (spaces.Box, spaces.Discrete, spaces.MultiDiscrete, spaces.MultiBinary)
 
 
 def check_shape(batched: spaces.Space, batch: Any, name: str) -> None:
@@ -25,7 +27,9 @@ def check_shape(batched: spaces.Space, batch: Any, name: str) -> None:
     Raises:
         ValueError: naming ``name`` (and where in it), its shape and the expected one.
     """
-    if isinstance(batched, spaces.Dict):
+    if isinstance(batched, _ARRAYS):  # first: Dict and Tuple are ABCs, slower to test for
+        _check_array(batched, batch, name)
+    elif isinstance(batched, spaces.Dict):
         if not isinstance(batch, Mapping) or set(batch) != set(batched.spaces):
             raise ValueError(f"{name} must be a map with the keys {sorted(batched.spaces)}")
         for key, space in batched.spaces.items():
@@ -36,17 +40,26 @@ def check_shape(batched: spaces.Space, batch: Any, name: str) -> None:
         for index, space in enumerate(batched.spaces):
             check_shape(space, batch[index], f"{name}[{index}]")
     else:
-        try:
-            shape = np.shape(batch)
-        except ValueError:  # ragged nested lists
-            raise ValueError(f"{name} is not an array of shape {batched.shape}") from None
-        if shape != batched.shape:
-            raise ValueError(f"{name} has shape {shape}, expected {batched.shape}")
+        _check_array(batched, batch, name)
+
+
+def _check_array(batched: spaces.Space, batch: Any, name: str) -> None:
+    try:
+        shape = np.shape(batch)
+    except ValueError:  # ragged nested lists
+        raise ValueError(f"{name} is not an array of shape {batched.shape}") from None
+    if shape != batched.shape:
+        raise ValueError(f"{name} has shape {shape}, expected {batched.shape}")
 
 
 def rows(batch: Any, start: int, stop: int) -> Any:
     """Sub-environments ``start`` to ``stop`` (excluded) of ``batch`` (views where possible)."""
     return _read(batch, lambda array: np.asarray(array)[start:stop])
+
+
+def empty_like(batch: Any) -> Any:
+    """A new batch of the same layout, shapes and dtypes as ``batch``, its values unset."""
+    return _read(batch, np.empty_like)
 
 
 def row(batch: Any, index: int) -> Any:

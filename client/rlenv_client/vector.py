@@ -36,9 +36,8 @@ from __future__ import annotations
 import logging
 import math
 import os
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -49,7 +48,7 @@ from rlenv.protocol import ErrorReply, Request, Response
 from rlenv.protocol.errors import RemoteError
 from rlenv_client.base import BaseClient
 from rlenv_client.launcher import ServerProcess
-from rlenv_client.rows import check_shape, row, rows, set_row, set_rows
+from rlenv_client.rows import check_shape, empty_like, row, rows, set_row, set_rows
 from rlenv_client.session import LOST, ServerSource, Session
 
 if TYPE_CHECKING:
@@ -159,6 +158,9 @@ class RemoteVectorEnv(VectorEnv):
         self.repeat_action = repeat_action
         self.max_episode_steps = max_episode_steps
         self._autoreset = np.zeros(self.num_envs, dtype=np.bool_)
+        self._all_envs = np.ones(self.num_envs, dtype=np.bool_)
+        self._observations_template = create_empty_array(self.single_observation_space,
+                                                         self.num_envs)
         self._steps = np.zeros(self.num_envs, dtype=np.int64)
         self._last: Any = None  # the last batch of observations returned
         self._interrupted: str | None = None  # what interrupted the last step or reset
@@ -191,9 +193,12 @@ class RemoteVectorEnv(VectorEnv):
             ValueError: a list of seeds of the wrong length.
             ConnectionLost: a server went away (with how it exited, if it died).
         """
-        with self._noting_interruptions():
-            self._interrupted = None
+        self._interrupted = None
+        try:
             return self._reset(seed, options)
+        except BaseException as error:
+            self._note_interruption(error)
+            raise
 
     def _reset(self, seed: int | Sequence[int | None] | None,
                options: Mapping[str, Any] | None) -> tuple[Any, dict[str, Any]]:
@@ -240,8 +245,11 @@ class RemoteVectorEnv(VectorEnv):
             raise TypeError(f"step() needs an action for each of the {self.num_envs} "
                             "sub-environments, got None")
         check_shape(self.action_space, actions, "actions")
-        with self._noting_interruptions():
+        try:
             return self._step(actions)
+        except BaseException as error:
+            self._note_interruption(error)
+            raise
 
     def _step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray,
                                              dict[str, Any]]:
@@ -292,7 +300,7 @@ class RemoteVectorEnv(VectorEnv):
                                           resetting[group.start:group.stop], self.repeat_action)
             except LOST as error:
                 raise session.failure(error) from None
-        observations = create_empty_array(self.single_observation_space, self.num_envs)
+        observations = empty_like(self._observations_template)  # every row is written below
         rewards = np.zeros(self.num_envs, np.float64)
         terminations = np.zeros(self.num_envs, np.bool_)
         truncations = np.zeros(self.num_envs, np.bool_)
@@ -345,15 +353,10 @@ class RemoteVectorEnv(VectorEnv):
                 np.zeros(self.num_envs, np.bool_), np.ones(self.num_envs, np.bool_),
                 np.zeros(self.num_envs, np.int64), [{"interrupted": why}] * self.num_envs)
 
-    @contextmanager
-    def _noting_interruptions(self) -> Iterator[None]:
-        """Remember an interruption (not an error) that escapes the block, for the next step."""
-        try:
-            yield
-        except BaseException as error:
-            if not isinstance(error, Exception):
-                self._interrupted = type(error).__name__
-            raise
+    def _note_interruption(self, error: BaseException) -> None:
+        """Remember an interruption (not an error) that escaped a step or reset, for the next."""
+        if not isinstance(error, Exception):
+            self._interrupted = type(error).__name__
 
     def render(self) -> tuple[np.ndarray, ...] | None:
         """One frame per sub-environment (``rgb_array``)."""
@@ -455,7 +458,7 @@ class RemoteVectorEnv(VectorEnv):
                      frames: np.ndarray) -> dict:
         """Gymnasium's batched infos, ``frames`` included; without a loop in the common case."""
         if not infos and not any(env_infos):
-            return {"frames": frames, "_frames": np.ones(self.num_envs, dtype=np.bool_)}
+            return {"frames": frames, "_frames": self._all_envs.copy()}
         for index, info in enumerate(env_infos):
             infos = self._add_info(infos, {**info, "frames": int(frames[index])}, index)
         return infos

@@ -96,6 +96,36 @@ def test_a_steps_request_without_reset_flags_reads_back_with_none_set() -> None:
     assert slots.read_request() == Request(3, {"steps": {"action": action, "reset": bytes(4)}})
 
 
+@pytest.mark.parametrize(("reset", "repeat"), [
+    (np.array([False, True, False, True]), None), (None, 2)], ids=["reset-flags", "repeat"])
+def test_steps_written_as_columns_read_back_as_the_request_they_stand_for(
+        reset: np.ndarray | None, repeat: int | None) -> None:
+    slots = slots_for(BOX)
+    action = np.arange(12, dtype=np.float32).reshape(4, 3)
+    assert slots.write_steps(5, action, reset, repeat) and slots.request_sequence == 1
+    steps = {"action": action.tobytes(),
+             "reset": bytes(4) if reset is None else reset.astype(np.uint8).tobytes()}
+    if repeat is not None:
+        steps["repeat_action"] = repeat
+    assert slots.read_request() == Request(5, {"steps": steps})
+
+
+@pytest.mark.parametrize(("action", "reset", "repeat"), [
+    (np.zeros((4, 3), np.float64), None, None),
+    (np.zeros((3, 3), np.float32), None, None),
+    (np.zeros(12, np.float32), None, None),
+    (np.zeros((4, 3), np.float32).tolist(), None, None),
+    (np.zeros((4, 3), np.float32), np.zeros(4, np.uint8), None),
+    (np.zeros((4, 3), np.float32), [False] * 4, None),
+    (np.zeros((4, 3), np.float32), None, 0),
+], ids=["dtype", "count", "flat", "list", "uint8-flags", "list-flags", "repeat-0"])
+def test_columns_that_do_not_fit_are_left_to_write_request(action: object, reset: object,
+                                                           repeat: int | None) -> None:
+    slots = slots_for(BOX)
+    assert not slots.write_steps(5, action, reset, repeat)
+    assert slots.request_sequence == 0  # nothing written
+
+
 def test_a_discrete_action_travels_as_its_dtype() -> None:
     slots = slots_for(spaces.Discrete(5, start=-2))
     request = Request(4, {"action": -2, "observation": {"agent": {}}})
@@ -160,6 +190,30 @@ def test_answers_that_fit_read_back_as_they_were_written() -> None:
         assert getattr(back, name).dtype == getattr(steps, name).dtype or name == "frames"
 
 
+def test_a_steps_answer_read_without_copy_is_read_only_views_of_the_slots() -> None:
+    slots = slots_for(BOX)
+    for answer_id in (1, 2):  # the views show the answer written last
+        column = np.arange(12, dtype=np.float32) * answer_id
+        steps = StepsResponse(answer_id, column.tobytes(),
+                              np.array([1.0, 2.0, 0.0, -1.0]) * answer_id,
+                              np.array([True, False, False, answer_id == 2]),
+                              np.array([False, True, False, False]),
+                              np.array([4, 4, 1, answer_id]), ({},) * 4)
+        assert slots.write_answer(steps, STEPS)
+        if answer_id == 1:
+            views = slots.read_answer(STEPS, copy=False)
+            copies = slots.read_answer(STEPS)
+        assert np.array_equal(views.observation, column.reshape(4, 3))
+        for name in ("reward", "terminated", "truncated", "frames"):
+            assert np.array_equal(getattr(views, name), getattr(steps, name))
+            assert getattr(views, name).dtype == getattr(copies, name).dtype
+    assert views.id == 1 and views.info == steps.info and views.errors is None
+    assert copies.observation == (np.arange(12, dtype=np.float32)).tobytes()  # its own copy
+    for array in (views.observation, views.reward, views.terminated, views.truncated,
+                  views.frames):
+        assert not array.flags.writeable
+
+
 @pytest.mark.parametrize(("reply", "kind"), [
     (Response(1, {"agent": bytes(12)}, info={"late": True}), STEP),
     (Response(1, {"agent": bytes(12), "world": {}}), STEP),
@@ -209,7 +263,7 @@ def test_steps_through_a_lane_are_those_through_the_socket(serve: Serve) -> None
     assert sum(1 for result in through_lane if result[0] == "reset") > 2  # episodes ended
 
 
-def steps_of(client: Client, seed: int, rounds: int) -> list[tuple]:
+def steps_of(client: Client, seed: int, rounds: int, copy: bool = True) -> list[tuple]:
     count = client.hello.instances
     client.send_batch([client.reset_request(seed + i) for i in range(count)])
     client.receive_batch()
@@ -218,7 +272,7 @@ def steps_of(client: Client, seed: int, rounds: int) -> list[tuple]:
     results = []
     for _ in range(rounds):
         client.send_steps(rng.uniform(-1, 1, (count, 1)).astype(np.float32), resetting, 2)
-        answer = client.receive_steps()
+        answer = client.receive_steps(copy=copy)
         results.append((answer.observation.tobytes(), answer.reward.tolist(),
                         answer.terminated.tolist(), answer.truncated.tolist(),
                         answer.frames.tolist(), answer.info))
@@ -231,9 +285,10 @@ def test_steps_of_many_instances_through_a_lane_are_those_through_the_socket(
     server = serve(args=["--instances", "5"])
     with Client(server.host, server.port, shared_memory=True) as lane:
         through_lane = steps_of(lane, 11, 150)
+        in_place = steps_of(lane, 11, 150, copy=False)  # the slots' views, read at once
     with Client(server.host, server.port, shared_memory=False) as plain:
         through_socket = steps_of(plain, 11, 150)
-    assert through_lane == through_socket
+    assert through_lane == in_place == through_socket
     assert any(any(row[2]) for row in through_lane)  # some episodes ended and reset
 
 

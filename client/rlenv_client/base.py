@@ -270,16 +270,18 @@ class BaseClient(ABC):
             steps["repeat_action"] = repeat_action
         self._post(Request(next(self._ids), {"steps": steps}))
 
-    def receive_steps(self) -> StepsResponse:
+    def receive_steps(self, *, copy: bool = True) -> StepsResponse:
         """Wait for the answer to :meth:`send_steps`.
 
         Its ``observation`` is the batch of observations (arrays may be read-only views of the
-        received bytes); an instance that failed has its error reply in ``errors``.
+        received bytes); an instance that failed has its error reply in ``errors``. Without
+        ``copy``, its arrays may be read-only views of the shared-memory lane, valid only until
+        the next request (a vector copies them into its own columns at once).
 
         Raises:
             RemoteError: the whole request was refused (nothing changed).
         """
-        answer = self._receive_answer(StepsResponse, "steps")
+        answer = self._receive_answer(StepsResponse, "steps", copy)
         _, observations = self._column_codecs()
         try:
             answer.observation = observations.unpack(answer.observation, writable=False)
@@ -407,8 +409,11 @@ class BaseClient(ABC):
         """Deliver ``request`` to the environment."""
 
     @abstractmethod
-    def _receive(self) -> Reply:
-        """Wait for the environment's next answer (to the oldest request not answered yet)."""
+    def _receive(self, copy: bool = True) -> Reply:
+        """Wait for the environment's next answer (to the oldest request not answered yet).
+
+        Without ``copy``, a ``steps`` answer may hold views valid until the next request.
+        """
 
     def answer_arrived(self) -> bool:
         """Whether the next answer has arrived: receiving it would not wait (a hint).
@@ -429,14 +434,14 @@ class BaseClient(ABC):
         self._awaited = request.id
         self._send(request)
 
-    def _reply(self) -> Reply:
+    def _reply(self, copy: bool = True) -> Reply:
         """The answer to the request sent last; answers to earlier ones are dropped.
 
         Their callers gave up on them (interrupted while waiting), so they belong to no one;
         an unsolicited error (id ``None``: a timeout, say) is returned as it is.
         """
         while True:
-            message = self._receive()
+            message = self._receive(copy)
             reply_id = message.id
             if reply_id is None or reply_id >= self._awaited:
                 return message
@@ -451,9 +456,9 @@ class BaseClient(ABC):
                              codec_for(batch_space(self.observation_space, count)))
         return self._columns
 
-    def _receive_answer(self, kind: type[_Answer], asked: str) -> _Answer:
+    def _receive_answer(self, kind: type[_Answer], asked: str, copy: bool = True) -> _Answer:
         """The answer to a batch or steps request, ``kind``; raises a refusal of it whole."""
-        message = self._reply()
+        message = self._reply(copy)
         if message.__class__ is ErrorReply:
             self._response(message)  # type: ignore[arg-type]
         if message.__class__ is not kind:

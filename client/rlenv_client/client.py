@@ -22,7 +22,9 @@ import logging
 import os
 import socket
 import time
-from typing import NoReturn
+from typing import Any, NoReturn
+
+import numpy as np
 
 from rlenv.protocol import (
     CONNECTION_CLOSED,
@@ -44,7 +46,7 @@ from rlenv.protocol.errors import (
     RequestTimeout,
 )
 from rlenv.protocol.lanes import Lane, LaneClosed, accept_lane, listen_for_lane, wait_for
-from rlenv.protocol.shared_memory import lane_unavailable
+from rlenv.protocol.shared_memory import STEPS, lane_unavailable
 from rlenv.protocol.sockets import AnswerWaiter, configure_socket, is_loopback
 from rlenv_client.base import BaseClient, StepResult
 
@@ -212,10 +214,7 @@ class Client(BaseClient):
             self._settle()
             kind = lane.slots.write_request(request)
             if kind:
-                self._connection.note_request(request.id)
-                self._lane_kind = kind
-                lane.ring()
-                self._waiter.sent()
+                self._rang(lane, request.id, kind)
                 return
         data = self._connection.send(request)
         try:
@@ -234,14 +233,37 @@ class Client(BaseClient):
                                     "while it was being sent; connect again")
             raise
 
-    def _receive(self) -> Reply:
+    def send_steps(self, action: Any, reset: np.ndarray | None = None,
+                   repeat_action: int | None = None) -> None:
+        """Step every instance of the server at once, in columns (see :class:`BaseClient`).
+
+        Through the lane, an array of the K actions' exact dtype and shape (and boolean reset
+        flags) is written straight into its slots.
+        """
+        lane = self._lane
+        if lane is not None and self._sock is not None and not self._connection.outstanding:
+            request_id = next(self._ids)
+            if lane.slots.write_steps(request_id, action, reset, repeat_action):
+                self._awaited = request_id
+                self._rang(lane, request_id, STEPS)
+                return
+        super().send_steps(action, reset, repeat_action)
+
+    def _rang(self, lane: Lane, request_id: int, kind: int) -> None:
+        """The lane's slots hold request ``request_id`` of ``kind``: wake the server."""
+        self._connection.note_request(request_id)
+        self._lane_kind = kind
+        lane.ring()
+        self._waiter.sent()
+
+    def _receive(self, copy: bool = True) -> Reply:
         kind = self._lane_kind
         if kind and not self._connection.buffered and self._answered_by_lane():
             self._lane_kind = 0
             assert self._lane is not None
             slots = self._lane.slots
             self._lane_answers = slots.answer_sequence
-            reply = slots.read_answer(kind)
+            reply = slots.read_answer(kind, copy)
             try:
                 self._connection.note_reply(reply.id)  # type: ignore[arg-type]
             except LocalProtocolError as error:

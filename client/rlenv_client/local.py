@@ -76,7 +76,7 @@ class LocalClient(BaseClient):
             raise
         self._replies.append(reply)
 
-    def _receive(self) -> Reply:
+    def _receive(self, copy: bool = True) -> Reply:
         if not self._replies:
             raise ConnectionLost(f"{self.address} is closed")
         return self._replies.popleft()

@@ -316,7 +316,7 @@ class RemoteVectorEnv(VectorEnv):
             session, group = self.sessions[number], self._groups[number]
             span = slice(group.start, group.stop)
             try:
-                answer = session.client.receive_steps()
+                answer = session.client.receive_steps(copy=False)  # copied into columns
                 set_rows(observations, group.start, answer.observation)
                 rewards[span], terminations[span] = answer.reward, answer.terminated
                 truncations[span], frames[span] = answer.truncated, answer.frames

@@ -60,6 +60,19 @@ _FLAG = np.dtype("|u1")
 _NO_INFO: dict[str, Any] = {}
 
 
+def _columns(buffer: Any, offset: int, count: int, space: spaces.Space) -> np.ndarray:
+    """The K values of ``space`` packed from ``offset`` in ``buffer``, as one array."""
+    shape: tuple[int, ...] = space.shape or ()
+    size = count * int(np.prod(shape, dtype=np.int64))
+    return np.frombuffer(buffer, space.dtype, size, offset).reshape(count, *shape)
+
+
+def _read_only(array: np.ndarray) -> np.ndarray:
+    view = array.view()
+    view.flags.writeable = False
+    return view
+
+
 def lane_unavailable(hello: Hello) -> str | None:
     """Why a lane cannot carry this server's steps on this machine; ``None`` if it can."""
     if not sys.platform.startswith("linux"):
@@ -166,6 +179,13 @@ class Slots:
         self._terminated = np.frombuffer(buffer, _FLAG, count, layout.terminated)
         self._truncated = np.frombuffer(buffer, _FLAG, count, layout.truncated)
         self._no_infos = (_NO_INFO,) * count
+        # The steps slots as arrays, for clients that write and read columns in place.
+        self._action_columns = _columns(buffer, _ACTIONS, count, action)
+        self._reset_flags = np.frombuffer(buffer, np.bool_, count, layout.reset)
+        self._answer_views = tuple(_read_only(view) for view in (
+            _columns(buffer, layout.observation, count, hello.observation_space),
+            self._rewards, self._terminated.view(np.bool_), self._truncated.view(np.bool_),
+            self._frames))
 
     # --- the request (the client writes, the server reads) ----------------------------------
 
@@ -234,6 +254,34 @@ class Slots:
         self._reset[:] = flags
         self._request[3] = repeat
         return STEPS
+
+    def write_steps(self, request_id: int, action: Any, reset: Any,
+                    repeat_action: int | None) -> bool:
+        """Write a ``steps`` request given as columns, in place; whether it fit.
+
+        ``action`` must be an array of exactly the K actions' dtype and shape and ``reset``
+        ``None`` or K booleans; anything else is left to :meth:`write_request` (the slots
+        unchanged). The request is the one ``{"steps": {"action", "reset", "repeat_action"}}``
+        would be, read back by :meth:`read_request` as such.
+        """
+        actions, flags = self._action_columns, self._reset_flags
+        if action.__class__ is not np.ndarray or action.dtype != actions.dtype or \
+                action.shape != actions.shape:
+            return False
+        if reset is not None and (reset.__class__ is not np.ndarray or
+                                  reset.dtype != np.bool_ or reset.shape != flags.shape):
+            return False
+        repeat = self._repeat({"repeat_action": repeat_action})
+        if repeat < 0:
+            return False
+        actions[...] = action
+        flags[...] = False if reset is None else reset
+        header = self._request
+        header[3] = repeat
+        header[1] = request_id
+        header[2] = STEPS
+        header[0] += 1
+        return True
 
     @staticmethod
     def _repeat(parts: dict[str, Any]) -> int:
@@ -330,14 +378,20 @@ class Slots:
         self._truncated[:] = reply.truncated  # type: ignore[union-attr]
         return True
 
-    def read_answer(self, kind: int) -> Reply:
-        """The answer in the slots to the request of ``kind`` written last (its own copy)."""
+    def read_answer(self, kind: int, copy: bool = True) -> Reply:
+        """The answer in the slots to the request of ``kind`` written last.
+
+        Its own copy; or, for a ``steps`` answer without ``copy``, read-only views of the
+        slots (its observations as an array of K): valid until the next request is written.
+        """
         reply_id = self._answer[1]
         if kind == STEP:
             size = self.layout.observation_size
             return Response(reply_id, {"agent": bytes(self._observations[:size])},
                             float(self._rewards[0]), bool(self._terminated[0]),
                             bool(self._truncated[0]), {}, int(self._frames[0]))
+        if not copy:
+            return StepsResponse(reply_id, *self._answer_views, self._no_infos)
         return StepsResponse(reply_id, bytes(self._observations), self._rewards.copy(),
                              self._terminated.astype(np.bool_), self._truncated.astype(np.bool_),
                              self._frames.copy(), self._no_infos)
@@ -348,4 +402,5 @@ class Slots:
                      self._observations):
             view.release()
         self._buffer.release()
-        del self._rewards, self._frames, self._terminated, self._truncated
+        del self._rewards, self._frames, self._terminated, self._truncated, \
+            self._action_columns, self._reset_flags, self._answer_views

@@ -1,11 +1,13 @@
 """The CPU a column step costs per env-step, in process: two revisions in one run, in turns.
 
-``python benchmarks/steps_cpu.py OTHER_PYTHON [--rounds R] [--requests N] [--instances K]``
-runs, alternately with this checkout's interpreter and with ``OTHER_PYTHON`` (the ``python`` of
-another checkout's virtual environment), a process that holds K CartPoles in a ``LocalClient``
-(the host a server runs, without the socket and the codec) and sends N ``steps`` requests at
-repeat_action 4 (random actions, episodes ending and resetting as a vector's do, a 500-step
-limit), then prints the process's CPU time per env-step. Each process makes the same requests.
+``python benchmarks/steps_cpu.py OTHER_PYTHON [--rounds R] [--requests N] [--instances K]
+[--action A]`` runs, alternately with this checkout's interpreter and with ``OTHER_PYTHON`` (the
+``python`` of another checkout's virtual environment), a process that holds K CartPoles in a
+``LocalClient`` (the host a server runs, without the socket and the codec) and sends N ``steps``
+requests at repeat_action 4 (random actions, or ``A`` for every instance, episodes ending and
+resetting as a vector's do, a 500-step limit), then prints the process's CPU time per env-step.
+Each process makes the same requests. A fixed action of 0.5 ends about 0.18 episodes per
+env-step, random ones about 0.12: the share of resets differs.
 
 It prints the figure's min and median for both, and the ratios of this checkout to the other
 (min and median of the per-round ratios): the server's share of a vector step, without the

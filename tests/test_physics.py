@@ -644,7 +644,8 @@ def test_a_space_that_saw_contacts_or_changed_restarts_as_a_new_one() -> None:
 
 def test_a_restart_in_place_leaves_pymunk_s_records_as_a_new_space_has_them() -> None:
     """Emptied and refilled with Chipmunk's calls alone, the space lists its bodies, shapes and
-    constraints as pymunk lists a new space's (in tree order), and checks its bodies again."""
+    constraints as pymunk lists a new space's (in tree order); its bodies were checked as
+    pymunk checks added ones (and passed), so the next step is the quick one."""
     tree, bodies, joint = jointed_scene("groove")
     world = tree.root.get_child(0)
     assert isinstance(world, PhysicsWorld)
@@ -654,7 +655,7 @@ def test_a_restart_in_place_leaves_pymunk_s_records_as_a_new_space_has_them() ->
              if isinstance(node, StaticBody | RigidBody)}
     fresh_names = {id(node.body): node.name for node in fresh_tree.root.get_child(0).iter_subtree()
                    if isinstance(node, StaticBody | RigidBody)}
-    for _ in range(3):
+    for turn in range(3):
         ticks(tree, 20)
         world.restart()
         space = world.space
@@ -663,7 +664,27 @@ def test_a_restart_in_place_leaves_pymunk_s_records_as_a_new_space_has_them() ->
             [fresh_names[id(s.body)] for s in fresh.shapes]
         assert list(space.constraints) == [joint.constraint]
         assert all(body.space is space for body in space.bodies)
-        assert set(space._bodies_to_check) == set(space.bodies)  # checked at the next step
+        # The first restart re-adds through pymunk (which checks at the next step); the others
+        # are in place, and checked already.
+        assert set(space._bodies_to_check) == (set() if turn else set(space.bodies))
+
+
+def test_a_restart_leaves_a_body_without_a_valid_mass_to_pymunk_s_check() -> None:
+    """A body turned dynamic without a mass (its shapes have none) is refused at the next step,
+    as after space.add."""
+    tree, _, _ = jointed_scene("groove")
+    world = tree.root.get_child(0)
+    assert isinstance(world, PhysicsWorld)
+    world.restart()
+    ticks(tree, 1)  # pymunk checks the bodies the first restart added
+    world.restart()  # the quick way from now on
+    assert not world.space._bodies_to_check
+    base = world.get_node("Base").body
+    base.body_type = pymunk.Body.DYNAMIC
+    world.restart()
+    assert world.space._bodies_to_check == {base}
+    with pytest.raises(AssertionError, match="Dynamic bodies must have a mass > 0"):
+        ticks(tree, 1)
 
 
 def test_a_restart_takes_out_what_was_added_to_the_space_by_hand() -> None:

@@ -17,6 +17,7 @@ rely on would fail them.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -26,6 +27,7 @@ from pymunk._chipmunk_cffi import ffi, lib
 __all__ = ["Refill", "place_at_rest", "refresh_constraint", "renumber"]
 
 _STATIC = pymunk.Body.STATIC
+_DYNAMIC = pymunk.Body.DYNAMIC
 _ZERO = (0.0, 0.0)
 
 
@@ -145,6 +147,14 @@ def renumber(space: pymunk.Space) -> None:
     lib.cpSpaceSetCurrentTimeStep(pointer, 0.0)
 
 
+def _valid_mass(pointer: Any) -> bool:
+    """What pymunk checks of a body added to a space before its next step (ours is cheaper)."""
+    if lib.cpBodyGetType(pointer) != _DYNAMIC:
+        return True
+    mass = lib.cpBodyGetMass(pointer)
+    return 0 < mass < math.inf and lib.cpBodyGetMoment(pointer) > 0
+
+
 class Refill:
     """A space's objects, ready to be put back into it as new, again and again, at Chipmunk's speed.
 
@@ -152,11 +162,14 @@ class Refill:
     :func:`place_at_rest` of each body at its pose, ``space.add`` of the bodies and shapes,
     then :func:`refresh_constraint` and ``space.add`` of each constraint do, in that order, with
     Chipmunk's calls alone: pymunk's own records of what the space holds would come out as
-    they are, so they are left alone (the bodies are given to pymunk's check before the next
-    step, as ``space.add`` does). The bodies themselves stay in the space: without sleeping,
-    taking one out and back leaves it in the same place of Chipmunk's lists, and placing it
-    wakes it as adding it would. What does not change between restarts (the objects' Chipmunk
-    pointers, how to refresh each constraint, the poses) is looked up once, here.
+    they are, so they are left alone. ``space.add`` would have pymunk check every dynamic
+    body's mass and moment before the next step (which then takes pymunk's slower
+    ``Space.step``): the same check is made here, and only a body that fails it is left to
+    pymunk, whose step refuses it as after ``space.add``. The bodies themselves stay in the
+    space: without sleeping, taking one out and back leaves it in the same place of Chipmunk's
+    lists, and placing it wakes it as adding it would. What does not change between restarts
+    (the objects' Chipmunk pointers, how to refresh each constraint, the poses) is looked up
+    once, here.
 
     Args:
         bodies: the space's bodies, in pymunk's order (``space.bodies``).
@@ -200,5 +213,7 @@ class Refill:
         for refresh in constraints:
             _refresh(*refresh)
             lib.cpSpaceAddConstraint(pointer, refresh[0])
-        space._bodies_to_check.update(self.bodies)
+        for body, (body_pointer, *_) in zip(self.bodies, self._places, strict=True):
+            if not _valid_mass(body_pointer):
+                space._bodies_to_check.add(body)  # pymunk's step refuses it, as after add
         return True

@@ -39,15 +39,18 @@ def place_at_rest(body: pymunk.Body, x: float, y: float, angle: float) -> None:
     _place_at_rest(body._body, x, y, angle)
 
 
-def _place_at_rest(pointer: Any, x: float, y: float, angle: float) -> None:
+def _place_at_rest(pointer: Any, x: float, y: float, angle: float) -> int:
+    """:func:`place_at_rest` of a body's Chipmunk pointer; the body's type."""
     if lib.cpBodyGetAngle(pointer) != angle:
         lib.cpBodySetAngle(pointer, angle)
     lib.cpBodySetPosition(pointer, (x, y))
-    if lib.cpBodyGetType(pointer) != _STATIC:
+    body_type = lib.cpBodyGetType(pointer)
+    if body_type != _STATIC:
         lib.cpBodySetVelocity(pointer, _ZERO)
         lib.cpBodySetAngularVelocity(pointer, 0.0)
         lib.cpBodySetForce(pointer, _ZERO)
         lib.cpBodySetTorque(pointer, 0.0)
+    return body_type
 
 
 # Each sets a constraint's struct up again: its pointer, the same cast to its kind, its bodies.
@@ -148,9 +151,7 @@ def renumber(space: pymunk.Space) -> None:
 
 
 def _valid_mass(pointer: Any) -> bool:
-    """What pymunk checks of a body added to a space before its next step (ours is cheaper)."""
-    if lib.cpBodyGetType(pointer) != _DYNAMIC:
-        return True
+    """What pymunk checks of a dynamic body added to a space before its next step."""
     mass = lib.cpBodyGetMass(pointer)
     return 0 < mass < math.inf and lib.cpBodyGetMoment(pointer) > 0
 
@@ -206,14 +207,15 @@ class Refill:
         for shape in self._shapes:
             lib.cpSpaceRemoveShape(pointer, shape)
         renumber(space)
-        for place in self._places:
-            _place_at_rest(*place)
+        types = [_place_at_rest(*place) for place in self._places]
         for shape in self._shapes:
             lib.cpSpaceAddShape(pointer, shape)
         for refresh in constraints:
             _refresh(*refresh)
             lib.cpSpaceAddConstraint(pointer, refresh[0])
-        for body, (body_pointer, *_) in zip(self.bodies, self._places, strict=True):
-            if not _valid_mass(body_pointer):
+        for body, body_type, (body_pointer, *_) in zip(self.bodies, types, self._places,
+                                                       strict=True):
+            # Once the shapes are back: a body's mass may come from its shapes.
+            if body_type == _DYNAMIC and not _valid_mass(body_pointer):
                 space._bodies_to_check.add(body)  # pymunk's step refuses it, as after add
         return True

@@ -209,3 +209,25 @@ def test_a_restore_answers_no_ticks_of_its_replay(client: Client) -> None:
     answer = client._call(restore=snapshot)
     assert (answer.frames, answer.reward) == (0, 0.0)
     assert client.step(np.zeros(1, np.float32), 3)[4]["frames"] == 3
+
+
+def test_a_snapshot_holds_the_configuration_of_the_reset_read_as_the_nodes_are_now() -> None:
+    """Every reset captures the configuration cheaply (its map is made when a snapshot asks):
+    a change of a node's configurable keys, or another world, is read at the next reset, and
+    a value user code changes after the reset is not the snapshot's."""
+    with LocalClient(TARGET) as local:
+        instance = local.host.instances[0]
+        world = instance.environment.world
+        local.reset(seed=1)
+        config = local.snapshot()["config"]
+        assert config == instance.settings.state() == {
+            part: {key: getattr(nodes[0], key) for key in nodes[0].configurable}
+            for part, nodes in (("environment", [instance.environment]),
+                                ("agent", instance.agents), ("world", [world]))}
+        world.track_limit = 9.0  # user code, mid-episode: the episode began with 2.4
+        assert local.snapshot()["config"]["world"]["track_limit"] == 2.4
+        world.configurable = ("track_limit",)  # this node's own, from now on
+        local.reset(seed=2)
+        assert local.snapshot()["config"]["world"] == {"track_limit": 9.0}
+        instance.environment.world = None  # no world: no part of the configuration
+        assert set(instance.settings.state()) == {"environment", "agent"}

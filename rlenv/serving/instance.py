@@ -297,7 +297,7 @@ class Instance:
         self._before_sets.clear()
         if seed is not None:
             environment.np_random, _ = seeding.np_random(seed)
-        self.log.begin(self.settings.state(), environment.np_random, options)
+        self.log.begin(self.settings.capture(), environment.np_random, options)
         self.stats.begin()
         for agent in self.agents:
             agent.reward = 0.0

@@ -11,7 +11,8 @@ environment: the instance switches real time; :class:`Settings` keeps the video 
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from operator import attrgetter
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -21,7 +22,7 @@ from rlenv.scene2d.recording import VideoRecorder
 if TYPE_CHECKING:
     from rlenv.serving.instance import Answer, Instance
 
-__all__ = ["Settings", "check_keys"]
+__all__ = ["Captured", "Settings", "check_keys"]
 
 logger = logging.getLogger(__name__)
 
@@ -44,6 +45,7 @@ class Settings:
         self._instance = instance
         self.record_dir = record_dir
         self.recorder: VideoRecorder | None = None
+        self._readers: _Readers | None = None  # how to capture, for the nodes as they are
 
     def check(self, config: Mapping[str, Any]) -> None:
         """Check a ``config`` part (every node it applies to) without applying it.
@@ -110,8 +112,20 @@ class Settings:
 
     def state(self) -> dict[str, dict[str, Any]]:
         """The current value of everything a client may configure (for snapshots)."""
-        return {part: {key: getattr(nodes[0], key) for key in nodes[0].configurable}
-                for part, nodes in self._nodes().items()}
+        return self.capture().state()
+
+    def capture(self) -> Captured:
+        """:meth:`state` as it is now, read cheaply (every reset does): its map comes later."""
+        readers = self._readers
+        instance = self._instance
+        environment, agent = instance.environment, instance.agents[0]
+        world = environment.world
+        if readers is None or readers.world is not world or \
+                readers.configurables[0] is not environment.configurable or \
+                readers.configurables[1] is not agent.configurable or \
+                (world is not None and readers.configurables[2] is not world.configurable):
+            readers = self._readers = _Readers(environment, agent, world)
+        return Captured(readers.keys, tuple([read(node) for node, read in readers.nodes]))
 
     def record(self, name: str) -> None:
         """Record the environment's frames into ``name`` in the record directory (``""``: stop)."""
@@ -163,6 +177,51 @@ def check_keys(part: Mapping[str, Any], allowed: frozenset[str], where: str) -> 
             f"unknown key {sorted(map(str, unknown))[0]!r} in {where}; expected any of "
             + ", ".join(sorted(allowed)),
         )
+
+
+class Captured:
+    """The configuration at one moment, as read (see :meth:`Settings.capture`).
+
+    Args:
+        keys: each part's name and configurable keys, in order.
+        values: each part's values, in the order of its keys.
+    """
+
+    __slots__ = ("keys", "values")
+
+    def __init__(self, keys: tuple[tuple[str, tuple[str, ...]], ...],
+                 values: tuple[tuple[Any, ...], ...]) -> None:
+        self.keys, self.values = keys, values
+
+    def state(self) -> dict[str, dict[str, Any]]:
+        """The configuration as :meth:`Settings.state` gives it."""
+        return {part: dict(zip(keys, values, strict=True))
+                for (part, keys), values in zip(self.keys, self.values, strict=True)}
+
+
+class _Readers:
+    """How to read the configurable values of the environment, its first agent and its world."""
+
+    def __init__(self, environment: Any, agent: Any, world: Any) -> None:
+        self.world = world
+        self.configurables = (environment.configurable, agent.configurable,
+                              None if world is None else world.configurable)
+        parts = [("environment", environment), ("agent", agent)]
+        if world is not None:
+            parts.append(("world", world))
+        self.keys = tuple((part, tuple(node.configurable)) for part, node in parts)
+        self.nodes = tuple((node, _reader(keys)) for (_, node), (_, keys) in
+                           zip(parts, self.keys, strict=True))
+
+
+def _reader(keys: tuple[str, ...]) -> Callable[[Any], tuple[Any, ...]]:
+    """A function giving the values of ``keys`` of a node, as a tuple (an attrgetter if it can)."""
+    if len(keys) > 1:
+        return attrgetter(*keys)
+    if keys:
+        key = keys[0]
+        return lambda node: (getattr(node, key),)
+    return lambda node: ()
 
 
 def _check_recording(name: Any, record_dir: Path | None) -> None:

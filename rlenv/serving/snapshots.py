@@ -20,11 +20,14 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from rlenv.protocol.errors import ErrorCode, RequestError
+
+if TYPE_CHECKING:
+    from rlenv.serving.settings import Captured
 
 __all__ = ["MAX_EVENTS", "EpisodeLog", "generator_from_state", "parse_snapshot"]
 
@@ -39,17 +42,22 @@ class EpisodeLog:
     """Records the current episode as it happens; see the module docstring."""
 
     def __init__(self) -> None:
-        self.config: dict[str, dict[str, Any]] = {}
+        self._config: Captured | None = None
         self._rng_state: dict[str, Any] = {}
         self.options: Mapping[str, Any] = {}
         self.events: list[list[Any]] = []
         self.started = False
         self.overflowed = False  # the episode has more events than a snapshot may hold
 
-    def begin(self, config: dict[str, dict[str, Any]], rng: np.random.Generator,
+    @property
+    def config(self) -> dict[str, dict[str, Any]]:
+        """The configuration at the reset (``{}`` before the first)."""
+        return {} if self._config is None else self._config.state()
+
+    def begin(self, config: Captured, rng: np.random.Generator,
               options: Mapping[str, Any]) -> None:
         """A reset: remember the configuration and the generator as they are now."""
-        self.config = config
+        self._config = config  # as a map only when a snapshot asks
         self._rng_state = rng.bit_generator.state  # as JSON only when a snapshot asks
         self.options = dict(options)
         self.events = []

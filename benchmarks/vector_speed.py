@@ -1,15 +1,18 @@
 """Vector throughput with CPU per env-step, each vector beside its baselines, rounds in turns.
 
-``python benchmarks/vector_speed.py [--rounds R] [--seconds S]`` steps, one after another in
-every round (after a warm-up round each), for ``S`` seconds each:
+``python benchmarks/vector_speed.py [--rounds R] [--seconds S] [--action A]`` steps, one after
+another in every round (after a warm-up round each), for ``S`` seconds each:
 
 - ``gymnasium.make_vec("rlenv/CartPole-v0", num_envs=N)`` as a user gets it (one server per
-  core, repeat_action 4, random actions, episodes ending and autoresetting), through
+  core, repeat_action 4, random actions or the fixed action ``A``, episodes ending and
+  autoresetting: a fixed 0.5 ends about 0.18 episodes per env-step, as the issue measured,
+  random actions about 0.12), through
   shared-memory lanes (the default) and on sockets alone (``shared_memory=False``), for N = 64
   and N = 8;
-- gymnasium's ``AsyncVectorEnv`` of 8 ``CartPole-v1``;
+- gymnasium's ``AsyncVectorEnv`` of 8 ``CartPole-v1`` (random actions);
 - the floor: hand-written servers (``python -m examples.handwritten 32``, as many as make_vec
-  starts) stepped in columns by a raw client, doing the same work as ``make_vec(64)``.
+  starts) stepped in columns by a raw client, doing the same work as ``make_vec(64)`` (with
+  the same actions).
 
 It prints, for each, env-steps/s (min and median over the rounds), the CPU time per env-step
 of the servers (or workers) and of this process (from ``/proc``, medians), and the ratios the
@@ -76,18 +79,33 @@ class Subject:
         self.client_cpu.append((time.process_time() - client) / env_steps * 1e6)
 
 
-def _made(stack: ExitStack, envs: int, **kwargs: Any) -> tuple[Callable[[int], None], list[int]]:
+def steps_of(step: Callable[[Any], object], envs: Any,
+             action: float | None) -> Callable[[int], None]:
+    """``run(n)``: ``n`` calls of ``step``, with random actions or ``action`` for every env."""
+    if action is None:
+        return random_steps_of(step, envs)
+    actions = np.full(envs.action_space.shape, action, envs.action_space.dtype)
+
+    def run(n: int) -> None:
+        for _ in range(n):
+            step(actions)
+    return run
+
+
+def _made(stack: ExitStack, envs: int, action: float | None,
+          **kwargs: Any) -> tuple[Callable[[int], None], list[int]]:
     made = gym.make_vec("rlenv/CartPole-v0", num_envs=envs, **kwargs)
     stack.callback(made.close)
-    return random_steps(made), [server.pid for server in made.unwrapped.servers]
+    made.reset(seed=0)
+    return steps_of(made.step, made, action), [server.pid for server in made.unwrapped.servers]
 
 
-def subjects(stack: ExitStack) -> list[Subject]:
-    """Everything to measure, started."""
+def subjects(stack: ExitStack, action: float | None = None) -> list[Subject]:
+    """Everything to measure, started (the rlenv vectors and the floor step with ``action``)."""
     measured = []
     for envs in (64, 8):
         for lanes in (True, False):
-            step, pids = _made(stack, envs, shared_memory=lanes)
+            step, pids = _made(stack, envs, action, shared_memory=lanes)
             how = "lanes" if lanes else "sockets"
             measured.append(Subject(f"make_vec({envs}), {how}", step, envs, pids))
     async_envs = gym.vector.AsyncVectorEnv([lambda: gym.make("CartPole-v1")] * 8)
@@ -100,7 +118,7 @@ def subjects(stack: ExitStack) -> list[Subject]:
     actions = SimpleNamespace(action_space=gym.vector.utils.batch_space(
         gym.spaces.Box(-1, 1, (1,), np.float32), 64))  # all random_steps_of asks of a vector
     measured.append(Subject(f"hand-written {len(layout)} x {layout[0]}",
-                            random_steps_of(floor.step, actions), 64,
+                            steps_of(floor.step, actions, action), 64,
                             [server.process.pid for server in floor.servers]))
     return measured
 
@@ -116,9 +134,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=7, help="timed rounds (after a warm-up)")
     parser.add_argument("--seconds", type=float, default=2.0, help="seconds per subject a round")
+    parser.add_argument("--action", type=float, default=None,
+                        help="one fixed action for the rlenv vectors and the floor (the issue's "
+                             "0.5) instead of random ones")
     args = parser.parse_args(argv)
     with ExitStack() as stack:
-        measured = subjects(stack)
+        measured = subjects(stack, args.action)
         for subject in measured:
             subject.round(args.seconds / 2)  # warm-up
             subject.rates.clear()
@@ -127,7 +148,9 @@ def main(argv: list[str] | None = None) -> int:
         for _ in range(args.rounds):
             for subject in measured:
                 subject.round(args.seconds)
-    print(f"{args.rounds} rounds of {args.seconds} s in turns; CPU per env-step from /proc")
+    actions = "random actions" if args.action is None else f"action {args.action}"
+    print(f"{args.rounds} rounds of {args.seconds} s in turns, {actions}; CPU per env-step "
+          "from /proc")
     print(f"{'':<34}{'env-steps/s min':>16}{'median':>10}{'server us':>11}{'client us':>11}")
     for subject in measured:
         print(f"{subject.name:<34}{min(subject.rates):>16,.0f}"

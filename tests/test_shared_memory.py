@@ -303,6 +303,42 @@ def test_a_discrete_environment_steps_through_a_lane(serve: Serve) -> None:
     assert str(results[0]) == str(results[1])
 
 
+def test_discrete_steps_of_many_instances_go_through_the_slots_as_through_the_socket(
+        serve: Serve) -> None:
+    """K Discrete actions (int64, as gymnasium batches them) are written into the slots as
+    they are; the episodes are those stepped on the socket."""
+    server = serve("examples.classic_cartpole:ClassicCartPoleEnvironment",
+                   args=["--instances", "3"])
+    results = []
+    for shared_memory in (True, False):
+        with Client(server.host, server.port, shared_memory=shared_memory) as client:
+            client.send_batch([client.reset_request(seed) for seed in range(3)])
+            client.receive_batch()
+            resetting, seen = np.zeros(3, bool), []
+            for step in range(60):
+                client.send_steps(np.array([step % 2, 1, 0], np.int64), resetting)
+                answer = client.receive_steps(copy=False)
+                seen.append((answer.observation.tobytes(), answer.reward.tolist(),
+                             answer.terminated.tolist(), answer.frames.tolist()))
+                resetting = answer.terminated | answer.truncated
+            results.append(seen)
+    assert results[0] == results[1]
+    assert any(any(row[2]) for row in results[0])  # some episodes ended and reset
+
+
+def test_views_of_an_answer_outlive_their_client(serve: Serve) -> None:
+    """Closing a client whose answer's views are still held neither fails nor unmaps them."""
+    server = serve()
+    with Client(server.host, server.port, shared_memory=True) as client:
+        client.send_batch([client.reset_request(0)])
+        client.receive_batch()
+        client.send_steps(np.zeros((1, 1), np.float32))
+        answer = client.receive_steps(copy=False)
+        kept = answer.observation.copy()
+    assert client.closed
+    assert np.array_equal(answer.observation, kept) and answer.frames.tolist() == [4]
+
+
 def faulty_session(client: Client) -> list[object]:
     """A refusal, a failure and steps, as results or errors (code and message)."""
     outcomes: list[object] = []

@@ -105,12 +105,19 @@ class Lane:
             raise LaneClosed(f"the shared-memory lane failed: {error}") from None
 
     def close(self) -> None:
-        """Close the doorbell and unmap the block; safe to repeat."""
+        """Close the doorbell and unmap the block; safe to repeat.
+
+        Views of an answer still held (``receive_steps(copy=False)``) keep the block mapped
+        until they are gone.
+        """
         if self.doorbell.fileno() < 0:
             return
         self.doorbell.close()
         self.slots.release()
-        self.memory.close()
+        try:
+            self.memory.close()
+        except BufferError:  # views still held: the block goes with the last of them
+            pass
 
 
 def wait_for(ready: Callable[[], bool], lane: Lane, waiter: AnswerWaiter,

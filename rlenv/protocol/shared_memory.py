@@ -67,6 +67,13 @@ def _columns(buffer: Any, offset: int, count: int, space: spaces.Space) -> np.nd
     return np.frombuffer(buffer, space.dtype, size, offset).reshape(count, *shape)
 
 
+def _repeat(repeat: Any) -> int:
+    """``repeat_action`` as the slot holds it: 0 when absent, -1 when it does not fit."""
+    if repeat is None:
+        return 0
+    return repeat if repeat.__class__ is int and 1 <= repeat < 2 ** 62 else -1
+
+
 def _read_only(array: np.ndarray) -> np.ndarray:
     view = array.view()
     view.flags.writeable = False
@@ -218,7 +225,7 @@ class Slots:
     def _write_step(self, parts: dict[str, Any]) -> int:
         if not parts.keys() <= _STEP_KEYS or parts.get("observation") != _AGENT_ONLY:
             return 0
-        repeat = self._repeat(parts)
+        repeat = _repeat(parts.get("repeat_action"))
         action = parts["action"]
         size = self.layout.action_size
         if self._discrete:
@@ -239,7 +246,7 @@ class Slots:
         if len(parts) != 1 or steps.__class__ is not dict or not steps.keys() <= _STEPS_KEYS:
             return 0
         action, reset = steps.get("action"), steps.get("reset")
-        repeat = self._repeat(steps)
+        repeat = _repeat(steps.get("repeat_action"))
         count = self.layout.instances
         if action.__class__ is not bytes or len(action) != count * self.layout.action_size or \
                 repeat < 0:
@@ -271,7 +278,7 @@ class Slots:
         if reset is not None and (reset.__class__ is not np.ndarray or
                                   reset.dtype != np.bool_ or reset.shape != flags.shape):
             return False
-        repeat = self._repeat({"repeat_action": repeat_action})
+        repeat = _repeat(repeat_action)
         if repeat < 0:
             return False
         actions[...] = action
@@ -282,14 +289,6 @@ class Slots:
         header[2] = STEPS
         header[0] += 1
         return True
-
-    @staticmethod
-    def _repeat(parts: dict[str, Any]) -> int:
-        """``repeat_action`` as the slot holds it: 0 when absent, -1 when it does not fit."""
-        repeat = parts.get("repeat_action")
-        if repeat is None:
-            return 0
-        return repeat if repeat.__class__ is int and 1 <= repeat < 2 ** 62 else -1
 
     def read_request(self) -> Request:
         """The request the client wrote last, as it would have come off the socket.

@@ -118,13 +118,8 @@ class Settings:
         """:meth:`state` as it is now, read cheaply (every reset does): its map comes later."""
         readers = self._readers
         instance = self._instance
-        environment, agent = instance.environment, instance.agents[0]
-        world = environment.world
-        if readers is None or readers.world is not world or \
-                readers.configurables[0] is not environment.configurable or \
-                readers.configurables[1] is not agent.configurable or \
-                (world is not None and readers.configurables[2] is not world.configurable):
-            readers = self._readers = _Readers(environment, agent, world)
+        if readers is None or not readers.fit(instance.environment, instance.agents[0]):
+            readers = self._readers = _Readers(self._nodes())
         return Captured(readers.keys, tuple([read(node) for node, read in readers.nodes]))
 
     def record(self, name: str) -> None:
@@ -200,18 +195,27 @@ class Captured:
 
 
 class _Readers:
-    """How to read the configurable values of the environment, its first agent and its world."""
+    """How to read each part's configurable values (its first node's), for the parts as they are.
 
-    def __init__(self, environment: Any, agent: Any, world: Any) -> None:
-        self.world = world
-        self.configurables = (environment.configurable, agent.configurable,
-                              None if world is None else world.configurable)
-        parts = [("environment", environment), ("agent", agent)]
-        if world is not None:
-            parts.append(("world", world))
-        self.keys = tuple((part, tuple(node.configurable)) for part, node in parts)
+    Args:
+        parts: :meth:`Settings._nodes`: environment, agents and, if any, the world.
+    """
+
+    def __init__(self, parts: dict[str, list[Any]]) -> None:
+        firsts = [(part, nodes[0]) for part, nodes in parts.items()]
+        self.world = parts["world"][0] if "world" in parts else None
+        self.configurables = [node.configurable for _, node in firsts]
+        self.keys = tuple((part, tuple(node.configurable)) for part, node in firsts)
         self.nodes = tuple((node, _reader(keys)) for (_, node), (_, keys) in
-                           zip(parts, self.keys, strict=True))
+                           zip(firsts, self.keys, strict=True))
+
+    def fit(self, environment: Any, agent: Any) -> bool:
+        """Whether these are still the parts: the same world, and every node's keys the same."""
+        world = environment.world
+        configurables = self.configurables
+        return world is self.world and configurables[0] is environment.configurable and \
+            configurables[1] is agent.configurable and \
+            (world is None or configurables[2] is world.configurable)
 
 
 def _reader(keys: tuple[str, ...]) -> Callable[[Any], tuple[Any, ...]]:

@@ -15,7 +15,6 @@ busy browser keeps this VM's cores awake, which alone can make the trainer faste
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
 import sys
 import time
@@ -25,17 +24,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 from browser import Browser, find_chromium  # noqa: E402  (the tests' DevTools driver)
+from procfs import cpu_seconds  # noqa: E402
 
 from rlenv_client import Client, ServerProcess  # noqa: E402
 from rlenv_client.inspector import Inspector  # noqa: E402
 
 CARTPOLE = "examples.cartpole:CartPoleEnvironment"
-
-
-def cpu_seconds(pid: int) -> float:
-    """User and system CPU time of process ``pid`` so far."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rpartition(")")[2].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def train(client: Client, seconds: float, random: np.random.Generator) -> float:

@@ -30,7 +30,6 @@ anything on a machine whose speed drifts.
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
 import time
 from collections.abc import Callable
@@ -38,19 +37,13 @@ from contextlib import ExitStack
 from dataclasses import dataclass, field
 
 import numpy as np
+from procfs import cpu_seconds
 
 from rlenv_client import Client, LocalClient, ServerProcess
 
 CARTPOLE = "examples.cartpole:CartPoleEnvironment"
 REPEAT = 4
 TIME_LIMIT = 500
-
-
-def cpu_seconds(pid: int) -> float:
-    """User and system CPU time a process used so far."""
-    with open(f"/proc/{pid}/stat") as stat:
-        fields = stat.read().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 @dataclass

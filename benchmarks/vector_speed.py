@@ -23,7 +23,6 @@ sockets (min and median of the per-round ratios).
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
 import time
 from collections.abc import Callable
@@ -34,19 +33,11 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from procfs import cpu_seconds
 
 import rlenv_client  # noqa: F401  (registers rlenv/CartPole-v0)
 from rlenv_client.bench import HandWrittenVector, random_steps, random_steps_of
 from rlenv_client.vector import default_layout
-
-_TICKS = os.sysconf("SC_CLK_TCK")
-
-
-def process_cpu(pid: int) -> float:
-    """Seconds of CPU (user and system) the process ``pid`` has used."""
-    with open(f"/proc/{pid}/stat") as stat:
-        fields = stat.read().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / _TICKS
 
 
 @dataclass
@@ -64,7 +55,7 @@ class Subject:
     def round(self, seconds: float) -> None:
         """Step for about ``seconds``; note env-steps/s and CPU us per env-step."""
         steps = 0
-        servers = [process_cpu(pid) for pid in self.pids]
+        servers = [cpu_seconds(pid) for pid in self.pids]
         client = time.process_time()
         start = time.perf_counter()
         while time.perf_counter() - start < seconds:
@@ -73,7 +64,7 @@ class Subject:
         elapsed = time.perf_counter() - start
         env_steps = steps * self.envs
         self.rates.append(env_steps / elapsed)
-        used = sum(process_cpu(pid) - before for pid, before in zip(self.pids, servers,
+        used = sum(cpu_seconds(pid) - before for pid, before in zip(self.pids, servers,
                                                                     strict=True))
         self.server_cpu.append(used / env_steps * 1e6)
         self.client_cpu.append((time.process_time() - client) / env_steps * 1e6)

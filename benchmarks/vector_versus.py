@@ -26,14 +26,7 @@ import sys
 import tempfile
 import time
 
-_TICKS = os.sysconf("SC_CLK_TCK")
-
-
-def process_cpu(pid: int) -> float:
-    """Seconds of CPU (user and system) the process ``pid`` has used."""
-    with open(f"/proc/{pid}/stat") as stat:
-        fields = stat.read().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / _TICKS
+from procfs import cpu_seconds
 
 
 def worker(envs: int, rounds: int, seconds: float, action: float | None) -> dict[str, float]:
@@ -55,7 +48,7 @@ def worker(envs: int, rounds: int, seconds: float, action: float | None) -> dict
         rates, servers, own = [], [], []
         for turn in range(rounds + 1):  # the first is a warm-up
             steps = 0
-            servers_before = sum(process_cpu(pid) for pid in pids)
+            servers_before = sum(cpu_seconds(pid) for pid in pids)
             own_before = time.process_time()
             start = time.perf_counter()
             while time.perf_counter() - start < seconds:
@@ -66,7 +59,7 @@ def worker(envs: int, rounds: int, seconds: float, action: float | None) -> dict
             env_steps = steps * envs
             if turn:
                 rates.append(env_steps / elapsed)
-                servers.append((sum(process_cpu(pid) for pid in pids) - servers_before)
+                servers.append((sum(cpu_seconds(pid) for pid in pids) - servers_before)
                                / env_steps * 1e6)
                 own.append((time.process_time() - own_before) / env_steps * 1e6)
     finally:

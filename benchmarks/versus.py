@@ -18,7 +18,6 @@ protocol must be the same major version on both sides.
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
 import subprocess
 import sys
@@ -28,6 +27,7 @@ from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
 
 import numpy as np
+from procfs import cpu_seconds
 
 from rlenv_client import Client, RemoteVectorEnv
 
@@ -50,13 +50,6 @@ def served(python: str, *args: str) -> Iterator[tuple[str, int]]:
     finally:
         process.terminate()
         process.wait(10)
-
-
-def cpu_seconds(pid: int) -> float:
-    """User and system CPU time a process used so far."""
-    with open(f"/proc/{pid}/stat") as stat:
-        fields = stat.read().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def single(address: str, pid: int, steps: int) -> Callable[[], tuple[float, float]]:

@@ -47,7 +47,7 @@ from rlenv.protocol.errors import (
 )
 from rlenv.protocol.lanes import Lane, LaneClosed, accept_lane, listen_for_lane, wait_for
 from rlenv.protocol.shared_memory import STEPS, lane_unavailable
-from rlenv.protocol.sockets import AnswerWaiter, configure_socket, is_loopback
+from rlenv.protocol.sockets import AnswerWaiter, configure_socket, is_loopback, readable_now
 from rlenv_client.base import BaseClient, StepResult
 
 __all__ = ["Client", "StepResult"]
@@ -55,7 +55,6 @@ __all__ = ["Client", "StepResult"]
 logger = logging.getLogger(__name__)
 
 _READ_SIZE = 64 * 1024
-_PEEK = socket.MSG_PEEK | socket.MSG_DONTWAIT
 _LANES_SINCE = (2, 3)
 
 
@@ -289,15 +288,7 @@ class Client(BaseClient):
                 lane.slots.answer_sequence != self._lane_answers:
             return True
         sock = self._sock
-        if self._connection.buffered or sock is None:
-            return True
-        try:
-            sock.recv(1, _PEEK)
-        except BlockingIOError:
-            return False
-        except OSError:  # receiving says what failed, at once
-            pass
-        return True
+        return self._connection.buffered or sock is None or readable_now(sock)
 
     def _answered_by_lane(self) -> bool:
         """Wait for the answer to the lane's request; whether it is in the slots.

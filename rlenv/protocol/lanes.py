@@ -30,7 +30,7 @@ from collections.abc import Callable
 
 from rlenv.protocol.messages import Hello
 from rlenv.protocol.shared_memory import Layout, Slots
-from rlenv.protocol.sockets import AnswerWaiter
+from rlenv.protocol.sockets import AnswerWaiter, readable_now
 
 __all__ = ["LANE_NAME", "KEY_SIZE", "Lane", "LaneClosed", "accept_lane", "listen_for_lane",
            "open_lane", "wait_for"]
@@ -41,7 +41,6 @@ KEY_SIZE = 16
 """Bytes of the key that proves the lane's connection came from the server."""
 
 _DONTWAIT = socket.MSG_DONTWAIT
-_PEEK = socket.MSG_PEEK | socket.MSG_DONTWAIT
 _RING = b"\x01"
 
 
@@ -140,11 +139,7 @@ def wait_for(ready: Callable[[], bool], lane: Lane, waiter: AnswerWaiter,
     def attempt() -> bool | None:
         if ready():
             return True
-        try:
-            sock.recv(1, _PEEK)
-            return False
-        except BlockingIOError:
-            return None
+        return False if readable_now(sock) else None
 
     now = waiter.clock
     try:

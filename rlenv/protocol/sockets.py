@@ -27,7 +27,8 @@ import time
 from collections.abc import Callable
 from typing import TypeVar
 
-__all__ = ["REQUEST_SPIN_WINDOW", "SPIN_WINDOW", "AnswerWaiter", "configure_socket", "is_loopback"]
+__all__ = ["REQUEST_SPIN_WINDOW", "SPIN_WINDOW", "AnswerWaiter", "configure_socket", "is_loopback",
+           "readable_now"]
 
 SPIN_WINDOW = 100e-6
 """Seconds after a request within which a client spins for its answer (if the last came so)."""
@@ -36,6 +37,7 @@ REQUEST_SPIN_WINDOW = 1e-3
 """Seconds after an answer within which a server spins for the next request (likewise)."""
 
 _DONTWAIT = socket.MSG_DONTWAIT
+_PEEK = socket.MSG_PEEK | socket.MSG_DONTWAIT
 _yield = os.sched_yield
 _Got = TypeVar("_Got")
 
@@ -113,6 +115,20 @@ def _received_now(sock: socket.socket, size: int) -> bytes | None:
         return sock.recv(size, _DONTWAIT)
     except BlockingIOError:
         return None
+
+
+def readable_now(sock: socket.socket) -> bool:
+    """Whether reading ``sock`` would not block: it has bytes, reached its end, or failed.
+
+    A peek, without system calls beyond it; reading then gets the bytes, the end or the error.
+    """
+    try:
+        sock.recv(1, _PEEK)
+    except BlockingIOError:
+        return False
+    except OSError:  # reading says what failed, at once
+        pass
+    return True
 
 
 def configure_socket(sock: socket.socket, receive_timeout: float, send_timeout: float) -> None:

@@ -120,7 +120,8 @@ def _received_now(sock: socket.socket, size: int) -> bytes | None:
 def readable_now(sock: socket.socket) -> bool:
     """Whether reading ``sock`` would not block: it has bytes, reached its end, or failed.
 
-    A peek, without system calls beyond it; reading then gets the bytes, the end or the error.
+    One non-blocking peek at a byte, which stays unread: reading then gets the bytes, the end
+    or the error.
     """
     try:
         sock.recv(1, _PEEK)

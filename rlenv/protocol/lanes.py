@@ -127,12 +127,13 @@ def wait_for(ready: Callable[[], bool], lane: Lane, waiter: AnswerWaiter,
     sleeps on both.
 
     Returns:
-        True once ``ready()``; False when the socket has bytes to read (or reached its end).
+        True once ``ready()``; False when reading the socket would not block: it has bytes,
+        reached its end, or failed (reading it then says how).
 
     Raises:
         BlockingIOError: ``timeout`` seconds passed.
         LaneClosed: the other end closed the lane.
-        OSError: the socket failed.
+        OSError: polling the doorbell and the socket failed.
     """
     sock = lane.sock
 

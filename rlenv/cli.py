@@ -35,6 +35,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     serve.add_argument("--instances", type=int, default=1,
                        help="independent copies of the environment to host, stepped together "
                        "by batch requests (default 1)")
+    serve.add_argument("--per-client", action="store_true",
+                       help="give every client environments of its own (--instances of them) "
+                       "in this process, instead of one controller and observers")
     serve.add_argument("--real-time", action="store_true",
                        help="ticks follow the wall clock; actions apply when they arrive")
     serve.add_argument("--record-dir", type=Path, default=None, metavar="DIR",
@@ -177,12 +180,16 @@ def serve_command(target: str) -> int:
 def _serve(args: argparse.Namespace) -> int:
     from rlenv.serving.server import Server
 
+    if args.per_client and args.inspect:
+        raise ValueError("--inspect watches the environment of a controller; with --per-client "
+                         "every client has its own: start the inspector on one of them instead")
     signal.signal(signal.SIGTERM, _exit_on_signal)
     limits = Limits(max_frame_size=args.max_frame_size, frame_deadline=args.frame_deadline,
                     idle_timeout=args.idle_timeout or None, max_connections=args.max_connections)
     server = Server(args.target, host=args.host, port=args.port, lifeline=args.lifeline,
                     token=args.token, limits=limits, instances=args.instances,
-                    record_dir=args.record_dir, real_time=args.real_time)
+                    record_dir=args.record_dir, real_time=args.real_time,
+                    per_client=args.per_client)
     with server:
         host, port = server.address
         print(f"listening on {host}:{port}", flush=True)

@@ -73,7 +73,8 @@ def test_replay_refuses_what_is_not_an_episode(tmp_path: Path) -> None:
 
 
 def test_an_inspectors_edits_are_replayed(tmp_path: Path) -> None:
-    env = RecordEpisodes(gym.make("rlenv/CartPole-v0", repeat_action=2), tmp_path)
+    env = RecordEpisodes(gym.make("rlenv/CartPole-v0", repeat_action=2,
+                                  share_server=False), tmp_path)
     try:
         address = env.unwrapped.client.address
         host, _, port = address.rpartition(":")

@@ -123,7 +123,7 @@ def run_checks(target: str, timeout: float = 30.0, compliance: bool = False,
     is_address = ":" in target and target.rsplit(":", 1)[1].isdigit()
     try:
         env = RemoteEnv(address=target, timeout=timeout, token=token) if is_address else \
-            RemoteEnv(target, timeout=timeout, max_restarts=0)
+            RemoteEnv(target, timeout=timeout, max_restarts=0, share_server=False)
     except Exception as error:
         return [CheckResult("connect", "fail", f"{type(error).__name__}: {error}")]
     hello = env.client.hello

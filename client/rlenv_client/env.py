@@ -3,8 +3,10 @@
 The spaces come from the server's hello, never from code on this side. The environment is
 reached in one of three ways:
 
-- ``RemoteEnv("examples.cartpole:CartPoleEnvironment")`` starts a server subprocess on a free
-  port and ends its whole process group on :meth:`~RemoteEnv.close` (or at exit);
+- ``RemoteEnv("examples.cartpole:CartPoleEnvironment")`` reaches it in a server subprocess: the
+  environments of one process that serve the same class share one (each has an environment of
+  its own in it; :mod:`rlenv_client.sharing`), started on a free port for the first of them and
+  ended, its whole process group, when the last closes (or at exit);
 - ``RemoteEnv(address="127.0.0.1:7000")`` attaches to a running server;
 - ``RemoteEnv("examples.cartpole:CartPoleEnvironment", in_process=True)`` runs the environment
   in this process with no socket (debugging, and the baseline for remote figures).
@@ -17,6 +19,7 @@ why. Nothing is sent twice, so no transition is invented or duplicated; call ``r
 
 from __future__ import annotations
 
+import copy
 import logging
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
@@ -59,6 +62,10 @@ class RemoteEnv(gymnasium.Env):
             ``inspector.url``.
         shared_memory: step through a shared-memory lane when the server is on this
             machine (see :class:`~rlenv_client.client.Client`): by default when it can.
+        share_server: with a ``target``, share this process's server of it with the other
+            environments of the same target and ``server_args`` (the default), rather than
+            start a server of its own. Either way the environment is this one's alone; the
+            inspector always gets a server of its own.
 
     Raises:
         ServerStartError: the server could not start (its output is in the message).
@@ -73,6 +80,7 @@ class RemoteEnv(gymnasium.Env):
         in_process: bool = False, timeout: float = 30.0, server_args: Sequence[str] = (),
         render_size: tuple[int, int] | None = None, token: str | None = None,
         max_restarts: int = 3, inspector: bool = False, shared_memory: bool | None = None,
+        share_server: bool = True,
     ) -> None:
         self.metadata = {"render_modes": ["rgb_array"], "render_fps": 15}
         if display_available():
@@ -86,7 +94,8 @@ class RemoteEnv(gymnasium.Env):
         self.session = Session(target, address=address, in_process=in_process,
                                max_restarts=max_restarts, timeout=timeout,
                                server_args=server_args, token=token,
-                               shared_memory=shared_memory)
+                               shared_memory=shared_memory,
+                               share_server=share_server and not inspector)
         hello = self.client.hello
         self.action_space = hello.action_space
         self.observation_space = hello.observation_space
@@ -115,7 +124,10 @@ class RemoteEnv(gymnasium.Env):
 
     @property
     def server(self) -> ServerProcess | None:
-        """The server process this environment started, or ``None``."""
+        """The server process this environment reaches, if rlenv started it (``None``: not).
+
+        A shared server (``share_server``) serves other environments of this process too.
+        """
         return self.session.server
 
     def configure(self, **settings: Any) -> None:
@@ -149,8 +161,8 @@ class RemoteEnv(gymnasium.Env):
             if self._last_observation is None:
                 raise self.session.failure(error) from None
             reason = self.session.restart(error)
-            return self._last_observation, 0.0, False, True, {"frames": 0,
-                                                              "server_restarted": reason}
+            return copy.deepcopy(self._last_observation), 0.0, False, True, {
+                "frames": 0, "server_restarted": reason}
         self._last_observation = result[0]
         if self.render_mode == "human":
             self.render()

@@ -24,7 +24,7 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvStepReturn,
 )
 
-from rlenv_client.vector import RemoteVectorEnv
+from rlenv_client.vector import RemoteVectorEnv, default_layout
 
 __all__ = ["SB3VecEnv"]
 
@@ -40,19 +40,25 @@ class SB3VecEnv(VecEnv):
         max_episode_steps: truncate episodes after this many steps.
         in_process: run the environments inside this process.
         render_mode: ``"rgb_array"`` or ``None``.
+        instances_per_server: how many environments each started server hosts; by default
+            one server per core but one, which is left to the trainer (its policy runs between
+            steps, while the servers wait: see ``docs/training-fast.md``).
     """
 
     def __init__(
         self, num_envs: int = 1, target: str | None = None, *,
         addresses: Sequence[str] | None = None, repeat_action: int | None = None,
         max_episode_steps: int | None = None, in_process: bool = False,
-        render_mode: str | None = None,
+        render_mode: str | None = None, instances_per_server: int | None = None,
     ) -> None:
+        if instances_per_server is None and addresses is None and not in_process:
+            instances_per_server = default_layout(num_envs, trainer_cores=1)[0]
         self.venv = RemoteVectorEnv(
             None if addresses is not None else num_envs, target, addresses=addresses,
             repeat_action=repeat_action,
             max_episode_steps=max_episode_steps, autoreset_mode=AutoresetMode.SAME_STEP,
             in_process=in_process, render_mode=render_mode,
+            instances_per_server=instances_per_server,
         )
         super().__init__(self.venv.num_envs, self.venv.single_observation_space,
                          self.venv.single_action_space)

@@ -18,6 +18,7 @@ from rlenv.protocol.errors import ConnectionLost, RequestTimeout
 from rlenv_client.base import BaseClient
 from rlenv_client.client import Client
 from rlenv_client.launcher import ServerProcess, with_server_story
+from rlenv_client.sharing import shared_servers
 
 __all__ = ["LOST", "ServerLost", "ServerSource", "Session", "as_lost", "connect", "parse_address"]
 
@@ -68,7 +69,7 @@ def connect(
     target: str | None = None, *, address: str | None = None, in_process: bool = False,
     timeout: float = 30.0, server_args: Sequence[str] = (), startup_timeout: float = 60.0,
     token: str | None = None, instances: int = 1, pool: ServerSource | None = None,
-    index: int = 0, shared_memory: bool | None = None,
+    index: int = 0, shared_memory: bool | None = None, share_server: bool = False,
 ) -> tuple[BaseClient, ServerProcess | None]:
     """Reach an environment the way :class:`RemoteEnv` does.
 
@@ -79,6 +80,8 @@ def connect(
     started with ``--instances``, or in this process). A ``pool`` wins over both: the client
     connects to its server ``index``, wherever that is now. ``shared_memory`` is
     :class:`~rlenv_client.client.Client`'s (a lane for steps to a server on this machine).
+    ``share_server`` reaches a ``target`` of one instance through this process's shared server
+    of it (:mod:`rlenv_client.sharing`) instead of a server of its own.
 
     Returns:
         The client, and the server process it started (``None`` when it started none).
@@ -101,6 +104,14 @@ def connect(
         from rlenv_client.local import LocalClient
 
         return LocalClient(target, instances=instances), None
+    if share_server and instances == 1:
+        server = shared_servers.lease(target, server_args)
+        try:
+            return Client(server.host, server.port, timeout=timeout,
+                          shared_memory=shared_memory), server
+        except BaseException:
+            shared_servers.release(server)
+            raise
     if instances > 1:
         server_args = [*server_args, "--instances", str(instances)]
     server = ServerProcess(target, startup_timeout=startup_timeout, args=server_args)
@@ -129,20 +140,23 @@ class Session:
         index: which server of ``pool``.
         shared_memory: step through a shared-memory lane (see
             :class:`~rlenv_client.client.Client`).
+        share_server: reach ``target`` through this process's shared server of it (see
+            :func:`connect`).
     """
 
     def __init__(
         self, target: str | None = None, *, address: str | None = None, in_process: bool = False,
         max_restarts: int = 0, timeout: float = 30.0, server_args: Sequence[str] = (),
         token: str | None = None, instances: int = 1, pool: ServerSource | None = None,
-        index: int = 0, shared_memory: bool | None = None,
+        index: int = 0, shared_memory: bool | None = None, share_server: bool = False,
     ) -> None:
         self._place = {"target": target, "address": address, "in_process": in_process,
                        "timeout": timeout, "server_args": server_args, "token": token,
                        "instances": instances, "pool": pool, "index": index,
-                       "shared_memory": shared_memory}
+                       "shared_memory": shared_memory, "share_server": share_server}
         self._pool = pool
         self.client, self.server = connect(**self._place)
+        self._leased = self.server is not None and self.server in shared_servers
         self.max_restarts = max_restarts
         self.restarts = 0
         self.on_restart: Callable[[], None] | None = None  # told once a restart reconnected
@@ -177,6 +191,7 @@ class Session:
         logger.warning("%s\n%s", reason, story)
         self.close()
         self.client, self.server = connect(**self._place)
+        self._leased = self.server is not None and self.server in shared_servers
         for settings in self._configuration:
             self.client.configure(**settings)
         if self.on_restart is not None:
@@ -195,7 +210,10 @@ class Session:
     def close(self) -> None:
         """Disconnect, and stop the server if this session started it."""
         self.client.close()
-        if self.server is not None:
+        if self._leased:
+            self._leased = False
+            shared_servers.release(self.server)  # type: ignore[arg-type]
+        elif self.server is not None:
             self.server.close(timeout=1.0)
 
 

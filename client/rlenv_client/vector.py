@@ -61,9 +61,13 @@ logger = logging.getLogger(__name__)
 Reply = Response | ErrorReply
 
 
-def default_layout(num_envs: int, cores: int | None = None) -> list[int]:
-    """Instances per server for ``num_envs`` environments: one server per core, shared fairly."""
-    servers = max(1, min(num_envs, cores or os.cpu_count() or 1))
+def default_layout(num_envs: int, cores: int | None = None, trainer_cores: int = 0) -> list[int]:
+    """Instances per server for ``num_envs`` environments: one server per core, shared fairly.
+
+    ``trainer_cores`` of the ``cores`` (this machine's by default) are left to the trainer,
+    but one server there always is.
+    """
+    servers = max(1, min(num_envs, (cores or os.cpu_count() or 1) - trainer_cores))
     share = math.ceil(num_envs / servers)
     return [min(share, num_envs - start) for start in range(0, num_envs, share)]
 

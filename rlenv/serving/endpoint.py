@@ -162,9 +162,14 @@ class Endpoint:
 
     def __init__(
         self, hello: Hello | None, limits: Limits | None = None, token: str | None = None,
-        clock: Callable[[], float] = time.monotonic,
+        clock: Callable[[], float] = time.monotonic, per_client: bool = False,
     ) -> None:
         self.limits = limits or Limits()
+        self.per_client = per_client
+        self.on_drop: Callable[[Peer], None] | None = None
+        self._waiter = AnswerWaiter(window=REQUEST_SPIN_WINDOW)
+        self._spin_poll = select.poll()
+        self._by_fd: dict[int, Peer] = {}
         self._token = token
         self._hello: Hello | None = None
         if hello is not None:
@@ -270,9 +275,39 @@ class Endpoint:
                         self._backlog = True
                     return controller, request
                 continue
+            if self.per_client and deadline is None and self._clock() < self._housekeeping_at:
+                got = self._spin_for_request()
+                if got is not None:
+                    return got
             self._wait(deadline)
             if deadline is not None and self._clock() >= deadline:
                 return self._next_request()
+
+    def _spin_for_request(self) -> tuple[Peer, Request] | None:
+        peers = [peer for peer in self._order if peer.lane is not None]
+        poll, by_fd = self._spin_poll.poll, self._by_fd
+
+        def attempt() -> Peer | None:
+            for peer in peers:
+                if peer.lane_ready():
+                    return peer
+            ready = poll(0)
+            return by_fd[ready[0][0]] if ready else None
+
+        waiter = self._waiter
+        peer = waiter.spin(attempt)
+        waiter.ended()
+        if peer is None:
+            return None
+        if not peer.lane_ready():
+            self._read(peer, block=False)
+            self._backlog = False
+        request = self._request_from(peer)
+        if request is None:
+            return None
+        if peer.connection.buffered:
+            self._backlog = True
+        return peer, request
 
     def reply(self, peer: Peer, message: Reply) -> None:
         """Send ``peer`` the answer to its oldest request (dropped if the client is gone)."""
@@ -281,7 +316,7 @@ class Endpoint:
 
     def controls(self, peer: Peer) -> bool:
         """Whether ``peer`` controls the environment."""
-        return peer is self._controller
+        return self.per_client or peer is self._controller
 
     def take_control(self, peer: Peer, request_id: int) -> bool:
         """Let ``peer``'s request change the environment, if ``peer`` may.
@@ -290,7 +325,7 @@ class Endpoint:
         answered ``busy`` (and this returns False).
         """
         controller = self._controller
-        if controller is peer:
+        if controller is peer or self.per_client:
             return True
         if controller is not None and self._has_left(controller):
             self._drop(controller, "client closed the connection")
@@ -396,6 +431,8 @@ class Endpoint:
         self._peers[sock] = peer
         self._order.append(peer)
         self._selector.register(sock, selectors.EVENT_READ)
+        self._spin_poll.register(sock, select.POLLIN)
+        self._by_fd[sock.fileno()] = peer
         logger.info("client %s connected", address)
         assert self._hello is not None, "set the endpoint's hello before serving"
         self._write(peer, peer.connection.send(self._hello))
@@ -608,6 +645,7 @@ class Endpoint:
                 peer.connection.note_reply(message.id)
                 lane.ring()
                 peer.waiter.sent()
+                self._waiter.sent()
                 return
         try:
             try:
@@ -623,6 +661,7 @@ class Endpoint:
                     f"the answer could not be sent: {error}"))
             peer.sock.sendall(data)
             peer.waiter.sent()
+            self._waiter.sent()
         except (TypeError, LocalProtocolError) as error:
             logger.warning("not sent to %s: %s", peer.address, error)
         except OSError as error:
@@ -643,7 +682,11 @@ class Endpoint:
         self._close_lane(peer, reason)
         if self._peers.pop(peer.sock, None) is not None:
             self._selector.unregister(peer.sock)
+            self._spin_poll.unregister(peer.sock)
+            del self._by_fd[peer.sock.fileno()]
             self._order.remove(peer)
+            if self.on_drop is not None:
+                self.on_drop(peer)
             logger.info("client %s disconnected: %s", peer.address, reason)
         if self._controller is peer:
             self._controller = None

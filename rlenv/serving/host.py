@@ -129,8 +129,7 @@ class Host:
         Instances in real time first run the ticks that came due, so that the checks see the
         current state.
         """
-        for instance in self._clocked:
-            instance.catch_up()
+        self.catch_up()
         parts = request.parts
         try:
             shape = shape_of(parts)
@@ -182,6 +181,11 @@ class Host:
             if instance.state is not Episode.NOT_STARTED:
                 instance.abandon_episode(why)
 
+    def catch_up(self) -> None:
+        """Run the ticks that came due on the instances in real time."""
+        for instance in self._clocked:
+            instance.catch_up()
+
     def time_to_next_tick(self) -> float | None:
         """Seconds until the next tick of an instance in real time (``None``: none is)."""
         if not self._clocked:
@@ -196,8 +200,7 @@ class Host:
         while True:
             got = endpoint.receive(self.time_to_next_tick() if self._clocked else None)
             if got is None:
-                for instance in self._clocked:
-                    instance.catch_up()
+                self.catch_up()
                 continue
             self.handle(endpoint, *got)
 

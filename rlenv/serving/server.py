@@ -8,6 +8,7 @@ from pathlib import Path
 from rlenv.environment import RLEnvironment
 from rlenv.serving.endpoint import DEFAULT_HOST, Endpoint, Limits
 from rlenv.serving.host import Host
+from rlenv.serving.per_client import HostPerClient
 
 __all__ = ["Server"]
 
@@ -36,9 +37,14 @@ class Server:
         instances: how many environment instances to host.
         record_dir: where clients may have the environment record videos (``None``: nowhere).
         real_time: start in real-time mode (ticks follow the wall clock).
+        per_client: give every client connection environments of its own (``instances`` of
+            them), built when it first asks and closed when it leaves
+            (:mod:`rlenv.serving.per_client`); otherwise the first client to change the
+            environment controls it and the others may observe.
 
     Attributes:
-        host: the instances and how requests reach them.
+        host: the instances and how requests reach them (with ``per_client``, the hosts of
+            every client).
         endpoint: the sockets.
         address: the (host, port) the server listens on.
 
@@ -50,10 +56,16 @@ class Server:
         self, environment: RLEnvironment | type[RLEnvironment] | str, host: str = DEFAULT_HOST,
         port: int = 0, lifeline: int | None = None, token: str | None = None,
         limits: Limits | None = None, instances: int = 1, record_dir: Path | None = None,
-        real_time: bool = False,
+        real_time: bool = False, per_client: bool = False,
     ) -> None:
-        self.host = Host(environment, instances, record_dir=record_dir, real_time=real_time)
-        self.endpoint = Endpoint(self.host.hello, limits or Limits(), token)
+        def build() -> Host:
+            return Host(environment, instances, record_dir=record_dir, real_time=real_time)
+
+        if per_client and not isinstance(environment, str | type):
+            raise TypeError("a server per client needs the environment class, not an instance")
+        self.host: Host | HostPerClient = HostPerClient(build) if per_client else build()
+        self.endpoint = Endpoint(self.host.hello, limits or Limits(), token,
+                                 per_client=per_client)
         self.address = self.endpoint.start_server(port, host)
         if lifeline is not None:
             self.endpoint.watch_lifeline(lifeline)

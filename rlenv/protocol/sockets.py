@@ -9,12 +9,13 @@ microseconds on a small virtual machine: more than a step of a simple environmen
 :class:`AnswerWaiter` spins for a short, bounded while before it blocks, but only when the
 other end answered within that window the previous time, and it yields its core at every
 turn (a process waiting for the core runs first). A client spins up to :data:`SPIN_WINDOW` for
-an answer (a fast environment's comes sooner; a vector's servers take longer, and the client
-would only take their cores); a server spins up to :data:`REQUEST_SPIN_WINDOW` for its
-controller's next request, which comes after the trainer's own work on the answer (a policy's
-forward pass, a vector's bookkeeping): measured here, a 1 ms window made SB3 PPO on one
-environment and an 8-environment vector a fifth to a half faster than 100 us, and longer
-client windows made vectors slower.
+an answer (a server stepping a trainer's 8 CartPoles takes ~150 us); a server spins up to
+:data:`REQUEST_SPIN_WINDOW` for its controller's next request, which comes after the trainer's
+own work on the answer (a policy's forward pass, a vector's bookkeeping): measured here, a 1 ms
+window made SB3 PPO on one environment and an 8-environment vector a fifth to a half faster
+than 100 us. But spinning only pays on a core nobody else wants: a yield that let another
+process run (torch's own spinning threads, another program) ends the spin, and a waiter that
+gives way often blocks for a while (``docs/training-fast.md`` has the figures).
 """
 
 from __future__ import annotations
@@ -27,14 +28,25 @@ import time
 from collections.abc import Callable
 from typing import TypeVar
 
-__all__ = ["REQUEST_SPIN_WINDOW", "SPIN_WINDOW", "AnswerWaiter", "configure_socket", "is_loopback",
+__all__ = ["CONTENDED", "GAVE_WAY", "REQUEST_SPIN_WINDOW", "SPIN_WINDOW", "AnswerWaiter",
+           "configure_socket", "is_loopback",
            "readable_now"]
 
-SPIN_WINDOW = 100e-6
+SPIN_WINDOW = 300e-6
 """Seconds after a request within which a client spins for its answer (if the last came so)."""
 
 REQUEST_SPIN_WINDOW = 1e-3
 """Seconds after an answer within which a server spins for the next request (likewise)."""
+
+GAVE_WAY = 50e-6
+"""A yield that took longer than this (seconds) let another process run on this core."""
+
+CONTENDED = 1e-3
+"""Seconds lost to other processes while spinning (halving every :data:`CONTENDED_HALF_LIFE`)
+beyond which a waiter stops spinning for :data:`CONTENDED_BACKOFF`."""
+
+CONTENDED_HALF_LIFE = 20e-3
+CONTENDED_BACKOFF = 50e-3
 
 _DONTWAIT = socket.MSG_DONTWAIT
 _PEEK = socket.MSG_PEEK | socket.MSG_DONTWAIT
@@ -54,14 +66,17 @@ class AnswerWaiter:
         window: seconds after :meth:`sent` within which an answer counts as quick.
 
     Attributes:
+        calm_at: until when the waiter blocks at once (it gave way too often).
         clock: as given.
+        lost: seconds other processes took from this one's spins lately (decaying).
+        lost_at: when :attr:`lost` was last added to.
         quick: the last answer came within ``window`` of its question, so the next one is
             spun for.
         since: when the other end was last asked (:meth:`sent`).
         window: as given.
     """
 
-    __slots__ = ("clock", "quick", "since", "window")
+    __slots__ = ("calm_at", "clock", "lost", "lost_at", "quick", "since", "window")
 
     def __init__(self, clock: Callable[[], float] = time.perf_counter,
                  window: float = SPIN_WINDOW) -> None:
@@ -69,6 +84,9 @@ class AnswerWaiter:
         self.window = window
         self.quick = False
         self.since = 0.0
+        self.calm_at = 0.0
+        self.lost = 0.0
+        self.lost_at = 0.0
 
     def sent(self) -> None:
         """The other end was just asked: its answer is awaited from now."""
@@ -78,18 +96,38 @@ class AnswerWaiter:
         """Call ``attempt`` until it gives something, while the answer may still come quickly.
 
         Only when the last answer was quick, and only until ``window`` after :meth:`sent`,
-        yielding the core between attempts; ``None`` if nothing came in that time.
+        yielding the core between attempts; ``None`` if nothing came in that time. A yield
+        that let another process run (:data:`GAVE_WAY`) ends the spin at once: that process
+        needs this core, and a process that spins keeps it from it (it waits its turn instead
+        of being woken). When that happens often (:data:`CONTENDED`), spinning stops for a
+        while: the waiter then blocks at once.
         """
         if not self.quick:
             return None
         now = self.clock
+        before = now()
+        if before < self.calm_at:
+            return None
         deadline = self.since + self.window
-        while now() < deadline:
+        while before < deadline:
             got = attempt()
             if got is not None:
                 return got
             _yield()  # a process waiting for this core runs first
+            after = now()
+            if after - before > GAVE_WAY:  # another process ran here: leave it the core
+                self._gave_way(after, after - before)
+                return None
+            before = after
         return None
+
+    def _gave_way(self, now: float, lost: float) -> None:
+        """A yield let another process run for ``lost`` seconds; too often, and spinning stops."""
+        self.lost = self.lost * 0.5 ** ((now - self.lost_at) / CONTENDED_HALF_LIFE) + lost
+        self.lost_at = now
+        if self.lost >= CONTENDED:
+            self.lost = 0.0
+            self.calm_at = now + CONTENDED_BACKOFF
 
     def ended(self) -> None:
         """The wait ended (answered, timed out or failed): note whether it was quick."""

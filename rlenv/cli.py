@@ -115,9 +115,23 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     bench = commands.add_parser("bench", help="measure rlenv against same-run baselines")
     bench.add_argument("--rounds", type=int, default=5, help="rounds per figure (median)")
-    bench.add_argument("--steps", type=int, default=2000, help="steps per round")
+    bench.add_argument("--steps", type=int, default=None,
+                       help="steps per round (default 2000; --train: 8000 env-steps per "
+                       "SyncVectorEnv round)")
     bench.add_argument("--quick", action="store_true", help="fewer vector sizes")
     bench.add_argument("--json", metavar="PATH", help="also write the figures as JSON")
+    bench.add_argument("--train", nargs="?", const="rlenv/CartPole-v1", metavar="TARGET",
+                       help="instead, what serving costs a trainer: PPO (if stable-baselines3 "
+                       "is installed) and SyncVectorEnv on TARGET (MODULE:CLASS or a registered "
+                       "id; default rlenv/CartPole-v1), each against TARGET in process")
+    bench.add_argument("--envs", type=int, default=8, help="--train: environments per trainer")
+    bench.add_argument("--busy", action="store_true",
+                       help="--train: with a CPU-bound process of something else running")
+    bench.add_argument("--torch-threads", type=int, default=None, metavar="N",
+                       help="--train: torch.set_num_threads(N) (default: torch's own)")
+    bench.add_argument("--native", metavar="ID",
+                       help="--train: PPO also trains on this gymnasium id (CartPole-v1), for "
+                       "reference")
     bench.set_defaults(run=_bench)
 
     replay = commands.add_parser("replay", help="re-run a recorded episode and compare")
@@ -282,15 +296,32 @@ def _check(args: argparse.Namespace) -> int:
 
 
 def _bench(args: argparse.Namespace) -> int:
+    if args.train is not None:
+        return _bench_training(args)
     from rlenv_client.bench import format_table, run_benchmarks, to_json
 
-    figures = run_benchmarks(rounds=args.rounds, steps=args.steps, quick=args.quick,
+    figures = run_benchmarks(rounds=args.rounds, steps=args.steps or 2000, quick=args.quick,
                              progress=lambda message: print(f"... {message}", file=sys.stderr,
                                                             flush=True))
     print(format_table(figures))
     if args.json:
         with open(args.json, "w") as out:
             out.write(to_json(figures) + "\n")
+    return 0
+
+
+def _bench_training(args: argparse.Namespace) -> int:
+    from rlenv_client.training_speed import format_rows, measure_training, rows_to_json
+
+    rows = measure_training(args.train, envs=args.envs, rounds=args.rounds, busy=args.busy,
+                            torch_threads=args.torch_threads, steps=args.steps or 8000,
+                            native=args.native,
+                            progress=lambda message: print(f"... {message}", file=sys.stderr,
+                                                           flush=True))
+    print(format_rows(rows))
+    if args.json:
+        with open(args.json, "w") as out:
+            out.write(rows_to_json(rows) + "\n")
     return 0
 
 

@@ -22,8 +22,8 @@ from gymnasium import spaces
 from examples.cartpole import TARGET
 from rlenv.protocol import Hello, Request, Response, StepsResponse
 from rlenv.protocol.errors import ConnectionLost, RemoteError, RequestTimeout
-from rlenv.protocol.lanes import listen_for_lane
 from rlenv.protocol.shared_memory import STEP, STEPS, Layout, Slots, lane_unavailable
+from rlenv.transport.lanes import listen_for_lane
 from rlenv_client import Client, RemoteVectorEnv
 
 pytestmark = pytest.mark.skipif(

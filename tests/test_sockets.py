@@ -6,7 +6,8 @@ import socket
 
 import pytest
 
-from rlenv.protocol.sockets import (
+from rlenv.testing import ManualClock
+from rlenv.transport.sockets import (
     CONTENDED,
     GAVE_WAY,
     REQUEST_SPIN_WINDOW,
@@ -14,7 +15,6 @@ from rlenv.protocol.sockets import (
     AnswerWaiter,
     configure_socket,
 )
-from rlenv.testing import ManualClock
 
 
 @pytest.fixture

@@ -38,6 +38,7 @@ from rlenv.protocol import (
 )
 from rlenv.protocol.errors import ConnectionLost, RemoteError
 from rlenv.protocol.spaces import Codec, codec_for
+from rlenv_client.inspection import Inspection, config_request
 
 __all__ = ["BaseClient", "StepResult"]
 
@@ -51,7 +52,7 @@ _AGENT_AND_WORLD: Mapping[str, Any] = {"agent": {}, "world": {}}
 _Answer = TypeVar("_Answer", BatchResponse, StepsResponse)
 
 
-class BaseClient(ABC):
+class BaseClient(Inspection, ABC):
     """configure / reset / step / observe / render over some transport.
 
     Attributes:
@@ -93,22 +94,7 @@ class BaseClient(ABC):
             RemoteError: ``invalid_config`` naming the key the server refused; nothing was
                 applied.
         """
-        self._call(config=_config(environment, agent, world))
-
-    def inspect_configure(
-        self, *, agent: Mapping[str, Any] | None = None, world: Mapping[str, Any] | None = None,
-        **environment: Any,
-    ) -> None:
-        """Change settings as :meth:`configure` does, as an inspector: from any client.
-
-        The server applies it between two of the controller's requests, keeps it across
-        episodes and logs it for snapshots; it takes no control (protocol 2.2).
-
-        Raises:
-            RemoteError: ``invalid_config`` naming the key the server refused; nothing was
-                applied.
-        """
-        self._call(inspect={"configure": _config(environment, agent, world)})
+        self._call(config=config_request(environment, agent, world))
 
     def reset(
         self, *, seed: int | None = None, options: Mapping[str, Any] | None = None
@@ -295,103 +281,6 @@ class BaseClient(ABC):
         response = self._call(observation=_AGENT_AND_WORLD)
         return {"agent": self._observation(response), "world": self._part(response, "world")}
 
-    def snapshot(self) -> dict[str, Any]:
-        """The environment's state as data (see :mod:`rlenv.serving.snapshots`).
-
-        Restore it later with :meth:`restore`.
-
-        Raises:
-            RemoteError: ``reset_required`` before the first reset.
-        """
-        return dict(self._call(snapshot={}).info["snapshot"])
-
-    def restore(self, snapshot: Mapping[str, Any]) -> tuple[Any, dict[str, Any]]:
-        """Bring the environment to the state of a :meth:`snapshot`.
-
-        The snapshot may come from this server or any other serving the same environment; the
-        same actions then give the same observations, bit for bit.
-
-        Returns:
-            ``(observation, info)`` in the restored state.
-
-        Raises:
-            RemoteError: ``bad_request`` / ``invalid_action`` / ``invalid_config`` naming what
-                in the snapshot is wrong (nothing changed), or ``environment_error`` if
-                replaying it failed (reset next).
-        """
-        response = self._call(restore=snapshot, observation=self._observation_request)
-        return self._observation(response), self._info(response)
-
-    def tree(self) -> list[dict[str, Any]]:
-        """The environment's node tree: every node's path, type and exported properties."""
-        return list(self._call(inspect={"tree": {}}).info["tree"])
-
-    def get_property(self, path: str, name: str) -> Any:
-        """The exported property ``name`` of the node at ``path``.
-
-        Paths are absolute (``/root/...``) or relative to the environment node.
-
-        Raises:
-            RemoteError: ``bad_request`` naming the missing node or property.
-        """
-        return self._call(inspect={"get": {"path": path, "property": name}}).info["value"]
-
-    def node(self, path: str) -> dict[str, Any]:
-        """One node of :meth:`tree`: its path, type and exported properties.
-
-        Raises:
-            RemoteError: ``bad_request`` naming the missing node.
-        """
-        return dict(self._call(inspect={"node": {"path": path}}).info["node"])
-
-    def set_property(self, path: str, name: str, value: Any) -> None:
-        """Set an exported property for this episode (type-checked; snapshots reproduce it).
-
-        Any client may, whoever controls the environment (an inspector's edit); the next
-        reset gives the property back its value from before the episode's first set.
-
-        Raises:
-            RemoteError: ``bad_request`` naming the node, property or expected type.
-        """
-        self._call(inspect={"set": {"path": path, "property": name, "value": value}})
-
-    def stats(self, since: int = 0) -> dict[str, Any]:
-        """The controller's episodes as the server counted them, numbered ``since`` and later.
-
-        See :mod:`rlenv.serving.stats` (totals, the episode under way).
-        """
-        return dict(self._call(inspect={"stats": {"since": since}}).info["stats"])
-
-    def draw(self) -> dict[str, Any]:
-        """The scene as a vector draw list (see :func:`rlenv.scene2d.render.draw_list`).
-
-        Raises:
-            RemoteError: ``reset_required`` before the first reset.
-        """
-        return dict(self._part(self._call(observation={"draw": {}}), "draw"))
-
-    def render(self, width: int | None = None, height: int | None = None) -> np.ndarray:
-        """Draw the environment's current state: an ``(height, width, 3)`` uint8 array.
-
-        The size defaults to the environment's ``render_size``.
-        """
-        self.send_request(self.render_request(width, height))
-        return self.render_result(self.receive_reply())
-
-    def render_request(self, width: int | None = None, height: int | None = None) -> Request:
-        """The request :meth:`render` sends, for a batch."""
-        size = {k: v for k, v in (("width", width), ("height", height)) if v is not None}
-        return Request(0, {"observation": {"render": size}})
-
-    def render_result(self, reply: Response | ErrorReply) -> np.ndarray:
-        """A render's answer as an ``(height, width, 3)`` uint8 array.
-
-        Raises:
-            RemoteError: the answer is an error.
-        """
-        frame = np.asarray(self._part(self._response(reply), "render"))
-        return frame if frame.flags.writeable else frame.copy()
-
     @abstractmethod
     def close(self) -> None:
         """Release the connection (or the in-process environment); safe to repeat."""
@@ -502,16 +391,3 @@ class BaseClient(ABC):
         if observation is not None and "world" in observation:
             info["world"] = observation["world"]
         return info
-
-
-def _config(environment: Mapping[str, Any], agent: Mapping[str, Any] | None,
-            world: Mapping[str, Any] | None) -> dict[str, Any]:
-    """A ``config`` part from :meth:`BaseClient.configure`'s arguments."""
-    config: dict[str, Any] = {}
-    if environment:
-        config["environment"] = dict(environment)
-    if agent is not None:
-        config["agent"] = dict(agent)
-    if world is not None:
-        config["world"] = dict(world)
-    return config

@@ -406,7 +406,7 @@ def _vectors(rounds: int, steps: int, quick: bool) -> list[Figure]:
     import gymnasium
 
     from rlenv_client import RemoteVectorEnv
-    from rlenv_client.vector import default_layout
+    from rlenv_client.vector_servers import default_layout
 
     theirs = "AsyncVectorEnv(8) CartPole-v1"
     layout = default_layout(64)

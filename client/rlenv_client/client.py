@@ -2,14 +2,14 @@
 
 A blocking socket pumps bytes into a sans-IO :class:`rlenv.protocol.Connection`; everything about
 the protocol is decided there. The socket's timeouts are enforced by the kernel
-(``SO_RCVTIMEO`` / ``SO_SNDTIMEO``, see :mod:`rlenv.protocol.sockets`), so no system call is
+(``SO_RCVTIMEO`` / ``SO_SNDTIMEO``, see :mod:`rlenv.transport.sockets`), so no system call is
 added to a step. Every failure surfaces as a typed error: :class:`RemoteError` (the server refused a
 request, with its code and message), :class:`RequestTimeout` (no answer within the deadline;
 the connection is closed so that a late answer can never be taken for the answer to a later
 request) and :class:`ConnectionLost`.
 
 A client on the same machine as its server moves its steps to a **shared-memory lane**
-(protocol 2.3, :mod:`rlenv.protocol.lanes`) when both ends can: a plain step and a ``steps``
+(protocol 2.3, :mod:`rlenv.transport.lanes`) when both ends can: a plain step and a ``steps``
 request then travel through fixed slots of memory both map, with no msgpack and no TCP; every
 other request, and any answer that does not fit the slots (an error, an ``info``), goes on the
 socket as before. Nothing else changes: the same requests, the same answers, the same errors.
@@ -45,9 +45,9 @@ from rlenv.protocol.errors import (
     RemoteError,
     RequestTimeout,
 )
-from rlenv.protocol.lanes import Lane, LaneClosed, accept_lane, listen_for_lane, wait_for
 from rlenv.protocol.shared_memory import STEPS, lane_unavailable
-from rlenv.protocol.sockets import AnswerWaiter, configure_socket, is_loopback, readable_now
+from rlenv.transport.lanes import Lane, LaneClosed, accept_lane, listen_for_lane, wait_for
+from rlenv.transport.sockets import AnswerWaiter, configure_socket, is_loopback, readable_now
 from rlenv_client.base import BaseClient, StepResult
 
 __all__ = ["Client", "StepResult"]

@@ -24,7 +24,8 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvStepReturn,
 )
 
-from rlenv_client.vector import RemoteVectorEnv, default_layout
+from rlenv_client.vector import RemoteVectorEnv
+from rlenv_client.vector_servers import default_layout
 
 __all__ = ["SB3VecEnv"]
 

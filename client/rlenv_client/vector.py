@@ -34,10 +34,7 @@ interrupted step left behind are dropped, never taken for later ones).
 from __future__ import annotations
 
 import logging
-import math
-import os
 from collections.abc import Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -50,6 +47,13 @@ from rlenv_client.base import BaseClient
 from rlenv_client.launcher import ServerProcess
 from rlenv_client.rows import check_shape, empty_like, row, rows, set_row, set_rows
 from rlenv_client.session import LOST, ServerSource, Session
+from rlenv_client.vector_servers import (
+    connect_sessions,
+    default_layout,
+    exchange,
+    server_places,
+    sure_reply,
+)
 
 if TYPE_CHECKING:
     from rlenv_client.inspector import Inspector
@@ -59,17 +63,6 @@ __all__ = ["RemoteVectorEnv", "default_layout"]
 logger = logging.getLogger(__name__)
 
 Reply = Response | ErrorReply
-
-
-def default_layout(num_envs: int, cores: int | None = None, trainer_cores: int = 0) -> list[int]:
-    """Instances per server for ``num_envs`` environments: one server per core, shared fairly.
-
-    ``trainer_cores`` of the ``cores`` (this machine's by default) are left to the trainer,
-    but one server there always is.
-    """
-    servers = max(1, min(num_envs, (cores or os.cpu_count() or 1) - trainer_cores))
-    share = math.ceil(num_envs / servers)
-    return [min(share, num_envs - start) for start in range(0, num_envs, share)]
 
 
 class RemoteVectorEnv(VectorEnv):
@@ -122,10 +115,10 @@ class RemoteVectorEnv(VectorEnv):
             raise ValueError(f"max_episode_steps must be at least 1, got {max_episode_steps}")
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
-        places = self._places(num_envs, target, addresses, pool, in_process, token,
-                              instances_per_server)
-        self._connect(places, timeout=timeout, max_restarts=max_restarts,
-                      shared_memory=shared_memory)
+        places = server_places(num_envs, target, addresses, pool, in_process, token,
+                               instances_per_server)
+        connect_sessions(self.sessions, places, timeout=timeout, max_restarts=max_restarts,
+                         shared_memory=shared_memory)
         self._groups: list[range] = []  # the sub-environments each session hosts
         start = 0
         for session in self.sessions:
@@ -216,11 +209,11 @@ class RemoteVectorEnv(VectorEnv):
                 raise ValueError(f"{len(seeds)} seeds for {self.num_envs} environments")
         super().reset(seed=seed if isinstance(seed, int) else None)
         plan = [self._client_of(i).reset_request(seeds[i], options) for i in range(self.num_envs)]
-        replies = self._exchange(plan)
+        replies = exchange(self.sessions, self._groups, plan)
         observations = create_empty_array(self.single_observation_space, self.num_envs)
         env_infos, frames = [], np.zeros(self.num_envs, np.int64)
         for index, reply in enumerate(replies):
-            observation, info = self._client_of(index).reset_result(self._sure(index, reply))
+            observation, info = self._client_of(index).reset_result(sure_reply(index, reply))
             set_row(observations, index, observation)
             frames[index] = info.pop("frames")
             env_infos.append(info)
@@ -277,10 +270,10 @@ class RemoteVectorEnv(VectorEnv):
                 )
             plan = [self._client_of(i).reset_request() if ended[i] else None
                     for i in range(self.num_envs)]
-            for index, reply in enumerate(self._exchange(plan)):
+            for index, reply in enumerate(exchange(self.sessions, self._groups, plan)):
                 if ended[index]:
                     observation, env_infos[index] = self._client_of(index).reset_result(
-                        self._sure(index, reply))
+                        sure_reply(index, reply))
                     set_row(observations, index, observation)
                     frames[index] = env_infos[index].pop("frames")
                     self._steps[index] = 0
@@ -368,8 +361,9 @@ class RemoteVectorEnv(VectorEnv):
             return None
         plan: list[Request | None] = [self._client_of(i).render_request()
                                       for i in range(self.num_envs)]
-        return tuple(self._client_of(index).render_result(self._sure(index, reply))
-                     for index, reply in enumerate(self._exchange(plan)))
+        replies = exchange(self.sessions, self._groups, plan)
+        return tuple(self._client_of(index).render_result(sure_reply(index, reply))
+                     for index, reply in enumerate(replies))
 
     def __enter__(self) -> RemoteVectorEnv:
         return self
@@ -391,72 +385,8 @@ class RemoteVectorEnv(VectorEnv):
     def _mode(self) -> AutoresetMode:
         return self.metadata["autoreset_mode"]
 
-    @staticmethod
-    def _places(num_envs: int | None, target: str | None, addresses: Sequence[str] | None,
-                pool: ServerSource | None, in_process: bool, token: str | None,
-                instances_per_server: int | None) -> list[dict[str, Any]]:
-        if pool is not None:
-            places: list[dict[str, Any]] = [{"pool": pool, "index": index}
-                                            for index in range(pool.servers)]
-        elif addresses is not None:
-            places = [{"address": address, "token": token} for address in addresses]
-        else:
-            num_envs = 1 if num_envs is None else num_envs
-            if instances_per_server is not None:
-                layout = [min(instances_per_server, num_envs - start)
-                          for start in range(0, num_envs, instances_per_server)]
-            else:  # in this process: all in one group; else one server per core
-                layout = [num_envs] if in_process else default_layout(num_envs)
-            places = [{"target": target, "in_process": in_process, "instances": count}
-                      for count in layout]
-        if not places:
-            raise ValueError("a vector environment needs at least one sub-environment")
-        return places
-
-    def _connect(self, places: list[dict[str, Any]], **options: Any) -> None:
-        with ThreadPoolExecutor(max_workers=min(len(places), 16)) as pool:
-            futures = [pool.submit(Session, **place, **options) for place in places]
-            failure: BaseException | None = None
-            for future in futures:
-                try:
-                    self.sessions.append(future.result())
-                except BaseException as error:  # keep collecting, so that nothing leaks
-                    failure = failure or error
-        if failure is not None:
-            self.close_extras()
-            raise failure
-
     def _client_of(self, index: int) -> BaseClient:
         return self.sessions[self._owner[index]].client
-
-    def _exchange(self, plan: list[Request | None]) -> list[Reply | None]:
-        """Send every server its requests, then gather the replies (in sub-environment order).
-
-        Raises:
-            ConnectionLost: a server was lost, with how it exited.
-        """
-        sent = []
-        for session, group in zip(self.sessions, self._groups, strict=True):
-            parts = [plan[index] for index in group]
-            if all(part is None for part in parts):
-                sent.append(False)
-                continue
-            try:
-                session.client.send_batch(parts)
-            except LOST as error:
-                raise session.failure(error) from None
-            sent.append(True)
-        replies: list[Reply | None] = [None] * self.num_envs
-        for session, group, was_sent in zip(self.sessions, self._groups, sent, strict=True):
-            if not was_sent:
-                continue
-            try:
-                answers = session.client.receive_batch()
-            except LOST as error:
-                raise session.failure(error) from None
-            for index, answer in zip(group, answers, strict=False):
-                replies[index] = answer
-        return replies
 
     def _merge_infos(self, infos: dict[str, Any], env_infos: list[dict[str, Any]],
                      frames: np.ndarray) -> dict:
@@ -466,9 +396,3 @@ class RemoteVectorEnv(VectorEnv):
         for index, info in enumerate(env_infos):
             infos = self._add_info(infos, {**info, "frames": int(frames[index])}, index)
         return infos
-
-    @staticmethod
-    def _sure(index: int, reply: Reply | None) -> Reply:
-        if reply is None:
-            raise RuntimeError(f"sub-environment {index} got no reply")
-        return reply

@@ -40,8 +40,8 @@ from rlenv.http.streams import stream_endpoints
 from rlenv.http.targets import Catalog
 from rlenv.http.writes import one_write_protocol
 from rlenv.protocol import PROTOCOL_VERSION, Hello
-from rlenv.protocol.sockets import is_loopback
 from rlenv.serving.endpoint import DEFAULT_HOST, InsecureBindError
+from rlenv.transport.sockets import is_loopback
 from rlenv_client.origins import OriginPolicy, host_names
 
 __all__ = ["Gateway", "Settings", "create_app", "serve"]

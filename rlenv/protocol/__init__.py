@@ -13,7 +13,7 @@ Three layers, one module each:
 What a request's parts mean is the server's business (:mod:`rlenv.serving.parts`); how values
 of a space travel is :mod:`rlenv.protocol.spaces`'. A client on the server's machine may carry
 its steps through shared memory instead (protocol 2.3): :mod:`~rlenv.protocol.shared_memory`
-says which requests and answers fit the slots, :mod:`~rlenv.protocol.lanes` does the I/O.
+says which requests and answers fit the slots, :mod:`~rlenv.transport.lanes` does the I/O.
 ``docs/protocol.md`` is the spec for other languages. Importing this package loads neither the
 runtime nor pymunk.
 """

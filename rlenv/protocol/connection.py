@@ -262,7 +262,7 @@ class Connection:
         return _write_prefix(len(body)) + body
 
     def note_request(self, request_id: int) -> None:
-        """A request went by the shared-memory lane (:mod:`rlenv.protocol.lanes`) instead.
+        """A request went by the shared-memory lane (:mod:`rlenv.transport.lanes`) instead.
 
         Its answer is awaited in turn, whichever way it comes back.
 

@@ -3,7 +3,7 @@
 A client on the same machine as its server may move its steps off the socket (protocol 2.3,
 ``docs/protocol.md``): both map one block of memory, the client writes a request into fixed
 slots, the server writes the answer into others, and a byte on a local socket wakes whoever
-sleeps (:mod:`rlenv.protocol.lanes` does that I/O). The requests and answers are the
+sleeps (:mod:`rlenv.transport.lanes` does that I/O). The requests and answers are the
 protocol's own messages; only how they travel changes. Two kinds of request fit:
 
 - **step**: a plain step of the (first) agent, ``{"action", "observation": {"agent": {}}}``

@@ -14,7 +14,7 @@ How a lane is set up (protocol 2.3, ``docs/protocol.md``):
 The Unix connection stays open as the lane's **doorbell**: after writing its slots, each end
 sends one byte on it (:meth:`Lane.ring`), and an end that waits sleeps in ``poll`` on the
 doorbell and its TCP socket together (:func:`wait_for`); either end's death closes it. An end
-that spins (see :mod:`rlenv.protocol.sockets`) sees the other's sequence number change in
+that spins (see :mod:`rlenv.transport.sockets`) sees the other's sequence number change in
 memory without any system call; the bytes it did not need stay unread until it next sleeps.
 """
 
@@ -30,7 +30,7 @@ from collections.abc import Callable
 
 from rlenv.protocol.messages import Hello
 from rlenv.protocol.shared_memory import Layout, Slots
-from rlenv.protocol.sockets import AnswerWaiter, readable_now
+from rlenv.transport.sockets import AnswerWaiter, readable_now
 
 __all__ = ["LANE_NAME", "KEY_SIZE", "Lane", "LaneClosed", "accept_lane", "listen_for_lane",
            "open_lane", "wait_for"]

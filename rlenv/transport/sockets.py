@@ -58,7 +58,7 @@ class AnswerWaiter:
     """Reads a socket's next bytes, spinning first when they came quickly the last time.
 
     Call :meth:`sent` when the other end was asked something, then :meth:`recv`; a waiter
-    that watches more than a socket (:func:`rlenv.protocol.lanes.wait_for`) calls :meth:`spin`,
+    that watches more than a socket (:func:`rlenv.transport.lanes.wait_for`) calls :meth:`spin`,
     then blocks its own way, then :meth:`ended`.
 
     Args:

@@ -5,8 +5,8 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-ray test-browser screenshot plinko-picture sb3 rllib cleanrl bench-http docs lint vectors\
-	clean
+.PHONY: demo test test-ray test-browser screenshot plinko-picture sb3 rllib cleanrl bench-http bench-train\
+	docs lint vectors clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -63,7 +63,8 @@ docs: $(STAMP)
 	$(BIN)/python -m pytest -m docs tests/test_docs.py
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --quiet
 
-# Optional: CleanRL's ppo.py, unmodified, on gymnasium's CartPole-v1 and on rlenv/CartPole-v1,
+# Optional: CleanRL's ppo.py, unmodified, on gymnasium's CartPole-v1 and on rlenv/CartPole-v1: its
+# SPS on each with 4 and 8 envs, rounds in turns (benchmarks/cleanrl_speed.py, a few minutes), then
 # their learning curves side by side (benchmarks/cleanrl_curves.py; about 10 minutes a seed).
 # ppo.py is not part of rlenv: pass CLEANRL_PPO=path/to/cleanrl/ppo.py, or where the network
 # reaches GitHub the target downloads it at a pinned commit and checks its sha256. Its venv,
@@ -92,8 +93,16 @@ $(CLEANRL_VENV)/ppo.py: | $(CLEANRL_VENV)/.installed
 	mv $@.part $@
 
 cleanrl: $(CLEANRL_VENV)/.installed $(CLEANRL_PPO)
+	$(CLEANRL_VENV)/bin/python benchmarks/cleanrl_speed.py $(CLEANRL_PPO)
 	$(CLEANRL_VENV)/bin/python benchmarks/cleanrl_curves.py $(CLEANRL_PPO) \
 		--total-timesteps $(CLEANRL_STEPS) --seeds $(CLEANRL_SEEDS)
+
+# Optional: what serving costs a real trainer (benchmarks/train_speed.py: SB3 PPO and SyncVectorEnv
+# against the environment in process, under three conditions; about 15 minutes). torch first.
+bench-train: $(STAMP)
+	$(BIN)/python -m pip install --quiet torch==2.13.0
+	$(BIN)/python -m pip install --quiet -e ".[test,sb3]"
+	$(BIN)/python benchmarks/train_speed.py
 
 # Optional: a step through the HTTP gateway (rlenv http, the http extra) against a TCP step.
 bench-http: $(STAMP)

@@ -1,16 +1,18 @@
-"""One server per sub-env against ``make_vec``: ``python benchmarks/server_per_env.py``.
+"""A server per sub-env, a shared server, and ``make_vec``: ``python benchmarks/server_per_env.py``.
 
 A trainer that builds its own ``gymnasium.vector.SyncVectorEnv`` of rlenv envs (CleanRL does:
-``SyncVectorEnv([make_env(...) for i in range(num_envs)])``, each ``gym.make(env_id)``) starts
-one ``rlenv serve`` subprocess per sub-env and steps them one after another, a round trip each.
-``gymnasium.make_vec(env_id, num_envs=N)`` starts one server per core, each hosting its share
-of the N sub-envs, and steps them all with one request per server.
+``SyncVectorEnv([make_env(...) for i in range(num_envs)])``, each ``gym.make(env_id)``) steps
+them one after another, a round trip each. Its ``gym.make`` envs share one ``rlenv serve
+--per-client`` subprocess (``rlenv_client.sharing``); with ``share_server=False`` each starts a
+server of its own. ``gymnasium.make_vec(env_id, num_envs=N)`` starts one server per core, each
+hosting its share of the N sub-envs, and steps them all with one request per server.
 
 For each N, three layouts are built, reset, stepped with the same random actions and closed,
 their rounds taking turns (this machine's speed drifts; only same-run ratios mean anything):
 
 - ``native``: ``SyncVectorEnv`` of N ``gym.make("CartPole-v1")``, the script before the change;
-- ``per-env``: ``SyncVectorEnv`` of N ``gym.make("rlenv/CartPole-v1")``: N servers;
+- ``gym.make``: ``SyncVectorEnv`` of N ``gym.make("rlenv/CartPole-v1")``: one shared server;
+- ``per-env``: the same with ``share_server=False``: N servers;
 - ``make_vec``: ``gym.make_vec("rlenv/CartPole-v1", num_envs=N)``: one server per core.
 
 Figures: start-up (construction and the first seeded reset), env-steps per second, and the
@@ -47,8 +49,12 @@ def native(num_envs: int) -> gym.vector.VectorEnv:
     return gym.vector.SyncVectorEnv([lambda: gym.make("CartPole-v1")] * num_envs)
 
 
-def per_env(num_envs: int) -> gym.vector.VectorEnv:
+def shared(num_envs: int) -> gym.vector.VectorEnv:
     return gym.vector.SyncVectorEnv([lambda: gym.make(ENV_ID)] * num_envs)
+
+
+def per_env(num_envs: int) -> gym.vector.VectorEnv:
+    return gym.vector.SyncVectorEnv([lambda: gym.make(ENV_ID, share_server=False)] * num_envs)
 
 
 def make_vec(num_envs: int) -> gym.vector.VectorEnv:
@@ -56,7 +62,7 @@ def make_vec(num_envs: int) -> gym.vector.VectorEnv:
 
 
 LAYOUTS: dict[str, Callable[[int], gym.vector.VectorEnv]] = {
-    "native": native, "per-env": per_env, "make_vec": make_vec}
+    "native": native, "gym.make": shared, "per-env": per_env, "make_vec": make_vec}
 
 
 def server_pids(envs: gym.vector.VectorEnv) -> list[int]:
@@ -65,7 +71,7 @@ def server_pids(envs: gym.vector.VectorEnv) -> list[int]:
         servers = [getattr(env.unwrapped, "server", None) for env in envs.envs]
     else:
         servers = list(envs.unwrapped.servers)
-    return [server.pid for server in servers if server is not None]
+    return sorted({server.pid for server in servers if server is not None})
 
 
 def memory_kib(pid: int) -> tuple[int, int]:
@@ -178,10 +184,14 @@ def main() -> None:
                   f"{spread([r['rate'] for r in rounds]):>17} {spread(rss, digits=1):>17} "
                   f"{spread(uss, digits=1):>17}")
 
+        print(f"gym.make (shared) against per-env, per round: start-up "
+              f"{ratios(results, 'start', 'gym.make', 'per-env')}x, env-steps/s "
+              f"{ratios(results, 'rate', 'gym.make', 'per-env')}x")
         print(f"per-env against make_vec, per round: start-up "
               f"{ratios(results, 'start', 'per-env', 'make_vec')}x, env-steps/s "
               f"{ratios(results, 'rate', 'per-env', 'make_vec')}x")
-        print(f"against native CartPole-v1: per-env env-steps/s "
+        print(f"against native CartPole-v1: gym.make env-steps/s "
+              f"{ratios(results, 'rate', 'gym.make', 'native')}x, per-env "
               f"{ratios(results, 'rate', 'per-env', 'native')}x, make_vec "
               f"{ratios(results, 'rate', 'make_vec', 'native')}x")
     print(f"\nwhere a server's start-up goes ({args.rounds} rounds in turns, ms, min / median)")

@@ -36,7 +36,9 @@ class Inspection:
         self, *, agent: Mapping[str, Any] | None = None, world: Mapping[str, Any] | None = None,
         **environment: Any,
     ) -> None:
-        """Change settings as :meth:`configure` does, as an inspector: from any client.
+        """Change settings as ``configure`` does, but as an inspector: from any client.
+
+        (:meth:`~rlenv_client.base.BaseClient.configure` needs control.)
 
         The server applies it between two of the controller's requests, keeps it across
         episodes and logs it for snapshots; it takes no control (protocol 2.2).

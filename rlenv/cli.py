@@ -296,32 +296,26 @@ def _check(args: argparse.Namespace) -> int:
 
 
 def _bench(args: argparse.Namespace) -> int:
+    def progress(message: str) -> None:
+        print(f"... {message}", file=sys.stderr, flush=True)
+
     if args.train is not None:
-        return _bench_training(args)
-    from rlenv_client.bench import format_table, run_benchmarks, to_json
+        from rlenv_client.training_speed import format_rows, measure_training, rows_to_json
 
-    figures = run_benchmarks(rounds=args.rounds, steps=args.steps or 2000, quick=args.quick,
-                             progress=lambda message: print(f"... {message}", file=sys.stderr,
-                                                            flush=True))
-    print(format_table(figures))
+        rows = measure_training(args.train, envs=args.envs, rounds=args.rounds, busy=args.busy,
+                                torch_threads=args.torch_threads, steps=args.steps or 8000,
+                                native=args.native, progress=progress)
+        table, as_json = format_rows(rows), rows_to_json(rows)
+    else:
+        from rlenv_client.bench import format_table, run_benchmarks, to_json
+
+        figures = run_benchmarks(rounds=args.rounds, steps=args.steps or 2000,
+                                 quick=args.quick, progress=progress)
+        table, as_json = format_table(figures), to_json(figures)
+    print(table)
     if args.json:
         with open(args.json, "w") as out:
-            out.write(to_json(figures) + "\n")
-    return 0
-
-
-def _bench_training(args: argparse.Namespace) -> int:
-    from rlenv_client.training_speed import format_rows, measure_training, rows_to_json
-
-    rows = measure_training(args.train, envs=args.envs, rounds=args.rounds, busy=args.busy,
-                            torch_threads=args.torch_threads, steps=args.steps or 8000,
-                            native=args.native,
-                            progress=lambda message: print(f"... {message}", file=sys.stderr,
-                                                           flush=True))
-    print(format_rows(rows))
-    if args.json:
-        with open(args.json, "w") as out:
-            out.write(rows_to_json(rows) + "\n")
+            out.write(as_json + "\n")
     return 0
 
 

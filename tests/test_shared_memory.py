@@ -126,6 +126,43 @@ def test_columns_that_do_not_fit_are_left_to_write_request(action: object, reset
     assert slots.request_sequence == 0  # nothing written
 
 
+@pytest.mark.parametrize(("space", "action", "repeat"), [
+    (BOX, np.array([0.5, -0.25, 1.0], np.float32), None),
+    (BOX, np.array([0.5, -0.25, 1.0], np.float32), 3),
+    (spaces.Discrete(5, start=-2), -2, None),
+    (spaces.Discrete(5, start=-2), np.int64(2), 4),
+    (spaces.Discrete(3, dtype=np.int8), np.int8(1), None),
+], ids=["box", "box-repeat", "discrete-int", "discrete-numpy", "discrete-int8"])
+def test_a_step_written_in_place_is_the_request_write_request_writes(
+        space: spaces.Space, action: object, repeat: int | None) -> None:
+    in_place, by_request = slots_for(space), slots_for(space)
+    assert in_place.write_step(7, action, repeat)
+    parts = {"action": int(action) if isinstance(space, spaces.Discrete) else action.tobytes(),
+             "observation": {"agent": {}}}
+    if repeat is not None:
+        parts["repeat_action"] = repeat
+    assert by_request.write_request(Request(7, parts)) == STEP
+    assert bytes(in_place._buffer) == bytes(by_request._buffer)  # the same block, to the byte
+    assert in_place.read_request() == Request(7, parts)
+
+
+@pytest.mark.parametrize(("space", "action", "repeat"), [
+    (BOX, np.zeros(3, np.float64), None),
+    (BOX, np.zeros((1, 3), np.float32), None),
+    (BOX, [0.0, 0.0, 0.0], None),
+    (BOX, np.zeros(3, np.float32), 0),
+    (BOX, None, None),
+    (spaces.Discrete(3), 3, None),
+    (spaces.Discrete(3), True, None),
+    (spaces.Discrete(3), 1.0, None),
+], ids=["dtype", "shape", "list", "repeat-0", "none", "out-of-range", "bool", "float"])
+def test_a_step_that_does_not_fit_is_left_to_write_request(space: spaces.Space, action: object,
+                                                           repeat: int | None) -> None:
+    slots = slots_for(space)
+    assert not slots.write_step(7, action, repeat)
+    assert slots.request_sequence == 0 and not any(bytes(slots._buffer))
+
+
 def test_a_discrete_action_travels_as_its_dtype() -> None:
     slots = slots_for(spaces.Discrete(5, start=-2))
     request = Request(4, {"action": -2, "observation": {"agent": {}}})

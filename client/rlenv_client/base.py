@@ -47,7 +47,8 @@ logger = logging.getLogger(__name__)
 StepResult = tuple[Any, float, bool, bool, dict[str, Any]]
 """``(observation, reward, terminated, truncated, info)``, as gymnasium's ``step`` returns."""
 
-_AGENT_ONLY: Mapping[str, Any] = {"agent": {}}
+AGENT_ONLY: Mapping[str, Any] = {"agent": {}}
+"""What a step observes by default: the agent's observation alone."""
 _AGENT_AND_WORLD: Mapping[str, Any] = {"agent": {}, "world": {}}
 _Answer = TypeVar("_Answer", BatchResponse, StepsResponse)
 
@@ -68,7 +69,7 @@ class BaseClient(Inspection, ABC):
     address: str
 
     def __init__(self, *, world_data: bool = False) -> None:
-        self._observation_request = _AGENT_AND_WORLD if world_data else _AGENT_ONLY
+        self._observation_request = _AGENT_AND_WORLD if world_data else AGENT_ONLY
         self._ids = count(1)
         self._awaited = 0  # the id of the request sent last: the answer to wait for
 

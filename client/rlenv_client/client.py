@@ -45,10 +45,10 @@ from rlenv.protocol.errors import (
     RemoteError,
     RequestTimeout,
 )
-from rlenv.protocol.shared_memory import STEPS, lane_unavailable
+from rlenv.protocol.shared_memory import STEP, STEPS, lane_unavailable
 from rlenv.transport.lanes import Lane, LaneClosed, accept_lane, listen_for_lane, wait_for
 from rlenv.transport.sockets import AnswerWaiter, configure_socket, is_loopback, readable_now
-from rlenv_client.base import BaseClient, StepResult
+from rlenv_client.base import AGENT_ONLY, BaseClient, StepResult
 
 __all__ = ["Client", "StepResult"]
 
@@ -231,6 +231,22 @@ class Client(BaseClient):
             self._closed_because = (f": a request was interrupted ({type(error).__name__}) "
                                     "while it was being sent; connect again")
             raise
+
+    def send_step(self, action: Any, repeat_action: int | None = None) -> None:
+        """Send a step request without waiting (see :class:`BaseClient`).
+
+        Through the lane, an action of the space's exact dtype and shape (or a ``Discrete``
+        integer) is written straight into its slot.
+        """
+        lane = self._lane
+        if lane is not None and self._sock is not None and not self._connection.outstanding \
+                and self._observation_request is AGENT_ONLY:
+            request_id = next(self._ids)
+            if lane.slots.write_step(request_id, action, repeat_action):
+                self._awaited = request_id
+                self._rang(lane, request_id, STEP)
+                return
+        super().send_step(action, repeat_action)
 
     def send_steps(self, action: Any, reset: np.ndarray | None = None,
                    repeat_action: int | None = None) -> None:

@@ -262,6 +262,35 @@ class Slots:
         self._request[3] = repeat
         return STEPS
 
+    def write_step(self, request_id: int, action: Any, repeat_action: int | None) -> bool:
+        """Write a plain step of ``action`` in place; whether it fit.
+
+        ``action`` must be an array of exactly the action space's dtype and shape, or, for a
+        ``Discrete`` space, an integer (Python's or numpy's) within it; anything else is left to
+        :meth:`write_request` (the slots unchanged). The request is the one ``{"action",
+        "observation": {"agent": {}}, "repeat_action"}`` would be, read back by
+        :meth:`read_request` as such.
+        """
+        repeat = _repeat(repeat_action)
+        if repeat < 0:
+            return False
+        slot = self._action_columns
+        if self._discrete:
+            if action.__class__ is not int and not isinstance(action, np.integer):
+                return False
+            if not self._first <= action < self._end:
+                return False
+        elif action.__class__ is not np.ndarray or action.dtype != slot.dtype or \
+                action.shape != slot.shape[1:]:
+            return False
+        slot[0] = action
+        header = self._request
+        header[3] = repeat
+        header[1] = request_id
+        header[2] = STEP
+        header[0] += 1
+        return True
+
     def write_steps(self, request_id: int, action: Any, reset: Any,
                     repeat_action: int | None) -> bool:
         """Write a ``steps`` request given as columns, in place; whether it fit.

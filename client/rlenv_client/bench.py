@@ -50,8 +50,8 @@ from typing import Any
 import msgpack
 import numpy as np
 
-__all__ = ["Figure", "HandWrittenServer", "HandWrittenVector", "format_table", "random_steps",
-           "random_steps_of", "run_benchmarks", "to_json"]
+__all__ = ["Figure", "HandWrittenServer", "HandWrittenVector", "Rate", "format_table",
+           "interleaved", "random_steps", "random_steps_of", "run_benchmarks", "to_json"]
 
 logger = logging.getLogger(__name__)
 
@@ -101,41 +101,54 @@ class Figure:
         return None if not self.baseline else self.value / self.baseline
 
 
-class _Rate:
+class Rate:
     """One thing to measure: ``run(steps)`` does ``steps`` units of work (calls, env-steps...).
 
     Args:
         run: does the work.
         steps: units per round.
         scale: units counted per step (e.g. sub-environments per vector step).
+        name: what progress reports call it.
+        warmup: units of its warm-up round (default: ``steps``).
+
+    Attributes:
+        rates: units per second, one per timed round.
     """
 
-    def __init__(self, run: Callable[[int], None], steps: int, scale: int = 1) -> None:
-        self.run, self.steps, self.scale = run, steps, scale
+    def __init__(self, run: Callable[[int], None], steps: int, scale: int = 1, name: str = "",
+                 warmup: int | None = None) -> None:
+        self.run, self.steps, self.scale, self.name = run, steps, scale, name
+        self.warmup = steps if warmup is None else warmup
         self.rates: list[float] = []
 
     def round(self) -> None:
+        """Time one round; its rate goes into :attr:`rates`."""
         start = time.perf_counter()
         self.run(self.steps)
         self.rates.append(self.steps * self.scale / (time.perf_counter() - start))
 
     @property
     def median(self) -> float:
+        """The median of :attr:`rates`."""
         return statistics.median(self.rates)
 
 
-def _interleaved(rounds: int, *measures: _Rate) -> list[float]:
+def interleaved(rounds: int, *measures: Rate,
+                progress: Callable[[str], None] | None = None) -> list[float]:
     """The median rate of each measure, their rounds taken in turn after one warm-up round.
 
     Taking turns puts a figure and its baseline under the same conditions, however the
-    machine's speed drifts during the run (shared virtual machines drift a lot).
+    machine's speed drifts during the run (shared virtual machines drift a lot). ``progress``
+    is told each round's rates.
     """
     for measure in measures:
-        measure.round()
-        measure.rates.clear()
-    for _ in range(rounds):
+        measure.run(measure.warmup)
+    for number in range(rounds):
         for measure in measures:
             measure.round()
+        if progress is not None:
+            progress(f"round {number + 1}/{rounds}: " + ", ".join(
+                f"{measure.name} {measure.rates[-1]:,.0f}" for measure in measures))
     return [measure.median for measure in measures]
 
 
@@ -353,14 +366,14 @@ def _single_steps(rounds: int, steps: int) -> tuple[list[Figure], int]:
         for each in (local, client, socket_client):
             each.configure(**ENDLESS)
             each.reset(seed=0)
-        floor, hand_written, local_rate, remote_1, remote_4, socket_4 = _interleaved(
+        floor, hand_written, local_rate, remote_1, remote_4, socket_4 = interleaved(
             rounds,
-            _Rate(_calls(lambda: echo.round_trip(request), pong_latencies), steps),
-            _Rate(_calls(lambda: raw.step(action, 4)), steps),
-            _Rate(_calls(lambda: local.step(action, 4)), steps),
-            _Rate(_calls(lambda: client.step(action, 1)), steps),
-            _Rate(_calls(lambda: client.step(action, 4), step_latencies), steps),
-            _Rate(_calls(lambda: socket_client.step(action, 4)), steps),
+            Rate(_calls(lambda: echo.round_trip(request), pong_latencies), steps),
+            Rate(_calls(lambda: raw.step(action, 4)), steps),
+            Rate(_calls(lambda: local.step(action, 4)), steps),
+            Rate(_calls(lambda: client.step(action, 1)), steps),
+            Rate(_calls(lambda: client.step(action, 4), step_latencies), steps),
+            Rate(_calls(lambda: socket_client.step(action, 4)), steps),
         )
         cartpole_rss = _rss_kib(server.pid)
     pong = "msgpack ping-pong"
@@ -394,9 +407,9 @@ def _image_steps(rounds: int, steps: int) -> Figure:
             Client(server.host, server.port) as client:
         client.reset(seed=0)
         request = _step_request(0)
-        image_floor, rate = _interleaved(
-            rounds, _Rate(_calls(lambda: echo.round_trip(request)), steps),
-            _Rate(_calls(lambda: client.step(0, 1)), steps))
+        image_floor, rate = interleaved(
+            rounds, Rate(_calls(lambda: echo.round_trip(request)), steps),
+            Rate(_calls(lambda: client.step(0, 1)), steps))
     return Figure("remote 84x84x3 observation step", rate, "steps/s",
                   "ping-pong carrying the same bytes", image_floor)
 
@@ -421,11 +434,11 @@ def _vectors(rounds: int, steps: int, quick: bool) -> list[Figure]:
         stack.callback(on_sockets.close)
         floor = HandWrittenVector(len(layout), layout[0])  # as make_vec lays them out
         stack.callback(floor.close)
-        async_rate, made_rate, floor_rate, sockets_rate = _interleaved(
-            rounds, _Rate(random_steps(async_envs), batches * 8, scale=8),
-            _Rate(random_steps(made), batches, scale=64),
-            _Rate(random_steps_of(floor.step, made), batches, scale=64),
-            _Rate(random_steps(on_sockets), batches, scale=64))
+        async_rate, made_rate, floor_rate, sockets_rate = interleaved(
+            rounds, Rate(random_steps(async_envs), batches * 8, scale=8),
+            Rate(random_steps(made), batches, scale=64),
+            Rate(random_steps_of(floor.step, made), batches, scale=64),
+            Rate(random_steps(on_sockets), batches, scale=64))
     figures = [
         Figure(f"gymnasium {theirs}", async_rate, "env-steps/s"),
         Figure(f"{floor_name}, raw client", floor_rate, "env-steps/s", theirs, async_rate),
@@ -449,15 +462,15 @@ def _vectors(rounds: int, steps: int, quick: bool) -> list[Figure]:
     with contextlib.ExitStack() as stack:
         async_envs = gymnasium.vector.AsyncVectorEnv([lambda: gymnasium.make("CartPole-v1")] * 8)
         stack.callback(async_envs.close)
-        measures = [_Rate(random_steps(async_envs), steps // 4, scale=8)]
+        measures = [Rate(random_steps(async_envs), steps // 4, scale=8)]
         for _, count, place in layouts:
             envs = stack.enter_context(RemoteVectorEnv(count, CARTPOLE, repeat_action=1,
                                                        **place))
             envs.reset(seed=0)
             batch = np.zeros((count, 1), np.float32)
-            measures.append(_Rate(_calls(lambda envs=envs, batch=batch: envs.step(batch)),
+            measures.append(Rate(_calls(lambda envs=envs, batch=batch: envs.step(batch)),
                                   max(steps // count, 20), scale=count))
-        async_rate, *vector_rates = _interleaved(rounds, *measures)
+        async_rate, *vector_rates = interleaved(rounds, *measures)
     for (name, _, _), rate in zip(layouts, vector_rates, strict=True):
         figures.append(Figure(f"RemoteVectorEnv {name} (repeat 1, zero actions)", rate,
                               "env-steps/s", theirs, async_rate))

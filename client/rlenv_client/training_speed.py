@@ -28,12 +28,13 @@ import logging
 import statistics
 import subprocess
 import sys
-import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import gymnasium
+
+from rlenv_client.bench import Rate, interleaved
 
 __all__ = ["PPO_CONFIGS", "Measure", "Row", "busy_process", "format_rows", "measure_training",
            "ppo_rows", "resolve_target", "rows_to_json", "sync_vector_rows"]
@@ -47,29 +48,24 @@ PPO_CONFIGS: dict[str, dict[str, Any]] = {
 instead of its linear schedules), and one that spends most of its time collecting rollouts."""
 
 
-@dataclass
-class Measure:
+class Measure(Rate):
     """One way of running a trainer: ``run(steps)`` trains or steps ``steps`` environment steps.
 
-    Attributes:
+    A :class:`~rlenv_client.bench.Rate` (its rounds taken in turns by
+    :func:`~rlenv_client.bench.interleaved`) that knows how to free what it holds.
+
+    Args:
         name: what the row says.
         run: does the work, counting environment steps.
+        steps: environment steps per round.
+        warmup: environment steps of the warm-up round.
         close: frees what it holds.
-        rates: environment steps per second, one per round.
     """
 
-    name: str
-    run: Callable[[int], None]
-    close: Callable[[], None] = lambda: None
-    rates: list[float] = field(default_factory=list)
-
-    def round(self, steps: int) -> float:
-        """Run ``steps`` environment steps; their rate, also kept in :attr:`rates`."""
-        start = time.perf_counter()
-        self.run(steps)
-        rate = steps / (time.perf_counter() - start)
-        self.rates.append(rate)
-        return rate
+    def __init__(self, name: str, run: Callable[[int], None], steps: int, warmup: int,
+                 close: Callable[[], None]) -> None:
+        super().__init__(run, steps, name=name, warmup=warmup)
+        self.close = close
 
 
 @dataclass(frozen=True)
@@ -110,17 +106,6 @@ def _env_factory(target: str, limit: int | None, **kwargs: Any) -> Callable[[], 
             env = gymnasium.wrappers.TimeLimit(env, limit)
         return env
     return make
-
-
-def _interleave(measures: Sequence[Measure], rounds: int, steps: int, warmup: int,
-                progress: Callable[[str], None]) -> None:
-    for measure in measures:
-        measure.run(warmup)
-    for number in range(rounds):
-        for measure in measures:
-            measure.round(steps)
-        progress(f"round {number + 1}/{rounds}: " + ", ".join(
-            f"{measure.name} {measure.rates[-1]:,.0f}" for measure in measures))
 
 
 def _rows(group: str, measures: Sequence[Measure], baseline: Measure) -> list[Row]:
@@ -175,9 +160,9 @@ def ppo_rows(
                 measures.append(Measure(
                     name, lambda steps, model=model: model.learn(steps,
                                                                  reset_num_timesteps=False),
-                    model.get_env().close))
+                    updates * batch, 2 * batch, model.get_env().close))
             progress(f"PPO, {config}: {len(measures)} trainers, {rounds} rounds in turns")
-            _interleave(measures, rounds, updates * batch, 2 * batch, progress)
+            interleaved(rounds, *measures, progress=progress)
         finally:
             for measure in measures:
                 measure.close()
@@ -213,9 +198,10 @@ def sync_vector_rows(
                 factory = _env_factory(module_class, limit, in_process=in_process)
                 vector = gymnasium.vector.SyncVectorEnv([factory] * count)
                 name = f"SyncVectorEnv({count})" + (" in process" if in_process else "")
-                measures[count, in_process] = Measure(name, _random_steps(vector), vector.close)
+                measures[count, in_process] = Measure(name, _random_steps(vector), steps,
+                                                      steps // 4, vector.close)
         progress(f"SyncVectorEnv: {len(measures)} vectors, {rounds} rounds in turns")
-        _interleave(list(measures.values()), rounds, steps, steps // 4, progress)
+        interleaved(rounds, *measures.values(), progress=progress)
     finally:
         for measure in measures.values():
             measure.close()

@@ -216,10 +216,7 @@ class Slots:
         else:
             return 0
         if kind:
-            header = self._request
-            header[1] = request.id
-            header[2] = kind
-            header[0] += 1
+            self._post(request.id, kind)
         return kind
 
     def _write_step(self, parts: dict[str, Any]) -> int:
@@ -284,11 +281,8 @@ class Slots:
                 action.shape != slot.shape[1:]:
             return False
         slot[0] = action
-        header = self._request
-        header[3] = repeat
-        header[1] = request_id
-        header[2] = STEP
-        header[0] += 1
+        self._request[3] = repeat
+        self._post(request_id, STEP)
         return True
 
     def write_steps(self, request_id: int, action: Any, reset: Any,
@@ -312,12 +306,16 @@ class Slots:
             return False
         actions[...] = action
         flags[...] = False if reset is None else reset
-        header = self._request
-        header[3] = repeat
-        header[1] = request_id
-        header[2] = STEPS
-        header[0] += 1
+        self._request[3] = repeat
+        self._post(request_id, STEPS)
         return True
+
+    def _post(self, request_id: int, kind: int) -> None:
+        """The slots and ``repeat_action`` are written: the header's id, kind, then sequence."""
+        header = self._request
+        header[1] = request_id
+        header[2] = kind
+        header[0] += 1
 
     def read_request(self) -> Request:
         """The request the client wrote last, as it would have come off the socket.

@@ -155,8 +155,7 @@ class Session:
                        "instances": instances, "pool": pool, "index": index,
                        "shared_memory": shared_memory, "share_server": share_server}
         self._pool = pool
-        self.client, self.server = connect(**self._place)
-        self._leased = self.server is not None and self.server in shared_servers
+        self._connect()
         self.max_restarts = max_restarts
         self.restarts = 0
         self.on_restart: Callable[[], None] | None = None  # told once a restart reconnected
@@ -190,13 +189,16 @@ class Session:
         reason = f"server lost ({error}); restarted ({self.restarts} of {self.max_restarts})"
         logger.warning("%s\n%s", reason, story)
         self.close()
-        self.client, self.server = connect(**self._place)
-        self._leased = self.server is not None and self.server in shared_servers
+        self._connect()
         for settings in self._configuration:
             self.client.configure(**settings)
         if self.on_restart is not None:
             self.on_restart()
         return reason
+
+    def _connect(self) -> None:
+        self.client, self.server = connect(**self._place)
+        self._leased = self.server is not None and self.server in shared_servers  # release it
 
     @property
     def token(self) -> str | None:

@@ -143,6 +143,11 @@ class Endpoint(Connections):
                 return self._next_request()
 
     def _spin_for_request(self) -> tuple[Peer, Request] | None:
+        """A per-client server's wait: spin over every lane and socket for the next request.
+
+        Clients that step one after the other find the server awake. ``None`` when the spin
+        ended without one (then the selector waits).
+        """
         peers = [peer for peer in self._order if peer.lane is not None]
         poll, by_fd = self._spin_poll.poll, self._by_fd
 
@@ -160,7 +165,7 @@ class Endpoint(Connections):
             return None
         if not peer.lane_ready():
             self._read(peer, block=False)
-            self._backlog = False
+            self._backlog = False  # receive() found none before the spin: only this peer's
         request = self._request_from(peer)
         if request is None:
             return None

@@ -45,9 +45,9 @@ class Peg(StaticBody):
         self.skin = CollisionShape.circle(radius, friction=0.25, color="gold", name="Skin")
         self.add_child(self.skin)
         self.times_hit = 0
-        self.skin.collision_started.connect(self._on_touched)
+        self.skin.collision_started.connect(self.on_touched)
 
-    def _on_touched(self, other: CollisionShape) -> None:
+    def on_touched(self, other: CollisionShape) -> None:
         self.times_hit += 1
 
 
@@ -125,7 +125,7 @@ def test_a_level_survives_msgpack_and_instantiates_alike(tree: SceneTree) -> Non
     peg = built.get_node("Pegs/Peg3")
     assert isinstance(peg, Peg) and peg.label == "first" and peg.tint == (1, 2, 3)
     assert peg.scores == {"a": [1, 2], "b": None} and peg.skin is peg.get_node("Skin")
-    assert peg.skin.collision_started.is_connected(peg._on_touched)
+    assert peg.skin.collision_started.is_connected(peg.on_touched)
     first = built.get_node("Pegs/Peg")
     assert first.hit.is_connected(built.get_node("Tally").add)
     assert PackedScene.pack(built).to_data() == data  # nothing lost on the way

@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import logging
 import math
+import re
+import subprocess
+import sys
 
 import pymunk
 import pytest
@@ -17,6 +21,7 @@ from rlenv.scene2d.physics import (
     StaticBody,
 )
 from rlenv.tree import SceneTree
+from rlenv_client import Client, ErrorCode, RemoteError
 
 
 @pytest.fixture
@@ -683,7 +688,8 @@ def test_a_restart_leaves_a_body_without_a_valid_mass_to_pymunk_s_check() -> Non
     base.body_type = pymunk.Body.DYNAMIC
     world.restart()
     assert world.space._bodies_to_check == {base}
-    with pytest.raises(AssertionError, match="Dynamic bodies must have a mass > 0"):
+    with pytest.raises(ValueError, match=re.escape(
+            "<StaticBody /root/PhysicsWorld/Base> has mass 0.0 and moment 0.0")):
         ticks(tree, 1)
 
 
@@ -703,3 +709,100 @@ def test_a_restart_takes_out_what_was_added_to_the_space_by_hand() -> None:
     ticks(tree, 60)
     ticks(fresh_tree, 60)
     assert state(bodies) == state(fresh_bodies)
+
+
+# --- what Chipmunk would abort on is a Python error (issue 32) --------------------------------
+
+
+_TWICE = """
+from rlenv.node import Node
+from rlenv.scene2d.physics import CollisionShape, PhysicsWorld, StaticBody
+from rlenv.tree import SceneTree
+
+tree = SceneTree(60)
+world = PhysicsWorld(name="World")
+tree.root.add_child(world)
+body = StaticBody(name="Peg")
+body.add_child(CollisionShape.circle(0.1, name="Skin"))
+world.add_child(body)
+for node in (body.get_node("Skin"), body):
+    try:
+        node._enter_tree()
+    except RuntimeError as error:
+        print(error)
+tree.physics_tick()
+"""
+
+
+def test_a_body_or_shape_entering_its_space_twice_is_an_error_not_an_abort() -> None:
+    # In a process of its own: before, Chipmunk's assertion aborted it (status -6).
+    run = subprocess.run([sys.executable, "-c", _TWICE], capture_output=True, text=True,
+                         timeout=60)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.splitlines() == [
+        "<CollisionShape /root/World/Peg/Skin>: its shape is in a space already (was "
+        "_enter_tree called outside the tree's lifecycle?)",
+        "<StaticBody /root/World/Peg>: its body is in a space already (was _enter_tree "
+        "called outside the tree's lifecycle?)"]
+
+
+@pytest.mark.parametrize(("make", "message"), [
+    (lambda: PhysicsWorld(iterations=0), "iterations must be an integer in [1,"),
+    (lambda: PhysicsWorld(damping=-1.0), "damping must be a number finite and >= 0"),
+    (lambda: PhysicsWorld(gravity=(math.nan, 0.0)), "gravity must be a number finite"),
+    (lambda: CollisionShape.circle(-0.1), "radius must be a number finite and >= 0"),
+    (lambda: CollisionShape.segment((0, 0), (1, 0), -0.1), "radius must be"),
+    (lambda: CollisionShape.circle(0.1, friction=-1.0), "friction must be"),
+    (lambda: CollisionShape.circle(0.1, elasticity=math.inf), "elasticity must be"),
+    (lambda: CollisionShape.circle(0.1, mass=-1.0), "mass must be"),
+    (lambda: Joint.pivot("../A", "../B", (0, 0), max_force=-1.0), "max_force must be"),
+])
+def test_values_chipmunk_refuses_are_refused_by_name(make, message: str) -> None:
+    with pytest.raises(ValueError, match=re.escape(message)):
+        make()
+
+
+def test_setting_what_chipmunk_refuses_names_the_node(world: PhysicsWorld) -> None:
+    body = floor()
+    world.add_child(body)
+    shape = body.get_node("FloorShape")
+    with pytest.raises(ValueError, match=re.escape(
+            "<CollisionShape /root/World/Floor/FloorShape>: friction must be a number")):
+        shape.friction = -0.5
+    with pytest.raises(ValueError, match=re.escape("<PhysicsWorld /root/World>: damping")):
+        world.damping = -1.0
+    with pytest.raises(ValueError, match="gravity must be two numbers"):
+        world.gravity = (1.0,)
+    assert shape.friction == 0.5 and world.damping == 1.0  # nothing changed
+
+
+def test_a_client_setting_a_negative_damping_is_refused_and_the_server_serves_on(
+    serve,
+) -> None:
+    server = serve()
+    with Client(server.host, server.port, timeout=20) as client:
+        client.reset(seed=1)
+        with pytest.raises(RemoteError, match="damping must be a number finite and >= 0") as no:
+            client.set_property("World/Physics", "damping", -1.0)
+        assert no.value.code == ErrorCode.BAD_REQUEST
+        client.step(client.action_space.sample())  # the episode goes on
+        assert server.is_alive()
+
+
+def test_a_dynamic_body_without_mass_is_named_at_its_first_step(
+    tree: SceneTree, world: PhysicsWorld,
+) -> None:
+    body = RigidBody(name="Ghost")
+    body.add_child(CollisionShape.circle(0.5))  # no mass, no density
+    world.add_child(body)
+    with pytest.raises(ValueError, match=re.escape(
+            "<RigidBody /root/World/Ghost> has mass 0.0 and moment 0.0")):
+        tree.physics_tick()
+
+
+def test_a_second_physics_world_beside_the_first_is_logged(
+    world: PhysicsWorld, caplog: pytest.LogCaptureFixture,
+) -> None:
+    with caplog.at_level(logging.WARNING, "rlenv.scene2d.physics"):
+        world.parent.add_child(PhysicsWorld(name="World"))
+    assert "<PhysicsWorld /root/World2> enters beside World" in caplog.text

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 from typing import Any
 
 import msgpack
@@ -10,6 +11,9 @@ import pytest
 from conftest import Serve
 
 from examples.plinko import TARGET, PlinkoEnvironment, follow
+from rlenv import CollisionShape, StaticBody
+from rlenv.scene2d.packed_scene import CONNECTABLE
+from rlenv.signals import Signal
 from rlenv_client import Client, ErrorCode, LocalClient, RemoteError
 
 STILL = np.zeros(1, np.float32)
@@ -152,3 +156,59 @@ def _entries(entry: dict[str, Any]) -> list[dict[str, Any]]:
     for child in entry.get("children", []):
         found += _entries(child)
     return found
+
+
+def _level_wiring(owner: str, signal: str, target: str, method: str) -> dict:
+    """A peg (a body and its shape, "Skin") with ``owner``'s ``signal`` wired, as data, to the
+    ``method`` of the node at ``target`` (a path from ``owner``)."""
+    connection = [[signal, target, method, False]]
+    return {"format": "rlenv.PackedScene", "version": 1, "root": {
+        "class": "StaticBody", "name": "Peg",
+        "connections": connection if owner == "Peg" else [], "children": [{
+            "class": "CollisionShape", "name": "Skin",
+            "properties": {"shape": {"kind": "circle", "radius": 0.1}},
+            "connections": connection if owner == "Skin" else []}]}}
+
+
+def _members(kind: type, signals: bool) -> list[str]:
+    return sorted(name for name in dir(kind) if not name.startswith("__") and (
+        isinstance(getattr(kind, name), Signal) if signals
+        else inspect.isfunction(inspect.getattr_static(kind, name))))
+
+
+def test_level_data_wiring_any_signal_to_any_method_never_breaks_the_server(
+    serve: Serve,
+) -> None:
+    """The attack of issue 32: signals of level data wired to lifecycle and structure methods.
+
+    Before, ``ready -> _enter_tree`` put the shape in its space twice and Chipmunk aborted the
+    process, and ``child_exiting_tree -> remove_child`` broke the instance for good. Now data
+    may connect only to what a level needs; whatever it tries, a normal reset works after it.
+    """
+    kinds = {"Peg": StaticBody, "Skin": CollisionShape}
+    paths = {("Peg", "Peg"): ".", ("Peg", "Skin"): "Skin", ("Skin", "Skin"): ".",
+             ("Skin", "Peg"): ".."}
+    assert "_enter_tree" in _members(CollisionShape, False)
+    assert "remove_child" in _members(StaticBody, False)
+    server = serve(TARGET)
+    accepted, tried = set(), 0
+    with Client(server.host, server.port, timeout=20) as client:
+        for (owner, target), path in paths.items():
+            for signal in _members(kinds[owner], True):
+                for method in _members(kinds[target], False):
+                    tried += 1
+                    try:
+                        client.reset(seed=1, options={
+                            "level": _level_wiring(owner, signal, path, method)})
+                    except RemoteError as error:
+                        assert "data may not connect to" in error.message or \
+                            "does not take" in error.message, \
+                            (owner, signal, method, error.message)
+                        continue
+                    accepted.add(method)
+                    client.step(STILL)
+                    client.reset(seed=2)
+                observation, _ = client.reset(seed=2)  # a normal level, served as ever
+                client.step(follow(observation))
+        assert server.is_alive()
+    assert tried > 500 and accepted == set(CONNECTABLE)

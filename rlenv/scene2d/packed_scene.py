@@ -31,6 +31,17 @@ node of the scene; signal connections to a method of a node of the scene (others
 connections to nodes outside or to functions, are not part of the scene: connect them after
 instantiating, as in Godot). Anything else is refused by :meth:`PackedScene.pack`, naming the
 node and the attribute. Tuples nested in lists come back as lists.
+
+**What data may connect to.** Data comes from clients (a reset's ``level`` option), so a
+connection is code it makes run. A signal may be connected to a *public* method that a class of
+``allowed`` adds itself, or to one of :data:`CONNECTABLE` (rlenv's methods a level needs). Never
+to a private method (``_on_hit``), a lifecycle method (``_enter_tree``, ``_ready``...) or
+another of rlenv's methods (``remove_child``...), nor to a method of rlenv's that an allowed
+class overrides. :meth:`PackedScene.pack` leaves such connections out, as Godot packs only the
+connections marked persistent: make them in ``_ready``, which runs on the instantiated scene
+too (one made in ``__init__`` is not made again). What data may set is as narrow: the properties
+each of rlenv's classes packs (``scene_codecs``), and attributes that are plain data and hide no
+method, property, signal or attribute of rlenv's.
 """
 
 from __future__ import annotations
@@ -47,7 +58,7 @@ from rlenv.node import Node, _check_name
 from rlenv.scene2d.scene_codecs import OWN_CLASSES, Codec, codec_for
 from rlenv.signals import Signal
 
-__all__ = ["FORMAT", "MAX_DEPTH", "MAX_NODES", "PackedScene", "PackedSceneError"]
+__all__ = ["CONNECTABLE", "FORMAT", "MAX_DEPTH", "MAX_NODES", "PackedScene", "PackedSceneError"]
 
 FORMAT = "rlenv.PackedScene"
 VERSION = 1
@@ -55,6 +66,8 @@ MAX_DEPTH = 256
 """Deepest nesting of nodes (and of plain values) a scene's data may have."""
 MAX_NODES = 200_000
 """Most nodes a scene's data may hold."""
+CONNECTABLE = frozenset({"queue_free"})
+"""The methods of rlenv's own classes that a scene's data may connect a signal to."""
 
 _NODE_KEYS = frozenset({"class", "name", "properties", "attributes", "tuples", "nodes", "groups",
                         "signals", "connections", "children"})
@@ -261,8 +274,22 @@ def _connections(node: Node, inside: set[int]) -> list[list[Any]]:
             method = callback.__func__.__name__
             if getattr(type(target), method, None) is not callback.__func__:
                 continue  # not the class's method of that name: it cannot be found again
+            if _not_connectable(type(target), method) is not None:
+                continue  # data may not carry it: _ready connects it again (Godot's rule too)
             found.append([name, node.get_path_to(target), method, one_shot])
     return found
+
+
+def _not_connectable(kind: type, method: str) -> str | None:
+    """Why a scene's data may not connect a signal to ``kind.method``; ``None`` if it may."""
+    if method.startswith("_"):
+        return "a private method, which data may not connect to"
+    if method in CONNECTABLE:
+        return None
+    for klass in kind.__mro__:
+        if method in vars(klass) and klass.__module__.split(".")[0] == "rlenv":
+            return f"a method of rlenv's {klass.__name__}, which data may not connect to"
+    return None
 
 
 # --- checking ----------------------------------------------------------------------------------
@@ -391,6 +418,24 @@ def _check_links(root: _Plan) -> None:
             if not inspect.isfunction(inspect.getattr_static(target.kind, method, None)):
                 raise PackedSceneError(f"{plan.where}: connection {signal}: "
                                        f"{target.kind.__name__} has no method {method!r}")
+            why = _not_connectable(target.kind, method)
+            if why is not None:
+                raise PackedSceneError(f"{plan.where}: connection {signal}: "
+                                       f"{target.kind.__name__}.{method} is {why}")
+            declared = getattr(plan.kind, signal, None)
+            if isinstance(declared, Signal):  # a user signal's arguments are its emitter's
+                _check_arguments(declared, target.kind, method, plan.where)
+
+
+def _check_arguments(signal: Signal, kind: type, method: str, where: str) -> None:
+    """``kind.method`` takes the arguments ``signal`` passes (Godot checks this on connecting)."""
+    function = inspect.getattr_static(kind, method)
+    try:
+        inspect.signature(function).bind(None, *signal.arguments)
+    except TypeError:
+        passes = ", ".join(signal.arguments) or "no arguments"
+        raise PackedSceneError(f"{where}: connection {signal.name}: it passes ({passes}), which "
+                               f"{kind.__name__}.{method} does not take") from None
 
 
 def _resolve(plan: _Plan, path: str, where: str) -> _Plan:

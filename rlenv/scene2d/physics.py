@@ -40,6 +40,7 @@ sets them.
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Callable, Sequence
 from typing import Any, ClassVar
@@ -52,8 +53,17 @@ from rlenv.node import Node, ProcessMode
 from rlenv.scene2d.colors import RGB, Color, to_rgb
 from rlenv.scene2d.fresh import Refill, place_at_rest, refresh_constraint, renumber
 from rlenv.scene2d.node2d import Node2D, Pose, compose, frame_of, relative_pose
-from rlenv.scene2d.pymunk_data import ConstraintRecipe, copy_body, copy_shape
+from rlenv.scene2d.pymunk_data import (
+    ConstraintRecipe,
+    copy_body,
+    copy_shape,
+    integer,
+    number,
+    vector,
+)
 from rlenv.signals import Signal
+
+logger = logging.getLogger(__name__)
 
 __all__ = [
     "CollisionShape",
@@ -104,7 +114,9 @@ class PhysicsWorld(Node):
         process_mode: ProcessMode = ProcessMode.INHERIT,
     ) -> None:
         super().__init__(name, process_mode=process_mode)
-        self.space = self._new_space(gravity, iterations, damping)
+        self.space = self._new_space(vector(gravity, "gravity"),
+                                     integer(iterations, "iterations", 1, 2**31 - 1),
+                                     number(damping, "damping", low=0.0))
         self._shape_nodes: dict[pymunk.Shape, CollisionShape] = {}
         self._kept_members: tuple[int | None, list[PhysicsBody], list[CollisionShape],
                                   list[Joint], Refill] | None = None  # see _members
@@ -200,7 +212,7 @@ class PhysicsWorld(Node):
 
     @gravity.setter
     def gravity(self, value: Vec) -> None:
-        self.space.gravity = value
+        self.space.gravity = vector(value, f"{self!r}: gravity")
 
     @property
     def damping(self) -> float:
@@ -209,12 +221,34 @@ class PhysicsWorld(Node):
 
     @damping.setter
     def damping(self, value: float) -> None:
-        self.space.damping = value
+        self.space.damping = number(value, f"{self!r}: damping", low=0.0)
+
+    def _enter_tree(self) -> None:
+        parent = self.parent
+        others = [node.name for node in parent.get_children()
+                  if node is not self and isinstance(node, PhysicsWorld)] if parent else []
+        if others:
+            logger.warning("%r enters beside %s: each PhysicsWorld simulates a space of its own. "
+                           "Left from an earlier reset? Remove the old one first", self,
+                           ", ".join(others))
 
     def _physics_step(self, delta: float) -> None:
+        if self.space._bodies_to_check:  # bodies added since the last step: pymunk checks them
+            self._check_masses()
         step_space(self.space, delta)
         if self._signals:  # someone asked for a signal of this node
             self._emit("stepped", delta)
+
+    def _check_masses(self) -> None:
+        """Refuse, naming the node, a dynamic body without a positive, finite mass and moment."""
+        for body in self.space._bodies_to_check:
+            if body.body_type == pymunk.Body.DYNAMIC and not (
+                    0 < body.mass < math.inf and body.moment > 0):
+                node = next((node for node in self.iter_subtree()
+                             if isinstance(node, PhysicsBody) and node.body is body), body)
+                raise ValueError(f"{node!r} has mass {body.mass} and moment {body.moment}: give "
+                                 "it a mass and moment, or its CollisionShape children a mass "
+                                 "or density")
 
     def _on_begin(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
         self._touched = True
@@ -378,6 +412,9 @@ class PhysicsBody(Node2D):
         if frame is not None:
             self._frame_pose = frame._global_pose()
             x, y, angle = compose(self._frame_pose, x, y, angle)
+        if self.body.space is not None:
+            raise RuntimeError(f"{self!r}: its body is in a space already (was _enter_tree "
+                               "called outside the tree's lifecycle?)")
         self._built_pose = (x, y, angle)
         self._set_body_pose(x, y, angle)
         self.world = world
@@ -703,14 +740,18 @@ class CollisionShape(Node):
         color: Color | None = None, name: str | None = None,
     ) -> None:
         super().__init__(name)
+        if shape.space is not None:
+            raise ValueError(f"{self!r}: the shape is in a space already; give each "
+                             "CollisionShape a shape of its own")
+        number(shape.radius, f"{self!r}: radius", low=0.0)
         self.shape = shape
         self.color = color
         if mass:
-            shape.mass = mass
+            shape.mass = number(mass, f"{self!r}: mass", low=0.0)
         if density:
-            shape.density = density
-        shape.friction = friction
-        shape.elasticity = elasticity
+            shape.density = number(density, f"{self!r}: density", low=0.0)
+        self.friction = friction
+        self.elasticity = elasticity
         shape.sensor = sensor
         self.body_node: PhysicsBody | None = None
         self._world: PhysicsWorld | None = None
@@ -742,7 +783,7 @@ class CollisionShape(Node):
 
     @friction.setter
     def friction(self, value: float) -> None:
-        self.shape.friction = value
+        self.shape.friction = number(value, f"{self!r}: friction", low=0.0)
 
     @property
     def elasticity(self) -> float:
@@ -751,7 +792,7 @@ class CollisionShape(Node):
 
     @elasticity.setter
     def elasticity(self, value: float) -> None:
-        self.shape.elasticity = value
+        self.shape.elasticity = number(value, f"{self!r}: elasticity", low=0.0)
 
     @property
     def sensor(self) -> bool:
@@ -826,6 +867,9 @@ class CollisionShape(Node):
         parent = self.parent
         if not isinstance(parent, PhysicsBody):
             raise RuntimeError(f"{self!r} must be a child of a body node, not of {parent!r}")
+        if self.shape.space is not None:
+            raise RuntimeError(f"{self!r}: its shape is in a space already (was _enter_tree "
+                               "called outside the tree's lifecycle?)")
         self.body_node = parent
         self._world = _world_of(self)
         self.shape.body = parent.body
@@ -884,7 +928,7 @@ class Joint(Node):
         self.node_b = node_b
         self._make = make
         self._collide_bodies = collide_bodies
-        self._max_force = max_force
+        self._max_force = number(max_force, f"joint {name}: max_force", low=0.0, finite=False)
         self.constraint: pymunk.Constraint | None = None
         self._world: PhysicsWorld | None = None
         self._attached = False

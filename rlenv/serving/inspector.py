@@ -129,7 +129,9 @@ def set_property(root: Node, path: Any, name: Any, value: Any, *,
     name and the value it had before (a deep copy: a setter may change it in place).
 
     Raises:
-        RequestError: ``bad_request`` naming the node, the property and the expected type.
+        RequestError: ``bad_request`` naming the node, the property and the expected type, or
+            what its setter refused: a setter that raises ``ValueError`` refuses the value
+            and changes nothing (rlenv's own do: a negative friction, a damping below 0).
     """
     node = node_at(root, path)
     prop = _exported(node, name)
@@ -144,7 +146,11 @@ def set_property(root: Node, path: Any, name: Any, value: Any, *,
     previous = getattr(node, prop)
     if not dry_run:
         previous = copy.deepcopy(previous)
-        setattr(node, prop, conformed)
+        try:
+            setattr(node, prop, conformed)
+        except ValueError as error:
+            raise RequestError(ErrorCode.BAD_REQUEST,
+                               f"inspect: {type(node).__name__}.{prop}: {error}") from None
     return node, prop, previous
 
 

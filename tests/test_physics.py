@@ -806,3 +806,43 @@ def test_a_second_physics_world_beside_the_first_is_logged(
     with caplog.at_level(logging.WARNING, "rlenv.scene2d.physics"):
         world.parent.add_child(PhysicsWorld(name="World"))
     assert "<PhysicsWorld /root/World2> enters beside World" in caplog.text
+
+
+_SPACE_SETTINGS = {"collision_slop": 0.3, "collision_bias": 0.2, "collision_persistence": 5,
+                   "idle_speed_threshold": 0.01, "iterations": 25, "damping": 0.9}
+
+
+def _space_settings(space: pymunk.Space) -> dict[str, object]:
+    return {name: getattr(space, name) for name in [*_SPACE_SETTINGS, "gravity",
+                                                    "sleep_time_threshold"]}
+
+
+@pytest.mark.parametrize("handler", [False, True])
+def test_a_restart_gives_the_same_space_whether_or_not_the_episode_saw_a_contact(
+    handler: bool,
+) -> None:
+    """Settings given to the pymunk space and the user's collision handlers survive a restart,
+    in place or into a new space: before, a new space dropped them, and whether one was made
+    depended on the last episode's contacts (the same seed and actions then diverged)."""
+    runs = []
+    for contact in (True, False):
+        tree, bodies = build_scene()
+        world = tree.root.get_child(0)
+        assert isinstance(world, PhysicsWorld)
+        for name, value in _SPACE_SETTINGS.items():
+            setattr(world.space, name, value)
+        solved: list[int] = []
+        if handler:
+            world.space.on_collision(0, 0, post_solve=lambda arbiter, space, data, seen=solved:
+                                     seen.append(1))
+        world.restart()
+        if contact:
+            ticks(tree, 60)
+        world.restart()
+        solved.clear()
+        ticks(tree, 120)
+        runs.append((_space_settings(world.space), state(bodies), len(solved)))
+    assert runs[0] == runs[1]  # bit for bit
+    assert runs[0][0] == {**_space_settings(pymunk.Space()), **_SPACE_SETTINGS,
+                          "gravity": (0.0, -9.81)}
+    assert runs[0][2] > 0 if handler else runs[0][2] == 0

@@ -47,11 +47,26 @@ from typing import Any, ClassVar
 
 import pymunk
 from pymunk import Vec2d
-from pymunk._chipmunk_cffi import lib
 
 from rlenv.node import Node, ProcessMode
+from rlenv.scene2d.chipmunk import (
+    FAST,
+    Refill,
+    apply_central_force,
+    bodies_to_check,
+    body_angle,
+    body_angular_velocity,
+    body_position,
+    body_velocity,
+    collision_handlers,
+    place_at_rest,
+    refresh_constraint,
+    renumber,
+    set_body_angular_velocity,
+    set_body_velocity,
+    step_space,
+)
 from rlenv.scene2d.colors import RGB, Color, to_rgb
-from rlenv.scene2d.fresh import Refill, place_at_rest, refresh_constraint, renumber
 from rlenv.scene2d.node2d import Node2D, Pose, compose, frame_of, relative_pose
 from rlenv.scene2d.pymunk_data import (
     ConstraintRecipe,
@@ -77,6 +92,10 @@ __all__ = [
 ]
 
 Vec = tuple[float, float]
+
+_SPACE_SETTINGS = ("collision_slop", "collision_bias", "collision_persistence",
+                   "idle_speed_threshold", "sleep_time_threshold")
+"""What a space is set up with besides gravity, iterations and damping (and its handlers)."""
 
 
 class PhysicsWorld(Node):
@@ -130,6 +149,18 @@ class PhysicsWorld(Node):
         space.on_collision(begin=self._on_begin, separate=self._on_separate)
         return space
 
+    def _space_like(self, old: pymunk.Space) -> pymunk.Space:
+        """An empty space set up as ``old``: its settings and every collision handler."""
+        space = self._new_space(old.gravity, old.iterations, old.damping)
+        for name in _SPACE_SETTINGS:
+            setattr(space, name, getattr(old, name))
+        for key, handler in collision_handlers(old).items():
+            if key != (None, None):  # rlenv's own, set up by _new_space
+                space.on_collision(*key, begin=handler.begin, pre_solve=handler.pre_solve,
+                                   post_solve=handler.post_solve, separate=handler.separate,
+                                   data=handler.data)
+        return space
+
     def restart(self) -> None:
         """Start the simulation afresh, as a newly built subtree would: cheap episode resets.
 
@@ -149,8 +180,8 @@ class PhysicsWorld(Node):
         """
         old = self.space
         bodies, shapes, joints, refill, unchanged = self._members()
-        in_place = unchanged and not self._touched and len(old._handlers) == 1 and \
-            old.sleep_time_threshold == math.inf
+        in_place = FAST and unchanged and not self._touched and \
+            len(collision_handlers(old)) == 1 and old.sleep_time_threshold == math.inf
         self._touched = False
         if in_place and refill.into(old):
             return
@@ -158,7 +189,7 @@ class PhysicsWorld(Node):
         if in_place:
             renumber(old)
         else:
-            self.space = self._new_space(old.gravity, old.iterations, old.damping)
+            self.space = self._space_like(old)
         for body in bodies:
             body._restart()
         self.space.add(*[body.body for body in bodies], *[shape.shape for shape in shapes])
@@ -198,7 +229,7 @@ class PhysicsWorld(Node):
 
     def _duplicate_resources(self, memo: dict[int, Any]) -> None:
         space = self.space
-        memo[id(space)] = self._new_space(space.gravity, space.iterations, space.damping)
+        memo[id(space)] = self._space_like(space)
 
     def _duplicated(self, original: Node) -> None:
         self._shape_nodes = {}
@@ -233,7 +264,7 @@ class PhysicsWorld(Node):
                            ", ".join(others))
 
     def _physics_step(self, delta: float) -> None:
-        if self.space._bodies_to_check:  # bodies added since the last step: pymunk checks them
+        if bodies_to_check(self.space):  # added since the last step: pymunk checks them
             self._check_masses()
         step_space(self.space, delta)
         if self._signals:  # someone asked for a signal of this node
@@ -241,7 +272,7 @@ class PhysicsWorld(Node):
 
     def _check_masses(self) -> None:
         """Refuse, naming the node, a dynamic body without a positive, finite mass and moment."""
-        for body in self.space._bodies_to_check:
+        for body in bodies_to_check(self.space):
             if body.body_type == pymunk.Body.DYNAMIC and not (
                     0 < body.mass < math.inf and body.moment > 0):
                 node = next((node for node in self.iter_subtree()
@@ -269,62 +300,6 @@ class PhysicsWorld(Node):
         if body_a is not None and body_b is not None and body_a is not body_b:
             body_a.get_signal(body_signal).emit(body_b)
             body_b.get_signal(body_signal).emit(body_a)
-
-
-_cp_space_step = lib.cpSpaceStep
-# Chipmunk's functions straight, for the accessors read every tick (pymunk's properties cost more).
-_body_position = lib.cpBodyGetPosition
-_body_angle = lib.cpBodyGetAngle
-_body_velocity = lib.cpBodyGetVelocity
-_body_angular_velocity = lib.cpBodyGetAngularVelocity
-_set_body_velocity = lib.cpBodySetVelocity
-_set_body_angular_velocity = lib.cpBodySetAngularVelocity
-_center_of_gravity = lib.cpBodyGetCenterOfGravity
-_local_to_world = lib.cpBodyLocalToWorld
-_apply_force_at_world_point = lib.cpBodyApplyForceAtWorldPoint
-_vec2d = tuple.__new__  # a Vec2d from a tuple, without its Python-level __new__
-
-
-def step_space(space: pymunk.Space, delta: float) -> None:
-    """``space.step(delta)``, without pymunk's Python work around Chipmunk's step when it has none.
-
-    ``Space.step`` checks the bodies added since the last step, then steps (Chipmunk's
-    ``cpSpaceStep``) with the space locked, and then adds and removes what callbacks asked for
-    during the step and runs the post-step callbacks. With nothing to check before the step,
-    this calls Chipmunk's step itself, and does the work after it only when there is some: the
-    same step (``tests/test_step_space.py`` compares them bit for bit, with collision handlers that
-    add and remove in their callbacks), with a tenth of the Python work of ``Space.step`` when
-    nothing is pending (measured: 0.07 against 0.63 us around a 1 us CartPole step). A threaded
-    space, or bodies to check, take ``Space.step`` itself.
-    """
-    if space._bodies_to_check or space.threaded:
-        space.step(delta)
-        return
-    try:
-        space._locked = True
-        _cp_space_step(space._space, delta)
-        if space._removed_shapes:  # shapes removed since the last step, kept alive through it
-            space._removed_shapes.clear()
-    finally:
-        space._locked = False
-    if space._add_later or space._remove_later or space._post_step_callbacks:
-        _after_step(space)
-
-
-def _after_step(space: pymunk.Space) -> None:
-    """What ``Space.step`` does after Chipmunk's step: the deferred adds, removals, callbacks."""
-    space.add(*space._add_later)
-    space._add_later.clear()
-    removed = set()
-    while space._remove_later:
-        item, _ = space._remove_later.popitem()
-        if item not in removed:
-            removed.add(item)
-            space._remove(item)
-    callbacks = space._post_step_callbacks
-    for key in callbacks:
-        callbacks[key](space)
-    callbacks.clear()
 
 
 def _world_of(node: Node) -> PhysicsWorld:
@@ -503,8 +478,7 @@ class PhysicsBody(Node2D):
         measured from.
         """
         if self._frame is None and self.world is not None:  # the body's pose is the pose
-            position = _body_position(self.body._body)
-            return _vec2d(Vec2d, (position.x, position.y))
+            return body_position(self.body)
         if self.world is None:
             return self._position
         x, y, _ = self._local_pose()
@@ -518,7 +492,7 @@ class PhysicsBody(Node2D):
     def rotation(self) -> float:
         """The rotation in radians, relative to the nearest Node2D ancestor."""
         if self._frame is None and self.world is not None:
-            return _body_angle(self.body._body)
+            return body_angle(self.body)
         if self.world is None:
             return self._rotation
         return self._local_pose()[2]
@@ -539,24 +513,23 @@ class PhysicsBody(Node2D):
     @property
     def velocity(self) -> pymunk.Vec2d:
         """The body's linear velocity, in world coordinates (units per second)."""
-        velocity = _body_velocity(self.body._body)
-        return _vec2d(Vec2d, (velocity.x, velocity.y))
+        return body_velocity(self.body)
 
     @velocity.setter
     def velocity(self, value: Vec) -> None:
         x, y = value
-        _set_body_velocity(self.body._body, (x, y))
+        set_body_velocity(self.body, x, y)
 
     linear_velocity = velocity  # Godot's name (RigidBody2D's): the same property
 
     @property
     def angular_velocity(self) -> float:
         """The body's angular velocity, in radians per second, counter-clockwise."""
-        return _body_angular_velocity(self.body._body)
+        return body_angular_velocity(self.body)
 
     @angular_velocity.setter
     def angular_velocity(self, value: float) -> None:
-        _set_body_angular_velocity(self.body._body, value)
+        set_body_angular_velocity(self.body, value)
 
     @property
     def color(self) -> RGB | None:
@@ -628,9 +601,7 @@ class RigidBody(PhysicsBody):
         Args:
             force: the force, in world coordinates.
         """
-        body = self.body._body
-        _apply_force_at_world_point(body, force,
-                                    _local_to_world(body, _center_of_gravity(body)))
+        apply_central_force(self.body, force)
 
     def apply_impulse(self, impulse: Vec, at: Vec = (0.0, 0.0)) -> None:
         """Change the body's velocity at once by ``impulse`` (divided by its mass).

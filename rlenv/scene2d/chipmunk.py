@@ -1,4 +1,15 @@
-"""Fresh pymunk objects in place, at Chipmunk's speed: what :meth:`PhysicsWorld.restart` needs.
+"""Every reach below pymunk's public API, in one place, and only on the versions it was tested on.
+
+rlenv calls Chipmunk through pymunk's binding (``pymunk._chipmunk_cffi``) and reads pymunk's
+private records where its public API costs too much for a step of a small scene, or has no
+way at all:
+
+- :func:`step_space`: ``Space.step`` without its Python work when nothing is pending;
+- :func:`body_position` and the other body accessors read every tick;
+- restarts at Chipmunk's speed (:class:`Refill`, :func:`refresh_constraint`,
+  :func:`renumber`, :func:`place_at_rest`): :meth:`PhysicsWorld.restart` reuses the bodies,
+  shapes and constraints as new, where pymunk would have them made again;
+- :func:`bodies_to_check` and :func:`collision_handlers`: what pymunk keeps and does not show.
 
 A restart must leave no solver state behind, as if the scene had just been built. Bodies and
 shapes are reused as they are (moved into a new space, which numbers their shapes afresh), but
@@ -9,22 +20,46 @@ was made (impulses zero); :func:`refresh_constraint` calls them with the constra
 anchors and parameters, and puts back what ``cpConstraintInit`` resets to its defaults (forces,
 biases, collisions, callbacks). pymunk's user data pointer is left as it is.
 
-The functions here call pymunk's Chipmunk binding (``pymunk._chipmunk_cffi``) directly, a step
-below pymunk's public API, for the sake of speed; the tests of ``PhysicsWorld.restart`` compare
-restarted scenes with newly built ones bit for bit, so a pymunk release that changed what they
-rely on would fail them.
+**Versions.** What pymunk keeps privately changes between releases (7.0.0 kept
+``Space._remove_later`` as a set, and a handler removing a body during a step then broke every
+tick). So the private ways are taken only on the pymunk versions the test suite passed on,
+:data:`TESTED` (the tests compare them with pymunk's public ways bit for bit); on any other
+version :data:`FAST` is false and each function here takes pymunk's public API instead, the
+same simulation more slowly, and a warning says so once.
 """
 
 from __future__ import annotations
 
+import logging
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Collection, Mapping
 from typing import Any
 
 import pymunk
+from pymunk import Vec2d
 from pymunk._chipmunk_cffi import ffi, lib
 
-__all__ = ["Refill", "place_at_rest", "refresh_constraint", "renumber"]
+__all__ = ["FAST", "TESTED", "Refill", "apply_central_force", "bodies_to_check",
+           "body_angle", "body_angular_velocity", "body_position", "body_velocity",
+           "collision_handlers", "place_at_rest", "refresh_constraint", "renumber",
+           "set_body_angular_velocity", "set_body_velocity", "step_space"]
+
+logger = logging.getLogger(__name__)
+
+TESTED = ((7, 0, 1), (7, 3, 1))
+"""The first and last pymunk versions whose internals this module was tested with."""
+
+
+def _version(text: str) -> tuple[int, ...]:
+    return tuple(int(part) for part in text.split(".")[:3] if part.isdigit())
+
+
+FAST = TESTED[0] <= _version(pymunk.version) <= TESTED[1]
+"""Whether the private ways are taken (pymunk's version is in :data:`TESTED`)."""
+if not FAST:
+    logger.warning("pymunk %s is not a version rlenv was tested with (%s to %s): rlenv uses "
+                   "pymunk's public API only, which is slower", pymunk.version,
+                   *(".".join(map(str, version)) for version in TESTED))
 
 _STATIC = pymunk.Body.STATIC
 _DYNAMIC = pymunk.Body.DYNAMIC
@@ -36,7 +71,17 @@ def place_at_rest(body: pymunk.Body, x: float, y: float, angle: float) -> None:
 
     The angle first: Chipmunk turns a body about its centre of gravity, then places it.
     """
-    _place_at_rest(body._body, x, y, angle)
+    if FAST:
+        _place_at_rest(body._body, x, y, angle)
+        return
+    if body.angle != angle:
+        body.angle = angle
+    body.position = (x, y)
+    if body.body_type != _STATIC:
+        body.velocity = _ZERO
+        body.angular_velocity = 0.0
+        body.force = _ZERO
+        body.torque = 0.0
 
 
 def _place_at_rest(pointer: Any, x: float, y: float, angle: float) -> int:
@@ -93,9 +138,9 @@ def refresh_constraint(constraint: pymunk.Constraint) -> bool:
     """Make ``constraint`` as it was when made: no accumulated impulse, its settings kept.
 
     It must be in no space. Returns ``False``, changing nothing, for a kind of constraint this
-    does not know (the caller then makes a new one).
+    does not know, or without :data:`FAST` (the caller then makes a new one).
     """
-    refresh = _refresher(constraint)
+    refresh = _refresher(constraint) if FAST else None
     if refresh is None:
         return False
     _refresh(*refresh)
@@ -138,12 +183,13 @@ _DEFAULTS = _settings(pymunk.SimpleMotor(pymunk.Body(), pymunk.Body(), 0.0)._con
 
 
 def renumber(space: pymunk.Space) -> None:
-    """Set an emptied space's counters back as a new space has them.
+    """Set an emptied space's counters back as a new space has them (only with :data:`FAST`).
 
     Shape ids (Chipmunk numbers shapes as they are added, and orders collision pairs by them),
     the step counter and the previous step's length (warm starts scale by it) start at zero.
     Only counters: a space whose hash tables grew (with contacts cached, say) is not new.
     """
+    assert FAST, "a space is renumbered only on the tested versions"
     pointer = space._space
     lib.cpSpaceSetShapeIDCounter(pointer, 0)
     lib.cpSpaceSetTimestamp(pointer, 0)
@@ -185,7 +231,7 @@ class Refill:
         self.bodies, self.shapes, self.constraints = bodies, shapes, constraints
         self._places = [(body._body, *pose) for body, pose in zip(bodies, poses, strict=True)]
         self._shapes = [shape._shape for shape in shapes]
-        refreshers = [_refresher(c) if c.a in bodies and c.b in bodies else None
+        refreshers = [_refresher(c) if FAST and c.a in bodies and c.b in bodies else None
                       for c in constraints]
         self._constraints = None if None in refreshers else refreshers
 
@@ -194,10 +240,11 @@ class Refill:
 
         It applies when the space holds exactly these objects, in this order, and every
         constraint is of a kind :func:`refresh_constraint` knows and joins two of these bodies.
-        Returns ``False``, changing nothing, otherwise (the caller then goes the long way).
+        Returns ``False``, changing nothing, otherwise (the caller then goes the long way), and
+        always without :data:`FAST`.
         """
         constraints = self._constraints
-        if constraints is None or list(space._bodies) != self.bodies or \
+        if not FAST or constraints is None or list(space._bodies) != self.bodies or \
                 list(space._shapes) != self.shapes or \
                 list(space._constraints) != self.constraints:
             return False
@@ -219,3 +266,143 @@ class Refill:
             if body_type == _DYNAMIC and not _valid_mass(body_pointer):
                 space._bodies_to_check.add(body)  # pymunk's step refuses it, as after add
         return True
+
+
+# --- what pymunk keeps and does not show ---------------------------------------------------------
+
+
+def bodies_to_check(space: pymunk.Space) -> Collection[pymunk.Body]:
+    """The bodies pymunk checks before the next step (those added since the last).
+
+    Empty without :data:`FAST`, where pymunk checks them all the same.
+    """
+    return space._bodies_to_check if FAST else ()
+
+
+def collision_handlers(space: pymunk.Space) -> Mapping[tuple[int | None, int | None], Any]:
+    """The space's collision handlers, by their pair of collision types.
+
+    ``(None, None)`` is the wildcard; each handler has ``begin``, ``pre_solve``, ``post_solve``,
+    ``separate`` and ``data``.
+
+    pymunk has no public way to list them (a restart copies them into a new space), so this
+    reads its record on every version.
+    """
+    return space._handlers
+
+
+# --- stepping ------------------------------------------------------------------------------------
+
+
+_cp_space_step = lib.cpSpaceStep
+
+
+def step_space(space: pymunk.Space, delta: float) -> None:
+    """``space.step(delta)``, without pymunk's Python work around Chipmunk's step when it has none.
+
+    ``Space.step`` checks the bodies added since the last step, then steps (Chipmunk's
+    ``cpSpaceStep``) with the space locked, and then adds and removes what callbacks asked for
+    during the step and runs the post-step callbacks. With nothing to check before the step,
+    this calls Chipmunk's step itself, and does the work after it only when there is some: the
+    same step (``tests/test_step_space.py`` compares them bit for bit, with collision handlers that
+    add and remove in their callbacks), with a tenth of the Python work of ``Space.step`` when
+    nothing is pending (measured: 0.07 against 0.63 us around a 1 us CartPole step). A threaded
+    space, bodies to check, or a pymunk version not in :data:`TESTED` take ``Space.step``.
+    """
+    if not FAST or space._bodies_to_check or space.threaded:
+        space.step(delta)
+        return
+    try:
+        space._locked = True
+        _cp_space_step(space._space, delta)
+        if space._removed_shapes:  # shapes removed since the last step, kept alive through it
+            space._removed_shapes.clear()
+    finally:
+        space._locked = False
+    if space._add_later or space._remove_later or space._post_step_callbacks:
+        _after_step(space)
+
+
+def _after_step(space: pymunk.Space) -> None:
+    """What ``Space.step`` does after Chipmunk's step: the deferred adds, removals, callbacks."""
+    space.add(*space._add_later)
+    space._add_later.clear()
+    removed = set()
+    while space._remove_later:
+        item, _ = space._remove_later.popitem()
+        if item not in removed:
+            removed.add(item)
+            space._remove(item)
+    callbacks = space._post_step_callbacks
+    for key in callbacks:
+        callbacks[key](space)
+    callbacks.clear()
+
+
+# --- a body's state, read and set every tick -----------------------------------------------------
+# Chipmunk's functions straight: pymunk's properties cost several times more.
+
+_vec2d = tuple.__new__  # a Vec2d from a tuple, without its Python-level __new__
+_position = lib.cpBodyGetPosition
+_angle = lib.cpBodyGetAngle
+_velocity = lib.cpBodyGetVelocity
+_angular_velocity = lib.cpBodyGetAngularVelocity
+_set_velocity = lib.cpBodySetVelocity
+_set_angular_velocity = lib.cpBodySetAngularVelocity
+_center_of_gravity = lib.cpBodyGetCenterOfGravity
+_local_to_world = lib.cpBodyLocalToWorld
+_apply_force_at_world_point = lib.cpBodyApplyForceAtWorldPoint
+
+if FAST:
+    def body_position(body: pymunk.Body) -> Vec2d:
+        """``body.position``."""
+        position = _position(body._body)
+        return _vec2d(Vec2d, (position.x, position.y))
+
+    def body_angle(body: pymunk.Body) -> float:
+        """``body.angle``."""
+        return _angle(body._body)
+
+    def body_velocity(body: pymunk.Body) -> Vec2d:
+        """``body.velocity``."""
+        velocity = _velocity(body._body)
+        return _vec2d(Vec2d, (velocity.x, velocity.y))
+
+    def body_angular_velocity(body: pymunk.Body) -> float:
+        """``body.angular_velocity``."""
+        return _angular_velocity(body._body)
+
+    def set_body_velocity(body: pymunk.Body, x: float, y: float) -> None:
+        """``body.velocity = (x, y)``."""
+        _set_velocity(body._body, (x, y))
+
+    def set_body_angular_velocity(body: pymunk.Body, value: float) -> None:
+        """``body.angular_velocity = value``."""
+        _set_angular_velocity(body._body, value)
+
+    def apply_central_force(body: pymunk.Body, force: tuple[float, float]) -> None:
+        """``force`` at ``body``'s centre of gravity (in world coordinates)."""
+        pointer = body._body
+        _apply_force_at_world_point(pointer, force,
+                                    _local_to_world(pointer, _center_of_gravity(pointer)))
+else:
+    def body_position(body: pymunk.Body) -> Vec2d:  # noqa: D103
+        return body.position
+
+    def body_angle(body: pymunk.Body) -> float:  # noqa: D103
+        return body.angle
+
+    def body_velocity(body: pymunk.Body) -> Vec2d:  # noqa: D103
+        return body.velocity
+
+    def body_angular_velocity(body: pymunk.Body) -> float:  # noqa: D103
+        return body.angular_velocity
+
+    def set_body_velocity(body: pymunk.Body, x: float, y: float) -> None:  # noqa: D103
+        body.velocity = (x, y)
+
+    def set_body_angular_velocity(body: pymunk.Body, value: float) -> None:  # noqa: D103
+        body.angular_velocity = value
+
+    def apply_central_force(body: pymunk.Body, force: tuple[float, float]) -> None:  # noqa: D103
+        body.apply_force_at_world_point(force, body.local_to_world(body.center_of_gravity))

@@ -38,19 +38,20 @@ EXPECTED = {
     "rlenv.agent.RLAgent._after_physics_tick": ["after the physics stepped"],
     "rlenv.world.RLEnvWorld": [],
     "rlenv.rl_node.RLNode": ["configurable"],
-    "rlenv.scene2d.physics.PhysicsWorld": ["gravity"],
-    "rlenv.scene2d.physics.RigidBody": ["mass", "moment"],
-    "rlenv.scene2d.physics.RigidBody.apply_force": ["world coordinates", "body's own frame"],
-    "rlenv.scene2d.physics.StaticBody": ["never moves"],
-    "rlenv.scene2d.physics.KinematicBody": ["velocity"],
-    "rlenv.scene2d.physics.PhysicsBody.body_entered": ["body_entered(body)"],
-    "rlenv.scene2d.physics.PhysicsBody.position": ["world coordinates"],
-    "rlenv.scene2d.physics.PhysicsBody.angle": ["radians"],
-    "rlenv.scene2d.physics.CollisionShape.box": ["width", "height", "mass"],
-    "rlenv.scene2d.physics.CollisionShape.segment": ["radius", "body's frame"],
-    "rlenv.scene2d.physics.CollisionShape.circle": ["radius"],
-    "rlenv.scene2d.physics.CollisionShape.collision_started": ["collision_started(shape)"],
-    "rlenv.scene2d.physics.Joint.pivot": ["world coordinates"],
+    "rlenv.scene2d.physics.world.PhysicsWorld": ["gravity"],
+    "rlenv.scene2d.physics.body.RigidBody": ["mass", "moment"],
+    "rlenv.scene2d.physics.body.RigidBody.apply_force": ["world coordinates", "body's own frame"],
+    "rlenv.scene2d.physics.body.StaticBody": ["never moves"],
+    "rlenv.scene2d.physics.body.KinematicBody": ["velocity"],
+    "rlenv.scene2d.physics.body.PhysicsBody.body_entered": ["body_entered(body)"],
+    "rlenv.scene2d.physics.body.PhysicsBody.position": ["world coordinates"],
+    "rlenv.scene2d.physics.body.PhysicsBody.angle": ["radians"],
+    "rlenv.scene2d.physics.collision_shape.CollisionShape.box": ["width", "height", "mass"],
+    "rlenv.scene2d.physics.collision_shape.CollisionShape.segment": ["radius", "body's frame"],
+    "rlenv.scene2d.physics.collision_shape.CollisionShape.circle": ["radius"],
+    "rlenv.scene2d.physics.collision_shape.CollisionShape.collision_started":
+        ["collision_started(shape)"],
+    "rlenv.scene2d.physics.joint.Joint.pivot": ["world coordinates"],
     "rlenv.scene2d.camera.Camera": ["row 0", "pixels"],
     "rlenv.scene2d.render.draw_list": [],
     "rlenv.scene2d.views.View": [],
@@ -136,7 +137,7 @@ def test_no_sphinx_role_is_left_as_text(site: Path) -> None:
              if re.search(r":(class|meth|func|attr|mod|data|exc|obj):", page.read_text("utf-8"))]
     assert leaks == []
     physics = (site / "reference" / "scene2d" / "index.html").read_text(encoding="utf-8")
-    assert 'href="#rlenv.scene2d.physics.PhysicsWorld"' in physics  # roles became links
+    assert 'href="#rlenv.scene2d.physics.world.PhysicsWorld"' in physics  # roles became links
 
 
 def test_a_reference_to_a_missing_name_fails_the_build(tmp_path: Path) -> None:

@@ -1,0 +1,240 @@
+"""PhysicsWorld: the node that owns a pymunk space and steps it (Godot's physics server).
+
+See :mod:`rlenv.scene2d.physics` for the family, units and frames.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from typing import Any, ClassVar
+
+import pymunk
+
+from rlenv.node import Node, ProcessMode
+from rlenv.scene2d.chipmunk import (
+    FAST,
+    Refill,
+    bodies_to_check,
+    collision_handlers,
+    renumber,
+    step_space,
+)
+from rlenv.scene2d.physics.body import PhysicsBody
+from rlenv.scene2d.physics.collision_shape import CollisionShape
+from rlenv.scene2d.physics.joint import Joint
+from rlenv.scene2d.physics.space_owner import SpaceOwner, Vec
+from rlenv.scene2d.pymunk_data import integer, number, vector
+from rlenv.signals import Signal
+
+__all__ = ["PhysicsWorld"]
+
+logger = logging.getLogger(__name__)
+
+_SPACE_SETTINGS = ("collision_slop", "collision_bias", "collision_persistence",
+                   "idle_speed_threshold", "sleep_time_threshold")
+"""What a space is set up with besides gravity, iterations and damping (and its handlers)."""
+
+
+class PhysicsWorld(SpaceOwner):
+    """Owns a ``pymunk.Space`` and steps it once per physics tick.
+
+    The space steps by the tree's fixed ``delta`` in ``_physics_step``, after every node's
+    ``_physics_process`` of the tick (so forces applied there act in this tick's step). Bodies,
+    shapes and joints anywhere below the world join its space (the nearest world above them).
+
+    Args:
+        gravity: the space's gravity, a world vector (acceleration, e.g. metres per second
+            squared: the default pulls down along y).
+        iterations: solver iterations per step (pymunk's default is 10).
+        damping: fraction of velocity kept per second (1 keeps all; 0.9 loses 10% a second).
+        name: the node name.
+        process_mode: when the space steps; by default it follows its parent.
+
+    Attributes:
+        space: the ``pymunk.Space``; :meth:`restart` replaces it with a new one.
+    """
+
+    stepped = Signal("delta")
+    """``stepped(delta)``: emitted after every step of the space (``delta``: its length, s)."""
+
+    exported: ClassVar[tuple[str, ...]] = ("gravity", "damping")
+    _TREE_STATE = Node._TREE_STATE | {"_shape_nodes", "_kept_members", "_touched"}
+
+    def __init__(
+        self,
+        gravity: Vec = (0.0, -9.81),
+        *,
+        iterations: int = 10,
+        damping: float = 1.0,
+        name: str | None = None,
+        process_mode: ProcessMode = ProcessMode.INHERIT,
+    ) -> None:
+        super().__init__(name, process_mode=process_mode)
+        self.space = self._new_space(vector(gravity, "gravity"),
+                                     integer(iterations, "iterations", 1, 2**31 - 1),
+                                     number(damping, "damping", low=0.0))
+        self._shape_nodes: dict[pymunk.Shape, CollisionShape] = {}
+        self._kept_members: tuple[int | None, list[PhysicsBody], list[CollisionShape],
+                                  list[Joint], Refill] | None = None  # see _members
+        self._touched = False  # a contact began since the space was made or restarted
+
+    def _new_space(self, gravity: Vec, iterations: int, damping: float) -> pymunk.Space:
+        space = pymunk.Space()
+        space.gravity = gravity
+        space.iterations = iterations
+        space.damping = damping
+        space.on_collision(begin=self._on_begin, separate=self._on_separate)
+        return space
+
+    def _space_like(self, old: pymunk.Space) -> pymunk.Space:
+        """An empty space set up as ``old``: its settings and every collision handler."""
+        space = self._new_space(old.gravity, old.iterations, old.damping)
+        for name in _SPACE_SETTINGS:
+            setattr(space, name, getattr(old, name))
+        for key, handler in collision_handlers(old).items():
+            if key != (None, None):  # rlenv's own, set up by _new_space
+                space.on_collision(*key, begin=handler.begin, pre_solve=handler.pre_solve,
+                                   post_solve=handler.post_solve, separate=handler.separate,
+                                   data=handler.data)
+        return space
+
+    def restart(self) -> None:
+        """Start the simulation afresh, as a newly built subtree would: cheap episode resets.
+
+        The bodies, shapes and joints below stay (nodes, pymunk objects and their settings),
+        but start again in a space as new (same gravity, iterations and damping), in tree order,
+        as they would on entering it: every body back at the pose it entered its space with
+        (composed through its Node2D frames, so each copy of a lattice goes back to its own
+        place), at rest (velocities, force and torque zero), and every joint's constraint as
+        when it was made (joints such as ``pivot`` read the bodies' pose when made). No solver
+        state (joint impulses, cached contacts, the spatial index) survives; contacts in
+        progress end, with their signals. Place the bodies for the episode afterwards.
+
+        The space is a new one, unless it can be made exactly as new in place: the same
+        bodies, shapes and joints as at the previous restart (the tree below unchanged), no
+        contact since then (Chipmunk's contact cache never grew), no collision handler but
+        rlenv's and no sleeping; then it is emptied and its counters set back (cheaper).
+        """
+        old = self.space
+        bodies, shapes, joints, refill, unchanged = self._members()
+        in_place = FAST and unchanged and not self._touched and \
+            len(collision_handlers(old)) == 1 and old.sleep_time_threshold == math.inf
+        self._touched = False
+        if in_place and refill.into(old):
+            return
+        old.remove(*old.constraints, *old.shapes, *old.bodies)
+        if in_place:
+            renumber(old)
+        else:
+            self.space = self._space_like(old)
+        for body in bodies:
+            body._restart()
+        self.space.add(*[body.body for body in bodies], *[shape.shape for shape in shapes])
+        for joint in joints:  # once every body is back, as joints attach when ready
+            joint._reattach(self)
+
+    def _members(self) -> tuple[list[PhysicsBody], list[CollisionShape], list[Joint], Refill,
+                                bool]:
+        """The bodies, shapes and joints in this world's space, in tree order, and their Refill.
+
+        Kept while the tree's structure stays the same; the last item says whether it did since
+        the previous call.
+        """
+        tree = self._tree
+        version = None if tree is None else tree.structure_version
+        members = self._kept_members
+        if members is not None and version is not None and members[0] == version:
+            return members[1], members[2], members[3], members[4], True
+        bodies, shapes, joints = [], [], []
+        for node in self.iter_subtree():
+            if isinstance(node, PhysicsBody) and node.world is self:
+                bodies.append(node)
+            elif isinstance(node, CollisionShape) and node._world is self:
+                shapes.append(node)
+            elif isinstance(node, Joint) and node._world is self and node._attached:
+                joints.append(node)
+        refill = Refill([body.body for body in bodies], [shape.shape for shape in shapes],
+                        [joint.constraint for joint in joints],
+                        [body._built_pose for body in bodies])
+        self._kept_members = (version, bodies, shapes, joints, refill)
+        return bodies, shapes, joints, refill, False
+
+    @property
+    def iterations(self) -> int:
+        """Solver iterations per step."""
+        return self.space.iterations
+
+    def _duplicate_resources(self, memo: dict[int, Any]) -> None:
+        space = self.space
+        memo[id(space)] = self._space_like(space)
+
+    def _duplicated(self, original: Node) -> None:
+        self._shape_nodes = {}
+        self._kept_members = None
+        self._touched = False
+
+    @property
+    def gravity(self) -> pymunk.Vec2d:
+        """The space's gravity, a world vector; clients may read and set it (exported)."""
+        return self.space.gravity
+
+    @gravity.setter
+    def gravity(self, value: Vec) -> None:
+        self.space.gravity = vector(value, f"{self!r}: gravity")
+
+    @property
+    def damping(self) -> float:
+        """The fraction of velocity bodies keep per second; exported."""
+        return self.space.damping
+
+    @damping.setter
+    def damping(self, value: float) -> None:
+        self.space.damping = number(value, f"{self!r}: damping", low=0.0)
+
+    def _enter_tree(self) -> None:
+        parent = self.parent
+        others = [node.name for node in parent.get_children()
+                  if node is not self and isinstance(node, PhysicsWorld)] if parent else []
+        if others:
+            logger.warning("%r enters beside %s: each PhysicsWorld simulates a space of its own. "
+                           "Left from an earlier reset? Remove the old one first", self,
+                           ", ".join(others))
+
+    def _physics_step(self, delta: float) -> None:
+        if bodies_to_check(self.space):  # added since the last step: pymunk checks them
+            self._check_masses()
+        step_space(self.space, delta)
+        if self._signals:  # someone asked for a signal of this node
+            self._emit("stepped", delta)
+
+    def _check_masses(self) -> None:
+        """Refuse, naming the node, a dynamic body without a positive, finite mass and moment."""
+        for body in bodies_to_check(self.space):
+            if body.body_type == pymunk.Body.DYNAMIC and not (
+                    0 < body.mass < math.inf and body.moment > 0):
+                node = next((node for node in self.iter_subtree()
+                             if isinstance(node, PhysicsBody) and node.body is body), body)
+                raise ValueError(f"{node!r} has mass {body.mass} and moment {body.moment}: give "
+                                 "it a mass and moment, or its CollisionShape children a mass "
+                                 "or density")
+
+    def _on_begin(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
+        self._touched = True
+        self._report(arbiter, "collision_started", "body_entered")
+
+    def _on_separate(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
+        self._report(arbiter, "collision_ended", "body_exited")
+
+    def _report(self, arbiter: pymunk.Arbiter, shape_signal: str, body_signal: str) -> None:
+        first, second = arbiter.shapes
+        a = self._shape_nodes.get(first)
+        b = self._shape_nodes.get(second)
+        if a is None or b is None:  # a shape that left the tree during this step
+            return
+        a.get_signal(shape_signal).emit(b)
+        b.get_signal(shape_signal).emit(a)
+        body_a, body_b = a.body_node, b.body_node
+        if body_a is not None and body_b is not None and body_a is not body_b:
+            body_a.get_signal(body_signal).emit(body_b)
+            body_b.get_signal(body_signal).emit(body_a)

@@ -60,6 +60,12 @@ class RLEnvironment(RLNode):
         configurable: what clients may configure (besides ``real_time`` and ``record``, which
             the server handles).
         exported: what clients may read remotely (besides :attr:`configurable`).
+        reset_options: the keys a reset's ``options`` may hold (others are refused with
+            ``bad_request``); ``None``, the default, accepts any.
+        rebuild_after_error: whether the server builds the environment again from its class
+            (constructor, entering the tree, ``_ready``) at the reset after its code raised
+            while serving, keeping its configuration and random generator; the reset's
+            ``info["rebuilt"]`` says why. Set it to ``False`` to keep the same objects.
         agent: the agent node (the first of :attr:`agents`).
         agents: every agent; several make the spaces ``Dict`` spaces keyed by agent name.
         world: the world node.
@@ -84,6 +90,8 @@ class RLEnvironment(RLNode):
     render_view: ClassVar[tuple[float, float, float, float] | None] = None
     configurable: ClassVar[tuple[str, ...]] = ("repeat_action",)
     exported: ClassVar[tuple[str, ...]] = ("real_time",)
+    reset_options: ClassVar[tuple[str, ...] | None] = None
+    rebuild_after_error: ClassVar[bool] = True
     _IS_ENVIRONMENT: ClassVar[bool] = True
 
     def __init__(self, name: str | None = None, *, repeat_action: int = 4) -> None:

@@ -46,6 +46,7 @@ __all__ = [
     "Node",
     "NodeNotFoundError",
     "ProcessMode",
+    "check_initialised",
 ]
 
 NOTIFICATION_PREDELETE = 1
@@ -205,10 +206,18 @@ class Node(SignalOwner):
         Raises:
             ValueError: ``node`` already has a parent, is this node or one of its ancestors, or
                 was freed.
+            TypeError: this node or ``node`` was never set up as a node (its class's
+                ``__init__`` did not call ``super().__init__()``).
         """
-        if self._deferred(self.add_child, node):
-            return
-        if node._freed:
+        try:
+            if self._deferred(self.add_child, node):
+                return
+            freed = node._freed
+        except AttributeError:
+            check_initialised(self)
+            check_initialised(node)
+            raise
+        if freed:
             raise ValueError(f"cannot add {node._name!r}: it was freed")
         if node._parent is not None:
             raise ValueError(
@@ -720,6 +729,18 @@ _CAN_PROCESS = {
     ProcessMode.ALWAYS: (True, True),
     ProcessMode.DISABLED: (False, False),
 }
+
+
+def check_initialised(node: Node) -> None:
+    """Refuse a node whose ``__init__`` never reached :class:`Node`'s.
+
+    Raises:
+        TypeError: naming the class, and saying to call ``super().__init__()``.
+    """
+    if isinstance(node, Node) and "_children" not in vars(node):
+        name = type(node).__name__
+        raise TypeError(f"{name} was not set up as a node: call super().__init__() in "
+                        f"{name}.__init__")
 
 
 def _overrides(node: Node, method: str) -> bool:

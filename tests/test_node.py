@@ -1080,3 +1080,41 @@ def test_deferred_mutation_errors_surface_at_flush(tree: SceneTree) -> None:
     with pytest.raises(ValueError, match="already a child of 'Other'"):
         tree.process(0.1)
     assert taken.parent is other
+
+
+class _NoSuperInit(Node):
+    def __init__(self) -> None:
+        self.speed = 1.0  # forgot super().__init__()
+
+
+def test_a_node_without_super_init_is_named_when_added() -> None:
+    message = r"_NoSuperInit was not set up as a node: call super\(\)\.__init__\(\) in " \
+              r"_NoSuperInit\.__init__"
+    with pytest.raises(TypeError, match=message):
+        Node("Parent").add_child(_NoSuperInit())
+    with pytest.raises(TypeError, match=message):
+        _NoSuperInit().add_child(Node("Child"))
+
+
+def test_an_agent_or_environment_without_super_init_is_named() -> None:
+    from examples.faulty import BrittleAgent, BrittleEnvironment
+    from rlenv_client import LocalClient
+
+    class AgentNoSuperInit(BrittleAgent):
+        def __init__(self) -> None:
+            self.push = 0.0
+
+    class EnvironmentNoSuperInit(BrittleEnvironment):
+        def __init__(self) -> None:
+            self.level = 1
+
+    class Hosting(BrittleEnvironment):
+        def __init__(self) -> None:
+            super().__init__()
+            self.add_child(AgentNoSuperInit())
+
+    with pytest.raises(TypeError, match=r"AgentNoSuperInit was not set up as a node: call "
+                                        r"super\(\)\.__init__\(\) in AgentNoSuperInit"):
+        LocalClient(Hosting)
+    with pytest.raises(TypeError, match=r"EnvironmentNoSuperInit was not set up as a node"):
+        LocalClient(EnvironmentNoSuperInit)

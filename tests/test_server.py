@@ -419,7 +419,10 @@ def test_discrete_actions_are_checked(serve: Serve) -> None:
         client.reset()
         for action, message in [(3, "action is 3, outside [0, 2]"),
                                 (0.0, "action must be an integer, got float"),
-                                (True, "action must be an integer, got bool")]:
+                                (True, "action must be an integer, got bool"),
+                                (np.array([1]), "action must be an integer (a Discrete value is "
+                                 "one integer, not an array), got an array of shape (1,) and "
+                                 "dtype int64")]:
             with pytest.raises(RemoteError) as error:
                 client.step(action)
             assert error.value.message == message

@@ -39,7 +39,6 @@ class LocalClient(BaseClient):
 
     Attributes:
         host: the instances and how requests reach them (``None`` once closed).
-        environment: the first instance's environment node.
     """
 
     def __init__(
@@ -51,9 +50,14 @@ class LocalClient(BaseClient):
         super().__init__(world_data=world_data)
         self.host: Host | None = Host(environment, instances, clock=clock or time.monotonic)
         self._replies: deque[Reply] = deque()  # answers not received yet
-        self.environment = self.host.instances[0].environment
+        self._first = self.host.instances[0]
         self._set_hello(self.host.hello)
         self.address = f"in-process {self.environment.name}"
+
+    @property
+    def environment(self) -> RLEnvironment:
+        """The first instance's environment node (a new one once rebuilt after an error)."""
+        return self._first.environment
 
     def close(self) -> None:
         """Take the environments out of their trees; safe to repeat."""

@@ -146,6 +146,7 @@ class ClassicCartPoleEnvironment(RLEnvironment):
 
     physics_ticks_per_second = 50
     render_view = (-3.0, -1.0, 3.0, 1.5)
+    reset_options = ("low", "high")
 
     def __init__(self) -> None:
         super().__init__("ClassicCartPole", repeat_action=1)

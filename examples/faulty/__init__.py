@@ -16,13 +16,18 @@ Serve one and drive it: ``rlenv serve examples.faulty:FaultyEnvironment``.
   what deadlines are for); action 0 behaves.
 - :class:`DyingEnvironment`: action 1 ends its process at once (``os._exit``), as a crash in
   native code would; action 2 calls ``sys.exit``; action 0 behaves.
+- :class:`BrittleEnvironment`: a ball under gravity; ``reset(options={"fail": True})`` makes
+  its world's reset raise after it removed its physics, leaving the environment broken until
+  the server rebuilds it.
 
 ## Action Space
-``Discrete(3)`` (Faulty, WrongShape, Dying) or ``Discrete(2)`` (Counting, Unsendable, Slow).
+``Discrete(3)`` (Faulty, WrongShape, Dying) or ``Discrete(2)`` (Counting, Unsendable, Slow,
+Brittle: a push left or right).
 
 ## Observation Space
 ``Box(0, 1000, (1,), int64)`` ticks since the reset (Faulty, Unsendable, Slow, Dying),
-``Box(0, 1e9, (1,), float64)`` (Counting).
+``Box(0, 1e9, (1,), float64)`` (Counting), ``Box(-inf, inf, (4,), float64)`` the ball's position
+and velocity (Brittle).
 
 ## Rewards
 0.5 per tick (Faulty); none otherwise.
@@ -42,7 +47,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from rlenv import RLAgent, RLEnvironment, RLEnvWorld
+from rlenv import CollisionShape, PhysicsWorld, RigidBody, RLAgent, RLEnvironment, RLEnvWorld
 
 
 class CountingWorld(RLEnvWorld):
@@ -220,3 +225,86 @@ class DyingEnvironment(RLEnvironment):
         super().__init__("Dying", repeat_action=1)
         self.add_child(DyingAgent())
         self.add_child(CountingWorld())
+
+
+class BrittleWorld(RLEnvWorld):
+    """A ball in a physics world built afresh at every reset, from the episode's generator.
+
+    Its reset removes the old physics first and only then reads the options: with ``fail`` it
+    raises there, leaving no physics at all (the half-done reset the server must recover from).
+    """
+
+    def __init__(self) -> None:
+        super().__init__("World")
+        self.add_child(self._physics())
+
+    def reset(self, options: Mapping[str, Any]) -> None:
+        """Build a new physics world with the ball at a seeded place.
+
+        Raises:
+            NodeNotFoundError: the physics is gone (a previous reset failed half way).
+            ValueError: ``options["fail"]``, after the physics was removed.
+        """
+        self.remove_child(self.get_node("Physics"))
+        if options.get("fail"):
+            raise ValueError("this level is refused (asked with options['fail'])")
+        self.add_child(self._physics())
+
+    def _physics(self) -> PhysicsWorld:
+        physics = PhysicsWorld(gravity=(0.0, -9.81), name="Physics")
+        ball = RigidBody(position=(0.0, 5.0), name="Ball")
+        ball.add_child(CollisionShape.circle(0.2, mass=1.0, name="Skin"))
+        physics.add_child(ball)
+        return physics
+
+    def sample_initial_position(self) -> np.ndarray:
+        """The ball's position and velocity, from the episode's generator."""
+        return self.np_random.uniform(-1.0, 1.0, size=4)
+
+
+class BrittleAgent(RLAgent):
+    """Pushes the ball left (0) or right (1); observes its position and velocity."""
+
+    action_space = spaces.Discrete(2)
+    observation_space = spaces.Box(-np.inf, np.inf, (4,), np.float64)
+
+    def __init__(self) -> None:
+        super().__init__("Agent")
+        self.push = 0.0
+
+    @property
+    def ball(self) -> RigidBody:
+        """The ball of the world's current physics."""
+        ball = self.environment.get_node("World/Physics/Ball")
+        assert isinstance(ball, RigidBody)
+        return ball
+
+    def reset(self, arguments: np.ndarray) -> None:
+        """Place the ball: x, y offset, and velocity from ``arguments``."""
+        x, y, vx, vy = arguments.tolist()
+        self.ball.position = (x, 5.0 + y)
+        self.ball.velocity = (vx, vy)
+        self.push = 0.0
+
+    def set_action(self, action: Any) -> None:
+        """Push right for 1, left for 0."""
+        self.push = 1.0 if int(action) == 1 else -1.0
+
+    def _physics_process(self, delta: float) -> None:
+        self.ball.apply_impulse((self.push * delta, 0.0))
+
+    def get_data(self, observation_request: Mapping[str, Any]) -> np.ndarray:
+        """The ball's position and velocity."""
+        ball = self.ball
+        return np.array([*ball.position, *ball.velocity], dtype=np.float64)
+
+
+class BrittleEnvironment(RLEnvironment):
+    """A ball whose world's reset can fail half way (``reset(options={"fail": True})``)."""
+
+    reset_options = ("fail",)
+
+    def __init__(self) -> None:
+        super().__init__("Brittle", repeat_action=2)
+        self.add_child(BrittleAgent())
+        self.add_child(BrittleWorld())

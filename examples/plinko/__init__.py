@@ -387,6 +387,7 @@ class PlinkoEnvironment(RLEnvironment):
 
     render_view = (-HALF_WIDTH - 0.5, -0.5, HALF_WIDTH + 0.5, TOP + 0.5)
     render_size = (450, 600)
+    reset_options = ("level",)
 
     def __init__(self) -> None:
         super().__init__("Plinko", repeat_action=4)

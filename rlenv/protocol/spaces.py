@@ -398,6 +398,10 @@ class _Discrete(SpaceKind):
     def check(self, space: spaces.Discrete, value: Any, path: str) -> np.integer:
         if isinstance(value, np.ndarray) and value.shape == ():
             value = value[()]
+        if isinstance(value, np.ndarray):
+            raise SpaceMismatch(f"{path} must be an integer (a Discrete value is one integer, "
+                                f"not an array), got an array of shape {value.shape} and dtype "
+                                f"{value.dtype}")
         if isinstance(value, bool | np.bool_) or not isinstance(value, int | np.integer):
             raise SpaceMismatch(f"{path} must be an integer, got {type(value).__name__}")
         if not space.start <= value < space.start + space.n:

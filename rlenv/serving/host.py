@@ -175,10 +175,12 @@ class Host:
     def abandon(self, why: str) -> None:
         """End every instance's episode where it stands (a request was cut short half way).
 
-        The next action is refused with ``reset_required``, saying ``why``.
+        The next action is refused with ``reset_required``, saying ``why``; the next reset
+        rebuilds the environments (their code was stopped half way).
         """
         for instance in self.instances:
             if instance.state is not Episode.NOT_STARTED:
+                instance.mark_broken(why)
                 instance.abandon_episode(why)
 
     def catch_up(self) -> None:

@@ -39,7 +39,7 @@ from gymnasium.utils import seeding
 
 from rlenv.agent import RLAgent
 from rlenv.environment import RLEnvironment, give_action
-from rlenv.node import Node
+from rlenv.node import Node, check_initialised
 from rlenv.protocol import ErrorReply, Response
 from rlenv.protocol.errors import ErrorCode, RequestError
 from rlenv.serving import inspector
@@ -121,7 +121,12 @@ class Instance:
         clock: the tree's clock, for real-time mode (tests pass a manual one).
         record_dir: where clients may have the environment record videos (``None``: nowhere).
 
+    Attributes:
+        broken: why the next reset rebuilds the environment from its class (user code raised
+            while serving the controller), or ``None``.
+
     Raises:
+        TypeError: the environment's ``__init__`` did not call ``super().__init__()``.
         RuntimeError: the environment has no agent, no world, or an agent without spaces.
     """
 
@@ -130,10 +135,12 @@ class Instance:
                  record_dir: Path | None = None) -> None:
         if isinstance(environment, str):
             environment = load_environment(environment)
+        self._class: type[RLEnvironment] | None = None  # what a rebuild builds (or none)
         if isinstance(environment, type):
+            self._class = environment if environment.rebuild_after_error else None
             environment = environment()
-        self.environment = environment
         self._dispatch = dispatch
+        self._clock = clock
         self.answer: Answer | None = None  # the answer to the request being served
         hooks = {name for name in _HOOKS
                  if getattr(type(environment), name) is not getattr(RLEnvironment, name)}
@@ -141,17 +148,8 @@ class Instance:
         self.configures_itself = "_configure" in hooks
         self.responds_itself = "_send_response" in hooks
         self.has_after_send = "_after_send_response" in hooks
-        environment.communication.bind(self)
-        self.tree = SceneTree(environment.physics_ticks_per_second, clock=clock)
-        self.tree.root.add_child(environment)
-        self.tree.paused = True
-        self.tree.on_physics_tick_end = self._end_tick
-        self.agents: list[RLAgent] = _agents_of(environment)
-        self.multi_agent = len(self.agents) > 1
-        self.action_space = _joint_space(self.agents, "action_space")
-        self.observation_space = _joint_space(self.agents, "observation_space")
-        self.checked_action = ActionCheck(self.agents, self.action_space)
-        self.observe = Observer(environment, self.agents).observe
+        self._enter(environment)
+        self.broken: str | None = None  # why the next reset rebuilds the environment
         self.settings = Settings(self, record_dir)
         self.state = Episode.NOT_STARTED
         self._no_episode = "no episode has started; reset first"  # why, when NOT_STARTED
@@ -165,6 +163,36 @@ class Instance:
         self._late = False
         self._late_actions = 0
 
+    def _enter(self, environment: RLEnvironment, replacing: bool = False) -> None:
+        """Make ``environment`` this instance's, in a new tree (its ``_ready`` runs).
+
+        Nothing of the instance changes if this raises. An environment ``replacing`` another
+        (rebuilt) must have its spaces.
+
+        Raises:
+            TypeError: the environment's ``__init__`` did not call ``super().__init__()``.
+            RuntimeError: the environment has no agent, no world, or an agent without spaces,
+                or (rebuilt) spaces other than those of the environment it replaces.
+        """
+        check_initialised(environment)
+        environment.communication.bind(self)
+        tree = SceneTree(environment.physics_ticks_per_second, clock=self._clock)
+        tree.root.add_child(environment)
+        tree.paused = True
+        agents = _agents_of(environment)
+        action_space = _joint_space(agents, "action_space")
+        observation_space = _joint_space(agents, "observation_space")
+        if replacing and (action_space, observation_space) != (
+                self.action_space, self.observation_space):
+            raise RuntimeError(f"the rebuilt {type(environment).__name__} has other spaces "
+                               "than the one it replaces; clients hold the first ones")
+        tree.on_physics_tick_end = self._end_tick
+        self.environment, self.tree, self.agents = environment, tree, agents
+        self.multi_agent = len(agents) > 1
+        self.action_space, self.observation_space = action_space, observation_space
+        self.checked_action = ActionCheck(agents, action_space)
+        self.observe = Observer(environment, agents).observe
+
     # --- one way in -------------------------------------------------------------------------
 
     def serve(self, request: Plan, reply_id: int, reports: bool = True) -> Response | ErrorReply:
@@ -177,9 +205,15 @@ class Instance:
         the environment), the answer carries no reward nor ticks and leaves them for the
         controller's next answer, and a failure of user code it met (a ``_draw`` of an
         inspector's, say) leaves the episode to its controller.
+
+        After user code raised (:attr:`broken`), a request that starts an episode (``reset``,
+        ``restore``) first rebuilds the environment (:meth:`rebuild`); its answer's ``info``
+        says so under ``"rebuilt"``.
         """
         answer = self.answer = Answer(reply_id, reports)
         try:
+            if self.broken is not None and ("reset" in request or "restore" in request):
+                answer.info = {"rebuilt": self.rebuild()}
             if self.dispatches_itself:
                 self.environment._on_got_connection(dict(request))
             else:
@@ -241,6 +275,7 @@ class Instance:
             self.environment._after_send_response()
         except Exception as error:
             logger.error("_after_send_response raised", exc_info=error)
+            self.mark_broken(error)
             self.abandon_episode(f"the episode was stopped: _after_send_response raised "
                                  f"{type(error).__name__}: {error}")
 
@@ -252,6 +287,49 @@ class Instance:
     def time_to_next_tick(self) -> float | None:
         """Seconds until this instance's next tick is due (``None`` in lockstep)."""
         return self.tree.time_to_next_tick()
+
+    def mark_broken(self, error: BaseException | str) -> None:
+        """User code raised ``error`` (or stopped half way, ``why``): the next reset rebuilds.
+
+        Nothing happens if the environment opted out (``rebuild_after_error = False``) or was
+        given as an object rather than its class (there is nothing to build it again from).
+        """
+        if self._class is not None and self.broken is None:
+            why = error if isinstance(error, str) else f"{type(error).__name__}: {error}"
+            self.broken = why[:_MAX_WHY]
+
+    def rebuild(self) -> str:
+        """Build the environment again from its class, in a new tree; why it was rebuilt.
+
+        The new environment is constructed, enters its tree and is ready, as at the start; it
+        takes over the configuration, the random generator and real time of the one it
+        replaces (as a reset keeps them), and no episode runs. If building raises, the
+        instance keeps the environment it had (and stays :attr:`broken`).
+
+        Raises:
+            RuntimeError: the instance has no class to rebuild from.
+        """
+        if self._class is None:
+            raise RuntimeError("this instance was given an environment object: it has no "
+                               "class to rebuild it from")
+        why = self.broken or "asked"
+        old, old_tree = self.environment, self.tree
+        config = self.settings.state()
+        generator = old.np_random
+        self._enter(self._class(), replacing=True)
+        self._before_sets.clear()
+        self.environment.np_random = generator
+        self.tree.real_time = old_tree.real_time
+        self.settings.carry(config)
+        self.broken = None
+        self.state = Episode.NOT_STARTED
+        try:
+            old_tree.root.remove_child(old)
+        except Exception as error:  # the broken environment's _exit_tree: its own business
+            logger.warning("the replaced %s raised leaving its tree", type(old).__name__,
+                           exc_info=error)
+        logger.warning("%s rebuilt from its class after %s", type(old).__name__, why)
+        return why
 
     def close(self) -> None:
         """Stop any recording and take the environment out of its tree."""
@@ -428,8 +506,10 @@ class Instance:
     def environment_error(self, reply_id: int, error: BaseException) -> ErrorReply:
         """The ``environment_error`` answer for an exception in user code (its traceback in it).
 
-        The tree is paused and the next action needs a reset first.
+        The tree is paused and the next action needs a reset first (which rebuilds the
+        environment, see :meth:`mark_broken`).
         """
+        self.mark_broken(error)
         self.abandon_episode("the episode was stopped by an environment_error")
         return failure(reply_id, error, "reset required")
 
@@ -510,5 +590,7 @@ def _agents_of(environment: RLEnvironment) -> list[RLAgent]:
                 raise RuntimeError(f"{agent!r} must set {attribute} to a gymnasium space")
     return list(environment.agents)
 
+
+_MAX_WHY = 500  # characters of an error kept to say why an environment was rebuilt
 
 _HOOKS = ("_on_got_connection", "_configure", "_send_response", "_after_send_response")

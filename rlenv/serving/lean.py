@@ -73,11 +73,15 @@ class LeanSteps:
         data: list[Any] = [None] * count
         acted = [False] * count
         errors: list[ErrorReply | None] | None = None
+        rebuilt: list[dict[str, Any] | None] | None = None  # rows rebuilt before their reset
         repeat = plan.repeat
         for row, (instance, action, resets) in enumerate(zip(self.instances, plan.actions,
                                                              plan.resets, strict=True)):
             try:
                 if resets:
+                    if instance.broken is not None:
+                        rebuilt = rebuilt or [None] * count
+                        rebuilt[row] = {"rebuilt": instance.rebuild()}
                     instance.begin_episode(None, {})  # its own: user code may keep it
                 else:
                     instance.act(action, repeat or instance.environment.repeat_action)
@@ -109,8 +113,9 @@ class LeanSteps:
             try:
                 reward[row], terminated[row], truncated[row], frames[row], _ = \
                     instance.report(True, acted[row])
-                if has_info:
-                    infos[row] = instance.info(acted[row], None)
+                extra = None if rebuilt is None else rebuilt[row]
+                if has_info or extra is not None:
+                    infos[row] = instance.info(acted[row], extra)
             except Exception as error:  # _get_info raised, or holds what cannot travel
                 errors = errors or [None] * count
                 errors[row] = instance.environment_error(reply_id, error)

@@ -117,10 +117,28 @@ class Reset(Part):
             raise _bad(f"reset.seed must be an integer >= 0, got {seed!r:.40}")
         if options is not None and not isinstance(options, Mapping):
             raise _bad("reset.options must be a map")
+        if options:
+            check_options(instance, options, "reset.options")
         return {"seed": seed, "options": options or {}}
 
     def apply(self, instance: Instance, value: Any, request: Plan) -> None:
         instance.begin_episode(value["seed"], value["options"])
+
+
+def check_options(instance: Instance, options: Mapping[str, Any], where: str) -> None:
+    """Refuse (``bad_request``) an option key the environment does not declare.
+
+    An environment that declares none (``reset_options = None``) accepts any.
+    """
+    environment = instance.environment
+    declared = environment.reset_options
+    if declared is None:
+        return
+    for key in options:
+        if key not in declared:
+            accepted = ", ".join(map(str, declared)) or "none"
+            raise _bad(f"{where}: {type(environment).__name__} has no reset option "
+                       f"{str(key)!r:.60}; it accepts {accepted}")
 
 
 class Action(Part):
@@ -236,6 +254,8 @@ class Restore(Part):
             if isinstance(settings, Mapping) and settings.get("real_time"):
                 raise _bad("restore: snapshots replay in lockstep; this one asks for real time")
         instance.settings.check(snapshot["config"])
+        if snapshot["options"]:
+            check_options(instance, snapshot["options"], "restore: options")
         actions = []
         for index, event in enumerate(snapshot["events"]):
             where = f"restore: events[{index}]: "

@@ -98,6 +98,19 @@ class Settings:
                 for key in settings:
                     self._instance.forget_set(node, key)
 
+    def carry(self, config: Mapping[str, Any]) -> None:
+        """Give a rebuilt environment the configuration of the one it replaces (:meth:`state`).
+
+        It goes through the environment's ``_configure``, as any configuration; it is neither
+        logged nor undone.
+        """
+        self._readers = None  # they read the replaced nodes
+        instance = self._instance
+        if instance.configures_itself:
+            instance.environment._configure(config)
+        else:
+            self.apply(config)
+
     def undo(self, answer: Answer) -> None:
         """Put back the settings a failed request changed (as they were before it)."""
         if answer.config_before is None:

@@ -20,24 +20,30 @@ from __future__ import annotations
 
 import copy
 import types
+from collections.abc import Mapping
 from enum import Enum
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
-from rlenv.node import _CAN_PROCESS, Node, ProcessMode
 from rlenv.signals import BoundSignal
+
+if TYPE_CHECKING:  # node.py imports this module: it knows nodes by their methods only
+    from rlenv.node import Node
 
 __all__ = ["copied_node", "duplicate_subtree"]
 
-N = TypeVar("N", bound=Node)
+N = TypeVar("N", bound="Node")
 
 _DUPLICATING = object()
 """In a memo, it marks the deep copy as a duplicate of a subtree."""
 _ATOMIC = frozenset({int, float, bool, str, bytes, complex, type(None)})
-_PAUSABLE = _CAN_PROCESS[ProcessMode.PAUSABLE]
 
 
-def duplicate_subtree(root: N) -> N:
+def duplicate_subtree(root: N, outside_a_tree: Mapping[str, Any]) -> N:
     """A copy of ``root`` and its subtree, outside any tree (see :meth:`Node.duplicate`).
+
+    Args:
+        root: the subtree's root.
+        outside_a_tree: the tree state of a node that never entered a tree, by attribute.
 
     Raises:
         ValueError: ``root`` was freed.
@@ -52,7 +58,7 @@ def duplicate_subtree(root: N) -> N:
     for node in originals:
         node._duplicate_resources(memo)
     for node, blank in zip(originals, copies, strict=True):
-        _copy_state(node, blank, memo)
+        _copy_state(node, blank, memo, outside_a_tree)
     copies[0]._parent = None
     for node, blank in zip(originals, copies, strict=True):
         if node._signals:
@@ -74,7 +80,8 @@ def copied_node(node: Node, memo: dict[int, Any]) -> Node:
     return node.duplicate()
 
 
-def _copy_state(node: Node, blank: Node, memo: dict[int, Any]) -> None:
+def _copy_state(node: Node, blank: Node, memo: dict[int, Any],
+                outside_a_tree: Mapping[str, Any]) -> None:
     kind = type(node)
     skipped = _SKIPPED.get(kind)
     if skipped is None:
@@ -98,17 +105,11 @@ def _copy_state(node: Node, blank: Node, memo: dict[int, Any]) -> None:
     state["_children_by_name"] = {name: memo[id(child)]
                                   for name, child in node._children_by_name.items()}
     state["_signals"] = {}
-    state.update(_OUTSIDE_A_TREE)
+    state.update(outside_a_tree)
 
 
 _SKIPPED: dict[type, frozenset[str]] = {}
 """Per class: the attributes a copy does not take from its original."""
-_OUTSIDE_A_TREE = {
-    "_tree": None, "_resolved_mode": ProcessMode.PAUSABLE, "_processes_when": _PAUSABLE,
-    "_is_ready": False, "_ready_requested": False, "_queued_for_deletion": False,
-    "_freed": False,
-}
-"""The tree state of a node that never entered a tree."""
 
 
 def _immutable(value: Any) -> bool:

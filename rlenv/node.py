@@ -30,10 +30,11 @@ from collections.abc import Callable, Iterator
 from enum import IntEnum
 from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
+from rlenv.duplication import copied_node, duplicate_subtree
+from rlenv.scene2d.views import View
 from rlenv.signals import Signal, SignalOwner
 
 if TYPE_CHECKING:
-    from rlenv.scene2d.views import View
     from rlenv.tree import SceneTree
 
 __all__ = [
@@ -329,17 +330,13 @@ class Node(SignalOwner):
         Raises:
             ValueError: the node was freed.
         """
-        from rlenv.duplication import duplicate_subtree
-
-        return duplicate_subtree(self)
+        return duplicate_subtree(self, _OUTSIDE_A_TREE)
 
     def __deepcopy__(self, memo: dict[int, Any]) -> Node:
         """``copy.deepcopy``: the :meth:`duplicate` of the node.
 
         Inside a duplicate, a node outside the duplicated subtree is kept, not copied.
         """
-        from rlenv.duplication import copied_node
-
         return copied_node(self, memo)
 
     @property
@@ -349,12 +346,7 @@ class Node(SignalOwner):
         Mounting points (Blueprints' placeholders): ``table.placeholders.named("leg*")
         .attach(leg)`` puts a copy of ``leg`` on every marker named like that.
         """
-        from rlenv.scene2d.marker2d import Marker2D
-        from rlenv.scene2d.views import View
-
-        return View([node for node in self.iter_subtree()
-                     if node is not self and isinstance(node, Marker2D)],
-                    f"{self._name}.placeholders")
+        return View([self], self._name).placeholders
 
     def _duplicate_resources(self, memo: dict[int, Any]) -> None:
         """Hook of :meth:`duplicate`: copies of what this node owns outside Python, into ``memo``.
@@ -729,6 +721,12 @@ _CAN_PROCESS = {
     ProcessMode.ALWAYS: (True, True),
     ProcessMode.DISABLED: (False, False),
 }
+_OUTSIDE_A_TREE = {
+    "_tree": None, "_resolved_mode": ProcessMode.PAUSABLE,
+    "_processes_when": _CAN_PROCESS[ProcessMode.PAUSABLE], "_is_ready": False,
+    "_ready_requested": False, "_queued_for_deletion": False, "_freed": False,
+}
+"""The tree state of a node that never entered a tree (a duplicate's)."""
 
 
 def check_initialised(node: Node) -> None:

@@ -6,13 +6,15 @@ import itertools
 import math
 import operator
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from rlenv.node import Node
-from rlenv.scene2d.node2d import Node2D
 from rlenv.scene2d.views import View
+
+if TYPE_CHECKING:  # node2d.py imports this module
+    from rlenv.node import Node
+    from rlenv.scene2d.node2d import Node2D
 
 __all__ = ["lattice"]
 

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 from pymunk import Vec2d
 
 from rlenv.node import Node, ProcessMode
+from rlenv.scene2d.lattice import lattice
 
 if TYPE_CHECKING:
     from rlenv.scene2d.views import View
@@ -140,8 +141,6 @@ class Node2D(Node):
             ValueError: offsets and counts do not match, a count is below 1, or the node has no
                 parent to put the copies under.
         """
-        from rlenv.scene2d.lattice import lattice
-
         return lattice(self, offsets, counts)
 
     # --- internals ----------------------------------------------------------------------------

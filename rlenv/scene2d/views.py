@@ -24,11 +24,10 @@ from __future__ import annotations
 
 import fnmatch
 from collections.abc import Callable, Iterable, Iterator
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from rlenv.node import Node
-from rlenv.scene2d.marker2d import Marker2D
-from rlenv.scene2d.physics import CollisionShape, Joint, PhysicsBody
+if TYPE_CHECKING:  # Node.placeholders is a View: this module knows nodes' classes by name
+    from rlenv.node import Node
 
 __all__ = ["View", "view"]
 
@@ -68,23 +67,23 @@ class View:
     @property
     def bodies(self) -> View:
         """The children of this view's nodes that are physics bodies."""
-        return self._typed("bodies", PhysicsBody)
+        return self._typed("bodies", _BODY)
 
     @property
     def shapes(self) -> View:
         """The children of this view's nodes that are collision shapes."""
-        return self._typed("shapes", CollisionShape)
+        return self._typed("shapes", _SHAPE)
 
     @property
     def joints(self) -> View:
         """The children of this view's nodes that are joints."""
-        return self._typed("joints", Joint)
+        return self._typed("joints", _JOINT)
 
     @property
     def placeholders(self) -> View:
         """The Marker2D nodes below the nodes of this view (their mounting points)."""
         return self._step("placeholders", (n for node in self._nodes for n in node.iter_subtree()
-                                           if n is not node and isinstance(n, Marker2D)))
+                                           if n is not node and _is_a(n, _MARKER)))
 
     def of_type(self, kind: type | tuple[type, ...]) -> View:
         """The nodes of this view that are instances of ``kind``."""
@@ -172,7 +171,7 @@ class View:
             TypeError: a node of the view is not a :class:`~rlenv.scene2d.marker2d.Marker2D`
                 (nothing was attached).
         """
-        strangers = [n for n in self._nodes if not isinstance(n, Marker2D)]
+        strangers = [n for n in self._nodes if not _is_a(n, _MARKER)]
         if strangers:
             raise TypeError(f"{strangers[0]!r} in {self!r} is not a Marker2D: attach puts "
                             "copies on markers only; nothing was attached")
@@ -184,9 +183,29 @@ class View:
     def _step(self, step: str, nodes: Iterable[Node]) -> View:
         return View(_tree_order(nodes), f"{self._label}.{step}" if self._label else step)
 
-    def _typed(self, step: str, kind: type) -> View:
+    def _typed(self, step: str, kind: str) -> View:
         return self._step(step, (c for node in self._nodes for c in node.get_children()
-                                 if isinstance(c, kind)))
+                                 if _is_a(c, kind)))
+
+
+_BODY = "rlenv.scene2d.physics.body.PhysicsBody"
+_SHAPE = "rlenv.scene2d.physics.collision_shape.CollisionShape"
+_JOINT = "rlenv.scene2d.physics.joint.Joint"
+_MARKER = "rlenv.scene2d.marker2d.Marker2D"
+_KINDS: dict[type, frozenset[str]] = {}
+
+
+def _is_a(node: Any, kind: str) -> bool:
+    """Whether ``node`` is an instance of the class named ``kind`` (module and name).
+
+    As Godot's ``is_class``: by name, so that this module, which :class:`~rlenv.node.Node`
+    itself uses, imports none of the classes it asks about.
+    """
+    cls = node.__class__
+    names = _KINDS.get(cls)
+    if names is None:
+        names = _KINDS[cls] = frozenset(f"{k.__module__}.{k.__qualname__}" for k in cls.__mro__)
+    return kind in names
 
 
 def view(*nodes: Node) -> View:

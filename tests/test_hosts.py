@@ -202,7 +202,7 @@ class NamespacedServer:
         lifeline, self._lifeline = os.pipe()
         command = hosts.run(namespace, sys.executable, "-m", "rlenv", "serve", TARGET,
                             "--host", host, "--port", "0", "--lifeline", str(lifeline),
-                            *(["--token", token] if token is not None else []))
+                            *([f"--token={token}"] if token is not None else []))
         try:
             self.process = subprocess.Popen(
                 command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,

@@ -1,0 +1,100 @@
+"""What a new user hit next (issue 32, F): statistics, hints, a port in use, Ctrl-C, replays,
+addresses, a normal close taken for a failure.
+
+Stable-Baselines3's episode statistics are tested in ``test_sb3`` (they need the extra).
+"""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import Serve
+from gymnasium import spaces
+
+from examples.cartpole import TARGET
+from rlenv.protocol import Connection, Hello, Role
+from rlenv_client import Client, RemoteEnv
+from rlenv_client.replay import RecordEpisodes
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+# --- a recorded episode names its target ------------------------------------------------------
+
+
+def test_an_episode_recorded_from_a_remote_env_replays_with_no_target_given(
+        tmp_path: Path) -> None:
+    env = RecordEpisodes(RemoteEnv(TARGET, repeat_action=2), tmp_path)
+    try:
+        env.reset(seed=3)
+        terminated = truncated = False
+        while not (terminated or truncated):
+            _, _, terminated, truncated, _ = env.step(np.array([0.5], np.float32))
+    finally:
+        env.close()
+    result = subprocess.run([sys.executable, "-m", "rlenv", "replay",
+                             str(tmp_path / "episode-0001.rlenv")],
+                            capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert result.returncode == 0, result.stderr
+    assert "every observation identical" in result.stdout
+
+
+# --- one address or two arguments ----------------------------------------------------------------
+
+
+def test_a_client_takes_the_address_a_server_process_gives(serve: Serve) -> None:
+    server = serve()
+    with Client(server.address, timeout=10) as joined, \
+            Client(server.host, server.port, timeout=10) as split:
+        assert joined.address == split.address == server.address
+        assert joined.hello.environment == split.hello.environment
+
+
+@pytest.mark.parametrize(("address", "message"), [
+    ("127.0.0.1", "expected HOST:PORT, e.g. 127.0.0.1:5000, got '127.0.0.1'"),
+    ("127.0.0.1:http", "expected HOST:PORT, e.g. 127.0.0.1:5000, got '127.0.0.1:http'"),
+    (":5000", "expected HOST:PORT, e.g. 127.0.0.1:5000, got ':5000'"),
+    ("127.0.0.1:70000", "'127.0.0.1:70000' has no port: ports run from 1 to 65535"),
+    ("::1:5000", "expected HOST:PORT, got '::1:5000': an IPv6 host goes in brackets, as in "
+                 "[::1]:5000"),
+])
+def test_a_malformed_address_is_refused_before_connecting(address: str, message: str) -> None:
+    with pytest.raises(ValueError) as error:
+        Client(address)
+    assert str(error.value) == message
+
+
+def _ipv6_loopback() -> bool:
+    try:
+        with socket.create_server(("::1", 0), family=socket.AF_INET6):
+            return True
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not _ipv6_loopback(), reason="no IPv6 loopback here")
+def test_an_ipv6_address_in_brackets_reaches_the_server() -> None:
+    hello = Hello("Six", spaces.Discrete(2), spaces.Discrete(2))
+    with socket.create_server(("::1", 0), family=socket.AF_INET6) as listener:
+        address = f"[::1]:{listener.getsockname()[1]}"
+        listener.settimeout(10)
+
+        def say_hello() -> None:  # a server that greets once: rlenv serve binds IPv4 only
+            accepted, _ = listener.accept()
+            with accepted:
+                accepted.sendall(Connection(Role.SERVER).send(hello))
+                accepted.recv(1)  # until the client closes
+
+        greeter = threading.Thread(target=say_hello)
+        greeter.start()
+        try:
+            with Client(address, timeout=10, shared_memory=False) as client:
+                assert client.hello.environment == "Six" and client.address == address
+        finally:
+            greeter.join(10)

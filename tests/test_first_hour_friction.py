@@ -6,6 +6,7 @@ Stable-Baselines3's episode statistics are tested in ``test_sb3`` (they need the
 
 from __future__ import annotations
 
+import mmap
 import socket
 import subprocess
 import sys
@@ -19,6 +20,8 @@ from gymnasium import spaces
 
 from examples.cartpole import TARGET
 from rlenv.protocol import Connection, Hello, Role
+from rlenv.protocol.shared_memory import Layout, Slots
+from rlenv.transport.lanes import Lane, LaneClosed
 from rlenv_client import Client, RemoteEnv
 from rlenv_client.replay import RecordEpisodes
 
@@ -98,3 +101,26 @@ def test_an_ipv6_address_in_brackets_reaches_the_server() -> None:
                 assert client.hello.environment == "Six" and client.address == address
         finally:
             greeter.join(10)
+
+
+# --- a normal close is no failure -------------------------------------------------------------
+
+
+def test_a_lane_closed_with_rings_unread_is_a_close_not_a_failure() -> None:
+    hello = Hello("Test", spaces.Box(-1.0, 1.0, (1,), np.float32),
+                  spaces.Box(-1.0, 1.0, (1,), np.float32))
+    layout = Layout.for_hello(hello)
+    ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+    tcp_ours, tcp_theirs = socket.socketpair()
+    memory = mmap.mmap(-1, layout.size)
+    lane = Lane(memory, ours, Slots(memory, layout, hello), tcp_ours)
+    try:
+        lane.ring()  # the other end never reads this ring: its close then resets the lane
+        theirs.close()
+        with pytest.raises(LaneClosed) as closed:
+            lane.drain()
+        assert str(closed.value) == "the other end closed the shared-memory lane"
+    finally:
+        lane.close()
+        tcp_ours.close()
+        tcp_theirs.close()

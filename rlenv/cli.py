@@ -205,10 +205,11 @@ def _serve(args: argparse.Namespace) -> int:
                     record_dir=args.record_dir, real_time=args.real_time,
                     per_client=args.per_client)
     with server:
-        host, port = server.address
-        print(f"listening on {host}:{port}", flush=True)
-        inspector = _start_inspector(host, port, args.token) if args.inspect else None
-        try:
+        inspector = None
+        try:  # Ctrl-C once it listens (however soon) ends it with status 0
+            host, port = server.address
+            print(f"listening on {host}:{port}", flush=True)
+            inspector = _start_inspector(host, port, args.token) if args.inspect else None
             server.serve_forever()
         except KeyboardInterrupt:
             pass

@@ -7,6 +7,7 @@ Stable-Baselines3's episode statistics are tested in ``test_sb3`` (they need the
 from __future__ import annotations
 
 import mmap
+import signal
 import socket
 import subprocess
 import sys
@@ -124,3 +125,47 @@ def test_a_lane_closed_with_rings_unread_is_a_close_not_a_failure() -> None:
         lane.close()
         tcp_ours.close()
         tcp_theirs.close()
+
+
+# --- a port in use, and Ctrl-C as soon as it listens -------------------------------------------
+
+
+def _in_use_line(command: str, port: int) -> str:
+    return (f"{command}: port {port} is in use on 127.0.0.1 (by another server?): choose "
+            "another port, or 0 for a free one")
+
+
+@pytest.mark.parametrize("command", ["rlenv http", "rlenv.run"])
+def test_a_port_in_use_is_one_line_everywhere(command: str) -> None:
+    if command == "rlenv http":
+        pytest.importorskip("uvicorn")
+    with socket.create_server(("127.0.0.1", 0)) as taken:
+        port = taken.getsockname()[1]
+        args = ["-m", "rlenv", "http", TARGET, "--port", str(port)] if command == "rlenv http" \
+            else ["-m", "examples.pusher", str(port)]
+        result = subprocess.run([sys.executable, *args], capture_output=True, text=True,
+                                timeout=120, cwd=ROOT)
+    assert result.returncode == 2
+    assert result.stderr.splitlines() == [_in_use_line(command, port)]
+
+
+@pytest.mark.parametrize("args", [["-m", "rlenv", "serve", TARGET], ["-m", "examples.pusher", "0"]],
+                         ids=["rlenv serve", "rlenv.run"])
+def test_ctrl_c_as_soon_as_it_listens_exits_with_status_0(args: list[str]) -> None:
+    process = subprocess.Popen([sys.executable, *args], cwd=ROOT, stdin=subprocess.DEVNULL,
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        assert process.stdout is not None
+        seen = []
+        for line in process.stdout:  # the first line that says where it listens
+            seen.append(line)
+            if line.startswith("listening on "):
+                break
+        process.send_signal(signal.SIGINT)
+        rest = process.communicate(timeout=60)[0]
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+    assert process.returncode == 0, "".join(seen) + rest
+    assert "Traceback" not in rest

@@ -169,3 +169,22 @@ def test_ctrl_c_as_soon_as_it_listens_exits_with_status_0(args: list[str]) -> No
             process.communicate()
     assert process.returncode == 0, "".join(seen) + rest
     assert "Traceback" not in rest
+
+
+# --- MODULE:CLASS: a file path, a near miss ---------------------------------------------------
+
+
+@pytest.mark.parametrize(("target", "line"), [
+    ("examples/cartpole.py:CartPoleEnvironment",
+     "rlenv serve: 'examples/cartpole.py:CartPoleEnvironment' names a file; MODULE:CLASS names a "
+     "module as Python imports it: drop .py (examples.cartpole:CartPoleEnvironment)"),
+    ("examples.cartpole:CartpoleEnvironment",
+     "rlenv serve: module 'examples.cartpole' has no attribute 'CartpoleEnvironment': did you "
+     "mean CartPoleEnvironment?"),
+    ("examples.cartpole:Nope", "rlenv serve: module 'examples.cartpole' has no attribute 'Nope'"),
+], ids=["file path", "near miss", "nothing near"])
+def test_a_target_that_does_not_load_gets_the_hint_that_helps(target: str, line: str) -> None:
+    result = subprocess.run([sys.executable, "-m", "rlenv", "serve", target], capture_output=True,
+                            text=True, timeout=120, cwd=ROOT)
+    assert result.returncode == 2
+    assert result.stderr.splitlines() == [line]

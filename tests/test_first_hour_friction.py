@@ -188,3 +188,25 @@ def test_a_target_that_does_not_load_gets_the_hint_that_helps(target: str, line:
                             text=True, timeout=120, cwd=ROOT)
     assert result.returncode == 2
     assert result.stderr.splitlines() == [line]
+
+
+# --- what the HTTP gateway takes as an action ---------------------------------------------------
+
+
+def test_the_gateway_takes_a_discrete_action_as_an_integer_as_docs_http_says() -> None:
+    pytest.importorskip("uvicorn")
+    from http_gateway import Gateway, assert_problem
+
+    docs = (ROOT / "docs" / "http.md").read_text()
+    assert "actions are always lists" not in docs
+    assert "a Discrete action an integer (`1`, not `[1]`" in docs
+    gateway = Gateway("examples.classic_cartpole:ClassicCartPoleEnvironment")
+    try:
+        session = gateway.session()
+        gateway.post(f"/v1/envs/{session}/reset", {"seed": 0})
+        assert gateway.post(f"/v1/envs/{session}/step", {"action": 1})["info"]["frames"] >= 1
+        refused = gateway.request("POST", f"/v1/envs/{session}/step", {"action": [1]})
+        problem = assert_problem(refused, 422, "invalid_action")
+        assert "action must be an integer, got list" in problem["detail"]
+    finally:
+        gateway.close()

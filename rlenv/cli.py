@@ -14,6 +14,7 @@ from types import FrameType
 
 from rlenv.protocol.errors import RlenvError
 from rlenv.serving.endpoint import DEFAULT_HOST, Limits
+from rlenv.serving.target_hints import explain_target_error
 
 __all__ = ["main", "serve_command"]
 
@@ -160,15 +161,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
     except Exception as error:  # one clear line; the traceback with --log-level DEBUG
         logger.debug("rlenv %s failed", args.command, exc_info=error)
-        print(f"rlenv {args.command}: {_in_words(error)}", file=sys.stderr)
+        print(f"rlenv {args.command}: {_in_words(error, getattr(args, 'target', None))}",
+              file=sys.stderr)
         return 2
 
 
-def _in_words(error: Exception) -> str:
+def _in_words(error: Exception, target: str | None) -> str:
     """What went wrong, for a person: the message first (with a hint where one helps)."""
-    if isinstance(error, ModuleNotFoundError):
-        return (f"{error}: run rlenv from the folder that holds the module, or put that folder "
-                "on PYTHONPATH")
+    explained = explain_target_error(error, target) if target is not None else None
+    if explained is not None:
+        return explained
     if isinstance(error, OSError | ValueError | ImportError | RuntimeError | RlenvError) and \
             str(error):
         return str(error)
@@ -205,10 +207,11 @@ def _serve(args: argparse.Namespace) -> int:
                     record_dir=args.record_dir, real_time=args.real_time,
                     per_client=args.per_client)
     with server:
-        host, port = server.address
-        print(f"listening on {host}:{port}", flush=True)
-        inspector = _start_inspector(host, port, args.token) if args.inspect else None
-        try:
+        inspector = None
+        try:  # Ctrl-C once it listens (however soon) ends it with status 0
+            host, port = server.address
+            print(f"listening on {host}:{port}", flush=True)
+            inspector = _start_inspector(host, port, args.token) if args.inspect else None
             server.serve_forever()
         except KeyboardInterrupt:
             pass

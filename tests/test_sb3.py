@@ -60,3 +60,46 @@ def test_ppo_learns_cartpole_through_gymnasium_make() -> None:
     finally:
         envs.close()
     assert after > max(4 * before, 400), (before, after)
+
+
+def _episodes(envs: SB3VecEnv | VecMonitor, steps: int) -> list[tuple[dict, float, int]]:
+    """Each finished episode's ``info["episode"]``, with its return and length counted here."""
+    returns, lengths = np.zeros(envs.num_envs), np.zeros(envs.num_envs, int)
+    finished = []
+    envs.seed(1)
+    envs.reset()
+    for _ in range(steps):
+        _, rewards, dones, infos = envs.step(np.ones((envs.num_envs, 1), np.float32))
+        returns += rewards
+        lengths += 1
+        for index in np.flatnonzero(dones):
+            finished.append((infos[index]["episode"], returns[index], lengths[index]))
+            returns[index], lengths[index] = 0, 0
+    return finished
+
+
+def test_sb3_vec_env_fills_episode_statistics_as_monitor_does() -> None:
+    envs = SB3VecEnv(2, TARGET, max_episode_steps=5, in_process=True)
+    try:
+        finished = _episodes(envs, 12)
+        assert len(finished) >= 4
+        for episode, episode_return, length in finished:
+            assert set(episode) == {"r", "l", "t"} and episode["t"] >= 0
+            assert episode["l"] == length and episode["r"] == pytest.approx(episode_return)
+        monitored = _episodes(VecMonitor(envs), 12)  # wrapped anyway: the same figures, once
+        assert [(e["l"], pytest.approx(e["r"])) for e, _, _ in monitored] == \
+            [(e["l"], e["r"]) for e, _, _ in finished]
+    finally:
+        envs.close()
+
+
+def test_ppo_logs_episode_returns_without_vec_monitor() -> None:
+    envs = SB3VecEnv(2, TARGET, max_episode_steps=20, in_process=True)
+    try:
+        model = PPO("MlpPolicy", envs, seed=0, n_steps=64, batch_size=64, n_epochs=1,
+                    verbose=0)
+        model.learn(total_timesteps=128)
+        assert len(model.ep_info_buffer) >= 6  # what ep_rew_mean and ep_len_mean average
+        assert all(info["l"] <= 20 for info in model.ep_info_buffer)
+    finally:
+        envs.close()

@@ -15,8 +15,8 @@ import numpy as np
 from gymnasium.utils.env_checker import check_env
 
 from rlenv.protocol.errors import ErrorCode, RemoteError
+from rlenv_client.addresses import parse_address
 from rlenv_client.env import RemoteEnv
-from rlenv_client.session import parse_address
 
 __all__ = ["CheckResult", "run_checks"]
 

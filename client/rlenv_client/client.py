@@ -48,6 +48,7 @@ from rlenv.protocol.errors import (
 from rlenv.protocol.shared_memory import STEP, STEPS, lane_unavailable
 from rlenv.transport.lanes import Lane, LaneClosed, accept_lane, listen_for_lane, wait_for
 from rlenv.transport.sockets import AnswerWaiter, configure_socket, is_loopback, readable_now
+from rlenv_client.addresses import format_address, parse_address
 from rlenv_client.base import AGENT_ONLY, BaseClient, StepResult
 
 __all__ = ["Client", "StepResult"]
@@ -61,8 +62,12 @@ _LANES_SINCE = (2, 3)
 class Client(BaseClient):
     """A connection to one environment server.
 
+    ``Client("127.0.0.1", 5000)`` and ``Client("127.0.0.1:5000")`` (what
+    :attr:`ServerProcess.address <rlenv_client.launcher.ServerProcess.address>` gives) are the
+    same; an IPv6 host goes in brackets in the latter: ``Client("[::1]:5000")``.
+
     Args:
-        host: the server's address.
+        host: the server's host, or ``HOST:PORT`` when ``port`` is not given.
         port: the server's port.
         timeout: seconds to wait for connecting and for each answer.
         world_data: also ask for the world's data on reset and step; it is returned as
@@ -81,16 +86,18 @@ class Client(BaseClient):
             lane asked for with ``shared_memory=True`` (``bad_request``, saying why).
         ProtocolVersionError: the server speaks another major protocol version.
         ValueError: ``shared_memory=True``, but no lane is possible here (the message says
-            why).
+            why); or, without ``port``, ``host`` is not ``HOST:PORT``.
         OSError: ``shared_memory=True``, but this process cannot listen on a Unix socket.
     """
 
     def __init__(
-        self, host: str = "127.0.0.1", port: int = 0, *, timeout: float = 30.0,
+        self, host: str, port: int | None = None, *, timeout: float = 30.0,
         world_data: bool = False, token: str | None = None, shared_memory: bool | None = None,
     ) -> None:
+        if port is None:
+            host, port = parse_address(host)
         super().__init__(world_data=world_data)
-        self.address = f"{host}:{port}"
+        self.address = format_address(host, port)
         self.timeout = timeout
         self._closed_because = ""  # what closed the connection, when it was no error of its own
         self._waiter = AnswerWaiter()

@@ -67,6 +67,10 @@ class RemoteEnv(gymnasium.Env):
             start a server of its own. Either way the environment is this one's alone; the
             inspector always gets a server of its own.
 
+    Attributes:
+        target: the ``MODULE:CLASS`` it serves (what :class:`~rlenv_client.replay.RecordEpisodes`
+            records), or ``None`` when reached at an ``address``.
+
     Raises:
         ServerStartError: the server could not start (its output is in the message).
         RuntimeError: ``render_mode="human"`` without a display.
@@ -91,6 +95,7 @@ class RemoteEnv(gymnasium.Env):
         if render_mode == "human" and not display_available():
             raise RuntimeError("render_mode='human' needs a display, and none is available "
                                "(DISPLAY is not set); use render_mode='rgb_array' instead")
+        self.target = target
         self.session = Session(target, address=address, in_process=in_process,
                                max_restarts=max_restarts, timeout=timeout,
                                server_args=server_args, token=token,

@@ -23,6 +23,7 @@ import weakref
 from collections.abc import Iterable, Mapping, Sequence
 
 from rlenv.protocol.errors import ConnectionLost, RlenvError
+from rlenv_client.addresses import format_address
 
 __all__ = ["ServerProcess", "ServerStartError", "with_server_story"]
 
@@ -106,8 +107,8 @@ class ServerProcess:
 
     @property
     def address(self) -> str:
-        """``host:port`` of the server."""
-        return f"{self.host}:{self.port}"
+        """``HOST:PORT`` of the server (``[HOST]:PORT`` for IPv6), as ``Client`` takes it."""
+        return format_address(self.host, self.port)
 
     @property
     def output(self) -> str:

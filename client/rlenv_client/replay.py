@@ -93,9 +93,9 @@ class RecordEpisodes(gymnasium.Wrapper):
         self._observations.append(digest(observation))
         if terminated or truncated:
             self.episodes += 1
-            client: BaseClient = self.env.unwrapped.client  # type: ignore[attr-defined]
-            target = self.env.unwrapped.spec.kwargs.get("target") \
-                if self.env.unwrapped.spec else None  # type: ignore[union-attr]
+            remote = self.env.unwrapped
+            client: BaseClient = remote.client  # type: ignore[attr-defined]
+            target: str | None = remote.target  # type: ignore[attr-defined]
             EpisodeFile(target, client.snapshot(), self._observations).save(
                 self.directory / f"episode-{self.episodes:04d}.rlenv")
         return observation, reward, terminated, truncated, info

@@ -5,6 +5,10 @@ round trip per environment per step. :class:`SB3VecEnv` instead sends every sub-
 request at once and waits once, and uses ``SAME_STEP`` autoreset, which is SB3's convention (the
 observation returned for a finished environment is the first of its next episode; the last one
 is in ``info["terminal_observation"]``, and ``info["TimeLimit.truncated"]`` tells truncation).
+Each finished episode's statistics are in ``info["episode"]`` (``r``: return, ``l``: length,
+``t``: seconds since the vector was made), as SB3's ``Monitor`` gives them, so that
+``ep_rew_mean`` is logged without a ``VecMonitor`` (wrapping it in one anyway overwrites
+them with the same figures).
 
 Needs the optional extra: ``pip install 'rlenv[sb3]'`` (on a machine without CUDA, install a CPU
 build of torch first).
@@ -12,6 +16,7 @@ build of torch first).
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 from typing import Any
 
@@ -65,12 +70,17 @@ class SB3VecEnv(VecEnv):
                          self.venv.single_action_space)
         self.render_mode = render_mode
         self._actions: np.ndarray | None = None
+        self._started = time.time()
+        self._episode_returns = np.zeros(self.num_envs, np.float64)
+        self._episode_lengths = np.zeros(self.num_envs, np.int64)
 
     def reset(self) -> VecEnvObs:
         """Reset every environment, with the seeds given to SB3's ``VecEnv.seed()`` if any."""
         seeds = self._seeds if any(seed is not None for seed in self._seeds) else None
         observations, infos = self.venv.reset(seed=seeds, options=self._options[0] or None)
         self.reset_infos = _split_infos(infos, self.num_envs)
+        self._episode_returns[:] = 0
+        self._episode_lengths[:] = 0
         self._reset_seeds()
         self._reset_options()
         return observations
@@ -84,10 +94,13 @@ class SB3VecEnv(VecEnv):
 
         A finished environment's info is that of its episode's last step (with
         ``server_restarted`` or ``interrupted`` when that is how it ended), as SB3's own
-        vectors give it.
+        vectors give it, and its statistics in ``info["episode"]``, as SB3's ``Monitor``
+        gives them.
         """
         observations, rewards, terminated, truncated, infos = self.venv.step(self._actions)
         dones = terminated | truncated
+        self._episode_returns += rewards
+        self._episode_lengths += 1
         per_env = _split_infos(infos, self.num_envs)
         final = _split_infos(infos.get("final_info", {}), self.num_envs)
         for index in np.flatnonzero(dones):
@@ -95,6 +108,12 @@ class SB3VecEnv(VecEnv):
             per_env[index]["terminal_observation"] = infos["final_obs"][index]
             per_env[index]["TimeLimit.truncated"] = bool(truncated[index] and
                                                          not terminated[index])
+            per_env[index]["episode"] = {
+                "r": round(float(self._episode_returns[index]), 6),
+                "l": int(self._episode_lengths[index]),
+                "t": round(time.time() - self._started, 6)}
+            self._episode_returns[index] = 0
+            self._episode_lengths[index] = 0
         return observations, rewards.astype(np.float32), dones, per_env
 
     def close(self) -> None:

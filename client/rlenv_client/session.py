@@ -15,12 +15,13 @@ from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
 from rlenv.protocol.errors import ConnectionLost, RequestTimeout
+from rlenv_client.addresses import parse_address
 from rlenv_client.base import BaseClient
 from rlenv_client.client import Client
 from rlenv_client.launcher import ServerProcess, with_server_story
 from rlenv_client.sharing import shared_servers
 
-__all__ = ["LOST", "ServerLost", "ServerSource", "Session", "as_lost", "connect", "parse_address"]
+__all__ = ["LOST", "ServerLost", "ServerSource", "Session", "as_lost", "connect"]
 
 logger = logging.getLogger(__name__)
 
@@ -51,18 +52,6 @@ class ServerSource(Protocol):
 
     def describe(self, index: int) -> str:
         """Which server ``index`` is, and where, for error messages."""
-
-
-def parse_address(address: str) -> tuple[str, int]:
-    """Split ``"host:port"``.
-
-    Raises:
-        ValueError: ``address`` is not of that form.
-    """
-    host, _, port = address.rpartition(":")
-    if not host or not port.isdigit():
-        raise ValueError(f"expected an address of the form HOST:PORT, got {address!r}")
-    return host, int(port)
 
 
 def connect(

@@ -40,6 +40,7 @@ from rlenv.http.streams import stream_endpoints
 from rlenv.http.targets import Catalog
 from rlenv.http.writes import one_write_protocol
 from rlenv.protocol import PROTOCOL_VERSION, Hello
+from rlenv.serving.access import bind_error
 from rlenv.serving.endpoint import DEFAULT_HOST, InsecureBindError
 from rlenv.transport.sockets import is_loopback
 from rlenv_client.origins import OriginPolicy, host_names
@@ -266,6 +267,7 @@ def serve(settings: Settings, *, ready: Callable[[str], None] | None = None,
 
     Raises:
         InsecureBindError: a host beyond loopback without a token.
+        OSError: the address cannot be bound (the port is in use, say), said in words.
         Exception: the TARGET cannot be served (checked before listening).
     """
     if settings.token is None and not is_loopback(settings.host):
@@ -304,6 +306,9 @@ def _listen(family: socket.AddressFamily, host: str, port: int) -> socket.socket
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         sock.bind((host, port))
         sock.listen(128)
+    except OSError as error:
+        sock.close()
+        raise bind_error(error, host, port) from None
     except BaseException:
         sock.close()
         raise

@@ -8,8 +8,10 @@ actions and the communication node polls in its ``_process`` (process mode ``ALW
 until a request comes (in lockstep) or the next tick is due (in real time); each request is
 served in a deferred call, outside the processing pass, so that ``_reset`` may build nodes.
 
-SIGINT or SIGTERM ends the loop: the socket is closed and :func:`run` returns, so a script that
-ends with it exits with status 0.
+SIGINT or SIGTERM ends the loop, or the start (once the tree is being built): the socket is
+closed and :func:`run` returns, so a script that ends with it exits with status 0. An address
+that cannot be bound (a port in use, say) ends the script with status 2 and one line on
+standard error, as ``rlenv serve`` says it.
 """
 
 from __future__ import annotations
@@ -17,11 +19,13 @@ from __future__ import annotations
 import logging
 import os
 import signal
+import sys
 from collections.abc import Callable
 from types import FrameType
 from typing import TYPE_CHECKING
 
 from rlenv.protocol import Request
+from rlenv.serving.access import InsecureBindError
 from rlenv.serving.endpoint import Endpoint, Limits, Peer
 from rlenv.serving.host import Host
 
@@ -48,11 +52,16 @@ class SelfHosting:
     def __init__(self, token: str | None, limits: Limits) -> None:
         self.endpoint = Endpoint(None, limits, token)
         self.host: Host | None = None  # set once the environment's tree is built
+        self.refused: Exception | None = None  # why binding failed, if it did
         self._serving = False
 
     def listen(self, port: int, host: str) -> tuple[str, int]:
         """Bind ``host:port`` (what ``communication.start_server`` does here)."""
-        return self.endpoint.start_server(port, host)
+        try:
+            return self.endpoint.start_server(port, host)
+        except (OSError, InsecureBindError) as error:
+            self.refused = error
+            raise
 
     def poll(self) -> None:
         """Wait for the next request and serve it after the current processing pass.
@@ -85,7 +94,8 @@ def run(environment: RLEnvironment | type[RLEnvironment]) -> None:
 
     Raises:
         RuntimeError: the environment's ``_ready`` did not call ``start_server``.
-        OSError: the address cannot be bound (a port in use, say).
+        SystemExit: status 2, the address cannot be bound (a port in use, say); why is said in
+            one line on standard error.
     """
     if not logging.getLogger().handlers:
         logging.basicConfig(level=logging.INFO, format="%(message)s")
@@ -94,8 +104,25 @@ def run(environment: RLEnvironment | type[RLEnvironment]) -> None:
     hosting = SelfHosting(os.environ.get("RLENV_TOKEN"), Limits())
     communication = environment.communication
     communication.host_itself(hosting)
+    try:
+        _until_stopped(lambda: _serve(environment, hosting))
+    except (OSError, InsecureBindError) as error:
+        if error is not hosting.refused:
+            raise
+        logger.debug("rlenv.run could not listen", exc_info=error)
+        print(f"rlenv.run: {error}", file=sys.stderr)
+        raise SystemExit(2) from None
+    finally:
+        hosting.endpoint.close()
+        if hosting.refused is None:
+            logger.info("stopped")
+
+
+def _serve(environment: RLEnvironment, hosting: SelfHosting) -> None:
+    """Build the environment's tree (its ``_ready`` binds) and run its main loop."""
     host = Host(environment)
     try:
+        communication = environment.communication
         if communication.address is None:
             raise RuntimeError(f"{type(environment).__name__}._ready did not call "
                                "self.communication.start_server(port, host): rlenv.run needs "
@@ -104,21 +131,19 @@ def run(environment: RLEnvironment | type[RLEnvironment]) -> None:
         hosting.host = host
         tree = host.instances[0].tree
         tree.root.add_child(communication)
-        _serve_until_stopped(tree.run)
+        tree.run()
     finally:
-        hosting.endpoint.close()
         host.close()
-        logger.info("stopped")
 
 
-def _serve_until_stopped(loop: Callable[[], None]) -> None:
-    """Run ``loop()`` until SIGINT or SIGTERM (then return)."""
+def _until_stopped(work: Callable[[], None]) -> None:
+    """Run ``work()`` until it returns, or until SIGINT or SIGTERM (then return)."""
     def stop(signum: int, frame: FrameType | None) -> None:
         raise _Stopped
 
     previous = signal.signal(signal.SIGTERM, stop)
     try:
-        loop()
+        work()
     except (KeyboardInterrupt, _Stopped):
         pass
     finally:

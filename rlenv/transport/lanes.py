@@ -100,6 +100,8 @@ class Lane:
                 raise LaneClosed("the other end closed the shared-memory lane")
         except (BlockingIOError, InterruptedError):
             pass
+        except ConnectionResetError:  # it closed with rings unread: a close all the same
+            raise LaneClosed("the other end closed the shared-memory lane") from None
         except OSError as error:
             raise LaneClosed(f"the shared-memory lane failed: {error}") from None
 

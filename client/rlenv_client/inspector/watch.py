@@ -23,8 +23,9 @@ from gymnasium import spaces
 
 from rlenv.protocol import ErrorReply, Request, Response
 from rlenv.protocol.errors import RemoteError
+from rlenv_client.addresses import parse_address
 from rlenv_client.client import Client
-from rlenv_client.session import LOST, parse_address
+from rlenv_client.session import LOST
 
 __all__ = ["InspectorError", "Watcher", "to_json"]
 

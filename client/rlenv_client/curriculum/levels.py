@@ -1,9 +1,10 @@
 """What a level is to a curriculum: plain data, checked, copied and made hashable.
 
-A level is an int seed or a packed scene's data (:meth:`rlenv.scene2d.PackedScene.to_data`):
-maps with str keys, lists, numbers, strings, bytes, booleans and nil. A level is kept as a copy
-(tuples as lists, numpy scalars as Python numbers), so that msgpack and json carry it as it is
-and the caller may reuse the object it passed.
+A level is an int seed or a packed scene's data
+(:meth:`rlenv.scene2d.packed_scene.PackedScene.to_data`): maps with str keys, lists, numbers,
+strings, bytes, booleans and nil. A level is kept as a copy (tuples as lists, numpy scalars as
+Python numbers), so that msgpack and json carry it as it is and the caller may reuse the object
+it passed.
 """
 
 from __future__ import annotations

@@ -195,6 +195,21 @@ def test_a_seed_fixes_the_decisions_and_levels() -> None:
     assert _episodes(_sampler(4), 200, 0) != first
 
 
+def test_robust_is_a_flag_for_the_caller_and_changes_no_draw() -> None:
+    robust = LevelSampler(8, replay_prob=0.6, minimum_fill_ratio=0.5, robust=True, seed=3)
+    assert robust.robust and not _sampler(3).robust
+    assert _episodes(robust, 100, 0) == _episodes(_sampler(3), 100, 0)
+
+
+def test_a_refused_state_leaves_the_sampler_as_it_was() -> None:
+    sampler = _filled([1.0, 2.0])
+    state = sampler.state_dict()
+    broken = {**state, "levels": [*state["levels"][:1], {**state["levels"][1], "score": "x"}]}
+    with pytest.raises(ValueError, match="score"):
+        sampler.load_state_dict(broken)
+    assert sampler.state_dict() == state
+
+
 @pytest.mark.parametrize("codec", ["msgpack", "json"])
 def test_a_restored_sampler_continues_bit_for_bit(codec: str) -> None:
     original = _sampler(11)

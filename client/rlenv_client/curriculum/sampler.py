@@ -212,14 +212,15 @@ class LevelSampler:
         if len(entries) > self.capacity:
             raise ValueError(f"state holds {len(entries)} levels, more than this sampler's "
                              f"capacity ({self.capacity})")
+        levels = [(int(entry["id"]), level_copy(entry["level"]), _score(entry["score"]),
+                   int(entry["timestamp"])) for entry in entries]
+        self._rng.bit_generator.state = _generator_state_from(state["rng"])
         self._clear()
-        for slot, entry in enumerate(entries):
-            self._place(slot, int(entry["id"]), level_copy(entry["level"]),
-                        _score(entry["score"]))
-            self._timestamps[slot] = int(entry["timestamp"])
+        for slot, (level_id, data, score, timestamp) in enumerate(levels):
+            self._place(slot, level_id, data, score)
+            self._timestamps[slot] = timestamp
         self._episode_count = int(state["episode_count"])
         self._next_id = int(state["next_id"])
-        self._rng.bit_generator.state = _generator_state_from(state["rng"])
 
     def _clear(self) -> None:
         self._ids = np.full(self.capacity, -1, dtype=np.int64)

@@ -69,6 +69,8 @@ EXPECTED = {
     "rlenv_client.sb3.SB3VecEnv": [],
     "rlenv_client.pettingzoo.RemoteParallelEnv": [],
     "rlenv_client.replay.RecordEpisodes": [],
+    "rlenv_client.curriculum.sampler.LevelSampler": ["staleness", "robust"],
+    "rlenv_client.curriculum.scores.learnability": ["p * (1 - p)"],
     "rlenv_client.compliance.check_server": [],
 }
 

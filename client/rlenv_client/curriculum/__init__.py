@@ -1,0 +1,20 @@
+"""Curricula over procedural levels: which level a trainer plays next.
+
+- :mod:`~rlenv_client.curriculum.sampler`: :class:`LevelSampler`, prioritized level replay
+  (PLR, Robust PLR, ACCEL) over a buffer of scored levels;
+- :mod:`~rlenv_client.curriculum.scores`: the scores it ranks by (:func:`positive_value_loss`,
+  :func:`max_mc`, :func:`learnability`);
+- :mod:`~rlenv_client.curriculum.levels`: what a level is (an int seed or plain data).
+
+numpy only, and no trainer: every call takes and returns plain values.
+"""
+
+from rlenv_client.curriculum.levels import Level as Level
+from rlenv_client.curriculum.sampler import PRIORITIZATIONS as PRIORITIZATIONS
+from rlenv_client.curriculum.sampler import LevelSampler as LevelSampler
+from rlenv_client.curriculum.scores import learnability as learnability
+from rlenv_client.curriculum.scores import max_mc as max_mc
+from rlenv_client.curriculum.scores import positive_value_loss as positive_value_loss
+
+__all__ = ["PRIORITIZATIONS", "Level", "LevelSampler", "learnability", "max_mc",
+           "positive_value_loss"]

@@ -273,12 +273,12 @@ class EnvironmentParameters:
                     behavior: str | None = None) -> bool:
         """Count a finished episode and move on the curricula whose lesson is complete.
 
-        As ML-Agents: each behavior keeps the rewards of its last episodes (as many as the
-        largest ``min_lesson_length`` of its criteria); a lesson is complete once it saw at
-        least ``min_lesson_length`` episodes and its measure is above ``threshold``:
-        ``progress`` itself for ``measure: progress``; for ``measure: reward`` the mean of those
-        rewards, smoothed when ``signal_smoothing`` is on (``0.25 * previous + 0.75 * mean``,
-        the previous smoothed value of the parameter starting at 0). Any change of lesson
+        As ML-Agents documents it: a lesson is complete once its behavior finished at least
+        ``min_lesson_length`` episodes in it and its measure is above ``threshold``:
+        ``progress`` itself for ``measure: progress``; for ``measure: reward`` the mean reward
+        of the last ``min_lesson_length`` episodes (at least the last one), smoothed when
+        ``signal_smoothing`` is on (``0.25 * previous + 0.75 * mean``, the parameter's previous
+        smoothed value starting at 0). Any change of lesson
         empties every behavior's rewards, so the next lesson counts its own episodes.
 
         Args:
@@ -352,7 +352,11 @@ class EnvironmentParameters:
 
     def _complete(self, parameter: _Parameter, criteria: _Criteria,
                   progress: float | None) -> bool:
-        """ML-Agents' ``CompletionCriteriaSettings.need_increment``, smoothing kept here."""
+        """ML-Agents' ``CompletionCriteriaSettings.need_increment``, smoothing kept here.
+
+        Its buffer holds as many rewards as the largest ``min_lesson_length`` of the behavior's
+        criteria; the mean is over this lesson's own ``min_lesson_length``, as documented.
+        """
         rewards = self._rewards[criteria.behavior]
         if len(rewards) < criteria.min_lesson_length:
             return False
@@ -360,7 +364,8 @@ class EnvironmentParameters:
             return progress is not None and progress > criteria.threshold
         if not rewards:
             return False
-        measure = float(np.mean(rewards))
+        window = max(1, criteria.min_lesson_length)
+        measure = float(np.mean(list(rewards)[-window:]))
         if criteria.signal_smoothing:
             measure = parameter.smoothed = 0.25 * parameter.smoothed + 0.75 * measure
         return measure > criteria.threshold
@@ -603,7 +608,7 @@ def _number(data: Mapping[str, Any], key: str, where: str) -> float:
 
 
 def _finite(value: Any, what: str) -> float:
-    if not _is_number(value) and not isinstance(value, np.floating | np.integer):
+    if isinstance(value, bool) or not isinstance(value, int | float | np.floating | np.integer):
         raise ValueError(f"{what} must be a number, got {value!r:.40}")
     value = float(value)
     if not math.isfinite(value):

@@ -60,7 +60,7 @@ _MEASURES = ("reward", "progress")
 _CRITERIA_KEYS = {"measure", "behavior", "threshold", "min_lesson_length", "signal_smoothing",
                   "require_reset"}
 
-Draw = Callable[[np.random.Generator], float]
+_Draw = Callable[[np.random.Generator], float]
 
 
 class EnvironmentParametersError(ValueError):
@@ -88,7 +88,7 @@ class _Lesson:
     """A lesson: its name, how its value is drawn, and when it is complete (``None``: last)."""
 
     name: str
-    draw: Draw
+    draw: _Draw
     rng: np.random.Generator
     criteria: _Criteria | None
 
@@ -254,7 +254,7 @@ class EnvironmentParameters:
         return parameter.key
 
     def sample(self) -> dict[str, float]:
-        """Draw every parameter's value from its current lesson, for the next reset.
+        """_Draw every parameter's value from its current lesson, for the next reset.
 
         Returns:
             ``{configure key: value}``, e.g. ``{"world.difficulty": 0.37}``; pass it through
@@ -487,7 +487,7 @@ def _criteria(data: Any, where: str, behaviors: Mapping[str, Any] | None) -> _Cr
 
 
 def _sampler(value: Any, where: str, seed: np.random.SeedSequence
-             ) -> tuple[Draw, np.random.Generator]:
+             ) -> tuple[_Draw, np.random.Generator]:
     """A value as ML-Agents writes it: a number, or ``{sampler_type, sampler_parameters}``."""
     rng = np.random.default_rng(seed)
     if not isinstance(value, Mapping):
@@ -523,7 +523,7 @@ def _sampler(value: Any, where: str, seed: np.random.SeedSequence
     return build(parameters, where), rng
 
 
-def _uniform(parameters: Mapping[str, Any], where: str) -> Draw:
+def _uniform(parameters: Mapping[str, Any], where: str) -> _Draw:
     low, high = _number(parameters, "min_value", where), _number(parameters, "max_value", where)
     if low > high:
         raise EnvironmentParametersError(
@@ -531,14 +531,14 @@ def _uniform(parameters: Mapping[str, Any], where: str) -> Draw:
     return lambda rng: float(rng.uniform(low, high))
 
 
-def _gaussian(parameters: Mapping[str, Any], where: str) -> Draw:
+def _gaussian(parameters: Mapping[str, Any], where: str) -> _Draw:
     mean, deviation = _number(parameters, "mean", where), _number(parameters, "st_dev", where)
     if deviation < 0:
         raise EnvironmentParametersError(f"{where}.st_dev must be >= 0, got {deviation}")
     return lambda rng: float(rng.normal(mean, deviation))
 
 
-def _multirange(parameters: Mapping[str, Any], where: str) -> Draw:
+def _multirange(parameters: Mapping[str, Any], where: str) -> _Draw:
     intervals = parameters["intervals"]
     where = f"{where}.intervals"
     if not isinstance(intervals, list) or not intervals:
@@ -568,7 +568,7 @@ def _multirange(parameters: Mapping[str, Any], where: str) -> Draw:
     return draw
 
 
-def _constant(parameters: Mapping[str, Any], where: str) -> Draw:
+def _constant(parameters: Mapping[str, Any], where: str) -> _Draw:
     value = parameters["value"]
     if not _is_number(value):
         raise EnvironmentParametersError(f"{where}.value must be a finite number, got "
@@ -576,7 +576,7 @@ def _constant(parameters: Mapping[str, Any], where: str) -> Draw:
     return lambda rng: value
 
 
-_SAMPLERS: dict[str, tuple[tuple[str, ...], Callable[[Mapping[str, Any], str], Draw]]] = {
+_SAMPLERS: dict[str, tuple[tuple[str, ...], Callable[[Mapping[str, Any], str], _Draw]]] = {
     "uniform": (("min_value", "max_value"), _uniform),
     "gaussian": (("mean", "st_dev"), _gaussian),
     "multirangeuniform": (("intervals",), _multirange),

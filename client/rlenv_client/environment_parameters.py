@@ -254,7 +254,7 @@ class EnvironmentParameters:
         return parameter.key
 
     def sample(self) -> dict[str, float]:
-        """_Draw every parameter's value from its current lesson, for the next reset.
+        """Draw every parameter's value from its current lesson, for the next reset.
 
         Returns:
             ``{configure key: value}``, e.g. ``{"world.difficulty": 0.37}``; pass it through

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from rlenv_client import Client
-from rlenv_client.environment_parameters import (
+from rlenv_client.curriculum import (
     EnvironmentParameters,
     EnvironmentParametersError,
     configurable_keys,

@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-ray test-browser screenshot plinko-picture sb3 rllib cleanrl bench-http bench-train\
+.PHONY: demo test test-lowest test-ray test-browser screenshot plinko-picture sb3 rllib cleanrl bench-http bench-train\
 	docs lint vectors clean
 
 $(STAMP): pyproject.toml
@@ -109,6 +109,17 @@ bench-http: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e ".[http]"
 	$(BIN)/python benchmarks/http_step.py --implementations
 
+# The suite against the lowest versions pyproject.toml allows (.ci/lowest.txt), in .venv-lowest.
+LOWEST_VENV := .venv-lowest
+$(LOWEST_VENV)/.installed: pyproject.toml .ci/lowest.txt
+	$(PYTHON) -m venv $(LOWEST_VENV)
+	$(LOWEST_VENV)/bin/python -m pip install --quiet --upgrade pip
+	$(LOWEST_VENV)/bin/python -m pip install --quiet -c .ci/lowest.txt -e ".[test]"
+	touch $@
+
+test-lowest: $(LOWEST_VENV)/.installed
+	$(LOWEST_VENV)/bin/python -m pytest
+
 lint: $(STAMP)
 	$(BIN)/ruff check rlenv client examples tests benchmarks docs
 
@@ -117,4 +128,4 @@ vectors: $(STAMP)
 	$(BIN)/python -m tests.protocol_vectors
 
 clean:
-	rm -rf $(VENV) $(CLEANRL_VENV) build site *.egg-info
+	rm -rf $(VENV) $(CLEANRL_VENV) $(LOWEST_VENV) build site *.egg-info

@@ -10,6 +10,7 @@ the socket.
 from __future__ import annotations
 
 import os
+import select
 import socket
 import subprocess
 import sys
@@ -150,6 +151,49 @@ def test_an_isolated_environment_that_hangs_is_504() -> None:
         assert slow.get("/v1")["hosting"] == "isolated"
     finally:
         slow.close()
+
+
+def test_an_environment_stuck_in_a_pymunk_callback_is_504_in_time() -> None:
+    stuck = Gateway("examples.faulty:StuckEnvironment", "--timeout", "0.5")
+    try:
+        looping, sleeping, fine = stuck.session(), stuck.session(), stuck.session()
+        for session in (looping, sleeping, fine):
+            stuck.post(f"/v1/envs/{session}/reset", {"seed": 0})
+        for session, action in ((looping, 1), (sleeping, 2)):
+            started = time.monotonic()
+            answer = stuck.request("POST", f"/v1/envs/{session}/step", {"action": action})
+            assert_problem(answer, 504, "timeout")
+            assert time.monotonic() - started < 2.5  # the deadline, not the callback, decides
+            assert stuck.get(f"/v1/envs/{session}")["status"] == "timed_out"
+        assert stuck.post(f"/v1/envs/{fine}/step", {"action": 0})["observation"] == [1]
+    finally:
+        assert stuck.close() < 5  # SIGTERM ends it, and the stuck servers with it
+
+
+def test_a_slow_session_never_stalls_the_others() -> None:
+    gateway = Gateway("examples.faulty:StuckEnvironment", "--timeout", "2")
+    try:
+        slow, fast = gateway.session(), gateway.session()
+        for session in (slow, fast):
+            gateway.post(f"/v1/envs/{session}/reset", {"seed": 0})
+        body = b'{"action": 2}'  # sleeps 5 s in a collision callback: 504 after 2 s
+        pending = socket.create_connection((gateway.host, gateway.port), timeout=30)
+        try:
+            pending.sendall(f"POST /v1/envs/{slow}/step HTTP/1.1\r\nHost: {gateway.host}:"
+                            f"{gateway.port}\r\nContent-Length: {len(body)}\r\n"
+                            "Connection: close\r\n\r\n".encode() + body)
+            started = time.monotonic()
+            for tick in range(1, 21):
+                step = gateway.post(f"/v1/envs/{fast}/step", {"action": 0})
+                assert step["observation"] == [tick]
+            assert time.monotonic() - started < 1.5  # not 2 s behind the slow one
+            assert not select.select([pending], [], [], 0)[0]  # the slow one still runs
+            assert _read_all(pending).startswith(b"HTTP/1.1 504")
+        finally:
+            pending.close()
+        assert gateway.post(f"/v1/envs/{fast}/step", {"action": 0})["observation"] == [21]
+    finally:
+        gateway.close()
 
 
 def test_an_environment_whose_server_dies_is_502_and_the_others_go_on() -> None:

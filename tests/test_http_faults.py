@@ -279,6 +279,21 @@ def test_foreign_hosts_and_origins_are_403(gateway: Gateway) -> None:
                 origin="http://attacker.example").close()  # type: ignore[arg-type]
 
 
+def test_requests_a_page_of_another_origin_made_are_403() -> None:
+    bevy = Gateway(CARTPOLE)
+    try:
+        for site in ("cross-site", "same-site"):  # what an <img src> sends: no Origin
+            for path in ("/step?payload=%5B%7B%22action%22%3A%22%5B0.0%5D%22%7D%5D", "/reset",
+                         "/state", "/v1/envs"):
+                refused = bevy.request("GET", path, headers={"Sec-Fetch-Site": site})
+                assert "Sec-Fetch-Site" in assert_problem(refused, 403, "forbidden")["detail"]
+        assert bevy.get("/v1/envs")["envs"] == []  # nothing was created, nor stepped
+        for site in ("same-origin", "none"):  # the gateway's own pages; a typed URL
+            assert bevy.request("GET", "/state", headers={"Sec-Fetch-Site": site}).status == 200
+    finally:
+        bevy.close()
+
+
 def test_bodies_are_limited(gateway: Gateway) -> None:
     session = gateway.session()
     large = gateway.request("POST", f"/v1/envs/{session}/step", raw=b" " * 5000)

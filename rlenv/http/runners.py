@@ -23,6 +23,7 @@ its environment's process (see :mod:`rlenv.http.sessions`).
 from __future__ import annotations
 
 import asyncio
+import os
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar
@@ -70,6 +71,8 @@ class Runner:
             finally:
                 deadline.cancel()
                 loop.remove_reader(readable)
+                os.set_blocking(readable, True)  # uvloop made it non-blocking; the client
+                # reads with kernel timeouts (a non-blocking read it would take for one)
             if not answered:
                 raise self._late()
             return receive()

@@ -10,6 +10,7 @@ the socket.
 from __future__ import annotations
 
 import os
+import resource
 import select
 import socket
 import subprocess
@@ -324,6 +325,42 @@ def test_garbage_on_the_socket_never_stops_it(gateway: Gateway) -> None:
         finally:
             connection.close()
     assert gateway.get("/v1")["versions"] == ["v1"]
+
+
+def test_unfinished_request_heads_are_closed_in_time() -> None:
+    gateway = Gateway(CARTPOLE, "--head-timeout", "0.5")
+    try:
+        for start in (b"", b"GET /v1 HTTP/1.1\r\nHost: x"):  # nothing, or half a head
+            connection = socket.create_connection((gateway.host, gateway.port), timeout=30)
+            try:
+                connection.sendall(start)
+                started = time.monotonic()
+                assert _read_all(connection) == b""  # closed, without an answer
+                assert time.monotonic() - started < 3
+            finally:
+                connection.close()
+        assert gateway.get("/v1")["limits"]["head_timeout"] == 0.5
+    finally:
+        gateway.close()
+
+
+def test_unfinished_heads_never_keep_real_requests_out() -> None:
+    gateway = Gateway(CARTPOLE, "--max-connections", "16")
+    resource.prlimit(gateway.process.pid, resource.RLIMIT_NOFILE, (64, 64))
+    loris: list[socket.socket] = []
+    try:
+        for _ in range(80):  # more than the gateway can open files for
+            connection = socket.create_connection((gateway.host, gateway.port), timeout=30)
+            connection.sendall(b"GET /v1 HTTP/1.1\r\n")
+            loris.append(connection)
+        started = time.monotonic()
+        assert gateway.request("GET", "/v1", timeout=5).status == 200
+        assert gateway.post(f"/v1/envs/{gateway.session()}/reset")["observation"]
+        assert time.monotonic() - started < 5
+    finally:
+        for connection in loris:
+            connection.close()
+        gateway.close()
 
 
 def _read_all(connection: socket.socket) -> bytes:

@@ -30,6 +30,7 @@ from starlette.routing import BaseRoute, Route, WebSocketRoute
 from rlenv.http.bevy import bevy_endpoints
 from rlenv.http.endpoints import Answer, Endpoint, JSONRoute
 from rlenv.http.guard import Guard
+from rlenv.http.heads import bounded_protocol
 from rlenv.http.json_spaces import dumps
 from rlenv.http.openapi import openapi_document
 from rlenv.http.problems import COMMON_HEADERS, PROBLEMS, Problem
@@ -64,6 +65,9 @@ class Settings:
         max_body: the largest request body or WebSocket message, in bytes (then 413).
         idle_timeout: seconds after which a session without requests is closed (``None``:
             never).
+        head_timeout: seconds a connection has to complete a request head (then closed).
+        max_connections: connections open at once (beyond: the oldest waiting for its
+            request head is closed).
     """
 
     target: str | None = None
@@ -74,6 +78,8 @@ class Settings:
     max_sessions: int = 32
     max_body: int = 1 << 20
     idle_timeout: float | None = 600.0
+    head_timeout: float = 5.0
+    max_connections: int = 100
 
 
 class Gateway:
@@ -110,7 +116,9 @@ class Gateway:
                              "render": ["image/png", "application/octet-stream"],
                              "snapshots": True, "openapi": "/openapi.json"},
             "limits": {"max_sessions": settings.max_sessions, "max_body": settings.max_body,
-                       "timeout": settings.timeout, "idle_timeout": settings.idle_timeout},
+                       "timeout": settings.timeout, "idle_timeout": settings.idle_timeout,
+                       "head_timeout": settings.head_timeout,
+                       "max_connections": settings.max_connections},
             "token_required": settings.token is not None,
         }
 
@@ -274,7 +282,9 @@ def serve(settings: Settings, *, ready: Callable[[str], None] | None = None,
     settings = replace(settings, port=sock.getsockname()[1])
     app = create_app(settings, hello)
     config = uvicorn.Config(
-        app, loop=loop, http=one_write_protocol(http), lifespan="on", log_config=None,
+        app, loop=loop, lifespan="on",
+        http=bounded_protocol(one_write_protocol(http), head_timeout=settings.head_timeout,
+                              max_connections=settings.max_connections), log_config=None,
         access_log=False, proxy_headers=False, server_header=False, ws_max_size=settings.max_body,
         ws_per_message_deflate=False, timeout_keep_alive=15, timeout_graceful_shutdown=3)
     server = _Server(config, app.state.gateway)

@@ -9,8 +9,9 @@ configuration, one zero action over and over), in turns, each round in a rotated
   server); **tcp+lane**: the same client through a shared-memory lane (its default on one
   machine);
 - **http**: ``POST /v1/envs/{id}/step`` against ``rlenv http TARGET`` (each session's
-  environment in an ``rlenv serve`` subprocess of its own), from a minimal raw-socket HTTP/1.1 keep-alive client,
-  as a Go or Rust client would send it (``http.client`` alone adds 50-80 us per request);
+  environment in an ``rlenv serve`` subprocess of its own), from a minimal raw-socket
+  HTTP/1.1 keep-alive client, as a Go or Rust client would send it (``http.client`` alone
+  adds 50-80 us per request);
 - **ws**: the same gateway's ``WS /v1/envs/{id}/ws``, from a minimal raw-socket WebSocket client;
 - **relay**: ``POST .../step`` against ``rlenv http HOST:PORT``, a gateway relaying to a
   running ``rlenv serve`` over TCP;

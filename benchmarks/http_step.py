@@ -4,13 +4,17 @@
 http extra). On the same environment (CartPole, repeat_action 4, the bench's endless
 configuration, one zero action over and over), in turns, each round in a rotated order:
 
-- **tcp**: ``rlenv_client.Client.step`` against an ``rlenv serve`` subprocess (the baseline);
-- **http**: ``POST /v1/envs/{id}/step`` against ``rlenv http TARGET`` (environments hosted in
-  the gateway's process, the default), from a minimal raw-socket HTTP/1.1 keep-alive client,
-  as a Go or Rust client would send it (``http.client`` alone adds 50-80 us per request);
+- **tcp**: ``rlenv_client.Client.step`` against an ``rlenv serve`` subprocess, on the socket
+  (``shared_memory=False``: the baseline, and what the gateway does to reach a session's
+  server); **tcp+lane**: the same client through a shared-memory lane (its default on one
+  machine);
+- **http**: ``POST /v1/envs/{id}/step`` against ``rlenv http TARGET`` (each session's
+  environment in an ``rlenv serve`` subprocess of its own), from a minimal raw-socket
+  HTTP/1.1 keep-alive client, as a Go or Rust client would send it (``http.client`` alone
+  adds 50-80 us per request);
 - **ws**: the same gateway's ``WS /v1/envs/{id}/ws``, from a minimal raw-socket WebSocket client;
-- **relay**: ``POST .../step`` against ``rlenv http HOST:PORT``, a gateway relaying to another
-  ``rlenv serve`` subprocess over TCP (what ``--isolate`` does for each session);
+- **relay**: ``POST .../step`` against ``rlenv http HOST:PORT``, a gateway relaying to a
+  running ``rlenv serve`` over TCP;
 - with ``--implementations``, the in-process gateway on the other uvicorn implementations
   (the asyncio event loop instead of uvloop, h11 instead of httptools), to see what the
   optional ``httptools`` and ``uvloop`` buy.
@@ -169,14 +173,16 @@ def main() -> None:
 
     closing: list[Callable[[], None]] = []
     try:
-        server = ServerProcess(CARTPOLE)
-        closing.append(server.close)
-        tcp = Client(server.host, server.port, timeout=30)
-        closing.append(tcp.close)
-        tcp.configure(**ENDLESS)
-        tcp.reset(seed=0)
         action = np.zeros(1, np.float32)
-        variants: dict[str, Callable[[], object]] = {"tcp": lambda: tcp.step(action, 4)}
+        variants: dict[str, Callable[[], object]] = {}
+        for name, lane in (("tcp", False), ("tcp+lane", None)):
+            server = ServerProcess(CARTPOLE)
+            closing.append(server.close)
+            client = Client(server.host, server.port, timeout=30, shared_memory=lane)
+            closing.append(client.close)
+            client.configure(**ENDLESS)
+            client.reset(seed=0)
+            variants[name] = lambda client=client: client.step(action, 4)  # type: ignore[misc]
 
         def http_variant(name: str, gateway: Gateway) -> str:
             closing.append(gateway.close)

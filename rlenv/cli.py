@@ -78,8 +78,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                       help="bearer token every request must carry (default: $RLENV_TOKEN); "
                       "required to bind anything but loopback")
     http.add_argument("--isolate", action="store_true",
-                      help="run each session's environment in a server subprocess of its own "
-                      "(a crash or a hang takes only its session: 502, 504)")
+                      help="accepted for older command lines: every session's environment runs "
+                      "in a server subprocess of its own (a crash or a hang takes only its "
+                      "session: 502, 504)")
     http.add_argument("--timeout", type=float, default=30.0,
                       help="seconds an environment may take to answer (default 30; then 504)")
     http.add_argument("--max-sessions", type=int, default=32,
@@ -89,6 +90,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     http.add_argument("--idle-timeout", type=float, default=600.0,
                       help="seconds after which a session without requests is closed (default "
                       "600; 0: never)")
+    http.add_argument("--head-timeout", type=float, default=5.0,
+                      help="seconds a connection has to complete a request head (default 5; "
+                      "then it is closed)")
+    http.add_argument("--max-connections", type=int, default=100,
+                      help="connections open at once (default 100; beyond, the oldest still "
+                      "waiting for its request head is closed)")
     http.set_defaults(run=_http)
 
     inspect = commands.add_parser(
@@ -244,9 +251,10 @@ def _http(args: argparse.Namespace) -> int:
               "pip install 'rlenv[http]'", file=sys.stderr)
         return 2
     settings = Settings(target=args.target, host=args.host, port=args.port, token=args.token,
-                        isolate=args.isolate, timeout=args.timeout,
+                        timeout=args.timeout,
                         max_sessions=args.max_sessions, max_body=args.max_body,
-                        idle_timeout=args.idle_timeout or None)
+                        idle_timeout=args.idle_timeout or None,
+                        head_timeout=args.head_timeout, max_connections=args.max_connections)
     serve(settings, ready=lambda url: print(f"listening on {url}", flush=True))
     return 0
 

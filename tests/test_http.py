@@ -191,7 +191,7 @@ def test_versions_and_capabilities(gateway: Gateway) -> None:
     assert about["versions"] == ["v1"] and about["target"] == CARTPOLE
     assert about["env_ids"][0] == CARTPOLE and "rlenv/CartPole-v0" in about["env_ids"]
     assert about["capabilities"]["websocket"] and about["capabilities"]["bevy_rl"]
-    assert about["hosting"] == "in-process" and about["token_required"] is False
+    assert about["hosting"] == "isolated" and about["token_required"] is False
 
 
 def test_openapi_is_generated_from_the_routes(gateway: Gateway) -> None:

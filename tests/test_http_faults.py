@@ -1,14 +1,17 @@
 """The HTTP gateway's error statuses and safety rules, through real ``rlenv http`` subprocesses.
 
 Every status of the issue: 400, 404, 409, 422, 503 with Retry-After, 504 (an environment that
-hangs: in the gateway's process, and isolated), 502 (an environment whose server dies: isolated,
-and a relayed server); each as an RFC 9457 problem, and each followed by a request that is
-served. Then Host, Origin, the token, body limits, idle sessions, garbage on the socket.
+hangs, also inside a pymunk callback, beside sessions that go on), 502 (an environment whose
+server dies, and a relayed server); each as an RFC 9457 problem, and each followed by a
+request that is served. Then Host, Origin, the token, body limits, idle sessions, garbage on
+the socket.
 """
 
 from __future__ import annotations
 
 import os
+import resource
+import select
 import socket
 import subprocess
 import sys
@@ -137,7 +140,7 @@ def test_an_environment_that_hangs_is_504_and_the_others_go_on() -> None:
 
 
 def test_an_isolated_environment_that_hangs_is_504() -> None:
-    slow = Gateway("examples.faulty:SlowEnvironment", "--isolate", "--timeout", "1")
+    slow = Gateway("examples.faulty:SlowEnvironment", "--isolate", "--timeout", "1")  # accepted
     try:
         hung, fine = slow.session(), slow.session()
         for session in (hung, fine):
@@ -149,6 +152,49 @@ def test_an_isolated_environment_that_hangs_is_504() -> None:
         assert slow.get("/v1")["hosting"] == "isolated"
     finally:
         slow.close()
+
+
+def test_an_environment_stuck_in_a_pymunk_callback_is_504_in_time() -> None:
+    stuck = Gateway("examples.faulty:StuckEnvironment", "--timeout", "0.5")
+    try:
+        looping, sleeping, fine = stuck.session(), stuck.session(), stuck.session()
+        for session in (looping, sleeping, fine):
+            stuck.post(f"/v1/envs/{session}/reset", {"seed": 0})
+        for session, action in ((looping, 1), (sleeping, 2)):
+            started = time.monotonic()
+            answer = stuck.request("POST", f"/v1/envs/{session}/step", {"action": action})
+            assert_problem(answer, 504, "timeout")
+            assert time.monotonic() - started < 2.5  # the deadline, not the callback, decides
+            assert stuck.get(f"/v1/envs/{session}")["status"] == "timed_out"
+        assert stuck.post(f"/v1/envs/{fine}/step", {"action": 0})["observation"] == [1]
+    finally:
+        assert stuck.close() < 5  # SIGTERM ends it, and the stuck servers with it
+
+
+def test_a_slow_session_never_stalls_the_others() -> None:
+    gateway = Gateway("examples.faulty:StuckEnvironment", "--timeout", "2")
+    try:
+        slow, fast = gateway.session(), gateway.session()
+        for session in (slow, fast):
+            gateway.post(f"/v1/envs/{session}/reset", {"seed": 0})
+        body = b'{"action": 2}'  # sleeps 5 s in a collision callback: 504 after 2 s
+        pending = socket.create_connection((gateway.host, gateway.port), timeout=30)
+        try:
+            pending.sendall(f"POST /v1/envs/{slow}/step HTTP/1.1\r\nHost: {gateway.host}:"
+                            f"{gateway.port}\r\nContent-Length: {len(body)}\r\n"
+                            "Connection: close\r\n\r\n".encode() + body)
+            started = time.monotonic()
+            for tick in range(1, 21):
+                step = gateway.post(f"/v1/envs/{fast}/step", {"action": 0})
+                assert step["observation"] == [tick]
+            assert time.monotonic() - started < 1.5  # not 2 s behind the slow one
+            assert not select.select([pending], [], [], 0)[0]  # the slow one still runs
+            assert _read_all(pending).startswith(b"HTTP/1.1 504")
+        finally:
+            pending.close()
+        assert gateway.post(f"/v1/envs/{fast}/step", {"action": 0})["observation"] == [21]
+    finally:
+        gateway.close()
 
 
 def test_an_environment_whose_server_dies_is_502_and_the_others_go_on() -> None:
@@ -175,7 +221,8 @@ def test_an_environment_that_calls_exit_ends_its_session_not_the_gateway() -> No
         for session in (exiting, fine):
             hosting.post(f"/v1/envs/{session}/reset")
         exited = hosting.request("POST", f"/v1/envs/{exiting}/step", {"action": 2})
-        assert "SystemExit" in assert_problem(exited, 502, "environment_lost")["detail"]
+        assert "closed the connection" in assert_problem(exited, 502,
+                                                         "environment_lost")["detail"]
         assert hosting.get(f"/v1/envs/{exiting}")["status"] == "lost"
         assert hosting.post(f"/v1/envs/{fine}/step", {"action": 0})["observation"] == [1]
     finally:
@@ -233,6 +280,21 @@ def test_foreign_hosts_and_origins_are_403(gateway: Gateway) -> None:
                 origin="http://attacker.example").close()  # type: ignore[arg-type]
 
 
+def test_requests_a_page_of_another_origin_made_are_403() -> None:
+    bevy = Gateway(CARTPOLE)
+    try:
+        for site in ("cross-site", "same-site"):  # what an <img src> sends: no Origin
+            for path in ("/step?payload=%5B%7B%22action%22%3A%22%5B0.0%5D%22%7D%5D", "/reset",
+                         "/state", "/v1/envs"):
+                refused = bevy.request("GET", path, headers={"Sec-Fetch-Site": site})
+                assert "Sec-Fetch-Site" in assert_problem(refused, 403, "forbidden")["detail"]
+        assert bevy.get("/v1/envs")["envs"] == []  # nothing was created, nor stepped
+        for site in ("same-origin", "none"):  # the gateway's own pages; a typed URL
+            assert bevy.request("GET", "/state", headers={"Sec-Fetch-Site": site}).status == 200
+    finally:
+        bevy.close()
+
+
 def test_bodies_are_limited(gateway: Gateway) -> None:
     session = gateway.session()
     large = gateway.request("POST", f"/v1/envs/{session}/step", raw=b" " * 5000)
@@ -263,6 +325,42 @@ def test_garbage_on_the_socket_never_stops_it(gateway: Gateway) -> None:
         finally:
             connection.close()
     assert gateway.get("/v1")["versions"] == ["v1"]
+
+
+def test_unfinished_request_heads_are_closed_in_time() -> None:
+    gateway = Gateway(CARTPOLE, "--head-timeout", "0.5")
+    try:
+        for start in (b"", b"GET /v1 HTTP/1.1\r\nHost: x"):  # nothing, or half a head
+            connection = socket.create_connection((gateway.host, gateway.port), timeout=30)
+            try:
+                connection.sendall(start)
+                started = time.monotonic()
+                assert _read_all(connection) == b""  # closed, without an answer
+                assert time.monotonic() - started < 3
+            finally:
+                connection.close()
+        assert gateway.get("/v1")["limits"]["head_timeout"] == 0.5
+    finally:
+        gateway.close()
+
+
+def test_unfinished_heads_never_keep_real_requests_out() -> None:
+    gateway = Gateway(CARTPOLE, "--max-connections", "16")
+    resource.prlimit(gateway.process.pid, resource.RLIMIT_NOFILE, (64, 64))
+    loris: list[socket.socket] = []
+    try:
+        for _ in range(80):  # more than the gateway can open files for
+            connection = socket.create_connection((gateway.host, gateway.port), timeout=30)
+            connection.sendall(b"GET /v1 HTTP/1.1\r\n")
+            loris.append(connection)
+        started = time.monotonic()
+        assert gateway.request("GET", "/v1", timeout=5).status == 200
+        assert gateway.post(f"/v1/envs/{gateway.session()}/reset")["observation"]
+        assert time.monotonic() - started < 5
+    finally:
+        for connection in loris:
+            connection.close()
+        gateway.close()
 
 
 def _read_all(connection: socket.socket) -> bytes:

@@ -201,6 +201,13 @@ class Client(BaseClient):
         """Whether the connection is closed."""
         return self._sock is None
 
+    def fileno(self) -> int:
+        """The socket's descriptor (-1 once closed), for an event loop to await answers on.
+
+        Without a lane (``shared_memory=False``) every answer arrives there.
+        """
+        return -1 if self._sock is None else self._sock.fileno()
+
     def __enter__(self) -> Client:
         return self
 

@@ -19,13 +19,16 @@ Serve one and drive it: ``rlenv serve examples.faulty:FaultyEnvironment``.
 - :class:`BrittleEnvironment`: a ball under gravity; ``reset(options={"fail": True})`` makes
   its world's reset raise after it removed its physics, leaving the environment broken until
   the server rebuilds it.
+- :class:`StuckEnvironment`: inside a pymunk collision callback (where cffi swallows
+  exceptions, a ``SIGALRM``'s included), action 1 loops forever and action 2 sleeps for
+  5 s; action 0 behaves.
 
 ## Action Space
-``Discrete(3)`` (Faulty, WrongShape, Dying) or ``Discrete(2)`` (Counting, Unsendable, Slow,
-Brittle: a push left or right).
+``Discrete(3)`` (Faulty, WrongShape, Dying, Stuck) or ``Discrete(2)`` (Counting, Unsendable,
+Slow, Brittle: a push left or right).
 
 ## Observation Space
-``Box(0, 1000, (1,), int64)`` ticks since the reset (Faulty, Unsendable, Slow, Dying),
+``Box(0, 1000, (1,), int64)`` ticks since the reset (Faulty, Unsendable, Slow, Dying, Stuck),
 ``Box(0, 1e9, (1,), float64)`` (Counting), ``Box(-inf, inf, (4,), float64)`` the ball's position
 and velocity (Brittle).
 
@@ -45,6 +48,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+import pymunk
 from gymnasium import spaces
 
 from rlenv import CollisionShape, PhysicsWorld, RigidBody, RLAgent, RLEnvironment, RLEnvWorld
@@ -308,3 +312,36 @@ class BrittleEnvironment(RLEnvironment):
         super().__init__("Brittle", repeat_action=2)
         self.add_child(BrittleAgent())
         self.add_child(BrittleWorld())
+
+
+class StuckAgent(UnsendableAgent):
+    """Collides two circles in a pymunk space after a non-zero action, and stalls in the callback.
+
+    The collision callback loops forever (action 1) or sleeps for 5 s (action 2).
+    """
+
+    action_space = spaces.Discrete(3)
+
+    def _physics_process(self, delta: float) -> None:
+        if self.action:
+            space = pymunk.Space()
+            for _ in range(2):  # two circles at the same place: they touch at once
+                body = pymunk.Body(1.0, 1.0)
+                space.add(body, pymunk.Circle(body, 1.0))
+            space.on_collision(begin=self._stall)
+            space.step(delta)
+
+    def _stall(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
+        if self.action == 1:
+            while True:
+                pass
+        time.sleep(5.0)
+
+
+class StuckEnvironment(RLEnvironment):
+    """A counting world whose agent hangs inside a pymunk callback (see :class:`StuckAgent`)."""
+
+    def __init__(self) -> None:
+        super().__init__("Stuck", repeat_action=1)
+        self.add_child(StuckAgent())
+        self.add_child(CountingWorld())

@@ -30,11 +30,11 @@ from starlette.routing import BaseRoute, Route, WebSocketRoute
 from rlenv.http.bevy import bevy_endpoints
 from rlenv.http.endpoints import Answer, Endpoint, JSONRoute
 from rlenv.http.guard import Guard
+from rlenv.http.heads import bounded_protocol
 from rlenv.http.json_spaces import dumps
 from rlenv.http.openapi import openapi_document
 from rlenv.http.problems import COMMON_HEADERS, PROBLEMS, Problem
 from rlenv.http.routes import component_schemas, session_endpoints, target_schemas
-from rlenv.http.runners import install_alarm
 from rlenv.http.sessions import Sessions
 from rlenv.http.streams import stream_endpoints
 from rlenv.http.targets import Catalog
@@ -61,23 +61,26 @@ class Settings:
         host: the address to bind (loopback by default).
         port: the port to bind (0: a free one).
         token: the bearer token every request must carry (required beyond loopback).
-        isolate: host each session's environment in a server subprocess of its own.
         timeout: seconds an environment may take to answer one request (then 504).
         max_sessions: sessions at once (then 503).
         max_body: the largest request body or WebSocket message, in bytes (then 413).
         idle_timeout: seconds after which a session without requests is closed (``None``:
             never).
+        head_timeout: seconds a connection has to complete a request head (then closed).
+        max_connections: connections open at once (beyond: the oldest waiting for its
+            request head is closed).
     """
 
     target: str | None = None
     host: str = DEFAULT_HOST
     port: int = 8000
     token: str | None = None
-    isolate: bool = False
     timeout: float = 30.0
     max_sessions: int = 32
     max_body: int = 1 << 20
     idle_timeout: float | None = 600.0
+    head_timeout: float = 5.0
+    max_connections: int = 100
 
 
 class Gateway:
@@ -91,8 +94,7 @@ class Gateway:
     def __init__(self, settings: Settings, hello: Hello | None = None) -> None:
         self.settings = settings
         self.hello = hello
-        self.catalog = Catalog(settings.target, isolate=settings.isolate,
-                               timeout=settings.timeout)
+        self.catalog = Catalog(settings.target, timeout=settings.timeout)
         self.sessions = Sessions(self.catalog, max_sessions=settings.max_sessions,
                                  idle_timeout=settings.idle_timeout)
         self._openapi: bytes | None = None
@@ -110,12 +112,14 @@ class Gateway:
             "versions": ["v1"], "api": _API_VERSION, "rlenv": _package_version(),
             "protocol": list(PROTOCOL_VERSION), "target": settings.target,
             "env_ids": self.catalog.ids(),
-            "hosting": "isolated" if settings.isolate else "in-process",
+            "hosting": "isolated",
             "capabilities": {"websocket": True, "events": True, "bevy_rl": bool(settings.target),
                              "render": ["image/png", "application/octet-stream"],
                              "snapshots": True, "openapi": "/openapi.json"},
             "limits": {"max_sessions": settings.max_sessions, "max_body": settings.max_body,
-                       "timeout": settings.timeout, "idle_timeout": settings.idle_timeout},
+                       "timeout": settings.timeout, "idle_timeout": settings.idle_timeout,
+                       "head_timeout": settings.head_timeout,
+                       "max_connections": settings.max_connections},
             "token_required": settings.token is not None,
         }
 
@@ -155,7 +159,6 @@ def create_app(settings: Settings, hello: Hello | None = None) -> Starlette:
 
     @contextlib.asynccontextmanager
     async def lifespan(app: Starlette) -> AsyncIterator[None]:
-        gateway.catalog.inline = install_alarm()
         reaper = asyncio.create_task(gateway.reap_forever())
         try:
             yield
@@ -275,14 +278,15 @@ def serve(settings: Settings, *, ready: Callable[[str], None] | None = None,
             f"refusing to listen on {settings.host}: anyone who can reach it could drive the "
             "environments. Set a token (rlenv http --token, or RLENV_TOKEN) that clients must "
             "send as Authorization: Bearer, or bind 127.0.0.1")
-    hello = Catalog(settings.target, isolate=settings.isolate,
-                    timeout=settings.timeout).describe()
+    hello = Catalog(settings.target, timeout=settings.timeout).describe()
     family = socket.AF_INET6 if ":" in settings.host else socket.AF_INET
     sock = _listen(family, settings.host, settings.port)
     settings = replace(settings, port=sock.getsockname()[1])
     app = create_app(settings, hello)
     config = uvicorn.Config(
-        app, loop=loop, http=one_write_protocol(http), lifespan="on", log_config=None,
+        app, loop=loop, lifespan="on",
+        http=bounded_protocol(one_write_protocol(http), head_timeout=settings.head_timeout,
+                              max_connections=settings.max_connections), log_config=None,
         access_log=False, proxy_headers=False, server_header=False, ws_max_size=settings.max_body,
         ws_per_message_deflate=False, timeout_keep_alive=15, timeout_graceful_shutdown=3)
     server = _Server(config, app.state.gateway)

@@ -2,6 +2,9 @@
 
 - ``Host`` and ``Origin`` as the inspector checks them (:mod:`rlenv_client.origins`): a foreign
   ``Host`` (DNS rebinding) or a page of another site gets 403 ``forbidden``;
+- so does a request a browser marks as sent by a page of another origin: ``Sec-Fetch-Site``
+  other than ``same-origin`` or ``none`` (a page's ``<img src>`` sends no ``Origin``, and
+  bevy_rl's ``GET /step`` and ``/reset`` change state);
 - with a token (required to bind beyond loopback: ``RLENV_TOKEN``), ``Authorization: Bearer
   TOKEN``, compared in constant time; else 401 ``unauthorized``;
 - bodies of at most ``max_body`` bytes: a larger ``Content-Length`` is refused before anything
@@ -31,6 +34,7 @@ ASGIApp = Callable[[Scope, Receive, Send], Awaitable[None]]
 
 _REMEMBERED = 256  # (Host, Origin) pairs whose verdict is kept
 _CLOSE = {"Connection": "close"}  # an unread body is never taken for the next request
+_OWN_FETCHES = (b"same-origin", b"none")  # Sec-Fetch-Site: this gateway's pages, or a person
 
 
 class Guard:
@@ -58,7 +62,7 @@ class Guard:
             await self.app(scope, receive, send)
             return
         host = origin = None
-        authorization = length = b""
+        authorization = length = fetch_site = b""
         chunked = False
         for name, value in scope["headers"]:
             if name == b"host":
@@ -71,7 +75,9 @@ class Guard:
                 length = value
             elif name == b"transfer-encoding":
                 chunked = True
-        problem = self._problem(host, origin, authorization, length)
+            elif name == b"sec-fetch-site":
+                fetch_site = value
+        problem = self._problem(host, origin, authorization, length, fetch_site)
         if problem is not None:
             await _refuse(problem, scope, receive, send)
             return
@@ -80,7 +86,7 @@ class Guard:
         await self.app(scope, receive, send)
 
     def _problem(self, host: bytes | None, origin: bytes | None, authorization: bytes,
-                 length: bytes) -> Problem | None:
+                 length: bytes, fetch_site: bytes) -> Problem | None:
         try:
             refusal = self._refusals[host, origin]
         except KeyError:
@@ -92,6 +98,9 @@ class Guard:
             self._refusals[host, origin] = refusal
         if refusal is not None:
             return Problem("forbidden", refusal)
+        if fetch_site and fetch_site.lower() not in _OWN_FETCHES:
+            return Problem("forbidden", "refused: a request a page of another origin made "
+                                        f"(Sec-Fetch-Site: {fetch_site.decode('latin-1'):.20})")
         if self._token is not None:
             scheme, _, token = authorization.partition(b" ")
             if scheme.lower() != b"bearer" or not hmac.compare_digest(token.strip(),

@@ -1,36 +1,34 @@
-"""How a session's environment runs, and the deadline every call to it has.
+"""How a call reaches a session's environment, and the deadline every call has.
 
-Two runners, measured in ``benchmarks/http_step.py``:
+Every environment runs in a process other than the gateway's (an ``rlenv serve`` subprocess
+of the session's own, or the TARGET ``HOST:PORT``), reached by a TCP
+:class:`~rlenv_client.client.Client`; the gateway's event loop never runs an environment's
+code. So a deadline holds whatever that code does (loops, blocks, raises half-way, loops
+inside a pymunk callback, where cffi swallows exceptions and a ``SIGALRM`` was lost), a hung
+environment is ended by ending its process, and no session ever waits for another.
 
-- :class:`InlineRunner` (environments hosted in the gateway's process, the default): a call
-  runs on the event loop's own thread, as the TCP server runs a request: no thread hand-off,
-  which costs a step about as much as the HTTP layer itself. Its deadline is an interval timer
-  (``SIGALRM``): past it, the environment's code is interrupted by :class:`_Interrupted` (a
-  ``BaseException``, so that the environment's own ``except Exception`` cannot swallow it) and
-  the call raises :class:`EnvironmentTimeout`. Code stuck in native code without returning to
-  Python cannot be interrupted: serve such an environment with ``--isolate``. Its code calling
-  ``sys.exit`` ends its session (``ConnectionLost``), never the gateway.
-- :class:`ThreadRunner` (relays: sessions whose environment is another process): a call runs
-  on the session's own thread, one at a time, so that the event loop goes on serving the
-  other sessions while a blocking client waits for its server; the client's own timeout ends
-  a call that takes too long (``RequestTimeout``, a ``TimeoutError``).
+A :class:`Runner` serves a session's calls one at a time, in order, in two ways:
 
-A runner never runs two calls at once: a session's requests are served in order.
+- :meth:`Runner.exchange` (steps and resets, the hot path): the request is sent from the
+  event loop, which then awaits the socket's answer among everything else it serves and reads
+  it once it has arrived: no thread hand-off (which cost a relayed step about as much as the
+  HTTP layer).
+- :meth:`Runner.call` (the rest: configure, observe, render, snapshots): a blocking client
+  call on the session's own thread.
+
+Past the deadline either raises :class:`EnvironmentTimeout` at once; the session then ends
+its environment's process (see :mod:`rlenv.http.sessions`).
 """
 
 from __future__ import annotations
 
 import asyncio
-import signal
-import threading
+import os
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from types import FrameType
-from typing import Protocol, TypeVar
+from typing import TypeVar
 
-from rlenv.protocol.errors import ConnectionLost
-
-__all__ = ["EnvironmentTimeout", "InlineRunner", "Runner", "ThreadRunner", "install_alarm"]
+__all__ = ["EnvironmentTimeout", "Runner"]
 
 _T = TypeVar("_T")
 
@@ -39,110 +37,78 @@ class EnvironmentTimeout(TimeoutError):
     """A call to an environment did not return within its deadline."""
 
 
-class _Interrupted(BaseException):
-    """Raised inside environment code by the alarm (never seen outside this module)."""
+class Runner:
+    """Runs a session's calls to its environment, one at a time, under a deadline.
 
-
-class Runner(Protocol):
-    """Runs a session's calls to its environment, under a deadline."""
-
-    timeout: float
-
-    async def call(self, function: Callable[[], _T], *, timeout: float | None = None) -> _T:
-        """``function()``, within ``timeout`` seconds (default: the runner's).
-
-        Raises:
-            TimeoutError: the deadline passed; the environment's state is unknown.
-        """
-        ...
-
-    def close(self) -> None:
-        """Release what the runner holds (its thread)."""
-        ...
-
-
-class _Alarm:
-    """The process's ``SIGALRM``, armed around inline calls (main thread only)."""
-
-    def __init__(self) -> None:
-        self.armed = False
-
-    def fire(self, signum: int, frame: FrameType | None) -> None:
-        if self.armed:  # once per arming: the code that handles it is never interrupted
-            self.armed = False
-            raise _Interrupted
-
-
-_ALARM = _Alarm()
-
-
-def install_alarm() -> bool:
-    """Let inline calls have a deadline: install the ``SIGALRM`` handler.
-
-    Returns:
-        Whether it could be installed: only the main thread can (where ``rlenv http`` runs its
-        event loop), and only where the platform has ``SIGALRM``.
-    """
-    if threading.current_thread() is not threading.main_thread() or \
-            not hasattr(signal, "setitimer"):
-        return False
-    signal.signal(signal.SIGALRM, _ALARM.fire)
-    return True
-
-
-class InlineRunner:
-    """Runs calls on the event loop's thread, interrupted past ``timeout`` seconds.
-
-    Only for a loop on the main thread with :func:`install_alarm` done (the gateway uses a
-    :class:`ThreadRunner` otherwise).
+    Args:
+        timeout: seconds a call may take (its default deadline).
     """
 
     def __init__(self, timeout: float) -> None:
         self.timeout = timeout
-
-    async def call(self, function: Callable[[], _T], *, timeout: float | None = None) -> _T:
-        """``function()`` now, on this thread; see :class:`Runner`."""
-        _ALARM.armed = True
-        signal.setitimer(signal.ITIMER_REAL, timeout or self.timeout)
-        try:
-            try:
-                return function()
-            finally:
-                signal.setitimer(signal.ITIMER_REAL, 0)
-                _ALARM.armed = False
-        except _Interrupted:
-            raise EnvironmentTimeout(
-                f"the environment did not answer within {timeout or self.timeout:g} s") from None
-        except (SystemExit, KeyboardInterrupt) as error:  # its code tried to end the process
-            raise ConnectionLost(f"the environment tried to end the gateway's process "
-                                 f"({error!r}); it did not") from None
-
-    def close(self) -> None:
-        """Nothing to release."""
-
-
-class ThreadRunner:
-    """Runs calls one at a time on a thread of its own; see the module docstring.
-
-    The calls are expected to end by themselves within ``timeout`` (a client's socket
-    timeout); a call still running ``grace`` seconds later is abandoned with
-    :class:`EnvironmentTimeout` and its thread left to finish.
-    """
-
-    def __init__(self, timeout: float, grace: float = 5.0) -> None:
-        self.timeout = timeout
-        self._grace = grace
+        self._turn = asyncio.Lock()
         self._executor = ThreadPoolExecutor(1, thread_name_prefix="rlenv-http-session")
 
+    async def exchange(self, send: Callable[[], None], receive: Callable[[], _T],
+                       readable: int) -> _T:
+        """``send()``, then ``receive()`` once the descriptor ``readable`` has bytes.
+
+        Both run on the event loop's thread: ``send`` must not block (a small request on a
+        connected socket), and ``receive`` reads an answer that has arrived.
+
+        Raises:
+            EnvironmentTimeout: no answer within the deadline; the environment's state is
+                unknown.
+        """
+        async with self._turn:
+            send()
+            loop = asyncio.get_running_loop()
+            arrived = loop.create_future()
+            loop.add_reader(readable, _settle, arrived, True)
+            deadline = loop.call_later(self.timeout, _settle, arrived, False)
+            try:
+                answered = await arrived
+            finally:
+                deadline.cancel()
+                loop.remove_reader(readable)
+                os.set_blocking(readable, True)  # uvloop made it non-blocking; the client
+                # reads with kernel timeouts (a non-blocking read it would take for one)
+            if not answered:
+                raise self._late()
+            return receive()
+
     async def call(self, function: Callable[[], _T], *, timeout: float | None = None) -> _T:
-        """``function()`` on the runner's thread; see :class:`Runner`."""
-        limit = (timeout or self.timeout) + self._grace
-        future = asyncio.get_running_loop().run_in_executor(self._executor, function)
-        done, _ = await asyncio.wait((future,), timeout=limit)
-        if not done:
-            raise EnvironmentTimeout(f"the environment did not answer within {limit:g} s")
-        return future.result()
+        """``function()`` on the session's thread, within ``timeout`` seconds (or the runner's).
+
+        Raises:
+            EnvironmentTimeout: the deadline passed (the call is abandoned; ending the
+                environment's process ends it).
+        """
+        limit = timeout or self.timeout
+        async with self._turn:
+            future = asyncio.get_running_loop().run_in_executor(self._executor, function)
+            done, _ = await asyncio.wait((future,), timeout=limit)
+            if not done:
+                future.add_done_callback(_consume)
+                raise self._late(limit)
+            return future.result()
+
+    def _late(self, limit: float | None = None) -> EnvironmentTimeout:
+        return EnvironmentTimeout(
+            f"the environment did not answer within {limit or self.timeout:g} s")
 
     def close(self) -> None:
-        """Let the thread end once its last call returns."""
+        """Let the session's thread end once its last call returns."""
         self._executor.shutdown(wait=False, cancel_futures=True)
+
+
+def _settle(future: asyncio.Future[bool], answered: bool) -> None:
+    """The first of the answer (``True``) and the deadline (``False``) decides."""
+    if not future.done():
+        future.set_result(answered)
+
+
+def _consume(future: asyncio.Future[object]) -> None:
+    """Retrieve an abandoned call's outcome (its environment was ended meanwhile)."""
+    if not future.cancelled():
+        future.exception()

@@ -1,18 +1,18 @@
 """Sessions: one environment each, gym-http-api style, with limits and an idle reaper.
 
-A :class:`Session` holds a client of its environment (any
-:class:`~rlenv_client.base.BaseClient`: a :class:`~rlenv_client.local.LocalClient` in this
-process, or a TCP :class:`~rlenv_client.client.Client` of a server) and the
-:class:`~rlenv.http.runners.Runner` that calls it under a deadline. Its answers are JSON values
-(:mod:`rlenv.http.json_spaces`); its refusals are problems (:class:`~rlenv.http.problems.Problem`).
+A :class:`Session` holds a TCP :class:`~rlenv_client.client.Client` of its environment's
+server and the :class:`~rlenv.http.runners.Runner` that calls it under a deadline. Its answers
+are JSON values (:mod:`rlenv.http.json_spaces`); its refusals are problems
+(:class:`~rlenv.http.problems.Problem`).
 
 A session's ``status``:
 
 - ``ready``: created, no episode yet; ``running``: an episode is under way; ``ended``: the
   episode terminated or was truncated (a step is refused until a reset);
 - ``timed_out`` (504) and ``lost`` (502, its server died): the session is over and says so
-  in every answer until it is deleted; its environment is released at once, and the other
-  sessions go on.
+  in every answer until it is deleted; its environment is released at once (a timed-out
+  environment's process is killed, on a thread: the event loop never waits for it), and the
+  other sessions go on.
 
 Watchers follow a session's transitions through :meth:`Session.watch` (server-sent events:
 ``id`` is the step's index in the episode, 0 for a reset); a watcher that falls behind loses
@@ -26,6 +26,7 @@ the oldest events, never slows the session.
 from __future__ import annotations
 
 import asyncio
+import functools
 import logging
 import math
 import secrets
@@ -44,7 +45,6 @@ from rlenv.http.json_spaces import (
     value_encoder,
 )
 from rlenv.http.problems import Problem, from_remote_error
-from rlenv.http.runners import InlineRunner
 from rlenv.http.targets import Catalog, Entry, Opened
 from rlenv.protocol.errors import ConnectionLost, ErrorCode, RemoteError
 
@@ -54,6 +54,8 @@ logger = logging.getLogger(__name__)
 
 _T = TypeVar("_T")
 _WATCH_BACKLOG = 64  # events a watcher may fall behind before the oldest are dropped
+_HUNG_GRACE = 0.2  # seconds a timed-out session's server has to exit on SIGTERM (its code
+# may never see the signal: a loop inside a pymunk callback) before SIGKILL
 
 
 class Status(StrEnum):
@@ -133,8 +135,9 @@ class Session:
     async def reset(self, seed: int | None = None,
                     options: Mapping[str, Any] | None = None) -> dict[str, Any]:
         """Start an episode: ``{"observation", "info"}`` (seed 0 is a seed)."""
+        client = self.client
         observation, info = await self.call(
-            lambda: self.client.reset(seed=seed, options=options))
+            client.receive_reset, lambda: client.send_reset(seed=seed, options=options))
         self._begin(0)
         answer = {"observation": self._encode_observation(observation), "info": to_json(info)}
         self._publish("reset", answer)
@@ -150,8 +153,9 @@ class Session:
         if self.status is Status.ENDED and self.failure is None:
             raise Problem(ErrorCode.RESET_REQUIRED, f"the episode {self._ending}: reset first")
         action = self._decode_action(action)
+        client = self.client
         observation, reward, terminated, truncated, info = await self.call(
-            lambda: self.client.step(action, repeat_action))
+            client.receive_step, lambda: client.send_step(action, repeat_action))
         self.step_index += 1
         if self.max_episode_steps is not None and self.step_index >= self.max_episode_steps \
                 and not terminated:
@@ -197,8 +201,13 @@ class Session:
 
     # --- the environment's calls, failures --------------------------------------------------
 
-    async def call(self, function: Callable[[], _T]) -> _T:
+    async def call(self, function: Callable[[], _T],
+                   send: Callable[[], None] | None = None) -> _T:
         """``function()`` (a call to :attr:`client`) through the runner, failures as problems.
+
+        With ``send``, ``send()`` sends the request and ``function()`` receives its answer,
+        both on the event loop (:meth:`Runner.exchange`); otherwise ``function()`` runs on the
+        session's thread (:meth:`Runner.call`).
 
         Raises:
             Problem: the environment's refusal (its code), or the session's failure:
@@ -208,8 +217,11 @@ class Session:
             failure = self.failure or Problem("environment_lost", "the session is closed")
             raise Problem(failure.code, failure.detail)
         self.last_used = self._clock()
+        runner = self._opened.runner
         try:
-            return await self._opened.runner.call(function)
+            if send is None:
+                return await runner.call(function)
+            return await runner.exchange(send, function, self.client.fileno())
         except RemoteError as error:
             if error.fatal:
                 raise await self._fail(Status.LOST, "environment_lost",
@@ -229,21 +241,24 @@ class Session:
                                      "another (the others go on)")
         logger.warning("session %s (%s): %s", self.id, self.env_id, why)
         self._publish("status", self.describe())
-        await self.close(keep_watchers=True)
+        await self.close(keep_watchers=True, hung=status is Status.TIMED_OUT)
         return Problem(code, self.failure.detail)
 
-    async def close(self, keep_watchers: bool = False) -> None:
-        """Release the environment (and its server subprocess); safe to repeat."""
+    async def close(self, keep_watchers: bool = False, hung: bool = False) -> None:
+        """Release the environment (and end its server subprocess); safe to repeat.
+
+        Args:
+            keep_watchers: leave the watchers subscribed (they are told of the failure).
+            hung: the environment timed out: kill its process almost at once.
+        """
         opened, self._opened = self._opened, None
         if not keep_watchers:
             self.end_watches()
         if opened is None:
             return
         try:
-            if isinstance(opened.runner, InlineRunner):
-                opened.close()  # an in-process environment: its tree, on the loop's thread
-            else:
-                await asyncio.get_running_loop().run_in_executor(None, opened.close)
+            close = functools.partial(opened.close, _HUNG_GRACE) if hung else opened.close
+            await asyncio.get_running_loop().run_in_executor(None, close)
         except Exception:  # a half-interrupted environment may fail to close: it is gone anyway
             logger.warning("session %s: closing its environment failed", self.id,
                            exc_info=True)

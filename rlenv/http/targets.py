@@ -4,16 +4,19 @@ A session's ``env_id`` is the command line's TARGET or an id registered by
 :mod:`rlenv_client.registration` (``rlenv/CartPole-v0`` ..., with its time limit). Nothing
 else: a request never names a module to import or an address to connect to.
 
-Where the environment runs (see ``docs/http.md`` for the measurements behind the default):
+Where the environment runs: never in the gateway's process (see ``docs/http.md`` for the
+measurements behind this), so that a deadline holds whatever its code does and a hung
+environment can be ended (:mod:`rlenv.http.runners`):
 
-- ``MODULE:CLASS`` and registered ids: **in the gateway's process** by default, a
-  :class:`~rlenv_client.local.LocalClient` per session driven by an
-  :class:`~rlenv.http.runners.InlineRunner` (the fastest: no socket, no thread hand-off);
-  with ``isolate``, in an ``rlenv serve`` subprocess of its own per session
+- ``MODULE:CLASS`` and registered ids: in an ``rlenv serve`` subprocess of the session's own
   (:class:`~rlenv_client.launcher.ServerProcess`), relayed over TCP: an environment that
-  crashes its process or hangs in native code takes only its session with it (502, 504).
+  crashes its process, hangs or loops takes only its session with it (502, 504), and its
+  process is ended.
 - ``HOST:PORT``: a running server, relayed over TCP (one connection per session; a server of
   one instance has one controller, so a second session's reset is told ``busy``).
+
+The relay's client keeps its answers on the socket (no shared-memory lane), where the event
+loop awaits them.
 """
 
 from __future__ import annotations
@@ -22,19 +25,18 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from rlenv.http.problems import Problem
-from rlenv.http.runners import InlineRunner, Runner, ThreadRunner
+from rlenv.http.runners import Runner
 from rlenv.protocol import Hello
 from rlenv.protocol.errors import ConnectionLost, ErrorCode, RemoteError, RequestTimeout
-from rlenv_client.base import BaseClient
 from rlenv_client.client import Client
 from rlenv_client.launcher import ServerProcess, ServerStartError
-from rlenv_client.local import LocalClient
 from rlenv_client.registration import ENVIRONMENTS
 from rlenv_client.session import parse_address
 
 __all__ = ["Catalog", "Entry", "Opened", "is_address"]
 
-_STARTUP_TIMEOUT = 60.0  # seconds an isolated session's server may take to start
+_STARTUP_TIMEOUT = 60.0  # seconds a session's server may take to start
+_CLOSING_GRACE = 5.0  # seconds a session's server has to exit on SIGTERM before SIGKILL
 
 
 def is_address(target: str) -> bool:
@@ -59,20 +61,25 @@ class Entry:
 
 
 class Opened:
-    """A session's environment: its client, the runner that calls it, what to close after."""
+    """A session's environment: its client, the runner that calls it, its server subprocess."""
 
-    def __init__(self, client: BaseClient, runner: Runner,
+    def __init__(self, client: Client, runner: Runner,
                  process: ServerProcess | None = None) -> None:
         self.client, self.runner, self.process = client, runner, process
 
-    def close(self) -> None:
-        """Close the client (the in-process environment), end the server subprocess, if any."""
+    def close(self, grace: float = _CLOSING_GRACE) -> None:
+        """Close the client and end the server subprocess, if any (blocking).
+
+        Args:
+            grace: seconds the subprocess has to exit on SIGTERM before SIGKILL (a hung
+                environment's process gets little: its code may never see the signal).
+        """
         try:
             self.client.close()
         finally:
             self.runner.close()
             if self.process is not None:
-                self.process.close()
+                self.process.close(grace)
 
 
 class Catalog:
@@ -80,21 +87,12 @@ class Catalog:
 
     Args:
         target: the command line's TARGET (``MODULE:CLASS`` or ``HOST:PORT``), or ``None``.
-        isolate: host each session's environment in a server subprocess of its own.
         timeout: seconds an environment may take to answer one request.
-
-    Attributes:
-        inline: run in-process environments on the event loop's thread (set once the
-            loop's deadline alarm is installed, see :func:`~rlenv.http.runners.install_alarm`);
-            otherwise each gets a thread.
     """
 
-    def __init__(self, target: str | None, *, isolate: bool = False,
-                 timeout: float = 30.0) -> None:
+    def __init__(self, target: str | None, *, timeout: float = 30.0) -> None:
         self.target = target
-        self.isolate = isolate
         self.timeout = timeout
-        self.inline = False
         self._entries = {env_id: Entry(env_id, r.target, r.max_episode_steps)
                          for env_id, r in ENVIRONMENTS.items()}
         if target is not None:
@@ -126,27 +124,20 @@ class Catalog:
         """
         if self.target is None:
             return None
-        opened = self._open_blocking(Entry(self.target, self.target))
+        opened = self._open_blocking(Entry(self.target, self.target), Runner(self.timeout))
         try:
             return opened.client.hello
         finally:
             opened.close()
 
     async def open(self, entry: Entry) -> Opened:
-        """Open ``entry``'s environment for a new session.
+        """Open ``entry``'s environment for a new session (on the session's thread).
 
         Raises:
             Problem: ``environment_error`` (its constructor raised), ``environment_lost`` (its
                 server did not start or cannot be reached), ``timeout``, ``busy``.
         """
-        if self.inline and not (self.isolate or is_address(entry.target)):
-            runner: Runner = InlineRunner(self.timeout)
-            try:
-                client = await runner.call(_guarded(lambda: LocalClient(entry.target)))
-            except TimeoutError as error:
-                raise Problem(ErrorCode.TIMEOUT, f"creating {entry.env_id}: {error}") from None
-            return Opened(client, runner)
-        runner = ThreadRunner(self.timeout)
+        runner = Runner(self.timeout)
         try:
             return await runner.call(_guarded(lambda: self._open_blocking(entry, runner)),
                                      timeout=_STARTUP_TIMEOUT + self.timeout)
@@ -154,13 +145,10 @@ class Catalog:
             runner.close()
             raise
 
-    def _open_blocking(self, entry: Entry, runner: Runner | None = None) -> Opened:
+    def _open_blocking(self, entry: Entry, runner: Runner) -> Opened:
         """Open ``entry`` from this thread (see :meth:`open`)."""
-        runner = runner or ThreadRunner(self.timeout)
         if is_address(entry.target):
             return Opened(_connect(*parse_address(entry.target), self.timeout), runner)
-        if not self.isolate:
-            return Opened(LocalClient(entry.target), runner)
         try:
             process = ServerProcess(entry.target, startup_timeout=_STARTUP_TIMEOUT)
         except ServerStartError as error:
@@ -176,7 +164,7 @@ class Catalog:
 def _connect(host: str, port: int, timeout: float) -> Client:
     """A client of the server at ``host:port``, its failures as problems."""
     try:
-        return Client(host, port, timeout=timeout)
+        return Client(host, port, timeout=timeout, shared_memory=False)
     except RequestTimeout as error:
         raise Problem(ErrorCode.TIMEOUT, str(error)) from None
     except ConnectionLost as error:

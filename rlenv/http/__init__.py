@@ -8,8 +8,8 @@ OpenAPI 3.1 document generated from the route table. ``docs/http.md`` is the gui
 One module per job (importing this package imports none of them, nor Starlette):
 
 - :mod:`~rlenv.http.app`: the Starlette application and uvicorn's server (``serve``);
-  :mod:`~rlenv.http.writes`: one write per response; :mod:`~rlenv.http.heads`: a deadline
-  on request heads, a bound on connections;
+  :mod:`~rlenv.http.uvicorn_protocol`: one write per response, a deadline
+  on request heads, a bound on connections (uvicorn's internals, on tested versions only);
 - :mod:`~rlenv.http.guard`: Host, Origin, token and body size, checked before any route;
 - :mod:`~rlenv.http.endpoints`: the route record, JSON bodies in and out;
 - :mod:`~rlenv.http.routes`: the ``/v1`` session API; :mod:`~rlenv.http.bevy`: bevy_rl's

@@ -30,7 +30,6 @@ from starlette.routing import BaseRoute, Route, WebSocketRoute
 from rlenv.http.bevy import bevy_endpoints
 from rlenv.http.endpoints import Answer, Endpoint, JSONRoute
 from rlenv.http.guard import Guard
-from rlenv.http.heads import bounded_protocol
 from rlenv.http.json_spaces import dumps
 from rlenv.http.openapi import openapi_document
 from rlenv.http.problems import COMMON_HEADERS, PROBLEMS, Problem
@@ -38,7 +37,7 @@ from rlenv.http.routes import component_schemas, session_endpoints, target_schem
 from rlenv.http.sessions import Sessions
 from rlenv.http.streams import stream_endpoints
 from rlenv.http.targets import Catalog
-from rlenv.http.writes import one_write_protocol
+from rlenv.http.uvicorn_protocol import connection_limit, http_protocol
 from rlenv.protocol import PROTOCOL_VERSION, Hello
 from rlenv.serving.access import bind_error
 from rlenv.serving.endpoint import DEFAULT_HOST, InsecureBindError
@@ -285,8 +284,9 @@ def serve(settings: Settings, *, ready: Callable[[str], None] | None = None,
     app = create_app(settings, hello)
     config = uvicorn.Config(
         app, loop=loop, lifespan="on",
-        http=bounded_protocol(one_write_protocol(http), head_timeout=settings.head_timeout,
-                              max_connections=settings.max_connections), log_config=None,
+        http=http_protocol(http, head_timeout=settings.head_timeout,
+                           max_connections=settings.max_connections),
+        limit_concurrency=connection_limit(settings.max_connections), log_config=None,
         access_log=False, proxy_headers=False, server_header=False, ws_max_size=settings.max_body,
         ws_per_message_deflate=False, timeout_keep_alive=15, timeout_graceful_shutdown=3)
     server = _Server(config, app.state.gateway)

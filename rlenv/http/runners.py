@@ -12,7 +12,10 @@ A :class:`Runner` serves a session's calls one at a time, in order, in two ways:
 - :meth:`Runner.exchange` (steps and resets, the hot path): the request is sent from the
   event loop, which then awaits the socket's answer among everything else it serves and reads
   it once it has arrived: no thread hand-off (which cost a relayed step about as much as the
-  HTTP layer).
+  HTTP layer). When the session's answers came quickly, the loop first looks for the answer
+  for a bounded while (:class:`~rlenv.transport.sockets.AnswerWaiter`'s spin, yielding the
+  core, at most :data:`~rlenv.transport.sockets.SPIN_WINDOW`): the answer to a quick step is
+  then read without the loop sleeping and being woken for it.
 - :meth:`Runner.call` (the rest: configure, observe, render, snapshots): a blocking client
   call on the session's own thread.
 
@@ -24,9 +27,12 @@ from __future__ import annotations
 
 import asyncio
 import os
+import select
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar
+
+from rlenv.transport.sockets import AnswerWaiter
 
 __all__ = ["EnvironmentTimeout", "Runner"]
 
@@ -48,6 +54,7 @@ class Runner:
         self.timeout = timeout
         self._turn = asyncio.Lock()
         self._executor = ThreadPoolExecutor(1, thread_name_prefix="rlenv-http-session")
+        self._waiter = AnswerWaiter()
 
     async def exchange(self, send: Callable[[], None], receive: Callable[[], _T],
                        readable: int) -> _T:
@@ -62,6 +69,11 @@ class Runner:
         """
         async with self._turn:
             send()
+            waiter = self._waiter
+            waiter.sent()
+            if waiter.spin(lambda: _arrived(readable)):
+                waiter.ended()
+                return receive()
             loop = asyncio.get_running_loop()
             arrived = loop.create_future()
             loop.add_reader(readable, _settle, arrived, True)
@@ -69,6 +81,7 @@ class Runner:
             try:
                 answered = await arrived
             finally:
+                waiter.ended()
                 deadline.cancel()
                 loop.remove_reader(readable)
                 os.set_blocking(readable, True)  # uvloop made it non-blocking; the client
@@ -100,6 +113,11 @@ class Runner:
     def close(self) -> None:
         """Let the session's thread end once its last call returns."""
         self._executor.shutdown(wait=False, cancel_futures=True)
+
+
+def _arrived(readable: int) -> bool | None:
+    """``True`` if the descriptor has bytes (or its end) now, else ``None``."""
+    return True if select.select((readable,), (), (), 0)[0] else None
 
 
 def _settle(future: asyncio.Future[bool], answered: bool) -> None:

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from conftest import Serve, wait_until
 
-from rlenv.protocol import ErrorReply, Hello
+from rlenv.protocol import ErrorReply, Hello, Response
 from rlenv.protocol.codec import pack
 from rlenv.protocol.errors import ErrorCode
 from rlenv.serving.endpoint import Endpoint, Limits
@@ -116,6 +116,8 @@ def test_an_idle_client_is_dropped_with_a_reason(serve: Serve) -> None:
     server = serve(args=["--idle-timeout", "0.3"])
     with socket.create_connection((server.host, server.port), timeout=10) as raw:
         read_frame(raw)  # the hello
+        raw.sendall(frame(pack({"id": 1})))  # its first request: the idle timeout counts next
+        assert read_frame(raw)["id"] == 1
         reply = read_frame(raw)  # blocks until the server gives up on us
         assert reply["error"]["code"] == ErrorCode.TIMEOUT and reply["error"]["fatal"]
         assert "no request for 0.3 s" in reply["error"]["message"]
@@ -135,8 +137,13 @@ def test_deadlines_follow_the_injected_clock() -> None:
         dripping = socket.create_connection((host, port), timeout=5)
         idle = socket.create_connection((host, port), timeout=5)
         assert endpoint.receive(0) is None  # accepts both, sends the hellos
-        read_frame(dripping)
-        read_frame(idle)
+        for sock in (dripping, idle):  # their first requests: the idle timeout counts next
+            read_frame(sock)
+            sock.sendall(frame(pack({"id": 1})))
+            got = endpoint.receive(0)
+            assert got is not None
+            endpoint.reply(got[0], Response(1))
+            read_frame(sock)
         dripping.sendall(b"\x00\x00\x00")
         assert endpoint.receive(0) is None
         clock.advance(1.9)
@@ -147,6 +154,64 @@ def test_deadlines_follow_the_injected_clock() -> None:
         clock.advance(3.0)  # 5.1 s since the idle client's connection
         assert endpoint.receive(0) is None and endpoint.connections == 0
         assert "no request for 5.0 s" in read_frame(idle)["error"]["message"]
+    finally:
+        endpoint.close()
+
+
+def test_silent_connections_make_room_for_a_client_with_the_token(serve: Serve) -> None:
+    server = serve(args=["--token", "t0ken", "--max-connections", "2"])
+    silent = [socket.create_connection((server.host, server.port), timeout=10) for _ in range(2)]
+    try:
+        for sock in silent:
+            read_frame(sock)  # the hello; then nothing
+        with Client(server.host, server.port, token="t0ken", timeout=10) as first, \
+                Client(server.host, server.port, token="t0ken", timeout=10) as second:
+            first.reset(seed=0)  # each got in at once, in the place of the oldest silent one
+            second.observe()
+            for sock in silent:
+                error = read_frame(sock)["error"]
+                assert (error["code"], error["fatal"]) == (ErrorCode.BUSY, True)
+                assert "full (2 clients) and this connection had sent no request: a newer one " \
+                       "took its place" == error["message"][len("this server is "):]
+            with pytest.raises(RemoteError) as full:  # clients with the token keep their place
+                Client(server.host, server.port, token="t0ken", timeout=10)
+            assert full.value.code == ErrorCode.BUSY and "2 clients connected" in \
+                full.value.message
+            first.step(np.zeros(1, np.float32))
+    finally:
+        for sock in silent:
+            sock.close()
+
+
+def test_a_connection_without_its_first_request_is_dropped_soon() -> None:
+    """The first request (with the token) is due within first_request_timeout, not the idle
+    timeout; an injected clock, no sleeping."""
+    from examples.cartpole import CartPoleAgent
+
+    clock = ManualClock()
+    hello = Hello("T", CartPoleAgent.action_space, CartPoleAgent.observation_space)
+    endpoint = Endpoint(hello, Limits(first_request_timeout=2.0, idle_timeout=100.0),
+                        token="t0ken", clock=clock)
+    host, port = endpoint.start_server()
+    try:
+        silent = socket.create_connection((host, port), timeout=5)
+        admitted = socket.create_connection((host, port), timeout=5)
+        assert endpoint.receive(0) is None
+        assert endpoint.limits.to_wire()["first_request_timeout"] == 2.0
+        assert read_frame(silent)["hello"]["limits"]["first_request_timeout"] == 2.0
+        read_frame(admitted)
+        admitted.sendall(frame(pack({"id": 1, "token": "t0ken"})))
+        got = endpoint.receive(0)
+        assert got is not None and got[1].id == 1
+        endpoint.reply(got[0], Response(1))
+        clock.advance(1.9)
+        assert endpoint.receive(0) is None and endpoint.connections == 2
+        clock.advance(0.2)
+        assert endpoint.receive(0) is None and endpoint.connections == 1  # the silent one left
+        error = read_frame(silent)["error"]
+        assert (error["code"], error["fatal"]) == (ErrorCode.TIMEOUT, True)
+        assert error["message"] == "no request with the right token within 2.0 s of connecting"
+        assert read_frame(admitted)["id"] == 1
     finally:
         endpoint.close()
 

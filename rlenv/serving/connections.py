@@ -5,8 +5,9 @@ whether it authenticated, its shared-memory lane if it asked for one
 (:mod:`rlenv.transport.lanes`), and how it waits. :class:`Connections` holds them for the
 :class:`~rlenv.serving.endpoint.Endpoint` (which adds listening, waiting and control): up to
 :attr:`Limits.max_connections` of them, each answered on its own connection, in arrival order,
-so that a misbehaving client never disturbs another; a connection beyond the cap is told
-``busy`` and closed, never silently queued. Sockets stay in blocking mode with kernel timeouts;
+so that a misbehaving client never disturbs another; a connection beyond the cap takes the
+place of the oldest client that has sent no request yet, or is told ``busy`` and closed, never
+silently queued. Sockets stay in blocking mode with kernel timeouts;
 frames go out with one ``sendall`` (``TCP_NODELAY``) and come in at most 64 KiB at a time.
 Requests taken from a lane go through the same door as any other, and their answers back into
 the lane when they fit (else on the socket).
@@ -168,6 +169,8 @@ class Connections:
                 if self._has_left(other):
                     self._drop(other, "client closed the connection")
         if len(self._peers) >= self.limits.max_connections:
+            self._make_room()
+        if len(self._peers) >= self.limits.max_connections:
             logger.info("refused %s: %d clients connected", address, len(self._peers))
             self._send(peer, ErrorReply(
                 None, ErrorCode.BUSY, f"this server already has {len(self._peers)} clients "
@@ -181,6 +184,20 @@ class Connections:
         logger.info("client %s connected", address)
         assert self._hello is not None, "set the endpoint's hello before serving"
         self._write(peer, peer.connection.send(self._hello))
+
+    def _make_room(self) -> None:
+        """Drop the oldest client that has not sent its first request, if any.
+
+        Such a client holds a slot without having shown it may (the token), so a newcomer takes
+        its place, as the oldest of the connections not yet admitted is the first to go past
+        OpenSSH's ``MaxStartups``: silent connections cannot keep a client with the token out.
+        """
+        waiting = next((peer for peer in self._order if not peer.authenticated), None)
+        if waiting is not None:
+            self._send(waiting, ErrorReply(
+                None, ErrorCode.BUSY, f"this server is full ({self.limits.max_connections} "
+                "clients) and this connection had sent no request: a newer one took its place",
+                fatal=True), "made room for a newer connection")
 
     def _check_lifeline(self, fd: int) -> None:
         if not os.read(fd, 4096):

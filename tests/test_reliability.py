@@ -22,6 +22,7 @@ from rlenv.serving.endpoint import Endpoint, Limits
 from rlenv.testing import ManualClock, frame, read_frame
 from rlenv_client import Client, ConnectionLost, RemoteEnv, RemoteError
 from rlenv_client.compliance import check_server
+from rlenv_client.compliance.harness import peak_rss_kib
 
 
 def test_compliance_suite_on_cartpole(serve: Serve, figures: dict[str, str]) -> None:
@@ -214,6 +215,31 @@ def test_a_connection_without_its_first_request_is_dropped_soon() -> None:
         assert read_frame(admitted)["id"] == 1
     finally:
         endpoint.close()
+
+
+def test_a_frame_that_would_expand_is_refused_and_the_server_keeps_its_memory(
+    serve: Serve,
+) -> None:
+    server = serve()
+    empties = 4 << 20  # 4 MiB of empty arrays: some 300 MB of Python lists, if decoded
+    crafted = b"\x82\xa2id\x02\xa5reset\x81\xa7options\x81\xa1a\xdd" + \
+        struct.pack(">I", empties) + b"\x90" * empties
+    with socket.create_connection((server.host, server.port), timeout=10) as raw:
+        read_frame(raw)
+        raw.sendall(frame(pack({"id": 1})))  # the first request: larger frames are allowed next
+        assert read_frame(raw)["id"] == 1
+        before = peak_rss_kib(server.pid)
+        raw.sendall(frame(crafted))
+        error = read_frame(raw)["error"]
+        assert (error["code"], error["fatal"]) == (ErrorCode.BAD_FRAME, False)
+        assert error["message"] == "frame holds more than 1048576 msgpack objects, the limit " \
+                                   "of a frame"
+        growth = peak_rss_kib(server.pid) - before
+        assert growth < 32 * 1024, f"the server's peak memory grew {growth} KiB"
+        raw.sendall(frame(pack({"id": 3, "reset": {"seed": 0}})))
+        assert read_frame(raw)["id"] == 3  # the same connection goes on
+    with Client(server.host, server.port, timeout=10) as client:
+        client.reset(seed=0)
 
 
 def test_non_finite_observations_are_environment_errors(serve: Serve) -> None:

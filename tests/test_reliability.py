@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 import random
 import signal
@@ -10,6 +11,7 @@ import struct
 import subprocess
 import sys
 import threading
+from typing import Any
 
 import numpy as np
 import pytest
@@ -19,6 +21,7 @@ from rlenv.protocol import ErrorReply, Hello, Response
 from rlenv.protocol.codec import pack
 from rlenv.protocol.errors import ErrorCode
 from rlenv.serving.endpoint import Endpoint, Limits
+from rlenv.serving.penalties import FREE_FAILURES
 from rlenv.testing import ManualClock, frame, read_frame
 from rlenv_client import Client, ConnectionLost, RemoteEnv, RemoteError
 from rlenv_client.compliance import check_server
@@ -213,6 +216,73 @@ def test_a_connection_without_its_first_request_is_dropped_soon() -> None:
         assert (error["code"], error["fatal"]) == (ErrorCode.TIMEOUT, True)
         assert error["message"] == "no request with the right token within 2.0 s of connecting"
         assert read_frame(admitted)["id"] == 1
+    finally:
+        endpoint.close()
+
+
+def test_wrong_tokens_make_their_address_wait(caplog: pytest.LogCaptureFixture) -> None:
+    """Past FREE_FAILURES wrong tokens, an address is refused (its token not compared) for a
+    penalty that doubles; another address is unaffected; every wrong token is logged with the
+    address, never the token. An injected clock, no sleeping."""
+    from examples.cartpole import CartPoleAgent
+
+    clock = ManualClock()
+    hello = Hello("T", CartPoleAgent.action_space, CartPoleAgent.observation_space)
+    endpoint = Endpoint(hello, Limits(), token="t0ken", clock=clock)
+    host, port = endpoint.start_server()
+
+    def attempt(token: str, source: str = "127.0.0.1") -> dict[str, Any]:
+        """Connect from ``source``, send ``token``: the server's last frame to this socket."""
+        with socket.create_connection((host, port), timeout=5,
+                                      source_address=(source, 0)) as sock:
+            assert endpoint.receive(0) is None  # accepted: a hello, or a refusal
+            first = read_frame(sock)
+            if "hello" not in first:
+                return first
+            sock.sendall(frame(pack({"id": 1, "token": token})))
+            got = endpoint.receive(0)
+            if got is not None:
+                endpoint.reply(got[0], Response(1))
+            return read_frame(sock)
+
+    caplog.set_level(logging.WARNING, logger="rlenv.serving.penalties")
+    try:
+        for _ in range(FREE_FAILURES):
+            assert attempt("guess")["error"]["message"] == "wrong token"
+        early = socket.create_connection((host, port), timeout=5)  # connected before ...
+        assert endpoint.receive(0) is None
+        read_frame(early)
+        assert attempt("guess")["error"]["message"] == "wrong token"  # counted: 1 s to wait
+        early.sendall(frame(pack({"id": 7, "token": "t0ken"})))  # ... its token not compared
+        assert endpoint.receive(0) is None
+        assert read_frame(early) == {"id": 7, "error": {
+            "code": ErrorCode.UNAUTHORIZED, "fatal": True,
+            "message": "too many wrong tokens from 127.0.0.1: try again in 1 s"}}
+        early.close()
+        reply = attempt("t0ken")  # the right token, not even read: no hello
+        refused = reply["error"]
+        assert (refused["code"], refused["fatal"], reply["id"]) == \
+            (ErrorCode.UNAUTHORIZED, True, None)
+        assert refused["message"] == "too many wrong tokens from 127.0.0.1: try again in 1 s"
+        assert attempt("t0ken", source="127.0.0.2")["id"] == 1  # another address gets in
+        clock.advance(1.0)
+        assert attempt("guess")["error"]["message"] == "wrong token"  # the next one: 2 s
+        clock.advance(1.5)
+        assert "try again in 1 s" in attempt("t0ken")["error"]["message"]
+        clock.advance(0.5)
+        assert attempt("t0ken")["id"] == 1  # the right token forgives it all
+        assert attempt("guess")["error"]["message"] == "wrong token"
+        assert "id" in attempt("t0ken")
+        lines = [record.getMessage() for record in caplog.records]
+        assert lines[:FREE_FAILURES] == [f"wrong token from 127.0.0.1 ({n} in a row)"
+                                         for n in range(1, FREE_FAILURES + 1)]
+        assert lines[FREE_FAILURES:] == [
+            f"wrong token from 127.0.0.1 ({FREE_FAILURES + 1} in a row): its requests are "
+            "refused for 1 s",
+            f"wrong token from 127.0.0.1 ({FREE_FAILURES + 2} in a row): its requests are "
+            "refused for 2 s",
+            "wrong token from 127.0.0.1 (1 in a row)"]
+        assert not any("guess" in line or "t0ken" in line for line in lines)
     finally:
         endpoint.close()
 

@@ -54,8 +54,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                        help=f"seconds a started frame may take (default {defaults.frame_deadline})")
     serve.add_argument("--first-request-timeout", type=float,
                        default=defaults.first_request_timeout,
-                       help="seconds a client has, from connecting, for its first request (with "
-                       f"the token, if one is required; default {defaults.first_request_timeout})")
+                       help="with a token, seconds a client has from connecting to send it (in its "
+                       f"first request; default {defaults.first_request_timeout})")
     serve.add_argument("--max-connections", type=int, default=defaults.max_connections,
                        help=f"clients connected at once (default {defaults.max_connections})")
     serve.add_argument("--idle-timeout", type=float, default=defaults.idle_timeout,

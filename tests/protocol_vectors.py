@@ -744,27 +744,21 @@ def _busy(recording: Recording) -> None:
                   closes=True)
 
 
-@scenario("error_timeout.json", "timeout: incomplete frames, no first request, idle clients",
-          CARTPOLE, "--idle-timeout", "0.6", "--frame-deadline", "0.2",
-          "--first-request-timeout", "0.4")
+@scenario("error_timeout.json", "timeout: incomplete frames and idle clients", CARTPOLE,
+          "--idle-timeout", "0.5", "--frame-deadline", "0.2")
 def _timeout(recording: Recording) -> None:
     slow = recording.connect()
-    silent = recording.connect()
     idle = recording.connect()
     slow.hello()
-    silent.hello()
     idle.hello()
-    idle.request({"id": 1}, "its first request: from now on the idle timeout counts")
     whole = pack({"id": 1})
     slow.send(raw=HEADER.pack(len(whole)) + whole[:2],
               note=f"the start of a frame (its prefix announces {len(whole)} bytes, 2 follow), "
                    "then nothing")
     slow.receive("the frame is not complete within 0.2 s (--frame-deadline): fatal",
                  closes=True)
-    silent.receive("a client that sends no request within 0.4 s of connecting "
-                   "(--first-request-timeout): unsolicited, fatal", closes=True)
-    idle.receive("a client that sends nothing for 0.6 s after a request (--idle-timeout): "
-                 "unsolicited, fatal", closes=True)
+    idle.receive("a client that sends nothing for 0.5 s (--idle-timeout): unsolicited, fatal",
+                 closes=True)
 
 
 @scenario("error_environment_error.json", "environment_error: user code raises", FAULTY,

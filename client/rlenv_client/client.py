@@ -124,12 +124,8 @@ class Client(BaseClient):
                 self.close()
                 raise RemoteError(ErrorCode.UNAUTHORIZED, f"{self.address} requires a token: "
                                   "pass token=... (or set RLENV_TOKEN)", fatal=True)
-        else:
-            token = None
-        # The first request at once (the server drops a connection that waits for long
-        # before it, see Limits.first_request_timeout), with the token if one is required.
-        self._post(Request(next(self._ids), token=token))
-        self._response(self.receive_reply())
+            self._post(Request(next(self._ids), token=token))
+            self._response(self.receive_reply())
         if shared_memory is not False:
             try:
                 self._open_lane(host, required=shared_memory is True)

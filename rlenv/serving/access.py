@@ -2,8 +2,9 @@
 
 An environment server is a network service and is treated like one: a frame's length is checked
 against :class:`Limits` before its body is read, a client that trickles bytes or stays silent
-is dropped (soon, while it has not sent its first request), and a server binds 127.0.0.1 unless
-told otherwise, and refuses to bind anything else without a token (:class:`InsecureBindError`).
+is dropped (soon, while it has not sent the token a server requires), and a server binds
+127.0.0.1 unless told otherwise, and refuses to bind anything else without a token
+(:class:`InsecureBindError`).
 """
 
 from __future__ import annotations
@@ -30,8 +31,8 @@ class Limits:
         max_unauthenticated_frame_size: largest frame before that (the first request); never
             more than ``max_frame_size`` (see :attr:`max_first_frame_size`).
         frame_deadline: seconds within which a frame, once started, must be complete.
-        first_request_timeout: seconds a client has, from connecting, for its first request
-            (with the right token when one is required).
+        first_request_timeout: when a token is required, seconds a client has, from
+            connecting, to send it (in its first request).
         idle_timeout: seconds a client may stay silent between requests (``None``: forever).
         write_timeout: seconds a reply may take to be written.
         max_connections: clients connected at once.

@@ -13,8 +13,8 @@ An environment server is a network service and is treated like one:
   :attr:`Limits.max_unauthenticated_frame_size` bytes until the client has authenticated (or
   when no token is needed, until its first request), :attr:`Limits.max_frame_size` after.
 - **Deadlines.** A frame that has started must complete within :attr:`Limits.frame_deadline`
-  (a client that trickles bytes is dropped); a client that has not sent its first request (with
-  the token, when one is required) within :attr:`Limits.first_request_timeout` of connecting is
+  (a client that trickles bytes is dropped); when a token is required, a client that has not
+  sent it (in its first request) within :attr:`Limits.first_request_timeout` of connecting is
   dropped; a client silent between requests for
   :attr:`Limits.idle_timeout` is dropped; a write that cannot complete within
   :attr:`Limits.write_timeout` drops the client.
@@ -234,7 +234,7 @@ class Endpoint(Connections):
                    default=None)
 
     def _due(self, peer: Peer) -> float | None:
-        if not peer.authenticated:  # its last_request is when it connected
+        if not peer.authenticated and self._token is not None:  # last_request: its connecting
             due = peer.last_request + self.limits.first_request_timeout
             if peer.frame_started is not None:
                 due = min(due, peer.frame_started + self.limits.frame_deadline)
@@ -251,9 +251,9 @@ class Endpoint(Connections):
             due = self._due(peer)
             if due is None or now < due:
                 continue
-            if not peer.authenticated and now >= peer.last_request + \
-                    self.limits.first_request_timeout:
-                message = (f"no request{' with the right token' if self._token else ''} within "
+            if not peer.authenticated and self._token is not None and \
+                    now >= peer.last_request + self.limits.first_request_timeout:
+                message = (f"no request with the right token within "
                            f"{self.limits.first_request_timeout} s of connecting")
             elif peer.frame_started is not None:
                 message = (f"a frame was not completed within {self.limits.frame_deadline} s "

@@ -53,6 +53,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                        help=f"largest request in bytes (default {defaults.max_frame_size})")
     serve.add_argument("--frame-deadline", type=float, default=defaults.frame_deadline,
                        help=f"seconds a started frame may take (default {defaults.frame_deadline})")
+    serve.add_argument("--first-request-timeout", type=float,
+                       default=defaults.first_request_timeout,
+                       help="with a token, seconds a client has from connecting to send it (in its "
+                       f"first request; default {defaults.first_request_timeout})")
     serve.add_argument("--max-connections", type=int, default=defaults.max_connections,
                        help=f"clients connected at once (default {defaults.max_connections})")
     serve.add_argument("--idle-timeout", type=float, default=defaults.idle_timeout,
@@ -208,6 +212,7 @@ def _serve(args: argparse.Namespace) -> int:
                          "every client has its own: start the inspector on one of them instead")
     signal.signal(signal.SIGTERM, _exit_on_signal)
     limits = Limits(max_frame_size=args.max_frame_size, frame_deadline=args.frame_deadline,
+                    first_request_timeout=args.first_request_timeout,
                     idle_timeout=args.idle_timeout or None, max_connections=args.max_connections)
     server = Server(args.target, host=args.host, port=args.port, lifeline=args.lifeline,
                     token=args.token, limits=limits, instances=args.instances,

@@ -9,6 +9,7 @@ the socket.
 
 from __future__ import annotations
 
+import http.client
 import os
 import resource
 import select
@@ -21,6 +22,8 @@ from collections.abc import Iterator
 import pytest
 from conftest import Serve, wait_until
 from http_gateway import Gateway, assert_problem
+
+from rlenv.serving.penalties import FREE_FAILURES
 
 CARTPOLE = "examples.cartpole:CartPoleEnvironment"
 
@@ -396,6 +399,34 @@ def test_a_token_is_required_when_set() -> None:
         assert "s3cret" not in guarded.request("GET", "/openapi.json", headers=good).body.decode()
         foreign = guarded.request("GET", "/v1", headers={**good, "Origin": "http://evil.test"})
         assert_problem(foreign, 403, "forbidden")
+    finally:
+        guarded.close()
+
+
+def test_wrong_tokens_make_their_address_wait_as_at_the_tcp_server() -> None:
+    guarded = Gateway(CARTPOLE, "--host", "0.0.0.0", env={"RLENV_TOKEN": "s3cret"})
+    try:
+        guarded.host = "127.0.0.1"
+        wrong, good = {"Authorization": "Bearer nope"}, {"Authorization": "Bearer s3cret"}
+        for _ in range(FREE_FAILURES + 1):  # the last one makes 127.0.0.1 wait 1 s
+            assert assert_problem(guarded.request("GET", "/v1", headers=wrong), 401,
+                                  "unauthorized")["detail"] == "wrong token"
+        refused = guarded.request("GET", "/v1", headers=good)  # its token is not compared
+        assert assert_problem(refused, 401, "unauthorized")["detail"] == \
+            "too many wrong tokens from 127.0.0.1: try again in 1 s"
+        assert refused.headers["retry-after"] == "1"
+        other = http.client.HTTPConnection("127.0.0.1", guarded.port, timeout=30,
+                                           source_address=("127.0.0.2", 0))
+        try:  # another address is not affected
+            other.request("GET", "/v1", headers=good)
+            assert other.getresponse().status == 200
+        finally:
+            other.close()
+        log = guarded.stderr()
+        assert "wrong token from 127.0.0.1 (1 in a row)" in log
+        assert f"wrong token from 127.0.0.1 ({FREE_FAILURES + 1} in a row): its requests are " \
+               "refused for 1 s" in log
+        assert "nope" not in log and "s3cret" not in log
     finally:
         guarded.close()
 

@@ -40,6 +40,7 @@ from rlenv.protocol import (
     pack,
     unpack,
 )
+from rlenv.protocol.codec import MAX_FRAME_OBJECTS
 from rlenv.protocol.connection import TRANSITIONS, Event
 from rlenv.protocol.errors import (
     ErrorCode,
@@ -1593,6 +1594,65 @@ def test_bad_frame_body_is_an_error_and_the_server_goes_on(
     server.send(ErrorReply(None, info.value.code, str(info.value)))
     assert server.next_message() == Request(id=2)
     assert server.state is State.READY
+
+
+def _nested_unfinished_arrays(levels: int, items: bytes, count: int) -> bytes:
+    """A request whose option nests ``levels`` arrays, each ``count`` ``items`` and then the
+    next array: none completes before the last (what a decoder's hooks would never see)."""
+    level = b"\xdd" + struct.pack(">I", count + 1) + items * count
+    return b"\x82\xa2id\x01\xa5reset\x81\xa7options\x81\xa1a" + level * levels + b"\x90" * levels
+
+
+@pytest.mark.parametrize("body", [
+    pytest.param(b"\x81\xa1a\xdd" + struct.pack(">I", MAX_FRAME_OBJECTS) +
+                 b"\x90" * MAX_FRAME_OBJECTS, id="empty-arrays"),
+    pytest.param(_nested_unfinished_arrays(8, b"\xa2ab", MAX_FRAME_OBJECTS // 6),
+                 id="unfinished-arrays-of-strings"),
+    pytest.param(_nested_unfinished_arrays(1000, b"\xc0", 2000), id="deep-nils"),
+])
+def test_a_frame_of_too_many_objects_is_refused_before_it_is_decoded(
+    ready: Pair, body: bytes
+) -> None:
+    """64 MiB of empty arrays decoded into 5.2 GB of Python objects: a frame now holds at most
+    MAX_FRAME_OBJECTS objects, counted before anything is decoded."""
+    server = ready.server
+    server.receive_data(raw_frame(body) + frame({"id": 2}))
+    with pytest.raises(RemoteProtocolError) as info:
+        server.next_message()
+    assert str(info.value) == f"frame holds more than {MAX_FRAME_OBJECTS} msgpack objects, " \
+                              "the limit of a frame"
+    assert (info.value.code, info.value.fatal, info.value.request_id) == \
+        (ErrorCode.BAD_FRAME, False, None)
+    assert server.next_message() == Request(id=2)  # the frame was consumed; the rest goes on
+
+
+def test_objects_are_counted_exactly_whatever_their_type() -> None:
+    """Every kind of msgpack object, then padding: exactly the limit decodes, one more does not
+    (on both sides, for the client decodes with the same codec)."""
+    array = np.arange(3, dtype=np.uint8)
+    kinds = [b"\x05", b"\xe0", b"\xc0", b"\xc2", b"\xc3", b"\xcc\xff", b"\xcd\x01\x00",
+             b"\xce" + bytes(4), b"\xcf" + bytes(8), b"\xd0\x80", b"\xd1" + bytes(2),
+             b"\xd2" + bytes(4), b"\xd3" + bytes(8), b"\xca" + bytes(4), b"\xcb" + bytes(8),
+             b"\xa3abc", b"\xd9\x05hello", b"\xda\x01\x00" + b"s" * 256,
+             b"\xdb" + struct.pack(">I", 70_000) + b"t" * 70_000, b"\xc4\x00",
+             b"\xc5\x01\x00" + bytes(256), b"\xc6" + struct.pack(">I", 70_000) + bytes(70_000),
+             pack(array), pack(np.zeros((), np.float64)), pack(np.zeros(300, np.uint8)),
+             pack(np.zeros(70_000, np.uint8)), b"\x80", b"\x90", b"\x81\xa1k\x01",
+             b"\xdc\x00\x01\x01", b"\xde\x00\x00", b"\xdf" + bytes(4), b"\xdd" + bytes(4)]
+    assert {kind[0] for kind in kinds} >= {0xd8, 0xc7, 0xc8, 0xc9}  # the arrays' ext sizes
+    objects_in_kinds = len(kinds) + 3  # the map {"k": 1} holds two more, the array16 one
+    for extra, refused in ((0, False), (1, True)):
+        padding = MAX_FRAME_OBJECTS - 3 - objects_in_kinds + extra
+        body = b"\x81\xa1a\xdd" + struct.pack(">I", len(kinds) + padding) + b"".join(kinds) + \
+            b"\x00" * padding
+        for strict in (True, False):
+            if refused:
+                with pytest.raises(RemoteProtocolError, match="more than 1048576 msgpack"):
+                    unpack(body, strict=strict)
+            else:
+                items = unpack(body, strict=strict)["a"]
+                assert len(items) == len(kinds) + padding and items[-1] == 0
+                assert items[22].tolist() == [0, 1, 2] and items[28] == {"k": 1}
 
 
 def test_non_map_frame_on_the_client_is_an_error(ready: Pair) -> None:

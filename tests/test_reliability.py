@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 import random
 import signal
@@ -10,18 +11,21 @@ import struct
 import subprocess
 import sys
 import threading
+from typing import Any
 
 import numpy as np
 import pytest
 from conftest import Serve, wait_until
 
-from rlenv.protocol import ErrorReply, Hello
+from rlenv.protocol import ErrorReply, Hello, Response
 from rlenv.protocol.codec import pack
 from rlenv.protocol.errors import ErrorCode
 from rlenv.serving.endpoint import Endpoint, Limits
+from rlenv.serving.penalties import FREE_FAILURES
 from rlenv.testing import ManualClock, frame, read_frame
 from rlenv_client import Client, ConnectionLost, RemoteEnv, RemoteError
 from rlenv_client.compliance import check_server
+from rlenv_client.compliance.harness import peak_rss_kib
 
 
 def test_compliance_suite_on_cartpole(serve: Serve, figures: dict[str, str]) -> None:
@@ -116,6 +120,8 @@ def test_an_idle_client_is_dropped_with_a_reason(serve: Serve) -> None:
     server = serve(args=["--idle-timeout", "0.3"])
     with socket.create_connection((server.host, server.port), timeout=10) as raw:
         read_frame(raw)  # the hello
+        raw.sendall(frame(pack({"id": 1})))  # its first request: the idle timeout counts next
+        assert read_frame(raw)["id"] == 1
         reply = read_frame(raw)  # blocks until the server gives up on us
         assert reply["error"]["code"] == ErrorCode.TIMEOUT and reply["error"]["fatal"]
         assert "no request for 0.3 s" in reply["error"]["message"]
@@ -135,8 +141,13 @@ def test_deadlines_follow_the_injected_clock() -> None:
         dripping = socket.create_connection((host, port), timeout=5)
         idle = socket.create_connection((host, port), timeout=5)
         assert endpoint.receive(0) is None  # accepts both, sends the hellos
-        read_frame(dripping)
-        read_frame(idle)
+        for sock in (dripping, idle):  # their first requests: the idle timeout counts next
+            read_frame(sock)
+            sock.sendall(frame(pack({"id": 1})))
+            got = endpoint.receive(0)
+            assert got is not None
+            endpoint.reply(got[0], Response(1))
+            read_frame(sock)
         dripping.sendall(b"\x00\x00\x00")
         assert endpoint.receive(0) is None
         clock.advance(1.9)
@@ -149,6 +160,156 @@ def test_deadlines_follow_the_injected_clock() -> None:
         assert "no request for 5.0 s" in read_frame(idle)["error"]["message"]
     finally:
         endpoint.close()
+
+
+def test_silent_connections_make_room_for_a_client_with_the_token(serve: Serve) -> None:
+    server = serve(args=["--token", "t0ken", "--max-connections", "2"])
+    silent = [socket.create_connection((server.host, server.port), timeout=10) for _ in range(2)]
+    try:
+        for sock in silent:
+            read_frame(sock)  # the hello; then nothing
+        with Client(server.host, server.port, token="t0ken", timeout=10) as first, \
+                Client(server.host, server.port, token="t0ken", timeout=10) as second:
+            first.reset(seed=0)  # each got in at once, in the place of the oldest silent one
+            second.observe()
+            for sock in silent:
+                error = read_frame(sock)["error"]
+                assert (error["code"], error["fatal"]) == (ErrorCode.BUSY, True)
+                assert "full (2 clients) and this connection had sent no request: a newer one " \
+                       "took its place" == error["message"][len("this server is "):]
+            with pytest.raises(RemoteError) as full:  # clients with the token keep their place
+                Client(server.host, server.port, token="t0ken", timeout=10)
+            assert full.value.code == ErrorCode.BUSY and "2 clients connected" in \
+                full.value.message
+            first.step(np.zeros(1, np.float32))
+    finally:
+        for sock in silent:
+            sock.close()
+
+
+def test_a_connection_without_its_first_request_is_dropped_soon() -> None:
+    """The first request (with the token) is due within first_request_timeout, not the idle
+    timeout; an injected clock, no sleeping."""
+    from examples.cartpole import CartPoleAgent
+
+    clock = ManualClock()
+    hello = Hello("T", CartPoleAgent.action_space, CartPoleAgent.observation_space)
+    endpoint = Endpoint(hello, Limits(first_request_timeout=2.0, idle_timeout=100.0),
+                        token="t0ken", clock=clock)
+    host, port = endpoint.start_server()
+    try:
+        silent = socket.create_connection((host, port), timeout=5)
+        admitted = socket.create_connection((host, port), timeout=5)
+        assert endpoint.receive(0) is None
+        assert endpoint.limits.to_wire()["first_request_timeout"] == 2.0
+        assert read_frame(silent)["hello"]["limits"]["first_request_timeout"] == 2.0
+        read_frame(admitted)
+        admitted.sendall(frame(pack({"id": 1, "token": "t0ken"})))
+        got = endpoint.receive(0)
+        assert got is not None and got[1].id == 1
+        endpoint.reply(got[0], Response(1))
+        clock.advance(1.9)
+        assert endpoint.receive(0) is None and endpoint.connections == 2
+        clock.advance(0.2)
+        assert endpoint.receive(0) is None and endpoint.connections == 1  # the silent one left
+        error = read_frame(silent)["error"]
+        assert (error["code"], error["fatal"]) == (ErrorCode.TIMEOUT, True)
+        assert error["message"] == "no request with the right token within 2.0 s of connecting"
+        assert read_frame(admitted)["id"] == 1
+    finally:
+        endpoint.close()
+
+
+def test_wrong_tokens_make_their_address_wait(caplog: pytest.LogCaptureFixture) -> None:
+    """Past FREE_FAILURES wrong tokens, an address is refused (its token not compared) for a
+    penalty that doubles; another address is unaffected; every wrong token is logged with the
+    address, never the token. An injected clock, no sleeping."""
+    from examples.cartpole import CartPoleAgent
+
+    clock = ManualClock()
+    hello = Hello("T", CartPoleAgent.action_space, CartPoleAgent.observation_space)
+    endpoint = Endpoint(hello, Limits(), token="t0ken", clock=clock)
+    host, port = endpoint.start_server()
+
+    def attempt(token: str, source: str = "127.0.0.1") -> dict[str, Any]:
+        """Connect from ``source``, send ``token``: the server's last frame to this socket."""
+        with socket.create_connection((host, port), timeout=5,
+                                      source_address=(source, 0)) as sock:
+            assert endpoint.receive(0) is None  # accepted: a hello, or a refusal
+            first = read_frame(sock)
+            if "hello" not in first:
+                return first
+            sock.sendall(frame(pack({"id": 1, "token": token})))
+            got = endpoint.receive(0)
+            if got is not None:
+                endpoint.reply(got[0], Response(1))
+            return read_frame(sock)
+
+    caplog.set_level(logging.WARNING, logger="rlenv.serving.penalties")
+    try:
+        for _ in range(FREE_FAILURES):
+            assert attempt("guess")["error"]["message"] == "wrong token"
+        early = socket.create_connection((host, port), timeout=5)  # connected before ...
+        assert endpoint.receive(0) is None
+        read_frame(early)
+        assert attempt("guess")["error"]["message"] == "wrong token"  # counted: 1 s to wait
+        early.sendall(frame(pack({"id": 7, "token": "t0ken"})))  # ... its token not compared
+        assert endpoint.receive(0) is None
+        assert read_frame(early) == {"id": 7, "error": {
+            "code": ErrorCode.UNAUTHORIZED, "fatal": True,
+            "message": "too many wrong tokens from 127.0.0.1: try again in 1 s"}}
+        early.close()
+        reply = attempt("t0ken")  # the right token, not even read: no hello
+        refused = reply["error"]
+        assert (refused["code"], refused["fatal"], reply["id"]) == \
+            (ErrorCode.UNAUTHORIZED, True, None)
+        assert refused["message"] == "too many wrong tokens from 127.0.0.1: try again in 1 s"
+        assert attempt("t0ken", source="127.0.0.2")["id"] == 1  # another address gets in
+        clock.advance(1.0)
+        assert attempt("guess")["error"]["message"] == "wrong token"  # the next one: 2 s
+        clock.advance(1.5)
+        assert "try again in 1 s" in attempt("t0ken")["error"]["message"]
+        clock.advance(0.5)
+        assert attempt("t0ken")["id"] == 1  # the right token forgives it all
+        assert attempt("guess")["error"]["message"] == "wrong token"
+        assert "id" in attempt("t0ken")
+        lines = [record.getMessage() for record in caplog.records]
+        assert lines[:FREE_FAILURES] == [f"wrong token from 127.0.0.1 ({n} in a row)"
+                                         for n in range(1, FREE_FAILURES + 1)]
+        assert lines[FREE_FAILURES:] == [
+            f"wrong token from 127.0.0.1 ({FREE_FAILURES + 1} in a row): its requests are "
+            "refused for 1 s",
+            f"wrong token from 127.0.0.1 ({FREE_FAILURES + 2} in a row): its requests are "
+            "refused for 2 s",
+            "wrong token from 127.0.0.1 (1 in a row)"]
+        assert not any("guess" in line or "t0ken" in line for line in lines)
+    finally:
+        endpoint.close()
+
+
+def test_a_frame_that_would_expand_is_refused_and_the_server_keeps_its_memory(
+    serve: Serve,
+) -> None:
+    server = serve()
+    empties = 4 << 20  # 4 MiB of empty arrays: some 300 MB of Python lists, if decoded
+    crafted = b"\x82\xa2id\x02\xa5reset\x81\xa7options\x81\xa1a\xdd" + \
+        struct.pack(">I", empties) + b"\x90" * empties
+    with socket.create_connection((server.host, server.port), timeout=10) as raw:
+        read_frame(raw)
+        raw.sendall(frame(pack({"id": 1})))  # the first request: larger frames are allowed next
+        assert read_frame(raw)["id"] == 1
+        before = peak_rss_kib(server.pid)
+        raw.sendall(frame(crafted))
+        error = read_frame(raw)["error"]
+        assert (error["code"], error["fatal"]) == (ErrorCode.BAD_FRAME, False)
+        assert error["message"] == "frame holds more than 1048576 msgpack objects, the limit " \
+                                   "of a frame"
+        growth = peak_rss_kib(server.pid) - before
+        assert growth < 32 * 1024, f"the server's peak memory grew {growth} KiB"
+        raw.sendall(frame(pack({"id": 3, "reset": {"seed": 0}})))
+        assert read_frame(raw)["id"] == 3  # the same connection goes on
+    with Client(server.host, server.port, timeout=10) as client:
+        client.reset(seed=0)
 
 
 def test_non_finite_observations_are_environment_errors(serve: Serve) -> None:

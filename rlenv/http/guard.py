@@ -6,7 +6,9 @@
   other than ``same-origin`` or ``none`` (a page's ``<img src>`` sends no ``Origin``, and
   bevy_rl's ``GET /step`` and ``/reset`` change state);
 - with a token (required to bind beyond loopback: ``RLENV_TOKEN``), ``Authorization: Bearer
-  TOKEN``, compared in constant time; else 401 ``unauthorized``;
+  TOKEN``, compared in constant time; else 401 ``unauthorized``. An address that sent too many
+  wrong tokens waits, as at the TCP server (:mod:`rlenv.serving.penalties`): meanwhile its
+  requests get 401 ``unauthorized`` with ``Retry-After``, their token not compared;
 - bodies of at most ``max_body`` bytes: a larger ``Content-Length`` is refused before anything
   is read, a chunked body as soon as it grows past it (413 ``payload_too_large``, and the
   connection closes).
@@ -22,6 +24,7 @@ from typing import Any
 
 from rlenv.http.problems import Problem
 from rlenv.protocol.errors import ErrorCode
+from rlenv.serving.penalties import Penalties, refusal
 from rlenv_client.origins import OriginPolicy
 
 __all__ = ["Guard"]
@@ -54,6 +57,7 @@ class Guard:
         self._token = None if token is None else token.encode()
         self._max_body = max_body
         self._refusals: dict[tuple[bytes | None, bytes | None], str | None] = {}
+        self._penalties = Penalties()
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         """Serve ``scope`` if it passes, else answer its problem."""
@@ -77,7 +81,9 @@ class Guard:
                 chunked = True
             elif name == b"sec-fetch-site":
                 fetch_site = value
-        problem = self._problem(host, origin, authorization, length, fetch_site)
+        client = scope.get("client")
+        problem = self._problem(host, origin, authorization, length, fetch_site,
+                                "an unknown address" if client is None else client[0])
         if problem is not None:
             await _refuse(problem, scope, receive, send)
             return
@@ -86,7 +92,7 @@ class Guard:
         await self.app(scope, receive, send)
 
     def _problem(self, host: bytes | None, origin: bytes | None, authorization: bytes,
-                 length: bytes, fetch_site: bytes) -> Problem | None:
+                 length: bytes, fetch_site: bytes, peer: str) -> Problem | None:
         try:
             refusal = self._refusals[host, origin]
         except KeyError:
@@ -102,18 +108,33 @@ class Guard:
             return Problem("forbidden", "refused: a request a page of another origin made "
                                         f"(Sec-Fetch-Site: {fetch_site.decode('latin-1'):.20})")
         if self._token is not None:
-            scheme, _, token = authorization.partition(b" ")
-            if scheme.lower() != b"bearer" or not hmac.compare_digest(token.strip(),
-                                                                      self._token):
-                return Problem(ErrorCode.UNAUTHORIZED,
-                               "this gateway requires its token: send Authorization: Bearer "
-                               "TOKEN (the RLENV_TOKEN it was started with)" if not token else
-                               "wrong token", headers={"WWW-Authenticate": 'Bearer realm="rlenv"'})
+            problem = self._token_problem(authorization, peer)
+            if problem is not None:
+                return problem
         if length and (not length.isdigit() or int(length) > self._max_body):
             return Problem("payload_too_large", f"a body is at most {self._max_body} bytes, "
                                                 f"this one {length.decode('latin-1')[:20]}",
                            headers=_CLOSE)
         return None
+
+    def _token_problem(self, authorization: bytes, peer: str) -> Problem | None:
+        """Why ``authorization`` from the address ``peer`` is refused, or ``None``."""
+        wait = self._penalties.wait(peer)
+        if wait:
+            return Problem(ErrorCode.UNAUTHORIZED, refusal(peer, wait),
+                           headers={"Retry-After": str(wait)})
+        assert self._token is not None
+        scheme, _, token = authorization.partition(b" ")
+        if scheme.lower() == b"bearer" and token and \
+                hmac.compare_digest(token.strip(), self._token):
+            self._penalties.succeeded(peer)
+            return None
+        if token:
+            self._penalties.failed(peer)
+        return Problem(ErrorCode.UNAUTHORIZED,
+                       "this gateway requires its token: send Authorization: Bearer TOKEN (the "
+                       "RLENV_TOKEN it was started with)" if not token else "wrong token",
+                       headers={"WWW-Authenticate": 'Bearer realm="rlenv"'})
 
     def _counted(self, receive: Receive) -> Receive:
         """``receive`` that refuses a chunked body once it grows past ``max_body``."""

@@ -22,6 +22,7 @@ from rlenv.protocol.errors import RemoteProtocolError
 __all__ = [
     "DEFAULT_MAX_FRAME_SIZE",
     "HEADER",
+    "MAX_FRAME_OBJECTS",
     "NDARRAY_EXT",
     "find_non_text_key",
     "frame",
@@ -31,6 +32,12 @@ __all__ = [
 
 DEFAULT_MAX_FRAME_SIZE: Final = 64 * 1024 * 1024
 """Largest frame body accepted by default, checked against the length prefix before reading."""
+
+MAX_FRAME_OBJECTS: Final = 1 << 20
+"""Most msgpack objects a frame may hold (every value counts, keys, arrays and maps included).
+A byte may hold an empty array, which costs Python some 64 bytes: this bounds what a frame
+decodes into. Frames of this many bytes or fewer cannot exceed it; longer ones are counted
+before they are decoded."""
 
 NDARRAY_EXT: Final = 1
 """msgpack ext type code of a numpy array."""
@@ -156,17 +163,22 @@ def unpack(body: bytes | bytearray | memoryview, *, strict: bool = True) -> Any:
     Strings are UTF-8, and every map key at every depth must be a str: msgpack refuses
     integer, float, nil and ext keys itself, and when ``strict`` (the default) a bin key is
     refused too. No container may declare more elements or bytes than ``body`` holds (msgpack
-    bounds each by the body's length, so a frame cannot make the decoder allocate more than the
-    frame limit allows). The only ext type is :data:`NDARRAY_EXT`; any other is refused, and
-    when ``strict`` so is msgpack's timestamp type (-1), which msgpack decodes without asking
-    the hook: a decoded frame that may hold one (its type byte, 0xff, is in it) is searched for
-    it. A client reading a server may skip the strict checks (rlenv servers never send either),
-    which keeps the search off a path where packed floats make 0xff bytes common.
+    bounds each by the body's length), and a frame holds at most :data:`MAX_FRAME_OBJECTS`
+    objects (counted before decoding, in frames longer than that). The only ext type is
+    :data:`NDARRAY_EXT`; any other is refused, and when ``strict`` so is msgpack's timestamp
+    type (-1), which msgpack decodes without asking the hook: a decoded frame that may hold one
+    (its type byte, 0xff, is in it) is searched for it. A client reading a server may skip the
+    strict checks (rlenv servers never send either), which keeps the search off a path where
+    packed floats make 0xff bytes common.
 
     Raises:
         RemoteProtocolError: invalid msgpack, a map key that is not a str, trailing bytes, a
-            foreign ext type (timestamps included) or a malformed array.
+            foreign ext type (timestamps included), a malformed array, or more objects than
+            :data:`MAX_FRAME_OBJECTS`.
     """
+    if len(body) > MAX_FRAME_OBJECTS and _count_objects(body) > MAX_FRAME_OBJECTS:
+        raise RemoteProtocolError(f"frame holds more than {MAX_FRAME_OBJECTS} msgpack objects, "
+                                  "the limit of a frame")
     try:
         value = msgpack.unpackb(body, ext_hook=_ext_hook,
                                 object_hook=_text_keys if strict else None)
@@ -178,6 +190,49 @@ def unpack(body: bytes | bytearray | memoryview, *, strict: bool = True) -> Any:
     if strict and (body.__class__ is memoryview or 0xFF in body) and _holds_timestamp(value):
         raise RemoteProtocolError(f"frame is not valid msgpack: {_foreign_ext(-1)}")
     return value
+
+
+def _object_sizes() -> tuple[list[int], dict[int, tuple[struct.Struct, int]]]:
+    """The bytes each msgpack type byte's object takes (0: read its length).
+
+    For the types with a length: the length's format and the bytes before the payload.
+    """
+    sizes = [1] * 0x100  # positive and negative fixint, nil, false, true; 0xc1 (never used)
+    for byte in range(0xA0, 0xC0):
+        sizes[byte] = 1 + (byte & 0x1F)  # fixstr; fixmap and fixarray are 1 byte, as headers
+    sizes[0xCA:0xE0] = [5, 9, 2, 3, 5, 9, 2, 3, 5, 9, 3, 4, 6, 10, 18, 0, 0, 0, 3, 5, 3, 5]
+    lengths = {}
+    for first, skip in ((0xC4, 1), (0xC7, 2), (0xD9, 1)):  # bin; ext (a type byte); str
+        for index, form in enumerate((">B", ">H", ">I")):
+            sizes[first + index] = 0
+            lengths[first + index] = (struct.Struct(form), skip + 2 ** index)
+    return sizes, lengths
+
+
+_SIZES, _LENGTHS = _object_sizes()
+
+
+def _count_objects(body: bytes | bytearray | memoryview) -> int:
+    """How many msgpack objects ``body`` holds, up to one more than :data:`MAX_FRAME_OBJECTS`.
+
+    Objects follow each other whatever their nesting (an array's header, then its elements), so
+    counting them is a walk over the headers that skips payloads; malformed bytes end the walk
+    (msgpack then says what is wrong).
+    """
+    end = len(body)
+    position = count = 0
+    sizes, lengths = _SIZES, _LENGTHS
+    while position < end and count <= MAX_FRAME_OBJECTS:
+        byte = body[position]
+        size = sizes[byte]
+        if not size:
+            form, skip = lengths[byte]
+            if position + skip > end:
+                break
+            size = skip + form.unpack_from(body, position + 1)[0]
+        position += size
+        count += 1
+    return count
 
 
 def _text_keys(mapping: dict[Any, Any]) -> dict[Any, Any]:

@@ -2,8 +2,9 @@
 
 An environment server is a network service and is treated like one: a frame's length is checked
 against :class:`Limits` before its body is read, a client that trickles bytes or stays silent
-is dropped, and a server binds 127.0.0.1 unless told otherwise, and refuses to bind anything
-else without a token (:class:`InsecureBindError`).
+is dropped (soon, while it has not sent the token a server requires), and a server binds
+127.0.0.1 unless told otherwise, and refuses to bind anything else without a token
+(:class:`InsecureBindError`).
 """
 
 from __future__ import annotations
@@ -30,6 +31,8 @@ class Limits:
         max_unauthenticated_frame_size: largest frame before that (the first request); never
             more than ``max_frame_size`` (see :attr:`max_first_frame_size`).
         frame_deadline: seconds within which a frame, once started, must be complete.
+        first_request_timeout: when a token is required, seconds a client has, from
+            connecting, to send it (in its first request).
         idle_timeout: seconds a client may stay silent between requests (``None``: forever).
         write_timeout: seconds a reply may take to be written.
         max_connections: clients connected at once.
@@ -38,6 +41,7 @@ class Limits:
     max_frame_size: int = DEFAULT_MAX_FRAME_SIZE
     max_unauthenticated_frame_size: int = 64 * 1024
     frame_deadline: float = 10.0
+    first_request_timeout: float = 10.0
     idle_timeout: float | None = 3600.0
     write_timeout: float = 10.0
     max_connections: int = 8
@@ -52,7 +56,9 @@ class Limits:
         return {"max_frame_size": self.max_frame_size,
                 "max_first_frame_size": self.max_first_frame_size,
                 "max_reply_size": DEFAULT_MAX_FRAME_SIZE,
-                "frame_deadline": self.frame_deadline, "idle_timeout": self.idle_timeout,
+                "frame_deadline": self.frame_deadline,
+                "first_request_timeout": self.first_request_timeout,
+                "idle_timeout": self.idle_timeout,
                 "write_timeout": self.write_timeout, "max_connections": self.max_connections}
 
 

@@ -5,8 +5,9 @@ whether it authenticated, its shared-memory lane if it asked for one
 (:mod:`rlenv.transport.lanes`), and how it waits. :class:`Connections` holds them for the
 :class:`~rlenv.serving.endpoint.Endpoint` (which adds listening, waiting and control): up to
 :attr:`Limits.max_connections` of them, each answered on its own connection, in arrival order,
-so that a misbehaving client never disturbs another; a connection beyond the cap is told
-``busy`` and closed, never silently queued. Sockets stay in blocking mode with kernel timeouts;
+so that a misbehaving client never disturbs another; a connection beyond the cap takes the
+place of the oldest client that has sent no request yet, or is told ``busy`` and closed, never
+silently queued. Sockets stay in blocking mode with kernel timeouts;
 frames go out with one ``sendall`` (``TCP_NODELAY``) and come in at most 64 KiB at a time.
 Requests taken from a lane go through the same door as any other, and their answers back into
 the lane when they fit (else on the socket).
@@ -27,6 +28,7 @@ from dataclasses import replace
 from rlenv.protocol import Connection, ErrorReply, Hello, Reply, Request, Response, Role
 from rlenv.protocol.errors import ErrorCode, LocalProtocolError
 from rlenv.serving.access import Limits
+from rlenv.serving.penalties import Penalties, refusal
 from rlenv.transport.lanes import Lane, LaneClosed, open_lane, wait_for
 from rlenv.transport.sockets import (
     REQUEST_SPIN_WINDOW,
@@ -53,13 +55,14 @@ class Peer:
         lane_kind: the kind of the request taken from the lane and not answered yet (0: none).
     """
 
-    __slots__ = ("active", "address", "authenticated", "connection", "frame_started",
+    __slots__ = ("active", "address", "authenticated", "connection", "frame_started", "host",
                  "lane", "lane_kind", "lane_seen", "last_request", "sock", "waiter")
 
-    def __init__(self, sock: socket.socket, address: str, max_frame_size: int,
+    def __init__(self, sock: socket.socket, host: str, port: int, max_frame_size: int,
                  now: float) -> None:
         self.sock = sock
-        self.address = address
+        self.host = host
+        self.address = f"{host}:{port}"
         self.connection = Connection(Role.SERVER, max_frame_size)
         self.authenticated = False
         self.last_request = now
@@ -103,6 +106,7 @@ class Connections:
         self._spin_poll = select.poll()
         self._by_fd: dict[int, Peer] = {}
         self._token = token
+        self._penalties = Penalties(clock)
         self._hello: Hello | None = None
         if hello is not None:
             self.hello = hello
@@ -158,15 +162,23 @@ class Connections:
                 sock, address = self._listener.accept()
             except (BlockingIOError, InterruptedError):
                 return
-            self._admit(sock, f"{address[0]}:{address[1]}")
+            self._admit(sock, address[0], address[1])
 
-    def _admit(self, sock: socket.socket, address: str) -> None:
+    def _admit(self, sock: socket.socket, host: str, port: int) -> None:
         configure_socket(sock, HOUSEKEEPING_INTERVAL, self.limits.write_timeout)
-        peer = Peer(sock, address, self.limits.max_first_frame_size, self._clock())
+        peer = Peer(sock, host, port, self.limits.max_first_frame_size, self._clock())
+        address = peer.address
+        wait = self._penalties.wait(host)
+        if wait:  # it sent too many wrong tokens: not even a hello
+            self._send(peer, ErrorReply(None, ErrorCode.UNAUTHORIZED, refusal(host, wait),
+                                        fatal=True))
+            return
         if len(self._peers) >= self.limits.max_connections:
             for other in list(self._order):
                 if self._has_left(other):
                     self._drop(other, "client closed the connection")
+        if len(self._peers) >= self.limits.max_connections:
+            self._make_room()
         if len(self._peers) >= self.limits.max_connections:
             logger.info("refused %s: %d clients connected", address, len(self._peers))
             self._send(peer, ErrorReply(
@@ -181,6 +193,20 @@ class Connections:
         logger.info("client %s connected", address)
         assert self._hello is not None, "set the endpoint's hello before serving"
         self._write(peer, peer.connection.send(self._hello))
+
+    def _make_room(self) -> None:
+        """Drop the oldest client that has not sent its first request, if any.
+
+        Such a client holds a slot without having shown it may (the token), so a newcomer takes
+        its place, as the oldest of the connections not yet admitted is the first to go past
+        OpenSSH's ``MaxStartups``: silent connections cannot keep a client with the token out.
+        """
+        waiting = next((peer for peer in self._order if not peer.authenticated), None)
+        if waiting is not None:
+            self._send(waiting, ErrorReply(
+                None, ErrorCode.BUSY, f"this server is full ({self.limits.max_connections} "
+                "clients) and this connection had sent no request: a newer one took its place",
+                fatal=True), "made room for a newer connection")
 
     def _check_lifeline(self, fd: int) -> None:
         if not os.read(fd, 4096):
@@ -308,22 +334,33 @@ class Connections:
         logger.info("client %s: shared-memory lane closed: %s", peer.address, reason)
 
     def _authenticate(self, peer: Peer, request: Request) -> bool:
-        """Check the first request's token; on success lift the frame size limit."""
-        if self._token is not None and not (
-            request.token is not None
-            and hmac.compare_digest(request.token.encode(), self._token.encode())
-        ):
-            logger.warning("client %s: refused, %s token", peer.address,
-                           "no" if request.token is None else "wrong")
-            self._send(peer, ErrorReply(
-                request.id, ErrorCode.UNAUTHORIZED,
-                "this server requires a token: pass token=... to the client (or set RLENV_TOKEN)"
-                if request.token is None else "wrong token", fatal=True,
-            ))
-            return False
+        """Check the first request's token; on success lift the frame size limit.
+
+        An address that sent too many wrong tokens waits (:mod:`rlenv.serving.penalties`):
+        meanwhile its requests are refused without their token being compared.
+        """
+        if self._token is not None:
+            wait = self._penalties.wait(peer.host)
+            why = refusal(peer.host, wait) if wait else self._token_refusal(peer, request.token)
+            if why is not None:
+                self._send(peer, ErrorReply(request.id, ErrorCode.UNAUTHORIZED, why, fatal=True))
+                return False
+            self._penalties.succeeded(peer.host)
         peer.authenticated = True
         peer.connection.max_frame_size = self.limits.max_frame_size
         return True
+
+    def _token_refusal(self, peer: Peer, token: str | None) -> str | None:
+        """Why ``token`` is refused (a wrong one counts against ``peer``'s address), or None."""
+        assert self._token is not None
+        if token is None:
+            logger.warning("client %s: refused, no token", peer.address)
+            return "this server requires a token: pass token=... to the client (or set " \
+                   "RLENV_TOKEN)"
+        if not hmac.compare_digest(token.encode(), self._token.encode()):
+            self._penalties.failed(peer.host)
+            return "wrong token"
+        return None
 
 
     # --- writing ----------------------------------------------------------------------------

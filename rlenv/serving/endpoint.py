@@ -7,13 +7,15 @@ An environment server is a network service and is treated like one:
   never disturbs another. The first client whose accepted request changes the environment
   controls it until it disconnects (:meth:`Endpoint.take_control`; which requests change it is
   the host's call, and a refused request takes no control); such a request from anyone else
-  gets a ``busy`` error reply. A connection beyond the cap is told ``busy`` and closed, never
-  silently queued.
+  gets a ``busy`` error reply. A connection beyond the cap takes the place of the oldest client
+  that has sent no request yet, or is told ``busy`` and closed, never silently queued.
 - **Limits before allocation.** A frame's length is checked before its body is read: at most
   :attr:`Limits.max_unauthenticated_frame_size` bytes until the client has authenticated (or
   when no token is needed, until its first request), :attr:`Limits.max_frame_size` after.
 - **Deadlines.** A frame that has started must complete within :attr:`Limits.frame_deadline`
-  (a client that trickles bytes is dropped); a client silent between requests for
+  (a client that trickles bytes is dropped); when a token is required, a client that has not
+  sent it (in its first request) within :attr:`Limits.first_request_timeout` of connecting is
+  dropped; a client silent between requests for
   :attr:`Limits.idle_timeout` is dropped; a write that cannot complete within
   :attr:`Limits.write_timeout` drops the client.
 - **Access.** The server binds 127.0.0.1 unless told otherwise, and refuses to bind anything else
@@ -232,6 +234,11 @@ class Endpoint(Connections):
                    default=None)
 
     def _due(self, peer: Peer) -> float | None:
+        if not peer.authenticated and self._token is not None:  # last_request: its connecting
+            due = peer.last_request + self.limits.first_request_timeout
+            if peer.frame_started is not None:
+                due = min(due, peer.frame_started + self.limits.frame_deadline)
+            return due
         if peer.frame_started is not None:
             return peer.frame_started + self.limits.frame_deadline
         if self.limits.idle_timeout is not None:
@@ -244,7 +251,11 @@ class Endpoint(Connections):
             due = self._due(peer)
             if due is None or now < due:
                 continue
-            if peer.frame_started is not None:
+            if not peer.authenticated and self._token is not None and \
+                    now >= peer.last_request + self.limits.first_request_timeout:
+                message = (f"no request with the right token within "
+                           f"{self.limits.first_request_timeout} s of connecting")
+            elif peer.frame_started is not None:
                 message = (f"a frame was not completed within {self.limits.frame_deadline} s "
                            f"({peer.connection.buffered} bytes received); is the client stalled?")
             else:

@@ -202,11 +202,36 @@ class Client(BaseClient):
         return self._sock is None
 
     def fileno(self) -> int:
-        """The socket's descriptor (-1 once closed), for an event loop to await answers on.
+        """The socket's descriptor (-1 once closed).
 
-        Without a lane (``shared_memory=False``) every answer arrives there.
+        Without a lane (``shared_memory=False``) every answer arrives there; an event loop
+        awaiting answers watches :meth:`answer_descriptors`.
         """
         return -1 if self._sock is None else self._sock.fileno()
+
+    def answer_descriptors(self) -> tuple[int, ...]:
+        """What an event loop watches for the next answer: the socket, and the lane's doorbell.
+
+        When one is readable, :meth:`wake` says whether the answer has arrived (a doorbell
+        rings for each answer in the lane's slots; the socket carries the others).
+        """
+        lane = self._lane
+        return (self.fileno(),) if lane is None else (self.fileno(), lane.doorbell.fileno())
+
+    def wake(self) -> bool:
+        """Whether the answer has arrived, after one of :meth:`answer_descriptors` was readable.
+
+        Reads the doorbell's bytes (so that it stops being readable), then
+        :meth:`answer_arrived`. A closed doorbell (the server is gone) counts as arrived:
+        receiving says so.
+        """
+        lane = self._lane
+        if lane is not None:
+            try:
+                lane.drain()
+            except LaneClosed:
+                return True
+        return self.answer_arrived()
 
     def __enter__(self) -> Client:
         return self

@@ -27,16 +27,25 @@ from __future__ import annotations
 
 import asyncio
 import os
-import select
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from typing import TypeVar
+from typing import Protocol, TypeVar
 
 from rlenv.transport.sockets import AnswerWaiter
 
-__all__ = ["EnvironmentTimeout", "Runner"]
+__all__ = ["AnswerSource", "EnvironmentTimeout", "Runner"]
 
 _T = TypeVar("_T")
+
+
+class AnswerSource(Protocol):
+    """What :meth:`Runner.exchange` awaits answers from (a :class:`~rlenv_client.Client`)."""
+
+    def answer_arrived(self) -> bool: ...  # noqa: D102
+
+    def answer_descriptors(self) -> tuple[int, ...]: ...  # noqa: D102
+
+    def wake(self) -> bool: ...  # noqa: D102
 
 
 class EnvironmentTimeout(TimeoutError):
@@ -57,11 +66,12 @@ class Runner:
         self._waiter = AnswerWaiter()
 
     async def exchange(self, send: Callable[[], None], receive: Callable[[], _T],
-                       readable: int) -> _T:
-        """``send()``, then ``receive()`` once the descriptor ``readable`` has bytes.
+                       client: AnswerSource) -> _T:
+        """``send()``, then ``receive()`` once ``client``'s answer has arrived.
 
         Both run on the event loop's thread: ``send`` must not block (a small request on a
-        connected socket), and ``receive`` reads an answer that has arrived.
+        connected socket, or in a lane's slots), and ``receive`` reads an answer that has
+        arrived.
 
         Raises:
             EnvironmentTimeout: no answer within the deadline; the environment's state is
@@ -71,21 +81,26 @@ class Runner:
             send()
             waiter = self._waiter
             waiter.sent()
-            if waiter.spin(lambda: _arrived(readable)):
+            if waiter.spin(lambda: True if client.answer_arrived() else None):
                 waiter.ended()
                 return receive()
             loop = asyncio.get_running_loop()
             arrived = loop.create_future()
-            loop.add_reader(readable, _settle, arrived, True)
+            descriptors = client.answer_descriptors()
+            blocking = [os.get_blocking(descriptor) for descriptor in descriptors]
+            for descriptor in descriptors:
+                loop.add_reader(descriptor, _woken, arrived, client)
             deadline = loop.call_later(self.timeout, _settle, arrived, False)
             try:
                 answered = await arrived
             finally:
                 waiter.ended()
                 deadline.cancel()
-                loop.remove_reader(readable)
-                os.set_blocking(readable, True)  # uvloop made it non-blocking; the client
-                # reads with kernel timeouts (a non-blocking read it would take for one)
+                for descriptor, was_blocking in zip(descriptors, blocking, strict=True):
+                    loop.remove_reader(descriptor)
+                    os.set_blocking(descriptor, was_blocking)  # as uvloop found it: the
+                    # client reads its socket with kernel timeouts (a non-blocking read would
+                    # look like one)
             if not answered:
                 raise self._late()
             return receive()
@@ -115,9 +130,10 @@ class Runner:
         self._executor.shutdown(wait=False, cancel_futures=True)
 
 
-def _arrived(readable: int) -> bool | None:
-    """``True`` if the descriptor has bytes (or its end) now, else ``None``."""
-    return True if select.select((readable,), (), (), 0)[0] else None
+def _woken(future: asyncio.Future[bool], client: AnswerSource) -> None:
+    """One of the client's descriptors is readable: settled once its answer is there."""
+    if not future.done() and client.wake():
+        future.set_result(True)
 
 
 def _settle(future: asyncio.Future[bool], answered: bool) -> None:

@@ -221,7 +221,7 @@ class Session:
         try:
             if send is None:
                 return await runner.call(function)
-            return await runner.exchange(send, function, self.client.fileno())
+            return await runner.exchange(send, function, self.client)
         except RemoteError as error:
             if error.fatal:
                 raise await self._fail(Status.LOST, "environment_lost",

@@ -164,7 +164,7 @@ class Catalog:
 def _connect(host: str, port: int, timeout: float) -> Client:
     """A client of the server at ``host:port``, its failures as problems."""
     try:
-        return Client(host, port, timeout=timeout, shared_memory=False)
+        return Client(host, port, timeout=timeout)
     except RequestTimeout as error:
         raise Problem(ErrorCode.TIMEOUT, str(error)) from None
     except ConnectionLost as error:

@@ -241,12 +241,18 @@ class BaseClient(Inspection, ABC):
         return self._receive_answer(BatchResponse, "a batch").replies
 
     def send_steps(self, action: Any, reset: np.ndarray | None = None,
-                   repeat_action: int | None = None) -> None:
+                   repeat_action: int | None = None,
+                   reset_with: Sequence[Mapping[str, Any] | None] | None = None) -> None:
         """Step every instance of the server at once, in columns.
 
         ``action`` stacks one action per instance (gymnasium's ``batch_space`` layout);
         ``reset`` marks the instances to reset instead (their action is ignored). Collect the
         answer with :meth:`receive_steps`.
+
+        ``reset_with`` (protocol 2.4) holds one entry per instance: ``None``, or the parts its
+        reset carries, ``{"reset": {"seed": s, "options": {...}}, "config": {...}}`` (both
+        optional), for an instance that ``reset`` marks. Without entries (or with only
+        ``None``) the request is as without ``reset_with``.
         """
         actions, _ = self._column_codecs()
         steps: dict[str, Any] = {"action": actions.pack_exact(action)}
@@ -255,6 +261,9 @@ class BaseClient(Inspection, ABC):
                 isinstance(reset, np.ndarray) else reset
         if repeat_action is not None:
             steps["repeat_action"] = repeat_action
+        if reset_with is not None and any(entry is not None for entry in reset_with):
+            steps["reset_with"] = [None if entry is None else dict(entry)
+                                   for entry in reset_with]
         self._post(Request(next(self._ids), {"steps": steps}))
 
     def receive_steps(self, *, copy: bool = True) -> StepsResponse:

@@ -22,6 +22,7 @@ import logging
 import os
 import socket
 import time
+from collections.abc import Mapping, Sequence
 from typing import Any, NoReturn
 
 import numpy as np
@@ -288,20 +289,23 @@ class Client(BaseClient):
         super().send_step(action, repeat_action)
 
     def send_steps(self, action: Any, reset: np.ndarray | None = None,
-                   repeat_action: int | None = None) -> None:
+                   repeat_action: int | None = None,
+                   reset_with: Sequence[Mapping[str, Any] | None] | None = None) -> None:
         """Step every instance of the server at once, in columns (see :class:`BaseClient`).
 
         Through the lane, an array of the K actions' exact dtype and shape (and boolean reset
-        flags) is written straight into its slots.
+        flags) is written straight into its slots; a request with ``reset_with`` entries goes
+        on the socket.
         """
         lane = self._lane
-        if lane is not None and self._sock is not None and not self._connection.outstanding:
+        if lane is not None and self._sock is not None and not self._connection.outstanding \
+                and (reset_with is None or all(entry is None for entry in reset_with)):
             request_id = next(self._ids)
             if lane.slots.write_steps(request_id, action, reset, repeat_action):
                 self._awaited = request_id
                 self._rang(lane, request_id, STEPS)
                 return
-        super().send_steps(action, reset, repeat_action)
+        super().send_steps(action, reset, repeat_action, reset_with)
 
     def _rang(self, lane: Lane, request_id: int, kind: int) -> None:
         """The lane's slots hold request ``request_id`` of ``kind``: wake the server."""

@@ -29,6 +29,12 @@ that stepped without the vector seeing it: the next step then sends nothing and 
 episode as truncated, with the last observations returned, reward 0 and
 ``info["interrupted"]``; the autoreset that follows starts fresh episodes (the answers the
 interrupted step left behind are dropped, never taken for later ones).
+
+:meth:`RemoteVectorEnv.set_next_reset` gives one sub-environment's next reset (its autoreset,
+or the next :meth:`~RemoteVectorEnv.reset`) a seed, reset options and settings of its own, as a
+curriculum needs (:class:`~rlenv_client.curriculum.CurriculumVectorEnv`): inside a step, they
+travel in the ``steps`` request's ``reset_with`` (protocol 2.4), on the socket; steps without
+them are sent as before.
 """
 
 from __future__ import annotations
@@ -44,6 +50,7 @@ from gymnasium.vector.utils import batch_space, create_empty_array
 from rlenv.protocol import ErrorReply, Request, Response
 from rlenv.protocol.errors import RemoteError
 from rlenv_client.base import BaseClient
+from rlenv_client.inspection import config_request
 from rlenv_client.launcher import ServerProcess
 from rlenv_client.rows import check_shape, empty_like, row, rows, set_row, set_rows
 from rlenv_client.session import LOST, ServerSource, Session
@@ -159,6 +166,8 @@ class RemoteVectorEnv(VectorEnv):
         self._observations_template = create_empty_array(self.single_observation_space,
                                                          self.num_envs)
         self._steps = np.zeros(self.num_envs, dtype=np.int64)
+        self._starts: list[dict[str, Any] | None] = [None] * self.num_envs  # set_next_reset's
+        self._pending_starts = 0  # how many of them are set
         self._last: Any = None  # the last batch of observations returned
         self._interrupted: str | None = None  # what interrupted the last step or reset
         if inspector:
@@ -208,7 +217,8 @@ class RemoteVectorEnv(VectorEnv):
             if len(seeds) != self.num_envs:
                 raise ValueError(f"{len(seeds)} seeds for {self.num_envs} environments")
         super().reset(seed=seed if isinstance(seed, int) else None)
-        plan = [self._client_of(i).reset_request(seeds[i], options) for i in range(self.num_envs)]
+        plan: list[Request | None] = [self._reset_request(i, seeds[i], options)
+                                      for i in range(self.num_envs)]
         replies = exchange(self.sessions, self._groups, plan)
         observations = create_empty_array(self.single_observation_space, self.num_envs)
         env_infos, frames = [], np.zeros(self.num_envs, np.int64)
@@ -268,8 +278,7 @@ class RemoteVectorEnv(VectorEnv):
                     infos, {"final_obs": row(observations, index), "final_info": final_info},
                     int(index),
                 )
-            plan = [self._client_of(i).reset_request() if ended[i] else None
-                    for i in range(self.num_envs)]
+            plan = [self._reset_request(i) if ended[i] else None for i in range(self.num_envs)]
             for index, reply in enumerate(exchange(self.sessions, self._groups, plan)):
                 if ended[index]:
                     observation, env_infos[index] = self._client_of(index).reset_result(
@@ -291,10 +300,13 @@ class RemoteVectorEnv(VectorEnv):
         """
         if self._interrupted is not None:
             return self._after_interruption()
+        starts = self._take_starts(resetting) if self._pending_starts else None
         for session, group in zip(self.sessions, self._groups, strict=True):
             try:
                 session.client.send_steps(rows(actions, group.start, group.stop),
-                                          resetting[group.start:group.stop], self.repeat_action)
+                                          resetting[group.start:group.stop], self.repeat_action,
+                                          None if starts is None else
+                                          starts[group.start:group.stop])
             except LOST as error:
                 raise session.failure(error) from None
         observations = empty_like(self._observations_template)  # every row is written below
@@ -355,6 +367,43 @@ class RemoteVectorEnv(VectorEnv):
         if not isinstance(error, Exception):
             self._interrupted = type(error).__name__
 
+    def set_next_reset(self, index: int, *, seed: int | None = None,
+                       options: Mapping[str, Any] | None = None,
+                       config: Mapping[str, Any] | None = None) -> None:
+        """Give sub-environment ``index``'s next reset a seed, options and settings of its own.
+
+        They apply once, at its next autoreset (inside a step, as the ``steps`` request's
+        ``reset_with``) or at the next :meth:`reset` (in place of that call's seed and options
+        for this sub-environment); setting them again before then replaces them.
+
+        Args:
+            index: the sub-environment, in ``[0, num_envs)``.
+            seed: the episode's seed (``None``: its generator continues).
+            options: its reset options (``{"level": data}``, say).
+            config: settings to configure before the reset, as :meth:`BaseClient.configure`'s
+                keywords (``{"world": {"difficulty": 0.3}}``; see
+                :func:`~rlenv_client.curriculum.configure_arguments`).
+
+        Raises:
+            IndexError: ``index`` is out of range.
+        """
+        if not 0 <= index < self.num_envs:
+            raise IndexError(f"sub-environment {index} of {self.num_envs}")
+        reset: dict[str, Any] = {}
+        if seed is not None:
+            reset["seed"] = int(seed)
+        if options is not None:
+            reset["options"] = dict(options)
+        start: dict[str, Any] = {"reset": reset}
+        if config:
+            arguments = dict(config)
+            start["config"] = config_request(
+                {key: value for key, value in arguments.items() if key not in ("agent", "world")},
+                arguments.get("agent"), arguments.get("world"))
+        if self._starts[index] is None:
+            self._pending_starts += 1
+        self._starts[index] = start
+
     def render(self) -> tuple[np.ndarray, ...] | None:
         """One frame per sub-environment (``rgb_array``)."""
         if self.render_mode is None:
@@ -387,6 +436,32 @@ class RemoteVectorEnv(VectorEnv):
 
     def _client_of(self, index: int) -> BaseClient:
         return self.sessions[self._owner[index]].client
+
+    def _reset_request(self, index: int, seed: int | None = None,
+                       options: Mapping[str, Any] | None = None) -> Request:
+        """The request that resets sub-environment ``index``: its next start if set, once."""
+        client = self._client_of(index)
+        start = self._starts[index]
+        if start is None:
+            return client.reset_request(seed, options)
+        self._starts[index] = None
+        self._pending_starts -= 1
+        reset = start["reset"]
+        request = client.reset_request(reset.get("seed"), reset.get("options"))
+        if "config" in start:
+            request = Request(request.id, {"config": start["config"], **request.parts})
+        return request
+
+    def _take_starts(self, resetting: np.ndarray) -> list[dict[str, Any] | None] | None:
+        """The starts of the sub-environments ``resetting`` marks (taken), or ``None``."""
+        starts: list[dict[str, Any] | None] = [None] * self.num_envs
+        for index in np.flatnonzero(resetting):
+            start = self._starts[index]
+            if start is not None:
+                starts[index] = start
+                self._starts[index] = None
+                self._pending_starts -= 1
+        return starts if any(start is not None for start in starts) else None
 
     def _merge_infos(self, infos: dict[str, Any], env_infos: list[dict[str, Any]],
                      frames: np.ndarray) -> dict:

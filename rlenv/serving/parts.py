@@ -459,32 +459,42 @@ class StepsPlan:
         actions: each instance's checked action (its row of the batch); ignored where it resets.
         resets: whether each instance resets instead of acting.
         repeat: ``repeat_action`` for every acting instance, or ``None`` for each one's own.
+        starts: ``None`` when every resetting instance resets without a seed or options (the
+            lean path serves only these); else each instance's checked ``config`` and ``reset``
+            parts (``None`` where it acts, or resets as the others do).
     """
 
-    __slots__ = ("actions", "repeat", "resets")
+    __slots__ = ("actions", "repeat", "resets", "starts")
 
-    def __init__(self, actions: list[Any], resets: list[bool], repeat: int | None) -> None:
+    def __init__(self, actions: list[Any], resets: list[bool], repeat: int | None,
+                 starts: list[Plan | None] | None = None) -> None:
         self.actions, self.resets, self.repeat = actions, resets, repeat
+        self.starts = starts
 
     def plans(self) -> list[Plan]:
         """Each instance's plan, as a request to it alone would have it."""
         repeat = self.repeat
-        return [{"reset": {"seed": None, "options": {}}, "observation": AGENT_ONLY} if resets
+        starts = self.starts or [None] * len(self.resets)
+        return [({**start, "observation": AGENT_ONLY} if start is not None else
+                 {"reset": {"seed": None, "options": {}}, "observation": AGENT_ONLY}) if resets
                 else {"action": action, "observation": AGENT_ONLY} if repeat is None
                 else {"repeat_action": repeat, "action": action, "observation": AGENT_ONLY}
-                for action, resets in zip(self.actions, self.resets, strict=True)]
+                for action, resets, start in zip(self.actions, self.resets, starts,
+                                                 strict=True)]
 
 
 class Steps(HostPart):
     """Every instance steps (or resets, where the mask says so), in columns.
 
-    ``{"action": <K actions>, "reset": <K bools>, "repeat_action": r}``; the actions stack as
-    gymnasium's ``batch_space`` lays them out, in packed form or as arrays. Everything is
-    checked before any instance moves; an instance whose user code raises fails alone.
+    ``{"action": <K actions>, "reset": <K bools>, "repeat_action": r, "reset_with": [...]}``;
+    the actions stack as gymnasium's ``batch_space`` lays them out, in packed form or as
+    arrays. ``reset_with`` (protocol 2.4) gives resetting instances a ``reset`` part (seed,
+    options) and a ``config`` part of their own. Everything is checked before any instance
+    moves; an instance whose user code raises fails alone.
     """
 
     name = "steps"
-    _KEYS = frozenset({"action", "reset", "repeat_action"})
+    _KEYS = frozenset({"action", "reset", "repeat_action", "reset_with"})
 
     def check(self, host: Host, request: Request) -> Any:
         steps = request.parts["steps"]
@@ -510,18 +520,56 @@ class Steps(HostPart):
             raise RequestError(ErrorCode.INVALID_ACTION, str(error)) from None
         actions = list(checked) if checked.__class__ is np.ndarray else \
             list(iterate(host.steps_action_space, checked))
-        return StepsPlan(actions, reset, repeat)
+        starts = steps.get("reset_with")
+        return StepsPlan(actions, reset, repeat,
+                         None if starts is None else _starts(host, starts, reset))
 
     def served(self, host: Host, checked: Any) -> list[Instance]:
         return host.instances
 
     def run(self, host: Host, request: Request, checked: Any, reports: bool) -> Reply:
         lean = host.lean
-        if lean is not None and reports and not any(i.tree.real_time for i in host.instances):
+        if lean is not None and reports and checked.starts is None and \
+                not any(i.tree.real_time for i in host.instances):
             return lean.run(request.id, checked)
         return host.columns.stack(request.id, [
             instance.serve(plan, request.id, reports)
             for instance, plan in zip(host.instances, checked.plans(), strict=True)])
+
+
+_START_KEYS = frozenset({"config", "reset"})
+
+
+def _starts(host: Host, entries: Any, flags: list[bool]) -> list[Plan | None]:
+    """The checked ``reset_with`` entries of a steps request: each flagged instance's start.
+
+    Raises:
+        RequestError: ``bad_request``: not a list of K maps or nils, an entry for an instance
+            that does not reset, an unknown key; any refusal of its ``config`` or ``reset``.
+    """
+    count = len(host.instances)
+    if not isinstance(entries, list) or len(entries) != count:
+        raise _bad(f"steps.reset_with must be a list of {count} entries (a map or nil each)")
+    starts: list[Plan | None] = []
+    for index, (instance, entry, resets) in enumerate(zip(host.instances, entries, flags,
+                                                          strict=True)):
+        if entry is None:
+            starts.append(None)
+            continue
+        where = f"steps.reset_with[{index}]"
+        if not isinstance(entry, Mapping):
+            raise _bad(f"{where} must be a map or nil")
+        if not resets:
+            raise _bad(f"{where} is given, but instance {index} does not reset (steps.reset)")
+        check_keys(entry, _START_KEYS, where)
+        parts = {"reset": entry.get("reset") or {}}
+        if "config" in entry:
+            parts["config"] = entry["config"]
+        try:
+            starts.append(plan_for(instance, parts, shape_of(parts)))
+        except RequestError as error:
+            raise RequestError(error.code, f"{where}: {error}") from None
+    return starts
 
 
 def _reset_mask(mask: Any, count: int) -> list[bool]:

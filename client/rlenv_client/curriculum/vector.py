@@ -1,0 +1,370 @@
+"""A vector wrapper that picks each sub-environment's next level: prioritized level replay.
+
+:class:`CurriculumVectorEnv` wraps a :class:`~rlenv_client.vector.RemoteVectorEnv`. At each
+sub-environment's reset it plays a new level (an int seed drawn from its own generator: domain
+randomisation) or replays one of its :class:`~rlenv_client.curriculum.LevelSampler`'s buffer,
+as the sampler decides; it scores the episodes played and keeps the buffer. An int level is
+played with ``reset(seed=level)``, a data level with ``reset(options={"level": data})``; a
+sub-environment's autoreset inside a step carries them in the ``steps`` request (protocol 2.4).
+
+At each reset, a sub-environment's ``info`` holds ``"replayed"`` (whether its new episode
+replays a buffered level) and ``"level"`` (the replayed level's id; ``None`` for a new level),
+each with gymnasium's mask (``info["_replayed"]``, ``info["_level"]``).
+
+Scores (the ``score`` argument):
+
+- ``"learnability"`` (the default, SFL): ``p * (1 - p)`` over the outcomes of the level's
+  episodes seen so far (at most ``outcomes_kept``). An episode succeeds when its last step's
+  info says ``info["success"]`` is true; without a ``success`` in that info, when it
+  terminated (not truncated) with a return above 0. Nothing is needed from the trainer.
+- a callable: ``score(episode)`` gives each finished :class:`Episode`'s score.
+- ``"external"``: the trainer scores finished episodes from its value estimates, with
+  :meth:`CurriculumVectorEnv.score_rollout` (CleanRL-style loops) or
+  :class:`rlenv_client.sb3.CurriculumCallback` (Stable-Baselines3); or with
+  :meth:`CurriculumVectorEnv.update` from its own code.
+
+A new level enters the buffer with its score (:meth:`LevelSampler.insert`); a replayed one has
+its score updated. With ``sampler.robust`` (Robust PLR) the trainer learns only from replayed
+levels: :attr:`CurriculumVectorEnv.train_mask` says which of the last step's transitions to
+learn from.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
+from numpy.typing import ArrayLike
+
+from rlenv_client.curriculum.levels import Level
+from rlenv_client.curriculum.parameters import (
+    EnvironmentParameters,
+    configurable_keys,
+    configure_arguments,
+)
+from rlenv_client.curriculum.sampler import LevelSampler
+from rlenv_client.curriculum.scores import learnability, max_mc, positive_value_loss
+
+__all__ = ["DEFAULT_CAPACITY", "CurriculumVectorEnv", "Episode"]
+
+logger = logging.getLogger(__name__)
+
+DEFAULT_CAPACITY = 1000
+"""The buffer size of the :class:`LevelSampler` a :class:`CurriculumVectorEnv` makes itself."""
+
+_SEEDS = 2**31  # new levels are seeds in [0, 2**31)
+_ROLLOUT_SCORES = ("positive_value_loss", "max_mc")
+
+
+class Episode:
+    """A finished episode, as a score sees it.
+
+    Attributes:
+        env: the sub-environment that played it.
+        level: its level (an int seed or data).
+        level_id: the buffered level's id if it was a replay, else ``None``.
+        replayed: whether it replayed a buffered level.
+        first_step: the index (counted over the wrapper's steps from 0) of its first step.
+        last_step: the index of its last step (that ended it).
+        reward: its return (the sum of its rewards).
+        success: whether it succeeded (see the module docstring).
+        rewards: each step's reward, for a callable score (else empty).
+    """
+
+    __slots__ = ("env", "first_step", "last_step", "level", "level_id", "replayed", "reward",
+                 "rewards", "success")
+
+    def __init__(self, env: int, level: Level, level_id: int | None, first_step: int) -> None:
+        self.env, self.level, self.level_id = env, level, level_id
+        self.replayed = level_id is not None
+        self.first_step, self.last_step = first_step, first_step - 1
+        self.reward, self.success = 0.0, False
+        self.rewards: list[float] = []
+
+    def __repr__(self) -> str:
+        return (f"Episode(env={self.env}, level_id={self.level_id}, steps={self.first_step}.."
+                f"{self.last_step}, reward={self.reward:.3g}, success={self.success})")
+
+
+class CurriculumVectorEnv(VectorWrapper):
+    """Prioritized level replay over a vector's sub-environments (see the module docstring).
+
+    Args:
+        envs: a :class:`~rlenv_client.vector.RemoteVectorEnv` (or a wrapper of one whose
+            ``unwrapped`` is), with ``NEXT_STEP`` or ``SAME_STEP`` autoreset.
+        sampler: the level buffer; ``None`` makes ``LevelSampler(DEFAULT_CAPACITY)`` (seeded
+            with ``seed``).
+        parameters: ML-Agents' environment parameters: a draw of
+            :meth:`~EnvironmentParameters.sample` is configured at every reset, and every
+            finished episode's return goes to :meth:`~EnvironmentParameters.add_episode`
+            (with :attr:`progress`).
+        score: ``"learnability"``, a callable taking an :class:`Episode`, or ``"external"``.
+        seed: seeds the generator of new levels (``reset(seed=...)`` seeds it again).
+        outcomes_kept: how many outcomes per level learnability counts (the latest).
+
+    Raises:
+        TypeError: ``envs`` is not over a ``RemoteVectorEnv``.
+        ValueError: an unknown ``score``, or an autoreset mode other than the two above.
+    """
+
+    def __init__(self, envs: VectorEnv, sampler: LevelSampler | None = None,
+                 parameters: EnvironmentParameters | None = None,
+                 score: str | Callable[[Episode], float] = "learnability", *,
+                 seed: int | None = None, outcomes_kept: int = 32) -> None:
+        super().__init__(envs)
+        remote = envs.unwrapped
+        if not hasattr(remote, "set_next_reset"):
+            raise TypeError(f"CurriculumVectorEnv needs a RemoteVectorEnv, got "
+                            f"{type(remote).__name__}")
+        if not (callable(score) or score in ("learnability", "external")):
+            raise ValueError(f"score must be 'learnability', 'external' or a callable, "
+                             f"not {score!r}")
+        mode = AutoresetMode(envs.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP))
+        if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
+            raise ValueError(f"CurriculumVectorEnv needs NEXT_STEP or SAME_STEP autoreset, "
+                             f"not {mode}")
+        self._remote: Any = remote
+        self._same_step = mode is AutoresetMode.SAME_STEP
+        self.sampler = sampler if sampler is not None else \
+            LevelSampler(DEFAULT_CAPACITY, seed=seed)
+        self.parameters = parameters
+        if parameters is not None:
+            parameters.bind(configurable_keys(self._remote.clients[0].tree()))
+        self.score = score
+        self.progress: float | None = None
+        """The fraction of training done, for parameters whose lessons measure progress."""
+        self.finished: list[Episode] = []
+        """With ``score="external"``: the finished episodes not scored yet, oldest first."""
+        self.train_mask = np.zeros(self.num_envs, np.bool_)
+        """Whether to learn from each sub-environment's transition of the last step: it
+        belongs to an episode (not a ``NEXT_STEP`` autoreset), on a replayed level if
+        ``sampler.robust``."""
+        self.steps = 0
+        """How many steps this wrapper made (the index of the next one)."""
+        self._rng = np.random.default_rng(seed)
+        self._outcomes: dict[int, deque[float]] = {}
+        self._outcomes_kept = outcomes_kept
+        self._max_returns: dict[int, float] = {}
+        self._keep_rewards = callable(score)
+        self._playing: list[Episode | None] = [None] * self.num_envs
+        self._next: list[tuple[Level, int | None] | None] = [None] * self.num_envs
+        self._autoreset = np.zeros(self.num_envs, np.bool_)
+
+    def reset(self, *, seed: int | list[int | None] | None = None,
+              options: Mapping[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        """Start every sub-environment on its next level (each new or replayed).
+
+        Args:
+            seed: an int seeds the generator of new levels (the levels' seeds decide the
+                episodes, so it is not passed on).
+            options: passed on to the vector (each level's options replace them).
+
+        Returns:
+            ``(observations, infos)``, the infos with ``replayed`` and ``level``.
+        """
+        if isinstance(seed, int):
+            self._rng = np.random.default_rng(seed)
+        for index in range(self.num_envs):
+            if self._next[index] is None:
+                self._choose(index)
+        observations, infos = self.env.reset(options=options)
+        self._autoreset[:] = False
+        return observations, self._begin(np.ones(self.num_envs, np.bool_), infos)
+
+    def step(self, actions: Any) -> tuple[Any, Any, Any, Any, dict[str, Any]]:
+        """Step every sub-environment; score the episodes that end; choose their next levels.
+
+        Returns:
+            gymnasium's ``(observations, rewards, terminations, truncations, infos)``; a
+            sub-environment that reset in this step has ``replayed`` and ``level`` in infos.
+        """
+        observations, rewards, terminations, truncations, infos = self.env.step(actions)
+        step = self.steps
+        self.steps += 1
+        ended = np.asarray(terminations) | np.asarray(truncations)
+        started = self._autoreset if not self._same_step else np.zeros_like(ended)
+        robust = self.sampler.robust
+        for index, episode in enumerate(self._playing):
+            if started[index] or episode is None:
+                self.train_mask[index] = False
+                continue
+            self.train_mask[index] = episode.replayed or not robust
+            reward = float(rewards[index])
+            episode.reward += reward
+            episode.last_step = step
+            if self._keep_rewards:
+                episode.rewards.append(reward)
+        if self._same_step:
+            last_infos = infos.get("final_info", {})
+        else:
+            last_infos = infos
+            if started.any():
+                infos = self._begin(started, infos)
+        for index in np.flatnonzero(ended):
+            self._finish(int(index), bool(terminations[index]), last_infos)
+            if not self._same_step:
+                self._choose(int(index))
+        if self._same_step and ended.any():
+            infos = self._begin(ended, infos)
+        self._autoreset = ended
+        return observations, rewards, terminations, truncations, infos
+
+    def update(self, episode: Episode, score: float) -> int | None:
+        """Score a finished episode's level: insert a new level, update a replayed one.
+
+        Returns:
+            The level's id in the buffer; ``None`` if a new level was refused (the buffer is
+            full of higher scores) or a replayed one has left the buffer since.
+        """
+        if episode.level_id is None:
+            level_id = self.sampler.insert(episode.level, score)
+            if level_id is not None and len(self.sampler) == self.sampler.capacity:
+                self._forget_evicted()
+            return level_id
+        try:
+            self.sampler.update(episode.level_id, score)
+        except KeyError:
+            return None
+        return episode.level_id
+
+    def score_rollout(self, advantages: ArrayLike, values: ArrayLike,
+                      score: str = "positive_value_loss") -> list[Episode]:
+        """Score the episodes that ended in the last rollout, from the trainer's estimates.
+
+        For a loop that steps this wrapper ``T`` times, then computes GAE: row ``t`` of the
+        arrays is the wrapper's step ``steps - T + t`` (the transition it returned), column
+        ``i`` sub-environment ``i``. Each finished episode that ended within those ``T``
+        steps is scored on its steps among them and leaves :attr:`finished`; episodes that
+        ended before are dropped unscored.
+
+        Args:
+            advantages: ``(T, num_envs)`` GAE advantages.
+            values: ``(T, num_envs)`` value estimates ``V(s)``.
+            score: ``"positive_value_loss"`` or ``"max_mc"`` (regret against the level's best
+                return seen, :func:`~rlenv_client.curriculum.max_mc`).
+
+        Returns:
+            The episodes scored.
+
+        Raises:
+            ValueError: an unknown ``score``, or arrays of another shape.
+        """
+        if score not in _ROLLOUT_SCORES:
+            raise ValueError(f"score must be one of {_ROLLOUT_SCORES}, not {score!r}")
+        advantages = np.asarray(advantages, np.float64)
+        values = np.asarray(values, np.float64)
+        if advantages.ndim != 2 or advantages.shape[1] != self.num_envs or \
+                values.shape != advantages.shape:
+            raise ValueError(f"advantages and values must both be (T, {self.num_envs}), got "
+                             f"{advantages.shape} and {values.shape}")
+        first = self.steps - len(advantages)
+        scored = []
+        for episode in self.finished:
+            if episode.last_step < first:
+                continue
+            rows = slice(max(episode.first_step, first) - first, episode.last_step - first + 1)
+            if score == "positive_value_loss":
+                value = positive_value_loss(advantages[rows, episode.env])
+            else:
+                best = max(self._max_returns.get(episode.level_id, -np.inf), episode.reward) \
+                    if episode.level_id is not None else episode.reward
+                value = max_mc(best, values[rows, episode.env])
+            level_id = self.update(episode, value)
+            if score == "max_mc" and level_id is not None:
+                self._max_returns[level_id] = best
+            scored.append(episode)
+        self.finished = []
+        return scored
+
+    # --- internals --------------------------------------------------------------------------
+
+    def _choose(self, index: int) -> None:
+        """Decide sub-environment ``index``'s next level and give it to the vector's reset."""
+        sampler = self.sampler
+        if sampler.sample_replay_decision():
+            level_id, level = sampler.sample_replay_level()
+            self._next[index] = (level, level_id)
+        else:
+            level, level_id = int(self._rng.integers(_SEEDS)), None
+            self._next[index] = (level, None)
+        config = None
+        if self.parameters is not None:
+            config = configure_arguments(self.parameters.sample())
+        if isinstance(level, int):
+            self._remote.set_next_reset(index, seed=level, config=config)
+        else:
+            self._remote.set_next_reset(index, options={"level": level}, config=config)
+
+    def _begin(self, started: np.ndarray, infos: dict[str, Any]) -> dict[str, Any]:
+        """Episodes start where ``started`` says: note their levels, in ``infos`` too."""
+        indices = np.flatnonzero(started)
+        replayed = infos.get("replayed", np.zeros(self.num_envs, np.bool_))
+        levels = infos.get("level", np.full(self.num_envs, None, object))
+        replayed_mask = infos.get("_replayed", np.zeros(self.num_envs, np.bool_))
+        level_mask = infos.get("_level", np.zeros(self.num_envs, np.bool_))
+        for index in indices:
+            chosen = self._next[index]
+            assert chosen is not None
+            level, level_id = chosen
+            self._next[index] = None
+            self._playing[index] = Episode(int(index), level, level_id, self.steps)
+            replayed[index], levels[index] = level_id is not None, level_id
+            replayed_mask[index] = level_mask[index] = True
+            if self._same_step:  # its reset comes within the step its episode ends in
+                self._choose(int(index))
+        return {**infos, "replayed": replayed, "_replayed": replayed_mask, "level": levels,
+                "_level": level_mask}
+
+    def _finish(self, index: int, terminated: bool, last_infos: Mapping[str, Any]) -> None:
+        """Sub-environment ``index``'s episode ended: score it, or keep it to be scored."""
+        episode = self._playing[index]
+        self._playing[index] = None
+        if episode is None:
+            return
+        if _row(last_infos, "server_restarted", index) is not None or \
+                _row(last_infos, "interrupted", index) is not None:
+            return  # not an outcome of the level
+        success = _row(last_infos, "success", index)
+        episode.success = bool(success) if success is not None else \
+            terminated and episode.reward > 0
+        if self.parameters is not None:
+            self.parameters.add_episode(episode.reward, progress=self.progress)
+        if self.score == "external":
+            self.finished.append(episode)
+        elif self.score == "learnability":
+            self._score_learnability(episode)
+        else:
+            assert callable(self.score)
+            self.update(episode, self.score(episode))
+
+    def _score_learnability(self, episode: Episode) -> None:
+        outcomes = self._outcomes.get(episode.level_id) if episode.level_id is not None \
+            else None
+        if outcomes is None:
+            outcomes = deque(maxlen=self._outcomes_kept)
+        outcomes.append(float(episode.success))
+        level_id = self.update(episode, learnability(outcomes))
+        if level_id is not None:
+            self._outcomes[level_id] = outcomes
+
+    def _forget_evicted(self) -> None:
+        """Drop what is kept of levels no longer in the buffer (one may just have left)."""
+        buffered = self.sampler.weights()
+        self._outcomes = {key: value for key, value in self._outcomes.items() if key in buffered}
+        self._max_returns = {key: value for key, value in self._max_returns.items()
+                             if key in buffered}
+
+
+def _row(infos: Mapping[str, Any], key: str, index: int) -> Any:
+    """Sub-environment ``index``'s ``key`` in gymnasium's batched infos, or ``None``."""
+    values = infos.get(key)
+    if values is None:
+        return None
+    mask = infos.get(f"_{key}")
+    if mask is not None and not mask[index]:
+        return None
+    return values[index]

@@ -10,6 +10,11 @@ Each finished episode's statistics are in ``info["episode"]`` (``r``: return, ``
 ``ep_rew_mean`` is logged without a ``VecMonitor`` (wrapping it in one anyway overwrites
 them with the same figures).
 
+:class:`CurriculumCallback` scores the levels of a
+:class:`~rlenv_client.curriculum.CurriculumVectorEnv` (given to :class:`SB3VecEnv` as
+``vector``) from each rollout's advantages and values (PLR's positive value loss, or
+``max_mc``), and with ``sampler.robust`` keeps PPO from learning from new levels.
+
 Needs the optional extra: ``pip install 'rlenv[sb3]'`` (on a machine without CUDA, install a CPU
 build of torch first).
 """
@@ -21,7 +26,8 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from gymnasium.vector import AutoresetMode
+from gymnasium.vector import AutoresetMode, VectorEnv
+from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnv,
     VecEnvIndices,
@@ -29,10 +35,11 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvStepReturn,
 )
 
+from rlenv_client.curriculum.vector import CurriculumVectorEnv
 from rlenv_client.vector import RemoteVectorEnv
 from rlenv_client.vector_servers import default_layout
 
-__all__ = ["SB3VecEnv"]
+__all__ = ["CurriculumCallback", "SB3VecEnv"]
 
 
 class SB3VecEnv(VecEnv):
@@ -49,6 +56,13 @@ class SB3VecEnv(VecEnv):
         instances_per_server: how many environments each started server hosts; by default
             one server per core but one, which is left to the trainer (its policy runs between
             steps, while the servers wait: see ``docs/training-fast.md``).
+        vector: a gymnasium vector environment to adapt instead of making one (the other
+            arguments but ``render_mode`` are then ignored): a ``RemoteVectorEnv`` with
+            ``SAME_STEP`` autoreset, or a wrapper of one such as a
+            :class:`~rlenv_client.curriculum.CurriculumVectorEnv`.
+
+    Raises:
+        ValueError: ``vector`` autoresets otherwise than ``SAME_STEP``.
     """
 
     def __init__(
@@ -56,16 +70,23 @@ class SB3VecEnv(VecEnv):
         addresses: Sequence[str] | None = None, repeat_action: int | None = None,
         max_episode_steps: int | None = None, in_process: bool = False,
         render_mode: str | None = None, instances_per_server: int | None = None,
+        vector: VectorEnv | None = None,
     ) -> None:
-        if instances_per_server is None and addresses is None and not in_process:
-            instances_per_server = default_layout(num_envs, trainer_cores=1)[0]
-        self.venv = RemoteVectorEnv(
-            None if addresses is not None else num_envs, target, addresses=addresses,
-            repeat_action=repeat_action,
-            max_episode_steps=max_episode_steps, autoreset_mode=AutoresetMode.SAME_STEP,
-            in_process=in_process, render_mode=render_mode,
-            instances_per_server=instances_per_server,
-        )
+        if vector is not None:
+            if vector.metadata.get("autoreset_mode") is not AutoresetMode.SAME_STEP:
+                raise ValueError("SB3VecEnv needs a vector with SAME_STEP autoreset (SB3's "
+                                 f"convention), not {vector.metadata.get('autoreset_mode')}")
+            self.venv: VectorEnv = vector
+        else:
+            if instances_per_server is None and addresses is None and not in_process:
+                instances_per_server = default_layout(num_envs, trainer_cores=1)[0]
+            self.venv = RemoteVectorEnv(
+                None if addresses is not None else num_envs, target, addresses=addresses,
+                repeat_action=repeat_action,
+                max_episode_steps=max_episode_steps, autoreset_mode=AutoresetMode.SAME_STEP,
+                in_process=in_process, render_mode=render_mode,
+                instances_per_server=instances_per_server,
+            )
         super().__init__(self.venv.num_envs, self.venv.single_observation_space,
                          self.venv.single_action_space)
         self.render_mode = render_mode
@@ -141,6 +162,65 @@ class SB3VecEnv(VecEnv):
     def env_is_wrapped(self, wrapper_class: type, indices: VecEnvIndices = None) -> list[bool]:
         """The remote environments are never wrapped on this side."""
         return [False] * len(self._get_indices(indices))
+
+
+class CurriculumCallback(BaseCallback):
+    """Scores a curriculum's levels from each PPO (or A2C) rollout, for a trainer on SB3.
+
+    At the end of every rollout, each episode that ended in it is scored from the rollout
+    buffer's advantages and values (:meth:`CurriculumVectorEnv.score_rollout`). With
+    ``wrapper.sampler.robust`` (Robust PLR), the transitions of new levels are then taken out
+    of learning: their advantages are set to 0 and their returns to their values, so that
+    they add nothing to the policy or value loss. SB3 has no per-transition mask: this is
+    exact only without advantage normalisation (``PPO(normalize_advantage=False)``; checked),
+    and the entropy bonus still sees those states.
+
+    Args:
+        wrapper: the :class:`~rlenv_client.curriculum.CurriculumVectorEnv` the model's
+            :class:`SB3VecEnv` adapts, made with ``score="external"``.
+        score: ``"positive_value_loss"`` or ``"max_mc"``.
+        verbose: SB3's verbosity.
+
+    Raises:
+        ValueError: the wrapper scores episodes itself, or ``score`` is unknown.
+    """
+
+    def __init__(self, wrapper: CurriculumVectorEnv, score: str = "positive_value_loss",
+                 verbose: int = 0) -> None:
+        super().__init__(verbose)
+        if wrapper.score != "external":
+            raise ValueError("CurriculumCallback scores the episodes: make the wrapper with "
+                             f"score='external', not {wrapper.score!r}")
+        if score not in ("positive_value_loss", "max_mc"):
+            raise ValueError(f"score must be 'positive_value_loss' or 'max_mc', not {score!r}")
+        self.wrapper = wrapper
+        self.score = score
+        self.scored = 0
+        """How many episodes were scored so far."""
+        self._masks: list[np.ndarray] = []
+
+    def _on_training_start(self) -> None:
+        if self.wrapper.sampler.robust and getattr(self.model, "normalize_advantage", False):
+            raise ValueError("Robust PLR with SB3 needs normalize_advantage=False: normalised "
+                             "advantages of new levels would not stay 0")
+
+    def _on_rollout_start(self) -> None:
+        self._masks = []
+
+    def _on_step(self) -> bool:
+        self._masks.append(self.wrapper.train_mask.copy())
+        return True
+
+    def _on_rollout_end(self) -> None:
+        buffer = self.model.rollout_buffer
+        steps = buffer.buffer_size if buffer.full else buffer.pos
+        advantages = buffer.advantages[:steps]
+        self.scored += len(self.wrapper.score_rollout(advantages, buffer.values[:steps],
+                                                      self.score))
+        if self.wrapper.sampler.robust and len(self._masks) == steps:
+            ignored = ~np.stack(self._masks)
+            buffer.advantages[:steps][ignored] = 0.0
+            buffer.returns[:steps][ignored] = buffer.values[:steps][ignored]
 
 
 def _split_infos(infos: dict[str, Any], num_envs: int) -> list[dict[str, Any]]:

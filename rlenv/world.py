@@ -5,9 +5,14 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+import numpy as np
+
 from rlenv.rl_node import RLNode
 
-__all__ = ["RLEnvWorld"]
+__all__ = ["MAX_LEVEL_EDITS", "RLEnvWorld"]
+
+MAX_LEVEL_EDITS = 64
+"""The most edits one ``edit_level`` request may ask for (``n_edits``)."""
 
 
 class RLEnvWorld(RLNode):
@@ -42,3 +47,32 @@ class RLEnvWorld(RLNode):
     def sample_initial_position(self) -> Any:
         """Draw the agent's initial state (use :attr:`np_random`); passed to ``agent.reset``."""
         return None
+
+    def _edit_level(self, level: Any, rng: np.random.Generator, n_edits: int) -> Any:
+        """Override to offer edits of levels (ACCEL): ``level`` with ``n_edits`` random changes.
+
+        Clients ask for it with ``client.edit_level(level, seed, n_edits)`` (the protocol's
+        ``edit_level`` part), from any connection, with or without an episode: build the edit
+        from ``level`` (and settings such as a difficulty), never from the live tree, and change
+        nothing of the environment. An environment that does not override it refuses every
+        ``edit_level`` request with ``bad_request``.
+
+        Args:
+            level: the level's data, as a reset's ``options["level"]`` takes it, or an int seed
+                (the level a reset with that seed builds). It comes from the network: check it.
+            rng: every random choice comes from it (seeded by the request: the same seed gives
+                the same edit).
+            n_edits: how many changes to make, 1 to :data:`MAX_LEVEL_EDITS`.
+
+        Returns:
+            The edited level's data, which a reset's ``options["level"]`` takes: plain msgpack
+            data (maps with str keys, lists, numbers, strings, bytes, booleans, nil, numpy
+            arrays).
+
+        Raises:
+            ValueError: ``level`` is not a level this environment can edit (the client gets
+                ``bad_request`` with the message); any other exception is an
+                ``environment_error``, and the episode goes on.
+        """
+        raise NotImplementedError(f"{type(self).__name__} has no _edit_level")
+

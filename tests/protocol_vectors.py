@@ -56,6 +56,7 @@ TESTS_DIR: Final = Path(__file__).resolve().parent
 VECTORS_DIR: Final = TESTS_DIR.parent / "docs" / "protocol" / "vectors"
 CARTPOLE: Final = "examples.cartpole:CartPoleEnvironment"
 FAULTY: Final = "examples.faulty:FaultyEnvironment"
+PLINKO: Final = "examples.plinko:PlinkoEnvironment"
 SPACES: Final = "protocol_vectors:SpacesEnvironment"
 VARIES: Final = "<varies>"
 """What a path listed in an exchange's ``varies`` is replaced with before comparing."""
@@ -678,6 +679,38 @@ def _shared_memory(recording: Recording) -> None:
                  "no client listens on that name", "the lane cannot be reached")
     link.request({"id": 4, "shared_memory": {"address": "rlenv-lane-" + "0" * 32, "key": key},
                   "reset": {}}, "with another part", "it goes alone")
+
+
+def _peg(name: str, x: float) -> dict[str, Any]:
+    """A Plinko peg as level data (what ``PackedScene.to_data`` gives)."""
+    return {"class": "Peg", "name": name, "properties": {"position": [x, 0.0]}, "children": [
+        {"class": "CollisionShape", "name": "Skin", "properties": {
+            "shape": {"kind": "circle", "radius": 0.1, "offset": [0.0, 0.0]},
+            "friction": 0.2, "elasticity": 0.5}}]}
+
+
+TWO_PEGS = {"format": "rlenv.PackedScene", "version": 1, "root": {
+    "class": "Node2D", "name": "Level", "properties": {"position": [0.0, 0.0]}, "children": [
+        {"class": "Node2D", "name": "Pegs", "properties": {"position": [0.0, 6.0]},
+         "children": [_peg("Peg", 0.0), _peg("Peg2", 1.0)]}]}}
+"""A Plinko level of two pegs, as data."""
+
+
+@scenario("edit_level.json", "edit_level (protocol 2.4): Plinko edits a level of two pegs",
+          PLINKO)
+def _edit_level(recording: Recording) -> None:
+    link = recording.connect()
+    link.hello()
+    link.request({"id": 1, "edit_level": {"level": TWO_PEGS, "seed": 3, "n_edits": 2}},
+                 "two edits, with no episode and no control", "info.level: the edited level")
+    link.request({"id": 2, "edit_level": {"level": TWO_PEGS, "seed": 3, "n_edits": 2}},
+                 "the same seed", "the same edit")
+    link.request({"id": 3, "edit_level": {"level": TWO_PEGS, "seed": 3, "n_edits": 0}},
+                 "n_edits out of [1, 64]", "bad_request")
+    link.request({"id": 4, "edit_level": {"level": "a level?", "seed": 3}},
+                 "a level the environment refuses", "bad_request naming its _edit_level")
+    link.request({"id": 5, "reset": {"seed": 0, "options": {"level": TWO_PEGS}}},
+                 "the level, played")
 
 
 @scenario("error_invalid_action.json", "invalid_action: actions outside the action space")

@@ -37,6 +37,8 @@ EXPECTED = {
     "rlenv.agent.RLAgent": ["action_space", "observation_space"],
     "rlenv.agent.RLAgent._after_physics_tick": ["after the physics stepped"],
     "rlenv.world.RLEnvWorld": [],
+    "rlenv.world.RLEnvWorld._edit_level": ["n_edits", "bad_request"],
+    "rlenv_client.base.BaseClient.edit_level": ["n_edits", "no control"],
     "rlenv.rl_node.RLNode": ["configurable"],
     "rlenv.scene2d.physics.world.PhysicsWorld": ["gravity"],
     "rlenv.scene2d.physics.body.RigidBody": ["mass", "moment"],

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from examples.cartpole import TARGET, CartPoleEnvironment
+from examples.plinko import TARGET as PLINKO
 from rlenv.protocol import BatchResponse, ErrorReply, Reply, Request, Response, StepsResponse, pack
 from rlenv.protocol.errors import ErrorCode
 from rlenv.serving.host import Host
@@ -65,10 +66,13 @@ def _continuation(host: Host) -> list[bytes]:
     return [pack(reply.to_wire()) for reply in replies]
 
 
-def _twin_check(parts: Mapping[str, Any], *, count: int = 1,
-                started: bool = True) -> tuple[Reply, bool]:
-    """Answer ``parts`` on one host of two twins; (the answer, whether the twins still agree)."""
-    host, twin = Host(TARGET, count), Host(TARGET, count)
+def _twin_check(parts: Mapping[str, Any], *, count: int = 1, started: bool = True,
+                target: str = TARGET) -> tuple[Reply, bool]:
+    """Answer ``parts`` on one host of two twins; (the answer, whether the twins still agree).
+
+    The twins serve ``target``, CartPole by default (its actions: ``[x]``, x in [-1, 1]).
+    """
+    host, twin = Host(target, count), Host(target, count)
     for each in (host, twin):
         if started:
             _start(each)
@@ -140,6 +144,29 @@ def test_requests_that_only_read_change_nothing(parts: dict[str, Any]) -> None:
     reply, unchanged = _twin_check(parts)
     assert isinstance(reply, Response) and reply.id == 7
     assert unchanged
+
+
+_EDIT = {"level": 3, "seed": 5, "n_edits": 4}
+
+
+@pytest.mark.parametrize(("parts", "started"), [
+    pytest.param({"edit_level": _EDIT}, True, id="plain"),
+    pytest.param({"edit_level": _EDIT}, False, id="plain-no-episode"),
+    pytest.param({"edit_level": _EDIT, "observation": {"agent": {}}}, True, id="observed"),
+    pytest.param({"batch": [None, {"edit_level": _EDIT}]}, True, id="batch"),
+    pytest.param({"batch": [None, {"edit_level": _EDIT}]}, False, id="batch-no-episode"),
+])
+def test_an_edit_of_a_level_changes_nothing(parts: dict[str, Any], started: bool) -> None:
+    reply, unchanged = _twin_check(parts, count=2, started=started, target=PLINKO)
+    answer = reply.replies[1] if isinstance(reply, BatchResponse) else reply
+    assert isinstance(answer, Response) and answer.frames == 0 and answer.reward == 0.0
+    assert answer.info["level"]["root"]["children"][0]["name"] == "Pegs"
+    assert unchanged
+
+
+def test_an_environment_without_edits_refuses_them_changing_nothing() -> None:
+    assert_refused({"edit_level": {"level": 0, "seed": 0}}, ErrorCode.BAD_REQUEST,
+                   "edit_level: CartPoleWorld has no _edit_level", count=2)
 
 
 # --- empty requests --------------------------------------------------------------------------

@@ -291,6 +291,32 @@ class BaseClient(Inspection, ABC):
         response = self._call(observation=_AGENT_AND_WORLD)
         return {"agent": self._observation(response), "world": self._part(response, "world")}
 
+    def edit_level(self, level: Any, seed: int, n_edits: int = 1) -> Any:
+        """``level`` with ``n_edits`` random changes: the environment's edit, for ACCEL.
+
+        The same level, seed and ``n_edits`` give the same edit; other seeds, other edits. It
+        needs no episode and takes no control (an observer may ask), and it changes nothing of
+        the environment: the episode under way goes on as if it had not been asked (protocol
+        2.4, the ``edit_level`` part).
+
+        Args:
+            level: a level's data, as ``reset(options={"level": ...})`` takes it, or an int
+                seed (the level a reset with that seed builds).
+            seed: an integer >= 0: where the edit's random choices come from.
+            n_edits: how many changes, 1 to 64.
+
+        Returns:
+            The edited level's data; play it with ``reset(options={"level": edited})``.
+
+        Raises:
+            RemoteError: ``bad_request``: the environment offers no edits (its world has no
+                ``_edit_level``), a bad ``seed`` or ``n_edits``, or a level the environment
+                refuses (the message says why); ``environment_error``: its ``_edit_level``
+                raised (the episode goes on).
+        """
+        edit = {"level": level, "seed": seed, "n_edits": n_edits}
+        return self._call(edit_level=edit).info["level"]
+
     @abstractmethod
     def close(self) -> None:
         """Release the connection (or the in-process environment); safe to repeat."""

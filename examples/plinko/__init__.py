@@ -8,7 +8,9 @@ coloured floors are copies mounted on :class:`~rlenv.Marker2D` placeholders. The
 change, and ``difficulty`` (0 to 1, configurable) makes levels with more rows, more jitter,
 bouncier pegs, more bins and a narrower catcher. ``reset(options={"level": data})`` plays a
 given level (the data of a :class:`~rlenv.PackedScene`, e.g. an earlier episode's, read with
-``client.get_property("World", "level")``)::
+``client.get_property("World", "level")``), and ``client.edit_level(level, seed)`` edits one
+for ACCEL (:meth:`PlinkoWorld._edit_level`: move, add or remove a peg, change a peg's
+bounciness)::
 
     Plinko (PlinkoEnvironment)
     |___PhysicsFramesTimer
@@ -54,6 +56,7 @@ that a given level with the same seed starts the same episode.
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import math
 from collections.abc import Mapping
@@ -62,6 +65,7 @@ from typing import Any
 import msgpack
 import numpy as np
 from gymnasium import spaces
+from gymnasium.utils import seeding
 
 from rlenv import (
     CollisionShape,
@@ -85,11 +89,13 @@ __all__ = [
     "TARGET",
     "BinFloor",
     "Divider",
+    "EDITS",
     "Peg",
     "PlinkoAgent",
     "PlinkoEnvironment",
     "PlinkoWorld",
     "build_level",
+    "edit_level",
     "follow",
     "main",
 ]
@@ -106,6 +112,9 @@ MAX_JITTER = 0.12  # a peg moves at most this far: the ball always fits between 
 SIDE_MARGIN = 0.2  # and between the walls and the pegs
 CATCHER_HEIGHT = 1.2
 DIVIDER_HEIGHT = 0.8
+BOUNCINESS = (0.3, 0.8)  # a peg's elasticity: build_level's at difficulty 0 and 1
+PEG_EDGE = HALF_WIDTH - 0.05 - 2 * BALL_RADIUS - PEG_RADIUS  # the ball passes a wall and a peg
+PEG_GAP = 2 * (PEG_RADIUS + BALL_RADIUS)  # centre to centre: the ball passes between two pegs
 PALETTE = ("purple", "blue", "teal", "seagreen", "darkorange", "crimson", "gold", "deeppink",
            "royalblue", "mediumvioletred", "limegreen", "sienna")
 """The colours a level's gradients go between."""
@@ -197,6 +206,110 @@ def build_level(rng: np.random.Generator, difficulty: float, columns: int = 8,
     return level
 
 
+EDITS = ("move", "add", "bounciness", "remove")
+"""The kinds of edit :func:`edit_level` makes, each drawn with equal odds."""
+
+_PLACES_TRIED = 16  # spots an edit tries for a moved or added peg
+_MOVE_SCALE = 0.4  # how far a moved peg goes (standard deviation, m)
+
+
+def edit_level(level: dict[str, Any], rng: np.random.Generator, n_edits: int) -> dict[str, Any]:
+    """``n_edits`` random edits of a level's data, each one of :data:`EDITS`.
+
+    A peg is *moved* (a step of about 0.4 m) or *added* (a copy of a peg, anywhere) only
+    where the ball still passes it: inside ``[-PEG_EDGE, PEG_EDGE]`` (clear of the walls),
+    between the rows' heights (above the bins and the catcher) and :data:`PEG_GAP` from every
+    other peg; when none of 16 spots is free, the edit changes a peg's bounciness instead. A
+    peg is *removed* only when another remains; its *bounciness* is drawn in
+    :data:`BOUNCINESS`. A peg is a ``Peg`` below the level's ``Pegs`` with a shape.
+
+    Args:
+        level: the data of a level (checked already: ``PackedScene.from_data``); not changed.
+        rng: where every choice comes from.
+        n_edits: how many edits to make (>= 1).
+
+    Returns:
+        The edited copy.
+
+    Raises:
+        ValueError: the level has no ``Pegs`` with a peg, or turns its ``Level`` or ``Pegs``.
+    """
+    edited = copy.deepcopy(level)
+    root = edited["root"]
+    pegs = next((child for child in root.get("children", []) if child.get("name") == "Pegs"),
+                None)
+    if pegs is None:
+        raise ValueError("the level has no Pegs node: it is not a Plinko level")
+    for node in (root, pegs):
+        if node.get("properties", {}).get("rotation", 0.0):
+            raise ValueError(f"the level's {node['name']} is rotated: an edit places pegs on an "
+                             "upright board")
+    children: list[dict[str, Any]] = pegs.setdefault("children", [])
+    origin = np.add(root.get("properties", {}).get("position", (0.0, 0.0)),
+                    pegs.get("properties", {}).get("position", (0.0, 0.0)))
+    for _ in range(n_edits):
+        every = [child for child in children if child["class"] == "Peg" and _skin(child)]
+        if not every:
+            raise ValueError("the level has no peg to edit")
+        kind = EDITS[int(rng.integers(len(EDITS) if len(every) > 1 else len(EDITS) - 1))]
+        if kind == "remove":  # drawn only while another peg remains: it is last in EDITS
+            children.remove(every[int(rng.integers(len(every)))])
+            continue
+        peg = every[int(rng.integers(len(every)))]
+        if kind in ("move", "add"):
+            others = [_position(other) + origin for other in every
+                      if other is not peg or kind == "add"]
+            start = _position(peg) + origin
+            spot = _free_spot(rng, others, start if kind == "move" else None)
+            if spot is not None:
+                if kind == "add":
+                    peg = copy.deepcopy(peg)
+                    peg["name"] = _free_name(children)
+                    children.append(peg)
+                peg.setdefault("properties", {})["position"] = (spot - origin).tolist()
+                continue
+        skin = _skin(peg)
+        assert skin is not None  # a peg has one
+        skin.setdefault("properties", {})["elasticity"] = float(rng.uniform(*BOUNCINESS))
+    return edited
+
+
+def _skin(peg: dict[str, Any]) -> dict[str, Any] | None:
+    """The peg's shape (its first CollisionShape), or ``None``."""
+    return next((child for child in peg.get("children", [])
+                 if child["class"] == "CollisionShape"), None)
+
+
+def _position(peg: dict[str, Any]) -> np.ndarray:
+    return np.asarray(peg.get("properties", {}).get("position", (0.0, 0.0)), dtype=float)
+
+
+def _free_spot(rng: np.random.Generator, others: list[np.ndarray],
+               start: np.ndarray | None) -> np.ndarray | None:
+    """A board position at least PEG_GAP from ``others``: near ``start``, or anywhere."""
+    low = np.array([-PEG_EDGE, PEG_BOTTOM - MAX_JITTER])
+    high = np.array([PEG_EDGE, PEG_TOP + MAX_JITTER])
+    for _ in range(_PLACES_TRIED):
+        spot = (rng.uniform(low, high) if start is None
+                else np.clip(start + rng.normal(0.0, _MOVE_SCALE, 2), low, high))
+        if all(np.hypot(*(spot - other)) >= PEG_GAP for other in others):
+            return spot
+    return None
+
+
+def _free_name(children: list[dict[str, Any]]) -> str:
+    taken = {child.get("name") for child in children}
+    number = len(children) + 1
+    while f"Peg{number}" in taken:
+        number += 1
+    return f"Peg{number}"
+
+
+def _ball_start(rng: np.random.Generator) -> tuple[float, float]:
+    """The ball's x and sideways speed: the first draws of an episode, before the level."""
+    return float(rng.uniform(-3.0, 3.0)), float(rng.uniform(-0.5, 0.5))
+
+
 class PlinkoWorld(RLEnvWorld):
     """The board, the catcher, the ball and this episode's level."""
 
@@ -240,7 +353,7 @@ class PlinkoWorld(RLEnvWorld):
         given = options.get("level")
         scene = None if given is None else PackedScene.from_data(given, allowed=LEVEL_CLASSES)
         rng = self.np_random
-        start_x, start_speed = rng.uniform(-3.0, 3.0), rng.uniform(-0.5, 0.5)
+        start_x, start_speed = _ball_start(rng)
         if self.physics is not None:
             self.remove_child(self.physics)
         physics = self.physics = PhysicsWorld(gravity=(0.0, -9.81), name="Physics")
@@ -273,6 +386,27 @@ class PlinkoWorld(RLEnvWorld):
         if self._level_data is None:
             self._level_data = PackedScene.pack(self.level_node).to_data()
         return self._level_data
+
+    def _edit_level(self, level: Any, rng: np.random.Generator, n_edits: int) -> Any:
+        """``n_edits`` edits of ``level`` (see :func:`edit_level`), checked before and after.
+
+        An int level is a seed: the level a reset with that seed builds at the world's
+        difficulty, its data edited. Nothing of the world changes.
+
+        Raises:
+            ValueError: ``level`` is neither an int seed >= 0 nor a Plinko level's data.
+        """
+        if type(level) is int:
+            if level < 0:
+                raise ValueError(f"a seed must be >= 0, got {level}")
+            rng_of_seed, _ = seeding.np_random(level)
+            _ball_start(rng_of_seed)  # drawn before the level, as in reset
+            built = build_level(rng_of_seed, self.difficulty, self.columns, self.rows)
+            data = PackedScene.pack(built).to_data()
+        else:
+            data = PackedScene.from_data(level, allowed=LEVEL_CLASSES).to_data()
+        edited = edit_level(data, rng, n_edits)
+        return PackedScene.from_data(edited, allowed=LEVEL_CLASSES).to_data()
 
     def get_data(self, observation_request: Mapping[str, Any]) -> dict[str, Any]:
         """The ball and the catcher, the level's size and fingerprint (its data's digest)."""

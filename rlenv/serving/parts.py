@@ -15,6 +15,8 @@ here, add it to :data:`PARTS`, and give the client a method that sends it.
 
 from __future__ import annotations
 
+import logging
+import traceback
 from collections.abc import Callable, Mapping
 from typing import Any, ClassVar, Protocol
 
@@ -23,7 +25,8 @@ from gymnasium import spaces
 from gymnasium.vector.utils import iterate
 
 from rlenv.protocol import BatchResponse, ErrorReply, Reply, Request
-from rlenv.protocol.errors import ErrorCode, RequestError
+from rlenv.protocol.codec import DEFAULT_MAX_FRAME_SIZE, pack, unpack
+from rlenv.protocol.errors import ErrorCode, RemoteProtocolError, RequestError
 from rlenv.protocol.spaces import SpaceMismatch
 from rlenv.serving import inspector
 from rlenv.serving.columns import Columns
@@ -31,11 +34,15 @@ from rlenv.serving.instance import Answer, Episode, Instance, Plan
 from rlenv.serving.lean import LeanSteps
 from rlenv.serving.settings import check_keys
 from rlenv.serving.snapshots import generator_from_state, parse_snapshot
+from rlenv.world import MAX_LEVEL_EDITS, RLEnvWorld
 
 __all__ = ["PARTS", "HostPart", "Part", "Shape", "StepsPlan", "dispatch", "plan_for", "shape_of",
            "takes_control"]
 
+logger = logging.getLogger(__name__)
+
 _MAX_RENDER_SIZE = 4096
+_MAX_LEVEL_SIZE = DEFAULT_MAX_FRAME_SIZE - 4096  # an edited level, with room for its answer
 AGENT_ONLY: Mapping[str, Any] = {"agent": {}}
 _RUNNING = Episode.RUNNING
 
@@ -292,6 +299,78 @@ class Restore(Part):
             raise RequestError(error.code, f"{error}; reset required") from None
         finally:
             instance.replaying = False
+
+
+class EditLevel(Part):
+    """``{"level": data or int, "seed": int >= 0, "n_edits": 1..64}``: a level, edited.
+
+    The world's ``_edit_level`` hook (:meth:`rlenv.RLEnvWorld._edit_level`) edits the level
+    with a generator seeded by ``seed``, so the same request gives the same level. It is built
+    from the request's data, not from the live tree: nothing of the environment changes, so
+    any client may ask, with or without an episode. The edit is made while the request is
+    checked (a hook that raises leaves the episode alone); the answer's ``info["level"]``
+    holds the edited data, as it travels.
+    """
+
+    name = "edit_level"
+    alone = True
+    _KEYS = frozenset({"level", "seed", "n_edits"})
+
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
+              where: str) -> Any:
+        edit = _map(parts["edit_level"], "edit_level", where)
+        check_keys(edit, self._KEYS, "edit_level")
+        if "level" not in edit:
+            raise _bad("edit_level needs a 'level' (a level's data or an int seed)")
+        seed, n_edits = edit.get("seed"), edit.get("n_edits", 1)
+        if type(seed) is not int or seed < 0:
+            raise _bad(f"edit_level.seed must be an integer >= 0, got {seed!r:.40}")
+        if type(n_edits) is not int or not 1 <= n_edits <= MAX_LEVEL_EDITS:
+            raise _bad(f"edit_level.n_edits must be an integer in [1, {MAX_LEVEL_EDITS}], "
+                       f"got {n_edits!r:.40}")
+        world: RLEnvWorld = instance.environment.world  # type: ignore[assignment]  # has one
+        hook = f"{type(world).__name__}._edit_level"
+        if type(world)._edit_level is RLEnvWorld._edit_level:
+            raise _bad(f"edit_level: {type(world).__name__} has no _edit_level: "
+                       f"{type(instance.environment).__name__} offers no edits of its levels")
+        try:
+            edited = world._edit_level(edit["level"], np.random.default_rng(seed), n_edits)
+        except RequestError:
+            raise
+        except ValueError as error:
+            raise _bad(f"edit_level: {hook} refused the level: {error}") from None
+        except Exception as error:  # user code raised: nothing changed, the episode goes on
+            logger.error("%s raised", hook, exc_info=error)
+            detail = "".join(traceback.format_exception(error)).rstrip()
+            raise RequestError(ErrorCode.ENVIRONMENT_ERROR,
+                               f"{hook} raised {type(error).__name__}: {error}; nothing "
+                               f"changed\n{detail}") from None
+        return _travelled(edited, hook)
+
+    def apply(self, instance: Instance, value: Any, request: Plan) -> None:
+        instance.answer.info = {"level": value}  # type: ignore[union-attr]
+
+
+def _travelled(level: Any, hook: str) -> Any:
+    """``level`` as it arrives on the other end (plain msgpack data, checked and bounded).
+
+    Raises:
+        RequestError: ``environment_error``: ``hook`` returned nothing, data that cannot
+            travel, or more than an answer may carry.
+    """
+    why = ""
+    if level is None:
+        why = "None, not a level"
+    else:
+        try:
+            body = pack(level)
+            if len(body) > _MAX_LEVEL_SIZE:
+                why = f"{len(body)} bytes of data, more than an answer may carry"
+            else:
+                return unpack(body)
+        except (TypeError, ValueError, RemoteProtocolError) as error:
+            why = f"data that cannot travel: {error}"
+    raise RequestError(ErrorCode.ENVIRONMENT_ERROR, f"{hook} returned {why}")
 
 
 def _prefixed(where: str, call: Callable[..., Any], *args: Any, **kwargs: Any) -> None:
@@ -597,8 +676,8 @@ def _reset_mask(mask: Any, count: int) -> list[bool]:
 
 PARTS: dict[str, Part | HostPart] = {
     part.name: part for part in (
-        Restore(), Inspect(), Snapshot(), Config(), Reset(), RepeatAction(), Action(),
-        Observation(), Batch(), Steps())
+        Restore(), Inspect(), Snapshot(), EditLevel(), Config(), Reset(), RepeatAction(),
+        Action(), Observation(), Batch(), Steps())
 }
 """Every kind of request part, in the order they apply."""
 

@@ -116,6 +116,38 @@ def test_learnability_scores_reach_the_buffer(two_on_one: gymnasium.vector.Vecto
     assert max(sampler.score(level) for level in sampler.weights()) > 0
 
 
+def test_accel_plays_an_edit_of_each_replayed_level_next(
+        two_on_one: gymnasium.vector.VectorEnv) -> None:
+    """With edit_levels, a replay is followed by its level edited (data), played as new."""
+    sampler = LevelSampler(2, replay_prob=1.0, seed=0)
+    wrapper = CurriculumVectorEnv(two_on_one, sampler, seed=4, edit_levels=2)
+    observations, info = wrapper.reset()
+    replays: list[list[Any]] = [[], []]  # per sub-env: what it played, in order
+    for _ in range(1500):
+        if "replayed" in info:
+            for index in np.flatnonzero(info["_replayed"]):
+                replays[index].append("replay" if info["replayed"][index] else
+                                      type(wrapper._playing[index].level).__name__)
+        observations, _, _, _, info = wrapper.step(follow(observations))
+        if sum(kind == "dict" for played in replays for kind in played) >= 2:
+            break
+    for played in replays:
+        for before, after in zip(played, played[1:], strict=False):
+            assert (after == "dict") == (before == "replay")  # an edit after each replay only
+    assert sum(kind == "dict" for played in replays for kind in played) >= 2
+    edited = [level for level in map(sampler.level, sampler.weights()) if isinstance(level, dict)]
+    assert all(level["format"] == "rlenv.PackedScene" for level in edited)
+
+
+def test_edit_levels_must_be_a_count() -> None:
+    envs = gymnasium.make_vec("rlenv/Plinko-v0", num_envs=1)
+    try:
+        with pytest.raises(ValueError, match="edit_levels must be an int >= 0, got -1"):
+            CurriculumVectorEnv(envs, edit_levels=-1)
+    finally:
+        envs.close()
+
+
 def test_a_replayed_seed_replays_the_first_observation_bit_for_bit(
         two_on_one: gymnasium.vector.VectorEnv) -> None:
     sampler = LevelSampler(1, replay_prob=1.0, seed=0)

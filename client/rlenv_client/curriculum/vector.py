@@ -24,7 +24,11 @@ Scores (the ``score`` argument):
   :meth:`CurriculumVectorEnv.update` from its own code.
 
 A new level enters the buffer with its score (:meth:`LevelSampler.insert`); a replayed one has
-its score updated. With ``sampler.robust`` (Robust PLR) the trainer learns only from replayed
+its score updated. With ``edit_levels=n`` (ACCEL), when a sub-environment's replay ends, its
+next episode plays that level with ``n`` random edits (the environment's, through
+:meth:`~rlenv_client.base.BaseClient.edit_level`) as a new level, scored and offered to the
+buffer like any other: the curriculum grows by small changes to the levels it replays.
+With ``sampler.robust`` (Robust PLR) the trainer learns only from replayed
 levels: :attr:`CurriculumVectorEnv.train_mask` says which of the last step's transitions to
 learn from.
 """
@@ -105,16 +109,20 @@ class CurriculumVectorEnv(VectorWrapper):
         score: ``"learnability"``, a callable taking an :class:`Episode`, or ``"external"``.
         seed: seeds the generator of new levels (``reset(seed=...)`` seeds it again).
         outcomes_kept: how many outcomes per level learnability counts (the latest).
+        edit_levels: ACCEL: after a replay, the sub-environment plays that level with this many
+            edits (the environment's ``_edit_level``) as a new level; 0 (the default) never.
 
     Raises:
         TypeError: ``envs`` is not over a ``RemoteVectorEnv``.
-        ValueError: an unknown ``score``, or an autoreset mode other than the two above.
+        ValueError: an unknown ``score``, an autoreset mode other than the two above, or
+            ``edit_levels`` not an int >= 0.
     """
 
     def __init__(self, envs: VectorEnv, sampler: LevelSampler | None = None,
                  parameters: EnvironmentParameters | None = None,
                  score: str | Callable[[Episode], float] = "learnability", *,
-                 seed: int | None = None, outcomes_kept: int = 32) -> None:
+                 seed: int | None = None, outcomes_kept: int = 32,
+                 edit_levels: int = 0) -> None:
         super().__init__(envs)
         remote = envs.unwrapped
         if not hasattr(remote, "set_next_reset"):
@@ -153,6 +161,12 @@ class CurriculumVectorEnv(VectorWrapper):
         self._playing: list[Episode | None] = [None] * self.num_envs
         self._next: list[tuple[Level, int | None] | None] = [None] * self.num_envs
         self._autoreset = np.zeros(self.num_envs, np.bool_)
+        if not isinstance(edit_levels, int) or isinstance(edit_levels, bool) or \
+                edit_levels < 0:
+            raise ValueError(f"edit_levels must be an int >= 0, got {edit_levels!r}")
+        self.edit_levels = edit_levels
+        """ACCEL: how many edits make the level played after a replay (0: none)."""
+        self._edited: list[Level | None] = [None] * self.num_envs
 
     def reset(self, *, seed: int | list[int | None] | None = None,
               options: Mapping[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
@@ -285,7 +299,12 @@ class CurriculumVectorEnv(VectorWrapper):
     def _choose(self, index: int) -> None:
         """Decide sub-environment ``index``'s next level and give it to the vector's reset."""
         sampler = self.sampler
-        if sampler.sample_replay_decision():
+        edited = self._edited[index]
+        if edited is not None:  # ACCEL: the last replay's level, edited, as a new level
+            self._edited[index] = None
+            level, level_id = edited, None
+            self._next[index] = (level, None)
+        elif sampler.sample_replay_decision():
             level_id, level = sampler.sample_replay_level()
             self._next[index] = (level, level_id)
         else:
@@ -328,6 +347,9 @@ class CurriculumVectorEnv(VectorWrapper):
         if _row(last_infos, "server_restarted", index) is not None or \
                 _row(last_infos, "interrupted", index) is not None:
             return  # not an outcome of the level
+        if self.edit_levels and episode.level_id is not None:
+            self._edited[index] = self._remote.clients[0].edit_level(
+                episode.level, int(self._rng.integers(_SEEDS)), self.edit_levels)
         success = _row(last_infos, "success", index)
         episode.success = bool(success) if success is not None else \
             terminated and episode.reward > 0

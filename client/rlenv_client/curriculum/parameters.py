@@ -27,8 +27,8 @@ A parameter is a plain number, a sampler or a curriculum, as ML-Agents writes th
 The trainer draws values with :meth:`~EnvironmentParameters.sample` before each reset,
 configures them (:func:`configure_arguments` gives ``client.configure``'s keywords) and reports
 each finished episode with :meth:`~EnvironmentParameters.add_episode`, which moves curricula on
-as ML-Agents' ``EnvironmentParameterManager`` does. ``docs/environment-parameters.md`` says what
-differs from ML-Agents.
+as ML-Agents' ``EnvironmentParameterManager`` does. ``docs/curriculum.md`` ("ML-Agents
+environment parameters") says what differs from ML-Agents.
 """
 
 from __future__ import annotations

@@ -1,8 +1,10 @@
 """Exact replays: record episodes as seed + configuration + actions, re-run them, compare.
 
 An episode file holds the server's snapshot of the episode (its configuration, generator state,
-reset options and every action, see :mod:`rlenv.serving.snapshots`) and a digest of every
-observation the client saw. Replaying restores the start of the episode on a fresh server,
+reset options and every action, see :mod:`rlenv.serving.snapshots`), a digest of every
+observation the client saw, and how the episode ended (``terminated``, ``truncated``: what the
+last step returned, time limits included; recordings made before these two were added lack
+them and still load, with ``None``). Replaying restores the start of the episode on a fresh server,
 sends the same actions, and compares each observation with the recorded digest: a
 deterministic environment gives bit-identical observations, and the first difference is
 reported.
@@ -15,7 +17,7 @@ reported.
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +26,7 @@ import gymnasium
 from rlenv.protocol import pack, unpack
 from rlenv_client.base import BaseClient
 
-__all__ = ["EpisodeFile", "RecordEpisodes", "ReplayResult", "digest", "replay"]
+__all__ = ["EpisodeFile", "RecordEpisodes", "ReplayResult", "Trajectory", "digest", "replay"]
 
 _FORMAT = "rlenv-episode"
 _VERSION = 1
@@ -37,17 +39,24 @@ def digest(observation: Any) -> str:
 
 @dataclass
 class EpisodeFile:
-    """One recorded episode: the server snapshot and the digests of what the client saw."""
+    """One recorded episode: the server snapshot, the digests of what the client saw, its end.
+
+    ``terminated`` and ``truncated`` are ``None`` in recordings older than them.
+    """
 
     target: str | None
     snapshot: dict[str, Any]
     observations: list[str]
+    terminated: bool | None = None
+    truncated: bool | None = None
 
     def save(self, path: str | Path) -> None:
-        """Write the episode to ``path``."""
-        Path(path).write_bytes(pack({"format": _FORMAT, "version": _VERSION,
-                                     "target": self.target, "snapshot": self.snapshot,
-                                     "observations": self.observations}))
+        """Write the episode to ``path`` (the end only when known: older readers skip it)."""
+        data = {"format": _FORMAT, "version": _VERSION, "target": self.target,
+                "snapshot": self.snapshot, "observations": self.observations}
+        if self.terminated is not None and self.truncated is not None:
+            data.update(terminated=self.terminated, truncated=self.truncated)
+        Path(path).write_bytes(pack(data))
 
     @classmethod
     def load(cls, path: str | Path) -> EpisodeFile:
@@ -63,7 +72,8 @@ class EpisodeFile:
         if not isinstance(data, dict) or data.get("format") != _FORMAT or \
                 data.get("version") != _VERSION:
             raise ValueError(f"{path} is not an rlenv episode (version {_VERSION})")
-        return cls(data["target"], data["snapshot"], list(data["observations"]))
+        return cls(data["target"], data["snapshot"], list(data["observations"]),
+                   data.get("terminated"), data.get("truncated"))
 
 
 class RecordEpisodes(gymnasium.Wrapper):
@@ -96,26 +106,52 @@ class RecordEpisodes(gymnasium.Wrapper):
             remote = self.env.unwrapped
             client: BaseClient = remote.client  # type: ignore[attr-defined]
             target: str | None = remote.target  # type: ignore[attr-defined]
-            EpisodeFile(target, client.snapshot(), self._observations).save(
-                self.directory / f"episode-{self.episodes:04d}.rlenv")
+            EpisodeFile(target, client.snapshot(), self._observations, bool(terminated),
+                        bool(truncated)).save(self.directory / f"episode-{self.episodes:04d}.rlenv")
         return observation, reward, terminated, truncated, info
+
+
+@dataclass
+class Trajectory:
+    """What a replay saw, as gymnasium returned it: ``observations`` has one more than the rest.
+
+    ``terminated`` and ``truncated`` are what the server's last step returned (a client-side
+    time limit does not show there).
+    """
+
+    observations: list[Any] = field(default_factory=list)
+    actions: list[Any] = field(default_factory=list)
+    rewards: list[Any] = field(default_factory=list)
+    terminated: bool = False
+    truncated: bool = False
 
 
 @dataclass(frozen=True)
 class ReplayResult:
-    """What a replay found: ``divergence`` is ``None`` when every observation matched."""
+    """What a replay found: ``divergence`` is ``None`` when every observation matched.
+
+    ``trajectory`` holds the replayed steps when :func:`replay` was asked to keep them.
+    """
 
     steps: int
     divergence: str | None
+    trajectory: Trajectory | None = None
 
 
-def replay(episode: EpisodeFile, client: BaseClient) -> ReplayResult:
-    """Re-run ``episode`` on ``client``'s environment and compare every observation."""
+def replay(episode: EpisodeFile, client: BaseClient, *, keep: bool = False) -> ReplayResult:
+    """Re-run ``episode`` on ``client``'s environment and compare every observation.
+
+    Args:
+        episode: the recording.
+        client: a client of a (fresh) server of the recording's environment.
+        keep: also return every observation, action and reward (``result.trajectory``).
+    """
     start = {**episode.snapshot, "events": []}
     observation, _ = client.restore(start)
     expected = iter(episode.observations)
     if digest(observation) != next(expected, None):
         return ReplayResult(0, "the first observation (after the reset) differs")
+    kept = Trajectory([observation]) if keep else None
     steps = 0
     for event in episode.snapshot["events"]:
         if event[0] == "config":
@@ -127,12 +163,16 @@ def replay(episode: EpisodeFile, client: BaseClient) -> ReplayResult:
             client.set_property(*event[1:])
             continue
         steps += 1
-        observation, *_ = client.step(event[1], event[2])
+        observation, reward, terminated, truncated, _ = client.step(event[1], event[2])
         recorded = next(expected, None)
         if recorded is None:
             break
         if digest(observation) != recorded:
             return ReplayResult(steps, f"step {steps}: the observation differs from the "
                                 f"recording")
-    return ReplayResult(steps, None)
-
+        if kept is not None:
+            kept.observations.append(observation)
+            kept.actions.append(event[1])
+            kept.rewards.append(reward)
+            kept.terminated, kept.truncated = bool(terminated), bool(truncated)
+    return ReplayResult(steps, None, kept)

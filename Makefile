@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-lowest test-ray test-browser screenshot plinko-picture sb3 rllib cleanrl bench-http bench-train\
+.PHONY: demo test test-lowest test-ray test-browser test-minari screenshot plinko-picture sb3 rllib cleanrl bench-http bench-train\
 	docs lint vectors clean
 
 $(STAMP): pyproject.toml
@@ -25,6 +25,12 @@ test: $(STAMP)
 test-ray: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e ".[test,ray]"
 	$(BIN)/python -m pytest -m ray
+
+# Optional: recorded episodes as Minari datasets (the minari extra: rlenv dataset create,
+# DataCollector, minari show), over real servers.
+test-minari: $(STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[test,minari]"
+	$(BIN)/python -m pytest -m minari
 
 # Optional: the inspector's page in headless Chromium (skipped, saying why, without one; .ci/run
 # installs Debian's chromium first), and what watching costs a trainer.

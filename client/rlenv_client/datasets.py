@@ -90,6 +90,9 @@ def create_dataset(
         report: called with a line for each recording whose end had to be derived (recordings
             older than the ``terminated`` and ``truncated`` they now carry).
 
+    Returns:
+        The dataset, as :func:`minari.load_dataset` would read it.
+
     Raises:
         ValueError: a malformed id, an empty folder, recordings of several environments or of
             none, a recording that no longer replays (its step is named), a dataset that exists.

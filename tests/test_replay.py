@@ -11,6 +11,7 @@ import numpy as np
 
 import rlenv_client  # registers the ids
 from examples.cartpole import controller
+from rlenv.protocol import unpack
 from rlenv_client.replay import EpisodeFile, RecordEpisodes
 
 
@@ -95,5 +96,18 @@ def test_an_inspectors_edits_are_replayed(tmp_path: Path) -> None:
     kinds = [event[0] for event in EpisodeFile.load(path).snapshot["events"]]
     assert "set" in kinds and "config" in kinds
     result = run_replay(path)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "every observation identical" in result.stdout
+
+
+def test_recordings_keep_how_episodes_ended_and_older_ones_still_replay(tmp_path: Path) -> None:
+    path = record(tmp_path, episodes=1)[0]
+    episode = EpisodeFile.load(path)
+    assert (episode.terminated, episode.truncated) in ((True, False), (False, True))
+    older = tmp_path / "older.rlenv"  # as written before the end was kept: no such keys
+    EpisodeFile(episode.target, episode.snapshot, episode.observations).save(older)
+    assert "terminated" not in unpack(older.read_bytes())
+    assert (EpisodeFile.load(older).terminated, EpisodeFile.load(older).truncated) == (None, None)
+    result = run_replay(older)
     assert result.returncode == 0, result.stdout + result.stderr
     assert "every observation identical" in result.stdout

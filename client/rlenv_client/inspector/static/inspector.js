@@ -371,6 +371,7 @@ function showControl(control, note = null, bad = false) {
   $("release-control").hidden = !control.controlling;
   const status = $("control-status");
   status.dataset.episodes = control.episodes;
+  status.dataset.held = (control.held || []).join(" ");
   status.textContent = note ?? (control.error ? control.error :
     mine ? `you control it: keys ${control.keys.map((k) => k === " " ? "Space" : k).join(", ")}` +
            ` · ${control.episodes} episodes recorded in ${control.directory}` :

@@ -12,21 +12,16 @@ inspector's page (``rlenv inspect HOST:PORT --record-demonstrations DIR``, see
 
 from __future__ import annotations
 
-import re
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import gymnasium
-import numpy as np
-from gymnasium import spaces
 
 from rlenv_client.env import RemoteEnv
-from rlenv_client.replay import EpisodeFile, digest
+from rlenv_client.replay import EpisodeFile, digest, next_episode_path
 
-__all__ = ["held_action", "idle_action", "next_episode_path", "record"]
-
-_NAME = re.compile(r"episode-(\d+)\.rlenv")
+__all__ = ["record"]
 
 
 def record(target_or_env: str | gymnasium.Env, controller: Callable[[Any], Any], episodes: int,
@@ -71,48 +66,3 @@ def record(target_or_env: str | gymnasium.Env, controller: Callable[[Any], Any],
         if env is not target_or_env:
             env.close()
     return written
-
-
-def next_episode_path(directory: Path) -> Path:
-    """``directory/episode-NNNN.rlenv``, numbered after the highest one there."""
-    numbers = [int(match.group(1)) for path in directory.iterdir()
-               if (match := _NAME.fullmatch(path.name))]
-    return directory / f"episode-{max(numbers, default=0) + 1:04d}.rlenv"
-
-
-def idle_action(space: spaces.Space) -> Any:
-    """The action while no key is held: 0 (clipped into a ``Box``'s bounds), ``start``.
-
-    ``Tuple`` and ``Dict`` spaces get their items' idle actions.
-
-    Raises:
-        ValueError: a space with no such action (a ``Text``, a ``Graph``...).
-    """
-    if isinstance(space, spaces.Discrete):
-        return int(space.start)
-    if isinstance(space, spaces.Box):
-        return np.clip(np.zeros(space.shape), space.low, space.high).astype(space.dtype)
-    if isinstance(space, spaces.MultiDiscrete):
-        return np.array(space.start, dtype=space.dtype)
-    if isinstance(space, spaces.MultiBinary):
-        return np.zeros(space.shape, dtype=space.dtype)
-    if isinstance(space, spaces.Tuple):
-        return tuple(idle_action(item) for item in space.spaces)
-    if isinstance(space, spaces.Dict):
-        return {key: idle_action(item) for key, item in space.spaces.items()}
-    raise ValueError(f"{space} has no idle action for demonstrations")
-
-
-def held_action(space: spaces.Space, actions: Sequence[Any]) -> Any:
-    """The action of the held keys' ``actions`` (oldest first), or the idle action.
-
-    In a ``Box`` the keys add up (left and up: a diagonal), clipped into the bounds; in any
-    other space the last pressed counts.
-    """
-    idle = idle_action(space)
-    if not actions:
-        return idle
-    if isinstance(space, spaces.Box):
-        total = idle + sum(np.asarray(action, space.dtype) - idle for action in actions)
-        return np.clip(total, space.low, space.high).astype(space.dtype)
-    return actions[-1]

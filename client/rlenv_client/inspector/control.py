@@ -6,7 +6,7 @@ trainer's reset would, so it is refused (``busy``) while another client controls
 A thread then steps the instance at the environment's real-time rate (its physics ticks a
 second over the ticks an action runs; or a fixed rate) with the action of the keys the person
 holds (:meth:`Demonstrator.hold`, the page sends them at every press and release; no key held:
-the idle action, see :func:`~rlenv_client.demonstrations.held_action`), and records every episode
+the idle action, see :func:`held_action`), and records every episode
 into the directory given at the start, as :class:`~rlenv_client.replay.RecordEpisodes` would.
 "Release" (:meth:`Demonstrator.release`) drops the episode under way and closes the
 connection, which frees control. The keys are the agent's ``demonstration_keys`` (see
@@ -28,12 +28,11 @@ from rlenv.protocol import ErrorReply, Request, Response
 from rlenv.protocol.errors import RemoteError
 from rlenv_client.addresses import parse_address
 from rlenv_client.client import Client
-from rlenv_client.demonstrations import held_action, idle_action, next_episode_path
 from rlenv_client.inspector.watch import InspectorError, Watcher, to_json
-from rlenv_client.replay import EpisodeFile, digest
+from rlenv_client.replay import EpisodeFile, digest, next_episode_path
 from rlenv_client.session import LOST
 
-__all__ = ["Demonstrator"]
+__all__ = ["Demonstrator", "held_action", "idle_action"]
 
 
 class _Control:
@@ -236,3 +235,41 @@ def _action(space: spaces.Space, value: Any) -> Any:
     if isinstance(space, spaces.Box | spaces.MultiDiscrete | spaces.MultiBinary):
         return np.asarray(to_json(value), dtype=space.dtype).reshape(space.shape)
     return value
+
+
+def idle_action(space: spaces.Space) -> Any:
+    """The action while no key is held: 0 (clipped into a ``Box``'s bounds), ``start``.
+
+    ``Tuple`` and ``Dict`` spaces get their items' idle actions.
+
+    Raises:
+        ValueError: a space with no such action (a ``Text``, a ``Graph``...).
+    """
+    if isinstance(space, spaces.Discrete):
+        return int(space.start)
+    if isinstance(space, spaces.Box):
+        return np.clip(np.zeros(space.shape), space.low, space.high).astype(space.dtype)
+    if isinstance(space, spaces.MultiDiscrete):
+        return np.array(space.start, dtype=space.dtype)
+    if isinstance(space, spaces.MultiBinary):
+        return np.zeros(space.shape, dtype=space.dtype)
+    if isinstance(space, spaces.Tuple):
+        return tuple(idle_action(item) for item in space.spaces)
+    if isinstance(space, spaces.Dict):
+        return {key: idle_action(item) for key, item in space.spaces.items()}
+    raise ValueError(f"{space} has no idle action for demonstrations")
+
+
+def held_action(space: spaces.Space, actions: Sequence[Any]) -> Any:
+    """The action of the held keys' ``actions`` (oldest first), or the idle action.
+
+    In a ``Box`` the keys add up (left and up: a diagonal), clipped into the bounds; in any
+    other space the last pressed counts.
+    """
+    idle = idle_action(space)
+    if not actions:
+        return idle
+    if isinstance(space, spaces.Box):
+        total = idle + sum(np.asarray(action, space.dtype) - idle for action in actions)
+        return np.clip(total, space.low, space.high).astype(space.dtype)
+    return actions[-1]

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, ClassVar
 
 from gymnasium import spaces
 
@@ -37,10 +37,22 @@ class RLAgent(RLNode):
             each answer).
         terminated: the episode reached a terminal state of the task.
         truncated: the episode was cut short by something outside the task (a time limit).
+        demonstration_keys: the keys a person acts with from the inspector's page (``rlenv
+            inspect --record-demonstrations DIR``): key names as the browser's
+            ``KeyboardEvent.key`` gives them (``"ArrowLeft"``, ``"a"``, ``" "``) mapped to
+            actions of :attr:`action_space`, e.g. ``{"ArrowLeft": 0, "ArrowRight": 2}``.
+            ``None`` (the default) picks keys from the space
+            (:func:`~rlenv.demonstration_keys.default_keys`): ``"1"``..``"9"`` for the first
+            actions of a ``Discrete`` (and arrows when it has 2 or 3), arrows to the bounds of
+            a ``Box`` of one or two values; other spaces have none (name yours). While no key
+            is held the agent gets the space's idle action (0, clipped into a ``Box``'s
+            bounds; a ``Discrete``'s ``start``); several held keys of a ``Box`` add up, of
+            other spaces the last pressed counts.
     """
 
     action_space: spaces.Space
     observation_space: spaces.Space
+    demonstration_keys: ClassVar[Mapping[str, Any] | None] = None
 
     def __init__(self, name: str | None = None) -> None:
         super().__init__(name)

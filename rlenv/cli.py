@@ -114,6 +114,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     inspect.add_argument("--follow-stdin", action="store_true",
                          help="read new address lists (JSON) from standard input; exit when it "
                          "closes (set by rlenv_client.inspector.Inspector)")
+    inspect.add_argument("--record-demonstrations", metavar="DIR", default=None,
+                         help="let a person take control from the page (keys to actions: the "
+                         "agent's demonstration_keys) and record each episode into DIR, as "
+                         "rlenv replay re-runs them")
+    inspect.add_argument("--target", metavar="MODULE:CLASS", default=None,
+                         help="the environment's class, written into demonstrations so that "
+                         "rlenv replay needs no --target")
+    inspect.add_argument("--demonstration-rate", type=float, default=None, metavar="HZ",
+                         help="actions a second while a person plays (default: the "
+                         "environment's real time, its ticks a second over repeat_action)")
     inspect.set_defaults(run=_inspect)
 
     check = commands.add_parser("check", help="check a server the way trainers use it")
@@ -285,7 +295,9 @@ def _inspect(args: argparse.Namespace) -> int:
     from rlenv_client.inspector import serve
 
     serve(args.addresses, token=args.token, port=args.port, follow_stdin=args.follow_stdin,
-          ready=lambda line: print(line, flush=True))
+          ready=lambda line: print(line, flush=True),
+          record_demonstrations=args.record_demonstrations, target=args.target,
+          demonstration_rate=args.demonstration_rate)
     return 0
 
 

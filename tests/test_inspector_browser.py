@@ -21,6 +21,7 @@ from inspector_http import Trainer
 from rlenv_client import Client
 from rlenv_client.inspector import Inspector
 from rlenv_client.launcher import ServerProcess
+from rlenv_client.replay import EpisodeFile
 
 pytestmark = pytest.mark.browser
 CHROMIUM = find_chromium()
@@ -161,3 +162,37 @@ def test_the_browser_cannot_reach_it_from_elsewhere(server: ServerProcess,
             body: {json.dumps(edit)}}}).then(() => 'sent', (e) => 'failed: ' + e)""")
         assert outcome in ("sent", "failed: TypeError: Failed to fetch")
         assert controller.get_property("World", "damping") == 0.3  # unchanged
+
+
+def press(browser: Browser, key: str, kind: str) -> None:
+    """A real key event (``keyDown`` or ``keyUp``) from the browser's input pipeline."""
+    codes = {"ArrowLeft": 37, "ArrowRight": 39}
+    browser.command("Input.dispatchKeyEvent", session=True, type=kind, key=key, code=key,
+                    windowsVirtualKeyCode=codes[key])
+
+
+def test_a_person_takes_control_and_their_episode_is_recorded(server: ServerProcess,
+                                                              browser: Browser,
+                                                              tmp_path: Path) -> None:
+    with Inspector([f"{server.host}:{server.port}"], record_demonstrations=tmp_path,
+                   target="examples.cartpole:CartPoleEnvironment",
+                   demonstration_rate=120) as inspector:
+        browser.open(inspector.url)
+        browser.wait_for("!document.getElementById('take-control').disabled && "
+                         "!document.getElementById('control').hidden", "no Take control")
+        browser.evaluate("document.getElementById('take-control').click()")
+        browser.wait_for("document.getElementById('control-status').textContent"
+                         ".includes('you control it')", "control was not taken")
+        status = "document.getElementById('control-status').dataset"
+        press(browser, "ArrowLeft", "keyDown")
+        held = browser.wait_for(f"{status}.held === 'ArrowLeft' && {status}.episodes",
+                                "the key did not reach the inspector")
+        browser.wait_for(f"{status}.episodes > {int(held) + 1}", "no episode recorded")
+        press(browser, "ArrowLeft", "keyUp")
+        browser.evaluate("document.getElementById('release-control').click()")
+        browser.wait_for("!document.getElementById('take-control').hidden", "not released")
+    episode = EpisodeFile.load(tmp_path / f"episode-{int(held) + 2:04d}.rlenv")
+    pushes = {float(e[1][0]) for e in episode.snapshot["events"] if e[0] == "action"}
+    assert pushes == {-1.0}  # the held key's action, all along
+    with Client(server.host, server.port) as trainer:  # control was given back
+        trainer.reset()

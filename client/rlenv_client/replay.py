@@ -17,6 +17,7 @@ reported.
 from __future__ import annotations
 
 import hashlib
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -26,15 +27,24 @@ import gymnasium
 from rlenv.protocol import pack, unpack
 from rlenv_client.base import BaseClient
 
-__all__ = ["EpisodeFile", "RecordEpisodes", "ReplayResult", "Trajectory", "digest", "replay"]
+__all__ = ["EpisodeFile", "RecordEpisodes", "ReplayResult", "Trajectory", "digest",
+           "next_episode_path", "replay"]
 
 _FORMAT = "rlenv-episode"
 _VERSION = 1
+_NAME = re.compile(r"episode-(\d+)\.rlenv")
 
 
 def digest(observation: Any) -> str:
     """A short fingerprint of an observation's exact bytes (dtype and shape included)."""
     return hashlib.blake2b(pack(observation), digest_size=16).hexdigest()
+
+
+def next_episode_path(directory: Path) -> Path:
+    """``directory/episode-NNNN.rlenv``, numbered after the highest one there."""
+    numbers = [int(match.group(1)) for path in directory.iterdir()
+               if (match := _NAME.fullmatch(path.name))]
+    return directory / f"episode-{max(numbers, default=0) + 1:04d}.rlenv"
 
 
 @dataclass

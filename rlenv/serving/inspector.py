@@ -22,6 +22,7 @@ import copy
 from collections.abc import Mapping
 from typing import Any
 
+from rlenv.demonstration_keys import keys_of
 from rlenv.environment import RLEnvironment
 from rlenv.node import Node
 from rlenv.protocol.errors import ErrorCode, RequestError
@@ -75,7 +76,9 @@ def node_entry(node: Node, section: str | None = None) -> dict[str, Any]:
 
     The nodes a ``config`` reaches (the environment, its agents, its world) also say which
     ``section`` of a config reaches them (``config``) and what it may change
-    (``configurable``): a change there lasts across episodes, a ``set`` for one.
+    (``configurable``): a change there lasts across episodes, a ``set`` for one. Agents also
+    say which keys a person acts with (``demonstration_keys``, see
+    :mod:`rlenv.demonstration_keys`).
     """
     names = exported_of(node)
     entry = {"path": node.get_path(), "type": type(node).__name__,
@@ -84,6 +87,8 @@ def node_entry(node: Node, section: str | None = None) -> dict[str, Any]:
     if section is not None:
         entry["config"] = section
         entry["configurable"] = list(getattr(node, "configurable", ()))
+    if section == "agent":
+        entry["demonstration_keys"] = keys_of(node)
     return entry
 
 

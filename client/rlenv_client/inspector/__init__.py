@@ -6,10 +6,13 @@ ordinary protocol, so the environment servers gain no HTTP code and no thread. T
 the scene from vector draw lists (up to ~30 frames a second, dropped when the browser is slow),
 lists the node tree (every second) and the selected node's properties (several times a second,
 editable: a setting lasts, any other property lasts its episode), shows camera observations as
-images and plots the episodes' returns and lengths, steps per second and restarts.
+images and plots the episodes' returns and lengths, steps per second and restarts. Started with
+``--record-demonstrations DIR``, it also lets a person take control and play from the keyboard,
+recording their episodes (:mod:`~rlenv_client.inspector.control`).
 
 - :mod:`~rlenv_client.inspector.watch`: the observer connections (what the page can ask);
 - :mod:`~rlenv_client.inspector.web`: the HTTP server and its safety rules;
+- :mod:`~rlenv_client.inspector.control`: a person's control, recorded (demonstrations);
 - ``static/``: the page (one HTML file, its script and its style; no build step).
 """
 
@@ -22,17 +25,19 @@ import subprocess
 import sys
 import threading
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import IO, TYPE_CHECKING
 
 from rlenv_client.client import Client
+from rlenv_client.inspector.control import Demonstrator
 from rlenv_client.inspector.watch import InspectorError, Watcher
 from rlenv_client.inspector.web import InspectorServer
 
 if TYPE_CHECKING:
     from rlenv_client.session import Session
 
-__all__ = ["Inspector", "InspectorError", "InspectorServer", "Watcher", "inspect_sessions",
-           "run"]
+__all__ = ["Demonstrator", "Inspector", "InspectorError", "InspectorServer", "Watcher",
+           "inspect_sessions", "run"]
 
 logger = logging.getLogger(__name__)
 
@@ -50,19 +55,29 @@ class Inspector:
         token: the servers' secret, if they need one (default ``$RLENV_TOKEN``).
         port: the page's port on 127.0.0.1 (0: a free one).
         timeout: seconds to wait for the subprocess to say where its page is.
+        record_demonstrations: let a person take control from the page, and record their
+            episodes into this directory (``None``: the page only watches).
+        target: the environment's ``MODULE:CLASS``, written into demonstrations.
+        demonstration_rate: actions a second while a person plays (``None``: real time).
 
     Raises:
         RuntimeError: the subprocess did not start (with what it printed).
     """
 
     def __init__(self, addresses: Sequence[str], token: str | None = None, port: int = 0,
-                 timeout: float = 30.0) -> None:
+                 timeout: float = 30.0, *, record_demonstrations: str | Path | None = None,
+                 target: str | None = None, demonstration_rate: float | None = None) -> None:
         env = dict(os.environ)
         if token is not None:
             env["RLENV_TOKEN"] = token
+        options = [] if record_demonstrations is None else \
+            ["--record-demonstrations", str(record_demonstrations)]
+        options += [] if target is None else ["--target", target]
+        options += [] if demonstration_rate is None else \
+            ["--demonstration-rate", str(demonstration_rate)]
         self._process = subprocess.Popen(
             [sys.executable, "-m", "rlenv_client.inspector", *addresses, "--port", str(port),
-             "--follow-stdin"],
+             "--follow-stdin", *options],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
             env=env, start_new_session=True)
         assert self._process.stdout is not None
@@ -157,17 +172,21 @@ def _drain(stdout: IO[str]) -> None:
 
 
 def serve(addresses: Sequence[str], *, token: str | None, port: int, follow_stdin: bool,
-          ready: Callable[[str], None]) -> None:
+          ready: Callable[[str], None], record_demonstrations: str | Path | None = None,
+          target: str | None = None, demonstration_rate: float | None = None) -> None:
     """Serve the page (``rlenv inspect``); ``ready(line)`` once it listens, with its address.
 
     Until interrupted, or until standard input closes with ``follow_stdin`` (address lists,
     one JSON list a line, are followed meanwhile). ``token`` ``None``: ``$RLENV_TOKEN``.
+    ``record_demonstrations``, ``target`` and ``demonstration_rate``: see :class:`Inspector`.
 
     Raises:
-        ValueError: an address is not ``HOST:PORT``.
+        ValueError: an address is not ``HOST:PORT``, or the rate is not positive.
     """
     watcher = Watcher(addresses, token=token)
-    server = InspectorServer(watcher, port=port)
+    demonstrator = None if record_demonstrations is None else Demonstrator(
+        watcher, record_demonstrations, target=target, rate=demonstration_rate, token=token)
+    server = InspectorServer(watcher, port=port, demonstrator=demonstrator)
     ready(f"{_READY}{server.url}")
     if follow_stdin:
         threading.Thread(target=_follow, args=(server,), daemon=True).start()
@@ -177,6 +196,8 @@ def serve(addresses: Sequence[str], *, token: str | None, port: int, follow_stdi
         pass
     finally:
         server.server_close()
+        if demonstrator is not None:
+            demonstrator.close()
         watcher.close()
 
 

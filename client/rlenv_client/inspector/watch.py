@@ -163,6 +163,14 @@ class Watcher:
         """The episode so far, as JSON-ready data."""
         return to_json(self._ask(server, instance, {"snapshot": {}}).info["snapshot"])
 
+    def address(self, server: int) -> str:
+        """The ``HOST:PORT`` of ``server`` (a controller of its own connects there).
+
+        Raises:
+            InspectorError: 404, no such server.
+        """
+        return self._watched(server).address
+
     def follow(self, addresses: Sequence[str]) -> None:
         """Watch these addresses from now on (a restarted server's new one, say).
 

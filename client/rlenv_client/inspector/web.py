@@ -15,8 +15,11 @@ Safe by default, as a local debugging server must be:
 
 Routes (below the key): ``/`` the page, ``/static/NAME`` its script and style, and the API:
 ``GET api/servers``, ``api/frame``, ``api/tree``, ``api/node``, ``api/stats``,
-``api/snapshot`` (``?server=S&instance=I``, and ``path`` or ``since``) and ``POST api/edit``
-(``{"server", "instance", "path", "property", "value"}``).
+``api/snapshot`` (``?server=S&instance=I``, and ``path`` or ``since``), ``api/control`` (the
+demonstration under way) and ``POST api/edit`` (``{"server", "instance", "path", "property",
+"value"}``); with demonstrations (:mod:`~rlenv_client.inspector.control`), ``POST api/control``
+(``{"server", "instance"}``: take control), ``api/keys`` (``{"held": [key, ...]}``) and
+``api/release`` (``{}``), under the same rules as an edit.
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ from importlib import resources
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
+from rlenv_client.inspector.control import Demonstrator
 from rlenv_client.inspector.watch import InspectorError, Watcher
 from rlenv_client.origins import OriginPolicy
 
@@ -62,13 +66,17 @@ class InspectorServer(ThreadingHTTPServer):
         watcher: the observer connections to the environment servers.
         port: the port to bind (0: a free one).
         key: the URL key (default: a fresh random one).
+        demonstrator: lets a person take control and records their episodes (``None``: the
+            page only watches).
     """
 
     daemon_threads = True
 
-    def __init__(self, watcher: Watcher, port: int = 0, key: str | None = None) -> None:
+    def __init__(self, watcher: Watcher, port: int = 0, key: str | None = None,
+                 demonstrator: Demonstrator | None = None) -> None:
         super().__init__(("127.0.0.1", port), _Handler)
         self.watcher = watcher
+        self.demonstrator = demonstrator
         self.key = key or secrets.token_urlsafe(18)
         self.origins = OriginPolicy(self.server_address[1])
         self._thread: threading.Thread | None = None
@@ -95,6 +103,8 @@ class InspectorServer(ThreadingHTTPServer):
             self._thread.join()
             self._thread = None
         self.server_close()
+        if self.demonstrator is not None:
+            self.demonstrator.close()
         self.watcher.close()
 
 
@@ -159,6 +169,10 @@ class _Handler(BaseHTTPRequestHandler):
             self._send_static(path[len("static/"):])
         elif path in _GETS:
             self._answer(lambda: _GETS[path](self.server.watcher, query))
+        elif path == "api/control":
+            demonstrator = self.server.demonstrator
+            self._send_json(200, {"enabled": False} if demonstrator is None else
+                            {"enabled": True, **demonstrator.status()})
         else:
             self._send_json(404, {"error": f"no such page: {path!r:.60}"})
 
@@ -167,14 +181,14 @@ class _Handler(BaseHTTPRequestHandler):
         if route is None:
             return
         path, _ = route
-        if path != "api/edit":
+        if path not in _POSTS:
             self._send_json(404, {"error": f"nothing to post to at {path!r:.60}"})
             return
         if self.headers.get_content_type() != "application/json":
-            self._send_json(415, {"error": "an edit is a JSON body (Content-Type: "
+            self._send_json(415, {"error": "a change is a JSON body (Content-Type: "
                                            "application/json)"})
             return
-        self._answer(self._edit)
+        self._answer(lambda: _POSTS[path](self))
 
     def do_OPTIONS(self) -> None:  # noqa: N802  (no preflight is ever granted: no CORS)
         self._send_json(405, {"error": "no cross-origin requests"})
@@ -196,27 +210,55 @@ class _Handler(BaseHTTPRequestHandler):
             return None
         return rest, parse_qs(url.query)
 
-    def _edit(self) -> Any:
+    def _body(self, what: str, expected: set[str]) -> dict[str, Any]:
+        """The request's JSON body: a map of exactly ``expected``.
+
+        ``server`` and ``instance``, when expected, must be integers >= 0.
+        """
         length = self.headers.get("Content-Length", "")
         if not length.isdigit() or not 0 < int(length) <= _MAX_BODY:
-            raise InspectorError(400, f"an edit's body must be 1 to {_MAX_BODY} bytes, with its "
+            raise InspectorError(400, f"{what}'s body must be 1 to {_MAX_BODY} bytes, with its "
                                       "Content-Length")
         try:
-            edit = json.loads(self.rfile.read(int(length)), parse_constant=_no_constant)
+            body = json.loads(self.rfile.read(int(length)), parse_constant=_no_constant)
         except ValueError as error:
-            raise InspectorError(400, f"an edit's body is not JSON: {error}") from None
-        expected = {"server", "instance", "path", "property", "value"}
-        if not isinstance(edit, dict) or set(edit) != expected:
-            raise InspectorError(400, f"an edit is a map of exactly {sorted(expected)}")
+            raise InspectorError(400, f"{what}'s body is not JSON: {error}") from None
+        if not isinstance(body, dict) or set(body) != expected:
+            raise InspectorError(400, f"{what} is a map of exactly {sorted(expected)}")
         for name in ("server", "instance"):
-            if type(edit[name]) is not int or edit[name] < 0:
+            if name in body and (type(body[name]) is not int or body[name] < 0):
                 raise InspectorError(400, f"{name} must be an integer >= 0")
+        return body
+
+    def _edit(self) -> Any:
+        edit = self._body("an edit", {"server", "instance", "path", "property", "value"})
         for name in ("path", "property"):
             if not isinstance(edit[name], str):
                 raise InspectorError(400, f"{name} must be a string")
         scope = self.server.watcher.edit(edit["server"], edit["instance"], edit["path"],
                                          edit["property"], edit["value"])
         return {"scope": scope}
+
+    def _demonstrator(self) -> Demonstrator:
+        if self.server.demonstrator is None:
+            raise InspectorError(404, "demonstrations are off: start the inspector with "
+                                      "--record-demonstrations DIR")
+        return self.server.demonstrator
+
+    def _take(self) -> Any:
+        body = self._body("taking control", {"server", "instance"})
+        return self._demonstrator().take(body["server"], body["instance"])
+
+    def _keys(self) -> Any:
+        held = self._body("a key change", {"held"})["held"]
+        if not isinstance(held, list) or not all(isinstance(key, str) for key in held) or \
+                len(held) > 32:
+            raise InspectorError(400, "held is a list of at most 32 key names")
+        return self._demonstrator().hold(held)
+
+    def _release(self) -> Any:
+        self._body("a release", set())
+        return self._demonstrator().release()
 
     def _answer(self, compute: Callable[[], Any]) -> None:
         try:
@@ -251,3 +293,11 @@ class _Handler(BaseHTTPRequestHandler):
 
     def log_message(self, format: str, *args: Any) -> None:  # noqa: A002 (http.server's name)
         logger.debug("%s %s", self.address_string(), format % args)
+
+
+_POSTS: dict[str, Callable[[_Handler], Any]] = {
+    "api/edit": _Handler._edit,
+    "api/control": _Handler._take,
+    "api/keys": _Handler._keys,
+    "api/release": _Handler._release,
+}

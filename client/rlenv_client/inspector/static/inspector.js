@@ -9,10 +9,13 @@ const TREE_INTERVAL = 1000;
 const STATS_INTERVAL = 500;
 const SERVERS_INTERVAL = 2000;
 const PLOTTED = 500;         // episodes kept in the plots
+const CONTROL_INTERVAL = 500;
+const OTHERS_QUIET = 2000;   // ms without another client's steps before taking control is offered
 
 const state = {
   server: 0, instance: 0, path: null, frames: 0, servers: [],
   episodes: [], next: 0, speed: [], lastTotals: null, generation: 0,
+  control: {enabled: false, controlling: false, keys: [], episodes: 0}, held: [], othersSteppedAt: -Infinity,
 };
 window.inspector = state;  // for whoever drives the page (its browser test)
 
@@ -320,6 +323,9 @@ async function refreshStats() {
     const speed = (stats.steps - previous.steps) / (stats.time - previous.time);
     state.speed = state.speed.concat([[stats.time, speed]]).slice(-PLOTTED);
   }
+  if (previous && stats.steps !== previous.steps && !state.control.controlling) {
+    state.othersSteppedAt = performance.now();  // another client drives it: it has control
+  }
   state.lastTotals = stats;
   const current = stats.current;
   $("episode").textContent = current ? `episode ${stats.next}: return ${current.return.toFixed(2)}` +
@@ -340,6 +346,70 @@ async function refreshStats() {
   const t0 = state.speed.length ? state.speed[0][0] : 0;
   plot($("plot-speed"), "steps per second", [{name: "steps/s",
        points: state.speed.map(([t, v]) => [t - t0, v])}]);
+}
+
+// --- demonstrations: a person takes control and plays from the keyboard -------------------
+
+async function post(path, body) {
+  const response = await fetch(`api/${path}`, {
+    method: "POST", headers: {"Content-Type": "application/json"}, body: JSON.stringify(body),
+  });
+  const answer = await response.json();
+  if (!response.ok) throw new Error(answer.error || response.statusText);
+  return answer;
+}
+
+function showControl(control, note = null, bad = false) {
+  state.control = control;
+  $("control").hidden = !control.enabled;
+  if (!control.enabled) return;
+  const busy = performance.now() - state.othersSteppedAt < OTHERS_QUIET;
+  const mine = control.controlling && control.server === state.server && control.instance === state.instance;
+  $("take-control").hidden = control.controlling;
+  $("take-control").disabled = busy;
+  $("take-control").title = busy ? "another client controls this environment" : "";
+  $("release-control").hidden = !control.controlling;
+  const status = $("control-status");
+  status.dataset.episodes = control.episodes;
+  status.dataset.held = (control.held || []).join(" ");
+  status.textContent = note ?? (control.error ? control.error :
+    mine ? `you control it: keys ${control.keys.map((k) => k === " " ? "Space" : k).join(", ")}` +
+           ` · ${control.episodes} episodes recorded in ${control.directory}` :
+    control.controlling ? `you control server ${control.server} instance ${control.instance}` :
+    busy ? "another client controls this environment" : `${control.episodes} episodes recorded`);
+  status.classList.toggle("bad", bad || !!control.error);
+}
+
+async function refreshControl() {
+  const response = await fetch("api/control", {cache: "no-store"});
+  showControl(await response.json());
+}
+
+async function takeControl() {
+  try {
+    showControl(await post("control", {server: state.server, instance: state.instance}));
+  } catch (error) { showControl(state.control, `refused: ${error.message}`, true); }
+}
+
+async function releaseControl() {
+  state.held = [];
+  showControl(await post("release", {}));
+}
+
+function onKey(event, down) {
+  if (!state.control.controlling || !state.control.keys.includes(event.key)) return;
+  const target = event.target;
+  if (target instanceof HTMLInputElement || target instanceof HTMLSelectElement) return;
+  event.preventDefault();  // the arrows and space would scroll the page
+  if (event.repeat) return;
+  state.held = state.held.filter((key) => key !== event.key).concat(down ? [event.key] : []);
+  post("keys", {held: state.held}).catch((error) => showControl(state.control, error.message, true));
+}
+
+function releaseKeys() {
+  if (!state.held.length || !state.control.controlling) return;
+  state.held = [];
+  post("keys", {held: []}).catch(() => {});
 }
 
 const PALETTE = ["#426eb4", "#d7782e", "#3a9a5b", "#a04cb0", "#b3261e"];
@@ -395,4 +465,11 @@ window.addEventListener("DOMContentLoaded", () => {
   every(TREE_INTERVAL, refreshTree);
   every(NODE_INTERVAL, refreshNode);
   every(STATS_INTERVAL, refreshStats);
+  $("take-control").addEventListener("click", takeControl);
+  $("release-control").addEventListener("click", () =>
+    releaseControl().catch((error) => showControl(state.control, error.message, true)));
+  document.addEventListener("keydown", (event) => onKey(event, true));
+  document.addEventListener("keyup", (event) => onKey(event, false));
+  window.addEventListener("blur", releaseKeys);  // a key released elsewhere is never seen
+  every(CONTROL_INTERVAL, refreshControl);
 });

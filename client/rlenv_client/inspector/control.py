@@ -1,0 +1,275 @@
+"""A person's control of an environment from the inspector's page: demonstrations.
+
+The page's "Take control" asks :meth:`Demonstrator.take`: a connection of its own (not the
+watcher's observer connections) resets the chosen instance, which takes control as any
+trainer's reset would, so it is refused (``busy``) while another client controls the server.
+A thread then steps the instance at the environment's real-time rate (its physics ticks a
+second over the ticks an action runs; or a fixed rate) with the action of the keys the person
+holds (:meth:`Demonstrator.hold`, the page sends them at every press and release; no key held:
+the idle action, see :func:`held_action`), and records every episode
+into the directory given at the start, as :class:`~rlenv_client.replay.RecordEpisodes` would.
+"Release" (:meth:`Demonstrator.release`) drops the episode under way and closes the
+connection, which frees control. The keys are the agent's ``demonstration_keys`` (see
+:mod:`rlenv.demonstration_keys`), read from the server's node tree.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from rlenv.protocol import ErrorReply, Request, Response
+from rlenv.protocol.errors import RemoteError
+from rlenv_client.addresses import parse_address
+from rlenv_client.client import Client
+from rlenv_client.inspector.watch import InspectorError, Watcher, to_json
+from rlenv_client.replay import EpisodeFile, digest, next_episode_path
+from rlenv_client.session import LOST
+
+__all__ = ["Demonstrator", "held_action", "idle_action"]
+
+
+class _Control:
+    """One taken instance: its connection, key map, held keys and the stepping thread."""
+
+    def __init__(self, client: Client, server: int, instance: int,
+                 keys: dict[str, Any]) -> None:
+        self.client = client
+        self.server = server
+        self.instance = instance
+        self.keys = keys
+        self.held: list[str] = []
+        self.stop = threading.Event()
+        self.thread: threading.Thread | None = None
+
+    def exchange(self, parts: Mapping[str, Any]) -> Response | ErrorReply:
+        """One request to this instance (in a batch when the server hosts several)."""
+        count = self.client.hello.instances
+        if count == 1:
+            self.client.send_request(Request(0, dict(parts)))
+            return self.client.receive_reply()
+        self.client.send_batch([None] * self.instance + [Request(0, dict(parts))])
+        reply = self.client.receive_batch()[self.instance]
+        assert reply is not None
+        return reply
+
+
+class Demonstrator:
+    """Takes control of a watched environment for a person and records their episodes.
+
+    Args:
+        watcher: the inspector's observer connections (for the servers' addresses).
+        directory: where the ``episode-NNNN.rlenv`` files go (created if missing).
+        target: the environment's ``MODULE:CLASS``, written into each file (``rlenv replay``
+            then needs no ``--target``).
+        rate: actions a second; ``None``: the environment's real-time rate.
+        token: the servers' secret, if they need one (default ``$RLENV_TOKEN``).
+    """
+
+    def __init__(self, watcher: Watcher, directory: str | Path, *, target: str | None = None,
+                 rate: float | None = None, token: str | None = None) -> None:
+        if rate is not None and not rate > 0:
+            raise ValueError(f"the demonstration rate must be > 0 actions a second, got {rate}")
+        self.watcher = watcher
+        self.directory = Path(directory)
+        self.directory.mkdir(parents=True, exist_ok=True)
+        self.target = target
+        self.rate = rate
+        self.episodes = 0
+        self.error = ""
+        self._token = token
+        self._lock = threading.Lock()
+        self._control: _Control | None = None
+
+    def status(self) -> dict[str, Any]:
+        """What the page shows: who controls, the keys, the episodes recorded, the last error."""
+        with self._lock:
+            control = self._control
+            running = control is not None and not control.stop.is_set()
+            return {"controlling": running,
+                    "server": control.server if running else None,  # type: ignore[union-attr]
+                    "instance": control.instance if running else None,  # type: ignore
+                    "keys": sorted(control.keys) if running else [],  # type: ignore[union-attr]
+                    "held": list(control.held) if running else [],  # type: ignore[union-attr]
+                    "episodes": self.episodes, "directory": str(self.directory),
+                    "error": self.error}
+
+    def take(self, server: int, instance: int) -> dict[str, Any]:
+        """Take control of ``instance`` of ``server`` and start playing (see the module).
+
+        Raises:
+            InspectorError: 409 already controlling, or another client controls it; 422 it
+                has no key map, or not one agent; 404 no such server or instance; 503
+                unreachable.
+        """
+        with self._lock:
+            if self._control is not None and not self._control.stop.is_set():
+                raise InspectorError(409, "already in control: release first")
+            self._release_locked()
+            address = self.watcher.address(server)
+            try:
+                client = Client(*parse_address(address), token=self._token)
+            except (RemoteError, *LOST) as error:
+                raise InspectorError(503, f"{address}: {error}") from None
+            try:
+                control = self._start(client, server, instance)
+            except BaseException:
+                client.close()
+                raise
+            self._control, self.error = control, ""
+        return self.status()
+
+    def hold(self, held: Sequence[str]) -> dict[str, Any]:
+        """The keys the person holds now, oldest first (keys outside the map are ignored).
+
+        Raises:
+            InspectorError: 409 not in control.
+        """
+        with self._lock:
+            control = self._control
+            if control is None or control.stop.is_set():
+                raise InspectorError(409, "not in control: take control first")
+            control.held = [key for key in dict.fromkeys(held) if key in control.keys]
+        return self.status()
+
+    def release(self) -> dict[str, Any]:
+        """Stop playing and give control back (the episode under way is not recorded)."""
+        with self._lock:
+            self._release_locked()
+        return self.status()
+
+    def close(self) -> None:
+        """Release control, if held; safe to repeat."""
+        self.release()
+
+    # --- taking, stepping ---------------------------------------------------------------------
+
+    def _start(self, client: Client, server: int, instance: int) -> _Control:
+        count = client.hello.instances
+        if not 0 <= instance < count:
+            raise InspectorError(404, f"server {server} has {count} instances, not "
+                                      f"{instance + 1}")
+        space = client.hello.action_space
+        control = _Control(client, server, instance, {})
+        agents = [node for node in _answer(control.exchange({"inspect": {"tree": {}}}))
+                  .info["tree"] if node.get("config") == "agent"]
+        if len(agents) != 1:
+            raise InspectorError(422, f"demonstrations play one agent; this environment has "
+                                      f"{len(agents)}")
+        control.keys = {key: _action(space, value)
+                        for key, value in agents[0].get("demonstration_keys", {}).items()}
+        if not control.keys:
+            raise InspectorError(422, f"demonstrations need a key map: {agents[0]['type']} "
+                                      f"names no demonstration_keys for {space}")
+        idle_action(space)  # refuses a space without one now
+        observation, _ = client.reset_result(_answer(control.exchange(
+            client.reset_request().parts)))
+        hello = client.hello
+        rate = self.rate or hello.physics_ticks_per_second / hello.repeat_action
+        control.thread = threading.Thread(target=self._play, args=(control, observation, rate),
+                                          name="rlenv-demonstration", daemon=True)
+        control.thread.start()
+        return control
+
+    def _play(self, control: _Control, observation: Any, rate: float) -> None:
+        """Step at ``rate`` with the held keys' action; record each episode as it ends."""
+        client, space = control.client, control.client.hello.action_space
+        seen = [digest(observation)]
+        due = time.monotonic()
+        try:
+            while not control.stop.is_set():
+                with self._lock:
+                    actions = [control.keys[key] for key in control.held]
+                request = client.step_request(held_action(space, actions))
+                observation, _, terminated, truncated, _ = client.step_result(
+                    control.exchange(request.parts))
+                seen.append(digest(observation))
+                if terminated or truncated:
+                    snapshot = _answer(control.exchange({"snapshot": {}})).info["snapshot"]
+                    with self._lock:
+                        EpisodeFile(self.target, snapshot, seen).save(
+                            next_episode_path(self.directory))
+                        self.episodes += 1
+                    observation, _ = client.reset_result(control.exchange(
+                        client.reset_request().parts))
+                    seen = [digest(observation)]
+                due = max(due + 1.0 / rate, time.monotonic() - 1.0)  # no burst after a stall
+                control.stop.wait(max(0.0, due - time.monotonic()))
+        except (RemoteError, InspectorError, *LOST) as error:
+            with self._lock:
+                self.error = f"the demonstration stopped: {error}"
+                control.stop.set()
+
+    def _release_locked(self) -> None:
+        control, self._control = self._control, None
+        if control is None:
+            return
+        control.stop.set()
+        if control.thread is not None and control.thread is not threading.current_thread():
+            self._lock.release()  # the thread may be waiting for it to record an episode
+            try:
+                control.thread.join()
+            finally:
+                self._lock.acquire()
+        control.client.close()
+
+
+def _answer(reply: Response | ErrorReply) -> Response:
+    """``reply`` as a response, or the page's error (409 when another client controls)."""
+    if isinstance(reply, ErrorReply):
+        status = 409 if reply.code == "busy" else 422
+        raise InspectorError(status, f"{reply.code}: {reply.message.splitlines()[0]}")
+    return reply
+
+
+def _action(space: spaces.Space, value: Any) -> Any:
+    """A key's action as the tree gave it, made a value of ``space``."""
+    if isinstance(space, spaces.Discrete):
+        return int(value)
+    if isinstance(space, spaces.Box | spaces.MultiDiscrete | spaces.MultiBinary):
+        return np.asarray(to_json(value), dtype=space.dtype).reshape(space.shape)
+    return value
+
+
+def idle_action(space: spaces.Space) -> Any:
+    """The action while no key is held: 0 (clipped into a ``Box``'s bounds), ``start``.
+
+    ``Tuple`` and ``Dict`` spaces get their items' idle actions.
+
+    Raises:
+        ValueError: a space with no such action (a ``Text``, a ``Graph``...).
+    """
+    if isinstance(space, spaces.Discrete):
+        return int(space.start)
+    if isinstance(space, spaces.Box):
+        return np.clip(np.zeros(space.shape), space.low, space.high).astype(space.dtype)
+    if isinstance(space, spaces.MultiDiscrete):
+        return np.array(space.start, dtype=space.dtype)
+    if isinstance(space, spaces.MultiBinary):
+        return np.zeros(space.shape, dtype=space.dtype)
+    if isinstance(space, spaces.Tuple):
+        return tuple(idle_action(item) for item in space.spaces)
+    if isinstance(space, spaces.Dict):
+        return {key: idle_action(item) for key, item in space.spaces.items()}
+    raise ValueError(f"{space} has no idle action for demonstrations")
+
+
+def held_action(space: spaces.Space, actions: Sequence[Any]) -> Any:
+    """The action of the held keys' ``actions`` (oldest first), or the idle action.
+
+    In a ``Box`` the keys add up (left and up: a diagonal), clipped into the bounds; in any
+    other space the last pressed counts.
+    """
+    idle = idle_action(space)
+    if not actions:
+        return idle
+    if isinstance(space, spaces.Box):
+        total = idle + sum(np.asarray(action, space.dtype) - idle for action in actions)
+        return np.clip(total, space.low, space.high).astype(space.dtype)
+    return actions[-1]

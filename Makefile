@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-lowest test-ray test-browser test-minari screenshot plinko-picture sb3 rllib cleanrl bench-http bench-train\
+.PHONY: demo test test-lowest test-ray test-browser test-minari test-onnx screenshot plinko-picture sb3 rllib cleanrl bench-http bench-train\
 	docs lint vectors clean
 
 $(STAMP): pyproject.toml
@@ -36,6 +36,13 @@ test-minari: $(STAMP)
 # installs Debian's chromium first), and what watching costs a trainer.
 test-browser: $(STAMP)
 	$(BIN)/python -m pytest -m browser
+
+# Optional: policies as ONNX files (the onnx extra): export (SB3 PPO, A2C, DQN, SAC; CPU torch
+# first, as for sb3) and rlenv serve --policy over real servers (about 30 s).
+test-onnx: $(STAMP)
+	$(BIN)/python -m pip install --quiet torch==2.13.0
+	$(BIN)/python -m pip install --quiet -e ".[test,sb3,onnx]"
+	OMP_NUM_THREADS=1 $(BIN)/python -m pytest -m onnx tests/test_onnx_policies.py
 
 # The README's picture of the inspector: its page beside a training loop, saved by the browser test.
 screenshot: $(STAMP)

@@ -63,6 +63,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     serve.add_argument("--idle-timeout", type=float, default=defaults.idle_timeout,
                        help=f"seconds a client may stay silent, 0: forever (default "
                        f"{defaults.idle_timeout})")
+    serve.add_argument("--policy", action="append", type=_policy, default=[],
+                       metavar="AGENT=FILE",
+                       help="let the ONNX policy FILE (rlenv_client.policies.export_onnx) act "
+                       "for AGENT; repeat for several agents. With every agent driven, the "
+                       "server plays episodes itself (seeded 0, 1, 2 ...) and clients observe; "
+                       "otherwise a client controls the other agents (needs the onnx extra)")
+    serve.add_argument("--max-episode-steps", type=int, default=None, metavar="N",
+                       help="cut policy-driven episodes short after N steps (truncated)")
     serve.add_argument("--inspect", action="store_true",
                        help="also start the live inspector (rlenv inspect) on this server and "
                        "print its page's address")
@@ -226,6 +234,15 @@ def _port(text: str) -> int:
     return port
 
 
+def _policy(text: str) -> tuple[str, str]:
+    """``AGENT=FILE`` from the command line, as (agent, file)."""
+    agent, equals, path = text.partition("=")
+    if not equals or not agent or not path:
+        raise argparse.ArgumentTypeError(f"expected AGENT=FILE (e.g. Agent=model.onnx), got "
+                                         f"{text!r}")
+    return agent, path
+
+
 def serve_command(target: str) -> int:
     """``rlenv serve TARGET`` with this process's other arguments (for ``python -m`` examples)."""
     return main(["serve", target, *sys.argv[1:]])
@@ -234,6 +251,9 @@ def serve_command(target: str) -> int:
 def _serve(args: argparse.Namespace) -> int:
     from rlenv.serving.server import Server
 
+    if args.max_episode_steps is not None and (args.max_episode_steps < 1 or not args.policy):
+        raise ValueError("--max-episode-steps needs a number >= 1 and --policy (it cuts "
+                         "policy-driven episodes short)")
     if args.per_client and args.inspect:
         raise ValueError("--inspect watches the environment of a controller; with --per-client "
                          "every client has its own: start the inspector on one of them instead")
@@ -244,7 +264,8 @@ def _serve(args: argparse.Namespace) -> int:
     server = Server(args.target, host=args.host, port=args.port, lifeline=args.lifeline,
                     token=args.token, limits=limits, instances=args.instances,
                     record_dir=args.record_dir, real_time=args.real_time,
-                    per_client=args.per_client)
+                    per_client=args.per_client, policies=dict(args.policy),
+                    max_episode_steps=args.max_episode_steps)
     with server:
         inspector = None
         try:  # Ctrl-C once it listens (however soon) ends it with status 0

@@ -3,7 +3,9 @@
 With one agent, the action is a member of its space. With several, it is a map from agent
 name to action for every agent still in the episode (every agent when the request starts an
 episode first); actions for agents whose episode ended are ignored, so that a client holding
-the joint ``Dict`` action space may keep sending them (PettingZoo's convention).
+the joint ``Dict`` action space may keep sending them (PettingZoo's convention). Actions for
+agents a policy drives (``rlenv serve --policy``) are ignored too: their policy gives them
+(:mod:`rlenv.serving.policy_driver`).
 """
 
 from __future__ import annotations
@@ -26,10 +28,13 @@ class ActionCheck:
     Args:
         agents: the instance's agents.
         space: their joint action space (the agent's own with one agent).
+        driven: the agents a policy drives (with several agents): no action is needed for them.
     """
 
-    def __init__(self, agents: Sequence[RLAgent], space: spaces.Space) -> None:
-        self._agents = list(agents)
+    def __init__(self, agents: Sequence[RLAgent], space: spaces.Space,
+                 driven: frozenset[str] = frozenset()) -> None:
+        self._agents = [agent for agent in agents if agent.name not in driven]
+        self._driven = driven
         self._several = len(agents) > 1
         self._one = compile_check(space, "action")
         self._each = {a.name: compile_check(a.action_space, f"action[{a.name!r}]")
@@ -54,6 +59,8 @@ class ActionCheck:
                 raise SpaceMismatch(f"action must be a map from agent name to action, one per "
                                     f"agent in the episode: {[a.name for a in agents]}")
             unknown = sorted(map(str, action.keys() - self._each.keys()))
+            if self._driven:
+                action = {k: v for k, v in action.items() if k not in self._driven}
             if unknown:
                 raise SpaceMismatch(f"action for unknown agent {unknown[0]!r}")
             if replayed:

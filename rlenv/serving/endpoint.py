@@ -179,12 +179,23 @@ class Endpoint(Connections):
         """Whether ``peer`` controls the environment."""
         return self.per_client or peer is self._controller
 
+    _reserved: str | None = None  # why no client may take control (see reserve)
+
+    def reserve(self, why: str) -> None:
+        """Let no client control the environment (the server drives it): ``busy``, saying why."""
+        self._reserved = why
+
     def take_control(self, peer: Peer, request_id: int) -> bool:
         """Let ``peer``'s request change the environment, if ``peer`` may.
 
         The first client to ask controls the environment until it leaves; anyone else is
-        answered ``busy`` (and this returns False).
+        answered ``busy`` (and this returns False), as everyone is after :meth:`reserve`.
         """
+        if self._reserved is not None:
+            self._send(peer, ErrorReply(request_id, ErrorCode.BUSY,
+                                        f"this environment cannot be controlled: "
+                                        f"{self._reserved}"))
+            return False
         controller = self._controller
         if controller is peer or self.per_client:
             return True

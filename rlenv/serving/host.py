@@ -18,7 +18,7 @@ before it answers.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +32,9 @@ from rlenv.serving.columns import Columns
 from rlenv.serving.endpoint import Endpoint, Peer
 from rlenv.serving.instance import Episode, Instance, failure, load_environment
 from rlenv.serving.lean import LeanSteps
+from rlenv.serving.onnx_policy import OnnxPolicy
 from rlenv.serving.parts import HostPart, dispatch, plan_for, shape_of, takes_control
+from rlenv.serving.policy_driver import DrivenAgents, PolicyDriver
 
 __all__ = ["Host", "Prepared"]
 
@@ -70,16 +72,27 @@ class Host:
         clock: the trees' clock, for real-time mode.
         record_dir: where clients may have the environments record videos.
         real_time: start in real-time mode.
+        policies: policy files that drive agents, by agent name (one instance, lockstep; see
+            :mod:`rlenv.serving.policy_driver`).
+        max_episode_steps: with every agent driven, steps after which an episode is cut short.
+
+    Attributes:
+        driver: plays episodes between requests when policies drive every agent, else
+            ``None``.
 
     Raises:
         ValueError: ``count`` is smaller than 1.
         TypeError: several instances of an environment object.
         RuntimeError: the environment has no agent, world or spaces.
+        ValueError: ``policies`` with several instances or in real time; a policy for an agent
+            the environment lacks, or whose spaces are not its agent's.
     """
 
     def __init__(self, environment: RLEnvironment | type[RLEnvironment] | str, count: int = 1,
                  *, clock: Callable[[], float] = time.monotonic,
-                 record_dir: Path | None = None, real_time: bool = False) -> None:
+                 record_dir: Path | None = None, real_time: bool = False,
+                 policies: Mapping[str, OnnxPolicy] | None = None,
+                 max_episode_steps: int | None = None) -> None:
         if isinstance(environment, str):
             environment = load_environment(environment)
         if count < 1:
@@ -109,6 +122,21 @@ class Host:
                 instance.set_real_time(True)
         self._clocked = self._in_real_time()
         self._after_send_hooks = any(instance.has_after_send for instance in self.instances)
+        self.driver: PolicyDriver | None = None
+        if policies:
+            self._drive(policies, max_episode_steps, real_time)
+
+    def _drive(self, policies: Mapping[str, OnnxPolicy], max_episode_steps: int | None,
+               real_time: bool) -> None:
+        """Let ``policies`` drive their agents; a driver when they drive every agent."""
+        if len(self.instances) > 1 or real_time:
+            raise ValueError("--policy drives the agents of one instance in lockstep: leave out "
+                             "--instances and --real-time")
+        instance = self.instances[0]
+        driven = DrivenAgents(policies, instance.agents)
+        instance.drive(driven)
+        if driven.every_agent:
+            self.driver = PolicyDriver(self.answer, instance, driven, max_episode_steps)
 
     def answer(self, request: Request) -> Reply:
         """The one answer to ``request`` (plain, batch or steps); a refusal changes nothing.
@@ -198,7 +226,21 @@ class Host:
         return [instance for instance in self.instances if instance.tree.real_time]
 
     def serve_forever(self, endpoint: Endpoint) -> None:
-        """Answer the endpoint's requests until interrupted; in real time, tick meanwhile."""
+        """Answer the endpoint's requests until interrupted; in real time, tick meanwhile.
+
+        With a :attr:`driver`, the policies play one step whenever no request is waiting, and
+        nobody may take control.
+        """
+        driver = self.driver
+        if driver is not None:
+            endpoint.reserve("its agents are driven by policies (rlenv serve --policy); only "
+                             "observing is open")
+            while True:
+                got = endpoint.receive(0.0)
+                if got is None:
+                    driver.step()
+                else:
+                    self.handle(endpoint, *got)
         while True:
             got = endpoint.receive(self.time_to_next_tick() if self._clocked else None)
             if got is None:

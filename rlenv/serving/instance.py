@@ -32,7 +32,7 @@ import traceback
 from collections.abc import Callable, Mapping
 from enum import Enum
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from gymnasium import spaces
 from gymnasium.utils import seeding
@@ -49,6 +49,9 @@ from rlenv.serving.settings import Settings
 from rlenv.serving.snapshots import EpisodeLog
 from rlenv.serving.stats import EpisodeStats
 from rlenv.tree import SceneTree
+
+if TYPE_CHECKING:
+    from rlenv.serving.policy_driver import DrivenAgents
 
 __all__ = ["Answer", "Episode", "Instance", "Plan", "failure", "load_environment"]
 
@@ -148,6 +151,7 @@ class Instance:
         self.configures_itself = "_configure" in hooks
         self.responds_itself = "_send_response" in hooks
         self.has_after_send = "_after_send_response" in hooks
+        self.driven: DrivenAgents | None = None  # agents a policy drives (rlenv serve --policy)
         self._enter(environment)
         self.broken: str | None = None  # why the next reset rebuilds the environment
         self.settings = Settings(self, record_dir)
@@ -190,7 +194,8 @@ class Instance:
         self.environment, self.tree, self.agents = environment, tree, agents
         self.multi_agent = len(agents) > 1
         self.action_space, self.observation_space = action_space, observation_space
-        self.checked_action = ActionCheck(agents, action_space)
+        self.checked_action = ActionCheck(agents, action_space,
+                                          self.driven.names if self.driven else frozenset())
         self.observe = Observer(environment, agents).observe
 
     # --- one way in -------------------------------------------------------------------------
@@ -367,6 +372,11 @@ class Instance:
         if self.log.started:
             self.log.record(["set", path, name, value])
 
+    def drive(self, driven: DrivenAgents) -> None:
+        """Let policies act for the ``driven`` agents within every action (several agents)."""
+        self.driven = driven
+        self.checked_action = ActionCheck(self.agents, self.action_space, driven.names)
+
     def begin_episode(self, seed: int | None, options: Mapping[str, Any]) -> None:
         """Reset: undo ``inspect`` sets, seed the generator (if given), start a new episode."""
         environment = self.environment
@@ -403,6 +413,8 @@ class Instance:
     def act(self, action: Any, frames: int) -> None:
         """Run a checked action for ``frames`` ticks (lockstep), or apply it now (real time)."""
         tree = self.tree
+        if self.driven is not None and self.multi_agent:
+            action = self.driven.complete(action, self.agents)
         if tree.real_time:
             self._act_now(action)
             return

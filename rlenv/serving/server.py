@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from pathlib import Path
 
 from rlenv.environment import RLEnvironment
 from rlenv.serving.endpoint import DEFAULT_HOST, Endpoint, Limits
 from rlenv.serving.host import Host
+from rlenv.serving.onnx_policy import OnnxPolicy
 from rlenv.serving.per_client import HostPerClient
 
 __all__ = ["Server"]
@@ -41,6 +43,10 @@ class Server:
             them), built when it first asks and closed when it leaves
             (:mod:`rlenv.serving.per_client`); otherwise the first client to change the
             environment controls it and the others may observe.
+        policies: ONNX policy files that drive agents, by agent name (``rlenv serve
+            --policy``; see :mod:`rlenv.serving.policy_driver`). With every agent driven, the
+            server plays episodes itself and clients may only observe.
+        max_episode_steps: steps after which a policy-driven episode is cut short.
 
     Attributes:
         host: the instances and how requests reach them (with ``per_client``, the hosts of
@@ -57,12 +63,19 @@ class Server:
         port: int = 0, lifeline: int | None = None, token: str | None = None,
         limits: Limits | None = None, instances: int = 1, record_dir: Path | None = None,
         real_time: bool = False, per_client: bool = False,
+        policies: Mapping[str, str | Path] | None = None, max_episode_steps: int | None = None,
     ) -> None:
+        loaded = {agent: OnnxPolicy(path) for agent, path in (policies or {}).items()}
+
         def build() -> Host:
-            return Host(environment, instances, record_dir=record_dir, real_time=real_time)
+            return Host(environment, instances, record_dir=record_dir, real_time=real_time,
+                        policies=loaded, max_episode_steps=max_episode_steps)
 
         if per_client and not isinstance(environment, str | type):
             raise TypeError("a server per client needs the environment class, not an instance")
+        if per_client and loaded:
+            raise ValueError("--policy drives the agents of the server's environment: leave out "
+                             "--per-client")
         self.host: Host | HostPerClient = HostPerClient(build) if per_client else build()
         self.endpoint = Endpoint(self.host.hello, limits or Limits(), token,
                                  per_client=per_client)

@@ -22,8 +22,8 @@ Agent=FILE --max-episode-steps N`` in a subprocess, and reads the returns of its
 episodes (seeded 0 to K-1 by the server) from an observer's ``client.stats()``. The expert plays
 the same ``K`` seeds through ``gymnasium.make`` for its mean return. A table compares them.
 
-The defaults (40 demonstrations, 100 evaluation episodes, 30 epochs) take about 3 minutes on 2
-cores; ``--episodes 10 --eval-episodes 20 --epochs 10`` about one. Figures in
+The defaults (40 demonstrations, 100 evaluation episodes, 30 epochs) take about a minute on 2
+cores; ``--episodes 5 --eval-episodes 10 --epochs 5`` about 15 seconds. Figures in
 ``docs/policies-and-data.md`` ("Imitation, end to end").
 """
 

@@ -328,7 +328,8 @@ def main() -> None:
                                for i in range(length)]
     references = {name: statistics.fmean(results[name]["held_out"])
                   for name in ("follow", "random")}
-    draw_curves(mean_curves, references, max(steps, 1), arguments.out)
+    right = max([steps, *(point[0] for curve in mean_curves.values() for point in curve)])
+    draw_curves(mean_curves, references, max(right, 1), arguments.out)
     print(f"\ncurves: {arguments.out}; {time.perf_counter() - began:.0f} s in all")
     if arguments.json:
         arguments.json.write_text(json.dumps({"results": results, "curves": curves,

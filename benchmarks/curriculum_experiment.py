@@ -28,10 +28,10 @@ held-out seeds, the hard levels and both, as mean +- std over the training seeds
 the learning curves (held-out catch rate against env-steps, mean over seeds) as a PNG drawn
 with numpy (no matplotlib): colours in ``COLOURS``, references dashed.
 
-Time, on the 2-core development machine (8 environments, one server, torch on one thread):
-about 1,000 env-steps/s of PPO, so ``--steps 20000`` takes ~25 s a run plus ~10 s of
-evaluations, and the default 5 methods x 3 seeds ~9 minutes; ``--steps 2000 --seeds 1
---methods dr`` runs end to end in well under a minute.
+Time, on the 2-core development machine (8 environments in one server, torch on one thread):
+about 1,200 env-steps/s of PPO with the evaluations, so a run of the default 50,000 env-steps
+takes ~45 s and the default 5 methods x 3 seeds ~12 minutes (ACCEL's edits cost ~20% more);
+``--steps 2000 --seeds 1 --methods dr`` runs end to end in well under a minute.
 """
 
 from __future__ import annotations
@@ -262,7 +262,7 @@ def _cell(values: Sequence[float]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=20_000, help="env-steps per run")
+    parser.add_argument("--steps", type=int, default=50_000, help="env-steps per run")
     parser.add_argument("--seeds", type=int, default=3, help="training seeds per method")
     parser.add_argument("--envs", type=int, default=8, help="sub-environments")
     parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)

@@ -1,0 +1,341 @@
+"""PPO on Plinko with five level curricula, evaluated on held-out levels.
+
+``python benchmarks/curriculum_experiment.py [--steps S] [--seeds K] [--envs N] [--methods ...]
+[--difficulty D] [--out PNG]``
+
+Optional: needs torch and stable-baselines3 (``make sb3``). Trains Stable-Baselines3's PPO on
+``rlenv/Plinko-v0`` (``gymnasium.make_vec`` with ``SAME_STEP`` autoreset, wrapped by
+``CurriculumVectorEnv``, adapted by ``SB3VecEnv(vector=...)``) for ``--steps`` env-steps with
+each method of ``--methods``, ``--seeds`` training seeds each, one run after the other:
+
+- ``dr``: domain randomisation, a fresh seed every episode (``replay_prob=0``);
+- ``plr``: PLR, ``score="external"`` and ``CurriculumCallback(..., "positive_value_loss")``;
+- ``robust_plr``: the same with ``LevelSampler(robust=True)`` and
+  ``PPO(normalize_advantage=False)``;
+- ``accel``: Robust PLR with ``edit_levels=EDITS`` and the ``max_mc`` score;
+- ``sfl``: ``score="learnability"``, ``prioritization="topk"``, ``staleness_coeff=0``.
+
+Every run plays at ``world.difficulty = --difficulty`` (0.7 by default: more rows, bouncier
+pegs, narrower catcher), configured at every reset through ``EnvironmentParameters``. Every
+``--eval-every`` steps and at the end, the policy (deterministic actions) plays the held-out
+levels: ``HELD_OUT`` seeds from ``2**32`` on (the wrapper draws training seeds in
+``[0, 2**31)``: never trained on), and at the end also ``HARD`` hand-made hard levels (a
+held-out seed's level at difficulty 1, 30 server-side edits by ``client.edit_level``, then
+every peg at the highest bounciness of ``BOUNCINESS``), each with ``BALLS`` balls. The
+hand-written ``follow`` policy (upper reference) and a random policy (lower reference) play
+the same levels. Prints a table of the catch rate (mean return: 1 per caught ball) on the
+held-out seeds, the hard levels and both, as mean +- std over the training seeds, and writes
+the learning curves (held-out catch rate against env-steps, mean over seeds) as a PNG drawn
+with numpy (no matplotlib): colours in ``COLOURS``, references dashed.
+
+Time, on the 2-core development machine (8 environments in one server, torch on one thread):
+about 1,200 env-steps/s of PPO with the evaluations, so a run of the default 50,000 env-steps
+takes ~45 s and the default 5 methods x 3 seeds ~12 minutes (ACCEL's edits cost ~20% more);
+``--steps 2000 --seeds 1 --methods dr`` runs end to end in well under a minute.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import gymnasium
+import numpy as np
+import torch
+from gymnasium.vector import AutoresetMode
+from stable_baselines3 import PPO
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+
+import rlenv_client  # noqa: F401  (registers rlenv/Plinko-v0)
+from examples.plinko import BOUNCINESS, follow
+from rlenv.http.png import encode_png
+from rlenv_client.curriculum import CurriculumVectorEnv, EnvironmentParameters, LevelSampler
+from rlenv_client.sb3 import CurriculumCallback, SB3VecEnv
+
+METHODS = ("dr", "plr", "robust_plr", "accel", "sfl")
+NAMES = {"dr": "DR", "plr": "PLR", "robust_plr": "Robust PLR", "accel": "ACCEL", "sfl": "SFL",
+         "follow": "follow (upper ref.)", "random": "random (lower ref.)"}
+COLOURS = {"dr": (0, 0, 0), "plr": (31, 119, 180), "robust_plr": (44, 160, 44),
+           "accel": (214, 39, 40), "sfl": (148, 103, 189), "follow": (150, 150, 150),
+           "random": (255, 127, 14)}
+"""The curves' colours (RGB): black, blue, green, red, purple; grey and orange dashed."""
+HELD_OUT = 50
+"""Held-out seeds: 2**32 .. 2**32 + HELD_OUT - 1."""
+HELD_OUT_START = 2**32
+HARD = 6
+"""Hand-made hard levels."""
+BALLS = 5
+"""Balls (episode seeds) per hard level."""
+EDITS = 30
+"""Edits of a hard level."""
+CAPACITY = 128
+"""Every sampler's buffer."""
+REPLAY_PROB = 0.5
+"""Replay probability of the buffered methods (PLR's Procgen value)."""
+ACCEL_EDITS = 2
+SFL_K = 32
+N_STEPS = 128
+"""PPO's rollout length per environment."""
+
+Level = tuple[int, Any]  # (episode seed, level data or None: the seed's own level)
+Policy = Callable[[np.ndarray], np.ndarray]
+
+
+def make_vector(num_envs: int, instances_per_server: int | None = None) -> Any:
+    return gymnasium.make_vec("rlenv/Plinko-v0", num_envs=num_envs,
+                              autoreset_mode=AutoresetMode.SAME_STEP,
+                              instances_per_server=instances_per_server)
+
+
+def hard_levels(difficulty: float) -> list[Level]:
+    """HARD levels x BALLS balls: held-out seeds' levels at difficulty 1, edited, bouncy."""
+    levels: list[Level] = []
+    with make_vector(1, 1) as vector:
+        client = vector.clients[0]
+        client.configure(world={"difficulty": 1.0})
+        for number in range(HARD):
+            seed = HELD_OUT_START + 10_000 + number
+            client.reset(seed=seed)
+            data = client.edit_level(client.get_property("World", "level"), seed, n_edits=EDITS)
+            pegs = next(child for child in data["root"]["children"] if child["name"] == "Pegs")
+            for peg in pegs.get("children", []):
+                for shape in peg.get("children", []):
+                    if shape["class"] == "CollisionShape":
+                        shape.setdefault("properties", {})["elasticity"] = BOUNCINESS[1]
+            levels += [(seed + 1000 * ball, data) for ball in range(1, BALLS + 1)]
+    del difficulty  # the hard levels carry their own pegs; the world's difficulty still
+    return levels   # sets the catcher's width
+
+
+def evaluate(policy: Policy, levels: Sequence[Level], vector: Any,
+             difficulty: float) -> np.ndarray:
+    """Each level's return under ``policy``, played ``vector.num_envs`` at a time."""
+    returns: list[float] = []
+    n = vector.num_envs
+    for start in range(0, len(levels), n):
+        batch = list(levels[start:start + n])
+        for index in range(n):
+            seed, data = batch[index] if index < len(batch) else batch[-1]
+            vector.set_next_reset(index, seed=seed,
+                                  options=None if data is None else {"level": data},
+                                  config={"world": {"difficulty": difficulty}})
+        observations, _ = vector.reset()
+        done = np.zeros(n, bool)
+        total = np.zeros(n)
+        while not done.all():
+            observations, rewards, terminated, truncated, _ = vector.step(policy(observations))
+            total += np.where(done, 0.0, rewards)
+            done |= terminated | truncated
+        returns += total[:len(batch)].tolist()
+    return np.array(returns)
+
+
+def follow_policy(observations: np.ndarray) -> np.ndarray:
+    return np.stack([follow(row) for row in observations])
+
+
+def random_policy(seed: int) -> Policy:
+    rng = np.random.default_rng(seed)
+    return lambda observations: rng.uniform(-1.0, 1.0, (len(observations), 1)).astype(np.float32)
+
+
+class HeldOutCurve(BaseCallback):
+    """Evaluates on the held-out seeds every ``every`` env-steps (and at step 0)."""
+
+    def __init__(self, every: int, levels: Sequence[Level], vector: Any,
+                 difficulty: float) -> None:
+        super().__init__()
+        self.every, self.levels, self.vector, self.difficulty = every, levels, vector, difficulty
+        self.points: list[tuple[int, float]] = []
+        self._next = 0
+
+    def _policy(self, observations: np.ndarray) -> np.ndarray:
+        return self.model.predict(observations, deterministic=True)[0]
+
+    def _on_rollout_start(self) -> None:
+        if self.num_timesteps >= self._next:
+            score = float(evaluate(self._policy, self.levels, self.vector,
+                                   self.difficulty).mean())
+            self.points.append((self.num_timesteps, score))
+            self._next += self.every
+
+    def _on_step(self) -> bool:
+        return True
+
+
+def train(method: str, seed: int, steps: int, num_envs: int, difficulty: float,
+          eval_every: int, eval_vector: Any, held_out: Sequence[Level]) -> tuple[PPO, list]:
+    """One PPO run; returns the model and its held-out curve."""
+    vector = make_vector(num_envs)
+    parameters = EnvironmentParameters({"difficulty": difficulty}, seed=seed)
+    ppo: dict[str, Any] = {}
+    score: Any = "external"
+    callbacks: list[BaseCallback] = []
+    edits = 0
+    if method == "dr":
+        sampler = LevelSampler(CAPACITY, replay_prob=0.0, seed=seed)
+        score = "learnability"
+    elif method == "plr":
+        sampler = LevelSampler(CAPACITY, replay_prob=REPLAY_PROB, seed=seed)
+    elif method in ("robust_plr", "accel"):
+        sampler = LevelSampler(CAPACITY, replay_prob=REPLAY_PROB, robust=True, seed=seed)
+        ppo["normalize_advantage"] = False
+        edits = ACCEL_EDITS if method == "accel" else 0
+    elif method == "sfl":
+        sampler = LevelSampler(CAPACITY, replay_prob=REPLAY_PROB, prioritization="topk",
+                               k=SFL_K, staleness_coeff=0.0, seed=seed)
+        score = "learnability"
+    else:
+        raise ValueError(f"unknown method {method!r}: one of {', '.join(METHODS)}")
+    wrapper = CurriculumVectorEnv(vector, sampler, parameters, score, seed=seed,
+                                  edit_levels=edits)
+    if score == "external":
+        callbacks.append(CurriculumCallback(wrapper, "max_mc" if method == "accel"
+                                            else "positive_value_loss"))
+    curve = HeldOutCurve(eval_every, held_out, eval_vector, difficulty)
+    callbacks.append(curve)
+    env = SB3VecEnv(vector=wrapper)
+    model = PPO("MlpPolicy", env, n_steps=N_STEPS, batch_size=256, seed=seed, verbose=0,
+                device="cpu", **ppo)
+    try:
+        model.learn(steps, callback=CallbackList(callbacks))
+    finally:
+        env.close()
+    return model, curve.points
+
+
+# -- the PNG, drawn with numpy -------------------------------------------------------------
+
+WIDTH, HEIGHT, LEFT, RIGHT, TOP, BOTTOM = 800, 500, 60, 20, 20, 50
+
+
+def _line(image: np.ndarray, x0: float, y0: float, x1: float, y1: float,
+          colour: tuple[int, int, int], width: int = 2, dash: int = 0) -> None:
+    count = int(max(abs(x1 - x0), abs(y1 - y0))) + 1
+    for step, t in enumerate(np.linspace(0.0, 1.0, count)):
+        if dash and (step // dash) % 2:
+            continue
+        x, y = int(round(x0 + t * (x1 - x0))), int(round(y0 + t * (y1 - y0)))
+        image[max(y - width // 2, 0):y + (width + 1) // 2,
+              max(x - width // 2, 0):x + (width + 1) // 2] = colour
+
+
+def draw_curves(curves: dict[str, list[tuple[int, float]]], references: dict[str, float],
+                steps: int, path: Path) -> None:
+    """Catch rate (0..1, y) against env-steps (0..steps, x): gridlines every 0.1 and every
+    tenth of the steps, the axes in black, references as dashed horizontal lines."""
+    image = np.full((HEIGHT, WIDTH, 3), 255, np.uint8)
+    plot_w, plot_h = WIDTH - LEFT - RIGHT, HEIGHT - TOP - BOTTOM
+
+    def at(step: float, value: float) -> tuple[float, float]:
+        return LEFT + plot_w * step / steps, TOP + plot_h * (1.0 - value)
+
+    for tenth in range(11):
+        grey = (225, 225, 225) if tenth % 5 else (190, 190, 190)
+        _line(image, *at(0, tenth / 10), *at(steps, tenth / 10), grey, 1)
+        _line(image, *at(steps * tenth / 10, 0), *at(steps * tenth / 10, 1), grey, 1)
+    _line(image, *at(0, 0), *at(steps, 0), (0, 0, 0), 2)
+    _line(image, *at(0, 0), *at(0, 1), (0, 0, 0), 2)
+    for name, value in references.items():
+        _line(image, *at(0, value), *at(steps, value), COLOURS[name], 2, dash=8)
+    for name, points in curves.items():
+        for (s0, v0), (s1, v1) in zip(points, points[1:], strict=False):
+            _line(image, *at(s0, v0), *at(s1, v1), COLOURS[name], 3)
+    # the legend: a swatch per method, in METHODS' order, below the x axis
+    for number, name in enumerate([*curves, *references]):
+        x = LEFT + 20 + number * 100
+        image[HEIGHT - 25:HEIGHT - 10, x:x + 40] = COLOURS[name]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(encode_png(image))
+
+
+def _cell(values: Sequence[float]) -> str:
+    mean = statistics.fmean(values)
+    std = statistics.stdev(values) if len(values) > 1 else 0.0
+    return f"{mean:.3f} ± {std:.3f}"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=50_000, help="env-steps per run")
+    parser.add_argument("--seeds", type=int, default=3, help="training seeds per method")
+    parser.add_argument("--envs", type=int, default=8, help="sub-environments")
+    parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
+    parser.add_argument("--difficulty", type=float, default=0.7)
+    parser.add_argument("--eval-every", type=int, default=0,
+                        help="env-steps between held-out evaluations (default: steps / 5)")
+    parser.add_argument("--out", type=Path, default=Path("docs/images/curriculum-experiment.png"))
+    parser.add_argument("--json", type=Path, default=None, help="also write the results here")
+    arguments = parser.parse_args()
+    torch.set_num_threads(1)
+    began = time.perf_counter()
+    steps, difficulty = arguments.steps, arguments.difficulty
+    eval_every = arguments.eval_every or max(steps // 5, 1)
+
+    held_out: list[Level] = [(HELD_OUT_START + number, None) for number in range(HELD_OUT)]
+    hard = hard_levels(difficulty)
+    results: dict[str, dict[str, list[float]]] = {}
+    curves: dict[str, list[list[tuple[int, float]]]] = {}
+    with make_vector(arguments.envs) as eval_vector:
+        def final(name: str, policy: Policy) -> None:
+            row = results.setdefault(name, {"held_out": [], "hard": [], "all": []})
+            seeds_returns = evaluate(policy, held_out, eval_vector, difficulty)
+            hard_returns = evaluate(policy, hard, eval_vector, difficulty)
+            row["held_out"].append(float(seeds_returns.mean()))
+            row["hard"].append(float(hard_returns.mean()))
+            row["all"].append(float(np.concatenate([seeds_returns, hard_returns]).mean()))
+
+        final("follow", follow_policy)
+        for seed in range(arguments.seeds):
+            final("random", random_policy(seed))
+        for method in arguments.methods:
+            for seed in range(arguments.seeds):
+                started = time.perf_counter()
+                model, points = train(method, seed, steps, arguments.envs, difficulty,
+                                      eval_every, eval_vector, held_out)
+                trained = time.perf_counter() - started
+
+                def policy(observations: np.ndarray, model: PPO = model) -> np.ndarray:
+                    return model.predict(observations, deterministic=True)[0]
+
+                final(method, policy)
+                points.append((model.num_timesteps, results[method]["held_out"][-1]))
+                curves.setdefault(method, []).append(points)
+                print(f"{NAMES[method]:>11} seed {seed}: {trained:.0f} s, "
+                      f"{model.num_timesteps / trained:.0f} env-steps/s (with evaluations), "
+                      f"held-out {results[method]['held_out'][-1]:.3f}, "
+                      f"hard {results[method]['hard'][-1]:.3f}", flush=True)
+
+    print(f"\nPPO, {steps} env-steps per run, {arguments.envs} environments, difficulty "
+          f"{difficulty}, {arguments.seeds} seed(s); catch rate, mean ± std over seeds")
+    print(f"{HELD_OUT} held-out seeds, {HARD} hard levels x {BALLS} balls\n")
+    print("| method | held-out seeds | hard levels | all |")
+    print("| --- | --- | --- | --- |")
+    for name in [*arguments.methods, "follow", "random"]:
+        row = results[name]
+        print(f"| {NAMES[name]} | {_cell(row['held_out'])} | {_cell(row['hard'])} | "
+              f"{_cell(row['all'])} |")
+    mean_curves = {}
+    for method, runs in curves.items():
+        length = min(len(run) for run in runs)
+        mean_curves[method] = [(int(np.mean([run[i][0] for run in runs])),
+                                float(np.mean([run[i][1] for run in runs])))
+                               for i in range(length)]
+    references = {name: statistics.fmean(results[name]["held_out"])
+                  for name in ("follow", "random")}
+    right = max([steps, *(point[0] for curve in mean_curves.values() for point in curve)])
+    draw_curves(mean_curves, references, max(right, 1), arguments.out)
+    print(f"\ncurves: {arguments.out}; {time.perf_counter() - began:.0f} s in all")
+    if arguments.json:
+        arguments.json.write_text(json.dumps({"results": results, "curves": curves,
+                                              "steps": steps, "difficulty": difficulty},
+                                             indent=1))
+
+
+if __name__ == "__main__":
+    main()

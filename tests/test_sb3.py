@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -17,6 +19,19 @@ import rlenv_client  # noqa: E402, F401  (registers the ids)
 from examples.cartpole import TARGET  # noqa: E402
 from examples.train_sb3 import evaluate  # noqa: E402
 from rlenv_client.sb3 import SB3VecEnv  # noqa: E402
+
+
+@pytest.fixture(autouse=True)
+def one_torch_thread() -> Iterator[None]:
+    """Torch on one thread, as the training docs advise on a small machine: with its default
+    threads its OpenMP worker spins and takes the servers' core (docs/training-fast.md), and
+    PPO's test ran past its timeout on this 2-core VM under load."""
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
 
 
 def test_sb3_check_env_passes() -> None:

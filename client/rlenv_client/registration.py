@@ -25,6 +25,7 @@ class _Registration:
 ENVIRONMENTS = {
     "rlenv/CartPole-v0": _Registration("examples.cartpole:CartPoleEnvironment", 500),
     "rlenv/CartPole-v1": _Registration("examples.classic_cartpole:ClassicCartPoleEnvironment", 500),
+    "rlenv/Maze-v0": _Registration("examples.maze:MazeEnvironment", 250),
     "rlenv/Pair-v0": _Registration("examples.pair:PairEnvironment", 300),
     "rlenv/Pixels-v0": _Registration("examples.pixels:PixelsEnvironment", 1000),
     "rlenv/Plinko-v0": _Registration("examples.plinko:PlinkoEnvironment", 100),

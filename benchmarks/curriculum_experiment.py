@@ -47,23 +47,29 @@ from typing import Any
 import gymnasium
 import numpy as np
 import torch
+from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
-import rlenv_client  # noqa: F401  (registers rlenv/Plinko-v0)
+import rlenv_client  # noqa: F401  (registers rlenv/Plinko-v0 and rlenv/Maze-v0)
+from examples import maze
 from examples.plinko import BOUNCINESS, follow
+from rlenv import PackedScene
 from rlenv.http.png import encode_png
 from rlenv_client.curriculum import CurriculumVectorEnv, EnvironmentParameters, LevelSampler
 from rlenv_client.sb3 import CurriculumCallback, SB3VecEnv
 
 METHODS = ("dr", "plr", "robust_plr", "accel", "sfl")
+ENVS = {"plinko": "rlenv/Plinko-v0", "maze": "rlenv/Maze-v0"}
 NAMES = {"dr": "DR", "plr": "PLR", "robust_plr": "Robust PLR", "accel": "ACCEL", "sfl": "SFL",
-         "follow": "follow (upper ref.)", "random": "random (lower ref.)"}
+         "follow": "follow (upper ref.)", "bfs": "BFS expert (upper ref.)",
+         "random": "random (lower ref.)"}
 COLOURS = {"dr": (0, 0, 0), "plr": (31, 119, 180), "robust_plr": (44, 160, 44),
            "accel": (214, 39, 40), "sfl": (148, 103, 189), "follow": (150, 150, 150),
-           "random": (255, 127, 14)}
-"""The curves' colours (RGB): black, blue, green, red, purple; grey and orange dashed."""
+           "bfs": (150, 150, 150), "random": (255, 127, 14)}
+"""The curves' colours (RGB): black, blue, green, red, purple; grey (the upper reference,
+``follow`` or ``bfs``) and orange dashed."""
 HELD_OUT = 50
 """Held-out seeds: 2**32 .. 2**32 + HELD_OUT - 1."""
 HELD_OUT_START = 2**32
@@ -86,8 +92,12 @@ Level = tuple[int, Any]  # (episode seed, level data or None: the seed's own lev
 Policy = Callable[[np.ndarray], np.ndarray]
 
 
+ENV_ID = ENVS["plinko"]
+"""The environment trained and evaluated on (``--env`` sets it)."""
+
+
 def make_vector(num_envs: int, instances_per_server: int | None = None) -> Any:
-    return gymnasium.make_vec("rlenv/Plinko-v0", num_envs=num_envs,
+    return gymnasium.make_vec(ENV_ID, num_envs=num_envs,
                               autoreset_mode=AutoresetMode.SAME_STEP,
                               instances_per_server=instances_per_server)
 
@@ -112,6 +122,86 @@ def hard_levels(difficulty: float) -> list[Level]:
     return levels   # sets the catcher's width
 
 
+# -- Maze-v0: hand-made hard mazes and a BFS expert -----------------------------------------
+
+STEPS_PER_CELL = 5
+"""Maze-v0 steps to cross one cell (3 m/s for 4 ticks of 1/60 s: a fifth of a cell a step)."""
+_MOVES = {(0, 1): 1, (0, -1): 2, (-1, 0): 3, (1, 0): 4}  # cell step -> Maze-v0 action
+
+
+def _maze_layouts() -> list[tuple[str, set[maze.Cell], maze.Cell, maze.Cell]]:
+    """Hand-made hard mazes (name, walls, start, goal) on the 9 x 9 inside (cells 1..9)."""
+    every = range(1, 10)
+    serpentine = ({(c, 2) for c in every if c != 9} | {(c, 4) for c in every if c != 1}
+                  | {(c, 6) for c in every if c != 9} | {(c, 8) for c in every if c != 1})
+    comb = {(c, r) for c in (2, 4, 6, 8) for r in range(1, 9)}
+    two_rooms = {(5, r) for r in range(1, 9)} | {(c, 5) for c in (1, 2, 3, 7, 8, 9)}
+    # the goal in a walled box, its door on the far side from the start
+    box = ({(c, 3) for c in range(3, 8)} | {(3, r) for r in range(3, 8)}
+           | {(7, r) for r in range(3, 8)} | {(c, 7) for c in (3, 4, 6, 7)})
+    # a spiral, the goal at its centre
+    spiral = ({(c, 2) for c in range(2, 9)} | {(8, r) for r in range(2, 9)}
+              | {(c, 8) for c in range(3, 9)} | {(3, r) for r in range(4, 9)}
+              | {(c, 4) for c in range(3, 7)} | {(6, r) for r in range(4, 7)})
+    corner = ({(c, 6) for c in range(5, 10) if c != 9} | {(5, r) for r in range(6, 10)}
+              | {(c, 3) for c in range(2, 10)})
+    return [("serpentine", serpentine, (1, 1), (1, 9)),
+            ("comb", comb, (1, 1), (9, 1)),
+            ("two rooms", two_rooms, (2, 2), (8, 2)),
+            ("box", box, (5, 1), (5, 5)),
+            ("spiral", spiral, (1, 1), (5, 5)),
+            ("corner room", corner, (1, 1), (8, 8))]
+
+
+def _rotate(cell: maze.Cell) -> maze.Cell:
+    """A quarter turn of the inside about its centre (5, 5)."""
+    return (10 - cell[1], cell[0])
+
+
+def hard_mazes() -> list[Level]:
+    """Each hand-made maze in its 4 quarter turns, as level data (episode seeds unused)."""
+    levels: list[Level] = []
+    for number, (_, walls, start, goal) in enumerate(_maze_layouts()):
+        for turn in range(4):
+            assert maze.shortest_path(walls, start, goal) is not None
+            levels.append((HELD_OUT_START + 20_000 + 4 * number + turn,
+                           maze.make_level(walls, start, goal)))
+            walls, start, goal = {_rotate(c) for c in walls}, _rotate(start), _rotate(goal)
+    return levels
+
+
+def maze_grid(level: Level, difficulty: float) -> tuple[set[maze.Cell], maze.Cell, maze.Cell]:
+    """The walls, start and goal of a level: its data's, or the one its seed builds."""
+    seed, data = level
+    if data is None:
+        rng, _ = seeding.np_random(seed)
+        data = PackedScene.pack(maze.build_level(rng, difficulty)).to_data()
+    return maze.grid_of(data)
+
+
+class BFSExpert:
+    """Sees the level: walks a shortest path cell by cell (STEPS_PER_CELL steps a cell)."""
+
+    def __init__(self, difficulty: float) -> None:
+        self.difficulty = difficulty
+        self.plans: list[list[int]] = []
+        self.t = 0
+
+    def begin(self, batch: Sequence[Level]) -> None:
+        self.plans, self.t = [], 0
+        for level in batch:
+            walls, start, goal = maze_grid(level, self.difficulty)
+            path = maze.shortest_path(walls, start, goal) or [start]
+            self.plans.append([_MOVES[(b[0] - a[0], b[1] - a[1])]
+                               for a, b in zip(path, path[1:], strict=False)
+                               for _ in range(STEPS_PER_CELL)])
+
+    def __call__(self, observations: np.ndarray) -> np.ndarray:
+        actions = np.array([plan[self.t] if self.t < len(plan) else 0 for plan in self.plans])
+        self.t += 1
+        return actions
+
+
 def evaluate(policy: Policy, levels: Sequence[Level], vector: Any,
              difficulty: float) -> np.ndarray:
     """Each level's return under ``policy``, played ``vector.num_envs`` at a time."""
@@ -124,6 +214,8 @@ def evaluate(policy: Policy, levels: Sequence[Level], vector: Any,
             vector.set_next_reset(index, seed=seed,
                                   options=None if data is None else {"level": data},
                                   config={"world": {"difficulty": difficulty}})
+        if hasattr(policy, "begin"):  # the BFS expert: it sees the levels
+            policy.begin([batch[min(index, len(batch) - 1)] for index in range(n)])
         observations, _ = vector.reset()
         done = np.zeros(n, bool)
         total = np.zeros(n)
@@ -141,6 +233,8 @@ def follow_policy(observations: np.ndarray) -> np.ndarray:
 
 def random_policy(seed: int) -> Policy:
     rng = np.random.default_rng(seed)
+    if ENV_ID == ENVS["maze"]:
+        return lambda observations: rng.integers(0, len(maze.ACTIONS), len(observations))
     return lambda observations: rng.uniform(-1.0, 1.0, (len(observations), 1)).astype(np.float32)
 
 
@@ -266,31 +360,46 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=3, help="training seeds per method")
     parser.add_argument("--envs", type=int, default=8, help="sub-environments")
     parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
-    parser.add_argument("--difficulty", type=float, default=0.7)
+    parser.add_argument("--env", choices=tuple(ENVS), default="plinko")
+    parser.add_argument("--difficulty", type=float, default=None,
+                        help="world.difficulty (default: 0.7 on plinko, 0.6 on maze)")
     parser.add_argument("--eval-every", type=int, default=0,
                         help="env-steps between held-out evaluations (default: steps / 5)")
-    parser.add_argument("--out", type=Path, default=Path("docs/images/curriculum-experiment.png"))
+    parser.add_argument("--out", type=Path, default=None, help="the curves' PNG (default: "
+                        "docs/images/curriculum-experiment.png, or curriculum-maze.png)")
     parser.add_argument("--json", type=Path, default=None, help="also write the results here")
     arguments = parser.parse_args()
+    global ENV_ID
+    ENV_ID = ENVS[arguments.env]
+    is_maze = arguments.env == "maze"
+    if arguments.difficulty is None:
+        arguments.difficulty = 0.6 if is_maze else 0.7
+    if arguments.out is None:
+        arguments.out = Path("docs/images/" + ("curriculum-maze.png" if is_maze
+                                               else "curriculum-experiment.png"))
     torch.set_num_threads(1)
     began = time.perf_counter()
     steps, difficulty = arguments.steps, arguments.difficulty
+    upper = "bfs" if is_maze else "follow"
     eval_every = arguments.eval_every or max(steps // 5, 1)
 
     held_out: list[Level] = [(HELD_OUT_START + number, None) for number in range(HELD_OUT)]
-    hard = hard_levels(difficulty)
+    hard = hard_mazes() if is_maze else hard_levels(difficulty)
     results: dict[str, dict[str, list[float]]] = {}
     curves: dict[str, list[list[tuple[int, float]]]] = {}
     with make_vector(arguments.envs) as eval_vector:
         def final(name: str, policy: Policy) -> None:
-            row = results.setdefault(name, {"held_out": [], "hard": [], "all": []})
+            row = results.setdefault(name, {"held_out": [], "hard": [], "all": [],
+                                            "held_out_success": [], "hard_success": []})
             seeds_returns = evaluate(policy, held_out, eval_vector, difficulty)
             hard_returns = evaluate(policy, hard, eval_vector, difficulty)
             row["held_out"].append(float(seeds_returns.mean()))
             row["hard"].append(float(hard_returns.mean()))
             row["all"].append(float(np.concatenate([seeds_returns, hard_returns]).mean()))
+            row["held_out_success"].append(float((seeds_returns > 0).mean()))
+            row["hard_success"].append(float((hard_returns > 0).mean()))
 
-        final("follow", follow_policy)
+        final(upper, BFSExpert(difficulty) if is_maze else follow_policy)
         for seed in range(arguments.seeds):
             final("random", random_policy(seed))
         for method in arguments.methods:
@@ -311,15 +420,27 @@ def main() -> None:
                       f"held-out {results[method]['held_out'][-1]:.3f}, "
                       f"hard {results[method]['hard'][-1]:.3f}", flush=True)
 
-    print(f"\nPPO, {steps} env-steps per run, {arguments.envs} environments, difficulty "
-          f"{difficulty}, {arguments.seeds} seed(s); catch rate, mean ± std over seeds")
-    print(f"{HELD_OUT} held-out seeds, {HARD} hard levels x {BALLS} balls\n")
-    print("| method | held-out seeds | hard levels | all |")
-    print("| --- | --- | --- | --- |")
-    for name in [*arguments.methods, "follow", "random"]:
+    print(f"\nPPO on {ENV_ID}, {steps} env-steps per run, {arguments.envs} environments, "
+          f"difficulty {difficulty}, {arguments.seeds} seed(s); "
+          f"{'return' if is_maze else 'catch rate'}, mean ± std over seeds")
+    if is_maze:
+        print(f"{HELD_OUT} held-out seeds, {len(hard)} hand-made hard mazes "
+              f"({len(hard) // 4} x 4 quarter turns); success: the goal reached\n")
+        print("| method | held-out return | held-out success | hard return | hard success |")
+        print("| --- | --- | --- | --- | --- |")
+    else:
+        print(f"{HELD_OUT} held-out seeds, {HARD} hard levels x {BALLS} balls\n")
+        print("| method | held-out seeds | hard levels | all |")
+        print("| --- | --- | --- | --- |")
+    for name in [*arguments.methods, upper, "random"]:
         row = results[name]
-        print(f"| {NAMES[name]} | {_cell(row['held_out'])} | {_cell(row['hard'])} | "
-              f"{_cell(row['all'])} |")
+        if is_maze:
+            print(f"| {NAMES[name]} | {_cell(row['held_out'])} | "
+                  f"{_cell(row['held_out_success'])} | {_cell(row['hard'])} | "
+                  f"{_cell(row['hard_success'])} |")
+        else:
+            print(f"| {NAMES[name]} | {_cell(row['held_out'])} | {_cell(row['hard'])} | "
+                  f"{_cell(row['all'])} |")
     mean_curves = {}
     for method, runs in curves.items():
         length = min(len(run) for run in runs)
@@ -327,13 +448,14 @@ def main() -> None:
                                 float(np.mean([run[i][1] for run in runs])))
                                for i in range(length)]
     references = {name: statistics.fmean(results[name]["held_out"])
-                  for name in ("follow", "random")}
+                  for name in (upper, "random")}
     right = max([steps, *(point[0] for curve in mean_curves.values() for point in curve)])
     draw_curves(mean_curves, references, max(right, 1), arguments.out)
     print(f"\ncurves: {arguments.out}; {time.perf_counter() - began:.0f} s in all")
     if arguments.json:
         arguments.json.write_text(json.dumps({"results": results, "curves": curves,
-                                              "steps": steps, "difficulty": difficulty},
+                                              "steps": steps, "difficulty": difficulty,
+                                              "env": ENV_ID},
                                              indent=1))
 
 

@@ -1,7 +1,21 @@
-"""PPO on Plinko with five level curricula, evaluated on held-out levels.
+"""PPO on Plinko or Maze with five level curricula, evaluated on held-out levels.
 
-``python benchmarks/curriculum_experiment.py [--steps S] [--seeds K] [--envs N] [--methods ...]
-[--difficulty D] [--out PNG]``
+``python benchmarks/curriculum_experiment.py [--env plinko|maze] [--steps S] [--seeds K]
+[--envs N] [--methods ...] [--difficulty D] [--out PNG]``
+
+``--env maze`` runs the same experiment on ``rlenv/Maze-v0`` (a partially observed agent looks
+for a goal behind walls; MiniGrid's reward, ``1 - 0.9 * steps / 250`` on reaching it), at
+difficulty 0.6 by default (31% of the inner cells walled). Its hard levels are 6 hand-made
+mazes (:func:`hard_mazes`: a serpentine, a comb of dead ends, two rooms, the goal in a box
+whose door faces away, a spiral, a walled corner room) in their 4 quarter turns, as level
+data; its upper reference is :class:`BFSExpert`, which sees the level and walks a shortest
+path, its lower one a uniformly random discrete policy; the table has the success rate (the
+goal reached) beside the return, and the PNG goes to ``docs/images/curriculum-maze.png``. On
+the development machine PPO trains at about 900 Maze env-steps/s, and an evaluation of the 50
+held-out seeds takes up to 5 s (an agent that never finds the goal plays 250 steps); ``--env
+maze --steps 2000 --seeds 1 --methods dr`` runs end to end in about half a minute.
+
+The rest of this docstring describes the Plinko run (the default).
 
 Optional: needs torch and stable-baselines3 (``make sb3``). Trains Stable-Baselines3's PPO on
 ``rlenv/Plinko-v0`` (``gymnasium.make_vec`` with ``SAME_STEP`` autoreset, wrapped by

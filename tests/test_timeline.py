@@ -1,0 +1,164 @@
+"""Timelines: recorded episodes re-simulated step by step, tick by tick, branched and compared."""
+
+from __future__ import annotations
+
+import random
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import rlenv_client  # noqa: F401  (registers the ids)
+from examples.cartpole import TARGET as CARTPOLE
+from examples.cartpole import controller
+from examples.plinko import TARGET as PLINKO
+from examples.plinko import follow
+from rlenv_client import Client
+from rlenv_client.replay import EpisodeFile, RecordEpisodes, digest, replay
+from rlenv_client.timeline import Timeline
+from tests.conftest import Serve
+
+IDS = {CARTPOLE: "rlenv/CartPole-v0", PLINKO: "rlenv/Plinko-v0"}
+
+
+def record(directory: Path, target: str) -> Path:
+    """One episode of ``target`` under a noisy controller, recorded in ``directory``."""
+    env = RecordEpisodes(gym.make(IDS[target], repeat_action=2, share_server=False), directory)
+    policy = controller if target == CARTPOLE else follow
+    try:
+        observation, _ = env.reset(seed=11)
+        for t in range(1000):
+            noise = 0.3 * np.sin(t / 3.0)
+            action = np.clip(policy(observation) + noise, -1, 1).astype(np.float32)
+            observation, _, terminated, truncated, _ = env.step(action)
+            if terminated or truncated:
+                break
+    finally:
+        env.close()
+    return directory / "episode-0001.rlenv"
+
+
+def actions(episode: EpisodeFile) -> list[np.ndarray]:
+    return [event[1] for event in episode.snapshot["events"] if event[0] == "action"]
+
+
+@pytest.mark.parametrize("target", [CARTPOLE, PLINKO])
+def test_every_step_is_the_recorded_one_in_any_order(tmp_path: Path, target: str) -> None:
+    path = record(tmp_path, target)
+    episode = EpisodeFile.load(path)
+    with Timeline.open(path, checkpoint_every=10) as timeline:
+        last = len(timeline)
+        assert last == len(episode.observations) - 1 > 25
+        steps = [0, last, 1, 9, 10, 11, 20, 19, last // 2, last - 1, 3, 25, 0, last]
+        random.Random(5).shuffle(steps)
+        for step in steps:  # backwards (misses), forwards (hits and stepping on), repeats
+            state = timeline.at(step)
+            assert state.step == step
+            assert digest(state.observation) == episode.observations[step], step
+        start = timeline.at(0)
+        assert start.reward == 0.0 and start.info["frames"] == 0
+        assert not (start.terminated or start.truncated)
+        end = timeline.at(last)
+        assert (end.terminated, end.truncated) == (episode.terminated, episode.truncated)
+        assert end.draw["shapes"]
+        agent = next(path for path in end.properties if path.endswith("/Agent"))
+        assert end.properties[agent] == timeline.at(1).properties[agent]
+
+
+@pytest.mark.parametrize("target", [CARTPOLE, PLINKO])
+def test_the_ticks_of_a_step_add_up_to_the_step(tmp_path: Path, target: str) -> None:
+    path = record(tmp_path, target)
+    with Timeline.open(path) as timeline:
+        for step in (1, 7, len(timeline)):
+            state = timeline.at(step)
+            ticks = timeline.ticks(step)
+            assert [tick.tick for tick in ticks] == list(range(1, state.info["frames"] + 1))
+            assert digest(ticks[-1].observation) == digest(state.observation)
+            assert sum(tick.reward for tick in ticks) == pytest.approx(state.reward)
+            assert ticks[-1].properties == state.properties
+            assert (ticks[-1].terminated, ticks[-1].truncated) == (state.terminated,
+                                                                  state.truncated)
+            assert not any(tick.terminated or tick.truncated for tick in ticks[:-1])
+        assert digest(timeline.at(8).observation) == timeline.episode.observations[8]
+        with pytest.raises(IndexError):
+            timeline.ticks(0)
+
+
+def test_branches_share_their_start_and_end_with_the_episode(tmp_path: Path) -> None:
+    path = record(tmp_path, CARTPOLE)
+    episode = EpisodeFile.load(path)
+    recorded = actions(episode)
+    with Timeline.open(path, checkpoint_every=4) as timeline:
+        same = timeline.branch(5, recorded[5:])
+        assert len(same) == len(timeline)
+        assert timeline.diff(same).first_difference is None
+
+        changed = [recorded[5] * -1 + np.float32(0.5), *recorded[6:]]
+        other = timeline.branch(5, changed)
+        difference = timeline.diff(other)
+        assert difference.first_difference is not None and difference.first_difference >= 6
+        assert not any(np.any(d) for d in difference.observations[:6])
+        assert difference.rewards[:6] == [0.0] * 6
+        assert np.any(difference.observations[difference.first_difference])
+        for step in (0, 5, 3):
+            assert digest(other.at(step).observation) == episode.observations[step]
+
+        short = timeline.branch(5, recorded[5:8])
+        assert len(short) == 8 and not short.ended
+        assert timeline.diff(short).first_difference == 9  # only one of them reaches it
+
+        push = [np.ones(1, np.float32)] * 1000
+        falls = timeline.branch(2, push)
+        assert len(falls) < 2 + 1000 and falls.episode.terminated
+        steered = timeline.branch(2, policy=lambda observation: np.ones(1, np.float32),
+                                  max_steps=1000)
+        assert timeline.diff(steered).first_difference is not None
+        assert falls.diff(steered).first_difference is None  # the same actions, by policy
+
+        deeper = falls.branch(len(falls) - 1, policy=lambda o: -np.ones(1, np.float32),
+                              max_steps=3)
+        assert len(deeper) <= len(falls) + 2
+        assert falls.diff(deeper).first_difference == len(falls)
+        assert len(timeline.branch(len(timeline), push)) == len(timeline)  # it had ended
+
+
+def test_a_policy_branch_stops_at_max_steps(tmp_path: Path) -> None:
+    path = record(tmp_path, PLINKO)
+    with Timeline.open(path) as timeline:
+        branch = timeline.branch(4, policy=follow, max_steps=3)
+        assert len(branch) == 7
+        chosen = actions(branch.episode)
+        for step in range(4, 7):  # the action from each state is the policy's of it
+            assert np.array_equal(chosen[step], follow(branch.at(step).observation))
+        with pytest.raises(ValueError):
+            timeline.branch(4, policy=follow)
+        with pytest.raises(ValueError):
+            timeline.branch(4)
+
+
+def test_a_saved_branch_replays_bit_for_bit(tmp_path: Path, serve: Serve) -> None:
+    path = record(tmp_path, CARTPOLE)
+    with Timeline.open(path) as timeline:
+        branch = timeline.branch(3, policy=controller, max_steps=40)
+        branch.save(tmp_path / "branch.rlenv")
+        length = len(branch)
+    saved = EpisodeFile.load(tmp_path / "branch.rlenv")
+    server = serve(CARTPOLE)
+    with Client(server.host, server.port, timeout=30) as client:
+        result = replay(saved, client)
+    assert result.divergence is None and result.steps == length
+
+
+def test_closing_ends_the_scratch_server(tmp_path: Path) -> None:
+    path = record(tmp_path, CARTPOLE)
+    timeline = Timeline.open(path)
+    branch = timeline.branch(2, policy=controller, max_steps=2)
+    branch.close()  # a branch leaves the server to its root
+    assert timeline.server.is_alive() and branch.server is timeline.server
+    assert len(timeline.at(3).observation) > 0
+    timeline.close()
+    assert not timeline.server.is_alive()
+    with pytest.raises(RuntimeError, match="closed"):
+        timeline.at(1)
+    timeline.close()  # twice is fine

@@ -20,7 +20,7 @@ state after the ``k``-th action. Changes made during the episode (an inspector's
 sets, configuration) belong to the step of the action that follows them. On an unbranched
 timeline every observation is the recorded one, bit for bit (its
 :func:`~rlenv_client.replay.digest` is checked at every step: a server that re-simulates
-differently raises :class:`RuntimeError`).
+differently raises ``RuntimeError``).
 
 Going to a step restores the nearest earlier checkpoint (a snapshot taken every
 ``checkpoint_every`` steps as the timeline passes them, the reset's at first) and replays the

@@ -16,6 +16,7 @@ from types import FrameType
 from rlenv.protocol.errors import RlenvError
 from rlenv.serving.endpoint import DEFAULT_HOST, Limits
 from rlenv.serving.target_hints import explain_target_error
+from rlenv.transport.sockets import format_address
 
 __all__ = ["main", "serve_command"]
 
@@ -270,7 +271,7 @@ def _serve(args: argparse.Namespace) -> int:
         inspector = None
         try:  # Ctrl-C once it listens (however soon) ends it with status 0
             host, port = server.address
-            print(f"listening on {host}:{port}", flush=True)
+            print(f"listening on {format_address(host, port)}", flush=True)
             inspector = _start_inspector(host, port, args.token) if args.inspect else None
             server.serve_forever()
         except KeyboardInterrupt:
@@ -291,7 +292,8 @@ def _start_inspector(host: str, port: int, token: str | None) -> subprocess.Pope
     env = dict(os.environ)
     if token is not None:
         env["RLENV_TOKEN"] = token
-    address = f"{'127.0.0.1' if host in ('0.0.0.0', '') else host}:{port}"
+    reachable = {"0.0.0.0": "127.0.0.1", "": "127.0.0.1", "::": "::1"}.get(host, host)
+    address = format_address(reachable, port)
     return subprocess.Popen([sys.executable, "-m", "rlenv_client.inspector", address,
                              "--follow-stdin"], stdin=subprocess.PIPE, env=env)
 

@@ -12,6 +12,8 @@ import pytest
 from conftest import Serve
 
 from examples.cartpole import TARGET, CartPoleEnvironment
+from examples.pair import NAMES, chase
+from examples.pair import TARGET as PAIR
 from rlenv.protocol import ErrorReply, Request
 from rlenv.serving import snapshots
 from rlenv.serving.host import Host, target_of
@@ -238,3 +240,41 @@ def test_the_hello_names_the_target_when_it_can() -> None:
         local.reset()
         assert [e.target for e in local.episodes()] == [TARGET]
 
+
+
+def test_several_agents_episodes_end_as_their_answers_said() -> None:
+    """With several agents, the end is the answers' (every agent done; terminated if any did)."""
+    with LocalClient(PAIR) as local:
+        ends = []
+        for seed in (2, 3):
+            observation, _ = local.reset(seed=seed)
+            seen = [digest(observation)]
+            terminated = truncated = False
+            for _ in range(300):
+                observation, _, terminated, truncated, _ = local.step(
+                    {name: chase(observation[name]) for name in NAMES})
+                seen.append(digest(observation))
+                if terminated or truncated:
+                    break
+            ends.append((seen, bool(terminated), bool(truncated)))
+        local.reset(seed=4)
+        episodes = local.episodes()
+        assert [(e.terminated, e.truncated) for e in episodes] == [end[1:] for end in ends]
+        assert any(terminated or truncated for _, terminated, truncated in ends)
+        for episode, (seen, _, _) in zip(episodes, ends, strict=True):
+            replays_as_lived(episode, seen, local)
+
+
+def test_a_vectors_autoresets_finish_episodes_too() -> None:
+    """Column steps (the lean path a vector's steps take) keep them as plain resets do."""
+    with LocalClient(TARGET, instances=2) as local:
+        assert local.host is not None and local.host.lean is not None
+        local.send_batch([local.reset_request(seed=i) for i in (0, 1)])
+        local.receive_batch()
+        actions = np.full((2, 1), 0.5, np.float32)
+        for flags in ((False, False), (True, False), (False, True)):
+            local.send_steps(actions, np.array(flags), 4)
+            local.receive_steps()
+        local.send_batch([Request(0, {"episodes": {}})] * 2)
+        kept = [reply.info["episodes"] for reply in local.receive_batch()]  # type: ignore[union-attr]
+        assert [[entry["steps"] for entry in entries] for entries in kept] == [[1], [2]]

@@ -72,9 +72,9 @@ class RecentEpisodes:
         entries = []
         for log, terminated, truncated in kept:
             snapshot = log.snapshot()
-            events = snapshot["events"]
-            end = max(i for i, event in enumerate(events) if event[0] == "action") + 1
-            del events[end:]
+            events = snapshot["events"]  # a copy of the log's
+            while events[-1][0] != "action":  # kept logs have one
+                events.pop()
             entries.append({"snapshot": snapshot, "terminated": terminated,
                             "truncated": truncated,
                             "steps": sum(event[0] == "action" for event in events)})

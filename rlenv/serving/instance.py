@@ -386,7 +386,10 @@ class Instance:
     def begin_episode(self, seed: int | None, options: Mapping[str, Any]) -> None:
         """Reset: undo ``inspect`` sets, seed the generator (if given), start a new episode.
 
-        The episode under way is finished: :attr:`recent` may keep its log.
+        The episode under way is finished: :attr:`recent` may keep its log. If the
+        environment's reset refuses (a ``RequestError`` from user code, such as level data it
+        cannot build), no episode runs and the next reset rebuilds the environment: the
+        refusal may have come half way through.
         """
         environment = self.environment
         if self.log.started and self.recent.keep:
@@ -409,7 +412,12 @@ class Instance:
         self._ticks = 0
         tree.paused = not tree.real_time
         self.state = Episode.RUNNING
-        environment._reset(options)
+        try:
+            environment._reset(options)
+        except RequestError as error:  # refused half way (level data, say): nothing is sure
+            self.mark_broken(error)
+            self.abandon_episode(f"the reset was refused ({error})")
+            raise
 
     def _finish_episode(self) -> None:
         """Hand the episode's log to :attr:`recent` (unless an error stopped the episode)."""

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import importlib
 import logging
+import os
 import time
 import traceback
 from collections.abc import Callable, Mapping
@@ -583,9 +584,14 @@ class Instance:
 
 
 def failure(reply_id: int | None, error: BaseException, consequence: str) -> ErrorReply:
-    """The ``environment_error`` answer for an exception in user code, with its traceback."""
+    """The ``environment_error`` answer for an exception in user code, with its traceback.
+
+    Files under the server's working folder are named relative to it: a client learns where
+    the error is in the environment's code, not how the server's machine is laid out.
+    """
     logger.error("environment error", exc_info=error)
     detail = "".join(traceback.format_exception(error)).rstrip()
+    detail = detail.replace(f'File "{os.getcwd()}{os.sep}', 'File "')
     return ErrorReply(reply_id, ErrorCode.ENVIRONMENT_ERROR, f"{error}; {consequence}\n{detail}")
 
 

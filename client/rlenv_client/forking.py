@@ -58,8 +58,6 @@ class ForkedEnvironment:
         self._socket = sock
         self.pid = pid
         self._process = process  # the first process only: a copy is not this process's child
-        self._fork_owed = False  # a copy was asked for and not collected
-        self._ready_owed = False  # a copy's word that it is ready is still to be read
         self.closed = False
 
     @classmethod
@@ -121,23 +119,7 @@ class ForkedEnvironment:
 
     def fork(self) -> ForkedEnvironment:
         """A copy of this process, at this state, with a socket of its own."""
-        self.request_fork()
-        return self.collect_fork()
-
-    def request_fork(self, *, warm: bool = False) -> None:
-        """Ask for a copy now and take it later (:meth:`collect_fork`), while it gets ready.
-
-        Args:
-            warm: the copy first reads its whole scene (the inspector's tree and draw list,
-                discarded), paying before it is needed for the first writes to the pages it
-                shares with this process.
-        """
-        self._send(["fork", warm])
-        self._fork_owed = True
-
-    def collect_fork(self) -> ForkedEnvironment:
-        """The copy :meth:`request_fork` asked for (its first call waits until it is ready)."""
-        self._fork_owed = False
+        self._send(["fork"])
         try:
             message, fds, _, _ = socket.recv_fds(self._socket, _FORKED.size, 1)
         except OSError as error:
@@ -150,9 +132,7 @@ class ForkedEnvironment:
             self._lost(ConnectionResetError("it did not fork"))
         sock = socket.socket(fileno=fds[0])
         sock.settimeout(self._socket.gettimeout())
-        copy = ForkedEnvironment(sock, _FORKED.unpack(message)[0])
-        copy._ready_owed = True
-        return copy
+        return ForkedEnvironment(sock, _FORKED.unpack(message)[0])
 
     def close(self) -> None:
         """Close the socket, which ends the process; safe to repeat."""
@@ -176,11 +156,6 @@ class ForkedEnvironment:
     def _send(self, message: Any) -> None:
         if self.closed:
             raise ConnectionError("the environment process is closed")
-        if self._fork_owed:
-            self.collect_fork().close()  # asked for, never taken
-        if self._ready_owed:
-            self._ready_owed = False
-            self._receive()
         try:
             self._socket.sendall(frame(message))
         except OSError as error:
@@ -291,12 +266,7 @@ def _serve(sock: socket.socket, target: str) -> None:
             elif request[0] == "run":
                 _reply(sock, "ok", run(*request[1:]))
             elif request[0] == "fork":
-                copy = _fork(sock)
-                if copy is not None:
-                    sock = copy
-                    if request[1]:
-                        _warm(client)
-                    _reply(sock, "ok", None)
+                sock = _fork(sock) or sock
             else:
                 _reply(sock, "error", ["bad_request", f"no operation {request[0]!r:.40}"])
         except RlenvError as error:
@@ -304,15 +274,6 @@ def _serve(sock: socket.socket, target: str) -> None:
                                    getattr(error, "message", str(error))])
         except Exception as error:  # noqa: BLE001 (the owner is told; the process goes on)
             _reply(sock, "error", ["environment_error", f"{type(error).__name__}: {error}"])
-
-
-def _warm(client: Any) -> None:
-    """Read the whole scene once (its first writes to shared pages), whatever it raises."""
-    try:
-        client.tree()
-        client.draw()
-    except Exception:  # noqa: BLE001 (a call that needs it will say what is wrong)
-        pass
 
 
 def _fork(sock: socket.socket) -> socket.socket | None:

@@ -173,7 +173,6 @@ class _Processes:
         self.first = ForkedEnvironment.start(target, timeout=timeout)
         self.parked: list[ForkedEnvironment] = [self.first]
         self.cursor: ForkedEnvironment | None = None
-        self.spare: _Mark | None = None  # the checkpoint asked for a warm copy
         self.position: tuple[Timeline, int] | None = None
         self.result: _Result | None = None
         self.closed = False
@@ -187,23 +186,8 @@ class _Processes:
     def resume(self, mark: _Mark) -> ForkedEnvironment:
         """A new cursor: a copy of the checkpoint's (the old cursor ends)."""
         self.drop_cursor()
-        if self.spare is mark:
-            self.spare = None
-            self.cursor = mark.environment.collect_fork()
-        else:
-            self.cursor = mark.environment.fork()
+        self.cursor = mark.environment.fork()
         return self.cursor
-
-    def prepare(self, mark: _Mark) -> None:
-        """Have a warm copy of the checkpoint's ready for the next :meth:`resume` from it.
-
-        Its first writes to shared pages, which make a fresh copy's first steps and first
-        scene reading slow, happen in the background. (A spare not taken is collected and
-        ended at its checkpoint's next use.)
-        """
-        if self.spare is not mark:
-            mark.environment.request_fork(warm=True)
-            self.spare = mark
 
     def drop_cursor(self) -> None:
         """End the cursor (its copies live on)."""
@@ -218,8 +202,6 @@ class _Processes:
             return
         self.closed = True
         self.drop_cursor()
-        if self.spare is not None:
-            self.spare.environment.collect_fork().end()
         for environment in self.parked:
             environment.close()
         for environment in self.parked:
@@ -339,10 +321,8 @@ class Timeline:
         entries = cursor.call("tree") if nodes is None else \
             [cursor.call("node", path) for path in nodes]
         properties = {node["path"]: dict(node["exported"]) for node in entries}
-        state = Step(step, copy.deepcopy(observation), reward, terminated, truncated,
-                     copy.deepcopy(info), cursor.call("draw"), properties)
-        self._processes.prepare(self._checkpoints.nearest(step)[1])  # for a jump back
-        return state
+        return Step(step, copy.deepcopy(observation), reward, terminated, truncated,
+                    copy.deepcopy(info), cursor.call("draw"), properties)
 
     def ticks(self, step: int) -> list[Tick]:
         """Each physics tick inside the action of ``step`` (from 1), re-simulated.

@@ -331,11 +331,12 @@ def _inspect(args: argparse.Namespace) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from examples.cartpole import TARGET, controller
+    from rlenv.targets import EXAMPLES, import_module
     from rlenv_client import Client
     from rlenv_client.launcher import ServerProcess
 
-    with ServerProcess(TARGET) as server, Client(server.host, server.port) as client:
+    cartpole = import_module(f"{EXAMPLES}.cartpole")  # examples.cartpole in a checkout
+    with ServerProcess(cartpole.TARGET) as server, Client(server.host, server.port) as client:
         print(f"CartPole served at {server.address}; balancing with a proportional controller")
         limit = round(args.max_seconds * client.hello.physics_ticks_per_second)
         for episode in range(args.episodes):
@@ -344,7 +345,7 @@ def _demo(args: argparse.Namespace) -> int:
             while not terminated and frames < limit:
                 repeat = min(args.repeat_action, limit - frames)
                 observation, reward, terminated, _, info = client.step(
-                    controller(observation), repeat_action=repeat
+                    cartpole.controller(observation), repeat_action=repeat
                 )
                 episode_return += reward
                 frames += info["frames"]

@@ -25,7 +25,6 @@ Every answer reports what happened since the previous one: summed rewards, flags
 
 from __future__ import annotations
 
-import importlib
 import logging
 import os
 import time
@@ -50,6 +49,7 @@ from rlenv.serving.recent import KEEP_EPISODES, RecentEpisodes
 from rlenv.serving.settings import Settings
 from rlenv.serving.snapshots import EpisodeLog
 from rlenv.serving.stats import EpisodeStats
+from rlenv.targets import import_module
 from rlenv.tree import SceneTree
 
 if TYPE_CHECKING:
@@ -63,6 +63,10 @@ logger = logging.getLogger(__name__)
 def load_environment(target: str) -> type[RLEnvironment]:
     """Import the environment class named ``MODULE:CLASS``.
 
+    A shipped example loads under its one name in this process, whichever of its two names
+    ``target`` uses (``examples.X`` in a checkout, ``rlenv.examples.X`` installed:
+    :mod:`rlenv.targets`).
+
     Raises:
         ValueError: ``target`` is not of the form ``MODULE:CLASS``.
         ImportError: the module cannot be imported.
@@ -72,7 +76,7 @@ def load_environment(target: str) -> type[RLEnvironment]:
     if not module_name or not class_name:
         raise ValueError(f"expected MODULE:CLASS, e.g. examples.cartpole:CartPoleEnvironment, "
                          f"got {target!r}")
-    module = importlib.import_module(module_name)
+    module = import_module(module_name)
     try:
         environment_class = getattr(module, class_name)
     except AttributeError:

@@ -243,3 +243,16 @@ def test_a_target_that_does_not_load_is_said(tmp_path: Path) -> None:
     path = record(tmp_path, CARTPOLE)
     with pytest.raises(ServerStartError, match="examples.nothing"):
         Timeline.open(path, target="examples.nothing:Nothing")
+
+
+def test_a_timeline_says_its_environment_and_lists_its_nodes(tmp_path: Path) -> None:
+    path = record(tmp_path, PLINKO)
+    with Timeline.open(path) as timeline:
+        assert timeline.hello.environment == "Plinko" and timeline.hello.agents == ("Agent",)
+        assert timeline.hello.action_space.shape == (1,)
+        nodes = timeline.tree(5)
+        agent = next(node for node in nodes if node.get("config") == "agent")
+        assert agent["demonstration_keys"]
+        assert {node["path"]: node["exported"] for node in nodes} == timeline.at(5).properties
+        branch = timeline.branch(2, policy=follow, max_steps=2)
+        assert branch.hello is timeline.hello

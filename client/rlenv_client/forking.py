@@ -29,6 +29,7 @@ from typing import Any, NoReturn
 
 from rlenv.protocol.codec import HEADER, frame, unpack
 from rlenv.protocol.errors import RemoteError
+from rlenv.protocol.messages import Hello
 from rlenv_client.launcher import ServerStartError
 
 __all__ = ["ForkedEnvironment", "StepRecord"]
@@ -51,12 +52,15 @@ class ForkedEnvironment:
 
     Attributes:
         pid: the process's id.
+        hello: what the environment says first, as a client of its server sees it (its agents
+            and spaces); a copy's is its original's.
     """
 
-    def __init__(self, sock: socket.socket, pid: int,
+    def __init__(self, sock: socket.socket, pid: int, hello: Hello | None,
                  process: subprocess.Popen[bytes] | None = None) -> None:
         self._socket = sock
         self.pid = pid
+        self.hello = hello
         self._process = process  # the first process only: a copy is not this process's child
         self.closed = False
 
@@ -79,9 +83,9 @@ class ForkedEnvironment:
         finally:
             theirs.close()
         mine.settimeout(timeout)
-        environment = cls(mine, process.pid, process)
+        environment = cls(mine, process.pid, None, process)
         try:
-            environment._receive()
+            environment.hello = Hello.from_wire(environment._receive())
         except (RemoteError, ConnectionError, OSError) as error:
             environment.close()
             raise ServerStartError(f"{target} did not start: {error}") from None
@@ -132,7 +136,7 @@ class ForkedEnvironment:
             self._lost(ConnectionResetError("it did not fork"))
         sock = socket.socket(fileno=fds[0])
         sock.settimeout(self._socket.gettimeout())
-        return ForkedEnvironment(sock, _FORKED.unpack(message)[0])
+        return ForkedEnvironment(sock, _FORKED.unpack(message)[0], self.hello)
 
     def close(self) -> None:
         """Close the socket, which ends the process; safe to repeat."""
@@ -229,7 +233,7 @@ def _serve(sock: socket.socket, target: str) -> None:
     except Exception as error:  # noqa: BLE001 (told to the owner, whatever it is)
         _reply(sock, "error", ["start_failed", f"{type(error).__name__}: {error}"])
         return
-    _reply(sock, "ok", os.getpid())
+    _reply(sock, "ok", client.hello.to_wire())
 
     def apply(changes: Sequence[Sequence[Any]]) -> None:
         for event in changes:

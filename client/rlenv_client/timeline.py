@@ -226,6 +226,8 @@ class Timeline:
 
     Attributes:
         episode: the recording (a branch's: what :meth:`save` writes).
+        hello: what the environment says first, as a client of its server sees it (its agents
+            and spaces, its ``repeat_action``).
 
     Raises:
         ValueError: the recording names no target and none is given, or its digests do not
@@ -271,6 +273,7 @@ class Timeline:
     def _setup(self, episode: EpisodeFile, processes: _Processes, owner: bool,
                checkpoints: _Checkpoints, records: list[StepRecord]) -> None:
         self.episode = episode
+        self.hello = processes.first.hello
         self._processes = processes
         self._owner = owner
         self._checkpoints = checkpoints
@@ -323,6 +326,20 @@ class Timeline:
         properties = {node["path"]: dict(node["exported"]) for node in entries}
         return Step(step, copy.deepcopy(observation), reward, terminated, truncated,
                     copy.deepcopy(info), cursor.call("draw"), properties)
+
+    def tree(self, step: int) -> list[dict[str, Any]]:
+        """Every node after ``step``, as the inspector's tree lists them (``client.tree()``).
+
+        Each entry has the node's ``path``, ``type``, ``exported`` values and ``read_only``
+        names; the environment, agent and world nodes also ``config`` and ``configurable`` (and
+        an agent its ``demonstration_keys``).
+
+        Raises:
+            IndexError: no such step.
+            RuntimeError: as :meth:`at`.
+        """
+        self._goto(step)
+        return self._cursor().call("tree")
 
     def ticks(self, step: int) -> list[Tick]:
         """Each physics tick inside the action of ``step`` (from 1), re-simulated.

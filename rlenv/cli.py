@@ -16,7 +16,6 @@ from types import FrameType
 from rlenv.protocol.errors import RlenvError
 from rlenv.serving.endpoint import DEFAULT_HOST, Limits
 from rlenv.serving.recent import KEEP_EPISODES
-from rlenv.serving.target_hints import explain_target_error
 from rlenv.transport.sockets import format_address
 
 __all__ = ["main", "serve_command"]
@@ -213,16 +212,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
     except Exception as error:  # one clear line; the traceback with --log-level DEBUG
         logger.debug("rlenv %s failed", args.command, exc_info=error)
-        print(f"rlenv {args.command}: {_in_words(error, getattr(args, 'target', None))}",
-              file=sys.stderr)
+        print(f"rlenv {args.command}: {_in_words(error)}", file=sys.stderr)
         return 2
 
 
-def _in_words(error: Exception, target: str | None) -> str:
-    """What went wrong, for a person: the message first (with a hint where one helps)."""
-    explained = explain_target_error(error, target) if target is not None else None
-    if explained is not None:
-        return explained
+def _in_words(error: Exception) -> str:
+    """What went wrong, for a person: the message first (a target's comes with its hint)."""
     if isinstance(error, OSError | ValueError | ImportError | RuntimeError | RlenvError) and \
             str(error):
         return str(error)

@@ -7,6 +7,7 @@ Stable-Baselines3's episode statistics are tested in ``test_sb3`` (they need the
 from __future__ import annotations
 
 import mmap
+import re
 import signal
 import socket
 import subprocess
@@ -197,6 +198,19 @@ def test_a_target_that_does_not_load_gets_the_hint_that_helps(target: str, line:
                             text=True, timeout=120, cwd=ROOT)
     assert result.returncode == 2
     assert result.stderr.splitlines() == [line]
+
+
+@pytest.mark.parametrize("target", ["examples/cartpole.py:CartPoleEnvironment",
+                                    "examples.cartpole:CartpoleEnvironment"])
+def test_the_python_api_gives_the_same_hint(target: str) -> None:
+    import rlenv
+    from rlenv_client import LocalClient
+
+    hint = "drop .py" if target.endswith(".py:CartPoleEnvironment") else \
+        "did you mean CartPoleEnvironment?"
+    for start in (rlenv.Server, LocalClient):
+        with pytest.raises(ImportError, match=re.escape(hint)):
+            start(target)
 
 
 # --- what the HTTP gateway takes as an action ---------------------------------------------------

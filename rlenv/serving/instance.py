@@ -49,6 +49,7 @@ from rlenv.serving.recent import KEEP_EPISODES, RecentEpisodes
 from rlenv.serving.settings import Settings
 from rlenv.serving.snapshots import EpisodeLog
 from rlenv.serving.stats import EpisodeStats
+from rlenv.serving.target_hints import explain_target_error
 from rlenv.targets import import_module
 from rlenv.tree import SceneTree
 
@@ -69,18 +70,24 @@ def load_environment(target: str) -> type[RLEnvironment]:
 
     Raises:
         ValueError: ``target`` is not of the form ``MODULE:CLASS``.
-        ImportError: the module cannot be imported.
+        ImportError: the module cannot be imported, or has no such class (with a hint where
+            one helps: :mod:`rlenv.serving.target_hints`).
         TypeError: the attribute is not an RLEnvironment subclass.
     """
     module_name, _, class_name = target.partition(":")
     if not module_name or not class_name:
         raise ValueError(f"expected MODULE:CLASS, e.g. examples.cartpole:CartPoleEnvironment, "
                          f"got {target!r}")
-    module = import_module(module_name)
     try:
-        environment_class = getattr(module, class_name)
-    except AttributeError:
-        raise ImportError(f"module {module_name!r} has no attribute {class_name!r}") from None
+        module = import_module(module_name)
+        if not hasattr(module, class_name):
+            raise ImportError(f"module {module_name!r} has no attribute {class_name!r}")
+    except ImportError as error:  # said with a hint where one helps (drop .py, did you mean)
+        hint = explain_target_error(error, target)
+        if hint is None:
+            raise
+        raise ImportError(hint) from None
+    environment_class = getattr(module, class_name)
     if not (isinstance(environment_class, type) and issubclass(environment_class, RLEnvironment)):
         raise TypeError(f"{target} is not an RLEnvironment subclass")
     return environment_class

@@ -60,6 +60,9 @@ def test_every_step_is_the_recorded_one_in_any_order(tmp_path: Path, target: str
             assert digest(state.observation) == episode.observations[step], step
         start = timeline.at(0)
         assert start.reward == 0.0 and start.info["frames"] == 0
+        assert len(timeline.rewards) == last + 1
+        for step in (0, 1, last // 2, last):
+            assert timeline.rewards[step] == timeline.at(step).reward
         assert not (start.terminated or start.truncated)
         end = timeline.at(last)
         assert (end.terminated, end.truncated) == (episode.terminated, episode.truncated)

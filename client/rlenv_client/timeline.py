@@ -300,6 +300,11 @@ class Timeline:
         return self.episode.terminated is not False or self.episode.truncated is not False
 
     @property
+    def rewards(self) -> list[float]:
+        """Every step's reward, 0.0 at step 0 (as the timeline first took them: no re-run)."""
+        return [0.0] + [record[1] for record in self._records]
+
+    @property
     def processes(self) -> list[int]:
         """The ids of the processes holding the environment and its checkpoints (the root's)."""
         processes = self._processes
@@ -456,8 +461,7 @@ class Timeline:
     def diff(self, other: Timeline) -> TimelineDiff:
         """How ``other`` differs from this timeline, step by step (both re-simulated)."""
         mine, theirs = self._every_observation(), other._every_observation()
-        rewards = [[0.0] + [record[1] for record in timeline._records]
-                   for timeline in (self, other)]
+        rewards = self.rewards, other.rewards
         digests = self.episode.observations, other.episode.observations
         first = None
         for k in range(max(len(mine), len(theirs))):

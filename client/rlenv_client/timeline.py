@@ -112,7 +112,9 @@ class TimelineDiff:
 
     Attributes:
         first_difference: the first step where the observations (bit for bit) or the rewards
-            differ, or that only one of the two reaches; ``None`` when they are the same.
+            differ, where one of the two episodes ended (terminated or truncated) and the
+            other did not, or that only one of the two reaches; ``None`` when they are the
+            same.
         observations: for each step both reach, the other's observation minus this one's
             (float64 arrays; maps and sequences of them for composite observations).
         rewards: for each step both reach, the other's reward minus this one's.
@@ -460,17 +462,13 @@ class Timeline:
 
     def diff(self, other: Timeline) -> TimelineDiff:
         """How ``other`` differs from this timeline, step by step (both re-simulated)."""
+        steps = [[(timeline.episode.observations[0], 0.0, False, False), *timeline._records]
+                 for timeline in (self, other)]
+        first = next((k for k, (a, b) in enumerate(zip(*steps, strict=False)) if a != b),
+                     None if len(steps[0]) == len(steps[1]) else min(map(len, steps)))
         mine, theirs = self._every_observation(), other._every_observation()
-        rewards = self.rewards, other.rewards
-        digests = self.episode.observations, other.episode.observations
-        first = None
-        for k in range(max(len(mine), len(theirs))):
-            if k >= len(mine) or k >= len(theirs) or rewards[0][k] != rewards[1][k] or \
-                    digests[0][k] != digests[1][k]:
-                first = k
-                break
         return TimelineDiff(first, [_subtract(a, b) for a, b in zip(mine, theirs, strict=False)],
-                            [b - a for a, b in zip(*rewards, strict=False)])
+                            [b - a for a, b in zip(self.rewards, other.rewards, strict=False)])
 
     def save(self, path: str | Path) -> None:
         """Write this timeline as a recording that ``rlenv replay`` re-runs."""

@@ -530,6 +530,9 @@ function onTimelineKey(event) {
   const target = event.target;
   if ((target instanceof HTMLInputElement && target.type !== "range") ||
       target instanceof HTMLSelectElement) return;
+  if (target instanceof HTMLButtonElement && (event.key === " " || event.key === "Enter")) {
+    return;  // the focused button's own click
+  }
   if (timeline.branching) {
     if (event.key === "Escape") { stopBranching(); timelineNote("branch-status", "done"); return; }
     if (timeline.info.keys.includes(event.key)) {
@@ -555,6 +558,7 @@ async function startTimelines() {
   await refreshTimelines();
   const servers = await (await fetch("api/servers", {cache: "no-store"})).json();
   timeline.offline = servers.length === 0;
+  document.body.classList.toggle("offline", timeline.offline);
   if (timeline.offline && timeline.list.length) await openTimeline(timeline.list[0].timeline);
 }
 

@@ -43,8 +43,9 @@ def record_failure(directory: str | Path, bias: float = BIAS) -> Path:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Record the failure; with ``--inspect``, serve it in the page with the controller as a
-    policy to branch with (until Ctrl-C).
+    """Record the failure; with ``--inspect``, also serve it in the page (until Ctrl-C).
+
+    The page then offers :func:`~examples.cartpole.controller` as a policy to branch with.
     """
     arguments = list(sys.argv[1:] if argv is None else argv)
     inspect = "--inspect" in arguments

@@ -197,7 +197,9 @@ def test_recent_episodes_need_a_watcher_that_keeps_them(page: str, recording: Pa
 
     class Keeping(Watcher):
         def recent_episodes(self, server: int, instance: int) -> list[EpisodeFile]:
-            return [EpisodeFile.load(recording)] * 2
+            kept = EpisodeFile.load(recording)  # as a server keeps it: no observations
+            return [EpisodeFile(kept.target, kept.snapshot, [], kept.terminated,
+                                kept.truncated)] * 2
 
     inspector = InspectorServer(Keeping([]), timelines=Timelines(max_recent=1))
     inspector.start()
@@ -210,7 +212,10 @@ def test_recent_episodes_need_a_watcher_that_keeps_them(page: str, recording: Pa
         assert status == 200 and info["length"] == 20  # type: ignore[index]
         assert info["origin"] == {"server": 0, "instance": 0, "recent": 1}  # type: ignore
         state = fetch(url, f"api/timeline/step?timeline={info['timeline']}&step=3")[2]  # type: ignore
-        assert state["step"] == 3
+        with Timeline.open(recording) as reference:
+            expected = reference.at(3).observation
+        assert state["step"] == 3 and state["observation"]["Agent"]["numbers"] == [
+            round(float(x), 5) for x in expected]
         status, again = post(url, "api/timeline/open", {"server": 0, "instance": 0,
                                                         "episode": 0})
         assert [t["timeline"] for t in fetch(url, "api/timelines")[2]["timelines"]] == [

@@ -198,8 +198,9 @@ def serve(addresses: Sequence[str], *, token: str | None, port: int, follow_stdi
     Until interrupted, or until standard input closes with ``follow_stdin`` (address lists,
     one JSON list a line, are followed meanwhile). ``token`` ``None``: ``$RLENV_TOKEN``.
     ``record_demonstrations``, ``target`` and ``demonstration_rate``: see :class:`Inspector`.
-    ``recordings`` (``rlenv replay FILE --inspect``): episode files the page opens as timelines,
-    re-simulated on ``target`` (default: each file's); ``policies`` and ``unavailable``: see
+    ``recordings`` (``rlenv replay FILE --inspect``): episode files the page opens as timelines
+    (with the watched instances' recent episodes), re-simulated on ``target`` (default: each
+    episode's); ``policies`` and ``unavailable``: see
     :class:`~rlenv_client.inspector.timelines.Timelines`.
 
     Raises:
@@ -207,7 +208,7 @@ def serve(addresses: Sequence[str], *, token: str | None, port: int, follow_stdi
             is not an rlenv episode.
     """
     timelines = Timelines(recordings, policies=policies, unavailable=unavailable,
-                          target=target if recordings else None)
+                          target=target)
     watcher = Watcher(addresses, token=token)
     demonstrator = None if record_demonstrations is None else Demonstrator(
         watcher, record_demonstrations, target=target, rate=demonstration_rate, token=token)

@@ -33,7 +33,7 @@ from rlenv_client.client import Client
 from rlenv_client.inspector.control import key_map
 from rlenv_client.inspector.watch import InspectorError, _shown, to_json
 from rlenv_client.launcher import ServerStartError
-from rlenv_client.replay import EpisodeFile
+from rlenv_client.replay import EpisodeFile, digest
 from rlenv_client.session import LOST
 from rlenv_client.timeline import Timeline
 
@@ -383,9 +383,18 @@ class Timelines:
         if root.timeline is not None:
             return root.timeline
         try:
-            timeline = Timeline(root.load(), target=self._target,
-                                checkpoint_every=self._every)
-        except (ValueError, ServerStartError, RuntimeError, OSError) as error:
+            episode = root.load()
+            try:
+                timeline = Timeline(episode, target=self._target, checkpoint_every=self._every)
+            except ValueError:
+                if episode.observations:
+                    raise
+                # a live server's recent episode: no observations were recorded (see
+                # _with_digests); a Timeline that accepts that never gets here
+                timeline = Timeline(_with_digests(episode, self._target),
+                                    target=self._target, checkpoint_every=self._every)
+        except (ValueError, ServerStartError, RuntimeError, OSError, RemoteError,
+                *LOST) as error:
             root.error = f"cannot open {root.name}: {error}"
             raise InspectorError(422, root.error) from None
         root.error = ""
@@ -468,6 +477,43 @@ class Timelines:
             raise InspectorError(400, str(error)) from None
         except (RuntimeError, RemoteError, *LOST) as error:
             raise InspectorError(422, f"the scratch server failed: {error}") from None
+
+
+def _with_digests(episode: EpisodeFile, target: str | None) -> EpisodeFile:
+    """``episode`` with the digest of every observation, re-simulated once to learn them.
+
+    A live server's recent episodes come without observations (a snapshot and the actions
+    only: kept cheaply); :class:`~rlenv_client.timeline.Timeline` wants one digest a step.
+    This pass records them on a scratch server of its own, as ``rlenv replay`` re-runs an
+    episode (configuration and property changes included), so that the timeline's checks hold.
+
+    Raises:
+        ValueError: the episode names no target and none is given.
+        ServerStartError: the scratch server did not start.
+    """
+    from rlenv_client.launcher import ServerProcess
+
+    target = target or episode.target
+    if target is None:
+        raise ValueError("the episode names no target: start the inspector with --target "
+                         "MODULE:CLASS")
+    with ServerProcess(target) as server, Client(server.host, server.port,
+                                                 timeout=120.0) as client:
+        observation, _ = client.restore({**episode.snapshot, "events": []})
+        digests = [digest(observation)]
+        for event in episode.snapshot["events"]:
+            if event[0] == "config":
+                part = event[1]
+                settings = {k: v for k, v in part.get("environment", {}).items()
+                            if k != "record"}
+                client.configure(agent=part.get("agent"), world=part.get("world"), **settings)
+            elif event[0] == "set":
+                client.set_property(*event[1:])
+            else:  # ["action", action, frames]
+                observation, *_ = client.step(event[1], event[2])
+                digests.append(digest(observation))
+    return EpisodeFile(episode.target or target, episode.snapshot, digests, episode.terminated,
+                       episode.truncated)
 
 
 def _step(timeline: Timeline, step: int) -> int:

@@ -399,3 +399,42 @@ def test_time_travel_branches_with_keys_and_a_policy_side_by_side(failure: Path,
         assert browser.console == [] or not any("rror" in line for line in browser.console)
     finally:
         inspector.close()
+
+
+def test_time_travel_on_a_live_run_opens_a_recent_episode(server: ServerProcess,
+                                                          browser: Browser,
+                                                          failure: Path) -> None:
+    """The live page lists the watched instance's recent episodes and opens one as a timeline
+    (here a watcher keeping the docs' failure stands for the server's own recent episodes)."""
+
+    class Keeping(Watcher):
+        def recent_episodes(self, server: int, instance: int) -> list[EpisodeFile]:
+            kept = EpisodeFile.load(failure)
+            return [EpisodeFile(kept.target, kept.snapshot, [], kept.terminated,
+                                kept.truncated)]
+
+    inspector = InspectorServer(Keeping([f"{server.host}:{server.port}"]))
+    inspector.start()
+    try:
+        with Trainer(server.host, server.port) as trainer:
+            browser.open(inspector.url)
+            browser.wait_for("window.inspector.frames > 3", "no live frame")
+            item = "document.querySelector('#recent-list li[data-episode=\"0\"]')"
+            assert "86 steps" in browser.wait_for(f"{item} && {item}.textContent",
+                                                  "no recent episode listed")
+            browser.evaluate(f"{item}.click()")
+            at(browser, 0)
+            assert not browser.evaluate("document.getElementById('timeline-live').hidden")
+            assert browser.evaluate("document.getElementById('recent').hidden")
+            frames = browser.evaluate("window.inspector.frames")
+            scrub(browser, 85)
+            key(browser, "ArrowRight")
+            at(browser, 86)
+            assert browser.evaluate("window.inspector.frames") == frames  # the live scene rests
+            browser.evaluate("document.getElementById('timeline-live').click()")
+            browser.wait_for(f"window.inspector.frames > {frames + 3}",
+                             "live frames did not resume")
+            browser.wait_for("!document.getElementById('recent').hidden", "no recent list again")
+            assert trainer.error is None
+    finally:
+        inspector.close()

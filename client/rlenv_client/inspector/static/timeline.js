@@ -68,6 +68,7 @@ async function openTimeline(number) {
   timeline.compared = null;
   showTimeline(info);
   $("timeline").hidden = false;
+  $("recent").hidden = true;
   $("timeline-live").hidden = timeline.offline;
   $("timeline-select").value = String(number);
   timelineNote("timeline-status", info.target || "");
@@ -85,6 +86,7 @@ function backToLive() {
   body.replaceChildren();
   delete body.dataset.signature;
   delete $("tree").dataset.signature;
+  refreshRecent().catch(() => {});
 }
 
 // The timeline's description (api/timeline, or what a branch returned): its tree, the policies.

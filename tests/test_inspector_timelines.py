@@ -59,6 +59,12 @@ def post(url: str, path: str, body: object) -> tuple[int, object]:
 
 def test_a_recording_is_scrubbed_ticked_branched_and_compared(page: str,
                                                               recording: Path) -> None:
+    status, headers, html = fetch(page)
+    assert status == 200 and b'<script src="static/timeline.js" defer>' in html
+    status, headers, script = fetch(page, "static/timeline.js")
+    assert status == 200 and headers["content-type"].startswith("text/javascript")
+    assert "script-src 'self'" in headers["content-security-policy"]
+    assert b"api/${path}" in script or b"timeline/step" in script
     listed = fetch(page, "api/timelines")[2]
     assert listed["timelines"][0]["name"] == recording.name and listed["policies"] == [
         "push-left"]

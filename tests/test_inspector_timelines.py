@@ -34,6 +34,14 @@ def push_left(observation: np.ndarray) -> np.ndarray:
     return np.full(1, -1.0, np.float32)
 
 
+def fails_at_the_third_step(observation: np.ndarray, calls: list[int] = []) -> np.ndarray:  # noqa: B006
+    """A policy that raises after two steps."""
+    calls.append(1)
+    if len(calls) % 3 == 0:
+        raise ZeroDivisionError("division by zero")
+    return np.full(1, 1.0, np.float32)
+
+
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """One CartPole episode of the failing agent (20 steps)."""
@@ -44,12 +52,18 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def page(recording: Path) -> Iterator[str]:
     """An inspector in this process with the recording as timeline 0 (no server watched)."""
     inspector = InspectorServer(Watcher([]), timelines=Timelines(
-        [recording], policies={"push-left": push_left}))
+        [recording], policies={"push-left": push_left, "broken": fails_at_the_third_step},
+        unavailable={"absent": "no onnxruntime"}))
     inspector.start()
     try:
         yield inspector.url
     finally:
         inspector.close()
+
+
+def page_recording(url: str) -> str:
+    """The file of the page's timeline 0."""
+    return str(fetch(url, "api/timelines")[2]["timelines"][0]["origin"]["file"])
 
 
 def post(url: str, path: str, body: object) -> tuple[int, object]:
@@ -67,7 +81,7 @@ def test_a_recording_is_scrubbed_ticked_branched_and_compared(page: str,
     assert b"api/${path}" in script or b"timeline/step" in script
     listed = fetch(page, "api/timelines")[2]
     assert listed["timelines"][0]["name"] == recording.name and listed["policies"] == [
-        "push-left"]
+        "broken", "push-left"] and listed["unavailable"] == {"absent": "no onnxruntime"}
     status, _, info = fetch(page, "api/timeline?timeline=0")
     assert status == 200 and info["length"] == 20 and info["agents"] == ["Agent"]
     assert info["keys"] == ["ArrowLeft", "ArrowRight"]  # CartPole's demonstration_keys
@@ -174,10 +188,18 @@ def test_the_timeline_routes_refuse_what_they_cannot_do(page: str) -> None:
     assert status == 409 and "only a key branch grows" in answer["error"]  # type: ignore
     policy = {"timeline": 0, "branch": 0, "step": 2, "policy": "elsewhere", "max_steps": 5}
     status, answer = post(page, "api/timeline/policy", policy)
-    assert status == 404 and "the policies are push-left" in answer["error"]  # type: ignore
+    assert status == 404 and "the policies are broken, push-left" in answer["error"]  # type: ignore
     status, answer = post(page, "api/timeline/policy", {**policy, "policy": "push-left",
                                                         "max_steps": 0})
     assert status == 400 and "max_steps" in answer["error"]  # type: ignore
+    status, answer = post(page, "api/timeline/policy", {**policy, "policy": "broken"})
+    assert status == 422 and "policy broken failed: ZeroDivisionError" in answer["error"]  # type: ignore
+    with Timeline.open(page_recording(page)) as reference:  # the timeline is still right after
+        expected = [round(float(x), 5) for x in reference.at(4).observation]
+    assert fetch(page, "api/timeline/step?timeline=0&step=4")[2]["observation"]["Agent"][
+        "numbers"] == expected
+    status, answer = post(page, "api/timeline/policy", {**policy, "policy": "absent"})
+    assert status == 422 and "absent is unavailable: no onnxruntime" in answer["error"]  # type: ignore
     # the page's rules: a change is a JSON POST, from this origin, with the key
     branch = {"timeline": 0, "branch": 0, "step": 2, "key": "ArrowLeft"}
     assert fetch(page, "api/timeline/branch")[0] == 404  # GET: nothing there

@@ -340,6 +340,7 @@ class Timelines:
             except InspectorError:
                 raise
             except Exception as error:  # the policy's own failure: the page says which
+                _forget_position(parent.timeline)
                 raise InspectorError(422, f"policy {policy} failed: {error!r:.200}") from None
             new = self._add_branch(root, branch, step, "policy", made, [policy])
             return {**self._describe(root), "branch": new.number}
@@ -412,8 +413,8 @@ class Timelines:
                 root.keys = key_map(observer.tree(), space)
         except InspectorError as error:
             root.keys, root.keys_error = {}, str(error)
-        except (RemoteError, *LOST) as error:
-            root.keys, root.keys_error = {}, f"the scratch server did not say: {error}"
+        except Exception as error:  # the page still scrubs; it says why keys are off
+            root.keys, root.keys_error = {}, f"the scratch server did not say: {error!r:.200}"
 
     def _branch(self, root: _Root, number: int) -> _Branch:
         self._opened(root)
@@ -514,6 +515,19 @@ def _with_digests(episode: EpisodeFile, target: str | None) -> EpisodeFile:
                 digests.append(digest(observation))
     return EpisodeFile(episode.target or target, episode.snapshot, digests, episode.terminated,
                        episode.truncated)
+
+
+def _forget_position(timeline: Timeline) -> None:
+    """After a policy raised mid-branch, make the timeline restore a checkpoint next time.
+
+    ``Timeline.branch`` leaves its scratch server's position at the branch point while the
+    policy's steps moved the server on; without this, the next step asked of that timeline
+    would step on from the wrong state (and fail its digest check). A workaround reaching into
+    the timeline's private scratch state, tolerant of its absence.
+    """
+    scratch = getattr(timeline, "_scratch", None)
+    if scratch is not None and hasattr(scratch, "position"):
+        scratch.position = None
 
 
 def _step(timeline: Timeline, step: int) -> int:

@@ -443,6 +443,13 @@ def _replay_inspect(args: argparse.Namespace) -> int:
         print("rlenv replay: --inspect re-simulates on scratch servers of its own; it takes no "
               "--address", file=sys.stderr)
         return 2
+    from rlenv_client.replay import EpisodeFile
+
+    for path in args.file:
+        if args.target is None and EpisodeFile.load(path).target is None:
+            print(f"rlenv replay: {path} names no target; pass --target MODULE:CLASS",
+                  file=sys.stderr)
+            return 2
     policies, unavailable = {}, {}
     for path in args.policy:
         name = Path(path).stem

@@ -269,9 +269,13 @@ def test_rlenv_replay_inspect_serves_the_recordings_until_stdin_closes(
         process = inspector._process
     assert process.returncode is not None  # closing its standard input ended it
     run = [sys.executable, "-m", "rlenv", "replay"]
+    untargeted = tmp_path / "untargeted.rlenv"
+    episode = EpisodeFile.load(recording)
+    EpisodeFile(None, episode.snapshot, episode.observations).save(untargeted)
     for arguments, words in (([str(recording), str(second)], "one file at a time"),
                              ([str(recording), "--policy", "x.onnx"], "go with --inspect"),
                              ([str(tmp_path / "nothing.rlenv"), "--inspect"], "nothing.rlenv"),
+                             ([str(untargeted), "--inspect"], "pass --target"),
                              ([str(recording), "--inspect", "--policy",
                                str(tmp_path / "absent.onnx")], "absent.onnx")):
         done = subprocess.run(run + arguments, capture_output=True, text=True, timeout=60,

@@ -7,7 +7,7 @@
 "use strict";
 
 const PLAY_INTERVAL = 100;   // ms between steps while playing
-const RECENT_INTERVAL = 2000;
+const RECENT_INTERVAL = 5000;  // the recent episodes of the watched instance
 
 const timeline = {
   active: false,       // the page shows a timeline (the live loops stand aside)

@@ -16,6 +16,7 @@ from types import FrameType
 
 from rlenv.protocol.errors import RlenvError
 from rlenv.serving.endpoint import DEFAULT_HOST, Limits
+from rlenv.serving.recent import KEEP_EPISODES
 from rlenv.serving.target_hints import explain_target_error
 
 __all__ = ["main", "serve_command"]
@@ -45,6 +46,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                        help="ticks follow the wall clock; actions apply when they arrive")
     serve.add_argument("--record-dir", type=Path, default=None, metavar="DIR",
                        help="let clients record videos into DIR (configure record='name.mp4')")
+    serve.add_argument("--keep-episodes", type=int, default=KEEP_EPISODES, metavar="N",
+                       help="keep each instance's last N finished episodes as recordings, for "
+                       "the inspector's timeline (client.episodes()); 0: none (default "
+                       f"{KEEP_EPISODES})")
     serve.add_argument("--lifeline", type=int, default=None, metavar="FD",
                        help="exit when this inherited pipe closes (set by ServerProcess)")
     serve.add_argument("--token", default=os.environ.get("RLENV_TOKEN"),
@@ -278,7 +283,8 @@ def _serve(args: argparse.Namespace) -> int:
                     token=args.token, limits=limits, instances=args.instances,
                     record_dir=args.record_dir, real_time=args.real_time,
                     per_client=args.per_client, policies=dict(args.policy),
-                    max_episode_steps=args.max_episode_steps)
+                    max_episode_steps=args.max_episode_steps,
+                    keep_episodes=args.keep_episodes)
     with server:
         inspector = None
         try:  # Ctrl-C once it listens (however soon) ends it with status 0

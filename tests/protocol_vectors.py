@@ -546,6 +546,29 @@ def _inspector(recording: Recording) -> None:
                       "only the episodes numbered 1 and later", "none yet")
 
 
+@scenario("episodes.json", "Recent episodes, fetched by an observer (protocol 2.5)", CARTPOLE,
+          "--keep-episodes", "2")
+def _episodes(recording: Recording) -> None:
+    controller = recording.connect()
+    controller.hello()
+    controller.request({"id": 1, "reset": {"seed": 0}}, "the controller starts an episode")
+    controller.request({"id": 2, "action": f4(0.5)}, "and steps once")
+    controller.request({"id": 3, "reset": {"seed": 1}}, "a reset finishes it (cut short)")
+    controller.request({"id": 4, "action": f4(-0.5)}, "one step")
+    controller.request({"id": 5, "action": f4(0.5), "repeat_action": 2}, "another, 2 ticks")
+    controller.request({"id": 6, "reset": {"seed": 2}}, "the second finished")
+    controller.request({"id": 7, "action": f4(0.0)}, "one step")
+    controller.request({"id": 8, "reset": {"seed": 3}}, "the third finished: the server keeps "
+                       "2 (--keep-episodes 2), the first is dropped")
+    observer = recording.connect()
+    observer.hello()
+    observer.request({"id": 1, "episodes": {}}, "the kept episodes: no control taken",
+                     "info.episodes: the second and third, oldest first, each a snapshot "
+                     "and how it ended")
+    observer.request({"id": 2, "episodes": {"last": 1}}, "only the most recent one")
+    observer.request({"id": 3, "episodes": {"last": 0}}, "a bad argument", "bad_request")
+
+
 @scenario("empty_request.json", "An empty request and a nil action", shared=True)
 def _empty(recording: Recording) -> None:
     link = recording.connect()

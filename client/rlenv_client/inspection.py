@@ -2,7 +2,8 @@
 
 :class:`Inspection` holds the requests an inspector makes (any client may, whoever controls
 the environment): snapshots and restores, the node tree and exported properties (read and set),
-configuration changes, episode statistics, draw lists and rendered frames. It is part of every
+configuration changes, episode statistics, the last finished episodes as recordings, draw
+lists and rendered frames. It is part of every
 :class:`~rlenv_client.base.BaseClient`, whose ``_call`` carries its requests.
 """
 
@@ -13,15 +14,21 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from rlenv.protocol import ErrorReply, Request, Response
+from rlenv.protocol import ErrorReply, Hello, Request, Response
+from rlenv.protocol.errors import ErrorCode, RemoteError
+from rlenv_client.replay import EpisodeFile
 
-__all__ = ["Inspection", "config_request"]
+__all__ = ["EPISODES_SINCE", "Inspection", "config_request", "episode_files"]
+
+EPISODES_SINCE = (2, 5)
+"""The protocol version that brought the ``episodes`` part (:meth:`Inspection.episodes`)."""
 
 
 class Inspection:
     """The inspection requests of a client (see the module docstring)."""
 
     if TYPE_CHECKING:  # what BaseClient provides
+        hello: Hello
         _observation_request: Mapping[str, Any]
 
         def _call(self, **parts: Any) -> Response: ...
@@ -75,6 +82,35 @@ class Inspection:
         """
         response = self._call(restore=snapshot, observation=self._observation_request)
         return self._observation(response), self._info(response)
+
+    def episodes(self, last: int | None = None) -> list[EpisodeFile]:
+        """The environment's last finished episodes, as recordings, oldest first.
+
+        The server keeps each instance's last few (``rlenv serve --keep-episodes N``, 8 by
+        default; see :mod:`rlenv.serving.recent`) at no cost to the steps; any client may ask,
+        an observer beside a trainer included (protocol 2.5, the ``episodes`` part). Each
+        snapshot restores the episode's start on any server of the environment and replays to
+        the observations the episode had.
+
+        Args:
+            last: only the ``last`` most recent ones (an integer >= 1); all kept if ``None``.
+
+        Returns:
+            One :class:`~rlenv_client.replay.EpisodeFile` per episode: ``target`` the server's
+            (``None`` if it cannot name one: pass yours to whatever replays it), its
+            ``snapshot``, ``observations=[]`` (the server keeps no digests: not recorded), and
+            how it ended (``terminated``, ``truncated``; both false when a reset cut it short).
+
+        Raises:
+            RemoteError: ``bad_request``: the server speaks a protocol older than 2.5, or
+                ``last`` is not an integer >= 1.
+        """
+        hello = self.hello
+        if hello.protocol < EPISODES_SINCE:
+            raise RemoteError(ErrorCode.BAD_REQUEST, "the server speaks protocol {}.{}; recent "
+                              "episodes need 2.5".format(*hello.protocol))
+        part = {} if last is None else {"last": last}
+        return episode_files(self._call(episodes=part).info["episodes"], hello.target)
 
     def tree(self) -> list[dict[str, Any]]:
         """The environment's node tree: every node's path, type and exported properties."""
@@ -145,6 +181,12 @@ class Inspection:
         """
         frame = np.asarray(self._part(self._response(reply), "render"))
         return frame if frame.flags.writeable else frame.copy()
+
+
+def episode_files(entries: list[Mapping[str, Any]], target: str | None) -> list[EpisodeFile]:
+    """The ``episodes`` part's answer (``info["episodes"]``) as recordings of ``target``."""
+    return [EpisodeFile(target, dict(entry["snapshot"]), [], bool(entry["terminated"]),
+                        bool(entry["truncated"])) for entry in entries]
 
 
 def config_request(environment: Mapping[str, Any], agent: Mapping[str, Any] | None,

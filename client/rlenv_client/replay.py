@@ -20,12 +20,14 @@ import hashlib
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium
 
 from rlenv.protocol import pack, unpack
-from rlenv_client.base import BaseClient
+
+if TYPE_CHECKING:  # only named: base.py's Inspection builds EpisodeFiles
+    from rlenv_client.base import BaseClient
 
 __all__ = ["EpisodeFile", "RecordEpisodes", "ReplayResult", "Trajectory", "digest",
            "next_episode_path", "replay"]

@@ -44,7 +44,7 @@ __all__ = [
     "StepsResponse",
 ]
 
-PROTOCOL_VERSION: Final = (2, 4)
+PROTOCOL_VERSION: Final = (2, 5)
 """(major, minor). Peers with different majors refuse each other; a newer minor only adds."""
 
 _REWARD = np.dtype("<f8")
@@ -61,7 +61,9 @@ class Hello:
     largest request frame), ``max_first_frame_size`` (the same, until the first request),
     ``max_reply_size`` (the largest frame it sends), ``frame_deadline``, ``idle_timeout``
     (``None``: never) and ``write_timeout`` in seconds, and ``max_connections``. Empty from a
-    2.0 server.
+    2.0 server. ``target`` (protocol 2.5) is the ``MODULE:CLASS`` another server of the same
+    environment is started with (``rlenv serve TARGET``), or ``None`` when the server cannot
+    name one (an environment object, a class defined in ``__main__``) or is older.
     """
 
     environment: str
@@ -75,6 +77,7 @@ class Hello:
     token_required: bool = False
     instances: int = 1
     limits: dict[str, Any] = field(default_factory=dict)
+    target: str | None = None
     protocol: tuple[int, int] = PROTOCOL_VERSION
 
     def to_wire(self) -> dict[str, Any]:
@@ -93,6 +96,7 @@ class Hello:
                 "token_required": self.token_required,
                 "instances": self.instances,
                 "limits": self.limits,
+                "target": self.target,
             }
         }
 
@@ -128,10 +132,18 @@ class Hello:
                 token_required=bool(body.get("token_required", False)),
                 instances=int(body.get("instances", 1)),
                 limits=dict(body.get("limits", {})),
+                target=_target(body.get("target")),
                 protocol=(int(version[0]), int(version[1])),
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise RemoteProtocolError(f"invalid hello: {exc!r}") from None
+
+
+def _target(value: Any) -> str | None:
+    """A hello's target: ``MODULE:CLASS``, or nil (absent from servers before 2.5)."""
+    if value is not None and not isinstance(value, str):
+        raise TypeError(f"target must be a string or nil, got {value!r:.80}")
+    return value
 
 
 def _size(value: Any) -> tuple[int, int] | None:

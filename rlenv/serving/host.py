@@ -35,8 +35,24 @@ from rlenv.serving.lean import LeanSteps
 from rlenv.serving.onnx_policy import OnnxPolicy
 from rlenv.serving.parts import HostPart, dispatch, plan_for, shape_of, takes_control
 from rlenv.serving.policy_driver import DrivenAgents, PolicyDriver
+from rlenv.serving.recent import KEEP_EPISODES
 
-__all__ = ["Host", "Prepared"]
+__all__ = ["Host", "Prepared", "target_of"]
+
+
+def target_of(environment: RLEnvironment | type[RLEnvironment] | str) -> str | None:
+    """The ``MODULE:CLASS`` another server of this environment is started with, if there is one.
+
+    ``None`` for an environment object (built by code of its own) and for a class that
+    :func:`~rlenv.serving.instance.load_environment` cannot find by name (defined in
+    ``__main__``, or inside a function or another class).
+    """
+    if isinstance(environment, str):
+        return environment
+    if not isinstance(environment, type):
+        return None
+    module, name = environment.__module__, environment.__qualname__
+    return None if module == "__main__" or "." in name or "<" in name else f"{module}:{name}"
 
 
 class Prepared:
@@ -75,6 +91,8 @@ class Host:
         policies: policy files that drive agents, by agent name (one instance, lockstep; see
             :mod:`rlenv.serving.policy_driver`).
         max_episode_steps: with every agent driven, steps after which an episode is cut short.
+        keep_episodes: how many finished episodes each instance keeps as recordings (0:
+            none; see :mod:`rlenv.serving.recent`).
 
     Attributes:
         driver: plays episodes between requests when policies drive every agent, else
@@ -92,14 +110,16 @@ class Host:
                  *, clock: Callable[[], float] = time.monotonic,
                  record_dir: Path | None = None, real_time: bool = False,
                  policies: Mapping[str, OnnxPolicy] | None = None,
-                 max_episode_steps: int | None = None) -> None:
+                 max_episode_steps: int | None = None,
+                 keep_episodes: int = KEEP_EPISODES) -> None:
+        target = target_of(environment)
         if isinstance(environment, str):
             environment = load_environment(environment)
         if count < 1:
             raise ValueError("a host holds at least one instance")
         if count > 1 and not isinstance(environment, type):
             raise TypeError("several instances need the environment class, not an instance")
-        self.instances = [Instance(environment, dispatch, clock, record_dir)
+        self.instances = [Instance(environment, dispatch, clock, record_dir, keep_episodes)
                           for _ in range(count)]
         first = self.instances[0]
         self.hello = Hello(
@@ -112,6 +132,7 @@ class Host:
             render_modes=("rgb_array",),
             render_size=first.environment.render_size,
             instances=count,
+            target=target,
         )
         self.steps_action_space = batch_space(first.action_space, count)
         self.steps_action = compile_check(self.steps_action_space, "steps.action")

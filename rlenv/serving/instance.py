@@ -45,6 +45,7 @@ from rlenv.protocol.errors import ErrorCode, RequestError
 from rlenv.serving import inspector
 from rlenv.serving.actions import ActionCheck
 from rlenv.serving.observing import Observer, check_text_keys
+from rlenv.serving.recent import KEEP_EPISODES, RecentEpisodes
 from rlenv.serving.settings import Settings
 from rlenv.serving.snapshots import EpisodeLog
 from rlenv.serving.stats import EpisodeStats
@@ -123,8 +124,10 @@ class Instance:
             :func:`rlenv.serving.parts.dispatch`).
         clock: the tree's clock, for real-time mode (tests pass a manual one).
         record_dir: where clients may have the environment record videos (``None``: nowhere).
+        keep_episodes: how many finished episodes to keep as recordings (:attr:`recent`).
 
     Attributes:
+        recent: the last finished episodes' logs (:mod:`rlenv.serving.recent`).
         broken: why the next reset rebuilds the environment from its class (user code raised
             while serving the controller), or ``None``.
 
@@ -135,7 +138,7 @@ class Instance:
 
     def __init__(self, environment: RLEnvironment | type[RLEnvironment] | str,
                  dispatch: Dispatch, clock: Callable[[], float] = time.monotonic,
-                 record_dir: Path | None = None) -> None:
+                 record_dir: Path | None = None, keep_episodes: int = KEEP_EPISODES) -> None:
         if isinstance(environment, str):
             environment = load_environment(environment)
         self._class: type[RLEnvironment] | None = None  # what a rebuild builds (or none)
@@ -158,6 +161,7 @@ class Instance:
         self.state = Episode.NOT_STARTED
         self._no_episode = "no episode has started; reset first"  # why, when NOT_STARTED
         self.log = EpisodeLog()
+        self.recent = RecentEpisodes(keep_episodes)
         self.stats = EpisodeStats([a.name for a in self.agents] if self.multi_agent else None)
         self._before_sets: dict[tuple[Node, str], Any] = {}  # what inspect sets replaced
         self.replaying = False  # restoring a snapshot: the episode moves on silently
@@ -355,6 +359,8 @@ class Instance:
     def set_real_time(self, value: bool) -> None:
         """Switch between real time (ticks follow the clock) and lockstep."""
         self.tree.real_time = value
+        if value:
+            self.log.timed = True
         self.tree.paused = not (value and self.state is Episode.RUNNING and
                                 not self._ended_unseen)
 
@@ -378,14 +384,20 @@ class Instance:
         self.checked_action = ActionCheck(self.agents, self.action_space, driven.names)
 
     def begin_episode(self, seed: int | None, options: Mapping[str, Any]) -> None:
-        """Reset: undo ``inspect`` sets, seed the generator (if given), start a new episode."""
+        """Reset: undo ``inspect`` sets, seed the generator (if given), start a new episode.
+
+        The episode under way is finished: :attr:`recent` may keep its log.
+        """
         environment = self.environment
+        if self.log.started and self.recent.keep:
+            self._finish_episode()
         for (node, name), value in reversed(self._before_sets.items()):
             setattr(node, name, value)
         self._before_sets.clear()
         if seed is not None:
             environment.np_random, _ = seeding.np_random(seed)
         self.log.begin(self.settings.capture(), environment.np_random, options)
+        self.log.timed = self.tree.real_time
         self.stats.begin()
         for agent in self.agents:
             agent.reward = 0.0
@@ -398,6 +410,20 @@ class Instance:
         tree.paused = not tree.real_time
         self.state = Episode.RUNNING
         environment._reset(options)
+
+    def _finish_episode(self) -> None:
+        """Hand the episode's log to :attr:`recent` (unless an error stopped the episode)."""
+        if self.state is Episode.NOT_STARTED:  # an environment_error: its replay would fail
+            return
+        agents = self.agents
+        if self.multi_agent:  # as an answer reports them
+            ended = all(agent.terminated or agent.truncated for agent in agents)
+            terminated = ended and any(agent.terminated for agent in agents)
+            truncated = ended and not terminated
+        else:
+            terminated, truncated = agents[0].terminated, agents[0].truncated
+        if self.recent.finished(self.log, bool(terminated), bool(truncated)):
+            self.log = EpisodeLog()
 
     def check_can_act(self) -> None:
         """Refuse a step before the first reset or after the episode ended.

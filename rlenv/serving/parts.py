@@ -245,6 +245,31 @@ class Snapshot(Part):
         instance.answer.info = {"snapshot": instance.log.snapshot()}  # type: ignore[union-attr]
 
 
+class Episodes(Part):
+    """``{}`` or ``{"last": n}``: the instance's last finished episodes, as snapshots (2.5).
+
+    See :mod:`rlenv.serving.recent`: ``info["episodes"]`` lists them oldest first, each
+    ``{"snapshot", "terminated", "truncated", "steps"}`` (``[]`` when the server keeps none).
+    It takes no control and needs no episode: any client may ask, at any time.
+    """
+
+    name = "episodes"
+    alone = True
+    _KEYS = frozenset({"last"})
+
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
+              where: str) -> Any:
+        episodes = _map(parts["episodes"], "episodes", where)
+        check_keys(episodes, self._KEYS, "episodes")
+        last = episodes.get("last")
+        if last is not None and (type(last) is not int or last < 1):
+            raise _bad(f"episodes.last must be an integer >= 1, got {last!r:.40}")
+        return last
+
+    def apply(self, instance: Instance, value: Any, request: Plan) -> None:
+        instance.answer.info = {"episodes": instance.recent.to_wire(value)}  # type: ignore[union-attr]
+
+
 class Restore(Part):
     """A snapshot: check everything in it, then reset and replay it."""
 
@@ -676,8 +701,8 @@ def _reset_mask(mask: Any, count: int) -> list[bool]:
 
 PARTS: dict[str, Part | HostPart] = {
     part.name: part for part in (
-        Restore(), Inspect(), Snapshot(), EditLevel(), Config(), Reset(), RepeatAction(),
-        Action(), Observation(), Batch(), Steps())
+        Restore(), Inspect(), Snapshot(), Episodes(), EditLevel(), Config(), Reset(),
+        RepeatAction(), Action(), Observation(), Batch(), Steps())
 }
 """Every kind of request part, in the order they apply."""
 

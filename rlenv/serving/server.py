@@ -11,6 +11,7 @@ from rlenv.serving.endpoint import DEFAULT_HOST, Endpoint, Limits
 from rlenv.serving.host import Host
 from rlenv.serving.onnx_policy import OnnxPolicy
 from rlenv.serving.per_client import HostPerClient
+from rlenv.serving.recent import KEEP_EPISODES
 
 __all__ = ["Server"]
 
@@ -47,6 +48,9 @@ class Server:
             --policy``; see :mod:`rlenv.serving.policy_driver`). With every agent driven, the
             server plays episodes itself and clients may only observe.
         max_episode_steps: steps after which a policy-driven episode is cut short.
+        keep_episodes: how many finished episodes each instance keeps as recordings, for
+            clients to fetch (the ``episodes`` part; ``rlenv serve --keep-episodes``); 0 keeps
+            none.
 
     Attributes:
         host: the instances and how requests reach them (with ``per_client``, the hosts of
@@ -64,12 +68,14 @@ class Server:
         limits: Limits | None = None, instances: int = 1, record_dir: Path | None = None,
         real_time: bool = False, per_client: bool = False,
         policies: Mapping[str, str | Path] | None = None, max_episode_steps: int | None = None,
+        keep_episodes: int = KEEP_EPISODES,
     ) -> None:
         loaded = {agent: OnnxPolicy(path) for agent, path in (policies or {}).items()}
 
         def build() -> Host:
             return Host(environment, instances, record_dir=record_dir, real_time=real_time,
-                        policies=loaded, max_episode_steps=max_episode_steps)
+                        policies=loaded, max_episode_steps=max_episode_steps,
+                        keep_episodes=keep_episodes)
 
         if per_client and not isinstance(environment, str | type):
             raise TypeError("a server per client needs the environment class, not an instance")

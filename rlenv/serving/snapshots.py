@@ -48,6 +48,7 @@ class EpisodeLog:
         self.events: list[list[Any]] = []
         self.started = False
         self.overflowed = False  # the episode has more events than a snapshot may hold
+        self.timed = False  # it ran in real time, at least for a while (no replay gives it)
 
     @property
     def config(self) -> dict[str, dict[str, Any]]:
@@ -63,6 +64,7 @@ class EpisodeLog:
         self.events = []
         self.started = True
         self.overflowed = False
+        self.timed = False
 
     def configured(self, config: Mapping[str, Any]) -> None:
         """Configuration applied during the episode."""

@@ -2,12 +2,13 @@
 
 A :class:`Watcher` holds one connection per server, opened as any client's would be (the token
 stays here, never in the page). It only sends what observers may send: ``observation``
-(``draw``, ``agent``), ``snapshot`` and ``inspect``, so it never takes control; the trainer's
-steps go on, and a change it makes applies between two of them. Every call is answered from a
-fresh request (nothing is cached, so a slow page drops frames, never queues them); a lost
-connection is reconnected on the next call (or at a new address, see :meth:`Watcher.follow`).
-A server counts as restarted when it moved to a new address, or when after a reconnection its
-step count went back (another process: an idle connection the server closed is not a restart).
+(``draw``, ``agent``), ``snapshot``, ``episodes`` and ``inspect``, so it never takes control;
+the trainer's steps go on, and a change it makes applies between two of them. Every call is
+answered from a fresh request (nothing is cached, so a slow page drops frames, never queues
+them); a lost connection is reconnected on the next call (or at a new address, see
+:meth:`Watcher.follow`). A server counts as restarted when it moved to a new address, or when
+after a reconnection its step count went back (another process: an idle connection the server
+closed is not a restart).
 """
 
 from __future__ import annotations
@@ -25,6 +26,8 @@ from rlenv.protocol import ErrorReply, Request, Response
 from rlenv.protocol.errors import RemoteError
 from rlenv_client.addresses import parse_address
 from rlenv_client.client import Client
+from rlenv_client.inspection import EPISODES_SINCE, episode_files
+from rlenv_client.replay import EpisodeFile
 from rlenv_client.session import LOST
 
 __all__ = ["InspectorError", "Watcher", "to_json"]
@@ -162,6 +165,23 @@ class Watcher:
     def snapshot(self, server: int, instance: int) -> dict[str, Any]:
         """The episode so far, as JSON-ready data."""
         return to_json(self._ask(server, instance, {"snapshot": {}}).info["snapshot"])
+
+    def recent_episodes(self, server: int, instance: int) -> list[EpisodeFile]:
+        """The instance's last finished episodes, as recordings, oldest first.
+
+        See :meth:`rlenv_client.inspection.Inspection.episodes`: ``target`` is the server's
+        (``None`` if it cannot name one), ``observations`` empty (not recorded).
+
+        Raises:
+            InspectorError: no such server or instance (404), a server older than protocol 2.5
+                (422), or one that cannot be reached (503).
+        """
+        hello = self._client(server).hello
+        if hello.protocol < EPISODES_SINCE:
+            raise InspectorError(422, "server {} speaks protocol {}.{}; recent episodes need "
+                                 "2.5".format(server, *hello.protocol))
+        reply = self._ask(server, instance, {"episodes": {}})
+        return episode_files(reply.info["episodes"], hello.target)
 
     def address(self, server: int) -> str:
         """The ``HOST:PORT`` of ``server`` (a controller of its own connects there).

@@ -402,39 +402,32 @@ def test_time_travel_branches_with_keys_and_a_policy_side_by_side(failure: Path,
 
 
 def test_time_travel_on_a_live_run_opens_a_recent_episode(server: ServerProcess,
-                                                          browser: Browser,
-                                                          failure: Path) -> None:
-    """The live page lists the watched instance's recent episodes and opens one as a timeline
-    (here a watcher keeping the docs' failure stands for the server's own recent episodes)."""
-
-    class Keeping(Watcher):
-        def recent_episodes(self, server: int, instance: int) -> list[EpisodeFile]:
-            kept = EpisodeFile.load(failure)
-            return [EpisodeFile(kept.target, kept.snapshot, [], kept.terminated,
-                                kept.truncated)]
-
-    inspector = InspectorServer(Keeping([f"{server.host}:{server.port}"]))
-    inspector.start()
-    try:
-        with Trainer(server.host, server.port) as trainer:
-            browser.open(inspector.url)
-            browser.wait_for("window.inspector.frames > 3", "no live frame")
-            item = "document.querySelector('#recent-list li[data-episode=\"0\"]')"
-            assert "86 steps" in browser.wait_for(f"{item} && {item}.textContent",
-                                                  "no recent episode listed")
-            browser.evaluate(f"{item}.click()")
-            at(browser, 0)
-            assert not browser.evaluate("document.getElementById('timeline-live').hidden")
-            assert browser.evaluate("document.getElementById('recent').hidden")
-            frames = browser.evaluate("window.inspector.frames")
-            scrub(browser, 85)
-            key(browser, "ArrowRight")
-            at(browser, 86)
-            assert browser.evaluate("window.inspector.frames") == frames  # the live scene rests
-            browser.evaluate("document.getElementById('timeline-live').click()")
-            browser.wait_for(f"window.inspector.frames > {frames + 3}",
-                             "live frames did not resume")
-            browser.wait_for("!document.getElementById('recent').hidden", "no recent list again")
-            assert trainer.error is None
-    finally:
-        inspector.close()
+                                                          browser: Browser) -> None:
+    """The live page lists the watched instance's recent episodes (the server keeps its last 8)
+    and opens one as a timeline; Back to live returns to the live scene."""
+    with Trainer(server.host, server.port) as trainer, \
+            Inspector([f"{server.host}:{server.port}"]) as inspector:
+        wait_until(lambda: trainer.episodes > 3, "the trainer did not finish episodes")
+        browser.open(inspector.url)
+        browser.wait_for("window.inspector.frames > 3", "no live frame")
+        items = "document.querySelectorAll('#recent-list li[data-episode]')"
+        browser.wait_for(f"{items}.length >= 3", "no recent episodes listed")
+        text = browser.evaluate(f"[...{items}].pop().textContent")
+        steps = int(text.split(" · ")[1].split()[0])  # "episode 8 of 8 · 23 steps · terminated"
+        browser.evaluate(f"[...{items}].pop().click()")
+        at(browser, 0)  # found, though the trainer finished more episodes since the list
+        assert browser.evaluate("document.getElementById('scrubber').max") == str(steps)
+        assert not browser.evaluate("document.getElementById('timeline-live').hidden")
+        assert browser.evaluate("document.getElementById('recent').hidden")
+        frames = browser.evaluate("window.inspector.frames")
+        scrub(browser, steps - 1)
+        key(browser, "ArrowRight")
+        at(browser, steps)
+        assert "terminated" in browser.evaluate(
+            "document.getElementById('position').textContent")  # the pole fell: it was kept
+        assert browser.evaluate("window.inspector.frames") == frames  # the live scene rests
+        browser.evaluate("document.getElementById('timeline-live').click()")
+        browser.wait_for(f"window.inspector.frames > {frames + 3}",
+                         "live frames did not resume")
+        browser.wait_for("!document.getElementById('recent').hidden", "no recent list again")
+        assert trainer.error is None

@@ -13,11 +13,14 @@ from urllib.parse import urlsplit
 
 import numpy as np
 import pytest
-from inspector_http import fetch
+from conftest import wait_until
+from inspector_http import Trainer, fetch
 
 from examples.cartpole import TARGET, controller
 from rlenv_client.demonstrations import record
 from rlenv_client.inspector import Inspector, InspectorServer, Timelines, Watcher
+from rlenv_client.inspector.timelines import episode_id
+from rlenv_client.launcher import ServerProcess
 from rlenv_client.replay import EpisodeFile, digest
 from rlenv_client.timeline import Timeline
 
@@ -235,22 +238,27 @@ def test_recent_episodes_need_a_watcher_that_keeps_them(page: str, recording: Pa
         url = inspector.url
         listed = fetch(url, "api/timeline/recent?server=0&instance=0")[2]
         assert [e["steps"] for e in listed] == [20, 20]
+        assert listed[0]["id"] == listed[1]["id"] == episode_id(EpisodeFile.load(recording))
         status, info = post(url, "api/timeline/open", {"server": 0, "instance": 0,
-                                                       "episode": 1})
+                                                       "id": listed[1]["id"]})
         assert status == 200 and info["length"] == 20  # type: ignore[index]
-        assert info["origin"] == {"server": 0, "instance": 0, "recent": 1}  # type: ignore
+        assert info["origin"] == {"server": 0, "instance": 0,  # type: ignore[index]
+                                  "recent": listed[1]["id"]}
         state = fetch(url, f"api/timeline/step?timeline={info['timeline']}&step=3")[2]  # type: ignore
         with Timeline.open(recording) as reference:
             expected = reference.at(3).observation
         assert state["step"] == 3 and state["observation"]["Agent"]["numbers"] == [
             round(float(x), 5) for x in expected]
         status, again = post(url, "api/timeline/open", {"server": 0, "instance": 0,
-                                                        "episode": 0})
+                                                        "id": listed[0]["id"]})
         assert [t["timeline"] for t in fetch(url, "api/timelines")[2]["timelines"]] == [
             again["timeline"]]  # type: ignore[index]  # max_recent=1: the older one closed
         status, answer = post(url, "api/timeline/open", {"server": 0, "instance": 0,
-                                                         "episode": 2})
-        assert status == 404 and "keeps 2 recent episodes" in answer["error"]  # type: ignore
+                                                         "id": "0" * 32})
+        assert status == 404 and "keeps no episode" in answer["error"]  # type: ignore
+        status, answer = post(url, "api/timeline/open", {"server": 0, "instance": 0,
+                                                         "episode": 0})
+        assert status == 400 and "exactly" in answer["error"]  # type: ignore
     finally:
         inspector.close()
 
@@ -306,3 +314,36 @@ def test_an_onnx_policy_from_the_command_line_branches(recording: Path,
             "timeline": 0, "branch": 0, "step": 5, "policy": "steady", "max_steps": 8})
         assert status == 200 and made["branches"][1]["label"] == "policy steady"  # type: ignore
         assert 5 < made["branches"][1]["length"] <= 13  # type: ignore[index]
+
+
+def test_a_live_instances_recent_episodes_open_as_timelines(server: ServerProcess) -> None:
+    """Live mode against a real server keeping its last episodes (rlenv serve --keep-episodes)."""
+    inspector = InspectorServer(Watcher([f"{server.host}:{server.port}"]))
+    inspector.start()
+    try:
+        url = inspector.url
+        with Trainer(server.host, server.port) as trainer:
+            wait_until(lambda: trainer.episodes > 3, "the trainer did not finish episodes")
+            listed = fetch(url, "api/timeline/recent?server=0&instance=0")[2]
+            assert 3 <= len(listed) <= 8 and all(e["steps"] > 0 for e in listed)
+            assert all(e["target"] == TARGET for e in listed)
+            newest = listed[-1]
+            before = trainer.episodes  # the server drops it once 8 more have finished ...
+            wait_until(lambda: trainer.episodes > before + 9, "the trainer stopped")
+            ids = [e["id"] for e in fetch(url, "api/timeline/recent?server=0&instance=0")[2]]
+            assert newest["id"] not in ids  # ... and the page still opens what it listed
+            status, info = post(url, "api/timeline/open", {"server": 0, "instance": 0,
+                                                           "id": newest["id"]})
+            assert status == 200, info
+            number, length = info["timeline"], info["length"]  # type: ignore[index]
+            assert length == newest["steps"]
+            state = fetch(url, f"api/timeline/step?timeline={number}&step={length}")[2]
+            assert state["step"] == length and state["draw"]["shapes"]
+            assert state["terminated"] or state["truncated"]  # it ended there: it was kept
+            status, made = post(url, "api/timeline/branch", {"timeline": number, "branch": 0,
+                                                             "step": 1, "key": "ArrowRight"})
+            assert status == 200 and made["branches"][1]["length"] == 2  # type: ignore[index]
+            assert trainer.error is None
+        assert fetch(url, "api/timeline/recent?server=0&instance=1")[0] == 404
+    finally:
+        inspector.close()

@@ -37,12 +37,13 @@ from rlenv_client.replay import EpisodeFile, digest
 from rlenv_client.session import LOST
 from rlenv_client.timeline import Timeline
 
-__all__ = ["MAX_BRANCH_STEPS", "Timelines", "load_policy"]
+__all__ = ["MAX_BRANCH_STEPS", "Timelines", "episode_id", "load_policy"]
 
 MAX_BRANCH_STEPS = 100_000
 """The most steps a policy's branch may take (``max_steps``)."""
 
 Policy = Callable[[Any], Any]
+_LISTED = 32  # recent episodes remembered per instance once the page was shown them
 
 
 def load_policy(path: str | Path) -> Policy:
@@ -125,6 +126,7 @@ class Timelines:
         self._max_recent = max_recent
         self._lock = threading.Lock()  # the registry; each root has its own
         self._roots: dict[int, _Root] = {}
+        self._listed: dict[tuple[int, int], dict[str, EpisodeFile]] = {}
         self._next = 0
         for path in paths:
             self.add_file(path)
@@ -145,25 +147,46 @@ class Timelines:
         return self._add(name, lambda: episode, dict(origin))
 
     def open_recent(self, episodes: list[EpisodeFile], server: int, instance: int,
-                    index: int) -> dict[str, Any]:
-        """Offer the ``index``-th of an instance's recent ``episodes``; its description.
+                    identifier: str) -> dict[str, Any]:
+        """Offer the recent episode whose :func:`episode_id` is ``identifier``; its description.
 
-        The oldest recent one opened is closed past ``max_recent``.
+        An identifier, not a place in ``episodes``: the list moves on as episodes finish. It is
+        looked for in ``episodes`` (the server's now), then in those last :meth:`listed`. The
+        oldest recent one opened is closed past ``max_recent``.
 
         Raises:
-            InspectorError: 404, no such episode.
+            InspectorError: 404, no such episode (or no longer kept).
         """
-        if not 0 <= index < len(episodes):
-            raise InspectorError(404, f"instance {instance} of server {server} keeps "
-                                      f"{len(episodes)} recent episodes, not {index + 1}")
-        origin = {"server": server, "instance": instance, "recent": index}
-        number = self.add_episode(episodes[index], f"server {server} · instance {instance} · "
-                                  f"recent episode {index + 1}/{len(episodes)}", origin)
+        with self._lock:
+            listed = self._listed.get((server, instance), {})
+        found = [episode for episode in episodes if episode_id(episode) == identifier]
+        if not found and identifier in listed:
+            found = [listed[identifier]]
+        if not found:
+            raise InspectorError(404, f"instance {instance} of server {server} keeps no episode "
+                                      f"{identifier!r:.40} (any more: newer ones replaced it)")
+        origin = {"server": server, "instance": instance, "recent": identifier}
+        steps = sum(event[0] == "action" for event in found[0].snapshot["events"])
+        number = self.add_episode(found[0], f"server {server} · instance {instance} · "
+                                  f"recent episode of {steps} steps ({identifier[:6]})", origin)
         with self._lock:
             recent = [root for root in self._roots.values() if "recent" in root.origin]
         for root in recent[:max(0, len(recent) - self._max_recent)]:
             self._remove(root)
         return self.describe(number)
+
+    def listed(self, server: int, instance: int, episodes: list[EpisodeFile]) -> None:
+        """Remember the recent ``episodes`` the page was shown for an instance (the last 32).
+
+        :meth:`open_recent` finds them even once the server has dropped them (a fast trainer
+        finishes several episodes while a person reads the list).
+        """
+        with self._lock:
+            kept = self._listed.setdefault((server, instance), {})
+            for episode in episodes:
+                kept[episode_id(episode)] = episode
+            for identifier in list(kept)[:max(0, len(kept) - _LISTED)]:
+                del kept[identifier]  # the oldest listed first
 
     def list(self) -> dict[str, Any]:
         """Every timeline offered (number, name, origin, whether open), and the policies."""
@@ -478,6 +501,11 @@ class Timelines:
             raise InspectorError(400, str(error)) from None
         except (RuntimeError, RemoteError, *LOST) as error:
             raise InspectorError(422, f"the scratch server failed: {error}") from None
+
+
+def episode_id(episode: EpisodeFile) -> str:
+    """A recent episode's identifier: the digest of its snapshot (the same at every asking)."""
+    return digest(episode.snapshot)
 
 
 def _with_digests(episode: EpisodeFile, target: str | None) -> EpisodeFile:

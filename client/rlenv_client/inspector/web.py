@@ -26,8 +26,8 @@ a watched instance's recent episodes), ``GET api/timelines`` (those offered, the
 ``api/timeline`` (``?timeline=T``: its length, keys and tree of branches),
 ``api/timeline/step`` and ``api/timeline/ticks`` (``?timeline=T&branch=B&step=K``),
 ``api/timeline/compare`` (``?timeline=T&a=A&b=B&step=K``), ``api/timeline/recent``
-(``?server=S&instance=I``: the instance's last finished episodes) and ``POST
-api/timeline/open`` (``{"server", "instance", "episode"}``: a recent one as a timeline),
+(``?server=S&instance=I``: the instance's last finished episodes, each with its ``id``) and
+``POST api/timeline/open`` (``{"server", "instance", "id"}``: a recent one as a timeline),
 ``api/timeline/branch`` (``{"timeline", "branch", "step", "key"}``), ``api/timeline/extend``
 (``{"timeline", "branch", "key"}``) and ``api/timeline/policy`` (``{"timeline", "branch",
 "step", "policy", "max_steps"}``), under the same rules as an edit.
@@ -47,7 +47,7 @@ from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 from rlenv_client.inspector.control import Demonstrator
-from rlenv_client.inspector.timelines import Timelines
+from rlenv_client.inspector.timelines import Timelines, episode_id
 from rlenv_client.inspector.watch import InspectorError, Watcher
 from rlenv_client.origins import OriginPolicy
 
@@ -171,13 +171,16 @@ def _recent(watcher: Watcher, server: int, instance: int) -> list[Any]:
     return list(recent(server, instance))
 
 
-def _recent_list(watcher: Watcher, query: dict[str, list[str]]) -> list[dict[str, Any]]:
+def _recent_list(inspector: InspectorServer,
+                 query: dict[str, list[str]]) -> list[dict[str, Any]]:
     server, instance = _number(query, "server"), _number(query, "instance")
-    return [{"episode": index, "steps": sum(1 for e in episode.snapshot.get("events", ())
-                                            if e[0] == "action"),
+    episodes = _recent(inspector.watcher, server, instance)
+    inspector.timelines.listed(server, instance, episodes)
+    return [{"episode": index, "id": episode_id(episode),
+             "steps": sum(1 for e in episode.snapshot.get("events", ()) if e[0] == "action"),
              "terminated": episode.terminated, "truncated": episode.truncated,
              "target": episode.target}
-            for index, episode in enumerate(_recent(watcher, server, instance))]
+            for index, episode in enumerate(episodes)]
 
 
 _TIMELINE_GETS: dict[str, Callable[[Timelines, dict[str, list[str]]], Any]] = {
@@ -219,7 +222,7 @@ class _Handler(BaseHTTPRequestHandler):
         elif path in _TIMELINE_GETS:
             self._answer(lambda: _TIMELINE_GETS[path](self.server.timelines, query))
         elif path == "api/timeline/recent":
-            self._answer(lambda: _recent_list(self.server.watcher, query))
+            self._answer(lambda: _recent_list(self.server, query))
         elif path == "api/control":
             demonstrator = self.server.demonstrator
             self._send_json(200, {"enabled": False} if demonstrator is None else
@@ -280,16 +283,16 @@ class _Handler(BaseHTTPRequestHandler):
                      "max_steps"):
             if name in body and (type(body[name]) is not int or not 0 <= body[name] < 2**31):
                 raise InspectorError(400, f"{name} must be an integer >= 0")
-        for name in ("key", "policy"):
+        for name in ("key", "policy", "id"):
             if name in body and (not isinstance(body[name], str) or len(body[name]) > 64):
                 raise InspectorError(400, f"{name} must be a string (at most 64 characters)")
         return body
 
     def _open_recent(self) -> Any:
-        body = self._body("opening a recent episode", {"server", "instance", "episode"})
+        body = self._body("opening a recent episode", {"server", "instance", "id"})
         episodes = _recent(self.server.watcher, body["server"], body["instance"])
         return self.server.timelines.open_recent(episodes, body["server"], body["instance"],
-                                                 body["episode"])
+                                                 body["id"])
 
     def _branch_keys(self) -> Any:
         body = self._body("a key branch", {"timeline", "branch", "step", "key"})

@@ -499,7 +499,7 @@ async function refreshRecent() {
     return;
   }
   $("recent").hidden = false;
-  const signature = `${server}/${instance}:` + answer.map((e) => `${e.episode}:${e.steps}`).join("|");
+  const signature = `${server}/${instance}:` + answer.map((e) => e.id).join("|");
   if (timeline.recentSignature === signature) return;
   timeline.recentSignature = signature;
   const list = $("recent-list");
@@ -510,16 +510,16 @@ async function refreshRecent() {
     li.textContent = `episode ${episode.episode + 1} of ${answer.length} · ${episode.steps} steps` +
       (episode.terminated ? " · terminated" : episode.truncated ? " · truncated" : "");
     li.title = "open it as a timeline";
-    li.addEventListener("click", () => openRecent(server, instance, episode.episode));
+    li.addEventListener("click", () => openRecent(server, instance, episode.id));
     return li;
   }));
   if (!answer.length) list.replaceChildren(Object.assign(document.createElement("li"), {
     textContent: "no finished episode kept yet"}));
 }
 
-async function openRecent(server, instance, episode) {
+async function openRecent(server, instance, id) {
   try {
-    const info = await post("timeline/open", {server, instance, episode});
+    const info = await post("timeline/open", {server, instance, id});
     await refreshTimelines();
     await openTimeline(info.timeline);
   } catch (error) { timelineNote("timeline-status", error.message, true); $("timeline").hidden = false; }

@@ -8,6 +8,7 @@ from __future__ import annotations
 import subprocess
 import sys
 from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from urllib.parse import urlsplit
 
@@ -347,3 +348,21 @@ def test_a_live_instances_recent_episodes_open_as_timelines(server: ServerProces
         assert fetch(url, "api/timeline/recent?server=0&instance=1")[0] == 404
     finally:
         inspector.close()
+
+
+def test_concurrent_requests_on_one_timeline_are_taken_one_at_a_time(page: str) -> None:
+    """The page's requests arrive on several threads; a root's lock keeps its timeline whole."""
+    paths = [f"api/timeline/step?timeline=0&step={k}" for k in (20, 3, 17, 0, 9, 12, 5, 20)]
+    alone = [fetch(page, path)[2]["observation"] for path in paths]
+    status, _ = post(page, "api/timeline/branch", {"timeline": 0, "branch": 0, "step": 4,
+                                                   "key": "ArrowRight"})
+    assert status == 200
+    paths += ["api/timeline/step?timeline=0&branch=1&step=5",
+              "api/timeline/ticks?timeline=0&step=6",
+              "api/timeline/compare?timeline=0&a=0&b=1&step=5"]
+    with ThreadPoolExecutor(len(paths)) as pool:
+        together = list(pool.map(lambda path: fetch(page, path), paths * 2))
+    assert all(status == 200 for status, _, _ in together)
+    assert [answer["observation"] for _, _, answer in together[:8]] == alone
+    assert [answer["observation"] for _, _, answer in together[11:19]] == alone
+    assert together[10][2]["first_difference"] == 5

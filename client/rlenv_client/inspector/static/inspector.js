@@ -337,7 +337,7 @@ async function refreshStats() {
   }
   state.lastTotals = stats;
   const current = stats.current;
-  $("episode").textContent = current ? `episode ${stats.next}: return ${current.return.toFixed(2)}` +
+  if (!timeTravelling()) $("episode").textContent = current ? `episode ${stats.next}: return ${current.return.toFixed(2)}` +
     `, ${current.length} steps` + (current.returns ? " · " + Object.entries(current.returns)
       .map(([agent, r]) => `${agent} ${r.toFixed(2)}`).join(", ") : "") : "no episode under way";
   $("totals").textContent = `${stats.next} episodes · ${stats.steps} steps · ${stats.errors} errors` +

@@ -217,6 +217,9 @@ function showPosition() {
     (tick ? ` · tick ${tick.index}/${tick.count} of step ${tick.step}` : "") +
     ` · reward ${formatNumber(tick ? timeline.ticks.ticks[tick.index - 1].reward : state.reward)}` +
     end + (timeline.branch ? ` · branch #${timeline.branch}` : "");
+  $("fps").textContent = `time travel · ${timeline.info.name}`;
+  $("episode").textContent = tick ? `tick ${tick.index} of step ${tick.step}` :
+    `step ${timeline.step}`;
   const position = $("position").dataset;
   position.step = timeline.step;
   position.tick = tick ? tick.index : 0;

@@ -253,9 +253,11 @@ def save_screenshot(browser: Browser, name: str) -> None:
         Path(folder, name).write_bytes(base64.b64decode(data))
 
 
-def test_time_travel_scrubs_steps_ticks_and_plays_a_recording(failure: Path,
-                                                              browser: Browser) -> None:
-    with Inspector([], recordings=[failure]) as inspector:  # rlenv replay FILE --inspect
+def test_time_travel_scrubs_steps_ticks_and_plays_a_recording(failure: Path, browser: Browser,
+                                                              tmp_path: Path) -> None:
+    from examples.time_travel import record_failure
+    sooner = record_failure(tmp_path, bias=0.03)  # a second file: the pole falls at step 20
+    with Inspector([], recordings=[failure, sooner]) as inspector:  # rlenv replay ... --inspect
         browser.open(inspector.url)
         at(browser, 0)
         assert browser.evaluate("document.getElementById('scrubber').max") == "86"
@@ -320,6 +322,12 @@ def test_time_travel_scrubs_steps_ticks_and_plays_a_recording(failure: Path,
         browser.wait_for("document.getElementById('play').dataset.playing === 'false'",
                          "playing did not stop at the end")
         assert "terminated" in browser.evaluate("document.getElementById('position').textContent")
+        # the other file
+        browser.evaluate("""(() => { const s = document.getElementById('timeline-select');
+            s.value = '1'; s.dispatchEvent(new Event('change')); })()""")
+        browser.wait_for("window.timeline.number === 1 && "
+                         "document.getElementById('scrubber').max === '20'", "no second file")
+        at(browser, 0)
 
 
 def test_time_travel_branches_with_keys_and_a_policy_side_by_side(failure: Path,

@@ -14,6 +14,7 @@ tick, and branch: with the keys, or with :func:`~examples.cartpole.controller` a
 from __future__ import annotations
 
 import sys
+import threading
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -53,10 +54,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     path = record_failure(arguments[0] if arguments else "episodes")
     print(f"recorded {path}: rlenv replay {path} --inspect", flush=True)
     if inspect:
-        from rlenv_client.inspector import serve
+        from rlenv_client.inspector import inspect_recordings
 
-        serve([], token=None, port=0, follow_stdin=False, recordings=[path],
-              policies={"controller": controller}, ready=lambda line: print(line, flush=True))
+        page = inspect_recordings([path], policies={"controller": controller})  # says its URL
+        try:
+            threading.Event().wait()
+        except KeyboardInterrupt:
+            pass
+        finally:
+            page.close()
     return 0
 
 

@@ -19,7 +19,13 @@ from inspector_http import Trainer, fetch
 
 from examples.cartpole import TARGET, controller
 from rlenv_client.demonstrations import record
-from rlenv_client.inspector import Inspector, InspectorServer, Timelines, Watcher
+from rlenv_client.inspector import (
+    Inspector,
+    InspectorServer,
+    Timelines,
+    Watcher,
+    inspect_recordings,
+)
 from rlenv_client.inspector.timelines import episode_id
 from rlenv_client.launcher import ServerProcess
 from rlenv_client.replay import EpisodeFile, digest
@@ -63,6 +69,19 @@ def page(recording: Path) -> Iterator[str]:
         yield inspector.url
     finally:
         inspector.close()
+
+
+def test_inspect_recordings_serves_them_with_python_policies(recording: Path) -> None:
+    page = inspect_recordings([recording], policies={"push-left": push_left})
+    try:
+        assert fetch(page.url, "api/timelines")[2]["policies"] == ["push-left"]
+        status, made = post(page.url, "api/timeline/policy", {
+            "timeline": 0, "branch": 0, "step": 2, "policy": "push-left", "max_steps": 3})
+        assert status == 200 and made["branches"][1]["length"] <= 5  # type: ignore[index]
+        scratch = page.timelines._roots[0].timeline.server  # type: ignore[union-attr]
+    finally:
+        page.close()
+    assert scratch.process.poll() is not None  # closing the page ended the scratch server
 
 
 def page_recording(url: str) -> str:

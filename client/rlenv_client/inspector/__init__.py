@@ -41,7 +41,7 @@ if TYPE_CHECKING:
     from rlenv_client.session import Session
 
 __all__ = ["Demonstrator", "Inspector", "InspectorError", "InspectorServer", "Timelines",
-           "Watcher", "inspect_sessions", "serve"]
+           "Watcher", "inspect_recordings", "inspect_sessions", "serve"]
 
 logger = logging.getLogger(__name__)
 
@@ -160,6 +160,26 @@ def inspect_sessions(sessions: Sequence[Session]) -> Inspector:
         session.on_restart = follow
     logger.warning("rlenv inspector: %s", inspector.url)
     return inspector
+
+
+def inspect_recordings(paths: Sequence[str | Path], *,
+                       policies: Mapping[str, Callable[[Any], Any]] | None = None,
+                       target: str | None = None, port: int = 0) -> InspectorServer:
+    """The page with ``paths`` as timelines, served by a thread of this process.
+
+    What ``rlenv replay FILE ... --inspect`` serves, with Python callables as policies to
+    branch with (``policies={"name": callable}``, each ``callable(observation) -> action``).
+    Its address (:attr:`InspectorServer.url`) is logged as a warning; :meth:`~InspectorServer.
+    close` ends it and the timelines' scratch servers.
+
+    Raises:
+        ValueError: a file is not an rlenv episode.
+    """
+    server = InspectorServer(Watcher([]), port=port, timelines=Timelines(
+        paths, policies=policies, target=target))
+    server.start()
+    logger.warning("rlenv inspector: %s", server.url)
+    return server
 
 
 def _read_url(stdout: IO[str], timeout: float, process: subprocess.Popen[str]) -> str:

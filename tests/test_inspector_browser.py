@@ -8,7 +8,6 @@ pictures of docs/time-travel.md there (``make screenshot`` sets both).
 
 from __future__ import annotations
 
-import base64
 import json
 import os
 from collections.abc import Iterator
@@ -248,9 +247,14 @@ def save_screenshot(browser: Browser, name: str) -> None:
     """The whole page as ``$RLENV_SCREENSHOT_DIR/NAME`` (``make screenshot`` sets it)."""
     folder = os.environ.get("RLENV_SCREENSHOT_DIR")
     if folder:
-        data = browser.command("Page.captureScreenshot", session=True, format="png",
-                               captureBeyondViewport=True)["data"]
-        Path(folder, name).write_bytes(base64.b64decode(data))
+        height = browser.evaluate("document.documentElement.scrollHeight")
+        browser.command("Emulation.setDeviceMetricsOverride", session=True, width=1400,
+                        height=height, deviceScaleFactor=1, mobile=False)  # no scroll bar
+        try:
+            Path(folder, name).write_bytes(browser.screenshot())
+        finally:
+            browser.command("Emulation.setDeviceMetricsOverride", session=True, width=1400,
+                            height=1000, deviceScaleFactor=1, mobile=False)
 
 
 def test_time_travel_scrubs_steps_ticks_and_plays_a_recording(failure: Path, browser: Browser,
@@ -403,6 +407,9 @@ def test_time_travel_branches_with_keys_and_a_policy_side_by_side(failure: Path,
         rows = browser.evaluate("[...document.querySelectorAll('#compare-table tr')].map("
                                 "r => [...r.cells].map(c => c.textContent))")
         assert rows[1] == ["reward", "2", "4", "2"]  # the episode's last step: half a reward
+        for plotted in ("compare-rewards", "compare-returns"):  # 87 and 161 steps' points
+            assert browser.evaluate(f"document.getElementById('{plotted}').dataset.points") \
+                == "248"
         save_screenshot(browser, "time-travel-branches.png")
         assert browser.console == [] or not any("rror" in line for line in browser.console)
     finally:

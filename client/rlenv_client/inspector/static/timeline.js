@@ -433,12 +433,15 @@ function showComparison(answer) {
     `first difference at step ${first}` + ` · returns ${formatNumber(answer.a.return)} and ` +
     `${formatNumber(answer.b.return)}`);
   const cumulative = (rewards) => { let total = 0; return rewards.map((r, i) => [i, total += r]); };
-  const canvas = $("compare-returns");
-  plot(canvas, "return so far, step by step", [
-    {name: `A #${answer.a.branch}`, points: cumulative(answer.a.rewards)},
-    {name: `B #${answer.b.branch}`, points: cumulative(answer.b.rewards)}]);
-  markSteps(canvas, Math.max(answer.a.rewards.length, answer.b.rewards.length) - 1,
-            [[answer.step, "#1d2530"], ...(first === null ? [] : [[first, "#b3261e"]])]);
+  const each = (rewards) => rewards.map((r, i) => [i, r]);
+  const last = Math.max(answer.a.rewards.length, answer.b.rewards.length) - 1;
+  const marks = [[answer.step, "#1d2530"], ...(first === null ? [] : [[first, "#b3261e"]])];
+  for (const [id, title, points] of [["compare-rewards", "reward per step", each],
+                                     ["compare-returns", "return so far", cumulative]]) {
+    plot($(id), title, [{name: `A #${answer.a.branch}`, points: points(answer.a.rewards)},
+                        {name: `B #${answer.b.branch}`, points: points(answer.b.rewards)}]);
+    markSteps($(id), last, marks);
+  }
   const rows = [["", `A #${answer.a.branch}`, `B #${answer.b.branch}`, "B − A"],
                 ["reward", answer.a.reward, answer.b.reward,
                  answer.a.reward === null || answer.b.reward === null ? "" :

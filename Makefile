@@ -5,8 +5,8 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-lowest test-ray test-browser test-minari test-onnx screenshot screenshot-time-travel plinko-picture sb3 rllib cleanrl bench-http bench-train\
-	docs lint vectors clean
+.PHONY: demo test test-lowest test-ray test-browser test-minari test-onnx test-package screenshot\
+	screenshot-time-travel plinko-picture sb3 rllib cleanrl bench-http bench-train docs lint vectors clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -43,6 +43,14 @@ test-onnx: $(STAMP)
 	$(BIN)/python -m pip install --quiet torch==2.13.0
 	$(BIN)/python -m pip install --quiet -e ".[test,sb3,onnx]"
 	OMP_NUM_THREADS=1 $(BIN)/python -m pytest -m onnx tests/test_onnx_policies.py
+
+# rlenv as users install it (the release extra: build, twine): the sdist and the wheel built and
+# checked (twine check, only rlenv and rlenv_client at the top), the wheel installed with its http
+# extra into a new venv outside the checkout, where rlenv demo, rlenv check, a gym.make episode
+# and rlenv http run (.ci/test-package; about a minute, most of it pip).
+test-package: $(STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[test,release]"
+	PYTHON=$(PYTHON) .ci/test-package $(BIN)/python
 
 # The README's picture of the inspector: its page beside a training loop, saved by the browser
 # test; and docs/time-travel.md's pictures (docs/images/time-travel-*.png): see screenshot-time-travel.
@@ -147,4 +155,4 @@ vectors: $(STAMP)
 	$(BIN)/python -m tests.protocol_vectors
 
 clean:
-	rm -rf $(VENV) $(CLEANRL_VENV) $(LOWEST_VENV) build site *.egg-info
+	rm -rf $(VENV) $(CLEANRL_VENV) $(LOWEST_VENV) build dist site *.egg-info

@@ -23,6 +23,8 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 __version__ = "0.1.0"
+"""The package's version: its one place (pyproject.toml reads it; ``rlenv_client.__version__`` is
+this one; CHANGELOG.md). The protocol's version is another: ``rlenv.protocol``."""
 
 _EXPORTS = {
     "Node": "rlenv.node",

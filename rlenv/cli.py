@@ -18,6 +18,7 @@ from rlenv.protocol.errors import RlenvError
 from rlenv.serving.endpoint import DEFAULT_HOST, Limits
 from rlenv.serving.recent import KEEP_EPISODES
 from rlenv.serving.target_hints import explain_target_error
+from rlenv.transport.sockets import format_address
 
 __all__ = ["main", "serve_command"]
 
@@ -289,7 +290,7 @@ def _serve(args: argparse.Namespace) -> int:
         inspector = None
         try:  # Ctrl-C once it listens (however soon) ends it with status 0
             host, port = server.address
-            print(f"listening on {host}:{port}", flush=True)
+            print(f"listening on {format_address(host, port)}", flush=True)
             inspector = _start_inspector(host, port, args.token) if args.inspect else None
             server.serve_forever()
         except KeyboardInterrupt:
@@ -310,7 +311,8 @@ def _start_inspector(host: str, port: int, token: str | None) -> subprocess.Pope
     env = dict(os.environ)
     if token is not None:
         env["RLENV_TOKEN"] = token
-    address = f"{'127.0.0.1' if host in ('0.0.0.0', '') else host}:{port}"
+    reachable = {"0.0.0.0": "127.0.0.1", "": "127.0.0.1", "::": "::1"}.get(host, host)
+    address = format_address(reachable, port)
     return subprocess.Popen([sys.executable, "-m", "rlenv_client.inspector", address,
                              "--follow-stdin"], stdin=subprocess.PIPE, env=env)
 
@@ -342,11 +344,12 @@ def _inspect(args: argparse.Namespace) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from examples.cartpole import TARGET, controller
+    from rlenv.targets import EXAMPLES, import_module
     from rlenv_client import Client
     from rlenv_client.launcher import ServerProcess
 
-    with ServerProcess(TARGET) as server, Client(server.host, server.port) as client:
+    cartpole = import_module(f"{EXAMPLES}.cartpole")  # examples.cartpole in a checkout
+    with ServerProcess(cartpole.TARGET) as server, Client(server.host, server.port) as client:
         print(f"CartPole served at {server.address}; balancing with a proportional controller")
         limit = round(args.max_seconds * client.hello.physics_ticks_per_second)
         for episode in range(args.episodes):
@@ -355,7 +358,7 @@ def _demo(args: argparse.Namespace) -> int:
             while not terminated and frames < limit:
                 repeat = min(args.repeat_action, limit - frames)
                 observation, reward, terminated, _, info = client.step(
-                    controller(observation), repeat_action=repeat
+                    cartpole.controller(observation), repeat_action=repeat
                 )
                 episode_return += reward
                 frames += info["frames"]

@@ -121,10 +121,13 @@ def entry_text(site: Path, page: str, identifier: str) -> str:
 
 def test_the_site_builds_without_a_warning_and_has_every_page(site: Path) -> None:
     for page in ("index.html", "architecture/index.html", "protocol/index.html",
-                 "protocol/vectors/index.html", "reference/index.html"):
+                 "protocol/vectors/index.html", "reference/index.html", "changelog/index.html"):
         assert (site / page).is_file(), page
     home = (site / "index.html").read_text(encoding="utf-8")
     assert "Writing an environment" in home  # the README is the home page
+    changelog = (site / "changelog" / "index.html").read_text(encoding="utf-8")
+    assert "Unreleased" in changelog and "Protocol 2.3" in changelog  # made from CHANGELOG.md
+    assert 'href="changelog/"' in home  # the README's link to CHANGELOG.md leads to that page
 
 
 @pytest.mark.parametrize("identifier", sorted(EXPECTED))

@@ -89,7 +89,7 @@ def test_an_ipv6_address_in_brackets_reaches_the_server() -> None:
         address = f"[::1]:{listener.getsockname()[1]}"
         listener.settimeout(10)
 
-        def say_hello() -> None:  # a server that greets once: rlenv serve binds IPv4 only
+        def say_hello() -> None:  # a server that greets once: any server of IPv6
             accepted, _ = listener.accept()
             with accepted:
                 accepted.sendall(Connection(Role.SERVER).send(hello))
@@ -102,6 +102,15 @@ def test_an_ipv6_address_in_brackets_reaches_the_server() -> None:
                 assert client.hello.environment == "Six" and client.address == address
         finally:
             greeter.join(10)
+
+
+@pytest.mark.skipif(not _ipv6_loopback(), reason="no IPv6 loopback here")
+def test_rlenv_serve_listens_on_an_ipv6_address(serve) -> None:
+    server = serve("examples.cartpole:CartPoleEnvironment", host="::1")
+    assert server.host == "::1" and server.address == f"[::1]:{server.port}"
+    with Client(server.address, timeout=10) as client:
+        observation, _ = client.reset(seed=1)
+        assert client.step(np.zeros(1, np.float32))[0].shape == observation.shape
 
 
 # --- a normal close is no failure -------------------------------------------------------------

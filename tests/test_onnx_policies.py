@@ -300,3 +300,21 @@ def test_a_learner_plays_against_a_policy_opponent(serve, pair_policy: Path) -> 
         observation, *_ = learner.step({"Red": reds[0], "Blue": -blue})
         mirrored, *_ = both.step({"Red": reds[0], "Blue": blue})
         np.testing.assert_array_equal(observation["Blue"], mirrored["Blue"])
+
+
+def test_a_timeline_branches_with_a_policy_file(tmp_path: Path, cartpole_policy: Path) -> None:
+    from rlenv_client.timeline import Timeline
+    from tests.test_timeline import record
+
+    path = record(tmp_path, CARTPOLE)
+    policy = OnnxPolicy(cartpole_policy)
+    with Timeline.open(path) as timeline:
+        branch = timeline.branch(3, policy=cartpole_policy, max_steps=6)
+        by_hand = timeline.branch(3, policy=policy.act, max_steps=6)
+        assert 3 < len(branch) <= 9 and timeline.diff(branch).first_difference is not None
+        assert branch.diff(by_hand).first_difference is None
+        chosen = [event[1] for event in branch.episode.snapshot["events"] if event[0] == "action"]
+        for step in range(3, len(branch)):
+            assert np.array_equal(chosen[step], policy.act(branch.at(step).observation))
+        with pytest.raises(ValueError, match="not an ONNX model"):
+            timeline.branch(3, policy=path, max_steps=2)  # a recording, not a policy

@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 from conftest import Serve
 
-from examples.faulty import BrittleEnvironment
-from rlenv.protocol.errors import ErrorCode, RemoteError
+from examples.faulty import BrittleAgent, BrittleEnvironment, BrittleWorld
+from rlenv import RLEnvironment
+from rlenv.protocol.errors import ErrorCode, RemoteError, RequestError
 from rlenv_client import BaseClient, Client, LocalClient
 
 TARGET = "examples.faulty:BrittleEnvironment"
@@ -155,3 +156,40 @@ def test_declared_options_are_checked_in_process_and_undeclared_ones_stay_free()
         client.reset(options={"low": -0.01, "high": 0.01})
     with LocalClient("examples.cartpole:CartPoleEnvironment") as client:
         client.reset(options={"anything": 1})  # declares none: any options, as before
+
+
+class _RefusingWorld(BrittleWorld):
+    """Brittle's world, refusing ``options["refuse"]`` half way through its reset."""
+
+    def reset(self, options: Any) -> None:
+        super().reset({})
+        if options.get("refuse"):
+            raise RequestError(ErrorCode.BAD_REQUEST, "this reset is refused half way")
+
+
+class _Refusing(RLEnvironment):
+    reset_options = ("refuse",)
+
+    def __init__(self) -> None:
+        super().__init__("Refusing", repeat_action=2)
+        self.add_child(BrittleAgent())
+        self.add_child(_RefusingWorld())
+
+
+def test_a_reset_the_environment_refuses_starts_no_episode_and_the_next_one_rebuilds() -> None:
+    client = LocalClient(_Refusing)
+    try:
+        client.reset(seed=1)
+        client.step(1)
+        with pytest.raises(RemoteError, match="refused half way") as refused:
+            client.reset(seed=2, options={"refuse": True})
+        assert refused.value.code == ErrorCode.BAD_REQUEST
+        with pytest.raises(RemoteError, match="the reset was refused") as stepped:
+            client.step(1)
+        assert stepped.value.code == ErrorCode.RESET_REQUIRED
+        _, info = client.reset(seed=2)
+        assert "refused half way" in info["rebuilt"]
+        assert client.step(1)[0].shape == (4,)
+        assert "rebuilt" not in client.reset(seed=2)[1]
+    finally:
+        client.close()

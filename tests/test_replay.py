@@ -41,7 +41,7 @@ def test_recorded_episodes_replay_bit_for_bit(tmp_path: Path) -> None:
     files = record(tmp_path)
     assert [f.name for f in files] == ["episode-0001.rlenv", "episode-0002.rlenv"]
     episode = EpisodeFile.load(files[0])
-    assert episode.target == "examples.cartpole:CartPoleEnvironment"
+    assert episode.target == "rlenv.examples.cartpole:CartPoleEnvironment"  # the id's target
     assert episode.snapshot["config"]["agent"]["max_force"] == 8.0
     assert len(episode.observations) == 1 + sum(e[0] == "action"
                                                 for e in episode.snapshot["events"])
@@ -49,6 +49,13 @@ def test_recorded_episodes_replay_bit_for_bit(tmp_path: Path) -> None:
         result = run_replay(path)
         assert result.returncode == 0, result.stdout + result.stderr
         assert "every observation identical" in result.stdout
+    # A recording naming the checkout's examples.cartpole (an installed rlenv loads
+    # rlenv.examples.cartpole for it: make test-package) replays the same.
+    episode.target = "examples.cartpole:CartPoleEnvironment"
+    episode.save(tmp_path / "checkout.rlenv")
+    result = run_replay(tmp_path / "checkout.rlenv")
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "every observation identical" in result.stdout
 
 
 def test_a_divergence_is_found_and_located(tmp_path: Path) -> None:

@@ -14,7 +14,9 @@ from examples.cartpole import TARGET as CARTPOLE
 from examples.cartpole import controller
 from examples.plinko import TARGET as PLINKO
 from examples.plinko import follow
+from rlenv.protocol.errors import RemoteError
 from rlenv_client import Client
+from rlenv_client.launcher import ServerStartError
 from rlenv_client.replay import EpisodeFile, RecordEpisodes, digest, replay
 from rlenv_client.timeline import Timeline
 from tests.conftest import Serve
@@ -150,15 +152,107 @@ def test_a_saved_branch_replays_bit_for_bit(tmp_path: Path, serve: Serve) -> Non
     assert result.divergence is None and result.steps == length
 
 
-def test_closing_ends_the_scratch_server(tmp_path: Path) -> None:
+def test_closing_ends_every_process(tmp_path: Path) -> None:
     path = record(tmp_path, CARTPOLE)
-    timeline = Timeline.open(path)
-    branch = timeline.branch(2, policy=controller, max_steps=2)
-    branch.close()  # a branch leaves the server to its root
-    assert timeline.server.is_alive() and branch.server is timeline.server
+    timeline = Timeline.open(path, checkpoint_every=5)
+    branch = timeline.branch(2, policy=controller, max_steps=12)
+    branch.close()  # a branch leaves the processes to its root
+    processes = timeline.processes
+    assert len(processes) >= 2 + len(timeline) // 5 and branch.processes == processes
+    assert all(alive(pid) for pid in processes)
     assert len(timeline.at(3).observation) > 0
     timeline.close()
-    assert not timeline.server.is_alive()
+    assert not any(alive(pid) for pid in processes)
     with pytest.raises(RuntimeError, match="closed"):
         timeline.at(1)
     timeline.close()  # twice is fine
+
+
+def alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_bytes().rsplit(b")", 1)[1].split()[0] != b"Z"
+    except FileNotFoundError:
+        return False
+
+
+def recorded(serve: Serve, target: str, actions: list[int], path: Path) -> Path:
+    """An episode of ``target`` taking ``actions`` over a real server, written to ``path``."""
+    server = serve(target)
+    with Client(server.host, server.port, timeout=30) as client:
+        observation, _ = client.reset(seed=3)
+        digests = [digest(observation)]
+        for action in actions:
+            digests.append(digest(client.step(action)[0]))
+        EpisodeFile(target, client.snapshot(), digests, False, False).save(path)
+    return path
+
+
+def test_an_episode_without_digests_gets_them_on_the_first_pass(tmp_path: Path) -> None:
+    path = record(tmp_path, PLINKO)
+    episode = EpisodeFile.load(path)
+    bare = EpisodeFile(episode.target, episode.snapshot, [], episode.terminated,
+                       episode.truncated)
+    with Timeline(bare) as timeline:
+        assert timeline.episode.observations == episode.observations
+        assert bare.observations == []  # the caller's recording is left as it was
+        timeline.save(tmp_path / "with-digests.rlenv")
+    assert EpisodeFile.load(tmp_path / "with-digests.rlenv").observations == episode.observations
+
+
+def test_a_step_can_read_a_few_nodes_only(tmp_path: Path) -> None:
+    path = record(tmp_path, PLINKO)
+    with Timeline.open(path) as timeline:
+        everything = timeline.at(6)
+        agent = next(path for path in everything.properties if path.endswith("/Agent"))
+        few = timeline.at(6, nodes=[agent])
+        assert few.properties == {agent: everything.properties[agent]}
+        assert digest(few.observation) == digest(everything.observation)
+        assert few.draw == everything.draw
+
+
+@pytest.mark.parametrize("target", ["examples.faulty:DyingEnvironment",
+                                    "examples.faulty:SlowEnvironment"])
+def test_a_crash_or_a_hang_fails_one_call_and_the_timeline_goes_on(
+        tmp_path: Path, serve: Serve, target: str) -> None:
+    path = recorded(serve, target, [0] * 8, tmp_path / "episode.rlenv")
+    recording = EpisodeFile.load(path)
+    with Timeline.open(path, timeout=1.0, checkpoint_every=4) as timeline:
+        with pytest.raises(RuntimeError, match="environment process .* (is gone|did not answer)"):
+            timeline.branch(5, [1])
+        for step in (6, 2, 8):
+            assert digest(timeline.at(step).observation) == recording.observations[step]
+        assert len(timeline.branch(5, [0, 0])) == 7
+
+
+def test_an_action_the_environment_raises_on_is_refused_and_the_timeline_goes_on(
+        tmp_path: Path, serve: Serve) -> None:
+    path = recorded(serve, "examples.faulty:FaultyEnvironment", [0] * 4,
+                    tmp_path / "episode.rlenv")
+    with Timeline.open(path) as timeline:
+        with pytest.raises(RemoteError, match="environment_error"):
+            timeline.branch(2, [1])
+        with pytest.raises(RemoteError, match="invalid_action"):
+            timeline.branch(2, [7])
+        again = timeline.branch(2, [0, 0])
+        assert again.episode.observations == timeline.episode.observations[:5]
+        with pytest.raises(RemoteError, match="cannot draw"):  # its _draw always raises
+            timeline.at(3)
+
+
+def test_a_target_that_does_not_load_is_said(tmp_path: Path) -> None:
+    path = record(tmp_path, CARTPOLE)
+    with pytest.raises(ServerStartError, match="examples.nothing"):
+        Timeline.open(path, target="examples.nothing:Nothing")
+
+
+def test_a_timeline_says_its_environment_and_lists_its_nodes(tmp_path: Path) -> None:
+    path = record(tmp_path, PLINKO)
+    with Timeline.open(path) as timeline:
+        assert timeline.hello.environment == "Plinko" and timeline.hello.agents == ("Agent",)
+        assert timeline.hello.action_space.shape == (1,)
+        nodes = timeline.tree(5)
+        agent = next(node for node in nodes if node.get("config") == "agent")
+        assert agent["demonstration_keys"]
+        assert {node["path"]: node["exported"] for node in nodes} == timeline.at(5).properties
+        branch = timeline.branch(2, policy=follow, max_steps=2)
+        assert branch.hello is timeline.hello

@@ -28,7 +28,7 @@ def test_sync_vectors_are_measured_against_one_env_and_in_process() -> None:
 
 def test_a_target_is_a_registered_id_or_module_class() -> None:
     assert resolve_target("rlenv/CartPole-v1") == (
-        "examples.classic_cartpole:ClassicCartPoleEnvironment", 500)
+        "rlenv.examples.classic_cartpole:ClassicCartPoleEnvironment", 500)
     assert resolve_target("examples.pair:PairEnvironment") == (
         "examples.pair:PairEnvironment", None)
     with pytest.raises(ValueError, match="expected MODULE:CLASS or a registered id"):

@@ -11,6 +11,7 @@ It imports no physics and no server code (only the shared protocol, spaces and e
 an environment is run in process.
 """
 
+from rlenv import __version__ as __version__
 from rlenv.protocol.errors import ConnectionLost as ConnectionLost
 from rlenv.protocol.errors import ErrorCode as ErrorCode
 from rlenv.protocol.errors import ProtocolVersionError as ProtocolVersionError

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from rlenv.transport.sockets import format_address
+
 __all__ = ["format_address", "parse_address"]
 
 
@@ -23,8 +25,3 @@ def parse_address(address: str) -> tuple[str, int]:
     if not 0 < int(port) <= 65535:
         raise ValueError(f"{address!r} has no port: ports run from 1 to 65535")
     return host, int(port)
-
-
-def format_address(host: str, port: int) -> str:
-    """``HOST:PORT``, the IPv6 host in brackets; :func:`parse_address` reads it back."""
-    return f"[{host}]:{port}" if ":" in host else f"{host}:{port}"

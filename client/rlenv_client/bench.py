@@ -50,15 +50,18 @@ from typing import Any
 import msgpack
 import numpy as np
 
+from rlenv.targets import module_name
+
 __all__ = ["Figure", "HandWrittenServer", "HandWrittenVector", "Rate", "format_table",
            "interleaved", "random_steps", "random_steps_of", "run_benchmarks", "to_json"]
 
 logger = logging.getLogger(__name__)
 
-CARTPOLE = "examples.cartpole:CartPoleEnvironment"
-PIXELS = "examples.pixels:PixelsEnvironment"
-HAND_WRITTEN = "examples.handwritten"
-"""The module of the hand-written CartPole server (run with ``python -m``)."""
+CARTPOLE = "rlenv.examples.cartpole:CartPoleEnvironment"
+PIXELS = "rlenv.examples.pixels:PixelsEnvironment"
+HAND_WRITTEN = "rlenv.examples.handwritten"
+"""The module of the hand-written CartPole server (run with ``python -m`` under its name here:
+``examples.handwritten`` in a checkout, :func:`rlenv.targets.module_name`)."""
 ENDLESS = {"world": {"track_limit": 1e9}, "agent": {"angle_limit": 1e9}}
 """CartPole's configuration for the bench: one episode for the whole run, no resets."""
 
@@ -222,8 +225,9 @@ class HandWrittenServer:
     """
 
     def __init__(self, instances: int = 1) -> None:
-        self.process = subprocess.Popen([sys.executable, "-m", HAND_WRITTEN, str(instances)],
-                                        stdout=subprocess.PIPE, text=True)
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", module_name(HAND_WRITTEN), str(instances)],
+            stdout=subprocess.PIPE, text=True)
         try:
             assert self.process.stdout is not None
             line = self.process.stdout.readline()

@@ -25,6 +25,7 @@ from typing import Any
 import gymnasium
 from gymnasium.envs.registration import EnvSpec
 
+from rlenv.targets import same_target
 from rlenv_client.registration import ENVIRONMENTS
 from rlenv_client.replay import EpisodeFile, replay
 
@@ -62,7 +63,7 @@ def environment_spec(target: str, repeat_action: int | None = None) -> EnvSpec:
     """
     extra = {} if repeat_action is None else {"repeat_action": repeat_action}
     for env_id, registration in ENVIRONMENTS.items():
-        if registration.target == target:
+        if same_target(registration.target, target):  # a checkout's examples.X too
             spec = gymnasium.spec(env_id)
             return dataclasses.replace(spec, kwargs={**spec.kwargs, **extra})
     name = target.rpartition(":")[2] or target

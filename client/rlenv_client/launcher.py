@@ -23,7 +23,7 @@ import weakref
 from collections.abc import Iterable, Mapping, Sequence
 
 from rlenv.protocol.errors import ConnectionLost, RlenvError
-from rlenv_client.addresses import format_address
+from rlenv_client.addresses import format_address, parse_address
 
 __all__ = ["ServerProcess", "ServerStartError", "with_server_story"]
 
@@ -173,8 +173,7 @@ class ServerProcess:
                     "exited before listening"
                 raise ServerStartError(f"server {self.target} {first}\n(exit code {code}; its "
                                        f"output:\n{self.output.rstrip()})")
-            host, _, port = line[len(_LISTENING):].strip().rpartition(":")
-            return host, int(port)
+            return parse_address(line[len(_LISTENING):].strip())
 
 
 def with_server_story(error: ConnectionLost, servers: Iterable[ServerProcess]) -> ConnectionLost:

@@ -1,7 +1,10 @@
 """Gymnasium ids for the shipped examples: ``gymnasium.make("rlenv/CartPole-v0")``.
 
 Registered when ``rlenv_client`` is imported (so ``gymnasium.register_envs(rlenv_client)``
-works too). The examples ship inside the distribution, so the ids work from any directory.
+works too). The examples ship inside the distribution, as ``rlenv.examples``, and the ids name
+them so: they work from any directory. In a checkout, whose examples are the top-level
+``examples`` package, the server loads ``rlenv.examples.X`` as ``examples.X``
+(:mod:`rlenv.targets`), so one process never holds both.
 Every id also has a vector entry point, so ``gymnasium.make_vec`` builds a
 :class:`~rlenv_client.vector.RemoteVectorEnv`.
 """
@@ -23,15 +26,16 @@ class _Registration:
 
 
 ENVIRONMENTS = {
-    "rlenv/CartPole-v0": _Registration("examples.cartpole:CartPoleEnvironment", 500),
-    "rlenv/CartPole-v1": _Registration("examples.classic_cartpole:ClassicCartPoleEnvironment", 500),
-    "rlenv/Maze-v0": _Registration("examples.maze:MazeEnvironment", 250),
-    "rlenv/Pair-v0": _Registration("examples.pair:PairEnvironment", 300),
-    "rlenv/Pixels-v0": _Registration("examples.pixels:PixelsEnvironment", 1000),
-    "rlenv/Plinko-v0": _Registration("examples.plinko:PlinkoEnvironment", 100),
-    "rlenv/Reacher-v0": _Registration("examples.reacher:ReacherEnvironment", 200),
-    "rlenv/Seeker-v0": _Registration("examples.seeker:SeekerEnvironment", 250),
-    "rlenv/SeekerPixels-v0": _Registration("examples.seeker:SeekerPixelsEnvironment", 250),
+    "rlenv/CartPole-v0": _Registration("rlenv.examples.cartpole:CartPoleEnvironment", 500),
+    "rlenv/CartPole-v1": _Registration(
+        "rlenv.examples.classic_cartpole:ClassicCartPoleEnvironment", 500),
+    "rlenv/Maze-v0": _Registration("rlenv.examples.maze:MazeEnvironment", 250),
+    "rlenv/Pair-v0": _Registration("rlenv.examples.pair:PairEnvironment", 300),
+    "rlenv/Pixels-v0": _Registration("rlenv.examples.pixels:PixelsEnvironment", 1000),
+    "rlenv/Plinko-v0": _Registration("rlenv.examples.plinko:PlinkoEnvironment", 100),
+    "rlenv/Reacher-v0": _Registration("rlenv.examples.reacher:ReacherEnvironment", 200),
+    "rlenv/Seeker-v0": _Registration("rlenv.examples.seeker:SeekerEnvironment", 250),
+    "rlenv/SeekerPixels-v0": _Registration("rlenv.examples.seeker:SeekerPixelsEnvironment", 250),
 }
 """Registered ids and what they serve. CartPole never ends by itself when balanced, so it gets
 a time limit (500 steps of 4 ticks: 33 simulated seconds), as gym-kraby's TimeLimit lesson

@@ -1,8 +1,8 @@
 """A recorded episode as a timeline: go to any step, look inside it, branch from it, compare.
 
 A :class:`Timeline` is built from a recording (:class:`~rlenv_client.replay.RecordEpisodes`)
-and re-simulates it on a scratch server of the recording's environment that it starts, owns and
-closes (never on the server a trainer uses)::
+and re-simulates it in processes of its own that it starts, owns and ends (never on the server
+a trainer uses)::
 
     from rlenv_client.timeline import Timeline
 
@@ -19,31 +19,41 @@ Steps are numbered as ``rlenv replay`` numbers them: 0 is the state after the re
 state after the ``k``-th action. Changes made during the episode (an inspector's property
 sets, configuration) belong to the step of the action that follows them. On an unbranched
 timeline every observation is the recorded one, bit for bit (its
-:func:`~rlenv_client.replay.digest` is checked at every step: a server that re-simulates
-differently raises ``RuntimeError``).
+:func:`~rlenv_client.replay.digest` is checked at every step: an environment that
+re-simulates differently raises ``RuntimeError``).
 
-Going to a step restores the nearest earlier checkpoint (a snapshot taken every
-``checkpoint_every`` steps as the timeline passes them, the reset's at first) and replays the
-actions from there; going forward from where the scratch server stands just steps on.
+Opening a timeline re-simulates the whole episode once, and on the way parks checkpoints: every
+``checkpoint_every`` steps, a copy of the environment's process made by ``fork``
+(:mod:`rlenv_client.forking`), which holds the whole state to the bit. Going to a step copies
+the nearest checkpoint at or before it and takes the steps from there (about 10 ms of them at
+most); going forward from where the timeline stands just steps on. ``benchmarks/time_travel.py``
+measures a step of a 10,000-step episode. Each checkpoint is a process that holds, of its own,
+the memory the episode changed since the one before (a few MiB for Plinko); there are at most
+256 over an episode, and branches add theirs. A timeline is not thread-safe, and needs
+``os.fork`` (Linux, macOS).
 """
 
 from __future__ import annotations
 
 import copy
+import time
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from rlenv_client.client import Client
-from rlenv_client.launcher import ServerProcess
+from rlenv.protocol.errors import RemoteError
+from rlenv_client.forking import ForkedEnvironment, StepRecord
 from rlenv_client.replay import EpisodeFile, digest
 
 __all__ = ["Step", "Tick", "Timeline", "TimelineDiff"]
 
-_END = object()  # the end of a branch's actions
+_PROBE_STEPS = 8  # steps timed to space the checkpoints, and the least spacing
+_REPLAY_BUDGET = 0.010  # seconds of steps from a checkpoint to the step asked for, at most
+_MOST_APART = 1000  # steps between two checkpoints, at most (unless the episode is longer)
+_MOST_CHECKPOINTS = 256  # over one episode
 _Result = tuple[Any, float, bool, bool, dict[str, Any]]  # observation, reward, ends, info
 
 
@@ -114,20 +124,17 @@ class TimelineDiff:
 
 @dataclass(frozen=True)
 class _Mark:
-    """A checkpoint: the snapshot at a step and what that step returned."""
+    """A checkpoint: a parked copy of the environment at a step, and what that step returned."""
 
-    snapshot: dict[str, Any]
-    reward: float
-    terminated: bool
-    truncated: bool
-    info: dict[str, Any]
+    environment: ForkedEnvironment
+    result: _Result
 
 
 class _Checkpoints:
-    """Snapshots taken every ``every`` steps as a timeline passes them (the reset's at 0).
+    """Parked copies every ``every`` steps (the reset's at 0), as a timeline passes them.
 
-    Going to step ``k`` restores the nearest one at or before ``k`` and replays at most
-    ``every - 1`` actions. Kept small and private so that faster checkpoints can replace it.
+    Going to step ``k`` copies the nearest one at or before ``k`` and takes at most
+    ``every - 1`` steps from there.
     """
 
     def __init__(self, every: int, marks: Mapping[int, _Mark]) -> None:
@@ -135,8 +142,12 @@ class _Checkpoints:
         self._marks = dict(marks)
 
     def due(self, step: int) -> bool:
-        """Whether a snapshot should be taken on reaching ``step``."""
+        """Whether a checkpoint should be parked on reaching ``step``."""
         return step % self.every == 0 and step not in self._marks
+
+    def next_due(self, step: int) -> int:
+        """The first step after ``step`` where one is due."""
+        return (step // self.every + 1) * self.every
 
     def keep(self, step: int, mark: _Mark) -> None:
         """Remember ``mark`` as the checkpoint at ``step``."""
@@ -152,84 +163,121 @@ class _Checkpoints:
         return _Checkpoints(self.every, {k: m for k, m in self._marks.items() if k <= step})
 
 
-class _Scratch:
-    """The scratch server a root timeline owns, its client, and where its episode stands."""
+class _Processes:
+    """The processes of a root timeline and its branches: the first, parked copies, the cursor.
 
-    def __init__(self, target: str, server_args: Iterable[str]) -> None:
-        self.server = ServerProcess(target, args=tuple(server_args))
-        try:
-            self.client = Client(self.server.host, self.server.port, timeout=120.0)
-        except BaseException:
-            self.server.close()
-            raise
+    The cursor is the copy that steps; ``position`` says which timeline's step it stands at.
+    """
+
+    def __init__(self, target: str, timeout: float) -> None:
+        self.first = ForkedEnvironment.start(target, timeout=timeout)
+        self.parked: list[ForkedEnvironment] = [self.first]
+        self.cursor: ForkedEnvironment | None = None
         self.position: tuple[Timeline, int] | None = None
         self.result: _Result | None = None
         self.closed = False
 
+    def park(self, environment: ForkedEnvironment) -> ForkedEnvironment:
+        """A copy of ``environment`` kept as it is now."""
+        copy = environment.fork()
+        self.parked.append(copy)
+        return copy
+
+    def resume(self, mark: _Mark) -> ForkedEnvironment:
+        """A new cursor: a copy of the checkpoint's (the old cursor ends)."""
+        self.drop_cursor()
+        self.cursor = mark.environment.fork()
+        return self.cursor
+
+    def drop_cursor(self) -> None:
+        """End the cursor (its copies live on)."""
+        self.position = self.result = None
+        if self.cursor is not None:
+            self.cursor.close()
+            self.cursor = None
+
     def close(self) -> None:
-        """Close the client and end the server."""
-        if not self.closed:
-            self.closed = True
-            self.position = self.result = None
-            self.client.close()
-            self.server.close()
+        """End every process; wait until they are gone."""
+        if self.closed:
+            return
+        self.closed = True
+        self.drop_cursor()
+        for environment in self.parked:
+            environment.close()
+        for environment in self.parked:
+            environment.end()
+        self.parked.clear()
 
 
 class Timeline:
     """A recorded episode to re-simulate, inspect and branch (see the module docstring).
 
+    Building one re-simulates the whole episode once, checking it against the recording and
+    parking the checkpoints (a recording without digests gets them here).
+
     Args:
         episode: the recording.
         target: the environment to serve (``MODULE:CLASS``; default: the recorded one).
-        checkpoint_every: how many steps apart the checkpoints are.
-        server_args: extra arguments for the scratch server's ``rlenv serve``.
+        checkpoint_every: how many steps apart the checkpoints are (default: as many as take
+            about 10 ms to re-simulate, from the cost of the first steps; at most 256
+            checkpoints over the episode).
+        timeout: seconds a re-simulation may take (a step, a scene read, a branch's run of
+            steps) before its process is ended and the call fails.
 
     Attributes:
         episode: the recording (a branch's: what :meth:`save` writes).
-        server: the scratch server (a branch shares its root's).
+        hello: what the environment says first, as a client of its server sees it (its agents
+            and spaces, its ``repeat_action``).
 
     Raises:
         ValueError: the recording names no target and none is given, or its digests do not
             match its actions.
-        ServerStartError: the scratch server did not start.
+        ServerStartError: the environment did not start.
+        RuntimeError: the environment re-simulated the recording differently.
     """
 
     def __init__(self, episode: EpisodeFile, *, target: str | None = None,
-                 checkpoint_every: int = 100, server_args: Iterable[str] = ()) -> None:
+                 checkpoint_every: int | None = None, timeout: float = 60.0) -> None:
         target = target or episode.target
         if target is None:
             raise ValueError("the recording names no target: pass target='MODULE:CLASS'")
-        if checkpoint_every < 1:
+        if checkpoint_every is not None and checkpoint_every < 1:
             raise ValueError("checkpoint_every must be at least 1")
-        start = {**episode.snapshot, "events": []}
-        scratch = _Scratch(target, server_args)
+        processes = _Processes(target, timeout)
+        episode = replace(episode, observations=list(episode.observations))
         try:
-            observation, info = scratch.client.restore(start)
+            unspaced = _Checkpoints(len(episode.snapshot["events"]) + 1, {})  # until measured
+            self._setup(episode, processes, True, unspaced, [])
+            start = {**episode.snapshot, "events": []}
+            observation, info = processes.first.call("restore", start)
+            result: _Result = (observation, 0.0, False, False, info)
+            self._check(0, digest(observation))
+            self._checkpoints.keep(0, _Mark(processes.first, result))
+            self._checkpoints.every = checkpoint_every or self._measured_spacing()
+            self._goto(len(self))
         except BaseException:
-            scratch.close()
+            processes.close()
             raise
-        marks = {0: _Mark(start, 0.0, False, False, info)}
-        self._setup(episode, scratch, True, _Checkpoints(checkpoint_every, marks))
-        scratch.position, scratch.result = (self, 0), (observation, 0.0, False, False, info)
 
     @classmethod
-    def open(cls, path: str | Path, *, target: str | None = None, checkpoint_every: int = 100,
-             server_args: Iterable[str] = ()) -> Timeline:
+    def open(cls, path: str | Path, *, target: str | None = None,
+             checkpoint_every: int | None = None, timeout: float = 60.0) -> Timeline:
         """The timeline of the recording at ``path`` (see :class:`Timeline` for the rest).
 
         Raises:
             ValueError: the file is not an rlenv episode (and as :class:`Timeline`).
         """
         return cls(EpisodeFile.load(path), target=target, checkpoint_every=checkpoint_every,
-                   server_args=server_args)
+                   timeout=timeout)
 
-    def _setup(self, episode: EpisodeFile, scratch: _Scratch, owner: bool,
-               checkpoints: _Checkpoints) -> None:
+    def _setup(self, episode: EpisodeFile, processes: _Processes, owner: bool,
+               checkpoints: _Checkpoints, records: list[StepRecord]) -> None:
         self.episode = episode
-        self.server = scratch.server
-        self._scratch = scratch
+        self.hello = processes.first.hello
+        self._processes = processes
         self._owner = owner
         self._checkpoints = checkpoints
+        self._records = records  # step k's record at k - 1, as each step is first taken
         self._steps: list[list[list[Any]]] = []  # each step's events, its action last
         pending: list[list[Any]] = []
         for event in episode.snapshot["events"]:
@@ -237,7 +285,7 @@ class Timeline:
             if event[0] == "action":
                 self._steps.append(pending)
                 pending = []
-        if len(episode.observations) != len(self._steps) + 1:
+        if episode.observations and len(episode.observations) != len(self._steps) + 1:
             raise ValueError(f"the recording has {len(episode.observations)} observations for "
                              f"{len(self._steps)} actions (one more expected)")
 
@@ -250,28 +298,58 @@ class Timeline:
         """Whether the episode ended at its last step (recordings older than that say so)."""
         return self.episode.terminated is not False or self.episode.truncated is not False
 
-    def at(self, step: int) -> Step:
-        """The state after ``step``, re-simulated on the scratch server.
+    @property
+    def processes(self) -> list[int]:
+        """The ids of the processes holding the environment and its checkpoints (the root's)."""
+        processes = self._processes
+        cursor = [] if processes.cursor is None else [processes.cursor]
+        return [environment.pid for environment in processes.parked + cursor]
+
+    def at(self, step: int, *, nodes: Iterable[str] | None = None) -> Step:
+        """The state after ``step``, re-simulated.
+
+        Args:
+            step: the step.
+            nodes: the paths of the nodes whose properties to read (default: every node's;
+                reading a few is cheaper on large scenes).
 
         Raises:
             IndexError: no such step.
-            RuntimeError: the scratch server re-simulated the step differently, or is closed.
+            RemoteError: the environment refused a read (no node at one of ``nodes``, a
+                ``_draw`` that raised).
+            RuntimeError: the timeline is closed, or its environment failed.
         """
         observation, reward, terminated, truncated, info = self._goto(step)
-        client = self._scratch.client
-        properties = {node["path"]: dict(node["exported"]) for node in client.tree()}
+        cursor = self._cursor()
+        entries = cursor.call("tree") if nodes is None else \
+            [cursor.call("node", path) for path in nodes]
+        properties = {node["path"]: dict(node["exported"]) for node in entries}
         return Step(step, copy.deepcopy(observation), reward, terminated, truncated,
-                    copy.deepcopy(info), client.draw(), properties)
+                    copy.deepcopy(info), cursor.call("draw"), properties)
+
+    def tree(self, step: int) -> list[dict[str, Any]]:
+        """Every node after ``step``, as the inspector's tree lists them (``client.tree()``).
+
+        Each entry has the node's ``path``, ``type``, ``exported`` values and ``read_only``
+        names; the environment, agent and world nodes also ``config`` and ``configurable`` (and
+        an agent its ``demonstration_keys``).
+
+        Raises:
+            IndexError: no such step.
+            RuntimeError: as :meth:`at`.
+        """
+        self._goto(step)
+        return self._cursor().call("tree")
 
     def ticks(self, step: int) -> list[Tick]:
         """Each physics tick inside the action of ``step`` (from 1), re-simulated.
 
         From the state before the step, the action runs with ``repeat_action=1`` as many times
-        as the step ran ticks. This is bit for bit the state one step with ``repeat_action=N``
-        reaches when the agent's ``set_action`` only sets what each tick uses (CartPole's and
-        Plinko's do: the tests check the last tick against :meth:`at` and the rewards' sum);
-        an agent that does something once per action (a jump, a counter) would do it at every
-        tick here.
+        as the step ran ticks (on a copy: the timeline's own state is untouched). This is bit
+        for bit the state one step with ``repeat_action=N`` reaches when the agent's
+        ``set_action`` only sets what each tick uses (CartPole's and Plinko's do: the tests
+        check the last tick against :meth:`at` and the rewards' sum); an agent that does
+        something once per action (a jump, a counter) would do it at every tick here.
 
         Raises:
             IndexError: no such step (step 0 has no action).
@@ -280,105 +358,123 @@ class Timeline:
         if not 1 <= step <= len(self):
             raise IndexError(f"step {step} has no action (steps 1 to {len(self)} have)")
         self._goto(step - 1)
-        scratch = self._scratch
-        scratch.position = scratch.result = None  # the log now holds single ticks
         *changes, (_, action, frames) = self._steps[step - 1]
-        self._apply(changes)
-        ticks = []
-        for tick in range(1, frames + 1):
-            observation, reward, terminated, truncated, info = scratch.client.step(action, 1)
-            properties = {node["path"]: dict(node["exported"]) for node in scratch.client.tree()}
-            ticks.append(Tick(tick, observation, float(reward), bool(terminated),
-                              bool(truncated), info, properties))
-            if terminated or truncated:
-                break
+        ticking = self._cursor().fork()
+        try:
+            ticks = []
+            for tick in range(1, frames + 1):
+                events = [*changes, ["action", action, 1]] if tick == 1 else [["action", action, 1]]
+                ((_, reward, terminated, truncated),), observation, info = ticking.run([events])
+                properties = {node["path"]: dict(node["exported"])
+                              for node in ticking.call("tree")}
+                ticks.append(Tick(tick, observation, reward, terminated, truncated, info,
+                                  properties))
+                if terminated or truncated:
+                    break
+        except (ConnectionError, RemoteError) as error:
+            raise RuntimeError(f"the timeline's environment failed: {error}") from None
+        finally:
+            ticking.end()
         return ticks
 
     def branch(self, step: int, actions: Iterable[Any] | None = None, *,
-               policy: Callable[[Any], Any] | None = None, max_steps: int | None = None,
-               repeat_action: int | None = None) -> Timeline:
+               policy: Callable[[Any], Any] | str | Path | None = None,
+               max_steps: int | None = None, repeat_action: int | None = None) -> Timeline:
         """A timeline sharing this one's first ``step`` steps, then going on differently.
 
-        It continues with ``actions``, or with ``policy(observation) -> action`` for at most
-        ``max_steps`` steps, and ends early where its episode ends (a branch from a step where
-        this episode ended has no more steps). Changes recorded before this timeline's next
-        action are not part of the branch. The branch shares the scratch server (its
-        :meth:`close` leaves it to this timeline's root).
+        It continues with ``actions``, or with a policy for at most ``max_steps`` steps, and
+        ends early where its episode ends (a branch from a step where this episode ended has no
+        more steps). Changes recorded before this timeline's next action are not part of the
+        branch. The branch shares its root's processes (its :meth:`close` leaves them to the
+        root).
 
         Args:
             step: the last step both share.
             actions: the branch's actions after ``step``.
-            policy: instead of ``actions``, what chooses each action from the observation.
+            policy: instead of ``actions``, what chooses each action: ``policy(observation) ->
+                action``, or the path of an ONNX file
+                (:func:`~rlenv_client.policies.export_onnx`; the ``onnx`` extra).
             max_steps: with ``policy``, the most steps it takes.
             repeat_action: ticks per action; default: the recorded action's at ``step + 1``
                 (or the last one), else the server's setting.
 
         Raises:
-            ValueError: not exactly one of ``actions`` and ``policy``, or ``policy`` without
-                ``max_steps``.
+            ValueError: not exactly one of ``actions`` and ``policy``, ``policy`` without
+                ``max_steps``, or a policy file that cannot be used.
             IndexError: no such step.
+            RemoteError: the environment refused an action (nothing of the branch is kept).
             RuntimeError: as :meth:`at`.
         """
         if (actions is None) == (policy is None):
             raise ValueError("branch needs actions or a policy (one of them)")
         if policy is not None and max_steps is None:
             raise ValueError("a policy needs max_steps")
+        if isinstance(policy, (str, Path)):
+            policy = _file_policy(policy)
         result = self._goto(step)
         if repeat_action is None and self._steps:
             repeat_action = self._steps[min(step, len(self) - 1)][-1][2]
         checkpoints = self._checkpoints.upto(step)
-        digests = self.episode.observations[:step + 1]
+        records = self._records[:step]
         terminated, truncated = result[2], result[3]
         if step == len(self) and self.ended:
             terminated, truncated = bool(self.episode.terminated), bool(self.episode.truncated)
-        chosen = None if actions is None else iter(actions)
-        client = self._scratch.client
-        taken = 0
-        while not (terminated or truncated):
-            if chosen is None:
-                if taken >= max_steps:  # type: ignore[operator]
-                    break
-                action = policy(result[0])  # type: ignore[misc]
+        processes = self._processes
+        cursor = self._cursor()
+        processes.position = None  # the cursor leaves this timeline
+        try:
+            if terminated or truncated:
+                pass
+            elif policy is None:
+                steps = [[["action", action, repeat_action]] for action in actions]  # type: ignore[union-attr]
+                result = self._take(step, steps, result, checkpoints, records, branching=True)
             else:
-                action = next(chosen, _END)
-                if action is _END:
-                    break
-            observation, reward, terminated, truncated, info = client.step(action, repeat_action)
-            result = (observation, float(reward), bool(terminated), bool(truncated), info)
-            digests.append(digest(observation))
-            taken += 1
-            if checkpoints.due(step + taken):
-                checkpoints.keep(step + taken, _Mark(client.snapshot(), *result[1:]))
-        episode = EpisodeFile(self.episode.target, client.snapshot(), digests,
-                              bool(terminated), bool(truncated))
+                for _ in range(max_steps):  # type: ignore[arg-type]
+                    action = policy(result[0])
+                    observation, reward, terminated, truncated, info = cursor.call(
+                        "step", action, repeat_action)
+                    result = (observation, float(reward), bool(terminated), bool(truncated), info)
+                    records.append((digest(observation), *result[1:4]))
+                    self._park_if_due(len(records), checkpoints, result)
+                    if terminated or truncated:
+                        break
+            snapshot = cursor.call("snapshot")
+        except ConnectionError as error:
+            raise RuntimeError(f"the timeline's environment failed: {error}") from None
+        except RemoteError:
+            processes.drop_cursor()  # it took part of the branch
+            raise
+        digests = self.episode.observations[:step + 1] + [record[0] for record in records[step:]]
+        ends = records[-1][2:] if len(records) > step else (terminated, truncated)
+        episode = EpisodeFile(self.episode.target, snapshot, digests, *ends)
         branch = object.__new__(Timeline)
-        branch._setup(episode, self._scratch, False, checkpoints)
-        self._scratch.position, self._scratch.result = (branch, len(branch)), result
+        branch._setup(episode, processes, False, checkpoints, records)
+        processes.position, processes.result = (branch, len(branch)), result
         return branch
 
     def diff(self, other: Timeline) -> TimelineDiff:
         """How ``other`` differs from this timeline, step by step (both re-simulated)."""
-        mine = [self._goto(k)[:2] for k in range(len(self) + 1)]
-        theirs = [other._goto(k)[:2] for k in range(len(other) + 1)]
+        mine, theirs = self._every_observation(), other._every_observation()
+        rewards = [[0.0] + [record[1] for record in timeline._records]
+                   for timeline in (self, other)]
+        digests = self.episode.observations, other.episode.observations
         first = None
         for k in range(max(len(mine), len(theirs))):
-            if k >= len(mine) or k >= len(theirs) or mine[k][1] != theirs[k][1] or \
-                    digest(mine[k][0]) != digest(theirs[k][0]):
+            if k >= len(mine) or k >= len(theirs) or rewards[0][k] != rewards[1][k] or \
+                    digests[0][k] != digests[1][k]:
                 first = k
                 break
-        common = zip(mine, theirs, strict=False)
-        return TimelineDiff(first, [_subtract(a[0], b[0]) for a, b in common],
-                            [float(b[1]) - float(a[1]) for a, b in zip(mine, theirs,
-                                                                       strict=False)])
+        return TimelineDiff(first, [_subtract(a, b) for a, b in zip(mine, theirs, strict=False)],
+                            [b - a for a, b in zip(*rewards, strict=False)])
 
     def save(self, path: str | Path) -> None:
         """Write this timeline as a recording that ``rlenv replay`` re-runs."""
         self.episode.save(path)
 
     def close(self) -> None:
-        """End the scratch server (a root timeline's; a branch leaves it to its root)."""
+        """End the processes (a root timeline's; a branch leaves them to its root)."""
         if self._owner:
-            self._scratch.close()
+            self._processes.close()
 
     def __enter__(self) -> Timeline:
         return self
@@ -390,48 +486,107 @@ class Timeline:
         return f"Timeline({self.episode.target}, {len(self)} steps)"
 
     def _goto(self, step: int) -> _Result:
-        """Bring the scratch server to ``step`` of this timeline; what that step returned."""
+        """Bring the cursor to ``step`` of this timeline; what that step returned."""
         if not 0 <= step <= len(self):
             raise IndexError(f"no step {step}: the timeline has steps 0 to {len(self)}")
-        scratch = self._scratch
-        if scratch.closed:
-            raise RuntimeError("the timeline's scratch server is closed")
+        processes = self._processes
+        if processes.closed:
+            raise RuntimeError("the timeline is closed")
         base, mark = self._checkpoints.nearest(step)
-        position = scratch.position
-        if position is not None and position[0] is self and base <= position[1] <= step:
-            base, result = position[1], scratch.result
-        else:
-            scratch.position = None
-            observation, _ = scratch.client.restore(mark.snapshot)
-            result = (observation, mark.reward, mark.terminated, mark.truncated, mark.info)
-            self._check(base, observation)
-        for k in range(base + 1, step + 1):
-            *changes, (_, action, frames) = self._steps[k - 1]
-            self._apply(changes)
-            observation, reward, terminated, truncated, info = scratch.client.step(action, frames)
-            result = (observation, float(reward), bool(terminated), bool(truncated), info)
-            self._check(k, observation)
-            if self._checkpoints.due(k):
-                self._checkpoints.keep(k, _Mark(scratch.client.snapshot(), *result[1:]))
-        scratch.position, scratch.result = (self, step), result
+        position = processes.position
+        try:
+            if position is not None and position[0] is self and base <= position[1] <= step:
+                base, result = position[1], processes.result
+            else:
+                processes.resume(mark)
+                result = mark.result
+            result = self._take(base, self._steps[base:step], result,  # type: ignore[arg-type]
+                                self._checkpoints, self._records)
+        except (ConnectionError, RemoteError) as error:
+            processes.drop_cursor()
+            raise RuntimeError(f"the timeline's environment failed: {error}") from None
+        processes.position, processes.result = (self, step), result
         assert result is not None
         return result
 
-    def _apply(self, changes: list[list[Any]]) -> None:
-        """Apply the configuration and property changes recorded before an action."""
-        client = self._scratch.client
-        for event in changes:
-            if event[0] == "config":
-                part = event[1]
-                settings = {k: v for k, v in part.get("environment", {}).items() if k != "record"}
-                client.configure(agent=part.get("agent"), world=part.get("world"), **settings)
-            else:  # ["set", path, property, value]
-                client.set_property(*event[1:])
+    def _take(self, step: int, steps: list[list[list[Any]]], result: _Result,
+              checkpoints: _Checkpoints, records: list[StepRecord], *,
+              branching: bool = False) -> _Result:
+        """Take ``steps`` after ``step`` on the cursor, parking checkpoints where due.
 
-    def _check(self, step: int, observation: Any) -> None:
-        if digest(observation) != self.episode.observations[step]:
-            raise RuntimeError(f"step {step}: the scratch server's observation differs from the "
+        This timeline's own steps are checked against the recording (the first time through a
+        recording without digests, recorded); a branch's new steps stop where its episode ends.
+        """
+        cursor = self._cursor()
+        done = 0
+        while done < len(steps):
+            chunk = steps[done:checkpoints.next_due(step + done) - step]
+            taken, observation, info = cursor.run(chunk, stop_at_end=branching)
+            for record in taken:
+                done += 1
+                if step + done > len(records):
+                    records.append(record)
+                if not branching:
+                    self._check(step + done, record[0])
+            result = (observation, *taken[-1][1:], info)  # type: ignore[assignment]
+            self._park_if_due(step + done, checkpoints, result)
+            if branching and (result[2] or result[3]):
+                break
+        return result
+
+    def _park_if_due(self, step: int, checkpoints: _Checkpoints, result: _Result) -> None:
+        if checkpoints.due(step):
+            checkpoints.keep(step, _Mark(self._processes.park(self._cursor()), result))
+
+    def _cursor(self) -> ForkedEnvironment:
+        cursor = self._processes.cursor
+        assert cursor is not None
+        return cursor
+
+    def _check(self, step: int, observed: str) -> None:
+        digests = self.episode.observations
+        if step == len(digests):  # not recorded: the first time through records it
+            digests.append(observed)
+        elif observed != digests[step]:
+            raise RuntimeError(f"step {step}: the re-simulated observation differs from the "
                                "recording (the environment is not deterministic here)")
+
+    def _measured_spacing(self) -> int:
+        """Checkpoints as far apart as ~10 ms of steps, from the cost of the first few.
+
+        The first steps after a copy pay for its first writes to shared pages; the next ones
+        are timed.
+        """
+        if len(self) < 2 * _PROBE_STEPS:
+            return _MOST_APART
+        self._goto(_PROBE_STEPS)
+        began = time.perf_counter()
+        self._goto(2 * _PROBE_STEPS)
+        cost = (time.perf_counter() - began) / _PROBE_STEPS
+        spacing = min(_MOST_APART, max(2 * _PROBE_STEPS, int(_REPLAY_BUDGET / cost)))
+        return max(spacing, -(-len(self) // _MOST_CHECKPOINTS))
+
+    def _every_observation(self) -> list[Any]:
+        """Every step's observation, re-simulated from the reset in one run."""
+        _, mark = self._checkpoints.nearest(0)
+        processes = self._processes
+        try:
+            cursor = processes.resume(mark)
+            observations = [mark.result[0]]
+            if self._steps:
+                observations += cursor.run(self._steps, observations=True)[1]
+        except (ConnectionError, RemoteError) as error:
+            processes.drop_cursor()
+            raise RuntimeError(f"the timeline's environment failed: {error}") from None
+        processes.position, processes.result = None, None
+        return observations
+
+
+def _file_policy(path: str | Path) -> Callable[[Any], Any]:
+    """The policy of an ONNX file, as a callable."""
+    from rlenv.serving.onnx_policy import OnnxPolicy
+
+    return OnnxPolicy(path).act
 
 
 def _subtract(mine: Any, theirs: Any) -> Any:

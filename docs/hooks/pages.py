@@ -1,8 +1,9 @@
 """MkDocs hooks: the README is the home page, and links out of ``docs/`` read as plain text.
 
-- ``index.md`` is generated from ``README.md`` at build time (nothing is copied into
-  ``docs/``, so the two never drift apart); the README's links into ``docs/`` are made relative
-  to the site.
+- ``index.md`` is generated from ``README.md`` at build time, and ``changelog.md`` from
+  ``CHANGELOG.md`` (nothing is copied into ``docs/``, so they never drift apart); their links
+  into ``docs/`` are made relative to the site, and the README's to the changelog lead to its
+  page.
 - A link to a folder of ``docs/`` that holds a ``README.md`` leads to it (a repository browser
   shows it there; on the site it is that folder's page).
 - A link from a page to a file outside ``docs/`` (``../../../tests/protocol_vectors.py``) works
@@ -24,10 +25,12 @@ LINK = re.compile(r"(?<!!)\[(?P<text>[^\]]+)\]\((?P<target>[^)\s]+)\)")
 
 
 def on_files(files: Files, config: MkDocsConfig) -> Files:
-    """Add ``index.md``, made from the README, to the site's files."""
-    readme = Path(config.config_file_path).parent / "README.md"
-    text = readme.read_text(encoding="utf-8").replace("](docs/", "](")
-    files.append(File.generated(config, "index.md", content=text))
+    """Add ``index.md`` and ``changelog.md``, made from the README and the changelog."""
+    root = Path(config.config_file_path).parent
+    for source, page in (("README.md", "index.md"), ("CHANGELOG.md", "changelog.md")):
+        text = (root / source).read_text(encoding="utf-8").replace("](docs/", "](")
+        text = text.replace("](CHANGELOG.md", "](changelog.md")
+        files.append(File.generated(config, page, content=text))
     return files
 
 

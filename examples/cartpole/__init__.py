@@ -73,7 +73,7 @@ from rlenv import (
 
 __all__ = ["TARGET", "CartPoleAgent", "CartPoleEnvironment", "CartPoleWorld", "controller", "main"]
 
-TARGET = "examples.cartpole:CartPoleEnvironment"
+TARGET = f"{__name__}:CartPoleEnvironment"
 """What ``rlenv serve`` takes to serve this environment."""
 
 POLE_LENGTH = 1.0

@@ -1,5 +1,5 @@
 """``python -m examples.cartpole [--host H] [--port P]`` serves CartPole."""
 
-from examples.cartpole import main
+from . import main
 
 main()

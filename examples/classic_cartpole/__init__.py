@@ -55,13 +55,14 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from examples.cartpole import POLE_LENGTH, CartPoleAgent, CartPoleWorld
 from rlenv import RLEnvironment
+
+from ..cartpole import POLE_LENGTH, CartPoleAgent, CartPoleWorld
 
 __all__ = ["TARGET", "ClassicCartPoleAgent", "ClassicCartPoleEnvironment", "ClassicCartPoleWorld",
            "heuristic", "main"]
 
-TARGET = "examples.classic_cartpole:ClassicCartPoleEnvironment"
+TARGET = f"{__name__}:ClassicCartPoleEnvironment"
 """What ``rlenv serve`` takes to serve this environment."""
 
 ANGLE_LIMIT = math.radians(12.0)

@@ -1,5 +1,5 @@
 """``python -m examples.classic_cartpole [--host H] [--port P]`` serves gymnasium's CartPole-v1."""
 
-from examples.classic_cartpole import main
+from . import main
 
 main()

@@ -2,4 +2,4 @@
 
 from rlenv.cli import serve_command
 
-raise SystemExit(serve_command("examples.faulty:FaultyEnvironment"))
+raise SystemExit(serve_command(f"{__package__}:FaultyEnvironment"))

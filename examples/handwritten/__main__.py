@@ -1,5 +1,5 @@
 """``python -m examples.handwritten`` serves the hand-written CartPole to one client."""
 
-from examples.handwritten import main
+from . import main
 
 main()

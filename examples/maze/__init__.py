@@ -105,7 +105,7 @@ __all__ = [
     "shortest_path",
 ]
 
-TARGET = "examples.maze:MazeEnvironment"
+TARGET = f"{__name__}:MazeEnvironment"
 """What ``rlenv serve`` takes to serve this environment."""
 
 SIZE = 11

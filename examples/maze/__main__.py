@@ -1,5 +1,5 @@
 """``python -m examples.maze [--host H] [--port P]`` serves Maze."""
 
-from examples.maze import main
+from . import main
 
 main()

@@ -38,7 +38,6 @@ import numpy as np
 import pymunk
 from gymnasium import spaces
 
-from examples.seeker import HALF, RADIUS, greedy, random_spot, room_walls
 from rlenv import (
     CollisionShape,
     PhysicsWorld,
@@ -50,9 +49,11 @@ from rlenv import (
 )
 from rlenv.signals import Signal
 
+from ..seeker import HALF, RADIUS, greedy, random_spot, room_walls
+
 __all__ = ["NAMES", "TARGET", "PairAgent", "PairEnvironment", "PairWorld", "chase"]
 
-TARGET = "examples.pair:PairEnvironment"
+TARGET = f"{__name__}:PairEnvironment"
 NAMES = ("Red", "Blue")
 _COLORS = {"Red": (200, 50, 50), "Blue": (50, 90, 200)}
 

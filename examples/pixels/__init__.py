@@ -29,7 +29,7 @@ from rlenv import RLAgent, RLEnvironment, RLEnvWorld
 
 __all__ = ["TARGET", "PixelsEnvironment"]
 
-TARGET = "examples.pixels:PixelsEnvironment"
+TARGET = f"{__name__}:PixelsEnvironment"
 SIZE = 84
 _MOVES = ((0, 0), (-1, 0), (1, 0), (0, -1), (0, 1))
 

@@ -100,7 +100,7 @@ __all__ = [
     "main",
 ]
 
-TARGET = "examples.plinko:PlinkoEnvironment"
+TARGET = f"{__name__}:PlinkoEnvironment"
 """What ``rlenv serve`` takes to serve this environment."""
 
 HALF_WIDTH = 4.0  # the board spans [-4, 4] in x

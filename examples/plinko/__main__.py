@@ -1,5 +1,5 @@
 """``python -m examples.plinko [--host H] [--port P]`` serves Plinko."""
 
-from examples.plinko import main
+from . import main
 
 main()

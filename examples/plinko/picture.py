@@ -14,8 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from examples.plinko import PlinkoEnvironment
 from rlenv_client import LocalClient
+
+from . import PlinkoEnvironment
 
 __all__ = ["levels_picture", "main", "write_png"]
 

@@ -53,7 +53,7 @@ from rlenv import CollisionShape, PhysicsWorld, RigidBody, RLAgent, RLEnvironmen
 
 __all__ = ["TARGET", "PusherAgent", "PusherEnvironment", "PusherWorld", "main", "towards_goal"]
 
-TARGET = "examples.pusher:PusherEnvironment"
+TARGET = f"{__name__}:PusherEnvironment"
 HALF = 2.0  # the table spans [-HALF, HALF] in x and y
 GOAL_RADIUS = 0.2
 

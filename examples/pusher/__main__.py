@@ -1,5 +1,5 @@
 """``python -m examples.pusher [PORT]``: the pusher hosts itself, as a Godot project does."""
 
-from examples.pusher import main
+from . import main
 
 main()

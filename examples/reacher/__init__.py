@@ -59,7 +59,7 @@ from rlenv import (
 
 __all__ = ["TARGET", "ReacherAgent", "ReacherEnvironment", "ReacherWorld", "main", "reach"]
 
-TARGET = "examples.reacher:ReacherEnvironment"
+TARGET = f"{__name__}:ReacherEnvironment"
 LINK = 0.5  # length of each link, in metres
 
 

@@ -1,5 +1,5 @@
 """``python -m examples.reacher [--host H] [--port P]`` serves the reacher."""
 
-from examples.reacher import main
+from . import main
 
 main()

@@ -69,8 +69,8 @@ __all__ = [
     "room_walls",
 ]
 
-TARGET = "examples.seeker:SeekerEnvironment"
-PIXELS_TARGET = "examples.seeker:SeekerPixelsEnvironment"
+TARGET = f"{__name__}:SeekerEnvironment"
+PIXELS_TARGET = f"{__name__}:SeekerPixelsEnvironment"
 HALF = 5.0  # the room spans [-HALF, HALF] in x and y
 RADIUS = 0.3
 

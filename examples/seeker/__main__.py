@@ -1,5 +1,5 @@
 """``python -m examples.seeker [--host H] [--port P]`` serves the apple seeker."""
 
-from examples.seeker import main
+from . import main
 
 main()

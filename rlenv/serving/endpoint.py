@@ -44,7 +44,7 @@ from rlenv.protocol import CONNECTION_CLOSED, NEED_DATA, ErrorReply, Request
 from rlenv.protocol.errors import ErrorCode, ProtocolError
 from rlenv.serving.access import DEFAULT_HOST, InsecureBindError, Limits, bind_error
 from rlenv.serving.connections import HOUSEKEEPING_INTERVAL, Connections, Peer
-from rlenv.transport.sockets import is_loopback
+from rlenv.transport.sockets import address_family, format_address, is_loopback
 
 __all__ = ["DEFAULT_HOST", "HOUSEKEEPING_INTERVAL", "Endpoint", "InsecureBindError", "Limits",
            "Peer"]
@@ -81,13 +81,14 @@ class Endpoint(Connections):
                 "must present, or bind 127.0.0.1"
             )
         try:
-            listener = socket.create_server((host, port), backlog=16)
+            listener = socket.create_server((host, port), family=address_family(host),
+                                            backlog=16)
         except OSError as error:
             raise bind_error(error, host, port) from None
         listener.setblocking(False)
         self._listener = listener
         self._selector.register(listener, selectors.EVENT_READ)
-        logger.info("listening on %s:%d%s", *self.address,
+        logger.info("listening on %s%s", format_address(*self.address),
                     " (token required)" if self._token else "")
         return self.address
 

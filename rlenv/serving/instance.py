@@ -25,8 +25,8 @@ Every answer reports what happened since the previous one: summed rewards, flags
 
 from __future__ import annotations
 
-import importlib
 import logging
+import os
 import time
 import traceback
 from collections.abc import Callable, Mapping
@@ -49,6 +49,7 @@ from rlenv.serving.recent import KEEP_EPISODES, RecentEpisodes
 from rlenv.serving.settings import Settings
 from rlenv.serving.snapshots import EpisodeLog
 from rlenv.serving.stats import EpisodeStats
+from rlenv.targets import import_module
 from rlenv.tree import SceneTree
 
 if TYPE_CHECKING:
@@ -62,6 +63,10 @@ logger = logging.getLogger(__name__)
 def load_environment(target: str) -> type[RLEnvironment]:
     """Import the environment class named ``MODULE:CLASS``.
 
+    A shipped example loads under its one name in this process, whichever of its two names
+    ``target`` uses (``examples.X`` in a checkout, ``rlenv.examples.X`` installed:
+    :mod:`rlenv.targets`).
+
     Raises:
         ValueError: ``target`` is not of the form ``MODULE:CLASS``.
         ImportError: the module cannot be imported.
@@ -71,7 +76,7 @@ def load_environment(target: str) -> type[RLEnvironment]:
     if not module_name or not class_name:
         raise ValueError(f"expected MODULE:CLASS, e.g. examples.cartpole:CartPoleEnvironment, "
                          f"got {target!r}")
-    module = importlib.import_module(module_name)
+    module = import_module(module_name)
     try:
         environment_class = getattr(module, class_name)
     except AttributeError:
@@ -386,7 +391,10 @@ class Instance:
     def begin_episode(self, seed: int | None, options: Mapping[str, Any]) -> None:
         """Reset: undo ``inspect`` sets, seed the generator (if given), start a new episode.
 
-        The episode under way is finished: :attr:`recent` may keep its log.
+        The episode under way is finished: :attr:`recent` may keep its log. If the
+        environment's reset refuses (a ``RequestError`` from user code, such as level data it
+        cannot build), no episode runs and the next reset rebuilds the environment: the
+        refusal may have come half way through.
         """
         environment = self.environment
         if self.log.started and self.recent.keep:
@@ -409,7 +417,12 @@ class Instance:
         self._ticks = 0
         tree.paused = not tree.real_time
         self.state = Episode.RUNNING
-        environment._reset(options)
+        try:
+            environment._reset(options)
+        except RequestError as error:  # refused half way (level data, say): nothing is sure
+            self.mark_broken(error)
+            self.abandon_episode(f"the reset was refused ({error})")
+            raise
 
     def _finish_episode(self) -> None:
         """Hand the episode's log to :attr:`recent` (unless an error stopped the episode)."""
@@ -575,9 +588,14 @@ class Instance:
 
 
 def failure(reply_id: int | None, error: BaseException, consequence: str) -> ErrorReply:
-    """The ``environment_error`` answer for an exception in user code, with its traceback."""
+    """The ``environment_error`` answer for an exception in user code, with its traceback.
+
+    Files under the server's working folder are named relative to it: a client learns where
+    the error is in the environment's code, not how the server's machine is laid out.
+    """
     logger.error("environment error", exc_info=error)
     detail = "".join(traceback.format_exception(error)).rstrip()
+    detail = detail.replace(f'File "{os.getcwd()}{os.sep}', 'File "')
     return ErrorReply(reply_id, ErrorCode.ENVIRONMENT_ERROR, f"{error}; {consequence}\n{detail}")
 
 

@@ -10,6 +10,8 @@ from __future__ import annotations
 import difflib
 import sys
 
+from rlenv.targets import module_name as canonical_name
+
 __all__ = ["explain_target_error"]
 
 
@@ -25,7 +27,7 @@ def explain_target_error(error: Exception, target: str) -> str | None:
             return None  # the module itself imports something missing: the message says what
         return (f"{error}: run rlenv from the folder that holds the module, or put that folder "
                 "on PYTHONPATH")
-    module = sys.modules.get(module_name)
+    module = sys.modules.get(canonical_name(module_name))
     if not isinstance(error, ImportError) or module is None or hasattr(module, class_name):
         return None
     classes = [name for name in dir(module) if isinstance(getattr(module, name), type)]

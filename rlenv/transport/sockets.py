@@ -189,6 +189,16 @@ def configure_socket(sock: socket.socket, receive_timeout: float, send_timeout: 
         sock.setsockopt(socket.SOL_SOCKET, option, struct.pack("ll", whole, micros))
 
 
+def format_address(host: str, port: int) -> str:
+    """``HOST:PORT``, the IPv6 host in brackets (``[::1]:5000``)."""
+    return f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
+
+
+def address_family(host: str) -> socket.AddressFamily:
+    """``AF_INET6`` for an IPv6 address (it holds a colon), else ``AF_INET``."""
+    return socket.AF_INET6 if ":" in host else socket.AF_INET
+
+
 def is_loopback(host: str) -> bool:
     """Whether ``host`` (an address, or ``localhost``) is a loopback address."""
     if host == "localhost":

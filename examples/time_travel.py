@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from examples.cartpole import TARGET, controller
+from .cartpole import TARGET, controller
 
 __all__ = ["BIAS", "drifting", "main", "record_failure"]
 

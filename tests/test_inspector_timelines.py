@@ -5,6 +5,7 @@ The page itself is driven in ``test_inspector_browser.py`` (marker ``browser``).
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -78,10 +79,21 @@ def test_inspect_recordings_serves_them_with_python_policies(recording: Path) ->
         status, made = post(page.url, "api/timeline/policy", {
             "timeline": 0, "branch": 0, "step": 2, "policy": "push-left", "max_steps": 3})
         assert status == 200 and made["branches"][1]["length"] <= 5  # type: ignore[index]
-        scratch = page.timelines._roots[0].timeline.server  # type: ignore[union-attr]
+        timeline = page.timelines._roots[0].timeline
+        assert timeline is not None and timeline.processes
+        pids = timeline.processes
     finally:
         page.close()
-    assert scratch.process.poll() is not None  # closing the page ended the scratch server
+    for pid in pids:  # closing the page ended the timeline's processes
+        wait_until(lambda pid=pid: _gone(pid), f"process {pid} outlived the page")
+
+
+def _gone(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    return Path(f"/proc/{pid}/stat").read_text().split(") ")[1].startswith("Z")
 
 
 def page_recording(url: str) -> str:

@@ -170,7 +170,7 @@ def inspect_recordings(paths: Sequence[str | Path], *,
     What ``rlenv replay FILE ... --inspect`` serves, with Python callables as policies to
     branch with (``policies={"name": callable}``, each ``callable(observation) -> action``).
     Its address (:attr:`InspectorServer.url`) is logged as a warning; :meth:`~InspectorServer.
-    close` ends it and the timelines' scratch servers.
+    close` ends it and the timelines' processes.
 
     Raises:
         ValueError: a file is not an rlenv episode.

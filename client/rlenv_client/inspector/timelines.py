@@ -4,8 +4,9 @@
 can open (files given to ``rlenv replay FILE --inspect``, or the recent episodes of a watched
 instance, see :meth:`Timelines.open_recent`), each with its tree of branches, numbered in the
 order they were made (branch 0 is the episode itself). A timeline is not thread-safe, and a
-root and its branches share one scratch server: every call on one of them holds its root's
-lock. A timeline's scratch server starts when the page first asks for one of its steps.
+root and its branches share its processes: every call on one of them holds its root's lock. A
+timeline is opened (its environment started, the episode re-simulated once) when the page
+first asks for it.
 
 Branches are made from the page with the agent's keys (its ``demonstration_keys``, the map the
 page's Take control uses, :func:`~rlenv_client.inspector.control.key_map`): the first key
@@ -29,7 +30,6 @@ from typing import Any
 from gymnasium import spaces
 
 from rlenv.protocol.errors import RemoteError
-from rlenv_client.client import Client
 from rlenv_client.inspector.control import key_map
 from rlenv_client.inspector.watch import InspectorError, _shown, to_json
 from rlenv_client.launcher import ServerStartError
@@ -110,7 +110,7 @@ class Timelines:
         policies: policies to branch with, by name (``callable(observation) -> action``).
         unavailable: policies that could not be loaded, by name: why (the page says so).
         target: the environment to serve (``MODULE:CLASS``; default: each recording's).
-        checkpoint_every: see :class:`~rlenv_client.timeline.Timeline`.
+        checkpoint_every: see :class:`~rlenv_client.timeline.Timeline` (default: its own).
         max_recent: how many recent episodes of live instances stay open at once (the oldest
             opened is closed, with its branches, to make room).
     """
@@ -118,7 +118,7 @@ class Timelines:
     def __init__(self, paths: Iterable[str | Path] = (), *,
                  policies: Mapping[str, Policy] | None = None,
                  unavailable: Mapping[str, str] | None = None, target: str | None = None,
-                 checkpoint_every: int = 100, max_recent: int = 3) -> None:
+                 checkpoint_every: int | None = None, max_recent: int = 3) -> None:
         self.policies = dict(policies or {})
         self.unavailable = dict(unavailable or {})
         self._target = target
@@ -202,7 +202,8 @@ class Timelines:
         """One timeline (opened if it was not): its length, keys and tree of branches.
 
         Raises:
-            InspectorError: 404 no such timeline; 422 its scratch server did not start.
+            InspectorError: 404 no such timeline; 422 its environment did not start, or
+                re-simulated the recording differently.
         """
         root = self._root(number)
         with root.lock:
@@ -219,8 +220,8 @@ class Timelines:
         list), "properties" (every node's exported values, by path)}``.
 
         Raises:
-            InspectorError: 404 no such timeline or branch; 400 no such step; 422 the scratch
-                server failed.
+            InspectorError: 404 no such timeline or branch; 400 no such step; 422 the
+                timeline's environment failed.
         """
         root = self._root(number)
         with root.lock:
@@ -363,13 +364,12 @@ class Timelines:
             except InspectorError:
                 raise
             except Exception as error:  # the policy's own failure: the page says which
-                _forget_position(parent.timeline)
                 raise InspectorError(422, f"policy {policy} failed: {error!r:.200}") from None
             new = self._add_branch(root, branch, step, "policy", made, [policy])
             return {**self._describe(root), "branch": new.number}
 
     def close(self) -> None:
-        """End every timeline's scratch server; safe to repeat."""
+        """Close every timeline (its processes end); safe to repeat."""
         with self._lock:
             roots = list(self._roots.values())
         for root in roots:
@@ -401,22 +401,13 @@ class Timelines:
         return root
 
     def _opened(self, root: _Root) -> Timeline:
-        """The root's timeline, opened (its scratch server started) on first use."""
+        """The root's timeline, opened (its environment started) on first use."""
         if root.closed:
             raise InspectorError(404, f"timeline {root.number} was closed")
         if root.timeline is not None:
             return root.timeline
-        try:
-            episode = root.load()
-            try:
-                timeline = Timeline(episode, target=self._target, checkpoint_every=self._every)
-            except ValueError:
-                if episode.observations:
-                    raise
-                # a live server's recent episode: no observations were recorded (see
-                # _with_digests); a Timeline that accepts that never gets here
-                timeline = Timeline(_with_digests(episode, self._target),
-                                    target=self._target, checkpoint_every=self._every)
+        try:  # a live server's recent episode has no digests: the timeline records them
+            timeline = Timeline(root.load(), target=self._target, checkpoint_every=self._every)
         except (ValueError, ServerStartError, RuntimeError, OSError, RemoteError,
                 *LOST) as error:
             root.error = f"cannot open {root.name}: {error}"
@@ -428,16 +419,16 @@ class Timelines:
 
     @staticmethod
     def _learn_keys(root: _Root, timeline: Timeline) -> None:
-        """The agent's key map and names, asked of the scratch server as an observer would."""
+        """The agent's key map and names, from the timeline's hello and node tree."""
         try:
-            with Client(timeline.server.host, timeline.server.port) as observer:
-                root.agents = list(observer.hello.agents)
-                space: spaces.Space = observer.hello.action_space
-                root.keys = key_map(observer.tree(), space)
+            hello = timeline.hello
+            root.agents = list(hello.agents)
+            space: spaces.Space = hello.action_space
+            root.keys = key_map(timeline.tree(0), space)
         except InspectorError as error:
             root.keys, root.keys_error = {}, str(error)
         except Exception as error:  # the page still scrubs; it says why keys are off
-            root.keys, root.keys_error = {}, f"the scratch server did not say: {error!r:.200}"
+            root.keys, root.keys_error = {}, f"the timeline did not say: {error!r:.200}"
 
     def _branch(self, root: _Root, number: int) -> _Branch:
         self._opened(root)
@@ -474,7 +465,7 @@ class Timelines:
         """Every step's reward (0.0 at step 0), re-simulated once per timeline and kept."""
         timeline = branch.timeline
         if branch.rewards is None or branch.rewards[0] is not timeline:
-            rewards = [self._call(lambda k=k: timeline.at(k)).reward
+            rewards = [self._call(lambda k=k: timeline.at(k, nodes=())).reward
                        for k in range(len(timeline) + 1)]
             branch.rewards = (timeline, rewards)
         return branch.rewards[1]
@@ -494,68 +485,18 @@ class Timelines:
 
     @staticmethod
     def _call(compute: Callable[[], Any]) -> Any:
-        """``compute()``, its scratch server's failures as the page's errors."""
+        """``compute()``, its timeline's failures as the page's errors."""
         try:
             return compute()
         except IndexError as error:
             raise InspectorError(400, str(error)) from None
         except (RuntimeError, RemoteError, *LOST) as error:
-            raise InspectorError(422, f"the scratch server failed: {error}") from None
+            raise InspectorError(422, f"the timeline's environment failed: {error}") from None
 
 
 def episode_id(episode: EpisodeFile) -> str:
     """A recent episode's identifier: the digest of its snapshot (the same at every asking)."""
     return digest(episode.snapshot)
-
-
-def _with_digests(episode: EpisodeFile, target: str | None) -> EpisodeFile:
-    """``episode`` with the digest of every observation, re-simulated once to learn them.
-
-    A live server's recent episodes come without observations (a snapshot and the actions
-    only: kept cheaply); :class:`~rlenv_client.timeline.Timeline` wants one digest a step.
-    This pass records them on a scratch server of its own, as ``rlenv replay`` re-runs an
-    episode (configuration and property changes included), so that the timeline's checks hold.
-
-    Raises:
-        ValueError: the episode names no target and none is given.
-        ServerStartError: the scratch server did not start.
-    """
-    from rlenv_client.launcher import ServerProcess
-
-    target = target or episode.target
-    if target is None:
-        raise ValueError("the episode names no target: start the inspector with --target "
-                         "MODULE:CLASS")
-    with ServerProcess(target) as server, Client(server.host, server.port,
-                                                 timeout=120.0) as client:
-        observation, _ = client.restore({**episode.snapshot, "events": []})
-        digests = [digest(observation)]
-        for event in episode.snapshot["events"]:
-            if event[0] == "config":
-                part = event[1]
-                settings = {k: v for k, v in part.get("environment", {}).items()
-                            if k != "record"}
-                client.configure(agent=part.get("agent"), world=part.get("world"), **settings)
-            elif event[0] == "set":
-                client.set_property(*event[1:])
-            else:  # ["action", action, frames]
-                observation, *_ = client.step(event[1], event[2])
-                digests.append(digest(observation))
-    return EpisodeFile(episode.target or target, episode.snapshot, digests, episode.terminated,
-                       episode.truncated)
-
-
-def _forget_position(timeline: Timeline) -> None:
-    """After a policy raised mid-branch, make the timeline restore a checkpoint next time.
-
-    ``Timeline.branch`` leaves its scratch server's position at the branch point while the
-    policy's steps moved the server on; without this, the next step asked of that timeline
-    would step on from the wrong state (and fail its digest check). A workaround reaching into
-    the timeline's private scratch state, tolerant of its absence.
-    """
-    scratch = getattr(timeline, "_scratch", None)
-    if scratch is not None and hasattr(scratch, "position"):
-        scratch.position = None
 
 
 def _step(timeline: Timeline, step: int) -> int:

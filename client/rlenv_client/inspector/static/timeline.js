@@ -57,7 +57,7 @@ async function refreshTimelines() {
 async function openTimeline(number) {
   timeline.playing = false;
   stopBranching();
-  timelineNote("timeline-status", "opening (the scratch server starts)…");
+  timelineNote("timeline-status", "opening (the episode is re-simulated once)…");
   const info = await timelineGet("timeline", {timeline: number});
   timeline.active = true;
   document.body.classList.add("time-travel");

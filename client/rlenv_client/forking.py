@@ -176,14 +176,10 @@ class ForkedEnvironment:
         return value
 
     def _exactly(self, size: int) -> bytes:
-        chunks = []
-        while size:
-            chunk = self._socket.recv(min(size, 1 << 20))
-            if not chunk:
-                raise ConnectionResetError("the environment process ended")
-            chunks.append(chunk)
-            size -= len(chunk)
-        return b"".join(chunks)
+        data = _read(self._socket, size)
+        if data is None:
+            raise ConnectionResetError("the environment process ended")
+        return data
 
     def _lost(self, error: OSError) -> NoReturn:
         what = "did not answer in time" if isinstance(error, TimeoutError) else f"is gone ({error})"
@@ -310,6 +306,7 @@ def _request(sock: socket.socket) -> Any:
 
 
 def _read(sock: socket.socket, size: int) -> bytes | None:
+    """``size`` bytes from ``sock``, or ``None`` if it closes first."""
     chunks = []
     while size:
         chunk = sock.recv(min(size, 1 << 20))

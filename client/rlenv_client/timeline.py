@@ -25,7 +25,7 @@ re-simulates differently raises ``RuntimeError``).
 Opening a timeline re-simulates the whole episode once, and on the way parks checkpoints: every
 ``checkpoint_every`` steps, a copy of the environment's process made by ``fork``
 (:mod:`rlenv_client.forking`), which holds the whole state to the bit. Going to a step copies
-the nearest checkpoint at or before it and takes the steps from there (about 10 ms of them at
+the nearest checkpoint at or before it and takes the steps from there (about 5 ms of them at
 most); going forward from where the timeline stands just steps on. ``benchmarks/time_travel.py``
 measures a step of a 10,000-step episode. Each checkpoint is a process that holds, of its own,
 the memory the episode changed since the one before (a few MiB for Plinko); there are at most
@@ -50,8 +50,9 @@ from rlenv_client.replay import EpisodeFile, digest
 
 __all__ = ["Step", "Tick", "Timeline", "TimelineDiff"]
 
-_PROBE_STEPS = 8  # steps timed to space the checkpoints, and the least spacing
-_REPLAY_BUDGET = 0.010  # seconds of steps from a checkpoint to the step asked for, at most
+_PROBE_STEPS = 8  # steps timed at a time to space the checkpoints (twice: the least spacing)
+_PROBE_ROUNDS = 4  # times they are timed
+_REPLAY_BUDGET = 0.005  # seconds of steps from a checkpoint to the step asked for, at most
 _MOST_APART = 1000  # steps between two checkpoints, at most (unless the episode is longer)
 _MOST_CHECKPOINTS = 256  # over one episode
 _Result = tuple[Any, float, bool, bool, dict[str, Any]]  # observation, reward, ends, info
@@ -219,7 +220,7 @@ class Timeline:
         episode: the recording.
         target: the environment to serve (``MODULE:CLASS``; default: the recorded one).
         checkpoint_every: how many steps apart the checkpoints are (default: as many as take
-            about 10 ms to re-simulate, from the cost of the first steps; at most 256
+            about 5 ms to re-simulate, from the cost of the first steps; at most 256
             checkpoints over the episode).
         timeout: seconds a re-simulation may take (a step, a scene read, a branch's run of
             steps) before its process is ended and the call fails.
@@ -552,18 +553,21 @@ class Timeline:
                                "recording (the environment is not deterministic here)")
 
     def _measured_spacing(self) -> int:
-        """Checkpoints as far apart as ~10 ms of steps, from the cost of the first few.
+        """Checkpoints as far apart as ~5 ms of steps, from the cost of the first few.
 
         The first steps after a copy pay for its first writes to shared pages; the next ones
-        are timed.
+        are timed, a few at a time, and the quickest few count (the machine's noise only ever
+        adds).
         """
-        if len(self) < 2 * _PROBE_STEPS:
+        if len(self) < _PROBE_STEPS * (_PROBE_ROUNDS + 1):
             return _MOST_APART
         self._goto(_PROBE_STEPS)
-        began = time.perf_counter()
-        self._goto(2 * _PROBE_STEPS)
-        cost = (time.perf_counter() - began) / _PROBE_STEPS
-        spacing = min(_MOST_APART, max(2 * _PROBE_STEPS, int(_REPLAY_BUDGET / cost)))
+        costs = []
+        for round_ in range(2, _PROBE_ROUNDS + 2):
+            began = time.perf_counter()
+            self._goto(round_ * _PROBE_STEPS)
+            costs.append((time.perf_counter() - began) / _PROBE_STEPS)
+        spacing = min(_MOST_APART, max(2 * _PROBE_STEPS, int(_REPLAY_BUDGET / min(costs))))
         return max(spacing, -(-len(self) // _MOST_CHECKPOINTS))
 
     def _every_observation(self) -> list[Any]:

@@ -26,7 +26,7 @@ from rlenv.demonstration_keys import keys_of
 from rlenv.environment import RLEnvironment
 from rlenv.node import Node
 from rlenv.protocol.errors import ErrorCode, RequestError
-from rlenv.serving.properties import conform, exported_of, to_wire
+from rlenv.serving.properties import conform, exported_of, exported_values, to_wire
 
 __all__ = ["check_inspect", "get_property", "node_at", "node_entry", "node_of", "set_property",
            "tree"]
@@ -80,10 +80,9 @@ def node_entry(node: Node, section: str | None = None) -> dict[str, Any]:
     say which keys a person acts with (``demonstration_keys``, see
     :mod:`rlenv.demonstration_keys`).
     """
-    names = exported_of(node)
-    entry = {"path": node.get_path(), "type": type(node).__name__,
-             "exported": {name: to_wire(getattr(node, name)) for name in names},
-             "read_only": [name for name in names if _read_only(node, name)]}
+    exported = exported_values(node)
+    entry = {"path": node.get_path(), "type": type(node).__name__, "exported": exported,
+             "read_only": [name for name in exported if _read_only(node, name)]}
     if section is not None:
         entry["config"] = section
         entry["configurable"] = list(getattr(node, "configurable", ()))

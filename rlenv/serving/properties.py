@@ -9,6 +9,7 @@ accepted. Configuration (:class:`~rlenv.rl_node.RLNode`) and the remote inspecto
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import numpy as np
@@ -16,13 +17,30 @@ import numpy as np
 from rlenv.node import Node
 from rlenv.protocol.spaces import find_non_finite
 
-__all__ = ["conform", "exported_of", "to_wire"]
+__all__ = ["conform", "declared_of", "exported_of", "exported_values", "to_wire"]
 
 
 def exported_of(node: Node) -> tuple[str, ...]:
     """The properties ``node`` exports: its class's ``exported`` and ``configurable``."""
-    names = (*getattr(type(node), "exported", ()), *getattr(type(node), "configurable", ()))
-    return tuple(name for name in dict.fromkeys(names) if hasattr(node, name))
+    return tuple(name for name in declared_of(type(node)) if hasattr(node, name))
+
+
+def exported_values(node: Node) -> dict[str, Any]:
+    """What ``node`` exports, each value as plain data (:func:`to_wire`), in one read each."""
+    values = {}
+    for name in declared_of(type(node)):
+        try:
+            values[name] = to_wire(getattr(node, name))
+        except AttributeError:  # not there (as exported_of leaves it out)
+            continue
+    return values
+
+
+@functools.cache
+def declared_of(node_class: type) -> tuple[str, ...]:
+    """The names a node class lists in ``exported`` and ``configurable``, each once."""
+    names = (*getattr(node_class, "exported", ()), *getattr(node_class, "configurable", ()))
+    return tuple(dict.fromkeys(names))
 
 
 def conform(current: Any, value: Any) -> Any:

@@ -5,8 +5,8 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-lowest test-ray test-browser test-minari test-onnx test-package screenshot plinko-picture sb3\
-	rllib cleanrl bench-http bench-train docs lint vectors clean
+.PHONY: demo test test-lowest test-ray test-browser test-minari test-onnx test-package screenshot\
+	screenshot-time-travel plinko-picture sb3 rllib cleanrl bench-http bench-train docs lint vectors clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -52,10 +52,16 @@ test-package: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e ".[test,release]"
 	PYTHON=$(PYTHON) .ci/test-package $(BIN)/python
 
-# The README's picture of the inspector: its page beside a training loop, saved by the browser test.
-screenshot: $(STAMP)
+# The README's picture of the inspector: its page beside a training loop, saved by the browser
+# test; and docs/time-travel.md's pictures (docs/images/time-travel-*.png): see screenshot-time-travel.
+screenshot: $(STAMP) screenshot-time-travel
 	RLENV_SCREENSHOT=docs/images/inspector.png $(BIN)/python -m pytest -m browser -q \
 		tests/test_inspector_browser.py -k training
+
+# docs/time-travel.md's pictures: the page scrubbing and branching examples/time_travel.py's failure.
+screenshot-time-travel: $(STAMP)
+	RLENV_SCREENSHOT_DIR=docs/images $(BIN)/python -m pytest -m browser -q \
+		tests/test_inspector_browser.py -k time_travel
 
 # The picture in docs/procedural.md: two Plinko levels drawn by rlenv's own renderer.
 plinko-picture: $(STAMP)

@@ -6,6 +6,7 @@ import argparse
 import logging
 import os
 import signal
+import stat
 import subprocess
 import sys
 import warnings
@@ -171,9 +172,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     bench.set_defaults(run=_bench)
 
     replay = commands.add_parser("replay", help="re-run a recorded episode and compare")
-    replay.add_argument("file", help="an episode file (rlenv_client.replay.RecordEpisodes)")
+    replay.add_argument("file", nargs="+", help="an episode file (rlenv_client.replay."
+                        "RecordEpisodes); several with --inspect")
     replay.add_argument("--target", help="MODULE:CLASS to serve (default: the recorded one)")
     replay.add_argument("--address", help="HOST:PORT of a running server instead")
+    replay.add_argument("--inspect", action="store_true",
+                        help="open the episodes as timelines in the inspector's page (scrub, "
+                        "step, tick, branch, compare; docs/time-travel.md): prints its "
+                        "address and serves it until Ctrl-C (or until standard input closes, "
+                        "when it is a pipe)")
+    replay.add_argument("--port", type=_port, default=0,
+                        help="with --inspect: the page's port on 127.0.0.1 (default 0: any free)")
+    replay.add_argument("--policy", action="append", default=[], metavar="FILE.onnx",
+                        help="with --inspect: a policy file to branch with (repeatable; the "
+                        "onnx extra)")
+    replay.add_argument("--follow-stdin", action="store_true", help=argparse.SUPPRESS)
     replay.set_defaults(run=_replay)
 
     dataset = commands.add_parser("dataset", help="Minari datasets (the minari extra)")
@@ -393,6 +406,16 @@ def _replay(args: argparse.Namespace) -> int:
     from rlenv_client.replay import EpisodeFile, replay
     from rlenv_client.session import Session
 
+    if args.inspect:
+        return _replay_inspect(args)
+    if args.policy or args.port or args.follow_stdin:
+        print("rlenv replay: --policy, --port and --follow-stdin go with --inspect",
+              file=sys.stderr)
+        return 2
+    if len(args.file) > 1:
+        print("rlenv replay: one file at a time (several with --inspect)", file=sys.stderr)
+        return 2
+    args.file = args.file[0]
     try:
         episode = EpisodeFile.load(args.file)
     except (OSError, ValueError) as error:
@@ -413,6 +436,42 @@ def _replay(args: argparse.Namespace) -> int:
         return 0
     print(f"replayed {args.file}: first divergence at {result.divergence}")
     return 1
+
+
+def _replay_inspect(args: argparse.Namespace) -> int:
+    """``rlenv replay FILE ... --inspect``: the inspector's page with the files as timelines."""
+    from rlenv_client.inspector import serve
+    from rlenv_client.inspector.timelines import load_policy
+
+    if args.address is not None:
+        print("rlenv replay: --inspect re-simulates on scratch servers of its own; it takes no "
+              "--address", file=sys.stderr)
+        return 2
+    from rlenv_client.replay import EpisodeFile
+
+    for path in args.file:
+        if args.target is None and EpisodeFile.load(path).target is None:
+            print(f"rlenv replay: {path} names no target; pass --target MODULE:CLASS",
+                  file=sys.stderr)
+            return 2
+    policies, unavailable = {}, {}
+    for path in args.policy:
+        name = Path(path).stem
+        try:
+            policies[name] = load_policy(path)
+        except ImportError as error:  # the page says why its policy button is off
+            unavailable[name] = str(error)
+            print(f"rlenv replay: policy {name} unavailable: {error}", file=sys.stderr)
+    signal.signal(signal.SIGTERM, _exit_on_signal)
+    stdin_is_pipe = False
+    try:
+        stdin_is_pipe = stat.S_ISFIFO(os.fstat(sys.stdin.fileno()).st_mode)
+    except (OSError, ValueError, AttributeError):
+        pass
+    serve([], token=None, port=args.port, follow_stdin=args.follow_stdin or stdin_is_pipe,
+          ready=lambda line: print(line, flush=True), target=args.target,
+          recordings=args.file, policies=policies, unavailable=unavailable)
+    return 0
 
 
 def _dataset_create(args: argparse.Namespace) -> int:

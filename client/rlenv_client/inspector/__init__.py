@@ -13,6 +13,9 @@ recording their episodes (:mod:`~rlenv_client.inspector.control`).
 - :mod:`~rlenv_client.inspector.watch`: the observer connections (what the page can ask);
 - :mod:`~rlenv_client.inspector.web`: the HTTP server and its safety rules;
 - :mod:`~rlenv_client.inspector.control`: a person's control, recorded (demonstrations);
+- :mod:`~rlenv_client.inspector.timelines`: recordings as timelines to scrub, step, tick,
+  branch and compare (``rlenv replay FILE --inspect``, or a watched instance's recent
+  episodes; see docs/time-travel.md);
 - ``static/``: the page (one HTML file, its script and its style; no build step).
 """
 
@@ -24,20 +27,21 @@ import os
 import subprocess
 import sys
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import IO, TYPE_CHECKING
+from typing import IO, TYPE_CHECKING, Any
 
 from rlenv_client.client import Client
 from rlenv_client.inspector.control import Demonstrator
+from rlenv_client.inspector.timelines import Timelines
 from rlenv_client.inspector.watch import InspectorError, Watcher
 from rlenv_client.inspector.web import InspectorServer
 
 if TYPE_CHECKING:
     from rlenv_client.session import Session
 
-__all__ = ["Demonstrator", "Inspector", "InspectorError", "InspectorServer", "Watcher",
-           "inspect_sessions", "run"]
+__all__ = ["Demonstrator", "Inspector", "InspectorError", "InspectorServer", "Timelines",
+           "Watcher", "inspect_recordings", "inspect_sessions", "serve"]
 
 logger = logging.getLogger(__name__)
 
@@ -48,7 +52,9 @@ class Inspector:
     """``rlenv inspect`` in a subprocess, watching ``addresses``; its page is at :attr:`url`.
 
     The subprocess holds the token (passed in its environment, never on its command line) and
-    exits when this object is closed or this process dies (its standard input closes).
+    exits when this object is closed or this process dies (its standard input closes). With
+    ``recordings`` it is ``rlenv replay FILE ... --inspect`` instead: the page opens those
+    recordings as timelines (``addresses`` must then be empty).
 
     Args:
         addresses: ``HOST:PORT`` of each server to watch.
@@ -59,14 +65,21 @@ class Inspector:
             episodes into this directory (``None``: the page only watches).
         target: the environment's ``MODULE:CLASS``, written into demonstrations.
         demonstration_rate: actions a second while a person plays (``None``: real time).
+        recordings: episode files to open as timelines (``rlenv replay FILE --inspect``).
+        policies: with ``recordings``, ONNX policy files to branch with (``--policy``).
 
     Raises:
         RuntimeError: the subprocess did not start (with what it printed).
+        ValueError: both ``addresses`` and ``recordings``, or neither.
     """
 
     def __init__(self, addresses: Sequence[str], token: str | None = None, port: int = 0,
                  timeout: float = 30.0, *, record_demonstrations: str | Path | None = None,
-                 target: str | None = None, demonstration_rate: float | None = None) -> None:
+                 target: str | None = None, demonstration_rate: float | None = None,
+                 recordings: Sequence[str | Path] = (),
+                 policies: Sequence[str | Path] = ()) -> None:
+        if bool(addresses) == bool(recordings):
+            raise ValueError("the inspector watches addresses or opens recordings (one of them)")
         env = dict(os.environ)
         if token is not None:
             env["RLENV_TOKEN"] = token
@@ -75,9 +88,12 @@ class Inspector:
         options += [] if target is None else ["--target", target]
         options += [] if demonstration_rate is None else \
             ["--demonstration-rate", str(demonstration_rate)]
+        for policy in policies:
+            options += ["--policy", str(policy)]
+        command = ["rlenv_client.inspector", *addresses] if addresses else \
+            ["rlenv", "replay", *map(str, recordings), "--inspect"]
         self._process = subprocess.Popen(
-            [sys.executable, "-m", "rlenv_client.inspector", *addresses, "--port", str(port),
-             "--follow-stdin", *options],
+            [sys.executable, "-m", *command, "--port", str(port), "--follow-stdin", *options],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
             env=env, start_new_session=True)
         assert self._process.stdout is not None
@@ -146,6 +162,26 @@ def inspect_sessions(sessions: Sequence[Session]) -> Inspector:
     return inspector
 
 
+def inspect_recordings(paths: Sequence[str | Path], *,
+                       policies: Mapping[str, Callable[[Any], Any]] | None = None,
+                       target: str | None = None, port: int = 0) -> InspectorServer:
+    """The page with ``paths`` as timelines, served by a thread of this process.
+
+    What ``rlenv replay FILE ... --inspect`` serves, with Python callables as policies to
+    branch with (``policies={"name": callable}``, each ``callable(observation) -> action``).
+    Its address (:attr:`InspectorServer.url`) is logged as a warning; :meth:`~InspectorServer.
+    close` ends it and the timelines' processes.
+
+    Raises:
+        ValueError: a file is not an rlenv episode.
+    """
+    server = InspectorServer(Watcher([]), port=port, timelines=Timelines(
+        paths, policies=policies, target=target))
+    server.start()
+    logger.warning("rlenv inspector: %s", server.url)
+    return server
+
+
 def _read_url(stdout: IO[str], timeout: float, process: subprocess.Popen[str]) -> str:
     """The URL the subprocess prints first (a reader thread bounds the wait)."""
     said: list[str] = []
@@ -173,20 +209,30 @@ def _drain(stdout: IO[str]) -> None:
 
 def serve(addresses: Sequence[str], *, token: str | None, port: int, follow_stdin: bool,
           ready: Callable[[str], None], record_demonstrations: str | Path | None = None,
-          target: str | None = None, demonstration_rate: float | None = None) -> None:
+          target: str | None = None, demonstration_rate: float | None = None,
+          recordings: Sequence[str | Path] = (),
+          policies: Mapping[str, Callable[[Any], Any]] | None = None,
+          unavailable: Mapping[str, str] | None = None) -> None:
     """Serve the page (``rlenv inspect``); ``ready(line)`` once it listens, with its address.
 
     Until interrupted, or until standard input closes with ``follow_stdin`` (address lists,
     one JSON list a line, are followed meanwhile). ``token`` ``None``: ``$RLENV_TOKEN``.
     ``record_demonstrations``, ``target`` and ``demonstration_rate``: see :class:`Inspector`.
+    ``recordings`` (``rlenv replay FILE --inspect``): episode files the page opens as timelines
+    (with the watched instances' recent episodes), re-simulated on ``target`` (default: each
+    episode's); ``policies`` and ``unavailable``: see
+    :class:`~rlenv_client.inspector.timelines.Timelines`.
 
     Raises:
-        ValueError: an address is not ``HOST:PORT``, or the rate is not positive.
+        ValueError: an address is not ``HOST:PORT``, the rate is not positive, or a recording
+            is not an rlenv episode.
     """
+    timelines = Timelines(recordings, policies=policies, unavailable=unavailable,
+                          target=target)
     watcher = Watcher(addresses, token=token)
     demonstrator = None if record_demonstrations is None else Demonstrator(
         watcher, record_demonstrations, target=target, rate=demonstration_rate, token=token)
-    server = InspectorServer(watcher, port=port, demonstrator=demonstrator)
+    server = InspectorServer(watcher, port=port, demonstrator=demonstrator, timelines=timelines)
     ready(f"{_READY}{server.url}")
     if follow_stdin:
         threading.Thread(target=_follow, args=(server,), daemon=True).start()
@@ -198,6 +244,7 @@ def serve(addresses: Sequence[str], *, token: str | None, port: int, follow_stdi
         server.server_close()
         if demonstrator is not None:
             demonstrator.close()
+        timelines.close()
         watcher.close()
 
 

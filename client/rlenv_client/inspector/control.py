@@ -32,7 +32,7 @@ from rlenv_client.inspector.watch import InspectorError, Watcher, to_json
 from rlenv_client.replay import EpisodeFile, digest, next_episode_path
 from rlenv_client.session import LOST
 
-__all__ = ["Demonstrator", "held_action", "idle_action"]
+__all__ = ["Demonstrator", "held_action", "idle_action", "key_map"]
 
 
 class _Control:
@@ -157,16 +157,8 @@ class Demonstrator:
                                       f"{instance + 1}")
         space = client.hello.action_space
         control = _Control(client, server, instance, {})
-        agents = [node for node in _answer(control.exchange({"inspect": {"tree": {}}}))
-                  .info["tree"] if node.get("config") == "agent"]
-        if len(agents) != 1:
-            raise InspectorError(422, f"demonstrations play one agent; this environment has "
-                                      f"{len(agents)}")
-        control.keys = {key: _action(space, value)
-                        for key, value in agents[0].get("demonstration_keys", {}).items()}
-        if not control.keys:
-            raise InspectorError(422, f"demonstrations need a key map: {agents[0]['type']} "
-                                      f"names no demonstration_keys for {space}")
+        control.keys = key_map(_answer(control.exchange({"inspect": {"tree": {}}}))
+                               .info["tree"], space)
         idle_action(space)  # refuses a space without one now
         observation, _ = client.reset_result(_answer(control.exchange(
             client.reset_request().parts)))
@@ -226,6 +218,27 @@ def _answer(reply: Response | ErrorReply) -> Response:
         status = 409 if reply.code == "busy" else 422
         raise InspectorError(status, f"{reply.code}: {reply.message.splitlines()[0]}")
     return reply
+
+
+def key_map(tree: Sequence[Mapping[str, Any]], space: spaces.Space) -> dict[str, Any]:
+    """The agent's keys and their actions (values of ``space``), from a node tree.
+
+    The tree is ``inspect tree``'s (its agent node carries ``demonstration_keys``); the
+    inspector's timelines branch with the same map (:mod:`~rlenv_client.inspector.timelines`).
+
+    Raises:
+        InspectorError: 422, not one agent, or one with no key map.
+    """
+    agents = [node for node in tree if node.get("config") == "agent"]
+    if len(agents) != 1:
+        raise InspectorError(422, f"demonstrations play one agent; this environment has "
+                                  f"{len(agents)}")
+    keys = {key: _action(space, value)
+            for key, value in agents[0].get("demonstration_keys", {}).items()}
+    if not keys:
+        raise InspectorError(422, f"demonstrations need a key map: {agents[0]['type']} "
+                                  f"names no demonstration_keys for {space}")
+    return keys
 
 
 def _action(space: spaces.Space, value: Any) -> Any:

@@ -20,6 +20,17 @@ demonstration under way) and ``POST api/edit`` (``{"server", "instance", "path",
 "value"}``); with demonstrations (:mod:`~rlenv_client.inspector.control`), ``POST api/control``
 (``{"server", "instance"}``: take control), ``api/keys`` (``{"held": [key, ...]}``) and
 ``api/release`` (``{}``), under the same rules as an edit.
+
+With timelines (:mod:`~rlenv_client.inspector.timelines`: ``rlenv replay FILE --inspect``, or
+a watched instance's recent episodes), ``GET api/timelines`` (those offered, the policies),
+``api/timeline`` (``?timeline=T``: its length, keys and tree of branches),
+``api/timeline/step`` and ``api/timeline/ticks`` (``?timeline=T&branch=B&step=K``),
+``api/timeline/compare`` (``?timeline=T&a=A&b=B&step=K``), ``api/timeline/recent``
+(``?server=S&instance=I``: the instance's last finished episodes, each with its ``id``) and
+``POST api/timeline/open`` (``{"server", "instance", "id"}``: a recent one as a timeline),
+``api/timeline/branch`` (``{"timeline", "branch", "step", "key"}``), ``api/timeline/extend``
+(``{"timeline", "branch", "key"}``) and ``api/timeline/policy`` (``{"timeline", "branch",
+"step", "policy", "max_steps"}``), under the same rules as an edit.
 """
 
 from __future__ import annotations
@@ -36,6 +47,7 @@ from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 from rlenv_client.inspector.control import Demonstrator
+from rlenv_client.inspector.timelines import Timelines, episode_id
 from rlenv_client.inspector.watch import InspectorError, Watcher
 from rlenv_client.origins import OriginPolicy
 
@@ -45,6 +57,7 @@ logger = logging.getLogger(__name__)
 
 _MAX_BODY = 64 * 1024
 _STATIC = {"inspector.js": "text/javascript; charset=utf-8",
+           "timeline.js": "text/javascript; charset=utf-8",
            "inspector.css": "text/css; charset=utf-8",
            "index.html": "text/html; charset=utf-8"}
 _HEADERS = {
@@ -68,15 +81,19 @@ class InspectorServer(ThreadingHTTPServer):
         key: the URL key (default: a fresh random one).
         demonstrator: lets a person take control and records their episodes (``None``: the
             page only watches).
+        timelines: recordings to scrub and branch (default: none but the watched instances'
+            recent episodes, opened from the page); closed with the server.
     """
 
     daemon_threads = True
 
     def __init__(self, watcher: Watcher, port: int = 0, key: str | None = None,
-                 demonstrator: Demonstrator | None = None) -> None:
+                 demonstrator: Demonstrator | None = None,
+                 timelines: Timelines | None = None) -> None:
         super().__init__(("127.0.0.1", port), _Handler)
         self.watcher = watcher
         self.demonstrator = demonstrator
+        self.timelines = timelines if timelines is not None else Timelines()
         self.key = key or secrets.token_urlsafe(18)
         self.origins = OriginPolicy(self.server_address[1])
         self._thread: threading.Thread | None = None
@@ -105,6 +122,7 @@ class InspectorServer(ThreadingHTTPServer):
         self.server_close()
         if self.demonstrator is not None:
             self.demonstrator.close()
+        self.timelines.close()
         self.watcher.close()
 
 
@@ -145,6 +163,38 @@ _GETS: dict[str, Callable[[Watcher, dict[str, list[str]]], Any]] = {
 }
 
 
+def _recent(watcher: Watcher, server: int, instance: int) -> list[Any]:
+    """The instance's recent finished episodes (the watched server must keep them)."""
+    recent = getattr(watcher, "recent_episodes", None)
+    if recent is None:
+        raise InspectorError(501, "this inspector cannot list recent episodes")
+    return list(recent(server, instance))
+
+
+def _recent_list(inspector: InspectorServer,
+                 query: dict[str, list[str]]) -> list[dict[str, Any]]:
+    server, instance = _number(query, "server"), _number(query, "instance")
+    episodes = _recent(inspector.watcher, server, instance)
+    inspector.timelines.listed(server, instance, episodes)
+    return [{"episode": index, "id": episode_id(episode),
+             "steps": sum(1 for e in episode.snapshot.get("events", ()) if e[0] == "action"),
+             "terminated": episode.terminated, "truncated": episode.truncated,
+             "target": episode.target}
+            for index, episode in enumerate(episodes)]
+
+
+_TIMELINE_GETS: dict[str, Callable[[Timelines, dict[str, list[str]]], Any]] = {
+    "api/timelines": lambda timelines, q: timelines.list(),
+    "api/timeline": lambda timelines, q: timelines.describe(_number(q, "timeline")),
+    "api/timeline/step": lambda timelines, q: timelines.step(
+        _number(q, "timeline"), _number(q, "branch"), _number(q, "step")),
+    "api/timeline/ticks": lambda timelines, q: timelines.ticks(
+        _number(q, "timeline"), _number(q, "branch"), _number(q, "step")),
+    "api/timeline/compare": lambda timelines, q: timelines.compare(
+        _number(q, "timeline"), _number(q, "a"), _number(q, "b", 1), _number(q, "step")),
+}
+
+
 class _Handler(BaseHTTPRequestHandler):
     server: InspectorServer
     protocol_version = "HTTP/1.1"  # the page polls over kept-alive connections
@@ -169,6 +219,10 @@ class _Handler(BaseHTTPRequestHandler):
             self._send_static(path[len("static/"):])
         elif path in _GETS:
             self._answer(lambda: _GETS[path](self.server.watcher, query))
+        elif path in _TIMELINE_GETS:
+            self._answer(lambda: _TIMELINE_GETS[path](self.server.timelines, query))
+        elif path == "api/timeline/recent":
+            self._answer(lambda: _recent_list(self.server, query))
         elif path == "api/control":
             demonstrator = self.server.demonstrator
             self._send_json(200, {"enabled": False} if demonstrator is None else
@@ -225,10 +279,36 @@ class _Handler(BaseHTTPRequestHandler):
             raise InspectorError(400, f"{what}'s body is not JSON: {error}") from None
         if not isinstance(body, dict) or set(body) != expected:
             raise InspectorError(400, f"{what} is a map of exactly {sorted(expected)}")
-        for name in ("server", "instance"):
-            if name in body and (type(body[name]) is not int or body[name] < 0):
+        for name in ("server", "instance", "timeline", "branch", "step", "episode",
+                     "max_steps"):
+            if name in body and (type(body[name]) is not int or not 0 <= body[name] < 2**31):
                 raise InspectorError(400, f"{name} must be an integer >= 0")
+        for name in ("key", "policy", "id"):
+            if name in body and (not isinstance(body[name], str) or len(body[name]) > 64):
+                raise InspectorError(400, f"{name} must be a string (at most 64 characters)")
         return body
+
+    def _open_recent(self) -> Any:
+        body = self._body("opening a recent episode", {"server", "instance", "id"})
+        episodes = _recent(self.server.watcher, body["server"], body["instance"])
+        return self.server.timelines.open_recent(episodes, body["server"], body["instance"],
+                                                 body["id"])
+
+    def _branch_keys(self) -> Any:
+        body = self._body("a key branch", {"timeline", "branch", "step", "key"})
+        return self.server.timelines.branch_keys(body["timeline"], body["branch"], body["step"],
+                                                 body["key"])
+
+    def _extend(self) -> Any:
+        body = self._body("a key step", {"timeline", "branch", "key"})
+        return self.server.timelines.extend(body["timeline"], body["branch"], body["key"])
+
+    def _branch_policy(self) -> Any:
+        body = self._body("a policy branch", {"timeline", "branch", "step", "policy",
+                                              "max_steps"})
+        return self.server.timelines.branch_policy(body["timeline"], body["branch"],
+                                                   body["step"], body["policy"],
+                                                   body["max_steps"])
 
     def _edit(self) -> Any:
         edit = self._body("an edit", {"server", "instance", "path", "property", "value"})
@@ -300,4 +380,8 @@ _POSTS: dict[str, Callable[[_Handler], Any]] = {
     "api/control": _Handler._take,
     "api/keys": _Handler._keys,
     "api/release": _Handler._release,
+    "api/timeline/open": _Handler._open_recent,
+    "api/timeline/branch": _Handler._branch_keys,
+    "api/timeline/extend": _Handler._extend,
+    "api/timeline/policy": _Handler._branch_policy,
 }

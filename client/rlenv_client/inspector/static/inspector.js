@@ -20,6 +20,10 @@ const state = {
 window.inspector = state;  // for whoever drives the page (its browser test)
 
 const $ = (id) => document.getElementById(id);
+// Whether the page shows a timeline (timeline.js): the live loops then leave the scene, the tree
+// and the properties to it.
+const timeTravelling = () => !!(window.timeline && window.timeline.active);
+const watching = () => state.servers.length > 0;
 
 async function api(path, params = {}) {
   const query = new URLSearchParams({server: state.server, instance: state.instance, ...params});
@@ -65,7 +69,8 @@ async function refreshServers() {
     select.value = `${state.server}/${state.instance}`;
   }
   const current = state.servers[state.server] || {};
-  if (current.error) showStatus(current.error, true);
+  if (!state.servers.length) showStatus("no server watched: recordings as timelines");
+  else if (current.error) showStatus(current.error, true);
   else showStatus(`protocol ${current.protocol} · ${current.observation_space} → ` +
                   `${current.action_space} · restarts ${current.restarts}`);
 }
@@ -187,6 +192,7 @@ function paintImage(canvas, image) {
 
 let frameTimes = [];
 async function refreshFrame() {
+  if (!watching() || timeTravelling()) return;
   const generation = state.generation;
   const frame = await api("frame");
   if (generation !== state.generation) return;
@@ -203,6 +209,7 @@ async function refreshFrame() {
 // --- the tree and the selected node ----------------------------------------------------------
 
 async function refreshTree() {
+  if (!watching() || timeTravelling()) return;
   const generation = state.generation;
   const nodes = await api("tree");
   if (generation !== state.generation) return;
@@ -237,7 +244,8 @@ function select(path) {
 }
 
 async function refreshNode() {
-  if (state.path === null) return;
+  if (timeTravelling()) { window.timeline.showProperties(); return; }
+  if (state.path === null || !watching()) return;
   const [path, generation] = [state.path, state.generation];
   const node = await api("node", {path});
   if (path !== state.path || generation !== state.generation) return;
@@ -307,6 +315,7 @@ async function takeSnapshot() {
 // --- statistics and plots ------------------------------------------------------------------
 
 async function refreshStats() {
+  if (!watching()) return;
   const generation = state.generation;
   let stats = await api("stats", {since: state.next});
   if (generation !== state.generation) return;
@@ -328,7 +337,7 @@ async function refreshStats() {
   }
   state.lastTotals = stats;
   const current = stats.current;
-  $("episode").textContent = current ? `episode ${stats.next}: return ${current.return.toFixed(2)}` +
+  if (!timeTravelling()) $("episode").textContent = current ? `episode ${stats.next}: return ${current.return.toFixed(2)}` +
     `, ${current.length} steps` + (current.returns ? " · " + Object.entries(current.returns)
       .map(([agent, r]) => `${agent} ${r.toFixed(2)}`).join(", ") : "") : "no episode under way";
   $("totals").textContent = `${stats.next} episodes · ${stats.steps} steps · ${stats.errors} errors` +
@@ -397,7 +406,7 @@ async function releaseControl() {
 }
 
 function onKey(event, down) {
-  if (!state.control.controlling || !state.control.keys.includes(event.key)) return;
+  if (timeTravelling() || !state.control.controlling || !state.control.keys.includes(event.key)) return;
   const target = event.target;
   if (target instanceof HTMLInputElement || target instanceof HTMLSelectElement) return;
   event.preventDefault();  // the arrows and space would scroll the page

@@ -82,6 +82,7 @@ def test_the_ticks_of_a_step_add_up_to_the_step(tmp_path: Path, target: str) -> 
             assert digest(ticks[-1].observation) == digest(state.observation)
             assert sum(tick.reward for tick in ticks) == pytest.approx(state.reward)
             assert ticks[-1].properties == state.properties
+            assert ticks[-1].draw == state.draw and ticks[0].draw["shapes"]
             assert (ticks[-1].terminated, ticks[-1].truncated) == (state.terminated,
                                                                   state.truncated)
             assert not any(tick.terminated or tick.truncated for tick in ticks[:-1])

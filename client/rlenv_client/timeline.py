@@ -95,6 +95,7 @@ class Tick:
         truncated: whether the episode was truncated at this tick.
         info: the tick's info.
         properties: every node's exported properties, by node path.
+        draw: the scene after the tick, as the inspector's vector draw list.
     """
 
     tick: int
@@ -104,6 +105,7 @@ class Tick:
     truncated: bool
     info: dict[str, Any]
     properties: dict[str, dict[str, Any]]
+    draw: dict[str, Any]
 
 
 @dataclass(frozen=True)
@@ -376,7 +378,7 @@ class Timeline:
                 properties = {node["path"]: dict(node["exported"])
                               for node in ticking.call("tree")}
                 ticks.append(Tick(tick, observation, reward, terminated, truncated, info,
-                                  properties))
+                                  properties, ticking.call("draw")))
                 if terminated or truncated:
                     break
         except (ConnectionError, RemoteError) as error:

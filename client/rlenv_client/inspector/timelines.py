@@ -68,7 +68,6 @@ class _Branch:
     how: str  # "episode", "keys" or "policy"
     timeline: Timeline
     actions: list[str] = field(default_factory=list)  # the keys pressed, or the policy's name
-    rewards: tuple[Timeline, list[float]] | None = None  # the timeline they are of, each step's
 
     def describe(self) -> dict[str, Any]:
         label = {"episode": "the episode", "policy": f"policy {''.join(self.actions)}"}.get(
@@ -238,7 +237,7 @@ class Timelines:
         """Each physics tick inside ``step``'s action: ``{"step", "ticks": [...]}``.
 
         Each tick with ``tick``, ``reward``, ``terminated``, ``truncated``, ``info``,
-        ``observation`` and ``properties`` (no draw list: a tick's scene is not drawn).
+        ``observation``, ``properties`` and ``draw`` (the scene after the tick).
 
         Raises:
             InspectorError: as :meth:`step` (step 0 has no ticks: 400).
@@ -254,7 +253,8 @@ class Timelines:
                 {"tick": tick.tick, "reward": to_json(tick.reward),
                  "terminated": tick.terminated, "truncated": tick.truncated,
                  "info": to_json(tick.info), "observation": self._shown(root, tick.observation),
-                 "properties": to_json(tick.properties)} for tick in ticks]}
+                 "properties": to_json(tick.properties), "draw": to_json(tick.draw)}
+                for tick in ticks]}
 
     def compare(self, number: int, first: int, second: int, step: int) -> dict[str, Any]:
         """Two branches side by side (``a``: ``first``, ``b``: ``second``).
@@ -331,7 +331,6 @@ class Timelines:
             timeline = node.timeline
             node.timeline = self._call(lambda: timeline.branch(len(timeline), [action]))
             node.actions.append(key)
-            node.rewards = None
             return {**self._describe(root), "branch": node.number}
 
     def branch_policy(self, number: int, branch: int, step: int, policy: str,
@@ -461,14 +460,10 @@ class Timelines:
                 "policies": sorted(self.policies), "unavailable": dict(self.unavailable),
                 "branches": [branch.describe() for branch in root.branches.values()]}
 
-    def _rewards(self, branch: _Branch) -> list[float]:
-        """Every step's reward (0.0 at step 0), re-simulated once per timeline and kept."""
-        timeline = branch.timeline
-        if branch.rewards is None or branch.rewards[0] is not timeline:
-            rewards = [self._call(lambda k=k: timeline.at(k, nodes=())).reward
-                       for k in range(len(timeline) + 1)]
-            branch.rewards = (timeline, rewards)
-        return branch.rewards[1]
+    @staticmethod
+    def _rewards(branch: _Branch) -> list[float]:
+        """Every step's reward (0.0 at step 0), as the timeline took them."""
+        return branch.timeline.rewards
 
     def _diff(self, root: _Root, a: _Branch, b: _Branch) -> Any:
         kept = root.diffs.get((a.number, b.number))

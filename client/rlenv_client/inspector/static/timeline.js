@@ -310,6 +310,7 @@ async function tickBy(direction) {
   timeline.tick = {step: action, index, count: ticks.length};
   timeline.step = action - 1;
   const shownTick = ticks[index - 1];
+  drawScene($("scene"), shownTick.draw);
   showObservations(shownTick.observation);
   showProperties();
   showPosition();

@@ -2,11 +2,11 @@
 
 ``python -m examples.time_travel [DIR]`` records one CartPole episode of :func:`drifting` into
 ``DIR`` (default ``episodes/``): the balancing controller with a small bias to the right. It
-keeps the pole up for a while, drifts, and lets it fall; then::
+keeps the pole up, but the cart drifts left until it leaves the track (step 86); then::
 
     rlenv replay episodes/episode-0001.rlenv --inspect
 
-opens the episode in the inspector's page, to scrub back to before the fall, watch it tick by
+opens the episode in the inspector's page, to scrub back to before it went wrong, watch it tick by
 tick, and branch: with the keys, or with :func:`~examples.cartpole.controller` as a policy
 (``python -m examples.time_travel --inspect`` serves the page with it).
 """

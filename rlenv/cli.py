@@ -444,7 +444,7 @@ def _replay_inspect(args: argparse.Namespace) -> int:
     from rlenv_client.inspector.timelines import load_policy
 
     if args.address is not None:
-        print("rlenv replay: --inspect re-simulates on scratch servers of its own; it takes no "
+        print("rlenv replay: --inspect re-simulates in processes of its own; it takes no "
               "--address", file=sys.stderr)
         return 2
     from rlenv_client.replay import EpisodeFile
@@ -457,6 +457,8 @@ def _replay_inspect(args: argparse.Namespace) -> int:
     policies, unavailable = {}, {}
     for path in args.policy:
         name = Path(path).stem
+        if not Path(path).is_file():  # said whether or not onnxruntime is there
+            raise ValueError(f"cannot read the policy {path}: no such file")
         try:
             policies[name] = load_policy(path)
         except ImportError as error:  # the page says why its policy button is off

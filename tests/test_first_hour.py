@@ -175,7 +175,7 @@ def _rlenv(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[s
 
 def test_the_console_script_serves_a_module_from_the_current_folder(tmp_path: Path) -> None:
     (tmp_path / "mymodule.py").write_text(
-        "from examples.cartpole import CartPoleEnvironment as PushEnvironment\n")
+        "from rlenv.examples.cartpole import CartPoleEnvironment as PushEnvironment\n")
     process = subprocess.Popen([str(RLENV), "serve", "mymodule:PushEnvironment", "--port", "0"],
                                cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                text=True, stdin=subprocess.DEVNULL)

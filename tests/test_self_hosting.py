@@ -162,7 +162,7 @@ def test_a_self_hosted_environment_in_real_time_ticks_by_the_clock() -> None:
 
 def test_rlenv_run_needs_start_server_in_ready(tmp_path: Path) -> None:
     script = tmp_path / "forgot.py"
-    script.write_text("import rlenv\nfrom examples.cartpole import CartPoleEnvironment\n"
+    script.write_text("import rlenv\nfrom rlenv.examples.cartpole import CartPoleEnvironment\n"
                       "rlenv.run(CartPoleEnvironment())\n")
     result = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
                             timeout=60, cwd=ROOT)

@@ -1,11 +1,13 @@
-"""Maze: levels from the seed or as data, reachable goals, MiniGrid's reward, ACCEL's edits."""
+"""Maze: wall density, reachable goals, rays, MiniGrid's reward, ACCEL's edits.
+
+Levels from the seed or as data, the same tests as Plinko's, are in test_levels.py.
+"""
 
 from __future__ import annotations
 
 from typing import Any
 
 import gymnasium as gym
-import msgpack
 import numpy as np
 import pytest
 from conftest import Serve
@@ -21,23 +23,10 @@ from examples.maze import (
     make_level,
     shortest_path,
 )
-from rlenv_client import Client, ErrorCode, LocalClient, RemoteError
+from rlenv_client import Client, LocalClient
 
 MAX_STEPS = 250
 STOP, UP, DOWN, LEFT, RIGHT = range(5)
-
-
-def random_run(client: Client | LocalClient, steps: int = 60, **reset: Any) -> list[Any]:
-    """Reset, then a fixed sequence of random actions: every observation's bytes."""
-    observation, info = client.reset(**reset)
-    seen: list[Any] = [observation.tobytes(), info["world"]["level"]]
-    actions = np.random.default_rng(0).integers(5, size=steps)
-    for action in actions:
-        observation, reward, terminated, truncated, _ = client.step(int(action))
-        seen.append((observation.tobytes(), reward, terminated, truncated))
-        if terminated or truncated:
-            break
-    return seen
 
 
 def toward(position: list[float], here: Any, there: Any) -> int:
@@ -73,53 +62,6 @@ def drive(client: Client | LocalClient, level: dict[str, Any] | None = None,
         _, reward, terminated, _, info = client.step(toward(position, here, there))
         steps += 1
     return steps, reward, terminated, level
-
-
-def test_the_seed_makes_the_level_and_episode_on_any_server(serve: Serve) -> None:
-    first, second = serve(TARGET), serve(TARGET)
-    with Client(first.host, first.port, timeout=20, world_data=True) as a, \
-            Client(second.host, second.port, timeout=20, world_data=True) as b:
-        b.reset(seed=11)  # another history first: it must not matter
-        random_run(b, steps=5)
-        run = random_run(a, seed=5)
-        assert random_run(b, seed=5) == run
-        level = a.get_property("World", "level")
-        assert b.get_property("World", "level") == level
-        assert {"Wall", "Goal", "Marker2D"} <= {child["class"] for child in
-                                               level["root"]["children"]
-                                               + level["root"]["children"][0]["children"]}
-        other = random_run(a, seed=6)
-        assert other[1] != run[1] and other[0] != run[0]
-
-
-def test_a_level_given_as_data_plays_the_same_whatever_the_seed(serve: Serve) -> None:
-    first, second = serve(TARGET), serve(TARGET)
-    with Client(first.host, first.port, timeout=20, world_data=True) as a, \
-            Client(second.host, second.port, timeout=20, world_data=True) as b:
-        run = random_run(a, seed=5)
-        level = msgpack.unpackb(msgpack.packb(a.get_property("World", "level")))
-        assert random_run(b, seed=5, options={"level": level}) == run
-        assert random_run(b, seed=9, options={"level": level}) == run  # nothing else is drawn
-        assert b.get_property("World", "level") == level
-
-
-def test_a_foreign_class_or_a_bad_difficulty_is_refused_and_the_server_serves_on(
-    serve: Serve,
-) -> None:
-    server = serve(TARGET)
-    with Client(server.host, server.port, timeout=20) as client:
-        client.reset(seed=5)
-        level = client.get_property("World", "level")
-        level["root"]["children"][0]["children"][0]["class"] = "Evil"
-        with pytest.raises(RemoteError) as refused:
-            client.reset(seed=5, options={"level": level})
-        assert refused.value.code == ErrorCode.ENVIRONMENT_ERROR
-        assert "class 'Evil' is not allowed" in refused.value.message
-        with pytest.raises(RemoteError) as bad:
-            client.configure(world={"difficulty": 1.5})
-        assert bad.value.code == ErrorCode.INVALID_CONFIG and "[0, 1]" in bad.value.message
-        client.reset(seed=5)
-        client.step(STOP)
 
 
 def test_difficulty_sets_the_wall_density_and_every_goal_is_reachable() -> None:

@@ -1,20 +1,21 @@
-"""Plinko: a new level from the seed at every reset, the same on any server, over sockets."""
+"""Plinko: snapshots, colours, difficulty, level data's wiring, over sockets.
+
+Levels from the seed or as data, the same tests as Maze's, are in test_levels.py.
+"""
 
 from __future__ import annotations
 
 import inspect
 from typing import Any
 
-import msgpack
 import numpy as np
-import pytest
 from conftest import Serve
 
 from examples.plinko import TARGET, PlinkoEnvironment, follow
 from rlenv import CollisionShape, StaticBody
 from rlenv.scene2d.packed_scene import CONNECTABLE
 from rlenv.signals import Signal
-from rlenv_client import Client, ErrorCode, LocalClient, RemoteError
+from rlenv_client import Client, LocalClient, RemoteError
 
 STILL = np.zeros(1, np.float32)
 
@@ -41,26 +42,6 @@ def colors_of(level: dict[str, Any]) -> set[tuple[int, ...]]:
         if color is not None:
             found.add(tuple(color))
     return found
-
-
-def test_the_seed_makes_the_level_on_any_server(serve: Serve) -> None:
-    first, second = serve(TARGET), serve(TARGET)
-    with Client(first.host, first.port, timeout=20, world_data=True) as a, \
-            Client(second.host, second.port, timeout=20, world_data=True) as b:
-        b.reset(seed=11)  # another history first: it must not matter
-        play(b, steps=5)
-        run = play(a, seed=5)
-        assert play(b, seed=5) == run
-        assert len(run) > 10 and run[-1][2]  # the ball fell through and the episode ended
-        level = a.get_property("World", "level")
-        assert b.get_property("World", "level") == level
-        assert level["root"]["class"] == "Node2D"
-        assert {"Peg", "Marker2D", "Divider", "BinFloor"} <= {
-            entry["class"] for entry in _entries(level["root"])}
-        other = play(a, seed=6)
-        assert other[1] != run[1]  # another level (its data's digest)
-        assert a.get_property("World", "level") != level
-        assert other[0] != run[0]
 
 
 def test_a_snapshot_restores_exactly_on_the_other_server(serve: Serve) -> None:
@@ -100,37 +81,6 @@ def test_a_frame_shows_the_level_colours(serve: Serve) -> None:
         assert not np.array_equal(client.render(), frame)
 
 
-def test_a_given_level_is_played(serve: Serve) -> None:
-    first, second = serve(TARGET), serve(TARGET)
-    with Client(first.host, first.port, timeout=20, world_data=True) as a, \
-            Client(second.host, second.port, timeout=20, world_data=True) as b:
-        run = play(a, seed=5)
-        level = msgpack.unpackb(msgpack.packb(a.get_property("World", "level")))
-        # the ball is drawn before the level: the same seed on the given level is the same run
-        assert play(b, seed=5, options={"level": level}) == run
-        again = play(b, seed=9, options={"level": level})
-        assert again[1] == run[1] and again[0] != run[0]  # same level, another ball
-
-
-def test_a_level_naming_a_foreign_class_is_refused_and_the_server_serves_on(
-    serve: Serve,
-) -> None:
-    server = serve(TARGET)
-    with Client(server.host, server.port, timeout=20) as client:
-        client.reset(seed=5)
-        level = client.get_property("World", "level")
-        level["root"]["children"][0]["children"][0]["class"] = "Evil"
-        with pytest.raises(RemoteError) as refused:
-            client.reset(seed=5, options={"level": level})
-        assert refused.value.code == ErrorCode.ENVIRONMENT_ERROR
-        assert "class 'Evil' is not allowed" in refused.value.message
-        with pytest.raises(RemoteError) as bad:
-            client.configure(world={"difficulty": 1.5})
-        assert bad.value.code == ErrorCode.INVALID_CONFIG and "[0, 1]" in bad.value.message
-        observation, _ = client.reset(seed=5)
-        client.step(follow(observation))
-
-
 def test_difficulty_changes_the_levels_and_following_the_ball_pays() -> None:
     with LocalClient(PlinkoEnvironment, world_data=True) as client:
         pegs = {}
@@ -149,13 +99,6 @@ def test_difficulty_changes_the_levels_and_following_the_ball_pays() -> None:
                 if terminated:
                     break
         assert caught["follow"] >= 8 > 5 >= caught["still"]
-
-
-def _entries(entry: dict[str, Any]) -> list[dict[str, Any]]:
-    found = [entry]
-    for child in entry.get("children", []):
-        found += _entries(child)
-    return found
 
 
 def _level_wiring(owner: str, signal: str, target: str, method: str) -> dict:

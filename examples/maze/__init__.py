@@ -58,17 +58,14 @@ whatever the seed, and the same seed builds the same level on any server.
 
 from __future__ import annotations
 
-import hashlib
 import math
 from collections import deque
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-import msgpack
 import numpy as np
 import pymunk
 from gymnasium import spaces
-from gymnasium.utils import seeding
 
 from rlenv import (
     CollisionShape,
@@ -79,10 +76,11 @@ from rlenv import (
     RigidBody,
     RLAgent,
     RLEnvironment,
-    RLEnvWorld,
     StaticBody,
 )
 from rlenv.protocol.errors import ErrorCode, RequestError
+
+from ..levels import LevelWorld
 
 __all__ = [
     "ACTIONS",
@@ -335,22 +333,20 @@ def edit_level(level: dict[str, Any], rng: np.random.Generator, n_edits: int) ->
     return make_level(walls, start, goal)
 
 
-class MazeWorld(RLEnvWorld):
-    """The border, the agent's body and this episode's level."""
+class MazeWorld(LevelWorld):
+    """The border, the agent's body and this episode's level (given, or from the seed)."""
 
     configurable = ("difficulty",)
-    exported = ("level",)
+    level_classes = LEVEL_CLASSES
+    edit_level_data = staticmethod(edit_level)
 
     def __init__(self) -> None:
         super().__init__("World")
         self.difficulty = 0.5
         self.physics: PhysicsWorld | None = None
-        self.level_node: Node2D | None = None
         self.body: RigidBody | None = None
         self.goal: Goal | None = None
         self.reached = False
-        self._level_data: dict[str, Any] | None = None
-        self._level_id = ""
 
     def check_config(self, config: Mapping[str, Any]) -> None:
         """Also refuse a difficulty outside [0, 1].
@@ -370,12 +366,7 @@ class MazeWorld(RLEnvWorld):
             PackedSceneError: ``options["level"]`` is not a level this environment may build.
             ValueError: the given level has no ``Goal`` or no ``Start``.
         """
-        given = options.get("level")
-        if given is not None:
-            scene = PackedScene.from_data(given, allowed=LEVEL_CLASSES)
-            level = scene.instantiate()
-        else:
-            level = build_level(self.np_random, self.difficulty)
+        _, level = self.new_level(options)
         goal = level.get_node_or_null("Goal")
         start = level.get_node_or_null("Start")
         if not isinstance(goal, Goal) or start is None:
@@ -394,52 +385,21 @@ class MazeWorld(RLEnvWorld):
             if isinstance(shape, CollisionShape):
                 shape.collision_started.connect(self._on_goal_touched)
         self.level_node = level
-        self._level_data = None
-        self._level_id = ""
         self.reached = False
         self.add_child(physics)
 
-    @property
-    def level(self) -> dict[str, Any] | None:
-        """This episode's level as data (a PackedScene's); ``None`` before the first reset.
+    def build_level(self, rng: np.random.Generator) -> Node2D:
+        """A new level (:func:`build_level`) at the world's difficulty."""
+        return build_level(rng, self.difficulty)
 
-        Play it again with ``reset(options={"level": level})``.
-        """
-        if self.level_node is None:
-            return None
-        if self._level_data is None:
-            self._level_data = PackedScene.pack(self.level_node).to_data()
-        return self._level_data
-
-    def _edit_level(self, level: Any, rng: np.random.Generator, n_edits: int) -> Any:
-        """``n_edits`` edits of ``level`` (see :func:`edit_level`), checked before and after.
-
-        An int level is a seed: the level a reset with that seed builds at the world's
-        difficulty, its data edited. Nothing of the world changes.
-
-        Raises:
-            ValueError: ``level`` is neither an int seed >= 0 nor a Maze level's data.
-        """
-        if type(level) is int:
-            if level < 0:
-                raise ValueError(f"a seed must be >= 0, got {level}")
-            rng_of_seed, _ = seeding.np_random(level)
-            data = PackedScene.pack(build_level(rng_of_seed, self.difficulty)).to_data()
-        else:
-            data = PackedScene.from_data(level, allowed=LEVEL_CLASSES).to_data()
-        edited = edit_level(data, rng, n_edits)
-        return PackedScene.from_data(edited, allowed=LEVEL_CLASSES).to_data()
 
     def get_data(self, observation_request: Mapping[str, Any]) -> dict[str, Any]:
         """The agent's position, the level's walls and fingerprint (its data's digest)."""
         assert self.body is not None and self.level_node is not None
-        if not self._level_id:
-            packed = msgpack.packb(self.level)
-            self._level_id = hashlib.sha256(packed).hexdigest()[:16]
         walls = self.level_node.get_node_or_null("Walls")
         return {"agent": list(self.body.position),
                 "walls": walls.get_child_count() if walls is not None else 0,
-                "level": self._level_id}
+                "level": self.level_id}
 
     def _border(self) -> StaticBody:
         border = StaticBody(name="Border")

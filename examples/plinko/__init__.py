@@ -57,32 +57,29 @@ that a given level with the same seed starts the same episode.
 from __future__ import annotations
 
 import copy
-import hashlib
 import math
 from collections.abc import Mapping
 from typing import Any
 
-import msgpack
 import numpy as np
 from gymnasium import spaces
-from gymnasium.utils import seeding
 
 from rlenv import (
     CollisionShape,
     KinematicBody,
     Marker2D,
     Node2D,
-    PackedScene,
     PhysicsWorld,
     RigidBody,
     RLAgent,
     RLEnvironment,
-    RLEnvWorld,
     StaticBody,
     gradient,
     view,
 )
 from rlenv.protocol.errors import ErrorCode, RequestError
+
+from ..levels import LevelWorld
 
 __all__ = [
     "LEVEL_CLASSES",
@@ -310,11 +307,12 @@ def _ball_start(rng: np.random.Generator) -> tuple[float, float]:
     return float(rng.uniform(-3.0, 3.0)), float(rng.uniform(-0.5, 0.5))
 
 
-class PlinkoWorld(RLEnvWorld):
-    """The board, the catcher, the ball and this episode's level."""
+class PlinkoWorld(LevelWorld):
+    """The board, the catcher, the ball and this episode's level (given, or from the seed)."""
 
     configurable = ("difficulty",)
-    exported = ("level",)
+    level_classes = LEVEL_CLASSES
+    edit_level_data = staticmethod(edit_level)
     columns = 8
     """Pegs in the wide rows of the levels it builds."""
     rows: int | None = None
@@ -324,14 +322,11 @@ class PlinkoWorld(RLEnvWorld):
         super().__init__("World")
         self.difficulty = 0.5
         self.physics: PhysicsWorld | None = None
-        self.level_node: Node2D | None = None
         self.ball: RigidBody | None = None
         self.catcher: KinematicBody | None = None
         self.catcher_half_width = 0.0
         self.caught = False
         self.landed = False
-        self._level_data: dict[str, Any] | None = None
-        self._level_id = ""
 
     def check_config(self, config: Mapping[str, Any]) -> None:
         """Also refuse a difficulty outside [0, 1].
@@ -350,10 +345,7 @@ class PlinkoWorld(RLEnvWorld):
         Raises:
             PackedSceneError: ``options["level"]`` is not a level this environment may build.
         """
-        given = options.get("level")
-        scene = None if given is None else PackedScene.from_data(given, allowed=LEVEL_CLASSES)
-        rng = self.np_random
-        start_x, start_speed = _ball_start(rng)
+        (start_x, start_speed), level = self.new_level(options)
         if self.physics is not None:
             self.remove_child(self.physics)
         physics = self.physics = PhysicsWorld(gravity=(0.0, -9.81), name="Physics")
@@ -366,59 +358,28 @@ class PlinkoWorld(RLEnvWorld):
                                              color="crimson", name="Skin"))
         ball.velocity = (start_speed, 0.0)
         physics.add_child(ball)
-        level = (scene.instantiate() if scene is not None
-                 else build_level(rng, self.difficulty, self.columns, self.rows))
         physics.add_child(level)
         self.level_node = level
-        self._level_data = None
-        self._level_id = ""
         self.caught = self.landed = False
         self.add_child(physics)
 
-    @property
-    def level(self) -> dict[str, Any] | None:
-        """This episode's level as data (a PackedScene's); ``None`` before the first reset.
+    def draw_before_level(self, rng: np.random.Generator) -> tuple[float, float]:
+        """The ball's x and sideways speed: drawn before the level, given or built."""
+        return _ball_start(rng)
 
-        Play it again with ``reset(options={"level": level})``.
-        """
-        if self.level_node is None:
-            return None
-        if self._level_data is None:
-            self._level_data = PackedScene.pack(self.level_node).to_data()
-        return self._level_data
+    def build_level(self, rng: np.random.Generator) -> Node2D:
+        """A new level (:func:`build_level`) at the world's difficulty, columns and rows."""
+        return build_level(rng, self.difficulty, self.columns, self.rows)
 
-    def _edit_level(self, level: Any, rng: np.random.Generator, n_edits: int) -> Any:
-        """``n_edits`` edits of ``level`` (see :func:`edit_level`), checked before and after.
-
-        An int level is a seed: the level a reset with that seed builds at the world's
-        difficulty, its data edited. Nothing of the world changes.
-
-        Raises:
-            ValueError: ``level`` is neither an int seed >= 0 nor a Plinko level's data.
-        """
-        if type(level) is int:
-            if level < 0:
-                raise ValueError(f"a seed must be >= 0, got {level}")
-            rng_of_seed, _ = seeding.np_random(level)
-            _ball_start(rng_of_seed)  # drawn before the level, as in reset
-            built = build_level(rng_of_seed, self.difficulty, self.columns, self.rows)
-            data = PackedScene.pack(built).to_data()
-        else:
-            data = PackedScene.from_data(level, allowed=LEVEL_CLASSES).to_data()
-        edited = edit_level(data, rng, n_edits)
-        return PackedScene.from_data(edited, allowed=LEVEL_CLASSES).to_data()
 
     def get_data(self, observation_request: Mapping[str, Any]) -> dict[str, Any]:
         """The ball and the catcher, the level's size and fingerprint (its data's digest)."""
         assert self.ball is not None and self.catcher is not None
         assert self.level_node is not None
-        if not self._level_id:
-            packed = msgpack.packb(self.level)
-            self._level_id = hashlib.sha256(packed).hexdigest()[:16]
         pegs = self.level_node.get_node_or_null("Pegs")
         return {"ball": list(self.ball.position), "catcher": list(self.catcher.position),
                 "pegs": pegs.get_child_count() if pegs is not None else 0,
-                "level": self._level_id}
+                "level": self.level_id}
 
     def _walls(self) -> StaticBody:
         walls = StaticBody(name="Walls")

@@ -261,7 +261,8 @@ async function refreshNode() {
   }
 }
 
-function propertyRow(node, name) {
+// A row of the properties table: the name, an input for the value, a badge (the timeline's too).
+function propertyCells(name) {
   const row = document.createElement("tr");
   row.dataset.name = name;
   const label = document.createElement("td");
@@ -269,15 +270,20 @@ function propertyRow(node, name) {
   const cell = document.createElement("td");
   const input = document.createElement("input");
   input.name = name;
-  input.readOnly = node.read_only.includes(name);
-  input.addEventListener("change", () => edit(node.path, name, input));
-  input.addEventListener("keydown", (event) => { if (event.key === "Escape") input.blur(); });
   cell.append(input);
   const badge = document.createElement("td");
   badge.className = "badge";
+  row.append(label, cell, badge);
+  return {row, input, badge};
+}
+
+function propertyRow(node, name) {
+  const {row, input, badge} = propertyCells(name);
+  input.readOnly = node.read_only.includes(name);
+  input.addEventListener("change", () => edit(node.path, name, input));
+  input.addEventListener("keydown", (event) => { if (event.key === "Escape") input.blur(); });
   badge.textContent = input.readOnly ? "read-only" :
     node.settings.includes(name) ? "setting" : "episode";
-  row.append(label, cell, badge);
   return row;
 }
 

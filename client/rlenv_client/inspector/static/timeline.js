@@ -264,18 +264,8 @@ timeline.showProperties = () => {
   const signature = "timeline:" + state.path + names.join("|");
   if (body.dataset.signature !== signature) {
     body.replaceChildren(...names.map((name) => {
-      const row = document.createElement("tr");
-      row.dataset.name = name;
-      const label = document.createElement("td");
-      label.textContent = name;
-      const cell = document.createElement("td");
-      const input = document.createElement("input");
-      input.name = name;
+      const {row, input} = propertyCells(name);
       input.readOnly = true;
-      cell.append(input);
-      const badge = document.createElement("td");
-      badge.className = "badge";
-      row.append(label, cell, badge);
       return row;
     }));
     body.dataset.signature = signature;

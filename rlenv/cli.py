@@ -80,6 +80,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     serve.add_argument("--inspect", action="store_true",
                        help="also start the live inspector (rlenv inspect) on this server and "
                        "print its page's address")
+    serve.add_argument("--record-demonstrations", metavar="DIR", default=None,
+                       help="with --inspect: let a person take control from the page and record "
+                       "their episodes into DIR (as rlenv inspect --record-demonstrations)")
     serve.set_defaults(run=_serve)
 
     http = commands.add_parser(
@@ -268,6 +271,9 @@ def _serve(args: argparse.Namespace) -> int:
     if args.max_episode_steps is not None and (args.max_episode_steps < 1 or not args.policy):
         raise ValueError("--max-episode-steps needs a number >= 1 and --policy (it cuts "
                          "policy-driven episodes short)")
+    if args.record_demonstrations is not None and not args.inspect:
+        raise ValueError("--record-demonstrations records what a person plays from the "
+                         "inspector's page: it goes with --inspect")
     if args.per_client and args.inspect:
         raise ValueError("--inspect watches the environment of a controller; with --per-client "
                          "every client has its own: start the inspector on one of them instead")
@@ -286,7 +292,8 @@ def _serve(args: argparse.Namespace) -> int:
         try:  # Ctrl-C once it listens (however soon) ends it with status 0
             host, port = server.address
             print(f"listening on {format_address(host, port)}", flush=True)
-            inspector = _start_inspector(host, port, args.token) if args.inspect else None
+            inspector = _start_inspector(host, port, args.token, args.target,
+                                         args.record_demonstrations) if args.inspect else None
             server.serve_forever()
         except KeyboardInterrupt:
             pass
@@ -297,19 +304,22 @@ def _serve(args: argparse.Namespace) -> int:
     return 0
 
 
-def _start_inspector(host: str, port: int, token: str | None) -> subprocess.Popen[bytes]:
+def _start_inspector(host: str, port: int, token: str | None, target: str,
+                     demonstrations: str | None) -> subprocess.Popen[bytes]:
     """``rlenv inspect`` on this server, in a process of its own (it prints its address).
 
     This process only holds the pipe whose end stops it: the server gains no HTTP code and no
-    thread.
+    thread. With ``demonstrations`` (a folder), a person may take control from the page.
     """
     env = dict(os.environ)
     if token is not None:
         env["RLENV_TOKEN"] = token
     reachable = {"0.0.0.0": "127.0.0.1", "": "127.0.0.1", "::": "::1"}.get(host, host)
     address = format_address(reachable, port)
+    options = [] if demonstrations is None else \
+        ["--record-demonstrations", demonstrations, "--target", target]
     return subprocess.Popen([sys.executable, "-m", "rlenv_client.inspector", address,
-                             "--follow-stdin"], stdin=subprocess.PIPE, env=env)
+                             "--follow-stdin", *options], stdin=subprocess.PIPE, env=env)
 
 
 def _http(args: argparse.Namespace) -> int:

@@ -331,6 +331,18 @@ def test_rlenv_serve_inspect_starts_an_inspector_that_ends_with_it(serve: Serve)
     wait_until(lambda: _refused(url), "the inspector outlived its server")
 
 
+def test_rlenv_serve_inspect_may_record_demonstrations(serve: Serve, tmp_path: Path) -> None:
+    server = serve(args=["--inspect", "--record-demonstrations", str(tmp_path)])
+    wait_until(lambda: "inspector on " in server.output,
+               "rlenv serve --inspect printed no inspector address")
+    url = server.output.split("inspector on ", 1)[1].split()[0]
+    assert fetch(url, "api/control")[2]["enabled"] is True
+    alone = subprocess.run([sys.executable, "-m", "rlenv", "serve",
+                            "examples.cartpole:CartPoleEnvironment", "--record-demonstrations",
+                            str(tmp_path)], capture_output=True, text=True, timeout=60)
+    assert alone.returncode == 2 and "it goes with --inspect" in alone.stderr
+
+
 def _refused(url: str) -> bool:
     try:
         fetch(url, "api/servers")

@@ -1944,3 +1944,15 @@ def test_steps_response_of_zero_instances_round_trips() -> None:
                           np.zeros(0, np.int64), ())
     got = StepsResponse.from_wire(unpack(pack(empty.to_wire())))
     assert got.reward.shape == (0,) and got.info == () and got.errors is None
+
+
+def test_a_message_of_more_objects_than_a_frame_may_hold_is_not_sent(ready: Pair) -> None:
+    ready.send(ready.client, Request(id=1))
+    many = list(range(MAX_FRAME_OBJECTS))  # and the map, its keys...: over the limit
+    with pytest.raises(LocalProtocolError, match=f"more than {MAX_FRAME_OBJECTS} msgpack "):
+        ready.server.send(Response(id=1, info={"many": many}))
+    assert ready.server.outstanding == (1,) and ready.server.state is State.READY
+    fewer = ready.server.send(Response(id=1, info={"many": many[:MAX_FRAME_OBJECTS - 100]}))
+    ready.client.receive_data(fewer)
+    (response,) = drain(ready.client)
+    assert len(response.info["many"]) == MAX_FRAME_OBJECTS - 100

@@ -40,7 +40,7 @@ def test_hello_describes_the_environment(client: Client) -> None:
     assert client.observation_space == CartPoleAgent.observation_space
     assert client.hello.limits == {
         "max_frame_size": 64 * 1024 * 1024, "max_first_frame_size": 64 * 1024,
-        "max_reply_size": 64 * 1024 * 1024, "frame_deadline": 10.0,
+        "max_reply_size": 64 * 1024 * 1024, "max_frame_objects": 1 << 20, "frame_deadline": 10.0,
         "first_request_timeout": 10.0, "idle_timeout": 3600.0, "write_timeout": 10.0,
         "max_connections": 8}
 

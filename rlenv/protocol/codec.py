@@ -24,6 +24,7 @@ __all__ = [
     "HEADER",
     "MAX_FRAME_OBJECTS",
     "NDARRAY_EXT",
+    "count_objects",
     "find_non_text_key",
     "frame",
     "pack",
@@ -176,7 +177,7 @@ def unpack(body: bytes | bytearray | memoryview, *, strict: bool = True) -> Any:
             foreign ext type (timestamps included), a malformed array, or more objects than
             :data:`MAX_FRAME_OBJECTS`.
     """
-    if len(body) > MAX_FRAME_OBJECTS and _count_objects(body) > MAX_FRAME_OBJECTS:
+    if len(body) > MAX_FRAME_OBJECTS and count_objects(body) > MAX_FRAME_OBJECTS:
         raise RemoteProtocolError(f"frame holds more than {MAX_FRAME_OBJECTS} msgpack objects, "
                                   "the limit of a frame")
     try:
@@ -212,7 +213,7 @@ def _object_sizes() -> tuple[list[int], dict[int, tuple[struct.Struct, int]]]:
 _SIZES, _LENGTHS = _object_sizes()
 
 
-def _count_objects(body: bytes | bytearray | memoryview) -> int:
+def count_objects(body: bytes | bytearray | memoryview) -> int:
     """How many msgpack objects ``body`` holds, up to one more than :data:`MAX_FRAME_OBJECTS`.
 
     Objects follow each other whatever their nesting (an array's header, then its elements), so

@@ -17,7 +17,14 @@ from collections import deque
 from enum import StrEnum
 from typing import Any, Final
 
-from rlenv.protocol.codec import DEFAULT_MAX_FRAME_SIZE, HEADER, pack, unpack
+from rlenv.protocol.codec import (
+    DEFAULT_MAX_FRAME_SIZE,
+    HEADER,
+    MAX_FRAME_OBJECTS,
+    count_objects,
+    pack,
+    unpack,
+)
 from rlenv.protocol.errors import LocalProtocolError, RemoteProtocolError
 from rlenv.protocol.messages import (
     BatchResponse,
@@ -232,7 +239,8 @@ class Connection:
 
         Raises:
             LocalProtocolError: this side may not send ``message`` now, or it is larger than
-                the protocol's frame limit.
+                the peer's frame limit, or holds more objects than a frame may
+                (:data:`~rlenv.protocol.codec.MAX_FRAME_OBJECTS`).
             TypeError: the message holds a value that cannot travel on the wire.
         """
         kind = message.__class__
@@ -253,6 +261,9 @@ class Connection:
         if len(body) > self.max_send_size:
             raise LocalProtocolError(f"message of {len(body)} bytes exceeds the peer's frame "
                                      f"limit of {self.max_send_size}")
+        if len(body) > MAX_FRAME_OBJECTS and count_objects(body) > MAX_FRAME_OBJECTS:
+            raise LocalProtocolError(f"message holds more than {MAX_FRAME_OBJECTS} msgpack "
+                                     "objects, the limit of a frame the peer reads")
         if kind is Request:
             outstanding.append(message.id)  # type: ignore[union-attr]
         elif reply_id is not None:

@@ -59,7 +59,8 @@ class Hello:
     ``render_size`` (protocol 2.1) is the (width, height) of a render that asks for no size.
     ``limits`` (protocol 2.1) holds the server's sizes and deadlines: ``max_frame_size`` (the
     largest request frame), ``max_first_frame_size`` (the same, until the first request),
-    ``max_reply_size`` (the largest frame it sends), ``frame_deadline``, ``idle_timeout``
+    ``max_reply_size`` (the largest frame it sends), ``max_frame_objects`` (the most msgpack
+    objects a frame may hold, either way; protocol 2.5), ``frame_deadline``, ``idle_timeout``
     (``None``: never) and ``write_timeout`` in seconds, and ``max_connections``. Empty from a
     2.0 server. ``target`` (protocol 2.5) is the ``MODULE:CLASS`` another server of the same
     environment is started with (``rlenv serve TARGET``), or ``None`` when the server cannot

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from rlenv.protocol import DEFAULT_MAX_FRAME_SIZE
+from rlenv.protocol.codec import MAX_FRAME_OBJECTS
 
 __all__ = ["DEFAULT_HOST", "InsecureBindError", "Limits", "bind_error"]
 
@@ -56,6 +57,7 @@ class Limits:
         return {"max_frame_size": self.max_frame_size,
                 "max_first_frame_size": self.max_first_frame_size,
                 "max_reply_size": DEFAULT_MAX_FRAME_SIZE,
+                "max_frame_objects": MAX_FRAME_OBJECTS,
                 "frame_deadline": self.frame_deadline,
                 "first_request_timeout": self.first_request_timeout,
                 "idle_timeout": self.idle_timeout,

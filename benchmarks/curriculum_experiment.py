@@ -28,7 +28,8 @@ each method of ``--methods``, ``--seeds`` training seeds each, one run after the
 - ``robust_plr``: the same with ``LevelSampler(robust=True)`` and
   ``PPO(normalize_advantage=False)``;
 - ``accel``: Robust PLR with ``edit_levels=EDITS`` and the ``max_mc`` score;
-- ``sfl``: ``score="learnability"``, ``prioritization="topk"``, ``staleness_coeff=0``.
+- ``sfl``: ``score="learnability"``, ``rollouts_per_level=SFL_ROLLOUTS``,
+  ``prioritization="topk"``, ``staleness_coeff=0``.
 
 Every run plays at ``world.difficulty = --difficulty`` (0.7 by default: more rows, bouncier
 pegs, narrower catcher), configured at every reset through ``EnvironmentParameters``. Every
@@ -100,6 +101,8 @@ REPLAY_PROB = 0.5
 """Replay probability of the buffered methods (PLR's Procgen value)."""
 ACCEL_EDITS = 2
 SFL_K = 32
+SFL_ROLLOUTS = 4
+"""SFL: how many episodes score a new level's learnability (one outcome's is 0)."""
 N_STEPS = 128
 """PPO's rollout length per environment."""
 
@@ -286,6 +289,7 @@ def train(method: str, seed: int, steps: int, num_envs: int, difficulty: float,
     score: Any = "external"
     callbacks: list[BaseCallback] = []
     edits = 0
+    rollouts = 1
     if method == "dr":
         sampler = LevelSampler(CAPACITY, replay_prob=0.0, seed=seed)
         score = "learnability"
@@ -299,10 +303,11 @@ def train(method: str, seed: int, steps: int, num_envs: int, difficulty: float,
         sampler = LevelSampler(CAPACITY, replay_prob=REPLAY_PROB, prioritization="topk",
                                k=SFL_K, staleness_coeff=0.0, seed=seed)
         score = "learnability"
+        rollouts = SFL_ROLLOUTS
     else:
         raise ValueError(f"unknown method {method!r}: one of {', '.join(METHODS)}")
     wrapper = CurriculumVectorEnv(vector, sampler, parameters, score, seed=seed,
-                                  edit_levels=edits)
+                                  edit_levels=edits, rollouts_per_level=rollouts)
     if score == "external":
         callbacks.append(CurriculumCallback(wrapper, "max_mc" if method == "accel"
                                             else "positive_value_loss"))

@@ -278,3 +278,135 @@ def test_the_sb3_callback_scores_a_ppo_rollout() -> None:
         with pytest.raises(ValueError, match="normalize_advantage=False"):
             sb3.PPO("MlpPolicy", SB3VecEnv(vector=wrapper), n_steps=64, device="cpu").learn(
                 64, callback=CurriculumCallback(wrapper))
+
+
+@pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+def test_a_level_on_trial_is_played_n_times_then_offered_with_their_mean(
+        mode: AutoresetMode) -> None:
+    """rollouts_per_level=3: a new level's 3 episodes (on either sub-env) come before its score."""
+    with RemoteVectorEnv(2, PLINKO, instances_per_server=2, autoreset_mode=mode) as envs:
+        sampler = LevelSampler(100, replay_prob=0.0, seed=0)
+        scores: dict[int, list[float]] = {}  # level -> the callable's scores, in order
+        players: dict[int, set[int]] = {}  # level -> the sub-envs that played it
+
+        def score(episode: Any) -> float:
+            assert episode.trial is not None and not episode.replayed
+            assert episode.level not in map(sampler.level, sampler.weights())  # not yet
+            value = float(episode.first_step % 7)
+            scores.setdefault(episode.level, []).append(value)
+            players.setdefault(episode.level, set()).add(episode.env)
+            return value
+
+        wrapper = CurriculumVectorEnv(envs, sampler, score=score, seed=5, rollouts_per_level=3)
+        observations, info = wrapper.reset()
+        firsts: dict[int, set[bytes]] = {}  # level -> its episodes' first observations
+        for step in range(3000):
+            for index in np.flatnonzero(info.get("_replayed", np.zeros(2, bool))):
+                assert not info["replayed"][index] and info["level"][index] is None
+                level = wrapper._playing[index].level
+                firsts.setdefault(level, set()).add(observations[index].tobytes())
+            if step == 70:  # episodes under way are cut short: their levels are played again
+                observations, info = wrapper.reset()
+                continue
+            observations, _, _, _, info = wrapper.step(follow(observations))
+            assert len(wrapper._trials) <= 2 * wrapper.num_envs
+            held = [e.trial for e in wrapper._playing if e is not None] + \
+                [chosen[2] for chosen in wrapper._next if chosen is not None]
+            for number, trial in wrapper._trials.items():  # no trial is lost or overplayed
+                assert trial.under_way == held.count(number)
+                assert len(trial.results) + trial.under_way <= 3
+            buffered = {sampler.level(i): sampler.score(i) for i in sampler.weights()}
+            for level, values in scores.items():
+                assert len(values) <= 3
+                if len(values) == 3:
+                    assert buffered[level] == pytest.approx(np.mean(values))
+                else:
+                    assert level not in buffered
+            if len(sampler) >= 4 and any(len(played) == 2 for played in players.values()):
+                break
+        assert len(sampler) >= 4, "fewer than 4 levels were offered"
+        assert any(len(played) == 2 for played in players.values()), \
+            "no level's trial went on another sub-env"
+        assert all(len(observed) == 1 for observed in firsts.values())  # the level, replayed
+
+
+@pytest.mark.parametrize("rollouts", [1, 2])
+def test_with_several_rollouts_learnable_levels_enter_a_full_buffer(
+        two_on_one: gymnasium.vector.VectorEnv, rollouts: int) -> None:
+    """The first 2 levels are always caught (learnability 0); each later level is caught on
+    its first rollout only (0.25 over 2): with one rollout no level enters the full buffer."""
+    sampler = LevelSampler(2, replay_prob=0.5, seed=0)
+    wrapper = CurriculumVectorEnv(two_on_one, sampler, seed=6, rollouts_per_level=rollouts)
+    observations, info = wrapper.reset()
+    catch = np.ones(2, bool)
+    starts: dict[int, int] = {}  # trial -> its episodes started
+    outcomes: dict[int, list[float]] = {}  # trial -> its outcomes
+    trials: list[Any] = [None, None]  # the trial each sub-env plays
+    levels: dict[int, Any] = {}  # trial -> its level
+    new_levels = 0
+    for _ in range(3000):
+        for index in np.flatnonzero(info.get("_replayed", np.zeros(2, bool))):
+            episode = wrapper._playing[index]
+            trials[index] = trial = episode.trial
+            if trial is not None:
+                starts[trial] = starts.get(trial, 0) + 1
+                levels[trial] = episode.level
+            catch[index] = trial is None or trial <= 2 or starts[trial] == 1
+            new_levels += not info["replayed"][index]
+        actions = follow(observations) * np.where(catch, 1, -1)[:, None].astype(np.float32)
+        observations, rewards, terminated, truncated, info = wrapper.step(actions)
+        for index in np.flatnonzero(terminated | truncated):
+            trial = trials[index]
+            if trial is None:
+                continue
+            outcomes.setdefault(trial, []).append(float(terminated[index] and rewards[index] > 0))
+            if len(outcomes[trial]) == rollouts:  # offered now: in the buffer if it entered
+                buffered = {sampler.level(i): sampler.score(i) for i in sampler.weights()}
+                if levels[trial] in buffered:
+                    assert buffered[levels[trial]] == pytest.approx(
+                        learnability(outcomes[trial]))
+        if new_levels >= 40 and (rollouts == 1 or max(sampler.weights()) >= 4):
+            break
+    if rollouts == 1:
+        assert sorted(sampler.weights()) == [0, 1]  # refused: 0 is not above the lowest
+    else:
+        entered = [i for i in sampler.weights() if i >= sampler.capacity]
+        assert entered and all(sampler.score(i) > 0 for i in entered)
+        assert max(sampler.weights()) >= 4, "fewer than 3 levels entered the full buffer"
+
+
+@pytest.mark.parametrize("options, message", [
+    ({"rollouts_per_level": 0}, "rollouts_per_level must be an int >= 1, got 0"),
+    ({"rollouts_per_level": 2, "score": "external"}, "not 'external'"),
+])
+def test_rollouts_per_level_is_checked(options: dict[str, Any], message: str) -> None:
+    envs = gymnasium.make_vec("rlenv/Plinko-v0", num_envs=1)
+    try:
+        with pytest.raises(ValueError, match=message):
+            CurriculumVectorEnv(envs, **options)
+    finally:
+        envs.close()
+
+
+def test_accel_edits_go_on_trial_like_new_levels(two_on_one: gymnasium.vector.VectorEnv) -> None:
+    sampler = LevelSampler(2, replay_prob=1.0, seed=0)
+    wrapper = CurriculumVectorEnv(two_on_one, sampler, seed=4, edit_levels=2,
+                                  rollouts_per_level=2)
+    observations, info = wrapper.reset()
+    plays: dict[bytes, int] = {}  # an edited level (packed) -> its episodes started
+    for _ in range(3000):
+        for index in np.flatnonzero(info.get("_replayed", np.zeros(2, bool))):
+            episode = wrapper._playing[index]
+            if isinstance(episode.level, dict):
+                assert episode.trial is not None and not info["replayed"][index]
+                key = msgpack.packb(episode.level)
+                plays[key] = plays.get(key, 0) + 1
+        observations, _, _, _, info = wrapper.step(follow(observations))
+        if sum(count == 2 for count in plays.values()) >= 3:
+            break
+    assert sum(count == 2 for count in plays.values()) >= 3
+    assert all(count <= 2 for count in plays.values())
+    for level_id in sampler.weights():  # a buffered edit was played twice first
+        level = sampler.level(level_id)
+        if isinstance(level, dict):
+            assert plays[msgpack.packb(level)] == 2

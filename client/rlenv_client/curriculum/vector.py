@@ -14,7 +14,8 @@ each with gymnasium's mask (``info["_replayed"]``, ``info["_level"]``).
 Scores (the ``score`` argument):
 
 - ``"learnability"`` (the default, SFL): ``p * (1 - p)`` over the outcomes of the level's
-  episodes seen so far (at most ``outcomes_kept``). An episode succeeds when its last step's
+  episodes seen so far (at most ``outcomes_kept``): for a new level, its first episode's, or
+  its ``rollouts_per_level`` episodes' on trial (below). An episode succeeds when its last step's
   info says ``info["success"]`` is true; without a ``success`` in that info, when it
   terminated (not truncated) with a return above 0. Nothing is needed from the trainer.
 - a callable: ``score(episode)`` gives each finished :class:`Episode`'s score.
@@ -24,10 +25,19 @@ Scores (the ``score`` argument):
   :meth:`CurriculumVectorEnv.update` from its own code.
 
 A new level enters the buffer with its score (:meth:`LevelSampler.insert`); a replayed one has
-its score updated. With ``edit_levels=n`` (ACCEL), when a sub-environment's replay ends, its
+its score updated. With ``rollouts_per_level=n`` (SFL: learnability needs several outcomes, one
+outcome's is 0), a new level is first **on trial**: it is played ``n`` times, and only then
+scored over those ``n`` episodes and offered to the buffer. Each time the sampler decides
+against a replay, a sub-environment plays the next rollout of a level on trial if one waits for
+it (the oldest first), else a new level, which goes on trial; so trial episodes take the place
+of new levels and ``replay_prob`` keeps its meaning. A level on trial is not in the buffer: its
+episodes report ``"replayed"`` False and ``"level"`` ``None``, and Robust PLR does not learn from
+them. No more levels are on trial than the sub-environments have episodes under way or chosen
+(two each). With ``edit_levels=n`` (ACCEL), when a sub-environment's replay ends, its
 next episode plays that level with ``n`` random edits (the environment's, through
 :meth:`~rlenv_client.base.BaseClient.edit_level`) as a new level, scored and offered to the
-buffer like any other: the curriculum grows by small changes to the levels it replays.
+buffer like any other (on trial too, once no level on trial waits for a rollout): the
+curriculum grows by small changes to the levels it replays.
 With ``sampler.robust`` (Robust PLR) the trainer learns only from replayed
 levels: :attr:`CurriculumVectorEnv.train_mask` says which of the last step's transitions to
 learn from.
@@ -77,21 +87,36 @@ class Episode:
         reward: its return (the sum of its rewards).
         success: whether it succeeded (see the module docstring).
         rewards: each step's reward, for a callable score (else empty).
+        trial: the number of the trial its level is on (``rollouts_per_level`` > 1), else
+            ``None``.
     """
 
     __slots__ = ("env", "first_step", "last_step", "level", "level_id", "replayed", "reward",
-                 "rewards", "success")
+                 "rewards", "success", "trial")
 
-    def __init__(self, env: int, level: Level, level_id: int | None, first_step: int) -> None:
-        self.env, self.level, self.level_id = env, level, level_id
+    def __init__(self, env: int, level: Level, level_id: int | None, first_step: int,
+                 trial: int | None = None) -> None:
+        self.env, self.level, self.level_id, self.trial = env, level, level_id, trial
         self.replayed = level_id is not None
         self.first_step, self.last_step = first_step, first_step - 1
         self.reward, self.success = 0.0, False
         self.rewards: list[float] = []
 
     def __repr__(self) -> str:
-        return (f"Episode(env={self.env}, level_id={self.level_id}, steps={self.first_step}.."
-                f"{self.last_step}, reward={self.reward:.3g}, success={self.success})")
+        return (f"Episode(env={self.env}, level_id={self.level_id}, trial={self.trial}, "
+                f"steps={self.first_step}..{self.last_step}, reward={self.reward:.3g}, "
+                f"success={self.success})")
+
+
+class _Trial:
+    """A new level on trial: its results so far, and how many of its episodes are under way."""
+
+    __slots__ = ("level", "results", "under_way")
+
+    def __init__(self, level: Level) -> None:
+        self.level = level
+        self.results: list[float] = []
+        self.under_way = 0  # episodes chosen or playing, not finished yet
 
 
 class CurriculumVectorEnv(VectorWrapper):
@@ -111,18 +136,24 @@ class CurriculumVectorEnv(VectorWrapper):
         outcomes_kept: how many outcomes per level learnability counts (the latest).
         edit_levels: ACCEL: after a replay, the sub-environment plays that level with this many
             edits (the environment's ``_edit_level``) as a new level; 0 (the default) never.
+        rollouts_per_level: how many episodes a new level is played (on trial) before it is
+            scored and offered to the buffer: with ``"learnability"``, ``p * (1 - p)`` over
+            their outcomes; with a callable, the mean of its scores. 1 (the default, PLR and
+            ACCEL) offers a level after its first episode; SFL needs more (4, say), since the
+            learnability of one outcome is 0 and a full buffer refuses a score of 0.
 
     Raises:
         TypeError: ``envs`` is not over a ``RemoteVectorEnv``.
-        ValueError: an unknown ``score``, an autoreset mode other than the two above, or
-            ``edit_levels`` not an int >= 0.
+        ValueError: an unknown ``score``, an autoreset mode other than the two above,
+            ``edit_levels`` not an int >= 0, or ``rollouts_per_level`` not an int >= 1 (or
+            above 1 with ``score="external"``).
     """
 
     def __init__(self, envs: VectorEnv, sampler: LevelSampler | None = None,
                  parameters: EnvironmentParameters | None = None,
                  score: str | Callable[[Episode], float] = "learnability", *,
                  seed: int | None = None, outcomes_kept: int = 32,
-                 edit_levels: int = 0) -> None:
+                 edit_levels: int = 0, rollouts_per_level: int = 1) -> None:
         super().__init__(envs)
         remote = envs.unwrapped
         if not hasattr(remote, "set_next_reset"):
@@ -159,7 +190,7 @@ class CurriculumVectorEnv(VectorWrapper):
         self._max_returns: dict[int, float] = {}
         self._keep_rewards = callable(score)
         self._playing: list[Episode | None] = [None] * self.num_envs
-        self._next: list[tuple[Level, int | None] | None] = [None] * self.num_envs
+        self._next: list[tuple[Level, int | None, int | None] | None] = [None] * self.num_envs
         self._autoreset = np.zeros(self.num_envs, np.bool_)
         if not isinstance(edit_levels, int) or isinstance(edit_levels, bool) or \
                 edit_levels < 0:
@@ -167,10 +198,24 @@ class CurriculumVectorEnv(VectorWrapper):
         self.edit_levels = edit_levels
         """ACCEL: how many edits make the level played after a replay (0: none)."""
         self._edited: list[Level | None] = [None] * self.num_envs
+        if not isinstance(rollouts_per_level, int) or isinstance(rollouts_per_level, bool) or \
+                rollouts_per_level < 1:
+            raise ValueError(f"rollouts_per_level must be an int >= 1, got "
+                             f"{rollouts_per_level!r}")
+        if rollouts_per_level > 1 and score == "external":
+            raise ValueError("rollouts_per_level > 1 needs a score the wrapper computes "
+                             "('learnability' or a callable), not 'external'")
+        self.rollouts_per_level = rollouts_per_level
+        """How many episodes a new level plays on trial before it is offered to the buffer."""
+        self._trials: dict[int, _Trial] = {}  # the levels on trial by number, oldest first
+        self._trial_count = 0
 
     def reset(self, *, seed: int | list[int | None] | None = None,
               options: Mapping[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         """Start every sub-environment on its next level (each new or replayed).
+
+        Episodes under way are cut short: they give no outcome, and a level on trial is played
+        once more for each.
 
         Args:
             seed: an int seeds the generator of new levels (the levels' seeds decide the
@@ -182,6 +227,10 @@ class CurriculumVectorEnv(VectorWrapper):
         """
         if isinstance(seed, int):
             self._rng = np.random.default_rng(seed)
+        for index, episode in enumerate(self._playing):  # cut short: not an outcome
+            self._playing[index] = None
+            if episode is not None:
+                self._lost(episode)
         for index in range(self.num_envs):
             if self._next[index] is None:
                 self._choose(index)
@@ -230,15 +279,19 @@ class CurriculumVectorEnv(VectorWrapper):
     def update(self, episode: Episode, score: float) -> int | None:
         """Score a finished episode's level: insert a new level, update a replayed one.
 
+        An episode of a level on trial adds its score to the level's; after the last of its
+        ``rollouts_per_level`` episodes, the level is offered with the mean of their scores.
+
         Returns:
             The level's id in the buffer; ``None`` if a new level was refused (the buffer is
-            full of higher scores) or a replayed one has left the buffer since.
+            full of higher scores) or is still on trial, or a replayed one has left the buffer
+            since.
         """
+        if episode.trial is not None:
+            results = self._rollout_done(episode, float(score))
+            return None if results is None else self._offer(episode.level, float(np.mean(results)))
         if episode.level_id is None:
-            level_id = self.sampler.insert(episode.level, score)
-            if level_id is not None and len(self.sampler) == self.sampler.capacity:
-                self._forget_evicted()
-            return level_id
+            return self._offer(episode.level, score)
         try:
             self.sampler.update(episode.level_id, score)
         except KeyError:
@@ -300,16 +353,22 @@ class CurriculumVectorEnv(VectorWrapper):
         """Decide sub-environment ``index``'s next level and give it to the vector's reset."""
         sampler = self.sampler
         edited = self._edited[index]
-        if edited is not None:  # ACCEL: the last replay's level, edited, as a new level
-            self._edited[index] = None
-            level, level_id = edited, None
-            self._next[index] = (level, None)
-        elif sampler.sample_replay_decision():
+        level: Level
+        level_id = trial = None
+        if edited is None and sampler.sample_replay_decision():
             level_id, level = sampler.sample_replay_level()
-            self._next[index] = (level, level_id)
+        elif (trial := self._waiting_trial()) is not None:  # the next rollout of a level on trial
+            level = self._trials[trial].level
+        elif edited is not None:  # ACCEL: the last replay's level, edited, as a new level
+            self._edited[index] = None
+            level = edited
+            trial = self._put_on_trial(level)
         else:
-            level, level_id = int(self._rng.integers(_SEEDS)), None
-            self._next[index] = (level, None)
+            level = int(self._rng.integers(_SEEDS))
+            trial = self._put_on_trial(level)
+        if trial is not None:
+            self._trials[trial].under_way += 1
+        self._next[index] = (level, level_id, trial)
         config = None
         if self.parameters is not None:
             config = configure_arguments(self.parameters.sample())
@@ -328,9 +387,9 @@ class CurriculumVectorEnv(VectorWrapper):
         for index in indices:
             chosen = self._next[index]
             assert chosen is not None
-            level, level_id = chosen
+            level, level_id, trial = chosen
             self._next[index] = None
-            self._playing[index] = Episode(int(index), level, level_id, self.steps)
+            self._playing[index] = Episode(int(index), level, level_id, self.steps, trial)
             replayed[index], levels[index] = level_id is not None, level_id
             replayed_mask[index] = level_mask[index] = True
             if self._same_step:  # its reset comes within the step its episode ends in
@@ -346,6 +405,7 @@ class CurriculumVectorEnv(VectorWrapper):
             return
         if _row(last_infos, "server_restarted", index) is not None or \
                 _row(last_infos, "interrupted", index) is not None:
+            self._lost(episode)
             return  # not an outcome of the level
         if self.edit_levels and episode.level_id is not None:
             self._edited[index] = self._remote.clients[0].edit_level(
@@ -364,6 +424,13 @@ class CurriculumVectorEnv(VectorWrapper):
             self.update(episode, self.score(episode))
 
     def _score_learnability(self, episode: Episode) -> None:
+        if episode.trial is not None:
+            results = self._rollout_done(episode, float(episode.success))
+            if results is not None:
+                level_id = self._offer(episode.level, learnability(results))
+                if level_id is not None:
+                    self._outcomes[level_id] = deque(results, maxlen=self._outcomes_kept)
+            return
         outcomes = self._outcomes.get(episode.level_id) if episode.level_id is not None \
             else None
         if outcomes is None:
@@ -372,6 +439,44 @@ class CurriculumVectorEnv(VectorWrapper):
         level_id = self.update(episode, learnability(outcomes))
         if level_id is not None:
             self._outcomes[level_id] = outcomes
+
+    def _offer(self, level: Level, score: float) -> int | None:
+        """Insert a new level; forget what is kept of a level it evicts."""
+        level_id = self.sampler.insert(level, score)
+        if level_id is not None and len(self.sampler) == self.sampler.capacity:
+            self._forget_evicted()
+        return level_id
+
+    def _put_on_trial(self, level: Level) -> int | None:
+        """The number of a new trial of ``level``; ``None`` when one rollout decides."""
+        if self.rollouts_per_level == 1:
+            return None
+        self._trial_count += 1
+        self._trials[self._trial_count] = _Trial(level)
+        return self._trial_count
+
+    def _waiting_trial(self) -> int | None:
+        """The oldest level on trial that needs an episode more than are under way."""
+        for number, trial in self._trials.items():
+            if len(trial.results) + trial.under_way < self.rollouts_per_level:
+                return number
+        return None
+
+    def _rollout_done(self, episode: Episode, result: float) -> list[float] | None:
+        """Add a trial episode's result; the trial's results once it has them all (it ends)."""
+        assert episode.trial is not None
+        trial = self._trials[episode.trial]
+        trial.under_way -= 1
+        trial.results.append(result)
+        if len(trial.results) < self.rollouts_per_level:
+            return None
+        del self._trials[episode.trial]
+        return trial.results
+
+    def _lost(self, episode: Episode) -> None:
+        """An episode ended without an outcome: its level on trial, if any, needs another."""
+        if episode.trial is not None:
+            self._trials[episode.trial].under_way -= 1
 
     def _forget_evicted(self) -> None:
         """Drop what is kept of levels no longer in the buffer (one may just have left)."""

@@ -220,7 +220,7 @@ def _serve(sock: socket.socket, target: str) -> None:
     """The process's loop: answer calls until the socket closes."""
     from rlenv.protocol.errors import RlenvError
     from rlenv_client.local import LocalClient
-    from rlenv_client.replay import digest
+    from rlenv_client.replay import apply_change, digest
 
     signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # copies of copies are reaped by the kernel
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the owner's Ctrl-C is the owner's
@@ -231,15 +231,6 @@ def _serve(sock: socket.socket, target: str) -> None:
         return
     _reply(sock, "ok", client.hello.to_wire())
 
-    def apply(changes: Sequence[Sequence[Any]]) -> None:
-        for event in changes:
-            if event[0] == "config":
-                part = event[1]
-                settings = {k: v for k, v in part.get("environment", {}).items() if k != "record"}
-                client.configure(agent=part.get("agent"), world=part.get("world"), **settings)
-            else:  # ["set", path, property, value]
-                client.set_property(*event[1:])
-
     def run(steps: list[list[Any]], stop_at_end: bool,
             every: bool) -> tuple[list[StepRecord], Any, dict[str, Any]]:
         records: list[StepRecord] = []
@@ -247,7 +238,8 @@ def _serve(sock: socket.socket, target: str) -> None:
         observation: Any = None
         info: dict[str, Any] = {}
         for *changes, (_, action, frames) in steps:
-            apply(changes)
+            for change in changes:
+                apply_change(client, change)
             observation, reward, terminated, truncated, info = client.step(action, frames)
             records.append((digest(observation), float(reward), bool(terminated),
                             bool(truncated)))

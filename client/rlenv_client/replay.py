@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import hashlib
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -29,7 +30,7 @@ from rlenv.protocol import pack, unpack
 if TYPE_CHECKING:  # only named: base.py's Inspection builds EpisodeFiles
     from rlenv_client.base import BaseClient
 
-__all__ = ["EpisodeFile", "RecordEpisodes", "ReplayResult", "Trajectory", "digest",
+__all__ = ["EpisodeFile", "RecordEpisodes", "ReplayResult", "Trajectory", "apply_change", "digest",
            "next_episode_path", "replay"]
 
 _FORMAT = "rlenv-episode"
@@ -150,6 +151,21 @@ class ReplayResult:
     trajectory: Trajectory | None = None
 
 
+def apply_change(client: BaseClient, event: Sequence[Any]) -> None:
+    """Make on ``client`` a change a snapshot's events recorded between two actions.
+
+    ``["config", part]`` is a ``configure`` (its ``record`` setting left out: a re-run records
+    nothing); ``["set", path, property, value]`` a property set during the episode (an
+    inspector's, say).
+    """
+    if event[0] == "config":
+        part = event[1]
+        settings = {k: v for k, v in part.get("environment", {}).items() if k != "record"}
+        client.configure(agent=part.get("agent"), world=part.get("world"), **settings)
+    else:
+        client.set_property(*event[1:])
+
+
 def replay(episode: EpisodeFile, client: BaseClient, *, keep: bool = False) -> ReplayResult:
     """Re-run ``episode`` on ``client``'s environment and compare every observation.
 
@@ -166,13 +182,8 @@ def replay(episode: EpisodeFile, client: BaseClient, *, keep: bool = False) -> R
     kept = Trajectory([observation]) if keep else None
     steps = 0
     for event in episode.snapshot["events"]:
-        if event[0] == "config":
-            part = event[1]
-            settings = {k: v for k, v in part.get("environment", {}).items() if k != "record"}
-            client.configure(agent=part.get("agent"), world=part.get("world"), **settings)
-            continue
-        if event[0] == "set":  # a property set during the episode (an inspector's, say)
-            client.set_property(*event[1:])
+        if event[0] != "action":
+            apply_change(client, event)
             continue
         steps += 1
         observation, reward, terminated, truncated, _ = client.step(event[1], event[2])

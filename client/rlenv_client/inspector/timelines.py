@@ -276,7 +276,7 @@ class Timelines:
             diff = self._diff(root, a, b)
             sides = {}
             for name, branch in (("a", a), ("b", b)):
-                rewards = self._rewards(branch)
+                rewards = branch.timeline.rewards
                 state = self._call(lambda t=branch.timeline: t.at(step)) \
                     if step <= len(branch.timeline) else None
                 sides[name] = {"branch": branch.number, "label": branch.describe()["label"],
@@ -459,11 +459,6 @@ class Timelines:
                 "keys": list(root.keys), "keys_error": root.keys_error,
                 "policies": sorted(self.policies), "unavailable": dict(self.unavailable),
                 "branches": [branch.describe() for branch in root.branches.values()]}
-
-    @staticmethod
-    def _rewards(branch: _Branch) -> list[float]:
-        """Every step's reward (0.0 at step 0), as the timeline took them."""
-        return branch.timeline.rewards
 
     def _diff(self, root: _Root, a: _Branch, b: _Branch) -> Any:
         kept = root.diffs.get((a.number, b.number))

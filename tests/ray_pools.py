@@ -3,17 +3,9 @@
 from __future__ import annotations
 
 import ray
+from conftest import alive as alive  # the Ray tests import it from here
 
 from rlenv_client.ray import RayServerPool
-
-
-def alive(pid: int) -> bool:
-    """Whether ``pid`` runs (a zombie, dead but not yet reaped by its parent, does not)."""
-    try:
-        with open(f"/proc/{pid}/stat") as stat:
-            return stat.read().rpartition(")")[2].split()[0] != "Z"
-    except FileNotFoundError:
-        return False
 
 
 def server_pids(servers: RayServerPool) -> list[int]:

@@ -15,7 +15,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import Serve
+from conftest import Serve, alive
 from gymnasium.utils.env_checker import check_env, check_space_limit
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
@@ -298,7 +298,7 @@ def test_no_server_outlives_close_or_a_killed_client() -> None:
     client.kill()
     client.wait()
     deadline = time.monotonic() + 20
-    while any(_running(pid) for pid in pids):
+    while any(alive(pid) for pid in pids):
         assert time.monotonic() < deadline, "a server outlived its killed client"
         time.sleep(0.05)  # polling a condition with a deadline, not waiting for time to pass
 
@@ -315,14 +315,6 @@ def test_a_server_that_dies_mid_episode_is_a_typed_error() -> None:
         assert "listening on" in str(error.value)  # and what it said
     finally:
         env.close()
-
-
-def _running(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as stat:
-            return stat.read().split(")")[1].split()[0] != "Z"  # a zombie has exited
-    except FileNotFoundError:
-        return False
 
 
 def _which(program: str) -> str | None:

@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from conftest import alive
 
 from examples.cartpole import TARGET
 
@@ -123,20 +124,11 @@ def our_namespaces() -> list[str]:
     return [name for name in names if re.fullmatch(rf"{PREFIX}-\d+-[0-9a-f]+-[ab]", name)]
 
 
-def is_running(pid: int) -> bool:
-    """Whether process ``pid`` exists and is not a zombie."""
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return False
-    return stat.rpartition(")")[2].split()[0] != "Z"
-
-
 def delete_stale_namespaces() -> None:
     """Delete namespaces left by runs whose process is gone (killed before their cleanup)."""
     for name in our_namespaces():
         pid = int(name.split("-")[1])
-        if pid != os.getpid() and not is_running(pid):
+        if pid != os.getpid() and not alive(pid):
             delete_namespace(name)
 
 

@@ -5,7 +5,6 @@ The page itself is driven in ``test_inspector_browser.py`` (marker ``browser``).
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -15,7 +14,7 @@ from urllib.parse import urlsplit
 
 import numpy as np
 import pytest
-from conftest import wait_until
+from conftest import alive, wait_until
 from inspector_http import Trainer, fetch
 
 from examples.cartpole import TARGET, controller
@@ -85,15 +84,7 @@ def test_inspect_recordings_serves_them_with_python_policies(recording: Path) ->
     finally:
         page.close()
     for pid in pids:  # closing the page ended the timeline's processes
-        wait_until(lambda pid=pid: _gone(pid), f"process {pid} outlived the page")
-
-
-def _gone(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return True
-    return Path(f"/proc/{pid}/stat").read_text().split(") ")[1].startswith("Z")
+        wait_until(lambda pid=pid: not alive(pid), f"process {pid} outlived the page")
 
 
 def page_recording(url: str) -> str:

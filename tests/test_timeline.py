@@ -8,6 +8,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import Serve, alive
 
 import rlenv_client  # noqa: F401  (registers the ids)
 from examples.cartpole import TARGET as CARTPOLE
@@ -19,7 +20,6 @@ from rlenv_client import Client
 from rlenv_client.launcher import ServerStartError
 from rlenv_client.replay import EpisodeFile, RecordEpisodes, digest, replay
 from rlenv_client.timeline import Timeline
-from tests.conftest import Serve
 
 IDS = {CARTPOLE: "rlenv/CartPole-v0", PLINKO: "rlenv/Plinko-v0"}
 
@@ -170,13 +170,6 @@ def test_closing_ends_every_process(tmp_path: Path) -> None:
     with pytest.raises(RuntimeError, match="closed"):
         timeline.at(1)
     timeline.close()  # twice is fine
-
-
-def alive(pid: int) -> bool:
-    try:
-        return Path(f"/proc/{pid}/stat").read_bytes().rsplit(b")", 1)[1].split()[0] != b"Z"
-    except FileNotFoundError:
-        return False
 
 
 def recorded(serve: Serve, target: str, actions: list[int], path: Path) -> Path:

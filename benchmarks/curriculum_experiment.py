@@ -69,9 +69,9 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
 import rlenv_client  # noqa: F401  (registers rlenv/Plinko-v0 and rlenv/Maze-v0)
-from examples import maze
-from examples.plinko import BOUNCINESS, follow
 from rlenv import PackedScene
+from rlenv.examples import maze
+from rlenv.examples.plinko import BOUNCINESS, follow
 from rlenv.http.png import encode_png
 from rlenv_client.curriculum import CurriculumVectorEnv, EnvironmentParameters, LevelSampler
 from rlenv_client.sb3 import CurriculumCallback, SB3VecEnv

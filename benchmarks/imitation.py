@@ -46,8 +46,8 @@ from gymnasium import spaces
 from torch import nn
 
 import rlenv_client  # noqa: F401  (registers the rlenv/ ids)
-from examples.classic_cartpole import heuristic
-from examples.plinko import follow
+from rlenv.examples.classic_cartpole import heuristic
+from rlenv.examples.plinko import follow
 from rlenv_client import Client, ServerProcess
 from rlenv_client.demonstrations import record
 from rlenv_client.policies import export_onnx

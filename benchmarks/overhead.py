@@ -25,7 +25,7 @@ from collections.abc import Callable
 import msgpack
 import numpy as np
 
-from examples.cartpole import CartPoleEnvironment
+from rlenv.examples.cartpole import CartPoleEnvironment
 from rlenv.protocol import Connection, Request, Role
 from rlenv.scene2d.physics import PhysicsWorld
 from rlenv.serving.host import Host

@@ -24,9 +24,9 @@ from collections.abc import Callable
 import numpy as np
 import pymunk
 
-from examples.plinko import Peg as PlinkoPeg
-from examples.plinko import PlinkoAgent, PlinkoWorld, build_level
 from rlenv import CollisionShape, Joint, Node2D, PhysicsWorld, RigidBody, RLEnvironment, StaticBody
+from rlenv.examples.plinko import Peg as PlinkoPeg
+from rlenv.examples.plinko import PlinkoAgent, PlinkoWorld, build_level
 from rlenv.scene2d.physics import PhysicsBody
 from rlenv.tree import SceneTree
 from rlenv_client import LocalClient

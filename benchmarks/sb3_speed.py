@@ -36,7 +36,7 @@ import gymnasium as gym
 import numpy as np
 
 import rlenv_client  # noqa: F401  (registers rlenv/CartPole-v0)
-from examples.cartpole import CartPoleAgent
+from rlenv.examples.cartpole import CartPoleAgent
 from rlenv_client.bench import HandWrittenServer
 
 ON_SOCKET = "rlenv/CartPole-v0 on the socket"

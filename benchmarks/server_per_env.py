@@ -38,9 +38,10 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from procfs import memory_kib
 
 import rlenv_client  # noqa: F401  (registers rlenv/CartPole-v1)
-from examples.classic_cartpole import TARGET
+from rlenv.examples.classic_cartpole import TARGET
 
 ENV_ID = "rlenv/CartPole-v1"
 
@@ -72,17 +73,6 @@ def server_pids(envs: gym.vector.VectorEnv) -> list[int]:
     else:
         servers = list(envs.unwrapped.servers)
     return sorted({server.pid for server in servers if server is not None})
-
-
-def memory_kib(pid: int) -> tuple[int, int]:
-    """RSS and USS (private pages) of process ``pid``, in KiB."""
-    fields: dict[str, int] = {}
-    with open(f"/proc/{pid}/smaps_rollup") as rollup:
-        for line in rollup:
-            name, _, rest = line.partition(":")
-            if rest.strip().endswith("kB"):
-                fields[name] = int(rest.split()[0])
-    return fields["Rss"], fields["Private_Clean"] + fields["Private_Dirty"]
 
 
 def one_round(layout: str, num_envs: int, actions: np.ndarray) -> dict[str, Any]:

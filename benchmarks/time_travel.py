@@ -25,8 +25,8 @@ from tempfile import TemporaryDirectory
 
 import numpy as np
 
-from examples.cartpole import controller
-from examples.plinko import TOP, PlinkoAgent, PlinkoEnvironment, follow
+from rlenv.examples.cartpole import controller
+from rlenv.examples.plinko import TOP, PlinkoAgent, PlinkoEnvironment, follow
 from rlenv_client import Client
 from rlenv_client.forking import ForkedEnvironment
 from rlenv_client.launcher import ServerProcess
@@ -94,13 +94,11 @@ def replayed(episode: EpisodeFile, environment: ForkedEnvironment, step: int) ->
 
 
 def private_megabytes(pids: list[int]) -> float:
-    """The memory the processes hold alone (Private_Clean + Private_Dirty), in MiB."""
-    total = 0
-    for pid in pids:
-        for line in Path(f"/proc/{pid}/smaps_rollup").read_text().splitlines():
-            if line.startswith(("Private_Clean:", "Private_Dirty:")):
-                total += int(line.split()[1])
-    return total / 1024
+    """The memory the processes hold alone (USS), in MiB."""
+    from procfs import memory_kib  # a sibling when run as a script; a server importing this
+    # module for EndlessPlinko never calls it
+
+    return sum(memory_kib(pid)[1] for pid in pids) / 1024
 
 
 def summary(seconds: list[float]) -> str:

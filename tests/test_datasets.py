@@ -47,24 +47,27 @@ def record(directory: Path, env_id: str, policies: list[Policy],
            **kwargs: Any) -> list[Seen]:
     """Record one episode per policy (given the episode, the step, the observation), for real."""
     env = RecordEpisodes(gym.make(env_id, **kwargs), directory)
-    episodes = []
     try:
-        for number, policy in enumerate(policies):
-            seen = Seen()
-            observation, _ = env.reset(seed=100 + number)
-            seen.observations.append(observation)
-            for t in range(1000):
-                action = policy(number, t, observation)
-                observation, _, terminated, truncated, _ = env.step(action)
-                seen.observations.append(observation)
-                seen.actions.append(action)
-                if terminated or truncated:
-                    seen.terminated, seen.truncated = terminated, truncated
-                    break
-            episodes.append(seen)
+        return [play(env, policy, number, 100 + number, 1000)
+                for number, policy in enumerate(policies)]
     finally:
         env.close()
-    return episodes
+
+
+def play(env: gym.Env, policy: Policy, number: int, seed: int, steps: int) -> Seen:
+    """Play episode ``number`` from a reset with ``seed``, ``steps`` at most: what was seen."""
+    seen = Seen()
+    observation, _ = env.reset(seed=seed)
+    seen.observations.append(observation)
+    for t in range(steps):
+        action = policy(number, t, observation)
+        observation, _, terminated, truncated, _ = env.step(action)
+        seen.observations.append(observation)
+        seen.actions.append(action)
+        if terminated or truncated:
+            seen.terminated, seen.truncated = terminated, truncated
+            break
+    return seen
 
 
 def rlenv(*args: str) -> subprocess.CompletedProcess[str]:
@@ -166,21 +169,8 @@ def test_a_box_action_environment_and_older_recordings(tmp_path: Path) -> None:
 
 def test_data_collector_around_an_rlenv_environment(tmp_path: Path) -> None:
     env = minari.DataCollector(gym.make("rlenv/CartPole-v1", max_episode_steps=20))
-    seen = []
     try:
-        for number in range(2):
-            episode = Seen()
-            observation, _ = env.reset(seed=number)
-            episode.observations.append(observation)
-            for t in range(100):
-                action = push(number, t, observation)
-                observation, _, terminated, truncated, _ = env.step(action)
-                episode.observations.append(observation)
-                episode.actions.append(action)
-                if terminated or truncated:
-                    episode.terminated, episode.truncated = terminated, truncated
-                    break
-            seen.append(episode)
+        seen = [play(env, push, number, number, 100) for number in range(2)]
         env.create_dataset("cartpole/collected-v0", algorithm_name="push",
                            author="rlenv tests", author_email="-", code_permalink="-",
                            description="DataCollector test", eval_env="rlenv/CartPole-v1")

@@ -451,7 +451,7 @@ def _replay(args: argparse.Namespace) -> int:
 def _replay_inspect(args: argparse.Namespace) -> int:
     """``rlenv replay FILE ... --inspect``: the inspector's page with the files as timelines."""
     from rlenv_client.inspector import serve
-    from rlenv_client.inspector.timelines import load_policy
+    from rlenv_client.timeline import load_policy
 
     if args.address is not None:
         print("rlenv replay: --inspect re-simulates in processes of its own; it takes no "

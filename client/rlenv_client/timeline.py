@@ -48,7 +48,7 @@ from rlenv.protocol.errors import RemoteError
 from rlenv_client.forking import ForkedEnvironment, StepRecord
 from rlenv_client.replay import EpisodeFile, digest
 
-__all__ = ["Step", "Tick", "Timeline", "TimelineDiff"]
+__all__ = ["Step", "Tick", "Timeline", "TimelineDiff", "load_policy"]
 
 _PROBE_STEPS = 8  # steps timed at a time to space the checkpoints (twice: the least spacing)
 _PROBE_ROUNDS = 4  # times they are timed
@@ -420,7 +420,7 @@ class Timeline:
         if policy is not None and max_steps is None:
             raise ValueError("a policy needs max_steps")
         if isinstance(policy, (str, Path)):
-            policy = _file_policy(policy)
+            policy = load_policy(policy)
         result = self._goto(step)
         if repeat_action is None and self._steps:
             repeat_action = self._steps[min(step, len(self) - 1)][-1][2]
@@ -590,8 +590,13 @@ class Timeline:
         return observations
 
 
-def _file_policy(path: str | Path) -> Callable[[Any], Any]:
-    """The policy of an ONNX file, as a callable."""
+def load_policy(path: str | Path) -> Callable[[Any], Any]:
+    """``OnnxPolicy(path).act``: a policy file as a branch's policy (loaded once, here).
+
+    Raises:
+        ImportError: onnxruntime is missing (the message says to install ``rlenv[onnx]``).
+        ValueError: the file is not a policy file (one line naming it).
+    """
     from rlenv.serving.onnx_policy import OnnxPolicy
 
     return OnnxPolicy(path).act

@@ -37,25 +37,13 @@ from rlenv_client.replay import EpisodeFile, digest
 from rlenv_client.session import LOST
 from rlenv_client.timeline import Timeline
 
-__all__ = ["MAX_BRANCH_STEPS", "Timelines", "episode_id", "load_policy"]
+__all__ = ["MAX_BRANCH_STEPS", "Timelines", "episode_id"]
 
 MAX_BRANCH_STEPS = 100_000
 """The most steps a policy's branch may take (``max_steps``)."""
 
 Policy = Callable[[Any], Any]
 _LISTED = 32  # recent episodes remembered per instance once the page was shown them
-
-
-def load_policy(path: str | Path) -> Policy:
-    """``OnnxPolicy(path).act``: a policy file as a branch's policy (loaded once, here).
-
-    Raises:
-        ImportError: onnxruntime is missing (the message says to install ``rlenv[onnx]``).
-        ValueError: the file is not a policy file (one line naming it).
-    """
-    from rlenv.serving.onnx_policy import OnnxPolicy
-
-    return OnnxPolicy(path).act
 
 
 @dataclass

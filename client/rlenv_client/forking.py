@@ -154,7 +154,7 @@ class ForkedEnvironment:
     def end(self) -> None:
         """Close, and make sure the process is gone (killed after a few seconds)."""
         self.close()
-        if self._process is None and self.pid:
+        if self._process is None:
             _wait_gone(self.pid)
 
     def _send(self, message: Any) -> None:
@@ -183,9 +183,9 @@ class ForkedEnvironment:
 
     def _lost(self, error: OSError) -> NoReturn:
         what = "did not answer in time" if isinstance(error, TimeoutError) else f"is gone ({error})"
-        if self.pid and self._process is None:
+        if self._process is None:
             _kill(self.pid)
-        elif self._process is not None:
+        else:
             self._process.kill()
         self.close()
         raise ConnectionError(f"the environment process {self.pid} {what}") from None

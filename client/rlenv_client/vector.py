@@ -99,6 +99,11 @@ class RemoteVectorEnv(VectorEnv):
             ``inspector.url``.
         shared_memory: step servers on this machine through shared-memory lanes (see
             :class:`~rlenv_client.client.Client`): by default wherever they can.
+        server_args: extra arguments for ``rlenv serve``, for each server this vector starts
+            (``["--policy", "Runner=heuristic"]``, say).
+
+    Raises:
+        ValueError: ``server_args`` with servers this vector does not start.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array"]}
@@ -112,6 +117,7 @@ class RemoteVectorEnv(VectorEnv):
         in_process: bool = False, render_mode: str | None = None, timeout: float = 30.0,
         token: str | None = None, max_restarts: int = 3, instances_per_server: int | None = None,
         inspector: bool = False, shared_memory: bool | None = None,
+        server_args: Sequence[str] = (),
     ) -> None:
         self.sessions: list[Session] = []  # first: closing a half-built vector closes these
         self.inspector: Inspector | None = None
@@ -122,8 +128,11 @@ class RemoteVectorEnv(VectorEnv):
             raise ValueError(f"max_episode_steps must be at least 1, got {max_episode_steps}")
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
+        if server_args and (addresses is not None or pool is not None or in_process):
+            raise ValueError("server_args are for the servers a vector starts, not for "
+                             "addresses, a pool or in_process")
         places = server_places(num_envs, target, addresses, pool, in_process, token,
-                               instances_per_server)
+                               instances_per_server, server_args)
         connect_sessions(self.sessions, places, timeout=timeout, max_restarts=max_restarts,
                          shared_memory=shared_memory)
         self._groups: list[range] = []  # the sub-environments each session hosts

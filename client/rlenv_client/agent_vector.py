@@ -1,0 +1,455 @@
+"""AgentVectorEnv: the chosen agents of N multi-agent instances, each one sub-environment.
+
+A trainer of one agent (or of a team sharing one policy) sees a plain gymnasium
+``VectorEnv``: as Godot RL Agents makes every AIController an environment, each learning agent
+of each of the ``instances`` is one sub-environment, sub-environment ``i * k + j`` being the
+``j``-th of the ``k`` learners of instance ``i``. The other agents are driven:
+
+- by default each by its class's ``RLAgent.heuristic``, run by the server beside the physics
+  (``rlenv serve --policy NAME=heuristic``); an agent with no heuristic and no entry in
+  ``others`` is refused, naming it;
+- ``others={"Runner1": "runner.onnx"}``: by an ONNX policy file, in the server likewise
+  (``--policy NAME=FILE``);
+- ``others={"Runner1": callable}``: by ``callable(observation) -> action``, called here on
+  the agent's own observation before each step (a frozen copy of the learner's policy, for
+  self-play: :mod:`rlenv_client.selfplay`);
+- agents the server was started to drive (its hello's ``driven``) need nothing.
+
+Episodes follow the agents, not the instances. A learner's episode ends when it terminates or
+is truncated, or when its instance's episode ends (every agent done, or ``max_episode_steps``:
+then it is truncated). Autoreset is ``SAME_STEP`` (``info["final_obs"]``,
+``info["final_info"]``). A learner that ends while its instance plays on (a runner caught
+while the other still runs) **waits** until the instance resets: each step returns its last
+observation again, reward 0, both flags false and ``info["waiting"]``; the step that resets
+its instance ends that wait as truncated, its final info holding ``waiting`` too, so that no
+episode statistics are counted for it. Its actions while waiting are ignored.
+
+Servers that route policies (``--policy``) host one instance each.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space, create_empty_array
+
+from rlenv.agent import RLAgent
+from rlenv_client.rows import check_shape, row, set_row
+from rlenv_client.vector import RemoteVectorEnv
+
+__all__ = ["AgentVectorEnv", "Agents", "OtherPolicy", "agent_classes", "has_heuristic",
+           "learner_names"]
+
+Agents = str | type[RLAgent] | Sequence[str | type[RLAgent]]
+"""Which agents learn: names, an RLAgent class (its every agent), or a list of both."""
+
+OtherPolicy = str | os.PathLike[str] | Callable[[Any], Any]
+"""What drives another agent: ``"heuristic"``, an ONNX file, or ``policy(observation)``."""
+
+HEURISTIC = "heuristic"
+
+
+def agent_classes(target: str) -> dict[str, type[RLAgent]]:
+    """Each agent's class, by name, read from one instance of ``target`` built in this process.
+
+    Raises:
+        ImportError, ValueError, TypeError: ``target`` does not load (see
+            :func:`rlenv.serving.instance.load_environment`).
+    """
+    from rlenv_client.local import LocalClient
+
+    with LocalClient(target) as probe:
+        assert probe.host is not None
+        return {agent.name: type(agent) for agent in probe.host.instances[0].agents}
+
+
+def has_heuristic(agent_class: type[RLAgent]) -> bool:
+    """Whether the class overrides ``RLAgent.heuristic``."""
+    own = getattr(agent_class, HEURISTIC, None)
+    return own is not None and own is not getattr(RLAgent, HEURISTIC, None)
+
+
+def learner_names(agents: Agents, names: Sequence[str],
+                  classes: Mapping[str, type[RLAgent]] | None) -> list[str]:
+    """The learning agents ``agents`` selects, in the environment's order.
+
+    Raises:
+        ValueError: a name the environment lacks, a class none of its agents has, or no agent.
+    """
+    wanted = [agents] if isinstance(agents, str | type) else list(agents)
+    chosen: set[str] = set()
+    for item in wanted:
+        if isinstance(item, str):
+            if item not in names:
+                raise ValueError(f"agents: the environment has no agent {item!r}; its agents: "
+                                 f"{', '.join(names)}")
+            chosen.add(item)
+        elif isinstance(item, type) and issubclass(item, RLAgent):
+            if classes is None:
+                raise ValueError(f"agents: cannot tell which agents are {item.__name__}s "
+                                 "without the environment's target; name them instead")
+            found = [name for name, cls in classes.items() if issubclass(cls, item)]
+            if not found:
+                raise ValueError(f"agents: no agent is a {item.__name__}; its agents: "
+                                 f"{_roster(names, classes)}")
+            chosen.update(found)
+        else:
+            raise TypeError(f"agents holds agent names or RLAgent classes, not {item!r}")
+    if not chosen:
+        raise ValueError("agents selects no agent")
+    return [name for name in names if name in chosen]
+
+
+class AgentVectorEnv(VectorEnv):
+    """The learning agents of ``instances`` copies of a multi-agent environment, as one vector.
+
+    Args:
+        instances: how many copies of the environment (``None``: as many as ``addresses``
+            host). The vector has ``instances * len(learners)`` sub-environments.
+        target: the environment class as ``MODULE:CLASS``.
+        agents: which agents learn (:data:`Agents`); they must share their spaces.
+        others: what drives each other agent, by name or by RLAgent class
+            (:data:`OtherPolicy`); by default its heuristic.
+        addresses: ``HOST:PORT`` of running servers instead; they can only be given callables
+            in ``others`` (or drive agents themselves, started with ``--policy``).
+        repeat_action: physics ticks per step; the servers' default if ``None``.
+        max_episode_steps: truncate each instance's episodes after this many steps.
+        in_process: run the copies inside this process (``others`` must then be callables).
+        instances_per_server: how many copies each started server hosts (1 where policies
+            are routed to it).
+        render_mode: ``"rgb_array"`` or ``None``.
+        timeout: seconds to wait for each answer.
+        token: the secret of servers that require one.
+        max_restarts: how many times each lost server that this vector started is replaced.
+
+    Attributes:
+        learners: the learning agents' names, in the environment's order.
+        driven_here: the agents a callable drives, by name.
+        driven_by_server: what the servers drive each other agent with, by name.
+        vector: the :class:`~rlenv_client.vector.RemoteVectorEnv` of the joint instances.
+
+    Raises:
+        ValueError: an unknown agent in ``agents`` or ``others``, a learner in ``others``,
+            learners with different spaces, another agent with neither a heuristic nor an
+            entry in ``others`` (named), or a server-side policy where no server is started.
+    """
+
+    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": ["rgb_array"]}
+
+    def __init__(
+        self, instances: int | None = None, target: str | None = None, *, agents: Agents,
+        others: Mapping[str | type[RLAgent], OtherPolicy] | None = None,
+        addresses: Sequence[str] | None = None, repeat_action: int | None = None,
+        max_episode_steps: int | None = None, in_process: bool = False,
+        instances_per_server: int | None = None, render_mode: str | None = None,
+        timeout: float = 30.0, token: str | None = None, max_restarts: int = 3,
+    ) -> None:
+        self.vector: RemoteVectorEnv | None = None
+        options: dict[str, Any] = {
+            "repeat_action": repeat_action, "max_episode_steps": max_episode_steps,
+            "autoreset_mode": AutoresetMode.SAME_STEP, "render_mode": render_mode,
+            "timeout": timeout, "token": token, "max_restarts": max_restarts}
+        try:
+            if addresses is not None:  # running servers: their hello says who they are
+                self.vector = RemoteVectorEnv(instances, target, addresses=addresses, **options)
+                hello = self.vector.clients[0].hello
+                classes = _classes_or_none(target or hello.target)
+                names, already = list(hello.agents), set(getattr(hello, "driven", ()) or ())
+            else:
+                if target is None:
+                    raise ValueError("AgentVectorEnv needs a target or addresses")
+                classes = agent_classes(target)
+                names, already = list(classes), set()
+            self.learners = learner_names(agents, names, classes)
+            self.driven_here, self.driven_by_server = _plan_others(
+                names, self.learners, classes, dict(others or {}), already)
+            if self.driven_by_server and (addresses is not None or in_process):
+                where = "servers given by address" if addresses is not None else "in_process"
+                name, policy = next(iter(self.driven_by_server.items()))
+                raise ValueError(
+                    f"agent {name!r} is to be driven by {policy!r} in its server, and {where} "
+                    f"start no server here: give others={{{name!r}: callable}}, or serve it "
+                    f"with rlenv serve --policy {name}={policy}")
+            if self.vector is None:
+                server_args = [argument for name, policy in self.driven_by_server.items()
+                               for argument in ("--policy", f"{name}={policy}")]
+                if server_args and instances_per_server is None:
+                    instances_per_server = 1  # a server routes policies for one instance
+                self.vector = RemoteVectorEnv(
+                    instances, target, in_process=in_process,
+                    instances_per_server=instances_per_server, server_args=server_args,
+                    **options)
+            self._set_spaces()
+        except BaseException:
+            if self.vector is not None:
+                self.vector.close()
+            raise
+        self.render_mode = render_mode
+        self.metadata = {**self.metadata, "render_fps": self.vector.metadata["render_fps"]}
+
+    def _set_spaces(self) -> None:
+        vector = self.vector
+        assert vector is not None
+        self.instances = vector.num_envs
+        joint_actions, joint_observations = vector.single_action_space, \
+            vector.single_observation_space
+        self._several = isinstance(joint_actions, spaces.Dict) and \
+            len(vector.clients[0].hello.agents) > 1
+        first = self.learners[0]
+        action_space, observation_space = self._agent_space(joint_actions, first), \
+            self._agent_space(joint_observations, first)
+        for name in self.learners[1:]:
+            if (self._agent_space(joint_actions, name), self._agent_space(
+                    joint_observations, name)) != (action_space, observation_space):
+                raise ValueError(f"agents {first!r} and {name!r} learn one policy but have "
+                                 "different spaces; train them apart")
+        k = len(self.learners)
+        self.num_envs = self.instances * k
+        self.single_action_space, self.single_observation_space = action_space, \
+            observation_space
+        self.action_space = batch_space(action_space, self.num_envs)
+        self.observation_space = batch_space(observation_space, self.num_envs)
+        self._joint_action = create_empty_array(joint_actions, self.instances)
+        self._joint_observation: Any = None
+        self._others_done = {name: np.zeros(self.instances, np.bool_) for name in self.driven_here}
+        self._waiting = np.zeros(self.num_envs, np.bool_)
+        self._last = create_empty_array(observation_space, self.num_envs)  # per sub-env
+
+    def _agent_space(self, joint: spaces.Space, name: str) -> spaces.Space:
+        return joint[name] if self._several else joint
+
+    def _of(self, joint_batch: Any, name: str) -> Any:
+        """Agent ``name``'s share of a joint batch (or of one joint value)."""
+        return joint_batch[name] if self._several else joint_batch
+
+    def reset(self, *, seed: int | Sequence[int | None] | None = None,
+              options: Mapping[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        """Reset every instance (an int ``seed`` seeds instance ``i`` with ``seed + i``).
+
+        Raises:
+            ValueError: a list of seeds not one per instance.
+        """
+        joint, infos = self.vector.reset(seed=seed, options=options)
+        self._joint_observation = joint
+        for done in self._others_done.values():
+            done[:] = False
+        self._waiting[:] = False
+        observations = self._learner_rows(joint)
+        self._last = observations
+        return observations, self._spread(infos)
+
+    def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray,
+                                          dict[str, Any]]:
+        """Step every instance with the learners' ``actions`` and the others' policies.
+
+        Raises:
+            ValueError: ``actions`` does not hold one action per sub-environment.
+            RuntimeError: step before reset.
+        """
+        if self._joint_observation is None:
+            raise RuntimeError("call reset() before step()")
+        check_shape(self.action_space, actions, "actions")
+        k, joint = len(self.learners), self._joint_action
+        for j, name in enumerate(self.learners):
+            column = self._of(joint, name)
+            for i in range(self.instances):
+                set_row(column, i, row(actions, i * k + j))
+        for name, policy in self.driven_here.items():
+            column, seen = self._of(joint, name), self._of(self._joint_observation, name)
+            for i in np.flatnonzero(~self._others_done[name]):
+                set_row(column, i, policy(row(seen, i)))
+        joint_obs, *flags, infos = self.vector.step(joint)
+        self._joint_observation = joint_obs
+        return self._outcomes(joint_obs, tuple(flags), infos)
+
+    def _agent_outcome(self, name: str, joint: tuple[np.ndarray, ...], ended: np.ndarray,
+                       infos: Mapping[str, Any]) -> tuple[np.ndarray, ...]:
+        """``(reward, terminated, truncated)`` columns of agent ``name`` over the instances.
+
+        Those of the last step of an instance that ended (its ``final_info``), not its reset.
+        """
+        if not self._several:
+            return joint
+        step = _columns(infos["agents"][name])
+        if not ended.any():
+            return step
+        final = _columns(infos["final_info"]["agents"][name])
+        return tuple(np.where(ended, last, now) for last, now in zip(final, step, strict=True))
+
+    def _outcomes(self, joint_obs: Any, joint: tuple[np.ndarray, ...],
+                  infos: dict[str, Any]) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray,
+                                                  dict[str, Any]]:
+        k = len(self.learners)
+        ended = joint[1] | joint[2]
+        rewards = np.zeros(self.num_envs, np.float64)
+        terminated = np.zeros(self.num_envs, np.bool_)
+        truncated = np.zeros(self.num_envs, np.bool_)
+        observations = self._learner_rows(joint_obs)
+        out = self._spread(infos)
+        for name in self.driven_here:
+            _, done_t, done_c = self._agent_outcome(name, joint, ended, infos)
+            self._others_done[name] |= done_t | done_c
+            self._others_done[name][ended] = False
+        waiting = self._waiting
+        for j, name in enumerate(self.learners):
+            reward, done_t, done_c = self._agent_outcome(name, joint, ended, infos)
+            span = slice(j, self.num_envs, k)
+            was_waiting = waiting[span].copy()
+            rewards[span] = np.where(was_waiting, 0.0, reward)
+            terminated[span] = done_t & ~was_waiting
+            truncated[span] = ((done_c | ended) & ~done_t & ~was_waiting) | (was_waiting & ended)
+        finished = terminated | truncated
+        for index in np.flatnonzero(finished):
+            instance = index // k
+            name = self.learners[index % k]
+            if self._waiting[index]:
+                final_obs, final_info = row(self._last, index), {"waiting": True}
+            elif ended[instance]:
+                final_obs = self._of(infos["final_obs"][instance], name)
+                final_info = _final_info(infos["final_info"], instance, name)
+            else:
+                final_obs = row(observations, index)
+                final_info = {}
+            out = self._add_info(out, {"final_obs": final_obs, "final_info": {
+                **final_info, "agent": name, "instance": int(instance)}}, int(index))
+            if not self._waiting[index] and not ended[instance]:
+                self._waiting[index] = True  # it waits for its instance to reset
+        instance_ended = np.repeat(ended, k)
+        self._waiting[instance_ended] = False
+        for index in np.flatnonzero(self._waiting & ~finished):
+            set_row(observations, index, row(self._last, index))
+        if self._waiting.any():
+            out = {**out, "waiting": self._waiting.copy(), "_waiting": self._waiting.copy()}
+        self._last = observations
+        return observations, rewards, terminated, truncated, out
+
+    def _learner_rows(self, joint: Any) -> Any:
+        """The learners' observations, instance by instance: row ``i * k + j``."""
+        k = len(self.learners)
+        out = create_empty_array(self.single_observation_space, self.num_envs)
+        for j, name in enumerate(self.learners):
+            column = self._of(joint, name)
+            for i in range(self.instances):
+                set_row(out, i * k + j, row(column, i))
+        return out
+
+    def _spread(self, infos: Mapping[str, Any]) -> dict[str, Any]:
+        """The instances' infos, each repeated for its learners (``agents`` and finals left)."""
+        k = len(self.learners)
+        return {key: _repeat(value, k) for key, value in infos.items()
+                if key not in ("agents", "_agents", "final_obs", "_final_obs", "final_info",
+                               "_final_info")}
+
+    def render(self) -> tuple[np.ndarray, ...] | None:
+        """One frame per sub-environment: its instance's (``rgb_array``)."""
+        frames = self.vector.render()
+        if frames is None:
+            return None
+        return tuple(frame for frame in frames for _ in self.learners)
+
+    def close_extras(self, **kwargs: Any) -> None:
+        """Stop the servers this vector started."""
+        self.vector.close()
+
+    def __enter__(self) -> AgentVectorEnv:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+
+def _classes_or_none(target: str | None) -> dict[str, type[RLAgent]] | None:
+    """:func:`agent_classes` of ``target``, or ``None`` where it cannot be built here."""
+    if target is None:
+        return None
+    try:
+        return agent_classes(target)
+    except ImportError:
+        return None
+
+
+def _roster(names: Sequence[str], classes: Mapping[str, type[RLAgent]] | None) -> str:
+    if classes is None:
+        return ", ".join(names)
+    return ", ".join(f"{name} ({classes[name].__name__})" for name in names)
+
+
+def _plan_others(names: Sequence[str], learners: Sequence[str],
+                 classes: Mapping[str, type[RLAgent]] | None,
+                 others: dict[Any, OtherPolicy],
+                 already: set[str]) -> tuple[dict[str, Callable[[Any], Any]], dict[str, str]]:
+    """Who drives each non-learning agent: callables here, and policies for the servers.
+
+    Raises:
+        ValueError: see :class:`AgentVectorEnv`.
+    """
+    by_name: dict[str, OtherPolicy] = {}
+    for key, policy in others.items():
+        if isinstance(key, str):
+            if key not in names:
+                raise ValueError(f"others: the environment has no agent {key!r}; its agents: "
+                                 f"{_roster(names, classes)}")
+            by_name[key] = policy
+        else:
+            found = learner_names(key, names, classes)
+            for name in found:
+                by_name.setdefault(name, policy)
+    learning = sorted(set(by_name) & set(learners))
+    if learning:
+        raise ValueError(f"others: agent {learning[0]!r} is a learner (agents selects it)")
+    here: dict[str, Callable[[Any], Any]] = {}
+    served: dict[str, str] = {}
+    for name in names:
+        if name in learners or name in already:
+            continue
+        policy = by_name.get(name, HEURISTIC)
+        if callable(policy):
+            here[name] = policy
+        elif policy == HEURISTIC:
+            if classes is None or not has_heuristic(classes[name]):
+                what = "its class has no heuristic" if classes is not None else \
+                    "its heuristic cannot be checked without the environment's target"
+                raise ValueError(
+                    f"agent {name!r} neither learns nor has a policy in others, and {what}: "
+                    f"give others={{{name!r}: 'policy.onnx'}} or a callable, or define "
+                    f"{classes[name].__name__ if classes else 'its class'}.heuristic")
+            served[name] = HEURISTIC
+        elif isinstance(policy, str | os.PathLike):
+            path = os.fspath(policy)
+            if not os.path.isfile(path):
+                raise ValueError(f"others[{name!r}]: no such policy file: {path}")
+            served[name] = os.path.abspath(path)
+        else:
+            raise TypeError(f"others[{name!r}] must be 'heuristic', an ONNX file or a "
+                            f"callable, not {policy!r}")
+    return here, served
+
+
+def _columns(outcome: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(reward, terminated, truncated)`` of one agent's batched outcome map."""
+    return (np.asarray(outcome["reward"], np.float64),
+            np.asarray(outcome["terminated"], np.bool_), np.asarray(outcome["truncated"], np.bool_))
+
+
+def _final_info(final_info: Mapping[str, Any], instance: int, name: str) -> dict[str, Any]:
+    """The last info of agent ``name`` in ``instance``: the instance's, less the other agents."""
+    info: dict[str, Any] = {}
+    for key, value in final_info.items():
+        if key.startswith("_") or key == "agents":
+            continue
+        mask = final_info.get(f"_{key}")
+        if mask is None or mask[instance]:
+            info[key] = value[instance]
+    return info
+
+
+def _repeat(value: Any, k: int) -> Any:
+    """A batched info value with each instance's row repeated ``k`` times."""
+    if isinstance(value, dict):
+        return {key: _repeat(item, k) for key, item in value.items()}
+    return np.repeat(value, k, axis=0) if k > 1 else value

@@ -231,9 +231,14 @@ class AgentVectorEnv(VectorEnv):
               options: Mapping[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         """Reset every instance (an int ``seed`` seeds instance ``i`` with ``seed + i``).
 
+        A list of seeds holds one per instance, or one per sub-environment (as SB3 gives
+        them), of which each instance takes its first learner's.
+
         Raises:
-            ValueError: a list of seeds not one per instance.
+            ValueError: a list of seeds of another length.
         """
+        if seed is not None and not isinstance(seed, int) and len(seed) == self.num_envs:
+            seed = list(seed)[::len(self.learners)]
         joint, infos = self.vector.reset(seed=seed, options=options)
         self._joint_observation = joint
         for done in self._others_done.values():

@@ -5,10 +5,14 @@ round trip per environment per step. :class:`SB3VecEnv` instead sends every sub-
 request at once and waits once, and uses ``SAME_STEP`` autoreset, which is SB3's convention (the
 observation returned for a finished environment is the first of its next episode; the last one
 is in ``info["terminal_observation"]``, and ``info["TimeLimit.truncated"]`` tells truncation).
-Each finished episode's statistics are in ``info["episode"]`` (``r``: return, ``l``: length,
-``t``: seconds since the vector was made), as SB3's ``Monitor`` gives them, so that
-``ep_rew_mean`` is logged without a ``VecMonitor`` (wrapping it in one anyway overwrites
-them with the same figures).
+With ``agents=``, the sub-environments are the learning agents of ``num_envs`` instances of a
+multi-agent environment (:class:`~rlenv_client.agent_vector.AgentVectorEnv`): one agent, or a
+team sharing one policy, trains straight from the game; ``others`` says what drives the other
+agents (their heuristics by default). Each finished episode's statistics are in
+``info["episode"]`` (``r``: return, ``l``: length, ``t``: seconds since the vector was made),
+as SB3's ``Monitor`` gives them, so that ``ep_rew_mean`` is logged without a ``VecMonitor``
+(wrapping it in one anyway overwrites them with the same figures); a learner's wait for its
+instance to reset counts as no episode.
 
 :class:`CurriculumCallback` scores the levels of a
 :class:`~rlenv_client.curriculum.CurriculumVectorEnv` (given to :class:`SB3VecEnv` as
@@ -22,7 +26,7 @@ build of torch first).
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -35,6 +39,7 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvStepReturn,
 )
 
+from rlenv_client.agent_vector import Agents, AgentVectorEnv, OtherPolicy
 from rlenv_client.curriculum.vector import CurriculumVectorEnv
 from rlenv_client.vector import RemoteVectorEnv
 from rlenv_client.vector_servers import default_layout
@@ -46,7 +51,8 @@ class SB3VecEnv(VecEnv):
     """``num_envs`` rlenv environments as one SB3 vectorised environment.
 
     Args:
-        num_envs: how many sub-environments.
+        num_envs: how many sub-environments; with ``agents``, how many instances of the
+            environment (each gives one sub-environment per learning agent).
         target: the environment class as ``MODULE:CLASS``, or a registered id's target.
         addresses: ``HOST:PORT`` of running servers instead of starting them.
         repeat_action: physics ticks per step (the servers' default if ``None``).
@@ -60,9 +66,15 @@ class SB3VecEnv(VecEnv):
             arguments but ``render_mode`` are then ignored): a ``RemoteVectorEnv`` with
             ``SAME_STEP`` autoreset, or a wrapper of one such as a
             :class:`~rlenv_client.curriculum.CurriculumVectorEnv`.
+        agents: of a multi-agent environment, which agents learn: names, or an RLAgent class
+            for all its agents (one policy shared); see
+            :class:`~rlenv_client.agent_vector.AgentVectorEnv`.
+        others: with ``agents``, what drives each other agent, by name: an ONNX file,
+            ``"heuristic"`` or ``policy(observation) -> action``; by default its heuristic.
 
     Raises:
-        ValueError: ``vector`` autoresets otherwise than ``SAME_STEP``.
+        ValueError: ``vector`` autoresets otherwise than ``SAME_STEP``; ``others`` without
+            ``agents``; see :class:`~rlenv_client.agent_vector.AgentVectorEnv` for the rest.
     """
 
     def __init__(
@@ -70,8 +82,18 @@ class SB3VecEnv(VecEnv):
         addresses: Sequence[str] | None = None, repeat_action: int | None = None,
         max_episode_steps: int | None = None, in_process: bool = False,
         render_mode: str | None = None, instances_per_server: int | None = None,
-        vector: VectorEnv | None = None,
+        vector: VectorEnv | None = None, agents: Agents | None = None,
+        others: Mapping[Any, OtherPolicy] | None = None,
     ) -> None:
+        if others is not None and agents is None:
+            raise ValueError("others says what drives the agents that do not learn: give "
+                             "agents= too")
+        if agents is not None and vector is None:
+            vector = AgentVectorEnv(
+                None if addresses is not None else num_envs, target, agents=agents,
+                others=others, addresses=addresses, repeat_action=repeat_action,
+                max_episode_steps=max_episode_steps, in_process=in_process,
+                render_mode=render_mode, instances_per_server=instances_per_server)
         if vector is not None:
             if vector.metadata.get("autoreset_mode") is not AutoresetMode.SAME_STEP:
                 raise ValueError("SB3VecEnv needs a vector with SAME_STEP autoreset (SB3's "
@@ -129,10 +151,11 @@ class SB3VecEnv(VecEnv):
             per_env[index]["terminal_observation"] = infos["final_obs"][index]
             per_env[index]["TimeLimit.truncated"] = bool(truncated[index] and
                                                          not terminated[index])
-            per_env[index]["episode"] = {
-                "r": round(float(self._episode_returns[index]), 6),
-                "l": int(self._episode_lengths[index]),
-                "t": round(time.time() - self._started, 6)}
+            if not final[index].get("waiting"):  # a learner's wait ends: no episode to count
+                per_env[index]["episode"] = {
+                    "r": round(float(self._episode_returns[index]), 6),
+                    "l": int(self._episode_lengths[index]),
+                    "t": round(time.time() - self._started, 6)}
             self._episode_returns[index] = 0
             self._episode_lengths[index] = 0
         return observations, rewards.astype(np.float32), dones, per_env

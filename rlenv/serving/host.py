@@ -32,9 +32,8 @@ from rlenv.serving.columns import Columns
 from rlenv.serving.endpoint import Endpoint, Peer
 from rlenv.serving.instance import Episode, Instance, failure, load_environment
 from rlenv.serving.lean import LeanSteps
-from rlenv.serving.onnx_policy import OnnxPolicy
 from rlenv.serving.parts import HostPart, dispatch, plan_for, shape_of, takes_control
-from rlenv.serving.policy_driver import DrivenAgents, PolicyDriver
+from rlenv.serving.policy_driver import DrivenAgents, Policy, PolicyDriver
 from rlenv.serving.recent import KEEP_EPISODES
 
 __all__ = ["Host", "Prepared", "target_of"]
@@ -88,8 +87,8 @@ class Host:
         clock: the trees' clock, for real-time mode.
         record_dir: where clients may have the environments record videos.
         real_time: start in real-time mode.
-        policies: policy files that drive agents, by agent name (one instance, lockstep; see
-            :mod:`rlenv.serving.policy_driver`).
+        policies: what drives agents (a loaded policy file, or ``"heuristic"``), by agent
+            name (one instance, lockstep; see :mod:`rlenv.serving.policy_driver`).
         max_episode_steps: with every agent driven, steps after which an episode is cut short.
         keep_episodes: how many finished episodes each instance keeps as recordings (0:
             none; see :mod:`rlenv.serving.recent`).
@@ -103,13 +102,14 @@ class Host:
         TypeError: several instances of an environment object.
         RuntimeError: the environment has no agent, world or spaces.
         ValueError: ``policies`` with several instances or in real time; a policy for an agent
-            the environment lacks, or whose spaces are not its agent's.
+            the environment lacks, or whose spaces are not its agent's; a heuristic for an
+            agent whose class defines none.
     """
 
     def __init__(self, environment: RLEnvironment | type[RLEnvironment] | str, count: int = 1,
                  *, clock: Callable[[], float] = time.monotonic,
                  record_dir: Path | None = None, real_time: bool = False,
-                 policies: Mapping[str, OnnxPolicy] | None = None,
+                 policies: Mapping[str, Policy] | None = None,
                  max_episode_steps: int | None = None,
                  keep_episodes: int = KEEP_EPISODES) -> None:
         target = target_of(environment)
@@ -147,7 +147,7 @@ class Host:
         if policies:
             self._drive(policies, max_episode_steps, real_time)
 
-    def _drive(self, policies: Mapping[str, OnnxPolicy], max_episode_steps: int | None,
+    def _drive(self, policies: Mapping[str, Policy], max_episode_steps: int | None,
                real_time: bool) -> None:
         """Let ``policies`` drive their agents; a driver when they drive every agent."""
         if len(self.instances) > 1 or real_time:
@@ -156,6 +156,8 @@ class Host:
         instance = self.instances[0]
         driven = DrivenAgents(policies, instance.agents)
         instance.drive(driven)
+        self.hello.driven = tuple(agent.name for agent in instance.agents
+                                  if agent.name in driven.names)
         if driven.every_agent:
             self.driver = PolicyDriver(self.answer, instance, driven, max_episode_steps)
 

@@ -1,4 +1,8 @@
-"""Agents driven by policy files (``rlenv serve --policy AGENT=FILE``).
+"""Agents driven by policy files or their heuristic (``rlenv serve --policy AGENT=FILE``).
+
+**What drives.** ``AGENT=FILE.onnx`` runs a policy file (:mod:`rlenv.serving.onnx_policy`);
+``AGENT=heuristic`` (:data:`HEURISTIC`) runs the agent's own :meth:`RLAgent.heuristic
+<rlenv.agent.RLAgent.heuristic>`, refused at start when its class defines none.
 
 **Who acts.** A driven agent's action is its policy's, computed inside each step from the
 agent's own observation (``get_data({})``) just before the action applies
@@ -21,51 +25,97 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from pathlib import Path
+from typing import Any, Final, Literal
 
 from rlenv.agent import RLAgent
 from rlenv.protocol import ErrorReply, Reply, Request, Response
+from rlenv.protocol.spaces import SpaceMismatch, compile_check
 from rlenv.serving.onnx_policy import OnnxPolicy
 
-__all__ = ["DrivenAgents", "PolicyDriver"]
+__all__ = ["HEURISTIC", "DrivenAgents", "Policy", "PolicyDriver", "load_policies"]
 
 logger = logging.getLogger(__name__)
 
+HEURISTIC: Final = "heuristic"
+"""What ``--policy AGENT=heuristic`` names instead of a file: the agent's own heuristic."""
+
+Policy = OnnxPolicy | Literal["heuristic"]
+"""What drives an agent: a loaded policy file, or :data:`HEURISTIC`."""
+
+
+def load_policies(policies: Mapping[str, str | Path]) -> dict[str, Policy]:
+    """Policy files loaded, by agent name; ``"heuristic"`` stays :data:`HEURISTIC`.
+
+    Raises:
+        ImportError: a file, and no onnxruntime.
+        ValueError: a file that cannot be read or is not an rlenv policy (one line).
+    """
+    return {agent: HEURISTIC if path == HEURISTIC else OnnxPolicy(path)
+            for agent, path in policies.items()}
+
 
 class DrivenAgents:
-    """The agents a policy file drives, checked against an instance's agents.
+    """The agents a policy file or their heuristic drives, checked against an instance's agents.
 
     Args:
-        policies: the policy of each driven agent, by agent name.
+        policies: what drives each driven agent, by agent name.
         agents: the instance's agents.
 
     Raises:
-        ValueError: one line: an agent the environment does not have, or a file whose spaces
-            are not its agent's (naming both).
+        ValueError: one line: an agent the environment does not have, a file whose spaces
+            are not its agent's (naming both), or ``heuristic`` for an agent whose class
+            defines none (naming the agent and its class).
     """
 
-    def __init__(self, policies: Mapping[str, OnnxPolicy], agents: Sequence[RLAgent]) -> None:
+    def __init__(self, policies: Mapping[str, Policy], agents: Sequence[RLAgent]) -> None:
         names = [agent.name for agent in agents]
         by_name = dict(zip(names, agents, strict=True))
         for name, policy in policies.items():
             agent = by_name.get(name)
             if agent is None:
-                raise ValueError(f"--policy {name}={policy.path}: the environment has no agent "
+                what = policy if policy == HEURISTIC else policy.path  # type: ignore[union-attr]
+                raise ValueError(f"--policy {name}={what}: the environment has no agent "
                                  f"{name!r}; its agents: {', '.join(names)}")
-            policy.check_spaces(name, agent.observation_space, agent.action_space)
+            if policy == HEURISTIC:
+                if not agent.has_heuristic():
+                    cls = type(agent).__name__
+                    raise ValueError(f"--policy {name}=heuristic: agent {name!r} (class {cls}) "
+                                     f"has no heuristic; define {cls}.heuristic(observation)")
+            else:
+                policy.check_spaces(  # type: ignore[union-attr]
+                    name, agent.observation_space, agent.action_space)
         self.policies = dict(policies)
         self.names = frozenset(policies)
         self.every_agent = self.names == set(names)
+        self._checks = {name: compile_check(by_name[name].action_space, "action")
+                        for name, policy in policies.items() if policy == HEURISTIC}
 
     def actions(self, agents: Sequence[RLAgent]) -> dict[str, Any]:
-        """The driven agents' actions (those still in the episode), from their observations."""
-        policies = self.policies
-        return {agent.name: policies[agent.name].act(agent.get_data({})) for agent in agents
-                if agent.name in policies and not (agent.terminated or agent.truncated)}
+        """The driven agents' actions (those still in the episode), from their observations.
+
+        Raises:
+            ValueError: a heuristic gave something that is not an action of its agent's space.
+        """
+        return {agent.name: self._act(agent) for agent in agents
+                if agent.name in self.policies and not (agent.terminated or agent.truncated)}
 
     def complete(self, action: Any, agents: Sequence[RLAgent]) -> Any:
         """A joint action (several agents) with the driven agents' actions put in."""
         return {**action, **self.actions(agents)}
+
+    def _act(self, agent: RLAgent) -> Any:
+        policy = self.policies[agent.name]
+        observation = agent.get_data({})
+        if policy != HEURISTIC:
+            return policy.act(observation)  # type: ignore[union-attr]
+        action = agent.heuristic(observation)
+        try:
+            return self._checks[agent.name](action)
+        except SpaceMismatch as error:
+            raise ValueError(f"{type(agent).__name__}.heuristic of agent {agent.name!r} gave "
+                             f"{action!r:.80}, not an action of {agent.action_space}: "
+                             f"{error}") from None
 
 
 class PolicyDriver:

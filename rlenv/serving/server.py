@@ -9,8 +9,8 @@ from pathlib import Path
 from rlenv.environment import RLEnvironment
 from rlenv.serving.endpoint import DEFAULT_HOST, Endpoint, Limits
 from rlenv.serving.host import Host
-from rlenv.serving.onnx_policy import OnnxPolicy
 from rlenv.serving.per_client import HostPerClient
+from rlenv.serving.policy_driver import load_policies
 from rlenv.serving.recent import KEEP_EPISODES
 
 __all__ = ["Server"]
@@ -44,7 +44,8 @@ class Server:
             them), built when it first asks and closed when it leaves
             (:mod:`rlenv.serving.per_client`); otherwise the first client to change the
             environment controls it and the others may observe.
-        policies: ONNX policy files that drive agents, by agent name (``rlenv serve
+        policies: what drives agents, by agent name: an ONNX policy file, or ``"heuristic"``
+            for the agent's own :meth:`~rlenv.agent.RLAgent.heuristic` (``rlenv serve
             --policy``; see :mod:`rlenv.serving.policy_driver`). With every agent driven, the
             server plays episodes itself and clients may only observe.
         max_episode_steps: steps after which a policy-driven episode is cut short.
@@ -70,7 +71,7 @@ class Server:
         policies: Mapping[str, str | Path] | None = None, max_episode_steps: int | None = None,
         keep_episodes: int = KEEP_EPISODES,
     ) -> None:
-        loaded = {agent: OnnxPolicy(path) for agent, path in (policies or {}).items()}
+        loaded = load_policies(policies or {})
 
         def build() -> Host:
             return Host(environment, instances, record_dir=record_dir, real_time=real_time,

@@ -1,0 +1,117 @@
+"""RLAgent.heuristic and the agents a server drives (``rlenv serve --policy NAME=heuristic``)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from examples.pair import PairAgent, chase
+from rlenv import RLAgent
+from rlenv.protocol.errors import RemoteError
+from rlenv_client import Client, LocalClient
+
+CHASING_PAIR = "heuristic_envs:ChasingPair"
+SEEKER = "heuristic_envs:HeuristicSeeker"
+PAIR = "examples.pair:PairEnvironment"
+HERE_TOO = {"PYTHONPATH": os.pathsep.join([str(Path(__file__).parent),
+                                           os.environ.get("PYTHONPATH", "")])}
+"""A server's environment that finds heuristic_envs."""
+
+
+def test_an_agent_class_has_a_heuristic_only_if_it_defines_one() -> None:
+    from heuristic_envs import ChasingPairAgent, HeuristicSeekerAgent
+
+    assert not RLAgent.has_heuristic() and not PairAgent.has_heuristic()
+    assert ChasingPairAgent.has_heuristic() and HeuristicSeekerAgent.has_heuristic()
+    assert ChasingPairAgent("Blue").has_heuristic()  # on an agent too
+    with pytest.raises(NotImplementedError, match="PairAgent has no heuristic"):
+        PairAgent("Red").heuristic(np.zeros(8, np.float32))
+
+
+def test_a_heuristic_plays_one_agent_as_if_its_actions_were_sent(serve) -> None:
+    """The learner sends Red's actions; Blue's are its heuristic's, on Blue's observation."""
+    rng = np.random.default_rng(0)
+    reds = [rng.uniform(-1, 1, 2).astype(np.float32) for _ in range(40)]
+    driven = serve(CHASING_PAIR, args=["--policy", "Blue=heuristic"], env=HERE_TOO)
+    plain = serve(PAIR)
+    with Client(driven.host, driven.port, timeout=10) as learner, \
+            Client(plain.host, plain.port, timeout=10) as both:
+        assert learner.hello.driven == ("Blue",) and both.hello.driven == ()
+        observation, _ = learner.reset(seed=5)
+        mirrored, _ = both.reset(seed=5)
+        for red in reds:
+            observation, reward, *_ = learner.step({"Red": red})
+            mirrored, mirrored_reward, *_ = both.step({"Red": red, "Blue": chase(mirrored["Blue"])})
+            for name in ("Red", "Blue"):
+                np.testing.assert_array_equal(observation[name], mirrored[name])
+            assert reward == mirrored_reward
+        assert np.abs(observation["Blue"][:2] - mirrored["Blue"][:2]).sum() == 0.0
+
+
+def _serve_refused(*args: str) -> str:
+    result = subprocess.run([sys.executable, "-m", "rlenv", "serve", *args], timeout=120,
+                            capture_output=True, text=True, stdin=subprocess.DEVNULL)
+    assert result.returncode == 2, result.stdout + result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    return lines[0]
+
+
+def test_a_heuristic_for_an_agent_without_one_is_refused_at_start_naming_its_class() -> None:
+    line = _serve_refused(PAIR, "--policy", "Red=heuristic")
+    assert line == ("rlenv serve: --policy Red=heuristic: agent 'Red' (class PairAgent) has "
+                    "no heuristic; define PairAgent.heuristic(observation)")
+    with pytest.raises(ValueError, match=r"agent 'Red' \(class PairAgent\) has no heuristic"):
+        LocalClient(CHASING_PAIR, policies={"Blue": "heuristic", "Red": "heuristic"})
+    with pytest.raises(ValueError, match="the environment has no agent 'Green'; its agents: "
+                                         "Red, Blue"):
+        LocalClient(CHASING_PAIR, policies={"Green": "heuristic"})
+
+
+def test_a_heuristic_plays_a_single_agent_environment_by_itself(serve) -> None:
+    server = serve(SEEKER, args=["--policy", "Agent=heuristic", "--max-episode-steps", "200"],
+                   env=HERE_TOO)
+    with Client(server.host, server.port, timeout=10) as observer:
+        assert observer.hello.driven == ("Agent",)
+        deadline = time.monotonic() + 60
+        while (stats := observer.stats())["next"] < 3:
+            assert time.monotonic() < deadline, f"only {stats['next']} episodes in 60 s"
+        caught = [e for e in stats["episodes"] if e["end"] == "terminated"]
+        assert caught and all(e["return"] > 0 for e in caught)  # the greedy push gets apples
+        with pytest.raises(RemoteError, match="driven by policies"):
+            observer.reset(seed=1)
+
+
+def test_in_process_a_heuristic_drives_its_agent_and_replays_exactly() -> None:
+    with LocalClient(CHASING_PAIR, policies={"Blue": "heuristic"}) as learner:
+        assert learner.hello.driven == ("Blue",)
+        observation, _ = learner.reset(seed=3)
+        before = observation["Blue"]
+        for _ in range(5):
+            observation, *_ = learner.step({"Red": np.zeros(2, np.float32)})
+        assert not np.array_equal(observation["Blue"], before)  # Blue moved by itself
+        snapshot = learner.snapshot()
+        with LocalClient(PAIR) as replayer:  # no heuristic there: the log holds Blue's actions
+            replayed, _ = replayer.restore(snapshot)
+        np.testing.assert_array_equal(replayed["Blue"], observation["Blue"])
+        np.testing.assert_array_equal(replayed["Red"], observation["Red"])
+
+
+def test_a_heuristic_answering_outside_its_space_is_an_environment_error_naming_it() -> None:
+    with LocalClient("heuristic_envs:WrongHeuristicPair", policies={"Blue": "heuristic"}) as env:
+        env.reset(seed=0)
+        with pytest.raises(RemoteError, match=r"WrongPairAgent.heuristic of agent 'Blue' gave "
+                                              r"array\(\[0., 0., 0.\]"):
+            env.step({"Red": np.zeros(2, np.float32)})
+        env.reset(seed=0)  # the server goes on
+
+
+def test_every_agent_driven_is_refused_in_process() -> None:
+    with pytest.raises(ValueError, match="policies drive every agent"):
+        LocalClient(SEEKER, policies={"Agent": "heuristic"})

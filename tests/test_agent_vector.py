@@ -62,6 +62,30 @@ def test_the_chaser_alone_plays_the_scripted_rewrite_bit_for_bit() -> None:
         rewrite.close()
 
 
+def test_by_default_the_servers_drive_the_others_by_their_heuristics() -> None:
+    """``agents="Chaser"`` alone: each runner's heuristic runs in the server, beside the
+    physics (``--policy Runner1=heuristic``), and the chaser sees the rewrite's game."""
+    alone = AgentVectorEnv(2, TAG, agents=CHASER, max_episode_steps=60)
+    rewrite = RemoteVectorEnv(2, SCRIPTED, autoreset_mode=AutoresetMode.SAME_STEP,
+                              max_episode_steps=60, instances_per_server=2)
+    try:
+        assert alone.driven_by_server == dict.fromkeys(RUNNERS, "heuristic")
+        assert alone.driven_here == {}
+        assert [client.hello.driven for client in alone.vector.clients] == [RUNNERS] * 2
+        seen, expected = alone.reset(seed=11)[0], rewrite.reset(seed=11)[0]
+        assert np.array_equal(seen, expected)
+        for _ in range(150):
+            actions = np.array([_chaser.heuristic(row) for row in seen])
+            seen, *ours, _ = alone.step(actions)
+            expected, *theirs, _ = rewrite.step(actions)
+            assert np.array_equal(seen, expected)
+            for mine, other in zip(ours, theirs, strict=True):
+                assert np.array_equal(mine, other)
+    finally:
+        alone.close()
+        rewrite.close()
+
+
 def test_a_class_makes_each_of_its_agents_a_sub_environment_sharing_one_policy() -> None:
     team = AgentVectorEnv(2, TAG, agents=Runner, others={CHASER: stand_still},
                           in_process=True)

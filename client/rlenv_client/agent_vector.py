@@ -16,8 +16,9 @@ of each of the ``instances`` is one sub-environment, sub-environment ``i * k + j
 - agents the server was started to drive (its hello's ``driven``) need nothing.
 
 Episodes follow the agents, not the instances. A learner's episode ends when it terminates or
-is truncated, or when its instance's episode ends (every agent done, or ``max_episode_steps``:
-then it is truncated). Autoreset is ``SAME_STEP`` (``info["final_obs"]``,
+is truncated, or when its instance's episode ends (every agent done: then it is truncated unless
+it terminated). ``max_episode_steps`` truncates every learner still in the episode, as
+gymnasium's ``TimeLimit`` does (a learner that terminated on that step is both). Autoreset is ``SAME_STEP`` (``info["final_obs"]``,
 ``info["final_info"]``). A learner that ends while its instance plays on (a runner caught
 while the other still runs) **waits** until the instance resets: each step returns its last
 observation again, reward 0, both flags false and ``info["waiting"]``; the step that resets
@@ -39,19 +40,17 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, create_empty_array
 
 from rlenv.agent import RLAgent
+from rlenv.serving.policy_driver import HEURISTIC
 from rlenv_client.rows import check_shape, row, set_row
 from rlenv_client.vector import RemoteVectorEnv
 
-__all__ = ["AgentVectorEnv", "Agents", "OtherPolicy", "agent_classes", "has_heuristic",
-           "learner_names"]
+__all__ = ["AgentVectorEnv", "Agents", "OtherPolicy", "agent_classes", "learner_names"]
 
 Agents = str | type[RLAgent] | Sequence[str | type[RLAgent]]
 """Which agents learn: names, an RLAgent class (its every agent), or a list of both."""
 
 OtherPolicy = str | os.PathLike[str] | Callable[[Any], Any]
 """What drives another agent: ``"heuristic"``, an ONNX file, or ``policy(observation)``."""
-
-HEURISTIC = "heuristic"
 
 
 def agent_classes(target: str) -> dict[str, type[RLAgent]]:
@@ -66,12 +65,6 @@ def agent_classes(target: str) -> dict[str, type[RLAgent]]:
     with LocalClient(target) as probe:
         assert probe.host is not None
         return {agent.name: type(agent) for agent in probe.host.instances[0].agents}
-
-
-def has_heuristic(agent_class: type[RLAgent]) -> bool:
-    """Whether the class overrides ``RLAgent.heuristic``."""
-    own = getattr(agent_class, HEURISTIC, None)
-    return own is not None and own is not getattr(RLAgent, HEURISTIC, None)
 
 
 def learner_names(agents: Agents, names: Sequence[str],
@@ -218,6 +211,7 @@ class AgentVectorEnv(VectorEnv):
         self._joint_observation: Any = None
         self._others_done = {name: np.zeros(self.instances, np.bool_) for name in self.driven_here}
         self._waiting = np.zeros(self.num_envs, np.bool_)
+        self._steps = np.zeros(self.instances, np.int64)  # of each instance's episode
         self._last = create_empty_array(observation_space, self.num_envs)  # per sub-env
 
     def _agent_space(self, joint: spaces.Space, name: str) -> spaces.Space:
@@ -244,6 +238,7 @@ class AgentVectorEnv(VectorEnv):
         for done in self._others_done.values():
             done[:] = False
         self._waiting[:] = False
+        self._steps[:] = 0
         observations = self._learner_rows(joint)
         self._last = observations
         return observations, self._spread(infos)
@@ -291,6 +286,10 @@ class AgentVectorEnv(VectorEnv):
                                                   dict[str, Any]]:
         k = len(self.learners)
         ended = joint[1] | joint[2]
+        self._steps += 1
+        limit = self.vector.max_episode_steps
+        timed_out = self._steps >= limit if limit is not None else np.zeros_like(ended)
+        self._steps[ended] = 0
         rewards = np.zeros(self.num_envs, np.float64)
         terminated = np.zeros(self.num_envs, np.bool_)
         truncated = np.zeros(self.num_envs, np.bool_)
@@ -307,7 +306,8 @@ class AgentVectorEnv(VectorEnv):
             was_waiting = waiting[span].copy()
             rewards[span] = np.where(was_waiting, 0.0, reward)
             terminated[span] = done_t & ~was_waiting
-            truncated[span] = ((done_c | ended) & ~done_t & ~was_waiting) | (was_waiting & ended)
+            truncated[span] = ((done_c | timed_out | (ended & ~done_t)) & ~was_waiting) | \
+                (was_waiting & ended)
         finished = terminated | truncated
         for index in np.flatnonzero(finished):
             instance = index // k
@@ -416,7 +416,7 @@ def _plan_others(names: Sequence[str], learners: Sequence[str],
         if callable(policy):
             here[name] = policy
         elif policy == HEURISTIC:
-            if classes is None or not has_heuristic(classes[name]):
+            if classes is None or not classes[name].has_heuristic():
                 what = "its class has no heuristic" if classes is not None else \
                     "its heuristic cannot be checked without the environment's target"
                 raise ValueError(

@@ -27,8 +27,10 @@ from ray.rllib.env.env_context import EnvContext  # noqa: E402
 from ray.tune.registry import ENV_CREATOR, _global_registry, register_env  # noqa: E402
 
 from examples.cartpole import TARGET  # noqa: E402
+from examples.tag import TARGET as TAG_TARGET  # noqa: E402
 from rlenv_client import ConnectionLost, RemoteVectorEnv  # noqa: E402
 from rlenv_client.rllib import RLlibEnvCreator, config_for, register  # noqa: E402
+from rlenv_client.rllib_agents import RemoteMultiAgentEnv, multi_agent_config_for  # noqa: E402
 
 pytestmark = pytest.mark.ray
 
@@ -349,3 +351,54 @@ def test_ppo_on_leased_servers_recovers_a_lost_one(pool: Any) -> None:
     finally:
         algo.stop()
     assert lease_is_free()
+
+
+# --- several agents: a MultiAgentEnv, a policy per class ---------------------------------------
+
+
+def test_two_policies_train_the_chaser_and_the_runners_of_tag(no_leftovers: str) -> None:
+    config = multi_agent_config_for(PPOConfig(), TAG_TARGET, per="class", num_env_runners=1,
+                                    max_episode_steps=100)
+    config = (config.env_runners(rollout_fragment_length=100)
+              .training(train_batch_size_per_learner=200, minibatch_size=50, num_epochs=1)
+              .debugging(seed=0))
+    assert config.policies.keys() == {"Chaser", "Runner"}
+    mapping = config.policy_mapping_fn
+    assert [mapping(name, None) for name in ("Chaser", "Runner1", "Runner2")] == \
+        ["Chaser", "Runner", "Runner"]
+    algo = config.build_algo()
+    try:
+        before = algo.learner_group.get_weights()
+        for _ in range(2):
+            result = algo.train()
+        after = algo.learner_group.get_weights()
+        runners = result["env_runners"]
+        assert set(runners["module_episode_returns_mean"]) == {"Chaser", "Runner"}
+        assert set(runners["agent_episode_returns_mean"]) == {"Chaser", "Runner1", "Runner2"}
+        assert {"Chaser", "Runner"} <= set(result["learners"])
+        for module in ("Chaser", "Runner"):  # each policy learned from its own agents
+            assert any(not np.array_equal(np.asarray(after[module][key]),
+                                          np.asarray(before[module][key]))
+                       for key in before[module]), module
+        servers = algo.env_runner_group.foreach_env_runner(
+            lambda runner: [env.unwrapped.session.server.pid for env in runner.env.envs],
+            local_env_runner=False)
+        assert servers and all(servers)
+    finally:
+        algo.stop()
+
+
+def test_the_server_drives_what_rllib_does_not_train(no_leftovers: str) -> None:
+    env = RemoteMultiAgentEnv(TAG_TARGET, others={"Runner1": "heuristic", "Runner2": "heuristic"},
+                              max_episode_steps=5)
+    try:
+        assert env.possible_agents == ["Chaser"] and env.driven == ("Runner1", "Runner2")
+        observations, _ = env.reset(seed=0)
+        assert list(observations) == ["Chaser"]
+        for _ in range(5):
+            observations, rewards, terminateds, truncateds, _ = env.step(
+                {"Chaser": np.zeros(2, np.float32)})
+        assert truncateds == {"Chaser": True, "__all__": True}
+        assert terminateds == {"Chaser": False, "__all__": False}
+    finally:
+        env.close()

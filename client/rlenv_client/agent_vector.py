@@ -18,12 +18,13 @@ of each of the ``instances`` is one sub-environment, sub-environment ``i * k + j
 Episodes follow the agents, not the instances. A learner's episode ends when it terminates or
 is truncated, or when its instance's episode ends (every agent done: then it is truncated unless
 it terminated). ``max_episode_steps`` truncates every learner still in the episode, as
-gymnasium's ``TimeLimit`` does (a learner that terminated on that step is both). Autoreset is ``SAME_STEP`` (``info["final_obs"]``,
-``info["final_info"]``). A learner that ends while its instance plays on (a runner caught
-while the other still runs) **waits** until the instance resets: each step returns its last
-observation again, reward 0, both flags false and ``info["waiting"]``; the step that resets
-its instance ends that wait as truncated, its final info holding ``waiting`` too, so that no
-episode statistics are counted for it. Its actions while waiting are ignored.
+gymnasium's ``TimeLimit`` does (a learner that terminated on that step is both). Autoreset is
+``SAME_STEP`` (``info["final_obs"]``, ``info["final_info"]``). A learner that ends while its
+instance plays on (a runner caught while the other still runs) **waits** until the instance
+resets: each step returns its last observation again, reward 0, both flags false and
+``info["waiting"]``; the step that resets its instance ends that wait as truncated, its final
+info holding ``waiting`` too, so that no episode statistics are counted for it. Its actions
+while waiting are ignored.
 
 Servers that route policies (``--policy``) host one instance each.
 """

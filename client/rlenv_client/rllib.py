@@ -82,6 +82,10 @@ and the pool must have ``pool_servers`` servers free for every EnvRunner (a vect
 recreates releases its lease before the new one leases). An EnvRunner that dies without closing
 its env (its actor killed) does not give its lease back.
 
+Multi-agent environments (one policy per agent, or per RLAgent class, through
+``policy_mapping_fn``) are each a :class:`RemoteMultiAgentEnv`, set up by
+:func:`multi_agent_config_for` (in :mod:`rlenv_client.rllib_agents`, importable from here).
+
 Only people who use RLlib import this module; the rest of ``rlenv_client`` never imports ray,
 and here only :func:`register`, :func:`config_for` and a ``pool`` import it.
 """
@@ -102,6 +106,18 @@ if TYPE_CHECKING:
     from ray.rllib.algorithms.algorithm_config import AlgorithmConfig
 
 __all__ = ["LeasedVectorEnv", "RLlibEnvCreator", "config_for", "register", "vector_options"]
+
+_MULTI_AGENT = ("AgentMapping", "RemoteMultiAgentEnv", "multi_agent_config_for",
+                "policy_per_agent", "policy_per_class", "register_multi_agent")
+
+
+def __getattr__(name: str) -> Any:
+    """The multi-agent names of :mod:`rlenv_client.rllib_agents` (which import ray)."""
+    if name in _MULTI_AGENT:
+        from rlenv_client import rllib_agents
+
+        return getattr(rllib_agents, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 _VECTOR_ENTRY = "rlenv_client.vector:RemoteVectorEnv"
 _NOT_WITH_POOL = ("addresses", "in_process", "instances_per_server", "token")

@@ -17,8 +17,12 @@ from stable_baselines3.common.vec_env import VecMonitor  # noqa: E402
 
 import rlenv_client  # noqa: E402, F401  (registers the ids)
 from examples.cartpole import TARGET  # noqa: E402
+from examples.tag import CHASER, RUNNERS, Chaser, Runner  # noqa: E402
+from examples.tag import TARGET as TAG  # noqa: E402
 from examples.train_sb3 import evaluate  # noqa: E402
-from rlenv_client.sb3 import SB3VecEnv  # noqa: E402
+from rlenv_client.sb3 import SB3VecEnv, SelfPlayCallback  # noqa: E402
+from rlenv_client.selfplay import FrozenPolicy  # noqa: E402
+from rlenv_client.vector import RemoteVectorEnv  # noqa: E402
 
 
 @pytest.fixture(autouse=True)
@@ -118,3 +122,94 @@ def test_ppo_logs_episode_returns_without_vec_monitor() -> None:
         assert all(info["l"] <= 20 for info in model.ep_info_buffer)
     finally:
         envs.close()
+
+
+# --- one agent, or a team, of a multi-agent env ----------------------------------------------
+
+
+def test_sb3_trains_the_chaser_straight_from_the_multi_agent_tag() -> None:
+    envs = SB3VecEnv(2, TAG, agents=CHASER, max_episode_steps=100)
+    try:
+        assert envs.num_envs == 2 and envs.observation_space == Chaser.observation_space
+        assert envs.venv.driven_by_server == dict.fromkeys(RUNNERS, "heuristic")
+        model = PPO("MlpPolicy", envs, seed=0, n_steps=64, batch_size=64, verbose=0)
+        model.learn(total_timesteps=512)
+        episodes = list(model.ep_info_buffer)
+    finally:
+        envs.close()
+    assert model.num_timesteps == 512 and len(episodes) >= 4
+    assert all(1 <= episode["l"] <= 100 for episode in episodes)
+
+
+def test_sb3_counts_a_team_members_wait_as_no_episode() -> None:
+    """Runners share one policy; a tagged runner's episode is counted once, at its tag."""
+    chaser = Chaser()
+    envs = SB3VecEnv(1, TAG, agents=Runner, others={CHASER: chaser.heuristic},
+                     max_episode_steps=300, in_process=True)
+    try:
+        envs.seed(1)
+        envs.reset()
+        tags, waits_ended = 0, 0
+        for _ in range(300):
+            envs.step_async(np.zeros((2, 2), np.float32))
+            _, rewards, dones, infos = envs.step_wait()
+            for index in np.flatnonzero(dones):
+                info = infos[index]
+                assert "terminal_observation" in info
+                if "episode" in info:  # tagged: its episode, its return
+                    assert info["episode"]["r"] < 0 and not info["TimeLimit.truncated"]
+                    tags += 1
+                else:  # a wait that ended with the instance's episode
+                    assert info["TimeLimit.truncated"] and rewards[index] == 0.0
+                    waits_ended += 1
+            if waits_ended:
+                break
+    finally:
+        envs.close()
+    assert tags == 2 and waits_ended == 1
+
+
+def test_self_play_refreshes_a_frozen_copy_of_the_learner_every_n_steps() -> None:
+    frozen = FrozenPolicy(deterministic=True)
+    envs = SB3VecEnv(2, TAG, agents="Runner1", others={"Runner2": frozen}, max_episode_steps=100)
+    try:
+        model = PPO("MlpPolicy", envs, seed=0, n_steps=64, batch_size=64, verbose=0)
+        initial = [p.detach().clone() for p in model.policy.parameters()]
+        model.learn(total_timesteps=512, callback=SelfPlayCallback(frozen, every=128))
+        assert frozen.refreshed_at == [0, 128, 256, 384, 512]
+        assert frozen.policy is not model.policy
+        copied = [p.detach().clone() for p in frozen.policy.parameters()]
+        assert any(not (a == b).all() for a, b in zip(copied, initial, strict=True))
+        model.learn(total_timesteps=128, reset_num_timesteps=False)  # without the callback
+        assert all((a == b).all() for a, b in zip(copied, frozen.policy.parameters(),
+                                                  strict=True))  # frozen: left as copied
+        assert any(not (a == b).all() for a, b in zip(copied, model.policy.parameters(),
+                                                      strict=True))
+    finally:
+        envs.close()
+
+
+def test_the_frozen_copy_plays_its_agent() -> None:
+    """Runner2's moves are the copy's actions on its own observations (checked by replaying
+    them into the joint env)."""
+    frozen, chaser = FrozenPolicy(deterministic=True), Chaser()
+    envs = SB3VecEnv(1, TAG, agents="Runner1", in_process=True,
+                     others={"Runner2": frozen, CHASER: chaser.heuristic})
+    joint = RemoteVectorEnv(1, TAG, in_process=True, autoreset_mode="SameStep")
+    try:
+        model = PPO("MlpPolicy", envs, seed=0, n_steps=64, batch_size=64, verbose=0)
+        frozen.refresh(model.policy)
+        envs.seed(3)
+        envs.reset()
+        observations, _ = joint.reset(seed=3)
+        for _ in range(30):  # Runner1 is not tagged yet
+            mine = np.array([[0.5, -0.5]], np.float32)
+            actions = {"Runner1": mine, "Runner2": np.array([frozen(observations["Runner2"][0])]),
+                       "Chaser": np.array([chaser.heuristic(observations["Chaser"][0])])}
+            envs.step_async(mine)
+            ours, _, dones, _ = envs.step_wait()
+            observations, *_ = joint.step(actions)
+            assert not dones[0] and np.array_equal(ours[0], observations["Runner1"][0])
+    finally:
+        envs.close()
+        joint.close()

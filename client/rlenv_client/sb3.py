@@ -41,10 +41,11 @@ from stable_baselines3.common.vec_env.base_vec_env import (
 
 from rlenv_client.agent_vector import Agents, AgentVectorEnv, OtherPolicy
 from rlenv_client.curriculum.vector import CurriculumVectorEnv
+from rlenv_client.selfplay import FrozenPolicy
 from rlenv_client.vector import RemoteVectorEnv
 from rlenv_client.vector_servers import default_layout
 
-__all__ = ["CurriculumCallback", "SB3VecEnv"]
+__all__ = ["CurriculumCallback", "SB3VecEnv", "SelfPlayCallback"]
 
 
 class SB3VecEnv(VecEnv):
@@ -244,6 +245,45 @@ class CurriculumCallback(BaseCallback):
             ignored = ~np.stack(self._masks)
             buffer.advantages[:steps][ignored] = 0.0
             buffer.returns[:steps][ignored] = buffer.values[:steps][ignored]
+
+
+class SelfPlayCallback(BaseCallback):
+    """Refreshes a :class:`~rlenv_client.selfplay.FrozenPolicy` from the model being trained.
+
+    The copy is taken when training starts, then every ``every`` steps (SB3's
+    ``num_timesteps``: one per sub-environment step), so that the agents it drives play the
+    learner as it was at most ``every`` steps ago.
+
+    Args:
+        frozen: the copy that ``others`` gives the opponents.
+        every: steps between refreshes (at least 1).
+        verbose: SB3's verbosity (1: say each refresh).
+
+    Raises:
+        ValueError: ``every`` is smaller than 1.
+    """
+
+    def __init__(self, frozen: FrozenPolicy, every: int, verbose: int = 0) -> None:
+        super().__init__(verbose)
+        if every < 1:
+            raise ValueError(f"every must be at least 1 step, not {every}")
+        self.frozen = frozen
+        self.every = every
+        self._last = 0
+
+    def _on_training_start(self) -> None:
+        self._refresh()
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps - self._last >= self.every:
+            self._refresh()
+        return True
+
+    def _refresh(self) -> None:
+        self.frozen.refresh(self.model.policy, self.num_timesteps)
+        self._last = self.num_timesteps
+        if self.verbose:
+            print(f"self-play: the opponents' copy refreshed at step {self.num_timesteps}")
 
 
 def _split_infos(infos: dict[str, Any], num_envs: int) -> list[dict[str, Any]]:

@@ -44,6 +44,7 @@ from rlenv.agent import RLAgent
 from rlenv.serving.policy_driver import HEURISTIC
 from rlenv_client.rows import check_shape, row, set_row
 from rlenv_client.vector import RemoteVectorEnv
+from rlenv_client.vector_servers import default_layout
 
 __all__ = ["AgentVectorEnv", "Agents", "OtherPolicy", "agent_classes", "learner_names"]
 
@@ -114,12 +115,15 @@ class AgentVectorEnv(VectorEnv):
         repeat_action: physics ticks per step; the servers' default if ``None``.
         max_episode_steps: truncate each instance's episodes after this many steps.
         in_process: run the copies inside this process (``others`` must then be callables).
-        instances_per_server: how many copies each started server hosts (1 where policies
-            are routed to it).
+        instances_per_server: how many copies each started server hosts: by default 1 where
+            policies are routed to the servers, else one server per core.
         render_mode: ``"rgb_array"`` or ``None``.
         timeout: seconds to wait for each answer.
         token: the secret of servers that require one.
         max_restarts: how many times each lost server that this vector started is replaced.
+        trainer_cores: cores the default layout leaves to the trainer (see
+            :func:`~rlenv_client.vector_servers.default_layout`;
+            :class:`~rlenv_client.sb3.SB3VecEnv` leaves 1).
 
     Attributes:
         learners: the learning agents' names, in the environment's order.
@@ -142,6 +146,7 @@ class AgentVectorEnv(VectorEnv):
         max_episode_steps: int | None = None, in_process: bool = False,
         instances_per_server: int | None = None, render_mode: str | None = None,
         timeout: float = 30.0, token: str | None = None, max_restarts: int = 3,
+        trainer_cores: int = 0,
     ) -> None:
         self.vector: RemoteVectorEnv | None = None
         options: dict[str, Any] = {
@@ -172,8 +177,9 @@ class AgentVectorEnv(VectorEnv):
             if self.vector is None:
                 server_args = [argument for name, policy in self.driven_by_server.items()
                                for argument in ("--policy", f"{name}={policy}")]
-                if server_args and instances_per_server is None:
-                    instances_per_server = 1  # a server routes policies for one instance
+                if instances_per_server is None and not in_process:
+                    instances_per_server = 1 if server_args else \
+                        default_layout(instances or 1, trainer_cores=trainer_cores)[0]
                 self.vector = RemoteVectorEnv(
                     instances, target, in_process=in_process,
                     instances_per_server=instances_per_server, server_args=server_args,

@@ -94,7 +94,8 @@ class SB3VecEnv(VecEnv):
                 None if addresses is not None else num_envs, target, agents=agents,
                 others=others, addresses=addresses, repeat_action=repeat_action,
                 max_episode_steps=max_episode_steps, in_process=in_process,
-                render_mode=render_mode, instances_per_server=instances_per_server)
+                render_mode=render_mode, instances_per_server=instances_per_server,
+                trainer_cores=1)
         if vector is not None:
             if vector.metadata.get("autoreset_mode") is not AutoresetMode.SAME_STEP:
                 raise ValueError("SB3VecEnv needs a vector with SAME_STEP autoreset (SB3's "

@@ -1,9 +1,10 @@
 """Self-play: some agents play a frozen copy of the learner's policy, refreshed every N steps.
 
-A :class:`FrozenPolicy` is a callable for ``others`` (:class:`~rlenv_client.agent_vector.
-AgentVectorEnv`, :class:`~rlenv_client.sb3.SB3VecEnv`): it acts for its agents with a copy of
-the learner's policy taken at its last :meth:`~FrozenPolicy.refresh`, so that the opponents
-stay fixed while the learner improves against them, then catch up. With Stable-Baselines3,
+A :class:`FrozenPolicy` is a callable for ``others``
+(:class:`~rlenv_client.agent_vector.AgentVectorEnv`, :class:`~rlenv_client.sb3.SB3VecEnv`): it
+acts for its agents with a copy of the learner's policy taken at its last
+:meth:`~FrozenPolicy.refresh`, so that the opponents stay fixed while the learner improves
+against them, then catch up. With Stable-Baselines3,
 :class:`~rlenv_client.sb3.SelfPlayCallback` refreshes it every N steps::
 
     from stable_baselines3 import PPO

@@ -195,3 +195,12 @@ def test_running_servers_cannot_be_given_server_side_policies(serve: Serve) -> N
         assert alone.num_envs == 1
         observations, _ = alone.reset(seed=0)
         assert alone.step(np.zeros((1, 2), np.float32))[0].shape == (1, 10)
+
+
+def test_others_may_name_a_class_for_all_its_agents() -> None:
+    with AgentVectorEnv(1, TAG, agents=CHASER, others={Runner: run_away},
+                        in_process=True) as alone:
+        assert alone.driven_here == dict.fromkeys(RUNNERS, run_away)
+        assert alone.driven_by_server == {}
+        alone.reset(seed=0)
+        assert alone.step(np.zeros((1, 2), np.float32))[0].shape == (1, 10)

@@ -318,3 +318,30 @@ def test_a_timeline_branches_with_a_policy_file(tmp_path: Path, cartpole_policy:
             assert np.array_equal(chosen[step], policy.act(branch.at(step).observation))
         with pytest.raises(ValueError, match="not an ONNX model"):
             timeline.branch(3, policy=path, max_steps=2)  # a recording, not a policy
+
+
+def test_an_onnx_file_in_others_drives_that_agent_in_the_server(pair_policy: Path) -> None:
+    """``others={"Blue": FILE}`` runs the file beside the physics; the same file called in the
+    trainer gives Red the same episode, bit for bit."""
+    from rlenv.serving.onnx_policy import OnnxPolicy
+    from rlenv_client.agent_vector import AgentVectorEnv
+
+    served = AgentVectorEnv(1, PAIR, agents="Red", others={"Blue": pair_policy},
+                            max_episode_steps=40)
+    called = AgentVectorEnv(1, PAIR, agents="Red", others={"Blue": OnnxPolicy(pair_policy).act},
+                            max_episode_steps=40)
+    try:
+        assert served.driven_by_server == {"Blue": str(pair_policy)}
+        assert served.vector.clients[0].hello.driven == ("Blue",)
+        first, second = served.reset(seed=4)[0], called.reset(seed=4)[0]
+        for _ in range(40):
+            assert np.array_equal(first, second)
+            actions = np.full((1, 2), 0.25, np.float32)
+            first, *ours, _ = served.step(actions)
+            second, *theirs, _ = called.step(actions)
+            for mine, other in zip(ours, theirs, strict=True):
+                assert np.array_equal(mine, other)
+        assert ours[2][0]  # the time limit ended the episode
+    finally:
+        served.close()
+        called.close()

@@ -158,7 +158,7 @@ class AgentVectorEnv(VectorEnv):
                 self.vector = RemoteVectorEnv(instances, target, addresses=addresses, **options)
                 hello = self.vector.clients[0].hello
                 classes = _classes_or_none(target or hello.target)
-                names, already = list(hello.agents), set(getattr(hello, "driven", ()) or ())
+                names, already = list(hello.agents), set(hello.driven)
             else:
                 if target is None:
                     raise ValueError("AgentVectorEnv needs a target or addresses")

@@ -204,3 +204,33 @@ def test_others_may_name_a_class_for_all_its_agents() -> None:
         assert alone.driven_by_server == {}
         alone.reset(seed=0)
         assert alone.step(np.zeros((1, 2), np.float32))[0].shape == (1, 10)
+
+
+def _batched_by_gymnasium(vector: RemoteVectorEnv, infos: dict) -> dict:
+    """``infos`` batched again, one sub-environment at a time, by gymnasium's ``_add_info``."""
+    batched: dict = {}
+    for index in range(vector.num_envs):
+        agents = {name: {key: column[index].item() for key, column in outcome.items()
+                         if not key.startswith("_")}
+                  for name, outcome in infos["agents"].items() if not name.startswith("_")}
+        batched = vector._add_info(batched, {"agents": agents,
+                                             "frames": int(infos["frames"][index])}, index)
+    return batched
+
+
+def _assert_same(ours: dict, theirs: dict) -> None:
+    assert ours.keys() == theirs.keys()
+    for key, value in ours.items():
+        if isinstance(value, dict):
+            _assert_same(value, theirs[key])
+        else:
+            assert value.dtype == theirs[key].dtype and np.array_equal(value, theirs[key]), key
+
+
+def test_several_agents_outcomes_are_batched_in_columns_as_gymnasium_batches_them() -> None:
+    with RemoteVectorEnv(3, TAG, in_process=True) as vector:
+        vector.reset(seed=0)
+        vector.action_space.seed(0)
+        for _ in range(5):
+            *_, infos = vector.step(vector.action_space.sample())
+            _assert_same(infos, _batched_by_gymnasium(vector, infos))

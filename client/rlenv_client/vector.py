@@ -472,11 +472,33 @@ class RemoteVectorEnv(VectorEnv):
                 self._pending_starts -= 1
         return starts if any(start is not None for start in starts) else None
 
+    def _agent_columns(self, env_infos: list[dict[str, Any]]) -> dict[str, Any]:
+        """``agents`` batched as gymnasium's ``_add_info`` batches it, a column per outcome."""
+        every = self._all_envs
+        columns: dict[str, Any] = {}
+        for name in env_infos[0]["agents"]:
+            outcomes = [info["agents"][name] for info in env_infos]
+            columns[name] = {
+                "reward": np.array([o["reward"] for o in outcomes], np.float64),
+                "_reward": every.copy(),
+                "terminated": np.array([o["terminated"] for o in outcomes], np.bool_),
+                "_terminated": every.copy(),
+                "truncated": np.array([o["truncated"] for o in outcomes], np.bool_),
+                "_truncated": every.copy()}
+            columns[f"_{name}"] = every.copy()
+        return columns
+
     def _merge_infos(self, infos: dict[str, Any], env_infos: list[dict[str, Any]],
                      frames: np.ndarray) -> dict:
-        """Gymnasium's batched infos, ``frames`` included; without a loop in the common case."""
+        """Gymnasium's batched infos, ``frames`` included; without a loop in the common cases.
+
+        Those are: no info, and several agents' outcomes alone (``agents``, built in columns).
+        """
         if not infos and not any(env_infos):
             return {"frames": frames, "_frames": self._all_envs.copy()}
+        if not infos and all(info.keys() == {"agents"} for info in env_infos):
+            return {"agents": self._agent_columns(env_infos), "_agents": self._all_envs.copy(),
+                    "frames": frames, "_frames": self._all_envs.copy()}
         for index, info in enumerate(env_infos):
             infos = self._add_info(infos, {**info, "frames": int(frames[index])}, index)
         return infos

@@ -75,7 +75,8 @@ class SB3VecEnv(VecEnv):
 
     Raises:
         ValueError: ``vector`` autoresets otherwise than ``SAME_STEP``; ``others`` without
-            ``agents``; see :class:`~rlenv_client.agent_vector.AgentVectorEnv` for the rest.
+            ``agents``, or ``agents`` with ``vector``; see
+            :class:`~rlenv_client.agent_vector.AgentVectorEnv` for the rest.
     """
 
     def __init__(
@@ -89,7 +90,9 @@ class SB3VecEnv(VecEnv):
         if others is not None and agents is None:
             raise ValueError("others says what drives the agents that do not learn: give "
                              "agents= too")
-        if agents is not None and vector is None:
+        if agents is not None and vector is not None:
+            raise ValueError("agents= makes the vector: give agents or vector, not both")
+        if agents is not None:
             vector = AgentVectorEnv(
                 None if addresses is not None else num_envs, target, agents=agents,
                 others=others, addresses=addresses, repeat_action=repeat_action,

@@ -554,7 +554,9 @@ class Timeline:
             digests.append(observed)
         elif observed != digests[step]:
             raise RuntimeError(f"step {step}: the re-simulated observation differs from the "
-                               "recording (the environment is not deterministic here)")
+                               "recording: its snapshot's settings, generator state and actions "
+                               "gave another observation (the environment depends on something "
+                               "a snapshot does not hold)")
 
     def _measured_spacing(self) -> int:
         """Checkpoints as far apart as ~5 ms of steps, from the cost of the first few.

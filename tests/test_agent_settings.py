@@ -10,6 +10,7 @@ subprocesses.
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -19,6 +20,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from conftest import Serve
+from http_gateway import Gateway, assert_problem
 from per_agent_envs import NAMES
 
 from rlenv.protocol.errors import ErrorCode, RemoteError
@@ -153,6 +155,29 @@ def test_one_agent_alone_keeps_its_flat_map_and_may_be_named(serve: Serve) -> No
             "agents: Agent (classes: CartPoleAgent)")
 
 
+def test_the_http_gateway_takes_both_forms_and_its_snapshots_keep_each_agents(
+        tests_on_path: None) -> None:
+    gateway = Gateway(CHASE)
+    try:
+        tuned = gateway.session(agent={"max_force": 9.0, "Runner1": {"max_force": 6.0}})
+        plain = gateway.session()
+        gateway.post(f"/v1/envs/{tuned}/reset", {"seed": 2})
+        action = {name: [0.5, -1.0] for name in NAMES}
+        gateway.post(f"/v1/envs/{tuned}/step", {"action": action})
+        snapshot = gateway.get(f"/v1/envs/{tuned}/snapshot")["snapshot"]
+        assert snapshot["config"]["agent"] == {"Chaser": {"max_force": 9.0},
+                                               "Runner1": {"max_force": 6.0, "sight": 10.0},
+                                               "Runner2": {"max_force": 9.0, "sight": 10.0}}
+        gateway.post(f"/v1/envs/{plain}/restore", {"snapshot": snapshot})
+        steps = [gateway.post(f"/v1/envs/{session}/step", {"action": action})
+                 for session in (tuned, plain)]
+        assert steps[0] == steps[1]  # the restored session pushes with each agent's force
+        refused = gateway.request("POST", "/v1/envs", {"kwargs": {"agent": {"speed": 1.0}}})
+        assert assert_problem(refused, 422, "invalid_config")["detail"].endswith(UNKNOWN)
+    finally:
+        gateway.close()
+
+
 # --- snapshots and restore ------------------------------------------------------------------
 
 
@@ -235,10 +260,17 @@ def test_a_game_whose_classes_differ_replays_bit_for_bit(tmp_path: Path,
             assert digest(timeline.at(step).observation) == episode.observations[step], step
 
 
-def test_the_compliance_suite_passes_on_a_game_whose_classes_differ(serve_chase: Any) -> None:
+def test_the_compliance_suite_passes_on_a_game_whose_classes_differ(
+        serve_chase: Any, tests_on_path: None) -> None:
+    """Its set and restore probes replay bit for bit (they diverged at step 1 when a restore
+    gave every agent the first agent's settings), as a library call and in ``rlenv check``."""
     server = serve_chase()
     report = check_server(server.host, server.port, random_frames=20)
     assert report.passed, "\n".join(report.failures)
+    checked = subprocess.run([sys.executable, "-m", "rlenv", "check", "--compliance", CHASE],
+                             capture_output=True, text=True, timeout=300)
+    line = next(line for line in checked.stdout.splitlines() if "compliance" in line)
+    assert re.search(r"PASS\S*\s+compliance under hostile input .* 0 failures", line), line
 
 
 @pytest.mark.minari
@@ -255,3 +287,6 @@ def test_a_dataset_of_a_game_whose_classes_differ(tmp_path: Path, tests_on_path:
     (stored,) = list(minari.load_dataset("chase/per-agent-v0").iterate_episodes())
     episode = EpisodeFile.load(path)
     assert len(stored.rewards) == len(episode.observations) - 1 == 40
+    for step in (0, 1, 40):  # what the recording client saw, bit for bit
+        seen = {name: stored.observations[name][step] for name in NAMES}
+        assert digest(seen) == episode.observations[step], step

@@ -260,6 +260,35 @@ def test_a_game_whose_classes_differ_replays_bit_for_bit(tmp_path: Path,
             assert digest(timeline.at(step).observation) == episode.observations[step], step
 
 
+def test_tags_recordings_replay_bit_for_bit_with_its_classes_own_settings(tmp_path: Path) -> None:
+    """examples/tag as shipped (the chaser's class 10 N, the runners' 8 N, nothing configured),
+    and once its Runner class and one runner are configured, by their names."""
+    env = RecordEpisodes(gym.make("rlenv/Tag-v0", max_episode_steps=25), tmp_path)
+    try:
+        for episode in range(2):
+            if episode == 1:
+                env.unwrapped.configure(agent={"Runner": {"max_force": 7.0},
+                                               "Runner2": {"max_force": 5.0}})
+            env.reset(seed=20 + episode)
+            for step in range(25):
+                _, _, terminated, truncated, _ = env.step(joint_action(step))
+                if terminated or truncated:
+                    break
+    finally:
+        env.close()
+    kept = [EpisodeFile.load(path).snapshot["config"]["agent"]
+            for path in sorted(tmp_path.glob("*.rlenv"))]
+    assert kept == [{"Chaser": {"max_force": 10.0}, "Runner1": {"max_force": 8.0},
+                     "Runner2": {"max_force": 8.0}},
+                    {"Chaser": {"max_force": 10.0}, "Runner1": {"max_force": 7.0},
+                     "Runner2": {"max_force": 5.0}}]
+    for path in sorted(tmp_path.glob("*.rlenv")):
+        replayed = subprocess.run([sys.executable, "-m", "rlenv", "replay", str(path)],
+                                  capture_output=True, text=True, timeout=120)
+        assert replayed.returncode == 0, replayed.stdout + replayed.stderr
+        assert "every observation identical" in replayed.stdout
+
+
 def test_the_compliance_suite_passes_on_a_game_whose_classes_differ(
         serve_chase: Any, tests_on_path: None) -> None:
     """Its set and restore probes replay bit for bit (they diverged at step 1 when a restore

@@ -260,6 +260,26 @@ def test_a_game_whose_classes_differ_replays_bit_for_bit(tmp_path: Path,
             assert digest(timeline.at(step).observation) == episode.observations[step], step
 
 
+def test_an_older_recording_that_cannot_replay_says_why(tmp_path: Path,
+                                                        tests_on_path: None) -> None:
+    """A recording made before settings per agent kept the first agent's settings only: where
+    the agents' differed it diverges, and the message says so instead of blaming the game."""
+    episode = EpisodeFile.load(record(tmp_path))
+    episode.snapshot["config"]["agent"] = {"max_force": 10.0}  # as a 2.5 server kept it
+    older = tmp_path / "older.rlenv"
+    episode.save(older)
+    replayed = subprocess.run([sys.executable, "-m", "rlenv", "replay", str(older)],
+                              capture_output=True, text=True, timeout=120)
+    assert replayed.returncode == 1
+    note = ("the recording predates settings per agent, protocol 2.6: it kept one agent's "
+            "settings, {'max_force': 10.0}, which replay on every agent; if the agents' "
+            "settings differed, it cannot replay")
+    # Runner2 saw the chaser within 3 m: the first observation already differs
+    assert f"the first observation (after the reset) differs ({note})" in replayed.stdout
+    with pytest.raises(RuntimeError, match="step 0: .*predates settings per agent"):
+        Timeline.open(older).close()
+
+
 def test_tags_recordings_replay_bit_for_bit_with_its_classes_own_settings(tmp_path: Path) -> None:
     """examples/tag as shipped (the chaser's class 10 N, the runners' 8 N, nothing configured),
     and once its Runner class and one runner are configured, by their names."""

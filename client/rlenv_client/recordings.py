@@ -45,7 +45,7 @@ def read_recording(path: str | Path, limit: int = MAX_RECORDING_BYTES) -> bytes:
         OSError: the file cannot be opened (no such file, no permission).
     """
     fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOCTTY", 0))
-    with open(fd, "rb", buffering=0, closefd=True) as file:
+    try:
         mode = os.fstat(fd)
         if not stat.S_ISREG(mode.st_mode):
             kind = next((name for test, name in _KINDS if test(mode.st_mode)), "no regular file")
@@ -55,14 +55,16 @@ def read_recording(path: str | Path, limit: int = MAX_RECORDING_BYTES) -> bytes:
                              f"{limit:,}")
         chunks, size = [], 0
         while size <= limit:
-            chunk = file.read(min(1 << 20, limit + 1 - size))
+            chunk = os.read(fd, min(1 << 20, limit + 1 - size))
             if not chunk:
                 break
             chunks.append(chunk)
             size += len(chunk)
-        if size > limit:
-            raise ValueError(f"{path} grew past {limit:,} bytes while it was read: a recording "
-                             f"holds at most {limit:,}")
+    finally:
+        os.close(fd)
+    if size > limit:
+        raise ValueError(f"{path} grew past {limit:,} bytes while it was read: a recording "
+                         f"holds at most {limit:,}")
     return b"".join(chunks)
 
 

@@ -351,6 +351,16 @@ class Timeline:
         """The number of actions (the last step's number)."""
         return len(self._steps)
 
+    def frames(self, step: int) -> int:
+        """The physics ticks the action of ``step`` asked for (its ``repeat_action``).
+
+        Raises:
+            IndexError: no such step (step 0 has no action).
+        """
+        if not 1 <= step <= len(self):
+            raise IndexError(f"step {step} has no action (steps 1 to {len(self)} have)")
+        return int(self._steps[step - 1][-1][2])
+
     @property
     def ended(self) -> bool:
         """Whether the episode ended at its last step (recordings older than that say so)."""

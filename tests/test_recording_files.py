@@ -195,3 +195,16 @@ def test_a_trusted_target_that_is_no_environment_is_refused(tmp_path: Path,
     assert result.returncode == 2
     assert "planted:NotAnEnvironment is not an RLEnvironment subclass" in result.stderr + \
         result.stdout
+
+
+def test_a_planted_target_makes_no_dataset(tmp_path: Path, recording: Path,
+                                           monkeypatch: pytest.MonkeyPatch) -> None:
+    pytest.importorskip("minari")
+    from rlenv_client.datasets import create_dataset
+
+    download = tmp_path / "download"
+    planted(download, recording)
+    monkeypatch.chdir(download)
+    with pytest.raises(UntrustedTargetError, match="a recording in .* names the target"):
+        create_dataset("planted/one-v0", download)
+    assert not (download / "ran").exists()

@@ -111,7 +111,7 @@ def create_dataset(
     if target is None:
         target = _one_target(episodes, Path(directory))
         if not trust_target:
-            check_target(target, named_by=f"the recordings of {directory}",
+            check_target(target, named_by=f"a recording in {directory}",
                          folder=Path(directory))
     spec = environment_spec(target, _repeat_action(episodes))
     env = gymnasium.make(spec)

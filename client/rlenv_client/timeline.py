@@ -29,8 +29,11 @@ the nearest checkpoint at or before it and takes the steps from there (about 5 m
 most); going forward from where the timeline stands just steps on. ``benchmarks/time_travel.py``
 measures a step of a 10,000-step episode. Each checkpoint is a process that holds, of its own,
 the memory the episode changed since the one before (a few MiB for Plinko); there are at most
-256 over an episode, and branches add theirs. A timeline is not thread-safe, and needs
-``os.fork`` (Linux, macOS).
+256 over an episode, and branches add theirs, within bounds: ``max_processes`` in all (the
+episode's checkpoints take at most half, each branch at most half of what is left) and
+``max_memory``, past which no more are parked. Every process dies with the timeline's owner
+(:mod:`rlenv_client.forking`'s lifeline). A timeline is not thread-safe, and needs ``os.fork``
+(Linux, macOS).
 """
 
 from __future__ import annotations

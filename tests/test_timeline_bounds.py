@@ -9,6 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from conftest import Serve, wait_until
 
@@ -188,5 +189,36 @@ def test_a_long_steps_ticks_come_a_page_at_a_time(serve: Serve, tmp_path: Path) 
             timelines.ticks(0, 0, 1, count=101)
         with pytest.raises(InspectorError, match="step 1 has ticks 1 to 250, not 251"):
             timelines.ticks(0, 0, 1, first=251)
+    finally:
+        timelines.close()
+
+
+def test_two_agents_ticks_page_by_agent_under_a_bounded_timeline(serve: Serve,
+                                                                 tmp_path: Path) -> None:
+    from examples.pair import TARGET as PAIR
+
+    server = serve(PAIR)
+    path = tmp_path / "episode-0001.rlenv"
+    with Client(server.host, server.port, timeout=30) as client:
+        observation, _ = client.reset(seed=4)
+        agents = list(client.hello.agents)
+        digests = [digest(observation)]
+        for k in range(30):
+            action = {name: np.array([np.sin(k + i), np.cos(k)], np.float32)
+                      for i, name in enumerate(agents)}
+            digests.append(digest(client.step(action, 6)[0]))
+        EpisodeFile(PAIR, client.snapshot(), digests, False, False).save(path)
+    timelines = Timelines([path], checkpoint_every=1, max_processes=60)  # 10 a timeline
+    try:
+        page = timelines.ticks(0, 0, 30, first=4, count=2)
+        assert (page["frames"], page["next"]) == (6, 6)
+        assert [sorted(tick["observation"]) for tick in page["ticks"]] == [sorted(agents)] * 2
+        (first,) = timelines_here()
+        assert len(group(first)) <= 10
+        with Timeline.open(path) as timeline:
+            whole = timeline.ticks(30)
+            assert digest(whole[-1].observation) == timeline.episode.observations[30]
+            assert [digest(tick.observation) for tick in whole[3:5]] == \
+                [digest(tick.observation) for tick in timeline.ticks(30, first=4, count=2)]
     finally:
         timelines.close()

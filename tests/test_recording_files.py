@@ -80,7 +80,7 @@ def test_a_fifo_a_device_and_a_folder_are_refused_at_once(tmp_path: Path) -> Non
             EpisodeFile.load(path)
         with pytest.raises(ValueError, match=f"is {kind}"):
             Timeline.open(path)
-        assert time.monotonic() - began < 5
+        assert time.monotonic() - began < 30  # at once: a hang never returns
     for args in (["replay", str(fifo)], ["replay", "/dev/zero"],
                  ["replay", str(fifo), "--inspect"]):
         result = rlenv(*args, timeout=60)  # a hang would be a TimeoutExpired
@@ -115,10 +115,8 @@ def test_an_action_asking_for_too_many_ticks_is_refused(tmp_path: Path, recordin
                f"{MAX_FRAMES_PER_ACTION:,}"
     with pytest.raises(ValueError, match=expected):
         EpisodeFile.load(tmp_path / "episode-0001.rlenv")
-    began = time.monotonic()
-    result = rlenv("replay", str(tmp_path / "episode-0001.rlenv"))
+    result = rlenv("replay", str(tmp_path / "episode-0001.rlenv"))  # 2**40 ticks: a timeout
     assert result.returncode == 2 and expected in result.stderr
-    assert time.monotonic() - began < 60
     action[2] = MAX_FRAMES_PER_ACTION  # the bound itself is a recording
     episode.save(tmp_path / "at-the-bound.rlenv")
     assert EpisodeFile.load(tmp_path / "at-the-bound.rlenv").snapshot["events"] == \

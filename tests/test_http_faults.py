@@ -123,7 +123,7 @@ def test_idle_sessions_are_reaped() -> None:
 
 
 def test_an_environment_that_hangs_is_504_and_the_others_go_on() -> None:
-    slow = Gateway("examples.faulty:SlowEnvironment", "--timeout", "0.5")
+    slow = Gateway("examples.faulty:SlowEnvironment", "--timeout", "3")  # the resets' too
     try:
         hung, fine = slow.session(), slow.session()
         for session in (hung, fine):
@@ -143,7 +143,7 @@ def test_an_environment_that_hangs_is_504_and_the_others_go_on() -> None:
 
 
 def test_an_isolated_environment_that_hangs_is_504() -> None:
-    slow = Gateway("examples.faulty:SlowEnvironment", "--isolate", "--timeout", "1")  # accepted
+    slow = Gateway("examples.faulty:SlowEnvironment", "--isolate", "--timeout", "3")  # accepted
     try:
         hung, fine = slow.session(), slow.session()
         for session in (hung, fine):

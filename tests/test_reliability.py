@@ -117,14 +117,14 @@ def test_a_server_on_all_interfaces_with_a_token(serve: Serve,
 
 
 def test_an_idle_client_is_dropped_with_a_reason(serve: Serve) -> None:
-    server = serve(args=["--idle-timeout", "0.3"])
-    with socket.create_connection((server.host, server.port), timeout=10) as raw:
+    server = serve(args=["--idle-timeout", "2.0"])  # a loaded machine may be slow to send
+    with socket.create_connection((server.host, server.port), timeout=30) as raw:
         read_frame(raw)  # the hello
         raw.sendall(frame(pack({"id": 1})))  # its first request: the idle timeout counts next
         assert read_frame(raw)["id"] == 1
         reply = read_frame(raw)  # blocks until the server gives up on us
         assert reply["error"]["code"] == ErrorCode.TIMEOUT and reply["error"]["fatal"]
-        assert "no request for 0.3 s" in reply["error"]["message"]
+        assert "no request for 2.0 s" in reply["error"]["message"]
     with Client(server.host, server.port) as client:  # and the next client is served
         client.reset(seed=0)
 
@@ -330,7 +330,7 @@ def test_kills_and_stops_at_random_points_lose_and_duplicate_nothing(
     transition the client sees is accounted for by the tick counter in the observation."""
     rng = random.Random(7)
     faults = 8
-    env = RemoteEnv("examples.faulty:CountingEnvironment", max_restarts=faults, timeout=1.0)
+    env = RemoteEnv("examples.faulty:CountingEnvironment", max_restarts=faults, timeout=5.0)
     transitions = lost = duplicated = survived = 0
     try:
         observation, _ = env.reset(seed=0)
@@ -371,11 +371,11 @@ def test_kills_and_stops_at_random_points_lose_and_duplicate_nothing(
 
 def test_the_client_closes_rather_than_pair_a_late_answer(serve: Serve) -> None:
     server = serve("examples.faulty:CountingEnvironment")
-    client = Client(server.host, server.port, timeout=0.3)
+    client = Client(server.host, server.port, timeout=3.0)  # the hello and reset's margin too
     client.reset(seed=0)
     os.killpg(server.pid, signal.SIGSTOP)
     try:
-        with pytest.raises(Exception, match="did not answer within 0.3s"):
+        with pytest.raises(Exception, match="did not answer within 3.0s"):
             client.step(0)
     finally:
         os.killpg(server.pid, signal.SIGCONT)

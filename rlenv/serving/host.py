@@ -257,7 +257,7 @@ class Host:
             endpoint.reserve("its agents are driven by policies (rlenv serve --policy); only "
                              "observing is open")
             while True:
-                got = endpoint.receive(0.0)
+                got = endpoint.receive(driver.wait())
                 if got is None:
                     driver.step()
                 else:

@@ -45,6 +45,7 @@ from rlenv.protocol.errors import ErrorCode, RequestError
 from rlenv.serving import inspector
 from rlenv.serving.actions import ActionCheck
 from rlenv.serving.observing import Observer, check_text_keys
+from rlenv.serving.onnx_policy import PolicyError
 from rlenv.serving.recent import KEEP_EPISODES, RecentEpisodes
 from rlenv.serving.settings import Settings
 from rlenv.serving.snapshots import EpisodeLog
@@ -460,7 +461,12 @@ class Instance:
         """Run a checked action for ``frames`` ticks (lockstep), or apply it now (real time)."""
         tree = self.tree
         if self.driven is not None and self.multi_agent:
-            action = self.driven.complete(action, self.agents)
+            try:
+                action = self.driven.complete(action, self.agents)
+            except PolicyError as error:  # a failed episode; the environment is intact
+                self.abandon_episode(f"the episode failed: {error}")
+                raise RequestError(ErrorCode.ENVIRONMENT_ERROR, f"{error}; reset required") \
+                    from None
         if tree.real_time:
             self._act_now(action)
             return

@@ -107,6 +107,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                       help="seconds an environment may take to answer (default 30; then 504)")
     http.add_argument("--max-sessions", type=int, default=32,
                       help="sessions at once (default 32; then 503)")
+    http.add_argument("--max-sessions-per-client", type=int, default=16, metavar="N",
+                      help="sessions at once created by one client address (default 16; then "
+                      "503)")
     http.add_argument("--max-body", type=int, default=1 << 20,
                       help="largest request body in bytes (default 1 MiB; then 413)")
     http.add_argument("--idle-timeout", type=float, default=600.0,
@@ -331,7 +334,9 @@ def _http(args: argparse.Namespace) -> int:
         return 2
     settings = Settings(target=args.target, host=args.host, port=args.port, token=args.token,
                         timeout=args.timeout,
-                        max_sessions=args.max_sessions, max_body=args.max_body,
+                        max_sessions=args.max_sessions,
+                        max_sessions_per_client=args.max_sessions_per_client,
+                        max_body=args.max_body,
                         idle_timeout=args.idle_timeout or None,
                         head_timeout=args.head_timeout, max_connections=args.max_connections)
     serve(settings, ready=lambda url: print(f"listening on {url}", flush=True))

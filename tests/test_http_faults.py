@@ -112,6 +112,49 @@ def test_the_session_limit_is_503_with_retry_after() -> None:
         limited.close()
 
 
+def test_one_client_holds_at_most_its_share_of_the_sessions() -> None:
+    limited = Gateway(CARTPOLE, "--max-sessions", "4", "--max-sessions-per-client", "2",
+                      "--idle-timeout", "120")
+    try:
+        first, _ = limited.session(), limited.session()
+        greedy = limited.request("POST", "/v1/envs", {})
+        assert "2 sessions per client, and 127.0.0.1 has as many" in \
+            assert_problem(greedy, 503, "session_limit")["detail"]
+        assert 1 <= int(greedy.headers["retry-after"]) <= 120
+        other = http.client.HTTPConnection("127.0.0.1", limited.port, timeout=60,
+                                           source_address=("127.0.0.2", 0))
+        try:  # another client still finds room
+            other.request("POST", "/v1/envs", "{}")
+            assert other.getresponse().status == 201
+        finally:
+            other.close()
+        assert limited.get("/v1")["limits"]["max_sessions_per_client"] == 2
+        assert limited.request("DELETE", f"/v1/envs/{first}").status == 204
+        limited.session()
+    finally:
+        limited.close()
+
+
+def test_a_creation_abandoned_mid_request_frees_its_slot() -> None:
+    limited = Gateway(CARTPOLE, "--max-sessions", "1", "--idle-timeout", "600")
+    try:
+        body = b"{}"
+        with socket.create_connection((limited.host, limited.port), timeout=30) as abandoned:
+            abandoned.sendall(f"POST /v1/envs HTTP/1.1\r\nHost: {limited.host}:{limited.port}"
+                              f"\r\nContent-Length: {len(body)}\r\n\r\n".encode() + body)
+        # it left before its answer: the session is deleted as soon as it is made, not reaped
+        # 600 s later; meanwhile the slot may be taken (503) or free
+        def created() -> bool:
+            reply = limited.request("POST", "/v1/envs", {})
+            assert reply.status in (201, 503), reply
+            return reply.status == 201
+        wait_until(created, "the abandoned creation kept the only slot", seconds=60)
+        assert len(limited.get("/v1/envs")["envs"]) == 1
+        assert "its client left before it was told of it" in limited.stderr()
+    finally:
+        limited.close()
+
+
 def test_idle_sessions_are_reaped() -> None:
     reaping = Gateway(CARTPOLE, "--idle-timeout", "0.5")
     try:

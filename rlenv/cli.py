@@ -46,10 +46,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                        help="ticks follow the wall clock; actions apply when they arrive")
     serve.add_argument("--record-dir", type=Path, default=None, metavar="DIR",
                        help="let clients record videos into DIR (configure record='name.mp4')")
-    serve.add_argument("--keep-episodes", type=int, default=KEEP_EPISODES, metavar="N",
-                       help="keep each instance's last N finished episodes as recordings, for "
-                       "the inspector's timeline (client.episodes()); 0: none (default "
-                       f"{KEEP_EPISODES})")
+    serve.add_argument("--keep-episodes", type=int, default=None, metavar="N",
+                       help="keep each instance's last N finished episodes as recordings from "
+                       "the start, for the inspector's timeline (client.episodes()); 0: none, "
+                       f"ever (default: the last {KEEP_EPISODES}, once a client asks for them)")
     serve.add_argument("--lifeline", type=int, default=None, metavar="FD",
                        help="exit when this inherited pipe closes (set by ServerProcess)")
     serve.add_argument("--token", default=os.environ.get("RLENV_TOKEN"),

@@ -90,9 +90,10 @@ class Inspection:
     def episodes(self, last: int | None = None) -> list[EpisodeFile]:
         """The environment's last finished episodes, as recordings, oldest first.
 
-        The server keeps each instance's last few (``rlenv serve --keep-episodes N``, 8 by
-        default; see :mod:`rlenv.serving.recent`) at no cost to the steps; any client may ask,
-        an observer beside a trainer included (protocol 2.5, the ``episodes`` part). Each
+        The server keeps each instance's last few once a client asks for them (this call does;
+        ``rlenv serve --keep-episodes N`` from the start; see :mod:`rlenv.serving.recent`) at
+        no cost to the steps; any client may ask, an observer beside a trainer included
+        (protocol 2.5, the ``episodes`` part; from a 2.6 server by index and in pages). Each
         snapshot restores the episode's start on any server of the environment and replays to
         the observations the episode had.
 

@@ -6,7 +6,8 @@ stays here, never in the page). It only sends what observers may send: ``observa
 the trainer's steps go on, and a change it makes applies between two of them. Every call is
 answered from a fresh request (nothing is cached, so a slow page drops frames, never queues
 them), but for the recent episodes, which never change once kept: each is fetched once, in
-pages, and the server is asked to keep them as soon as the watcher connects. A lost connection is reconnected on the next call (or at a new address, see
+pages, and the server is asked to keep them as soon as the watcher connects. A lost connection
+is reconnected on the next call (or at a new address, see
 :meth:`Watcher.follow`). A server counts as restarted when it moved to a new address, or when
 after a reconnection its step count went back (another process: an idle connection the server
 closed is not a restart).

@@ -16,6 +16,7 @@ policy decides what a failure costs (:mod:`rlenv.serving.policy_driver`: the epi
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from pathlib import Path
@@ -171,11 +172,11 @@ def fit_action(space: spaces.Space, action: Any, who: str = "the policy") -> Any
         if values.shape != space.shape or values.dtype.kind not in "biuf":
             raise PolicyError(f"{who} gave {_shape(values)}; its action space is "
                               f"{_one_line(space)}")
-        if values.dtype.kind == "f" and np.isnan(values).any():
+        if values.dtype.kind == "f" and values.size and math.isnan(values.min()):  # NaN wins
             raise PolicyError(f"{who} gave NaN in its action; no action of {_one_line(space)} "
                               "is NaN")
-        with np.errstate(invalid="ignore", over="ignore"):
-            return np.clip(values, space.low, space.high).astype(space.dtype)
+        return np.minimum(np.maximum(values, space.low), space.high).astype(space.dtype,
+                                                                            copy=False)
     if isinstance(space, spaces.Discrete):
         values = np.asarray(action)
         if values.size == 1 and values.dtype.kind in "biuf":

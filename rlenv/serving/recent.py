@@ -45,10 +45,10 @@ KEEP_EVENTS = 200_000
 """Most events (actions and changes: about steps) a server keeps in all, its instances sharing
 them (some 40 MB at 200 bytes a step)."""
 
-PAGE_EVENTS = 10_000
+PAGE_EVENTS = 2_000
 """Most events one answer of the paged form (2.6) holds."""
 
-WHOLE_EVENTS = 50_000
+WHOLE_EVENTS = 20_000
 """Most events an answer of the 2.5 forms holds in all (beyond: refused, saying to page)."""
 
 

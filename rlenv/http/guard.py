@@ -87,12 +87,8 @@ class Guard:
         peer = "an unknown address" if client is None else client[0]
         problem, delay = self._problem(host, origin, authorization, length, fetch_site, peer)
         if problem is not None:
-            if delay:  # a wrong token: its answer waits
-                self._penalties.hold(peer)
-                try:
-                    await asyncio.sleep(delay)
-                finally:
-                    self._penalties.release(peer)
+            if delay:  # a wrong token: its answer waits (on its own connection)
+                await asyncio.sleep(delay)
             await _refuse(problem, scope, receive, send)
             return
         if chunked and kind == "http":

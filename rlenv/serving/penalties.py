@@ -13,8 +13,9 @@ token costs is the answer that says so:
   while it has that many, the TCP server compares none of its new tokens (their connections
   wait, greeted, in their slots; the next is compared when a held answer goes out), so an
   address compares at most :data:`MAX_HELD` guesses per delay however many connections it
-  opens. The gateway holds each wrong answer as long, on a connection of its own (bounded by
-  its open connections), and never delays a right one.
+  opens (and with 64 answers held in all, no address's token is compared until one goes out:
+  a wait, never a refusal). The gateway holds each wrong answer as long, on a connection of
+  its own (bounded by its open connections), and never delays a right one.
 - **Forgiving.** An address is forgiven one failure per :data:`FORGIVE_AFTER` seconds without
   one; the right token forgives nothing (a busy token holder beside a guesser must not renew
   the guesser's free tries).

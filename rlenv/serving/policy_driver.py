@@ -39,7 +39,7 @@ from rlenv.protocol import ErrorReply, Reply, Request, Response
 from rlenv.protocol.errors import ErrorCode
 from rlenv.serving.onnx_policy import OnnxPolicy, PolicyError, fit_action
 
-__all__ = ["FAILURE_PAUSE", "DrivenAgents", "PolicyDriver", "PolicyError"]
+__all__ = ["FAILURE_PAUSE", "DrivenAgents", "PolicyDriver"]
 
 logger = logging.getLogger(__name__)
 
@@ -128,7 +128,6 @@ class PolicyDriver:
         self._answer, self._instance, self._driven = answer, instance, driven
         self.max_episode_steps = max_episode_steps
         self.episodes = 0  # started so far: the seed of the next one
-        self.failed = 0  # episodes that failed (a policy, or the environment)
         self._steps = 0
         self._running = False
         self._clock = clock
@@ -185,6 +184,5 @@ class PolicyDriver:
         return False
 
     def _fail(self) -> None:
-        self.failed += 1
         self._running = False
         self._resume_at = self._clock() + FAILURE_PAUSE

@@ -46,10 +46,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                        help="ticks follow the wall clock; actions apply when they arrive")
     serve.add_argument("--record-dir", type=Path, default=None, metavar="DIR",
                        help="let clients record videos into DIR (configure record='name.mp4')")
-    serve.add_argument("--keep-episodes", type=int, default=KEEP_EPISODES, metavar="N",
-                       help="keep each instance's last N finished episodes as recordings, for "
-                       "the inspector's timeline (client.episodes()); 0: none (default "
-                       f"{KEEP_EPISODES})")
+    serve.add_argument("--keep-episodes", type=int, default=None, metavar="N",
+                       help="keep each instance's last N finished episodes as recordings from "
+                       "the start, for the inspector's timeline (client.episodes()); 0: none, "
+                       f"ever (default: the last {KEEP_EPISODES}, once a client asks for them)")
     serve.add_argument("--lifeline", type=int, default=None, metavar="FD",
                        help="exit when this inherited pipe closes (set by ServerProcess)")
     serve.add_argument("--token", default=os.environ.get("RLENV_TOKEN"),
@@ -107,6 +107,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                       help="seconds an environment may take to answer (default 30; then 504)")
     http.add_argument("--max-sessions", type=int, default=32,
                       help="sessions at once (default 32; then 503)")
+    http.add_argument("--max-sessions-per-client", type=int, default=16, metavar="N",
+                      help="sessions at once created by one client address (default 16; then "
+                      "503)")
     http.add_argument("--max-body", type=int, default=1 << 20,
                       help="largest request body in bytes (default 1 MiB; then 413)")
     http.add_argument("--idle-timeout", type=float, default=600.0,
@@ -345,7 +348,9 @@ def _http(args: argparse.Namespace) -> int:
         return 2
     settings = Settings(target=args.target, host=args.host, port=args.port, token=args.token,
                         timeout=args.timeout,
-                        max_sessions=args.max_sessions, max_body=args.max_body,
+                        max_sessions=args.max_sessions,
+                        max_sessions_per_client=args.max_sessions_per_client,
+                        max_body=args.max_body,
                         idle_timeout=args.idle_timeout or None,
                         head_timeout=args.head_timeout, max_connections=args.max_connections)
     serve(settings, ready=lambda url: print(f"listening on {url}", flush=True))

@@ -105,7 +105,12 @@ class InspectorServer(ThreadingHTTPServer):
         return f"http://127.0.0.1:{self.server_address[1]}/{self.key}/"
 
     def start(self) -> None:
-        """Serve in a background thread (see :meth:`close`)."""
+        """Serve in a background thread (see :meth:`close`).
+
+        The watched servers are connected first: a server keeps its recent episodes from the
+        moment an inspector asks (the watcher does as it connects).
+        """
+        self.watcher.servers()
         self._thread = threading.Thread(target=self.serve_forever, name="rlenv-inspector",
                                         daemon=True)
         self._thread.start()

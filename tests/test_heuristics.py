@@ -115,3 +115,67 @@ def test_a_heuristic_answering_outside_its_space_is_an_environment_error_naming_
 def test_every_agent_driven_is_refused_in_process() -> None:
     with pytest.raises(ValueError, match="policies drive every agent"):
         LocalClient(SEEKER, policies={"Agent": "heuristic"})
+
+
+# --- the trainer's view: driven agents left out -----------------------------------------------
+
+def test_remote_env_leaves_the_driven_agent_out_of_its_spaces_actions_and_rewards(serve) -> None:
+    from gymnasium.utils.env_checker import check_env
+
+    from rlenv_client import RemoteEnv
+
+    server = serve(CHASING_PAIR, args=["--policy", "Blue=heuristic"], env=HERE_TOO)
+    env = RemoteEnv(address=f"{server.host}:{server.port}")
+    try:
+        assert list(env.action_space.keys()) == ["Red"]
+        assert list(env.observation_space.keys()) == ["Red"]
+        observation, _ = env.reset(seed=2)
+        assert list(observation) == ["Red"] and observation in env.observation_space
+        with pytest.raises(ValueError, match="agent 'Blue' is driven by the server .* act for "
+                                             "Red only"):
+            env.step({"Red": np.zeros(2, np.float32), "Blue": np.zeros(2, np.float32)})
+        terminated = truncated = False
+        steps = 0
+        while not (terminated or truncated):
+            observation, reward, terminated, truncated, info = env.step(
+                {"Red": chase(observation["Red"])})
+            assert list(observation) == ["Red"]
+            assert reward == pytest.approx(info["agents"]["Red"]["reward"])
+            assert set(info["agents"]) == {"Red", "Blue"}  # the server's report, whole
+            steps += 1
+            assert steps < 500, "greedy Red never caught its apple"
+        assert terminated and not truncated and info["agents"]["Red"]["terminated"]
+        check_env(env.unwrapped, skip_render_check=True)
+    finally:
+        env.close()
+
+
+def test_a_parallel_env_lists_only_the_agents_it_acts_for(serve) -> None:
+    from pettingzoo.test import parallel_api_test
+
+    from rlenv_client.pettingzoo import RemoteParallelEnv
+
+    server = serve(CHASING_PAIR, args=["--policy", "Blue=heuristic"], env=HERE_TOO)
+    env = RemoteParallelEnv(address=f"{server.host}:{server.port}", max_cycles=30)
+    try:
+        assert env.possible_agents == ["Red"]
+        observations, infos = env.reset(seed=1)
+        assert env.agents == ["Red"] and list(observations) == ["Red"] and list(infos) == ["Red"]
+        assert list(env.action_spaces) == list(env.observation_spaces) == ["Red"]
+        with pytest.raises(ValueError, match="agent 'Blue' is driven by the server"):
+            env.step({"Red": np.zeros(2, np.float32), "Blue": np.zeros(2, np.float32)})
+        observations, rewards, terminations, truncations, _ = env.step(
+            {"Red": np.zeros(2, np.float32)})  # no action for Blue is needed
+        assert list(observations) == list(rewards) == list(terminations) == ["Red"]
+        parallel_api_test(env, num_cycles=30)
+    finally:
+        env.close()
+
+
+def test_a_server_driving_every_agent_leaves_a_trainer_nothing_and_says_so(serve) -> None:
+    from rlenv_client import RemoteEnv
+
+    server = serve(SEEKER, args=["--policy", "Agent=heuristic"], env=HERE_TOO)
+    with pytest.raises(ValueError, match=r"the server drives every agent of Seeker \(Agent; "
+                                         r"rlenv serve --policy\): there is nothing to act for"):
+        RemoteEnv(address=f"{server.host}:{server.port}")

@@ -55,8 +55,10 @@ def test_a_heuristic_plays_one_agent_as_if_its_actions_were_sent(serve) -> None:
 
 
 def _serve_refused(*args: str) -> str:
+    """The one line ``rlenv serve ARGS`` exits 2 with (it finds heuristic_envs)."""
     result = subprocess.run([sys.executable, "-m", "rlenv", "serve", *args], timeout=120,
-                            capture_output=True, text=True, stdin=subprocess.DEVNULL)
+                            capture_output=True, text=True, stdin=subprocess.DEVNULL,
+                            env={**os.environ, **HERE_TOO})
     assert result.returncode == 2, result.stdout + result.stderr
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1, result.stderr
@@ -179,3 +181,89 @@ def test_a_server_driving_every_agent_leaves_a_trainer_nothing_and_says_so(serve
     with pytest.raises(ValueError, match=r"the server drives every agent of Seeker \(Agent; "
                                          r"rlenv serve --policy\): there is nothing to act for"):
         RemoteEnv(address=f"{server.host}:{server.port}")
+
+
+def test_a_vector_env_steps_only_the_trainers_agents_of_several_instances(serve) -> None:
+    """Two instances, Blue driven: Red's view matches a plain vector whose Blue we push."""
+    from rlenv_client import RemoteVectorEnv
+
+    driven = serve(CHASING_PAIR, args=["--instances", "2", "--policy", "Blue=heuristic"],
+                   env=HERE_TOO)
+    plain = serve(PAIR, args=["--instances", "2"])
+    vector = RemoteVectorEnv(addresses=[f"{driven.host}:{driven.port}"])
+    mirror = RemoteVectorEnv(addresses=[f"{plain.host}:{plain.port}"])
+    try:
+        assert list(vector.single_action_space) == list(vector.single_observation_space) == \
+            ["Red"]
+        observations, _ = vector.reset(seed=[4, 9])
+        mirrored, _ = mirror.reset(seed=[4, 9])
+        with pytest.raises(ValueError, match="agent 'Blue' is driven by the server"):
+            vector.step({"Red": np.zeros((2, 2), np.float32),
+                         "Blue": np.zeros((2, 2), np.float32)})
+        for _ in range(300):  # until Red catches its apple somewhere (then autoresets differ)
+            reds = np.stack([chase(row) for row in observations["Red"]])
+            blues = np.stack([chase(row) for row in mirrored["Blue"]])
+            observations, rewards, terminations, truncations, _ = vector.step({"Red": reds})
+            mirrored, _, _, _, infos = mirror.step({"Red": reds, "Blue": blues})
+            assert list(observations) == ["Red"]
+            np.testing.assert_array_equal(observations["Red"], mirrored["Red"])
+            red = infos["agents"]["Red"]  # the mirror's Red alone, not both agents' sum
+            np.testing.assert_allclose(rewards, red["reward"])
+            np.testing.assert_array_equal(terminations, red["terminated"])
+            assert not truncations.any()
+            if terminations.any():
+                break
+        else:
+            raise AssertionError("greedy Red never caught its apple")
+    finally:
+        vector.close()
+        mirror.close()
+
+
+# --- gym.make(..., server_args=["--policy", ...]): the shared per-client server ---------------
+
+def test_environments_sharing_a_server_each_drive_their_own_agent(monkeypatch) -> None:
+    from rlenv_client import RemoteEnv
+
+    monkeypatch.setenv("PYTHONPATH", HERE_TOO["PYTHONPATH"])
+    args = ["--policy", "Blue=heuristic"]
+    first, second = RemoteEnv(CHASING_PAIR, server_args=args), \
+        RemoteEnv(CHASING_PAIR, server_args=args)
+    try:
+        assert first.server is second.server  # one --per-client server, two environments
+        assert list(first.action_space) == list(second.action_space) == ["Red"]
+        one, _ = first.reset(seed=7)
+        other, _ = second.reset(seed=7)
+        for _ in range(10):  # the same seed and actions: the same episode in each
+            one, *_ = first.step({"Red": chase(one["Red"])})
+            other, *_ = second.step({"Red": chase(other["Red"])})
+            np.testing.assert_array_equal(one["Red"], other["Red"])
+        with Client(first.server.host, first.server.port, timeout=10) as third:
+            assert third.hello.driven == ("Blue",)
+            observation, _ = third.reset(seed=7)
+            third.step({"Red": chase(observation["Red"])})
+            blue_moved = third.step({"Red": np.zeros(2, np.float32)})[0]["Blue"]
+            assert np.abs(blue_moved[2:4]).sum() > 0  # its own Blue, pushed by the heuristic
+    finally:
+        first.close()
+        second.close()
+
+
+def test_gym_make_passes_policy_to_the_shared_server_which_checks_it() -> None:
+    import gymnasium
+
+    from rlenv_client.launcher import ServerStartError
+
+    with pytest.raises(ServerStartError, match=r"agent 'Red' \(class PairAgent\) has no "
+                                               r"heuristic"):
+        gymnasium.make("rlenv/Pair-v0", server_args=["--policy", "Red=heuristic"])
+
+
+def test_a_per_client_server_driving_every_agent_is_refused_at_start() -> None:
+    line = _serve_refused("examples.seeker:SeekerEnvironment", "--per-client", "--policy",
+                          "Agent=heuristic")
+    assert "has no heuristic" in line  # the seeker's agent has none: checked first
+    line = _serve_refused(SEEKER, "--per-client", "--policy", "Agent=heuristic")
+    assert line == ("rlenv serve: --policy drives every agent, so the server plays its "
+                    "episodes itself and no client controls them: leave out --per-client, or "
+                    "drive fewer agents")

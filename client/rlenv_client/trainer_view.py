@@ -100,15 +100,18 @@ class TrainerView:
         return {name: observation[name] for name in self.agents}
 
     def result(self, result: StepResult) -> StepResult:
-        """A step's result for the trainer's agents (reward and flags from ``info["agents"]``)."""
+        """A step's result for the trainer's agents (see :meth:`outcome`)."""
         if not self.driven:
             return result
         observation, _, _, _, info = result
+        return (self.observation(observation), *self.outcome(info), info)
+
+    def outcome(self, info: Mapping[str, Any]) -> tuple[float, bool, bool]:
+        """The trainer's agents' reward, terminated and truncated, from ``info["agents"]``."""
         mine = [info["agents"][name] for name in self.agents]
         ended = all(o["terminated"] or o["truncated"] for o in mine)
         cut = ended and any(o["truncated"] for o in mine)
-        return (self.observation(observation), float(sum(o["reward"] for o in mine)),
-                ended and not cut, cut, info)
+        return float(sum(o["reward"] for o in mine)), ended and not cut, cut
 
     def full_actions(self, actions: Any, count: int) -> Any:
         """A batch of ``count`` trainer actions with stand-ins for the driven agents.

@@ -47,7 +47,9 @@ class Server:
         policies: what drives agents, by agent name: an ONNX policy file, or ``"heuristic"``
             for the agent's own :meth:`~rlenv.agent.RLAgent.heuristic` (``rlenv serve
             --policy``; see :mod:`rlenv.serving.policy_driver`). With every agent driven, the
-            server plays episodes itself and clients may only observe.
+            server plays episodes itself and clients may only observe. With ``per_client``,
+            every client's environment has its driven agents, driven by the same loaded files
+            (they keep no state between steps); not every agent may be driven then.
         max_episode_steps: steps after which a policy-driven episode is cut short.
         keep_episodes: how many finished episodes each instance keeps as recordings, for
             clients to fetch (the ``episodes`` part; ``rlenv serve --keep-episodes``); 0 keeps
@@ -80,9 +82,6 @@ class Server:
 
         if per_client and not isinstance(environment, str | type):
             raise TypeError("a server per client needs the environment class, not an instance")
-        if per_client and loaded:
-            raise ValueError("--policy drives the agents of the server's environment: leave out "
-                             "--per-client")
         self.host: Host | HostPerClient = HostPerClient(build) if per_client else build()
         self.endpoint = Endpoint(self.host.hello, limits or Limits(), token,
                                  per_client=per_client)

@@ -54,7 +54,9 @@ def next_episode_path(directory: Path) -> Path:
 class EpisodeFile:
     """One recorded episode: the server snapshot, the digests of what the client saw, its end.
 
-    ``terminated`` and ``truncated`` are ``None`` in recordings older than them.
+    ``terminated`` and ``truncated`` are ``None`` in recordings older than them. ``agent``
+    names the agent a person played, in a demonstration of one agent of several (the
+    inspector's Take control); ``None`` otherwise.
     """
 
     target: str | None
@@ -62,6 +64,7 @@ class EpisodeFile:
     observations: list[str]
     terminated: bool | None = None
     truncated: bool | None = None
+    agent: str | None = None
 
     def save(self, path: str | Path) -> None:
         """Write the episode to ``path`` (the end only when known: older readers skip it)."""
@@ -69,6 +72,8 @@ class EpisodeFile:
                 "snapshot": self.snapshot, "observations": self.observations}
         if self.terminated is not None and self.truncated is not None:
             data.update(terminated=self.terminated, truncated=self.truncated)
+        if self.agent is not None:
+            data["agent"] = self.agent
         Path(path).write_bytes(pack(data))
 
     @classmethod
@@ -86,7 +91,7 @@ class EpisodeFile:
                 data.get("version") != _VERSION:
             raise ValueError(f"{path} is not an rlenv episode (version {_VERSION})")
         return cls(data["target"], data["snapshot"], list(data["observations"]),
-                   data.get("terminated"), data.get("truncated"))
+                   data.get("terminated"), data.get("truncated"), data.get("agent"))
 
 
 class RecordEpisodes(gymnasium.Wrapper):

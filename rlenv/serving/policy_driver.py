@@ -24,7 +24,7 @@ agent's own observation (``get_data({})``) just before the action applies
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Final, Literal
 
@@ -91,14 +91,16 @@ class DrivenAgents:
         self._checks = {name: compile_check(by_name[name].action_space, "action")
                         for name, policy in policies.items() if policy == HEURISTIC}
 
-    def actions(self, agents: Sequence[RLAgent]) -> dict[str, Any]:
-        """The driven agents' actions (those still in the episode), from their observations.
+    def actions(self, agents: Sequence[RLAgent],
+                only: Collection[str] | None = None) -> dict[str, Any]:
+        """The driven agents' actions (those still in the episode, of ``only`` if given).
 
         Raises:
             ValueError: a heuristic gave something that is not an action of its agent's space.
         """
+        names = self.names if only is None else self.names & set(only)
         return {agent.name: self._act(agent) for agent in agents
-                if agent.name in self.policies and not (agent.terminated or agent.truncated)}
+                if agent.name in names and not (agent.terminated or agent.truncated)}
 
     def complete(self, action: Any, agents: Sequence[RLAgent]) -> Any:
         """A joint action (several agents) with the driven agents' actions put in."""

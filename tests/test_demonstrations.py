@@ -233,3 +233,31 @@ def test_with_the_other_agent_driven_by_the_server_the_person_plays_the_one_left
     assert EpisodeFile.load(first).agent == "Red"
     assert {tuple(action) for action in _actions_of(first, "Red")} == {(0.0, 0.0)}  # idle
     assert len({tuple(action) for action in _actions_of(first, "Blue")}) > 1  # the server's
+
+
+def test_a_person_plays_the_chaser_of_tag_while_both_runners_play_their_heuristic(
+        serve, tmp_path: Path) -> None:
+    server = serve("examples.tag:TagEnvironment")
+    watcher = Watcher([f"{server.host}:{server.port}"])
+    demonstrator = Demonstrator(watcher, tmp_path, target="examples.tag:TagEnvironment",
+                                rate=200.0)
+    inspector = InspectorServer(watcher, demonstrator=demonstrator)
+    inspector.start()
+    try:
+        page = inspector.url
+        status, _, answer = fetch(page, "api/control", method="POST",
+                                  body={"server": 0, "instance": 0})
+        assert status == 422 and answer["error"] == ("this environment has 3 agents: choose "
+                                                     "the one to play (Chaser, Runner1, Runner2)")
+        assert fetch(page, "api/servers")[2][0]["driven"] == []
+        status, _, state = fetch(page, "api/control", method="POST",
+                                 body={"server": 0, "instance": 0, "agent": "Chaser"})
+        assert status == 200 and state["agent"] == "Chaser", state
+        assert state["heuristic"] == ["Runner1", "Runner2"]
+        with Client(server.host, server.port) as observer:
+            start = observer.observe()["agent"]["Runner1"][:2].copy()
+            wait_until(lambda: not np.array_equal(observer.observe()["agent"]["Runner1"][:2],
+                                                  start), "Runner1 never ran")
+        fetch(page, "api/release", method="POST", body={})
+    finally:
+        inspector.close()

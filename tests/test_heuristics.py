@@ -267,3 +267,46 @@ def test_a_per_client_server_driving_every_agent_is_refused_at_start() -> None:
     assert line == ("rlenv serve: --policy drives every agent, so the server plays its "
                     "episodes itself and no client controls them: leave out --per-client, or "
                     "drive fewer agents")
+
+
+# --- examples.tag: one chaser, two runners, each class with a heuristic -----------------------
+
+RUNNERS_DRIVEN = ["--policy", "Runner1=heuristic", "--policy", "Runner2=heuristic"]
+
+
+def test_gym_make_trains_the_chaser_against_the_runners_heuristics() -> None:
+    import gymnasium
+
+    from examples.tag import Chaser
+
+    chaser = Chaser()  # its heuristic is a function of the observation: here the learner's
+    env = gymnasium.make("rlenv/Tag-v0", server_args=RUNNERS_DRIVEN)
+    try:
+        assert list(env.action_space) == list(env.observation_space) == ["Chaser"]
+        assert env.unwrapped.client.hello.driven == ("Runner1", "Runner2")
+        observation, _ = env.reset(seed=0)
+        runners, terminated, truncated = 0.0, False, False
+        while not (terminated or truncated):
+            observation, reward, terminated, truncated, info = env.step(
+                {"Chaser": chaser.heuristic(observation["Chaser"])})
+            assert list(observation) == ["Chaser"]
+            assert reward == pytest.approx(info["agents"]["Chaser"]["reward"])
+            runners += info["agents"]["Runner1"]["reward"] + info["agents"]["Runner2"]["reward"]
+        assert terminated == info["agents"]["Chaser"]["terminated"]  # both runners tagged
+        assert runners != 0.0  # the runners played, on the server
+    finally:
+        env.close()
+
+
+def test_a_parallel_env_of_tag_lists_the_runners_when_the_chaser_is_driven(serve) -> None:
+    from pettingzoo.test import parallel_api_test
+
+    from rlenv_client.pettingzoo import RemoteParallelEnv
+
+    server = serve("examples.tag:TagEnvironment", args=["--policy", "Chaser=heuristic"])
+    env = RemoteParallelEnv(address=f"{server.host}:{server.port}", max_cycles=50)
+    try:
+        assert env.possible_agents == ["Runner1", "Runner2"]
+        parallel_api_test(env, num_cycles=50)
+    finally:
+        env.close()

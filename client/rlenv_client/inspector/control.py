@@ -17,7 +17,7 @@ may be played). The others keep what drives them: the agents the server drives (
 --policy``: a policy file or their heuristic) go on by themselves; each other agent whose class
 has a ``heuristic`` plays it (the step's ``heuristic`` part, protocol 2.6), and the rest take
 their idle action. The recorded files say which agent the person played
-(:attr:`EpisodeFile.agent <rlenv_client.replay.EpisodeFile.agent>`).
+(``EpisodeFile.agent``, see :class:`~rlenv_client.replay.EpisodeFile`).
 """
 
 from __future__ import annotations

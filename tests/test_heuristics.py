@@ -310,3 +310,23 @@ def test_a_parallel_env_of_tag_lists_the_runners_when_the_chaser_is_driven(serve
         parallel_api_test(env, num_cycles=50)
     finally:
         env.close()
+
+
+def test_make_vec_starts_servers_that_drive_the_runners() -> None:
+    import gymnasium
+
+    from examples.tag import Chaser
+
+    chaser = Chaser()
+    vector = gymnasium.make_vec("rlenv/Tag-v0", num_envs=2, vectorization_mode="vector_entry_point",
+                                server_args=RUNNERS_DRIVEN, instances_per_server=1)
+    try:
+        assert list(vector.single_action_space) == ["Chaser"]
+        observations, _ = vector.reset(seed=3)
+        for _ in range(5):
+            actions = np.stack([chaser.heuristic(row) for row in observations["Chaser"]])
+            observations, rewards, *_, infos = vector.step({"Chaser": actions})
+            np.testing.assert_allclose(rewards, infos["agents"]["Chaser"]["reward"])
+        assert list(observations) == ["Chaser"]
+    finally:
+        vector.close()

@@ -104,6 +104,8 @@ class RemoteVectorEnv(VectorEnv):
             ``inspector.url``.
         shared_memory: step servers on this machine through shared-memory lanes (see
             :class:`~rlenv_client.client.Client`): by default wherever they can.
+        server_args: extra arguments for the servers this vector starts (``rlenv serve``),
+            e.g. ``["--policy", "Runner1=heuristic"]``.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array"]}
@@ -117,6 +119,7 @@ class RemoteVectorEnv(VectorEnv):
         in_process: bool = False, render_mode: str | None = None, timeout: float = 30.0,
         token: str | None = None, max_restarts: int = 3, instances_per_server: int | None = None,
         inspector: bool = False, shared_memory: bool | None = None,
+        server_args: Sequence[str] = (),
     ) -> None:
         self.sessions: list[Session] = []  # first: closing a half-built vector closes these
         self.inspector: Inspector | None = None
@@ -128,7 +131,7 @@ class RemoteVectorEnv(VectorEnv):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
         places = server_places(num_envs, target, addresses, pool, in_process, token,
-                               instances_per_server)
+                               instances_per_server, server_args)
         connect_sessions(self.sessions, places, timeout=timeout, max_restarts=max_restarts,
                          shared_memory=shared_memory)
         self._groups: list[range] = []  # the sub-environments each session hosts

@@ -90,6 +90,32 @@ class RLAgent(RLNode):
         """
         raise NotImplementedError(f"{type(self).__name__} must implement get_data")
 
+    def heuristic(self, observation: Any) -> Any:
+        """Return an action of :attr:`action_space` for ``observation``: a hand-written policy.
+
+        Optional, as ML-Agents' ``Heuristic()`` and Godot RL Agents' ``heuristic``: an agent
+        class that does not override it has none (:meth:`has_heuristic`). ``rlenv serve
+        --policy NAME=heuristic`` (``rlenv.Server(policies={NAME: "heuristic"})``) lets it act
+        for agent ``NAME``, as a policy file would: it is called once per step, just before the
+        action applies, on the observation the agent would be sent (``get_data({})``). The
+        server checks what it returns against :attr:`action_space` (an
+        ``environment_error`` naming the agent otherwise) and records it in the episode's
+        log: snapshots and replays play the logged actions back without calling it. So draw
+        any randomness from a generator of its own, not from the environment's
+        ``np_random`` (the episode's, which a replay would then draw from differently). In
+        the inspector, a person playing another agent leaves this one to its heuristic (a
+        step's ``heuristic`` part).
+
+        Args:
+            observation: the agent's observation, a member of :attr:`observation_space`.
+        """
+        raise NotImplementedError(f"{type(self).__name__} has no heuristic")
+
+    @classmethod
+    def has_heuristic(cls) -> bool:
+        """Whether this agent class defines :meth:`heuristic` (overrides RLAgent's)."""
+        return cls.heuristic is not RLAgent.heuristic
+
     def _after_physics_tick(self, delta: float) -> None:
         """Called at the end of every physics tick of an action, after the physics stepped.
 

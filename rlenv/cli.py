@@ -70,11 +70,13 @@ def main(argv: Sequence[str] | None = None) -> int:
                        help=f"seconds a client may stay silent, 0: forever (default "
                        f"{defaults.idle_timeout})")
     serve.add_argument("--policy", action="append", type=_policy, default=[],
-                       metavar="AGENT=FILE",
+                       metavar="AGENT=FILE|heuristic",
                        help="let the ONNX policy FILE (rlenv_client.policies.export_onnx) act "
-                       "for AGENT; repeat for several agents. With every agent driven, the "
-                       "server plays episodes itself (seeded 0, 1, 2 ...) and clients observe; "
-                       "otherwise a client controls the other agents (needs the onnx extra)")
+                       "for AGENT, or its own heuristic with AGENT=heuristic "
+                       "(RLAgent.heuristic); repeat for several agents. With every agent "
+                       "driven, the server plays episodes itself (seeded 0, 1, 2 ...) and "
+                       "clients observe; otherwise a client controls the other agents (a file "
+                       "needs the onnx extra)")
     serve.add_argument("--max-episode-steps", type=int, default=None, metavar="N",
                        help="cut policy-driven episodes short after N steps (truncated)")
     serve.add_argument("--inspect", action="store_true",
@@ -272,8 +274,8 @@ def _policy(text: str) -> tuple[str, str]:
     """``AGENT=FILE`` from the command line, as (agent, file)."""
     agent, equals, path = text.partition("=")
     if not equals or not agent or not path:
-        raise argparse.ArgumentTypeError(f"expected AGENT=FILE (e.g. Agent=model.onnx), got "
-                                         f"{text!r}")
+        raise argparse.ArgumentTypeError(f"expected AGENT=FILE or AGENT=heuristic (e.g. "
+                                         f"Agent=model.onnx), got {text!r}")
     return agent, path
 
 

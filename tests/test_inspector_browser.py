@@ -200,6 +200,28 @@ def test_a_person_takes_control_and_their_episode_is_recorded(server: ServerProc
         trainer.reset()
 
 
+def test_a_person_chooses_the_agent_to_play_from_the_page(serve: Serve, browser: Browser,
+                                                          tmp_path: Path) -> None:
+    """examples.tag, Runner2 driven by the server: the menu offers Chaser and Runner1."""
+    server = serve("examples.tag:TagEnvironment", args=["--policy", "Runner2=heuristic"])
+    with Inspector([f"{server.host}:{server.port}"], record_demonstrations=tmp_path,
+                   target="examples.tag:TagEnvironment", demonstration_rate=120) as inspector:
+        browser.open(inspector.url)
+        browser.wait_for("!document.getElementById('control-agent').hidden && "
+                         "!document.getElementById('take-control').disabled",
+                         "no menu of agents")
+        offered = browser.evaluate("[...document.getElementById('control-agent').options]"
+                                   ".map((o) => o.value).join(',')")
+        assert offered == "Chaser,Runner1"
+        browser.evaluate("document.getElementById('control-agent').value = 'Runner1'")
+        browser.evaluate("document.getElementById('take-control').click()")
+        browser.wait_for("document.getElementById('control-status').textContent"
+                         ".includes('you control Runner1')", "control was not taken")
+        assert browser.evaluate("document.getElementById('control-agent').hidden")
+        browser.evaluate("document.getElementById('release-control').click()")
+        browser.wait_for("!document.getElementById('take-control').hidden", "not released")
+
+
 # --- time travel (docs/time-travel.md) -----------------------------------------------------------
 
 POSITION = "document.getElementById('position').dataset"

@@ -573,6 +573,7 @@ def test_hello_reaches_the_client_intact(pair: Pair) -> None:
         token_required=True,
         instances=3,
         target="examples.pair:PairEnvironment",
+        driven=("right",),
     )
     received = pair.send(pair.server, hello)
     assert received == [hello]
@@ -588,6 +589,7 @@ def test_hello_reaches_the_client_intact(pair: Pair) -> None:
     assert got.token_required is True
     assert got.instances == 3
     assert got.target == "examples.pair:PairEnvironment"
+    assert got.driven == ("right",)
     assert got.protocol == PROTOCOL_VERSION
     assert pair.server.state is State.READY
     assert pair.client.state is State.READY
@@ -596,9 +598,11 @@ def test_hello_reaches_the_client_intact(pair: Pair) -> None:
 def test_hello_without_token_required_or_instances_takes_the_defaults(pair: Pair) -> None:
     wire = make_hello().to_wire()
     del wire["hello"]["token_required"], wire["hello"]["instances"], wire["hello"]["target"]
+    del wire["hello"]["driven"]
     pair.client.receive_data(frame(wire))
     (got,) = drain(pair.client)
     assert got.token_required is False and got.instances == 1 and got.target is None
+    assert got.driven == ()
 
 
 @pytest.mark.parametrize(
@@ -688,6 +692,9 @@ def test_client_refuses_a_first_message_that_is_not_a_hello(pair: Pair) -> None:
         pytest.param(lambda h: h.update(agents=3), "invalid hello", id="agents-int"),
         pytest.param(lambda h: h.update(instances="two"), "invalid hello", id="instances-str"),
         pytest.param(lambda h: h.update(target=3), "invalid hello", id="target-int"),
+        pytest.param(lambda h: h.update(driven="agent"), "invalid hello", id="driven-str"),
+        pytest.param(lambda h: h.update(driven=["other"]), "driven must list some of the "
+                     "agents", id="driven-unknown"),
     ],
 )
 def test_invalid_hello_is_a_remote_protocol_error(

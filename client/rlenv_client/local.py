@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from rlenv.protocol import Reply, Request
@@ -36,6 +37,9 @@ class LocalClient(BaseClient):
         clock: the trees' clock for real-time mode (e.g. ``rlenv.testing.ManualClock``).
         instances: how many instances of the environment class to hold; a plain request goes
             to the first.
+        policies: what drives agents, by agent name, as ``rlenv serve --policy`` (an ONNX
+            file, or ``"heuristic"``; see :mod:`rlenv.serving.policy_driver`). The hello's
+            ``driven`` names them. They may not drive every agent.
 
     Attributes:
         host: the instances and how requests reach them (``None`` once closed).
@@ -44,11 +48,18 @@ class LocalClient(BaseClient):
     def __init__(
         self, environment: RLEnvironment | type[RLEnvironment] | str, *, world_data: bool = False,
         clock: Callable[[], float] | None = None, instances: int = 1,
+        policies: Mapping[str, str | Path] | None = None,
     ) -> None:
         from rlenv.serving.host import Host
+        from rlenv.serving.policy_driver import load_policies
 
         super().__init__(world_data=world_data)
-        self.host: Host | None = Host(environment, instances, clock=clock or time.monotonic)
+        self.host: Host | None = Host(environment, instances, clock=clock or time.monotonic,
+                                      policies=load_policies(policies or {}))
+        if self.host.driver is not None:
+            self.host.close()
+            raise ValueError("policies drive every agent, so nothing is left to control in "
+                             "process; serve it (rlenv serve --policy) to watch it play")
         self._replies: deque[Reply] = deque()  # answers not received yet
         self._first = self.host.instances[0]
         self._set_hello(self.host.hello)

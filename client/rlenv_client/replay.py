@@ -57,8 +57,9 @@ def next_episode_path(directory: Path) -> Path:
 class EpisodeFile:
     """One recorded episode: the server snapshot, the digests of what the client saw, its end.
 
-    ``terminated`` and ``truncated`` are ``None`` in recordings older than them; ``path`` is
-    where :meth:`load` read it.
+    ``terminated`` and ``truncated`` are ``None`` in recordings older than them. ``agent``
+    names the agent a person played, in a demonstration of one agent of several (the
+    inspector's Take control); ``None`` otherwise. ``path`` is where :meth:`load` read it.
     """
 
     target: str | None
@@ -66,6 +67,7 @@ class EpisodeFile:
     observations: list[str]
     terminated: bool | None = None
     truncated: bool | None = None
+    agent: str | None = None
     path: Path | None = field(default=None, compare=False, repr=False)
     """The file it was read from (``None``: made in this process, or a server's)."""
 
@@ -75,6 +77,8 @@ class EpisodeFile:
                 "snapshot": self.snapshot, "observations": self.observations}
         if self.terminated is not None and self.truncated is not None:
             data.update(terminated=self.terminated, truncated=self.truncated)
+        if self.agent is not None:
+            data["agent"] = self.agent
         Path(path).write_bytes(pack(data))
 
     @classmethod
@@ -110,8 +114,11 @@ class EpisodeFile:
         except RequestError as error:
             raise ValueError(f"{path} is not an rlenv episode: {error}") from None
         check_frames(snapshot["events"], str(path))
+        agent = data.get("agent")
+        if not (agent is None or isinstance(agent, str)):
+            raise ValueError(f"{path} is not an rlenv episode: its agent must be a name")
         return cls(target, snapshot, observations, data.get("terminated"),
-                   data.get("truncated"), Path(path))
+                   data.get("truncated"), agent, Path(path))
 
 
 class RecordEpisodes(gymnasium.Wrapper):

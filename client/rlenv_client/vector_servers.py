@@ -35,11 +35,12 @@ def default_layout(num_envs: int, cores: int | None = None, trainer_cores: int =
 
 def server_places(num_envs: int | None, target: str | None, addresses: Sequence[str] | None,
                   pool: ServerSource | None, in_process: bool, token: str | None,
-                  instances_per_server: int | None) -> list[dict[str, Any]]:
+                  instances_per_server: int | None,
+                  server_args: Sequence[str] = ()) -> list[dict[str, Any]]:
     """Where each server's share of a vector is: the :class:`Session` arguments of each.
 
     A pool's servers, running servers by address, or servers to start (``instances_per_server``
-    each, or :func:`default_layout`'s), or groups in this process.
+    each, or :func:`default_layout`'s; started with ``server_args``), or groups in this process.
 
     Raises:
         ValueError: no sub-environment at all.
@@ -56,8 +57,8 @@ def server_places(num_envs: int | None, target: str | None, addresses: Sequence[
                       for start in range(0, num_envs, instances_per_server)]
         else:  # in this process: all in one group; else one server per core
             layout = [num_envs] if in_process else default_layout(num_envs)
-        places = [{"target": target, "in_process": in_process, "instances": count}
-                  for count in layout]
+        places = [{"target": target, "in_process": in_process, "instances": count,
+                   "server_args": server_args} for count in layout]
     if not places:
         raise ValueError("a vector environment needs at least one sub-environment")
     return places

@@ -65,6 +65,9 @@ class Hello:
     2.0 server. ``target`` (protocol 2.5) is the ``MODULE:CLASS`` another server of the same
     environment is started with (``rlenv serve TARGET``), or ``None`` when the server cannot
     name one (an environment object, a class defined in ``__main__``) or is older.
+    ``driven`` (protocol 2.6) names the agents the server drives itself (``rlenv serve
+    --policy``: a policy file or the agent's heuristic), in ``agents``' order; empty when none
+    is, or from an older server. A trainer leaves them out: it needs no actions for them.
     """
 
     environment: str
@@ -79,6 +82,7 @@ class Hello:
     instances: int = 1
     limits: dict[str, Any] = field(default_factory=dict)
     target: str | None = None
+    driven: tuple[str, ...] = ()
     protocol: tuple[int, int] = PROTOCOL_VERSION
 
     def to_wire(self) -> dict[str, Any]:
@@ -98,6 +102,7 @@ class Hello:
                 "instances": self.instances,
                 "limits": self.limits,
                 "target": self.target,
+                "driven": list(self.driven),
             }
         }
 
@@ -134,6 +139,7 @@ class Hello:
                 instances=int(body.get("instances", 1)),
                 limits=dict(body.get("limits", {})),
                 target=_target(body.get("target")),
+                driven=_driven(body.get("driven", []), body["agents"]),
                 protocol=(int(version[0]), int(version[1])),
             )
         except (KeyError, TypeError, ValueError) as exc:
@@ -145,6 +151,14 @@ def _target(value: Any) -> str | None:
     if value is not None and not isinstance(value, str):
         raise TypeError(f"target must be a string or nil, got {value!r:.80}")
     return value
+
+
+def _driven(value: Any, agents: Any) -> tuple[str, ...]:
+    """A hello's driven agents: names among its ``agents`` (absent from servers before 2.6)."""
+    if not isinstance(value, list) or not all(name in agents for name in value):
+        raise ValueError(f"driven must list some of the agents {agents!r:.80}, got "
+                         f"{value!r:.80}")
+    return tuple(value)
 
 
 def _size(value: Any) -> tuple[int, int] | None:

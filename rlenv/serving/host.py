@@ -32,9 +32,8 @@ from rlenv.serving.columns import Columns
 from rlenv.serving.endpoint import Endpoint, Peer
 from rlenv.serving.instance import Episode, Instance, failure, load_environment
 from rlenv.serving.lean import LeanSteps
-from rlenv.serving.onnx_policy import OnnxPolicy
 from rlenv.serving.parts import HostPart, dispatch, plan_for, shape_of, takes_control
-from rlenv.serving.policy_driver import DrivenAgents, PolicyDriver
+from rlenv.serving.policy_driver import DrivenAgents, Policy, PolicyDriver
 from rlenv.serving.recent import KEEP_EVENTS
 
 __all__ = ["Host", "Prepared", "target_of"]
@@ -88,7 +87,8 @@ class Host:
         clock: the trees' clock, for real-time mode.
         record_dir: where clients may have the environments record videos.
         real_time: start in real-time mode.
-        policies: policy files that drive agents, by agent name (one instance, lockstep; see
+        policies: what drives agents (a loaded policy file, or ``"heuristic"``), by agent
+            name, in every instance (lockstep; one instance when they drive every agent; see
             :mod:`rlenv.serving.policy_driver`).
         max_episode_steps: with every agent driven, steps after which an episode is cut short.
         keep_episodes: how many finished episodes each instance keeps as recordings, from the
@@ -104,14 +104,15 @@ class Host:
         ValueError: ``count`` is smaller than 1.
         TypeError: several instances of an environment object.
         RuntimeError: the environment has no agent, world or spaces.
-        ValueError: ``policies`` with several instances or in real time; a policy for an agent
-            the environment lacks, or whose spaces are not its agent's.
+        ValueError: ``policies`` in real time, or driving every agent of several instances; a
+            policy for an agent the environment lacks, or whose spaces are not its agent's; a
+            heuristic for an agent whose class defines none.
     """
 
     def __init__(self, environment: RLEnvironment | type[RLEnvironment] | str, count: int = 1,
                  *, clock: Callable[[], float] = time.monotonic,
                  record_dir: Path | None = None, real_time: bool = False,
-                 policies: Mapping[str, OnnxPolicy] | None = None,
+                 policies: Mapping[str, Policy] | None = None,
                  max_episode_steps: int | None = None,
                  keep_episodes: int | None = None) -> None:
         target = target_of(environment)
@@ -149,17 +150,22 @@ class Host:
         if policies:
             self._drive(policies, max_episode_steps, real_time)
 
-    def _drive(self, policies: Mapping[str, OnnxPolicy], max_episode_steps: int | None,
+    def _drive(self, policies: Mapping[str, Policy], max_episode_steps: int | None,
                real_time: bool) -> None:
-        """Let ``policies`` drive their agents; a driver when they drive every agent."""
-        if len(self.instances) > 1 or real_time:
-            raise ValueError("--policy drives the agents of one instance in lockstep: leave out "
-                             "--instances and --real-time")
-        instance = self.instances[0]
-        driven = DrivenAgents(policies, instance.agents)
-        instance.drive(driven)
-        if driven.every_agent:
-            self.driver = PolicyDriver(self.answer, instance, driven, max_episode_steps)
+        """Let ``policies`` drive their agents in every instance; a driver when they drive all."""
+        if real_time:
+            raise ValueError("--policy drives agents in lockstep: leave out --real-time")
+        driven = [DrivenAgents(policies, instance.agents) for instance in self.instances]
+        for instance, agents in zip(self.instances, driven, strict=True):
+            instance.drive(agents)
+        first = self.instances[0]
+        self.hello.driven = tuple(agent.name for agent in first.agents
+                                  if agent.name in driven[0].names)
+        if driven[0].every_agent:
+            if len(self.instances) > 1:
+                raise ValueError("--policy drives every agent, so the server plays one "
+                                 "instance itself: leave out --instances")
+            self.driver = PolicyDriver(self.answer, first, driven[0], max_episode_steps)
 
     def answer(self, request: Request) -> Reply:
         """The one answer to ``request`` (plain, batch or steps); a refusal changes nothing.

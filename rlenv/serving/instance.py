@@ -172,6 +172,7 @@ class Instance:
         self.responds_itself = "_send_response" in hooks
         self.has_after_send = "_after_send_response" in hooks
         self.driven: DrivenAgents | None = None  # agents a policy drives (rlenv serve --policy)
+        self._heuristic_agents: DrivenAgents | None = None  # see _heuristics
         self._enter(environment)
         self.broken: str | None = None  # why the next reset rebuilds the environment
         self.settings = Settings(self, record_dir)
@@ -396,6 +397,15 @@ class Instance:
         if self.log.started:
             self.log.record(["set", path, name, value])
 
+    def _heuristics(self) -> DrivenAgents:
+        """Every agent that has a heuristic, driven by it (for a request's ``heuristic``)."""
+        if self._heuristic_agents is None:
+            from rlenv.serving.policy_driver import HEURISTIC, DrivenAgents
+
+            self._heuristic_agents = DrivenAgents(
+                {a.name: HEURISTIC for a in self.agents if a.has_heuristic()}, self.agents)
+        return self._heuristic_agents
+
     def drive(self, driven: DrivenAgents) -> None:
         """Let policies act for the ``driven`` agents within every action (several agents)."""
         self.driven = driven
@@ -462,12 +472,19 @@ class Instance:
         if self.state is Episode.ENDED:
             raise RequestError(ErrorCode.RESET_REQUIRED, "the episode has ended; reset first")
 
-    def act(self, action: Any, frames: int) -> None:
-        """Run a checked action for ``frames`` ticks (lockstep), or apply it now (real time)."""
+    def act(self, action: Any, frames: int, heuristic: frozenset[str] = frozenset()) -> None:
+        """Run a checked action for ``frames`` ticks (lockstep), or apply it now (real time).
+
+        With several agents, the driven agents' actions and those of the agents named in
+        ``heuristic`` (by their heuristic) are put in first, unless the action replays a log.
+        """
         tree = self.tree
-        if self.driven is not None and self.multi_agent:
+        if self.multi_agent and not self.replaying:
             try:
-                action = self.driven.complete(action, self.agents)
+                if self.driven is not None:
+                    action = self.driven.complete(action, self.agents)
+                if heuristic:
+                    action = {**action, **self._heuristics().actions(self.agents, heuristic)}
             except PolicyError as error:  # a failed episode; the environment is intact
                 self.abandon_episode(f"the episode failed: {error}")
                 raise RequestError(ErrorCode.ENVIRONMENT_ERROR, f"{error}; reset required") \

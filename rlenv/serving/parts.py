@@ -164,13 +164,52 @@ class Action(Part):
             return None
         if not fresh and instance.state is not _RUNNING:
             instance.check_can_act()  # refuses
-        return instance.checked_action(action, fresh)
+        return instance.checked_action(action, fresh,
+                                       heuristic=frozenset(parts.get("heuristic") or ()))
 
     def apply(self, instance: Instance, value: Any, request: Plan) -> None:
         if value is not None:
             instance.act(value, request.get("repeat_action") or
-                         instance.environment.repeat_action)
+                         instance.environment.repeat_action,
+                         request.get("heuristic") or frozenset())
             instance.answer.acted = True  # type: ignore[union-attr]
+
+
+class Heuristic(Part):
+    """Agent names (2.6): in this request's action, they act by their ``RLAgent.heuristic``.
+
+    As for agents the server drives (``rlenv serve --policy NAME=heuristic``), each named agent
+    still in the episode gets its heuristic's action for its observation just before the
+    action applies, and the episode's log records it; the action has no entry for them. The
+    inspector's demonstrations send it: a person plays one agent, the others their heuristic.
+    """
+
+    name = "heuristic"
+
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
+              where: str) -> Any:
+        names = parts["heuristic"]
+        agents = {agent.name: agent for agent in instance.agents}
+        if not (isinstance(names, list) and all(isinstance(n, str) for n in names)):
+            raise _bad(f"{where}'heuristic' must be a list of agent names")
+        if parts.get("action") is None:
+            raise _bad(f"{where}'heuristic' given without an 'action'")
+        if not instance.multi_agent:
+            raise _bad(f"{where}'heuristic' names agents of an action of several; to let a "
+                       "lone agent's heuristic play, serve it with --policy NAME=heuristic")
+        driven = instance.driven.names if instance.driven is not None else frozenset()
+        for name in names:
+            agent = agents.get(name)
+            if agent is None:
+                raise _bad(f"{where}heuristic: no agent {name!r:.40}; the agents: "
+                           f"{', '.join(agents)}")
+            if not agent.has_heuristic():
+                raise _bad(f"{where}heuristic: agent {name!r} (class {type(agent).__name__}) "
+                           "has no heuristic")
+            if name in driven:
+                raise _bad(f"{where}heuristic: agent {name!r} is driven by the server "
+                           "already (rlenv serve --policy)")
+        return frozenset(names)
 
 
 class RepeatAction(Part):
@@ -734,7 +773,7 @@ def _reset_mask(mask: Any, count: int) -> list[bool]:
 PARTS: dict[str, Part | HostPart] = {
     part.name: part for part in (
         Restore(), Inspect(), Snapshot(), Episodes(), EditLevel(), Config(), Reset(),
-        RepeatAction(), Action(), Observation(), Batch(), Steps())
+        RepeatAction(), Heuristic(), Action(), Observation(), Batch(), Steps())
 }
 """Every kind of request part, in the order they apply."""
 

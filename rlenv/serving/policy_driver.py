@@ -1,4 +1,8 @@
-"""Agents driven by policy files (``rlenv serve --policy AGENT=FILE``).
+"""Agents driven by policy files or their heuristic (``rlenv serve --policy AGENT=FILE``).
+
+**What drives.** ``AGENT=FILE.onnx`` runs a policy file (:mod:`rlenv.serving.onnx_policy`);
+``AGENT=heuristic`` (:data:`HEURISTIC`) runs the agent's own :meth:`RLAgent.heuristic
+<rlenv.agent.RLAgent.heuristic>`, refused at start when its class defines none.
 
 **Who acts.** A driven agent's action is its policy's, computed inside each step from the
 agent's own observation (``get_data({})``) just before the action applies
@@ -18,8 +22,8 @@ agent's own observation (``get_data({})``) just before the action applies
 
 **A policy that fails is a failed episode**, never a dead server. Its action is checked against
 its agent's space (:func:`~rlenv.serving.onnx_policy.fit_action`: clipped into a ``Box``, NaN
-refused), and a call runs under a deadline and a memory bound (:mod:`rlenv.serving.onnx_policy`).
-When a policy raises, runs past its deadline or gives what no action is, the episode ends where
+refused; a heuristic's, user code, must be an action of the space as it is), and a file's call
+runs under a deadline and a memory bound (:mod:`rlenv.serving.onnx_policy`). When a policy raises, runs past its deadline or gives what no action is, the episode ends where
 it stands (``error`` in the statistics; a learner's step is answered ``environment_error``,
 reset required), the environment is left as it was (nothing was applied), and the failure is
 logged once per agent. Driven alone, the server waits :data:`FAILURE_PAUSE` seconds before the
@@ -31,15 +35,18 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from collections.abc import Callable, Collection, Mapping, Sequence
+from pathlib import Path
+from typing import Any, Final, Literal
 
 from rlenv.agent import RLAgent
 from rlenv.protocol import ErrorReply, Reply, Request, Response
 from rlenv.protocol.errors import ErrorCode
+from rlenv.protocol.spaces import SpaceMismatch, compile_check
 from rlenv.serving.onnx_policy import OnnxPolicy, PolicyError, fit_action
 
-__all__ = ["FAILURE_PAUSE", "DrivenAgents", "PolicyDriver"]
+__all__ = ["FAILURE_PAUSE", "HEURISTIC", "DrivenAgents", "Policy", "PolicyDriver",
+           "load_policies"]
 
 logger = logging.getLogger(__name__)
 
@@ -48,54 +55,87 @@ FAILURE_PAUSE = 1.0
 
 _LOGGED = 64  # distinct failures a driver logs (each once); past that, none
 
+HEURISTIC: Final = "heuristic"
+"""What ``--policy AGENT=heuristic`` names instead of a file: the agent's own heuristic."""
+
+Policy = OnnxPolicy | Literal["heuristic"]
+"""What drives an agent: a loaded policy file, or :data:`HEURISTIC`."""
+
+
+def load_policies(policies: Mapping[str, str | Path]) -> dict[str, Policy]:
+    """Policy files loaded, by agent name; ``"heuristic"`` stays :data:`HEURISTIC`.
+
+    Raises:
+        ImportError: a file, and no onnxruntime.
+        ValueError: a file that cannot be read or is not an rlenv policy (one line).
+    """
+    return {agent: HEURISTIC if path == HEURISTIC else OnnxPolicy(path)
+            for agent, path in policies.items()}
+
 
 class DrivenAgents:
-    """The agents a policy file drives, checked against an instance's agents.
+    """The agents a policy file or their heuristic drives, checked against an instance's agents.
 
     Args:
-        policies: the policy of each driven agent, by agent name.
+        policies: what drives each driven agent, by agent name.
         agents: the instance's agents.
 
     Raises:
-        ValueError: one line: an agent the environment does not have, or a file whose spaces
-            are not its agent's (naming both).
+        ValueError: one line: an agent the environment does not have, a file whose spaces
+            are not its agent's (naming both), or ``heuristic`` for an agent whose class
+            defines none (naming the agent and its class).
     """
 
-    def __init__(self, policies: Mapping[str, OnnxPolicy], agents: Sequence[RLAgent]) -> None:
+    def __init__(self, policies: Mapping[str, Policy], agents: Sequence[RLAgent]) -> None:
         names = [agent.name for agent in agents]
         by_name = dict(zip(names, agents, strict=True))
         for name, policy in policies.items():
             agent = by_name.get(name)
             if agent is None:
-                raise ValueError(f"--policy {name}={policy.path}: the environment has no agent "
+                what = policy if policy == HEURISTIC else policy.path  # type: ignore[union-attr]
+                raise ValueError(f"--policy {name}={what}: the environment has no agent "
                                  f"{name!r}; its agents: {', '.join(names)}")
-            policy.check_spaces(name, agent.observation_space, agent.action_space)
+            if policy == HEURISTIC:
+                if not agent.has_heuristic():
+                    cls = type(agent).__name__
+                    raise ValueError(f"--policy {name}=heuristic: agent {name!r} (class {cls}) "
+                                     f"has no heuristic; define {cls}.heuristic(observation)")
+            else:
+                policy.check_spaces(  # type: ignore[union-attr]
+                    name, agent.observation_space, agent.action_space)
         self.policies = dict(policies)
         self.names = frozenset(policies)
         self.every_agent = self.names == set(names)
+        self._checks = {name: compile_check(by_name[name].action_space, "action")
+                        for name, policy in policies.items() if policy == HEURISTIC}
         self._failed: set[str] = set()  # agents whose policy failure was logged
 
-    def actions(self, agents: Sequence[RLAgent]) -> dict[str, Any]:
-        """The driven agents' actions (those still in the episode), from their observations.
+    def actions(self, agents: Sequence[RLAgent],
+                only: Collection[str] | None = None) -> dict[str, Any]:
+        """The driven agents' actions (those still in the episode, of ``only`` if given).
 
-        Each is checked against its agent's action space (clipped into a ``Box``).
+        A policy file's is checked against its agent's action space (clipped into a ``Box``);
+        a heuristic's must be an action of the space as it is.
 
         Raises:
-            PolicyError: a policy (or the observation it needs) failed, or gave no action of
-                its space; the first failure of each agent is logged.
+            PolicyError: a policy or heuristic (or the observation it needs) failed, or gave
+                no action of its space; the first failure of each agent is logged.
         """
-        policies = self.policies
-        return {agent.name: self._action(agent, policies[agent.name]) for agent in agents
-                if agent.name in policies and not (agent.terminated or agent.truncated)}
+        names = self.names if only is None else self.names & set(only)
+        return {agent.name: self._action(agent, self.policies[agent.name]) for agent in agents
+                if agent.name in names and not (agent.terminated or agent.truncated)}
 
-    def _action(self, agent: RLAgent, policy: Any) -> Any:
+    def _action(self, agent: RLAgent, policy: Policy) -> Any:
         who = f"agent {agent.name!r}"
         try:
-            action = policy.act(agent.get_data({}))
+            if policy == HEURISTIC:
+                return self._heuristic(agent)
+            action = policy.act(agent.get_data({}))  # type: ignore[union-attr]
         except PolicyError as error:
-            failure = PolicyError(f"{who}: {error}")
+            failure = PolicyError(error if policy == HEURISTIC else f"{who}: {error}")
         except Exception as error:  # the policy's code, or the environment's observation
-            failure = PolicyError(f"{who}: its policy failed: {type(error).__name__}: {error}")
+            failure = PolicyError(f"{who}: its {'heuristic' if policy == HEURISTIC else 'policy'} "
+                                  f"failed: {type(error).__name__}: {error}")
         else:
             try:
                 return fit_action(agent.action_space, action, f"{who}: its policy")
@@ -105,6 +145,15 @@ class DrivenAgents:
             self._failed.add(agent.name)
             logger.warning("%s; its episodes fail (logged once per agent)", failure)
         raise failure
+
+    def _heuristic(self, agent: RLAgent) -> Any:
+        action = agent.heuristic(agent.get_data({}))
+        try:
+            return self._checks[agent.name](action)
+        except SpaceMismatch as error:
+            raise PolicyError(f"{type(agent).__name__}.heuristic of agent {agent.name!r} gave "
+                              f"{action!r:.80}, not an action of {agent.action_space}: "
+                              f"{error}") from None
 
     def complete(self, action: Any, agents: Sequence[RLAgent]) -> Any:
         """A joint action (several agents) with the driven agents' actions put in."""

@@ -9,8 +9,8 @@ from pathlib import Path
 from rlenv.environment import RLEnvironment
 from rlenv.serving.endpoint import DEFAULT_HOST, Endpoint, Limits
 from rlenv.serving.host import Host
-from rlenv.serving.onnx_policy import OnnxPolicy
 from rlenv.serving.per_client import HostPerClient
+from rlenv.serving.policy_driver import load_policies
 
 __all__ = ["Server"]
 
@@ -43,9 +43,12 @@ class Server:
             them), built when it first asks and closed when it leaves
             (:mod:`rlenv.serving.per_client`); otherwise the first client to change the
             environment controls it and the others may observe.
-        policies: ONNX policy files that drive agents, by agent name (``rlenv serve
+        policies: what drives agents, by agent name: an ONNX policy file, or ``"heuristic"``
+            for the agent's own :meth:`~rlenv.agent.RLAgent.heuristic` (``rlenv serve
             --policy``; see :mod:`rlenv.serving.policy_driver`). With every agent driven, the
-            server plays episodes itself and clients may only observe.
+            server plays episodes itself and clients may only observe. With ``per_client``,
+            every client's environment has its driven agents, driven by the same loaded files
+            (they keep no state between steps); not every agent may be driven then.
         max_episode_steps: steps after which a policy-driven episode is cut short.
         keep_episodes: how many finished episodes each instance keeps as recordings, for
             clients to fetch (the ``episodes`` part; ``rlenv serve --keep-episodes``), from the
@@ -69,7 +72,7 @@ class Server:
         policies: Mapping[str, str | Path] | None = None, max_episode_steps: int | None = None,
         keep_episodes: int | None = None,
     ) -> None:
-        loaded = {agent: OnnxPolicy(path) for agent, path in (policies or {}).items()}
+        loaded = load_policies(policies or {})
 
         def build() -> Host:
             return Host(environment, instances, record_dir=record_dir, real_time=real_time,
@@ -78,9 +81,6 @@ class Server:
 
         if per_client and not isinstance(environment, str | type):
             raise TypeError("a server per client needs the environment class, not an instance")
-        if per_client and loaded:
-            raise ValueError("--policy drives the agents of the server's environment: leave out "
-                             "--per-client")
         self.host: Host | HostPerClient = HostPerClient(build) if per_client else build()
         self.endpoint = Endpoint(self.host.hello, limits or Limits(), token,
                                  per_client=per_client)

@@ -104,7 +104,8 @@ class Watcher:
             else:
                 hello = client.hello
                 entry.update(environment=hello.environment, instances=hello.instances,
-                             agents=list(hello.agents), action_space=_short(hello.action_space),
+                             agents=list(hello.agents), driven=list(hello.driven),
+                             action_space=_short(hello.action_space),
                              observation_space=_short(hello.observation_space),
                              ticks_per_second=hello.physics_ticks_per_second,
                              protocol=".".join(map(str, hello.protocol)))

@@ -18,8 +18,9 @@ Routes (below the key): ``/`` the page, ``/static/NAME`` its script and style, a
 ``api/snapshot`` (``?server=S&instance=I``, and ``path`` or ``since``), ``api/control`` (the
 demonstration under way) and ``POST api/edit`` (``{"server", "instance", "path", "property",
 "value"}``); with demonstrations (:mod:`~rlenv_client.inspector.control`), ``POST api/control``
-(``{"server", "instance"}``: take control), ``api/keys`` (``{"held": [key, ...]}``) and
-``api/release`` (``{}``), under the same rules as an edit.
+(``{"server", "instance"}`` and, with several agents, the ``agent`` to play: take control),
+``api/keys`` (``{"held": [key, ...]}``) and ``api/release`` (``{}``), under the same rules as
+an edit.
 
 With timelines (:mod:`~rlenv_client.inspector.timelines`: ``rlenv replay FILE --inspect``, or
 a watched instance's recent episodes), ``GET api/timelines`` (those offered, the policies),
@@ -271,8 +272,9 @@ class _Handler(BaseHTTPRequestHandler):
             return None
         return rest, parse_qs(url.query)
 
-    def _body(self, what: str, expected: set[str]) -> dict[str, Any]:
-        """The request's JSON body: a map of exactly ``expected``.
+    def _body(self, what: str, expected: set[str],
+              optional: frozenset[str] = frozenset()) -> dict[str, Any]:
+        """The request's JSON body: a map of ``expected``, and maybe some of ``optional``.
 
         ``server`` and ``instance``, when expected, must be integers >= 0.
         """
@@ -284,13 +286,14 @@ class _Handler(BaseHTTPRequestHandler):
             body = json.loads(self.rfile.read(int(length)), parse_constant=_no_constant)
         except ValueError as error:
             raise InspectorError(400, f"{what}'s body is not JSON: {error}") from None
-        if not isinstance(body, dict) or set(body) != expected:
-            raise InspectorError(400, f"{what} is a map of exactly {sorted(expected)}")
+        if not isinstance(body, dict) or not expected <= set(body) <= expected | optional:
+            also = f" (and maybe {sorted(optional)})" if optional else ""
+            raise InspectorError(400, f"{what} is a map of exactly {sorted(expected)}{also}")
         for name in ("server", "instance", "timeline", "branch", "step", "episode",
                      "max_steps"):
             if name in body and (type(body[name]) is not int or not 0 <= body[name] < 2**31):
                 raise InspectorError(400, f"{name} must be an integer >= 0")
-        for name in ("key", "policy", "id"):
+        for name in ("key", "policy", "id", "agent"):
             if name in body and (not isinstance(body[name], str) or len(body[name]) > 64):
                 raise InspectorError(400, f"{name} must be a string (at most 64 characters)")
         return body
@@ -333,8 +336,8 @@ class _Handler(BaseHTTPRequestHandler):
         return self.server.demonstrator
 
     def _take(self) -> Any:
-        body = self._body("taking control", {"server", "instance"})
-        return self._demonstrator().take(body["server"], body["instance"])
+        body = self._body("taking control", {"server", "instance"}, frozenset({"agent"}))
+        return self._demonstrator().take(body["server"], body["instance"], body.get("agent"))
 
     def _keys(self) -> Any:
         held = self._body("a key change", {"held"})["held"]

@@ -5,13 +5,13 @@
 
 **Rate.** ``examples/tag`` has one chaser and two runners. ``SB3VecEnv(N, tag, agents="Chaser")``
 trains the chaser from it, the runners driven by their heuristics inside the servers
-(``--policy Runner1=heuristic``: one instance per server). Its baseline is the rewrite a user
-had to write before: ``examples/tag/scripted.py``, the same game as one single-agent env whose
-runners are scripted by the same heuristics (``tests/test_agent_vector.py`` checks that both
-give the chaser bit-identical observations, rewards and ends), served with the same layout (one
-instance per server). A third figure drives the runners by the same heuristics called in the
-trainer (``others={"Runner1": callable, ...}``), whose servers may host several instances (the
-rewrite's default layout is measured beside it). In each round every variant, in turns (the
+(``--policy Runner1=heuristic``). Its baseline is the rewrite a user had to write before:
+``examples/tag/scripted.py``, the same game as one single-agent env whose runners are scripted
+by the same heuristics (``tests/test_agent_vector.py`` checks that both give the chaser
+bit-identical observations, rewards and ends). A third figure drives the runners by the same
+heuristics called in the trainer (``others={"Runner1": callable, ...}``). All three lay their
+servers out as ``SB3VecEnv`` does by default (one server per core but the trainer's). In each
+round every variant, in turns (the
 order rotating from round to round), runs PPO for ``S`` env-steps (``learn``, collection and
 updates, construction excluded) and then steps ``S`` env-steps of random actions without
 learning; the script prints the min and median env-steps/s of each and the ratio of medians
@@ -54,9 +54,8 @@ def _variants(instances: int) -> dict[str, Callable[[], SB3VecEnv]]:
         return lambda: SB3VecEnv(instances, target, max_episode_steps=MAX_STEPS, **options)
 
     return {
-        "rewrite, 1 instance per server": make(SCRIPTED, instances_per_server=1),
+        "rewrite (scripted runners)": make(SCRIPTED),
         "multi-agent, runners served (heuristic)": make(TAG, agents=CHASER),
-        "rewrite, default layout": make(SCRIPTED),
         "multi-agent, runners called in the trainer": make(
             TAG, agents=CHASER, others=dict.fromkeys(RUNNERS, run_away)),
     }
@@ -132,7 +131,7 @@ def main() -> None:
     for kind, rates in (("PPO learning", learning), ("stepping (random actions)", stepping)):
         print(f"{kind}: env-steps/s, min / median, ratio of medians to the rewrite's")
         for name in names:
-            baseline = names[0] if "1 instance" in name or "served" in name else names[2]
+            baseline = names[0]
             ratio = statistics.median(rates[name]) / statistics.median(rates[baseline])
             print(f"  {name:45s} {min(rates[name]):7.0f} / {statistics.median(rates[name]):7.0f}"
                   f"   x{ratio:.2f} of '{baseline}'")

@@ -50,6 +50,7 @@ _EXPORTS = {
     "view": "rlenv.scene2d.views",
     "Node2D": "rlenv.scene2d.node2d",
     "Marker2D": "rlenv.scene2d.marker2d",
+    "RaycastSensor2D": "rlenv.scene2d.raycast_sensor",
     "PackedScene": "rlenv.scene2d.packed_scene",
     "PackedSceneError": "rlenv.scene2d.packed_scene",
     "gradient": "rlenv.scene2d.colors",
@@ -84,6 +85,7 @@ if TYPE_CHECKING:
     from rlenv.scene2d.physics import PhysicsWorld as PhysicsWorld
     from rlenv.scene2d.physics import RigidBody as RigidBody
     from rlenv.scene2d.physics import StaticBody as StaticBody
+    from rlenv.scene2d.raycast_sensor import RaycastSensor2D as RaycastSensor2D
     from rlenv.scene2d.views import View as View
     from rlenv.scene2d.views import view as view
     from rlenv.serving.self_hosting import run as run

@@ -100,8 +100,11 @@ class RLAgent(RLNode):
         action applies, on the observation the agent would be sent (``get_data({})``). The
         server checks what it returns against :attr:`action_space` (an
         ``environment_error`` naming the agent otherwise) and records it in the episode's
-        log, so snapshots and replays play it back exactly; draw any randomness from the
-        environment's ``np_random``.
+        log: snapshots and replays play the logged actions back without calling it. So draw
+        any randomness from a generator of its own, not from the environment's
+        ``np_random`` (the episode's, which a replay would then draw from differently). In
+        the inspector, a person playing another agent leaves this one to its heuristic (a
+        step's ``heuristic`` part).
 
         Args:
             observation: the agent's observation, a member of :attr:`observation_space`.

@@ -3,6 +3,8 @@
 ``ChasingPair`` is examples.pair with a heuristic for Blue only (the seeker's greedy push), so
 that a heuristic drives one agent and Red has none. ``HeuristicSeeker`` is the seeker with
 one. ``WrongHeuristicPair`` gives Blue a heuristic that answers outside its action space.
+``TimedChasingPair`` is ChasingPair whose episodes are cut short after 40 steps (for
+demonstrations, which record an episode when it ends).
 """
 
 from __future__ import annotations
@@ -65,3 +67,38 @@ class HeuristicSeeker(SeekerEnvironment):
         RLEnvironment.__init__(self, "Seeker", repeat_action=4)
         self.add_child(HeuristicSeekerAgent())
         self.add_child(SeekerWorld())
+
+
+class TimedPairAgent(PairAgent):
+    """A pair agent whose episode is cut short after 160 ticks (40 steps)."""
+
+    def __init__(self, name: str) -> None:
+        super().__init__(name)
+        self.ticks = 0
+
+    def _after_physics_tick(self, delta: float) -> None:
+        super()._after_physics_tick(delta)
+        self.ticks += 1
+        if self.ticks >= 160 and not self.terminated:
+            self.set_truncated()
+
+    def reset(self, arguments: np.ndarray) -> None:
+        """As the pair's, and the clock starts again."""
+        super().reset(arguments)
+        self.ticks = 0
+
+
+class TimedChasingAgent(TimedPairAgent, ChasingPairAgent):
+    """Timed, with the greedy heuristic."""
+
+
+class TimedChasingPair(ChasingPair):
+    """Red (no heuristic) and Blue (a heuristic), both cut short after 40 steps."""
+
+    blue = TimedChasingAgent
+
+    def __init__(self) -> None:
+        RLEnvironment.__init__(self, "Pair", repeat_action=4)
+        self.add_child(TimedPairAgent("Red"))
+        self.add_child(self.blue("Blue"))
+        self.add_child(PairWorld())

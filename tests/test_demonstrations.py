@@ -6,6 +6,7 @@ A person plays through the inspector's control routes, over real HTTP beside a r
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -149,5 +150,114 @@ def test_without_a_directory_the_inspector_only_watches(server: ServerProcess) -
         status, _, answer = fetch(inspector.url, "api/control", method="POST",
                                   body={"server": 0, "instance": 0})
         assert status == 404 and "--record-demonstrations" in answer["error"]
+    finally:
+        inspector.close()
+
+
+# --- several agents: a person plays one, the others keep what drives them ---------------------
+
+TIMED_PAIR = "heuristic_envs:TimedChasingPair"
+FINDS_TEST_ENVS = {"PYTHONPATH": os.pathsep.join([str(Path(__file__).parent),
+                                                  os.environ.get("PYTHONPATH", "")])}
+
+
+@pytest.fixture
+def pair_demonstrations(serve, tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[
+        tuple[str, Demonstrator, ServerProcess]]:
+    """An inspector on a TimedChasingPair server (its arguments: the test's parameter)."""
+    server = serve(TIMED_PAIR, args=getattr(request, "param", []), env=FINDS_TEST_ENVS)
+    watcher = Watcher([f"{server.host}:{server.port}"])
+    demonstrator = Demonstrator(watcher, tmp_path, target=TIMED_PAIR, rate=200.0)
+    inspector = InspectorServer(watcher, demonstrator=demonstrator)
+    inspector.start()
+    try:
+        yield inspector.url, demonstrator, server
+    finally:
+        inspector.close()
+
+
+def _actions_of(path: Path, agent: str) -> list[list[float]]:
+    return [list(map(float, event[1][agent])) for event in
+            EpisodeFile.load(path).snapshot["events"] if event[0] == "action"
+            and agent in event[1]]
+
+
+def test_a_person_chooses_the_agent_to_play_and_the_other_plays_its_heuristic(
+        pair_demonstrations: tuple[str, Demonstrator, ServerProcess], tmp_path: Path) -> None:
+    page, demonstrator, server = pair_demonstrations
+    take = {"server": 0, "instance": 0}
+    status, _, answer = fetch(page, "api/control", method="POST", body=take)
+    assert status == 422 and answer["error"] == \
+        "this environment has 2 agents: choose the one to play (Red, Blue)"
+    status, _, answer = fetch(page, "api/control", method="POST", body={**take, "agent": "Green"})
+    assert status == 404 and answer["error"] == "no agent 'Green'; the agents: Red, Blue"
+    assert fetch(page, "api/control", method="POST", body={**take, "agent": 3})[0] == 400
+    status, _, state = fetch(page, "api/control", method="POST", body={**take, "agent": "Red"})
+    assert status == 200 and state["controlling"] and state["agent"] == "Red", state
+    assert state["heuristic"] == ["Blue"]  # Blue's class has one: it plays it
+    assert state["keys"] == ["ArrowDown", "ArrowLeft", "ArrowRight", "ArrowUp"]
+    fetch(page, "api/keys", method="POST", body={"held": ["ArrowRight"]})
+    wait_until(lambda: demonstrator.episodes >= 2, "no episode was recorded", seconds=60)
+    status, _, state = fetch(page, "api/release", method="POST", body={})
+    assert status == 200 and not state["controlling"] and state["error"] == ""
+    recorded = sorted(tmp_path.glob("episode-*.rlenv"))[1]  # held ArrowRight all along
+    episode = EpisodeFile.load(recorded)
+    assert episode.agent == "Red" and episode.target == TIMED_PAIR
+    assert episode.terminated or episode.truncated
+    assert {tuple(action) for action in _actions_of(recorded, "Red")} == {(1.0, 0.0)}
+    blue = _actions_of(recorded, "Blue")
+    assert len({tuple(action) for action in blue}) > 1  # the heuristic's pushes, not one idle
+    result = subprocess.run([sys.executable, "-m", "rlenv", "replay", str(recorded)],
+                            capture_output=True, text=True, timeout=120,
+                            env={**os.environ, **FINDS_TEST_ENVS})
+    assert result.returncode == 0 and "every observation identical" in result.stdout, \
+        result.stdout + result.stderr
+    with Client(server.host, server.port) as trainer:  # control was given back
+        trainer.reset()
+
+
+@pytest.mark.parametrize("pair_demonstrations", [["--policy", "Blue=heuristic"]],
+                         indirect=True)
+def test_with_the_other_agent_driven_by_the_server_the_person_plays_the_one_left(
+        pair_demonstrations: tuple[str, Demonstrator, ServerProcess], tmp_path: Path) -> None:
+    page, demonstrator, _ = pair_demonstrations
+    take = {"server": 0, "instance": 0}
+    status, _, answer = fetch(page, "api/control", method="POST", body={**take, "agent": "Blue"})
+    assert status == 422 and answer["error"] == (
+        "agent 'Blue' is driven by the server (rlenv serve --policy); choose another: Red")
+    status, _, state = fetch(page, "api/control", method="POST", body=take)  # the only one
+    assert status == 200 and state["agent"] == "Red" and state["heuristic"] == []
+    wait_until(lambda: demonstrator.episodes >= 1, "no episode was recorded", seconds=60)
+    fetch(page, "api/release", method="POST", body={})
+    (first, *_) = sorted(tmp_path.glob("episode-*.rlenv"))
+    assert EpisodeFile.load(first).agent == "Red"
+    assert {tuple(action) for action in _actions_of(first, "Red")} == {(0.0, 0.0)}  # idle
+    assert len({tuple(action) for action in _actions_of(first, "Blue")}) > 1  # the server's
+
+
+def test_a_person_plays_the_chaser_of_tag_while_both_runners_play_their_heuristic(
+        serve, tmp_path: Path) -> None:
+    server = serve("examples.tag:TagEnvironment")
+    watcher = Watcher([f"{server.host}:{server.port}"])
+    demonstrator = Demonstrator(watcher, tmp_path, target="examples.tag:TagEnvironment",
+                                rate=200.0)
+    inspector = InspectorServer(watcher, demonstrator=demonstrator)
+    inspector.start()
+    try:
+        page = inspector.url
+        status, _, answer = fetch(page, "api/control", method="POST",
+                                  body={"server": 0, "instance": 0})
+        assert status == 422 and answer["error"] == ("this environment has 3 agents: choose "
+                                                     "the one to play (Chaser, Runner1, Runner2)")
+        assert fetch(page, "api/servers")[2][0]["driven"] == []
+        status, _, state = fetch(page, "api/control", method="POST",
+                                 body={"server": 0, "instance": 0, "agent": "Chaser"})
+        assert status == 200 and state["agent"] == "Chaser", state
+        assert state["heuristic"] == ["Runner1", "Runner2"]
+        with Client(server.host, server.port) as observer:
+            start = observer.observe()["agent"]["Runner1"][:2].copy()
+            wait_until(lambda: not np.array_equal(observer.observe()["agent"]["Runner1"][:2],
+                                                  start), "Runner1 never ran")
+        fetch(page, "api/release", method="POST", body={})
     finally:
         inspector.close()

@@ -139,7 +139,7 @@ def test_it_watches_a_trainer_and_edits_between_its_steps(server: ServerProcess,
         wait_until(lambda: trainer.episodes > 3, "the trainer did not run")
         status, _, servers = fetch(page, "api/servers")
         assert status == 200 and servers[0]["environment"] == "CartPole"
-        assert servers[0]["instances"] == 1 and servers[0]["protocol"] == "2.5"
+        assert servers[0]["instances"] == 1 and servers[0]["protocol"] == "2.6"
         frames = [fetch(page, "api/frame")[2] for _ in range(3)]
         assert all(len(f["draw"]["shapes"]) == 3 for f in frames)
         assert len({str(f["draw"]["shapes"]) for f in frames}) > 1  # the cart moves
@@ -238,17 +238,22 @@ def test_every_example_can_be_watched(serve: Serve, target: str) -> None:
 
 
 def test_an_agents_setting_is_its_own_among_several(serve: Serve) -> None:
+    """The node panel sets one agent of several (config.agent by its name): it lasts, and
+    the other agent keeps its own value."""
     server = serve("compliance_envs:GainPairEnvironment", env={"PYTHONPATH": str(TESTS)})
     with watching(server) as url:
         with Client(server.host, server.port) as controller:
             controller.reset(seed=0)
             red = fetch(url, "api/node?path=Red")[2]
-            assert red["configurable"] == ["gain"] and red["settings"] == []  # not all agents'
+            assert red["configurable"] == ["gain"] and red["settings"] == ["gain"]
             edit = {"server": 0, "instance": 0, "path": "Red", "property": "gain", "value": 5.0}
             assert fetch(url, "api/edit", method="POST", body=edit)[2] == {
-                "scope": "episode"}
+                "scope": "setting"}
+            controller.reset(seed=1)  # a setting outlives the episode
             gains = [controller.get_property(name, "gain") for name in ("Red", "Blue")]
+            kept = controller.snapshot()["config"]["agent"]
     assert gains == [5.0, 1.0]
+    assert kept == {"Red": {"gain": 5.0}, "Blue": {"gain": 1.0}}
 
 
 def test_a_dead_inspector_never_stops_the_training() -> None:
@@ -352,7 +357,7 @@ def _refused(url: str) -> bool:
 
 
 def test_restarts_count_new_processes_not_idle_reconnections(serve: Serve) -> None:
-    first = serve(args=["--idle-timeout", "0.3"])
+    first = serve(args=["--idle-timeout", "3.0"])  # the controller's steps within it
     watcher = Watcher([f"{first.host}:{first.port}"])
     try:
         with Client(first.host, first.port) as controller:

@@ -200,6 +200,28 @@ def test_a_person_takes_control_and_their_episode_is_recorded(server: ServerProc
         trainer.reset()
 
 
+def test_a_person_chooses_the_agent_to_play_from_the_page(serve: Serve, browser: Browser,
+                                                          tmp_path: Path) -> None:
+    """examples.tag, Runner2 driven by the server: the menu offers Chaser and Runner1."""
+    server = serve("examples.tag:TagEnvironment", args=["--policy", "Runner2=heuristic"])
+    with Inspector([f"{server.host}:{server.port}"], record_demonstrations=tmp_path,
+                   target="examples.tag:TagEnvironment", demonstration_rate=120) as inspector:
+        browser.open(inspector.url)
+        browser.wait_for("!document.getElementById('control-agent').hidden && "
+                         "!document.getElementById('take-control').disabled",
+                         "no menu of agents")
+        offered = browser.evaluate("[...document.getElementById('control-agent').options]"
+                                   ".map((o) => o.value).join(',')")
+        assert offered == "Chaser,Runner1"
+        browser.evaluate("document.getElementById('control-agent').value = 'Runner1'")
+        browser.evaluate("document.getElementById('take-control').click()")
+        browser.wait_for("document.getElementById('control-status').textContent"
+                         ".includes('you control Runner1')", "control was not taken")
+        assert browser.evaluate("document.getElementById('control-agent').hidden")
+        browser.evaluate("document.getElementById('release-control').click()")
+        browser.wait_for("!document.getElementById('take-control').hidden", "not released")
+
+
 # --- time travel (docs/time-travel.md) -----------------------------------------------------------
 
 POSITION = "document.getElementById('position').dataset"
@@ -412,6 +434,52 @@ def test_time_travel_branches_with_keys_and_a_policy_side_by_side(failure: Path,
                 == "248"
         save_screenshot(browser, "time-travel-branches.png")
         assert browser.console == [] or not any("rror" in line for line in browser.console)
+    finally:
+        inspector.close()
+
+
+def test_time_travel_says_why_a_recording_did_not_open_and_tells_twins_apart(
+        failure: Path, browser: Browser, tmp_path: Path) -> None:
+    broken = EpisodeFile.load(failure)
+    broken.target = "examples.nothing:Nothing"
+    broken.save(tmp_path / "broken.rlenv")
+    twin = tmp_path / "elsewhere" / failure.name
+    twin.parent.mkdir()
+    twin.write_bytes(failure.read_bytes())
+    timelines = Timelines([tmp_path / "broken.rlenv", failure, twin],
+                          policies={"controller": controller})
+    timelines.branch_policy(1, 0, 60, "controller", 20)  # made before the page opens it
+    inspector = InspectorServer(Watcher([]), timelines=timelines)
+    inspector.start()
+    try:
+        browser.open(inspector.url)
+        status = "document.getElementById('timeline-status')"
+        browser.wait_for(f"{status}.textContent.includes('examples.nothing')",
+                         "the page did not say why the first recording did not open")
+        assert browser.evaluate(f"{status}.classList.contains('bad')")
+        assert not browser.evaluate("document.getElementById('timeline').hidden")
+        assert browser.evaluate("document.getElementById('timeline-body').hidden")
+        options = browser.wait_for("""(() => { const o = [...document.querySelectorAll(
+            '#timeline-select option')].map(o => o.textContent);
+            return o[0].includes('did not open') && o; })()""", "the menu did not mark it")
+        assert options == ["broken.rlenv (did not open)",
+                           f"{failure.parent.name}/{failure.name}",
+                           f"elsewhere/{failure.name}"]
+        # the menu is still there: another recording opens, with its episode and newest
+        # branch side by side
+        browser.evaluate("""(() => { const s = document.getElementById('timeline-select');
+            s.value = '1'; s.dispatchEvent(new Event('change')); })()""")
+        at(browser, 0)
+        assert not browser.evaluate("document.getElementById('timeline-body').hidden")
+        compare = "document.getElementById('compare').dataset"
+        browser.wait_for(f"{compare}.a === '0' && {compare}.b === '1'",
+                         "side by side did not start at the episode and the newest branch")
+        assert browser.evaluate(f"{compare}.firstDifference") == "61"
+        browser.evaluate("""(() => { const s = document.getElementById('timeline-select');
+            s.value = '2'; s.dispatchEvent(new Event('change')); })()""")
+        browser.wait_for("window.timeline.number === 2", "the twin did not open")
+        at(browser, 0)
+        assert browser.evaluate("document.getElementById('compare').hidden")  # no branch yet
     finally:
         inspector.close()
 

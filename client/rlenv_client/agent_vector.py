@@ -5,7 +5,7 @@ A trainer of one agent (or of a team sharing one policy) sees a plain gymnasium
 of each of the ``instances`` is one sub-environment, sub-environment ``i * k + j`` being the
 ``j``-th of the ``k`` learners of instance ``i``. The other agents are driven:
 
-- by default each by its class's ``RLAgent.heuristic``, run by the server beside the physics
+- by default each by its class's ``RLAgent.heuristic``, run by the servers beside the physics
   (``rlenv serve --policy NAME=heuristic``); an agent with no heuristic and no entry in
   ``others`` is refused, naming it;
 - ``others={"Runner1": "runner.onnx"}``: by an ONNX policy file, in the server likewise
@@ -25,8 +25,6 @@ resets: each step returns its last observation again, reward 0, both flags false
 ``info["waiting"]``; the step that resets its instance ends that wait as truncated, its final
 info holding ``waiting`` too, so that no episode statistics are counted for it. Its actions
 while waiting are ignored.
-
-Servers that route policies (``--policy``) host one instance each.
 """
 
 from __future__ import annotations
@@ -115,8 +113,8 @@ class AgentVectorEnv(VectorEnv):
         repeat_action: physics ticks per step; the servers' default if ``None``.
         max_episode_steps: truncate each instance's episodes after this many steps.
         in_process: run the copies inside this process (``others`` must then be callables).
-        instances_per_server: how many copies each started server hosts: by default 1 where
-            policies are routed to the servers, else one server per core.
+        instances_per_server: how many copies each started server hosts: by default one
+            server per core but ``trainer_cores``.
         render_mode: ``"rgb_array"`` or ``None``.
         timeout: seconds to wait for each answer.
         token: the secret of servers that require one.
@@ -178,8 +176,8 @@ class AgentVectorEnv(VectorEnv):
                 server_args = [argument for name, policy in self.driven_by_server.items()
                                for argument in ("--policy", f"{name}={policy}")]
                 if instances_per_server is None and not in_process:
-                    instances_per_server = 1 if server_args else \
-                        default_layout(instances or 1, trainer_cores=trainer_cores)[0]
+                    instances_per_server = default_layout(instances or 1,
+                                                          trainer_cores=trainer_cores)[0]
                 self.vector = RemoteVectorEnv(
                     instances, target, in_process=in_process,
                     instances_per_server=instances_per_server, server_args=server_args,

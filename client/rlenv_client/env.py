@@ -31,6 +31,7 @@ from rlenv_client.base import BaseClient, StepResult
 from rlenv_client.display import Display, display_available
 from rlenv_client.launcher import ServerProcess
 from rlenv_client.session import LOST, Session
+from rlenv_client.trainer_view import TrainerView
 
 if TYPE_CHECKING:
     from rlenv_client.inspector import Inspector
@@ -102,8 +103,13 @@ class RemoteEnv(gymnasium.Env):
                                shared_memory=shared_memory,
                                share_server=share_server and not inspector)
         hello = self.client.hello
-        self.action_space = hello.action_space
-        self.observation_space = hello.observation_space
+        try:
+            self._view = TrainerView(hello)
+        except ValueError:
+            self.session.close()
+            raise
+        self.action_space = self._view.action_space
+        self.observation_space = self._view.observation_space
         self.repeat_action = repeat_action
         ticks = repeat_action or hello.repeat_action
         self.metadata["render_fps"] = hello.physics_ticks_per_second / ticks
@@ -136,7 +142,11 @@ class RemoteEnv(gymnasium.Env):
         return self.session.server
 
     def configure(self, **settings: Any) -> None:
-        """Configure the environment (see ``Client.configure``); replayed after a restart."""
+        """Configure the environment (see ``Client.configure``); replayed after a restart.
+
+        ``agent`` sets every agent, or one agent by its name (or a class by its name):
+        ``configure(agent={"Runner1": {"max_force": 6.0}})``.
+        """
         self.session.configure(**settings)
 
     def reset(
@@ -149,6 +159,7 @@ class RemoteEnv(gymnasium.Env):
         except LOST as error:  # nothing happened yet: reset the replacement instead
             self.session.restart(error)
             observation, info = self.client.reset(seed=seed, options=options)
+        observation = self._view.observation(observation)
         self._last_observation = observation
         if self.render_mode == "human":
             self.render()
@@ -157,17 +168,23 @@ class RemoteEnv(gymnasium.Env):
     def step(self, action: Any) -> StepResult:
         """Run ``action`` for ``repeat_action`` physics ticks; ``info["frames"]`` says how many.
 
+        Agents the server drives (the hello's ``driven``) are left out of the spaces, the
+        action, the observation, the reward and the episode's end
+        (:mod:`rlenv_client.trainer_view`).
+
         Raises:
+            ValueError: ``action`` has an entry for an agent the server drives.
             ConnectionLost: the server was lost and cannot be restarted (with how it exited).
         """
         try:
-            result = self.client.step(action, self.repeat_action)
+            result = self.client.step(self._view.action(action), self.repeat_action)
         except LOST as error:
             if self._last_observation is None:
                 raise self.session.failure(error) from None
             reason = self.session.restart(error)
             return copy.deepcopy(self._last_observation), 0.0, False, True, {
                 "frames": 0, "server_restarted": reason}
+        result = self._view.result(result)
         self._last_observation = result[0]
         if self.render_mode == "human":
             self.render()

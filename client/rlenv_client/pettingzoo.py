@@ -2,7 +2,10 @@
 
 A server with several agents declares ``Dict`` action and observation spaces keyed by agent
 name; this adaptor splits them back into PettingZoo's per-agent view. Agents whose episode has
-ended leave ``agents`` and take no further actions; the server checks that too.
+ended leave ``agents`` and take no further actions; the server checks that too. Agents the
+server drives itself (``rlenv serve --policy``, the hello's ``driven``) are in neither
+``possible_agents`` nor ``agents``, and take no actions from here
+(:mod:`rlenv_client.trainer_view`).
 
 Needs the optional extra: ``pip install pettingzoo``.
 """
@@ -17,6 +20,7 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from rlenv_client.session import Session
+from rlenv_client.trainer_view import TrainerView
 
 __all__ = ["RemoteParallelEnv"]
 
@@ -46,17 +50,23 @@ class RemoteParallelEnv(ParallelEnv):
         self.session = Session(target, address=address, in_process=in_process, timeout=timeout,
                                server_args=server_args)
         hello = self.session.client.hello
-        self.possible_agents = list(hello.agents)
-        self.agents: list[str] = []
         joint_actions, joint_observations = hello.action_space, hello.observation_space
-        if len(self.possible_agents) > 1:
-            if not (isinstance(joint_actions, spaces.Dict)
-                    and isinstance(joint_observations, spaces.Dict)):
-                self.session.close()
-                raise ValueError(f"{hello.environment} has {len(self.possible_agents)} agents "
-                                 "but its spaces are not keyed by agent")
-            self.action_spaces = dict(joint_actions.spaces)
-            self.observation_spaces = dict(joint_observations.spaces)
+        if len(hello.agents) > 1 and not (isinstance(joint_actions, spaces.Dict)
+                                          and isinstance(joint_observations, spaces.Dict)):
+            self.session.close()
+            raise ValueError(f"{hello.environment} has {len(hello.agents)} agents "
+                             "but its spaces are not keyed by agent")
+        try:
+            self._view = TrainerView(hello)
+        except ValueError:
+            self.session.close()
+            raise
+        self.possible_agents = list(self._view.agents)
+        self.agents: list[str] = []
+        if self._view.joint:
+            self.action_spaces = dict(self._view.action_space.spaces)  # type: ignore[attr-defined]
+            self.observation_spaces = dict(
+                self._view.observation_space.spaces)  # type: ignore[attr-defined]
         else:
             name = self.possible_agents[0]
             self.action_spaces = {name: joint_actions}
@@ -74,6 +84,14 @@ class RemoteParallelEnv(ParallelEnv):
         """The action space of ``agent``."""
         return self.action_spaces[agent]
 
+    def configure(self, **settings: Any) -> None:
+        """Configure the environment, as ``RemoteEnv.configure`` does; replayed after a restart.
+
+        ``agent`` sets every agent, or one agent by its name (or a class by its name):
+        ``configure(agent={"Runner1": {"max_force": 6.0}})``.
+        """
+        self.session.configure(**settings)
+
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
@@ -84,9 +102,15 @@ class RemoteParallelEnv(ParallelEnv):
         return self._split(observation), {agent: {} for agent in self.agents}
 
     def step(self, actions: dict[str, Any]) -> tuple[dict[str, Any], ...]:
-        """Act for every agent still in the episode; returns PettingZoo's five dicts."""
+        """Act for every agent still in the episode; returns PettingZoo's five dicts.
+
+        Raises:
+            ValueError: an action for an agent the server drives (see
+                :mod:`rlenv_client.trainer_view`).
+        """
         live = list(self.agents)
-        joint = {agent: actions[agent] for agent in live} if len(self.possible_agents) > 1 \
+        self._view.refuse_driven(actions)
+        joint = {agent: actions[agent] for agent in live} if self._view.joint \
             else actions[live[0]]
         observation, reward, terminated, truncated, info = self.session.client.step(
             joint, self.repeat_action)
@@ -113,6 +137,6 @@ class RemoteParallelEnv(ParallelEnv):
         self.session.close()
 
     def _split(self, observation: Any) -> dict[str, Any]:
-        if len(self.possible_agents) > 1:
-            return dict(observation)
+        if self._view.joint:
+            return dict(self._view.observation(observation))
         return {self.possible_agents[0]: observation}

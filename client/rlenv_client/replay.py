@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import hashlib
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -26,12 +26,15 @@ from typing import TYPE_CHECKING, Any
 import gymnasium
 
 from rlenv.protocol import pack, unpack
+from rlenv.protocol.errors import RequestError
+from rlenv.serving.snapshots import parse_snapshot
+from rlenv_client.recordings import check_frames, read_recording
 
 if TYPE_CHECKING:  # only named: base.py's Inspection builds EpisodeFiles
     from rlenv_client.base import BaseClient
 
 __all__ = ["EpisodeFile", "RecordEpisodes", "ReplayResult", "Trajectory", "apply_change", "digest",
-           "next_episode_path", "replay"]
+           "next_episode_path", "older_settings", "replay"]
 
 _FORMAT = "rlenv-episode"
 _VERSION = 1
@@ -54,7 +57,9 @@ def next_episode_path(directory: Path) -> Path:
 class EpisodeFile:
     """One recorded episode: the server snapshot, the digests of what the client saw, its end.
 
-    ``terminated`` and ``truncated`` are ``None`` in recordings older than them.
+    ``terminated`` and ``truncated`` are ``None`` in recordings older than them. ``agent``
+    names the agent a person played, in a demonstration of one agent of several (the
+    inspector's Take control); ``None`` otherwise. ``path`` is where :meth:`load` read it.
     """
 
     target: str | None
@@ -62,6 +67,9 @@ class EpisodeFile:
     observations: list[str]
     terminated: bool | None = None
     truncated: bool | None = None
+    agent: str | None = None
+    path: Path | None = field(default=None, compare=False, repr=False)
+    """The file it was read from (``None``: made in this process, or a server's)."""
 
     def save(self, path: str | Path) -> None:
         """Write the episode to ``path`` (the end only when known: older readers skip it)."""
@@ -69,24 +77,48 @@ class EpisodeFile:
                 "snapshot": self.snapshot, "observations": self.observations}
         if self.terminated is not None and self.truncated is not None:
             data.update(terminated=self.terminated, truncated=self.truncated)
+        if self.agent is not None:
+            data["agent"] = self.agent
         Path(path).write_bytes(pack(data))
 
     @classmethod
     def load(cls, path: str | Path) -> EpisodeFile:
-        """Read an episode written by :meth:`save`.
+        """Read an episode written by :meth:`save`, within bounds.
+
+        Through :func:`~rlenv_client.recordings.read_recording`: a regular file of at most
+        64 MiB, each action of at most :data:`~rlenv_client.recordings.MAX_FRAMES_PER_ACTION`
+        ticks, its snapshot of the form a server restores.
+
+        The episode keeps ``path`` (:attr:`path`): the folder it came from counts in whether
+        its ``target`` may be imported (:mod:`rlenv_client.trusted_targets`).
 
         Raises:
-            ValueError: the file is not an rlenv episode.
+            ValueError: the file is not an rlenv episode, not a regular file, or too large.
+            OSError: the file cannot be opened.
         """
+        raw = read_recording(path)
         try:
-            data = unpack(Path(path).read_bytes())
+            data = unpack(raw)
         except Exception as error:
             raise ValueError(f"{path} is not an rlenv episode: {error}") from None
         if not isinstance(data, dict) or data.get("format") != _FORMAT or \
                 data.get("version") != _VERSION:
             raise ValueError(f"{path} is not an rlenv episode (version {_VERSION})")
-        return cls(data["target"], data["snapshot"], list(data["observations"]),
-                   data.get("terminated"), data.get("truncated"))
+        target, observations = data.get("target"), data.get("observations")
+        if not (target is None or isinstance(target, str)) or not isinstance(observations, list) \
+                or not all(isinstance(seen, str) for seen in observations):
+            raise ValueError(f"{path} is not an rlenv episode: its target must be a string and "
+                             "its observations a list of digests")
+        try:
+            snapshot = parse_snapshot(data.get("snapshot"))
+        except RequestError as error:
+            raise ValueError(f"{path} is not an rlenv episode: {error}") from None
+        check_frames(snapshot["events"], str(path))
+        agent = data.get("agent")
+        if not (agent is None or isinstance(agent, str)):
+            raise ValueError(f"{path} is not an rlenv episode: its agent must be a name")
+        return cls(target, snapshot, observations, data.get("terminated"),
+                   data.get("truncated"), agent, Path(path))
 
 
 class RecordEpisodes(gymnasium.Wrapper):
@@ -166,6 +198,21 @@ def apply_change(client: BaseClient, event: Sequence[Any]) -> None:
         client.set_property(*event[1:])
 
 
+def older_settings(snapshot: Mapping[str, Any], agents: Sequence[str]) -> str:
+    """Why a recording of several agents may not replay: it predates their settings by name.
+
+    Before protocol 2.6 a snapshot kept one ``config.agent`` map, the first agent's, and a
+    restore gave it to every agent: agents whose settings differed replay with another's.
+    Returns that, to add to a divergence's message (``""`` where it does not apply).
+    """
+    kept = snapshot.get("config", {}).get("agent") or {}
+    if len(agents) < 2 or not kept or any(name in kept for name in agents):
+        return ""
+    return (" (the recording predates settings per agent, protocol 2.6: it kept one agent's "
+            f"settings, {dict(kept)!r:.60}, which replay on every agent; if the agents' "
+            "settings differed, it cannot replay)")
+
+
 def replay(episode: EpisodeFile, client: BaseClient, *, keep: bool = False) -> ReplayResult:
     """Re-run ``episode`` on ``client``'s environment and compare every observation.
 
@@ -178,7 +225,8 @@ def replay(episode: EpisodeFile, client: BaseClient, *, keep: bool = False) -> R
     observation, _ = client.restore(start)
     expected = iter(episode.observations)
     if digest(observation) != next(expected, None):
-        return ReplayResult(0, "the first observation (after the reset) differs")
+        return ReplayResult(0, "the first observation (after the reset) differs"
+                            + older_settings(episode.snapshot, client.hello.agents))
     kept = Trajectory([observation]) if keep else None
     steps = 0
     for event in episode.snapshot["events"]:
@@ -192,7 +240,7 @@ def replay(episode: EpisodeFile, client: BaseClient, *, keep: bool = False) -> R
             break
         if digest(observation) != recorded:
             return ReplayResult(steps, f"step {steps}: the observation differs from the "
-                                f"recording")
+                                f"recording{older_settings(episode.snapshot, client.hello.agents)}")
         if kept is not None:
             kept.observations.append(observation)
             kept.actions.append(event[1])

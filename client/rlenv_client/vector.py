@@ -18,6 +18,10 @@ Autoreset follows gymnasium 1.x (:class:`gymnasium.vector.AutoresetMode`):
   observation is the reset one, and ``info["final_obs"]`` / ``info["final_info"]`` hold the
   last observation and info of the episode that ended.
 
+Agents the servers drive themselves (``rlenv serve --policy``, the hello's ``driven``) are left
+out of the spaces, actions, observations, rewards and episode ends, as
+:class:`~rlenv_client.env.RemoteEnv` leaves them (:mod:`rlenv_client.trainer_view`).
+
 ``max_episode_steps`` truncates each sub-environment's episodes, as ``TimeLimit`` does. A lost
 server that this vector started is restarted (``max_restarts`` each), and one of a pool is
 found again wherever the pool brought it back: the interrupted episodes
@@ -54,6 +58,7 @@ from rlenv_client.inspection import config_request
 from rlenv_client.launcher import ServerProcess
 from rlenv_client.rows import check_shape, empty_like, row, rows, set_row, set_rows
 from rlenv_client.session import LOST, ServerSource, Session
+from rlenv_client.trainer_view import TrainerView
 from rlenv_client.vector_servers import (
     connect_sessions,
     default_layout,
@@ -99,11 +104,8 @@ class RemoteVectorEnv(VectorEnv):
             ``inspector.url``.
         shared_memory: step servers on this machine through shared-memory lanes (see
             :class:`~rlenv_client.client.Client`): by default wherever they can.
-        server_args: extra arguments for ``rlenv serve``, for each server this vector starts
-            (``["--policy", "Runner=heuristic"]``, say).
-
-    Raises:
-        ValueError: ``server_args`` with servers this vector does not start.
+        server_args: extra arguments for the servers this vector starts (``rlenv serve``),
+            e.g. ``["--policy", "Runner1=heuristic"]``.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array"]}
@@ -160,8 +162,13 @@ class RemoteVectorEnv(VectorEnv):
             raise ValueError(f"num_envs={num_envs}, but the servers given host "
                              f"{len(self._owner)} sub-environments")
         self.num_envs = len(self._owner)
-        self.single_action_space = hello.action_space
-        self.single_observation_space = hello.observation_space
+        try:
+            self._view = TrainerView(hello)
+        except ValueError:
+            self.close()
+            raise
+        self.single_action_space = self._view.action_space
+        self.single_observation_space = self._view.observation_space
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.metadata = {**self.metadata, "autoreset_mode": mode,
@@ -260,6 +267,7 @@ class RemoteVectorEnv(VectorEnv):
         if actions is None:
             raise TypeError(f"step() needs an action for each of the {self.num_envs} "
                             "sub-environments, got None")
+        self._view.action(actions)
         check_shape(self.action_space, actions, "actions")
         try:
             return self._step(actions)
@@ -310,6 +318,7 @@ class RemoteVectorEnv(VectorEnv):
         if self._interrupted is not None:
             return self._after_interruption()
         starts = self._take_starts(resetting) if self._pending_starts else None
+        actions = self._view.full_actions(actions, self.num_envs)
         for session, group in zip(self.sessions, self._groups, strict=True):
             try:
                 session.client.send_steps(rows(actions, group.start, group.stop),
@@ -357,6 +366,11 @@ class RemoteVectorEnv(VectorEnv):
             self._gather_order = [late[-1], *(n for n in order if n != late[-1])]
         if refusals:
             raise refusals[min(refusals)]
+        if self._view.driven:  # the trainer's agents' rewards and ends, not every agent's
+            for index, info in enumerate(env_infos):
+                if "agents" in info:  # not in a lost server's
+                    rewards[index], terminations[index], truncations[index] = \
+                        self._view.outcome(info)
         return observations, rewards, terminations, truncations, frames, env_infos
 
     def _after_interruption(self) -> tuple[Any, ...]:

@@ -40,8 +40,7 @@ def server_places(num_envs: int | None, target: str | None, addresses: Sequence[
     """Where each server's share of a vector is: the :class:`Session` arguments of each.
 
     A pool's servers, running servers by address, or servers to start (``instances_per_server``
-    each, or :func:`default_layout`'s; ``server_args`` for ``rlenv serve``), or groups in this
-    process.
+    each, or :func:`default_layout`'s; started with ``server_args``), or groups in this process.
 
     Raises:
         ValueError: no sub-environment at all.
@@ -58,11 +57,8 @@ def server_places(num_envs: int | None, target: str | None, addresses: Sequence[
                       for start in range(0, num_envs, instances_per_server)]
         else:  # in this process: all in one group; else one server per core
             layout = [num_envs] if in_process else default_layout(num_envs)
-        places = [{"target": target, "in_process": in_process, "instances": count}
-                  for count in layout]
-        if server_args:
-            for place in places:
-                place["server_args"] = tuple(server_args)
+        places = [{"target": target, "in_process": in_process, "instances": count,
+                   "server_args": server_args} for count in layout]
     if not places:
         raise ValueError("a vector environment needs at least one sub-environment")
     return places

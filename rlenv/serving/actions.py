@@ -5,7 +5,9 @@ name to action for every agent still in the episode (every agent when the reques
 episode first); actions for agents whose episode ended are ignored, so that a client holding
 the joint ``Dict`` action space may keep sending them (PettingZoo's convention). Actions for
 agents a policy drives (``rlenv serve --policy``) are ignored too: their policy gives them
-(:mod:`rlenv.serving.policy_driver`).
+(:mod:`rlenv.serving.policy_driver`), except in a replayed action, where the logged ones
+replay. An action leaves out the agents a request's ``heuristic`` part names (their heuristic
+acts), and may not act for them.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ class ActionCheck:
 
     def __init__(self, agents: Sequence[RLAgent], space: spaces.Space,
                  driven: frozenset[str] = frozenset()) -> None:
+        self._every = list(agents)
         self._agents = [agent for agent in agents if agent.name not in driven]
         self._driven = driven
         self._several = len(agents) > 1
@@ -41,12 +44,14 @@ class ActionCheck:
                       for a in agents}
 
     def __call__(self, action: Any, fresh: bool, where: str = "",
-                 replayed: bool = False) -> Any:
+                 replayed: bool = False, heuristic: frozenset[str] = frozenset()) -> Any:
         """``action`` in its space's native form.
 
         ``fresh``: the request starts an episode first (every agent takes an action). A
         ``replayed`` action (from a snapshot's log) holds the agents that were still in the
-        episode: any of them.
+        episode: any of them, driven ones included (their logged actions replay). The agents
+        named in ``heuristic`` act by their heuristic in this action: they need no entry, and
+        may not have one.
 
         Raises:
             RequestError: ``invalid_action``, the message prefixed with ``where``.
@@ -59,14 +64,21 @@ class ActionCheck:
                 raise SpaceMismatch(f"action must be a map from agent name to action, one per "
                                     f"agent in the episode: {[a.name for a in agents]}")
             unknown = sorted(map(str, action.keys() - self._each.keys()))
-            if self._driven:
-                action = {k: v for k, v in action.items() if k not in self._driven}
             if unknown:
                 raise SpaceMismatch(f"action for unknown agent {unknown[0]!r}")
             if replayed:
-                live = [a.name for a in agents if a.name in action]
-            else:
-                live = [a.name for a in agents if fresh or not (a.terminated or a.truncated)]
+                return {a.name: self._each[a.name](action[a.name]) for a in self._every
+                        if a.name in action}
+            if self._driven:
+                action = {k: v for k, v in action.items() if k not in self._driven}
+            if heuristic:
+                both = sorted(heuristic & action.keys())
+                if both:
+                    raise SpaceMismatch(f"an action for agent {both[0]!r}, whose heuristic "
+                                        "acts in this step (the heuristic part): one or the "
+                                        "other")
+                agents = [a for a in agents if a.name not in heuristic]
+            live = [a.name for a in agents if fresh or not (a.terminated or a.truncated)]
             missing = sorted(set(live) - action.keys())
             if missing:
                 raise SpaceMismatch(f"no action for agent {missing[0]!r}")

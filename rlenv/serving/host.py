@@ -34,7 +34,7 @@ from rlenv.serving.instance import Episode, Instance, failure, load_environment
 from rlenv.serving.lean import LeanSteps
 from rlenv.serving.parts import HostPart, dispatch, plan_for, shape_of, takes_control
 from rlenv.serving.policy_driver import DrivenAgents, Policy, PolicyDriver
-from rlenv.serving.recent import KEEP_EPISODES
+from rlenv.serving.recent import KEEP_EVENTS
 
 __all__ = ["Host", "Prepared", "target_of"]
 
@@ -88,10 +88,13 @@ class Host:
         record_dir: where clients may have the environments record videos.
         real_time: start in real-time mode.
         policies: what drives agents (a loaded policy file, or ``"heuristic"``), by agent
-            name (one instance, lockstep; see :mod:`rlenv.serving.policy_driver`).
+            name, in every instance (lockstep; one instance when they drive every agent; see
+            :mod:`rlenv.serving.policy_driver`).
         max_episode_steps: with every agent driven, steps after which an episode is cut short.
-        keep_episodes: how many finished episodes each instance keeps as recordings (0:
-            none; see :mod:`rlenv.serving.recent`).
+        keep_episodes: how many finished episodes each instance keeps as recordings, from the
+            start (0: none, ever; ``None``: 8, once a client asks for them; see
+            :mod:`rlenv.serving.recent`). They hold at most
+            :data:`~rlenv.serving.recent.KEEP_EVENTS` events in all, shared by the instances.
 
     Attributes:
         driver: plays episodes between requests when policies drive every agent, else
@@ -101,9 +104,9 @@ class Host:
         ValueError: ``count`` is smaller than 1.
         TypeError: several instances of an environment object.
         RuntimeError: the environment has no agent, world or spaces.
-        ValueError: ``policies`` with several instances or in real time; a policy for an agent
-            the environment lacks, or whose spaces are not its agent's; a heuristic for an
-            agent whose class defines none.
+        ValueError: ``policies`` in real time, or driving every agent of several instances; a
+            policy for an agent the environment lacks, or whose spaces are not its agent's; a
+            heuristic for an agent whose class defines none.
     """
 
     def __init__(self, environment: RLEnvironment | type[RLEnvironment] | str, count: int = 1,
@@ -111,7 +114,7 @@ class Host:
                  record_dir: Path | None = None, real_time: bool = False,
                  policies: Mapping[str, Policy] | None = None,
                  max_episode_steps: int | None = None,
-                 keep_episodes: int = KEEP_EPISODES) -> None:
+                 keep_episodes: int | None = None) -> None:
         target = target_of(environment)
         if isinstance(environment, str):
             environment = load_environment(environment)
@@ -119,8 +122,8 @@ class Host:
             raise ValueError("a host holds at least one instance")
         if count > 1 and not isinstance(environment, type):
             raise TypeError("several instances need the environment class, not an instance")
-        self.instances = [Instance(environment, dispatch, clock, record_dir, keep_episodes)
-                          for _ in range(count)]
+        self.instances = [Instance(environment, dispatch, clock, record_dir, keep_episodes,
+                                   KEEP_EVENTS // count) for _ in range(count)]
         first = self.instances[0]
         self.hello = Hello(
             environment=first.environment.name,
@@ -149,17 +152,20 @@ class Host:
 
     def _drive(self, policies: Mapping[str, Policy], max_episode_steps: int | None,
                real_time: bool) -> None:
-        """Let ``policies`` drive their agents; a driver when they drive every agent."""
-        if len(self.instances) > 1 or real_time:
-            raise ValueError("--policy drives the agents of one instance in lockstep: leave out "
-                             "--instances and --real-time")
-        instance = self.instances[0]
-        driven = DrivenAgents(policies, instance.agents)
-        instance.drive(driven)
-        self.hello.driven = tuple(agent.name for agent in instance.agents
-                                  if agent.name in driven.names)
-        if driven.every_agent:
-            self.driver = PolicyDriver(self.answer, instance, driven, max_episode_steps)
+        """Let ``policies`` drive their agents in every instance; a driver when they drive all."""
+        if real_time:
+            raise ValueError("--policy drives agents in lockstep: leave out --real-time")
+        driven = [DrivenAgents(policies, instance.agents) for instance in self.instances]
+        for instance, agents in zip(self.instances, driven, strict=True):
+            instance.drive(agents)
+        first = self.instances[0]
+        self.hello.driven = tuple(agent.name for agent in first.agents
+                                  if agent.name in driven[0].names)
+        if driven[0].every_agent:
+            if len(self.instances) > 1:
+                raise ValueError("--policy drives every agent, so the server plays one "
+                                 "instance itself: leave out --instances")
+            self.driver = PolicyDriver(self.answer, first, driven[0], max_episode_steps)
 
     def answer(self, request: Request) -> Reply:
         """The one answer to ``request`` (plain, batch or steps); a refusal changes nothing.
@@ -259,7 +265,7 @@ class Host:
             endpoint.reserve("its agents are driven by policies (rlenv serve --policy); only "
                              "observing is open")
             while True:
-                got = endpoint.receive(0.0)
+                got = endpoint.receive(driver.wait())
                 if got is None:
                     driver.step()
                 else:

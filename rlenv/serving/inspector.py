@@ -78,7 +78,7 @@ def node_entry(node: Node, section: str | None = None) -> dict[str, Any]:
     ``section`` of a config reaches them (``config``) and what it may change
     (``configurable``): a change there lasts across episodes, a ``set`` for one. Agents also
     say which keys a person acts with (``demonstration_keys``, see
-    :mod:`rlenv.demonstration_keys`).
+    :mod:`rlenv.demonstration_keys`) and whether their class has a ``heuristic`` (2.6).
     """
     exported = exported_values(node)
     entry = {"path": node.get_path(), "type": type(node).__name__, "exported": exported,
@@ -88,6 +88,7 @@ def node_entry(node: Node, section: str | None = None) -> dict[str, Any]:
         entry["configurable"] = list(getattr(node, "configurable", ()))
     if section == "agent":
         entry["demonstration_keys"] = keys_of(node)
+        entry["heuristic"] = node.has_heuristic()  # type: ignore[attr-defined]  # an RLAgent
     return entry
 
 

@@ -164,13 +164,52 @@ class Action(Part):
             return None
         if not fresh and instance.state is not _RUNNING:
             instance.check_can_act()  # refuses
-        return instance.checked_action(action, fresh)
+        return instance.checked_action(action, fresh,
+                                       heuristic=frozenset(parts.get("heuristic") or ()))
 
     def apply(self, instance: Instance, value: Any, request: Plan) -> None:
         if value is not None:
             instance.act(value, request.get("repeat_action") or
-                         instance.environment.repeat_action)
+                         instance.environment.repeat_action,
+                         request.get("heuristic") or frozenset())
             instance.answer.acted = True  # type: ignore[union-attr]
+
+
+class Heuristic(Part):
+    """Agent names (2.6): in this request's action, they act by their ``RLAgent.heuristic``.
+
+    As for agents the server drives (``rlenv serve --policy NAME=heuristic``), each named agent
+    still in the episode gets its heuristic's action for its observation just before the
+    action applies, and the episode's log records it; the action has no entry for them. The
+    inspector's demonstrations send it: a person plays one agent, the others their heuristic.
+    """
+
+    name = "heuristic"
+
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
+              where: str) -> Any:
+        names = parts["heuristic"]
+        agents = {agent.name: agent for agent in instance.agents}
+        if not (isinstance(names, list) and all(isinstance(n, str) for n in names)):
+            raise _bad(f"{where}'heuristic' must be a list of agent names")
+        if parts.get("action") is None:
+            raise _bad(f"{where}'heuristic' given without an 'action'")
+        if not instance.multi_agent:
+            raise _bad(f"{where}'heuristic' names agents of an action of several; to let a "
+                       "lone agent's heuristic play, serve it with --policy NAME=heuristic")
+        driven = instance.driven.names if instance.driven is not None else frozenset()
+        for name in names:
+            agent = agents.get(name)
+            if agent is None:
+                raise _bad(f"{where}heuristic: no agent {name!r:.40}; the agents: "
+                           f"{', '.join(agents)}")
+            if not agent.has_heuristic():
+                raise _bad(f"{where}heuristic: agent {name!r} (class {type(agent).__name__}) "
+                           "has no heuristic")
+            if name in driven:
+                raise _bad(f"{where}heuristic: agent {name!r} is driven by the server "
+                           "already (rlenv serve --policy)")
+        return frozenset(names)
 
 
 class RepeatAction(Part):
@@ -246,28 +285,60 @@ class Snapshot(Part):
 
 
 class Episodes(Part):
-    """``{}`` or ``{"last": n}``: the instance's last finished episodes, as snapshots (2.5).
+    """The instance's last finished episodes, as snapshots (2.5; by index and in pages, 2.6).
 
-    See :mod:`rlenv.serving.recent`: ``info["episodes"]`` lists them oldest first, each
-    ``{"snapshot", "terminated", "truncated", "steps"}`` (``[]`` when the server keeps none).
-    It takes no control and needs no episode: any client may ask, at any time.
+    See :mod:`rlenv.serving.recent`. ``{}`` or ``{"last": n}``: ``info["episodes"]`` lists
+    them whole, oldest first, each ``{"snapshot", "terminated", "truncated", "steps"}``.
+    ``{"index": true}``: ``info["episodes"]`` lists them without events, each ``{"id",
+    "terminated", "truncated", "steps", "events"}``. ``{"episode": id, "from": k}``:
+    ``info["episode"]`` is one page of one (``None`` when it is no longer kept). Any form
+    starts the keeping (``[]`` until an episode finishes, and always when the server keeps
+    none). It takes no control and needs no episode: any client may ask, at any time.
     """
 
     name = "episodes"
     alone = True
-    _KEYS = frozenset({"last"})
+    _KEYS = frozenset({"last", "index", "episode", "from"})
 
     def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
               where: str) -> Any:
         episodes = _map(parts["episodes"], "episodes", where)
         check_keys(episodes, self._KEYS, "episodes")
+        forms = [key for key in ("last", "index", "episode") if key in episodes]
+        if len(forms) > 1:
+            raise _bad(f"episodes takes one of last, index and episode, got "
+                       f"{' and '.join(forms)}")
+        if "from" in episodes and "episode" not in episodes:
+            raise _bad("episodes.from goes with episodes.episode (a page of that episode)")
+        if "index" in episodes:
+            if episodes["index"] is not True:
+                raise _bad(f"episodes.index must be true, got {episodes['index']!r:.40}")
+            return ("index",)
+        if "episode" in episodes:
+            return ("page", _count(episodes, "episode"), _count(episodes, "from"))
         last = episodes.get("last")
         if last is not None and (type(last) is not int or last < 1):
             raise _bad(f"episodes.last must be an integer >= 1, got {last!r:.40}")
-        return last
+        return ("whole", last)
 
     def apply(self, instance: Instance, value: Any, request: Plan) -> None:
-        instance.answer.info = {"episodes": instance.recent.to_wire(value)}  # type: ignore[union-attr]
+        recent = instance.recent
+        recent.start()
+        if value[0] == "index":
+            info: dict[str, Any] = {"episodes": recent.index()}
+        elif value[0] == "page":
+            info = {"episode": recent.page(value[1], value[2])}
+        else:
+            info = {"episodes": recent.to_wire(value[1])}
+        instance.answer.info = info  # type: ignore[union-attr]
+
+
+def _count(part: Mapping[str, Any], key: str) -> int:
+    """``part[key]``, an integer >= 0 (0 if absent)."""
+    value = part.get(key, 0)
+    if type(value) is not int or value < 0:
+        raise _bad(f"episodes.{key} must be an integer >= 0, got {value!r:.40}")
+    return value
 
 
 class Restore(Part):
@@ -702,7 +773,7 @@ def _reset_mask(mask: Any, count: int) -> list[bool]:
 PARTS: dict[str, Part | HostPart] = {
     part.name: part for part in (
         Restore(), Inspect(), Snapshot(), Episodes(), EditLevel(), Config(), Reset(),
-        RepeatAction(), Action(), Observation(), Batch(), Steps())
+        RepeatAction(), Heuristic(), Action(), Observation(), Batch(), Steps())
 }
 """Every kind of request part, in the order they apply."""
 

@@ -28,7 +28,12 @@ class HostPerClient:
     """A :class:`Host` per client connection, each built by ``build``.
 
     Args:
-        build: makes a host (the environment's instances, in trees of their own).
+        build: makes a host (the environment's instances, in trees of their own), with its
+            driven agents if any (``rlenv serve --per-client --policy NAME=...``: each
+            client's environment drives its own ``NAME``).
+
+    Raises:
+        ValueError: the hosts' policies drive every agent (no client could control one).
 
     Attributes:
         hello: what every client is told (the first host's: every host says the same).
@@ -37,6 +42,11 @@ class HostPerClient:
     def __init__(self, build: Callable[[], Host]) -> None:
         self._build = build
         self._spare: Host | None = build()  # proves the environment loads; the first client's
+        if self._spare.driver is not None:
+            self._spare.close()
+            raise ValueError("--policy drives every agent, so the server plays its episodes "
+                             "itself and no client controls them: leave out --per-client, or "
+                             "drive fewer agents")
         self.hello = self._spare.hello
         self._hosts: dict[Peer, Host] = {}
 

@@ -11,7 +11,6 @@ from rlenv.serving.endpoint import DEFAULT_HOST, Endpoint, Limits
 from rlenv.serving.host import Host
 from rlenv.serving.per_client import HostPerClient
 from rlenv.serving.policy_driver import load_policies
-from rlenv.serving.recent import KEEP_EPISODES
 
 __all__ = ["Server"]
 
@@ -47,11 +46,13 @@ class Server:
         policies: what drives agents, by agent name: an ONNX policy file, or ``"heuristic"``
             for the agent's own :meth:`~rlenv.agent.RLAgent.heuristic` (``rlenv serve
             --policy``; see :mod:`rlenv.serving.policy_driver`). With every agent driven, the
-            server plays episodes itself and clients may only observe.
+            server plays episodes itself and clients may only observe. With ``per_client``,
+            every client's environment has its driven agents, driven by the same loaded files
+            (they keep no state between steps); not every agent may be driven then.
         max_episode_steps: steps after which a policy-driven episode is cut short.
         keep_episodes: how many finished episodes each instance keeps as recordings, for
-            clients to fetch (the ``episodes`` part; ``rlenv serve --keep-episodes``); 0 keeps
-            none.
+            clients to fetch (the ``episodes`` part; ``rlenv serve --keep-episodes``), from the
+            start; 0 keeps none; ``None`` (the default) keeps 8 once a client asks for them.
 
     Attributes:
         host: the instances and how requests reach them (with ``per_client``, the hosts of
@@ -69,7 +70,7 @@ class Server:
         limits: Limits | None = None, instances: int = 1, record_dir: Path | None = None,
         real_time: bool = False, per_client: bool = False,
         policies: Mapping[str, str | Path] | None = None, max_episode_steps: int | None = None,
-        keep_episodes: int = KEEP_EPISODES,
+        keep_episodes: int | None = None,
     ) -> None:
         loaded = load_policies(policies or {})
 
@@ -80,9 +81,6 @@ class Server:
 
         if per_client and not isinstance(environment, str | type):
             raise TypeError("a server per client needs the environment class, not an instance")
-        if per_client and loaded:
-            raise ValueError("--policy drives the agents of the server's environment: leave out "
-                             "--per-client")
         self.host: Host | HostPerClient = HostPerClient(build) if per_client else build()
         self.endpoint = Endpoint(self.host.hello, limits or Limits(), token,
                                  per_client=per_client)

@@ -14,6 +14,11 @@ Snapshot format (``version`` 1)::
      "rng": "<the generator's state, as JSON>", "options": {...},
      "events": [["config", {...}], ["action", action, frames],
                 ["set", node path, property, value], ...]}
+
+``config`` is a ``config`` part that sets everything again (:meth:`Settings.state
+<rlenv.serving.settings.Settings.state>`): its ``agent`` holds the one agent's settings or,
+with several agents, each agent's by name (protocol 2.6; before, one map, the first agent's,
+which restores on every agent as it always did).
 """
 
 from __future__ import annotations
@@ -88,12 +93,17 @@ class EpisodeLog:
             return
         self.events.append(event)
 
-    def snapshot(self) -> dict[str, Any]:
-        """The episode so far, as data (see :meth:`check_snapshot` for when it is refused)."""
+    def snapshot(self, events: slice | None = None) -> dict[str, Any]:
+        """The episode so far, as data (see :meth:`check_snapshot` for when it is refused).
+
+        Args:
+            events: only these of its events (a page of a kept episode's, say); all if
+                ``None``.
+        """
         self.check_snapshot()
         return {"version": SNAPSHOT_VERSION, "config": self.config,
                 "rng": json.dumps(self._rng_state), "options": self.options,
-                "events": list(self.events)}
+                "events": list(self.events) if events is None else self.events[events]}
 
     def check_snapshot(self) -> None:
         """Refuse a snapshot that cannot be taken.

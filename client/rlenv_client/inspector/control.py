@@ -11,6 +11,13 @@ into the directory given at the start, as :class:`~rlenv_client.replay.RecordEpi
 "Release" (:meth:`Demonstrator.release`) drops the episode under way and closes the
 connection, which frees control. The keys are the agent's ``demonstration_keys`` (see
 :mod:`rlenv.demonstration_keys`), read from the server's node tree.
+
+With several agents the person chooses the one to play (``agent``; needed when more than one
+may be played). The others keep what drives them: the agents the server drives (``rlenv serve
+--policy``: a policy file or their heuristic) go on by themselves; each other agent whose class
+has a ``heuristic`` plays it (the step's ``heuristic`` part, protocol 2.6), and the rest take
+their idle action. The recorded files say which agent the person played
+(``EpisodeFile.agent``, see :class:`~rlenv_client.replay.EpisodeFile`).
 """
 
 from __future__ import annotations
@@ -36,7 +43,7 @@ __all__ = ["Demonstrator", "held_action", "idle_action", "key_map"]
 
 
 class _Control:
-    """One taken instance: its connection, key map, held keys and the stepping thread."""
+    """One taken instance: its connection, the agent played, key map, held keys, the thread."""
 
     def __init__(self, client: Client, server: int, instance: int,
                  keys: dict[str, Any]) -> None:
@@ -44,9 +51,23 @@ class _Control:
         self.server = server
         self.instance = instance
         self.keys = keys
+        self.agent: str | None = None  # the agent played, with several
+        self.space: spaces.Space = client.hello.action_space  # the played agent's
+        self.idle: dict[str, Any] = {}  # the other agents' idle actions, by name
+        self.heuristic: list[str] = []  # the other agents that play their heuristic
         self.held: list[str] = []
         self.stop = threading.Event()
         self.thread: threading.Thread | None = None
+
+    def step_parts(self, action: Any) -> dict[str, Any]:
+        """The parts of a step that plays ``action`` for the person's agent."""
+        client = self.client
+        if self.agent is None:
+            return client.step_request(action).parts
+        parts = client.step_request({**self.idle, self.agent: action}).parts
+        if self.heuristic:
+            parts["heuristic"] = self.heuristic
+        return parts
 
     def exchange(self, parts: Mapping[str, Any]) -> Response | ErrorReply:
         """One request to this instance (in a batch when the server hosts several)."""
@@ -95,17 +116,22 @@ class Demonstrator:
             return {"controlling": running,
                     "server": control.server if running else None,  # type: ignore[union-attr]
                     "instance": control.instance if running else None,  # type: ignore
+                    "agent": control.agent if running else None,  # type: ignore[union-attr]
+                    "heuristic": list(control.heuristic) if running else [],  # type: ignore
                     "keys": sorted(control.keys) if running else [],  # type: ignore[union-attr]
                     "held": list(control.held) if running else [],  # type: ignore[union-attr]
                     "episodes": self.episodes, "directory": str(self.directory),
                     "error": self.error}
 
-    def take(self, server: int, instance: int) -> dict[str, Any]:
-        """Take control of ``instance`` of ``server`` and start playing (see the module).
+    def take(self, server: int, instance: int, agent: str | None = None) -> dict[str, Any]:
+        """Take control of ``instance`` of ``server`` and play ``agent`` (see the module).
+
+        ``agent`` may be left out when only one agent can be played.
 
         Raises:
-            InspectorError: 409 already controlling, or another client controls it; 422 it
-                has no key map, or not one agent; 404 no such server or instance; 503
+            InspectorError: 409 already controlling, or another client controls it; 422 its
+                agent has no key map, no ``agent`` was chosen among several, or the one
+                chosen is driven by the server; 404 no such server, instance or agent; 503
                 unreachable.
         """
         with self._lock:
@@ -118,7 +144,7 @@ class Demonstrator:
             except (RemoteError, *LOST) as error:
                 raise InspectorError(503, f"{address}: {error}") from None
             try:
-                control = self._start(client, server, instance)
+                control = self._start(client, server, instance, agent)
             except BaseException:
                 client.close()
                 raise
@@ -150,19 +176,23 @@ class Demonstrator:
 
     # --- taking, stepping ---------------------------------------------------------------------
 
-    def _start(self, client: Client, server: int, instance: int) -> _Control:
-        count = client.hello.instances
+    def _start(self, client: Client, server: int, instance: int,
+               agent: str | None) -> _Control:
+        hello = client.hello
+        count = hello.instances
         if not 0 <= instance < count:
             raise InspectorError(404, f"server {server} has {count} instances, not "
                                       f"{instance + 1}")
-        space = client.hello.action_space
         control = _Control(client, server, instance, {})
-        control.keys = key_map(_answer(control.exchange({"inspect": {"tree": {}}}))
-                               .info["tree"], space)
-        idle_action(space)  # refuses a space without one now
+        tree = _answer(control.exchange({"inspect": {"tree": {}}})).info["tree"]
+        if len(hello.agents) > 1:
+            _choose(control, tree, agent)
+        elif agent is not None and agent not in hello.agents:
+            raise InspectorError(404, f"no agent {agent!r:.40}: the agent is {hello.agents[0]}")
+        control.keys = key_map(tree, control.space, control.agent)
+        idle_action(control.space)  # refuses a space without one now
         observation, _ = client.reset_result(_answer(control.exchange(
             client.reset_request().parts)))
-        hello = client.hello
         rate = self.rate or hello.physics_ticks_per_second / hello.repeat_action
         control.thread = threading.Thread(target=self._play, args=(control, observation, rate),
                                           name="rlenv-demonstration", daemon=True)
@@ -171,21 +201,21 @@ class Demonstrator:
 
     def _play(self, control: _Control, observation: Any, rate: float) -> None:
         """Step at ``rate`` with the held keys' action; record each episode as it ends."""
-        client, space = control.client, control.client.hello.action_space
+        client, space = control.client, control.space
         seen = [digest(observation)]
         due = time.monotonic()
         try:
             while not control.stop.is_set():
                 with self._lock:
                     actions = [control.keys[key] for key in control.held]
-                request = client.step_request(held_action(space, actions))
                 observation, _, terminated, truncated, _ = client.step_result(
-                    control.exchange(request.parts))
+                    control.exchange(control.step_parts(held_action(space, actions))))
                 seen.append(digest(observation))
                 if terminated or truncated:
                     snapshot = _answer(control.exchange({"snapshot": {}})).info["snapshot"]
                     with self._lock:
-                        EpisodeFile(self.target, snapshot, seen).save(
+                        EpisodeFile(self.target, snapshot, seen, terminated, truncated,
+                                    agent=control.agent).save(
                             next_episode_path(self.directory))
                         self.episodes += 1
                     observation, _ = client.reset_result(control.exchange(
@@ -220,23 +250,66 @@ def _answer(reply: Response | ErrorReply) -> Response:
     return reply
 
 
-def key_map(tree: Sequence[Mapping[str, Any]], space: spaces.Space) -> dict[str, Any]:
-    """The agent's keys and their actions (values of ``space``), from a node tree.
+def _choose(control: _Control, tree: Sequence[Mapping[str, Any]], agent: str | None) -> None:
+    """Set the agent ``control`` plays among several, and what the others do.
 
-    The tree is ``inspect tree``'s (its agent node carries ``demonstration_keys``); the
+    Raises:
+        InspectorError: 422 none chosen among several, or a driven one; 404 no such agent.
+    """
+    hello = control.client.hello
+    playable = [name for name in hello.agents if name not in hello.driven]
+    if agent is None:
+        if len(playable) != 1:
+            raise InspectorError(422, f"this environment has {len(hello.agents)} agents: "
+                                      f"choose the one to play ({', '.join(playable)})")
+        agent = playable[0]
+    if agent not in hello.agents:
+        raise InspectorError(404, f"no agent {agent!r:.40}; the agents: "
+                                  f"{', '.join(hello.agents)}")
+    if agent in hello.driven:
+        raise InspectorError(422, f"agent {agent!r} is driven by the server (rlenv serve "
+                                  f"--policy); choose another: {', '.join(playable)}")
+    joint = hello.action_space
+    assert isinstance(joint, spaces.Dict)
+    nodes = _agent_nodes(tree)
+    control.agent, control.space = agent, joint[agent]
+    others = [name for name in playable if name != agent]
+    control.heuristic = [name for name in others if nodes[name].get("heuristic")]
+    control.idle = {name: idle_action(joint[name]) for name in others
+                    if name not in control.heuristic}
+
+
+def _agent_nodes(tree: Sequence[Mapping[str, Any]]) -> dict[str, Mapping[str, Any]]:
+    """The agents' nodes of an ``inspect tree``, by agent name (the last part of the path)."""
+    return {str(node["path"]).rsplit("/", 1)[-1]: node for node in tree
+            if node.get("config") == "agent"}
+
+
+def key_map(tree: Sequence[Mapping[str, Any]], space: spaces.Space,
+            agent: str | None = None) -> dict[str, Any]:
+    """The keys of ``agent`` (the only one if ``None``), as actions of its ``space``.
+
+    The tree is ``inspect tree``'s (its agent nodes carry ``demonstration_keys``); the
     inspector's timelines branch with the same map (:mod:`~rlenv_client.inspector.timelines`).
 
     Raises:
-        InspectorError: 422, not one agent, or one with no key map.
+        InspectorError: 422, no agent named, among several, or one with no key map; 404 no
+            such agent.
     """
-    agents = [node for node in tree if node.get("config") == "agent"]
-    if len(agents) != 1:
-        raise InspectorError(422, f"demonstrations play one agent; this environment has "
-                                  f"{len(agents)}")
+    agents = _agent_nodes(tree)
+    if agent is None:
+        if len(agents) != 1:
+            raise InspectorError(422, f"this environment has {len(agents)} agents: choose "
+                                      f"the one to play ({', '.join(agents)})")
+        (node,) = agents.values()
+    elif agent in agents:
+        node = agents[agent]
+    else:
+        raise InspectorError(404, f"no agent {agent!r:.40}; the agents: {', '.join(agents)}")
     keys = {key: _action(space, value)
-            for key, value in agents[0].get("demonstration_keys", {}).items()}
+            for key, value in node.get("demonstration_keys", {}).items()}
     if not keys:
-        raise InspectorError(422, f"demonstrations need a key map: {agents[0]['type']} "
+        raise InspectorError(422, f"demonstrations need a key map: {node['type']} "
                                   f"names no demonstration_keys for {space}")
     return keys
 

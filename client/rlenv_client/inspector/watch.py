@@ -5,7 +5,9 @@ stays here, never in the page). It only sends what observers may send: ``observa
 (``draw``, ``agent``), ``snapshot``, ``episodes`` and ``inspect``, so it never takes control;
 the trainer's steps go on, and a change it makes applies between two of them. Every call is
 answered from a fresh request (nothing is cached, so a slow page drops frames, never queues
-them); a lost connection is reconnected on the next call (or at a new address, see
+them), but for the recent episodes, which never change once kept: each is fetched once, in
+pages, and the server is asked to keep them as soon as the watcher connects. A lost connection
+is reconnected on the next call (or at a new address, see
 :meth:`Watcher.follow`). A server counts as restarted when it moved to a new address, or when
 after a reconnection its step count went back (another process: an idle connection the server
 closed is not a restart).
@@ -26,7 +28,12 @@ from rlenv.protocol import ErrorReply, Request, Response
 from rlenv.protocol.errors import RemoteError
 from rlenv_client.addresses import parse_address
 from rlenv_client.client import Client
-from rlenv_client.inspection import EPISODES_SINCE, episode_files
+from rlenv_client.inspection import (
+    AGENT_SETTINGS_SINCE,
+    EPISODES_SINCE,
+    PAGED_EPISODES_SINCE,
+    fetch_episodes,
+)
 from rlenv_client.replay import EpisodeFile
 from rlenv_client.session import LOST
 
@@ -61,6 +68,7 @@ class _Watched:
         self.steps: dict[int, int] = {}  # per instance, the step count its last statistics gave
         self.lost_at = -_RETRY_AFTER
         self.error = ""
+        self.recent: dict[int, dict[int, EpisodeFile]] = {}  # fetched, by instance and id
 
 
 class Watcher:
@@ -96,7 +104,8 @@ class Watcher:
             else:
                 hello = client.hello
                 entry.update(environment=hello.environment, instances=hello.instances,
-                             agents=list(hello.agents), action_space=_short(hello.action_space),
+                             agents=list(hello.agents), driven=list(hello.driven),
+                             action_space=_short(hello.action_space),
                              observation_space=_short(hello.observation_space),
                              ticks_per_second=hello.physics_ticks_per_second,
                              protocol=".".join(map(str, hello.protocol)))
@@ -123,12 +132,15 @@ class Watcher:
     def node(self, server: int, instance: int, path: str) -> dict[str, Any]:
         """One node, with its exported values.
 
-        ``settings`` names those an edit keeps across episodes: its configurable ones, unless it
-        is one agent of several (a setting of the agent section would change every agent).
+        ``settings`` names those an edit keeps across episodes: its configurable ones. One
+        agent of several has them on a server that sets one agent by its name (protocol 2.6);
+        on an older one a setting would change every agent, so it has none.
         """
         node = dict(to_json(self._ask(server, instance, {"inspect": {"node": {"path": path}}})
                             .info["node"]))
-        shared = node.get("config") == "agent" and len(self._client(server).hello.agents) > 1
+        hello = self._client(server).hello
+        shared = node.get("config") == "agent" and len(hello.agents) > 1 and \
+            hello.protocol < AGENT_SETTINGS_SINCE
         node["settings"] = [] if shared else list(node.get("configurable", ()))
         return node
 
@@ -136,12 +148,15 @@ class Watcher:
         """Change a property; returns which kind of change it was.
 
         ``setting`` (a ``configure``: it lasts) where the node's config section reaches the
-        property, else ``episode`` (a ``set``, until the next reset).
+        property (an agent of several: that agent's, by its name), else ``episode`` (a
+        ``set``, until the next reset).
         """
         node = self.node(server, instance, path)
         if name in node["settings"]:
-            self._ask(server, instance,
-                      {"inspect": {"configure": {node["config"]: {name: value}}}})
+            settings = {name: value}
+            if node["config"] == "agent" and len(self._client(server).hello.agents) > 1:
+                settings = {node["path"].rsplit("/", 1)[-1]: settings}
+            self._ask(server, instance, {"inspect": {"configure": {node["config"]: settings}}})
             return "setting"
         self._ask(server, instance, {"inspect": {"set": {"path": path, "property": name,
                                                         "value": value}}})
@@ -180,8 +195,9 @@ class Watcher:
         if hello.protocol < EPISODES_SINCE:
             raise InspectorError(422, "server {} speaks protocol {}.{}; recent episodes need "
                                  "2.5".format(server, *hello.protocol))
-        reply = self._ask(server, instance, {"episodes": {}})
-        return episode_files(reply.info["episodes"], hello.target)
+        cache = self._watched(server).recent.setdefault(instance, {})
+        return fetch_episodes(lambda part: self._ask(server, instance, {"episodes": part}),
+                              hello, cache=cache)
 
     def address(self, server: int) -> str:
         """The ``HOST:PORT`` of ``server`` (a controller of its own connects there).
@@ -277,6 +293,8 @@ class Watcher:
             watched.lost_at, watched.error = now, str(error)
             raise InspectorError(503, f"{watched.address} is unreachable: {error}") from None
         watched.reconnected = set(watched.steps)  # the instances seen before: still the same?
+        watched.recent.clear()  # perhaps another process: its ids name other episodes
+        _start_keeping(watched.client)
         return watched.client
 
     @staticmethod
@@ -285,6 +303,23 @@ class Watcher:
             watched.client.close()
             watched.client = None
         watched.lost_at, watched.error = time.monotonic(), why
+
+
+def _start_keeping(client: Client) -> None:
+    """Ask every instance for its recent episodes' index: a server keeps none until asked."""
+    hello = client.hello
+    if hello.protocol < PAGED_EPISODES_SINCE:
+        return
+    part = {"episodes": {"index": True}}
+    try:
+        if hello.instances == 1:
+            client.send_request(Request(0, part))
+            client.receive_reply()
+        else:
+            client.send_batch([Request(0, part)] * hello.instances)
+            client.receive_batch()
+    except (RemoteError, *LOST):
+        pass  # the next call says what is wrong
 
 
 def _short(space: spaces.Space) -> str:

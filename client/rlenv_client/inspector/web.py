@@ -18,13 +18,15 @@ Routes (below the key): ``/`` the page, ``/static/NAME`` its script and style, a
 ``api/snapshot`` (``?server=S&instance=I``, and ``path`` or ``since``), ``api/control`` (the
 demonstration under way) and ``POST api/edit`` (``{"server", "instance", "path", "property",
 "value"}``); with demonstrations (:mod:`~rlenv_client.inspector.control`), ``POST api/control``
-(``{"server", "instance"}``: take control), ``api/keys`` (``{"held": [key, ...]}``) and
-``api/release`` (``{}``), under the same rules as an edit.
+(``{"server", "instance"}`` and, with several agents, the ``agent`` to play: take control),
+``api/keys`` (``{"held": [key, ...]}``) and ``api/release`` (``{}``), under the same rules as
+an edit.
 
 With timelines (:mod:`~rlenv_client.inspector.timelines`: ``rlenv replay FILE --inspect``, or
 a watched instance's recent episodes), ``GET api/timelines`` (those offered, the policies),
 ``api/timeline`` (``?timeline=T``: its length, keys and tree of branches),
-``api/timeline/step`` and ``api/timeline/ticks`` (``?timeline=T&branch=B&step=K``),
+``api/timeline/step`` and ``api/timeline/ticks`` (``?timeline=T&branch=B&step=K``; the ticks
+a page at a time: ``&first=F&count=N``, at most 100),
 ``api/timeline/compare`` (``?timeline=T&a=A&b=B&step=K``), ``api/timeline/recent``
 (``?server=S&instance=I``: the instance's last finished episodes, each with its ``id``) and
 ``POST api/timeline/open`` (``{"server", "instance", "id"}``: a recent one as a timeline),
@@ -47,7 +49,7 @@ from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 from rlenv_client.inspector.control import Demonstrator
-from rlenv_client.inspector.timelines import Timelines, episode_id
+from rlenv_client.inspector.timelines import MAX_TICKS, Timelines, episode_id
 from rlenv_client.inspector.watch import InspectorError, Watcher
 from rlenv_client.origins import OriginPolicy
 
@@ -104,7 +106,12 @@ class InspectorServer(ThreadingHTTPServer):
         return f"http://127.0.0.1:{self.server_address[1]}/{self.key}/"
 
     def start(self) -> None:
-        """Serve in a background thread (see :meth:`close`)."""
+        """Serve in a background thread (see :meth:`close`).
+
+        The watched servers are connected first: a server keeps its recent episodes from the
+        moment an inspector asks (the watcher does as it connects).
+        """
+        self.watcher.servers()
         self._thread = threading.Thread(target=self.serve_forever, name="rlenv-inspector",
                                         daemon=True)
         self._thread.start()
@@ -189,7 +196,8 @@ _TIMELINE_GETS: dict[str, Callable[[Timelines, dict[str, list[str]]], Any]] = {
     "api/timeline/step": lambda timelines, q: timelines.step(
         _number(q, "timeline"), _number(q, "branch"), _number(q, "step")),
     "api/timeline/ticks": lambda timelines, q: timelines.ticks(
-        _number(q, "timeline"), _number(q, "branch"), _number(q, "step")),
+        _number(q, "timeline"), _number(q, "branch"), _number(q, "step"), _number(q, "first", 1),
+        _number(q, "count", MAX_TICKS)),
     "api/timeline/compare": lambda timelines, q: timelines.compare(
         _number(q, "timeline"), _number(q, "a"), _number(q, "b", 1), _number(q, "step")),
 }
@@ -264,8 +272,9 @@ class _Handler(BaseHTTPRequestHandler):
             return None
         return rest, parse_qs(url.query)
 
-    def _body(self, what: str, expected: set[str]) -> dict[str, Any]:
-        """The request's JSON body: a map of exactly ``expected``.
+    def _body(self, what: str, expected: set[str],
+              optional: frozenset[str] = frozenset()) -> dict[str, Any]:
+        """The request's JSON body: a map of ``expected``, and maybe some of ``optional``.
 
         ``server`` and ``instance``, when expected, must be integers >= 0.
         """
@@ -277,13 +286,14 @@ class _Handler(BaseHTTPRequestHandler):
             body = json.loads(self.rfile.read(int(length)), parse_constant=_no_constant)
         except ValueError as error:
             raise InspectorError(400, f"{what}'s body is not JSON: {error}") from None
-        if not isinstance(body, dict) or set(body) != expected:
-            raise InspectorError(400, f"{what} is a map of exactly {sorted(expected)}")
+        if not isinstance(body, dict) or not expected <= set(body) <= expected | optional:
+            also = f" (and maybe {sorted(optional)})" if optional else ""
+            raise InspectorError(400, f"{what} is a map of exactly {sorted(expected)}{also}")
         for name in ("server", "instance", "timeline", "branch", "step", "episode",
                      "max_steps"):
             if name in body and (type(body[name]) is not int or not 0 <= body[name] < 2**31):
                 raise InspectorError(400, f"{name} must be an integer >= 0")
-        for name in ("key", "policy", "id"):
+        for name in ("key", "policy", "id", "agent"):
             if name in body and (not isinstance(body[name], str) or len(body[name]) > 64):
                 raise InspectorError(400, f"{name} must be a string (at most 64 characters)")
         return body
@@ -326,8 +336,8 @@ class _Handler(BaseHTTPRequestHandler):
         return self.server.demonstrator
 
     def _take(self) -> Any:
-        body = self._body("taking control", {"server", "instance"})
-        return self._demonstrator().take(body["server"], body["instance"])
+        body = self._body("taking control", {"server", "instance"}, frozenset({"agent"}))
+        return self._demonstrator().take(body["server"], body["instance"], body.get("agent"))
 
     def _keys(self) -> Any:
         held = self._body("a key change", {"held"})["held"]

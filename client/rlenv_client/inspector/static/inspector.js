@@ -280,14 +280,16 @@ function propertyCells(name) {
 function propertyRow(node, name) {
   const {row, input, badge} = propertyCells(name);
   input.readOnly = node.read_only.includes(name);
-  input.addEventListener("change", () => edit(node.path, name, input));
+  input.addEventListener("change", () => edit(node, name, input));
   input.addEventListener("keydown", (event) => { if (event.key === "Escape") input.blur(); });
   badge.textContent = input.readOnly ? "read-only" :
     node.settings.includes(name) ? "setting" : "episode";
   return row;
 }
 
-async function edit(path, name, input) {
+// A setting of an agent is that agent's alone (config.agent by its name, protocol 2.6).
+async function edit(node, name, input) {
+  const path = node.path;
   const note = $("edit-status");
   let value;
   try { value = JSON.parse(input.value); } catch (error) {
@@ -301,7 +303,8 @@ async function edit(path, name, input) {
   });
   const answer = await response.json();
   note.textContent = response.ok ? `${name} = ${JSON.stringify(value)} (${answer.scope === "setting" ?
-    "a setting: kept across episodes" : "until the next reset"})` : `refused: ${answer.error}`;
+    `a setting${node.config === "agent" ? " of this agent" : ""}: kept across episodes` :
+    "until the next reset"})` : `refused: ${answer.error}`;
   note.className = response.ok ? "note" : "note bad";
   input.blur();
 }
@@ -380,6 +383,13 @@ function showControl(control, note = null, bad = false) {
   if (!control.enabled) return;
   const busy = performance.now() - state.othersSteppedAt < OTHERS_QUIET;
   const mine = control.controlling && control.server === state.server && control.instance === state.instance;
+  const playable = playableAgents();
+  const choice = $("control-agent");
+  if (choice.dataset.agents !== playable.join("|")) {
+    choice.replaceChildren(...playable.map((name) => new Option(name, name)));
+    choice.dataset.agents = playable.join("|");
+  }
+  choice.hidden = control.controlling || playable.length < 2;
   $("take-control").hidden = control.controlling;
   $("take-control").disabled = busy;
   $("take-control").title = busy ? "another client controls this environment" : "";
@@ -388,7 +398,7 @@ function showControl(control, note = null, bad = false) {
   status.dataset.episodes = control.episodes;
   status.dataset.held = (control.held || []).join(" ");
   status.textContent = note ?? (control.error ? control.error :
-    mine ? `you control it: keys ${control.keys.map((k) => k === " " ? "Space" : k).join(", ")}` +
+    mine ? `you control ${control.agent ?? "it"}: keys ${control.keys.map((k) => k === " " ? "Space" : k).join(", ")}` +
            ` · ${control.episodes} episodes recorded in ${control.directory}` :
     control.controlling ? `you control server ${control.server} instance ${control.instance}` :
     busy ? "another client controls this environment" : `${control.episodes} episodes recorded`);
@@ -400,9 +410,17 @@ async function refreshControl() {
   showControl(await response.json());
 }
 
+// The agents a person may play on the selected server: its agents less those it drives.
+function playableAgents() {
+  const server = state.servers[state.server] || {};
+  return (server.agents || []).filter((name) => !(server.driven || []).includes(name));
+}
+
 async function takeControl() {
+  const body = {server: state.server, instance: state.instance};
+  if (playableAgents().length > 1) body.agent = $("control-agent").value;
   try {
-    showControl(await post("control", {server: state.server, instance: state.instance}));
+    showControl(await post("control", body));
   } catch (error) { showControl(state.control, `refused: ${error.message}`, true); }
 }
 

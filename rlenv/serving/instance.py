@@ -437,9 +437,8 @@ class Instance:
             return
         agents = self.agents
         if self.multi_agent:  # as an answer reports them
-            ended = all(agent.terminated or agent.truncated for agent in agents)
-            terminated = ended and any(agent.terminated for agent in agents)
-            truncated = ended and not terminated
+            terminated, truncated = _joint_end([(agent.terminated, agent.truncated)
+                                                for agent in agents])
         else:
             terminated, truncated = agents[0].terminated, agents[0].truncated
         if self.recent.finished(self.log, bool(terminated), bool(truncated)):
@@ -618,13 +617,24 @@ def _outcome(agents: list[RLAgent], several: bool,
     outcomes = {each.name: {"reward": float(each.reward) if reports else 0.0,
                             "terminated": bool(each.terminated),
                             "truncated": bool(each.truncated)} for each in agents}
-    ended = all(o["terminated"] or o["truncated"] for o in outcomes.values())
-    terminated = ended and any(o["terminated"] for o in outcomes.values())
+    terminated, truncated = _joint_end([(o["terminated"], o["truncated"])
+                                        for o in outcomes.values()])
     if reports:
         for each in agents:
             each.reward = 0.0
-    return (sum(o["reward"] for o in outcomes.values()), terminated, ended and not terminated,
-            outcomes)
+    return sum(o["reward"] for o in outcomes.values()), terminated, truncated, outcomes
+
+
+def _joint_end(flags: list[tuple[bool, bool]]) -> tuple[bool, bool]:
+    """The joint episode's ``(terminated, truncated)``, from each agent's.
+
+    ``terminated`` when every agent ended terminated; ``truncated`` when every agent is done
+    and at least one was truncated (a time-out after a catch is no terminal state, so a
+    trainer still bootstraps from it). An agent both terminated and truncated counts as
+    terminated; the two joint flags are never both true.
+    """
+    terminated = all(ended for ended, _ in flags)
+    return terminated, not terminated and all(ended or cut for ended, cut in flags)
 
 
 def _joint_space(agents: list[RLAgent], which: str) -> spaces.Space:

@@ -50,6 +50,7 @@ _EXPORTS = {
     "view": "rlenv.scene2d.views",
     "Node2D": "rlenv.scene2d.node2d",
     "Marker2D": "rlenv.scene2d.marker2d",
+    "RaycastSensor2D": "rlenv.scene2d.raycast_sensor",
     "PackedScene": "rlenv.scene2d.packed_scene",
     "PackedSceneError": "rlenv.scene2d.packed_scene",
     "gradient": "rlenv.scene2d.colors",
@@ -78,6 +79,7 @@ if TYPE_CHECKING:
     from rlenv.scene2d.node2d import Node2D as Node2D
     from rlenv.scene2d.packed_scene import PackedScene as PackedScene
     from rlenv.scene2d.packed_scene import PackedSceneError as PackedSceneError
+    from rlenv.scene2d.raycast_sensor import RaycastSensor2D as RaycastSensor2D
     from rlenv.scene2d.physics import CollisionShape as CollisionShape
     from rlenv.scene2d.physics import Joint as Joint
     from rlenv.scene2d.physics import KinematicBody as KinematicBody

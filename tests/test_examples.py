@@ -69,7 +69,7 @@ def test_the_reacher_reaches_and_pays_for_effort(serve: Serve) -> None:
 
 
 @pytest.mark.parametrize("name", ["cartpole", "classic_cartpole", "seeker", "pixels", "reacher",
-                                  "pair", "plinko", "maze"])
+                                  "pair", "tag", "plinko", "maze"])
 def test_every_example_serves_as_a_module(name: str) -> None:
     process = subprocess.Popen(
         [sys.executable, "-m", f"examples.{name}", "--port", "0"], stdout=subprocess.PIPE,

@@ -3,8 +3,8 @@
 The levels of PLR and ACCEL's mazes, on pymunk: an agent (a small round body) moves on a
 grid of 11 x 11 one-metre cells, the outer ring a wall, walls on some of the 9 x 9 cells
 inside, and a goal (a sensor) on one free cell. The agent does not observe where it or the
-goal is: it casts 16 rays and sees how far each goes before a wall, and whether (and how
-near) the goal is along it. So levels differ in what they teach: a goal in sight of the start
+goal is: it casts 16 rays (a :class:`~rlenv.RaycastSensor2D` on its body) and sees how far
+each goes before a wall, and whether (and how near) the goal is along it. So levels differ in what they teach: a goal in sight of the start
 is reached by walking to it, a goal behind walls needs exploring.
 
 Every reset builds a new level from the episode's seeded generator (walls at random cells, as
@@ -27,6 +27,7 @@ kept reachable)::
             |   |___Goal (Goal)           a sensor box on its cell
             |   |___Start (Marker2D)      where the agent starts
             |___Body (RigidBody)          the agent
+                |___Eyes (RaycastSensor2D) its 16 rays
 
 ## Action Space
 ``Discrete(5)``: 0 stop, 1 up (+y), 2 down, 3 left (-x), 4 right; the agent's body moves at
@@ -64,7 +65,6 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 import numpy as np
-import pymunk
 from gymnasium import spaces
 
 from rlenv import (
@@ -73,6 +73,7 @@ from rlenv import (
     Node2D,
     PackedScene,
     PhysicsWorld,
+    RaycastSensor2D,
     RigidBody,
     RLAgent,
     RLEnvironment,
@@ -116,8 +117,6 @@ RAY_LENGTH = 6.0
 DENSITY = (0.1, 0.45)  # the fraction of inner cells walled: build_level's at difficulty 0 and 1
 ACTIONS = ((0.0, 0.0), (0.0, 1.0), (0.0, -1.0), (-1.0, 0.0), (1.0, 0.0))
 """The direction of each action: stop, up, down, left, right."""
-_DIRECTIONS = [(math.cos(i * math.tau / RAYS), math.sin(i * math.tau / RAYS))
-               for i in range(RAYS)]
 
 Cell = tuple[int, int]
 """A cell as (column, row), 0 to SIZE - 1 from the bottom left; the inside is 1 to SIZE - 2."""
@@ -379,6 +378,7 @@ class MazeWorld(LevelWorld):
         body = self.body = RigidBody(position=tuple(start.global_position), name="Body")
         body.add_child(CollisionShape.circle(AGENT_RADIUS, mass=1.0, friction=0.0,
                                              color="crimson", name="Skin"))
+        body.add_child(RaycastSensor2D(n_rays=RAYS, ray_length=RAY_LENGTH, name="Eyes"))
         physics.add_child(body)
         self.goal = goal
         for shape in goal.get_children():
@@ -458,23 +458,14 @@ class MazeAgent(RLAgent):
         """The rays' wall and goal channels and the agent's velocity (see the module)."""
         world = self._world()
         assert world.body is not None and world.physics is not None and world.goal is not None
-        space = world.physics.space
-        own = set(world.body.body.shapes)
-        goal = set(world.goal.body.shapes)
-        x, y = world.body.position
+        goal = world.goal
+        eyes = world.body.get_node("Eyes")
         observation = np.zeros(2 * RAYS + 2, dtype=np.float32)
-        for index, (dx, dy) in enumerate(_DIRECTIONS):
-            end = (x + dx * RAY_LENGTH, y + dy * RAY_LENGTH)
-            wall, seen = 1.0, 1.0
-            for hit in space.segment_query((x, y), end, 0.0, pymunk.ShapeFilter()):
-                if hit.shape in own:
-                    continue
-                if hit.shape in goal:
-                    seen = min(seen, hit.alpha)
-                else:
-                    wall = min(wall, hit.alpha)
-            observation[index] = wall
-            observation[RAYS + index] = 1.0 - seen if seen < wall else 0.0
+        for index, crossed in enumerate(eyes.cast()):  # the goal is a sensor: rays cross it
+            wall = next((d for d, node in crossed if node.body_node is not goal), RAY_LENGTH)
+            seen = next((d for d, node in crossed if node.body_node is goal), RAY_LENGTH)
+            observation[index] = wall / RAY_LENGTH
+            observation[RAYS + index] = 1.0 - seen / RAY_LENGTH if seen < wall else 0.0
         vx, vy = world.body.velocity
         scale = 2.0 * self.max_speed
         observation[2 * RAYS:] = (vx / scale + 0.5, vy / scale + 0.5)

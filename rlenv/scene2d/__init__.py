@@ -2,6 +2,7 @@
 
 - :mod:`~rlenv.scene2d.node2d`: Node2D, a node placed relative to the Node2D above it;
 - :mod:`~rlenv.scene2d.marker2d`: Marker2D, a mounting point copies are attached to;
+- :mod:`~rlenv.scene2d.raycast_sensor`: RaycastSensor2D, rays and the distances to what they hit;
 - :mod:`~rlenv.scene2d.physics`: the world (a pymunk space), bodies, collision shapes, joints;
 - :mod:`~rlenv.scene2d.lattice`, :mod:`~rlenv.scene2d.colors`: copies along a pattern, and
   colours and gradients;

@@ -16,6 +16,7 @@ from typing import Any
 import pymunk
 
 from rlenv.node import Node, ProcessMode, _overrides
+from rlenv.scene2d import raycast_sensor
 from rlenv.scene2d.camera import Camera
 from rlenv.scene2d.colors import to_rgb
 from rlenv.scene2d.marker2d import Marker2D
@@ -38,6 +39,7 @@ from rlenv.scene2d.pymunk_data import (
     shape_to_data,
     vector,
 )
+from rlenv.scene2d.raycast_sensor import RaycastSensor2D
 from rlenv.timer import PhysicsFramesTimer
 
 __all__ = ["CODECS", "OWN_CLASSES", "Codec", "codec_for"]
@@ -138,6 +140,40 @@ class Node2DCodec(Codec):
         """See :meth:`Codec.construct`."""
         self.base.__init__(node, name, position=properties["position"],  # type: ignore[call-arg]
                            rotation=properties["rotation"])
+
+
+class SensorCodec(Node2DCodec):
+    """RaycastSensor2D: the pose and the rays' settings (checked: level data may hold one)."""
+
+    settings = frozenset({"n_rays", "ray_length", "cone_width", "collision_mask",
+                          "collide_with_sensors", "exclude_parent"})
+    keys = Node2DCodec.keys | settings
+    handled = Node2DCodec.handled | settings | {"_hits"}
+    _defaults = {"n_rays": 16, "ray_length": 5.0, "cone_width": math.tau,
+                 "collision_mask": raycast_sensor.ALL_LAYERS, "collide_with_sensors": False,
+                 "exclude_parent": True}
+
+    def pack(self, node: Node) -> dict[str, Any]:
+        """See :meth:`Codec.pack`."""
+        properties = super().pack(node)
+        for key, default in self._defaults.items():
+            value = getattr(node, key)
+            if value != default:
+                properties[key] = value
+        return properties
+
+    def _checked(self, properties: Mapping[str, Any]) -> dict[str, Any]:
+        checked = super()._checked(properties)
+        checked.update(raycast_sensor.check_settings({**self._defaults, **{
+            key: value for key, value in properties.items() if key in self.settings}}))
+        return checked
+
+    def construct(self, node: Node, name: str, properties: Mapping[str, Any]) -> None:
+        """See :meth:`Codec.construct`."""
+        RaycastSensor2D.__init__(node, name,  # type: ignore[arg-type]
+                                 **{key: properties[key] for key in self.settings},
+                                 position=properties["position"],
+                                 rotation=properties["rotation"])
 
 
 _BODY_TYPES = {"dynamic": pymunk.Body.DYNAMIC, "kinematic": pymunk.Body.KINEMATIC,
@@ -337,6 +373,7 @@ CODECS: dict[type[Node], Codec] = {
     Node: Codec(Node),
     Node2D: Node2DCodec(Node2D),
     Marker2D: Node2DCodec(Marker2D),
+    RaycastSensor2D: SensorCodec(RaycastSensor2D),
     PhysicsWorld: WorldCodec(PhysicsWorld),
     PhysicsBody: BodyCodec(PhysicsBody),
     RigidBody: BodyCodec(RigidBody),

@@ -205,3 +205,31 @@ def test_the_registered_multi_agent_id_gives_remote_env_its_time_limit() -> None
     assert spec.max_episode_steps == registration.max_episode_steps == 300
     assert spec.kwargs["max_episode_steps"] == 300  # RemoteEnv's own, agreeing per agent
     assert "max_episode_steps" not in gymnasium.spec("rlenv/CartPole-v0").kwargs
+
+
+def test_a_runner_caught_then_the_time_limit_is_a_time_out_in_tag() -> None:
+    """The new user's game: agents of two classes, through ``gymnasium.make`` and its limit."""
+    from examples.tag import CHASER, Chaser, Runner
+
+    chaser, runner = Chaser(), Runner("Runner")
+    env = gymnasium.make("rlenv/Tag-v0")
+    try:
+        ends = {}
+        for seed in (2, 0):  # seed 2: Runner2 alone is caught in 300 steps; seed 0: both are
+            observation, _ = env.reset(seed=seed)
+            for steps in range(1, 301):
+                observation, _, terminated, truncated, info = env.step({
+                    name: (chaser if name == CHASER else runner).heuristic(value)
+                    for name, value in observation.items()})
+                if terminated or truncated:
+                    break
+            ends[seed] = (steps, terminated, truncated, {
+                name: (outcome["terminated"], outcome["truncated"])
+                for name, outcome in info["agents"].items()})
+    finally:
+        env.close()
+    assert ends[2] == (300, False, True, {"Chaser": (False, True), "Runner1": (False, True),
+                                          "Runner2": (True, False)})
+    steps, terminated, truncated, agents = ends[0]
+    assert steps < 300 and (terminated, truncated) == (True, False)
+    assert agents == dict.fromkeys(agents, (True, False))

@@ -35,7 +35,7 @@ ENVIRONMENTS = {
     "rlenv/Pixels-v0": _Registration("rlenv.examples.pixels:PixelsEnvironment", 1000),
     "rlenv/Plinko-v0": _Registration("rlenv.examples.plinko:PlinkoEnvironment", 100),
     "rlenv/Reacher-v0": _Registration("rlenv.examples.reacher:ReacherEnvironment", 200),
-    "rlenv/Tag-v0": _Registration("rlenv.examples.tag:TagEnvironment", 300),
+    "rlenv/Tag-v0": _Registration("rlenv.examples.tag:TagEnvironment", 300, True),
     "rlenv/Seeker-v0": _Registration("rlenv.examples.seeker:SeekerEnvironment", 250),
     "rlenv/SeekerPixels-v0": _Registration("rlenv.examples.seeker:SeekerPixelsEnvironment", 250),
 }

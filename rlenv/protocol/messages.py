@@ -44,7 +44,7 @@ __all__ = [
     "StepsResponse",
 ]
 
-PROTOCOL_VERSION: Final = (2, 5)
+PROTOCOL_VERSION: Final = (2, 6)
 """(major, minor). Peers with different majors refuse each other; a newer minor only adds."""
 
 _REWARD = np.dtype("<f8")

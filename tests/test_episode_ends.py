@@ -217,12 +217,13 @@ def test_a_runner_caught_then_the_time_limit_is_a_time_out_in_tag() -> None:
         ends = {}
         for seed in (2, 0):  # seed 2: Runner2 alone is caught in 300 steps; seed 0: both are
             observation, _ = env.reset(seed=seed)
-            for steps in range(1, 301):
+            terminated = truncated = False
+            steps = 0
+            while not (terminated or truncated):  # gym.make's TimeLimit ends it at 300 at most
                 observation, _, terminated, truncated, info = env.step({
                     name: (chaser if name == CHASER else runner).heuristic(value)
                     for name, value in observation.items()})
-                if terminated or truncated:
-                    break
+                steps += 1
             ends[seed] = (steps, terminated, truncated, {
                 name: (outcome["terminated"], outcome["truncated"])
                 for name, outcome in info["agents"].items()})

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 from conftest import Serve
 
+from rlenv_client import ServerProcess
 from rlenv_client.observations import observation_difference
 
 TESTS = Path(__file__).parent
@@ -77,6 +78,20 @@ def test_a_served_pair_passes_with_compliance(serve: Serve) -> None:
     assert compliance.startswith("PASS  ") and " 0 failures" in compliance
     assert line_of(result.stdout, "seeded reset is reproducible").startswith("PASS  ")
     if HAS_PETTINGZOO:  # its own client, after the checks' client released control
+        assert line_of(result.stdout, "pettingzoo parallel_api_test").startswith("PASS  ")
+
+
+def test_a_served_pair_with_a_token_passes_every_check() -> None:
+    """The token reaches every client of the checks: the environment's and PettingZoo's."""
+    token = "pair-secret-0123456789"
+    environ = _environ()
+    with ServerProcess(PAIR, args=["--token", token]) as server:
+        result = subprocess.run(
+            [sys.executable, "-m", "rlenv", "check", server.address, "--token", token],
+            capture_output=True, text=True, timeout=300, stdin=subprocess.DEVNULL,
+            env={key: value for key, value in environ.items() if key != "RLENV_TOKEN"})
+    assert result.returncode == 0, result.stdout + result.stderr
+    if HAS_PETTINGZOO:
         assert line_of(result.stdout, "pettingzoo parallel_api_test").startswith("PASS  ")
 
 

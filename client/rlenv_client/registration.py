@@ -31,11 +31,13 @@ ENVIRONMENTS = {
     "rlenv/CartPole-v1": _Registration(
         "rlenv.examples.classic_cartpole:ClassicCartPoleEnvironment", 500),
     "rlenv/Maze-v0": _Registration("rlenv.examples.maze:MazeEnvironment", 250),
-    "rlenv/Pair-v0": _Registration("rlenv.examples.pair:PairEnvironment", 300, True),
+    "rlenv/Pair-v0": _Registration("rlenv.examples.pair:PairEnvironment", 300,
+                                   several_agents=True),
     "rlenv/Pixels-v0": _Registration("rlenv.examples.pixels:PixelsEnvironment", 1000),
     "rlenv/Plinko-v0": _Registration("rlenv.examples.plinko:PlinkoEnvironment", 100),
     "rlenv/Reacher-v0": _Registration("rlenv.examples.reacher:ReacherEnvironment", 200),
-    "rlenv/Tag-v0": _Registration("rlenv.examples.tag:TagEnvironment", 300, True),
+    "rlenv/Tag-v0": _Registration("rlenv.examples.tag:TagEnvironment", 300,
+                                  several_agents=True),
     "rlenv/Seeker-v0": _Registration("rlenv.examples.seeker:SeekerEnvironment", 250),
     "rlenv/SeekerPixels-v0": _Registration("rlenv.examples.seeker:SeekerPixelsEnvironment", 250),
 }

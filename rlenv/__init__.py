@@ -79,13 +79,13 @@ if TYPE_CHECKING:
     from rlenv.scene2d.node2d import Node2D as Node2D
     from rlenv.scene2d.packed_scene import PackedScene as PackedScene
     from rlenv.scene2d.packed_scene import PackedSceneError as PackedSceneError
-    from rlenv.scene2d.raycast_sensor import RaycastSensor2D as RaycastSensor2D
     from rlenv.scene2d.physics import CollisionShape as CollisionShape
     from rlenv.scene2d.physics import Joint as Joint
     from rlenv.scene2d.physics import KinematicBody as KinematicBody
     from rlenv.scene2d.physics import PhysicsWorld as PhysicsWorld
     from rlenv.scene2d.physics import RigidBody as RigidBody
     from rlenv.scene2d.physics import StaticBody as StaticBody
+    from rlenv.scene2d.raycast_sensor import RaycastSensor2D as RaycastSensor2D
     from rlenv.scene2d.views import View as View
     from rlenv.scene2d.views import view as view
     from rlenv.serving.self_hosting import run as run

@@ -58,6 +58,7 @@ CARTPOLE: Final = "examples.cartpole:CartPoleEnvironment"
 FAULTY: Final = "examples.faulty:FaultyEnvironment"
 PLINKO: Final = "examples.plinko:PlinkoEnvironment"
 SPACES: Final = "protocol_vectors:SpacesEnvironment"
+CHASE: Final = "per_agent_envs:ChaseEnvironment"
 VARIES: Final = "<varies>"
 """What a path listed in an exchange's ``varies`` is replaced with before comparing."""
 
@@ -478,6 +479,24 @@ def _config(recording: Recording) -> None:
                  "an empty response")
     link.request({"id": 2, "reset": {"seed": 0}, "action": f4(1.0), "observation": AGENT},
                  "reset and act in one request", "2 ticks: the configured repeat_action")
+
+
+@scenario("agent_settings.json", "Settings per agent (protocol 2.6): every agent, a class, one "
+          "agent", CHASE)
+def _agent_settings(recording: Recording) -> None:
+    link = recording.connect()
+    link.hello("three agents of two classes: Chaser (ChaserAgent), Runner1 and Runner2 "
+               "(RunnerAgent)")
+    link.request({"id": 1, "config": {"agent": {"max_force": 9.0, "RunnerAgent": {"sight": 3.0},
+                                                "Runner1": {"max_force": 6.0}}}},
+                 "a setting for every agent, one for a class, one for an agent: the more "
+                 "precise wins", "an empty response")
+    link.request({"id": 2, "reset": {"seed": 0}}, "reset")
+    link.request({"id": 3, "snapshot": {}}, "take a snapshot",
+                 "info.snapshot.config.agent: each agent's settings, by name")
+    link.request({"id": 4, "config": {"agent": {"Runner3": {"max_force": 1.0}}}},
+                 "a key that is neither a setting nor an agent",
+                 "invalid_config naming the settings, the agents and their classes")
 
 
 @scenario("snapshot.json", "Snapshot and restore")

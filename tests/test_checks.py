@@ -18,7 +18,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pytest
 from conftest import Serve
 
 from rlenv_client import ServerProcess
@@ -104,8 +103,6 @@ def test_agents_of_different_classes_pass() -> None:
             line_of(result.stdout, "pettingzoo parallel_api_test")
 
 
-@pytest.mark.xfail(strict=True, reason="a snapshot keeps the first agent's settings for every "
-                   "agent (issue 41, item 1: settings per agent): drop this mark when it lands")
 def test_a_served_tag_passes_with_compliance(serve: Serve) -> None:
     server = serve(TAG)
     result = check(server.address, "--compliance")

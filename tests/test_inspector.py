@@ -238,17 +238,22 @@ def test_every_example_can_be_watched(serve: Serve, target: str) -> None:
 
 
 def test_an_agents_setting_is_its_own_among_several(serve: Serve) -> None:
+    """The node panel sets one agent of several (config.agent by its name): it lasts, and
+    the other agent keeps its own value."""
     server = serve("compliance_envs:GainPairEnvironment", env={"PYTHONPATH": str(TESTS)})
     with watching(server) as url:
         with Client(server.host, server.port) as controller:
             controller.reset(seed=0)
             red = fetch(url, "api/node?path=Red")[2]
-            assert red["configurable"] == ["gain"] and red["settings"] == []  # not all agents'
+            assert red["configurable"] == ["gain"] and red["settings"] == ["gain"]
             edit = {"server": 0, "instance": 0, "path": "Red", "property": "gain", "value": 5.0}
             assert fetch(url, "api/edit", method="POST", body=edit)[2] == {
-                "scope": "episode"}
+                "scope": "setting"}
+            controller.reset(seed=1)  # a setting outlives the episode
             gains = [controller.get_property(name, "gain") for name in ("Red", "Blue")]
+            kept = controller.snapshot()["config"]["agent"]
     assert gains == [5.0, 1.0]
+    assert kept == {"Red": {"gain": 5.0}, "Blue": {"gain": 1.0}}
 
 
 def test_a_dead_inspector_never_stops_the_training() -> None:

@@ -87,9 +87,15 @@ class BaseClient(Inspection, ABC):
         self, *, agent: Mapping[str, Any] | None = None, world: Mapping[str, Any] | None = None,
         **environment: Any,
     ) -> None:
-        """Configure the environment (keywords), the agent and the world.
+        """Configure the environment (keywords), the agents and the world.
 
         Example: ``client.configure(repeat_action=7, agent={"max_force": 20.0})``.
+
+        ``agent`` sets every agent; keyed by an agent's name (as :attr:`hello`'s ``agents``
+        lists them) or its class's name, it sets that agent or that class's agents (protocol
+        2.6): ``agent={"Runner1": {"max_force": 6.0}}``. The forms mix, the more precise
+        winning (every agent < class < name): ``agent={"max_force": 9.0, "Runner":
+        {"max_force": 8.0}, "Runner1": {"max_force": 6.0}}``.
 
         Raises:
             RemoteError: ``invalid_config`` naming the key the server refused; nothing was

@@ -145,7 +145,11 @@ class RemoteEnv(gymnasium.Env):
         return self.session.server
 
     def configure(self, **settings: Any) -> None:
-        """Configure the environment (see ``Client.configure``); replayed after a restart."""
+        """Configure the environment (see ``Client.configure``); replayed after a restart.
+
+        ``agent`` sets every agent, or one agent by its name (or a class by its name):
+        ``configure(agent={"Runner1": {"max_force": 6.0}})``.
+        """
         self.session.configure(**settings)
 
     def reset(

@@ -21,6 +21,8 @@ from rlenv_client.replay import EpisodeFile
 __all__ = ["EPISODES_SINCE", "Inspection", "config_request", "episode_files"]
 
 EPISODES_SINCE = (2, 5)
+AGENT_SETTINGS_SINCE = (2, 6)
+"""The protocol whose ``config.agent`` may set one agent, keyed by its name."""
 """The protocol version that brought the ``episodes`` part (:meth:`Inspection.episodes`)."""
 
 
@@ -43,7 +45,7 @@ class Inspection:
         self, *, agent: Mapping[str, Any] | None = None, world: Mapping[str, Any] | None = None,
         **environment: Any,
     ) -> None:
-        """Change settings as ``configure`` does, but as an inspector: from any client.
+        """Change settings as ``configure`` does (``agent`` by name too), but as an inspector.
 
         (:meth:`~rlenv_client.base.BaseClient.configure` needs control.)
 

@@ -75,6 +75,14 @@ class RemoteParallelEnv(ParallelEnv):
         """The action space of ``agent``."""
         return self.action_spaces[agent]
 
+    def configure(self, **settings: Any) -> None:
+        """Configure the environment, as ``RemoteEnv.configure`` does; replayed after a restart.
+
+        ``agent`` sets every agent, or one agent by its name (or a class by its name):
+        ``configure(agent={"Runner1": {"max_force": 6.0}})``.
+        """
+        self.session.configure(**settings)
+
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:

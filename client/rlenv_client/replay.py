@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import hashlib
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -31,7 +31,7 @@ if TYPE_CHECKING:  # only named: base.py's Inspection builds EpisodeFiles
     from rlenv_client.base import BaseClient
 
 __all__ = ["EpisodeFile", "RecordEpisodes", "ReplayResult", "Trajectory", "apply_change", "digest",
-           "next_episode_path", "replay"]
+           "next_episode_path", "older_settings", "replay"]
 
 _FORMAT = "rlenv-episode"
 _VERSION = 1
@@ -166,6 +166,21 @@ def apply_change(client: BaseClient, event: Sequence[Any]) -> None:
         client.set_property(*event[1:])
 
 
+def older_settings(snapshot: Mapping[str, Any], agents: Sequence[str]) -> str:
+    """Why a recording of several agents may not replay: it predates their settings by name.
+
+    Before protocol 2.6 a snapshot kept one ``config.agent`` map, the first agent's, and a
+    restore gave it to every agent: agents whose settings differed replay with another's.
+    Returns that, to add to a divergence's message (``""`` where it does not apply).
+    """
+    kept = snapshot.get("config", {}).get("agent") or {}
+    if len(agents) < 2 or not kept or any(name in kept for name in agents):
+        return ""
+    return (" (the recording predates settings per agent, protocol 2.6: it kept one agent's "
+            f"settings, {dict(kept)!r:.60}, which replay on every agent; if the agents' "
+            "settings differed, it cannot replay)")
+
+
 def replay(episode: EpisodeFile, client: BaseClient, *, keep: bool = False) -> ReplayResult:
     """Re-run ``episode`` on ``client``'s environment and compare every observation.
 
@@ -178,7 +193,8 @@ def replay(episode: EpisodeFile, client: BaseClient, *, keep: bool = False) -> R
     observation, _ = client.restore(start)
     expected = iter(episode.observations)
     if digest(observation) != next(expected, None):
-        return ReplayResult(0, "the first observation (after the reset) differs")
+        return ReplayResult(0, "the first observation (after the reset) differs"
+                            + older_settings(episode.snapshot, client.hello.agents))
     kept = Trajectory([observation]) if keep else None
     steps = 0
     for event in episode.snapshot["events"]:
@@ -192,7 +208,7 @@ def replay(episode: EpisodeFile, client: BaseClient, *, keep: bool = False) -> R
             break
         if digest(observation) != recorded:
             return ReplayResult(steps, f"step {steps}: the observation differs from the "
-                                f"recording")
+                                f"recording{older_settings(episode.snapshot, client.hello.agents)}")
         if kept is not None:
             kept.observations.append(observation)
             kept.actions.append(event[1])

@@ -46,7 +46,7 @@ import numpy as np
 
 from rlenv.protocol.errors import RemoteError
 from rlenv_client.forking import ForkedEnvironment, StepRecord
-from rlenv_client.replay import EpisodeFile, digest
+from rlenv_client.replay import EpisodeFile, digest, older_settings
 
 __all__ = ["Step", "Tick", "Timeline", "TimelineDiff", "load_policy"]
 
@@ -553,8 +553,11 @@ class Timeline:
         if step == len(digests):  # not recorded: the first time through records it
             digests.append(observed)
         elif observed != digests[step]:
+            why = older_settings(self.episode.snapshot, self.hello.agents) or (
+                " (the environment depends on something a snapshot does not hold)")
             raise RuntimeError(f"step {step}: the re-simulated observation differs from the "
-                               "recording (the environment is not deterministic here)")
+                               "recording: its snapshot's settings, generator state and actions "
+                               f"gave another observation{why}")
 
     def _measured_spacing(self) -> int:
         """Checkpoints as far apart as ~5 ms of steps, from the cost of the first few.

@@ -4,8 +4,9 @@ The levels of PLR and ACCEL's mazes, on pymunk: an agent (a small round body) mo
 grid of 11 x 11 one-metre cells, the outer ring a wall, walls on some of the 9 x 9 cells
 inside, and a goal (a sensor) on one free cell. The agent does not observe where it or the
 goal is: it casts 16 rays (a :class:`~rlenv.RaycastSensor2D` on its body) and sees how far
-each goes before a wall, and whether (and how near) the goal is along it. So levels differ in what they teach: a goal in sight of the start
-is reached by walking to it, a goal behind walls needs exploring.
+each goes before a wall, and whether (and how near) the goal is along it. So levels differ in
+what they teach: a goal in sight of the start is reached by walking to it, a goal behind walls
+needs exploring.
 
 Every reset builds a new level from the episode's seeded generator (walls at random cells, as
 many as ``difficulty``, 0 to 1 and configurable, asks for; the agent's start and the goal on

@@ -1,11 +1,19 @@
 """Settings: what clients configure on one instance, and what the server handles itself.
 
-A ``config`` part maps ``environment``, ``agent`` (every agent) and ``world`` to settings of
-those nodes (their ``configurable`` attributes). :class:`Settings` checks one whole before
-anything is applied, applies it through the environment's ``_configure`` hook (by default to
-each node), logs it for snapshots, and puts the previous values back when the request that
-applied it fails. ``real_time`` and ``record`` are the server's own settings of the
-environment: the instance switches real time; :class:`Settings` keeps the video recorder.
+A ``config`` part maps ``environment``, ``agent`` and ``world`` to settings of those nodes
+(their ``configurable`` attributes). :class:`Settings` checks one whole before anything is
+applied, applies it through the environment's ``_configure`` hook (by default to each node),
+logs it for snapshots, and puts the previous values back when the request that applied it
+fails.
+
+The ``agent`` map sets every agent, one class of agents or one agent (:func:`agent_settings`):
+a key that is a setting sets every agent; a key that is an agent class's name (``Runner``) maps
+to settings of that class's agents, and an agent's name (``Runner1``) to settings of that
+agent. Where they overlap, the more precise wins: every agent < class < name. The state a
+snapshot keeps (:meth:`Settings.state`) has one agent's flat, several agents' by name.
+
+``real_time`` and ``record`` are the server's own settings of the environment: the instance
+switches real time; :class:`Settings` keeps the video recorder.
 """
 
 from __future__ import annotations
@@ -22,7 +30,7 @@ from rlenv.scene2d.recording import VideoRecorder
 if TYPE_CHECKING:
     from rlenv.serving.instance import Answer, Instance
 
-__all__ = ["Captured", "Settings", "check_keys"]
+__all__ = ["Captured", "Settings", "agent_settings", "check_keys"]
 
 logger = logging.getLogger(__name__)
 
@@ -54,7 +62,7 @@ class Settings:
             RequestError: ``bad_request`` (its shape) or ``invalid_config`` naming the key.
         """
         check_keys(config, _PARTS, "config")
-        for part, nodes in self._nodes().items():
+        for part in self._nodes():
             if part not in config:
                 continue
             settings = config[part]
@@ -62,8 +70,14 @@ class Settings:
                 raise RequestError(ErrorCode.BAD_REQUEST, f"config.{part} must be a map")
             if part == "environment":
                 settings = self._check_environment(settings)
-            for node in nodes:
-                node.check_config(settings)
+            for node, own in self._reached(part, settings):
+                try:
+                    node.check_config(own)
+                except RequestError as error:
+                    if part != "agent" or not self._instance.multi_agent:
+                        raise
+                    raise RequestError(error.code, f"config.agent: {node.name}: {error}") \
+                        from None
 
     def configure(self, config: Mapping[str, Any]) -> None:
         """Apply a checked ``config`` part through the environment's ``_configure``.
@@ -87,15 +101,15 @@ class Settings:
         A configured property is the configuration's from then on: a reset keeps it, even if
         ``inspect`` set it earlier in the episode.
         """
-        for part, nodes in self._nodes().items():
+        for part in self._nodes():
             if part not in config:
                 continue
             settings = config[part]
             if part == "environment":
                 settings = self._apply_environment(settings)
-            for node in nodes:
-                node.configure(settings)
-                for key in settings:
+            for node, own in self._reached(part, settings):
+                node.configure(own)
+                for key in own:
                     self._instance.forget_set(node, key)
 
     def carry(self, config: Mapping[str, Any]) -> None:
@@ -115,25 +129,30 @@ class Settings:
         """Put back the settings a failed request changed (as they were before it)."""
         if answer.config_before is None:
             return
-        for part, nodes in self._nodes().items():
-            for node in nodes:
+        for part in self._nodes():
+            for node, own in self._reached(part, answer.config_before[part]):
                 try:
-                    node.configure(answer.config_before[part])
+                    node.configure(own)
                 except Exception as error:  # user code: what it keeps is its own
                     logger.error("could not undo the configuration of %s", node.get_path(),
                                  exc_info=error)
 
     def state(self) -> dict[str, dict[str, Any]]:
-        """The current value of everything a client may configure (for snapshots)."""
+        """The current value of everything a client may configure (for snapshots).
+
+        A ``config`` part that sets it all again: ``agent`` holds the one agent's settings, or
+        with several agents each agent's by name (those with a setting).
+        """
         return self.capture().state()
 
     def capture(self) -> Captured:
         """:meth:`state` as it is now, read cheaply (every reset does): its map comes later."""
         readers = self._readers
         instance = self._instance
-        if readers is None or not readers.fit(instance.environment, instance.agents[0]):
-            readers = self._readers = _Readers(self._nodes())
-        return Captured(readers.keys, tuple([read(node) for node, read in readers.nodes]))
+        if readers is None or not readers.fit(instance.environment, instance.agents):
+            readers = self._readers = _Readers(self._nodes(), instance.multi_agent)
+        return Captured(readers.parts, readers.keys,
+                        tuple([read(node) for node, read in readers.nodes]))
 
     def record(self, name: str) -> None:
         """Record the environment's frames into ``name`` in the record directory (``""``: stop)."""
@@ -152,6 +171,13 @@ class Settings:
         if environment.world is not None:
             parts["world"] = [environment.world]
         return parts
+
+    def _reached(self, part: str,
+                 settings: Mapping[str, Any]) -> list[tuple[Any, Mapping[str, Any]]]:
+        """Each node a part's ``settings`` reach, with the settings it gets."""
+        if part == "agent":
+            return agent_settings(self._instance.agents, settings)
+        return [(node, settings) for node in self._nodes()[part]]
 
     def _check_environment(self, settings: Mapping[str, Any]) -> dict[str, Any]:
         """Check what the server handles itself (real_time, record); the rest is the node's."""
@@ -176,6 +202,51 @@ class Settings:
         return rest
 
 
+def agent_settings(agents: list[Any],
+                   settings: Mapping[str, Any]) -> list[tuple[Any, Mapping[str, Any]]]:
+    """Each agent a ``config.agent`` map reaches, with its own settings (module docstring).
+
+    A map of settings only reaches every agent, as it always did; a map that names a class or
+    an agent reaches the agents it gives a setting.
+
+    Raises:
+        RequestError: ``invalid_config`` for a key that is neither a setting nor an agent's
+            (or its class's) name, naming them all; ``bad_request`` when a class's or an
+            agent's entry is not a map.
+    """
+    names = {agent.name for agent in agents}
+    classes = {type(agent).__name__ for agent in agents}
+    common: dict[str, Any] = {}
+    by_class: dict[str, Mapping[str, Any]] = {}
+    by_name: dict[str, Mapping[str, Any]] = {}
+    for key, value in settings.items():
+        if key in names or key in classes:
+            kind = "agent" if key in names else "class"
+            if not isinstance(value, Mapping):
+                raise RequestError(ErrorCode.BAD_REQUEST,
+                                   f"config.agent.{key} must be a map of that {kind}'s settings")
+            (by_name if kind == "agent" else by_class)[key] = value
+        elif any(key in agent.configurable for agent in agents):
+            common[key] = value
+        else:
+            known = sorted({name for agent in agents for name in agent.configurable})
+            raise RequestError(
+                ErrorCode.INVALID_CONFIG,
+                f"config.agent has no setting or agent {key!r:.40}; its settings: "
+                f"{', '.join(known) or 'none'}; its agents: "
+                f"{', '.join(agent.name for agent in agents)} (classes: "
+                f"{', '.join(sorted(classes))})")
+    if not by_class and not by_name:
+        return [(agent, common) for agent in agents]
+    reached = []
+    for agent in agents:
+        merged = {**common, **by_class.get(type(agent).__name__, {}),
+                  **by_name.get(agent.name, {})}
+        if merged:
+            reached.append((agent, merged))
+    return reached
+
+
 def check_keys(part: Mapping[str, Any], allowed: frozenset[str], where: str) -> None:
     """Refuse (``bad_request``) a key of ``part`` that is not ``allowed``, naming them all."""
     unknown = part.keys() - allowed
@@ -191,44 +262,63 @@ class Captured:
     """The configuration at one moment, as read (see :meth:`Settings.capture`).
 
     Args:
-        keys: each part's name and configurable keys, in order.
-        values: each part's values, in the order of its keys.
+        parts: the parts, in order.
+        keys: for each node read, its part, its agent's name (``None``: the part's only node,
+            whose settings are the part's) and its configurable keys, in order.
+        values: each node's values, in the order of its keys.
     """
 
-    __slots__ = ("keys", "values")
+    __slots__ = ("keys", "parts", "values")
 
-    def __init__(self, keys: tuple[tuple[str, tuple[str, ...]], ...],
+    def __init__(self, parts: tuple[str, ...],
+                 keys: tuple[tuple[str, str | None, tuple[str, ...]], ...],
                  values: tuple[tuple[Any, ...], ...]) -> None:
-        self.keys, self.values = keys, values
+        self.parts, self.keys, self.values = parts, keys, values
 
     def state(self) -> dict[str, dict[str, Any]]:
         """The configuration as :meth:`Settings.state` gives it."""
-        return {part: dict(zip(keys, values, strict=True))
-                for (part, keys), values in zip(self.keys, self.values, strict=True)}
+        state: dict[str, dict[str, Any]] = {part: {} for part in self.parts}
+        for (part, name, keys), values in zip(self.keys, self.values, strict=True):
+            settings = dict(zip(keys, values, strict=True))
+            if name is None:
+                state[part] = settings
+            else:
+                state[part][name] = settings
+        return state
 
 
 class _Readers:
-    """How to read each part's configurable values (its first node's), for the parts as they are.
+    """How to read the configurable values of each node, for the nodes as they are.
 
     Args:
         parts: :meth:`Settings._nodes`: environment, agents and, if any, the world.
+        by_name: read each agent under its name (several agents), else the first agent only.
     """
 
-    def __init__(self, parts: dict[str, list[Any]]) -> None:
-        firsts = [(part, nodes[0]) for part, nodes in parts.items()]
+    def __init__(self, parts: dict[str, list[Any]], by_name: bool) -> None:
+        agents = parts["agent"]
+        read = [("environment", None, parts["environment"][0])]
+        read += [("agent", agent.name, agent) for agent in agents if agent.configurable] \
+            if by_name else [("agent", None, agents[0])]
+        if "world" in parts:
+            read.append(("world", None, parts["world"][0]))
+        self.parts = tuple(parts)
         self.world = parts["world"][0] if "world" in parts else None
-        self.configurables = [node.configurable for _, node in firsts]
-        self.keys = tuple((part, tuple(node.configurable)) for part, node in firsts)
-        self.nodes = tuple((node, _reader(keys)) for (_, node), (_, keys) in
-                           zip(firsts, self.keys, strict=True))
+        self.agents = list(agents)
+        self.configurables = [node.configurable for _, _, node in read]
+        self.agent_configurables = [agent.configurable for agent in agents]
+        self.keys = tuple((part, name, tuple(node.configurable)) for part, name, node in read)
+        self.nodes = tuple((node, _reader(keys)) for (_, _, node), (_, _, keys) in
+                           zip(read, self.keys, strict=True))
 
-    def fit(self, environment: Any, agent: Any) -> bool:
-        """Whether these are still the parts: the same world, and every node's keys the same."""
+    def fit(self, environment: Any, agents: list[Any]) -> bool:
+        """Whether these are still the nodes: the same world and agents, their keys the same."""
         world = environment.world
-        configurables = self.configurables
-        return world is self.world and configurables[0] is environment.configurable and \
-            configurables[1] is agent.configurable and \
-            (world is None or configurables[2] is world.configurable)
+        return world is self.world and self.configurables[0] is environment.configurable and \
+            agents == self.agents and all(
+                agent.configurable is configurable
+                for agent, configurable in zip(agents, self.agent_configurables, strict=True)) \
+            and (world is None or self.configurables[-1] is world.configurable)
 
 
 def _reader(keys: tuple[str, ...]) -> Callable[[Any], tuple[Any, ...]]:

@@ -14,6 +14,11 @@ Snapshot format (``version`` 1)::
      "rng": "<the generator's state, as JSON>", "options": {...},
      "events": [["config", {...}], ["action", action, frames],
                 ["set", node path, property, value], ...]}
+
+``config`` is a ``config`` part that sets everything again (:meth:`Settings.state
+<rlenv.serving.settings.Settings.state>`): its ``agent`` holds the one agent's settings or,
+with several agents, each agent's by name (protocol 2.6; before, one map, the first agent's,
+which restores on every agent as it always did).
 """
 
 from __future__ import annotations

@@ -26,7 +26,7 @@ from rlenv.protocol import ErrorReply, Request, Response
 from rlenv.protocol.errors import RemoteError
 from rlenv_client.addresses import parse_address
 from rlenv_client.client import Client
-from rlenv_client.inspection import EPISODES_SINCE, episode_files
+from rlenv_client.inspection import AGENT_SETTINGS_SINCE, EPISODES_SINCE, episode_files
 from rlenv_client.replay import EpisodeFile
 from rlenv_client.session import LOST
 
@@ -123,12 +123,15 @@ class Watcher:
     def node(self, server: int, instance: int, path: str) -> dict[str, Any]:
         """One node, with its exported values.
 
-        ``settings`` names those an edit keeps across episodes: its configurable ones, unless it
-        is one agent of several (a setting of the agent section would change every agent).
+        ``settings`` names those an edit keeps across episodes: its configurable ones. One
+        agent of several has them on a server that sets one agent by its name (protocol 2.6);
+        on an older one a setting would change every agent, so it has none.
         """
         node = dict(to_json(self._ask(server, instance, {"inspect": {"node": {"path": path}}})
                             .info["node"]))
-        shared = node.get("config") == "agent" and len(self._client(server).hello.agents) > 1
+        hello = self._client(server).hello
+        shared = node.get("config") == "agent" and len(hello.agents) > 1 and \
+            hello.protocol < AGENT_SETTINGS_SINCE
         node["settings"] = [] if shared else list(node.get("configurable", ()))
         return node
 
@@ -136,12 +139,15 @@ class Watcher:
         """Change a property; returns which kind of change it was.
 
         ``setting`` (a ``configure``: it lasts) where the node's config section reaches the
-        property, else ``episode`` (a ``set``, until the next reset).
+        property (an agent of several: that agent's, by its name), else ``episode`` (a
+        ``set``, until the next reset).
         """
         node = self.node(server, instance, path)
         if name in node["settings"]:
-            self._ask(server, instance,
-                      {"inspect": {"configure": {node["config"]: {name: value}}}})
+            settings = {name: value}
+            if node["config"] == "agent" and len(self._client(server).hello.agents) > 1:
+                settings = {node["path"].rsplit("/", 1)[-1]: settings}
+            self._ask(server, instance, {"inspect": {"configure": {node["config"]: settings}}})
             return "setting"
         self._ask(server, instance, {"inspect": {"set": {"path": path, "property": name,
                                                         "value": value}}})

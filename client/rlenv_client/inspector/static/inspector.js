@@ -280,14 +280,16 @@ function propertyCells(name) {
 function propertyRow(node, name) {
   const {row, input, badge} = propertyCells(name);
   input.readOnly = node.read_only.includes(name);
-  input.addEventListener("change", () => edit(node.path, name, input));
+  input.addEventListener("change", () => edit(node, name, input));
   input.addEventListener("keydown", (event) => { if (event.key === "Escape") input.blur(); });
   badge.textContent = input.readOnly ? "read-only" :
     node.settings.includes(name) ? "setting" : "episode";
   return row;
 }
 
-async function edit(path, name, input) {
+// A setting of an agent is that agent's alone (config.agent by its name, protocol 2.6).
+async function edit(node, name, input) {
+  const path = node.path;
   const note = $("edit-status");
   let value;
   try { value = JSON.parse(input.value); } catch (error) {
@@ -301,7 +303,8 @@ async function edit(path, name, input) {
   });
   const answer = await response.json();
   note.textContent = response.ok ? `${name} = ${JSON.stringify(value)} (${answer.scope === "setting" ?
-    "a setting: kept across episodes" : "until the next reset"})` : `refused: ${answer.error}`;
+    `a setting${node.config === "agent" ? " of this agent" : ""}: kept across episodes` :
+    "until the next reset"})` : `refused: ${answer.error}`;
   note.className = response.ok ? "note" : "note bad";
   input.blur();
 }

@@ -46,10 +46,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                        help="ticks follow the wall clock; actions apply when they arrive")
     serve.add_argument("--record-dir", type=Path, default=None, metavar="DIR",
                        help="let clients record videos into DIR (configure record='name.mp4')")
-    serve.add_argument("--keep-episodes", type=int, default=KEEP_EPISODES, metavar="N",
-                       help="keep each instance's last N finished episodes as recordings, for "
-                       "the inspector's timeline (client.episodes()); 0: none (default "
-                       f"{KEEP_EPISODES})")
+    serve.add_argument("--keep-episodes", type=int, default=None, metavar="N",
+                       help="keep each instance's last N finished episodes as recordings from "
+                       "the start, for the inspector's timeline (client.episodes()); 0: none, "
+                       f"ever (default: the last {KEEP_EPISODES}, once a client asks for them)")
     serve.add_argument("--lifeline", type=int, default=None, metavar="FD",
                        help="exit when this inherited pipe closes (set by ServerProcess)")
     serve.add_argument("--token", default=os.environ.get("RLENV_TOKEN"),
@@ -107,6 +107,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                       help="seconds an environment may take to answer (default 30; then 504)")
     http.add_argument("--max-sessions", type=int, default=32,
                       help="sessions at once (default 32; then 503)")
+    http.add_argument("--max-sessions-per-client", type=int, default=16, metavar="N",
+                      help="sessions at once created by one client address (default 16; then "
+                      "503)")
     http.add_argument("--max-body", type=int, default=1 << 20,
                       help="largest request body in bytes (default 1 MiB; then 413)")
     http.add_argument("--idle-timeout", type=float, default=600.0,
@@ -137,7 +140,12 @@ def main(argv: Sequence[str] | None = None) -> int:
                          "rlenv replay re-runs them")
     inspect.add_argument("--target", metavar="MODULE:CLASS", default=None,
                          help="the environment's class, written into demonstrations so that "
-                         "rlenv replay needs no --target")
+                         "rlenv replay needs no --target; the recent episodes' timelines run it "
+                         "(default: the servers' own target, where it is an installed package)")
+    inspect.add_argument("--trust-target", action="store_true",
+                         help="run the servers' target in the page's timelines even where it is "
+                         "no installed package (importing runs its code: only for servers you "
+                         "trust)")
     inspect.add_argument("--demonstration-rate", type=float, default=None, metavar="HZ",
                          help="actions a second while a person plays (default: the "
                          "environment's real time, its ticks a second over repeat_action)")
@@ -177,7 +185,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     replay = commands.add_parser("replay", help="re-run a recorded episode and compare")
     replay.add_argument("file", nargs="+", help="an episode file (rlenv_client.replay."
                         "RecordEpisodes); several with --inspect")
-    replay.add_argument("--target", help="MODULE:CLASS to serve (default: the recorded one)")
+    replay.add_argument("--target", help="MODULE:CLASS to serve (default: the recorded one, "
+                        "where it is an installed package: a module beside the recording or in "
+                        "the current folder runs only with --target or --trust-target)")
+    replay.add_argument("--trust-target", action="store_true",
+                        help="run the recorded target even where it is no installed package "
+                        "(importing runs its code: only for recordings you trust)")
     replay.add_argument("--address", help="HOST:PORT of a running server instead")
     replay.add_argument("--inspect", action="store_true",
                         help="open the episodes as timelines in the inspector's page (scrub, "
@@ -200,7 +213,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="Minari's id: ENV/NAME-vN or NAMESPACE/ENV/NAME-vN")
     create.add_argument("--from", dest="source", type=Path, required=True, metavar="DIR",
                         help="a folder of recordings (rlenv_client.replay.RecordEpisodes)")
-    create.add_argument("--target", help="MODULE:CLASS to serve (default: the recorded one)")
+    create.add_argument("--target", help="MODULE:CLASS to serve (default: the recorded one, "
+                        "where it is an installed package: see rlenv replay --help)")
+    create.add_argument("--trust-target", action="store_true",
+                        help="run the recorded target even where it is no installed package "
+                        "(importing runs its code: only for recordings you trust)")
     create.add_argument("--description", help="what the dataset holds (Minari's metadata)")
     create.add_argument("--algorithm-name", help="what chose the actions")
     create.add_argument("--author", help="who made the dataset")
@@ -331,7 +348,9 @@ def _http(args: argparse.Namespace) -> int:
         return 2
     settings = Settings(target=args.target, host=args.host, port=args.port, token=args.token,
                         timeout=args.timeout,
-                        max_sessions=args.max_sessions, max_body=args.max_body,
+                        max_sessions=args.max_sessions,
+                        max_sessions_per_client=args.max_sessions_per_client,
+                        max_body=args.max_body,
                         idle_timeout=args.idle_timeout or None,
                         head_timeout=args.head_timeout, max_connections=args.max_connections)
     serve(settings, ready=lambda url: print(f"listening on {url}", flush=True))
@@ -344,7 +363,7 @@ def _inspect(args: argparse.Namespace) -> int:
     serve(args.addresses, token=args.token, port=args.port, follow_stdin=args.follow_stdin,
           ready=lambda line: print(line, flush=True),
           record_demonstrations=args.record_demonstrations, target=args.target,
-          demonstration_rate=args.demonstration_rate)
+          demonstration_rate=args.demonstration_rate, trust_target=args.trust_target)
     return 0
 
 
@@ -429,6 +448,7 @@ def _bench(args: argparse.Namespace) -> int:
 def _replay(args: argparse.Namespace) -> int:
     from rlenv_client.replay import EpisodeFile, replay
     from rlenv_client.session import Session
+    from rlenv_client.trusted_targets import check_target
 
     if args.inspect:
         return _replay_inspect(args)
@@ -450,6 +470,9 @@ def _replay(args: argparse.Namespace) -> int:
         print("rlenv replay: the episode names no target; pass --target or --address",
               file=sys.stderr)
         return 2
+    if args.address is None and args.target is None and not args.trust_target:
+        check_target(target, named_by=f"the recording {args.file}",
+                     folder=Path(args.file).parent)
     session = Session(target, address=args.address)
     try:
         result = replay(episode, session.client)
@@ -472,12 +495,16 @@ def _replay_inspect(args: argparse.Namespace) -> int:
               "--address", file=sys.stderr)
         return 2
     from rlenv_client.replay import EpisodeFile
+    from rlenv_client.trusted_targets import check_target
 
-    for path in args.file:
-        if args.target is None and EpisodeFile.load(path).target is None:
+    for path in args.file if args.target is None else ():
+        recorded = EpisodeFile.load(path).target
+        if recorded is None:
             print(f"rlenv replay: {path} names no target; pass --target MODULE:CLASS",
                   file=sys.stderr)
             return 2
+        if not args.trust_target:  # said now, not only on the page
+            check_target(recorded, named_by=f"the recording {path}", folder=Path(path).parent)
     policies, unavailable = {}, {}
     for path in args.policy:
         name = Path(path).stem
@@ -496,7 +523,8 @@ def _replay_inspect(args: argparse.Namespace) -> int:
         pass
     serve([], token=None, port=args.port, follow_stdin=args.follow_stdin or stdin_is_pipe,
           ready=lambda line: print(line, flush=True), target=args.target,
-          recordings=args.file, policies=policies, unavailable=unavailable)
+          recordings=args.file, policies=policies, unavailable=unavailable,
+          trust_target=args.trust_target)
     return 0
 
 
@@ -509,7 +537,8 @@ def _dataset_create(args: argparse.Namespace) -> int:
     with warnings.catch_warnings():  # Minari's advice on every field left out, one line each
         warnings.filterwarnings("ignore", message=r"`\w+` is set to None", category=UserWarning)
         dataset = create_dataset(
-            args.dataset_id, args.source, target=args.target, description=args.description,
+            args.dataset_id, args.source, target=args.target, trust_target=args.trust_target,
+            description=args.description,
             algorithm_name=args.algorithm_name, author=args.author,
             author_email=args.author_email, code_permalink=args.code_permalink,
             report=lambda line: print(f"note: {line}"))

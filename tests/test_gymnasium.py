@@ -349,7 +349,7 @@ def test_a_vector_env_names_the_server_that_died() -> None:
 
 
 def test_a_lost_server_is_restarted_and_the_episode_truncated() -> None:
-    with RemoteEnv(TARGET, max_restarts=1, timeout=1.0) as env:
+    with RemoteEnv(TARGET, max_restarts=1, timeout=30.0) as env:
         observation, _ = env.reset(seed=0)
         observation, *_ = env.step(np.zeros(1, np.float32))
         first = env.server

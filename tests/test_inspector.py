@@ -357,7 +357,7 @@ def _refused(url: str) -> bool:
 
 
 def test_restarts_count_new_processes_not_idle_reconnections(serve: Serve) -> None:
-    first = serve(args=["--idle-timeout", "0.3"])
+    first = serve(args=["--idle-timeout", "3.0"])  # the controller's steps within it
     watcher = Watcher([f"{first.host}:{first.port}"])
     try:
         with Client(first.host, first.port) as controller:

@@ -416,6 +416,52 @@ def test_time_travel_branches_with_keys_and_a_policy_side_by_side(failure: Path,
         inspector.close()
 
 
+def test_time_travel_says_why_a_recording_did_not_open_and_tells_twins_apart(
+        failure: Path, browser: Browser, tmp_path: Path) -> None:
+    broken = EpisodeFile.load(failure)
+    broken.target = "examples.nothing:Nothing"
+    broken.save(tmp_path / "broken.rlenv")
+    twin = tmp_path / "elsewhere" / failure.name
+    twin.parent.mkdir()
+    twin.write_bytes(failure.read_bytes())
+    timelines = Timelines([tmp_path / "broken.rlenv", failure, twin],
+                          policies={"controller": controller})
+    timelines.branch_policy(1, 0, 60, "controller", 20)  # made before the page opens it
+    inspector = InspectorServer(Watcher([]), timelines=timelines)
+    inspector.start()
+    try:
+        browser.open(inspector.url)
+        status = "document.getElementById('timeline-status')"
+        browser.wait_for(f"{status}.textContent.includes('examples.nothing')",
+                         "the page did not say why the first recording did not open")
+        assert browser.evaluate(f"{status}.classList.contains('bad')")
+        assert not browser.evaluate("document.getElementById('timeline').hidden")
+        assert browser.evaluate("document.getElementById('timeline-body').hidden")
+        options = browser.wait_for("""(() => { const o = [...document.querySelectorAll(
+            '#timeline-select option')].map(o => o.textContent);
+            return o[0].includes('did not open') && o; })()""", "the menu did not mark it")
+        assert options == ["broken.rlenv (did not open)",
+                           f"{failure.parent.name}/{failure.name}",
+                           f"elsewhere/{failure.name}"]
+        # the menu is still there: another recording opens, with its episode and newest
+        # branch side by side
+        browser.evaluate("""(() => { const s = document.getElementById('timeline-select');
+            s.value = '1'; s.dispatchEvent(new Event('change')); })()""")
+        at(browser, 0)
+        assert not browser.evaluate("document.getElementById('timeline-body').hidden")
+        compare = "document.getElementById('compare').dataset"
+        browser.wait_for(f"{compare}.a === '0' && {compare}.b === '1'",
+                         "side by side did not start at the episode and the newest branch")
+        assert browser.evaluate(f"{compare}.firstDifference") == "61"
+        browser.evaluate("""(() => { const s = document.getElementById('timeline-select');
+            s.value = '2'; s.dispatchEvent(new Event('change')); })()""")
+        browser.wait_for("window.timeline.number === 2", "the twin did not open")
+        at(browser, 0)
+        assert browser.evaluate("document.getElementById('compare').hidden")  # no branch yet
+    finally:
+        inspector.close()
+
+
 def test_time_travel_on_a_live_run_opens_a_recent_episode(server: ServerProcess,
                                                           browser: Browser) -> None:
     """The live page lists the watched instance's recent episodes (the server keeps its last 8)

@@ -388,3 +388,42 @@ def test_concurrent_requests_on_one_timeline_are_taken_one_at_a_time(page: str) 
     assert [answer["observation"] for _, _, answer in together[:8]] == alone
     assert [answer["observation"] for _, _, answer in together[11:19]] == alone
     assert together[10][2]["first_difference"] == 5
+
+
+def test_the_ticks_route_pages_and_the_list_tells_files_apart(recording: Path,
+                                                              tmp_path: Path) -> None:
+    """Files of one name differ by their folder; one that does not open says why; a page of
+    ticks holds at most MAX_TICKS (the ticks route's ``first`` and ``count``)."""
+    twin = tmp_path / "elsewhere" / recording.name
+    twin.parent.mkdir()
+    twin.write_bytes(recording.read_bytes())
+    broken = EpisodeFile.load(recording)
+    broken.target = "examples.nothing:Nothing"
+    broken.save(tmp_path / "broken.rlenv")
+    inspector = InspectorServer(Watcher([]), timelines=Timelines(
+        [recording, twin, tmp_path / "broken.rlenv"]))
+    inspector.start()
+    try:
+        page = inspector.url
+        listed = fetch(page, "api/timelines")[2]["timelines"]
+        assert [entry["name"] for entry in listed] == [
+            f"{recording.parent.name}/{recording.name}", f"elsewhere/{recording.name}",
+            "broken.rlenv"]
+        status, _, answer = fetch(page, "api/timeline?timeline=2")
+        assert status == 422 and "examples.nothing" in answer["error"]
+        assert "examples.nothing" in fetch(page, "api/timelines")[2]["timelines"][2]["error"]
+        first = fetch(page, "api/timeline/ticks?timeline=0&branch=0&step=3&first=2&count=2")[2]
+        assert (first["frames"], first["first"], first["next"]) == (4, 2, 4)
+        assert [tick["tick"] for tick in first["ticks"]] == [2, 3]
+        rest = fetch(page, "api/timeline/ticks?timeline=0&branch=0&step=3&first=4")[2]
+        assert rest["next"] is None and [tick["tick"] for tick in rest["ticks"]] == [4]
+        whole = fetch(page, "api/timeline/ticks?timeline=0&branch=0&step=3")[2]
+        assert whole["ticks"][1:3] == first["ticks"] and whole["ticks"][3:] == rest["ticks"]
+        for query, words in (("first=5", "step 3 has ticks 1 to 4, not 5"),
+                             ("first=0", "step 3 has ticks 1 to 4, not 0"),
+                             ("count=101", "count must be 1 to 100"),
+                             ("count=0", "count must be 1 to 100")):
+            status, _, answer = fetch(page, f"api/timeline/ticks?timeline=0&step=3&{query}")
+            assert status == 400 and words in answer["error"], (query, answer)
+    finally:
+        inspector.close()

@@ -156,6 +156,7 @@ def test_refusals_name_what_is_wrong(serve: Serve) -> None:
 
 def test_only_replayable_episodes_with_actions_are_kept() -> None:
     with LocalClient(FAULTY) as local:
+        assert local.episodes() == []  # asked: kept from now on
         local.reset(seed=1)  # no action: nothing to replay
         local.reset(seed=2)
         local.step(0)
@@ -174,6 +175,7 @@ def test_only_replayable_episodes_with_actions_are_kept() -> None:
 def test_overflowed_and_real_time_episodes_are_not_kept(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(snapshots, "MAX_EVENTS", 5)
     with LocalClient(TARGET, clock=ManualClock()) as local:
+        local.episodes()  # asked: kept from now on
         local.reset(seed=1)
         for _ in range(6):
             local.step(np.zeros(1, np.float32))  # past MAX_EVENTS: the log stopped
@@ -197,6 +199,7 @@ def test_overflowed_and_real_time_episodes_are_not_kept(monkeypatch: pytest.Monk
 def test_changes_after_the_last_action_belong_to_the_next_episode() -> None:
     """A configuration (or a restore's) before the next reset is left out of the recording."""
     with LocalClient(TARGET) as local:
+        local.episodes()  # asked: kept from now on
         seen, _, _ = play(local, 5, [LEFT, RIGHT, LEFT])
         local.configure(agent={"angle_limit": 0.5})
         local.reset(seed=6)
@@ -236,6 +239,7 @@ def test_the_hello_names_the_target_when_it_can() -> None:
     assert target_of(Local) is None  # load_environment cannot find it by name
     with LocalClient(CartPoleEnvironment) as local:
         assert local.hello.target == TARGET
+        local.episodes()  # asked: kept from now on
         play(local, 0, [LEFT])
         local.reset()
         assert [e.target for e in local.episodes()] == [TARGET]
@@ -245,6 +249,7 @@ def test_the_hello_names_the_target_when_it_can() -> None:
 def test_several_agents_episodes_end_as_their_answers_said() -> None:
     """With several agents, the end is the answers' (every agent done; terminated if any did)."""
     with LocalClient(PAIR) as local:
+        local.episodes()  # asked: kept from now on
         ends = []
         for seed in (2, 3):
             observation, _ = local.reset(seed=seed)
@@ -269,6 +274,8 @@ def test_a_vectors_autoresets_finish_episodes_too() -> None:
     """Column steps (the lean path a vector's steps take) keep them as plain resets do."""
     with LocalClient(TARGET, instances=2) as local:
         assert local.host is not None and local.host.lean is not None
+        local.send_batch([Request(0, {"episodes": {"index": True}})] * 2)  # asked: kept now
+        local.receive_batch()
         local.send_batch([local.reset_request(seed=i) for i in (0, 1)])
         local.receive_batch()
         actions = np.full((2, 1), 0.5, np.float32)
@@ -278,3 +285,107 @@ def test_a_vectors_autoresets_finish_episodes_too() -> None:
         local.send_batch([Request(0, {"episodes": {}})] * 2)
         kept = [reply.info["episodes"] for reply in local.receive_batch()]  # type: ignore[union-attr]
         assert [[entry["steps"] for entry in entries] for entries in kept] == [[1], [2]]
+
+
+# --- bounds: what is kept, what one answer holds ------------------------------------------------
+
+def test_nothing_is_kept_until_a_client_asks() -> None:
+    """A server no inspector asked keeps nothing (gym.make's shared servers, say)."""
+    host = Host(CartPoleEnvironment, count=2)
+    for seed in range(3):
+        host.answer(Request(1, {"batch": [{"reset": {"seed": seed}}] * 2}))
+        host.answer(Request(2, {"batch": [{"action": LEFT}] * 2}))
+    assert [len(instance.recent) for instance in host.instances] == [0, 0]
+    answer = host.answer(Request(3, {"batch": [None, {"episodes": {"index": True}}]}))
+    assert answer.replies[1].info["episodes"] == []  # type: ignore[union-attr]
+    for seed in range(3):
+        host.answer(Request(4, {"batch": [{"reset": {"seed": seed}}] * 2}))
+        host.answer(Request(5, {"batch": [{"action": LEFT}] * 2}))
+    host.answer(Request(6, {"batch": [{"reset": {}}] * 2}))
+    # the one asked: the episode under way when it was asked, and the three after it
+    assert [len(instance.recent) for instance in host.instances] == [0, 4]
+    host.close()
+
+
+def test_what_a_server_keeps_is_bounded_in_events_shared_by_its_instances(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from rlenv.serving import host as hosting
+    monkeypatch.setattr(hosting, "KEEP_EVENTS", 10)  # 5 events for each of two instances
+    host = Host(CartPoleEnvironment, count=2, keep_episodes=8)
+    for steps in (2, 2, 2, 6, 2):
+        host.answer(Request(1, {"batch": [{"reset": {"seed": steps}}] * 2}))
+        for _ in range(steps):
+            host.answer(Request(2, {"batch": [{"action": np.zeros(1, np.float32)}] * 2}))
+    host.answer(Request(3, {"batch": [{"reset": {}}] * 2}))
+    for instance in host.instances:
+        index = instance.recent.index()
+        # The 6-step one is beyond the bound: not kept; the oldest went to make room
+        assert [entry["events"] for entry in index] == [2, 2]
+        assert [entry["id"] for entry in index] == [2, 3]
+    host.close()
+
+
+def test_a_90000_step_episode_is_served_in_pages_no_answer_over_a_frame() -> None:
+    """Its whole snapshot is refused as one answer, clearly; its pages rebuild it exactly."""
+    from rlenv.protocol.codec import MAX_FRAME_OBJECTS, count_objects, pack
+    from rlenv.serving.recent import PAGE_EVENTS, WHOLE_EVENTS
+
+    host = Host(CartPoleEnvironment, keep_episodes=1)
+    instance = host.instances[0]
+    host.answer(Request(1, {"reset": {"seed": 0}}))
+    host.answer(Request(2, {"action": LEFT}))
+    log = instance.log
+    log.events.extend(["action", np.array([0.25], np.float32), 1] for _ in range(89_999))
+    whole = log.snapshot()
+    host.answer(Request(3, {"reset": {}}))
+    refused = host.answer(Request(4, {"episodes": {}}))
+    assert isinstance(refused, ErrorReply) and refused.code == ErrorCode.BAD_REQUEST
+    assert f"90,000 events, more than one answer carries ({WHOLE_EVENTS:,})" in refused.message
+    (entry,) = host.answer(Request(5, {"episodes": {"index": True}})).info["episodes"]  # type: ignore[union-attr]
+    assert (entry["steps"], entry["events"]) == (90_000, 90_000)
+    events, pages = [], 0
+    while len(events) < entry["events"]:
+        answer = host.answer(Request(6, {"episodes": {"episode": entry["id"],
+                                                      "from": len(events)}}))
+        body = pack(answer.to_wire())
+        assert count_objects(body) <= MAX_FRAME_OBJECTS and len(body) < 4 << 20
+        page = answer.info["episode"]  # type: ignore[union-attr]
+        assert page["from"] == len(events) and len(page["snapshot"]["events"]) <= PAGE_EVENTS
+        events.extend(page["snapshot"]["events"])
+        pages += 1
+    assert pages == -(-90_000 // PAGE_EVENTS)
+    assert {**page["snapshot"], "events": events} == whole
+    gone = host.answer(Request(7, {"episodes": {"episode": entry["id"] + 1}}))
+    assert gone.info["episode"] is None  # type: ignore[union-attr]
+    host.close()
+
+
+def test_paged_forms_refuse_what_is_wrong() -> None:
+    host = Host(CartPoleEnvironment)
+    for part, message in (({"index": False}, "episodes.index must be true"),
+                          ({"episode": -1}, "episodes.episode must be an integer >= 0"),
+                          ({"episode": 0, "from": 1.5}, "episodes.from must be an integer"),
+                          ({"from": 3}, "episodes.from goes with episodes.episode"),
+                          ({"index": True, "last": 2}, "one of last, index and episode")):
+        reply = host.answer(Request(1, {"episodes": part}))
+        assert isinstance(reply, ErrorReply) and reply.code == ErrorCode.BAD_REQUEST
+        assert message in reply.message, reply.message
+    host.close()
+
+
+def test_the_watcher_fetches_each_kept_episode_once(serve: Serve) -> None:
+    live = serve()
+    watcher = Watcher([live.address])
+    watcher.servers()  # connects: the server keeps episodes from now on
+    with Client(live.address, timeout=10) as trainer:
+        for seed in range(3):
+            play(trainer, seed, [LEFT, RIGHT])
+        trainer.reset()
+        first = watcher.recent_episodes(0, 0)
+        assert len(first) == 3
+        play(trainer, 7, [LEFT])
+        trainer.reset()
+        again = watcher.recent_episodes(0, 0)
+    assert again[:3] == first and all(a is b for a, b in zip(again, first, strict=False))
+    assert len(again) == 4
+    watcher.close()

@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 import os
 import random
+import select
 import signal
 import socket
 import struct
@@ -21,7 +22,7 @@ from rlenv.protocol import ErrorReply, Hello, Response
 from rlenv.protocol.codec import pack
 from rlenv.protocol.errors import ErrorCode
 from rlenv.serving.endpoint import Endpoint, Limits
-from rlenv.serving.penalties import FREE_FAILURES
+from rlenv.serving.penalties import FREE_FAILURES, MAX_HELD, MAX_PENALTY
 from rlenv.testing import ManualClock, frame, read_frame
 from rlenv_client import Client, ConnectionLost, RemoteEnv, RemoteError
 from rlenv_client.compliance import check_server
@@ -117,14 +118,14 @@ def test_a_server_on_all_interfaces_with_a_token(serve: Serve,
 
 
 def test_an_idle_client_is_dropped_with_a_reason(serve: Serve) -> None:
-    server = serve(args=["--idle-timeout", "0.3"])
-    with socket.create_connection((server.host, server.port), timeout=10) as raw:
+    server = serve(args=["--idle-timeout", "2.0"])  # a loaded machine may be slow to send
+    with socket.create_connection((server.host, server.port), timeout=30) as raw:
         read_frame(raw)  # the hello
         raw.sendall(frame(pack({"id": 1})))  # its first request: the idle timeout counts next
         assert read_frame(raw)["id"] == 1
         reply = read_frame(raw)  # blocks until the server gives up on us
         assert reply["error"]["code"] == ErrorCode.TIMEOUT and reply["error"]["fatal"]
-        assert "no request for 0.3 s" in reply["error"]["message"]
+        assert "no request for 2.0 s" in reply["error"]["message"]
     with Client(server.host, server.port) as client:  # and the next client is served
         client.reset(seed=0)
 
@@ -220,70 +221,83 @@ def test_a_connection_without_its_first_request_is_dropped_soon() -> None:
         endpoint.close()
 
 
-def test_wrong_tokens_make_their_address_wait(caplog: pytest.LogCaptureFixture) -> None:
-    """Past FREE_FAILURES wrong tokens, an address is refused (its token not compared) for a
-    penalty that doubles; another address is unaffected; every wrong token is logged with the
+def test_wrong_tokens_slow_the_guesser_never_the_token_holder(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """Past FREE_FAILURES wrong tokens, each wrong token's refusal is held (1 s, 2 s ...) out of
+    any slot; the right token from the same address is let in at once; an address compares no
+    token while MAX_HELD of its refusals are held; every wrong token is logged with the
     address, never the token. An injected clock, no sleeping."""
     from examples.cartpole import CartPoleAgent
 
     clock = ManualClock()
     hello = Hello("T", CartPoleAgent.action_space, CartPoleAgent.observation_space)
-    endpoint = Endpoint(hello, Limits(), token="t0ken", clock=clock)
+    endpoint = Endpoint(hello, Limits(max_connections=2), token="t0ken", clock=clock)
     host, port = endpoint.start_server()
+    opened: list[socket.socket] = []
 
-    def attempt(token: str, source: str = "127.0.0.1") -> dict[str, Any]:
-        """Connect from ``source``, send ``token``: the server's last frame to this socket."""
-        with socket.create_connection((host, port), timeout=5,
-                                      source_address=(source, 0)) as sock:
-            assert endpoint.receive(0) is None  # accepted: a hello, or a refusal
-            first = read_frame(sock)
-            if "hello" not in first:
-                return first
-            sock.sendall(frame(pack({"id": 1, "token": token})))
-            got = endpoint.receive(0)
-            if got is not None:
-                endpoint.reply(got[0], Response(1))
+    def send(token: str) -> socket.socket:
+        """Connect, read the hello, send ``token`` in the first request (id 1)."""
+        sock = socket.create_connection((host, port), timeout=5)
+        opened.append(sock)
+        assert endpoint.receive(0) is None  # accepted: its hello
+        assert "hello" in read_frame(sock)
+        sock.sendall(frame(pack({"id": 1, "token": token})))
+        return sock
+
+    def served(sock: socket.socket) -> bool:
+        got = endpoint.receive(0)
+        if got is None:
+            return False
+        endpoint.reply(got[0], Response(1))
+        assert read_frame(sock)["id"] == 1 and "error" not in read_frame_or_none(sock)
+        return True
+
+    def read_frame_or_none(sock: socket.socket) -> dict[str, Any]:
+        sock.setblocking(False)
+        try:
             return read_frame(sock)
+        except BlockingIOError:
+            return {}
+        finally:
+            sock.setblocking(True)
+
+    def answered(sock: socket.socket) -> bool:
+        return select.select([sock], [], [], 0)[0] != []
 
     caplog.set_level(logging.WARNING, logger="rlenv.serving.penalties")
     try:
-        for _ in range(FREE_FAILURES):
-            assert attempt("guess")["error"]["message"] == "wrong token"
-        early = socket.create_connection((host, port), timeout=5)  # connected before ...
-        assert endpoint.receive(0) is None
-        read_frame(early)
-        assert attempt("guess")["error"]["message"] == "wrong token"  # counted: 1 s to wait
-        early.sendall(frame(pack({"id": 7, "token": "t0ken"})))  # ... its token not compared
-        assert endpoint.receive(0) is None
-        assert read_frame(early) == {"id": 7, "error": {
-            "code": ErrorCode.UNAUTHORIZED, "fatal": True,
-            "message": "too many wrong tokens from 127.0.0.1: try again in 1 s"}}
-        early.close()
-        reply = attempt("t0ken")  # the right token, not even read: no hello
-        refused = reply["error"]
-        assert (refused["code"], refused["fatal"], reply["id"]) == \
-            (ErrorCode.UNAUTHORIZED, True, None)
-        assert refused["message"] == "too many wrong tokens from 127.0.0.1: try again in 1 s"
-        assert attempt("t0ken", source="127.0.0.2")["id"] == 1  # another address gets in
+        for _ in range(FREE_FAILURES):  # a person mistyping: answered at once
+            sock = send("guess")
+            assert endpoint.receive(0) is None
+            assert read_frame(sock)["error"]["message"] == "wrong token"
+        held = [send("guess")]  # its refusal waits 1 s, in no slot
+        assert endpoint.receive(0) is None and not answered(held[0])
+        assert endpoint.connections == 0
+        assert served(send("t0ken"))  # the right token, from the same address: at once
+        for _ in range(MAX_HELD - 1):  # 2 s, 4 s, 8 s
+            held.append(send("guess"))
+            assert endpoint.receive(0) is None
+        waiting = send("t0ken")  # MAX_HELD held: compared once one goes out
+        assert endpoint.receive(0) is None and not answered(waiting)
         clock.advance(1.0)
-        assert attempt("guess")["error"]["message"] == "wrong token"  # the next one: 2 s
-        clock.advance(1.5)
-        assert "try again in 1 s" in attempt("t0ken")["error"]["message"]
-        clock.advance(0.5)
-        assert attempt("t0ken")["id"] == 1  # the right token forgives it all
-        assert attempt("guess")["error"]["message"] == "wrong token"
-        assert "id" in attempt("t0ken")
+        assert served(waiting)  # the first held refusal went out: the token is compared
+        error = read_frame(held[0])["error"]
+        assert (error["code"], error["fatal"], error["message"]) == \
+            (ErrorCode.UNAUTHORIZED, True, "wrong token")
+        assert not any(answered(sock) for sock in held[1:])
+        clock.advance(MAX_PENALTY)
+        assert endpoint.receive(0) is None
+        assert all(read_frame(sock)["error"]["message"] == "wrong token" for sock in held[1:])
         lines = [record.getMessage() for record in caplog.records]
         assert lines[:FREE_FAILURES] == [f"wrong token from 127.0.0.1 ({n} in a row)"
                                          for n in range(1, FREE_FAILURES + 1)]
         assert lines[FREE_FAILURES:] == [
-            f"wrong token from 127.0.0.1 ({FREE_FAILURES + 1} in a row): its requests are "
-            "refused for 1 s",
-            f"wrong token from 127.0.0.1 ({FREE_FAILURES + 2} in a row): its requests are "
-            "refused for 2 s",
-            "wrong token from 127.0.0.1 (1 in a row)"]
+            f"wrong token from 127.0.0.1 ({FREE_FAILURES + n} in a row): answered in "
+            f"{2 ** (n - 1)} s" for n in range(1, MAX_HELD + 1)]
         assert not any("guess" in line or "t0ken" in line for line in lines)
     finally:
+        for sock in opened:
+            sock.close()
         endpoint.close()
 
 
@@ -330,7 +344,7 @@ def test_kills_and_stops_at_random_points_lose_and_duplicate_nothing(
     transition the client sees is accounted for by the tick counter in the observation."""
     rng = random.Random(7)
     faults = 8
-    env = RemoteEnv("examples.faulty:CountingEnvironment", max_restarts=faults, timeout=1.0)
+    env = RemoteEnv("examples.faulty:CountingEnvironment", max_restarts=faults, timeout=5.0)
     transitions = lost = duplicated = survived = 0
     try:
         observation, _ = env.reset(seed=0)
@@ -371,11 +385,11 @@ def test_kills_and_stops_at_random_points_lose_and_duplicate_nothing(
 
 def test_the_client_closes_rather_than_pair_a_late_answer(serve: Serve) -> None:
     server = serve("examples.faulty:CountingEnvironment")
-    client = Client(server.host, server.port, timeout=0.3)
+    client = Client(server.host, server.port, timeout=3.0)  # the hello and reset's margin too
     client.reset(seed=0)
     os.killpg(server.pid, signal.SIGSTOP)
     try:
-        with pytest.raises(Exception, match="did not answer within 0.3s"):
+        with pytest.raises(Exception, match="did not answer within 3.0s"):
             client.step(0)
     finally:
         os.killpg(server.pid, signal.SIGCONT)

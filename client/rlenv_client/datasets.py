@@ -28,6 +28,7 @@ from gymnasium.envs.registration import EnvSpec
 from rlenv.targets import same_target
 from rlenv_client.registration import ENVIRONMENTS
 from rlenv_client.replay import EpisodeFile, replay
+from rlenv_client.trusted_targets import check_target
 
 try:
     import minari
@@ -73,7 +74,7 @@ def environment_spec(target: str, repeat_action: int | None = None) -> EnvSpec:
 
 def create_dataset(
     dataset_id: str, directory: str | Path, *, target: str | None = None,
-    description: str | None = None, algorithm_name: str | None = None,
+    trust_target: bool = False, description: str | None = None, algorithm_name: str | None = None,
     author: str | None = None, author_email: str | None = None,
     code_permalink: str | None = None, report: Callable[[str], None] | None = None,
 ) -> minari.MinariDataset:
@@ -82,7 +83,10 @@ def create_dataset(
     Args:
         dataset_id: Minari's id, of the form :data:`DATASET_ID_FORM`.
         directory: a folder of ``*.rlenv`` recordings, all of one environment.
-        target: ``MODULE:CLASS`` to re-simulate with (default: the recorded one).
+        target: ``MODULE:CLASS`` to re-simulate with (default: the recorded one, imported only
+            where it is an installed package: :mod:`rlenv_client.trusted_targets`).
+        trust_target: import the recorded target whatever it is (it runs its code: only for
+            recordings you trust).
         description: what the dataset holds (default: how many episodes of what).
         algorithm_name: what chose the actions (Minari's metadata, like the next three).
         author: who made the dataset.
@@ -96,12 +100,19 @@ def create_dataset(
 
     Raises:
         ValueError: a malformed id, an empty folder, recordings of several environments or of
-            none, a recording that no longer replays (its step is named), a dataset that exists.
+            none, a recording that no longer replays (its step is named), a dataset that exists,
+            a recording that is no regular file or is too large
+            (:func:`~rlenv_client.recordings.read_recording`), or a recorded target that is no
+            installed package with neither ``target`` nor ``trust_target``.
     """
     check_dataset_id(dataset_id)
     paths = _recordings(Path(directory))
     episodes = [EpisodeFile.load(path) for path in paths]
-    target = target or _one_target(episodes, Path(directory))
+    if target is None:
+        target = _one_target(episodes, Path(directory))
+        if not trust_target:
+            check_target(target, named_by=f"a recording in {directory}",
+                         folder=Path(directory))
     spec = environment_spec(target, _repeat_action(episodes))
     env = gymnasium.make(spec)
     try:

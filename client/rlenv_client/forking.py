@@ -10,14 +10,24 @@ checkpoints (:mod:`rlenv_client.timeline`).
 
 Every call is a msgpack frame (:mod:`rlenv.protocol.codec`) naming one of a few operations;
 nothing is ever unpickled. A process ends when its socket closes, so closing the owner's end
-(or the owner's death) ends it. POSIX only (``os.fork``); the environment must not rely on
-threads of its own, which a fork does not copy.
+ends it. POSIX only (``os.fork``); the environment must not rely on threads of its own, which a
+fork does not copy.
+
+Every copy dies with its owner, whatever it is doing (a hung ``step`` included): the first
+process and all its copies form a process group of their own, and hold the read end of a pipe,
+the lifeline, whose only write end the owner holds. On Linux the lifeline is armed
+(``O_ASYNC`` with ``F_SETSIG``): when its write end closes, because the owner closed the first
+process or died (``SIGKILL`` included), the kernel sends ``SIGKILL`` to the whole group. (Not
+``PR_SET_PDEATHSIG``: that fires when the parent *thread* ends, and a copy's parent is a
+checkpoint, not the owner.) Elsewhere a process ends when it next reads its closed socket.
 """
 
 from __future__ import annotations
 
+import fcntl
 import gc
 import os
+import select
 import signal
 import socket
 import struct
@@ -57,16 +67,20 @@ class ForkedEnvironment:
     """
 
     def __init__(self, sock: socket.socket, pid: int, hello: Hello | None,
-                 process: subprocess.Popen[bytes] | None = None) -> None:
+                 process: subprocess.Popen[bytes] | None = None, lifeline: int | None = None,
+                 ) -> None:
         self._socket = sock
         self.pid = pid
         self.hello = hello
         self._process = process  # the first process only: a copy is not this process's child
+        self._lifeline = lifeline  # the first's only: closing it ends the group
         self.closed = False
 
     @classmethod
     def start(cls, target: str, *, timeout: float = 120.0) -> ForkedEnvironment:
         """Start a process serving ``target`` (``MODULE:CLASS``), reset by no one yet.
+
+        Closing it (:meth:`close`) ends its copies too, as the owner's death does.
 
         Args:
             target: the environment class.
@@ -76,14 +90,20 @@ class ForkedEnvironment:
             ServerStartError: the class did not load (with why).
         """
         mine, theirs = socket.socketpair()
+        lifeline, held = os.pipe()
         try:
             process = subprocess.Popen(
-                [sys.executable, "-m", "rlenv_client.forking", str(theirs.fileno()), target],
-                pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL)
+                [sys.executable, "-m", "rlenv_client.forking", str(theirs.fileno()),
+                 str(lifeline), target],
+                pass_fds=(theirs.fileno(), lifeline), stdin=subprocess.DEVNULL, process_group=0)
+        except BaseException:
+            os.close(held)
+            raise
         finally:
             theirs.close()
+            os.close(lifeline)
         mine.settimeout(timeout)
-        environment = cls(mine, process.pid, None, process)
+        environment = cls(mine, process.pid, None, process, held)
         try:
             environment.hello = Hello.from_wire(environment._receive())
         except (RemoteError, ConnectionError, OSError) as error:
@@ -139,11 +159,14 @@ class ForkedEnvironment:
         return ForkedEnvironment(sock, _FORKED.unpack(message)[0], self.hello)
 
     def close(self) -> None:
-        """Close the socket, which ends the process; safe to repeat."""
+        """Close the socket, which ends the process (the first's copies too); safe to repeat."""
         if self.closed:
             return
         self.closed = True
         self._socket.close()
+        if self._lifeline is not None:
+            os.close(self._lifeline)
+            self._lifeline = None
         if self._process is not None:
             try:
                 self._process.wait(5.0)
@@ -156,6 +179,20 @@ class ForkedEnvironment:
         self.close()
         if self._process is None:
             _wait_gone(self.pid)
+
+    def memory(self) -> int:
+        """The process's proportional share of memory (PSS), in bytes.
+
+        0 where ``/proc`` says none (not Linux, or the process is gone).
+        """
+        try:
+            with open(f"/proc/{self.pid}/smaps_rollup", "rb") as rollup:
+                for line in rollup:
+                    if line.startswith(b"Pss:"):
+                        return int(line.split()[1]) * 1024
+        except OSError:
+            pass
+        return 0
 
     def _send(self, message: Any) -> None:
         if self.closed:
@@ -313,9 +350,22 @@ def _reply(sock: socket.socket, status: str, value: Any) -> None:
     sock.sendall(frame([status, value]))
 
 
+def _arm(lifeline: int) -> None:
+    """Have the kernel kill this process group once the lifeline's write end closes (Linux)."""
+    set_signal = getattr(fcntl, "F_SETSIG", None)
+    if set_signal is None:
+        return
+    fcntl.fcntl(lifeline, fcntl.F_SETOWN, -os.getpgrp())
+    fcntl.fcntl(lifeline, set_signal, signal.SIGKILL)
+    fcntl.fcntl(lifeline, fcntl.F_SETFL, fcntl.fcntl(lifeline, fcntl.F_GETFL) | os.O_ASYNC)
+    if select.select([lifeline], [], [], 0)[0]:  # the owner was gone before it was armed
+        os.killpg(os.getpgrp(), signal.SIGKILL)
+
+
 def main(argv: Sequence[str] | None = None) -> None:
-    """``python -m rlenv_client.forking FD MODULE:CLASS``: serve the socket ``FD``."""
-    fd, target = (sys.argv[1:] if argv is None else argv)
+    """``python -m rlenv_client.forking FD LIFELINE MODULE:CLASS``: serve the socket ``FD``."""
+    fd, lifeline, target = (sys.argv[1:] if argv is None else argv)
+    _arm(int(lifeline))
     sock = socket.socket(fileno=int(fd))
     try:
         _serve(sock, target)

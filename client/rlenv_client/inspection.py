@@ -9,7 +9,7 @@ lists and rendered frames. It is part of every
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, MutableMapping
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -18,12 +18,16 @@ from rlenv.protocol import ErrorReply, Hello, Request, Response
 from rlenv.protocol.errors import ErrorCode, RemoteError
 from rlenv_client.replay import EpisodeFile
 
-__all__ = ["EPISODES_SINCE", "Inspection", "config_request", "episode_files"]
+__all__ = ["EPISODES_SINCE", "PAGED_EPISODES_SINCE", "Inspection", "config_request",
+           "episode_files", "fetch_episodes"]
 
 EPISODES_SINCE = (2, 5)
 AGENT_SETTINGS_SINCE = (2, 6)
 """The protocol whose ``config.agent`` may set one agent, keyed by its name."""
 """The protocol version that brought the ``episodes`` part (:meth:`Inspection.episodes`)."""
+
+PAGED_EPISODES_SINCE = (2, 6)
+"""The protocol version that serves the ``episodes`` part by index and in pages."""
 
 
 class Inspection:
@@ -88,9 +92,10 @@ class Inspection:
     def episodes(self, last: int | None = None) -> list[EpisodeFile]:
         """The environment's last finished episodes, as recordings, oldest first.
 
-        The server keeps each instance's last few (``rlenv serve --keep-episodes N``, 8 by
-        default; see :mod:`rlenv.serving.recent`) at no cost to the steps; any client may ask,
-        an observer beside a trainer included (protocol 2.5, the ``episodes`` part). Each
+        The server keeps each instance's last few once a client asks for them (this call does;
+        ``rlenv serve --keep-episodes N`` from the start; see :mod:`rlenv.serving.recent`) at
+        no cost to the steps; any client may ask, an observer beside a trainer included
+        (protocol 2.5, the ``episodes`` part; from a 2.6 server by index and in pages). Each
         snapshot restores the episode's start on any server of the environment and replays to
         the observations the episode had.
 
@@ -111,8 +116,10 @@ class Inspection:
         if hello.protocol < EPISODES_SINCE:
             raise RemoteError(ErrorCode.BAD_REQUEST, "the server speaks protocol {}.{}; recent "
                               "episodes need 2.5".format(*hello.protocol))
-        part = {} if last is None else {"last": last}
-        return episode_files(self._call(episodes=part).info["episodes"], hello.target)
+        if last is not None and (type(last) is not int or last < 1):
+            raise RemoteError(ErrorCode.BAD_REQUEST,
+                              f"episodes.last must be an integer >= 1, got {last!r:.40}")
+        return fetch_episodes(lambda part: self._call(episodes=part), hello, last)
 
     def tree(self) -> list[dict[str, Any]]:
         """The environment's node tree: every node's path, type and exported properties."""
@@ -183,6 +190,59 @@ class Inspection:
         """
         frame = np.asarray(self._part(self._response(reply), "render"))
         return frame if frame.flags.writeable else frame.copy()
+
+
+def fetch_episodes(ask: Callable[[dict[str, Any]], Response], hello: Hello,
+                   last: int | None = None,
+                   cache: MutableMapping[int, EpisodeFile] | None = None) -> list[EpisodeFile]:
+    """An instance's kept episodes (the ``last`` ones), oldest first, as recordings.
+
+    From a 2.6 server, by index and in pages (no answer holds more than a page, and each
+    episode is asked for once if ``cache`` keeps them by id: a kept episode never changes);
+    from a 2.5 server, whole in one answer.
+
+    Args:
+        ask: sends an ``episodes`` part to the instance; its answer.
+        hello: the server's hello (its protocol and target).
+        last: only the ``last`` most recent.
+        cache: the episodes fetched before, by id (updated: those no longer kept leave it).
+    """
+    if hello.protocol < PAGED_EPISODES_SINCE:
+        part = {} if last is None else {"last": last}
+        return episode_files(ask(part).info["episodes"], hello.target)
+    index = ask({"index": True}).info["episodes"]
+    if cache is not None:
+        for identifier in set(cache) - {entry["id"] for entry in index}:
+            del cache[identifier]
+    files = []
+    for entry in index if last is None else index[-last:]:
+        identifier = entry["id"]
+        found = None if cache is None else cache.get(identifier)
+        if found is None:
+            found = _fetch_episode(ask, identifier, hello.target)
+            if found is None:  # dropped meanwhile (newer ones finished)
+                continue
+            if cache is not None:
+                cache[identifier] = found
+        files.append(found)
+    return files
+
+
+def _fetch_episode(ask: Callable[[dict[str, Any]], Response], identifier: int,
+                   target: str | None) -> EpisodeFile | None:
+    """One kept episode, page by page (``None``: no longer kept)."""
+    events: list[Any] = []
+    while True:
+        page = ask({"episode": identifier, "from": len(events)}).info["episode"]
+        if page is None:
+            return None
+        snapshot = dict(page["snapshot"])
+        got = snapshot["events"]
+        events.extend(got)
+        if not got or len(events) >= page["events"]:
+            snapshot["events"] = events
+            return EpisodeFile(target, snapshot, [], bool(page["terminated"]),
+                               bool(page["truncated"]))
 
 
 def episode_files(entries: list[Mapping[str, Any]], target: str | None) -> list[EpisodeFile]:

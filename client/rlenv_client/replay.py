@@ -26,6 +26,9 @@ from typing import TYPE_CHECKING, Any
 import gymnasium
 
 from rlenv.protocol import pack, unpack
+from rlenv.protocol.errors import RequestError
+from rlenv.serving.snapshots import parse_snapshot
+from rlenv_client.recordings import check_frames, read_recording
 
 if TYPE_CHECKING:  # only named: base.py's Inspection builds EpisodeFiles
     from rlenv_client.base import BaseClient
@@ -54,7 +57,8 @@ def next_episode_path(directory: Path) -> Path:
 class EpisodeFile:
     """One recorded episode: the server snapshot, the digests of what the client saw, its end.
 
-    ``terminated`` and ``truncated`` are ``None`` in recordings older than them.
+    ``terminated`` and ``truncated`` are ``None`` in recordings older than them; ``path`` is
+    where :meth:`load` read it.
     """
 
     target: str | None
@@ -62,6 +66,8 @@ class EpisodeFile:
     observations: list[str]
     terminated: bool | None = None
     truncated: bool | None = None
+    path: Path | None = field(default=None, compare=False, repr=False)
+    """The file it was read from (``None``: made in this process, or a server's)."""
 
     def save(self, path: str | Path) -> None:
         """Write the episode to ``path`` (the end only when known: older readers skip it)."""
@@ -73,20 +79,39 @@ class EpisodeFile:
 
     @classmethod
     def load(cls, path: str | Path) -> EpisodeFile:
-        """Read an episode written by :meth:`save`.
+        """Read an episode written by :meth:`save`, within bounds.
+
+        Through :func:`~rlenv_client.recordings.read_recording`: a regular file of at most
+        64 MiB, each action of at most :data:`~rlenv_client.recordings.MAX_FRAMES_PER_ACTION`
+        ticks, its snapshot of the form a server restores.
+
+        The episode keeps ``path`` (:attr:`path`): the folder it came from counts in whether
+        its ``target`` may be imported (:mod:`rlenv_client.trusted_targets`).
 
         Raises:
-            ValueError: the file is not an rlenv episode.
+            ValueError: the file is not an rlenv episode, not a regular file, or too large.
+            OSError: the file cannot be opened.
         """
+        raw = read_recording(path)
         try:
-            data = unpack(Path(path).read_bytes())
+            data = unpack(raw)
         except Exception as error:
             raise ValueError(f"{path} is not an rlenv episode: {error}") from None
         if not isinstance(data, dict) or data.get("format") != _FORMAT or \
                 data.get("version") != _VERSION:
             raise ValueError(f"{path} is not an rlenv episode (version {_VERSION})")
-        return cls(data["target"], data["snapshot"], list(data["observations"]),
-                   data.get("terminated"), data.get("truncated"))
+        target, observations = data.get("target"), data.get("observations")
+        if not (target is None or isinstance(target, str)) or not isinstance(observations, list) \
+                or not all(isinstance(seen, str) for seen in observations):
+            raise ValueError(f"{path} is not an rlenv episode: its target must be a string and "
+                             "its observations a list of digests")
+        try:
+            snapshot = parse_snapshot(data.get("snapshot"))
+        except RequestError as error:
+            raise ValueError(f"{path} is not an rlenv episode: {error}") from None
+        check_frames(snapshot["events"], str(path))
+        return cls(target, snapshot, observations, data.get("terminated"),
+                   data.get("truncated"), Path(path))
 
 
 class RecordEpisodes(gymnasium.Wrapper):

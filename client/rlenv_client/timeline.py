@@ -29,8 +29,11 @@ the nearest checkpoint at or before it and takes the steps from there (about 5 m
 most); going forward from where the timeline stands just steps on. ``benchmarks/time_travel.py``
 measures a step of a 10,000-step episode. Each checkpoint is a process that holds, of its own,
 the memory the episode changed since the one before (a few MiB for Plinko); there are at most
-256 over an episode, and branches add theirs. A timeline is not thread-safe, and needs
-``os.fork`` (Linux, macOS).
+256 over an episode, and branches add theirs, within bounds: ``max_processes`` in all (the
+episode's checkpoints take at most half, each branch at most half of what is left) and
+``max_memory``, past which no more are parked. Every process dies with the timeline's owner
+(:mod:`rlenv_client.forking`'s lifeline). A timeline is not thread-safe, and needs ``os.fork``
+(Linux, macOS).
 """
 
 from __future__ import annotations
@@ -47,14 +50,23 @@ import numpy as np
 from rlenv.protocol.errors import RemoteError
 from rlenv_client.forking import ForkedEnvironment, StepRecord
 from rlenv_client.replay import EpisodeFile, digest, older_settings
+from rlenv_client.trusted_targets import check_target
 
-__all__ = ["Step", "Tick", "Timeline", "TimelineDiff", "load_policy"]
+__all__ = ["MAX_MEMORY", "MAX_PROCESSES", "Step", "Tick", "Timeline", "TimelineDiff",
+           "load_policy"]
 
 _PROBE_STEPS = 8  # steps timed at a time to space the checkpoints (twice: the least spacing)
 _PROBE_ROUNDS = 4  # times they are timed
 _REPLAY_BUDGET = 0.005  # seconds of steps from a checkpoint to the step asked for, at most
 _MOST_APART = 1000  # steps between two checkpoints, at most (unless the episode is longer)
-_MOST_CHECKPOINTS = 256  # over one episode
+_MOST_CHECKPOINTS = 256  # over one episode (and at most half a timeline's processes)
+_WORKING = 2  # processes besides the checkpoints: the cursor, a tick view's copy
+_MEASURE_EVERY = 8  # parks between two measures of the memory (an eighth of them, past 64)
+_SKIPPED_AT_ONCE = 10_000  # ticks a tick view takes unread in one run
+MAX_PROCESSES = 512
+"""A timeline's processes at most, its branches' included (``max_processes``' default)."""
+MAX_MEMORY = 2 << 30
+"""The memory a timeline's processes hold at most, in bytes (``max_memory``' default)."""
 _Result = tuple[Any, float, bool, bool, dict[str, Any]]  # observation, reward, ends, info
 
 
@@ -172,21 +184,44 @@ class _Processes:
     """The processes of a root timeline and its branches: the first, parked copies, the cursor.
 
     The cursor is the copy that steps; ``position`` says which timeline's step it stands at.
+    At most ``limit`` processes at once (the cursor and a tick view's copy included), holding
+    at most ``memory`` bytes (their PSS, measured every few parks): past either, no more
+    checkpoints are parked (going to a step then takes more steps from an earlier one).
     """
 
-    def __init__(self, target: str, timeout: float) -> None:
+    def __init__(self, target: str, timeout: float, limit: int, memory: int) -> None:
         self.first = ForkedEnvironment.start(target, timeout=timeout)
         self.parked: list[ForkedEnvironment] = [self.first]
         self.cursor: ForkedEnvironment | None = None
         self.position: tuple[Timeline, int] | None = None
         self.result: _Result | None = None
         self.closed = False
+        self.limit = limit
+        self.memory = memory
+        self._measured = 0  # bytes, at the last measure
+        self._since = 0  # parks since
 
-    def park(self, environment: ForkedEnvironment) -> ForkedEnvironment:
-        """A copy of ``environment`` kept as it is now."""
+    def room(self) -> int:
+        """How many more checkpoints may be parked now."""
+        if self._measured > self.memory:
+            return 0
+        return max(0, self.limit - len(self.parked) - _WORKING)
+
+    def park(self, environment: ForkedEnvironment) -> ForkedEnvironment | None:
+        """A copy of ``environment`` kept as it is now (``None``: no room left for one)."""
+        if self._since >= max(_MEASURE_EVERY, len(self.parked) // 8):
+            self._since, self._measured = 0, self.used()
+        if not self.room():
+            return None
         copy = environment.fork()
         self.parked.append(copy)
+        self._since += 1
         return copy
+
+    def used(self) -> int:
+        """The memory the processes hold (PSS), in bytes."""
+        cursor = [] if self.cursor is None else [self.cursor]
+        return sum(environment.memory() for environment in self.parked + cursor)
 
     def resume(self, mark: _Mark) -> ForkedEnvironment:
         """A new cursor: a copy of the checkpoint's (the old cursor ends)."""
@@ -222,12 +257,19 @@ class Timeline:
 
     Args:
         episode: the recording.
-        target: the environment to serve (``MODULE:CLASS``; default: the recorded one).
+        target: the environment to serve (``MODULE:CLASS``; default: the recorded one, imported
+            only where it is an installed package, see :mod:`rlenv_client.trusted_targets`).
+        trust_target: import the recorded target whatever it is (it runs its code: only for
+            recordings you trust).
         checkpoint_every: how many steps apart the checkpoints are (default: as many as take
             about 5 ms to re-simulate, from the cost of the first steps; at most 256
             checkpoints over the episode).
         timeout: seconds a re-simulation may take (a step, a scene read, a branch's run of
             steps) before its process is ended and the call fails.
+        max_processes: the most processes the timeline and its branches hold at once (the
+            episode's checkpoints take at most half; each branch at most half of what is left).
+        max_memory: the most memory (PSS, bytes) they hold: past it, no more checkpoints are
+            parked (Linux measures it; elsewhere only ``max_processes`` bounds them).
 
     Attributes:
         episode: the recording (a branch's: what :meth:`save` writes).
@@ -237,18 +279,28 @@ class Timeline:
     Raises:
         ValueError: the recording names no target and none is given, or its digests do not
             match its actions.
+        UntrustedTargetError: the recorded target is not installed, and neither ``target``
+            nor ``trust_target`` is given (a ``ValueError``; the message says both).
         ServerStartError: the environment did not start.
         RuntimeError: the environment re-simulated the recording differently.
     """
 
     def __init__(self, episode: EpisodeFile, *, target: str | None = None,
-                 checkpoint_every: int | None = None, timeout: float = 60.0) -> None:
-        target = target or episode.target
+                 trust_target: bool = False, checkpoint_every: int | None = None,
+                 timeout: float = 60.0, max_processes: int = MAX_PROCESSES,
+                 max_memory: int = MAX_MEMORY) -> None:
         if target is None:
-            raise ValueError("the recording names no target: pass target='MODULE:CLASS'")
+            target = episode.target
+            if target is None:
+                raise ValueError("the recording names no target: pass target='MODULE:CLASS'")
+            if not trust_target:
+                check_target(target, named_by=_named_by(episode),
+                             folder=None if episode.path is None else episode.path.parent)
         if checkpoint_every is not None and checkpoint_every < 1:
             raise ValueError("checkpoint_every must be at least 1")
-        processes = _Processes(target, timeout)
+        if max_processes < 2 * _WORKING:
+            raise ValueError(f"max_processes must be at least {2 * _WORKING}")
+        processes = _Processes(target, timeout, max_processes, max_memory)
         episode = replace(episode, observations=list(episode.observations))
         try:
             unspaced = _Checkpoints(len(episode.snapshot["events"]) + 1, {})  # until measured
@@ -258,22 +310,26 @@ class Timeline:
             result: _Result = (observation, 0.0, False, False, info)
             self._check(0, digest(observation))
             self._checkpoints.keep(0, _Mark(processes.first, result))
-            self._checkpoints.every = checkpoint_every or self._measured_spacing()
+            self._checkpoints.every = max(checkpoint_every or self._measured_spacing(),
+                                          -(-len(self) // (processes.room() // 2 or 1)))
             self._goto(len(self))
         except BaseException:
             processes.close()
             raise
 
     @classmethod
-    def open(cls, path: str | Path, *, target: str | None = None,
-             checkpoint_every: int | None = None, timeout: float = 60.0) -> Timeline:
+    def open(cls, path: str | Path, *, target: str | None = None, trust_target: bool = False,
+             checkpoint_every: int | None = None, timeout: float = 60.0,
+             max_processes: int = MAX_PROCESSES, max_memory: int = MAX_MEMORY) -> Timeline:
         """The timeline of the recording at ``path`` (see :class:`Timeline` for the rest).
 
         Raises:
-            ValueError: the file is not an rlenv episode (and as :class:`Timeline`).
+            ValueError: the file is not an rlenv episode, not a regular file, or too large
+                (:func:`~rlenv_client.recordings.read_recording`; and as :class:`Timeline`).
         """
-        return cls(EpisodeFile.load(path), target=target, checkpoint_every=checkpoint_every,
-                   timeout=timeout)
+        return cls(EpisodeFile.load(path), target=target, trust_target=trust_target,
+                   checkpoint_every=checkpoint_every, timeout=timeout,
+                   max_processes=max_processes, max_memory=max_memory)
 
     def _setup(self, episode: EpisodeFile, processes: _Processes, owner: bool,
                checkpoints: _Checkpoints, records: list[StepRecord]) -> None:
@@ -298,6 +354,16 @@ class Timeline:
         """The number of actions (the last step's number)."""
         return len(self._steps)
 
+    def frames(self, step: int) -> int:
+        """The physics ticks the action of ``step`` asked for (its ``repeat_action``).
+
+        Raises:
+            IndexError: no such step (step 0 has no action).
+        """
+        if not 1 <= step <= len(self):
+            raise IndexError(f"step {step} has no action (steps 1 to {len(self)} have)")
+        return int(self._steps[step - 1][-1][2])
+
     @property
     def ended(self) -> bool:
         """Whether the episode ended at its last step (recordings older than that say so)."""
@@ -307,6 +373,14 @@ class Timeline:
     def rewards(self) -> list[float]:
         """Every step's reward, 0.0 at step 0 (as the timeline first took them: no re-run)."""
         return [0.0] + [record[1] for record in self._records]
+
+    @property
+    def memory(self) -> int:
+        """The memory (PSS, bytes) its processes hold now, its branches' included.
+
+        0 where ``/proc`` does not say.
+        """
+        return self._processes.used()
 
     @property
     def processes(self) -> list[int]:
@@ -351,28 +425,41 @@ class Timeline:
         self._goto(step)
         return self._cursor().call("tree")
 
-    def ticks(self, step: int) -> list[Tick]:
-        """Each physics tick inside the action of ``step`` (from 1), re-simulated.
+    def ticks(self, step: int, *, first: int = 1, count: int | None = None) -> list[Tick]:
+        """Physics ticks inside the action of ``step``, re-simulated, a page at a time.
+
+        From tick ``first`` (ticks count from 1), ``count`` of them at most (default: to the
+        step's end).
 
         From the state before the step, the action runs with ``repeat_action=1`` as many times
-        as the step ran ticks (on a copy: the timeline's own state is untouched). This is bit
-        for bit the state one step with ``repeat_action=N`` reaches when the agent's
-        ``set_action`` only sets what each tick uses (CartPole's and Plinko's do: the tests
-        check the last tick against :meth:`at` and the rewards' sum); an agent that does
-        something once per action (a jump, a counter) would do it at every tick here.
+        as the step ran ticks (on a copy: the timeline's own state is untouched); the ticks
+        before ``first`` are only taken, not read, so a page of a long step costs its own
+        ticks and a run to them. This is bit for bit the state one step with
+        ``repeat_action=N`` reaches when the agent's ``set_action`` only sets what each tick
+        uses (CartPole's and Plinko's do: the tests check the last tick against :meth:`at` and
+        the rewards' sum); an agent that does something once per action (a jump, a counter)
+        would do it at every tick here. Fewer ticks come back where the episode ends.
 
         Raises:
-            IndexError: no such step (step 0 has no action).
+            IndexError: no such step (step 0 has no action), or ``first`` past its ticks.
+            ValueError: ``count`` below 1.
             RuntimeError: as :meth:`at`.
         """
         if not 1 <= step <= len(self):
             raise IndexError(f"step {step} has no action (steps 1 to {len(self)} have)")
-        self._goto(step - 1)
         *changes, (_, action, frames) = self._steps[step - 1]
+        if not 1 <= first <= frames:
+            raise IndexError(f"step {step} has ticks 1 to {frames}, not {first}")
+        if count is not None and count < 1:
+            raise ValueError("count must be at least 1")
+        last = frames if count is None else min(frames, first + count - 1)
+        self._goto(step - 1)
         ticking = self._cursor().fork()
         try:
+            if first > 1 and self._skip(ticking, changes, action, first - 1):
+                return []  # the episode ended before ``first``
             ticks = []
-            for tick in range(1, frames + 1):
+            for tick in range(first, last + 1):
                 events = [*changes, ["action", action, 1]] if tick == 1 else [["action", action, 1]]
                 ((_, reward, terminated, truncated),), observation, info = ticking.run([events])
                 properties = {node["path"]: dict(node["exported"])
@@ -386,6 +473,22 @@ class Timeline:
         finally:
             ticking.end()
         return ticks
+
+    @staticmethod
+    def _skip(ticking: ForkedEnvironment, changes: list[list[Any]], action: Any,
+              ticks: int) -> bool:
+        """Take the first ``ticks`` ticks of an action unread; whether the episode ended."""
+        taken = 0
+        while taken < ticks:
+            chunk = min(_SKIPPED_AT_ONCE, ticks - taken)
+            steps = [[["action", action, 1]] for _ in range(chunk)]
+            if taken == 0:
+                steps[0] = [*changes, *steps[0]]
+            records, _, _ = ticking.run(steps, stop_at_end=True)
+            taken += len(records)
+            if records[-1][2] or records[-1][3]:
+                return True
+        return False
 
     def branch(self, step: int, actions: Iterable[Any] | None = None, *,
                policy: Callable[[Any], Any] | str | Path | None = None,
@@ -425,6 +528,10 @@ class Timeline:
         if repeat_action is None and self._steps:
             repeat_action = self._steps[min(step, len(self) - 1)][-1][2]
         checkpoints = self._checkpoints.upto(step)
+        actions = None if actions is None else list(actions)
+        length = max_steps if actions is None else len(actions)
+        checkpoints.every = max(checkpoints.every,  # half the room left, at most
+                                -(-length // (self._processes.room() // 2 or 1)))  # type: ignore[operator]
         records = self._records[:step]
         terminated, truncated = result[2], result[3]
         if step == len(self) and self.ended:
@@ -436,7 +543,7 @@ class Timeline:
             if terminated or truncated:
                 pass
             elif policy is None:
-                steps = [[["action", action, repeat_action]] for action in actions]  # type: ignore[union-attr]
+                steps = [[["action", action, repeat_action]] for action in actions or ()]
                 result = self._take(step, steps, result, checkpoints, records, branching=True)
             else:
                 for _ in range(max_steps):  # type: ignore[arg-type]
@@ -541,7 +648,9 @@ class Timeline:
 
     def _park_if_due(self, step: int, checkpoints: _Checkpoints, result: _Result) -> None:
         if checkpoints.due(step):
-            checkpoints.keep(step, _Mark(self._processes.park(self._cursor()), result))
+            parked = self._processes.park(self._cursor())
+            if parked is not None:
+                checkpoints.keep(step, _Mark(parked, result))
 
     def _cursor(self) -> ForkedEnvironment:
         cursor = self._processes.cursor
@@ -591,6 +700,10 @@ class Timeline:
             raise RuntimeError(f"the timeline's environment failed: {error}") from None
         processes.position, processes.result = None, None
         return observations
+
+
+def _named_by(episode: EpisodeFile) -> str:
+    return "the episode" if episode.path is None else f"the recording {episode.path}"
 
 
 def load_policy(path: str | Path) -> Callable[[Any], Any]:

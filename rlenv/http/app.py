@@ -34,7 +34,7 @@ from rlenv.http.json_spaces import dumps
 from rlenv.http.openapi import openapi_document
 from rlenv.http.problems import COMMON_HEADERS, PROBLEMS, Problem
 from rlenv.http.routes import component_schemas, session_endpoints, target_schemas
-from rlenv.http.sessions import Sessions
+from rlenv.http.sessions import MAX_SESSIONS_PER_CLIENT, Sessions
 from rlenv.http.streams import stream_endpoints
 from rlenv.http.targets import Catalog
 from rlenv.http.uvicorn_protocol import connection_limit, http_protocol
@@ -62,6 +62,8 @@ class Settings:
         token: the bearer token every request must carry (required beyond loopback).
         timeout: seconds an environment may take to answer one request (then 504).
         max_sessions: sessions at once (then 503).
+        max_sessions_per_client: sessions at once created by one client, one address (then
+            503).
         max_body: the largest request body or WebSocket message, in bytes (then 413).
         idle_timeout: seconds after which a session without requests is closed (``None``:
             never).
@@ -76,6 +78,7 @@ class Settings:
     token: str | None = None
     timeout: float = 30.0
     max_sessions: int = 32
+    max_sessions_per_client: int = MAX_SESSIONS_PER_CLIENT
     max_body: int = 1 << 20
     idle_timeout: float | None = 600.0
     head_timeout: float = 5.0
@@ -95,6 +98,7 @@ class Gateway:
         self.hello = hello
         self.catalog = Catalog(settings.target, timeout=settings.timeout)
         self.sessions = Sessions(self.catalog, max_sessions=settings.max_sessions,
+                                 max_sessions_per_client=settings.max_sessions_per_client,
                                  idle_timeout=settings.idle_timeout)
         self._openapi: bytes | None = None
         self.endpoints: list[Endpoint] = [
@@ -115,7 +119,9 @@ class Gateway:
             "capabilities": {"websocket": True, "events": True, "bevy_rl": bool(settings.target),
                              "render": ["image/png", "application/octet-stream"],
                              "snapshots": True, "openapi": "/openapi.json"},
-            "limits": {"max_sessions": settings.max_sessions, "max_body": settings.max_body,
+            "limits": {"max_sessions": settings.max_sessions,
+                       "max_sessions_per_client": settings.max_sessions_per_client,
+                       "max_body": settings.max_body,
                        "timeout": settings.timeout, "idle_timeout": settings.idle_timeout,
                        "head_timeout": settings.head_timeout,
                        "max_connections": settings.max_connections},

@@ -6,9 +6,10 @@
   other than ``same-origin`` or ``none`` (a page's ``<img src>`` sends no ``Origin``, and
   bevy_rl's ``GET /step`` and ``/reset`` change state);
 - with a token (required to bind beyond loopback: ``RLENV_TOKEN``), ``Authorization: Bearer
-  TOKEN``, compared in constant time; else 401 ``unauthorized``. An address that sent too many
-  wrong tokens waits, as at the TCP server (:mod:`rlenv.serving.penalties`): meanwhile its
-  requests get 401 ``unauthorized`` with ``Retry-After``, their token not compared;
+  TOKEN``, compared in constant time; else 401 ``unauthorized``. Every token is compared: the
+  right one is served whatever its address sent before. Past a few wrong tokens from an
+  address, each wrong one's 401 is held, longer and longer, as at the TCP server
+  (:mod:`rlenv.serving.penalties`): the guesser is slowed, not the address;
 - bodies of at most ``max_body`` bytes: a larger ``Content-Length`` is refused before anything
   is read, a chunked body as soon as it grows past it (413 ``payload_too_large``, and the
   connection closes).
@@ -18,13 +19,14 @@ WebSockets are refused the same way, before they are accepted. No CORS header is
 
 from __future__ import annotations
 
+import asyncio
 import hmac
 from collections.abc import Awaitable, Callable, MutableMapping
 from typing import Any
 
 from rlenv.http.problems import Problem
 from rlenv.protocol.errors import ErrorCode
-from rlenv.serving.penalties import Penalties, refusal
+from rlenv.serving.penalties import Penalties
 from rlenv_client.origins import OriginPolicy
 
 __all__ = ["Guard"]
@@ -82,9 +84,11 @@ class Guard:
             elif name == b"sec-fetch-site":
                 fetch_site = value
         client = scope.get("client")
-        problem = self._problem(host, origin, authorization, length, fetch_site,
-                                "an unknown address" if client is None else client[0])
+        peer = "an unknown address" if client is None else client[0]
+        problem, delay = self._problem(host, origin, authorization, length, fetch_site, peer)
         if problem is not None:
+            if delay:  # a wrong token: its answer waits (on its own connection)
+                await asyncio.sleep(delay)
             await _refuse(problem, scope, receive, send)
             return
         if chunked and kind == "http":
@@ -92,7 +96,8 @@ class Guard:
         await self.app(scope, receive, send)
 
     def _problem(self, host: bytes | None, origin: bytes | None, authorization: bytes,
-                 length: bytes, fetch_site: bytes, peer: str) -> Problem | None:
+                 length: bytes, fetch_site: bytes, peer: str) -> tuple[Problem | None, float]:
+        """Why the request is refused (``None``: it passes), and how long to hold the answer."""
         try:
             refusal = self._refusals[host, origin]
         except KeyError:
@@ -103,38 +108,33 @@ class Guard:
                 self._refusals.clear()
             self._refusals[host, origin] = refusal
         if refusal is not None:
-            return Problem("forbidden", refusal)
+            return Problem("forbidden", refusal), 0.0
         if fetch_site and fetch_site.lower() not in _OWN_FETCHES:
+            site = fetch_site.decode("latin-1")
             return Problem("forbidden", "refused: a request a page of another origin made "
-                                        f"(Sec-Fetch-Site: {fetch_site.decode('latin-1'):.20})")
+                                        f"(Sec-Fetch-Site: {site:.20})"), 0.0
         if self._token is not None:
-            problem = self._token_problem(authorization, peer)
+            problem, delay = self._token_problem(authorization, peer)
             if problem is not None:
-                return problem
+                return problem, delay
         if length and (not length.isdigit() or int(length) > self._max_body):
             return Problem("payload_too_large", f"a body is at most {self._max_body} bytes, "
                                                 f"this one {length.decode('latin-1')[:20]}",
-                           headers=_CLOSE)
-        return None
+                           headers=_CLOSE), 0.0
+        return None, 0.0
 
-    def _token_problem(self, authorization: bytes, peer: str) -> Problem | None:
-        """Why ``authorization`` from the address ``peer`` is refused, or ``None``."""
-        wait = self._penalties.wait(peer)
-        if wait:
-            return Problem(ErrorCode.UNAUTHORIZED, refusal(peer, wait),
-                           headers={"Retry-After": str(wait)})
+    def _token_problem(self, authorization: bytes, peer: str) -> tuple[Problem | None, float]:
+        """Why ``authorization`` from ``peer`` is refused (``None``: it passes); the hold."""
         assert self._token is not None
         scheme, _, token = authorization.partition(b" ")
         if scheme.lower() == b"bearer" and token and \
                 hmac.compare_digest(token.strip(), self._token):
-            self._penalties.succeeded(peer)
-            return None
-        if token:
-            self._penalties.failed(peer)
+            return None, 0.0
+        delay = self._penalties.failed(peer) if token else 0.0
         return Problem(ErrorCode.UNAUTHORIZED,
                        "this gateway requires its token: send Authorization: Bearer TOKEN (the "
                        "RLENV_TOKEN it was started with)" if not token else "wrong token",
-                       headers={"WWW-Authenticate": 'Bearer realm="rlenv"'})
+                       headers={"WWW-Authenticate": 'Bearer realm="rlenv"'}), delay
 
     def _counted(self, receive: Receive) -> Receive:
         """``receive`` that refuses a chunked body once it grows past ``max_body``."""

@@ -94,7 +94,11 @@ def session_endpoints(gateway: Gateway) -> list[Endpoint]:
         if settings is not None and type(settings) is not dict:
             raise Problem(ErrorCode.BAD_REQUEST, "kwargs must be a JSON object of settings "
                                                  "(as BaseClient.configure takes them)")
-        session = await sessions.create(env_id, settings)
+        client = request.client
+        session = await sessions.create(env_id, settings,
+                                        owner=None if client is None else client.host)
+        if await request.is_disconnected():  # abandoned mid-request: nobody knows its id
+            await sessions.abandon(session)
         return json_response({"id": session.id, "env_id": session.env_id, **session.spaces()},
                              201, headers={"Location": f"/v1/envs/{session.id}"})
 

@@ -19,8 +19,11 @@ Watchers follow a session's transitions through :meth:`Session.watch` (server-se
 the oldest events, never slows the session.
 
 :class:`Sessions` is the table: at most ``max_sessions`` (``session_limit``, 503 with
-``Retry-After``: when the first idle session will be reaped), and sessions idle for
-``idle_timeout`` seconds are closed by :meth:`Sessions.reap`.
+``Retry-After``: when the first idle session will be reaped), at most
+``max_sessions_per_client`` of them created by one client (its address: every client of a
+gateway with a token holds the same token), and sessions idle for ``idle_timeout`` seconds are
+closed by :meth:`Sessions.reap`. A creation whose client left before its answer was sent is
+deleted at once (:meth:`Sessions.abandon`), never left to the reaper.
 """
 
 from __future__ import annotations
@@ -49,9 +52,12 @@ from rlenv.http.targets import Catalog, Entry, Opened
 from rlenv.protocol.errors import ConnectionLost, ErrorCode, RemoteError
 from rlenv_client.time_limits import truncate_agents
 
-__all__ = ["Session", "Sessions", "Status"]
+__all__ = ["MAX_SESSIONS_PER_CLIENT", "Session", "Sessions", "Status"]
 
 logger = logging.getLogger(__name__)
+
+MAX_SESSIONS_PER_CLIENT = 16
+"""Sessions one client (one address) may hold at once by default (``--max-sessions-per-client``)."""
 
 _T = TypeVar("_T")
 _WATCH_BACKLOG = 64  # events a watcher may fall behind before the oldest are dropped
@@ -77,11 +83,13 @@ class Session:
         entry: what ``env_id`` it was created with.
         opened: its environment (client and runner).
         clock: monotonic seconds, for idleness.
+        owner: the address of the client that created it (``None``: shared, bevy_rl's).
     """
 
     def __init__(self, session_id: str, entry: Entry, opened: Opened,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic, owner: str | None = None) -> None:
         self.id = session_id
+        self.owner = owner
         self.env_id = entry.env_id
         self.max_episode_steps = entry.max_episode_steps
         self.client = opened.client
@@ -309,20 +317,23 @@ class Sessions:
     Args:
         catalog: the ``env_id`` values served and how they open.
         max_sessions: sessions at once.
+        max_sessions_per_client: sessions at once created by one client (one address).
         idle_timeout: seconds without a request after which a session is closed (``None``:
             never).
         clock: monotonic seconds.
     """
 
     def __init__(self, catalog: Catalog, *, max_sessions: int = 32,
+                 max_sessions_per_client: int = MAX_SESSIONS_PER_CLIENT,
                  idle_timeout: float | None = 600.0,
                  clock: Callable[[], float] = time.monotonic) -> None:
         self.catalog = catalog
         self.max_sessions = max_sessions
+        self.max_sessions_per_client = max_sessions_per_client
         self.idle_timeout = idle_timeout
         self._clock = clock
         self._sessions: dict[str, Session] = {}
-        self._opening = 0
+        self._opening: dict[str | None, int] = {}  # creations under way, by client
 
     def __len__(self) -> int:
         return len(self._sessions)
@@ -348,23 +359,40 @@ class Sessions:
         return self._sessions.get(session_id)
 
     async def create(self, env_id: object, settings: Mapping[str, Any] | None = None,
-                     session_id: str | None = None) -> Session:
+                     session_id: str | None = None, owner: str | None = None) -> Session:
         """Open a session on ``env_id``, configured with ``settings`` (``kwargs``).
+
+        Args:
+            env_id: what to open.
+            settings: its ``kwargs``.
+            session_id: its id (a new random one if ``None``).
+            owner: the creating client's address, whose sessions are bounded (``None``: a
+                shared session, counted in ``max_sessions`` only).
 
         Raises:
             Problem: ``bad_request`` (unknown ``env_id``), ``session_limit`` (503 with
-                ``Retry-After``), and the environment's failures to open or configure.
+                ``Retry-After``: the gateway's limit, or the client's), and the environment's
+                failures to open or configure.
         """
         entry = self.catalog.entry(env_id)
-        if len(self._sessions) + self._opening >= self.max_sessions:
+        if len(self._sessions) + sum(self._opening.values()) >= self.max_sessions:
             raise Problem("session_limit",
                           f"this gateway holds at most {self.max_sessions} sessions; delete "
                           "one, or retry once an idle one is reaped",
                           headers={"Retry-After": str(self.retry_after())})
-        self._opening += 1  # counted from now on: concurrent creations respect the limit
+        if owner is not None:
+            held = [s for s in self._sessions.values() if s.owner == owner]
+            if len(held) + self._opening.get(owner, 0) >= self.max_sessions_per_client:
+                raise Problem("session_limit",
+                              f"this gateway holds at most {self.max_sessions_per_client} "
+                              f"sessions per client, and {owner} has as many; delete one, or "
+                              "retry once an idle one is reaped",
+                              headers={"Retry-After": str(self.retry_after(held))})
+        # counted from now on: concurrent creations respect the limits
+        self._opening[owner] = self._opening.get(owner, 0) + 1
         try:
             session = Session(session_id or secrets.token_hex(8), entry,
-                              await self.catalog.open(entry), self._clock)
+                              await self.catalog.open(entry), self._clock, owner)
             if settings:
                 try:
                     await session.configure(settings)
@@ -373,9 +401,18 @@ class Sessions:
                     raise
             self._sessions[session.id] = session
         finally:
-            self._opening -= 1
+            self._opening[owner] -= 1
+            if not self._opening[owner]:
+                del self._opening[owner]
         logger.info("session %s created on %s", session.id, env_id)
         return session
+
+    async def abandon(self, session: Session) -> None:
+        """Delete ``session``, just created for a client that left before it heard of it."""
+        if self._sessions.get(session.id) is session:
+            logger.warning("session %s deleted: its client left before it was told of it",
+                        session.id)
+            await self.delete(session.id)
 
     async def delete(self, session_id: str) -> None:
         """Close and forget the session.
@@ -387,13 +424,13 @@ class Sessions:
         del self._sessions[session_id]
         await session.close()
 
-    def retry_after(self) -> int:
-        """Seconds until the first idle session is reaped (at least 1)."""
-        if self.idle_timeout is None or not self._sessions:
+    def retry_after(self, among: list[Session] | None = None) -> int:
+        """Seconds until the first idle session (of ``among``, else any) is reaped (>= 1)."""
+        candidates = list(self._sessions.values()) if among is None else among
+        if self.idle_timeout is None or not candidates:
             return 1
         now = self._clock()
-        soonest = min(session.last_used + self.idle_timeout - now
-                      for session in self._sessions.values())
+        soonest = min(session.last_used + self.idle_timeout - now for session in candidates)
         return max(1, math.ceil(soonest))
 
     async def reap(self) -> list[str]:

@@ -15,6 +15,7 @@ the lane when they fit (else on the socket).
 
 from __future__ import annotations
 
+import heapq
 import hmac
 import logging
 import os
@@ -28,7 +29,7 @@ from dataclasses import replace
 from rlenv.protocol import Connection, ErrorReply, Hello, Reply, Request, Response, Role
 from rlenv.protocol.errors import ErrorCode, LocalProtocolError
 from rlenv.serving.access import Limits
-from rlenv.serving.penalties import Penalties, refusal
+from rlenv.serving.penalties import Penalties
 from rlenv.transport.lanes import Lane, LaneClosed, open_lane, wait_for
 from rlenv.transport.sockets import (
     REQUEST_SPIN_WINDOW,
@@ -45,6 +46,7 @@ HOUSEKEEPING_INTERVAL = 0.01
 """Seconds between looks at everything but the controller while the controller is busy."""
 _READ_SIZE = 64 * 1024
 _PROBE_READS = 16
+_HELD_IN_ALL = 64  # wrong-token answers held at once, all addresses together
 
 
 class Peer:
@@ -120,6 +122,8 @@ class Connections:
         self._lifeline: int | None = None
         self._housekeeping_at = 0.0
         self._backlog = False  # frames may be buffered on other peers than the controller
+        self._held: list[tuple[float, int, Peer, ErrorReply]] = []  # wrong tokens' answers
+        self._held_count = 0  # a tie-breaker for the heap
 
     @property
     def hello(self) -> Hello | None:
@@ -145,6 +149,9 @@ class Connections:
         """Disconnect every client and stop listening."""
         for peer in list(self._peers.values()):
             self._drop(peer, "server closing")
+        for _, _, peer, _ in self._held:
+            peer.sock.close()
+        self._held.clear()
         if self._listener is not None:
             self._selector.unregister(self._listener)
             self._listener.close()
@@ -168,11 +175,6 @@ class Connections:
         configure_socket(sock, HOUSEKEEPING_INTERVAL, self.limits.write_timeout)
         peer = Peer(sock, host, port, self.limits.max_first_frame_size, self._clock())
         address = peer.address
-        wait = self._penalties.wait(host)
-        if wait:  # it sent too many wrong tokens: not even a hello
-            self._send(peer, ErrorReply(None, ErrorCode.UNAUTHORIZED, refusal(host, wait),
-                                        fatal=True))
-            return
         if len(self._peers) >= self.limits.max_connections:
             for other in list(self._order):
                 if self._has_left(other):
@@ -202,6 +204,7 @@ class Connections:
         OpenSSH's ``MaxStartups``: silent connections cannot keep a client with the token out.
         """
         waiting = next((peer for peer in self._order if not peer.authenticated), None)
+        # (a client whose wrong token was compared is held apart, in no slot: see _hold)
         if waiting is not None:
             self._send(waiting, ErrorReply(
                 None, ErrorCode.BUSY, f"this server is full ({self.limits.max_connections} "
@@ -336,31 +339,61 @@ class Connections:
     def _authenticate(self, peer: Peer, request: Request) -> bool:
         """Check the first request's token; on success lift the frame size limit.
 
-        An address that sent too many wrong tokens waits (:mod:`rlenv.serving.penalties`):
-        meanwhile its requests are refused without their token being compared.
+        Every token is compared (in constant time): the right one is let in whatever its
+        address sent before. A wrong one's refusal is held as long as its address's penalty
+        says (:mod:`rlenv.serving.penalties`), the connection out of its slot meanwhile.
         """
         if self._token is not None:
-            wait = self._penalties.wait(peer.host)
-            why = refusal(peer.host, wait) if wait else self._token_refusal(peer, request.token)
+            why, delay = self._token_refusal(peer, request.token)
             if why is not None:
-                self._send(peer, ErrorReply(request.id, ErrorCode.UNAUTHORIZED, why, fatal=True))
+                refusal = ErrorReply(request.id, ErrorCode.UNAUTHORIZED, why, fatal=True)
+                if delay > 0.0:
+                    self._hold(peer, refusal, delay)
+                else:
+                    self._send(peer, refusal)
                 return False
-            self._penalties.succeeded(peer.host)
         peer.authenticated = True
         peer.connection.max_frame_size = self.limits.max_frame_size
         return True
 
-    def _token_refusal(self, peer: Peer, token: str | None) -> str | None:
-        """Why ``token`` is refused (a wrong one counts against ``peer``'s address), or None."""
+    def _may_compare(self, peer: Peer) -> bool:
+        """Whether ``peer``'s token may be compared now (its address holds few answers)."""
+        return len(self._held) < _HELD_IN_ALL and self._penalties.may_compare(peer.host)
+
+    def _token_refusal(self, peer: Peer, token: str | None) -> tuple[str | None, float]:
+        """Why ``token`` is refused, or None; and how long to hold the refusal (seconds)."""
         assert self._token is not None
         if token is None:
             logger.warning("client %s: refused, no token", peer.address)
             return "this server requires a token: pass token=... to the client (or set " \
-                   "RLENV_TOKEN)"
+                   "RLENV_TOKEN)", 0.0
         if not hmac.compare_digest(token.encode(), self._token.encode()):
-            self._penalties.failed(peer.host)
-            return "wrong token"
-        return None
+            return "wrong token", self._penalties.failed(peer.host)
+        return None, 0.0
+
+    def _hold(self, peer: Peer, refusal: ErrorReply, delay: float) -> None:
+        """Answer ``peer``'s wrong token after ``delay`` seconds; it leaves its slot now."""
+        self._forget(peer, "wrong token (its answer held)")
+        self._penalties.hold(peer.host)
+        self._held_count += 1
+        heapq.heappush(self._held, (self._clock() + delay, self._held_count, peer, refusal))
+
+    def _release_held(self) -> None:
+        """Send the held refusals that are due, and close their connections."""
+        now = self._clock()
+        while self._held and self._held[0][0] <= now:
+            _, _, peer, refusal = heapq.heappop(self._held)
+            try:
+                peer.sock.sendall(peer.connection.send(refusal))
+            except (OSError, LocalProtocolError):
+                pass  # it left meanwhile: nothing to tell
+            peer.sock.close()
+            self._penalties.release(peer.host)
+            self._backlog = True  # tokens that waited for this may be compared now
+
+    def _next_release(self) -> float | None:
+        """When the next held refusal is due."""
+        return self._held[0][0] if self._held else None
 
 
     # --- writing ----------------------------------------------------------------------------
@@ -410,6 +443,11 @@ class Connections:
             self._drop(peer, "send failed")
 
     def _drop(self, peer: Peer, reason: str) -> None:
+        self._forget(peer, reason)
+        peer.sock.close()
+
+    def _forget(self, peer: Peer, reason: str) -> None:
+        """Take ``peer`` out of every list (its socket stays open)."""
         self._close_lane(peer, reason)
         if self._peers.pop(peer.sock, None) is not None:
             self._selector.unregister(peer.sock)
@@ -421,4 +459,3 @@ class Connections:
             logger.info("client %s disconnected: %s", peer.address, reason)
         if self._controller is peer:
             self._controller = None
-        peer.sock.close()

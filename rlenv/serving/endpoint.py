@@ -20,7 +20,8 @@ An environment server is a network service and is treated like one:
   :attr:`Limits.write_timeout` drops the client.
 - **Access.** The server binds 127.0.0.1 unless told otherwise, and refuses to bind anything else
   without a token. With a token, the client's first request must carry it (compared in constant
-  time), or the connection is refused.
+  time), or the connection is refused; past a few wrong tokens from an address, each refusal is
+  held apart (no slot) and sent late (:mod:`rlenv.serving.penalties`).
 
 **The hot path.** While the controller keeps sending, the endpoint blocks in ``recv`` on the
 controller's socket alone (one system call per request, no selector); the others (new
@@ -241,12 +242,17 @@ class Endpoint(Connections):
         self._housekeeping_at = self._clock() + HOUSEKEEPING_INTERVAL
 
     def _next_deadline(self) -> float | None:
-        """When the earliest peer times out (a frame's deadline, or its idle timeout)."""
-        return min((due for peer in self._order if (due := self._due(peer)) is not None),
-                   default=None)
+        """When the next peer times out (a frame's deadline, its idle timeout) or refusal is due."""
+        dues = [due for peer in self._order if (due := self._due(peer)) is not None]
+        release = self._next_release()
+        if release is not None:
+            dues.append(release)
+        return min(dues, default=None)
 
     def _due(self, peer: Peer) -> float | None:
         if not peer.authenticated and self._token is not None:  # last_request: its connecting
+            if peer.connection.buffered and not self._may_compare(peer):
+                return None  # it sent in time; its token waits for a held answer to go out
             due = peer.last_request + self.limits.first_request_timeout
             if peer.frame_started is not None:
                 due = min(due, peer.frame_started + self.limits.frame_deadline)
@@ -258,6 +264,7 @@ class Endpoint(Connections):
         return None
 
     def _enforce_deadlines(self) -> None:
+        self._release_held()
         now = self._clock()
         for peer in list(self._order):
             due = self._due(peer)
@@ -300,6 +307,9 @@ class Endpoint(Connections):
             if request is not None:
                 return request
         connection = peer.connection
+        if not peer.authenticated and self._token is not None and connection.buffered and \
+                not self._may_compare(peer):
+            return None  # its address's wrong answers are held: compared once one goes out
         while peer.sock in self._peers:
             try:
                 message = connection.next_message()

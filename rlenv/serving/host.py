@@ -35,7 +35,7 @@ from rlenv.serving.lean import LeanSteps
 from rlenv.serving.onnx_policy import OnnxPolicy
 from rlenv.serving.parts import HostPart, dispatch, plan_for, shape_of, takes_control
 from rlenv.serving.policy_driver import DrivenAgents, PolicyDriver
-from rlenv.serving.recent import KEEP_EPISODES
+from rlenv.serving.recent import KEEP_EVENTS
 
 __all__ = ["Host", "Prepared", "target_of"]
 
@@ -91,8 +91,10 @@ class Host:
         policies: policy files that drive agents, by agent name (one instance, lockstep; see
             :mod:`rlenv.serving.policy_driver`).
         max_episode_steps: with every agent driven, steps after which an episode is cut short.
-        keep_episodes: how many finished episodes each instance keeps as recordings (0:
-            none; see :mod:`rlenv.serving.recent`).
+        keep_episodes: how many finished episodes each instance keeps as recordings, from the
+            start (0: none, ever; ``None``: 8, once a client asks for them; see
+            :mod:`rlenv.serving.recent`). They hold at most
+            :data:`~rlenv.serving.recent.KEEP_EVENTS` events in all, shared by the instances.
 
     Attributes:
         driver: plays episodes between requests when policies drive every agent, else
@@ -111,7 +113,7 @@ class Host:
                  record_dir: Path | None = None, real_time: bool = False,
                  policies: Mapping[str, OnnxPolicy] | None = None,
                  max_episode_steps: int | None = None,
-                 keep_episodes: int = KEEP_EPISODES) -> None:
+                 keep_episodes: int | None = None) -> None:
         target = target_of(environment)
         if isinstance(environment, str):
             environment = load_environment(environment)
@@ -119,8 +121,8 @@ class Host:
             raise ValueError("a host holds at least one instance")
         if count > 1 and not isinstance(environment, type):
             raise TypeError("several instances need the environment class, not an instance")
-        self.instances = [Instance(environment, dispatch, clock, record_dir, keep_episodes)
-                          for _ in range(count)]
+        self.instances = [Instance(environment, dispatch, clock, record_dir, keep_episodes,
+                                   KEEP_EVENTS // count) for _ in range(count)]
         first = self.instances[0]
         self.hello = Hello(
             environment=first.environment.name,
@@ -257,7 +259,7 @@ class Host:
             endpoint.reserve("its agents are driven by policies (rlenv serve --policy); only "
                              "observing is open")
             while True:
-                got = endpoint.receive(0.0)
+                got = endpoint.receive(driver.wait())
                 if got is None:
                     driver.step()
                 else:

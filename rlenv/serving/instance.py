@@ -45,7 +45,8 @@ from rlenv.protocol.errors import ErrorCode, RequestError
 from rlenv.serving import inspector
 from rlenv.serving.actions import ActionCheck
 from rlenv.serving.observing import Observer, check_text_keys
-from rlenv.serving.recent import KEEP_EPISODES, RecentEpisodes
+from rlenv.serving.onnx_policy import PolicyError
+from rlenv.serving.recent import KEEP_EPISODES, KEEP_EVENTS, RecentEpisodes
 from rlenv.serving.settings import Settings
 from rlenv.serving.snapshots import EpisodeLog
 from rlenv.serving.stats import EpisodeStats
@@ -136,7 +137,10 @@ class Instance:
             :func:`rlenv.serving.parts.dispatch`).
         clock: the tree's clock, for real-time mode (tests pass a manual one).
         record_dir: where clients may have the environment record videos (``None``: nowhere).
-        keep_episodes: how many finished episodes to keep as recordings (:attr:`recent`).
+        keep_episodes: how many finished episodes to keep as recordings (:attr:`recent`), from
+            the start; ``None``: :data:`~rlenv.serving.recent.KEEP_EPISODES`, once a client
+            asks for them.
+        keep_events: how many events those may hold in all.
 
     Attributes:
         recent: the last finished episodes' logs (:mod:`rlenv.serving.recent`).
@@ -150,7 +154,8 @@ class Instance:
 
     def __init__(self, environment: RLEnvironment | type[RLEnvironment] | str,
                  dispatch: Dispatch, clock: Callable[[], float] = time.monotonic,
-                 record_dir: Path | None = None, keep_episodes: int = KEEP_EPISODES) -> None:
+                 record_dir: Path | None = None, keep_episodes: int | None = None,
+                 keep_events: int = KEEP_EVENTS) -> None:
         if isinstance(environment, str):
             environment = load_environment(environment)
         self._class: type[RLEnvironment] | None = None  # what a rebuild builds (or none)
@@ -173,7 +178,8 @@ class Instance:
         self.state = Episode.NOT_STARTED
         self._no_episode = "no episode has started; reset first"  # why, when NOT_STARTED
         self.log = EpisodeLog()
-        self.recent = RecentEpisodes(keep_episodes)
+        self.recent = RecentEpisodes(KEEP_EPISODES if keep_episodes is None else keep_episodes,
+                                     keep_events, eager=keep_episodes is not None)
         self.stats = EpisodeStats([a.name for a in self.agents] if self.multi_agent else None)
         self._before_sets: dict[tuple[Node, str], Any] = {}  # what inspect sets replaced
         self.replaying = False  # restoring a snapshot: the episode moves on silently
@@ -404,7 +410,7 @@ class Instance:
         refusal may have come half way through.
         """
         environment = self.environment
-        if self.log.started and self.recent.keep:
+        if self.log.started and self.recent.keeping:
             self._finish_episode()
         for (node, name), value in reversed(self._before_sets.items()):
             setattr(node, name, value)
@@ -459,7 +465,12 @@ class Instance:
         """Run a checked action for ``frames`` ticks (lockstep), or apply it now (real time)."""
         tree = self.tree
         if self.driven is not None and self.multi_agent:
-            action = self.driven.complete(action, self.agents)
+            try:
+                action = self.driven.complete(action, self.agents)
+            except PolicyError as error:  # a failed episode; the environment is intact
+                self.abandon_episode(f"the episode failed: {error}")
+                raise RequestError(ErrorCode.ENVIRONMENT_ERROR, f"{error}; reset required") \
+                    from None
         if tree.real_time:
             self._act_now(action)
             return

@@ -246,28 +246,60 @@ class Snapshot(Part):
 
 
 class Episodes(Part):
-    """``{}`` or ``{"last": n}``: the instance's last finished episodes, as snapshots (2.5).
+    """The instance's last finished episodes, as snapshots (2.5; by index and in pages, 2.6).
 
-    See :mod:`rlenv.serving.recent`: ``info["episodes"]`` lists them oldest first, each
-    ``{"snapshot", "terminated", "truncated", "steps"}`` (``[]`` when the server keeps none).
-    It takes no control and needs no episode: any client may ask, at any time.
+    See :mod:`rlenv.serving.recent`. ``{}`` or ``{"last": n}``: ``info["episodes"]`` lists
+    them whole, oldest first, each ``{"snapshot", "terminated", "truncated", "steps"}``.
+    ``{"index": true}``: ``info["episodes"]`` lists them without events, each ``{"id",
+    "terminated", "truncated", "steps", "events"}``. ``{"episode": id, "from": k}``:
+    ``info["episode"]`` is one page of one (``None`` when it is no longer kept). Any form
+    starts the keeping (``[]`` until an episode finishes, and always when the server keeps
+    none). It takes no control and needs no episode: any client may ask, at any time.
     """
 
     name = "episodes"
     alone = True
-    _KEYS = frozenset({"last"})
+    _KEYS = frozenset({"last", "index", "episode", "from"})
 
     def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
               where: str) -> Any:
         episodes = _map(parts["episodes"], "episodes", where)
         check_keys(episodes, self._KEYS, "episodes")
+        forms = [key for key in ("last", "index", "episode") if key in episodes]
+        if len(forms) > 1:
+            raise _bad(f"episodes takes one of last, index and episode, got "
+                       f"{' and '.join(forms)}")
+        if "from" in episodes and "episode" not in episodes:
+            raise _bad("episodes.from goes with episodes.episode (a page of that episode)")
+        if "index" in episodes:
+            if episodes["index"] is not True:
+                raise _bad(f"episodes.index must be true, got {episodes['index']!r:.40}")
+            return ("index",)
+        if "episode" in episodes:
+            return ("page", _count(episodes, "episode"), _count(episodes, "from"))
         last = episodes.get("last")
         if last is not None and (type(last) is not int or last < 1):
             raise _bad(f"episodes.last must be an integer >= 1, got {last!r:.40}")
-        return last
+        return ("whole", last)
 
     def apply(self, instance: Instance, value: Any, request: Plan) -> None:
-        instance.answer.info = {"episodes": instance.recent.to_wire(value)}  # type: ignore[union-attr]
+        recent = instance.recent
+        recent.start()
+        if value[0] == "index":
+            info: dict[str, Any] = {"episodes": recent.index()}
+        elif value[0] == "page":
+            info = {"episode": recent.page(value[1], value[2])}
+        else:
+            info = {"episodes": recent.to_wire(value[1])}
+        instance.answer.info = info  # type: ignore[union-attr]
+
+
+def _count(part: Mapping[str, Any], key: str) -> int:
+    """``part[key]``, an integer >= 0 (0 if absent)."""
+    value = part.get(key, 0)
+    if type(value) is not int or value < 0:
+        raise _bad(f"episodes.{key} must be an integer >= 0, got {value!r:.40}")
+    return value
 
 
 class Restore(Part):

@@ -15,21 +15,38 @@ agent's own observation (``get_data({})``) just before the action applies
   agents' actions (a map from agent name to action); actions it sends for driven agents are
   ignored, as those for agents whose episode ended are. The policy opponents act within the
   learner's steps, so they see the same ticks.
+
+**A policy that fails is a failed episode**, never a dead server. Its action is checked against
+its agent's space (:func:`~rlenv.serving.onnx_policy.fit_action`: clipped into a ``Box``, NaN
+refused), and a call runs under a deadline and a memory bound (:mod:`rlenv.serving.onnx_policy`).
+When a policy raises, runs past its deadline or gives what no action is, the episode ends where
+it stands (``error`` in the statistics; a learner's step is answered ``environment_error``,
+reset required), the environment is left as it was (nothing was applied), and the failure is
+logged once per agent. Driven alone, the server waits :data:`FAILURE_PAUSE` seconds before the
+next episode, answering observers and signals meanwhile, so a policy that always fails costs
+one episode a second, not a loop.
 """
 
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from rlenv.agent import RLAgent
 from rlenv.protocol import ErrorReply, Reply, Request, Response
-from rlenv.serving.onnx_policy import OnnxPolicy
+from rlenv.protocol.errors import ErrorCode
+from rlenv.serving.onnx_policy import OnnxPolicy, PolicyError, fit_action
 
-__all__ = ["DrivenAgents", "PolicyDriver"]
+__all__ = ["FAILURE_PAUSE", "DrivenAgents", "PolicyDriver"]
 
 logger = logging.getLogger(__name__)
+
+FAILURE_PAUSE = 1.0
+"""Seconds a driven server waits after a failed episode before it starts the next."""
+
+_LOGGED = 64  # distinct failures a driver logs (each once); past that, none
 
 
 class DrivenAgents:
@@ -56,12 +73,38 @@ class DrivenAgents:
         self.policies = dict(policies)
         self.names = frozenset(policies)
         self.every_agent = self.names == set(names)
+        self._failed: set[str] = set()  # agents whose policy failure was logged
 
     def actions(self, agents: Sequence[RLAgent]) -> dict[str, Any]:
-        """The driven agents' actions (those still in the episode), from their observations."""
+        """The driven agents' actions (those still in the episode), from their observations.
+
+        Each is checked against its agent's action space (clipped into a ``Box``).
+
+        Raises:
+            PolicyError: a policy (or the observation it needs) failed, or gave no action of
+                its space; the first failure of each agent is logged.
+        """
         policies = self.policies
-        return {agent.name: policies[agent.name].act(agent.get_data({})) for agent in agents
+        return {agent.name: self._action(agent, policies[agent.name]) for agent in agents
                 if agent.name in policies and not (agent.terminated or agent.truncated)}
+
+    def _action(self, agent: RLAgent, policy: Any) -> Any:
+        who = f"agent {agent.name!r}"
+        try:
+            action = policy.act(agent.get_data({}))
+        except PolicyError as error:
+            failure = PolicyError(f"{who}: {error}")
+        except Exception as error:  # the policy's code, or the environment's observation
+            failure = PolicyError(f"{who}: its policy failed: {type(error).__name__}: {error}")
+        else:
+            try:
+                return fit_action(agent.action_space, action, f"{who}: its policy")
+            except PolicyError as error:
+                failure = error
+        if agent.name not in self._failed:
+            self._failed.add(agent.name)
+            logger.warning("%s; its episodes fail (logged once per agent)", failure)
+        raise failure
 
     def complete(self, action: Any, agents: Sequence[RLAgent]) -> Any:
         """A joint action (several agents) with the driven agents' actions put in."""
@@ -76,30 +119,45 @@ class PolicyDriver:
         instance: the instance it plays (the host's only one).
         driven: its driven agents (every agent).
         max_episode_steps: steps after which an episode is cut short (``None``: never).
+        clock: the clock of :data:`FAILURE_PAUSE`.
     """
 
     def __init__(self, answer: Callable[[Request], Reply], instance: Any,
-                 driven: DrivenAgents, max_episode_steps: int | None = None) -> None:
+                 driven: DrivenAgents, max_episode_steps: int | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self._answer, self._instance, self._driven = answer, instance, driven
         self.max_episode_steps = max_episode_steps
         self.episodes = 0  # started so far: the seed of the next one
         self._steps = 0
         self._running = False
+        self._clock = clock
+        self._resume_at = 0.0  # after a failure: when the next episode may start
+        self._logged: set[str] = set()
+
+    def wait(self) -> float:
+        """Seconds until :meth:`step` has something to do (0 but after a failed episode)."""
+        return 0.0 if self._running else max(0.0, self._resume_at - self._clock())
 
     def step(self) -> None:
         """One request's worth of play: a reset when no episode runs, else one step."""
         if not self._running:
+            if self.wait() > 0.0:
+                return
             seed = self.episodes
             self.episodes += 1
             self._steps = 0
             self._running = self._served(self._answer(Request(0, {"reset": {"seed": seed}})))
             return
         instance = self._instance
-        action = {} if instance.multi_agent else \
-            self._driven.actions(instance.agents)[instance.agents[0].name]
+        try:
+            action = {} if instance.multi_agent else \
+                self._driven.actions(instance.agents)[instance.agents[0].name]
+        except PolicyError as error:  # logged by DrivenAgents; nothing was applied
+            instance.abandon_episode(f"the episode failed: {error}")
+            self._fail()
+            return
         reply = self._answer(Request(0, {"action": action}))
         if not self._served(reply):
-            self._running = False
             return
         self._steps += 1
         if reply.terminated or reply.truncated:  # type: ignore[union-attr]
@@ -108,10 +166,23 @@ class PolicyDriver:
             instance.stats.end("truncated")  # as a time limit: the next reset starts afresh
             self._running = False
 
-    @staticmethod
-    def _served(reply: Reply) -> bool:
+    def _served(self, reply: Reply) -> bool:
+        """Whether ``reply`` served; a failed episode if not.
+
+        An ``environment_error`` was logged where it was raised (a policy's once); any other
+        refusal is logged once per message.
+        """
         if reply.__class__ is Response:
             return True
         assert isinstance(reply, ErrorReply)
-        logger.warning("a policy-driven request failed: %s", reply.message)
+        message = reply.message
+        if reply.code != ErrorCode.ENVIRONMENT_ERROR and message not in self._logged and \
+                len(self._logged) < _LOGGED:
+            self._logged.add(message)
+            logger.warning("a policy-driven request failed (logged once): %s", message)
+        self._fail()
         return False
+
+    def _fail(self) -> None:
+        self._running = False
+        self._resume_at = self._clock() + FAILURE_PAUSE

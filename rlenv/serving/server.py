@@ -11,7 +11,6 @@ from rlenv.serving.endpoint import DEFAULT_HOST, Endpoint, Limits
 from rlenv.serving.host import Host
 from rlenv.serving.onnx_policy import OnnxPolicy
 from rlenv.serving.per_client import HostPerClient
-from rlenv.serving.recent import KEEP_EPISODES
 
 __all__ = ["Server"]
 
@@ -49,8 +48,8 @@ class Server:
             server plays episodes itself and clients may only observe.
         max_episode_steps: steps after which a policy-driven episode is cut short.
         keep_episodes: how many finished episodes each instance keeps as recordings, for
-            clients to fetch (the ``episodes`` part; ``rlenv serve --keep-episodes``); 0 keeps
-            none.
+            clients to fetch (the ``episodes`` part; ``rlenv serve --keep-episodes``), from the
+            start; 0 keeps none; ``None`` (the default) keeps 8 once a client asks for them.
 
     Attributes:
         host: the instances and how requests reach them (with ``per_client``, the hosts of
@@ -68,7 +67,7 @@ class Server:
         limits: Limits | None = None, instances: int = 1, record_dir: Path | None = None,
         real_time: bool = False, per_client: bool = False,
         policies: Mapping[str, str | Path] | None = None, max_episode_steps: int | None = None,
-        keep_episodes: int = KEEP_EPISODES,
+        keep_episodes: int | None = None,
     ) -> None:
         loaded = {agent: OnnxPolicy(path) for agent, path in (policies or {}).items()}
 

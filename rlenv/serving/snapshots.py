@@ -93,12 +93,17 @@ class EpisodeLog:
             return
         self.events.append(event)
 
-    def snapshot(self) -> dict[str, Any]:
-        """The episode so far, as data (see :meth:`check_snapshot` for when it is refused)."""
+    def snapshot(self, events: slice | None = None) -> dict[str, Any]:
+        """The episode so far, as data (see :meth:`check_snapshot` for when it is refused).
+
+        Args:
+            events: only these of its events (a page of a kept episode's, say); all if
+                ``None``.
+        """
         self.check_snapshot()
         return {"version": SNAPSHOT_VERSION, "config": self.config,
                 "rng": json.dumps(self._rng_state), "options": self.options,
-                "events": list(self.events)}
+                "events": list(self.events) if events is None else self.events[events]}
 
     def check_snapshot(self) -> None:
         """Refuse a snapshot that cannot be taken.

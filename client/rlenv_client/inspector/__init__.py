@@ -67,6 +67,9 @@ class Inspector:
         demonstration_rate: actions a second while a person plays (``None``: real time).
         recordings: episode files to open as timelines (``rlenv replay FILE --inspect``).
         policies: with ``recordings``, ONNX policy files to branch with (``--policy``).
+        trust_target: import the target a recording or a watched server names even where it
+            is no installed package (``--trust-target``; see
+            :mod:`rlenv_client.trusted_targets`).
 
     Raises:
         RuntimeError: the subprocess did not start (with what it printed).
@@ -77,7 +80,7 @@ class Inspector:
                  timeout: float = 30.0, *, record_demonstrations: str | Path | None = None,
                  target: str | None = None, demonstration_rate: float | None = None,
                  recordings: Sequence[str | Path] = (),
-                 policies: Sequence[str | Path] = ()) -> None:
+                 policies: Sequence[str | Path] = (), trust_target: bool = False) -> None:
         if bool(addresses) == bool(recordings):
             raise ValueError("the inspector watches addresses or opens recordings (one of them)")
         env = dict(os.environ)
@@ -90,6 +93,7 @@ class Inspector:
             ["--demonstration-rate", str(demonstration_rate)]
         for policy in policies:
             options += ["--policy", str(policy)]
+        options += ["--trust-target"] if trust_target else []
         command = ["rlenv_client.inspector", *addresses] if addresses else \
             ["rlenv", "replay", *map(str, recordings), "--inspect"]
         self._process = subprocess.Popen(
@@ -164,7 +168,8 @@ def inspect_sessions(sessions: Sequence[Session]) -> Inspector:
 
 def inspect_recordings(paths: Sequence[str | Path], *,
                        policies: Mapping[str, Callable[[Any], Any]] | None = None,
-                       target: str | None = None, port: int = 0) -> InspectorServer:
+                       target: str | None = None, trust_target: bool = False,
+                       port: int = 0) -> InspectorServer:
     """The page with ``paths`` as timelines, served by a thread of this process.
 
     What ``rlenv replay FILE ... --inspect`` serves, with Python callables as policies to
@@ -172,11 +177,13 @@ def inspect_recordings(paths: Sequence[str | Path], *,
     Its address (:attr:`InspectorServer.url`) is logged as a warning; :meth:`~InspectorServer.
     close` ends it and the timelines' processes.
 
+    ``target`` and ``trust_target``: see :class:`~rlenv_client.inspector.timelines.Timelines`.
+
     Raises:
         ValueError: a file is not an rlenv episode.
     """
     server = InspectorServer(Watcher([]), port=port, timelines=Timelines(
-        paths, policies=policies, target=target))
+        paths, policies=policies, target=target, trust_target=trust_target))
     server.start()
     logger.warning("rlenv inspector: %s", server.url)
     return server
@@ -212,7 +219,7 @@ def serve(addresses: Sequence[str], *, token: str | None, port: int, follow_stdi
           target: str | None = None, demonstration_rate: float | None = None,
           recordings: Sequence[str | Path] = (),
           policies: Mapping[str, Callable[[Any], Any]] | None = None,
-          unavailable: Mapping[str, str] | None = None) -> None:
+          unavailable: Mapping[str, str] | None = None, trust_target: bool = False) -> None:
     """Serve the page (``rlenv inspect``); ``ready(line)`` once it listens, with its address.
 
     Until interrupted, or until standard input closes with ``follow_stdin`` (address lists,
@@ -220,7 +227,7 @@ def serve(addresses: Sequence[str], *, token: str | None, port: int, follow_stdi
     ``record_demonstrations``, ``target`` and ``demonstration_rate``: see :class:`Inspector`.
     ``recordings`` (``rlenv replay FILE --inspect``): episode files the page opens as timelines
     (with the watched instances' recent episodes), re-simulated on ``target`` (default: each
-    episode's); ``policies`` and ``unavailable``: see
+    episode's, where it is installed or ``trust_target``); ``policies`` and ``unavailable``: see
     :class:`~rlenv_client.inspector.timelines.Timelines`.
 
     Raises:
@@ -228,7 +235,7 @@ def serve(addresses: Sequence[str], *, token: str | None, port: int, follow_stdi
             is not an rlenv episode.
     """
     timelines = Timelines(recordings, policies=policies, unavailable=unavailable,
-                          target=target)
+                          target=target, trust_target=trust_target)
     watcher = Watcher(addresses, token=token)
     demonstrator = None if record_demonstrations is None else Demonstrator(
         watcher, record_demonstrations, target=target, rate=demonstration_rate, token=token)

@@ -17,12 +17,20 @@ command line (:class:`~rlenv.serving.onnx_policy.OnnxPolicy`, loaded once).
 
 What the page gets is JSON: see :meth:`Timelines.step`, :meth:`Timelines.ticks`,
 :meth:`Timelines.compare` and :meth:`Timelines.describe`.
+
+The page's timelines are bounded: at most ``max_recent`` recent episodes and ``max_files``
+recordings from files are open at once (past either, the oldest opened is closed: a recent
+episode leaves the list, a file stays in it and is opened again when asked), and each open
+timeline holds at most its share of the page's ``max_processes`` and ``max_memory``. A
+recording's target is imported only where it is installed, unless the page was given a
+``target`` or ``trust_target`` (:mod:`rlenv_client.trusted_targets`).
 """
 
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -37,10 +45,12 @@ from rlenv_client.replay import EpisodeFile, digest
 from rlenv_client.session import LOST
 from rlenv_client.timeline import Timeline
 
-__all__ = ["MAX_BRANCH_STEPS", "Timelines", "episode_id"]
+__all__ = ["MAX_BRANCH_STEPS", "MAX_TICKS", "Timelines", "episode_id"]
 
 MAX_BRANCH_STEPS = 100_000
 """The most steps a policy's branch may take (``max_steps``)."""
+MAX_TICKS = 100
+"""The most ticks one answer of the tick view holds (``count``; a page of a long step)."""
 
 Policy = Callable[[Any], Any]
 _LISTED = 32  # recent episodes remembered per instance once the page was shown them
@@ -82,6 +92,7 @@ class _Root:
         self.diffs: dict[tuple[int, int], tuple[Timeline, Timeline, Any]] = {}
         self.error = ""
         self.closed = False
+        self.opened = 0  # when it was last opened (the order of openings), 0: not open
 
     @property
     def timeline(self) -> Timeline | None:
@@ -96,21 +107,35 @@ class Timelines:
         paths: recordings (``episode-NNNN.rlenv`` files) to offer.
         policies: policies to branch with, by name (``callable(observation) -> action``).
         unavailable: policies that could not be loaded, by name: why (the page says so).
-        target: the environment to serve (``MODULE:CLASS``; default: each recording's).
+        target: the environment to serve (``MODULE:CLASS``; default: each recording's, where
+            it is an installed package).
+        trust_target: import each recording's target whatever it is (``--trust-target``).
         checkpoint_every: see :class:`~rlenv_client.timeline.Timeline` (default: its own).
         max_recent: how many recent episodes of live instances stay open at once (the oldest
             opened is closed, with its branches, to make room).
+        max_files: how many recordings from files stay open at once (the oldest opened is
+            closed, with its branches; it stays offered, and opens again when asked).
+        max_processes: the most processes the page's timelines hold in all (each open one
+            gets an equal share).
+        max_memory: the most memory (PSS, bytes) they hold in all (shared the same way).
     """
 
     def __init__(self, paths: Iterable[str | Path] = (), *,
                  policies: Mapping[str, Policy] | None = None,
                  unavailable: Mapping[str, str] | None = None, target: str | None = None,
-                 checkpoint_every: int | None = None, max_recent: int = 3) -> None:
+                 trust_target: bool = False, checkpoint_every: int | None = None,
+                 max_recent: int = 3, max_files: int = 3, max_processes: int = 1024,
+                 max_memory: int = 4 << 30) -> None:
         self.policies = dict(policies or {})
         self.unavailable = dict(unavailable or {})
         self._target = target
+        self._trust = trust_target
         self._every = checkpoint_every
         self._max_recent = max_recent
+        self._max_files = max_files
+        self._share = {"max_processes": max_processes // (max_recent + max_files),
+                       "max_memory": max_memory // (max_recent + max_files)}
+        self._openings = 0
         self._lock = threading.Lock()  # the registry; each root has its own
         self._roots: dict[int, _Root] = {}
         self._listed: dict[tuple[int, int], dict[str, EpisodeFile]] = {}
@@ -127,7 +152,13 @@ class Timelines:
             ValueError: the file is not an rlenv episode.
         """
         episode = EpisodeFile.load(path)
-        return self._add(Path(path).name, lambda: episode, {"file": str(path)})
+        number = self._add(Path(path).name, lambda: episode, {"file": str(path)})
+        with self._lock:
+            files = [root for root in self._roots.values() if "file" in root.origin]
+            for root, name in zip(files, _distinct([Path(r.origin["file"]) for r in files]),
+                                  strict=True):
+                root.name = name
+        return number
 
     def add_episode(self, episode: EpisodeFile, name: str, origin: Mapping[str, Any]) -> int:
         """Offer ``episode`` (a live instance's recent one, say) as ``name``; its number."""
@@ -139,7 +170,7 @@ class Timelines:
 
         An identifier, not a place in ``episodes``: the list moves on as episodes finish. It is
         looked for in ``episodes`` (the server's now), then in those last :meth:`listed`. The
-        oldest recent one opened is closed past ``max_recent``.
+        oldest recent one opened is closed past ``max_recent`` (and leaves the list).
 
         Raises:
             InspectorError: 404, no such episode (or no longer kept).
@@ -156,10 +187,6 @@ class Timelines:
         steps = sum(event[0] == "action" for event in found[0].snapshot["events"])
         number = self.add_episode(found[0], f"server {server} · instance {instance} · "
                                   f"recent episode of {steps} steps ({identifier[:6]})", origin)
-        with self._lock:
-            recent = [root for root in self._roots.values() if "recent" in root.origin]
-        for root in recent[:max(0, len(recent) - self._max_recent)]:
-            self._remove(root)
         return self.describe(number)
 
     def listed(self, server: int, instance: int, episodes: list[EpisodeFile]) -> None:
@@ -192,8 +219,7 @@ class Timelines:
             InspectorError: 404 no such timeline; 422 its environment did not start, or
                 re-simulated the recording differently.
         """
-        root = self._root(number)
-        with root.lock:
+        with self._using(number) as root:
             self._opened(root)
             return self._describe(root)
 
@@ -210,8 +236,7 @@ class Timelines:
             InspectorError: 404 no such timeline or branch; 400 no such step; 422 the
                 timeline's environment failed.
         """
-        root = self._root(number)
-        with root.lock:
+        with self._using(number) as root:
             timeline = self._branch(root, branch).timeline
             state = self._call(lambda: timeline.at(_step(timeline, step)))
             return {"timeline": number, "branch": branch, "step": step,
@@ -221,28 +246,40 @@ class Timelines:
                                                                            state.observation),
                     "draw": to_json(state.draw), "properties": to_json(state.properties)}
 
-    def ticks(self, number: int, branch: int, step: int) -> dict[str, Any]:
-        """Each physics tick inside ``step``'s action: ``{"step", "ticks": [...]}``.
+    def ticks(self, number: int, branch: int, step: int, first: int = 1,
+              count: int = MAX_TICKS) -> dict[str, Any]:
+        """A page of the physics ticks inside ``step``'s action: ``count`` from tick ``first``.
 
-        Each tick with ``tick``, ``reward``, ``terminated``, ``truncated``, ``info``,
-        ``observation``, ``properties`` and ``draw`` (the scene after the tick).
+        ``{"timeline", "branch", "step", "frames" (the ticks the action asked for), "first",
+        "next" (the first tick of the next page, ``None`` after the last), "ticks": [...]}``,
+        each tick with ``tick``, ``reward``, ``terminated``, ``truncated``, ``info``,
+        ``observation``, ``properties`` and ``draw`` (the scene after the tick). A page holds
+        at most :data:`MAX_TICKS`, so no answer (nor the timeline's lock) lasts long whatever
+        the step's ``repeat_action``.
 
         Raises:
-            InspectorError: as :meth:`step` (step 0 has no ticks: 400).
+            InspectorError: as :meth:`step` (step 0 has no ticks: 400; ``first`` past the
+                step's ticks, or ``count`` outside 1 to :data:`MAX_TICKS`: 400).
         """
-        root = self._root(number)
-        with root.lock:
+        if not 1 <= count <= MAX_TICKS:
+            raise InspectorError(400, f"count must be 1 to {MAX_TICKS}")
+        with self._using(number) as root:
             timeline = self._branch(root, branch).timeline
             if not 1 <= step <= len(timeline):
                 raise InspectorError(400, f"step {step} has no action: steps 1 to "
                                           f"{len(timeline)} have")
-            ticks = self._call(lambda: timeline.ticks(step))
-            return {"timeline": number, "branch": branch, "step": step, "ticks": [
-                {"tick": tick.tick, "reward": to_json(tick.reward),
-                 "terminated": tick.terminated, "truncated": tick.truncated,
-                 "info": to_json(tick.info), "observation": self._shown(root, tick.observation),
-                 "properties": to_json(tick.properties), "draw": to_json(tick.draw)}
-                for tick in ticks]}
+            frames = timeline.frames(step)
+            ticks = self._call(lambda: timeline.ticks(step, first=first, count=count))
+            more = len(ticks) == count and first + count <= frames and \
+                not (ticks[-1].terminated or ticks[-1].truncated)
+            return {"timeline": number, "branch": branch, "step": step, "frames": frames,
+                    "first": first, "next": first + count if more else None, "ticks": [
+                        {"tick": tick.tick, "reward": to_json(tick.reward),
+                         "terminated": tick.terminated, "truncated": tick.truncated,
+                         "info": to_json(tick.info),
+                         "observation": self._shown(root, tick.observation),
+                         "properties": to_json(tick.properties), "draw": to_json(tick.draw)}
+                        for tick in ticks]}
 
     def compare(self, number: int, first: int, second: int, step: int) -> dict[str, Any]:
         """Two branches side by side (``a``: ``first``, ``b``: ``second``).
@@ -255,8 +292,7 @@ class Timelines:
         Raises:
             InspectorError: as :meth:`step` (a step neither reaches: 400).
         """
-        root = self._root(number)
-        with root.lock:
+        with self._using(number) as root:
             a, b = self._branch(root, first), self._branch(root, second)
             if not 0 <= step <= max(len(a.timeline), len(b.timeline)):
                 raise InspectorError(400, f"no step {step}: the branches have steps 0 to "
@@ -289,8 +325,7 @@ class Timelines:
         Raises:
             InspectorError: as :meth:`step`; 422 a key outside the agent's map (or none).
         """
-        root = self._root(number)
-        with root.lock:
+        with self._using(number) as root:
             parent = self._branch(root, branch)
             action = self._action(root, key)
             _step(parent.timeline, step)
@@ -306,8 +341,7 @@ class Timelines:
         Raises:
             InspectorError: as :meth:`branch_keys`; 409 not a key branch, or its episode ended.
         """
-        root = self._root(number)
-        with root.lock:
+        with self._using(number) as root:
             node = self._branch(root, branch)
             if node.how != "keys":
                 raise InspectorError(409, f"branch {branch} is {node.describe()['label']}: "
@@ -341,8 +375,7 @@ class Timelines:
         if not 1 <= max_steps <= MAX_BRANCH_STEPS:
             raise InspectorError(400, f"max_steps must be 1 to {MAX_BRANCH_STEPS}")
         chosen = self.policies[policy]
-        root = self._root(number)
-        with root.lock:
+        with self._using(number) as root:
             parent = self._branch(root, branch)
             _step(parent.timeline, step)
             try:
@@ -375,10 +408,42 @@ class Timelines:
             self._roots.pop(root.number, None)
         with root.lock:
             root.closed = True
-            if root.timeline is not None:
-                root.timeline.close()
-            root.branches.clear()
-            root.diffs.clear()
+            self._shut(root)
+
+    @staticmethod
+    def _shut(root: _Root) -> None:
+        """End the root's timeline and branches (its lock held)."""
+        if root.timeline is not None:
+            root.timeline.close()
+        root.branches.clear()
+        root.diffs.clear()
+        root.opened = 0
+
+    @contextmanager
+    def _using(self, number: int) -> Iterator[_Root]:
+        """The root ``number``, its lock held; then the oldest opened closed past the bounds."""
+        root = self._root(number)
+        try:
+            with root.lock:
+                yield root
+        finally:
+            self._make_room()
+
+    def _make_room(self) -> None:
+        """Close the oldest opened timelines past ``max_recent`` and ``max_files``.
+
+        A recent episode leaves the list; a file stays in it, to open again.
+        """
+        with self._lock:
+            opened = sorted((root for root in self._roots.values() if root.opened),
+                            key=lambda root: root.opened)
+        recent = [root for root in opened if "recent" in root.origin]
+        files = [root for root in opened if "recent" not in root.origin]
+        for root in recent[:max(0, len(recent) - self._max_recent)]:
+            self._remove(root)
+        for root in files[:max(0, len(files) - self._max_files)]:
+            with root.lock:
+                self._shut(root)
 
     def _root(self, number: int) -> _Root:
         with self._lock:
@@ -394,12 +459,16 @@ class Timelines:
         if root.timeline is not None:
             return root.timeline
         try:  # a live server's recent episode has no digests: the timeline records them
-            timeline = Timeline(root.load(), target=self._target, checkpoint_every=self._every)
+            timeline = Timeline(root.load(), target=self._target, trust_target=self._trust,
+                                checkpoint_every=self._every, **self._share)
         except (ValueError, ServerStartError, RuntimeError, OSError, RemoteError,
                 *LOST) as error:
             root.error = f"cannot open {root.name}: {error}"
             raise InspectorError(422, root.error) from None
         root.error = ""
+        with self._lock:
+            self._openings += 1
+            root.opened = self._openings
         root.branches[0] = _Branch(0, None, 0, "episode", timeline)
         self._learn_keys(root, timeline)
         return timeline
@@ -475,6 +544,19 @@ class Timelines:
 def episode_id(episode: EpisodeFile) -> str:
     """A recent episode's identifier: the digest of its snapshot (the same at every asking)."""
     return digest(episode.snapshot)
+
+
+def _distinct(paths: list[Path]) -> list[str]:
+    """Each file's name, with as much of its folder as tells apart files of the same name."""
+    resolved = [path.resolve().parts for path in paths]
+    names = []
+    for parts in resolved:
+        depth = 1
+        while depth < len(parts) and sum(other[-depth:] == parts[-depth:]
+                                         for other in resolved) > 1:
+            depth += 1
+        names.append("/".join(parts[-depth:]).lstrip("/"))
+    return names
 
 
 def _step(timeline: Timeline, step: int) -> int:

@@ -5,7 +5,9 @@ stays here, never in the page). It only sends what observers may send: ``observa
 (``draw``, ``agent``), ``snapshot``, ``episodes`` and ``inspect``, so it never takes control;
 the trainer's steps go on, and a change it makes applies between two of them. Every call is
 answered from a fresh request (nothing is cached, so a slow page drops frames, never queues
-them); a lost connection is reconnected on the next call (or at a new address, see
+them), but for the recent episodes, which never change once kept: each is fetched once, in
+pages, and the server is asked to keep them as soon as the watcher connects. A lost connection
+is reconnected on the next call (or at a new address, see
 :meth:`Watcher.follow`). A server counts as restarted when it moved to a new address, or when
 after a reconnection its step count went back (another process: an idle connection the server
 closed is not a restart).
@@ -26,7 +28,12 @@ from rlenv.protocol import ErrorReply, Request, Response
 from rlenv.protocol.errors import RemoteError
 from rlenv_client.addresses import parse_address
 from rlenv_client.client import Client
-from rlenv_client.inspection import AGENT_SETTINGS_SINCE, EPISODES_SINCE, episode_files
+from rlenv_client.inspection import (
+    AGENT_SETTINGS_SINCE,
+    EPISODES_SINCE,
+    PAGED_EPISODES_SINCE,
+    fetch_episodes,
+)
 from rlenv_client.replay import EpisodeFile
 from rlenv_client.session import LOST
 
@@ -61,6 +68,7 @@ class _Watched:
         self.steps: dict[int, int] = {}  # per instance, the step count its last statistics gave
         self.lost_at = -_RETRY_AFTER
         self.error = ""
+        self.recent: dict[int, dict[int, EpisodeFile]] = {}  # fetched, by instance and id
 
 
 class Watcher:
@@ -186,8 +194,9 @@ class Watcher:
         if hello.protocol < EPISODES_SINCE:
             raise InspectorError(422, "server {} speaks protocol {}.{}; recent episodes need "
                                  "2.5".format(server, *hello.protocol))
-        reply = self._ask(server, instance, {"episodes": {}})
-        return episode_files(reply.info["episodes"], hello.target)
+        cache = self._watched(server).recent.setdefault(instance, {})
+        return fetch_episodes(lambda part: self._ask(server, instance, {"episodes": part}),
+                              hello, cache=cache)
 
     def address(self, server: int) -> str:
         """The ``HOST:PORT`` of ``server`` (a controller of its own connects there).
@@ -283,6 +292,8 @@ class Watcher:
             watched.lost_at, watched.error = now, str(error)
             raise InspectorError(503, f"{watched.address} is unreachable: {error}") from None
         watched.reconnected = set(watched.steps)  # the instances seen before: still the same?
+        watched.recent.clear()  # perhaps another process: its ids name other episodes
+        _start_keeping(watched.client)
         return watched.client
 
     @staticmethod
@@ -291,6 +302,23 @@ class Watcher:
             watched.client.close()
             watched.client = None
         watched.lost_at, watched.error = time.monotonic(), why
+
+
+def _start_keeping(client: Client) -> None:
+    """Ask every instance for its recent episodes' index: a server keeps none until asked."""
+    hello = client.hello
+    if hello.protocol < PAGED_EPISODES_SINCE:
+        return
+    part = {"episodes": {"index": True}}
+    try:
+        if hello.instances == 1:
+            client.send_request(Request(0, part))
+            client.receive_reply()
+        else:
+            client.send_batch([Request(0, part)] * hello.instances)
+            client.receive_batch()
+    except (RemoteError, *LOST):
+        pass  # the next call says what is wrong
 
 
 def _short(space: spaces.Space) -> str:

@@ -24,7 +24,8 @@ demonstration under way) and ``POST api/edit`` (``{"server", "instance", "path",
 With timelines (:mod:`~rlenv_client.inspector.timelines`: ``rlenv replay FILE --inspect``, or
 a watched instance's recent episodes), ``GET api/timelines`` (those offered, the policies),
 ``api/timeline`` (``?timeline=T``: its length, keys and tree of branches),
-``api/timeline/step`` and ``api/timeline/ticks`` (``?timeline=T&branch=B&step=K``),
+``api/timeline/step`` and ``api/timeline/ticks`` (``?timeline=T&branch=B&step=K``; the ticks
+a page at a time: ``&first=F&count=N``, at most 100),
 ``api/timeline/compare`` (``?timeline=T&a=A&b=B&step=K``), ``api/timeline/recent``
 (``?server=S&instance=I``: the instance's last finished episodes, each with its ``id``) and
 ``POST api/timeline/open`` (``{"server", "instance", "id"}``: a recent one as a timeline),
@@ -47,7 +48,7 @@ from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 from rlenv_client.inspector.control import Demonstrator
-from rlenv_client.inspector.timelines import Timelines, episode_id
+from rlenv_client.inspector.timelines import MAX_TICKS, Timelines, episode_id
 from rlenv_client.inspector.watch import InspectorError, Watcher
 from rlenv_client.origins import OriginPolicy
 
@@ -104,7 +105,12 @@ class InspectorServer(ThreadingHTTPServer):
         return f"http://127.0.0.1:{self.server_address[1]}/{self.key}/"
 
     def start(self) -> None:
-        """Serve in a background thread (see :meth:`close`)."""
+        """Serve in a background thread (see :meth:`close`).
+
+        The watched servers are connected first: a server keeps its recent episodes from the
+        moment an inspector asks (the watcher does as it connects).
+        """
+        self.watcher.servers()
         self._thread = threading.Thread(target=self.serve_forever, name="rlenv-inspector",
                                         daemon=True)
         self._thread.start()
@@ -189,7 +195,8 @@ _TIMELINE_GETS: dict[str, Callable[[Timelines, dict[str, list[str]]], Any]] = {
     "api/timeline/step": lambda timelines, q: timelines.step(
         _number(q, "timeline"), _number(q, "branch"), _number(q, "step")),
     "api/timeline/ticks": lambda timelines, q: timelines.ticks(
-        _number(q, "timeline"), _number(q, "branch"), _number(q, "step")),
+        _number(q, "timeline"), _number(q, "branch"), _number(q, "step"), _number(q, "first", 1),
+        _number(q, "count", MAX_TICKS)),
     "api/timeline/compare": lambda timelines, q: timelines.compare(
         _number(q, "timeline"), _number(q, "a"), _number(q, "b", 1), _number(q, "step")),
 }

@@ -8,6 +8,7 @@
 
 const PLAY_INTERVAL = 100;   // ms between steps while playing
 const RECENT_INTERVAL = 5000;  // the recent episodes of the watched instance
+const TICK_PAGE = 100;  // ticks asked for at a time (the server's most: a long step comes in pages)
 
 const timeline = {
   active: false,       // the page shows a timeline (the live loops stand aside)
@@ -16,7 +17,7 @@ const timeline = {
   number: null, info: null, branch: 0, step: 0, shown: null, loads: 0,
   wanted: null, inflight: false,
   tick: null,          // {step, index, count} while between two steps, else null
-  ticks: null,         // the ticks of one step: {step, ticks}
+  ticks: null,         // a page of the ticks of one step: {step, branch, frames, first, next, ticks}
   playing: false,
   branching: null,     // {parent, step, branch}: key presses make and lengthen a branch
   queue: Promise.resolve(),
@@ -46,31 +47,57 @@ async function refreshTimelines() {
   timeline.policies = answer.policies;
   timeline.unavailable = answer.unavailable;
   const select = $("timeline-select");
-  const signature = answer.timelines.map((t) => `${t.timeline}=${t.name}`).join("|");
+  // A file's name comes with as much of its folder as tells it from others of the same name.
+  const label = (t) => t.name + (t.error ? " (did not open)" : "");
+  const signature = answer.timelines.map((t) => `${t.timeline}=${label(t)}`).join("|");
   if (select.dataset.signature !== signature) {
-    select.replaceChildren(...answer.timelines.map((t) => new Option(t.name, t.timeline)));
+    select.replaceChildren(...answer.timelines.map((t) => {
+      const option = new Option(label(t), t.timeline);
+      option.title = t.origin.file || t.name;
+      return option;
+    }));
     select.dataset.signature = signature;
   }
   if (timeline.number !== null) select.value = String(timeline.number);
 }
 
+// Open a timeline. If it cannot be opened, the section still shows, with why and the menu to
+// choose another (its scrubber and branches stand aside).
 async function openTimeline(number) {
   timeline.playing = false;
   stopBranching();
+  const section = $("timeline");
+  section.hidden = false;
+  $("timeline-live").hidden = timeline.offline;
+  $("timeline-select").value = String(number);
   timelineNote("timeline-status", "opening (the episode is re-simulated once)…");
-  const info = await timelineGet("timeline", {timeline: number});
+  let info;
+  try {
+    info = await timelineGet("timeline", {timeline: number});
+  } catch (error) {
+    timeline.active = false;
+    timeline.number = number;
+    timeline.shown = null;
+    $("timeline-body").hidden = true;
+    $("compare").hidden = true;
+    section.dataset.failed = number;
+    await refreshTimelines().catch(() => {});  // the menu marks it
+    $("timeline-select").value = String(number);
+    timelineNote("timeline-status", error.message, true);
+    return;
+  }
+  delete section.dataset.failed;
+  $("timeline-body").hidden = false;
   timeline.active = true;
   document.body.classList.add("time-travel");
   timeline.number = number;
   timeline.branch = 0;
   timeline.a = 0;
-  timeline.b = 0;
+  timeline.b = newestBranch(info);  // side by side: the episode and its newest branch
   timeline.compared = null;
+  timeline.ticks = null;
   showTimeline(info);
-  $("timeline").hidden = false;
   $("recent").hidden = true;
-  $("timeline-live").hidden = timeline.offline;
-  $("timeline-select").value = String(number);
   timelineNote("timeline-status", info.target || "");
   want(0);
 }
@@ -117,12 +144,14 @@ function showTimeline(info) {
       chooser.dataset.signature = signature;
     }
   }
+  if (timeline.a === timeline.b) timeline.b = newestBranch(info);  // never one branch twice
   $("compare-a").value = String(timeline.a);
   $("compare-b").value = String(timeline.b);
   $("compare").hidden = info.branches.length < 2;
 }
 
 const keyName = (key) => (key === " " ? "Space" : key);
+const newestBranch = (info) => Math.max(...info.branches.map((b) => b.branch));
 
 function branchOf(number) {
   return timeline.info.branches.find((b) => b.branch === number);
@@ -215,7 +244,7 @@ function showPosition() {
   const end = state.terminated ? " · terminated" : state.truncated ? " · truncated" : "";
   $("position").textContent = `step ${timeline.step} / ${branchLength()}` +
     (tick ? ` · tick ${tick.index}/${tick.count} of step ${tick.step}` : "") +
-    ` · reward ${formatNumber(tick ? timeline.ticks.ticks[tick.index - 1].reward : state.reward)}` +
+    ` · reward ${formatNumber(tick ? shownTick().reward : state.reward)}` +
     end + (timeline.branch ? ` · branch #${timeline.branch}` : "");
   $("fps").textContent = `time travel · ${timeline.info.name}`;
   $("episode").textContent = tick ? `tick ${tick.index} of step ${tick.step}` :
@@ -257,7 +286,7 @@ function showTree(paths) {
 timeline.showProperties = () => {
   if (!timeline.shown || state.path === null) return;
   const tick = timeline.tick;
-  const properties = (tick ? timeline.ticks.ticks[tick.index - 1] : timeline.shown).properties;
+  const properties = (tick ? shownTick() : timeline.shown).properties;
   const values = properties[state.path] || {};
   const body = $("properties").tBodies[0];
   const names = Object.keys(values);
@@ -278,11 +307,18 @@ timeline.showProperties = () => {
   body.dataset.moment = moment;
 };
 
-async function ticksOf(step) {
-  if (!timeline.ticks || timeline.ticks.step !== step || timeline.ticks.branch !== timeline.branch) {
-    const answer = await timelineGet("timeline/ticks", {timeline: timeline.number,
-                                                        branch: timeline.branch, step});
-    timeline.ticks = {...answer, branch: timeline.branch};
+// The tick shown between two steps, from the page of ticks held.
+const shownTick = () => timeline.ticks.ticks[timeline.tick.index - timeline.ticks.first];
+
+// The page of the ticks of ``step`` that holds tick ``index`` (pages of TICK_PAGE, from tick 1).
+async function ticksPage(step, index) {
+  const held = timeline.ticks;
+  const first = Math.floor((index - 1) / TICK_PAGE) * TICK_PAGE + 1;
+  if (!held || held.step !== step || held.branch !== timeline.branch || held.first !== first) {
+    const branch = timeline.branch;
+    const answer = await timelineGet("timeline/ticks", {timeline: timeline.number, branch, step,
+                                                        first, count: TICK_PAGE});
+    timeline.ticks = {...answer, branch};
   }
   return timeline.ticks;
 }
@@ -293,15 +329,22 @@ async function tickBy(direction) {
   const tick = timeline.tick;
   const action = tick ? tick.step : direction > 0 ? timeline.step + 1 : timeline.step;
   if (action < 1 || action > branchLength()) return;
-  const ticks = (await ticksOf(action)).ticks;
-  let index = tick ? tick.index + direction : direction > 0 ? 1 : ticks.length - 1;
-  if (index >= ticks.length) { want(action); return; }
+  let index = tick ? tick.index + direction : direction > 0 ? 1 :
+    (await ticksPage(action, 1)).frames - 1;
   if (index <= 0) { want(action - 1); return; }
-  timeline.tick = {step: action, index, count: ticks.length};
+  let page = await ticksPage(action, index);
+  const lastOf = (p) => (p.next === null ? p.first + p.ticks.length - 1 : Infinity);
+  if (!tick && direction < 0 && index >= lastOf(page)) {  // the episode ended inside the step
+    index = lastOf(page) - 1;
+    if (index <= 0) { want(action - 1); return; }
+    page = await ticksPage(action, index);
+  }
+  if (index >= lastOf(page)) { want(action); return; }
+  timeline.tick = {step: action, index, count: page.frames};
   timeline.step = action - 1;
-  const shownTick = ticks[index - 1];
-  drawScene($("scene"), shownTick.draw);
-  showObservations(shownTick.observation);
+  const shown = shownTick();
+  drawScene($("scene"), shown.draw);
+  showObservations(shown.observation);
   showProperties();
   showPosition();
 }

@@ -22,7 +22,7 @@ value per instance; observations travel in their space's packed form (:mod:`rlen
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Final
 
@@ -42,6 +42,7 @@ __all__ = [
     "Request",
     "Response",
     "StepsResponse",
+    "joint_end",
 ]
 
 PROTOCOL_VERSION: Final = (2, 6)
@@ -414,3 +415,19 @@ def _column(data: Any, dtype: np.dtype, size: int) -> np.ndarray:
 Message = Hello | Request | Response | BatchResponse | StepsResponse | ErrorReply
 Reply = Response | BatchResponse | StepsResponse | ErrorReply
 """Any answer a server sends to a request."""
+
+
+def joint_end(flags: Iterable[tuple[bool, bool]]) -> tuple[bool, bool]:
+    """The joint episode's ``(terminated, truncated)``, from each agent's (protocol 2.6).
+
+    The rule both ends follow: a server's answer for all its agents, a client's for the agents
+    it trains (the others driven by the server).
+
+    ``terminated`` when every agent ended terminated; ``truncated`` when every agent is done
+    and at least one was truncated (a time-out after a catch is no terminal state, so a
+    trainer still bootstraps from it). An agent both terminated and truncated counts as
+    terminated; the two joint flags are never both true.
+    """
+    flags = list(flags)
+    terminated = all(ended for ended, _ in flags)
+    return terminated, not terminated and all(ended or cut for ended, cut in flags)

@@ -42,6 +42,7 @@ from rlenv.environment import RLEnvironment, give_action
 from rlenv.node import Node, check_initialised
 from rlenv.protocol import ErrorReply, Response
 from rlenv.protocol.errors import ErrorCode, RequestError
+from rlenv.protocol.messages import joint_end
 from rlenv.serving import inspector
 from rlenv.serving.actions import ActionCheck
 from rlenv.serving.observing import Observer, check_text_keys
@@ -453,9 +454,8 @@ class Instance:
             return
         agents = self.agents
         if self.multi_agent:  # as an answer reports them
-            ended = all(agent.terminated or agent.truncated for agent in agents)
-            terminated = ended and any(agent.terminated for agent in agents)
-            truncated = ended and not terminated
+            terminated, truncated = joint_end([(agent.terminated, agent.truncated)
+                                                for agent in agents])
         else:
             terminated, truncated = agents[0].terminated, agents[0].truncated
         if self.recent.finished(self.log, bool(terminated), bool(truncated)):
@@ -646,13 +646,12 @@ def _outcome(agents: list[RLAgent], several: bool,
     outcomes = {each.name: {"reward": float(each.reward) if reports else 0.0,
                             "terminated": bool(each.terminated),
                             "truncated": bool(each.truncated)} for each in agents}
-    ended = all(o["terminated"] or o["truncated"] for o in outcomes.values())
-    terminated = ended and any(o["terminated"] for o in outcomes.values())
+    terminated, truncated = joint_end([(o["terminated"], o["truncated"])
+                                        for o in outcomes.values()])
     if reports:
         for each in agents:
             each.reward = 0.0
-    return (sum(o["reward"] for o in outcomes.values()), terminated, ended and not terminated,
-            outcomes)
+    return sum(o["reward"] for o in outcomes.values()), terminated, truncated, outcomes
 
 
 def _joint_space(agents: list[RLAgent], which: str) -> spaces.Space:

@@ -29,6 +29,8 @@ from rlenv.environment import RLEnvironment
 from rlenv.protocol import ErrorReply, Hello, Reply, Request, Response
 from rlenv.protocol.errors import ErrorCode, RequestError
 from rlenv.protocol.spaces import compile_check
+from rlenv.scene2d.packed_scene import MAX_DEPTH, MAX_NODES
+from rlenv.serving.actions import MAX_REPEAT_ACTION
 from rlenv.serving.columns import Columns
 from rlenv.serving.endpoint import Endpoint, Peer
 from rlenv.serving.instance import Episode, Instance, failure, load_environment
@@ -38,9 +40,16 @@ from rlenv.serving.parts import HostPart, dispatch, plan_for, shape_of, takes_co
 from rlenv.serving.policy_driver import DrivenAgents, PolicyDriver
 from rlenv.serving.recent import KEEP_EPISODES
 
-__all__ = ["Host", "Prepared", "target_of"]
+__all__ = ["REQUEST_LIMITS", "Host", "Prepared", "target_of"]
 
 logger = logging.getLogger(__name__)
+
+REQUEST_LIMITS: Mapping[str, int] = {"max_repeat_action": MAX_REPEAT_ACTION,
+                                     "max_level_nodes": MAX_NODES, "max_level_depth": MAX_DEPTH}
+"""What one request may ask of an environment, as the hello's ``limits`` announce it (2.6)
+beside the endpoint's sizes and deadlines: the ticks of one action, and a level's nodes and
+their nesting (:mod:`rlenv.scene2d.packed_scene`); beyond them a request is refused with
+``bad_request`` before anything runs."""
 
 
 def target_of(environment: RLEnvironment | type[RLEnvironment] | str) -> str | None:
@@ -135,6 +144,7 @@ class Host:
             render_modes=("rgb_array",),
             render_size=first.environment.render_size,
             instances=count,
+            limits=dict(REQUEST_LIMITS),
             target=target,
         )
         self.steps_action_space = batch_space(first.action_space, count)

@@ -894,3 +894,69 @@ def test_a_restart_gives_the_same_space_whether_or_not_the_episode_saw_a_contact
     assert runs[0][0] == {**_space_settings(pymunk.Space()), **_SPACE_SETTINGS,
                           "gravity": (0.0, -9.81)}
     assert runs[0][2] > 0 if handler else runs[0][2] == 0
+
+
+# --- the user's collision handlers beside rlenv's ----------------------------------------------
+
+
+def _landing(tree: SceneTree, world: PhysicsWorld) -> tuple[RigidBody, list[object]]:
+    body = ball(position=(0.0, 0.8))
+    world.add_child(floor())
+    world.add_child(body)
+    signals: list[object] = []
+    body.body_entered.connect(lambda other: signals.append(("entered", other.name)))
+    body.body_exited.connect(lambda other: signals.append(("exited", other.name)))
+    return body, signals
+
+
+def test_a_user_s_handler_without_collision_types_runs_beside_rlenv_s_signals(
+    tree: SceneTree, world: PhysicsWorld,
+) -> None:
+    """pymunk's catch-all handler is rlenv's, which emits the signals: a user's ``begin`` or
+    ``separate`` there used to replace it, and ``body_entered`` stopped firing."""
+    body, signals = _landing(tree, world)
+    theirs: list[object] = []
+    world.space.on_collision(begin=lambda arbiter, space, data: theirs.append(("begin", data)),
+                             separate=lambda arbiter, space, data: theirs.append(("end", data)),
+                             post_solve=lambda arbiter, space, data: theirs.append(data),
+                             data="mine")
+    ticks(tree, 30)
+    assert signals[0] == ("entered", "Floor") and theirs[0] == ("begin", "mine")
+    assert "mine" in theirs  # post_solve, with the user's data
+    body.queue_free()  # its contact ends: both separates
+    ticks(tree, 1)
+    assert signals[-1] == ("exited", "Floor") and theirs[-1] == ("end", "mine")
+
+
+def test_the_user_s_catch_all_handler_survives_a_restart_and_can_be_removed() -> None:
+    tree = SceneTree(60)
+    world = PhysicsWorld(gravity=(0.0, -10.0))
+    tree.root.add_child(world)
+    _, signals = _landing(tree, world)
+    theirs: list[object] = []
+    world.space.on_collision(begin=lambda arbiter, space, data: theirs.append(data), data=7)
+    ticks(tree, 30)
+    old = world.space
+    world.restart()  # a contact began: a new space, the handlers carried over
+    assert world.space is not old and theirs == [7]
+    signals.clear()
+    ticks(tree, 30)
+    assert signals == [("entered", "Floor")] and theirs == [7, 7]
+    world.space.on_collision(begin=pymunk.empty_callback)  # the user's goes, rlenv's stays
+    world.restart()
+    signals.clear()
+    ticks(tree, 30)
+    assert signals == [("entered", "Floor")] and theirs == [7, 7]
+
+
+def test_a_duplicated_world_reports_its_own_contacts(tree: SceneTree) -> None:
+    """The copy's space called the original world, which knew none of the copy's shapes."""
+    world = PhysicsWorld(gravity=(0.0, -10.0), name="World")
+    _landing(tree, world)
+    copy = world.duplicate()
+    copy.name = "Copy"
+    tree.root.add_child(copy)
+    copied: list[object] = []
+    copy.get_node("Ball").body_entered.connect(copied.append)
+    ticks(tree, 30)
+    assert [node.name for node in copied] == ["Floor"]

@@ -274,7 +274,7 @@ class Host:
                 else:
                     self.handle(endpoint, *got)
         while True:
-            got = endpoint.receive(self.time_to_next_tick())
+            got = endpoint.receive(self.time_to_next_tick() if self._clocked else None)
             if got is None:
                 self.catch_up()
                 continue
@@ -292,29 +292,25 @@ class Host:
         server's) is logged and answered with ``environment_error``, and the server serves on.
         """
         try:
-            self._handle(endpoint, peer, request)
+            prepared = self.prepare(request)
+            if isinstance(prepared, ErrorReply):
+                endpoint.reply(peer, prepared)
+                return
+            if endpoint.controls(peer):
+                endpoint.reply(peer, self.run(prepared))
+            elif not prepared.takes_control:
+                endpoint.reply(peer, self.run(prepared, reports=False))
+            elif endpoint.take_control(peer, request.id):
+                endpoint.reply(peer, self.run(prepared))
+            else:
+                return
+            self.after_send(prepared)
         except Exception as error:  # the last resort: this request fails, not the server
             logger.error("serving request %r raised", request.id, exc_info=error)
             endpoint.reply(peer, ErrorReply(
                 request.id, ErrorCode.ENVIRONMENT_ERROR,
                 f"the server failed answering this request ({type(error).__name__}: "
                 f"{error}); it serves on, but what the request changed is not known"))
-
-    def _handle(self, endpoint: Endpoint, peer: Peer, request: Request) -> None:
-        prepared = self.prepare(request)
-        if prepared.__class__ is ErrorReply:
-            endpoint.reply(peer, prepared)  # type: ignore[arg-type]
-            return
-        assert isinstance(prepared, Prepared)
-        if endpoint.controls(peer):
-            endpoint.reply(peer, self.run(prepared))
-        elif not prepared.takes_control:
-            endpoint.reply(peer, self.run(prepared, reports=False))
-        elif endpoint.take_control(peer, request.id):
-            endpoint.reply(peer, self.run(prepared))
-        else:
-            return
-        self.after_send(prepared)
 
     def close(self) -> None:
         """Take every environment out of its tree."""

@@ -320,6 +320,19 @@ def test_repeat_action_is_bounded_by_the_hello_s_limit(
     host.close()
 
 
+def test_repeat_action_is_bounded_with_several_agents_too() -> None:
+    from examples.pair import TARGET as PAIR
+
+    with LocalClient(PAIR) as client:
+        client.reset(seed=0)
+        action = {name: np.zeros(2, np.float32) for name in ("Red", "Blue")}
+        with pytest.raises(RemoteError) as refused:
+            client.step(action, repeat_action=_BEYOND)
+        assert refused.value.code == ErrorCode.BAD_REQUEST
+        assert "must be at most 10000 ticks" in refused.value.message
+        assert client.step(action, repeat_action=3)[4]["frames"] == 3  # the episode goes on
+
+
 def test_a_restore_whose_action_asks_for_more_ticks_than_the_limit_is_refused() -> None:
     host = Host(TARGET)
     _ask(host, {"reset": {"seed": 1}})

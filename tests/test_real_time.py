@@ -252,3 +252,23 @@ def test_a_tick_that_raises_between_requests_ends_the_episode_not_the_server(
         client.reset()
         client.stats()
         assert server.is_alive()
+
+
+def test_several_agents_follow_the_clock_an_observer_switched_on(clock: ManualClock) -> None:
+    """The same with two agents (examples/pair): an inspector's switch, whoever sends it, is the
+    host's to follow; each agent's outcome counts the ticks."""
+    from examples.pair import TARGET as PAIR
+    from rlenv.serving.host import Host
+
+    host = Host(PAIR, clock=clock)
+    host.answer(Request(1, {"reset": {"seed": 2}}))
+    switch = host.prepare(Request(2, {"inspect": {"configure": {"environment":
+                                                                {"real_time": True}}}}))
+    host.run(switch, reports=False)  # type: ignore[arg-type]  # as to an observer
+    assert host.time_to_next_tick() is not None
+    clock.advance(0.1)
+    answer = host.answer(Request(3, {"observation": {"agent": {}}}))
+    assert answer.frames >= 6 and set(answer.agents) == {"Red", "Blue"}  # type: ignore[union-attr]
+    host.answer(Request(4, {"config": {"environment": {"real_time": False}}}))
+    assert host.time_to_next_tick() is None
+    host.close()

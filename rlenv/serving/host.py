@@ -291,26 +291,31 @@ class Host:
         No request ends the server: an exception that escapes everything else (a bug of the
         server's) is logged and answered with ``environment_error``, and the server serves on.
         """
+        answered = False
         try:
             prepared = self.prepare(request)
             if isinstance(prepared, ErrorReply):
+                answered = True
                 endpoint.reply(peer, prepared)
                 return
             if endpoint.controls(peer):
-                endpoint.reply(peer, self.run(prepared))
+                reply = self.run(prepared)
             elif not prepared.takes_control:
-                endpoint.reply(peer, self.run(prepared, reports=False))
+                reply = self.run(prepared, reports=False)
             elif endpoint.take_control(peer, request.id):
-                endpoint.reply(peer, self.run(prepared))
+                reply = self.run(prepared)
             else:
-                return
+                return  # answered busy
+            answered = True
+            endpoint.reply(peer, reply)
             self.after_send(prepared)
         except Exception as error:  # the last resort: this request fails, not the server
             logger.error("serving request %r raised", request.id, exc_info=error)
-            endpoint.reply(peer, ErrorReply(
-                request.id, ErrorCode.ENVIRONMENT_ERROR,
-                f"the server failed answering this request ({type(error).__name__}: "
-                f"{error}); it serves on, but what the request changed is not known"))
+            if not answered:  # one answer per request, or the client loses the thread
+                endpoint.reply(peer, ErrorReply(
+                    request.id, ErrorCode.ENVIRONMENT_ERROR,
+                    f"the server failed answering this request ({type(error).__name__}: "
+                    f"{error}); it serves on, but what the request changed is not known"))
 
     def close(self) -> None:
         """Take every environment out of its tree."""

@@ -346,11 +346,12 @@ class EditLevel(Part):
     The world's ``_edit_level`` hook (:meth:`rlenv.RLEnvWorld._edit_level`) edits the level
     with a generator seeded by ``seed``, so the same request gives the same level. It is built
     from the request's data, not from the live tree: nothing of the environment changes, with
-    or without an episode. The edit is made while the request is checked (a hook that raises
-    leaves the episode alone); the answer's ``info["level"]`` holds the edited data, as it
-    travels. A level beyond the hello's limits (its nodes, their depth) is refused before the
-    hook runs. It takes control (2.6): an edit holds the server's loop as long as it builds, so
-    only the controller's own requests may cost the controller that time.
+    or without an episode. The request is checked whole first (its fields, the world's hook, a
+    level beyond the hello's limits: its nodes, their depth); the edit is made when it is
+    applied, once control was granted: it takes control (2.6), as an edit holds the server's
+    loop as long as it builds, so an observer's is answered ``busy`` before it costs anything.
+    A hook that refuses or raises leaves the episode alone; the answer's ``info["level"]``
+    holds the edited data, as it travels.
     """
 
     name = "edit_level"
@@ -371,7 +372,6 @@ class EditLevel(Part):
             raise _bad(f"edit_level.n_edits must be an integer in [1, {MAX_LEVEL_EDITS}], "
                        f"got {n_edits!r:.40}")
         world: RLEnvWorld = instance.environment.world  # type: ignore[assignment]  # has one
-        hook = f"{type(world).__name__}._edit_level"
         if type(world)._edit_level is RLEnvWorld._edit_level:
             raise _bad(f"edit_level: {type(world).__name__} has no _edit_level: "
                        f"{type(instance.environment).__name__} offers no edits of its levels")
@@ -379,8 +379,14 @@ class EditLevel(Part):
             check_size(edit["level"])
         except PackedSceneError as error:
             raise _bad(f"edit_level.level: {error}") from None
+        return edit["level"], seed, n_edits
+
+    def apply(self, instance: Instance, value: Any, request: Plan) -> None:
+        level, seed, n_edits = value
+        world: RLEnvWorld = instance.environment.world  # type: ignore[assignment]  # has one
+        hook = f"{type(world).__name__}._edit_level"
         try:
-            edited = world._edit_level(edit["level"], np.random.default_rng(seed), n_edits)
+            edited = world._edit_level(level, np.random.default_rng(seed), n_edits)
         except RequestError:
             raise
         except ValueError as error:
@@ -391,10 +397,7 @@ class EditLevel(Part):
             raise RequestError(ErrorCode.ENVIRONMENT_ERROR,
                                f"{hook} raised {type(error).__name__}: {error}; nothing "
                                f"changed\n{detail}") from None
-        return _travelled(edited, hook)
-
-    def apply(self, instance: Instance, value: Any, request: Plan) -> None:
-        instance.answer.info = {"level": value}  # type: ignore[union-attr]
+        instance.answer.info = {"level": _travelled(edited, hook)}  # type: ignore[union-attr]
 
 
 def _travelled(level: Any, hook: str) -> Any:

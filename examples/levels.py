@@ -4,7 +4,10 @@ What the examples with levels share (see docs/procedural.md, "Levels as reset op
 reset plays the level given as ``options["level"]`` (the data of a
 :class:`~rlenv.PackedScene`, checked against :attr:`LevelWorld.level_classes`) or builds one
 from the episode's generator; ``client.get_property("World", "level")`` reads the episode's
-level as data, packed once; :attr:`LevelWorld.level_id` is its fingerprint, computed once; and
+level as data, packed once; a given level is built and checked while the server checks the
+reset's request (:meth:`LevelWorld.check_options`, :meth:`LevelWorld.check_level`), so that
+one refused leaves the episode under way alone; :attr:`LevelWorld.level_id` is its
+fingerprint, computed once; and
 ``client.edit_level(level, seed, n_edits)`` edits a level given as data or as an int seed
 (ACCEL). An example implements what is its own: :meth:`~LevelWorld.build_level`,
 :meth:`~LevelWorld.edit_level_data`, and the draws a reset makes before the level

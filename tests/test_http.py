@@ -261,6 +261,9 @@ def test_bevy_rl_routes_in_bevy_rl_formats(gateway: Gateway) -> None:
     for bad in ("nope", urllib.parse.quote("[]"), urllib.parse.quote('[{"action": "[0.5"}]')):
         assert_problem(gateway.request("GET", f"/step?payload={bad}"), 400, "bad_request")
     assert_problem(gateway.request("GET", "/step"), 400, "bad_request")
+    for beyond in ("10001", "1099511627776", "9" * 40):  # the hello's limits.max_repeat_action
+        refused = gateway.request("GET", f"/step?payload={payload}&repeat_action={beyond}")
+        assert "at most 10000" in assert_problem(refused, 400, "bad_request")["detail"]
     outside = urllib.parse.quote(json.dumps([{"action": "[7.0]"}]))
     assert_problem(gateway.request("GET", f"/step?payload={outside}"), 422, "invalid_action")
     for _ in range(500):  # pushed one way, the pole falls

@@ -46,6 +46,7 @@ from rlenv.http.png import encode_png
 from rlenv.http.problems import COMMON_HEADERS, Problem
 from rlenv.protocol.errors import ErrorCode
 from rlenv.protocol.spaces import SpaceMismatch, check
+from rlenv.serving.actions import MAX_REPEAT_ACTION
 
 if TYPE_CHECKING:
     from rlenv.http.app import Gateway
@@ -280,7 +281,8 @@ def component_schemas(observation: dict[str, Any], action: dict[str, Any]) -> di
             "info": {"$ref": "#/components/schemas/Info"}}},
         "StepBody": {"type": "object", "required": ["action"], "additionalProperties": False,
                      "properties": {"action": {"$ref": "#/components/schemas/Action"},
-                                    "repeat_action": {"type": "integer", "minimum": 1}}},
+                                    "repeat_action": {"type": "integer", "minimum": 1,
+                                                      "maximum": MAX_REPEAT_ACTION}}},
         "Step": {"type": "object", "required": ["observation", "reward", "terminated",
                                                 "truncated", "info"], "properties": {
             "observation": {"$ref": "#/components/schemas/Observation"},

@@ -62,10 +62,12 @@ class Hello:
     largest request frame), ``max_first_frame_size`` (the same, until the first request),
     ``max_reply_size`` (the largest frame it sends), ``max_frame_objects`` (the most msgpack
     objects a frame may hold, either way; protocol 2.5), ``frame_deadline``, ``idle_timeout``
-    (``None``: never) and ``write_timeout`` in seconds, and ``max_connections``. Empty from a
-    2.0 server. ``target`` (protocol 2.5) is the ``MODULE:CLASS`` another server of the same
-    environment is started with (``rlenv serve TARGET``), or ``None`` when the server cannot
-    name one (an environment object, a class defined in ``__main__``) or is older.
+    (``None``: never) and ``write_timeout`` in seconds, and ``max_connections``; and what one
+    request may ask (protocol 2.6): ``max_repeat_action`` (the ticks of one action),
+    ``max_level_nodes`` and ``max_level_depth`` (a level's data). Empty from a 2.0 server.
+    ``target`` (protocol 2.5) is the ``MODULE:CLASS`` another server of the same environment
+    is started with (``rlenv serve TARGET``), or ``None`` when the server cannot name one (an
+    environment object, a class defined in ``__main__``) or is older.
     ``driven`` (protocol 2.6) names the agents the server drives itself (``rlenv serve
     --policy``: a policy file or the agent's heuristic), in ``agents``' order; empty when none
     is, or from an older server. A trainer leaves them out: it needs no actions for them.

@@ -21,7 +21,29 @@ from rlenv.agent import RLAgent
 from rlenv.protocol.errors import ErrorCode, RequestError
 from rlenv.protocol.spaces import SpaceMismatch, compile_check
 
-__all__ = ["ActionCheck"]
+__all__ = ["MAX_REPEAT_ACTION", "ActionCheck", "check_repeat_action"]
+
+MAX_REPEAT_ACTION = 10_000
+"""The most ticks one action may run: a request's or a ``steps`` request's ``repeat_action``, a
+configured one, a restored snapshot's (the hello's ``limits.max_repeat_action``, protocol 2.6).
+
+Trainers skip 1 to a few dozen frames; 10,000 ticks are almost three minutes at 60 ticks a
+second, and a few tenths of a second of the server's loop for the examples (10 to 50 us a
+tick), so that one request never holds the loop long enough for other clients to time out."""
+
+
+def check_repeat_action(repeat: Any, name: str, code: ErrorCode = ErrorCode.BAD_REQUEST) -> int:
+    """``repeat`` if it is a number of ticks an action may run: an int in 1..MAX_REPEAT_ACTION.
+
+    Raises:
+        RequestError: ``code``, naming the field ``name``.
+    """
+    if type(repeat) is not int or repeat < 1:
+        raise RequestError(code, f"{name} must be an integer >= 1, got {repeat!r:.40}")
+    if repeat > MAX_REPEAT_ACTION:
+        raise RequestError(code, f"{name} must be at most {MAX_REPEAT_ACTION} ticks (the "
+                                 f"hello's limits.max_repeat_action), got {repeat}")
+    return repeat
 
 
 class ActionCheck:

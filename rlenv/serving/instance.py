@@ -147,6 +147,8 @@ class Instance:
         recent: the last finished episodes' logs (:mod:`rlenv.serving.recent`).
         broken: why the next reset rebuilds the environment from its class (user code raised
             while serving the controller), or ``None``.
+        real_time_changed: called after every switch of real time (:meth:`set_real_time`),
+            whoever asked for it; the host knows by it which instances tick by the clock.
 
     Raises:
         TypeError: the environment's ``__init__`` did not call ``super().__init__()``.
@@ -174,6 +176,7 @@ class Instance:
         self.has_after_send = "_after_send_response" in hooks
         self.driven: DrivenAgents | None = None  # agents a policy drives (rlenv serve --policy)
         self._heuristic_agents: DrivenAgents | None = None  # see _heuristics
+        self.real_time_changed: Callable[[], None] | None = None  # the host's, to follow it
         self._enter(environment)
         self.broken: str | None = None  # why the next reset rebuilds the environment
         self.settings = Settings(self, record_dir)
@@ -309,9 +312,20 @@ class Instance:
                                  f"{type(error).__name__}: {error}")
 
     def catch_up(self) -> None:
-        """In real time, run the ticks that came due by the clock (and a frame)."""
-        if self.tree.real_time:
+        """In real time, run the ticks that came due by the clock (and a frame).
+
+        An exception in user code during those ticks is logged and ends the episode (the next
+        action is refused with ``reset_required``, saying why); the server serves on.
+        """
+        if not self.tree.real_time:
+            return
+        try:
             self.tree.iteration()
+        except Exception as error:  # user code raised between two requests: nobody to tell
+            logger.error("a tick in real time raised", exc_info=error)
+            self.mark_broken(error)
+            self.abandon_episode(f"the episode was stopped: a tick raised "
+                                 f"{type(error).__name__}: {error}")
 
     def time_to_next_tick(self) -> float | None:
         """Seconds until this instance's next tick is due (``None`` in lockstep)."""
@@ -377,12 +391,20 @@ class Instance:
         self._before_sets.pop((node, name), None)
 
     def set_real_time(self, value: bool) -> None:
-        """Switch between real time (ticks follow the clock) and lockstep."""
+        """Switch between real time (ticks follow the clock) and lockstep.
+
+        Whoever asks (a ``config``, an inspector's ``configure``, a ``batch``, a ``steps``
+        request's ``reset_with``, a restore), the switch is made here alone, and
+        :attr:`real_time_changed` (the host's) hears of it: the tree's ``real_time`` is the one
+        place that says whether the instance runs by the clock.
+        """
         self.tree.real_time = value
         if value:
             self.log.timed = True
         self.tree.paused = not (value and self.state is Episode.RUNNING and
                                 not self._ended_unseen)
+        if self.real_time_changed is not None:
+            self.real_time_changed()
 
     # --- episodes ---------------------------------------------------------------------------
 

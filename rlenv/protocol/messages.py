@@ -33,6 +33,7 @@ from rlenv.protocol.errors import ErrorCode, ProtocolVersionError, RemoteProtoco
 from rlenv.protocol.spaces import space_from_spec, space_to_spec
 
 __all__ = [
+    "MAX_REPEAT_ACTION",
     "PROTOCOL_VERSION",
     "BatchResponse",
     "ErrorReply",
@@ -47,6 +48,15 @@ __all__ = [
 
 PROTOCOL_VERSION: Final = (2, 6)
 """(major, minor). Peers with different majors refuse each other; a newer minor only adds."""
+
+MAX_REPEAT_ACTION = 10_000
+"""The most ticks one action may run: a request's or a ``steps`` request's ``repeat_action``, a
+configured one, a restored snapshot's, a recording's (the hello's ``limits.max_repeat_action``,
+protocol 2.6).
+
+Trainers skip 1 to a few dozen frames; 10,000 ticks are almost three minutes at 60 ticks a
+second, and a few tenths of a second of the server's loop for the examples (10 to 50 us a
+tick), so that one request never holds the loop long enough for other clients to time out."""
 
 _REWARD = np.dtype("<f8")
 _FRAMES = np.dtype("<i8")

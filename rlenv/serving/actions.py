@@ -19,18 +19,10 @@ from gymnasium import spaces
 
 from rlenv.agent import RLAgent
 from rlenv.protocol.errors import ErrorCode, RequestError
+from rlenv.protocol.messages import MAX_REPEAT_ACTION
 from rlenv.protocol.spaces import SpaceMismatch, compile_check
 
 __all__ = ["MAX_REPEAT_ACTION", "ActionCheck", "check_repeat_action"]
-
-MAX_REPEAT_ACTION = 10_000
-"""The most ticks one action may run: a request's or a ``steps`` request's ``repeat_action``, a
-configured one, a restored snapshot's (the hello's ``limits.max_repeat_action``, protocol 2.6).
-
-Trainers skip 1 to a few dozen frames; 10,000 ticks are almost three minutes at 60 ticks a
-second, and a few tenths of a second of the server's loop for the examples (10 to 50 us a
-tick), so that one request never holds the loop long enough for other clients to time out."""
-
 
 def check_repeat_action(repeat: Any, name: str, code: ErrorCode = ErrorCode.BAD_REQUEST) -> int:
     """``repeat`` if it is a number of ticks an action may run: an int in 1..MAX_REPEAT_ACTION.

@@ -33,6 +33,7 @@ from rlenv.protocol.errors import ErrorCode, ProtocolVersionError, RemoteProtoco
 from rlenv.protocol.spaces import space_from_spec, space_to_spec
 
 __all__ = [
+    "MAX_RENDER_SIZE",
     "PROTOCOL_VERSION",
     "BatchResponse",
     "ErrorReply",
@@ -46,6 +47,9 @@ __all__ = [
 
 PROTOCOL_VERSION: Final = (2, 5)
 """(major, minor). Peers with different majors refuse each other; a newer minor only adds."""
+
+MAX_RENDER_SIZE: Final = 4096
+"""The largest ``width`` or ``height`` a ``render`` may ask for (over TCP and HTTP alike)."""
 
 _REWARD = np.dtype("<f8")
 _FRAMES = np.dtype("<i8")

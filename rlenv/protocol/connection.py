@@ -197,13 +197,14 @@ class Connection:
         elif start == len(buffer):  # nothing left unread: the usual case
             self._buffer, self._start = data, 0
         else:
-            if buffer.__class__ is bytes:
-                buffer = self._buffer = bytearray(memoryview(buffer)[start:])
+            if isinstance(buffer, bytes):  # a read's own bytes: copied once, to grow
+                buffer = bytearray(memoryview(buffer)[start:])
                 self._start = 0
             elif start > len(buffer) // 2:  # compacted once the read part is most of it
                 del buffer[:start]
                 self._start = 0
             buffer += data
+            self._buffer = buffer
 
     def next_message(self) -> Message | _Sentinel:
         """Return the next whole message, :data:`NEED_DATA` or :data:`CONNECTION_CLOSED`.

@@ -34,6 +34,7 @@ from rlenv.protocol.spaces import space_from_spec, space_to_spec
 
 __all__ = [
     "MAX_REPEAT_ACTION",
+    "MAX_RENDER_SIZE",
     "PROTOCOL_VERSION",
     "BatchResponse",
     "ErrorReply",
@@ -49,7 +50,7 @@ __all__ = [
 PROTOCOL_VERSION: Final = (2, 6)
 """(major, minor). Peers with different majors refuse each other; a newer minor only adds."""
 
-MAX_REPEAT_ACTION = 10_000
+MAX_REPEAT_ACTION: Final = 10_000
 """The most ticks one action may run: a request's or a ``steps`` request's ``repeat_action``, a
 configured one, a restored snapshot's, a recording's (the hello's ``limits.max_repeat_action``,
 protocol 2.6).
@@ -57,6 +58,8 @@ protocol 2.6).
 Trainers skip 1 to a few dozen frames; 10,000 ticks are almost three minutes at 60 ticks a
 second, and a few tenths of a second of the server's loop for the examples (10 to 50 us a
 tick), so that one request never holds the loop long enough for other clients to time out."""
+MAX_RENDER_SIZE: Final = 4096
+"""The largest ``width`` or ``height`` a ``render`` may ask for (over TCP and HTTP alike)."""
 
 _REWARD = np.dtype("<f8")
 _FRAMES = np.dtype("<i8")

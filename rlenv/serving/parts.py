@@ -27,6 +27,7 @@ from gymnasium.vector.utils import iterate
 from rlenv.protocol import BatchResponse, ErrorReply, Reply, Request
 from rlenv.protocol.codec import DEFAULT_MAX_FRAME_SIZE, pack, unpack
 from rlenv.protocol.errors import ErrorCode, RemoteProtocolError, RequestError
+from rlenv.protocol.messages import MAX_RENDER_SIZE
 from rlenv.protocol.spaces import SpaceMismatch
 from rlenv.scene2d.packed_scene import PackedSceneError, check_size
 from rlenv.serving import inspector
@@ -43,7 +44,6 @@ __all__ = ["PARTS", "HostPart", "Part", "Shape", "StepsPlan", "dispatch", "plan_
 
 logger = logging.getLogger(__name__)
 
-_MAX_RENDER_SIZE = 4096
 _MAX_LEVEL_SIZE = DEFAULT_MAX_FRAME_SIZE - 4096  # an edited level, with room for its answer
 AGENT_ONLY: Mapping[str, Any] = {"agent": {}}
 _RUNNING = Episode.RUNNING
@@ -270,9 +270,9 @@ class Observation(Part):
             raise _bad("observation.render must be a map")
         check_keys(size, self._RENDER_KEYS, "observation.render")
         for key, value in size.items():
-            if type(value) is not int or not 1 <= value <= _MAX_RENDER_SIZE:
+            if type(value) is not int or not 1 <= value <= MAX_RENDER_SIZE:
                 raise _bad(f"observation.render.{key} must be an integer in "
-                           f"[1, {_MAX_RENDER_SIZE}], got {value!r:.40}")
+                           f"[1, {MAX_RENDER_SIZE}], got {value!r:.40}")
 
     def apply(self, instance: Instance, value: Any, request: Plan) -> None:
         instance.send_response(value)

@@ -252,7 +252,7 @@ class PhysicsWorld(SpaceOwner):
 
     @gravity.setter
     def gravity(self, value: Vec) -> None:
-        self.space.gravity = vector(value, f"{self!r}: gravity")
+        self.space.gravity = self._checked(vector, value, "gravity")
 
     @property
     def damping(self) -> float:
@@ -261,7 +261,17 @@ class PhysicsWorld(SpaceOwner):
 
     @damping.setter
     def damping(self, value: float) -> None:
-        self.space.damping = number(value, f"{self!r}: damping", low=0.0)
+        self.space.damping = self._checked(number, value, "damping", low=0.0)
+
+    def _checked(self, check: Callable[..., Any], value: Any, what: str, **limits: Any) -> Any:
+        """``check(value, what, **limits)``, a refusal naming this node.
+
+        The name is built only for a refusal: environments set these at every reset.
+        """
+        try:
+            return check(value, what, **limits)
+        except ValueError as error:
+            raise ValueError(f"{self!r}: {error}") from None
 
     def _enter_tree(self) -> None:
         parent = self.parent
@@ -273,9 +283,7 @@ class PhysicsWorld(SpaceOwner):
                            ", ".join(others))
 
     def _physics_step(self, delta: float) -> None:
-        if bodies_to_check(self.space):  # added since the last step: pymunk checks them
-            self._check_masses()
-        step_space(self.space, delta)
+        step_space(self.space, delta, self._check_masses)  # before pymunk checks new bodies
         if self._signals:  # someone asked for a signal of this node
             self._emit("stepped", delta)
 

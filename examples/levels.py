@@ -4,7 +4,10 @@ What the examples with levels share (see docs/procedural.md, "Levels as reset op
 reset plays the level given as ``options["level"]`` (the data of a
 :class:`~rlenv.PackedScene`, checked against :attr:`LevelWorld.level_classes`) or builds one
 from the episode's generator; ``client.get_property("World", "level")`` reads the episode's
-level as data, packed once; :attr:`LevelWorld.level_id` is its fingerprint, computed once; and
+level as data, packed once; a given level is built and checked while the server checks the
+reset's request (:meth:`LevelWorld.check_options`, :meth:`LevelWorld.check_level`), so that
+one refused leaves the episode under way alone; :attr:`LevelWorld.level_id` is its
+fingerprint, computed once; and
 ``client.edit_level(level, seed, n_edits)`` edits a level given as data or as an int seed
 (ACCEL). An example implements what is its own: :meth:`~LevelWorld.build_level`,
 :meth:`~LevelWorld.edit_level_data`, and the draws a reset makes before the level
@@ -43,6 +46,7 @@ class LevelWorld(RLEnvWorld):
         self._level_node: Node2D | None = None
         self._level_data: dict[str, Any] | None = None
         self._level_id = ""
+        self._checked: tuple[Any, Node2D] | None = None  # a given level, built by its check
 
     def build_level(self, rng: np.random.Generator) -> Node2D:
         """Override: a new level, every random choice from ``rng`` (at the world's settings).
@@ -71,24 +75,60 @@ class LevelWorld(RLEnvWorld):
         """
         return None
 
+    def check_level(self, level: Node2D) -> None:
+        """Override to refuse a given level that its data's checks let through; nothing here.
+
+        Raises:
+            ValueError: ``level`` (built from a client's data, not in the tree) is not a level
+                this world plays.
+        """
+
+    def check_options(self, options: Mapping[str, Any]) -> None:
+        """Build ``options["level"]`` and :meth:`check_level` it, before anything changes.
+
+        The server calls this while it checks the request, so that a level refused here
+        leaves the episode under way alone; the level built is the one :meth:`new_level`
+        plays.
+
+        Raises:
+            PackedSceneError: ``options["level"]`` is not a level this world may build.
+            ValueError: :meth:`check_level` refused it.
+        """
+        self._checked = None
+        given = options.get("level")
+        if given is not None:
+            self._checked = (given, self._given_level(given))
+
+    def _given_level(self, given: Any) -> Node2D:
+        level = PackedScene.from_data(given, allowed=self.level_classes).instantiate()
+        if not isinstance(level, Node2D):
+            raise ValueError(f"a level's root is a Node2D, not a {type(level).__name__}")
+        self.check_level(level)
+        return level
+
     def new_level(self, options: Mapping[str, Any]) -> tuple[Any, Node2D]:
         """This episode's draws before the level, then its level: the given one or a new one.
 
-        ``options["level"]`` is checked before anything is drawn; without it, the level is
-        :meth:`build_level`'s from the episode's generator.
+        ``options["level"]`` is checked before anything is drawn (the server checked and built
+        it already, :meth:`check_options`); without it, the level is :meth:`build_level`'s
+        from the episode's generator.
 
         Returns:
             What :meth:`draw_before_level` drew, and the level (not yet in the tree).
 
         Raises:
             PackedSceneError: ``options["level"]`` is not a level this world may build.
+            ValueError: :meth:`check_level` refused it.
         """
         given = options.get("level")
-        scene = None if given is None else PackedScene.from_data(given,
-                                                                 allowed=self.level_classes)
+        checked, self._checked = self._checked, None
+        level = None
+        if given is not None:
+            level = checked[1] if checked is not None and checked[0] is given else \
+                self._given_level(given)
         rng = self.np_random
         drawn = self.draw_before_level(rng)
-        return drawn, scene.instantiate() if scene is not None else self.build_level(rng)
+        return drawn, level if level is not None else self.build_level(rng)
 
     @property
     def level_node(self) -> Node2D | None:

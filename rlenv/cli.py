@@ -395,14 +395,28 @@ def _demo(args: argparse.Namespace) -> int:
     return 0
 
 
+_STATUS_COLOURS = {"pass": "32", "fail": "31", "skip": "33"}
+"""ANSI colours of ``rlenv check``'s statuses: green, red, yellow."""
+
+
+def _colour_wanted() -> bool:
+    """Colour only for a terminal, and never when ``NO_COLOR`` is set (no-color.org)."""
+    return sys.stdout.isatty() and not os.environ.get("NO_COLOR") and \
+        os.environ.get("TERM") != "dumb"
+
+
 def _check(args: argparse.Namespace) -> int:
     from rlenv_client.checks import run_checks
 
     results = run_checks(args.target, timeout=args.timeout, compliance=args.compliance,
                          token=args.token)
     width = max(len(result.name) for result in results)
+    colours = _STATUS_COLOURS if _colour_wanted() else {}
     for result in results:
-        print(f"{result.status.upper():<5} {result.name:<{width}}  {result.detail}")
+        status = f"{result.status.upper():<5}"
+        if result.status in colours:
+            status = f"\x1b[{colours[result.status]}m{status}\x1b[0m"
+        print(f"{status} {result.name:<{width}}  {result.detail}")
     failed = sum(result.status == "fail" for result in results)
     passed = sum(result.status == "pass" for result in results)
     print(f"{passed} passed, {failed} failed")

@@ -44,6 +44,24 @@ class RLEnvWorld(RLNode):
         """
         return {}
 
+    def check_options(self, options: Mapping[str, Any]) -> None:
+        """Override to check a reset's options before anything changes (a level's data, say).
+
+        The server calls it while it checks a request that starts an episode with options (a
+        ``reset``, one in a ``batch`` or a ``steps`` request's ``reset_with``, a ``restore``),
+        before any part of the request is applied: a refusal leaves the episode under way as
+        it was, and watchers go on observing it. Check here what :meth:`reset` would refuse
+        half way. What it builds to check may be kept for the :meth:`reset` that follows (the
+        same ``options`` object comes to it).
+
+        Args:
+            options: the reset's options (never empty).
+
+        Raises:
+            ValueError: the options are refused: the client gets ``bad_request`` with the
+                message (any other exception is an ``environment_error``; nothing changed).
+        """
+
     def sample_initial_position(self) -> Any:
         """Draw the agent's initial state (use :attr:`np_random`); passed to ``agent.reset``."""
         return None
@@ -52,7 +70,8 @@ class RLEnvWorld(RLNode):
         """Override to offer edits of levels (ACCEL): ``level`` with ``n_edits`` random changes.
 
         Clients ask for it with ``client.edit_level(level, seed, n_edits)`` (the protocol's
-        ``edit_level`` part), from any connection, with or without an episode: build the edit
+        ``edit_level`` part), from the controlling connection, with or without an episode; a
+        level beyond the hello's limits never reaches it (its nodes, their depth). Build the edit
         from ``level`` (and settings such as a difficulty), never from the live tree, and change
         nothing of the environment. An environment that does not override it refuses every
         ``edit_level`` request with ``bad_request``.

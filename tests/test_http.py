@@ -163,6 +163,25 @@ def test_a_registered_id_keeps_its_time_limit(gateway: Gateway) -> None:
     assert "time limit of 500 steps" in assert_problem(late, 409, "reset_required")["detail"]
 
 
+def test_the_time_limit_truncates_every_agent_still_playing(gateway: Gateway) -> None:
+    """Red catches its apple early, Blue stands still: at the limit, Blue is truncated too."""
+    from examples.pair import chase
+
+    session = gateway.session("rlenv/Pair-v0")
+    observation = gateway.post(f"/v1/envs/{session}/reset", {"seed": 3})["observation"]
+    for _ in range(300):
+        red = chase(np.array(observation["Red"], np.float32)).tolist()
+        step = gateway.post(f"/v1/envs/{session}/step",
+                            {"action": {"Red": red, "Blue": [0.0, 0.0]}})
+        observation = step["observation"]
+        if step["terminated"] or step["truncated"]:
+            break
+    assert (step["terminated"], step["truncated"]) == (False, True)
+    agents = step["info"]["agents"]
+    assert (agents["Red"]["terminated"], agents["Red"]["truncated"]) == (True, False)
+    assert (agents["Blue"]["terminated"], agents["Blue"]["truncated"]) == (False, True)
+
+
 def test_snapshots_restore_in_another_session(gateway: Gateway) -> None:
     source, copy = gateway.session(), gateway.session()
     gateway.post(f"/v1/envs/{source}/reset", {"seed": 5})
@@ -242,6 +261,9 @@ def test_bevy_rl_routes_in_bevy_rl_formats(gateway: Gateway) -> None:
     for bad in ("nope", urllib.parse.quote("[]"), urllib.parse.quote('[{"action": "[0.5"}]')):
         assert_problem(gateway.request("GET", f"/step?payload={bad}"), 400, "bad_request")
     assert_problem(gateway.request("GET", "/step"), 400, "bad_request")
+    for beyond in ("10001", "1099511627776", "9" * 40):  # the hello's limits.max_repeat_action
+        refused = gateway.request("GET", f"/step?payload={payload}&repeat_action={beyond}")
+        assert "at most 10000" in assert_problem(refused, 400, "bad_request")["detail"]
     outside = urllib.parse.quote(json.dumps([{"action": "[7.0]"}]))
     assert_problem(gateway.request("GET", f"/step?payload={outside}"), 422, "invalid_action")
     for _ in range(500):  # pushed one way, the pole falls

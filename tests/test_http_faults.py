@@ -59,6 +59,19 @@ def test_bad_bodies_are_400(gateway: Gateway) -> None:
     assert gateway.post(step, {"action": [0.5]})["info"]["frames"] == 4  # served after all that
 
 
+def test_a_repeat_action_beyond_the_limit_is_400_at_once_and_the_session_steps_on(
+    gateway: Gateway,
+) -> None:
+    """Before, 2**40 ticks held the session's server until the gateway gave up (504)."""
+    session = gateway.session()
+    gateway.post(f"/v1/envs/{session}/reset", {"seed": 1})
+    step = f"/v1/envs/{session}/step"
+    for repeat in (10_001, 2**40):
+        refused = gateway.request("POST", step, {"action": [0.5], "repeat_action": repeat})
+        assert "must be at most 10000" in assert_problem(refused, 400, "bad_request")["detail"]
+    assert gateway.post(step, {"action": [0.5], "repeat_action": 10_000})["info"]["frames"] >= 1
+
+
 def test_unknown_sessions_and_routes_are_404_and_methods_405(gateway: Gateway) -> None:
     for method, path in (("GET", "/v1/envs/nope"), ("POST", "/v1/envs/nope/step"),
                          ("POST", "/v1/envs/nope/reset"), ("GET", "/v1/envs/nope/render"),

@@ -15,7 +15,14 @@ import numpy as np
 import pytest
 
 from examples.cartpole import CartPoleEnvironment
-from examples.faulty import CountingEnvironment, FaultyEnvironment, WrongShapeEnvironment
+from examples.faulty import (
+    CountingEnvironment,
+    CountingWorld,
+    FaultyEnvironment,
+    TickAgent,
+    WrongShapeEnvironment,
+)
+from rlenv import RLEnvironment
 from rlenv_client import LocalClient
 
 K = 6
@@ -34,6 +41,25 @@ class RespondingCartPole(CartPoleEnvironment):
 
     def _send_response(self, observation_request: Mapping[str, Any] | None) -> None:
         super()._send_response(observation_request)
+
+
+class SharedBufferAgent(TickAgent):
+    """Writes its observation into one array that every instance shares, and returns it."""
+
+    buffer = np.zeros(1, np.float64)
+
+    def get_data(self, observation_request: Mapping[str, Any]) -> np.ndarray:
+        self.buffer[:] = super().get_data(observation_request)
+        return self.buffer
+
+
+class SharedBufferCounting(RLEnvironment):
+    """Counting, its agents sharing one observation array: a row's NaN is gone by the next's."""
+
+    def __init__(self) -> None:
+        super().__init__("Counting", repeat_action=50)
+        self.add_child(SharedBufferAgent())
+        self.add_child(CountingWorld())
 
 
 def _clients(environment: type) -> tuple[LocalClient, LocalClient]:
@@ -58,9 +84,10 @@ def _answer(client: LocalClient, actions: Any, reset: np.ndarray) -> dict[str, A
     (CartPoleEnvironment, lambda rng: rng.uniform(-1, 1, (K, 1)).astype(np.float32)),
     (InfoCartPole, lambda rng: rng.uniform(-1, 1, (K, 1)).astype(np.float32)),
     (CountingEnvironment, lambda rng: rng.choice(2, K, p=[0.9, 0.1])),  # 1: NaN observed
+    (SharedBufferCounting, lambda rng: rng.choice(2, K, p=[0.8, 0.2])),
     (FaultyEnvironment, lambda rng: rng.choice(3, K, p=[0.8, 0.1, 0.1])),  # 1, 2 raise
     (WrongShapeEnvironment, lambda rng: rng.choice(3, K)),
-], ids=["cartpole", "info", "counting", "faulty", "wrong shape"])
+], ids=["cartpole", "info", "counting", "shared buffer", "faulty", "wrong shape"])
 def test_the_lean_path_answers_as_the_general_path(environment: type, actions: Any) -> None:
     lean, general = _clients(environment)
     rng = np.random.default_rng(7)
@@ -78,7 +105,8 @@ def test_the_lean_path_answers_as_the_general_path(environment: type, actions: A
         reset = np.array(answers[0]["terminated"]) | np.array(answers[0]["truncated"]) | failed
     assert [i.stats.since(0)["steps"] for i in lean.host.instances] == \
         [i.stats.since(0)["steps"] for i in general.host.instances]
-    if environment in (CountingEnvironment, FaultyEnvironment, WrongShapeEnvironment):
+    if environment in (CountingEnvironment, SharedBufferCounting, FaultyEnvironment,
+                       WrongShapeEnvironment):
         assert failures > 0  # the failing rows were compared too
 
 

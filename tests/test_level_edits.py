@@ -105,9 +105,11 @@ def test_edits_are_deterministic_valid_counted_and_playable(serve: Serve) -> Non
                                                                               n_edits=5)
 
 
-def test_an_observer_edits_mid_episode_and_the_episode_goes_on_bit_for_bit(
+def test_the_controller_edits_mid_episode_and_the_episode_goes_on_bit_for_bit(
     serve: Serve,
 ) -> None:
+    """An edit changes nothing of the episode; it takes control (2.6), as it holds the server's
+    loop while it builds: an observer's is refused with ``busy``."""
     server = serve(TARGET)
     with Client(server.host, server.port, timeout=20, world_data=True) as controller, \
             Client(server.host, server.port, timeout=20) as observer:
@@ -119,9 +121,11 @@ def test_an_observer_edits_mid_episode_and_the_episode_goes_on_bit_for_bit(
             for step in range(200):
                 if edit and step in (2, 5):
                     snapshot = controller.snapshot()
-                    observer.edit_level(level, seed=step, n_edits=8)
-                    observer.edit_level(9, seed=step)
-                    controller.edit_level(level, seed=step, n_edits=3)
+                    controller.edit_level(level, seed=step, n_edits=8)
+                    controller.edit_level(9, seed=step)
+                    with pytest.raises(RemoteError) as busy:
+                        observer.edit_level(level, seed=step, n_edits=3)
+                    assert busy.value.code == ErrorCode.BUSY
                     assert controller.snapshot() == snapshot
                 observation, reward, terminated, truncated, info = controller.step(
                     follow(observation))
@@ -136,7 +140,7 @@ def test_an_observer_edits_mid_episode_and_the_episode_goes_on_bit_for_bit(
         assert len(reference) > 8  # the edits come mid-episode
         assert run(edit=True) == reference
         with pytest.raises(RemoteError) as busy:
-            observer.reset(seed=1)  # editing took no control from the controller
+            observer.reset(seed=1)  # the refused edits took no control from the controller
         assert busy.value.code == ErrorCode.BUSY
 
 
@@ -156,6 +160,14 @@ def _refusal(client: Client, parts: dict[str, Any]) -> ErrorReply:
     reply = client.receive_reply()
     assert isinstance(reply, ErrorReply) and not reply.fatal, reply
     return reply
+
+
+def _chain(depth: int) -> dict[str, Any]:
+    """``depth`` Node2D, each the only child of the one before."""
+    node: dict[str, Any] = {"class": "Node2D", "name": "Deepest"}
+    for _ in range(depth - 1):
+        node = {"class": "Node2D", "name": "Level", "children": [node]}
+    return node
 
 
 REFUSALS = [
@@ -189,6 +201,14 @@ REFUSALS = [
     pytest.param({"level": {"format": "rlenv.PackedScene", "version": 1, "root": {
         "class": "Node2D", "name": "Level"}}, "seed": 3}, ErrorCode.BAD_REQUEST,
                  "the level has no Pegs node", id="no-pegs"),
+    pytest.param({"level": {"format": "rlenv.PackedScene", "version": 1, "root": {
+        "class": "Node2D", "name": "Level", "children": [
+            {"class": "Node2D", "name": f"N{index}"} for index in range(1024)]}}, "seed": 3},
+                 ErrorCode.BAD_REQUEST, "edit_level.level: a scene holds at most 1,024 nodes",
+                 id="too-many-nodes"),
+    pytest.param({"level": {"format": "rlenv.PackedScene", "version": 1,
+                            "root": _chain(250)}, "seed": 3}, ErrorCode.BAD_REQUEST,
+                 "edit_level.level: nodes nested more than 64 deep", id="too-deep"),
     pytest.param({"level": "crash", "seed": 3}, ErrorCode.ENVIRONMENT_ERROR,
                  "FragileWorld._edit_level raised RuntimeError: the editor broke; nothing "
                  "changed", id="hook-raises"),
@@ -196,6 +216,11 @@ REFUSALS = [
                  "FragileWorld._edit_level returned data that cannot travel", id="untravelled"),
 ]
 """Edits refused: the request, the error's code, a fragment of its message."""
+
+_BY_THE_HOOK = {"level-negative-seed", "hook-refuses", "foreign-class", "no-pegs", "hook-raises",
+                "untravelled"}
+"""Refusals that come from the world's hook: made once control was granted (an observer's edit
+is answered busy before the hook runs); the others come from the request's checks."""
 
 
 def test_bad_edits_are_refused_and_the_episode_goes_on(serve: Serve) -> None:
@@ -208,12 +233,17 @@ def test_bad_edits_are_refused_and_the_episode_goes_on(serve: Serve) -> None:
             edit, code, fragment = case.values
             for client in (observer, controller):  # the controller's own failure breaks nothing
                 reply = _refusal(client, {"edit_level": edit})
-                assert reply.code == code and fragment in reply.message, (case.id, reply.message)
+                expected = (ErrorCode.BUSY, "controlled by another client") \
+                    if client is observer and case.id in _BY_THE_HOOK else (code, fragment)
+                assert reply.code == expected[0] and expected[1] in reply.message, \
+                    (case.id, reply.message)
                 observation, *_ = controller.step(follow(observation), 1)  # no reset_required
                 reference.append(observation.tobytes())
         reply = _refusal(controller, {"edit_level": {"level": 4, "seed": 3}, "reset": {}})
         assert "edit_level goes alone" in reply.message
-        assert isinstance(_ask(observer, {"edit_level": {"level": 4, "seed": 3}}), Response)
+        busy = _ask(observer, {"edit_level": {"level": 4, "seed": 3}})  # checked, but not its
+        assert isinstance(busy, ErrorReply) and busy.code == ErrorCode.BUSY
+        assert isinstance(_ask(controller, {"edit_level": {"level": 4, "seed": 3}}), Response)
         observation, _ = controller.reset(seed=4)  # the same episode as if nothing was asked
         replayed = [observation.tobytes()]
         for _ in reference[1:]:

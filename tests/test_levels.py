@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -105,24 +106,72 @@ def test_a_level_given_as_data_is_played(serve: Serve, example: Levels) -> None:
             assert again == run  # nothing else is drawn
 
 
+def _deep(depth: int) -> dict[str, Any]:
+    """A level whose root holds a chain of ``depth`` Node2D, one inside the other."""
+    node: dict[str, Any] = {"class": "Node2D", "name": f"N{depth}"}
+    for level in range(depth - 1, 0, -1):
+        node = {"class": "Node2D", "name": f"N{level}", "children": [node]}
+    return {"format": "rlenv.PackedScene", "version": 1, "root": node}
+
+
+def _wide(nodes: int) -> dict[str, Any]:
+    """A level of ``nodes`` plain Node2D: a root and its children."""
+    children = [{"class": "Node2D", "name": f"N{index}"} for index in range(nodes - 1)]
+    return {"format": "rlenv.PackedScene", "version": 1,
+            "root": {"class": "Node2D", "name": "Level", "children": children}}
+
+
 @pytest.mark.parametrize("example", EXAMPLES)
-def test_a_level_naming_a_foreign_class_or_a_bad_difficulty_is_refused_and_the_server_serves_on(
+def test_a_refused_level_costs_nothing_and_the_episode_goes_on(
     serve: Serve, example: Levels,
 ) -> None:
-    server = serve(example.target)
-    with Client(server.host, server.port, timeout=20) as client:
-        client.reset(seed=5)
+    """Level data that fails its checks (a foreign class, a Maze level without its Goal, more
+    nodes or deeper than the hello's limits) is refused with ``bad_request`` before anything
+    changes: the controller's episode goes on as if nothing was asked, bit for bit, and a
+    watcher still observes it. Before, the reset had begun: ``environment_error ... reset
+    required``, and the watcher was refused too."""
+    first, second = serve(example.target), serve(example.target)
+    with Client(first.host, first.port, timeout=20) as client, \
+            Client(first.host, first.port, timeout=20) as watcher, \
+            Client(second.host, second.port, timeout=20) as alone:
+        limits = client.hello.limits
+        assert (limits["max_level_nodes"], limits["max_level_depth"]) == (1024, 64)
+        observation, _ = client.reset(seed=5)
         level = client.get_property("World", "level")
-        level["root"]["children"][0]["children"][0]["class"] = "Evil"
-        with pytest.raises(RemoteError) as refused:
-            client.reset(seed=5, options={"level": level})
-        assert refused.value.code == ErrorCode.ENVIRONMENT_ERROR
-        assert "class 'Evil' is not allowed" in refused.value.message
+        foreign = copy.deepcopy(level)
+        foreign["root"]["children"][0]["children"][0]["class"] = "Evil"
+        hollow = copy.deepcopy(level)  # no Goal for Maze; for Plinko no Pegs, which it allows
+        hollow["root"]["children"] = [child for child in hollow["root"]["children"]
+                                      if child["name"] != "Goal"]
+        refusals = [(foreign, "class 'Evil' is not allowed"),
+                    (_wide(1025), "a scene holds at most 1,024 nodes"),
+                    (_deep(66), "nodes nested more than 64 deep"),
+                    (_deep(250), "nodes nested more than 64 deep")]
+        if example.target == maze.TARGET:
+            refusals.append((hollow, "the level has no Goal"))
+        seen = [observation.tobytes()]
+        expected, _ = alone.reset(seed=5)
+        expect = [expected.tobytes()]
+        for step, (wrong, why) in enumerate(refusals):
+            with pytest.raises(RemoteError) as refused:
+                client.reset(seed=5, options={"level": wrong})
+            assert refused.value.code == ErrorCode.BAD_REQUEST, refused.value.message
+            assert refused.value.message.startswith("reset.options"), refused.value.message
+            assert why in refused.value.message
+            assert watcher.observe() is not None  # the episode is there to watch
+            observation, *_ = client.step(example.policy(observation, step))  # no reset first
+            seen.append(observation.tobytes())
+            expected, *_ = alone.step(example.policy(expected, step))
+            expect.append(expected.tobytes())
+        assert seen == expect
         with pytest.raises(RemoteError) as bad:
             client.configure(world={"difficulty": 1.5})
         assert bad.value.code == ErrorCode.INVALID_CONFIG and "[0, 1]" in bad.value.message
-        observation, _ = client.reset(seed=5)
-        client.step(example.policy(observation, 0))
+        if example.target == plinko.TARGET:  # any level will do: the limits themselves play
+            client.reset(seed=5, options={"level": _deep(64)})
+            client.reset(seed=5, options={"level": _wide(1024)})
+            client.step(example.policy(observation, 0))
+        assert first.is_alive()
 
 
 @pytest.mark.parametrize("example", EXAMPLES)

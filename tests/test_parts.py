@@ -287,6 +287,64 @@ def test_repeat_action_must_be_an_integer_of_at_least_one(repeat: Any) -> None:
                    f"'repeat_action' must be an integer >= 1, got {repeat!r}")
 
 
+_BEYOND = 10_001  # one tick over the hello's limits.max_repeat_action
+
+
+@pytest.mark.parametrize(("parts", "count", "code", "fragment"), [
+    pytest.param({"action": ACTION, "repeat_action": _BEYOND}, 1, ErrorCode.BAD_REQUEST,
+                 "'repeat_action' must be at most 10000 ticks (the hello's "
+                 "limits.max_repeat_action), got 10001", id="request"),
+    pytest.param({"action": ACTION, "repeat_action": 2**40}, 1, ErrorCode.BAD_REQUEST,
+                 "got 1099511627776", id="request-huge"),
+    pytest.param({"batch": [None, {"action": ACTION, "repeat_action": _BEYOND}]}, 2,
+                 ErrorCode.BAD_REQUEST, "'repeat_action' must be at most 10000", id="batch"),
+    pytest.param({"steps": {"action": [[0.1], [0.1]], "repeat_action": _BEYOND}}, 2,
+                 ErrorCode.BAD_REQUEST, "steps.repeat_action must be at most 10000",
+                 id="steps"),
+    pytest.param({"config": {"environment": {"repeat_action": _BEYOND}}}, 1,
+                 ErrorCode.INVALID_CONFIG, "repeat_action must be at most 10000", id="config"),
+])
+def test_repeat_action_is_bounded_by_the_hello_s_limit(
+    parts: dict[str, Any], count: int, code: ErrorCode, fragment: str,
+) -> None:
+    """Before, any number went: one request kept the server's loop for as long as it asked."""
+    reply, unchanged = _twin_check(parts, count=count)
+    answer = reply.replies[1] if isinstance(reply, BatchResponse) else reply
+    assert isinstance(answer, ErrorReply) and answer.code == code, answer
+    assert fragment in answer.message, answer.message
+    assert unchanged
+    host = Host(TARGET)
+    assert host.hello.limits["max_repeat_action"] == 10_000
+    assert isinstance(_ask(host, {"reset": {}, "action": ACTION, "repeat_action": 10_000}),
+                      Response)  # the limit itself is served
+    host.close()
+
+
+def test_repeat_action_is_bounded_with_several_agents_too() -> None:
+    from examples.pair import TARGET as PAIR
+
+    with LocalClient(PAIR) as client:
+        client.reset(seed=0)
+        action = {name: np.zeros(2, np.float32) for name in ("Red", "Blue")}
+        with pytest.raises(RemoteError) as refused:
+            client.step(action, repeat_action=_BEYOND)
+        assert refused.value.code == ErrorCode.BAD_REQUEST
+        assert "must be at most 10000 ticks" in refused.value.message
+        assert client.step(action, repeat_action=3)[4]["frames"] == 3  # the episode goes on
+
+
+def test_a_restore_whose_action_asks_for_more_ticks_than_the_limit_is_refused() -> None:
+    host = Host(TARGET)
+    _ask(host, {"reset": {"seed": 1}})
+    _ask(host, {"action": ACTION})
+    snapshot = _ask(host, {"snapshot": {}}).info["snapshot"]  # type: ignore[union-attr]
+    snapshot["events"][-1][2] = _BEYOND
+    refused = _ask(host, {"restore": snapshot})
+    assert isinstance(refused, ErrorReply) and refused.code == ErrorCode.BAD_REQUEST
+    assert "restore: events[0]: the action's frames must be at most 10000" in refused.message
+    host.close()
+
+
 @pytest.mark.parametrize(
     "parts",
     [

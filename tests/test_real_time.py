@@ -158,3 +158,117 @@ def test_observers_of_a_real_time_server_take_no_ticks_from_the_controller(
             observed = observer._observation(answer)
         answer = controller._call(observation={"agent": {}})
         assert answer.frames >= 1 and answer.reward > 0
+
+
+# --- real time switched by anyone (issue 43, item 1) --------------------------------------------
+
+
+def _ticks_run(client: Client, at_least: int, message: str) -> None:
+    """Poll the statistics (never stepping) until the episode ran ``at_least`` ticks (the
+    controller's answers count them)."""
+    deadline = time.monotonic() + 30
+    while client.stats()["current"]["ticks"] < at_least:
+        assert time.monotonic() < deadline, message
+
+
+def test_an_observer_switching_one_of_two_instances_to_lockstep_ends_nothing(
+    serve: Serve
+) -> None:
+    """Before, the host kept its list of instances in real time apart, and rebuilt it for
+    ``config``, ``batch`` and ``restore`` only: the next wait took ``min(float, None)`` and the
+    process ended."""
+    server = serve(args=["--instances", "2", "--real-time"])
+    with Client(server.host, server.port, timeout=10) as controller, \
+            Client(server.host, server.port, timeout=10) as observer:
+        controller.reset(seed=0)
+        observer.inspect_configure(real_time=False)
+        assert observer.get_property(".", "real_time") is False
+        controller.send_batch([None, controller.reset_request(seed=1)])
+        controller.receive_batch()
+        assert server.is_alive()
+        observer.inspect_configure(real_time=True)  # and back: instance 0 follows the clock
+        _ticks_run(controller, 3, "instance 0 did not tick after it was switched back")
+        assert server.is_alive()
+
+
+def test_a_per_client_server_survives_one_client_switching_real_time(serve: Serve) -> None:
+    """Every client's environments shared the process that the crash ended."""
+    server = serve(args=["--per-client", "--instances", "2", "--real-time"])
+    with Client(server.host, server.port, timeout=10) as first, \
+            Client(server.host, server.port, timeout=10) as second:
+        first.reset(seed=0)
+        second.reset(seed=0)
+        first.inspect_configure(real_time=False)
+        first.step(STILL)  # lockstep now: the action runs its ticks
+        _ticks_run(second, 3, "the other client's environment stopped ticking")
+        second.step(STILL)
+        assert server.is_alive()
+
+
+def test_an_inspector_switching_a_lockstep_server_to_real_time_starts_its_clock(
+    serve: Serve
+) -> None:
+    """Before, the clock stayed stopped: 0 ticks in a second."""
+    server = serve()
+    with Client(server.host, server.port, timeout=10) as controller, \
+            Client(server.host, server.port, timeout=10) as observer:
+        controller.reset(seed=0)
+        observer.inspect_configure(real_time=True)
+        _ticks_run(controller, 30, "switched to real time by an inspector, the server never ticked")
+
+
+def test_a_steps_request_starting_real_time_starts_the_clock(clock: ManualClock) -> None:
+    from rlenv.serving.host import Host
+
+    host = Host(TARGET, 2, clock=clock)
+    real_time = {"config": {"environment": {"real_time": True}}, "reset": {"seed": 3}}
+    host.answer(Request(1, {"steps": {"action": np.zeros((2, 1), np.float32),
+                                      "reset": [True, True],
+                                      "reset_with": [real_time, None]}}))
+    assert host.time_to_next_tick() is not None  # the host follows the clock of instance 0
+    clock.advance(0.1)
+    host.catch_up()
+    answer = host.answer(Request(2, {"observation": {"agent": {}}}))
+    assert answer.frames >= 6  # type: ignore[union-attr]  # 0.1 s at 60 ticks a second
+    host.close()
+
+
+def test_a_tick_that_raises_between_requests_ends_the_episode_not_the_server(
+    serve: Serve
+) -> None:
+    """In real time user code runs between requests too: an exception there is the episode's,
+    not the process's."""
+    server = serve("examples.faulty:FaultyEnvironment", args=["--real-time"])
+    with Client(server.host, server.port, timeout=10) as client:
+        client.reset()
+        client.step(1)  # FaultyAgent's tick raises under action 1: the next tick due
+        deadline = time.monotonic() + 30
+        with pytest.raises(RemoteError) as stopped:
+            while True:
+                assert time.monotonic() < deadline, "the raising tick never ran"
+                client.step(0)
+        assert stopped.value.code in (ErrorCode.RESET_REQUIRED, ErrorCode.ENVIRONMENT_ERROR)
+        assert server.is_alive()
+        client.reset()
+        client.stats()
+        assert server.is_alive()
+
+
+def test_several_agents_follow_the_clock_an_observer_switched_on(clock: ManualClock) -> None:
+    """The same with two agents (examples/pair): an inspector's switch, whoever sends it, is the
+    host's to follow; each agent's outcome counts the ticks."""
+    from examples.pair import TARGET as PAIR
+    from rlenv.serving.host import Host
+
+    host = Host(PAIR, clock=clock)
+    host.answer(Request(1, {"reset": {"seed": 2}}))
+    switch = host.prepare(Request(2, {"inspect": {"configure": {"environment":
+                                                                {"real_time": True}}}}))
+    host.run(switch, reports=False)  # type: ignore[arg-type]  # as to an observer
+    assert host.time_to_next_tick() is not None
+    clock.advance(0.1)
+    answer = host.answer(Request(3, {"observation": {"agent": {}}}))
+    assert answer.frames >= 6 and set(answer.agents) == {"Red", "Blue"}  # type: ignore[union-attr]
+    host.answer(Request(4, {"config": {"environment": {"real_time": False}}}))
+    assert host.time_to_next_tick() is None
+    host.close()

@@ -15,9 +15,10 @@ import pytest
 
 import rlenv_client  # noqa: F401  (registers the ids)
 from examples.cartpole import controller
+from rlenv.protocol.messages import MAX_REPEAT_ACTION
 from rlenv_client.inspector import Timelines
 from rlenv_client.inspector.watch import InspectorError
-from rlenv_client.recordings import MAX_FRAMES_PER_ACTION, MAX_RECORDING_BYTES
+from rlenv_client.recordings import MAX_RECORDING_BYTES
 from rlenv_client.replay import EpisodeFile, digest
 from rlenv_client.timeline import Timeline
 from rlenv_client.trusted_targets import UntrustedTargetError
@@ -112,12 +113,12 @@ def test_an_action_asking_for_too_many_ticks_is_refused(tmp_path: Path, recordin
     action[2] = 2**40
     episode.save(tmp_path / "episode-0001.rlenv")
     expected = f"asks for {2**40:,} ticks; a recorded action runs at most " \
-               f"{MAX_FRAMES_PER_ACTION:,}"
+               f"{MAX_REPEAT_ACTION:,}"
     with pytest.raises(ValueError, match=expected):
         EpisodeFile.load(tmp_path / "episode-0001.rlenv")
     result = rlenv("replay", str(tmp_path / "episode-0001.rlenv"))  # 2**40 ticks: a timeout
     assert result.returncode == 2 and expected in result.stderr
-    action[2] = MAX_FRAMES_PER_ACTION  # the bound itself is a recording
+    action[2] = MAX_REPEAT_ACTION  # the bound itself is a recording
     episode.save(tmp_path / "at-the-bound.rlenv")
     assert EpisodeFile.load(tmp_path / "at-the-bound.rlenv").snapshot["events"] == \
         episode.snapshot["events"]

@@ -42,7 +42,22 @@ def test_hello_describes_the_environment(client: Client) -> None:
         "max_frame_size": 64 * 1024 * 1024, "max_first_frame_size": 64 * 1024,
         "max_reply_size": 64 * 1024 * 1024, "max_frame_objects": 1 << 20, "frame_deadline": 10.0,
         "first_request_timeout": 10.0, "idle_timeout": 3600.0, "write_timeout": 10.0,
-        "max_connections": 8}
+        "max_connections": 8, "max_repeat_action": 10_000, "max_level_nodes": 1024,
+        "max_level_depth": 64}
+
+
+def test_a_huge_repeat_action_is_refused_at_once_and_others_are_served(serve: Serve) -> None:
+    """Before, 2**40 ticks kept the server's loop busy: new clients timed out."""
+    server = serve()
+    with Client(server.host, server.port, timeout=10) as client:
+        client.reset(seed=0)
+        with pytest.raises(RemoteError) as refused:
+            client.step(STILL, repeat_action=2**40)
+        assert refused.value.code == ErrorCode.BAD_REQUEST
+        assert "at most 10000 ticks" in refused.value.message
+        with Client(server.host, server.port, timeout=10) as newcomer:
+            assert newcomer.stats()["current"]["length"] == 0  # served: nothing was stepped
+        client.step(STILL)
 
 
 def test_the_hello_announces_the_limits_the_server_was_started_with(serve: Serve) -> None:

@@ -595,3 +595,33 @@ def test_slots_of_an_unknown_kind_are_refused_on_the_socket(serve: Serve) -> Non
         del header
         assert reply.code == "bad_request" and "kind 7" in reply.message  # type: ignore[union-attr]
         assert client.step(np.zeros(1, np.float32))[-1]["frames"] == 4  # the lane goes on
+
+
+_LANE_WITHOUT_DESCRIPTORS = textwrap.dedent("""
+    import errno, os, resource
+    from rlenv.serving.host import Host
+    from rlenv.transport.lanes import KEY_SIZE, open_lane
+    hello = Host("examples.cartpole:CartPoleEnvironment").hello
+    resource.setrlimit(resource.RLIMIT_NOFILE, (64, 64))
+    held = []
+    try:
+        while True:
+            held.append(os.open(os.devnull, os.O_RDONLY))
+    except OSError:
+        os.close(held.pop())  # one descriptor free: the block takes it, the doorbell finds none
+    try:
+        open_lane("rlenv-lane-" + "0" * 32, bytes(KEY_SIZE), hello, None)
+    except OSError as error:
+        print(errno.errorcode[error.errno])
+    try:
+        os.close(os.open(os.devnull, os.O_RDONLY))
+        print("free")
+    except OSError:
+        print("leaked")
+""")
+
+
+def test_a_lane_that_cannot_open_leaves_no_descriptor_behind() -> None:
+    result = subprocess.run([sys.executable, "-c", _LANE_WITHOUT_DESCRIPTORS],
+                            capture_output=True, text=True, timeout=120, check=True)
+    assert result.stdout.split() == ["EMFILE", "free"]

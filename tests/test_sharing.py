@@ -4,13 +4,17 @@ from __future__ import annotations
 
 import os
 import signal
+import threading
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
+import pytest
 from conftest import wait_until
 
 import rlenv_client  # noqa: F401  (registers the ids)
-from rlenv_client.sharing import shared_servers
+from rlenv_client.launcher import ServerProcess
+from rlenv_client.sharing import SharedServers, shared_servers
 
 ID = "rlenv/CartPole-v1"
 
@@ -76,3 +80,49 @@ def test_a_forked_child_starts_servers_of_its_own() -> None:
         assert env.unwrapped.server in shared_servers
     finally:
         env.close()
+
+
+def test_a_server_that_starts_holds_up_only_those_that_wait_for_it(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # A target whose import waits for a gate file: its server takes as long as the test says.
+    started, gate = tmp_path / "started", tmp_path / "gate"
+    (tmp_path / "gated_cartpole.py").write_text(
+        "import pathlib, time\n"
+        f"pathlib.Path({str(started)!r}).touch()\n"
+        "deadline = time.monotonic() + 120\n"
+        f"while not pathlib.Path({str(gate)!r}).exists() and time.monotonic() < deadline:\n"
+        "    time.sleep(0.01)\n"
+        "from examples.cartpole import CartPoleEnvironment\n")
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(tmp_path),
+                                                      os.environ.get("PYTHONPATH", "")]))
+    shared = SharedServers()
+    leased: dict[str, ServerProcess] = {}
+
+    def lease(name: str, target: str) -> None:
+        leased[name] = shared.lease(target)
+
+    gated = "gated_cartpole:CartPoleEnvironment"
+    first = threading.Thread(target=lease, args=("first", gated))
+    first.start()
+    try:
+        wait_until(started.exists, "the gated server did not start")
+        other = threading.Thread(target=lease,
+                                 args=("other", "examples.cartpole:CartPoleEnvironment"))
+        other.start()
+        other.join(timeout=60)
+        assert not other.is_alive() and first.is_alive()  # served while the first still starts
+        assert shared.servers() == [leased["other"]]
+        second = threading.Thread(target=lease, args=("second", gated))
+        second.start()
+        gate.touch()
+        first.join(timeout=120)
+        second.join(timeout=120)
+        assert leased["second"] is leased["first"]  # waited for it, then shared it
+        assert set(shared.servers()) == {leased["first"], leased["other"]}
+    finally:
+        gate.touch()
+        first.join(timeout=120)
+        for server in leased.values():
+            shared.release(server)
+    for server in leased.values():
+        wait_until(lambda server=server: not server.is_alive(), "a server outlived its lease")

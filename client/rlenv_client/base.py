@@ -301,9 +301,11 @@ class BaseClient(Inspection, ABC):
         """``level`` with ``n_edits`` random changes: the environment's edit, for ACCEL.
 
         The same level, seed and ``n_edits`` give the same edit; other seeds, other edits. It
-        needs no episode and takes no control (an observer may ask), and it changes nothing of
-        the environment: the episode under way goes on as if it had not been asked (protocol
-        2.4, the ``edit_level`` part).
+        needs no episode and changes nothing of the environment: the episode under way goes on
+        as if it had not been asked (protocol 2.4, the ``edit_level`` part). It takes control
+        (protocol 2.6; before, it took no control and an observer could ask): the edit holds
+        the server while it builds, so only the controller may have it cost the episode that
+        time.
 
         Args:
             level: a level's data, as ``reset(options={"level": ...})`` takes it, or an int
@@ -316,9 +318,11 @@ class BaseClient(Inspection, ABC):
 
         Raises:
             RemoteError: ``bad_request``: the environment offers no edits (its world has no
-                ``_edit_level``), a bad ``seed`` or ``n_edits``, or a level the environment
+                ``_edit_level``), a bad ``seed`` or ``n_edits``, a level beyond the hello's
+                ``limits`` (``max_level_nodes``, ``max_level_depth``) or one the environment
                 refuses (the message says why); ``environment_error``: its ``_edit_level``
-                raised (the episode goes on).
+                raised (the episode goes on); ``busy``: another client controls the
+                environment.
         """
         edit = {"level": level, "seed": seed, "n_edits": n_edits}
         return self._call(edit_level=edit).info["level"]

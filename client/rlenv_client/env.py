@@ -31,6 +31,7 @@ from rlenv_client.base import BaseClient, StepResult
 from rlenv_client.display import Display, display_available
 from rlenv_client.launcher import ServerProcess
 from rlenv_client.session import LOST, Session
+from rlenv_client.time_limits import truncate_agents
 from rlenv_client.trainer_view import TrainerView
 
 if TYPE_CHECKING:
@@ -50,6 +51,10 @@ class RemoteEnv(gymnasium.Env):
         target: the environment class as ``MODULE:CLASS``; a server is started for it.
         address: ``HOST:PORT`` of a running server, instead of ``target``.
         repeat_action: physics ticks each :meth:`step` runs; the server's default if ``None``.
+        max_episode_steps: truncate episodes after this many steps (``None``: never), as
+            gymnasium's ``TimeLimit`` does; with several agents, every agent still in the
+            episode is truncated in ``info["agents"]`` too (the registered multi-agent ids
+            pass theirs here).
         render_mode: ``"rgb_array"`` (frames as arrays), ``"human"`` (a window; needs a
             display) or ``None``.
         in_process: run the environment inside this process instead of a server.
@@ -85,7 +90,7 @@ class RemoteEnv(gymnasium.Env):
         in_process: bool = False, timeout: float = 30.0, server_args: Sequence[str] = (),
         render_size: tuple[int, int] | None = None, token: str | None = None,
         max_restarts: int = 3, inspector: bool = False, shared_memory: bool | None = None,
-        share_server: bool = True,
+        share_server: bool = True, max_episode_steps: int | None = None,
     ) -> None:
         self.metadata = {"render_modes": ["rgb_array"], "render_fps": 15}
         if display_available():
@@ -93,6 +98,8 @@ class RemoteEnv(gymnasium.Env):
         if render_mode is not None and render_mode not in ("rgb_array", "human"):
             raise ValueError(f"render_mode must be 'rgb_array', 'human' or None, got "
                              f"{render_mode!r}")
+        if max_episode_steps is not None and max_episode_steps < 1:
+            raise ValueError(f"max_episode_steps must be at least 1, got {max_episode_steps}")
         if render_mode == "human" and not display_available():
             raise RuntimeError("render_mode='human' needs a display, and none is available "
                                "(DISPLAY is not set); use render_mode='rgb_array' instead")
@@ -111,6 +118,8 @@ class RemoteEnv(gymnasium.Env):
         self.action_space = self._view.action_space
         self.observation_space = self._view.observation_space
         self.repeat_action = repeat_action
+        self.max_episode_steps = max_episode_steps
+        self._steps = 0
         ticks = repeat_action or hello.repeat_action
         self.metadata["render_fps"] = hello.physics_ticks_per_second / ticks
         self.render_mode = render_mode
@@ -161,6 +170,7 @@ class RemoteEnv(gymnasium.Env):
             observation, info = self.client.reset(seed=seed, options=options)
         observation = self._view.observation(observation)
         self._last_observation = observation
+        self._steps = 0
         if self.render_mode == "human":
             self.render()
         return observation, info
@@ -186,6 +196,10 @@ class RemoteEnv(gymnasium.Env):
                 "frames": 0, "server_restarted": reason}
         result = self._view.result(result)
         self._last_observation = result[0]
+        self._steps += 1
+        if self.max_episode_steps is not None and self._steps >= self.max_episode_steps:
+            observation, reward, terminated, _, info = result
+            result = observation, reward, terminated, True, truncate_agents(info)
         if self.render_mode == "human":
             self.render()
         return result

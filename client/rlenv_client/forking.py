@@ -34,6 +34,7 @@ import struct
 import subprocess
 import sys
 import time
+import traceback
 from collections.abc import Sequence
 from typing import Any, NoReturn
 
@@ -264,7 +265,7 @@ def _serve(sock: socket.socket, target: str) -> None:
     try:
         client = LocalClient(target)
     except Exception as error:  # noqa: BLE001 (told to the owner, whatever it is)
-        _reply(sock, "error", ["start_failed", f"{type(error).__name__}: {error}"])
+        _reply(sock, "error", ["start_failed", _described(error)])
         return
     _reply(sock, "ok", client.hello.to_wire())
 
@@ -302,24 +303,35 @@ def _serve(sock: socket.socket, target: str) -> None:
             _reply(sock, "error", [getattr(error, "code", "bad_request"),
                                    getattr(error, "message", str(error))])
         except Exception as error:  # noqa: BLE001 (the owner is told; the process goes on)
-            _reply(sock, "error", ["environment_error", f"{type(error).__name__}: {error}"])
+            _reply(sock, "error", ["environment_error", _described(error)])
+
+
+def _described(error: BaseException) -> str:
+    """``Type: message``, then the traceback of where it was raised in this process.
+
+    The owner raises the text, as gymnasium's AsyncVectorEnv workers send theirs.
+    """
+    trace = "".join(traceback.format_exception(error)).rstrip()
+    return f"{type(error).__name__}: {error}\n{trace}"
 
 
 def _fork(sock: socket.socket) -> socket.socket | None:
     """Fork; in the copy, the copy's socket (``None`` in the original, which sent it)."""
     mine, theirs = socket.socketpair()
-    gc.freeze()  # the collector would otherwise touch (and so copy) every page
+    gc.freeze()  # the copy's collector would otherwise touch (and so copy) every page
     try:
         pid = os.fork()
     except OSError:
+        gc.unfreeze()
         mine.close()
         theirs.close()
         sock.sendall(_FAILED)  # then the error's frame
         raise
-    if pid == 0:
+    if pid == 0:  # the copy keeps what it inherited frozen: those pages stay shared
         sock.close()
         theirs.close()
         return mine
+    gc.unfreeze()  # the original collects its own objects again
     mine.close()
     socket.send_fds(sock, [_FORKED.pack(pid)], [theirs.fileno()])
     theirs.close()

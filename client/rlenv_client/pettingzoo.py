@@ -37,6 +37,7 @@ class RemoteParallelEnv(ParallelEnv):
         render_mode: ``"rgb_array"`` or ``None``.
         timeout: seconds to wait for each answer.
         server_args: extra arguments for ``rlenv serve``.
+        token: the secret of a server that requires one (default ``$RLENV_TOKEN``).
     """
 
     metadata = {"name": "rlenv_parallel", "render_modes": ["rgb_array"]}
@@ -45,10 +46,10 @@ class RemoteParallelEnv(ParallelEnv):
         self, target: str | None = None, *, address: str | None = None,
         repeat_action: int | None = None, max_cycles: int | None = None,
         in_process: bool = False, render_mode: str | None = None, timeout: float = 30.0,
-        server_args: Sequence[str] = (),
+        server_args: Sequence[str] = (), token: str | None = None,
     ) -> None:
         self.session = Session(target, address=address, in_process=in_process, timeout=timeout,
-                               server_args=server_args)
+                               server_args=server_args, token=token)
         hello = self.session.client.hello
         joint_actions, joint_observations = hello.action_space, hello.observation_space
         if len(hello.agents) > 1 and not (isinstance(joint_actions, spaces.Dict)

@@ -10,7 +10,7 @@ reads it through :func:`read_recording`, from :meth:`EpisodeFile.load
 - a file of more than :data:`MAX_RECORDING_BYTES` is refused from its size, before it is read
   (a sparse file costs nothing), and it is read as a stream that stops one byte past the bound
   (a file that grows while it is read);
-- :func:`check_frames` refuses an action that asks for more than :data:`MAX_FRAMES_PER_ACTION`
+- :func:`check_frames` refuses an action that asks for more than :data:`MAX_REPEAT_ACTION`
   ticks, which a re-simulation would otherwise run.
 """
 
@@ -22,16 +22,14 @@ from pathlib import Path
 from typing import Any
 
 from rlenv.protocol.codec import DEFAULT_MAX_FRAME_SIZE
+from rlenv.protocol.messages import MAX_REPEAT_ACTION
 
-__all__ = ["MAX_FRAMES_PER_ACTION", "MAX_RECORDING_BYTES", "check_frames", "read_recording"]
+__all__ = ["MAX_RECORDING_BYTES", "check_frames", "read_recording"]
 
 MAX_RECORDING_BYTES = DEFAULT_MAX_FRAME_SIZE
 """The largest recording a tool reads (64 MiB, a frame's bound: a recording is one msgpack map,
 and holds at most a frame's objects)."""
 
-MAX_FRAMES_PER_ACTION = 100_000
-"""The most physics ticks one recorded action may ask for (its ``frames``, the
-``repeat_action`` it ran with)."""
 
 _KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a device"),
           (stat.S_ISBLK, "a device"), (stat.S_ISSOCK, "a socket"))
@@ -75,6 +73,6 @@ def check_frames(events: list[Any], where: str) -> None:
         ValueError: naming the event and the bound.
     """
     for index, event in enumerate(events):
-        if event[0] == "action" and event[2] > MAX_FRAMES_PER_ACTION:
+        if event[0] == "action" and event[2] > MAX_REPEAT_ACTION:
             raise ValueError(f"{where}: events[{index}] asks for {event[2]:,} ticks; a recorded "
-                             f"action runs at most {MAX_FRAMES_PER_ACTION:,}")
+                             f"action runs at most {MAX_REPEAT_ACTION:,}")

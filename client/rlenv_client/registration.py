@@ -23,6 +23,7 @@ __all__ = ["ENVIRONMENTS", "register_environments"]
 class _Registration:
     target: str
     max_episode_steps: int | None
+    several_agents: bool = False
 
 
 ENVIRONMENTS = {
@@ -30,18 +31,23 @@ ENVIRONMENTS = {
     "rlenv/CartPole-v1": _Registration(
         "rlenv.examples.classic_cartpole:ClassicCartPoleEnvironment", 500),
     "rlenv/Maze-v0": _Registration("rlenv.examples.maze:MazeEnvironment", 250),
-    "rlenv/Pair-v0": _Registration("rlenv.examples.pair:PairEnvironment", 300),
+    "rlenv/Pair-v0": _Registration("rlenv.examples.pair:PairEnvironment", 300,
+                                   several_agents=True),
     "rlenv/Pixels-v0": _Registration("rlenv.examples.pixels:PixelsEnvironment", 1000),
     "rlenv/Plinko-v0": _Registration("rlenv.examples.plinko:PlinkoEnvironment", 100),
     "rlenv/Reacher-v0": _Registration("rlenv.examples.reacher:ReacherEnvironment", 200),
-    "rlenv/Tag-v0": _Registration("rlenv.examples.tag:TagEnvironment", 300),
+    "rlenv/Tag-v0": _Registration("rlenv.examples.tag:TagEnvironment", 300,
+                                  several_agents=True),
     "rlenv/Seeker-v0": _Registration("rlenv.examples.seeker:SeekerEnvironment", 250),
     "rlenv/SeekerPixels-v0": _Registration("rlenv.examples.seeker:SeekerPixelsEnvironment", 250),
 }
 """Registered ids and what they serve. CartPole never ends by itself when balanced, so it gets
 a time limit (500 steps of 4 ticks: 33 simulated seconds), as gym-kraby's TimeLimit lesson
 teaches. ``rlenv/CartPole-v1`` is gymnasium's ``CartPole-v1`` (its spaces, rewards, thresholds
-and 500-step limit) on rlenv's physics, for scripts written for gymnasium's."""
+and 500-step limit) on rlenv's physics, for scripts written for gymnasium's. An id of several
+agents also gives its limit to :class:`~rlenv_client.env.RemoteEnv`, which truncates every agent
+still in the episode in ``info["agents"]`` as well (gymnasium's ``TimeLimit``, which ``make``
+still adds, cuts only the joint episode)."""
 
 
 def register_environments() -> None:
@@ -60,6 +66,8 @@ def register_environments() -> None:
             id=env_id,
             entry_point="rlenv_client.env:RemoteEnv",
             vector_entry_point="rlenv_client.vector:RemoteVectorEnv",
-            kwargs={"target": registration.target},
+            kwargs={"target": registration.target, **(
+                {"max_episode_steps": registration.max_episode_steps}
+                if registration.several_agents else {})},
             max_episode_steps=registration.max_episode_steps,
         )

@@ -86,7 +86,7 @@ class EpisodeFile:
         """Read an episode written by :meth:`save`, within bounds.
 
         Through :func:`~rlenv_client.recordings.read_recording`: a regular file of at most
-        64 MiB, each action of at most :data:`~rlenv_client.recordings.MAX_FRAMES_PER_ACTION`
+        64 MiB, each action of at most :data:`~rlenv.protocol.messages.MAX_REPEAT_ACTION`
         ticks, its snapshot of the form a server restores.
 
         The episode keeps ``path`` (:attr:`path`): the folder it came from counts in whether

@@ -291,13 +291,17 @@ class SelfPlayCallback(BaseCallback):
 
 
 def _split_infos(infos: dict[str, Any], num_envs: int) -> list[dict[str, Any]]:
-    """Split a batched gymnasium info dict (with ``_key`` masks) into one dict per environment."""
+    """Split a batched gymnasium info dict (with ``_key`` masks) into one dict per environment.
+
+    A nested dict (``agents``: each agent's outcome, with several agents) is split likewise.
+    """
     per_env: list[dict[str, Any]] = [{} for _ in range(num_envs)]
     for key, values in infos.items():
         if key.startswith("_") or key in ("final_obs", "final_info"):
             continue
         mask = infos.get(f"_{key}")
+        split = _split_infos(values, num_envs) if isinstance(values, dict) else values
         for index in range(num_envs):
             if mask is None or mask[index]:
-                per_env[index][key] = values[index]
+                per_env[index][key] = split[index]
     return per_env

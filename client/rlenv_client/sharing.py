@@ -49,24 +49,38 @@ class SharedServers:
     def lease(self, target: str, server_args: Sequence[str] = ()) -> ServerProcess:
         """A running server of ``target`` with a place for one more environment.
 
-        Call :meth:`release` with it when that environment closes.
+        Call :meth:`release` with it when that environment closes. A server that must start
+        starts outside the lock: other threads lease, release and look meanwhile, and those
+        that want the same server wait for it (then start one themselves if it did not start).
 
         Raises:
             ServerStartError: a new server was needed and could not start.
         """
         key = (target, tuple(server_args))
-        with self._lock:
-            shared = self._servers.setdefault(key, [])
-            place = next((entry for entry in shared
-                          if entry.users < MAX_CLIENTS and entry.server.is_alive()), None)
-            if place is None:
-                place = _Shared(ServerProcess(
-                    target, startup_timeout=self.startup_timeout,
-                    args=[*server_args, "--per-client", "--max-connections", str(MAX_CLIENTS)]))
-                shared.append(place)
-                self._keys[place.server] = key
-            place.users += 1
-            return place.server
+        while True:
+            with self._lock:
+                place = next((entry for entry in self._servers.get(key, ())
+                              if entry.users < MAX_CLIENTS and entry.server.is_alive()), None)
+                if place is not None:
+                    place.users += 1
+                    return place.server
+                starting = self._starting.get(key)
+                if starting is None:  # this thread starts it
+                    starting = self._starting[key] = threading.Event()
+                    break
+            starting.wait()
+        try:
+            server = ServerProcess(
+                target, startup_timeout=self.startup_timeout,
+                args=[*server_args, "--per-client", "--max-connections", str(MAX_CLIENTS)])
+            with self._lock:
+                self._servers.setdefault(key, []).append(_Shared(server, users=1))
+                self._keys[server] = key
+            return server
+        finally:
+            with self._lock:
+                del self._starting[key]
+            starting.set()
 
     def release(self, server: ServerProcess) -> None:
         """One environment of ``server`` closed; the server stops with the last of them."""
@@ -99,6 +113,7 @@ class SharedServers:
         self._lock = threading.Lock()
         self._servers: dict[tuple[str, tuple[str, ...]], list[_Shared]] = {}
         self._keys: dict[ServerProcess, tuple[str, tuple[str, ...]]] = {}
+        self._starting: dict[tuple[str, tuple[str, ...]], threading.Event] = {}  # set: started
 
 
 shared_servers = SharedServers()

@@ -27,6 +27,7 @@ from gymnasium import spaces
 from gymnasium.vector.utils import concatenate, create_empty_array
 
 from rlenv.protocol import Hello
+from rlenv.protocol.messages import joint_end
 from rlenv_client.base import StepResult
 
 __all__ = ["TrainerView"]
@@ -109,9 +110,8 @@ class TrainerView:
     def outcome(self, info: Mapping[str, Any]) -> tuple[float, bool, bool]:
         """The trainer's agents' reward, terminated and truncated, from ``info["agents"]``."""
         mine = [info["agents"][name] for name in self.agents]
-        ended = all(o["terminated"] or o["truncated"] for o in mine)
-        cut = ended and any(o["truncated"] for o in mine)
-        return float(sum(o["reward"] for o in mine)), ended and not cut, cut
+        terminated, truncated = joint_end((o["terminated"], o["truncated"]) for o in mine)
+        return float(sum(o["reward"] for o in mine)), terminated, truncated
 
     def full_actions(self, actions: Any, count: int) -> Any:
         """A batch of ``count`` trainer actions with stand-ins for the driven agents.

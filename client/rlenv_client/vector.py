@@ -22,7 +22,8 @@ Agents the servers drive themselves (``rlenv serve --policy``, the hello's ``dri
 out of the spaces, actions, observations, rewards and episode ends, as
 :class:`~rlenv_client.env.RemoteEnv` leaves them (:mod:`rlenv_client.trainer_view`).
 
-``max_episode_steps`` truncates each sub-environment's episodes, as ``TimeLimit`` does. A lost
+``max_episode_steps`` truncates each sub-environment's episodes, as ``TimeLimit`` does (with
+several agents, each agent still in the episode is truncated in ``info["agents"]``). A lost
 server that this vector started is restarted (``max_restarts`` each), and one of a pool is
 found again wherever the pool brought it back: the interrupted episodes
 of its instances end as truncated with their last observation, reward 0 and
@@ -58,6 +59,7 @@ from rlenv_client.inspection import config_request
 from rlenv_client.launcher import ServerProcess
 from rlenv_client.rows import check_shape, empty_like, row, rows, set_row, set_rows
 from rlenv_client.session import LOST, ServerSource, Session
+from rlenv_client.time_limits import truncate_agents
 from rlenv_client.trainer_view import TrainerView
 from rlenv_client.vector_servers import (
     connect_sessions,
@@ -285,7 +287,10 @@ class RemoteVectorEnv(VectorEnv):
         steps += 1
         steps[resetting] = 0  # these started an episode instead
         if self.max_episode_steps is not None:
-            truncations |= steps >= self.max_episode_steps
+            timed_out = steps >= self.max_episode_steps
+            truncations |= timed_out
+            for index in np.flatnonzero(timed_out):  # with several agents, each of them too
+                env_infos[index] = truncate_agents(env_infos[index])
         ended = terminations | truncations
         infos: dict[str, Any] = {}
         if self._mode is AutoresetMode.SAME_STEP and ended.any():

@@ -367,10 +367,7 @@ class MazeWorld(LevelWorld):
             ValueError: the given level has no ``Goal`` or no ``Start``.
         """
         _, level = self.new_level(options)
-        goal = level.get_node_or_null("Goal")
-        start = level.get_node_or_null("Start")
-        if not isinstance(goal, Goal) or start is None:
-            raise ValueError("the level has no Goal (a Goal) or no Start: it is not a Maze level")
+        goal, start = level.get_node("Goal"), level.get_node("Start")  # as check_level wants
         if self.physics is not None:
             self.remove_child(self.physics)
         physics = self.physics = PhysicsWorld(gravity=(0.0, 0.0), name="Physics")
@@ -388,6 +385,16 @@ class MazeWorld(LevelWorld):
         self.level_node = level
         self.reached = False
         self.add_child(physics)
+
+    def check_level(self, level: Node2D) -> None:
+        """Refuse a level without a ``Goal`` (a Goal) or a ``Start`` (a Node2D).
+
+        Raises:
+            ValueError: it has none.
+        """
+        if not isinstance(level.get_node_or_null("Goal"), Goal) or \
+                not isinstance(level.get_node_or_null("Start"), Node2D):
+            raise ValueError("the level has no Goal (a Goal) or no Start: it is not a Maze level")
 
     def build_level(self, rng: np.random.Generator) -> Node2D:
         """A new level (:func:`build_level`) at the world's difficulty."""

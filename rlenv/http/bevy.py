@@ -30,6 +30,7 @@ from rlenv.http.endpoints import Answer, Endpoint, Parameter, json_response, par
 from rlenv.http.png import encode_png
 from rlenv.http.problems import COMMON_HEADERS, Problem
 from rlenv.protocol.errors import ErrorCode
+from rlenv.serving.actions import MAX_REPEAT_ACTION
 
 if TYPE_CHECKING:
     from rlenv.http.app import Gateway
@@ -80,7 +81,8 @@ def bevy_endpoints(gateway: Gateway) -> list[Endpoint]:
     async def step(request: Request) -> Response:
         driven = await session()
         action = _action(request.query_params.get("payload"), driven.agents)
-        answer = await driven.step(action, _integer(request, "repeat_action", 1))
+        answer = await driven.step(action, _integer(request, "repeat_action", 1,
+                                                    MAX_REPEAT_ACTION))
         if len(driven.agents) == 1:
             done = answer["terminated"] or answer["truncated"]
             return json_response([{"reward": answer["reward"], "is_terminated": done}])
@@ -95,7 +97,8 @@ def bevy_endpoints(gateway: Gateway) -> list[Endpoint]:
                                          _AGENT_STATES)},
                  problems=(*_PROBLEMS, ErrorCode.BAD_REQUEST, ErrorCode.RESET_REQUIRED,
                            ErrorCode.INVALID_ACTION),
-                 query=(payload, Parameter("repeat_action", {"type": "integer", "minimum": 1},
+                 query=(payload, Parameter("repeat_action", {"type": "integer", "minimum": 1,
+                                                             "maximum": MAX_REPEAT_ACTION},
                                            "physics ticks (default: the environment's)"))),
         Endpoint("GET", "/state", state, "bevy_state", "bevy_rl: the observation as JSON",
                  "bevy_rl", {200: Answer("the observation", "Observation")},
@@ -114,12 +117,16 @@ def bevy_endpoints(gateway: Gateway) -> list[Endpoint]:
     ]
 
 
-def _integer(request: Request, name: str, minimum: int) -> int | None:
+def _integer(request: Request, name: str, minimum: int,
+             maximum: int | None = None) -> int | None:
     text = request.query_params.get(name)
     if text is None:
         return None
     if not text.isdigit() or int(text) < minimum:
         raise Problem(ErrorCode.BAD_REQUEST, f"{name} must be an integer >= {minimum}, got "
+                                             f"{text!r:.20}")
+    if maximum is not None and (len(text) > 20 or int(text) > maximum):
+        raise Problem(ErrorCode.BAD_REQUEST, f"{name} must be at most {maximum}, got "
                                              f"{text!r:.20}")
     return int(text)
 

@@ -45,7 +45,9 @@ from rlenv.http.json_spaces import json_schema, space_to_json
 from rlenv.http.png import encode_png
 from rlenv.http.problems import COMMON_HEADERS, Problem
 from rlenv.protocol.errors import ErrorCode
+from rlenv.protocol.messages import MAX_RENDER_SIZE
 from rlenv.protocol.spaces import SpaceMismatch, check
+from rlenv.serving.actions import MAX_REPEAT_ACTION
 
 if TYPE_CHECKING:
     from rlenv.http.app import Gateway
@@ -58,7 +60,6 @@ _RESET_KEYS = frozenset({"seed", "options"})
 _STEP_KEYS = frozenset({"action", "repeat_action"})
 _ACTION = frozenset({"action"})
 _RESTORE_KEYS = frozenset({"snapshot"})
-_MAX_RENDER_SIZE = 4096
 _RAW = "application/octet-stream"
 
 _ENV = ("unknown_session",)
@@ -188,9 +189,9 @@ def session_endpoints(gateway: Gateway) -> list[Endpoint]:
                               {"type": "string", "contentMediaType": "image/png"}, "image/png")},
                  problems=(*_CALL, ErrorCode.BAD_REQUEST, ErrorCode.RESET_REQUIRED),
                  query=(Parameter("width", {"type": "integer", "minimum": 1,
-                                            "maximum": _MAX_RENDER_SIZE}, "pixels"),
+                                            "maximum": MAX_RENDER_SIZE}, "pixels"),
                         Parameter("height", {"type": "integer", "minimum": 1,
-                                             "maximum": _MAX_RENDER_SIZE}, "pixels"))),
+                                             "maximum": MAX_RENDER_SIZE}, "pixels"))),
         Endpoint("GET", f"{one}/action_space", action_space, "action_space",
                  "The action space and the JSON Schema of actions", "sessions",
                  {200: Answer("the space in gymnasium's terms, and its schema", "SpaceAnswer")},
@@ -225,9 +226,9 @@ def _size(request: Request, name: str) -> int | None:
     text = request.query_params.get(name)
     if text is None:
         return None
-    if not text.isdigit() or not 1 <= int(text) <= _MAX_RENDER_SIZE:
+    if not text.isdigit() or not 1 <= int(text) <= MAX_RENDER_SIZE:
         raise Problem(ErrorCode.BAD_REQUEST, f"{name} must be an integer in [1, "
-                                             f"{_MAX_RENDER_SIZE}], got {text!r:.20}")
+                                             f"{MAX_RENDER_SIZE}], got {text!r:.20}")
     return int(text)
 
 
@@ -280,7 +281,8 @@ def component_schemas(observation: dict[str, Any], action: dict[str, Any]) -> di
             "info": {"$ref": "#/components/schemas/Info"}}},
         "StepBody": {"type": "object", "required": ["action"], "additionalProperties": False,
                      "properties": {"action": {"$ref": "#/components/schemas/Action"},
-                                    "repeat_action": {"type": "integer", "minimum": 1}}},
+                                    "repeat_action": {"type": "integer", "minimum": 1,
+                                                      "maximum": MAX_REPEAT_ACTION}}},
         "Step": {"type": "object", "required": ["observation", "reward", "terminated",
                                                 "truncated", "info"], "properties": {
             "observation": {"$ref": "#/components/schemas/Observation"},

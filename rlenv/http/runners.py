@@ -112,7 +112,7 @@ class Runner:
             EnvironmentTimeout: the deadline passed (the call is abandoned; ending the
                 environment's process ends it).
         """
-        limit = timeout or self.timeout
+        limit = self.timeout if timeout is None else timeout
         async with self._turn:
             future = asyncio.get_running_loop().run_in_executor(self._executor, function)
             done, _ = await asyncio.wait((future,), timeout=limit)

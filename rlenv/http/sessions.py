@@ -50,6 +50,7 @@ from rlenv.http.json_spaces import (
 from rlenv.http.problems import Problem, from_remote_error
 from rlenv.http.targets import Catalog, Entry, Opened
 from rlenv.protocol.errors import ConnectionLost, ErrorCode, RemoteError
+from rlenv_client.time_limits import truncate_agents
 
 __all__ = ["MAX_SESSIONS_PER_CLIENT", "Session", "Sessions", "Status"]
 
@@ -167,7 +168,7 @@ class Session:
         self.step_index += 1
         if self.max_episode_steps is not None and self.step_index >= self.max_episode_steps \
                 and not terminated:
-            truncated = True
+            truncated, info = True, truncate_agents(info)  # each agent still in it too
         if terminated or truncated:
             self.status = Status.ENDED
             self._ending = "terminated" if terminated else (

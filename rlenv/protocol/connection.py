@@ -170,6 +170,7 @@ class Connection:
         self.state = _AWAIT
         self._next = _NEXT[(role, self.state)]
         self._buffer: bytes | bytearray = b""
+        self._start = 0  # where the bytes not read yet begin in _buffer
         self._eof = False
         self._outstanding: deque[int] = deque()
 
@@ -181,7 +182,7 @@ class Connection:
     @property
     def buffered(self) -> int:
         """Bytes received that do not form a whole frame yet."""
-        return len(self._buffer)
+        return len(self._buffer) - self._start
 
     @property
     def peer_closed(self) -> bool:
@@ -190,14 +191,20 @@ class Connection:
 
     def receive_data(self, data: bytes) -> None:
         """Buffer bytes read from the peer; ``b""`` means the peer closed its end."""
+        buffer, start = self._buffer, self._start
         if not data:
             self._eof = True
-        elif not self._buffer:
-            self._buffer = data
+        elif start == len(buffer):  # nothing left unread: the usual case
+            self._buffer, self._start = data, 0
         else:
-            if type(self._buffer) is bytes:
-                self._buffer = bytearray(self._buffer)
-            self._buffer += data
+            if isinstance(buffer, bytes):  # a read's own bytes: copied once, to grow
+                buffer = bytearray(memoryview(buffer)[start:])
+                self._start = 0
+            elif start > len(buffer) // 2:  # compacted once the read part is most of it
+                del buffer[:start]
+                self._start = 0
+            buffer += data
+            self._buffer = buffer
 
     def next_message(self) -> Message | _Sentinel:
         """Return the next whole message, :data:`NEED_DATA` or :data:`CONNECTION_CLOSED`.
@@ -307,24 +314,30 @@ class Connection:
         self.state = state
         self._next = _NEXT[(self.role, state)]
 
-    def _next_frame(self) -> bytes | memoryview | _Sentinel:
-        buffer = self._buffer
-        buffered = len(buffer)
+    def _next_frame(self) -> bytes | bytearray | memoryview | _Sentinel:
+        """The next whole frame's body, or a sentinel.
+
+        Pipelined frames are read at an offset into the buffer (:attr:`_start`): each costs
+        its own bytes, whatever is buffered behind it.
+        """
+        buffer, start = self._buffer, self._start
+        size = len(buffer)
+        buffered = size - start
         if buffered >= _PREFIX:
-            (length,) = _read_prefix(buffer)
+            (length,) = _read_prefix(buffer, start)
             if length > self.max_frame_size:
                 self._enter(self._next.get(_BREAK, _CLOSED))
                 raise RemoteProtocolError(
                     f"frame length {length} exceeds the limit of {self.max_frame_size} bytes "
                     "(is the peer speaking the rlenv protocol?)", fatal=True)
-            end = _PREFIX + length
-            if buffered == end:  # the usual case: one whole frame per read
-                self._buffer = b""
-                return buffer[_PREFIX:] if length <= _COPIED else memoryview(buffer)[_PREFIX:]
-            if buffered > end:
-                body = bytes(buffer[_PREFIX:end])
-                self._buffer = buffer[end:]
-                return body
+            begin = start + _PREFIX
+            end = begin + length
+            if size == end:  # the last frame buffered (usually the only one of a read)
+                self._buffer, self._start = b"", 0
+                return buffer[begin:] if length <= _COPIED else memoryview(buffer)[begin:]
+            if size > end:  # a copy: the buffer grows on (a view would pin it)
+                self._start = end
+                return buffer[begin:end]
         if not self._eof:
             return NEED_DATA
         self._enter(_CLOSED)

@@ -22,7 +22,7 @@ value per instance; observations travel in their space's packed form (:mod:`rlen
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Final
 
@@ -33,6 +33,8 @@ from rlenv.protocol.errors import ErrorCode, ProtocolVersionError, RemoteProtoco
 from rlenv.protocol.spaces import space_from_spec, space_to_spec
 
 __all__ = [
+    "MAX_REPEAT_ACTION",
+    "MAX_RENDER_SIZE",
     "PROTOCOL_VERSION",
     "BatchResponse",
     "ErrorReply",
@@ -42,10 +44,22 @@ __all__ = [
     "Request",
     "Response",
     "StepsResponse",
+    "joint_end",
 ]
 
 PROTOCOL_VERSION: Final = (2, 6)
 """(major, minor). Peers with different majors refuse each other; a newer minor only adds."""
+
+MAX_REPEAT_ACTION: Final = 10_000
+"""The most ticks one action may run: a request's or a ``steps`` request's ``repeat_action``, a
+configured one, a restored snapshot's, a recording's (the hello's ``limits.max_repeat_action``,
+protocol 2.6).
+
+Trainers skip 1 to a few dozen frames; 10,000 ticks are almost three minutes at 60 ticks a
+second, and a few tenths of a second of the server's loop for the examples (10 to 50 us a
+tick), so that one request never holds the loop long enough for other clients to time out."""
+MAX_RENDER_SIZE: Final = 4096
+"""The largest ``width`` or ``height`` a ``render`` may ask for (over TCP and HTTP alike)."""
 
 _REWARD = np.dtype("<f8")
 _FRAMES = np.dtype("<i8")
@@ -61,10 +75,12 @@ class Hello:
     largest request frame), ``max_first_frame_size`` (the same, until the first request),
     ``max_reply_size`` (the largest frame it sends), ``max_frame_objects`` (the most msgpack
     objects a frame may hold, either way; protocol 2.5), ``frame_deadline``, ``idle_timeout``
-    (``None``: never) and ``write_timeout`` in seconds, and ``max_connections``. Empty from a
-    2.0 server. ``target`` (protocol 2.5) is the ``MODULE:CLASS`` another server of the same
-    environment is started with (``rlenv serve TARGET``), or ``None`` when the server cannot
-    name one (an environment object, a class defined in ``__main__``) or is older.
+    (``None``: never) and ``write_timeout`` in seconds, and ``max_connections``; and what one
+    request may ask (protocol 2.6): ``max_repeat_action`` (the ticks of one action),
+    ``max_level_nodes`` and ``max_level_depth`` (a level's data). Empty from a 2.0 server.
+    ``target`` (protocol 2.5) is the ``MODULE:CLASS`` another server of the same environment
+    is started with (``rlenv serve TARGET``), or ``None`` when the server cannot name one (an
+    environment object, a class defined in ``__main__``) or is older.
     ``driven`` (protocol 2.6) names the agents the server drives itself (``rlenv serve
     --policy``: a policy file or the agent's heuristic), in ``agents``' order; empty when none
     is, or from an older server. A trainer leaves them out: it needs no actions for them.
@@ -414,3 +430,19 @@ def _column(data: Any, dtype: np.dtype, size: int) -> np.ndarray:
 Message = Hello | Request | Response | BatchResponse | StepsResponse | ErrorReply
 Reply = Response | BatchResponse | StepsResponse | ErrorReply
 """Any answer a server sends to a request."""
+
+
+def joint_end(flags: Iterable[tuple[bool, bool]]) -> tuple[bool, bool]:
+    """The joint episode's ``(terminated, truncated)``, from each agent's (protocol 2.6).
+
+    The rule both ends follow: a server's answer for all its agents, a client's for the agents
+    it trains (the others driven by the server).
+
+    ``terminated`` when every agent ended terminated; ``truncated`` when every agent is done
+    and at least one was truncated (a time-out after a catch is no terminal state, so a
+    trainer still bootstraps from it). An agent both terminated and truncated counts as
+    terminated; the two joint flags are never both true.
+    """
+    flags = list(flags)
+    terminated = all(ended for ended, _ in flags)
+    return terminated, not terminated and all(ended or cut for ended, cut in flags)

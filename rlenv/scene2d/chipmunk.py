@@ -12,9 +12,11 @@ way at all:
 - :func:`bodies_to_check` and :func:`collision_handlers`: what pymunk keeps and does not show.
 
 A restart must leave no solver state behind, as if the scene had just been built. Bodies and
-shapes are reused as they are (moved into a new space, which numbers their shapes afresh), but
-a constraint keeps its accumulated impulses (Chipmunk's warm start) in its C struct, which
-pymunk does not expose: making a new pymunk constraint costs more than the rest of a restart.
+shapes are reused as they are (moved into a new space, which numbers their shapes afresh, and
+has no cached arbiters), each body placed at rest with its bias velocities, the solver's push
+out of overlaps, back to zero (:func:`place_at_rest`). A constraint keeps its accumulated
+impulses (Chipmunk's warm start) in its C struct, which pymunk does not expose: making a new
+pymunk constraint costs more than the rest of a restart.
 Chipmunk's own ``cp*Init`` functions set up a constraint's struct in place exactly as when it
 was made (impulses zero); :func:`refresh_constraint` calls them with the constraint's own
 anchors and parameters, and puts back what ``cpConstraintInit`` resets to its defaults (forces,
@@ -69,32 +71,39 @@ _ZERO = (0.0, 0.0)
 def place_at_rest(body: pymunk.Body, x: float, y: float, angle: float) -> None:
     """Put ``body`` at ``(x, y)`` and ``angle``, with no velocity, force or torque.
 
-    The angle first: Chipmunk turns a body about its centre of gravity, then places it.
+    Its bias velocities go back to zero too: the solver's push out of overlaps, which Chipmunk
+    keeps in the body from one step's contacts to the next step's move (with
+    ``collision_slop`` 0 a resting body always has some) and which a new body does not have.
+    ``cpBodyUpdatePosition`` over no time sets them to zero and moves nothing (the velocities
+    are zero by then); it is pymunk's public ``Body.update_position``. The angle before the
+    position: Chipmunk turns a body about its centre of gravity, then places it.
     """
     if FAST:
         _place_at_rest(body._body, x, y, angle)
         return
-    if body.angle != angle:
-        body.angle = angle
-    body.position = (x, y)
     if body.body_type != _STATIC:
         body.velocity = _ZERO
         body.angular_velocity = 0.0
+        pymunk.Body.update_position(body, 0.0)  # no bias velocity left from the last contacts
         body.force = _ZERO
         body.torque = 0.0
+    if body.angle != angle:
+        body.angle = angle
+    body.position = (x, y)
 
 
 def _place_at_rest(pointer: Any, x: float, y: float, angle: float) -> int:
     """:func:`place_at_rest` of a body's Chipmunk pointer; the body's type."""
-    if lib.cpBodyGetAngle(pointer) != angle:
-        lib.cpBodySetAngle(pointer, angle)
-    lib.cpBodySetPosition(pointer, (x, y))
     body_type = lib.cpBodyGetType(pointer)
     if body_type != _STATIC:
         lib.cpBodySetVelocity(pointer, _ZERO)
         lib.cpBodySetAngularVelocity(pointer, 0.0)
+        lib.cpBodyUpdatePosition(pointer, 0.0)  # no bias velocity left from the last contacts
         lib.cpBodySetForce(pointer, _ZERO)
         lib.cpBodySetTorque(pointer, 0.0)
+    if lib.cpBodyGetAngle(pointer) != angle:
+        lib.cpBodySetAngle(pointer, angle)
+    lib.cpBodySetPosition(pointer, (x, y))
     return body_type
 
 
@@ -297,7 +306,8 @@ def collision_handlers(space: pymunk.Space) -> Mapping[tuple[int | None, int | N
 _cp_space_step = lib.cpSpaceStep
 
 
-def step_space(space: pymunk.Space, delta: float) -> None:
+def step_space(space: pymunk.Space, delta: float,
+               before_checks: Callable[[], None] | None = None) -> None:
     """``space.step(delta)``, without pymunk's Python work around Chipmunk's step when it has none.
 
     ``Space.step`` checks the bodies added since the last step, then steps (Chipmunk's
@@ -308,8 +318,12 @@ def step_space(space: pymunk.Space, delta: float) -> None:
     add and remove in their callbacks), with a tenth of the Python work of ``Space.step`` when
     nothing is pending (measured: 0.07 against 0.63 us around a 1 us CartPole step). A threaded
     space, bodies to check, or a pymunk version not in :data:`TESTED` take ``Space.step``.
+    ``before_checks`` runs first when there are bodies to check (:func:`bodies_to_check`): one
+    test per step for both.
     """
     if not FAST or space._bodies_to_check or space.threaded:
+        if before_checks is not None and FAST and space._bodies_to_check:
+            before_checks()
         space.step(delta)
         return
     try:

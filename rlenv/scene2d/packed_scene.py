@@ -58,14 +58,22 @@ from rlenv.node import Node, _check_name
 from rlenv.scene2d.scene_codecs import OWN_CLASSES, Codec, codec_for
 from rlenv.signals import Signal
 
-__all__ = ["CONNECTABLE", "FORMAT", "MAX_DEPTH", "MAX_NODES", "PackedScene", "PackedSceneError"]
+__all__ = ["CONNECTABLE", "FORMAT", "MAX_DEPTH", "MAX_NODES", "PackedScene", "PackedSceneError",
+           "check_size"]
 
 FORMAT = "rlenv.PackedScene"
 VERSION = 1
-MAX_DEPTH = 256
-"""Deepest nesting of nodes (and of plain values) a scene's data may have."""
-MAX_NODES = 200_000
-"""Most nodes a scene's data may hold."""
+MAX_DEPTH = 64
+"""Deepest nesting of nodes (and of plain values) that :meth:`PackedScene.from_data` reads by
+default: levels go 5 deep (Plinko's, Maze's), and the tree enters a node a few calls deeper
+than its parent, so that 64 leaves room below Python's recursion limit (the hello's
+``limits.max_level_depth``)."""
+MAX_NODES = 1_024
+"""Most nodes that :meth:`PackedScene.from_data` reads by default (the hello's
+``limits.max_level_nodes``). The examples' levels hold at most about 200 nodes, and stay there
+however often they are edited (Plinko's pegs keep their distances, Maze's walls fill a grid);
+a Plinko level of 1,000 nodes costs a reset under 0.2 s, where 4,000 cost 1.4 s and 200,000
+held the server's loop for 7.7 s. Pass ``max_nodes`` to read larger scenes of your own."""
 CONNECTABLE = frozenset({"queue_free"})
 """The methods of rlenv's own classes that a scene's data may connect a signal to."""
 
@@ -144,19 +152,26 @@ class PackedScene:
         return self
 
     @classmethod
-    def from_data(cls, data: Any, allowed: Iterable[type[Node]] = ()) -> PackedScene:
+    def from_data(cls, data: Any, allowed: Iterable[type[Node]] = (), *,
+                  max_nodes: int = MAX_NODES, max_depth: int = MAX_DEPTH) -> PackedScene:
         """The scene ``data`` describes (see :meth:`to_data`), checked all through.
+
+        Its nodes are counted first (:func:`check_size`), before anything else is read.
 
         Args:
             data: a scene's data, e.g. from ``msgpack.unpackb``.
             allowed: node classes the data may name besides rlenv's own (an environment
                 passes its own classes).
+            max_nodes: the most nodes the data may hold.
+            max_depth: the deepest the data may nest its nodes (the root is at depth 0).
 
         Raises:
-            PackedSceneError: the data names a class that is neither rlenv's nor in
+            PackedSceneError: the data holds more than ``max_nodes`` nodes or nests them more
+                than ``max_depth`` deep, names a class that is neither rlenv's nor in
                 ``allowed``, or is not a scene; the message says where.
             TypeError: ``allowed`` holds something that is not a Node class.
         """
+        check_size(data, max_nodes, max_depth)
         registry = dict(OWN_CLASSES)
         for kind in allowed:
             if not (isinstance(kind, type) and issubclass(kind, Node)):
@@ -295,6 +310,34 @@ def _not_connectable(kind: type, method: str) -> str | None:
 # --- checking ----------------------------------------------------------------------------------
 
 
+def check_size(data: Any, max_nodes: int = MAX_NODES, max_depth: int = MAX_DEPTH) -> None:
+    """Refuse scene data with more than ``max_nodes`` nodes, or nested more than ``max_depth``.
+
+    It counts the nodes under ``data["root"]`` through their ``children`` lists, without
+    recursion and reading nothing else, so that data beyond the limits is refused before it
+    costs anything (and never by a ``RecursionError``). Anything that is not shaped as a scene
+    is left to :meth:`PackedScene.from_data`'s checks.
+
+    Raises:
+        PackedSceneError: too many nodes, or too deep.
+    """
+    root = data.get("root") if isinstance(data, Mapping) else None
+    waiting: list[tuple[Any, int]] = [] if root is None else [(root, 0)]
+    count = 0
+    while waiting:
+        entry, depth = waiting.pop()
+        count += 1
+        if depth > max_depth:
+            raise PackedSceneError(f"nodes nested more than {max_depth} deep: a scene's data "
+                                   f"nests at most {max_depth} (limits.max_level_depth)")
+        children = entry.get("children") if isinstance(entry, Mapping) else None
+        if isinstance(children, list | tuple):
+            waiting.extend((child, depth + 1) for child in children)
+        if count + len(waiting) > max_nodes:
+            raise PackedSceneError(f"a scene holds at most {max_nodes:,} nodes "
+                                   "(limits.max_level_nodes)")
+
+
 def _compile(data: Any, registry: Mapping[str, type[Node]]) -> _Plan:
     """Check ``data`` all through; the plan that builds it."""
     if not isinstance(data, Mapping) or set(data) != {"format", "version", "root"}:
@@ -303,19 +346,14 @@ def _compile(data: Any, registry: Mapping[str, type[Node]]) -> _Plan:
     if data["format"] != FORMAT or data["version"] != VERSION:
         raise PackedSceneError(f"this reads {FORMAT!r} version {VERSION}, not "
                                f"{data['format']!r:.40} version {data['version']!r:.20}")
-    counter = [0]
-    root = _compile_node(data["root"], registry, None, "", 0, counter)
+    root = _compile_node(data["root"], registry, None, "")
     _check_links(root)
     return root
 
 
 def _compile_node(entry: Any, registry: Mapping[str, type[Node]], parent: _Plan | None,
-                  where: str, depth: int, counter: list[int]) -> _Plan:
-    if depth > MAX_DEPTH:
-        raise PackedSceneError(f"{where}: nodes nested more than {MAX_DEPTH} deep")
-    counter[0] += 1
-    if counter[0] > MAX_NODES:
-        raise PackedSceneError(f"a scene holds at most {MAX_NODES:,} nodes")
+                  where: str) -> _Plan:
+    """One node's plan and its children's (data from outside was sized by check_size)."""
     if not isinstance(entry, Mapping):
         raise PackedSceneError(f"{where or 'root'}: a node is a map")
     unknown = set(entry) - _NODE_KEYS
@@ -344,7 +382,7 @@ def _compile_node(entry: Any, registry: Mapping[str, type[Node]], parent: _Plan 
     _compile_members(plan, entry)
     names = set()
     for child in _list(entry.get("children", []), f"{where}: children"):
-        built = _compile_node(child, registry, plan, where, depth + 1, counter)
+        built = _compile_node(child, registry, plan, where)
         if built.name in names:
             raise PackedSceneError(f"{where}: two children named {built.name!r}")
         names.add(built.name)

@@ -19,9 +19,23 @@ from gymnasium import spaces
 
 from rlenv.agent import RLAgent
 from rlenv.protocol.errors import ErrorCode, RequestError
+from rlenv.protocol.messages import MAX_REPEAT_ACTION
 from rlenv.protocol.spaces import SpaceMismatch, compile_check
 
-__all__ = ["ActionCheck"]
+__all__ = ["MAX_REPEAT_ACTION", "ActionCheck", "check_repeat_action"]
+
+def check_repeat_action(repeat: Any, name: str, code: ErrorCode = ErrorCode.BAD_REQUEST) -> int:
+    """``repeat`` if it is a number of ticks an action may run: an int in 1..MAX_REPEAT_ACTION.
+
+    Raises:
+        RequestError: ``code``, naming the field ``name``.
+    """
+    if type(repeat) is not int or repeat < 1:
+        raise RequestError(code, f"{name} must be an integer >= 1, got {repeat!r:.40}")
+    if repeat > MAX_REPEAT_ACTION:
+        raise RequestError(code, f"{name} must be at most {MAX_REPEAT_ACTION} ticks (the "
+                                 f"hello's limits.max_repeat_action), got {repeat}")
+    return repeat
 
 
 class ActionCheck:

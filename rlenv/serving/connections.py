@@ -133,7 +133,8 @@ class Connections:
     @hello.setter
     def hello(self, hello: Hello) -> None:
         self._hello = replace(hello, token_required=hello.token_required or
-                              self._token is not None, limits=self.limits.to_wire())
+                              self._token is not None,
+                              limits={**hello.limits, **self.limits.to_wire()})
 
     @property
     def connections(self) -> int:

@@ -17,6 +17,7 @@ before it answers.
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -26,8 +27,10 @@ from gymnasium.vector.utils import batch_space
 
 from rlenv.environment import RLEnvironment
 from rlenv.protocol import ErrorReply, Hello, Reply, Request, Response
-from rlenv.protocol.errors import RequestError
+from rlenv.protocol.errors import ErrorCode, RequestError
 from rlenv.protocol.spaces import compile_check
+from rlenv.scene2d.packed_scene import MAX_DEPTH, MAX_NODES
+from rlenv.serving.actions import MAX_REPEAT_ACTION
 from rlenv.serving.columns import Columns
 from rlenv.serving.endpoint import Endpoint, Peer
 from rlenv.serving.instance import Episode, Instance, failure, load_environment
@@ -36,7 +39,16 @@ from rlenv.serving.parts import HostPart, dispatch, plan_for, shape_of, takes_co
 from rlenv.serving.policy_driver import DrivenAgents, Policy, PolicyDriver
 from rlenv.serving.recent import KEEP_EVENTS
 
-__all__ = ["Host", "Prepared", "target_of"]
+__all__ = ["REQUEST_LIMITS", "Host", "Prepared", "target_of"]
+
+logger = logging.getLogger(__name__)
+
+REQUEST_LIMITS: Mapping[str, int] = {"max_repeat_action": MAX_REPEAT_ACTION,
+                                     "max_level_nodes": MAX_NODES, "max_level_depth": MAX_DEPTH}
+"""What one request may ask of an environment, as the hello's ``limits`` announce it (2.6)
+beside the endpoint's sizes and deadlines: the ticks of one action, and a level's nodes and
+their nesting (:mod:`rlenv.scene2d.packed_scene`); beyond them a request is refused with
+``bad_request`` before anything runs."""
 
 
 def target_of(environment: RLEnvironment | type[RLEnvironment] | str) -> str | None:
@@ -135,16 +147,18 @@ class Host:
             render_modes=("rgb_array",),
             render_size=first.environment.render_size,
             instances=count,
+            limits=dict(REQUEST_LIMITS),
             target=target,
         )
         self.steps_action_space = batch_space(first.action_space, count)
         self.steps_action = compile_check(self.steps_action_space, "steps.action")
         self.columns = Columns(first.observation_space)
         self.lean = LeanSteps(self.instances) if LeanSteps.serves(self.instances) else None
-        if real_time:
-            for instance in self.instances:
+        self._clocked: list[Instance] = []  # those in real time: each instance tells (below)
+        for instance in self.instances:
+            instance.real_time_changed = self._follow_real_time
+            if real_time:
                 instance.set_real_time(True)
-        self._clocked = self._in_real_time()
         self._after_send_hooks = any(instance.has_after_send for instance in self.instances)
         self.driver: PolicyDriver | None = None
         if policies:
@@ -209,14 +223,10 @@ class Host:
         request = prepared.request
         parts = request.parts
         if prepared.part is not None:
-            reply = prepared.part.run(self, request, prepared.checked, reports)
-        elif not parts:
+            return prepared.part.run(self, request, prepared.checked, reports)
+        if not parts:
             return Response(request.id)  # nothing asked (the token, say)
-        else:
-            reply = self.instances[0].serve(prepared.checked, request.id, reports)
-        if "config" in parts or "batch" in parts or "restore" in parts:  # may switch real time
-            self._clocked = self._in_real_time()
-        return reply
+        return self.instances[0].serve(prepared.checked, request.id, reports)
 
     def after_send(self, prepared: Prepared) -> None:
         """Tell the environments that served ``prepared`` that its answer went out."""
@@ -247,12 +257,13 @@ class Host:
 
     def time_to_next_tick(self) -> float | None:
         """Seconds until the next tick of an instance in real time (``None``: none is)."""
-        if not self._clocked:
-            return None
-        return min(instance.time_to_next_tick() for instance in self._clocked)
+        waits = [wait for instance in self._clocked
+                 if (wait := instance.time_to_next_tick()) is not None]
+        return min(waits, default=None)
 
-    def _in_real_time(self) -> list[Instance]:
-        return [instance for instance in self.instances if instance.tree.real_time]
+    def _follow_real_time(self) -> None:
+        """An instance switched real time (whoever asked): which ones tick by the clock now."""
+        self._clocked = [instance for instance in self.instances if instance.tree.real_time]
 
     def serve_forever(self, endpoint: Endpoint) -> None:
         """Answer the endpoint's requests until interrupted; in real time, tick meanwhile.
@@ -284,21 +295,35 @@ class Host:
         included. A request that changes the environment then needs its client to control it
         (the endpoint answers ``busy`` otherwise). Once the answer went out, the environments
         that served it hear of it (``_after_send_response``).
+
+        No request ends the server: an exception that escapes everything else (a bug of the
+        server's) is logged and answered with ``environment_error``, and the server serves on.
         """
-        prepared = self.prepare(request)
-        if prepared.__class__ is ErrorReply:
-            endpoint.reply(peer, prepared)  # type: ignore[arg-type]
-            return
-        assert isinstance(prepared, Prepared)
-        if endpoint.controls(peer):
-            endpoint.reply(peer, self.run(prepared))
-        elif not prepared.takes_control:
-            endpoint.reply(peer, self.run(prepared, reports=False))
-        elif endpoint.take_control(peer, request.id):
-            endpoint.reply(peer, self.run(prepared))
-        else:
-            return
-        self.after_send(prepared)
+        answered = False
+        try:
+            prepared = self.prepare(request)
+            if isinstance(prepared, ErrorReply):
+                answered = True
+                endpoint.reply(peer, prepared)
+                return
+            if endpoint.controls(peer):
+                reply = self.run(prepared)
+            elif not prepared.takes_control:
+                reply = self.run(prepared, reports=False)
+            elif endpoint.take_control(peer, request.id):
+                reply = self.run(prepared)
+            else:
+                return  # answered busy
+            answered = True
+            endpoint.reply(peer, reply)
+            self.after_send(prepared)
+        except Exception as error:  # the last resort: this request fails, not the server
+            logger.error("serving request %r raised", request.id, exc_info=error)
+            if not answered:  # one answer per request, or the client loses the thread
+                endpoint.reply(peer, ErrorReply(
+                    request.id, ErrorCode.ENVIRONMENT_ERROR,
+                    f"the server failed answering this request ({type(error).__name__}: "
+                    f"{error}); it serves on, but what the request changed is not known"))
 
     def close(self) -> None:
         """Take every environment out of its tree."""

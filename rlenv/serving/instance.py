@@ -42,6 +42,7 @@ from rlenv.environment import RLEnvironment, give_action
 from rlenv.node import Node, check_initialised
 from rlenv.protocol import ErrorReply, Response
 from rlenv.protocol.errors import ErrorCode, RequestError
+from rlenv.protocol.messages import joint_end
 from rlenv.serving import inspector
 from rlenv.serving.actions import ActionCheck
 from rlenv.serving.observing import Observer, check_text_keys
@@ -146,6 +147,8 @@ class Instance:
         recent: the last finished episodes' logs (:mod:`rlenv.serving.recent`).
         broken: why the next reset rebuilds the environment from its class (user code raised
             while serving the controller), or ``None``.
+        real_time_changed: called after every switch of real time (:meth:`set_real_time`),
+            whoever asked for it; the host knows by it which instances tick by the clock.
 
     Raises:
         TypeError: the environment's ``__init__`` did not call ``super().__init__()``.
@@ -173,6 +176,7 @@ class Instance:
         self.has_after_send = "_after_send_response" in hooks
         self.driven: DrivenAgents | None = None  # agents a policy drives (rlenv serve --policy)
         self._heuristic_agents: DrivenAgents | None = None  # see _heuristics
+        self.real_time_changed: Callable[[], None] | None = None  # the host's, to follow it
         self._enter(environment)
         self.broken: str | None = None  # why the next reset rebuilds the environment
         self.settings = Settings(self, record_dir)
@@ -308,9 +312,20 @@ class Instance:
                                  f"{type(error).__name__}: {error}")
 
     def catch_up(self) -> None:
-        """In real time, run the ticks that came due by the clock (and a frame)."""
-        if self.tree.real_time:
+        """In real time, run the ticks that came due by the clock (and a frame).
+
+        An exception in user code during those ticks is logged and ends the episode (the next
+        action is refused with ``reset_required``, saying why); the server serves on.
+        """
+        if not self.tree.real_time:
+            return
+        try:
             self.tree.iteration()
+        except Exception as error:  # user code raised between two requests: nobody to tell
+            logger.error("a tick in real time raised", exc_info=error)
+            self.mark_broken(error)
+            self.abandon_episode(f"the episode was stopped: a tick raised "
+                                 f"{type(error).__name__}: {error}")
 
     def time_to_next_tick(self) -> float | None:
         """Seconds until this instance's next tick is due (``None`` in lockstep)."""
@@ -376,12 +391,20 @@ class Instance:
         self._before_sets.pop((node, name), None)
 
     def set_real_time(self, value: bool) -> None:
-        """Switch between real time (ticks follow the clock) and lockstep."""
+        """Switch between real time (ticks follow the clock) and lockstep.
+
+        Whoever asks (a ``config``, an inspector's ``configure``, a ``batch``, a ``steps``
+        request's ``reset_with``, a restore), the switch is made here alone, and
+        :attr:`real_time_changed` (the host's) hears of it: the tree's ``real_time`` is the one
+        place that says whether the instance runs by the clock.
+        """
         self.tree.real_time = value
         if value:
             self.log.timed = True
         self.tree.paused = not (value and self.state is Episode.RUNNING and
                                 not self._ended_unseen)
+        if self.real_time_changed is not None:
+            self.real_time_changed()
 
     # --- episodes ---------------------------------------------------------------------------
 
@@ -453,9 +476,8 @@ class Instance:
             return
         agents = self.agents
         if self.multi_agent:  # as an answer reports them
-            ended = all(agent.terminated or agent.truncated for agent in agents)
-            terminated = ended and any(agent.terminated for agent in agents)
-            truncated = ended and not terminated
+            terminated, truncated = joint_end([(agent.terminated, agent.truncated)
+                                                for agent in agents])
         else:
             terminated, truncated = agents[0].terminated, agents[0].truncated
         if self.recent.finished(self.log, bool(terminated), bool(truncated)):
@@ -646,13 +668,12 @@ def _outcome(agents: list[RLAgent], several: bool,
     outcomes = {each.name: {"reward": float(each.reward) if reports else 0.0,
                             "terminated": bool(each.terminated),
                             "truncated": bool(each.truncated)} for each in agents}
-    ended = all(o["terminated"] or o["truncated"] for o in outcomes.values())
-    terminated = ended and any(o["terminated"] for o in outcomes.values())
+    terminated, truncated = joint_end([(o["terminated"], o["truncated"])
+                                        for o in outcomes.values()])
     if reports:
         for each in agents:
             each.reward = 0.0
-    return (sum(o["reward"] for o in outcomes.values()), terminated, ended and not terminated,
-            outcomes)
+    return sum(o["reward"] for o in outcomes.values()), terminated, truncated, outcomes
 
 
 def _joint_space(agents: list[RLAgent], which: str) -> spaces.Space:

@@ -138,8 +138,12 @@ class LeanSteps:
             instance = self.instances[row]
             if errors is not None and errors[row] is not None:
                 continue
-            error = non_finite_observation(instance.agents[0], data[row])
-            assert error is not None  # written as it came: no conversion made it so
+            agent = instance.agents[0]
+            # Where, in what get_data gave; in the row as written if that is finite by now (an
+            # array the environment reuses, changed by a later row's get_data).
+            error = non_finite_observation(agent, data[row]) or \
+                non_finite_observation(agent, column[row].copy()) or \
+                FloatingPointError(f"the observation of {agent.get_path()} is not finite")
             errors = errors or [None] * len(column)
             errors[row] = instance.environment_error(reply_id, error)
             column[row] = 0

@@ -27,8 +27,11 @@ from gymnasium.vector.utils import iterate
 from rlenv.protocol import BatchResponse, ErrorReply, Reply, Request
 from rlenv.protocol.codec import DEFAULT_MAX_FRAME_SIZE, pack, unpack
 from rlenv.protocol.errors import ErrorCode, RemoteProtocolError, RequestError
+from rlenv.protocol.messages import MAX_RENDER_SIZE
 from rlenv.protocol.spaces import SpaceMismatch
+from rlenv.scene2d.packed_scene import PackedSceneError, check_size
 from rlenv.serving import inspector
+from rlenv.serving.actions import check_repeat_action
 from rlenv.serving.columns import Columns
 from rlenv.serving.instance import Answer, Episode, Instance, Plan
 from rlenv.serving.lean import LeanSteps
@@ -41,7 +44,6 @@ __all__ = ["PARTS", "HostPart", "Part", "Shape", "StepsPlan", "dispatch", "plan_
 
 logger = logging.getLogger(__name__)
 
-_MAX_RENDER_SIZE = 4096
 _MAX_LEVEL_SIZE = DEFAULT_MAX_FRAME_SIZE - 4096  # an edited level, with room for its answer
 AGENT_ONLY: Mapping[str, Any] = {"agent": {}}
 _RUNNING = Episode.RUNNING
@@ -133,19 +135,32 @@ class Reset(Part):
 
 
 def check_options(instance: Instance, options: Mapping[str, Any], where: str) -> None:
-    """Refuse (``bad_request``) an option key the environment does not declare.
+    """Refuse (``bad_request``) options the environment does not take, before anything changes.
 
-    An environment that declares none (``reset_options = None``) accepts any.
+    An option key the environment does not declare is refused (one that declares none,
+    ``reset_options = None``, accepts any); a ``level`` larger than the hello's limits
+    (:func:`~rlenv.scene2d.packed_scene.check_size`); then whatever the world's
+    :meth:`~rlenv.RLEnvWorld.check_options` refuses (a ``ValueError``).
     """
     environment = instance.environment
     declared = environment.reset_options
-    if declared is None:
-        return
-    for key in options:
-        if key not in declared:
-            accepted = ", ".join(map(str, declared)) or "none"
-            raise _bad(f"{where}: {type(environment).__name__} has no reset option "
-                       f"{str(key)!r:.60}; it accepts {accepted}")
+    if declared is not None:
+        for key in options:
+            if key not in declared:
+                accepted = ", ".join(map(str, declared)) or "none"
+                raise _bad(f"{where}: {type(environment).__name__} has no reset option "
+                           f"{str(key)!r:.60}; it accepts {accepted}")
+    if "level" in options:
+        try:
+            check_size(options["level"])
+        except PackedSceneError as error:
+            raise _bad(f"{where}.level: {error}") from None
+    world = environment.world
+    if world is not None:
+        try:
+            world.check_options(options)
+        except ValueError as error:  # refused before anything changed: the episode goes on
+            raise _bad(f"{where}: {error}") from None
 
 
 class Action(Part):
@@ -219,9 +234,7 @@ class RepeatAction(Part):
 
     def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
               where: str) -> Any:
-        repeat = parts["repeat_action"]
-        if type(repeat) is not int or repeat < 1:
-            raise _bad(f"{where}'repeat_action' must be an integer >= 1, got {repeat!r:.40}")
+        repeat = check_repeat_action(parts["repeat_action"], f"{where}'repeat_action'")
         if parts.get("action") is None:
             raise _bad(f"{where}'repeat_action' given without an 'action'")
         return repeat
@@ -257,9 +270,9 @@ class Observation(Part):
             raise _bad("observation.render must be a map")
         check_keys(size, self._RENDER_KEYS, "observation.render")
         for key, value in size.items():
-            if type(value) is not int or not 1 <= value <= _MAX_RENDER_SIZE:
+            if type(value) is not int or not 1 <= value <= MAX_RENDER_SIZE:
                 raise _bad(f"observation.render.{key} must be an integer in "
-                           f"[1, {_MAX_RENDER_SIZE}], got {value!r:.40}")
+                           f"[1, {MAX_RENDER_SIZE}], got {value!r:.40}")
 
     def apply(self, instance: Instance, value: Any, request: Plan) -> None:
         instance.send_response(value)
@@ -365,6 +378,7 @@ class Restore(Part):
             if event[0] == "config":
                 instance.settings.check(event[1])
             elif event[0] == "action":
+                check_repeat_action(event[2], f"{where}the action's frames")
                 actions.append(instance.checked_action(event[1], fresh=True, replayed=True,
                                                        where=where))
             elif instance.environment.get_node_or_null(event[1]) is not None:
@@ -402,13 +416,17 @@ class EditLevel(Part):
 
     The world's ``_edit_level`` hook (:meth:`rlenv.RLEnvWorld._edit_level`) edits the level
     with a generator seeded by ``seed``, so the same request gives the same level. It is built
-    from the request's data, not from the live tree: nothing of the environment changes, so
-    any client may ask, with or without an episode. The edit is made while the request is
-    checked (a hook that raises leaves the episode alone); the answer's ``info["level"]``
+    from the request's data, not from the live tree: nothing of the environment changes, with
+    or without an episode. The request is checked whole first (its fields, the world's hook, a
+    level beyond the hello's limits: its nodes, their depth); the edit is made when it is
+    applied, once control was granted: it takes control (2.6), as an edit holds the server's
+    loop as long as it builds, so an observer's is answered ``busy`` before it costs anything.
+    A hook that refuses or raises leaves the episode alone; the answer's ``info["level"]``
     holds the edited data, as it travels.
     """
 
     name = "edit_level"
+    takes_control = True
     alone = True
     _KEYS = frozenset({"level", "seed", "n_edits"})
 
@@ -425,12 +443,21 @@ class EditLevel(Part):
             raise _bad(f"edit_level.n_edits must be an integer in [1, {MAX_LEVEL_EDITS}], "
                        f"got {n_edits!r:.40}")
         world: RLEnvWorld = instance.environment.world  # type: ignore[assignment]  # has one
-        hook = f"{type(world).__name__}._edit_level"
         if type(world)._edit_level is RLEnvWorld._edit_level:
             raise _bad(f"edit_level: {type(world).__name__} has no _edit_level: "
                        f"{type(instance.environment).__name__} offers no edits of its levels")
         try:
-            edited = world._edit_level(edit["level"], np.random.default_rng(seed), n_edits)
+            check_size(edit["level"])
+        except PackedSceneError as error:
+            raise _bad(f"edit_level.level: {error}") from None
+        return edit["level"], seed, n_edits
+
+    def apply(self, instance: Instance, value: Any, request: Plan) -> None:
+        level, seed, n_edits = value
+        world: RLEnvWorld = instance.environment.world  # type: ignore[assignment]  # has one
+        hook = f"{type(world).__name__}._edit_level"
+        try:
+            edited = world._edit_level(level, np.random.default_rng(seed), n_edits)
         except RequestError:
             raise
         except ValueError as error:
@@ -441,10 +468,7 @@ class EditLevel(Part):
             raise RequestError(ErrorCode.ENVIRONMENT_ERROR,
                                f"{hook} raised {type(error).__name__}: {error}; nothing "
                                f"changed\n{detail}") from None
-        return _travelled(edited, hook)
-
-    def apply(self, instance: Instance, value: Any, request: Plan) -> None:
-        instance.answer.info = {"level": value}  # type: ignore[union-attr]
+        instance.answer.info = {"level": _travelled(edited, hook)}  # type: ignore[union-attr]
 
 
 def _travelled(level: Any, hook: str) -> Any:
@@ -681,8 +705,8 @@ class Steps(HostPart):
         count = len(host.instances)
         reset = _reset_mask(steps.get("reset"), count)
         repeat = steps.get("repeat_action")
-        if repeat is not None and (type(repeat) is not int or repeat < 1):
-            raise _bad(f"steps.repeat_action must be an integer >= 1, got {repeat!r:.40}")
+        if repeat is not None:
+            check_repeat_action(repeat, "steps.repeat_action")
         for index, (instance, resets) in enumerate(zip(host.instances, reset, strict=True)):
             if not resets and instance.state is not _RUNNING:  # running: it can act
                 try:

@@ -23,12 +23,13 @@ agent's own observation (``get_data({})``) just before the action applies
 **A policy that fails is a failed episode**, never a dead server. Its action is checked against
 its agent's space (:func:`~rlenv.serving.onnx_policy.fit_action`: clipped into a ``Box``, NaN
 refused; a heuristic's, user code, must be an action of the space as it is), and a file's call
-runs under a deadline and a memory bound (:mod:`rlenv.serving.onnx_policy`). When a policy raises, runs past its deadline or gives what no action is, the episode ends where
-it stands (``error`` in the statistics; a learner's step is answered ``environment_error``,
-reset required), the environment is left as it was (nothing was applied), and the failure is
-logged once per agent. Driven alone, the server waits :data:`FAILURE_PAUSE` seconds before the
-next episode, answering observers and signals meanwhile, so a policy that always fails costs
-one episode a second, not a loop.
+runs under a deadline and a memory bound (:mod:`rlenv.serving.onnx_policy`). When a policy
+raises, runs past its deadline or gives what no action is, the episode ends where it stands
+(``error`` in the statistics; a learner's step is answered ``environment_error``, reset
+required), the environment is left as it was (nothing was applied), and the failure is logged
+once per agent. Driven alone, the server waits :data:`FAILURE_PAUSE` seconds before the next
+episode, answering observers and signals meanwhile, so a policy that always fails costs one
+episode a second, not a loop.
 """
 
 from __future__ import annotations

@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 
 from rlenv.protocol.errors import ErrorCode, RequestError
 from rlenv.scene2d.recording import VideoRecorder
+from rlenv.serving.actions import check_repeat_action
 
 if TYPE_CHECKING:
     from rlenv.serving.instance import Answer, Instance
@@ -187,10 +188,7 @@ class Settings:
         if "record" in rest:
             _check_recording(rest.pop("record"), self.record_dir)
         if "repeat_action" in rest:
-            repeat = rest["repeat_action"]
-            if type(repeat) is not int or repeat < 1:
-                raise RequestError(ErrorCode.INVALID_CONFIG, f"repeat_action must be an "
-                                   f"integer >= 1, got {repeat!r:.40}")
+            check_repeat_action(rest["repeat_action"], "repeat_action", ErrorCode.INVALID_CONFIG)
         return rest
 
     def _apply_environment(self, settings: Mapping[str, Any]) -> dict[str, Any]:

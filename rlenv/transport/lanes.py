@@ -188,18 +188,19 @@ def open_lane(name: str, key: bytes, hello: Hello, sock: socket.socket) -> Lane:
         raise ValueError(f"shared_memory.key must be {KEY_SIZE} bytes")
     layout = Layout.for_hello(hello)
     block = os.memfd_create("rlenv-lane", os.MFD_CLOEXEC)
-    doorbell = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     try:
-        os.ftruncate(block, layout.size)
-        memory = mmap.mmap(block, layout.size)
-        doorbell.settimeout(1.0)
-        doorbell.connect("\0" + name)
-        socket.send_fds(doorbell, [key], [block])
-    except BaseException:
-        doorbell.close()
-        raise
+        doorbell = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        try:
+            os.ftruncate(block, layout.size)
+            memory = mmap.mmap(block, layout.size)
+            doorbell.settimeout(1.0)
+            doorbell.connect("\0" + name)
+            socket.send_fds(doorbell, [key], [block])
+        except BaseException:
+            doorbell.close()
+            raise
     finally:
-        os.close(block)
+        os.close(block)  # the mapping and the client's copy keep the block
     return Lane(memory, doorbell, Slots(memory, layout, hello), sock)
 
 

@@ -21,6 +21,7 @@ from rlenv.protocol import pack
 from rlenv.protocol.errors import ErrorCode, RemoteError
 from rlenv.testing import frame
 from rlenv_client.compliance.harness import Harness, Probes, assert_error, connection_closed
+from rlenv_client.observations import observation_difference
 
 __all__ = ["HostileProbes"]
 
@@ -184,7 +185,9 @@ class HostileProbes:
         else:
             raise AssertionError(f"{what} was accepted: {answer!r:.80}")
         after = self.controller.observe()["agent"]
-        assert _same(before, after), f"{what} was refused but changed the environment"
+        difference = observation_difference(before, after)
+        assert difference is None, \
+            f"{what} was refused but changed the environment, at {difference}"
 
     def refused_config(self, code: ErrorCode, key: str) -> None:
         """Configuring ``key`` is refused with ``code``, naming the key."""
@@ -195,13 +198,3 @@ class HostileProbes:
         else:
             raise AssertionError(f"configuration {key!r} was accepted")
 
-
-def _same(a: Any, b: Any) -> bool:
-    """Whether two observations are equal (maps and sequences of arrays, element by element)."""
-    if isinstance(a, dict) or isinstance(b, dict):
-        return isinstance(a, dict) and isinstance(b, dict) and a.keys() == b.keys() and \
-            all(_same(a[key], b[key]) for key in a)
-    if isinstance(a, tuple | list) and isinstance(b, tuple | list) and \
-            not all(np.isscalar(item) for item in (*a, *b)):
-        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
-    return bool(np.array_equal(np.asarray(a), np.asarray(b)))

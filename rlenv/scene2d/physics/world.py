@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 from typing import Any, ClassVar
 
 import pymunk
@@ -35,6 +36,76 @@ _SPACE_SETTINGS = ("collision_slop", "collision_bias", "collision_persistence",
                    "idle_speed_threshold", "sleep_time_threshold")
 """What a space is set up with besides gravity, iterations and damping (and its handlers)."""
 
+_PHASES = ("begin", "pre_solve", "post_solve", "separate")
+_CATCH_ALL = (None, None)
+_Callback = Callable[[pymunk.Arbiter, pymunk.Space, Any], Any]
+
+
+class _Space(pymunk.Space):
+    """A world's ``pymunk.Space``, whose catch-all collision handler rlenv shares with its user.
+
+    rlenv reports contacts to the nodes (``collision_started``, ``body_entered``...) from the
+    ``begin`` and ``separate`` of the catch-all handler, the one ``on_collision`` sets up
+    without collision types. A ``begin`` or ``separate`` that a user sets there (pymunk would
+    replace rlenv's with it, and the signals would stop) runs after rlenv's instead, with the
+    user's ``data``; ``pymunk.empty_callback`` removes it again. Everything else is pymunk's.
+
+    Args:
+        begin: rlenv's ``begin``.
+        separate: rlenv's ``separate``.
+    """
+
+    def __init__(self, begin: _Callback, separate: _Callback) -> None:
+        super().__init__()
+        self.own = {"begin": begin, "separate": separate}
+        self.theirs: dict[str, tuple[_Callback, Any]] = {}  # the user's, and their data
+        super().on_collision(begin=self._begin, separate=self._separate)
+
+    def on_collision(self, collision_type_a: int | None = None,
+                     collision_type_b: int | None = None, begin: _Callback | None = None,
+                     pre_solve: _Callback | None = None, post_solve: _Callback | None = None,
+                     separate: _Callback | None = None, data: Any = None) -> None:
+        """Set up a collision handler as pymunk does; one without types runs beside rlenv's."""
+        if collision_type_a is None and collision_type_b is None:
+            for phase, callback in (("begin", begin), ("separate", separate)):
+                if callback is pymunk.empty_callback:
+                    self.theirs.pop(phase, None)
+                elif callback is not None:
+                    self.theirs[phase] = (callback, data)
+            begin = separate = None  # rlenv's stay, and call the user's
+        super().on_collision(collision_type_a, collision_type_b, begin, pre_solve, post_solve,
+                             separate, data)
+
+    def rlenv_alone(self) -> bool:
+        """Whether no collision handler but rlenv's is set up."""
+        handlers = collision_handlers(self)
+        catch_all = handlers[_CATCH_ALL]
+        return len(handlers) == 1 and not self.theirs and catch_all.pre_solve is None and \
+            catch_all.post_solve is None
+
+    def copy_handlers(self, into: _Space) -> None:
+        """Set up this space's collision handlers of the user's again in ``into``."""
+        for key, handler in collision_handlers(self).items():
+            for phase in _PHASES:
+                if key == _CATCH_ALL and phase in self.own:
+                    callback, data = self.theirs.get(phase, (None, None))
+                else:
+                    callback, data = getattr(handler, phase), handler.data.get(phase)
+                if callback is not None:
+                    into.on_collision(*key, **{phase: callback}, data=data)
+
+    def _begin(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
+        self.own["begin"](arbiter, space, data)
+        theirs = self.theirs.get("begin")
+        if theirs is not None:
+            theirs[0](arbiter, space, theirs[1])
+
+    def _separate(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
+        self.own["separate"](arbiter, space, data)
+        theirs = self.theirs.get("separate")
+        if theirs is not None:
+            theirs[0](arbiter, space, theirs[1])
+
 
 class PhysicsWorld(SpaceOwner):
     """Owns a ``pymunk.Space`` and steps it once per physics tick.
@@ -52,7 +123,10 @@ class PhysicsWorld(SpaceOwner):
         process_mode: when the space steps; by default it follows its parent.
 
     Attributes:
-        space: the ``pymunk.Space``; :meth:`restart` replaces it with a new one.
+        space: the ``pymunk.Space``; :meth:`restart` replaces it with a new one. Its collision
+            handlers are the user's to set up (``space.on_collision``); one without collision
+            types runs beside rlenv's own, which emits the collision signals, and does not
+            replace it.
     """
 
     stepped = Signal("delta")
@@ -79,24 +153,19 @@ class PhysicsWorld(SpaceOwner):
                                   list[Joint], Refill] | None = None  # see _members
         self._touched = False  # a contact began since the space was made or restarted
 
-    def _new_space(self, gravity: Vec, iterations: int, damping: float) -> pymunk.Space:
-        space = pymunk.Space()
+    def _new_space(self, gravity: Vec, iterations: int, damping: float) -> _Space:
+        space = _Space(self._on_begin, self._on_separate)
         space.gravity = gravity
         space.iterations = iterations
         space.damping = damping
-        space.on_collision(begin=self._on_begin, separate=self._on_separate)
         return space
 
-    def _space_like(self, old: pymunk.Space) -> pymunk.Space:
+    def _space_like(self, old: _Space) -> _Space:
         """An empty space set up as ``old``: its settings and every collision handler."""
         space = self._new_space(old.gravity, old.iterations, old.damping)
         for name in _SPACE_SETTINGS:
             setattr(space, name, getattr(old, name))
-        for key, handler in collision_handlers(old).items():
-            if key != (None, None):  # rlenv's own, set up by _new_space
-                space.on_collision(*key, begin=handler.begin, pre_solve=handler.pre_solve,
-                                   post_solve=handler.post_solve, separate=handler.separate,
-                                   data=handler.data)
+        old.copy_handlers(space)
         return space
 
     def restart(self) -> None:
@@ -108,7 +177,8 @@ class PhysicsWorld(SpaceOwner):
         (composed through its Node2D frames, so each copy of a lattice goes back to its own
         place), at rest (velocities, force and torque zero), and every joint's constraint as
         when it was made (joints such as ``pivot`` read the bodies' pose when made). No solver
-        state (joint impulses, cached contacts, the spatial index) survives; contacts in
+        state (joint impulses, cached contacts, the bodies' bias velocities, the spatial index)
+        survives, whatever the space's settings (``collision_slop`` 0 included); contacts in
         progress end, with their signals. Place the bodies for the episode afterwards.
 
         The space is a new one, unless it can be made exactly as new in place: the same
@@ -118,8 +188,8 @@ class PhysicsWorld(SpaceOwner):
         """
         old = self.space
         bodies, shapes, joints, refill, unchanged = self._members()
-        in_place = FAST and unchanged and not self._touched and \
-            len(collision_handlers(old)) == 1 and old.sleep_time_threshold == math.inf
+        in_place = FAST and unchanged and not self._touched and old.rlenv_alone() and \
+            old.sleep_time_threshold == math.inf
         self._touched = False
         if in_place and refill.into(old):
             return
@@ -170,6 +240,7 @@ class PhysicsWorld(SpaceOwner):
         memo[id(space)] = self._space_like(space)
 
     def _duplicated(self, original: Node) -> None:
+        self.space.own = {"begin": self._on_begin, "separate": self._on_separate}  # not its
         self._shape_nodes = {}
         self._kept_members = None
         self._touched = False
@@ -181,7 +252,7 @@ class PhysicsWorld(SpaceOwner):
 
     @gravity.setter
     def gravity(self, value: Vec) -> None:
-        self.space.gravity = vector(value, f"{self!r}: gravity")
+        self.space.gravity = self._checked(vector, value, "gravity")
 
     @property
     def damping(self) -> float:
@@ -190,7 +261,17 @@ class PhysicsWorld(SpaceOwner):
 
     @damping.setter
     def damping(self, value: float) -> None:
-        self.space.damping = number(value, f"{self!r}: damping", low=0.0)
+        self.space.damping = self._checked(number, value, "damping", low=0.0)
+
+    def _checked(self, check: Callable[..., Any], value: Any, what: str, **limits: Any) -> Any:
+        """``check(value, what, **limits)``, a refusal naming this node.
+
+        The name is built only for a refusal: environments set these at every reset.
+        """
+        try:
+            return check(value, what, **limits)
+        except ValueError as error:
+            raise ValueError(f"{self!r}: {error}") from None
 
     def _enter_tree(self) -> None:
         parent = self.parent
@@ -202,9 +283,7 @@ class PhysicsWorld(SpaceOwner):
                            ", ".join(others))
 
     def _physics_step(self, delta: float) -> None:
-        if bodies_to_check(self.space):  # added since the last step: pymunk checks them
-            self._check_masses()
-        step_space(self.space, delta)
+        step_space(self.space, delta, self._check_masses)  # before pymunk checks new bodies
         if self._signals:  # someone asked for a signal of this node
             self._emit("stepped", delta)
 

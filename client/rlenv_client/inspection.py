@@ -16,6 +16,7 @@ import numpy as np
 
 from rlenv.protocol import ErrorReply, Hello, Request, Response
 from rlenv.protocol.errors import ErrorCode, RemoteError
+from rlenv.protocol.snapshots import WHOLE_EVENTS
 from rlenv_client.replay import EpisodeFile
 
 __all__ = ["EPISODES_SINCE", "PAGED_EPISODES_SINCE", "Inspection", "config_request",
@@ -211,19 +212,36 @@ def fetch_episodes(ask: Callable[[dict[str, Any]], Response], hello: Hello,
         part = {} if last is None else {"last": last}
         return episode_files(ask(part).info["episodes"], hello.target)
     index = ask({"index": True}).info["episodes"]
-    if cache is not None:
-        for identifier in set(cache) - {entry["id"] for entry in index}:
-            del cache[identifier]
+    if cache is None:
+        cache = {}
+    for identifier in set(cache) - {entry["id"] for entry in index}:
+        del cache[identifier]
+    wanted = index if last is None else index[-last:]
+    missing = [entry for entry in wanted if entry["id"] not in cache]
+    if missing and sum(entry["events"] for entry in index) <= WHOLE_EVENTS:
+        # in one answer, as they are now: an instance that finishes episodes faster than
+        # pages come would replace them between pages
+        try:
+            whole = ask({} if last is None else {"last": last}).info["episodes"]
+        except RemoteError as error:  # more came meanwhile than one answer carries: page them
+            if error.code != ErrorCode.BAD_REQUEST:
+                raise
+        else:
+            files = [cache.setdefault(entry["id"], _episode_file(entry, hello.target))
+                     for entry in whole]
+            if last is None:  # what the index listed and is gone since
+                for identifier in set(cache) - {entry["id"] for entry in whole}:
+                    del cache[identifier]
+            return files
     files = []
-    for entry in index if last is None else index[-last:]:
+    for entry in wanted:
         identifier = entry["id"]
-        found = None if cache is None else cache.get(identifier)
+        found = cache.get(identifier)
         if found is None:
             found = _fetch_episode(ask, identifier, hello.target)
             if found is None:  # dropped meanwhile (newer ones finished)
                 continue
-            if cache is not None:
-                cache[identifier] = found
+            cache[identifier] = found
         files.append(found)
     return files
 
@@ -247,8 +265,12 @@ def _fetch_episode(ask: Callable[[dict[str, Any]], Response], identifier: int,
 
 def episode_files(entries: list[Mapping[str, Any]], target: str | None) -> list[EpisodeFile]:
     """The ``episodes`` part's answer (``info["episodes"]``) as recordings of ``target``."""
-    return [EpisodeFile(target, dict(entry["snapshot"]), [], bool(entry["terminated"]),
-                        bool(entry["truncated"])) for entry in entries]
+    return [_episode_file(entry, target) for entry in entries]
+
+
+def _episode_file(entry: Mapping[str, Any], target: str | None) -> EpisodeFile:
+    return EpisodeFile(target, dict(entry["snapshot"]), [], bool(entry["terminated"]),
+                       bool(entry["truncated"]))
 
 
 def config_request(environment: Mapping[str, Any], agent: Mapping[str, Any] | None,

@@ -27,7 +27,7 @@ import gymnasium
 
 from rlenv.protocol import pack, unpack
 from rlenv.protocol.errors import RequestError
-from rlenv.serving.snapshots import parse_snapshot
+from rlenv.protocol.snapshots import parse_snapshot
 from rlenv_client.recordings import check_frames, read_recording
 
 if TYPE_CHECKING:  # only named: base.py's Inspection builds EpisodeFiles

@@ -34,6 +34,7 @@ from collections import deque
 from typing import Any
 
 from rlenv.protocol.errors import ErrorCode, RequestError
+from rlenv.protocol.snapshots import PAGE_EVENTS, WHOLE_EVENTS
 from rlenv.serving.snapshots import EpisodeLog
 
 __all__ = ["KEEP_EPISODES", "KEEP_EVENTS", "PAGE_EVENTS", "WHOLE_EVENTS", "RecentEpisodes"]
@@ -45,11 +46,6 @@ KEEP_EVENTS = 200_000
 """Most events (actions and changes: about steps) a server keeps in all, its instances sharing
 them (some 40 MB at 200 bytes a step)."""
 
-PAGE_EVENTS = 2_000
-"""Most events one answer of the paged form (2.6) holds."""
-
-WHOLE_EVENTS = 20_000
-"""Most events an answer of the 2.5 forms holds in all (beyond: refused, saying to page)."""
 
 
 class _Kept:
@@ -144,9 +140,9 @@ class RecentEpisodes:
     def to_wire(self, last: int | None = None) -> list[dict[str, Any]]:
         """The kept episodes (the ``last`` ones only, if given), oldest first, whole (2.5).
 
-        Each is ``{"snapshot", "terminated", "truncated", "steps"}``; the snapshot holds the
-        episode up to its last action (the changes that came after it, the next reset's
-        configuration say, belong to no step of it).
+        Each is ``{"snapshot", "id", "terminated", "truncated", "steps"}`` (``id`` since 2.6);
+        the snapshot holds the episode up to its last action (the changes that came after it,
+        the next reset's configuration say, belong to no step of it).
 
         Raises:
             RequestError: ``bad_request``: they hold more than :data:`WHOLE_EVENTS` events.
@@ -160,7 +156,7 @@ class RecentEpisodes:
                                f"more than one answer carries ({WHOLE_EVENTS:,}); ask for "
                                "fewer (last), or page them (protocol 2.6: {\"index\": true}, "
                                "then {\"episode\": ID, \"from\": K})")
-        return [{"snapshot": entry.log.snapshot(slice(0, entry.stop)),
+        return [{"snapshot": entry.log.snapshot(slice(0, entry.stop)), "id": entry.id,
                  "terminated": entry.terminated, "truncated": entry.truncated,
                  "steps": entry.steps} for entry in kept]
 

@@ -30,16 +30,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from rlenv.protocol.errors import ErrorCode, RequestError
+from rlenv.protocol.snapshots import MAX_EVENTS, SNAPSHOT_VERSION, parse_snapshot
 
 if TYPE_CHECKING:
     from rlenv.serving.settings import Captured
 
 __all__ = ["MAX_EVENTS", "EpisodeLog", "generator_from_state", "parse_snapshot"]
 
-SNAPSHOT_VERSION = 1
-MAX_EVENTS = 100_000
-"""Most events a snapshot holds. The log of a longer episode stops there (bounded memory:
-an endless episode would otherwise grow its log forever) and its snapshots are refused."""
 _BIT_GENERATORS = {"PCG64": np.random.PCG64}
 
 
@@ -119,44 +116,6 @@ class EpisodeLog:
             raise RequestError(ErrorCode.BAD_REQUEST, f"this episode is too long to snapshot: "
                                f"more than {MAX_EVENTS:,} actions and changes since its reset "
                                "(snapshot earlier, or reset)")
-
-
-def parse_snapshot(snapshot: Any) -> dict[str, Any]:
-    """Check a snapshot's structure (not its content, which the environment checks).
-
-    Raises:
-        RequestError: ``bad_request`` naming the field.
-    """
-    def bad(message: str) -> RequestError:
-        return RequestError(ErrorCode.BAD_REQUEST, f"restore: {message}")
-
-    if not isinstance(snapshot, Mapping):
-        raise bad("a snapshot is a map")
-    expected = {"version", "config", "rng", "options", "events"}
-    if set(snapshot) != expected:
-        raise bad(f"a snapshot has exactly the keys {sorted(expected)}")
-    if snapshot["version"] != SNAPSHOT_VERSION:
-        raise bad(f"snapshot version {snapshot['version']!r:.20} is not {SNAPSHOT_VERSION}")
-    config = snapshot["config"]
-    if not isinstance(config, Mapping) or not all(isinstance(v, Mapping) for v in config.values()):
-        raise bad("config must map parts to maps")
-    if not isinstance(snapshot["rng"], str) or not isinstance(snapshot["options"], Mapping):
-        raise bad("rng must be a string and options a map")
-    events = snapshot["events"]
-    if not isinstance(events, list) or len(events) > MAX_EVENTS:
-        raise bad(f"events must be a list of at most {MAX_EVENTS}")
-    for index, event in enumerate(events):
-        valid = isinstance(event, list) and (
-            (len(event) == 2 and event[0] == "config" and isinstance(event[1], Mapping))
-            or (len(event) == 3 and event[0] == "action" and type(event[2]) is int
-                and event[2] >= 1)
-            or (len(event) == 4 and event[0] == "set" and isinstance(event[1], str)
-                and isinstance(event[2], str))
-        )
-        if not valid:
-            raise bad(f"events[{index}] must be ['config', map], ['action', action, frames] "
-                      "or ['set', path, property, value]")
-    return dict(snapshot)
 
 
 def generator_from_state(state: str) -> np.random.Generator:

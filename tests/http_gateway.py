@@ -48,6 +48,7 @@ class Gateway:
     """
 
     def __init__(self, *args: str, env: dict[str, str] | None = None) -> None:
+        self.opened: list[str] = []  # sessions made by session(), for close_sessions
         self._stderr = tempfile.TemporaryFile()
         self.process = subprocess.Popen(
             [sys.executable, "-m", "rlenv", "http", *args, "--port", "0"],
@@ -87,7 +88,14 @@ class Gateway:
             body["kwargs"] = kwargs
         reply = self.request("POST", "/v1/envs", body)
         assert reply.status == 201, reply
-        return reply.json()["id"]
+        self.opened.append(reply.json()["id"])
+        return self.opened[-1]
+
+    def close_sessions(self) -> None:
+        """Delete the sessions :meth:`session` opened that are still there."""
+        while self.opened:
+            status = self.request("DELETE", f"/v1/envs/{self.opened.pop()}").status
+            assert status in (204, 404), status
 
     def post(self, path: str, body: Any = None, expect: int = 200) -> Any:
         """POST, check the status, return the JSON answer."""

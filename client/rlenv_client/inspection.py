@@ -17,15 +17,19 @@ import numpy as np
 from rlenv.protocol import ErrorReply, Hello, Request, Response
 from rlenv.protocol.errors import ErrorCode, RemoteError
 from rlenv.protocol.snapshots import WHOLE_EVENTS
+from rlenv.protocol.spaces import codec_for
 from rlenv_client.replay import EpisodeFile
 
-__all__ = ["EPISODES_SINCE", "PAGED_EPISODES_SINCE", "Inspection", "config_request",
+__all__ = ["CLAIMS_SINCE", "EPISODES_SINCE", "PAGED_EPISODES_SINCE", "Inspection", "config_request",
            "episode_files", "fetch_episodes"]
 
 EPISODES_SINCE = (2, 5)
 AGENT_SETTINGS_SINCE = (2, 6)
 """The protocol whose ``config.agent`` may set one agent, keyed by its name."""
 """The protocol version that brought the ``episodes`` part (:meth:`Inspection.episodes`)."""
+
+CLAIMS_SINCE = (2, 6)
+"""The protocol version that brought the ``claim`` part (:meth:`Inspection.claim`)."""
 
 PAGED_EPISODES_SINCE = (2, 6)
 """The protocol version that serves the ``episodes`` part by index and in pages."""
@@ -62,6 +66,40 @@ class Inspection:
                 applied.
         """
         self._call(inspect={"configure": config_request(environment, agent, world)})
+
+    def claim(self, agent: str, action: Any) -> list[str]:
+        """Play ``agent`` (one of several) beside the controller: hold ``action`` for it.
+
+        Call it again to change the held action. The controller's steps then act for the agent
+        with the held action instead of the controller's own, and the episode records it; the
+        claim lasts until :meth:`release_claim`, until this client takes control, or until it
+        disconnects (protocol 2.6, the ``claim`` part; see :mod:`rlenv.serving.claims`).
+
+        Returns:
+            The agents claimed now, by any client (as the controller's ``info["claimed"]``).
+
+        Raises:
+            RemoteError: ``busy``: another client claimed the agent; ``bad_request``: this
+                client controls the environment, claims another agent already, names no agent
+                of several or a driven one, or the server is older than 2.6;
+                ``invalid_action``: the action is not in the agent's space.
+        """
+        hello = self.hello
+        if hello.protocol < CLAIMS_SINCE:
+            raise RemoteError(ErrorCode.BAD_REQUEST, "the server speaks protocol {}.{}; claims "
+                              "need 2.6".format(*hello.protocol))
+        space = hello.action_space
+        packed = action
+        if len(hello.agents) > 1 and agent in hello.agents:
+            packed = codec_for(space[agent]).pack_exact(action)  # type: ignore[index]
+        return list(self._call(claim={"agent": agent, "action": packed}).info["claimed"])
+
+    def release_claim(self) -> None:
+        """End this client's claim (see :meth:`claim`), if it holds one.
+
+        Its agent goes back to the controller's actions.
+        """
+        self._call(claim=None)
 
     def snapshot(self) -> dict[str, Any]:
         """The environment's state as data (see :mod:`rlenv.serving.snapshots`).

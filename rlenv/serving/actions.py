@@ -99,3 +99,14 @@ class ActionCheck:
             return {name: self._each[name](action[name]) for name in live}
         except SpaceMismatch as error:
             raise RequestError(ErrorCode.INVALID_ACTION, f"{where}{error}") from None
+
+    def of_agent(self, name: str, action: Any, where: str = "") -> Any:
+        """``action`` for agent ``name`` alone (one of several), in its space's native form.
+
+        Raises:
+            RequestError: ``invalid_action``, the message prefixed with ``where``.
+        """
+        try:
+            return self._each[name](action)
+        except SpaceMismatch as error:
+            raise RequestError(ErrorCode.INVALID_ACTION, f"{where}{error}") from None

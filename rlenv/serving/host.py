@@ -31,6 +31,7 @@ from rlenv.protocol.errors import ErrorCode, RequestError
 from rlenv.protocol.spaces import compile_check
 from rlenv.scene2d.packed_scene import MAX_DEPTH, MAX_NODES
 from rlenv.serving.actions import MAX_REPEAT_ACTION
+from rlenv.serving.claims import Requester
 from rlenv.serving.columns import Columns
 from rlenv.serving.endpoint import Endpoint, Peer
 from rlenv.serving.instance import Episode, Instance, failure, load_environment
@@ -136,6 +137,9 @@ class Host:
             raise TypeError("several instances need the environment class, not an instance")
         self.instances = [Instance(environment, dispatch, clock, record_dir, keep_episodes,
                                    KEEP_EVENTS // count) for _ in range(count)]
+        self.requester = Requester()  # who sent the request being served (for claims)
+        for instance in self.instances:
+            instance.requester = self.requester
         first = self.instances[0]
         self.hello = Hello(
             environment=first.environment.name,
@@ -271,6 +275,7 @@ class Host:
         With a :attr:`driver`, the policies play one step whenever no request is waiting, and
         nobody may take control.
         """
+        endpoint.on_drop = self.release_claims
         driver = self.driver
         if driver is not None:
             endpoint.reserve("its agents are driven by policies (rlenv serve --policy); only "
@@ -300,6 +305,7 @@ class Host:
         server's) is logged and answered with ``environment_error``, and the server serves on.
         """
         answered = False
+        self.requester.peer = peer
         try:
             prepared = self.prepare(request)
             if isinstance(prepared, ErrorReply):
@@ -311,6 +317,7 @@ class Host:
             elif not prepared.takes_control:
                 reply = self.run(prepared, reports=False)
             elif endpoint.take_control(peer, request.id):
+                self.release_claims(peer)  # it acts for every agent now
                 reply = self.run(prepared)
             else:
                 return  # answered busy
@@ -324,6 +331,14 @@ class Host:
                     request.id, ErrorCode.ENVIRONMENT_ERROR,
                     f"the server failed answering this request ({type(error).__name__}: "
                     f"{error}); it serves on, but what the request changed is not known"))
+        finally:
+            self.requester.peer = None
+
+    def release_claims(self, peer: object) -> None:
+        """End the claims ``peer`` holds (it left, or took control; :mod:`.claims`)."""
+        for instance in self.instances:
+            if instance.claims is not None:
+                instance.release_claim(peer)
 
     def close(self) -> None:
         """Take every environment out of its tree."""

@@ -45,6 +45,7 @@ from rlenv.protocol.errors import ErrorCode, RequestError
 from rlenv.protocol.messages import joint_end
 from rlenv.serving import inspector
 from rlenv.serving.actions import ActionCheck
+from rlenv.serving.claims import Claims, Requester
 from rlenv.serving.observing import Observer, check_text_keys
 from rlenv.serving.onnx_policy import PolicyError
 from rlenv.serving.recent import KEEP_EPISODES, KEEP_EVENTS, RecentEpisodes
@@ -176,6 +177,8 @@ class Instance:
         self.has_after_send = "_after_send_response" in hooks
         self.driven: DrivenAgents | None = None  # agents a policy drives (rlenv serve --policy)
         self._heuristic_agents: DrivenAgents | None = None  # see _heuristics
+        self.claims: Claims | None = None  # agents observers play (none: no cost in act)
+        self.requester = Requester()  # who sent the request served (the host shares its own)
         self.real_time_changed: Callable[[], None] | None = None  # the host's, to follow it
         self._enter(environment)
         self.broken: str | None = None  # why the next reset rebuilds the environment
@@ -497,14 +500,17 @@ class Instance:
     def act(self, action: Any, frames: int, heuristic: frozenset[str] = frozenset()) -> None:
         """Run a checked action for ``frames`` ticks (lockstep), or apply it now (real time).
 
-        With several agents, the driven agents' actions and those of the agents named in
-        ``heuristic`` (by their heuristic) are put in first, unless the action replays a log.
+        With several agents, the driven agents' actions, the claimed agents' held actions
+        (:mod:`rlenv.serving.claims`) and those of the agents named in ``heuristic`` (by their
+        heuristic) are put in first, unless the action replays a log.
         """
         tree = self.tree
         if self.multi_agent and not self.replaying:
             try:
                 if self.driven is not None:
                     action = self.driven.complete(action, self.agents)
+                if self.claims is not None:
+                    action, heuristic = self.claims.complete(action, heuristic)
                 if heuristic:
                     action = {**action, **self._heuristics().actions(self.agents, heuristic)}
             except PolicyError as error:  # a failed episode; the environment is intact
@@ -609,7 +615,21 @@ class Instance:
         if extra:
             check_text_keys(extra, "the answer holds")
             info = {**info, **extra}
+        if self.claims is not None:
+            info = {**info, "claimed": [a.name for a in self.agents if a.name in
+                                        self.claims.owners]}
         return info
+
+    def claim(self, owner: object, name: str, action: Any) -> None:
+        """``owner`` (an observer's connection) plays agent ``name`` with ``action`` (checked)."""
+        if self.claims is None:
+            self.claims = Claims()
+        self.claims.hold(owner, name, action)
+
+    def release_claim(self, owner: object) -> None:
+        """End ``owner``'s claim, if it holds one (its agent goes back to the controller)."""
+        if self.claims is not None and not self.claims.release(owner):
+            self.claims = None
 
     def environment_error(self, reply_id: int, error: BaseException) -> ErrorReply:
         """The ``environment_error`` answer for an exception in user code (its traceback in it).

@@ -548,6 +548,67 @@ class Inspect(Part):
             answer.info = {"stats": instance.stats.since(arguments.get("since", 0))}
 
 
+class Claim(Part):
+    """``{"agent": NAME, "action": A}`` or ``nil`` (2.6): an observer plays one agent.
+
+    The observer claims agent ``NAME`` of several (or changes the action it holds for the agent
+    it claimed) and holds ``A`` until changed; the controller's steps then act for the agent
+    with ``A`` (:mod:`rlenv.serving.claims`). ``nil`` releases the observer's claim. It takes
+    no control: the controller may not send it.
+    """
+
+    name = "claim"
+    alone = True
+    _KEYS = frozenset({"agent", "action"})
+
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
+              where: str) -> Any:
+        claim, owner = parts["claim"], instance.requester.peer
+        if owner is None:
+            raise _bad(f"{where}claim: a claim comes from a client's connection")
+        if claim is None:  # release
+            return None
+        claim = _map(claim, "claim", where)
+        check_keys(claim, self._KEYS, f"{where}claim")
+        agents = [agent.name for agent in instance.agents]
+        if not instance.multi_agent:
+            raise _bad(f"{where}claim: this environment has one agent ({agents[0]}), and the "
+                       "client that controls the environment owns it: claims are for "
+                       "environments of several agents")
+        name = claim.get("agent")
+        if name not in agents:
+            raise _bad(f"{where}claim.agent: no agent {name!r:.40}; the agents: "
+                       f"{', '.join(agents)}")
+        if instance.driven is not None and name in instance.driven.names:
+            raise _bad(f"{where}claim: agent {name!r} is driven by the server (rlenv serve "
+                       "--policy); claim another")
+        claims = instance.claims
+        if claims is not None:
+            holder = claims.owners.get(name)
+            if holder is not None and holder is not owner:
+                raise RequestError(ErrorCode.BUSY, f"{where}claim: agent {name!r} is claimed "
+                                   f"by another client ({getattr(holder, 'address', '?')}): "
+                                   "one claim per agent")
+            mine = claims.of(owner)
+            if mine is not None and mine != name:
+                raise _bad(f"{where}claim: this client plays {mine!r} already (one claim per "
+                           f"client): release it first (claim: nil) to play {name!r}")
+        if "action" not in claim:
+            raise _bad(f"{where}claim.action: the action to hold for {name!r} is missing")
+        return name, instance.checked_action.of_agent(name, claim["action"],
+                                                      f"{where}claim.")
+
+    def apply(self, instance: Instance, value: Any, request: Plan) -> None:
+        owner = instance.requester.peer
+        if instance.answer.reports:  # type: ignore[union-attr]
+            raise _bad("claim: this client controls the environment and acts for every agent "
+                       "itself; claims are for the clients that observe it")
+        if value is None:
+            instance.release_claim(owner)
+        else:
+            instance.claim(owner, *value)
+
+
 def _need_lockstep(instance: Instance) -> None:
     if instance.tree.real_time:
         raise _bad("snapshots need lockstep mode: configure real_time=False first")
@@ -796,7 +857,7 @@ def _reset_mask(mask: Any, count: int) -> list[bool]:
 
 PARTS: dict[str, Part | HostPart] = {
     part.name: part for part in (
-        Restore(), Inspect(), Snapshot(), Episodes(), EditLevel(), Config(), Reset(),
+        Restore(), Inspect(), Snapshot(), Episodes(), EditLevel(), Claim(), Config(), Reset(),
         RepeatAction(), Heuristic(), Action(), Observation(), Batch(), Steps())
 }
 """Every kind of request part, in the order they apply."""

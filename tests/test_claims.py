@@ -1,0 +1,158 @@
+"""An observer claims one agent of several while a trainer controls the episode (protocol 2.6).
+
+Over real sockets, against ``rlenv serve`` subprocesses of ``examples.tag``: the claimed agent
+moves as the observer holds (bit for bit as if the trainer had sent that action itself), the
+trainer's ``info["claimed"]`` says so, a release or a disconnect gives the agent back, the
+episode's snapshot replays exactly, and the refusals name what is wrong.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import pytest
+from conftest import wait_until
+
+from rlenv.protocol.errors import RemoteError
+from rlenv_client import Client
+from rlenv_client.launcher import ServerProcess
+
+TAG = "examples.tag:TagEnvironment"
+HELD = np.array([1.0, -0.5], np.float32)  # what the person holds for Runner1
+
+
+def trainer_action(step: int) -> dict[str, np.ndarray]:
+    """The trainer's own actions: every agent, Runner1 included, changing with the step."""
+    phase = np.float32(step % 7 / 7.0)
+    return {"Chaser": np.array([phase, 1.0 - phase], np.float32),
+            "Runner1": np.array([-1.0, phase], np.float32),
+            "Runner2": np.array([0.0, -phase], np.float32)}
+
+
+def same(a: Any, b: Any) -> bool:
+    """Whether two observations are identical, bit for bit."""
+    if isinstance(a, Mapping):
+        return a.keys() == b.keys() and all(same(a[key], b[key]) for key in a)
+    return np.asarray(a).tobytes() == np.asarray(b).tobytes() and \
+        np.asarray(a).dtype == np.asarray(b).dtype
+
+
+@pytest.fixture
+def tag(serve) -> ServerProcess:
+    return serve(TAG)
+
+
+def test_a_claimed_agent_moves_as_the_observer_holds_bit_for_bit(tag: ServerProcess) -> None:
+    claimed_steps, free_steps = 12, 6
+    with Client(tag.host, tag.port) as trainer, Client(tag.host, tag.port) as person:
+        trainer.reset(seed=5)
+        assert person.claim("Runner1", HELD) == ["Runner1"]
+        seen = []
+        for step in range(claimed_steps):
+            observation, _, _, _, info = trainer.step(trainer_action(step))
+            assert info["claimed"] == ["Runner1"]
+            seen.append(observation)
+        person.release_claim()
+        for step in range(claimed_steps, claimed_steps + free_steps):
+            observation, _, _, _, info = trainer.step(trainer_action(step))
+            assert "claimed" not in info  # Runner1 is the trainer's again
+            seen.append(observation)
+        snapshot = trainer.snapshot()
+        logged = [event[1] for event in snapshot["events"] if event[0] == "action"]
+        assert all(np.array_equal(action["Runner1"], HELD) for action in logged[:claimed_steps])
+        assert np.array_equal(logged[claimed_steps]["Runner1"],
+                              trainer_action(claimed_steps)["Runner1"])
+        # the same episode, the trainer sending the person's action itself
+        trainer.reset(seed=5)
+        for step, expected in enumerate(seen):
+            action = trainer_action(step)
+            if step < claimed_steps:
+                action["Runner1"] = HELD
+            observation, *_ = trainer.step(action)
+            assert same(observation, expected), f"step {step} differs"
+        # and the claimed episode's snapshot replays to where it ended, bit for bit
+        restored, _ = trainer.restore(snapshot)
+        assert same(restored, seen[-1])
+
+
+def test_a_trainer_thread_plays_on_while_a_person_claims_and_disconnects(
+        tag: ServerProcess) -> None:
+    stop = threading.Event()
+    infos: list[dict[str, Any]] = []
+    failures: list[BaseException] = []
+
+    def train() -> None:
+        try:
+            with Client(tag.host, tag.port) as trainer:
+                trainer.reset(seed=1)
+                step = 0
+                while not stop.is_set():
+                    _, _, terminated, truncated, info = trainer.step(trainer_action(step))
+                    infos.append(info)
+                    step += 1
+                    if terminated or truncated:
+                        trainer.reset()
+        except BaseException as error:  # the test's thread reports it
+            failures.append(error)
+
+    thread = threading.Thread(target=train, daemon=True)
+    thread.start()
+    try:
+        wait_until(lambda: len(infos) > 3 or failures, "the trainer never stepped", seconds=60)
+        person = Client(tag.host, tag.port)
+        assert person.claim("Runner2", HELD) == ["Runner2"]
+        wait_until(lambda: infos[-1].get("claimed") == ["Runner2"] or failures,
+                   "the trainer's info never said Runner2 was claimed", seconds=60)
+        person.close()  # a disconnect releases the claim
+        wait_until(lambda: "claimed" not in infos[-1] or failures,
+                   "the claim outlived its client's connection", seconds=60)
+        with Client(tag.host, tag.port) as other:  # and Runner2 may be claimed again
+            assert other.claim("Runner2", HELD) == ["Runner2"]
+    finally:
+        stop.set()
+        thread.join(timeout=60)
+    assert not failures, failures
+
+
+def test_claims_are_refused_precisely(serve, tag: ServerProcess) -> None:
+    with Client(tag.host, tag.port) as trainer, Client(tag.host, tag.port) as person, \
+            Client(tag.host, tag.port) as other:
+        trainer.reset(seed=0)
+        with pytest.raises(RemoteError) as refused:
+            person.claim("Runner3", HELD)
+        assert refused.value.code == "bad_request" and str(refused.value).endswith(
+            "claim.agent: no agent 'Runner3'; the agents: Chaser, Runner1, Runner2")
+        with pytest.raises(RemoteError) as refused:
+            person.claim("Runner1", np.array([3.0, 0.0], np.float32))
+        assert refused.value.code == "invalid_action" and "claim." in str(refused.value)
+        person.claim("Runner1", HELD)
+        with pytest.raises(RemoteError) as refused:  # one claim per client
+            person.claim("Runner2", HELD)
+        assert refused.value.code == "bad_request" and "this client plays 'Runner1' already" \
+            in str(refused.value)
+        with pytest.raises(RemoteError) as refused:  # one claim per agent
+            other.claim("Runner1", HELD)
+        assert refused.value.code == "busy" and "agent 'Runner1' is claimed by another " \
+            "client" in str(refused.value)
+        with pytest.raises(RemoteError) as refused:  # the controller acts for all already
+            trainer.claim("Runner2", HELD)
+        assert refused.value.code == "bad_request" and "this client controls the " \
+            "environment" in str(refused.value)
+        person.claim("Runner1", -HELD)  # changing the held action is no second claim
+        assert trainer.step(trainer_action(0))[4]["claimed"] == ["Runner1"]
+    driven = serve(TAG, args=["--policy", "Chaser=heuristic"])
+    with Client(driven.host, driven.port) as person:
+        with pytest.raises(RemoteError) as refused:
+            person.claim("Chaser", HELD)
+        assert refused.value.code == "bad_request" and str(refused.value).endswith(
+            "claim: agent 'Chaser' is driven by the server (rlenv serve --policy); claim "
+            "another")
+    single = serve()  # CartPole: one agent
+    with Client(single.host, single.port) as person:
+        with pytest.raises(RemoteError) as refused:
+            person.claim("CartPole", 0)
+        assert refused.value.code == "bad_request" and "the client that controls the " \
+            "environment owns it" in str(refused.value)

@@ -18,6 +18,17 @@ may be played). The others keep what drives them: the agents the server drives (
 has a ``heuristic`` plays it (the step's ``heuristic`` part, protocol 2.6), and the rest take
 their idle action. The recorded files say which agent the person played
 (``EpisodeFile.agent``, see :class:`~rlenv_client.replay.EpisodeFile`).
+
+While a trainer controls an environment of several agents, the reset is refused ``busy`` and
+the person **claims** the chosen agent instead (protocol 2.6, :mod:`rlenv.serving.claims`): the
+thread then holds the keys' action for it (a ``claim`` request whenever it changes) and the
+trainer's steps play it, while the trainer acts for the others. The recorded files are then the
+trainer's episodes, as it played them (from the server's recent episodes, see
+:meth:`~rlenv_client.inspection.Inspection.episodes`): each one that ends while the person
+plays, the one under way at Take control included, with ``agent`` naming the person's agent
+and no observation digests (the inspector does not see the trainer's observations); each
+replays bit for bit from its snapshot. "Release" ends the claim, and the agent is the
+trainer's again.
 """
 
 from __future__ import annotations
@@ -33,8 +44,10 @@ from gymnasium import spaces
 
 from rlenv.protocol import ErrorReply, Request, Response
 from rlenv.protocol.errors import RemoteError
+from rlenv.protocol.spaces import codec_for
 from rlenv_client.addresses import parse_address
 from rlenv_client.client import Client
+from rlenv_client.inspection import fetch_episodes
 from rlenv_client.inspector.watch import InspectorError, Watcher, to_json
 from rlenv_client.replay import EpisodeFile, digest, next_episode_path
 from rlenv_client.session import LOST
@@ -56,6 +69,7 @@ class _Control:
         self.idle: dict[str, Any] = {}  # the other agents' idle actions, by name
         self.heuristic: list[str] = []  # the other agents that play their heuristic
         self.held: list[str] = []
+        self.claim = False  # the person plays a claimed agent beside a trainer (2.6)
         self.stop = threading.Event()
         self.thread: threading.Thread | None = None
 
@@ -68,6 +82,11 @@ class _Control:
         if self.heuristic:
             parts["heuristic"] = self.heuristic
         return parts
+
+    def send_claim(self, action: Any) -> None:
+        """Claim the person's agent (protocol 2.6), or change its held action, to ``action``."""
+        packed = codec_for(self.space).pack_exact(action)
+        _answer(self.exchange({"claim": {"agent": self.agent, "action": packed}}))
 
     def exchange(self, parts: Mapping[str, Any]) -> Response | ErrorReply:
         """One request to this instance (in a batch when the server hosts several)."""
@@ -118,6 +137,7 @@ class Demonstrator:
                     "instance": control.instance if running else None,  # type: ignore
                     "agent": control.agent if running else None,  # type: ignore[union-attr]
                     "heuristic": list(control.heuristic) if running else [],  # type: ignore
+                    "claim": control.claim if running else False,  # type: ignore[union-attr]
                     "keys": sorted(control.keys) if running else [],  # type: ignore[union-attr]
                     "held": list(control.held) if running else [],  # type: ignore[union-attr]
                     "episodes": self.episodes, "directory": str(self.directory),
@@ -129,10 +149,11 @@ class Demonstrator:
         ``agent`` may be left out when only one agent can be played.
 
         Raises:
-            InspectorError: 409 already controlling, or another client controls it; 422 its
-                agent has no key map, no ``agent`` was chosen among several, or the one
-                chosen is driven by the server; 404 no such server, instance or agent; 503
-                unreachable.
+            InspectorError: 409 already controlling, or another client controls it (with one
+                agent; with several, the person claims the agent, see the module) or claimed
+                the agent; 422 its agent has no key map, no ``agent`` was chosen among several,
+                or the one chosen is driven by the server; 404 no such server, instance or
+                agent; 503 unreachable.
         """
         with self._lock:
             if self._control is not None and not self._control.stop.is_set():
@@ -190,11 +211,20 @@ class Demonstrator:
         elif agent is not None and agent not in hello.agents:
             raise InspectorError(404, f"no agent {agent!r:.40}: the agent is {hello.agents[0]}")
         control.keys = key_map(tree, control.space, control.agent)
-        idle_action(control.space)  # refuses a space without one now
-        observation, _ = client.reset_result(_answer(control.exchange(
-            client.reset_request().parts)))
+        idle = idle_action(control.space)  # refuses a space without one now
         rate = self.rate or hello.physics_ticks_per_second / hello.repeat_action
-        control.thread = threading.Thread(target=self._play, args=(control, observation, rate),
+        reply = control.exchange(client.reset_request().parts)
+        if isinstance(reply, ErrorReply) and reply.code == "busy" and control.agent is not None:
+            control.claim = True  # a trainer controls it: play the agent beside it
+            kept: dict[int, EpisodeFile] = {}  # the server keeps them from now on
+            fetch_episodes(lambda part: _answer(control.exchange({"episodes": part})), hello,
+                           cache=kept)
+            control.send_claim(idle)  # refused here: 409 claimed by another, 422 otherwise
+            play, args = self._play_beside, (control, idle, rate, kept)
+        else:
+            observation, _ = client.reset_result(_answer(reply))
+            play, args = self._play, (control, observation, rate)
+        control.thread = threading.Thread(target=play, args=args,
                                           name="rlenv-demonstration", daemon=True)
         control.thread.start()
         return control
@@ -227,6 +257,52 @@ class Demonstrator:
             with self._lock:
                 self.error = f"the demonstration stopped: {error}"
                 control.stop.set()
+
+    def _play_beside(self, control: _Control, idle: Any, rate: float,
+                     cache: dict[int, EpisodeFile]) -> None:
+        """Hold the keys' action for the claimed agent; record the trainer's episodes that end.
+
+        The agent was claimed (with ``idle``) before the thread started, and ``cache`` holds
+        the episodes kept then (not the person's). Every second the server's recent episodes
+        are looked at, and each one that ended since is saved.
+        """
+        client, space = control.client, control.space
+
+        def ask(part: dict[str, Any]) -> Response:
+            return _answer(control.exchange({"episodes": part}))
+
+        try:
+            known = set(cache)
+            held = sent = idle
+            looked = time.monotonic()
+            while not control.stop.is_set():
+                if not np.array_equal(to_json(held), to_json(sent)):
+                    control.send_claim(held)
+                    sent = held
+                if time.monotonic() - looked >= 1.0:
+                    looked = time.monotonic()
+                    fetch_episodes(ask, client.hello, cache=cache)
+                    self._save_new(control, cache, known)
+                control.stop.wait(1.0 / rate)
+                with self._lock:
+                    held = held_action(space, [control.keys[key] for key in control.held])
+            _answer(control.exchange({"claim": None}))
+        except (RemoteError, InspectorError, *LOST) as error:
+            with self._lock:
+                self.error = f"the demonstration stopped: {error}"
+                control.stop.set()
+
+    def _save_new(self, control: _Control, kept: Mapping[int, EpisodeFile],
+                  known: set[int]) -> None:
+        """Save each ``kept`` episode (by id) not ``known`` before, as the person's."""
+        for identifier in sorted(kept.keys() - known):
+            known.add(identifier)
+            episode = kept[identifier]
+            with self._lock:
+                EpisodeFile(self.target or episode.target, episode.snapshot, [],
+                            episode.terminated, episode.truncated,
+                            agent=control.agent).save(next_episode_path(self.directory))
+                self.episodes += 1
 
     def _release_locked(self) -> None:
         control, self._control = self._control, None

@@ -391,17 +391,22 @@ function showControl(control, note = null, bad = false) {
   }
   choice.hidden = control.controlling || playable.length < 2;
   $("take-control").hidden = control.controlling;
-  $("take-control").disabled = busy;
-  $("take-control").title = busy ? "another client controls this environment" : "";
+  const several = ((state.servers[state.server] || {}).agents || []).length > 1;
+  $("take-control").disabled = busy && !several;  // beside a trainer: the agent is claimed
+  $("take-control").title = !busy ? "" : several ?
+    "a trainer controls this environment: you play the chosen agent beside it" :
+    "another client controls this environment";
   $("release-control").hidden = !control.controlling;
   const status = $("control-status");
   status.dataset.episodes = control.episodes;
   status.dataset.held = (control.held || []).join(" ");
   status.textContent = note ?? (control.error ? control.error :
-    mine ? `you control ${control.agent ?? "it"}: keys ${control.keys.map((k) => k === " " ? "Space" : k).join(", ")}` +
+    mine ? `you ${control.claim ? "play" : "control"} ${control.agent ?? "it"}` +
+           `${control.claim ? " beside the trainer" : ""}: keys ${control.keys.map((k) => k === " " ? "Space" : k).join(", ")}` +
            ` · ${control.episodes} episodes recorded in ${control.directory}` :
     control.controlling ? `you control server ${control.server} instance ${control.instance}` :
-    busy ? "another client controls this environment" : `${control.episodes} episodes recorded`);
+    busy ? (several ? "a trainer controls this environment: Take control plays one agent beside it" :
+      "another client controls this environment") : `${control.episodes} episodes recorded`);
   status.classList.toggle("bad", bad || !!control.error);
 }
 

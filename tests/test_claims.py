@@ -10,15 +10,19 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 from conftest import wait_until
+from inspector_http import fetch
 
 from rlenv.protocol.errors import RemoteError
 from rlenv_client import Client
+from rlenv_client.inspector import Demonstrator, InspectorServer, Watcher
 from rlenv_client.launcher import ServerProcess
+from rlenv_client.replay import EpisodeFile
 
 TAG = "examples.tag:TagEnvironment"
 HELD = np.array([1.0, -0.5], np.float32)  # what the person holds for Runner1
@@ -156,3 +160,61 @@ def test_claims_are_refused_precisely(serve, tag: ServerProcess) -> None:
             person.claim("CartPole", 0)
         assert refused.value.code == "bad_request" and "the client that controls the " \
             "environment owns it" in str(refused.value)
+
+
+def test_the_inspectors_take_control_claims_an_agent_beside_a_trainer_and_records_it(
+        tag: ServerProcess, tmp_path: Path) -> None:
+    stop = threading.Event()
+    infos: list[dict[str, Any]] = []
+    failures: list[BaseException] = []
+
+    def train() -> None:  # a trainer of every agent, its episodes cut at 25 steps
+        try:
+            with Client(tag.host, tag.port) as trainer:
+                while not stop.is_set():
+                    trainer.reset()
+                    for step in range(25):
+                        _, _, terminated, truncated, info = trainer.step(trainer_action(step))
+                        infos.append(info)
+                        if terminated or truncated or stop.wait(0.002):
+                            break
+        except BaseException as error:  # the test's thread reports it
+            failures.append(error)
+
+    thread = threading.Thread(target=train, daemon=True)
+    thread.start()
+    watcher = Watcher([f"{tag.host}:{tag.port}"])
+    demonstrator = Demonstrator(watcher, tmp_path, target=TAG, rate=200.0)
+    inspector = InspectorServer(watcher, demonstrator=demonstrator)
+    inspector.start()
+    try:
+        wait_until(lambda: infos or failures, "the trainer never stepped", seconds=60)
+        page = inspector.url
+        status, _, state = fetch(page, "api/control", method="POST",
+                                 body={"server": 0, "instance": 0, "agent": "Runner1"})
+        assert status == 200 and state["controlling"] and state["claim"], state
+        assert state["agent"] == "Runner1" and "ArrowRight" in state["keys"]
+        fetch(page, "api/keys", method="POST", body={"held": ["ArrowRight"]})
+        wait_until(lambda: infos[-1].get("claimed") == ["Runner1"] or failures,
+                   "the trainer's info never said Runner1 was claimed", seconds=60)
+        wait_until(lambda: demonstrator.episodes >= 2 or failures,
+                   "no episode of the trainer's was recorded", seconds=60)
+        status, _, state = fetch(page, "api/release", method="POST", body={})
+        assert status == 200 and not state["controlling"] and state["error"] == ""
+        count = len(infos)
+        wait_until(lambda: len(infos) > count + 2 or failures, "the trainer stopped",
+                   seconds=60)
+        assert "claimed" not in infos[-1]  # released: Runner1 is the trainer's again
+        last = EpisodeFile.load(sorted(tmp_path.glob("episode-*.rlenv"))[-1])
+        assert last.agent == "Runner1" and last.target == TAG and last.observations == []
+        runner1 = {tuple(map(float, event[1]["Runner1"])) for event in
+                   last.snapshot["events"] if event[0] == "action" and "Runner1" in event[1]}
+        assert runner1 == {(1.0, 0.0)}, runner1  # the person's, not the trainer's (-1, phase)
+        chaser = {tuple(map(float, event[1]["Chaser"])) for event in
+                  last.snapshot["events"] if event[0] == "action"}
+        assert len(chaser) > 1  # the trainer's own actions for the others
+    finally:
+        inspector.close()
+        stop.set()
+        thread.join(timeout=60)
+    assert not failures, failures

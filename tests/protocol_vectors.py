@@ -59,6 +59,7 @@ FAULTY: Final = "examples.faulty:FaultyEnvironment"
 PLINKO: Final = "examples.plinko:PlinkoEnvironment"
 SPACES: Final = "protocol_vectors:SpacesEnvironment"
 CHASE: Final = "per_agent_envs:ChaseEnvironment"
+TAG: Final = "examples.tag:TagEnvironment"
 VARIES: Final = "<varies>"
 """What a path listed in an exchange's ``varies`` is replaced with before comparing."""
 
@@ -497,6 +498,30 @@ def _agent_settings(recording: Recording) -> None:
     link.request({"id": 4, "config": {"agent": {"Runner3": {"max_force": 1.0}}}},
                  "a key that is neither a setting nor an agent",
                  "invalid_config naming the settings, the agents and their classes")
+
+
+@scenario("claim.json", "An observer plays one agent beside the controller: claims (protocol "
+          "2.6)", TAG)
+def _claim(recording: Recording) -> None:
+    controller = recording.connect()
+    controller.hello("three agents: Chaser, Runner1 and Runner2, each a Box(-1, 1, (2,))")
+    controller.request({"id": 1, "reset": {"seed": 0}}, "the controller starts an episode")
+    person = recording.connect()
+    person.hello()
+    person.request({"id": 1, "claim": {"agent": "Runner1", "action": f4(1.0, -0.5)}},
+                   "claim Runner1, holding an action for it: no control taken",
+                   "info.claimed: the agents claimed now")
+    whole = {"Chaser": f4(0.0, 1.0), "Runner1": f4(-1.0, 0.0), "Runner2": f4(0.0, 0.0)}
+    controller.request({"id": 2, "action": whole, "observation": AGENT},
+                       "a whole action, as ever",
+                       "info.claimed: Runner1 moved by the held action, not by this entry")
+    person.request({"id": 2, "claim": {"agent": "Runner2", "action": f4(0.0, 0.0)}},
+                   "a second agent", "bad_request: one claim per client")
+    controller.request({"id": 3, "claim": {"agent": "Runner2", "action": f4(0.0, 0.0)}},
+                       "the controller claims", "bad_request: it acts for every agent already")
+    person.request({"id": 3, "claim": None}, "release the claim", "an empty response")
+    controller.request({"id": 4, "action": whole, "observation": AGENT},
+                       "Runner1 is the controller's again", "no claimed in info")
 
 
 @scenario("snapshot.json", "Snapshot and restore")

@@ -18,7 +18,8 @@ Routes (below the key): ``/`` the page, ``/static/NAME`` its script and style, a
 ``api/snapshot`` (``?server=S&instance=I``, and ``path`` or ``since``), ``api/control`` (the
 demonstration under way) and ``POST api/edit`` (``{"server", "instance", "path", "property",
 "value"}``); with demonstrations (:mod:`~rlenv_client.inspector.control`), ``POST api/control``
-(``{"server", "instance"}`` and, with several agents, the ``agent`` to play: take control),
+(``{"server", "instance"}`` and, with several agents, the ``agent`` to play: take control;
+beside a trainer, claim that agent),
 ``api/keys`` (``{"held": [key, ...]}``) and ``api/release`` (``{}``), under the same rules as
 an edit.
 

@@ -18,6 +18,7 @@ import pytest
 from conftest import wait_until
 from inspector_http import fetch
 
+from rlenv.protocol import Request, Response
 from rlenv.protocol.errors import RemoteError
 from rlenv_client import Client
 from rlenv_client.inspector import Demonstrator, InspectorServer, Watcher
@@ -190,8 +191,13 @@ def test_the_inspectors_take_control_claims_an_agent_beside_a_trainer_and_record
     try:
         wait_until(lambda: infos or failures, "the trainer never stepped", seconds=60)
         page = inspector.url
-        status, _, state = fetch(page, "api/control", method="POST",
-                                 body={"server": 0, "instance": 0, "agent": "Runner1"})
+        take = {"server": 0, "instance": 0, "agent": "Runner1"}
+        with Client(tag.host, tag.port) as other:  # another person plays Runner1 already
+            other.claim("Runner1", HELD)
+            status, _, answer = fetch(page, "api/control", method="POST", body=take)
+            assert status == 409 and "agent 'Runner1' is claimed by another client" in \
+                answer["error"], answer
+        status, _, state = fetch(page, "api/control", method="POST", body=take)
         assert status == 200 and state["controlling"] and state["claim"], state
         assert state["agent"] == "Runner1" and "ArrowRight" in state["keys"]
         fetch(page, "api/keys", method="POST", body={"held": ["ArrowRight"]})
@@ -218,3 +224,25 @@ def test_the_inspectors_take_control_claims_an_agent_beside_a_trainer_and_record
         stop.set()
         thread.join(timeout=60)
     assert not failures, failures
+
+
+def test_a_claim_in_a_batch_plays_an_agent_of_that_instance_alone(serve) -> None:
+    server = serve(TAG, args=["--instances", "2"])
+    with Client(server.host, server.port) as trainer, \
+            Client(server.host, server.port) as person:
+        trainer.send_batch([trainer.reset_request(seed=2), trainer.reset_request(seed=2)])
+        trainer.receive_batch()
+        person.send_batch([None, Request(0, {"claim": {"agent": "Runner1",
+                                                      "action": HELD.tolist()}})])
+        _, claimed = person.receive_batch()
+        assert isinstance(claimed, Response) and claimed.info["claimed"] == ["Runner1"]
+        for step in range(5):
+            trainer.send_batch([trainer.step_request(trainer_action(step))] * 2)
+            first, second = trainer.receive_batch()
+            assert "claimed" not in first.info and second.info["claimed"] == ["Runner1"]
+        assert not same(first.observation, second.observation)  # same seed, Runner1 differs
+        logged = [event[1]["Runner1"] for event in trainer.snapshot()["events"]
+                  if event[0] == "action"]
+        assert len(logged) == 5 and all(  # instance 0's log: the trainer's own actions
+            np.array_equal(action, trainer_action(step)["Runner1"])
+            for step, action in enumerate(logged))

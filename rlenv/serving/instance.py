@@ -148,6 +148,9 @@ class Instance:
         recent: the last finished episodes' logs (:mod:`rlenv.serving.recent`).
         broken: why the next reset rebuilds the environment from its class (user code raised
             while serving the controller), or ``None``.
+        claims: the agents observers play (:mod:`rlenv.serving.claims`), ``None`` while none
+            is claimed.
+        requester: who sent the request being served (the host's, shared by its instances).
         real_time_changed: called after every switch of real time (:meth:`set_real_time`),
             whoever asked for it; the host knows by it which instances tick by the clock.
 
@@ -604,7 +607,10 @@ class Instance:
         return reward, terminated, truncated, frames, outcomes
 
     def info(self, acted: bool, extra: dict[str, Any] | None) -> dict[str, Any]:
-        """An answer's ``info``: ``_get_info()`` while an episode exists, real time's, ``extra``."""
+        """An answer's ``info``: ``_get_info()`` while an episode exists, real time's, ``extra``.
+
+        While observers claim agents (:mod:`rlenv.serving.claims`), ``"claimed"`` lists them.
+        """
         info: dict[str, Any] = {}
         if self.state is not Episode.NOT_STARTED:
             info = self.environment._get_info()

@@ -246,3 +246,22 @@ def test_a_claim_in_a_batch_plays_an_agent_of_that_instance_alone(serve) -> None
         assert len(logged) == 5 and all(  # instance 0's log: the trainer's own actions
             np.array_equal(action, trainer_action(step)["Runner1"])
             for step, action in enumerate(logged))
+
+
+def test_pettingzoo_says_which_agent_a_person_played(tag: ServerProcess) -> None:
+    pytest.importorskip("pettingzoo")
+    from rlenv_client.pettingzoo import RemoteParallelEnv
+
+    env = RemoteParallelEnv(address=f"{tag.host}:{tag.port}")
+    try:
+        env.reset(seed=0)
+        with Client(tag.host, tag.port) as person:
+            person.claim("Runner2", HELD)
+            infos = env.step({agent: np.zeros(2, np.float32) for agent in env.agents})[4]
+            assert infos["Runner2"]["claimed"] is True
+            assert "claimed" not in infos["Chaser"] and "claimed" not in infos["Runner1"]
+            person.release_claim()
+            infos = env.step({agent: np.zeros(2, np.float32) for agent in env.agents})[4]
+            assert all("claimed" not in info for info in infos.values())
+    finally:
+        env.close()

@@ -105,6 +105,10 @@ class RemoteParallelEnv(ParallelEnv):
     def step(self, actions: dict[str, Any]) -> tuple[dict[str, Any], ...]:
         """Act for every agent still in the episode; returns PettingZoo's five dicts.
 
+        An agent that another client claimed in this step (a person played it, see
+        :meth:`~rlenv_client.inspection.Inspection.claim`) has ``"claimed": True`` in its info:
+        its action was not the one given here, so a learner leaves its transition out.
+
         Raises:
             ValueError: an action for an agent the server drives (see
                 :mod:`rlenv_client.trainer_view`).
@@ -125,6 +129,9 @@ class RemoteParallelEnv(ParallelEnv):
         terminations = {agent: bool(outcomes[agent]["terminated"]) for agent in live}
         truncations = {agent: bool(outcomes[agent]["truncated"]) or cut for agent in live}
         infos: dict[str, dict[str, Any]] = {agent: {"frames": info["frames"]} for agent in live}
+        for agent in info.get("claimed", ()):  # a person played it (protocol 2.6 claims)
+            if agent in infos:
+                infos[agent]["claimed"] = True
         self.agents = [agent for agent in live
                        if not (terminations[agent] or truncations[agent])]
         return observations, rewards, terminations, truncations, infos

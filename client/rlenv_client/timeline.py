@@ -640,7 +640,7 @@ class Timeline:
                     records.append(record)
                 if not branching:
                     self._check(step + done, record[0])
-            result = (observation, *taken[-1][1:], info)  # type: ignore[assignment]
+            result = (observation, *taken[-1][1:], info)
             self._park_if_due(step + done, checkpoints, result)
             if branching and (result[2] or result[3]):
                 break

@@ -224,7 +224,7 @@ class Connection:
             return CONNECTION_CLOSED
         body = self._next_frame()
         if body.__class__ is _Sentinel:
-            return body  # type: ignore[return-value]
+            return body
         wire = unpack(body, strict=self.role is _SERVER)
         if wire.__class__ is not dict:
             raise RemoteProtocolError(f"a frame must hold a map, got {type(wire).__name__}")

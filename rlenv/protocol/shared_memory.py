@@ -374,9 +374,9 @@ class Slots:
         return True
 
     def _fill_step(self, reply: Reply) -> bool:
-        if reply.__class__ is not Response or reply.info or reply.agents is not None:  # type: ignore[union-attr]
+        if reply.__class__ is not Response or reply.info or reply.agents is not None:
             return False
-        observation = reply.observation  # type: ignore[union-attr]
+        observation = reply.observation
         if observation is None or len(observation) != 1:
             return False
         agent = observation.get("agent")
@@ -384,24 +384,24 @@ class Slots:
         if agent.__class__ is not bytes or len(agent) != size:
             return False
         self._observations[:size] = agent
-        self._rewards[0] = reply.reward  # type: ignore[union-attr]
-        self._frames[0] = reply.frames  # type: ignore[union-attr]
-        self._terminated[0] = reply.terminated  # type: ignore[union-attr]
-        self._truncated[0] = reply.truncated  # type: ignore[union-attr]
+        self._rewards[0] = reply.reward
+        self._frames[0] = reply.frames
+        self._terminated[0] = reply.terminated
+        self._truncated[0] = reply.truncated
         return True
 
     def _fill_steps(self, reply: Reply) -> bool:
         if reply.__class__ is not StepsResponse or reply.errors is not None or \
-                any(reply.info):  # type: ignore[union-attr]
+                any(reply.info):
             return False
-        observation = reply.observation  # type: ignore[union-attr]
+        observation = reply.observation
         if observation.__class__ is not bytes or len(observation) != len(self._observations):
             return False
         self._observations[:] = observation
-        self._rewards[:] = reply.reward  # type: ignore[union-attr]
-        self._frames[:] = reply.frames  # type: ignore[union-attr]
-        self._terminated[:] = reply.terminated  # type: ignore[union-attr]
-        self._truncated[:] = reply.truncated  # type: ignore[union-attr]
+        self._rewards[:] = reply.reward
+        self._frames[:] = reply.frames
+        self._terminated[:] = reply.terminated
+        self._truncated[:] = reply.truncated
         return True
 
     def read_answer(self, kind: int, copy: bool = True) -> Reply:

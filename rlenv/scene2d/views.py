@@ -175,7 +175,7 @@ class View:
         if strangers:
             raise TypeError(f"{strangers[0]!r} in {self!r} is not a Marker2D: attach puts "
                             "copies on markers only; nothing was attached")
-        return View([marker.attach(node) for marker in self._nodes],  # type: ignore[attr-defined]
+        return View([marker.attach(node) for marker in self._nodes],
                     f"{self._label}.attach({node.name})")
 
     # --- internals --------------------------------------------------------------------------

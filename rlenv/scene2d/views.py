@@ -85,7 +85,7 @@ class View:
         return self._step("placeholders", (n for node in self._nodes for n in node.iter_subtree()
                                            if n is not node and _is_a(n, _MARKER)))
 
-    def of_type(self, kind: type | tuple[type, ...]) -> View:
+    def of_type(self, kind: type[Any] | tuple[type[Any], ...]) -> View:
         """The nodes of this view that are instances of ``kind``."""
         name = kind.__name__ if isinstance(kind, type) else "|".join(k.__name__ for k in kind)
         return self._step(f"of_type({name})", (n for n in self._nodes if isinstance(n, kind)))

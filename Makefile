@@ -1,12 +1,14 @@
 # make demo: set up .venv and serve CartPole to a controller client.
 # make test: set up .venv and run the test suite.
+# make typecheck: mypy over the runtime and the client (the typecheck extra; .ci/run runs it).
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
 .PHONY: demo test test-lowest test-ray test-browser test-minari test-onnx test-package screenshot\
-	screenshot-time-travel plinko-picture sb3 rllib cleanrl bench-http bench-train docs lint vectors clean
+	screenshot-time-travel plinko-picture sb3 rllib cleanrl bench-http bench-train docs lint typecheck\
+	vectors clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -149,6 +151,12 @@ test-lowest: $(LOWEST_VENV)/.installed
 
 lint: $(STAMP)
 	$(BIN)/ruff check rlenv client examples tests benchmarks docs
+
+# The type checker: mypy with pyproject.toml's [tool.mypy] (its files: rlenv and
+# client/rlenv_client), 0 errors and no unused "type: ignore" (the typecheck extra installs it).
+typecheck: $(STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[test,typecheck]"
+	$(BIN)/mypy
 
 # Regenerate the protocol test vectors (docs/protocol/vectors/) by driving real servers.
 vectors: $(STAMP)

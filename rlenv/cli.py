@@ -13,6 +13,7 @@ import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from types import FrameType
+from typing import cast
 
 from rlenv.protocol.errors import RlenvError
 from rlenv.serving.endpoint import DEFAULT_HOST, Limits
@@ -473,7 +474,8 @@ def _replay(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 2
     if args.address is None and args.target is None and not args.trust_target:
-        check_target(target, named_by=f"the recording {args.file}",
+        # Without an address there is a target (refused above otherwise).
+        check_target(cast(str, target), named_by=f"the recording {args.file}",
                      folder=Path(args.file).parent)
     session = Session(target, address=args.address)
     try:

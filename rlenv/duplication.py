@@ -22,7 +22,7 @@ import copy
 import types
 from collections.abc import Mapping
 from enum import Enum
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar, cast
 
 from rlenv.signals import BoundSignal
 
@@ -66,7 +66,7 @@ def duplicate_subtree(root: N, outside_a_tree: Mapping[str, Any]) -> N:
                               for name, bound in node._signals.items()}
     for node, blank in zip(originals, copies, strict=True):
         blank._duplicated(node)
-    return copies[0]
+    return cast(N, copies[0])  # a blank of type(root)
 
 
 def copied_node(node: Node, memo: dict[int, Any]) -> Node:

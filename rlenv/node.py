@@ -28,7 +28,7 @@ from __future__ import annotations
 import fnmatch
 from collections.abc import Callable, Iterator
 from enum import IntEnum
-from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, TypeVar, cast
 
 from rlenv.duplication import copied_node, duplicate_subtree
 from rlenv.scene2d.views import View
@@ -457,7 +457,7 @@ class Node(SignalOwner):
                 continue
             if fnmatch.fnmatchcase(node._name, pattern):
                 found.append(node)
-        return found
+        return cast(list[N], found)  # each an instance of ``type`` (N), or of Node (no type)
 
     def find_child(
         self,
@@ -745,7 +745,7 @@ def _overrides(node: Node, method: str) -> bool:
     return getattr(type(node), method) is not getattr(Node, method)
 
 
-def _check_name(name: str) -> str:
+def _check_name(name: object) -> str:
     if not isinstance(name, str) or not name or name in (".", ".."):
         raise ValueError(f"invalid node name {name!r}")
     bad = _INVALID_NAME_CHARACTERS.intersection(name)

@@ -8,7 +8,7 @@ the class attribute ``_IS_ENVIRONMENT``, not by importing its class.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, cast
 
 import numpy as np
 
@@ -51,7 +51,7 @@ class RLNode(Node):
                 node = node.parent
             if node is None:
                 raise RuntimeError(f"{self!r} is not below an RLEnvironment")
-            environment = node  # type: ignore[assignment]
+            environment = cast("RLEnvironment", node)  # only RLEnvironment sets the flag
             if self.is_inside_tree():  # valid until the node leaves the tree
                 self.__environment = environment
         return environment

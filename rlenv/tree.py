@@ -340,9 +340,12 @@ class _TickPlan:
         self._physics_nodes = [node for node in order if node._physics_processing]
         self._step_nodes = [node for node in order if _simulates(node)]
         self._process_nodes = [node for node in order if node._processing]
-        self.physics = [node._physics_process for node in self._physics_nodes]
-        self.steps = [node._physics_step for node in self._step_nodes]
-        self.process = [node._process for node in self._process_nodes]
+        self.physics: list[Callable[[float], None]] = [
+            node._physics_process for node in self._physics_nodes]
+        self.steps: list[Callable[[float], None]] = [
+            node._physics_step for node in self._step_nodes]
+        self.process: list[Callable[[float], None]] = [
+            node._process for node in self._process_nodes]
 
     def skip_stopped(self) -> None:
         """Turn into no-ops the calls of nodes that can no longer run (a change mid-pass)."""

@@ -105,6 +105,22 @@ def test_ci_builds_checks_and_installs_the_wheel() -> None:
     assert all(re.fullmatch(r"(build|twine)>=[0-9.]+,<=[0-9.]+", pin) for pin in release)
 
 
+def test_ci_type_checks_the_runtime_and_the_client_without_silencing_errors() -> None:
+    assert re.search(r"^make typecheck$", (ROOT / ".ci" / "run").read_text(encoding="utf-8"),
+                     re.M)
+    makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
+    assert re.search(r"^typecheck: .*\n.*\[test,typecheck\].*\n\t\$\(BIN\)/mypy$", makefile, re.M)
+    assert not re.search(r"^test: .*typecheck", makefile, re.M)  # make test does without it
+    mypy = PYPROJECT["tool"]["mypy"]
+    assert mypy["files"] == ["rlenv", "client/rlenv_client"] and mypy["warn_unused_ignores"]
+    assert not {"disable_error_code", "ignore_errors", "ignore_missing_imports"} & set(mypy)
+    for override in mypy["overrides"]:  # only named libraries' missing types, nothing of ours
+        assert set(override) == {"module", "ignore_missing_imports"}, override
+        assert not [name for name in override["module"] if name.startswith("rlenv")]
+    assert all(re.fullmatch(r"[a-zA-Z-]+>=[0-9.]+(,<=[0-9.]+)?", pin)
+               for pin in PYPROJECT["project"]["optional-dependencies"]["typecheck"])
+
+
 # The examples' two names, in this checkout: one module per example in a process.
 
 def test_registered_ids_name_the_installed_examples() -> None:

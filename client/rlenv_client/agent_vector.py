@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import Any, SupportsIndex, cast
 
 import numpy as np
 from gymnasium import spaces
@@ -146,15 +146,15 @@ class AgentVectorEnv(VectorEnv):
         timeout: float = 30.0, token: str | None = None, max_restarts: int = 3,
         trainer_cores: int = 0,
     ) -> None:
-        self.vector: RemoteVectorEnv | None = None
+        vector: RemoteVectorEnv | None = None  # self.vector once built
         options: dict[str, Any] = {
             "repeat_action": repeat_action, "max_episode_steps": max_episode_steps,
             "autoreset_mode": AutoresetMode.SAME_STEP, "render_mode": render_mode,
             "timeout": timeout, "token": token, "max_restarts": max_restarts}
         try:
             if addresses is not None:  # running servers: their hello says who they are
-                self.vector = RemoteVectorEnv(instances, target, addresses=addresses, **options)
-                hello = self.vector.clients[0].hello
+                vector = RemoteVectorEnv(instances, target, addresses=addresses, **options)
+                hello = vector.clients[0].hello
                 classes = _classes_or_none(target or hello.target)
                 names, already = list(hello.agents), set(hello.driven)
             else:
@@ -172,27 +172,27 @@ class AgentVectorEnv(VectorEnv):
                     f"agent {name!r} is to be driven by {policy!r} in its server, and {where} "
                     f"start no server here: give others={{{name!r}: callable}}, or serve it "
                     f"with rlenv serve --policy {name}={policy}")
-            if self.vector is None:
+            if vector is None:
                 server_args = [argument for name, policy in self.driven_by_server.items()
                                for argument in ("--policy", f"{name}={policy}")]
                 if instances_per_server is None and not in_process:
                     instances_per_server = default_layout(instances or 1,
                                                           trainer_cores=trainer_cores)[0]
-                self.vector = RemoteVectorEnv(
+                vector = RemoteVectorEnv(
                     instances, target, in_process=in_process,
                     instances_per_server=instances_per_server, server_args=server_args,
                     **options)
+            self.vector: RemoteVectorEnv = vector
             self._set_spaces()
         except BaseException:
-            if self.vector is not None:
-                self.vector.close()
+            if vector is not None:
+                vector.close()
             raise
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": self.vector.metadata["render_fps"]}
 
     def _set_spaces(self) -> None:
         vector = self.vector
-        assert vector is not None
         self.instances = vector.num_envs
         joint_actions, joint_observations = vector.single_action_space, \
             vector.single_observation_space
@@ -220,7 +220,8 @@ class AgentVectorEnv(VectorEnv):
         self._last = create_empty_array(observation_space, self.num_envs)  # per sub-env
 
     def _agent_space(self, joint: spaces.Space, name: str) -> spaces.Space:
-        return joint[name] if self._several else joint
+        # Several agents: the joint spaces are Dicts by agent (see _set_spaces).
+        return cast(spaces.Dict, joint)[name] if self._several else joint
 
     def _of(self, joint_batch: Any, name: str) -> Any:
         """Agent ``name``'s share of a joint batch (or of one joint value)."""
@@ -266,8 +267,8 @@ class AgentVectorEnv(VectorEnv):
                 set_row(column, i, row(actions, i * k + j))
         for name, policy in self.driven_here.items():
             column, seen = self._of(joint, name), self._of(self._joint_observation, name)
-            for i in np.flatnonzero(~self._others_done[name]):
-                set_row(column, i, policy(row(seen, i)))
+            for live in np.flatnonzero(~self._others_done[name]):
+                set_row(column, live, policy(row(seen, live)))
         joint_obs, *flags, infos = self.vector.step(joint)
         self._joint_observation = joint_obs
         return self._outcomes(joint_obs, tuple(flags), infos)
@@ -446,7 +447,8 @@ def _columns(outcome: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, np.nda
             np.asarray(outcome["terminated"], np.bool_), np.asarray(outcome["truncated"], np.bool_))
 
 
-def _final_info(final_info: Mapping[str, Any], instance: int, name: str) -> dict[str, Any]:
+def _final_info(final_info: Mapping[str, Any], instance: SupportsIndex,
+                name: str) -> dict[str, Any]:
     """The last info of agent ``name`` in ``instance``: the instance's, less the other agents."""
     info: dict[str, Any] = {}
     for key, value in final_info.items():

@@ -178,8 +178,8 @@ class BaseClient(Inspection, ABC):
             RemoteError: the answer is an error.
         """
         response = reply if reply.__class__ is Response else self._response(reply)
-        return (self._observation(response, writable), response.reward,  # type: ignore[union-attr]
-                response.terminated, response.truncated, self._info(response))  # type: ignore[union-attr,arg-type]
+        return (self._observation(response, writable), response.reward,
+                response.terminated, response.truncated, self._info(response))
 
     def reset_result(self, reply: Response | ErrorReply) -> tuple[Any, dict[str, Any]]:
         """A reset's answer as ``(observation, info)``.
@@ -229,9 +229,9 @@ class BaseClient(Inspection, ABC):
         if message.__class__ is not Response and message.__class__ is not ErrorReply:
             self.close()
             raise ConnectionLost(f"{self.address} answered a request with {message!r:.80}")
-        if message.__class__ is ErrorReply and message.fatal:  # type: ignore[union-attr]
+        if message.__class__ is ErrorReply and message.fatal:
             self.close()
-        return message  # type: ignore[return-value]
+        return message
 
     def send_batch(self, requests: Sequence[Request | None]) -> None:
         """Send one request per instance of the server (``None``: skip one)."""
@@ -395,21 +395,21 @@ class BaseClient(Inspection, ABC):
         """The answer to a batch or steps request, ``kind``; raises a refusal of it whole."""
         message = self._reply(copy)
         if message.__class__ is ErrorReply:
-            self._response(message)  # type: ignore[arg-type]
+            self._response(message)
         if message.__class__ is not kind:
             self.close()
             raise ConnectionLost(f"{self.address} answered {asked} with {message!r:.80}")
-        return message  # type: ignore[return-value]
+        return message
 
     def _response(self, message: Response | ErrorReply) -> Response:
         if message.__class__ is ErrorReply:
-            if message.fatal:  # type: ignore[union-attr]
+            if message.fatal:
                 self.close()
-            raise RemoteError(message.code, message.message, message.fatal)  # type: ignore[union-attr]
+            raise RemoteError(message.code, message.message, message.fatal)
         if message.__class__ is not Response:
             self.close()
             raise ConnectionLost(f"{self.address} answered a request with {message!r:.80}")
-        return message  # type: ignore[return-value]
+        return message
 
     def _observation(self, response: Response, writable: bool = True) -> Any:
         observation = response.observation

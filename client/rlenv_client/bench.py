@@ -34,6 +34,7 @@ Progress goes to stderr, the table to stdout, and everything to JSON with ``--js
 from __future__ import annotations
 
 import contextlib
+import functools
 import itertools
 import json
 import logging
@@ -309,9 +310,8 @@ class HandWrittenVector:
 
 def _step_request(action: np.ndarray | int) -> bytes:
     """A step request as rlenv's client sends one; arrays as raw bytes."""
-    if isinstance(action, np.ndarray):
-        action = action.tobytes()
-    return _frame({"id": 1, "action": action, "observation": {"agent": {}}})
+    wire = action.tobytes() if isinstance(action, np.ndarray) else action
+    return _frame({"id": 1, "action": wire, "observation": {"agent": {}}})
 
 
 def _step_reply(observation: np.ndarray) -> bytes:
@@ -472,7 +472,7 @@ def _vectors(rounds: int, steps: int, quick: bool) -> list[Figure]:
                                                        **place))
             envs.reset(seed=0)
             batch = np.zeros((count, 1), np.float32)
-            measures.append(Rate(_calls(lambda envs=envs, batch=batch: envs.step(batch)),
+            measures.append(Rate(_calls(functools.partial(envs.step, batch)),
                                   max(steps // count, 20), scale=count))
         async_rate, *vector_rates = interleaved(rounds, *measures)
     for (name, _, _), rate in zip(layouts, vector_rates, strict=True):

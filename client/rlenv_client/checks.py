@@ -16,6 +16,7 @@ The details hold no ANSI colour codes (gymnasium colours its warnings; they are 
 from __future__ import annotations
 
 import contextlib
+import functools
 import io
 import re
 import warnings
@@ -232,7 +233,7 @@ def run_checks(target: str, timeout: float = 30.0, compliance: bool = False,
     results = [CheckResult("connect", "pass", f"{hello.environment}: action space "
                            f"{hello.action_space}, observation space {hello.observation_space}")]
     try:
-        results += [_run(name, lambda check=check: check(env)) for name, check in CHECKS]
+        results += [_run(name, functools.partial(check, env)) for name, check in CHECKS]
         address = env.client.address
         env.client.close()  # release control: the checks below bring their own clients
         results.append(_run("pettingzoo parallel_api_test",

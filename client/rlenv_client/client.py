@@ -347,7 +347,7 @@ class Client(BaseClient):
                 lane.slots.answer_sequence != self._lane_answers:
             return True
         sock = self._sock
-        return self._connection.buffered or sock is None or readable_now(sock)
+        return self._connection.buffered > 0 or sock is None or readable_now(sock)
 
     def _answered_by_lane(self) -> bool:
         """Wait for the answer to the lane's request; whether it is in the slots.

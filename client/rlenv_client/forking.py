@@ -140,7 +140,7 @@ class ForkedEnvironment:
         """
         self._send(["run", [list(step) for step in steps], stop_at_end, observations])
         records, observation, info = self._receive()
-        return [tuple(record) for record in records], observation, info  # type: ignore[misc]
+        return [tuple(record) for record in records], observation, info
 
     def fork(self) -> ForkedEnvironment:
         """A copy of this process, at this state, with a socket of its own."""

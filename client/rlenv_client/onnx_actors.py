@@ -34,7 +34,7 @@ class Actor(torch.nn.Module):
         self.squash = sb3 and bool(getattr(policy, "squash_output", False))
         self.dtype = np.dtype(action_space.dtype)
         self.torch_dtype = torch.from_numpy(np.zeros(0, self.dtype)).dtype
-        if not self.discrete:
+        if not isinstance(action_space, spaces.Discrete):  # not self.discrete: a Box
             self.register_buffer("low", torch.as_tensor(action_space.low, dtype=torch.float32))
             self.register_buffer("high", torch.as_tensor(action_space.high, dtype=torch.float32))
         if sb3:

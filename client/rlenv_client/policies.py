@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import warnings
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from gymnasium import spaces
@@ -82,7 +82,7 @@ def export_onnx(model: Any, path: str | Path, observation_space: spaces.Space | 
         if not isinstance(space, spaces.Box | spaces.Discrete):
             raise TypeError(f"export_onnx takes Box and Discrete spaces; the {which} space is "
                             f"{space}")
-    actor = Actor(policy, action_space, sb3)
+    actor = Actor(policy, cast(spaces.Box | spaces.Discrete, action_space), sb3)  # checked above
     observations = _sample(observation_space, CHECKED_OBSERVATIONS)
     path = Path(path)
     with warnings.catch_warnings():  # the TorchScript exporter: torch.export cannot trace SB3

@@ -44,7 +44,7 @@ import os
 import secrets
 import time
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, cast
 
 import ray
 from ray.util.placement_group import placement_group, remove_placement_group
@@ -214,7 +214,8 @@ class RayServerPool(_Servers):
             tell(f"rlenv: placing {servers} servers of {target} on the Ray cluster")
             ray.get(self._group.ready(), timeout=startup_timeout)
             for index in range(servers):
-                actors.append(ServerActor.options(
+                # @ray.remote made the class an actor class (mypy sees the class as written).
+                actors.append(cast(Any, ServerActor).options(
                     num_cpus=cpus_per_server, max_restarts=max_restarts, max_task_retries=-1,
                     scheduling_strategy=PlacementGroupSchedulingStrategy(
                         self._group, placement_group_bundle_index=index),
@@ -231,7 +232,7 @@ class RayServerPool(_Servers):
                 tell(f"rlenv: {servers - len(pending)} of {servers} servers up on "
                      f"{len(set(self._nodes.values()))} nodes")
             if name is not None:
-                self._registry = _Registry.options(name=_REGISTRY.format(name)).remote(
+                self._registry = cast(Any, _Registry).options(name=_REGISTRY.format(name)).remote(
                     actors, token, instances_per_server)
         except BaseException:
             self.close()

@@ -96,7 +96,8 @@ class RemoteMultiAgentEnv(MultiAgentEnv):
         self.driven = tuple(hello.driven)
         self.possible_agents = [name for name in hello.agents if name not in self.driven]
         self.agents: list[str] = []
-        if self._several:
+        if self._several and isinstance(joint_actions, spaces.Dict) and \
+                isinstance(joint_observations, spaces.Dict):  # (Dicts when several: see above)
             self.observation_spaces = {name: joint_observations[name]
                                        for name in self.possible_agents}
             self.action_spaces = {name: joint_actions[name] for name in self.possible_agents}

@@ -9,7 +9,7 @@ helpers cut and fill such batches without going through one value per sub-enviro
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import Any, SupportsIndex
 
 import numpy as np
 from gymnasium import spaces
@@ -62,7 +62,7 @@ def empty_like(batch: Any) -> Any:
     return _read(batch, np.empty_like)
 
 
-def row(batch: Any, index: int) -> Any:
+def row(batch: Any, index: SupportsIndex) -> Any:
     """Sub-environment ``index`` of ``batch``, copied (later writes to the batch leave it be)."""
     return _read(batch, lambda array: np.array(array[index]))
 
@@ -72,7 +72,7 @@ def set_rows(out: Any, start: int, part: Any) -> None:
     _write(out, part, lambda piece: slice(start, start + len(piece)))
 
 
-def set_row(out: Any, index: int, value: Any) -> None:
+def set_row(out: Any, index: SupportsIndex, value: Any) -> None:
     """Write one sub-environment's ``value`` into row ``index`` of ``out``."""
     _write(out, value, lambda piece: index)
 

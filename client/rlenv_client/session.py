@@ -139,10 +139,11 @@ class Session:
         token: str | None = None, instances: int = 1, pool: ServerSource | None = None,
         index: int = 0, shared_memory: bool | None = None, share_server: bool = False,
     ) -> None:
-        self._place = {"target": target, "address": address, "in_process": in_process,
-                       "timeout": timeout, "server_args": server_args, "token": token,
-                       "instances": instances, "pool": pool, "index": index,
-                       "shared_memory": shared_memory, "share_server": share_server}
+        # connect's keyword arguments, as given.
+        self._place: dict[str, Any] = {
+            "target": target, "address": address, "in_process": in_process, "timeout": timeout,
+            "server_args": server_args, "token": token, "instances": instances, "pool": pool,
+            "index": index, "shared_memory": shared_memory, "share_server": share_server}
         self._pool = pool
         self._connect()
         self.max_restarts = max_restarts

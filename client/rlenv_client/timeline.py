@@ -43,10 +43,11 @@ import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
+from rlenv.protocol import Hello
 from rlenv.protocol.errors import RemoteError
 from rlenv_client.forking import ForkedEnvironment, StepRecord
 from rlenv_client.replay import EpisodeFile, digest, older_settings
@@ -334,7 +335,8 @@ class Timeline:
     def _setup(self, episode: EpisodeFile, processes: _Processes, owner: bool,
                checkpoints: _Checkpoints, records: list[StepRecord]) -> None:
         self.episode = episode
-        self.hello = processes.first.hello
+        # A started process has said its hello (ForkedEnvironment.start).
+        self.hello = cast(Hello, processes.first.hello)
         self._processes = processes
         self._owner = owner
         self._checkpoints = checkpoints
@@ -640,7 +642,7 @@ class Timeline:
                     records.append(record)
                 if not branching:
                     self._check(step + done, record[0])
-            result = (observation, *taken[-1][1:], info)  # type: ignore[assignment]
+            result = (observation, *taken[-1][1:], info)
             self._park_if_due(step + done, checkpoints, result)
             if branching and (result[2] or result[3]):
                 break

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, cast
 
 from gymnasium import spaces
 from gymnasium.vector.utils import concatenate, create_empty_array
@@ -134,5 +134,6 @@ def _stand_in(space: spaces.Space, count: int) -> Any:
     space = copy.deepcopy(space)  # seeding the hello's own would change its samples
     space.seed(0)
     one = space.sample()
-    return concatenate(space, [one] * count, create_empty_array(space, count))
+    out = cast(Any, create_empty_array(space, count))  # an action space: never None
+    return concatenate(space, [one] * count, out)
 

@@ -23,6 +23,7 @@ ratios. A CPU-bound process of something else (``busy=True``) and torch's thread
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 import statistics
@@ -158,8 +159,7 @@ def ppo_rows(
             for name, make in ways:
                 model = PPO("MlpPolicy", make(), seed=0, verbose=0, **hyperparameters)
                 measures.append(Measure(
-                    name, lambda steps, model=model: model.learn(steps,
-                                                                 reset_num_timesteps=False),
+                    name, functools.partial(model.learn, reset_num_timesteps=False),
                     updates * batch, 2 * batch, model.get_env().close))
             progress(f"PPO, {config}: {len(measures)} trainers, {rounds} rounds in turns")
             interleaved(rounds, *measures, progress=progress)

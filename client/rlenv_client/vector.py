@@ -301,13 +301,13 @@ class RemoteVectorEnv(VectorEnv):
                     int(index),
                 )
             plan = [self._reset_request(i) if ended[i] else None for i in range(self.num_envs)]
-            for index, reply in enumerate(exchange(self.sessions, self._groups, plan)):
-                if ended[index]:
-                    observation, env_infos[index] = self._client_of(index).reset_result(
-                        sure_reply(index, reply))
-                    set_row(observations, index, observation)
-                    frames[index] = env_infos[index].pop("frames")
-                    self._steps[index] = 0
+            for i, reply in enumerate(exchange(self.sessions, self._groups, plan)):
+                if ended[i]:
+                    observation, env_infos[i] = self._client_of(i).reset_result(
+                        sure_reply(i, reply))
+                    set_row(observations, i, observation)
+                    frames[i] = env_infos[i].pop("frames")
+                    self._steps[i] = 0
         self._autoreset = ended
         self._last = observations
         return observations, rewards, terminations, truncations, \
@@ -353,10 +353,10 @@ class RemoteVectorEnv(VectorEnv):
                 rewards[span], terminations[span] = answer.reward, answer.terminated
                 truncations[span], frames[span] = answer.truncated, answer.frames
                 env_infos[span] = answer.info
-                for error in answer.errors or ():
-                    if error is not None:
-                        refusals.setdefault(number, RemoteError(error.code, error.message,
-                                                                error.fatal))
+                for refused in answer.errors or ():
+                    if refused is not None:
+                        refusals.setdefault(number, RemoteError(refused.code, refused.message,
+                                                                refused.fatal))
             except RemoteError as error:  # read every server's answer before raising
                 refusals[number] = error
             except LOST as error:

@@ -174,7 +174,7 @@ def create_app(settings: Settings, hello: Hello | None = None) -> Starlette:
     origins = OriginPolicy(settings.port, host_names(settings.host))
     app = Starlette(
         routes=_routes(gateway.endpoints),
-        middleware=[Middleware(Guard, origins=origins, token=settings.token,  # type: ignore[arg-type]
+        middleware=[Middleware(Guard, origins=origins, token=settings.token,
                                max_body=settings.max_body)],
         exception_handlers={Problem: _problem, HTTPException: _http_exception,
                             Exception: _bug},

@@ -29,7 +29,7 @@ import asyncio
 import os
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from typing import Protocol, TypeVar
+from typing import Any, Protocol, TypeVar
 
 from rlenv.transport.sockets import AnswerWaiter
 
@@ -142,7 +142,7 @@ def _settle(future: asyncio.Future[bool], answered: bool) -> None:
         future.set_result(answered)
 
 
-def _consume(future: asyncio.Future[object]) -> None:
+def _consume(future: asyncio.Future[Any]) -> None:
     """Retrieve an abandoned call's outcome (its environment was ended meanwhile)."""
     if not future.cancelled():
         future.exception()

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TypeVar
 
 from rlenv.http.problems import Problem
 from rlenv.http.runners import Runner
@@ -35,6 +36,7 @@ from rlenv_client.session import parse_address
 
 __all__ = ["Catalog", "Entry", "Opened", "is_address"]
 
+_T = TypeVar("_T")
 _STARTUP_TIMEOUT = 60.0  # seconds a session's server may take to start
 _CLOSING_GRACE = 5.0  # seconds a session's server has to exit on SIGTERM before SIGKILL
 
@@ -174,9 +176,9 @@ def _connect(host: str, port: int, timeout: float) -> Client:
         raise Problem(code, f"{host}:{port} refused the connection: {error.message}") from None
 
 
-def _guarded(open_client: Callable[[], object]) -> Callable[[], object]:
+def _guarded(open_client: Callable[[], _T]) -> Callable[[], _T]:
     """``open_client`` whose failures (the environment's own code raising) are problems."""
-    def call() -> object:
+    def call() -> _T:
         try:
             return open_client()
         except (Problem, TimeoutError):

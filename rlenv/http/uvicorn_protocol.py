@@ -139,8 +139,8 @@ class _OneWrite:
 def _one_write(base: type[Any]) -> type[asyncio.Protocol]:
     """Uvicorn's protocol ``base``, its writes within one event loop step sent at once."""
 
-    class OneWriteProtocol(base):  # type: ignore[valid-type,misc]
-        def connection_made(self, transport: asyncio.BaseTransport) -> None:  # type: ignore[override]
+    class OneWriteProtocol(base):
+        def connection_made(self, transport: asyncio.BaseTransport) -> None:
             super().connection_made(_OneWrite(transport))  # type: ignore[arg-type]
 
     OneWriteProtocol.__name__ = OneWriteProtocol.__qualname__ = f"OneWrite{base.__name__}"
@@ -151,13 +151,13 @@ def _bounded(base: type[Any], *, head_timeout: float,
                      max_connections: int) -> type[asyncio.Protocol]:
     """The protocol ``base`` (uvicorn's) with the head deadline and the connection bound."""
 
-    class BoundedProtocol(base):  # type: ignore[valid-type,misc]
+    class BoundedProtocol(base):
         _head_deadline: asyncio.TimerHandle | None = None
         _head_cycle: object = None
         _head_since = 0.0
         _between_requests = False
 
-        def connection_made(self, transport: asyncio.BaseTransport) -> None:  # type: ignore[override]
+        def connection_made(self, transport: asyncio.BaseTransport) -> None:
             super().connection_made(transport)
             self._arm()
             if len(self.connections) > max_connections:

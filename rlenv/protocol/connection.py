@@ -223,8 +223,8 @@ class Connection:
                 self._enter(_CLOSED)
             return CONNECTION_CLOSED
         body = self._next_frame()
-        if body.__class__ is _Sentinel:
-            return body  # type: ignore[return-value]
+        if isinstance(body, _Sentinel):
+            return body
         wire = unpack(body, strict=self.role is _SERVER)
         if wire.__class__ is not dict:
             raise RemoteProtocolError(f"a frame must hold a map, got {type(wire).__name__}")
@@ -271,8 +271,8 @@ class Connection:
         if len(body) > MAX_FRAME_OBJECTS and count_objects(body) > MAX_FRAME_OBJECTS:
             raise LocalProtocolError(f"message holds more than {MAX_FRAME_OBJECTS} msgpack "
                                      "objects, the limit of a frame the peer reads")
-        if kind is Request:
-            outstanding.append(message.id)  # type: ignore[union-attr]
+        if message.__class__ is Request:
+            outstanding.append(message.id)
         elif reply_id is not None:
             outstanding.popleft()
         if state is not self.state:

@@ -34,7 +34,7 @@ from __future__ import annotations
 import platform
 import sys
 from dataclasses import dataclass
-from typing import Any, Final
+from typing import Any, Final, cast
 
 import numpy as np
 from gymnasium import spaces
@@ -51,7 +51,7 @@ STEPS: Final = 2
 _ANSWER = 64
 _ACTIONS = 128
 _RAW_BYTES = (spaces.Box, spaces.MultiDiscrete, spaces.MultiBinary)
-_AGENT_ONLY: Final = {"agent": {}}
+_AGENT_ONLY: Final[dict[str, dict[str, Any]]] = {"agent": {}}
 _STEP_KEYS = frozenset({"action", "observation", "repeat_action"})
 _STEPS_KEYS = frozenset({"action", "reset", "repeat_action"})
 _REWARD = np.dtype("<f8")
@@ -96,6 +96,12 @@ def lane_unavailable(hello: Hello) -> str | None:
     return None
 
 
+def _packed_size(space: spaces.Space[Any]) -> int:
+    # Only spaces that lane_unavailable admits come here: each has a fixed dtype and shape.
+    dtype, shape = cast(np.dtype, space.dtype), cast(tuple[int, ...], space.shape)
+    return dtype.itemsize * int(np.prod(shape, dtype=np.int64))
+
+
 def _aligned(offset: int) -> int:
     return (offset + 7) // 8 * 8
 
@@ -135,9 +141,7 @@ class Layout:
             raise ValueError(why)
         count = hello.instances
         action, observation = hello.action_space, hello.observation_space
-        action_size = action.dtype.itemsize * int(np.prod(action.shape, dtype=np.int64))
-        observation_size = observation.dtype.itemsize * int(
-            np.prod(observation.shape, dtype=np.int64))
+        action_size, observation_size = _packed_size(action), _packed_size(observation)
         reset = _aligned(_ACTIONS + count * action_size)
         observations = _aligned(reset + count)
         reward = _aligned(observations + count * observation_size)
@@ -175,7 +179,7 @@ class Slots:
         action = hello.action_space
         self._discrete = isinstance(action, spaces.Discrete)
         self._action_dtype = action.dtype
-        if self._discrete:
+        if isinstance(action, spaces.Discrete):
             self._first, self._end = int(action.start), int(action.start + action.n)
         self._actions = self._buffer[_ACTIONS:_ACTIONS + count * layout.action_size]
         self._reset = self._buffer[layout.reset:layout.reset + count]
@@ -374,9 +378,9 @@ class Slots:
         return True
 
     def _fill_step(self, reply: Reply) -> bool:
-        if reply.__class__ is not Response or reply.info or reply.agents is not None:  # type: ignore[union-attr]
+        if reply.__class__ is not Response or reply.info or reply.agents is not None:
             return False
-        observation = reply.observation  # type: ignore[union-attr]
+        observation = reply.observation
         if observation is None or len(observation) != 1:
             return False
         agent = observation.get("agent")
@@ -384,24 +388,24 @@ class Slots:
         if agent.__class__ is not bytes or len(agent) != size:
             return False
         self._observations[:size] = agent
-        self._rewards[0] = reply.reward  # type: ignore[union-attr]
-        self._frames[0] = reply.frames  # type: ignore[union-attr]
-        self._terminated[0] = reply.terminated  # type: ignore[union-attr]
-        self._truncated[0] = reply.truncated  # type: ignore[union-attr]
+        self._rewards[0] = reply.reward
+        self._frames[0] = reply.frames
+        self._terminated[0] = reply.terminated
+        self._truncated[0] = reply.truncated
         return True
 
     def _fill_steps(self, reply: Reply) -> bool:
         if reply.__class__ is not StepsResponse or reply.errors is not None or \
-                any(reply.info):  # type: ignore[union-attr]
+                any(reply.info):
             return False
-        observation = reply.observation  # type: ignore[union-attr]
+        observation = reply.observation
         if observation.__class__ is not bytes or len(observation) != len(self._observations):
             return False
         self._observations[:] = observation
-        self._rewards[:] = reply.reward  # type: ignore[union-attr]
-        self._frames[:] = reply.frames  # type: ignore[union-attr]
-        self._terminated[:] = reply.terminated  # type: ignore[union-attr]
-        self._truncated[:] = reply.truncated  # type: ignore[union-attr]
+        self._rewards[:] = reply.reward
+        self._frames[:] = reply.frames
+        self._terminated[:] = reply.terminated
+        self._truncated[:] = reply.truncated
         return True
 
     def read_answer(self, kind: int, copy: bool = True) -> Reply:
@@ -417,7 +421,9 @@ class Slots:
                             float(self._rewards[0]), bool(self._terminated[0]),
                             bool(self._truncated[0]), {}, int(self._frames[0]))
         if not copy:
-            return StepsResponse(reply_id, *self._answer_views, self._no_infos)
+            observation, reward, terminated, truncated, frames = self._answer_views
+            return StepsResponse(reply_id, observation, reward, terminated, truncated, frames,
+                                 self._no_infos)
         return StepsResponse(reply_id, bytes(self._observations), self._rewards.copy(),
                              self._terminated.astype(np.bool_), self._truncated.astype(np.bool_),
                              self._frames.copy(), self._no_infos)

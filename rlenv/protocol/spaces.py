@@ -286,7 +286,7 @@ class _MultiDiscrete(_ArrayKind):
         return {"type": "MultiDiscrete", "dtype": space.dtype.str, "nvec": space.nvec,
                 "start": space.start}
 
-    def from_spec(self, spec: Spec) -> spaces.MultiDiscrete:
+    def from_spec(self, spec: Spec) -> spaces.MultiDiscrete[Any]:  # of the dtype spec names
         if not (np.asarray(spec["nvec"]) > 0).all():
             raise ValueError(f"nvec (counts) must be positive, got {spec['nvec']!r:.80}")
         return spaces.MultiDiscrete(spec["nvec"], dtype=np.dtype(spec["dtype"]),
@@ -315,7 +315,8 @@ class _MultiBinary(_ArrayKind):
 
     def to_spec(self, space: spaces.MultiBinary) -> Spec:
         n = space.n
-        return {"type": "MultiBinary", "n": int(n) if np.ndim(n) == 0 else [int(k) for k in n]}
+        return {"type": "MultiBinary",
+                "n": int(n) if isinstance(n, int | np.integer) else [int(k) for k in n]}
 
     def from_spec(self, spec: Spec) -> spaces.MultiBinary:
         return spaces.MultiBinary(spec["n"])
@@ -395,7 +396,7 @@ class _Discrete(SpaceKind):
         return {"type": "Discrete", "n": int(space.n), "start": int(space.start),
                 "dtype": space.dtype.str}
 
-    def from_spec(self, spec: Spec) -> spaces.Discrete:
+    def from_spec(self, spec: Spec) -> spaces.Discrete[Any]:  # of the dtype spec names
         return spaces.Discrete(spec["n"], start=spec["start"], dtype=np.dtype(spec["dtype"]))
 
     def check(self, space: spaces.Discrete, value: Any, path: str) -> np.integer:

@@ -242,7 +242,8 @@ class Refill:
         self._shapes = [shape._shape for shape in shapes]
         refreshers = [_refresher(c) if FAST and c.a in bodies and c.b in bodies else None
                       for c in constraints]
-        self._constraints = None if None in refreshers else refreshers
+        known = [refresher for refresher in refreshers if refresher is not None]
+        self._constraints = known if len(known) == len(refreshers) else None
 
     def into(self, space: pymunk.Space) -> bool:
         """Empty ``space`` of these objects and put them back as new.

@@ -92,7 +92,7 @@ def _free_names(name: str, parent: Node, count: int) -> list[str]:
     stem = name.rstrip("0123456789") or name
     number = int(name[len(stem):] or 1)
     taken = parent._children_by_name
-    names = []
+    names: list[str] = []
     while len(names) < count:
         number += 1
         candidate = f"{stem}{number}"

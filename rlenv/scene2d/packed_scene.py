@@ -79,7 +79,7 @@ CONNECTABLE = frozenset({"queue_free"})
 
 _NODE_KEYS = frozenset({"class", "name", "properties", "attributes", "tuples", "nodes", "groups",
                         "signals", "connections", "children"})
-_PLAIN = (bool, int, float, str, bytes, type(None))
+_PLAIN: tuple[type, ...] = (bool, int, float, str, bytes, type(None))
 
 
 class PackedSceneError(ValueError):

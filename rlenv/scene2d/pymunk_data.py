@@ -12,7 +12,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
 
 import pymunk
@@ -69,7 +69,7 @@ def _new_shape(shape: pymunk.Shape) -> pymunk.Shape:
     raise TypeError(f"cannot copy a {type(shape).__name__}")
 
 
-def _poly(vertices: list[tuple[float, float]], radius: float) -> pymunk.Poly:
+def _poly(vertices: Sequence[tuple[float, float]], radius: float) -> pymunk.Poly:
     """A polygon with exactly these (convex, counter-clockwise) vertices, in this order.
 
     pymunk's constructor takes the convex hull, which may start at another vertex (a box's
@@ -178,14 +178,14 @@ def shape_from_data(data: Any) -> pymunk.Shape:
 def _checked_poly(vertices: Any, radius: float) -> pymunk.Poly:
     if not isinstance(vertices, list | tuple) or not 3 <= len(vertices) <= MAX_VERTICES:
         raise ValueError(f"a poly's vertices are a list of 3 to {MAX_VERTICES} points")
-    points = [tuple(vector(v, "vertex")) for v in vertices]
+    points = [vector(v, "vertex") for v in vertices]
     hull = [tuple(v) for v in pymunk.Poly(None, points).get_vertices()]
     if len(hull) != len(points) or not _same_cycle(hull, points):
         raise ValueError("a poly's vertices must go counter-clockwise round a convex polygon")
-    return _poly(points, radius)  # type: ignore[arg-type]
+    return _poly(points, radius)
 
 
-def _same_cycle(hull: list[tuple[float, ...]], points: list[tuple[float, ...]]) -> bool:
+def _same_cycle(hull: list[tuple[float, ...]], points: Sequence[tuple[float, ...]]) -> bool:
     if points[0] not in hull:
         return False
     start = hull.index(points[0])
@@ -278,7 +278,8 @@ class ConstraintRecipe:
         if set(arguments) != set(names):
             raise ValueError(f"a {kind} constraint takes exactly {', '.join(names)}")
         self.kind = kind
-        self.arguments = {
+        # Each value as KINDS says: a point (tuple[float, float]) or a number (float).
+        self.arguments: dict[str, Any] = {
             name: vector(arguments[name], f"{kind}.{name}") if sort == "vector"
             else number(arguments[name], f"{kind}.{name}") for name, sort in spec}
 

@@ -13,7 +13,7 @@ from its body's kind.
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import pymunk
@@ -93,7 +93,7 @@ def draw_list(root: Node, view: View | None = None) -> dict[str, Any]:
 
 
 def _described(shape: pymunk.Shape, color: tuple[int, int, int]) -> list[Any] | None:
-    body = shape.body
+    body = _body(shape)
     rgb = color[0] << 16 | color[1] << 8 | color[2]
     if isinstance(shape, pymunk.Circle):
         x, y = body.local_to_world(shape.offset)
@@ -119,6 +119,11 @@ def fit_view(shapes: Sequence[pymunk.Shape], margin: float = 0.1) -> View:
     top = max(b.top for b in boxes)
     pad = margin * max(right - left, top - bottom, 1e-3)
     return (left - pad, bottom - pad, right + pad, top + pad)
+
+
+def _body(shape: pymunk.Shape) -> pymunk.Body:
+    # Only a space's shapes are drawn, and pymunk adds no shape to a space without its body.
+    return cast(pymunk.Body, shape.body)
 
 
 def _shapes(root: Node) -> Iterable[tuple[pymunk.Shape, tuple[int, int, int]]]:
@@ -171,7 +176,7 @@ def _pixel_range(low: float, high: float, scale: float, size: int) -> tuple[int,
 
 
 def _inside(shape: pymunk.Shape, x: np.ndarray, y: np.ndarray, half_pixel: float) -> np.ndarray:
-    body = shape.body
+    body = _body(shape)
     if isinstance(shape, pymunk.Circle):
         cx, cy = body.local_to_world(shape.offset)
         return (x - cx) ** 2 + (y - cy) ** 2 <= max(shape.radius, half_pixel) ** 2

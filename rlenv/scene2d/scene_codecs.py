@@ -103,7 +103,7 @@ class Codec:
 
     def construct(self, node: Node, name: str, properties: Mapping[str, Any]) -> None:
         """Call the class's ``__init__`` on ``node``."""
-        self.base.__init__(node, name=name)  # type: ignore[misc]
+        self.base.__init__(node, name=name)
 
     def restore(self, node: Node, properties: Mapping[str, Any]) -> None:
         """Set what ``__init__`` does not take."""
@@ -195,7 +195,7 @@ class BodyCodec(Node2DCodec):
         kind = next(name for name, value in _BODY_TYPES.items() if value == body.body_type)
         if self.base not in _IMPLIED_TYPES:
             properties["type"] = kind
-        elif _IMPLIED_TYPES[self.base] != kind:  # type: ignore[index]
+        elif _IMPLIED_TYPES[self.base] != kind:
             raise ValueError(f"a {self.base.__name__} holds a {kind} pymunk body")
         if kind == "dynamic":
             if body.mass:
@@ -211,7 +211,7 @@ class BodyCodec(Node2DCodec):
 
     def _checked(self, properties: Mapping[str, Any]) -> dict[str, Any]:
         checked = super()._checked(properties)
-        implied = _IMPLIED_TYPES.get(self.base)  # type: ignore[call-overload]
+        implied = _IMPLIED_TYPES.get(self.base)
         kind = properties.get("type", implied or "dynamic")
         if kind not in _BODY_TYPES or (implied is not None and kind != implied):
             expected = implied or "one of " + ", ".join(_BODY_TYPES)

@@ -85,7 +85,7 @@ class View:
         return self._step("placeholders", (n for node in self._nodes for n in node.iter_subtree()
                                            if n is not node and _is_a(n, _MARKER)))
 
-    def of_type(self, kind: type | tuple[type, ...]) -> View:
+    def of_type(self, kind: type[Any] | tuple[type[Any], ...]) -> View:
         """The nodes of this view that are instances of ``kind``."""
         name = kind.__name__ if isinstance(kind, type) else "|".join(k.__name__ for k in kind)
         return self._step(f"of_type({name})", (n for n in self._nodes if isinstance(n, kind)))
@@ -175,7 +175,7 @@ class View:
         if strangers:
             raise TypeError(f"{strangers[0]!r} in {self!r} is not a Marker2D: attach puts "
                             "copies on markers only; nothing was attached")
-        return View([marker.attach(node) for marker in self._nodes],  # type: ignore[attr-defined]
+        return View([marker.attach(node) for marker in self._nodes],
                     f"{self._label}.attach({node.name})")
 
     # --- internals --------------------------------------------------------------------------

@@ -55,7 +55,7 @@ class Columns:
                 reply.reward, reply.terminated, reply.truncated, reply.frames
             info.append(reply.info if reply.agents is None else
                         {**reply.info, "agents": reply.agents})
-        errors = tuple(reply if reply.__class__ is ErrorReply else None  # type: ignore[misc]
+        errors = tuple(reply if reply.__class__ is ErrorReply else None
                        for reply in replies) if failed else None
         return StepsResponse(reply_id, self._codec.join(observations), reward, terminated,
                              truncated, frames, tuple(info), errors)

@@ -433,7 +433,7 @@ class Connections:
             logger.info("client %s: send failed: %s", peer.address, error)
             self._drop(peer, "send failed")
             return
-        if message.__class__ is ErrorReply and message.fatal:  # type: ignore[union-attr]
+        if message.__class__ is ErrorReply and message.fatal:
             self._drop(peer, why_fatal)
 
     def _write(self, peer: Peer, data: bytes) -> None:

@@ -332,10 +332,10 @@ class Endpoint(Connections):
             assert message.__class__ is Request
             peer.frame_started = None
             peer.last_request = self._clock()
-            if not peer.authenticated and not self._authenticate(peer, message):  # type: ignore[arg-type]
+            if not peer.authenticated and not self._authenticate(peer, message):
                 continue
-            if "shared_memory" in message.parts:  # type: ignore[union-attr]
-                self._open_lane(peer, message)  # type: ignore[arg-type]
+            if "shared_memory" in message.parts:
+                self._open_lane(peer, message)
                 continue
-            return message  # type: ignore[return-value]
+            return message
         return None

@@ -193,7 +193,7 @@ class Host:
         """
         prepared = self.prepare(request)
         if prepared.__class__ is ErrorReply:
-            return prepared  # type: ignore[return-value]
+            return prepared
         reply = self.run(prepared)  # type: ignore[arg-type]
         self.after_send(prepared)  # type: ignore[arg-type]
         return reply

@@ -159,6 +159,12 @@ class Instance:
         RuntimeError: the environment has no agent, no world, or an agent without spaces.
     """
 
+    # Set by _enter (from __init__ on, and again by a rebuild).
+    agents: list[RLAgent]
+    multi_agent: bool
+    action_space: spaces.Space
+    observation_space: spaces.Space
+
     def __init__(self, environment: RLEnvironment | type[RLEnvironment] | str,
                  dispatch: Dispatch, clock: Callable[[], float] = time.monotonic,
                  record_dir: Path | None = None, keep_episodes: int | None = None,
@@ -691,9 +697,10 @@ def _outcome(agents: list[RLAgent], several: bool,
         if reports:
             agent.reward = 0.0
         return reward, bool(agent.terminated), bool(agent.truncated), None
-    outcomes = {each.name: {"reward": float(each.reward) if reports else 0.0,
-                            "terminated": bool(each.terminated),
-                            "truncated": bool(each.truncated)} for each in agents}
+    outcomes: dict[str, dict[str, Any]] = {
+        each.name: {"reward": float(each.reward) if reports else 0.0,
+                    "terminated": bool(each.terminated), "truncated": bool(each.truncated)}
+        for each in agents}
     terminated, truncated = joint_end([(o["terminated"], o["truncated"])
                                         for o in outcomes.values()])
     if reports:

@@ -18,7 +18,7 @@ included).
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 from gymnasium import spaces
@@ -49,8 +49,9 @@ class LeanSteps:
     def __init__(self, instances: Sequence[Instance]) -> None:
         self.instances = list(instances)
         space = instances[0].observation_space
-        self.shape: tuple[int, ...] = space.shape
-        self.dtype: np.dtype = space.dtype  # type: ignore[assignment]
+        # A space packed as raw bytes (the module docstring): its shape and dtype are fixed.
+        self.shape = cast(tuple[int, ...], space.shape)
+        self.dtype = cast(np.dtype, space.dtype)
         self._codec = codec_for(space)
         self._column = np.zeros((len(instances), *self.shape), self.dtype)
         self._floats = self.dtype.kind in "fc"

@@ -39,7 +39,7 @@ class Observer:
                 holds a map key that is not a str (the environment's fault: answered as
                 ``environment_error``).
         """
-        observation = {}
+        observation: dict[str, Any] = {}
         environment = self.environment
         if "agent" in request:
             asked = request["agent"]

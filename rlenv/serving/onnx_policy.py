@@ -258,9 +258,9 @@ def _same(first: spaces.Space, second: spaces.Space) -> bool:
     """Whether two spaces are equal, dtype and exact bounds included."""
     if type(first) is not type(second) or first != second or first.dtype != second.dtype:
         return False
-    if isinstance(first, spaces.Box):
+    if isinstance(first, spaces.Box) and isinstance(second, spaces.Box):  # (the same type)
         return bool(np.array_equal(first.low, second.low) and
-                    np.array_equal(first.high, second.high))  # type: ignore[attr-defined]
+                    np.array_equal(first.high, second.high))
     return True
 
 

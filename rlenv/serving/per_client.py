@@ -61,8 +61,8 @@ class HostPerClient:
         while True:
             got = endpoint.receive(self._time_to_next_tick())
             if got is None:
-                for host in self._hosts.values():
-                    host.catch_up()
+                for each in self._hosts.values():
+                    each.catch_up()
                 continue
             peer, request = got
             host = self._hosts.get(peer) or self._seat(endpoint, peer, request)

@@ -93,7 +93,7 @@ class DrivenAgents:
         for name, policy in policies.items():
             agent = by_name.get(name)
             if agent is None:
-                what = policy if policy == HEURISTIC else policy.path  # type: ignore[union-attr]
+                what = policy if policy == HEURISTIC else policy.path
                 raise ValueError(f"--policy {name}={what}: the environment has no agent "
                                  f"{name!r}; its agents: {', '.join(names)}")
             if policy == HEURISTIC:
@@ -102,7 +102,7 @@ class DrivenAgents:
                     raise ValueError(f"--policy {name}=heuristic: agent {name!r} (class {cls}) "
                                      f"has no heuristic; define {cls}.heuristic(observation)")
             else:
-                policy.check_spaces(  # type: ignore[union-attr]
+                policy.check_spaces(
                     name, agent.observation_space, agent.action_space)
         self.policies = dict(policies)
         self.names = frozenset(policies)
@@ -131,7 +131,7 @@ class DrivenAgents:
         try:
             if policy == HEURISTIC:
                 return self._heuristic(agent)
-            action = policy.act(agent.get_data({}))  # type: ignore[union-attr]
+            action = policy.act(agent.get_data({}))
         except PolicyError as error:
             failure = PolicyError(error if policy == HEURISTIC else f"{who}: {error}")
         except Exception as error:  # the policy's code, or the environment's observation

@@ -22,13 +22,15 @@ __all__ = ["conform", "declared_of", "exported_of", "exported_values", "to_wire"
 
 def exported_of(node: Node) -> tuple[str, ...]:
     """The properties ``node`` exports: its class's ``exported`` and ``configurable``."""
-    return tuple(name for name in declared_of(type(node)) if hasattr(node, name))
+    node_class: type = type(node)  # as a plain type: mypy finds type[Node] unhashable
+    return tuple(name for name in declared_of(node_class) if hasattr(node, name))
 
 
 def exported_values(node: Node) -> dict[str, Any]:
     """What ``node`` exports, each value as plain data (:func:`to_wire`), in one read each."""
     values = {}
-    for name in declared_of(type(node)):
+    node_class: type = type(node)  # as a plain type: mypy finds type[Node] unhashable
+    for name in declared_of(node_class):
         try:
             values[name] = to_wire(getattr(node, name))
         except AttributeError:  # not there (as exported_of leaves it out)

@@ -236,7 +236,7 @@ def agent_settings(agents: list[Any],
                 f"{', '.join(sorted(classes))})")
     if not by_class and not by_name:
         return [(agent, common) for agent in agents]
-    reached = []
+    reached: list[tuple[Any, Mapping[str, Any]]] = []
     for agent in agents:
         merged = {**common, **by_class.get(type(agent).__name__, {}),
                   **by_name.get(agent.name, {})}

@@ -45,7 +45,7 @@ class EpisodeLog:
 
     def __init__(self) -> None:
         self._config: Captured | None = None
-        self._rng_state: dict[str, Any] = {}
+        self._rng_state: Mapping[str, Any] = {}
         self.options: Mapping[str, Any] = {}
         self.events: list[list[Any]] = []
         self.started = False

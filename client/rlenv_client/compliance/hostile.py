@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from gymnasium import spaces
@@ -160,8 +160,8 @@ class HostileProbes:
                       words: str) -> None:
         """Valid actions for every instance, with ``reset`` as the mask, are refused."""
         space = self.controller.action_space
-        actions = concatenate(space, [self.harness.valid_action() for _ in range(instances)],
-                              create_empty_array(space, instances))
+        out = cast(Any, create_empty_array(space, instances))  # an action space: never None
+        actions = concatenate(space, [self.harness.valid_action() for _ in range(instances)], out)
 
         def attempt() -> object:
             self.controller.send_steps(actions, None if reset is None else np.array(reset))
@@ -192,7 +192,8 @@ class HostileProbes:
     def refused_config(self, code: ErrorCode, key: str) -> None:
         """Configuring ``key`` is refused with ``code``, naming the key."""
         try:
-            self.controller.configure(**{key: 1})
+            setting: dict[str, Any] = {key: 1}
+            self.controller.configure(**setting)
         except RemoteError as error:
             assert error.code == code and key in error.message, error.message
         else:

@@ -19,7 +19,7 @@ __all__ = ["Level", "level_copy", "level_key"]
 Level = Any
 """An int seed, or plain data (a packed scene's data)."""
 
-_SCALARS = (type(None), bool, int, float, str, bytes)
+_SCALARS: tuple[type, ...] = (type(None), bool, int, float, str, bytes)
 
 
 def level_copy(level: Any) -> Level:

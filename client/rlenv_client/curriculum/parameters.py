@@ -104,7 +104,8 @@ class EnvironmentParameters:
                     criteria = lesson.criteria
                     capacity[criteria.behavior] = max(capacity.get(criteria.behavior, 1),
                                                       criteria.min_lesson_length)
-        self._rewards = {behavior: deque(maxlen=size) for behavior, size in capacity.items()}
+        self._rewards: dict[str, deque[float]] = {
+            behavior: deque(maxlen=size) for behavior, size in capacity.items()}
         self._by_name = {parameter.name: parameter for parameter in self._parameters}
         self._reset_required = False
 

@@ -167,7 +167,7 @@ class LevelSampler:
 
     def weights(self) -> dict[int, float]:
         """Each buffered level's probability of being drawn by :meth:`sample_replay_level`."""
-        weights = self._slot_weights() if self._size else []
+        weights: np.ndarray | list[float] = self._slot_weights() if self._size else []
         return {int(level_id): float(weight)
                 for level_id, weight in zip(self._ids[:self._size], weights, strict=True)}
 

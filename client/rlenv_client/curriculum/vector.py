@@ -155,7 +155,7 @@ class CurriculumVectorEnv(VectorWrapper):
                  seed: int | None = None, outcomes_kept: int = 32,
                  edit_levels: int = 0, rollouts_per_level: int = 1) -> None:
         super().__init__(envs)
-        remote = envs.unwrapped
+        remote: Any = envs.unwrapped  # a RemoteVectorEnv (checked next)
         if not hasattr(remote, "set_next_reset"):
             raise TypeError(f"CurriculumVectorEnv needs a RemoteVectorEnv, got "
                             f"{type(remote).__name__}")
@@ -234,7 +234,7 @@ class CurriculumVectorEnv(VectorWrapper):
         for index in range(self.num_envs):
             if self._next[index] is None:
                 self._choose(index)
-        observations, infos = self.env.reset(options=options)
+        observations, infos = self.env.reset(options=None if options is None else dict(options))
         self._autoreset[:] = False
         return observations, self._begin(np.ones(self.num_envs, np.bool_), infos)
 
@@ -267,10 +267,10 @@ class CurriculumVectorEnv(VectorWrapper):
             last_infos = infos
             if started.any():
                 infos = self._begin(started, infos)
-        for index in np.flatnonzero(ended):
-            self._finish(int(index), bool(terminations[index]), last_infos)
+        for done in np.flatnonzero(ended):
+            self._finish(int(done), bool(terminations[done]), last_infos)
             if not self._same_step:
-                self._choose(int(index))
+                self._choose(int(done))
         if self._same_step and ended.any():
             infos = self._begin(ended, infos)
         self._autoreset = ended

@@ -154,11 +154,11 @@ def inspect_sessions(sessions: Sequence[Session]) -> Inspector:
     if not all(isinstance(client, Client) for client in clients):
         raise ValueError("the inspector watches served environments: in_process=True has no "
                          "server to watch")
-    inspector = Inspector([client.address for client in clients],  # type: ignore[attr-defined]
+    inspector = Inspector([client.address for client in clients],
                           token=sessions[0].token)
 
     def follow() -> None:
-        inspector.follow([session.client.address for session in sessions])  # type: ignore
+        inspector.follow([session.client.address for session in sessions])
 
     for session in sessions:
         session.on_restart = follow

@@ -33,9 +33,10 @@ trainer's again.
 
 from __future__ import annotations
 
+import functools
 import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -220,12 +221,12 @@ class Demonstrator:
             fetch_episodes(lambda part: _answer(control.exchange({"episodes": part})), hello,
                            cache=kept)
             control.send_claim(idle)  # refused here: 409 claimed by another, 422 otherwise
-            play, args = self._play_beside, (control, idle, rate, kept)
+            play: Callable[[], None] = functools.partial(self._play_beside, control, idle, rate,
+                                                         kept)
         else:
             observation, _ = client.reset_result(_answer(reply))
-            play, args = self._play, (control, observation, rate)
-        control.thread = threading.Thread(target=play, args=args,
-                                          name="rlenv-demonstration", daemon=True)
+            play = functools.partial(self._play, control, observation, rate)
+        control.thread = threading.Thread(target=play, name="rlenv-demonstration", daemon=True)
         control.thread.start()
         return control
 

@@ -28,8 +28,9 @@ recording's target is imported only where it is installed, unless the page was g
 
 from __future__ import annotations
 
+import functools
 import threading
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -301,7 +302,7 @@ class Timelines:
             sides = {}
             for name, branch in (("a", a), ("b", b)):
                 rewards = branch.timeline.rewards
-                state = self._call(lambda t=branch.timeline: t.at(step)) \
+                state = self._call(functools.partial(branch.timeline.at, step)) \
                     if step <= len(branch.timeline) else None
                 sides[name] = {"branch": branch.number, "label": branch.describe()["label"],
                                "length": len(branch.timeline), "rewards": to_json(rewards),
@@ -495,7 +496,7 @@ class Timelines:
         return branch
 
     def _add_branch(self, root: _Root, parent: int, at: int, how: str, timeline: Timeline,
-                    actions: list[str]) -> _Branch:
+                    actions: Sequence[str]) -> _Branch:
         number = max(root.branches) + 1
         root.branches[number] = _Branch(number, parent, at, how, timeline, list(actions))
         return root.branches[number]

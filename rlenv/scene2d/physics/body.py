@@ -5,6 +5,7 @@ Godot's ``PhysicsBody2D`` family. See :mod:`rlenv.scene2d.physics` for units and
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any, ClassVar
 
 import pymunk
@@ -204,7 +205,7 @@ class PhysicsBody(Node2D):
         return Vec2d(x, y)
 
     @position.setter
-    def position(self, value: Vec) -> None:
+    def position(self, value: Sequence[float]) -> None:  # as Node2D's setter takes
         Node2D.position.fset(self, value)  # type: ignore[attr-defined]
 
     @property

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import Any, cast
 
 import pymunk
 
@@ -192,7 +192,8 @@ class Joint(Node):
 
     def _exit_tree(self) -> None:
         if self._world is not None and self._attached:
-            self._world.space.remove(self.constraint)
+            # Attached: its constraint is in the world's space.
+            self._world.space.remove(cast(pymunk.Constraint, self.constraint))
         self._attached = False
         self._world = None
         self.request_ready()  # on re-entry, attach again once the bodies are back

@@ -8,7 +8,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Callable
-from typing import Any, ClassVar
+from typing import Any, ClassVar, cast
 
 import pymunk
 
@@ -92,7 +92,8 @@ class _Space(pymunk.Space):
                 else:
                     callback, data = getattr(handler, phase), handler.data.get(phase)
                 if callback is not None:
-                    into.on_collision(*key, **{phase: callback}, data=data)
+                    handler_of_phase: dict[str, Any] = {phase: callback}
+                    into.on_collision(*key, **handler_of_phase, data=data)
 
     def _begin(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
         self.own["begin"](arbiter, space, data)
@@ -128,6 +129,8 @@ class PhysicsWorld(SpaceOwner):
             types runs beside rlenv's own, which emits the collision signals, and does not
             replace it.
     """
+
+    space: _Space
 
     stepped = Signal("delta")
     """``stepped(delta)``: emitted after every step of the space (``delta``: its length, s)."""
@@ -224,9 +227,11 @@ class PhysicsWorld(SpaceOwner):
                 shapes.append(node)
             elif isinstance(node, Joint) and node._world is self and node._attached:
                 joints.append(node)
+        # An attached joint has its constraint, and a body in the space the pose it entered with.
         refill = Refill([body.body for body in bodies], [shape.shape for shape in shapes],
-                        [joint.constraint for joint in joints],
-                        [body._built_pose for body in bodies])
+                        cast(list[pymunk.Constraint], [joint.constraint for joint in joints]),
+                        cast(list[tuple[float, float, float]],
+                             [body._built_pose for body in bodies]))
         self._kept_members = (version, bodies, shapes, joints, refill)
         return bodies, shapes, joints, refill, False
 

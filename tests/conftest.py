@@ -47,6 +47,17 @@ def serve() -> Iterator[Serve]:
         process.close()
 
 
+@pytest.fixture(autouse=True)
+def _sessions_closed(request: pytest.FixtureRequest) -> Iterator[None]:
+    """A test's HTTP gateway sessions are deleted after it, as a user's would be: a module's
+    shared ``gateway`` holds at most so many sessions per client."""
+    yield
+    if "gateway" in request.fixturenames:
+        close = getattr(request.getfixturevalue("gateway"), "close_sessions", None)
+        if close is not None:
+            close()
+
+
 @pytest.fixture
 def server(serve: Serve) -> ServerProcess:
     """A fresh CartPole server on a free port."""

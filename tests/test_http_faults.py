@@ -36,14 +36,6 @@ def gateway() -> Iterator[Gateway]:
     started.close()
 
 
-@pytest.fixture(autouse=True)
-def _sessions_closed(request: pytest.FixtureRequest) -> Iterator[None]:
-    """Each test's sessions are deleted after it, as a user's would be: the shared gateway
-    holds at most so many sessions per client."""
-    yield
-    if "gateway" in request.fixturenames:
-        request.getfixturevalue("gateway").close_sessions()
-
 
 def test_bad_bodies_are_400(gateway: Gateway) -> None:
     session = gateway.session()

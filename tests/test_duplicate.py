@@ -131,6 +131,28 @@ def test_physics_nodes_get_their_own_pymunk_objects(tree: SceneTree) -> None:
     assert twin_skin.shape.body is None  # not attached until it enters a space
 
 
+def test_a_copied_body_reads_and_pushes_its_own_body(tree: SceneTree) -> None:
+    """The accessors' handle (taken once per body) is the copy's, in a space and out of one."""
+    world = PhysicsWorld(gravity=(0.0, 0.0), name="World")
+    tree.root.add_child(world)
+    bob = RigidBody(name="Bob", position=(1.0, 0.0))
+    bob.add_child(CollisionShape.circle(0.1, mass=1.0))
+    world.add_child(bob)
+    twin = bob.duplicate()
+    twin.velocity = (3.0, 4.0)
+    twin.angular_velocity = 2.0
+    assert bob.body.velocity == (0.0, 0.0) and bob.body.angular_velocity == 0.0
+    assert twin.body.velocity == (3.0, 4.0) and twin.velocity == (3.0, 4.0)
+    twin.name = "Twin"
+    world.add_child(twin)
+    twin.apply_central_force((10.0, 0.0))
+    assert twin.body.force == (10.0, 0.0) and bob.body.force == (0.0, 0.0)
+    tree.physics_tick()
+    assert bob.position == (1.0, 0.0) and bob.rotation == 0.0
+    assert twin.position == twin.body.position != (1.0, 0.0)
+    assert twin.rotation == twin.body.angle != 0.0
+
+
 def test_a_joint_between_copied_bodies_joins_the_copies(tree: SceneTree) -> None:
     world = PhysicsWorld(gravity=(0.0, -9.8), name="World")
     tree.root.add_child(world)

@@ -5,7 +5,7 @@ private records where its public API costs too much for a step of a small scene,
 way at all:
 
 - :func:`step_space`: ``Space.step`` without its Python work when nothing is pending;
-- :func:`body_position` and the other body accessors read every tick;
+- :func:`handle`, :data:`position_of` and the other body accessors, read every tick;
 - restarts at Chipmunk's speed (:class:`Refill`, :func:`refresh_constraint`,
   :func:`renumber`, :func:`place_at_rest`): :meth:`PhysicsWorld.restart` reuses the bodies,
   shapes and constraints as new, where pymunk would have them made again;
@@ -34,17 +34,18 @@ from __future__ import annotations
 
 import logging
 import math
+import operator
 from collections.abc import Callable, Collection, Mapping
 from typing import Any
 
 import pymunk
-from pymunk import Vec2d
 from pymunk._chipmunk_cffi import ffi, lib
 
-__all__ = ["FAST", "TESTED", "Refill", "apply_central_force", "bodies_to_check",
-           "body_angle", "body_angular_velocity", "body_position", "body_velocity",
-           "collision_handlers", "place_at_rest", "refresh_constraint", "renumber",
-           "set_body_angular_velocity", "set_body_velocity", "step_space"]
+__all__ = ["FAST", "TESTED", "Refill", "angle_of", "angular_velocity_of",
+           "apply_force_at_world_point_of", "bodies_to_check",
+           "center_of_gravity_of", "collision_handlers", "handle", "local_to_world_of",
+           "place_at_rest", "position_of", "refresh_constraint", "renumber",
+           "set_angular_velocity_of", "set_velocity_of", "step_space", "velocity_of"]
 
 logger = logging.getLogger(__name__)
 
@@ -355,69 +356,43 @@ def _after_step(space: pymunk.Space) -> None:
 
 
 # --- a body's state, read and set every tick -----------------------------------------------------
-# Chipmunk's functions straight: pymunk's properties cost several times more.
-
-_vec2d = tuple.__new__  # a Vec2d from a tuple, without its Python-level __new__
-_position = lib.cpBodyGetPosition
-_angle = lib.cpBodyGetAngle
-_velocity = lib.cpBodyGetVelocity
-_angular_velocity = lib.cpBodyGetAngularVelocity
-_set_velocity = lib.cpBodySetVelocity
-_set_angular_velocity = lib.cpBodySetAngularVelocity
-_center_of_gravity = lib.cpBodyGetCenterOfGravity
-_local_to_world = lib.cpBodyLocalToWorld
-_apply_force_at_world_point = lib.cpBodyApplyForceAtWorldPoint
+# A body node reads and pushes its body several times a tick (CartPole: ~15 calls per env-step),
+# so it calls these itself, with no Python function of this module in between (a call frame
+# costs about what the read does): it takes its body's handle once, when it enters a space
+# (:func:`handle`), and each function below is one Chipmunk call on it. Chipmunk's functions
+# straight cost several times less than pymunk's properties. Without :data:`FAST` the handle is
+# the pymunk body and each function is pymunk's public API, with the same arguments and results
+# (a vector read has ``x`` and ``y``).
 
 if FAST:
-    def body_position(body: pymunk.Body) -> Vec2d:
-        """``body.position``."""
-        position = _position(body._body)
-        return _vec2d(Vec2d, (position.x, position.y))
+    def handle(body: pymunk.Body) -> Any:
+        """What the functions below take for ``body``: its Chipmunk body (``cpBody *``)."""
+        return body._body
 
-    def body_angle(body: pymunk.Body) -> float:
-        """``body.angle``."""
-        return _angle(body._body)
-
-    def body_velocity(body: pymunk.Body) -> Vec2d:
-        """``body.velocity``."""
-        velocity = _velocity(body._body)
-        return _vec2d(Vec2d, (velocity.x, velocity.y))
-
-    def body_angular_velocity(body: pymunk.Body) -> float:
-        """``body.angular_velocity``."""
-        return _angular_velocity(body._body)
-
-    def set_body_velocity(body: pymunk.Body, x: float, y: float) -> None:
-        """``body.velocity = (x, y)``."""
-        _set_velocity(body._body, (x, y))
-
-    def set_body_angular_velocity(body: pymunk.Body, value: float) -> None:
-        """``body.angular_velocity = value``."""
-        _set_angular_velocity(body._body, value)
-
-    def apply_central_force(body: pymunk.Body, force: tuple[float, float]) -> None:
-        """``force`` at ``body``'s centre of gravity (in world coordinates)."""
-        pointer = body._body
-        _apply_force_at_world_point(pointer, force,
-                                    _local_to_world(pointer, _center_of_gravity(pointer)))
+    position_of = lib.cpBodyGetPosition
+    angle_of = lib.cpBodyGetAngle
+    velocity_of = lib.cpBodyGetVelocity
+    angular_velocity_of = lib.cpBodyGetAngularVelocity
+    set_velocity_of = lib.cpBodySetVelocity  # (handle, (x, y))
+    set_angular_velocity_of = lib.cpBodySetAngularVelocity
+    center_of_gravity_of = lib.cpBodyGetCenterOfGravity
+    local_to_world_of = lib.cpBodyLocalToWorld  # (handle, point): the point in the world
+    apply_force_at_world_point_of = lib.cpBodyApplyForceAtWorldPoint  # (handle, force, point)
 else:
-    def body_position(body: pymunk.Body) -> Vec2d:  # noqa: D103
-        return body.position
+    def handle(body: pymunk.Body) -> Any:  # noqa: D103
+        return body
 
-    def body_angle(body: pymunk.Body) -> float:  # noqa: D103
-        return body.angle
+    position_of = operator.attrgetter("position")
+    angle_of = operator.attrgetter("angle")
+    velocity_of = operator.attrgetter("velocity")
+    angular_velocity_of = operator.attrgetter("angular_velocity")
+    center_of_gravity_of = operator.attrgetter("center_of_gravity")
+    local_to_world_of = pymunk.Body.local_to_world
+    apply_force_at_world_point_of = pymunk.Body.apply_force_at_world_point
 
-    def body_velocity(body: pymunk.Body) -> Vec2d:  # noqa: D103
-        return body.velocity
+    def set_velocity_of(body: pymunk.Body, velocity: tuple[float, float]) -> None:  # noqa: D103
+        body.velocity = velocity
 
-    def body_angular_velocity(body: pymunk.Body) -> float:  # noqa: D103
-        return body.angular_velocity
-
-    def set_body_velocity(body: pymunk.Body, x: float, y: float) -> None:  # noqa: D103
-        body.velocity = (x, y)
-
-    def set_body_angular_velocity(body: pymunk.Body, value: float) -> None:  # noqa: D103
+    def set_angular_velocity_of(body: pymunk.Body, value: float) -> None:  # noqa: D103
         body.angular_velocity = value
 
-    def apply_central_force(body: pymunk.Body, force: tuple[float, float]) -> None:  # noqa: D103
-        body.apply_force_at_world_point(force, body.local_to_world(body.center_of_gravity))

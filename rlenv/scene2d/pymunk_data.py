@@ -209,10 +209,11 @@ def number(value: Any, what: str, low: float = -math.inf, finite: bool = True) -
     Raises:
         ValueError: naming ``what``.
     """
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ValueError(f"{what} must be a number, got {value!r:.40}")
-    value = float(value)
-    if math.isnan(value) or (finite and math.isinf(value)) or value < low:
+    if value.__class__ is not float:  # environments set floats at every reset: the short way
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ValueError(f"{what} must be a number, got {value!r:.40}")
+        value = float(value)
+    if not low <= value or (finite and (value == math.inf or value == -math.inf)):  # NaN: not <=
         needs = (["finite"] if finite else []) + ([f">= {low:g}"] if low > -math.inf else [])
         raise ValueError(f"{what} must be a number {' and '.join(needs)}, got {value!r:.40}")
     return value

@@ -185,7 +185,7 @@ class BodyCodec(Node2DCodec):
     """Physics bodies: the pose (local), the kind, mass and moment, the velocities."""
 
     keys = Node2DCodec.keys | {"type", "mass", "moment", "velocity", "angular_velocity"}
-    handled = Node2DCodec.handled | {"body"}
+    handled = Node2DCodec.handled | {"body", "_chipmunk"}  # the body's handle goes with it
 
     def pack(self, node: Node) -> dict[str, Any]:
         """See :meth:`Codec.pack`."""

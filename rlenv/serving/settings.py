@@ -312,11 +312,13 @@ class _Readers:
     def fit(self, environment: Any, agents: list[Any]) -> bool:
         """Whether these are still the nodes: the same world and agents, their keys the same."""
         world = environment.world
-        return world is self.world and self.configurables[0] is environment.configurable and \
-            agents == self.agents and all(
-                agent.configurable is configurable
-                for agent, configurable in zip(agents, self.agent_configurables, strict=True)) \
-            and (world is None or self.configurables[-1] is world.configurable)
+        if world is not self.world or self.configurables[0] is not environment.configurable or \
+                agents != self.agents:
+            return False
+        for agent, configurable in zip(agents, self.agent_configurables, strict=True):
+            if agent.configurable is not configurable:  # a loop: asked at every reset
+                return False
+        return world is None or self.configurables[-1] is world.configurable
 
 
 def _reader(keys: tuple[str, ...]) -> Callable[[Any], tuple[Any, ...]]:

@@ -13,14 +13,17 @@ from pymunk import Vec2d
 
 from rlenv.node import Node
 from rlenv.scene2d.chipmunk import (
-    apply_central_force,
-    body_angle,
-    body_angular_velocity,
-    body_position,
-    body_velocity,
+    angle_of,
+    angular_velocity_of,
+    apply_force_at_world_point_of,
+    center_of_gravity_of,
+    handle,
+    local_to_world_of,
     place_at_rest,
-    set_body_angular_velocity,
-    set_body_velocity,
+    position_of,
+    set_angular_velocity_of,
+    set_velocity_of,
+    velocity_of,
 )
 from rlenv.scene2d.colors import RGB, Color
 from rlenv.scene2d.node2d import Node2D, Pose, compose, frame_of, relative_pose
@@ -29,6 +32,8 @@ from rlenv.scene2d.pymunk_data import copy_body
 from rlenv.signals import Signal
 
 __all__ = ["KinematicBody", "PhysicsBody", "RigidBody", "StaticBody"]
+
+_vec2d = tuple.__new__  # a Vec2d from a tuple, without its Python-level __new__
 
 
 class PhysicsBody(Node2D):
@@ -88,6 +93,7 @@ class PhysicsBody(Node2D):
             raise ValueError("give the body's rotation or its angle (the same thing), not both")
         super().__init__(name, position=position, rotation=rotation or angle)
         self.body = body
+        self._chipmunk = handle(body)  # what chipmunk's accessors take for the body
         body.position = self._position
         body.angle = self._rotation
         self.world: SpaceOwner | None = None
@@ -175,7 +181,8 @@ class PhysicsBody(Node2D):
             body.space.reindex_shapes_for_body(body)  # pymunk's rule for moved static bodies
 
     def _duplicate_resources(self, memo: dict[int, Any]) -> None:
-        memo[id(self.body)] = copy_body(self.body)
+        copy = memo[id(self.body)] = copy_body(self.body)
+        memo[id(self._chipmunk)] = handle(copy)  # the copy's own (the body itself without FAST)
 
     def _duplicated(self, original: Node) -> None:
         assert isinstance(original, PhysicsBody)
@@ -198,7 +205,8 @@ class PhysicsBody(Node2D):
         measured from.
         """
         if self._frame is None and self.world is not None:  # the body's pose is the pose
-            return body_position(self.body)
+            position = position_of(self._chipmunk)
+            return _vec2d(Vec2d, (position.x, position.y))
         if self.world is None:
             return self._position
         x, y, _ = self._local_pose()
@@ -212,7 +220,7 @@ class PhysicsBody(Node2D):
     def rotation(self) -> float:
         """The rotation in radians, relative to the nearest Node2D ancestor."""
         if self._frame is None and self.world is not None:
-            return body_angle(self.body)
+            return angle_of(self._chipmunk)
         if self.world is None:
             return self._rotation
         return self._local_pose()[2]
@@ -233,23 +241,24 @@ class PhysicsBody(Node2D):
     @property
     def velocity(self) -> pymunk.Vec2d:
         """The body's linear velocity, in world coordinates (units per second)."""
-        return body_velocity(self.body)
+        velocity = velocity_of(self._chipmunk)
+        return _vec2d(Vec2d, (velocity.x, velocity.y))
 
     @velocity.setter
     def velocity(self, value: Vec) -> None:
         x, y = value
-        set_body_velocity(self.body, x, y)
+        set_velocity_of(self._chipmunk, (x, y))
 
     linear_velocity = velocity  # Godot's name (RigidBody2D's): the same property
 
     @property
     def angular_velocity(self) -> float:
         """The body's angular velocity, in radians per second, counter-clockwise."""
-        return body_angular_velocity(self.body)
+        return angular_velocity_of(self._chipmunk)
 
     @angular_velocity.setter
     def angular_velocity(self, value: float) -> None:
-        set_body_angular_velocity(self.body, value)
+        set_angular_velocity_of(self._chipmunk, value)
 
     @property
     def color(self) -> RGB | None:
@@ -324,7 +333,9 @@ class RigidBody(PhysicsBody):
         Args:
             force: the force, in world coordinates.
         """
-        apply_central_force(self.body, force)
+        pointer = self._chipmunk
+        apply_force_at_world_point_of(pointer, force,
+                                      local_to_world_of(pointer, center_of_gravity_of(pointer)))
 
     def apply_impulse(self, impulse: Vec, at: Vec = (0.0, 0.0)) -> None:
         """Change the body's velocity at once by ``impulse`` (divided by its mass).

@@ -257,7 +257,10 @@ class PhysicsWorld(SpaceOwner):
 
     @gravity.setter
     def gravity(self, value: Vec) -> None:
-        self.space.gravity = self._checked(vector, value, "gravity")
+        try:
+            self.space.gravity = vector(value, "gravity")
+        except ValueError as error:
+            raise self._refusal(error) from None
 
     @property
     def damping(self) -> float:
@@ -266,17 +269,18 @@ class PhysicsWorld(SpaceOwner):
 
     @damping.setter
     def damping(self, value: float) -> None:
-        self.space.damping = self._checked(number, value, "damping", low=0.0)
-
-    def _checked(self, check: Callable[..., Any], value: Any, what: str, **limits: Any) -> Any:
-        """``check(value, what, **limits)``, a refusal naming this node.
-
-        The name is built only for a refusal: environments set these at every reset.
-        """
         try:
-            return check(value, what, **limits)
+            self.space.damping = number(value, "damping", low=0.0)
         except ValueError as error:
-            raise ValueError(f"{self!r}: {error}") from None
+            raise self._refusal(error) from None
+
+    def _refusal(self, error: ValueError) -> ValueError:
+        """``error``, naming this node.
+
+        Built only for a refusal, and the setters check inline: environments set gravity and
+        damping at every reset.
+        """
+        return ValueError(f"{self!r}: {error}")
 
     def _enter_tree(self) -> None:
         parent = self.parent

@@ -502,7 +502,7 @@ def random_steps_of(step: Callable[[Any], object], envs: Any,
 _INSTANCE_MEMORY = """
 import os, sys
 from rlenv_client import LocalClient
-from rlenv_client.bench import _rss_kib
+from rlenv_tools.bench import _rss_kib
 first = LocalClient(sys.argv[1])
 first.reset(seed=0)
 before = _rss_kib(os.getpid())

@@ -4,7 +4,7 @@ Each check is a small function over a :class:`~rlenv_client.env.RemoteEnv`; :fun
 runs them all (one failing does not stop the others) and returns one :class:`CheckResult` per
 check, which the command line prints as a pass/fail report. Observations, a map by agent name
 with several agents, are compared member by member
-(:func:`~rlenv_client.observations.observation_difference`). Then, with a client of their own
+(:func:`~rlenv_tools.observations.observation_difference`). Then, with a client of their own
 (the environment's releases control first): PettingZoo's ``parallel_api_test``, where
 PettingZoo is installed, and the compliance suite when asked.
 
@@ -29,7 +29,7 @@ from gymnasium.utils.env_checker import check_env
 from rlenv.protocol.errors import ErrorCode, RemoteError
 from rlenv_client.addresses import parse_address
 from rlenv_client.env import RemoteEnv
-from rlenv_client.observations import observation_difference
+from rlenv_tools.observations import observation_difference
 
 __all__ = ["CheckResult", "run_checks"]
 
@@ -256,7 +256,7 @@ def _run(name: str, check: Callable[[], str]) -> CheckResult:
 
 def _compliance(env: RemoteEnv, address: str, token: str | None,
                 timeout: float) -> CheckResult:
-    from rlenv_client.compliance import check_server
+    from rlenv_tools.compliance import check_server
 
     host, port = parse_address(address)
     server = env.server

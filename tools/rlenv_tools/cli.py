@@ -71,7 +71,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                        f"{defaults.idle_timeout})")
     serve.add_argument("--policy", action="append", type=_policy, default=[],
                        metavar="AGENT=FILE|heuristic",
-                       help="let the ONNX policy FILE (rlenv_client.policies.export_onnx) act "
+                       help="let the ONNX policy FILE (rlenv_tools.policies.export_onnx) act "
                        "for AGENT, or its own heuristic with AGENT=heuristic "
                        "(RLAgent.heuristic); repeat for several agents. With every agent "
                        "driven, the server plays episodes itself (seeded 0, 1, 2 ...) and "
@@ -135,7 +135,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                          help="the page's port on 127.0.0.1 (default 0: a free one)")
     inspect.add_argument("--follow-stdin", action="store_true",
                          help="read new address lists (JSON) from standard input; exit when it "
-                         "closes (set by rlenv_client.inspector.Inspector)")
+                         "closes (set by rlenv_tools.inspector.Inspector)")
     inspect.add_argument("--record-demonstrations", metavar="DIR", default=None,
                          help="let a person take control from the page (keys to actions: the "
                          "agent's demonstration_keys) and record each episode into DIR, as "
@@ -337,13 +337,13 @@ def _start_inspector(host: str, port: int, token: str | None, target: str,
     address = format_address(reachable, port)
     options = [] if demonstrations is None else \
         ["--record-demonstrations", demonstrations, "--target", target]
-    return subprocess.Popen([sys.executable, "-m", "rlenv_client.inspector", address,
+    return subprocess.Popen([sys.executable, "-m", "rlenv_tools.inspector", address,
                              "--follow-stdin", *options], stdin=subprocess.PIPE, env=env)
 
 
 def _http(args: argparse.Namespace) -> int:
     try:
-        from rlenv.http.app import Settings, serve
+        from rlenv_tools.http.app import Settings, serve
     except ImportError as error:
         print(f"rlenv http: {error.name or error} is missing; install the http extra: "
               "pip install 'rlenv[http]'", file=sys.stderr)
@@ -360,7 +360,7 @@ def _http(args: argparse.Namespace) -> int:
 
 
 def _inspect(args: argparse.Namespace) -> int:
-    from rlenv_client.inspector import serve
+    from rlenv_tools.inspector import serve
 
     serve(args.addresses, token=args.token, port=args.port, follow_stdin=args.follow_stdin,
           ready=lambda line: print(line, flush=True),
@@ -406,7 +406,7 @@ def _colour_wanted() -> bool:
 
 
 def _check(args: argparse.Namespace) -> int:
-    from rlenv_client.checks import run_checks
+    from rlenv_tools.checks import run_checks
 
     results = run_checks(args.target, timeout=args.timeout, compliance=args.compliance,
                          token=args.token)
@@ -428,14 +428,14 @@ def _bench(args: argparse.Namespace) -> int:
         print(f"... {message}", file=sys.stderr, flush=True)
 
     if args.train is not None:
-        from rlenv_client.training_speed import format_rows, measure_training, rows_to_json
+        from rlenv_tools.training_speed import format_rows, measure_training, rows_to_json
 
         rows = measure_training(args.train, envs=args.envs, rounds=args.rounds, busy=args.busy,
                                 torch_threads=args.torch_threads, steps=args.steps or 8000,
                                 native=args.native, progress=progress)
         table, as_json = format_rows(rows), rows_to_json(rows)
     else:
-        from rlenv_client.bench import format_table, run_benchmarks, to_json
+        from rlenv_tools.bench import format_table, run_benchmarks, to_json
 
         figures = run_benchmarks(rounds=args.rounds, steps=args.steps or 2000,
                                  quick=args.quick, progress=progress)
@@ -489,8 +489,8 @@ def _replay(args: argparse.Namespace) -> int:
 
 def _replay_inspect(args: argparse.Namespace) -> int:
     """``rlenv replay FILE ... --inspect``: the inspector's page with the files as timelines."""
-    from rlenv_client.inspector import serve
-    from rlenv_client.timeline import load_policy
+    from rlenv_tools.inspector import serve
+    from rlenv_tools.timeline import load_policy
 
     if args.address is not None:
         print("rlenv replay: --inspect re-simulates in processes of its own; it takes no "
@@ -532,7 +532,7 @@ def _replay_inspect(args: argparse.Namespace) -> int:
 
 def _dataset_create(args: argparse.Namespace) -> int:
     try:
-        from rlenv_client.datasets import create_dataset
+        from rlenv_tools.datasets import create_dataset
     except ImportError as error:
         print(f"rlenv dataset: {error}", file=sys.stderr)
         return 2

@@ -34,7 +34,7 @@ try:
     import minari
     from minari.data_collector import EpisodeBuffer
 except ImportError as missing:  # pragma: no cover - the message names the extra
-    raise ImportError(f"rlenv_client.datasets needs the minari extra: pip install "
+    raise ImportError(f"rlenv_tools.datasets needs the minari extra: pip install "
                       f"'rlenv[minari]' ({missing})") from None
 
 __all__ = ["DATASET_ID_FORM", "check_dataset_id", "create_dataset", "environment_spec"]

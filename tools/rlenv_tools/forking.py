@@ -6,7 +6,7 @@ answers calls over a Unix socket pair that only its owner holds. :meth:`~ForkedE
 copies that process: the copy holds the same state to the bit (pymunk's contact caches and
 sleeping bodies, the generators, every Python object), which no snapshot taken as data holds,
 and it costs about a millisecond however large the scene. Timelines park such copies as
-checkpoints (:mod:`rlenv_client.timeline`).
+checkpoints (:mod:`rlenv_tools.timeline`).
 
 Every call is a msgpack frame (:mod:`rlenv.protocol.codec`) naming one of a few operations;
 nothing is ever unpickled. A process ends when its socket closes, so closing the owner's end
@@ -94,7 +94,7 @@ class ForkedEnvironment:
         lifeline, held = os.pipe()
         try:
             process = subprocess.Popen(
-                [sys.executable, "-m", "rlenv_client.forking", str(theirs.fileno()),
+                [sys.executable, "-m", "rlenv_tools.forking", str(theirs.fileno()),
                  str(lifeline), target],
                 pass_fds=(theirs.fileno(), lifeline), stdin=subprocess.DEVNULL, process_group=0)
         except BaseException:
@@ -375,7 +375,7 @@ def _arm(lifeline: int) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    """``python -m rlenv_client.forking FD LIFELINE MODULE:CLASS``: serve the socket ``FD``."""
+    """``python -m rlenv_tools.forking FD LIFELINE MODULE:CLASS``: serve the socket ``FD``."""
     fd, lifeline, target = (sys.argv[1:] if argv is None else argv)
     _arm(int(lifeline))
     sock = socket.socket(fileno=int(fd))

@@ -1,4 +1,4 @@
-"""The torch module :func:`rlenv_client.policies.export_onnx` exports: a policy's actions.
+"""The torch module :func:`rlenv_tools.policies.export_onnx` exports: a policy's actions.
 
 Needs torch (imported here, so import this module only where torch is wanted).
 """

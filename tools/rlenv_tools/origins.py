@@ -1,6 +1,6 @@
 """Which ``Host`` and ``Origin`` headers a web server on this machine answers.
 
-The inspector (:mod:`rlenv_client.inspector.web`) and the HTTP gateway (:mod:`rlenv.http`)
+The inspector (:mod:`rlenv_tools.inspector.web`) and the HTTP gateway (:mod:`rlenv_tools.http`)
 share these rules:
 
 - the ``Host`` header must name one of the server's own names with its port: a DNS name that

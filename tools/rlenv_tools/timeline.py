@@ -4,7 +4,7 @@ A :class:`Timeline` is built from a recording (:class:`~rlenv_client.replay.Reco
 and re-simulates it in processes of its own that it starts, owns and ends (never on the server
 a trainer uses)::
 
-    from rlenv_client.timeline import Timeline
+    from rlenv_tools.timeline import Timeline
 
     with Timeline.open("episodes/episode-0001.rlenv") as timeline:
         len(timeline)                      # the number of actions
@@ -24,7 +24,7 @@ re-simulates differently raises ``RuntimeError``).
 
 Opening a timeline re-simulates the whole episode once, and on the way parks checkpoints: every
 ``checkpoint_every`` steps, a copy of the environment's process made by ``fork``
-(:mod:`rlenv_client.forking`), which holds the whole state to the bit. Going to a step copies
+(:mod:`rlenv_tools.forking`), which holds the whole state to the bit. Going to a step copies
 the nearest checkpoint at or before it and takes the steps from there (about 5 ms of them at
 most); going forward from where the timeline stands just steps on. ``benchmarks/time_travel.py``
 measures a step of a 10,000-step episode. Each checkpoint is a process that holds, of its own,
@@ -32,7 +32,7 @@ the memory the episode changed since the one before (a few MiB for Plinko); ther
 256 over an episode, and branches add theirs, within bounds: ``max_processes`` in all (the
 episode's checkpoints take at most half, each branch at most half of what is left) and
 ``max_memory``, past which no more are parked. Every process dies with the timeline's owner
-(:mod:`rlenv_client.forking`'s lifeline). A timeline is not thread-safe, and needs ``os.fork``
+(:mod:`rlenv_tools.forking`'s lifeline). A timeline is not thread-safe, and needs ``os.fork``
 (Linux, macOS).
 """
 
@@ -48,9 +48,9 @@ from typing import Any
 import numpy as np
 
 from rlenv.protocol.errors import RemoteError
-from rlenv_client.forking import ForkedEnvironment, StepRecord
 from rlenv_client.replay import EpisodeFile, digest, older_settings
 from rlenv_client.trusted_targets import check_target
+from rlenv_tools.forking import ForkedEnvironment, StepRecord
 
 __all__ = ["MAX_MEMORY", "MAX_PROCESSES", "Step", "Tick", "Timeline", "TimelineDiff",
            "load_policy"]
@@ -506,7 +506,7 @@ class Timeline:
             actions: the branch's actions after ``step``.
             policy: instead of ``actions``, what chooses each action: ``policy(observation) ->
                 action``, or the path of an ONNX file
-                (:func:`~rlenv_client.policies.export_onnx`; the ``onnx`` extra).
+                (:func:`~rlenv_tools.policies.export_onnx`; the ``onnx`` extra).
             max_steps: with ``policy``, the most steps it takes.
             repeat_action: ticks per action; default: the recorded action's at ``step + 1``
                 (or the last one), else the server's setting.

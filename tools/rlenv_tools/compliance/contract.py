@@ -7,7 +7,7 @@ Each is a probe whose failure line says what was expected and what came back:
   and actions get a non-fatal ``busy``, and its observations, snapshots, ``inspect`` reads,
   ``action: nil`` and id-only requests are answered;
 - **determinism after sets** and **repeated restores**:
-  :class:`~rlenv_client.compliance.determinism.DeterminismProbes`;
+  :class:`~rlenv_tools.compliance.determinism.DeterminismProbes`;
 - **ext types**: a request holding msgpack ext type -1 (timestamp) or a foreign one gets a
   non-fatal ``bad_frame`` and the connection goes on; every reply the suite reads holds no ext
   type but 1;
@@ -24,8 +24,8 @@ from typing import Any
 from rlenv.protocol import ErrorReply, Request, pack
 from rlenv.protocol.errors import ErrorCode, RemoteError
 from rlenv.testing import frame
-from rlenv_client.compliance.determinism import DeterminismProbes
-from rlenv_client.compliance.harness import (
+from rlenv_tools.compliance.determinism import DeterminismProbes
+from rlenv_tools.compliance.harness import (
     Harness,
     Probes,
     Skipped,

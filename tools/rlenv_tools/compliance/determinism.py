@@ -21,7 +21,7 @@ import numpy as np
 
 from rlenv.protocol import ErrorReply, Request, Response, pack
 from rlenv.protocol.errors import ErrorCode, RemoteError
-from rlenv_client.compliance.harness import Harness, Skipped
+from rlenv_tools.compliance.harness import Harness, Skipped
 
 __all__ = ["DeterminismProbes"]
 

@@ -25,7 +25,7 @@ from rlenv.testing import frame, read_body
 from rlenv_client.client import Client
 
 if TYPE_CHECKING:
-    from rlenv_client.compliance import ComplianceReport
+    from rlenv_tools.compliance import ComplianceReport
 
 __all__ = ["Harness", "Probes", "ReplyTap", "Skipped", "TappedClient", "assert_error",
            "connection_closed", "peak_rss_kib"]

@@ -20,8 +20,8 @@ from gymnasium.vector.utils import concatenate, create_empty_array
 from rlenv.protocol import pack
 from rlenv.protocol.errors import ErrorCode, RemoteError
 from rlenv.testing import frame
-from rlenv_client.compliance.harness import Harness, Probes, assert_error, connection_closed
-from rlenv_client.observations import observation_difference
+from rlenv_tools.compliance.harness import Harness, Probes, assert_error, connection_closed
+from rlenv_tools.observations import observation_difference
 
 __all__ = ["HostileProbes"]
 

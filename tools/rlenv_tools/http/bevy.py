@@ -26,15 +26,15 @@ from typing import TYPE_CHECKING, Any
 from starlette.requests import Request
 from starlette.responses import Response
 
-from rlenv.http.endpoints import Answer, Endpoint, Parameter, json_response, parse_json
-from rlenv.http.png import encode_png
-from rlenv.http.problems import COMMON_HEADERS, Problem
 from rlenv.protocol.errors import ErrorCode
 from rlenv.serving.actions import MAX_REPEAT_ACTION
+from rlenv_tools.http.endpoints import Answer, Endpoint, Parameter, json_response, parse_json
+from rlenv_tools.http.png import encode_png
+from rlenv_tools.http.problems import COMMON_HEADERS, Problem
 
 if TYPE_CHECKING:
-    from rlenv.http.app import Gateway
-    from rlenv.http.sessions import Session
+    from rlenv_tools.http.app import Gateway
+    from rlenv_tools.http.sessions import Session
 
 __all__ = ["BEVY_SESSION", "bevy_endpoints"]
 

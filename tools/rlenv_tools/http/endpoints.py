@@ -1,7 +1,7 @@
 """The route table's record, and what every handler shares: JSON in, JSON out.
 
-Each route is one :class:`Endpoint`: Starlette serves it (:mod:`rlenv.http.app`) and the
-OpenAPI document describes it (:mod:`rlenv.http.openapi`) from the same record, so the two
+Each route is one :class:`Endpoint`: Starlette serves it (:mod:`rlenv_tools.http.app`) and the
+OpenAPI document describes it (:mod:`rlenv_tools.http.openapi`) from the same record, so the two
 never disagree.
 """
 
@@ -15,9 +15,9 @@ from typing import Any, NamedTuple
 from starlette.requests import Request
 from starlette.responses import Response
 
-from rlenv.http.json_spaces import dumps
-from rlenv.http.problems import COMMON_HEADERS, Problem
 from rlenv.protocol.errors import ErrorCode
+from rlenv_tools.http.json_spaces import dumps
+from rlenv_tools.http.problems import COMMON_HEADERS, Problem
 
 __all__ = ["JSON", "Answer", "Endpoint", "JSONRoute", "Parameter", "json_response",
            "object_body", "parse_json", "read_json"]
@@ -60,7 +60,7 @@ class Endpoint:
         body_required: whether the body must be sent.
         answers: status -> answer.
         problems: the codes of the problems it may answer (see
-            :data:`rlenv.http.problems.PROBLEMS`), besides those every route may.
+            :data:`rlenv_tools.http.problems.PROBLEMS`), besides those every route may.
         query: its query parameters.
         description: more, for OpenAPI.
         json: the handler takes the path parameters and the JSON body and returns the JSON

@@ -1,6 +1,6 @@
 """The gateway's door: every request is checked here before any route sees it.
 
-- ``Host`` and ``Origin`` as the inspector checks them (:mod:`rlenv_client.origins`): a foreign
+- ``Host`` and ``Origin`` as the inspector checks them (:mod:`rlenv_tools.origins`): a foreign
   ``Host`` (DNS rebinding) or a page of another site gets 403 ``forbidden``;
 - so does a request a browser marks as sent by a page of another origin: ``Sec-Fetch-Site``
   other than ``same-origin`` or ``none`` (a page's ``<img src>`` sends no ``Origin``, and
@@ -24,10 +24,10 @@ import hmac
 from collections.abc import Awaitable, Callable, MutableMapping
 from typing import Any
 
-from rlenv.http.problems import Problem
 from rlenv.protocol.errors import ErrorCode
 from rlenv.serving.penalties import Penalties
-from rlenv_client.origins import OriginPolicy
+from rlenv_tools.http.problems import Problem
+from rlenv_tools.origins import OriginPolicy
 
 __all__ = ["Guard"]
 

@@ -29,8 +29,8 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from rlenv.http.png import encode_png
 from rlenv.protocol.spaces import space_from_spec, space_to_spec
+from rlenv_tools.http.png import encode_png
 
 __all__ = ["action_decoder", "dumps", "is_image", "json_schema", "space_from_json",
            "space_to_json", "to_json", "value_encoder"]

@@ -1,10 +1,10 @@
 """``GET /openapi.json``: OpenAPI 3.1, generated from the route table and the spaces.
 
 Nothing is written twice: the paths, operations, parameters, bodies, answers and problem
-statuses come from the :class:`~rlenv.http.endpoints.Endpoint` records that Starlette serves;
+statuses come from the :class:`~rlenv_tools.http.endpoints.Endpoint` records that Starlette serves;
 ``Action`` and ``Observation`` are the JSON Schemas of the TARGET's spaces
-(:func:`rlenv.http.json_spaces.json_schema`); the problems' statuses and titles come from
-:data:`rlenv.http.problems.PROBLEMS`.
+(:func:`rlenv_tools.http.json_spaces.json_schema`); the problems' statuses and titles come from
+:data:`rlenv_tools.http.problems.PROBLEMS`.
 """
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ import re
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-from rlenv.http.endpoints import JSON, Answer, Endpoint
-from rlenv.http.problems import PROBLEM_MEDIA_TYPE, PROBLEM_TYPE, PROBLEMS
+from rlenv_tools.http.endpoints import JSON, Answer, Endpoint
+from rlenv_tools.http.problems import PROBLEM_MEDIA_TYPE, PROBLEM_TYPE, PROBLEMS
 
 __all__ = ["openapi_document"]
 

@@ -17,8 +17,8 @@ from typing import Any, NamedTuple
 
 from starlette.responses import Response
 
-from rlenv.http.json_spaces import dumps
 from rlenv.protocol.errors import ErrorCode, RemoteError
+from rlenv_tools.http.json_spaces import dumps
 
 __all__ = ["COMMON_HEADERS", "PROBLEMS", "PROBLEM_MEDIA_TYPE", "PROBLEM_TYPE", "Problem",
            "ProblemKind", "from_remote_error"]

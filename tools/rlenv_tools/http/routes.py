@@ -21,7 +21,7 @@ POST        /v1/envs/{id}/restore                 ``{"observation", "info"}``
 GET         /v1                                   versions and capabilities
 ==========  ====================================  =============================================
 
-Every refusal is a problem (:mod:`rlenv.http.problems`).
+Every refusal is a problem (:mod:`rlenv_tools.http.problems`).
 """
 
 from __future__ import annotations
@@ -33,7 +33,11 @@ from typing import TYPE_CHECKING, Any
 from starlette.requests import Request
 from starlette.responses import Response
 
-from rlenv.http.endpoints import (
+from rlenv.protocol.errors import ErrorCode
+from rlenv.protocol.messages import MAX_RENDER_SIZE
+from rlenv.protocol.spaces import SpaceMismatch, check
+from rlenv.serving.actions import MAX_REPEAT_ACTION
+from rlenv_tools.http.endpoints import (
     Answer,
     Endpoint,
     Parameter,
@@ -41,17 +45,13 @@ from rlenv.http.endpoints import (
     object_body,
     read_json,
 )
-from rlenv.http.json_spaces import json_schema, space_to_json
-from rlenv.http.png import encode_png
-from rlenv.http.problems import COMMON_HEADERS, Problem
-from rlenv.protocol.errors import ErrorCode
-from rlenv.protocol.messages import MAX_RENDER_SIZE
-from rlenv.protocol.spaces import SpaceMismatch, check
-from rlenv.serving.actions import MAX_REPEAT_ACTION
+from rlenv_tools.http.json_spaces import json_schema, space_to_json
+from rlenv_tools.http.png import encode_png
+from rlenv_tools.http.problems import COMMON_HEADERS, Problem
 
 if TYPE_CHECKING:
-    from rlenv.http.app import Gateway
-    from rlenv.http.sessions import Session
+    from rlenv_tools.http.app import Gateway
+    from rlenv_tools.http.sessions import Session
 
 __all__ = ["component_schemas", "session_endpoints", "target_schemas"]
 
@@ -233,7 +233,7 @@ def _size(request: Request, name: str) -> int | None:
 
 
 def component_schemas(observation: dict[str, Any], action: dict[str, Any]) -> dict[str, Any]:
-    """The component schemas the session routes name (for :mod:`rlenv.http.openapi`).
+    """The component schemas the session routes name (for :mod:`rlenv_tools.http.openapi`).
 
     Args:
         observation: the JSON Schema of observations (the TARGET's, or any value).

@@ -20,7 +20,7 @@ A :class:`Runner` serves a session's calls one at a time, in order, in two ways:
   call on the session's own thread.
 
 Past the deadline either raises :class:`EnvironmentTimeout` at once; the session then ends
-its environment's process (see :mod:`rlenv.http.sessions`).
+its environment's process (see :mod:`rlenv_tools.http.sessions`).
 """
 
 from __future__ import annotations

@@ -1,9 +1,9 @@
 """Sessions: one environment each, gym-http-api style, with limits and an idle reaper.
 
 A :class:`Session` holds a TCP :class:`~rlenv_client.client.Client` of its environment's
-server and the :class:`~rlenv.http.runners.Runner` that calls it under a deadline. Its answers
-are JSON values (:mod:`rlenv.http.json_spaces`); its refusals are problems
-(:class:`~rlenv.http.problems.Problem`).
+server and the :class:`~rlenv_tools.http.runners.Runner` that calls it under a deadline. Its answers
+are JSON values (:mod:`rlenv_tools.http.json_spaces`); its refusals are problems
+(:class:`~rlenv_tools.http.problems.Problem`).
 
 A session's ``status``:
 
@@ -40,17 +40,17 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from rlenv.http.json_spaces import (
+from rlenv.protocol.errors import ConnectionLost, ErrorCode, RemoteError
+from rlenv_client.time_limits import truncate_agents
+from rlenv_tools.http.json_spaces import (
     action_decoder,
     dumps,
     space_to_json,
     to_json,
     value_encoder,
 )
-from rlenv.http.problems import Problem, from_remote_error
-from rlenv.http.targets import Catalog, Entry, Opened
-from rlenv.protocol.errors import ConnectionLost, ErrorCode, RemoteError
-from rlenv_client.time_limits import truncate_agents
+from rlenv_tools.http.problems import Problem, from_remote_error
+from rlenv_tools.http.targets import Catalog, Entry, Opened
 
 __all__ = ["MAX_SESSIONS_PER_CLIENT", "Session", "Sessions", "Status"]
 

@@ -26,14 +26,14 @@ from starlette.requests import Request
 from starlette.responses import Response, StreamingResponse
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
-from rlenv.http.endpoints import Answer, Endpoint, object_body, parse_json
-from rlenv.http.json_spaces import dumps
-from rlenv.http.problems import COMMON_HEADERS, Problem
 from rlenv.protocol.errors import ErrorCode
+from rlenv_tools.http.endpoints import Answer, Endpoint, object_body, parse_json
+from rlenv_tools.http.json_spaces import dumps
+from rlenv_tools.http.problems import COMMON_HEADERS, Problem
 
 if TYPE_CHECKING:
-    from rlenv.http.app import Gateway
-    from rlenv.http.sessions import Session
+    from rlenv_tools.http.app import Gateway
+    from rlenv_tools.http.sessions import Session
 
 __all__ = ["stream_endpoints"]
 

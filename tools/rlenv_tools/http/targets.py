@@ -6,7 +6,7 @@ else: a request never names a module to import or an address to connect to.
 
 Where the environment runs: never in the gateway's process (see ``docs/http.md`` for the
 measurements behind this), so that a deadline holds whatever its code does and a hung
-environment can be ended (:mod:`rlenv.http.runners`):
+environment can be ended (:mod:`rlenv_tools.http.runners`):
 
 - ``MODULE:CLASS`` and registered ids: in an ``rlenv serve`` subprocess of the session's own
   (:class:`~rlenv_client.launcher.ServerProcess`), relayed over TCP: an environment that
@@ -24,14 +24,14 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from rlenv.http.problems import Problem
-from rlenv.http.runners import Runner
 from rlenv.protocol import Hello
 from rlenv.protocol.errors import ConnectionLost, ErrorCode, RemoteError, RequestTimeout
 from rlenv_client.client import Client
 from rlenv_client.launcher import ServerProcess, ServerStartError
 from rlenv_client.registration import ENVIRONMENTS
 from rlenv_client.session import parse_address
+from rlenv_tools.http.problems import Problem
+from rlenv_tools.http.runners import Runner
 
 __all__ = ["Catalog", "Entry", "Opened", "is_address"]
 

@@ -10,7 +10,7 @@ does not offer:
   protocol gets a transport that gathers what is written during one step of the event loop and
   sends it at the end of that step, in one write: a head and its body, or a WebSocket's frames.
   Closing sends what is pending first. Connections also set ``TCP_NODELAY`` (see
-  :func:`rlenv.http.app.serve`), so a stream's later writes never wait for an acknowledgement.
+  :func:`rlenv_tools.http.app.serve`), so a stream's later writes never wait for an acknowledgement.
 - **A deadline on every request head, and a bound on open connections** (:func:`_bounded`).
   uvicorn times out idle keep-alive connections, but not a request head that never ends: a
   connection that sent ``GET / HTTP/1.1`` and nothing more was kept forever, and 300 of them

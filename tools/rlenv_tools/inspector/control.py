@@ -35,9 +35,9 @@ from rlenv.protocol import ErrorReply, Request, Response
 from rlenv.protocol.errors import RemoteError
 from rlenv_client.addresses import parse_address
 from rlenv_client.client import Client
-from rlenv_client.inspector.watch import InspectorError, Watcher, to_json
 from rlenv_client.replay import EpisodeFile, digest, next_episode_path
 from rlenv_client.session import LOST
+from rlenv_tools.inspector.watch import InspectorError, Watcher, to_json
 
 __all__ = ["Demonstrator", "held_action", "idle_action", "key_map"]
 
@@ -290,7 +290,7 @@ def key_map(tree: Sequence[Mapping[str, Any]], space: spaces.Space,
     """The keys of ``agent`` (the only one if ``None``), as actions of its ``space``.
 
     The tree is ``inspect tree``'s (its agent nodes carry ``demonstration_keys``); the
-    inspector's timelines branch with the same map (:mod:`~rlenv_client.inspector.timelines`).
+    inspector's timelines branch with the same map (:mod:`~rlenv_tools.inspector.timelines`).
 
     Raises:
         InspectorError: 422, no agent named, among several, or one with no key map; 404 no

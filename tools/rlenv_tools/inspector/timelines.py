@@ -1,6 +1,6 @@
 """The inspector's timelines: recordings to scrub, step, tick, branch and compare from the page.
 
-:class:`Timelines` holds the :class:`~rlenv_client.timeline.Timeline` of each recording the page
+:class:`Timelines` holds the :class:`~rlenv_tools.timeline.Timeline` of each recording the page
 can open (files given to ``rlenv replay FILE --inspect``, or the recent episodes of a watched
 instance, see :meth:`Timelines.open_recent`), each with its tree of branches, numbered in the
 order they were made (branch 0 is the episode itself). A timeline is not thread-safe, and a
@@ -9,7 +9,7 @@ timeline is opened (its environment started, the episode re-simulated once) when
 first asks for it.
 
 Branches are made from the page with the agent's keys (its ``demonstration_keys``, the map the
-page's Take control uses, :func:`~rlenv_client.inspector.control.key_map`): the first key
+page's Take control uses, :func:`~rlenv_tools.inspector.control.key_map`): the first key
 press makes a branch of one action at the scrubbed step, each next press lengthens it by one
 action (``branch(len(b), [action])``: the tree keeps it under its branch point); or with a
 policy: ``policies={"name": callable}`` given from Python, or ``--policy FILE.onnx`` on the
@@ -38,12 +38,12 @@ from typing import Any
 from gymnasium import spaces
 
 from rlenv.protocol.errors import RemoteError
-from rlenv_client.inspector.control import key_map
-from rlenv_client.inspector.watch import InspectorError, _shown, to_json
 from rlenv_client.launcher import ServerStartError
 from rlenv_client.replay import EpisodeFile, digest
 from rlenv_client.session import LOST
-from rlenv_client.timeline import Timeline
+from rlenv_tools.inspector.control import key_map
+from rlenv_tools.inspector.watch import InspectorError, _shown, to_json
+from rlenv_tools.timeline import Timeline
 
 __all__ = ["MAX_BRANCH_STEPS", "MAX_TICKS", "Timelines", "episode_id"]
 
@@ -110,7 +110,7 @@ class Timelines:
         target: the environment to serve (``MODULE:CLASS``; default: each recording's, where
             it is an installed package).
         trust_target: import each recording's target whatever it is (``--trust-target``).
-        checkpoint_every: see :class:`~rlenv_client.timeline.Timeline` (default: its own).
+        checkpoint_every: see :class:`~rlenv_tools.timeline.Timeline` (default: its own).
         max_recent: how many recent episodes of live instances stay open at once (the oldest
             opened is closed, with its branches, to make room).
         max_files: how many recordings from files stay open at once (the oldest opened is
@@ -285,7 +285,7 @@ class Timelines:
         """Two branches side by side (``a``: ``first``, ``b``: ``second``).
 
         Each one's reward at every step, their first difference
-        (:meth:`~rlenv_client.timeline.Timeline.diff`), and at ``step`` each one's observation
+        (:meth:`~rlenv_tools.timeline.Timeline.diff`), and at ``step`` each one's observation
         and reward and the second's observation minus the first's (``None`` where a branch does
         not reach ``step``).
 

@@ -10,19 +10,19 @@ Safe by default, as a local debugging server must be:
   DNS name rebound to 127.0.0.1, can neither read nor change anything;
 - changes only by ``POST`` with a JSON body (which a cross-site form cannot send without a
   preflight that is never granted); no CORS header is ever sent;
-- the environment servers' token stays in :class:`~rlenv_client.inspector.watch.Watcher`; no
+- the environment servers' token stays in :class:`~rlenv_tools.inspector.watch.Watcher`; no
   response carries it.
 
 Routes (below the key): ``/`` the page, ``/static/NAME`` its script and style, and the API:
 ``GET api/servers``, ``api/frame``, ``api/tree``, ``api/node``, ``api/stats``,
 ``api/snapshot`` (``?server=S&instance=I``, and ``path`` or ``since``), ``api/control`` (the
 demonstration under way) and ``POST api/edit`` (``{"server", "instance", "path", "property",
-"value"}``); with demonstrations (:mod:`~rlenv_client.inspector.control`), ``POST api/control``
+"value"}``); with demonstrations (:mod:`~rlenv_tools.inspector.control`), ``POST api/control``
 (``{"server", "instance"}`` and, with several agents, the ``agent`` to play: take control),
 ``api/keys`` (``{"held": [key, ...]}``) and ``api/release`` (``{}``), under the same rules as
 an edit.
 
-With timelines (:mod:`~rlenv_client.inspector.timelines`: ``rlenv replay FILE --inspect``, or
+With timelines (:mod:`~rlenv_tools.inspector.timelines`: ``rlenv replay FILE --inspect``, or
 a watched instance's recent episodes), ``GET api/timelines`` (those offered, the policies),
 ``api/timeline`` (``?timeline=T``: its length, keys and tree of branches),
 ``api/timeline/step`` and ``api/timeline/ticks`` (``?timeline=T&branch=B&step=K``; the ticks
@@ -48,10 +48,10 @@ from importlib import resources
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
-from rlenv_client.inspector.control import Demonstrator
-from rlenv_client.inspector.timelines import MAX_TICKS, Timelines, episode_id
-from rlenv_client.inspector.watch import InspectorError, Watcher
-from rlenv_client.origins import OriginPolicy
+from rlenv_tools.inspector.control import Demonstrator
+from rlenv_tools.inspector.timelines import MAX_TICKS, Timelines, episode_id
+from rlenv_tools.inspector.watch import InspectorError, Watcher
+from rlenv_tools.origins import OriginPolicy
 
 __all__ = ["InspectorServer"]
 
@@ -360,7 +360,7 @@ class _Handler(BaseHTTPRequestHandler):
             self._send_json(500, {"error": f"the inspector failed: {error!r:.200}"})
 
     def _send_static(self, name: str) -> None:
-        body = resources.files("rlenv_client.inspector").joinpath("static", name).read_bytes()
+        body = resources.files("rlenv_tools.inspector").joinpath("static", name).read_bytes()
         self._send(200, _STATIC[name], body)
 
     def _send_json(self, status: int, value: Any) -> None:

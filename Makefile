@@ -20,7 +20,7 @@ demo: $(STAMP)
 	$(BIN)/rlenv demo
 
 test: $(STAMP)
-	$(BIN)/ruff check rlenv client examples tests benchmarks docs
+	$(BIN)/ruff check rlenv client tools examples tests benchmarks docs
 	$(BIN)/python -m pytest
 
 # Optional: servers on Ray (the ray extra) and their tests: one node, then a fake cluster.
@@ -47,7 +47,7 @@ test-onnx: $(STAMP)
 	OMP_NUM_THREADS=1 $(BIN)/python -m pytest -m onnx tests/test_onnx_policies.py
 
 # rlenv as users install it (the release extra: build, twine): the sdist and the wheel built and
-# checked (twine check, only rlenv and rlenv_client at the top), the wheel installed with its http
+# checked (twine check, only rlenv, rlenv_client and rlenv_tools at the top), the wheel installed with its http
 # extra into a new venv outside the checkout, where rlenv demo, rlenv check, a gym.make episode
 # and rlenv http run (.ci/test-package; about a minute, most of it pip).
 test-package: $(STAMP)
@@ -150,7 +150,7 @@ test-lowest: $(LOWEST_VENV)/.installed
 	$(LOWEST_VENV)/bin/python -m pytest
 
 lint: $(STAMP)
-	$(BIN)/ruff check rlenv client examples tests benchmarks docs
+	$(BIN)/ruff check rlenv client tools examples tests benchmarks docs
 
 # The type checker: mypy with pyproject.toml's [tool.mypy] (its files: rlenv and
 # client/rlenv_client), 0 errors and no unused "type: ignore" (the typecheck extra installs it).

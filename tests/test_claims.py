@@ -21,9 +21,9 @@ from inspector_http import fetch
 from rlenv.protocol import Request, Response
 from rlenv.protocol.errors import RemoteError
 from rlenv_client import Client
-from rlenv_client.inspector import Demonstrator, InspectorServer, Watcher
 from rlenv_client.launcher import ServerProcess
 from rlenv_client.replay import EpisodeFile
+from rlenv_tools.inspector import Demonstrator, InspectorServer, Watcher
 
 TAG = "examples.tag:TagEnvironment"
 HELD = np.array([1.0, -0.5], np.float32)  # what the person holds for Runner1

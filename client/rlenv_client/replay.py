@@ -40,18 +40,15 @@ _FORMAT = "rlenv-episode"
 _VERSION = 1
 _NAME = re.compile(r"episode-(\d+)\.rlenv")
 
-
 def digest(observation: Any) -> str:
     """A short fingerprint of an observation's exact bytes (dtype and shape included)."""
     return hashlib.blake2b(pack(observation), digest_size=16).hexdigest()
-
 
 def next_episode_path(directory: Path) -> Path:
     """``directory/episode-NNNN.rlenv``, numbered after the highest one there."""
     numbers = [int(match.group(1)) for path in directory.iterdir()
                if (match := _NAME.fullmatch(path.name))]
     return directory / f"episode-{max(numbers, default=0) + 1:04d}.rlenv"
-
 
 @dataclass
 class EpisodeFile:
@@ -109,6 +106,7 @@ class EpisodeFile:
                 or not all(isinstance(seen, str) for seen in observations):
             raise ValueError(f"{path} is not an rlenv episode: its target must be a string and "
                              "its observations a list of digests")
+
         try:
             snapshot = parse_snapshot(data.get("snapshot"))
         except RequestError as error:
@@ -119,7 +117,6 @@ class EpisodeFile:
             raise ValueError(f"{path} is not an rlenv episode: its agent must be a name")
         return cls(target, snapshot, observations, data.get("terminated"),
                    data.get("truncated"), agent, Path(path))
-
 
 class RecordEpisodes(gymnasium.Wrapper):
     """Write every episode of an rlenv environment to ``directory`` when it ends.
@@ -155,7 +152,6 @@ class RecordEpisodes(gymnasium.Wrapper):
                         bool(truncated)).save(self.directory / f"episode-{self.episodes:04d}.rlenv")
         return observation, reward, terminated, truncated, info
 
-
 @dataclass
 class Trajectory:
     """What a replay saw, as gymnasium returned it: ``observations`` has one more than the rest.
@@ -170,7 +166,6 @@ class Trajectory:
     terminated: bool = False
     truncated: bool = False
 
-
 @dataclass(frozen=True)
 class ReplayResult:
     """What a replay found: ``divergence`` is ``None`` when every observation matched.
@@ -181,7 +176,6 @@ class ReplayResult:
     steps: int
     divergence: str | None
     trajectory: Trajectory | None = None
-
 
 def apply_change(client: BaseClient, event: Sequence[Any]) -> None:
     """Make on ``client`` a change a snapshot's events recorded between two actions.
@@ -197,7 +191,6 @@ def apply_change(client: BaseClient, event: Sequence[Any]) -> None:
     else:
         client.set_property(*event[1:])
 
-
 def older_settings(snapshot: Mapping[str, Any], agents: Sequence[str]) -> str:
     """Why a recording of several agents may not replay: it predates their settings by name.
 
@@ -211,7 +204,6 @@ def older_settings(snapshot: Mapping[str, Any], agents: Sequence[str]) -> str:
     return (" (the recording predates settings per agent, protocol 2.6: it kept one agent's "
             f"settings, {dict(kept)!r:.60}, which replay on every agent; if the agents' "
             "settings differed, it cannot replay)")
-
 
 def replay(episode: EpisodeFile, client: BaseClient, *, keep: bool = False) -> ReplayResult:
     """Re-run ``episode`` on ``client``'s environment and compare every observation.

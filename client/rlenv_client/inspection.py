@@ -19,12 +19,13 @@ from rlenv.protocol.errors import ErrorCode, RemoteError
 from rlenv_client.replay import EpisodeFile
 
 __all__ = ["EPISODES_SINCE", "PAGED_EPISODES_SINCE", "Inspection", "config_request",
-           "episode_files", "fetch_episodes"]
+           "episode_files", "episodes_refusal", "fetch_episodes"]
 
 EPISODES_SINCE = (2, 5)
+"""The protocol version that brought the ``episodes`` part (:meth:`Inspection.episodes`)."""
+
 AGENT_SETTINGS_SINCE = (2, 6)
 """The protocol whose ``config.agent`` may set one agent, keyed by its name."""
-"""The protocol version that brought the ``episodes`` part (:meth:`Inspection.episodes`)."""
 
 PAGED_EPISODES_SINCE = (2, 6)
 """The protocol version that serves the ``episodes`` part by index and in pages."""
@@ -113,9 +114,9 @@ class Inspection:
                 ``last`` is not an integer >= 1.
         """
         hello = self.hello
-        if hello.protocol < EPISODES_SINCE:
-            raise RemoteError(ErrorCode.BAD_REQUEST, "the server speaks protocol {}.{}; recent "
-                              "episodes need 2.5".format(*hello.protocol))
+        refusal = episodes_refusal(hello)
+        if refusal is not None:
+            raise RemoteError(ErrorCode.BAD_REQUEST, refusal)
         if last is not None and (type(last) is not int or last < 1):
             raise RemoteError(ErrorCode.BAD_REQUEST,
                               f"episodes.last must be an integer >= 1, got {last!r:.40}")
@@ -190,6 +191,19 @@ class Inspection:
         """
         frame = np.asarray(self._part(self._response(reply), "render"))
         return frame if frame.flags.writeable else frame.copy()
+
+
+def episodes_refusal(hello: Hello, server: str = "the server") -> str | None:
+    """Why the server of ``hello`` cannot serve recent episodes (older than 2.5), or ``None``.
+
+    Args:
+        hello: the server's hello.
+        server: how the message names the server.
+    """
+    if hello.protocol >= EPISODES_SINCE:
+        return None
+    return "{} speaks protocol {}.{}; recent episodes need {}.{}".format(
+        server, *hello.protocol, *EPISODES_SINCE)
 
 
 def fetch_episodes(ask: Callable[[dict[str, Any]], Response], hello: Hello,

@@ -46,8 +46,8 @@ _EXPORTS = {
     "Communication": "rlenv.communication",
     "run": "rlenv.serving.self_hosting",
     "Camera": "rlenv.scene2d.camera",
-    "View": "rlenv.scene2d.views",
-    "view": "rlenv.scene2d.views",
+    "View": "rlenv.views",
+    "view": "rlenv.views",
     "Node2D": "rlenv.scene2d.node2d",
     "Marker2D": "rlenv.scene2d.marker2d",
     "RaycastSensor2D": "rlenv.scene2d.raycast_sensor",
@@ -86,11 +86,11 @@ if TYPE_CHECKING:
     from rlenv.scene2d.physics import RigidBody as RigidBody
     from rlenv.scene2d.physics import StaticBody as StaticBody
     from rlenv.scene2d.raycast_sensor import RaycastSensor2D as RaycastSensor2D
-    from rlenv.scene2d.views import View as View
-    from rlenv.scene2d.views import view as view
     from rlenv.serving.self_hosting import run as run
     from rlenv.serving.server import Server as Server
     from rlenv.signals import Signal as Signal
     from rlenv.timer import PhysicsFramesTimer as PhysicsFramesTimer
     from rlenv.tree import SceneTree as SceneTree
+    from rlenv.views import View as View
+    from rlenv.views import view as view
     from rlenv.world import RLEnvWorld as RLEnvWorld

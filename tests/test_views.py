@@ -6,8 +6,8 @@ import pytest
 
 from rlenv.node import Node
 from rlenv.scene2d.physics import CollisionShape, Joint, PhysicsWorld, RigidBody, StaticBody
-from rlenv.scene2d.views import View, view
 from rlenv.tree import SceneTree
+from rlenv.views import View, view
 
 
 @pytest.fixture
@@ -87,3 +87,20 @@ def test_overlapping_views_hold_each_node_once_in_tree_order() -> None:
     upper.add_child(lower)
     lower.add_child(leaf)
     assert list(view(lower, upper, lower).all) == [upper, lower, leaf]
+
+
+def test_the_old_import_path_warns_and_the_package_names_do_not() -> None:
+    import warnings
+
+    import rlenv
+    from rlenv.scene2d import views as old
+
+    with pytest.warns(DeprecationWarning, match="moved to rlenv.views.View"):
+        assert old.View is View
+    with pytest.warns(DeprecationWarning, match="moved to rlenv.views.view"):
+        assert old.view is view
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert rlenv.View is View and rlenv.view is view
+    with pytest.raises(AttributeError, match="no attribute 'Nothing'"):
+        old.Nothing  # noqa: B018

@@ -4,11 +4,13 @@ Layout (the design card's, one concept per module):
 
 - ``node``, ``signals``, ``tree``, ``timer``: the Godot-style scene tree runtime;
 - ``environment``, ``agent``, ``world`` (and their base ``rl_node``): what users subclass;
+  ``levels``: a world whose levels come from the seed or as data (``LevelWorld``);
+- ``views``: queries over a tree, bulk reads and writes (``view``);
 - ``communication``: an environment's link to its clients (``start_server``; ``run`` hosts
   an environment itself, in ``serving/self_hosting.py``);
 - ``cli``: the ``rlenv`` command; ``testing``: fakes and clocks for tests;
 - ``scene2d/``: the 2D scene: Node2D and Marker2D, pymunk physics nodes, drawing, cameras,
-  tree views, procedural building (lattices, gradients, packed scenes);
+  procedural building (lattices, gradients, packed scenes);
 - ``protocol/``: the wire (sans-IO codec, messages, connection; spaces, errors), shared with
   ``rlenv_client``;
 - ``serving/``: the path a request takes through a server (endpoint, host, parts, instance).
@@ -41,6 +43,7 @@ _EXPORTS = {
     "Joint": "rlenv.scene2d.physics",
     "RLAgent": "rlenv.agent",
     "RLEnvWorld": "rlenv.world",
+    "LevelWorld": "rlenv.levels",
     "RLEnvironment": "rlenv.environment",
     "Server": "rlenv.serving.server",
     "Communication": "rlenv.communication",
@@ -70,6 +73,7 @@ if TYPE_CHECKING:
     from rlenv.agent import RLAgent as RLAgent
     from rlenv.communication import Communication as Communication
     from rlenv.environment import RLEnvironment as RLEnvironment
+    from rlenv.levels import LevelWorld as LevelWorld
     from rlenv.node import Node as Node
     from rlenv.node import NodeNotFoundError as NodeNotFoundError
     from rlenv.node import ProcessMode as ProcessMode

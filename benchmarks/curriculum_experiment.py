@@ -72,9 +72,9 @@ import rlenv_client  # noqa: F401  (registers rlenv/Plinko-v0 and rlenv/Maze-v0)
 from rlenv import PackedScene
 from rlenv.examples import maze
 from rlenv.examples.plinko import BOUNCINESS, follow
-from rlenv.http.png import encode_png
 from rlenv_client.curriculum import CurriculumVectorEnv, EnvironmentParameters, LevelSampler
 from rlenv_client.sb3 import CurriculumCallback, SB3VecEnv
+from rlenv_tools.http.png import encode_png
 
 METHODS = ("dr", "plr", "robust_plr", "accel", "sfl")
 ENVS = {"plinko": "rlenv/Plinko-v0", "maze": "rlenv/Maze-v0"}

@@ -40,7 +40,7 @@ from collections.abc import Callable
 import numpy as np
 
 from rlenv_client import Client, ServerProcess
-from rlenv_client.bench import ENDLESS
+from rlenv_tools.bench import ENDLESS
 
 CARTPOLE = "examples.cartpole:CartPoleEnvironment"
 STEP_BODY = json.dumps({"action": [0.0], "repeat_action": 4}).encode()
@@ -232,7 +232,7 @@ def main() -> None:
 
 def serve_variant(target: str, loop: str, http_impl: str) -> None:
     """``rlenv http TARGET --port 0`` on the given uvicorn loop and HTTP implementation."""
-    from rlenv.http.app import Settings, serve
+    from rlenv_tools.http.app import Settings, serve
 
     serve(Settings(target=target, port=0), loop=loop, http=http_impl,
           ready=lambda url: print(f"listening on {url}", flush=True))

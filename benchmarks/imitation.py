@@ -11,13 +11,13 @@ examples with a scripted expert:
   1 for a caught ball;
 
 it records ``E`` episodes of the expert as exact recordings
-(:func:`rlenv_client.demonstrations.record`, seeds 10000 and on), turns them into a Minari
-dataset (:func:`rlenv_client.datasets.create_dataset`, which re-simulates and checks every
+(:func:`rlenv_tools.demonstrations.record`, seeds 10000 and on), turns them into a Minari
+dataset (:func:`rlenv_tools.datasets.create_dataset`, which re-simulates and checks every
 observation; ``MINARI_DATASETS_PATH`` is ``DIR/minari``), reads it back with
 ``minari.load_dataset``, trains behaviour cloning on its (observation, action) pairs with plain
 torch (an MLP of 2 x 64 tanh units, inputs standardised by the dataset's mean and deviation;
 cross-entropy for ``Discrete``, mean squared error for ``Box``; Adam, seeded), exports it with
-:func:`rlenv_client.policies.export_onnx`, serves it with ``rlenv serve TARGET --policy
+:func:`rlenv_tools.policies.export_onnx`, serves it with ``rlenv serve TARGET --policy
 Agent=FILE --max-episode-steps N`` in a subprocess, and reads the returns of its first ``K``
 episodes (seeded 0 to K-1 by the server) from an observer's ``client.stats()``. The expert plays
 the same ``K`` seeds through ``gymnasium.make`` for its mean return. A table compares them.
@@ -49,8 +49,8 @@ import rlenv_client  # noqa: F401  (registers the rlenv/ ids)
 from rlenv.examples.classic_cartpole import heuristic
 from rlenv.examples.plinko import follow
 from rlenv_client import Client, ServerProcess
-from rlenv_client.demonstrations import record
-from rlenv_client.policies import export_onnx
+from rlenv_tools.demonstrations import record
+from rlenv_tools.policies import export_onnx
 
 DEMONSTRATION_SEED = 10_000  # demonstrations start here; evaluation uses seeds 0 to K-1
 
@@ -89,7 +89,7 @@ def make_dataset(task: Task, episodes: int, out: Path) -> tuple[np.ndarray, np.n
     """Record the expert, make the Minari dataset, read it back: (observations, actions, s)."""
     import minari
 
-    from rlenv_client.datasets import create_dataset
+    from rlenv_tools.datasets import create_dataset
 
     demos = out / task.name / "demonstrations"
     shutil.rmtree(demos, ignore_errors=True)

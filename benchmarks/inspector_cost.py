@@ -27,7 +27,7 @@ from browser import Browser, find_chromium  # noqa: E402  (the tests' DevTools d
 from procfs import cpu_seconds  # noqa: E402
 
 from rlenv_client import Client, ServerProcess  # noqa: E402
-from rlenv_client.inspector import Inspector  # noqa: E402
+from rlenv_tools.inspector import Inspector  # noqa: E402
 
 CARTPOLE = "examples.cartpole:CartPoleEnvironment"
 

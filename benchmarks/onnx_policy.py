@@ -26,7 +26,7 @@ from stable_baselines3 import PPO
 from rlenv.serving.host import Host
 from rlenv.serving.onnx_policy import OnnxPolicy
 from rlenv_client import Client, ServerProcess
-from rlenv_client.policies import export_onnx
+from rlenv_tools.policies import export_onnx
 
 TARGET = "examples.cartpole:CartPoleEnvironment"
 

@@ -2,7 +2,7 @@
 
 import sys
 
-from rlenv.cli import main
+from rlenv_tools.cli import main
 
 if __name__ == "__main__":
     raise SystemExit(main(["bench", *sys.argv[1:]]))

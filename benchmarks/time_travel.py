@@ -1,7 +1,7 @@
 """What going to a step of a 10,000-step episode costs: ``python benchmarks/time_travel.py``.
 
 Records one 10,000-step episode of each environment over a real server, opens it as a
-:class:`~rlenv_client.timeline.Timeline` (which re-simulates it once, checking every digest, and
+:class:`~rlenv_tools.timeline.Timeline` (which re-simulates it once, checking every digest, and
 parks its checkpoints: forked copies of the environment's process), then goes to random steps
 in a random order, each through ``timeline.at(step)`` (the observation, the draw list and every
 node's exported properties: what the inspector's page shows). Printed: the open time, the
@@ -28,10 +28,10 @@ import numpy as np
 from rlenv.examples.cartpole import controller
 from rlenv.examples.plinko import TOP, PlinkoAgent, PlinkoEnvironment, follow
 from rlenv_client import Client
-from rlenv_client.forking import ForkedEnvironment
 from rlenv_client.launcher import ServerProcess
 from rlenv_client.replay import EpisodeFile, digest
-from rlenv_client.timeline import Timeline
+from rlenv_tools.forking import ForkedEnvironment
+from rlenv_tools.timeline import Timeline
 
 STEPS = 10_000
 

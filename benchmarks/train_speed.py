@@ -1,7 +1,7 @@
 """Training speed over rlenv's servers against the same environment in process.
 
 ``python benchmarks/train_speed.py [--rounds R] [--target TARGET]`` runs ``rlenv bench --train``
-(``client/rlenv_client/training_speed.py``: SB3 PPO in two configurations and gymnasium's
+(``tools/rlenv_tools/training_speed.py``: SB3 PPO in two configurations and gymnasium's
 SyncVectorEnv, each against the environment in process, rounds in turns) under the three
 conditions issue 31 names, each in a process of its own:
 

@@ -35,7 +35,7 @@ def drifting(observation: np.ndarray) -> np.ndarray:
 
 def record_failure(directory: str | Path, bias: float = BIAS) -> Path:
     """Record one episode (seed 0) of the controller biased by ``bias``; its file."""
-    from rlenv_client.demonstrations import record
+    from rlenv_tools.demonstrations import record
 
     def agent(observation: np.ndarray) -> np.ndarray:
         return np.clip(controller(observation) + bias, -1.0, 1.0).astype(np.float32)
@@ -54,7 +54,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     path = record_failure(arguments[0] if arguments else "episodes")
     print(f"recorded {path}: rlenv replay {path} --inspect", flush=True)
     if inspect:
-        from rlenv_client.inspector import inspect_recordings
+        from rlenv_tools.inspector import inspect_recordings
 
         page = inspect_recordings([path], policies={"controller": controller})  # says its URL
         try:

@@ -8,7 +8,7 @@ Layout (the design card's, one concept per module):
 - ``views``: queries over a tree, bulk reads and writes (``view``);
 - ``communication``: an environment's link to its clients (``start_server``; ``run`` hosts
   an environment itself, in ``serving/self_hosting.py``);
-- ``cli``: the ``rlenv`` command; ``testing``: fakes and clocks for tests;
+- ``testing``: fakes and clocks for tests (the ``rlenv`` command is the tools', ``rlenv_tools``);
 - ``scene2d/``: the 2D scene: Node2D and Marker2D, pymunk physics nodes, drawing, cameras,
   procedural building (lattices, gradients, packed scenes);
 - ``protocol/``: the wire (sans-IO codec, messages, connection; spaces, errors), shared with
@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import importlib
 from typing import TYPE_CHECKING, Any
+
+from rlenv._deprecation import forward
 
 __version__ = "0.1.0"
 """The package's version: its one place (pyproject.toml reads it; ``rlenv_client.__version__`` is
@@ -98,3 +100,6 @@ if TYPE_CHECKING:
     from rlenv.views import View as View
     from rlenv.views import view as view
     from rlenv.world import RLEnvWorld as RLEnvWorld
+
+# Moved to the tools (rlenv_tools); the old names work, with a warning, for one release.
+forward({"rlenv.cli": "rlenv_tools.cli", "rlenv.http": "rlenv_tools.http"})

@@ -1,5 +1,5 @@
 """``python -m rlenv`` is the ``rlenv`` command."""
 
-from rlenv.cli import main
+from rlenv_tools.cli import main
 
 raise SystemExit(main())

@@ -1,6 +1,6 @@
 """Which keys a person presses to act for an agent: :attr:`RLAgent.demonstration_keys`.
 
-The inspector's page (:mod:`rlenv_client.inspector`) lets a person take control of an
+The inspector's page (:mod:`rlenv_tools.inspector`) lets a person take control of an
 environment and play it from the keyboard. Key names are those of the browser's
 ``KeyboardEvent.key`` (``"ArrowLeft"``, ``"a"``, ``" "``); each maps to an action of the
 agent's space. An agent without a map of its own gets :func:`default_keys` of its space.

@@ -1,7 +1,7 @@
 """Testing support, shipped so that any rlenv server and client can be tested the way ours are.
 
 The compliance suite for a running server, which drives it as a client does, is
-:func:`rlenv_client.compliance.check_server`. Here:
+:func:`rlenv_tools.compliance.check_server`. Here:
 
 - :func:`connection_pair`: a client and a server :class:`~rlenv.protocol.Connection` wired
   back to back, for protocol tests without sockets.

@@ -25,9 +25,9 @@ from per_agent_envs import NAMES
 
 from rlenv.protocol.errors import ErrorCode, RemoteError
 from rlenv_client import Client, RemoteEnv
-from rlenv_client.compliance import check_server
 from rlenv_client.replay import EpisodeFile, RecordEpisodes, digest
-from rlenv_client.timeline import Timeline
+from rlenv_tools.compliance import check_server
+from rlenv_tools.timeline import Timeline
 
 TESTS = Path(__file__).parent
 CHASE = "per_agent_envs:ChaseEnvironment"

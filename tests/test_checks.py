@@ -21,7 +21,7 @@ import numpy as np
 from conftest import Serve
 
 from rlenv_client import ServerProcess
-from rlenv_client.observations import observation_difference
+from rlenv_tools.observations import observation_difference
 
 TESTS = Path(__file__).parent
 PAIR = "examples.pair:PairEnvironment"

@@ -13,8 +13,8 @@ import msgpack
 from conftest import Serve
 
 from rlenv.protocol import pack
-from rlenv_client.compliance import check_server
-from rlenv_client.compliance.harness import ReplyTap
+from rlenv_tools.compliance import check_server
+from rlenv_tools.compliance.harness import ReplyTap
 
 TESTS = Path(__file__).parent
 TOKEN = "s3cret"

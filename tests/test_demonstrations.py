@@ -21,10 +21,10 @@ from inspector_http import fetch
 from examples.cartpole import TARGET, controller
 from rlenv.demonstration_keys import default_keys
 from rlenv_client import Client
-from rlenv_client.demonstrations import record
-from rlenv_client.inspector import Demonstrator, InspectorServer, Watcher
 from rlenv_client.launcher import ServerProcess
 from rlenv_client.replay import EpisodeFile
+from rlenv_tools.demonstrations import record
+from rlenv_tools.inspector import Demonstrator, InspectorServer, Watcher
 
 
 def replays_identically(path: Path) -> bool:

@@ -74,7 +74,7 @@ EXPECTED = {
     "rlenv_client.replay.RecordEpisodes": [],
     "rlenv_client.curriculum.sampler.LevelSampler": ["staleness", "robust"],
     "rlenv_client.curriculum.scores.learnability": ["p * (1 - p)"],
-    "rlenv_client.compliance.check_server": [],
+    "rlenv_tools.compliance.check_server": [],
 }
 
 

@@ -1,5 +1,5 @@
 """A forked environment's process: its errors carry their traceback; a fork leaves the original's
-collector as it was (``rlenv_client.forking``)."""
+collector as it was (``rlenv_tools.forking``)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import sys
 import pytest
 
 from rlenv.protocol.errors import RemoteError
-from rlenv_client.forking import ForkedEnvironment
+from rlenv_tools.forking import ForkedEnvironment
 
 
 def test_an_error_in_the_environment_process_comes_with_its_traceback() -> None:
@@ -30,7 +30,7 @@ def test_an_error_in_the_environment_process_comes_with_its_traceback() -> None:
 
 _FORK_AND_COUNT = """
 import gc, os, socket, sys
-from rlenv_client import forking
+from rlenv_tools import forking
 
 ours, theirs = socket.socketpair()
 gc.collect()

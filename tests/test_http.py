@@ -21,9 +21,9 @@ from openapi_spec_validator import validate
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
-from rlenv.http.json_spaces import space_from_json
 from rlenv_client import LocalClient
-from rlenv_client.bench import ENDLESS
+from rlenv_tools.bench import ENDLESS
+from rlenv_tools.http.json_spaces import space_from_json
 
 CARTPOLE = "examples.cartpole:CartPoleEnvironment"
 

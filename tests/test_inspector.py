@@ -21,8 +21,8 @@ from inspector_http import Trainer, fetch
 
 from examples.cartpole import controller
 from rlenv_client import Client, RemoteEnv
-from rlenv_client.inspector import Inspector, InspectorError, InspectorServer, Watcher
 from rlenv_client.launcher import ServerProcess
+from rlenv_tools.inspector import Inspector, InspectorError, InspectorServer, Watcher
 
 POLE = "/root/CartPole/World/Physics/Pole"
 TESTS = Path(__file__).resolve().parent

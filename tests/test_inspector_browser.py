@@ -21,9 +21,9 @@ from inspector_http import Trainer
 
 from examples.cartpole import controller
 from rlenv_client import Client
-from rlenv_client.inspector import Inspector, InspectorServer, Timelines, Watcher
 from rlenv_client.launcher import ServerProcess
 from rlenv_client.replay import EpisodeFile
+from rlenv_tools.inspector import Inspector, InspectorServer, Timelines, Watcher
 
 pytestmark = pytest.mark.browser
 CHROMIUM = find_chromium()

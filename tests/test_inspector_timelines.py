@@ -18,18 +18,18 @@ from conftest import alive, wait_until
 from inspector_http import Trainer, fetch
 
 from examples.cartpole import TARGET, controller
-from rlenv_client.demonstrations import record
-from rlenv_client.inspector import (
+from rlenv_client.launcher import ServerProcess
+from rlenv_client.replay import EpisodeFile, digest
+from rlenv_tools.demonstrations import record
+from rlenv_tools.inspector import (
     Inspector,
     InspectorServer,
     Timelines,
     Watcher,
     inspect_recordings,
 )
-from rlenv_client.inspector.timelines import episode_id
-from rlenv_client.launcher import ServerProcess
-from rlenv_client.replay import EpisodeFile, digest
-from rlenv_client.timeline import Timeline
+from rlenv_tools.inspector.timelines import episode_id
+from rlenv_tools.timeline import Timeline
 
 BIAS = 0.03  # a controller pushing a little too far right: the pole falls at step 20
 
@@ -323,7 +323,7 @@ def test_an_onnx_policy_from_the_command_line_branches(recording: Path,
     pytest.importorskip("onnxruntime")
     from gymnasium import spaces
 
-    from rlenv_client.policies import export_onnx
+    from rlenv_tools.policies import export_onnx
 
     torch.manual_seed(0)
     model = torch.nn.Sequential(torch.nn.Linear(5, 8), torch.nn.Tanh(), torch.nn.Linear(8, 1))

@@ -21,7 +21,7 @@ onnx = pytest.importorskip("onnx")
 onnxruntime = pytest.importorskip("onnxruntime")
 
 from rlenv.serving.onnx_policy import OnnxPolicy  # noqa: E402
-from rlenv_client.policies import ExportMismatch, export_onnx  # noqa: E402
+from rlenv_tools.policies import ExportMismatch, export_onnx  # noqa: E402
 
 CARTPOLE = "examples.cartpole:CartPoleEnvironment"
 PAIR = "examples.pair:PairEnvironment"
@@ -303,7 +303,7 @@ def test_a_learner_plays_against_a_policy_opponent(serve, pair_policy: Path) -> 
 
 
 def test_a_timeline_branches_with_a_policy_file(tmp_path: Path, cartpole_policy: Path) -> None:
-    from rlenv_client.timeline import Timeline
+    from rlenv_tools.timeline import Timeline
     from tests.test_timeline import record
 
     path = record(tmp_path, CARTPOLE)

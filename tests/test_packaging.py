@@ -42,7 +42,7 @@ def test_the_distribution_installs_only_rlenv_and_rlenv_client_at_the_top() -> N
 def test_every_package_folder_is_listed_and_the_examples_are_rlenv_examples() -> None:
     folders = (_folders("rlenv", ROOT / "rlenv") | _folders("rlenv.examples", ROOT / "examples")
                | _folders("rlenv_client", ROOT / "client" / "rlenv_client"))
-    pages = {"rlenv_client.inspector.static"}  # the inspector's page: files, no __init__.py
+    pages = {"rlenv_tools.inspector.static"}  # the inspector's page: files, no __init__.py
     assert set(SETUPTOOLS["packages"]) == folders | pages
     examples = {path.name for path in (ROOT / "examples").iterdir()
                 if (path / "__init__.py").is_file()}

@@ -19,8 +19,8 @@ from rlenv.serving import snapshots
 from rlenv.serving.host import Host, target_of
 from rlenv.testing import ManualClock
 from rlenv_client import Client, ErrorCode, LocalClient, RemoteError
-from rlenv_client.inspector.watch import InspectorError, Watcher
 from rlenv_client.replay import EpisodeFile, digest, replay
+from rlenv_tools.inspector.watch import InspectorError, Watcher
 
 FAULTY = "examples.faulty:FaultyEnvironment"
 LEFT, RIGHT = np.array([-1.0], np.float32), np.array([1.0], np.float32)

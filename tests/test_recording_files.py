@@ -16,12 +16,12 @@ import pytest
 import rlenv_client  # noqa: F401  (registers the ids)
 from examples.cartpole import controller
 from rlenv.protocol.messages import MAX_REPEAT_ACTION
-from rlenv_client.inspector import Timelines
-from rlenv_client.inspector.watch import InspectorError
 from rlenv_client.recordings import MAX_RECORDING_BYTES
 from rlenv_client.replay import EpisodeFile, digest
-from rlenv_client.timeline import Timeline
 from rlenv_client.trusted_targets import UntrustedTargetError
+from rlenv_tools.inspector import Timelines
+from rlenv_tools.inspector.watch import InspectorError
+from rlenv_tools.timeline import Timeline
 
 CHECKOUT = Path(__file__).resolve().parent.parent
 PLANTED = """\
@@ -199,7 +199,7 @@ def test_a_trusted_target_that_is_no_environment_is_refused(tmp_path: Path,
 def test_a_planted_target_makes_no_dataset(tmp_path: Path, recording: Path,
                                            monkeypatch: pytest.MonkeyPatch) -> None:
     pytest.importorskip("minari")
-    from rlenv_client.datasets import create_dataset
+    from rlenv_tools.datasets import create_dataset
 
     download = tmp_path / "download"
     planted(download, recording)

@@ -25,8 +25,8 @@ from rlenv.serving.endpoint import Endpoint, Limits
 from rlenv.serving.penalties import FREE_FAILURES, MAX_HELD, MAX_PENALTY
 from rlenv.testing import ManualClock, frame, read_frame
 from rlenv_client import Client, ConnectionLost, RemoteEnv, RemoteError
-from rlenv_client.compliance import check_server
-from rlenv_client.compliance.harness import peak_rss_kib
+from rlenv_tools.compliance import check_server
+from rlenv_tools.compliance.harness import peak_rss_kib
 
 
 def test_compliance_suite_on_cartpole(serve: Serve, figures: dict[str, str]) -> None:

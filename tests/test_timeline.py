@@ -19,7 +19,7 @@ from rlenv.protocol.errors import RemoteError
 from rlenv_client import Client
 from rlenv_client.launcher import ServerStartError
 from rlenv_client.replay import EpisodeFile, RecordEpisodes, digest, replay
-from rlenv_client.timeline import Timeline
+from rlenv_tools.timeline import Timeline
 
 IDS = {CARTPOLE: "rlenv/CartPole-v0", PLINKO: "rlenv/Plinko-v0"}
 

@@ -15,10 +15,10 @@ from conftest import Serve, wait_until
 
 from examples.cartpole import controller
 from rlenv_client import Client
-from rlenv_client.inspector import Timelines
-from rlenv_client.inspector.watch import InspectorError
 from rlenv_client.replay import EpisodeFile, digest
-from rlenv_client.timeline import Timeline
+from rlenv_tools.inspector import Timelines
+from rlenv_tools.inspector.watch import InspectorError
+from rlenv_tools.timeline import Timeline
 
 CHECKOUT = Path(__file__).resolve().parent.parent
 CARTPOLE = "examples.cartpole:CartPoleEnvironment"
@@ -60,7 +60,7 @@ def group(pgid: int) -> list[int]:
 def timelines_here() -> list[int]:
     """The first process of each timeline this process opened (each leads a group)."""
     return [pid for pid, (parent, of) in processes().items()
-            if parent == os.getpid() and of == pid and b"rlenv_client.forking" in _command(pid)]
+            if parent == os.getpid() and of == pid and b"rlenv_tools.forking" in _command(pid)]
 
 
 def _command(pid: int) -> bytes:
@@ -134,7 +134,7 @@ def test_the_pages_timelines_share_its_bound_and_close_the_oldest(cartpole: Path
 
 OWNER = """\
 import sys, threading
-from rlenv_client.timeline import Timeline
+from rlenv_tools.timeline import Timeline
 timeline = Timeline.open(sys.argv[1], checkpoint_every=2, timeout=3600)
 print(timeline.processes[0], flush=True)
 threading.Thread(target=timeline.branch, args=(2, [1])).start()  # loops for ever, in C

@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from rlenv_client.training_speed import format_rows, measure_training, resolve_target, rows_to_json
+from rlenv_tools.training_speed import format_rows, measure_training, resolve_target, rows_to_json
 
 
 def test_sync_vectors_are_measured_against_one_env_and_in_process() -> None:

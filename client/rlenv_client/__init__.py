@@ -7,11 +7,13 @@
   ``gymnasium.make("rlenv/CartPole-v0")``.
 - :class:`ServerProcess`: a server subprocess that leaves nothing behind.
 
-It imports no physics and no server code (only the shared protocol, spaces and errors), unless
-an environment is run in process.
+It imports no physics, no server code (only the shared protocol, spaces and errors, and the
+transport) unless an environment is run in process, and none of the tools (``rlenv_tools``:
+the inspector, timelines, compliance, benchmarks, datasets, policies) unless asked for one.
 """
 
 from rlenv import __version__ as __version__
+from rlenv._deprecation import forward
 from rlenv.protocol.errors import ConnectionLost as ConnectionLost
 from rlenv.protocol.errors import ErrorCode as ErrorCode
 from rlenv.protocol.errors import ProtocolVersionError as ProtocolVersionError
@@ -46,3 +48,8 @@ __all__ = [
 ]
 
 register_environments()
+
+# Moved to the tools (rlenv_tools); the old names work, with a warning, for one release.
+forward({f"rlenv_client.{name}": f"rlenv_tools.{name}" for name in (
+    "bench", "checks", "compliance", "datasets", "demonstrations", "forking", "inspector",
+    "observations", "onnx_actors", "origins", "policies", "timeline", "training_speed")})

@@ -410,7 +410,7 @@ class Client(BaseClient):
 
         All the client reads comes through here, in order, the hello included: a subclass may
         override it to watch the byte stream, calling this one for the bytes (the compliance
-        suite's :class:`~rlenv_client.compliance.harness.TappedClient` does). It is on every
+        suite's :class:`~rlenv_tools.compliance.harness.TappedClient` does). It is on every
         step's path: keep an override cheap.
         """
         sock = self._sock

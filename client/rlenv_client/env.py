@@ -35,7 +35,7 @@ from rlenv_client.time_limits import truncate_agents
 from rlenv_client.trainer_view import TrainerView
 
 if TYPE_CHECKING:
-    from rlenv_client.inspector import Inspector
+    from rlenv_tools.inspector import Inspector
 
 __all__ = ["RemoteEnv"]
 
@@ -63,7 +63,7 @@ class RemoteEnv(gymnasium.Env):
         render_size: (width, height) of rendered frames; the environment's default if ``None``.
         token: the secret of a server that requires one (default ``$RLENV_TOKEN``).
         max_restarts: how many times a lost server that this environment started is replaced.
-        inspector: also start the live inspector (:mod:`rlenv_client.inspector`) on the
+        inspector: also start the live inspector (:mod:`rlenv_tools.inspector`) on the
             server: its page's address is printed on standard error and kept in
             ``inspector.url``.
         shared_memory: step through a shared-memory lane when the server is on this
@@ -128,7 +128,7 @@ class RemoteEnv(gymnasium.Env):
         self._last_observation: Any = None
         self.inspector: Inspector | None = None
         if inspector:
-            from rlenv_client.inspector import inspect_sessions
+            from rlenv_tools.inspector import inspect_sessions
 
             try:
                 self.inspector = inspect_sessions([self.session])

@@ -1,7 +1,7 @@
 """Reading a recording from a file: regular files only, within a size bound, its shape checked.
 
 Every tool that opens a recording (``rlenv replay``, :meth:`Timeline.open
-<rlenv_client.timeline.Timeline.open>`, ``rlenv dataset create``, ``rlenv replay --inspect``)
+<rlenv_tools.timeline.Timeline.open>`, ``rlenv dataset create``, ``rlenv replay --inspect``)
 reads it through :func:`read_recording`, from :meth:`EpisodeFile.load
 <rlenv_client.replay.EpisodeFile.load>`:
 

@@ -2,7 +2,7 @@
 
 A recording's ``target`` (and a served hello's, which the inspector's recent episodes carry) is
 text from outside: importing the module it names runs that module's code. So ``rlenv replay``,
-:class:`~rlenv_client.timeline.Timeline`, ``rlenv dataset create``, ``rlenv replay --inspect``
+:class:`~rlenv_tools.timeline.Timeline`, ``rlenv dataset create``, ``rlenv replay --inspect``
 and ``rlenv inspect`` import such a target only when its top-level package is **installed**,
 which here means both:
 

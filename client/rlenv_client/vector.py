@@ -70,7 +70,7 @@ from rlenv_client.vector_servers import (
 )
 
 if TYPE_CHECKING:
-    from rlenv_client.inspector import Inspector
+    from rlenv_tools.inspector import Inspector
 
 __all__ = ["RemoteVectorEnv", "default_layout"]
 
@@ -101,7 +101,7 @@ class RemoteVectorEnv(VectorEnv):
         max_restarts: how many times each lost server that this vector started is replaced.
         instances_per_server: how many sub-environments each started server hosts; by default
             one server per core (see :func:`default_layout`).
-        inspector: also start the live inspector (:mod:`rlenv_client.inspector`) on every
+        inspector: also start the live inspector (:mod:`rlenv_tools.inspector`) on every
             server: its page's address is printed on standard error and kept in
             ``inspector.url``.
         shared_memory: step servers on this machine through shared-memory lanes (see
@@ -189,7 +189,7 @@ class RemoteVectorEnv(VectorEnv):
         self._last: Any = None  # the last batch of observations returned
         self._interrupted: str | None = None  # what interrupted the last step or reset
         if inspector:
-            from rlenv_client.inspector import inspect_sessions
+            from rlenv_tools.inspector import inspect_sessions
 
             try:
                 self.inspector = inspect_sessions(self.sessions)

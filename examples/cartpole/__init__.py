@@ -242,6 +242,6 @@ class CartPoleEnvironment(RLEnvironment):
 
 def main() -> None:
     """Serve CartPole: ``python -m examples.cartpole [--port P]``."""
-    from rlenv.cli import serve_command
+    from rlenv_tools.cli import serve_command
 
     raise SystemExit(serve_command(TARGET))

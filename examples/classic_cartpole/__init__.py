@@ -157,6 +157,6 @@ class ClassicCartPoleEnvironment(RLEnvironment):
 
 def main() -> None:
     """Serve it: ``python -m examples.classic_cartpole [--port P]``."""
-    from rlenv.cli import serve_command
+    from rlenv_tools.cli import serve_command
 
     raise SystemExit(serve_command(TARGET))

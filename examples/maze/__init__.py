@@ -499,6 +499,6 @@ class MazeEnvironment(RLEnvironment):
 
 def main() -> None:
     """Serve Maze: ``python -m examples.maze [--port P]``."""
-    from rlenv.cli import serve_command
+    from rlenv_tools.cli import serve_command
 
     raise SystemExit(serve_command(TARGET))

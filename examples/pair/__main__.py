@@ -1,6 +1,6 @@
 """``python -m examples.pair [--host H] [--port P]`` serves the two-agent pair."""
 
-from rlenv.cli import serve_command
+from rlenv_tools.cli import serve_command
 
 from . import TARGET
 

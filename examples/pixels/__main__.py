@@ -1,6 +1,6 @@
 """``python -m examples.pixels [--host H] [--port P]`` serves the pixels example."""
 
-from rlenv.cli import serve_command
+from rlenv_tools.cli import serve_command
 
 from . import TARGET
 

@@ -491,6 +491,6 @@ class PlinkoEnvironment(RLEnvironment):
 
 def main() -> None:
     """Serve Plinko: ``python -m examples.plinko [--port P]``."""
-    from rlenv.cli import serve_command
+    from rlenv_tools.cli import serve_command
 
     raise SystemExit(serve_command(TARGET))

@@ -216,6 +216,6 @@ class ReacherEnvironment(RLEnvironment):
 
 def main() -> None:
     """Serve the reacher: ``python -m examples.reacher [--port P]``."""
-    from rlenv.cli import serve_command
+    from rlenv_tools.cli import serve_command
 
     raise SystemExit(serve_command(TARGET))

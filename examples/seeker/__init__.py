@@ -246,6 +246,6 @@ class SeekerPixelsEnvironment(SeekerEnvironment):
 
 def main() -> None:
     """Serve the seeker: ``python -m examples.seeker [--port P]``."""
-    from rlenv.cli import serve_command
+    from rlenv_tools.cli import serve_command
 
     raise SystemExit(serve_command(TARGET))

@@ -1,6 +1,6 @@
 """``python -m examples.tag [--host H] [--port P]`` serves the chaser and its two runners."""
 
-from rlenv.cli import serve_command
+from rlenv_tools.cli import serve_command
 
 from . import TARGET
 

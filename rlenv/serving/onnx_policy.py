@@ -1,6 +1,6 @@
 """A policy in an ONNX file, run by onnxruntime on the CPU (the ``onnx`` extra).
 
-The file is one :func:`rlenv_client.policies.export_onnx` wrote: an input ``observation`` (a
+The file is one :func:`rlenv_tools.policies.export_onnx` wrote: an input ``observation`` (a
 batch), an output ``action``, and the spaces as rlenv's space specs in JSON in its metadata.
 Files come from the command line, never from the network; a file that is not ONNX, or lacks the
 spaces, is refused with a one-line error.
@@ -95,7 +95,7 @@ class OnnxPolicy:
                    if key not in metadata]
         if missing:
             raise ValueError(f"{path} holds no {missing[0]} in its metadata; export it with "
-                             "rlenv_client.policies.export_onnx")
+                             "rlenv_tools.policies.export_onnx")
         try:
             self.observation_space = space_from_json(metadata[OBSERVATION_SPACE_KEY])
             self.action_space = space_from_json(metadata[ACTION_SPACE_KEY])

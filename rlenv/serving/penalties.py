@@ -1,9 +1,9 @@
 """Slowing down token guessing: the guesser is slowed, never the address's rightful user.
 
 Shared by the TCP endpoint (:mod:`rlenv.serving.connections`) and the HTTP gateway's door
-(:mod:`rlenv.http.guard`). Every token is compared, in constant time (``hmac.compare_digest``),
-so a request with the right token is served whatever others on its address sent. What a wrong
-token costs is the answer that says so:
+(:mod:`rlenv_tools.http.guard`). Every token is compared, in constant time
+(``hmac.compare_digest``), so a request with the right token is served whatever others on its
+address sent. What a wrong token costs is the answer that says so:
 
 - **Its answer is held.** The first :data:`FREE_FAILURES` wrong tokens of an address are
   answered at once (a person mistyping); each one after that is answered only after a delay

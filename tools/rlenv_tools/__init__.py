@@ -1,0 +1,14 @@
+"""rlenv_tools: the tools above the runtime and the client, each both a client and a host.
+
+- ``cli``: the ``rlenv`` command (``python -m rlenv`` too);
+- ``http/``: the HTTP/JSON gateway (``rlenv http``);
+- ``inspector/``, ``timeline``, ``forking``: the live inspector's page, timelines of an episode
+  and the forked servers they branch from;
+- ``compliance/``, ``checks``, ``observations``: ``rlenv check``, a server held to the protocol;
+- ``bench``, ``training_speed``: ``rlenv bench``'s library code;
+- ``datasets``, ``demonstrations``, ``policies``, ``onnx_actors``: Minari datasets, recorded
+  demonstrations, policies exported as ONNX files.
+
+Layers (docs/architecture.md): the tools import the runtime (``rlenv``) and the client
+(``rlenv_client``); neither of those imports the tools.
+"""

@@ -1,0 +1,727 @@
+"""A recorded episode as a timeline: go to any step, look inside it, branch from it, compare.
+
+A :class:`Timeline` is built from a recording (:class:`~rlenv_client.replay.RecordEpisodes`)
+and re-simulates it in processes of its own that it starts, owns and ends (never on the server
+a trainer uses)::
+
+    from rlenv_tools.timeline import Timeline
+
+    with Timeline.open("episodes/episode-0001.rlenv") as timeline:
+        len(timeline)                      # the number of actions
+        state = timeline.at(120)           # after the 120th action: observation, reward, info,
+        state.draw, state.properties       # the inspector's draw list, every exported property
+        timeline.ticks(120)                # each physics tick inside that action
+        other = timeline.branch(100, policy=my_policy, max_steps=200)
+        timeline.diff(other).first_difference   # 101 or later: where they part
+        other.save("episodes/what-if.rlenv")    # rlenv replay re-runs it
+
+Steps are numbered as ``rlenv replay`` numbers them: 0 is the state after the reset, ``k`` the
+state after the ``k``-th action. Changes made during the episode (an inspector's property
+sets, configuration) belong to the step of the action that follows them. On an unbranched
+timeline every observation is the recorded one, bit for bit (its
+:func:`~rlenv_client.replay.digest` is checked at every step: an environment that
+re-simulates differently raises ``RuntimeError``).
+
+Opening a timeline re-simulates the whole episode once, and on the way parks checkpoints: every
+``checkpoint_every`` steps, a copy of the environment's process made by ``fork``
+(:mod:`rlenv_tools.forking`), which holds the whole state to the bit. Going to a step copies
+the nearest checkpoint at or before it and takes the steps from there (about 5 ms of them at
+most); going forward from where the timeline stands just steps on. ``benchmarks/time_travel.py``
+measures a step of a 10,000-step episode. Each checkpoint is a process that holds, of its own,
+the memory the episode changed since the one before (a few MiB for Plinko); there are at most
+256 over an episode, and branches add theirs, within bounds: ``max_processes`` in all (the
+episode's checkpoints take at most half, each branch at most half of what is left) and
+``max_memory``, past which no more are parked. Every process dies with the timeline's owner
+(:mod:`rlenv_tools.forking`'s lifeline). A timeline is not thread-safe, and needs ``os.fork``
+(Linux, macOS).
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rlenv.protocol.errors import RemoteError
+from rlenv_client.replay import EpisodeFile, digest, older_settings
+from rlenv_client.trusted_targets import check_target
+from rlenv_tools.forking import ForkedEnvironment, StepRecord
+
+__all__ = ["MAX_MEMORY", "MAX_PROCESSES", "Step", "Tick", "Timeline", "TimelineDiff",
+           "load_policy"]
+
+_PROBE_STEPS = 8  # steps timed at a time to space the checkpoints (twice: the least spacing)
+_PROBE_ROUNDS = 4  # times they are timed
+_REPLAY_BUDGET = 0.005  # seconds of steps from a checkpoint to the step asked for, at most
+_MOST_APART = 1000  # steps between two checkpoints, at most (unless the episode is longer)
+_MOST_CHECKPOINTS = 256  # over one episode (and at most half a timeline's processes)
+_WORKING = 2  # processes besides the checkpoints: the cursor, a tick view's copy
+_MEASURE_EVERY = 8  # parks between two measures of the memory (an eighth of them, past 64)
+_SKIPPED_AT_ONCE = 10_000  # ticks a tick view takes unread in one run
+MAX_PROCESSES = 512
+"""A timeline's processes at most, its branches' included (``max_processes``' default)."""
+MAX_MEMORY = 2 << 30
+"""The memory a timeline's processes hold at most, in bytes (``max_memory``' default)."""
+_Result = tuple[Any, float, bool, bool, dict[str, Any]]  # observation, reward, ends, info
+
+
+@dataclass(frozen=True)
+class Step:
+    """The state after a step (:meth:`Timeline.at`).
+
+    Attributes:
+        step: its number (0: after the reset).
+        observation: the agent's observation, as the recording saw it.
+        reward: the step's reward (0.0 at step 0).
+        terminated: whether the episode terminated at this step.
+        truncated: whether the episode was truncated at this step.
+        info: the step's info (the reset's at step 0).
+        draw: the scene as the inspector's vector draw list (``client.draw()``).
+        properties: every node's exported properties, by node path (the inspect tree's).
+    """
+
+    step: int
+    observation: Any
+    reward: float
+    terminated: bool
+    truncated: bool
+    info: dict[str, Any]
+    draw: dict[str, Any]
+    properties: dict[str, dict[str, Any]]
+
+
+@dataclass(frozen=True)
+class Tick:
+    """The state after one physics tick inside a step's action (:meth:`Timeline.ticks`).
+
+    Attributes:
+        tick: its number inside the action, from 1.
+        observation: the agent's observation after the tick.
+        reward: the tick's reward.
+        terminated: whether the episode terminated at this tick.
+        truncated: whether the episode was truncated at this tick.
+        info: the tick's info.
+        properties: every node's exported properties, by node path.
+        draw: the scene after the tick, as the inspector's vector draw list.
+    """
+
+    tick: int
+    observation: Any
+    reward: float
+    terminated: bool
+    truncated: bool
+    info: dict[str, Any]
+    properties: dict[str, dict[str, Any]]
+    draw: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class TimelineDiff:
+    """How two timelines differ (:meth:`Timeline.diff`).
+
+    Attributes:
+        first_difference: the first step where the observations (bit for bit) or the rewards
+            differ, where one of the two episodes ended (terminated or truncated) and the
+            other did not, or that only one of the two reaches; ``None`` when they are the
+            same.
+        observations: for each step both reach, the other's observation minus this one's
+            (float64 arrays; maps and sequences of them for composite observations).
+        rewards: for each step both reach, the other's reward minus this one's.
+    """
+
+    first_difference: int | None
+    observations: list[Any]
+    rewards: list[float]
+
+
+@dataclass(frozen=True)
+class _Mark:
+    """A checkpoint: a parked copy of the environment at a step, and what that step returned."""
+
+    environment: ForkedEnvironment
+    result: _Result
+
+
+class _Checkpoints:
+    """Parked copies every ``every`` steps (the reset's at 0), as a timeline passes them.
+
+    Going to step ``k`` copies the nearest one at or before ``k`` and takes at most
+    ``every - 1`` steps from there.
+    """
+
+    def __init__(self, every: int, marks: Mapping[int, _Mark]) -> None:
+        self.every = every
+        self._marks = dict(marks)
+
+    def due(self, step: int) -> bool:
+        """Whether a checkpoint should be parked on reaching ``step``."""
+        return step % self.every == 0 and step not in self._marks
+
+    def next_due(self, step: int) -> int:
+        """The first step after ``step`` where one is due."""
+        return (step // self.every + 1) * self.every
+
+    def keep(self, step: int, mark: _Mark) -> None:
+        """Remember ``mark`` as the checkpoint at ``step``."""
+        self._marks[step] = mark
+
+    def nearest(self, step: int) -> tuple[int, _Mark]:
+        """The checkpoint at ``step`` or the latest before it."""
+        best = max(k for k in self._marks if k <= step)
+        return best, self._marks[best]
+
+    def upto(self, step: int) -> _Checkpoints:
+        """A copy holding the checkpoints at ``step`` and before (a branch's shared part)."""
+        return _Checkpoints(self.every, {k: m for k, m in self._marks.items() if k <= step})
+
+
+class _Processes:
+    """The processes of a root timeline and its branches: the first, parked copies, the cursor.
+
+    The cursor is the copy that steps; ``position`` says which timeline's step it stands at.
+    At most ``limit`` processes at once (the cursor and a tick view's copy included), holding
+    at most ``memory`` bytes (their PSS, measured every few parks): past either, no more
+    checkpoints are parked (going to a step then takes more steps from an earlier one).
+    """
+
+    def __init__(self, target: str, timeout: float, limit: int, memory: int) -> None:
+        self.first = ForkedEnvironment.start(target, timeout=timeout)
+        self.parked: list[ForkedEnvironment] = [self.first]
+        self.cursor: ForkedEnvironment | None = None
+        self.position: tuple[Timeline, int] | None = None
+        self.result: _Result | None = None
+        self.closed = False
+        self.limit = limit
+        self.memory = memory
+        self._measured = 0  # bytes, at the last measure
+        self._since = 0  # parks since
+
+    def room(self) -> int:
+        """How many more checkpoints may be parked now."""
+        if self._measured > self.memory:
+            return 0
+        return max(0, self.limit - len(self.parked) - _WORKING)
+
+    def park(self, environment: ForkedEnvironment) -> ForkedEnvironment | None:
+        """A copy of ``environment`` kept as it is now (``None``: no room left for one)."""
+        if self._since >= max(_MEASURE_EVERY, len(self.parked) // 8):
+            self._since, self._measured = 0, self.used()
+        if not self.room():
+            return None
+        copy = environment.fork()
+        self.parked.append(copy)
+        self._since += 1
+        return copy
+
+    def used(self) -> int:
+        """The memory the processes hold (PSS), in bytes."""
+        cursor = [] if self.cursor is None else [self.cursor]
+        return sum(environment.memory() for environment in self.parked + cursor)
+
+    def resume(self, mark: _Mark) -> ForkedEnvironment:
+        """A new cursor: a copy of the checkpoint's (the old cursor ends)."""
+        self.drop_cursor()
+        self.cursor = mark.environment.fork()
+        return self.cursor
+
+    def drop_cursor(self) -> None:
+        """End the cursor (its copies live on)."""
+        self.position = self.result = None
+        if self.cursor is not None:
+            self.cursor.close()
+            self.cursor = None
+
+    def close(self) -> None:
+        """End every process; wait until they are gone."""
+        if self.closed:
+            return
+        self.closed = True
+        self.drop_cursor()
+        for environment in self.parked:
+            environment.close()
+        for environment in self.parked:
+            environment.end()
+        self.parked.clear()
+
+
+class Timeline:
+    """A recorded episode to re-simulate, inspect and branch (see the module docstring).
+
+    Building one re-simulates the whole episode once, checking it against the recording and
+    parking the checkpoints (a recording without digests gets them here).
+
+    Args:
+        episode: the recording.
+        target: the environment to serve (``MODULE:CLASS``; default: the recorded one, imported
+            only where it is an installed package, see :mod:`rlenv_client.trusted_targets`).
+        trust_target: import the recorded target whatever it is (it runs its code: only for
+            recordings you trust).
+        checkpoint_every: how many steps apart the checkpoints are (default: as many as take
+            about 5 ms to re-simulate, from the cost of the first steps; at most 256
+            checkpoints over the episode).
+        timeout: seconds a re-simulation may take (a step, a scene read, a branch's run of
+            steps) before its process is ended and the call fails.
+        max_processes: the most processes the timeline and its branches hold at once (the
+            episode's checkpoints take at most half; each branch at most half of what is left).
+        max_memory: the most memory (PSS, bytes) they hold: past it, no more checkpoints are
+            parked (Linux measures it; elsewhere only ``max_processes`` bounds them).
+
+    Attributes:
+        episode: the recording (a branch's: what :meth:`save` writes).
+        hello: what the environment says first, as a client of its server sees it (its agents
+            and spaces, its ``repeat_action``).
+
+    Raises:
+        ValueError: the recording names no target and none is given, or its digests do not
+            match its actions.
+        UntrustedTargetError: the recorded target is not installed, and neither ``target``
+            nor ``trust_target`` is given (a ``ValueError``; the message says both).
+        ServerStartError: the environment did not start.
+        RuntimeError: the environment re-simulated the recording differently.
+    """
+
+    def __init__(self, episode: EpisodeFile, *, target: str | None = None,
+                 trust_target: bool = False, checkpoint_every: int | None = None,
+                 timeout: float = 60.0, max_processes: int = MAX_PROCESSES,
+                 max_memory: int = MAX_MEMORY) -> None:
+        if target is None:
+            target = episode.target
+            if target is None:
+                raise ValueError("the recording names no target: pass target='MODULE:CLASS'")
+            if not trust_target:
+                check_target(target, named_by=_named_by(episode),
+                             folder=None if episode.path is None else episode.path.parent)
+        if checkpoint_every is not None and checkpoint_every < 1:
+            raise ValueError("checkpoint_every must be at least 1")
+        if max_processes < 2 * _WORKING:
+            raise ValueError(f"max_processes must be at least {2 * _WORKING}")
+        processes = _Processes(target, timeout, max_processes, max_memory)
+        episode = replace(episode, observations=list(episode.observations))
+        try:
+            unspaced = _Checkpoints(len(episode.snapshot["events"]) + 1, {})  # until measured
+            self._setup(episode, processes, True, unspaced, [])
+            start = {**episode.snapshot, "events": []}
+            observation, info = processes.first.call("restore", start)
+            result: _Result = (observation, 0.0, False, False, info)
+            self._check(0, digest(observation))
+            self._checkpoints.keep(0, _Mark(processes.first, result))
+            self._checkpoints.every = max(checkpoint_every or self._measured_spacing(),
+                                          -(-len(self) // (processes.room() // 2 or 1)))
+            self._goto(len(self))
+        except BaseException:
+            processes.close()
+            raise
+
+    @classmethod
+    def open(cls, path: str | Path, *, target: str | None = None, trust_target: bool = False,
+             checkpoint_every: int | None = None, timeout: float = 60.0,
+             max_processes: int = MAX_PROCESSES, max_memory: int = MAX_MEMORY) -> Timeline:
+        """The timeline of the recording at ``path`` (see :class:`Timeline` for the rest).
+
+        Raises:
+            ValueError: the file is not an rlenv episode, not a regular file, or too large
+                (:func:`~rlenv_client.recordings.read_recording`; and as :class:`Timeline`).
+        """
+        return cls(EpisodeFile.load(path), target=target, trust_target=trust_target,
+                   checkpoint_every=checkpoint_every, timeout=timeout,
+                   max_processes=max_processes, max_memory=max_memory)
+
+    def _setup(self, episode: EpisodeFile, processes: _Processes, owner: bool,
+               checkpoints: _Checkpoints, records: list[StepRecord]) -> None:
+        self.episode = episode
+        self.hello = processes.first.hello
+        self._processes = processes
+        self._owner = owner
+        self._checkpoints = checkpoints
+        self._records = records  # step k's record at k - 1, as each step is first taken
+        self._steps: list[list[list[Any]]] = []  # each step's events, its action last
+        pending: list[list[Any]] = []
+        for event in episode.snapshot["events"]:
+            pending.append(event)
+            if event[0] == "action":
+                self._steps.append(pending)
+                pending = []
+        if episode.observations and len(episode.observations) != len(self._steps) + 1:
+            raise ValueError(f"the recording has {len(episode.observations)} observations for "
+                             f"{len(self._steps)} actions (one more expected)")
+
+    def __len__(self) -> int:
+        """The number of actions (the last step's number)."""
+        return len(self._steps)
+
+    def frames(self, step: int) -> int:
+        """The physics ticks the action of ``step`` asked for (its ``repeat_action``).
+
+        Raises:
+            IndexError: no such step (step 0 has no action).
+        """
+        if not 1 <= step <= len(self):
+            raise IndexError(f"step {step} has no action (steps 1 to {len(self)} have)")
+        return int(self._steps[step - 1][-1][2])
+
+    @property
+    def ended(self) -> bool:
+        """Whether the episode ended at its last step (recordings older than that say so)."""
+        return self.episode.terminated is not False or self.episode.truncated is not False
+
+    @property
+    def rewards(self) -> list[float]:
+        """Every step's reward, 0.0 at step 0 (as the timeline first took them: no re-run)."""
+        return [0.0] + [record[1] for record in self._records]
+
+    @property
+    def memory(self) -> int:
+        """The memory (PSS, bytes) its processes hold now, its branches' included.
+
+        0 where ``/proc`` does not say.
+        """
+        return self._processes.used()
+
+    @property
+    def processes(self) -> list[int]:
+        """The ids of the processes holding the environment and its checkpoints (the root's)."""
+        processes = self._processes
+        cursor = [] if processes.cursor is None else [processes.cursor]
+        return [environment.pid for environment in processes.parked + cursor]
+
+    def at(self, step: int, *, nodes: Iterable[str] | None = None) -> Step:
+        """The state after ``step``, re-simulated.
+
+        Args:
+            step: the step.
+            nodes: the paths of the nodes whose properties to read (default: every node's;
+                reading a few is cheaper on large scenes).
+
+        Raises:
+            IndexError: no such step.
+            RemoteError: the environment refused a read (no node at one of ``nodes``, a
+                ``_draw`` that raised).
+            RuntimeError: the timeline is closed, or its environment failed.
+        """
+        observation, reward, terminated, truncated, info = self._goto(step)
+        cursor = self._cursor()
+        entries = cursor.call("tree") if nodes is None else \
+            [cursor.call("node", path) for path in nodes]
+        properties = {node["path"]: dict(node["exported"]) for node in entries}
+        return Step(step, copy.deepcopy(observation), reward, terminated, truncated,
+                    copy.deepcopy(info), cursor.call("draw"), properties)
+
+    def tree(self, step: int) -> list[dict[str, Any]]:
+        """Every node after ``step``, as the inspector's tree lists them (``client.tree()``).
+
+        Each entry has the node's ``path``, ``type``, ``exported`` values and ``read_only``
+        names; the environment, agent and world nodes also ``config`` and ``configurable`` (and
+        an agent its ``demonstration_keys``).
+
+        Raises:
+            IndexError: no such step.
+            RuntimeError: as :meth:`at`.
+        """
+        self._goto(step)
+        return self._cursor().call("tree")
+
+    def ticks(self, step: int, *, first: int = 1, count: int | None = None) -> list[Tick]:
+        """Physics ticks inside the action of ``step``, re-simulated, a page at a time.
+
+        From tick ``first`` (ticks count from 1), ``count`` of them at most (default: to the
+        step's end).
+
+        From the state before the step, the action runs with ``repeat_action=1`` as many times
+        as the step ran ticks (on a copy: the timeline's own state is untouched); the ticks
+        before ``first`` are only taken, not read, so a page of a long step costs its own
+        ticks and a run to them. This is bit for bit the state one step with
+        ``repeat_action=N`` reaches when the agent's ``set_action`` only sets what each tick
+        uses (CartPole's and Plinko's do: the tests check the last tick against :meth:`at` and
+        the rewards' sum); an agent that does something once per action (a jump, a counter)
+        would do it at every tick here. Fewer ticks come back where the episode ends.
+
+        Raises:
+            IndexError: no such step (step 0 has no action), or ``first`` past its ticks.
+            ValueError: ``count`` below 1.
+            RuntimeError: as :meth:`at`.
+        """
+        if not 1 <= step <= len(self):
+            raise IndexError(f"step {step} has no action (steps 1 to {len(self)} have)")
+        *changes, (_, action, frames) = self._steps[step - 1]
+        if not 1 <= first <= frames:
+            raise IndexError(f"step {step} has ticks 1 to {frames}, not {first}")
+        if count is not None and count < 1:
+            raise ValueError("count must be at least 1")
+        last = frames if count is None else min(frames, first + count - 1)
+        self._goto(step - 1)
+        ticking = self._cursor().fork()
+        try:
+            if first > 1 and self._skip(ticking, changes, action, first - 1):
+                return []  # the episode ended before ``first``
+            ticks = []
+            for tick in range(first, last + 1):
+                events = [*changes, ["action", action, 1]] if tick == 1 else [["action", action, 1]]
+                ((_, reward, terminated, truncated),), observation, info = ticking.run([events])
+                properties = {node["path"]: dict(node["exported"])
+                              for node in ticking.call("tree")}
+                ticks.append(Tick(tick, observation, reward, terminated, truncated, info,
+                                  properties, ticking.call("draw")))
+                if terminated or truncated:
+                    break
+        except (ConnectionError, RemoteError) as error:
+            raise RuntimeError(f"the timeline's environment failed: {error}") from None
+        finally:
+            ticking.end()
+        return ticks
+
+    @staticmethod
+    def _skip(ticking: ForkedEnvironment, changes: list[list[Any]], action: Any,
+              ticks: int) -> bool:
+        """Take the first ``ticks`` ticks of an action unread; whether the episode ended."""
+        taken = 0
+        while taken < ticks:
+            chunk = min(_SKIPPED_AT_ONCE, ticks - taken)
+            steps = [[["action", action, 1]] for _ in range(chunk)]
+            if taken == 0:
+                steps[0] = [*changes, *steps[0]]
+            records, _, _ = ticking.run(steps, stop_at_end=True)
+            taken += len(records)
+            if records[-1][2] or records[-1][3]:
+                return True
+        return False
+
+    def branch(self, step: int, actions: Iterable[Any] | None = None, *,
+               policy: Callable[[Any], Any] | str | Path | None = None,
+               max_steps: int | None = None, repeat_action: int | None = None) -> Timeline:
+        """A timeline sharing this one's first ``step`` steps, then going on differently.
+
+        It continues with ``actions``, or with a policy for at most ``max_steps`` steps, and
+        ends early where its episode ends (a branch from a step where this episode ended has no
+        more steps). Changes recorded before this timeline's next action are not part of the
+        branch. The branch shares its root's processes (its :meth:`close` leaves them to the
+        root).
+
+        Args:
+            step: the last step both share.
+            actions: the branch's actions after ``step``.
+            policy: instead of ``actions``, what chooses each action: ``policy(observation) ->
+                action``, or the path of an ONNX file
+                (:func:`~rlenv_tools.policies.export_onnx`; the ``onnx`` extra).
+            max_steps: with ``policy``, the most steps it takes.
+            repeat_action: ticks per action; default: the recorded action's at ``step + 1``
+                (or the last one), else the server's setting.
+
+        Raises:
+            ValueError: not exactly one of ``actions`` and ``policy``, ``policy`` without
+                ``max_steps``, or a policy file that cannot be used.
+            IndexError: no such step.
+            RemoteError: the environment refused an action (nothing of the branch is kept).
+            RuntimeError: as :meth:`at`.
+        """
+        if (actions is None) == (policy is None):
+            raise ValueError("branch needs actions or a policy (one of them)")
+        if policy is not None and max_steps is None:
+            raise ValueError("a policy needs max_steps")
+        if isinstance(policy, (str, Path)):
+            policy = load_policy(policy)
+        result = self._goto(step)
+        if repeat_action is None and self._steps:
+            repeat_action = self._steps[min(step, len(self) - 1)][-1][2]
+        checkpoints = self._checkpoints.upto(step)
+        actions = None if actions is None else list(actions)
+        length = max_steps if actions is None else len(actions)
+        checkpoints.every = max(checkpoints.every,  # half the room left, at most
+                                -(-length // (self._processes.room() // 2 or 1)))  # type: ignore[operator]
+        records = self._records[:step]
+        terminated, truncated = result[2], result[3]
+        if step == len(self) and self.ended:
+            terminated, truncated = bool(self.episode.terminated), bool(self.episode.truncated)
+        processes = self._processes
+        cursor = self._cursor()
+        processes.position = None  # the cursor leaves this timeline
+        try:
+            if terminated or truncated:
+                pass
+            elif policy is None:
+                steps = [[["action", action, repeat_action]] for action in actions or ()]
+                result = self._take(step, steps, result, checkpoints, records, branching=True)
+            else:
+                for _ in range(max_steps):  # type: ignore[arg-type]
+                    action = policy(result[0])
+                    observation, reward, terminated, truncated, info = cursor.call(
+                        "step", action, repeat_action)
+                    result = (observation, float(reward), bool(terminated), bool(truncated), info)
+                    records.append((digest(observation), *result[1:4]))
+                    self._park_if_due(len(records), checkpoints, result)
+                    if terminated or truncated:
+                        break
+            snapshot = cursor.call("snapshot")
+        except ConnectionError as error:
+            raise RuntimeError(f"the timeline's environment failed: {error}") from None
+        except RemoteError:
+            processes.drop_cursor()  # it took part of the branch
+            raise
+        digests = self.episode.observations[:step + 1] + [record[0] for record in records[step:]]
+        ends = records[-1][2:] if len(records) > step else (terminated, truncated)
+        episode = EpisodeFile(self.episode.target, snapshot, digests, *ends)
+        branch = object.__new__(Timeline)
+        branch._setup(episode, processes, False, checkpoints, records)
+        processes.position, processes.result = (branch, len(branch)), result
+        return branch
+
+    def diff(self, other: Timeline) -> TimelineDiff:
+        """How ``other`` differs from this timeline, step by step (both re-simulated)."""
+        steps = [[(timeline.episode.observations[0], 0.0, False, False), *timeline._records]
+                 for timeline in (self, other)]
+        first = next((k for k, (a, b) in enumerate(zip(*steps, strict=False)) if a != b),
+                     None if len(steps[0]) == len(steps[1]) else min(map(len, steps)))
+        mine, theirs = self._every_observation(), other._every_observation()
+        return TimelineDiff(first, [_subtract(a, b) for a, b in zip(mine, theirs, strict=False)],
+                            [b - a for a, b in zip(self.rewards, other.rewards, strict=False)])
+
+    def save(self, path: str | Path) -> None:
+        """Write this timeline as a recording that ``rlenv replay`` re-runs."""
+        self.episode.save(path)
+
+    def close(self) -> None:
+        """End the processes (a root timeline's; a branch leaves them to its root)."""
+        if self._owner:
+            self._processes.close()
+
+    def __enter__(self) -> Timeline:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"Timeline({self.episode.target}, {len(self)} steps)"
+
+    def _goto(self, step: int) -> _Result:
+        """Bring the cursor to ``step`` of this timeline; what that step returned."""
+        if not 0 <= step <= len(self):
+            raise IndexError(f"no step {step}: the timeline has steps 0 to {len(self)}")
+        processes = self._processes
+        if processes.closed:
+            raise RuntimeError("the timeline is closed")
+        base, mark = self._checkpoints.nearest(step)
+        position = processes.position
+        try:
+            if position is not None and position[0] is self and base <= position[1] <= step:
+                base, result = position[1], processes.result
+            else:
+                processes.resume(mark)
+                result = mark.result
+            result = self._take(base, self._steps[base:step], result,  # type: ignore[arg-type]
+                                self._checkpoints, self._records)
+        except (ConnectionError, RemoteError) as error:
+            processes.drop_cursor()
+            raise RuntimeError(f"the timeline's environment failed: {error}") from None
+        processes.position, processes.result = (self, step), result
+        assert result is not None
+        return result
+
+    def _take(self, step: int, steps: list[list[list[Any]]], result: _Result,
+              checkpoints: _Checkpoints, records: list[StepRecord], *,
+              branching: bool = False) -> _Result:
+        """Take ``steps`` after ``step`` on the cursor, parking checkpoints where due.
+
+        This timeline's own steps are checked against the recording (the first time through a
+        recording without digests, recorded); a branch's new steps stop where its episode ends.
+        """
+        cursor = self._cursor()
+        done = 0
+        while done < len(steps):
+            chunk = steps[done:checkpoints.next_due(step + done) - step]
+            taken, observation, info = cursor.run(chunk, stop_at_end=branching)
+            for record in taken:
+                done += 1
+                if step + done > len(records):
+                    records.append(record)
+                if not branching:
+                    self._check(step + done, record[0])
+            result = (observation, *taken[-1][1:], info)  # type: ignore[assignment]
+            self._park_if_due(step + done, checkpoints, result)
+            if branching and (result[2] or result[3]):
+                break
+        return result
+
+    def _park_if_due(self, step: int, checkpoints: _Checkpoints, result: _Result) -> None:
+        if checkpoints.due(step):
+            parked = self._processes.park(self._cursor())
+            if parked is not None:
+                checkpoints.keep(step, _Mark(parked, result))
+
+    def _cursor(self) -> ForkedEnvironment:
+        cursor = self._processes.cursor
+        assert cursor is not None
+        return cursor
+
+    def _check(self, step: int, observed: str) -> None:
+        digests = self.episode.observations
+        if step == len(digests):  # not recorded: the first time through records it
+            digests.append(observed)
+        elif observed != digests[step]:
+            why = older_settings(self.episode.snapshot, self.hello.agents) or (
+                " (the environment depends on something a snapshot does not hold)")
+            raise RuntimeError(f"step {step}: the re-simulated observation differs from the "
+                               "recording: its snapshot's settings, generator state and actions "
+                               f"gave another observation{why}")
+
+    def _measured_spacing(self) -> int:
+        """Checkpoints as far apart as ~5 ms of steps, from the cost of the first few.
+
+        The first steps after a copy pay for its first writes to shared pages; the next ones
+        are timed, a few at a time, and the quickest few count (the machine's noise only ever
+        adds).
+        """
+        if len(self) < _PROBE_STEPS * (_PROBE_ROUNDS + 1):
+            return _MOST_APART
+        self._goto(_PROBE_STEPS)
+        costs = []
+        for round_ in range(2, _PROBE_ROUNDS + 2):
+            began = time.perf_counter()
+            self._goto(round_ * _PROBE_STEPS)
+            costs.append((time.perf_counter() - began) / _PROBE_STEPS)
+        spacing = min(_MOST_APART, max(2 * _PROBE_STEPS, int(_REPLAY_BUDGET / min(costs))))
+        return max(spacing, -(-len(self) // _MOST_CHECKPOINTS))
+
+    def _every_observation(self) -> list[Any]:
+        """Every step's observation, re-simulated from the reset in one run."""
+        _, mark = self._checkpoints.nearest(0)
+        processes = self._processes
+        try:
+            cursor = processes.resume(mark)
+            observations = [mark.result[0]]
+            if self._steps:
+                observations += cursor.run(self._steps, observations=True)[1]
+        except (ConnectionError, RemoteError) as error:
+            processes.drop_cursor()
+            raise RuntimeError(f"the timeline's environment failed: {error}") from None
+        processes.position, processes.result = None, None
+        return observations
+
+
+def _named_by(episode: EpisodeFile) -> str:
+    return "the episode" if episode.path is None else f"the recording {episode.path}"
+
+
+def load_policy(path: str | Path) -> Callable[[Any], Any]:
+    """``OnnxPolicy(path).act``: a policy file as a branch's policy (loaded once, here).
+
+    Raises:
+        ImportError: onnxruntime is missing (the message says to install ``rlenv[onnx]``).
+        ValueError: the file is not a policy file (one line naming it).
+    """
+    from rlenv.serving.onnx_policy import OnnxPolicy
+
+    return OnnxPolicy(path).act
+
+
+def _subtract(mine: Any, theirs: Any) -> Any:
+    """``theirs - mine`` as float64 arrays, through maps and sequences."""
+    if isinstance(mine, Mapping):
+        return {key: _subtract(mine[key], theirs[key]) for key in mine}
+    if isinstance(mine, (tuple, list)):
+        return [_subtract(a, b) for a, b in zip(mine, theirs, strict=True)]
+    return np.asarray(theirs, np.float64) - np.asarray(mine, np.float64)

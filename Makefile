@@ -18,7 +18,7 @@ demo: $(STAMP)
 	$(BIN)/rlenv demo
 
 test: $(STAMP)
-	$(BIN)/ruff check rlenv client examples tests benchmarks docs
+	$(BIN)/ruff check rlenv client tools examples tests benchmarks docs
 	$(BIN)/python -m pytest
 
 # Optional: servers on Ray (the ray extra) and their tests: one node, then a fake cluster.
@@ -45,7 +45,7 @@ test-onnx: $(STAMP)
 	OMP_NUM_THREADS=1 $(BIN)/python -m pytest -m onnx tests/test_onnx_policies.py
 
 # rlenv as users install it (the release extra: build, twine): the sdist and the wheel built and
-# checked (twine check, only rlenv and rlenv_client at the top), the wheel installed with its http
+# checked (twine check, only rlenv, rlenv_client and rlenv_tools at the top), the wheel installed with its http
 # extra into a new venv outside the checkout, where rlenv demo, rlenv check, a gym.make episode
 # and rlenv http run (.ci/test-package; about a minute, most of it pip).
 test-package: $(STAMP)
@@ -148,7 +148,7 @@ test-lowest: $(LOWEST_VENV)/.installed
 	$(LOWEST_VENV)/bin/python -m pytest
 
 lint: $(STAMP)
-	$(BIN)/ruff check rlenv client examples tests benchmarks docs
+	$(BIN)/ruff check rlenv client tools examples tests benchmarks docs
 
 # Regenerate the protocol test vectors (docs/protocol/vectors/) by driving real servers.
 vectors: $(STAMP)

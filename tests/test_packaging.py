@@ -31,17 +31,21 @@ def _folders(package: str, folder: Path) -> set[str]:
             for init in folder.rglob("__init__.py") if "__pycache__" not in init.parts}
 
 
-def test_the_distribution_installs_only_rlenv_and_rlenv_client_at_the_top() -> None:
+def test_the_distribution_installs_one_package_a_layer_at_the_top() -> None:
     packages = SETUPTOOLS["packages"]
-    assert {package.split(".")[0] for package in packages} == {"rlenv", "rlenv_client"}
+    assert {package.split(".")[0] for package in packages} == {"rlenv", "rlenv_client",
+                                                               "rlenv_tools"}
     assert SETUPTOOLS["package-dir"] == {"rlenv": "rlenv", "rlenv.examples": "examples",
-                                         "rlenv_client": "client/rlenv_client"}
+                                         "rlenv_client": "client/rlenv_client",
+                                         "rlenv_tools": "tools/rlenv_tools"}
+    assert PYPROJECT["project"]["scripts"] == {"rlenv": "rlenv_tools.cli:main"}
     assert "examples" in PYPROJECT["tool"]["ruff"]["lint"]["isort"]["known-first-party"]
 
 
 def test_every_package_folder_is_listed_and_the_examples_are_rlenv_examples() -> None:
     folders = (_folders("rlenv", ROOT / "rlenv") | _folders("rlenv.examples", ROOT / "examples")
-               | _folders("rlenv_client", ROOT / "client" / "rlenv_client"))
+               | _folders("rlenv_client", ROOT / "client" / "rlenv_client")
+               | _folders("rlenv_tools", ROOT / "tools" / "rlenv_tools"))
     pages = {"rlenv_tools.inspector.static"}  # the inspector's page: files, no __init__.py
     assert set(SETUPTOOLS["packages"]) == folders | pages
     examples = {path.name for path in (ROOT / "examples").iterdir()
@@ -65,7 +69,7 @@ def test_the_version_has_one_place() -> None:
     assert SETUPTOOLS["dynamic"]["version"] == {"attr": "rlenv.__version__"}
     assert re.fullmatch(r"\d+\.\d+\.\d+", rlenv.__version__)
     assert rlenv_client.__version__ == rlenv.__version__
-    sources = [path for folder in ("rlenv", "client", "examples")
+    sources = [path for folder in ("rlenv", "client", "tools", "examples")
                for path in (ROOT / folder).rglob("*.py")]
     literals = [path for path in sources
                 if re.search(r"^__version__ = ['\"]", path.read_text(encoding="utf-8"), re.M)]

@@ -1,13 +1,42 @@
-"""The code's shape: no module imports one that imports it back, counting imports inside
-functions (``TYPE_CHECKING`` blocks aside: they never run)."""
+"""The code's shape: three layers imported only downward, and no module imports one that
+imports it back, counting imports inside functions (``TYPE_CHECKING`` blocks aside: they never
+run). docs/architecture.md draws the layers."""
 
 from __future__ import annotations
 
 import ast
+import json
+import subprocess
+import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-PACKAGES = {"rlenv": ROOT / "rlenv", "rlenv_client": ROOT / "client" / "rlenv_client"}
+PACKAGES = {"rlenv": ROOT / "rlenv", "rlenv_client": ROOT / "client" / "rlenv_client",
+            "rlenv_tools": ROOT / "tools" / "rlenv_tools"}
+LAYERS = ["rlenv", "rlenv_client", "rlenv_tools"]
+"""The runtime, the client a trainer imports, the tools above both: each imports only below."""
+SHARED = ("rlenv", "rlenv.protocol", "rlenv.transport")
+"""What the client may import of the runtime: the package's face (its version), the wire."""
+EXCEPTIONS = {
+    # python -m rlenv is the rlenv command, which is the tools'.
+    ("rlenv.__main__", "rlenv_tools.cli"),
+    # The helper that keeps the old names of moved modules working, with a warning.
+    ("rlenv_client", "rlenv._deprecation"),
+    # LocalClient hosts an environment in the trainer's process: the runtime's host, imported
+    # inside its functions only when one is made.
+    ("rlenv_client.local", "rlenv.serving.host"),
+    ("rlenv_client.local", "rlenv.serving.policy_driver"),
+    # agents= and others= name an environment's RLAgent classes, and "heuristic" their own policy.
+    ("rlenv_client.agent_vector", "rlenv.agent"),
+    ("rlenv_client.agent_vector", "rlenv.serving.policy_driver"),
+    # A recording's snapshot is read as the servers read one.
+    ("rlenv_client.replay", "rlenv.serving.snapshots"),
+    # RemoteEnv(inspector=True) and RemoteVectorEnv(inspector=True) start the inspector: imported
+    # inside __init__, only when asked for.
+    ("rlenv_client.env", "rlenv_tools.inspector"),
+    ("rlenv_client.vector", "rlenv_tools.inspector"),
+}
+"""(importer, imported) pairs allowed across the layers' rule, each for the reason above it."""
 
 
 def _modules() -> dict[str, Path]:
@@ -80,6 +109,62 @@ def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
         if module not in index:
             visit(module)
     return groups
+
+
+def _crossings(graph: dict[str, set[str]]) -> set[tuple[str, str]]:
+    """The imports that break the layers' rule: upward, or the client's of the runtime's inside."""
+    def layer(module: str) -> int:
+        return LAYERS.index(module.split(".")[0])
+
+    def shared(module: str) -> bool:
+        return module == "rlenv" or module.startswith(tuple(f"{name}." for name in SHARED[1:])) \
+            or module in SHARED
+
+    return {(importer, imported) for importer, imports in graph.items() for imported in imports
+            if layer(imported) > layer(importer)
+            or (importer.startswith("rlenv_client") and imported.split(".")[0] == "rlenv"
+                and not shared(imported))}
+
+
+def test_each_layer_imports_only_the_layers_below_it() -> None:
+    modules = _modules()
+    graph = {name: _imports(name, path, modules) for name, path in modules.items()}
+    assert graph["rlenv_tools.cli"] >= {"rlenv_client", "rlenv.serving.server"}  # both below
+    assert _crossings(graph) - EXCEPTIONS == set()
+    assert EXCEPTIONS - _crossings(graph) == set()  # no exception outlives its import
+
+
+def test_the_layers_check_finds_an_upward_import_inside_a_function(tmp_path: Path) -> None:
+    sources = {"rlenv.node": "def f():\n    from rlenv_tools import cli\n",
+               "rlenv.serving.host": "",
+               "rlenv.protocol": "",
+               "rlenv_client.base": "import rlenv.protocol\n"
+                                    "def g():\n    from rlenv.serving import host\n",
+               "rlenv_tools": "",
+               "rlenv_tools.cli": "import rlenv.node\nimport rlenv_client.base\n"}
+    modules = {}
+    for name, text in sources.items():
+        modules[name] = tmp_path / f"{name}.py"
+        modules[name].write_text(text)
+    graph = {name: _imports(name, path, modules) for name, path in modules.items()}
+    assert graph["rlenv.node"] == {"rlenv_tools.cli"}
+    assert _crossings(graph) == {("rlenv.node", "rlenv_tools.cli"),
+                                 ("rlenv_client.base", "rlenv.serving.host")}
+
+
+def test_importing_the_client_loads_no_tool_no_http_framework_no_onnxruntime() -> None:
+    code = ("import json, sys\nimport rlenv_client\n"
+            "print(json.dumps(sorted(sys.modules)))")
+    loaded = set(json.loads(subprocess.run([sys.executable, "-c", code], check=True,
+                                           capture_output=True, text=True).stdout))
+    assert "rlenv_client.client" in loaded
+    assert not {name for name in loaded if name.split(".")[0] in {
+        "rlenv_tools", "starlette", "uvicorn", "httptools", "websockets", "onnxruntime", "onnx",
+        "pymunk"}}
+    assert "http.server" not in loaded  # the inspector's server
+    runtime = {name for name in loaded if name.split(".")[0] == "rlenv"}
+    assert runtime - {"rlenv", "rlenv._deprecation", "rlenv.serving", "rlenv.serving.snapshots"} \
+        <= {name for name in runtime if name.startswith(("rlenv.protocol", "rlenv.transport"))}
 
 
 def test_no_module_imports_one_that_imports_it_back() -> None:

@@ -102,4 +102,5 @@ if TYPE_CHECKING:
     from rlenv.world import RLEnvWorld as RLEnvWorld
 
 # Moved to the tools (rlenv_tools); the old names work, with a warning, for one release.
-forward({"rlenv.cli": "rlenv_tools.cli", "rlenv.http": "rlenv_tools.http"})
+forward({"rlenv.cli": "rlenv_tools.cli", "rlenv.http": "rlenv_tools.http",
+         "rlenv.scene2d.views": "rlenv.views"})

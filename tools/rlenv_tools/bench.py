@@ -51,6 +51,7 @@ import msgpack
 import numpy as np
 
 from rlenv.targets import module_name
+from rlenv.transport import procfs
 
 __all__ = ["Figure", "HandWrittenServer", "HandWrittenVector", "Rate", "format_table",
            "interleaved", "random_steps", "random_steps_of", "run_benchmarks", "to_json"]
@@ -321,11 +322,10 @@ def _step_reply(observation: np.ndarray) -> bytes:
 
 
 def _rss_kib(pid: int) -> int:
-    with open(f"/proc/{pid}/status") as status:
-        for line in status:
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1])
-    raise RuntimeError("no VmRSS")
+    rss = procfs.status_kib(pid, "VmRSS")
+    if rss is None:
+        raise RuntimeError("no VmRSS")
+    return rss
 
 
 def run_benchmarks(

@@ -41,6 +41,7 @@ from typing import Any, NoReturn
 from rlenv.protocol.codec import HEADER, frame, unpack
 from rlenv.protocol.errors import RemoteError
 from rlenv.protocol.messages import Hello
+from rlenv.transport import procfs
 from rlenv_client.launcher import ServerStartError
 
 __all__ = ["ForkedEnvironment", "StepRecord"]
@@ -187,13 +188,9 @@ class ForkedEnvironment:
         0 where ``/proc`` says none (not Linux, or the process is gone).
         """
         try:
-            with open(f"/proc/{self.pid}/smaps_rollup", "rb") as rollup:
-                for line in rollup:
-                    if line.startswith(b"Pss:"):
-                        return int(line.split()[1]) * 1024
+            return procfs.rollup_kib(self.pid).get("Pss", 0) * 1024
         except OSError:
-            pass
-        return 0
+            return 0
 
     def _send(self, message: Any) -> None:
         if self.closed:
@@ -239,19 +236,11 @@ def _kill(pid: int) -> None:
 def _wait_gone(pid: int, timeout: float = 5.0) -> None:
     """Wait for a process that is not our child to end; kill it at the deadline."""
     deadline = time.monotonic() + timeout
-    while _exists(pid):
+    while procfs.alive(pid):
         if time.monotonic() > deadline:
             _kill(pid)
             deadline = float("inf")
         time.sleep(0.001)
-
-
-def _exists(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat", "rb") as stat:
-            return stat.read().rsplit(b")", 1)[1].split()[0] != b"Z"
-    except (FileNotFoundError, ProcessLookupError):  # gone before or while it was read
-        return False
 
 
 def _serve(sock: socket.socket, target: str) -> None:

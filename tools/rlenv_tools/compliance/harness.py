@@ -22,6 +22,7 @@ from rlenv.protocol import pack
 from rlenv.protocol.codec import HEADER, NDARRAY_EXT
 from rlenv.protocol.errors import ErrorCode, RemoteError
 from rlenv.testing import frame, read_body
+from rlenv.transport import procfs
 from rlenv_client.client import Client
 
 if TYPE_CHECKING:
@@ -285,13 +286,4 @@ def assert_error(reply: dict[str, Any], code: ErrorCode, words: str, *, fatal: b
 
 def peak_rss_kib(pid: int | None) -> int | None:
     """The peak resident memory of process ``pid``, in KiB (Linux only; else ``None``)."""
-    if pid is None:
-        return None
-    try:
-        with open(f"/proc/{pid}/status") as status:
-            for line in status:
-                if line.startswith("VmHWM:"):
-                    return int(line.split()[1])
-    except OSError:
-        return None
-    return None
+    return None if pid is None else procfs.status_kib(pid, "VmHWM")

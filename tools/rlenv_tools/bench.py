@@ -52,6 +52,7 @@ import numpy as np
 
 from rlenv.targets import module_name
 from rlenv.transport import procfs
+from rlenv_client.launcher import end_process
 
 __all__ = ["Figure", "HandWrittenServer", "HandWrittenVector", "Rate", "format_table",
            "interleaved", "random_steps", "random_steps_of", "run_benchmarks", "to_json"]
@@ -208,8 +209,7 @@ class _PingPong:
 
     def close(self) -> None:
         self.sock.close()
-        self.process.kill()
-        self.process.wait()
+        end_process(self.process, 0.0, first=None)
 
     def __enter__(self) -> _PingPong:
         return self
@@ -237,8 +237,7 @@ class HandWrittenServer:
             host, _, port = line.removeprefix("listening on ").strip().rpartition(":")
             self.sock = socket.create_connection((host, int(port)))
         except BaseException:
-            self.process.kill()
-            self.process.wait()
+            end_process(self.process, 0.0, first=None)
             raise
         self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self.ids = itertools.count(1)
@@ -258,8 +257,7 @@ class HandWrittenServer:
     def close(self) -> None:
         """Close the connection and stop the server."""
         self.sock.close()
-        self.process.kill()
-        self.process.wait()
+        end_process(self.process, 0.0, first=None)
 
     def __enter__(self) -> HandWrittenServer:
         return self

@@ -42,7 +42,7 @@ from rlenv.protocol.codec import HEADER, frame, unpack
 from rlenv.protocol.errors import RemoteError
 from rlenv.protocol.messages import Hello
 from rlenv.transport import procfs
-from rlenv_client.launcher import ServerStartError
+from rlenv_client.launcher import ServerStartError, end_process
 
 __all__ = ["ForkedEnvironment", "StepRecord"]
 
@@ -170,11 +170,7 @@ class ForkedEnvironment:
             os.close(self._lifeline)
             self._lifeline = None
         if self._process is not None:
-            try:
-                self._process.wait(5.0)
-            except subprocess.TimeoutExpired:
-                self._process.kill()
-                self._process.wait()
+            end_process(self._process, 5.0, first=None)  # it ends once its socket closes
 
     def end(self) -> None:
         """Close, and make sure the process is gone (killed after a few seconds)."""
@@ -221,7 +217,7 @@ class ForkedEnvironment:
         if self._process is None:
             _kill(self.pid)
         else:
-            self._process.kill()
+            end_process(self._process, 0.0, first=None)
         self.close()
         raise ConnectionError(f"the environment process {self.pid} {what}") from None
 

@@ -6,6 +6,7 @@
 - :mod:`~rlenv.transport.lanes`: a shared-memory lane's block and doorbell (setting it up,
   ringing, waiting on the lane and its socket together); which requests fit its slots is
   :mod:`rlenv.protocol.shared_memory`'s business;
+- :mod:`~rlenv.transport.frames`: one whole frame from a blocking socket, for simple peers;
 - :mod:`~rlenv.transport.procfs`: what one process reads of another in ``/proc`` (the one reader).
 
 The server's endpoint (:mod:`rlenv.serving.endpoint`) and the TCP client

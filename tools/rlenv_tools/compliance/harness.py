@@ -107,7 +107,10 @@ class TappedClient(Client):
 
     It overrides :meth:`Client._recv`, the one place the client's received bytes pass (the
     hook is documented there): the tap sees the hello too, as the override is in place before
-    :class:`Client` connects.
+    :class:`Client` connects. It splits the bytes into frames by the codec's :data:`HEADER`
+    itself rather than through a :class:`~rlenv.protocol.Connection` (which the client reads
+    with already): the tap wants each body undecoded, to decode it with its own ext hook and
+    note what the client's strict decoding would refuse before anything saw it.
     """
 
     def __init__(self, tap: ReplyTap, where: str, host: str, port: int, **kwargs: Any) -> None:

@@ -64,11 +64,19 @@ class _Forwarder(importlib.abc.MetaPathFinder, importlib.abc.Loader):
 
 
 def _caller_level() -> int:
-    """The ``stacklevel`` of the first frame outside the import machinery and this module."""
+    """The ``stacklevel`` of the first frame outside this module and the import machinery.
+
+    ``warnings.warn`` does not count the machinery's frames (``importlib._bootstrap``); this
+    does not either.
+    """
     frame, level = sys._getframe(1), 1
-    while frame is not None and (frame.f_code.co_filename.startswith("<frozen importlib")
-                                 or frame.f_code.co_filename == __file__):
-        frame, level = frame.f_back, level + 1
+    while frame is not None:
+        filename = frame.f_code.co_filename
+        if filename == __file__:
+            level += 1
+        elif not ("importlib" in filename and "_bootstrap" in filename):
+            break
+        frame = frame.f_back
     return level
 
 

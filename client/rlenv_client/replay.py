@@ -27,7 +27,6 @@ import gymnasium
 
 from rlenv.protocol import pack, unpack
 from rlenv.protocol.errors import RequestError
-from rlenv.serving.snapshots import parse_snapshot
 from rlenv_client.recordings import check_frames, read_recording
 
 if TYPE_CHECKING:  # only named: base.py's Inspection builds EpisodeFiles
@@ -109,6 +108,8 @@ class EpisodeFile:
                 or not all(isinstance(seen, str) for seen in observations):
             raise ValueError(f"{path} is not an rlenv episode: its target must be a string and "
                              "its observations a list of digests")
+        from rlenv.serving.snapshots import parse_snapshot  # as a server reads one; loaded here
+
         try:
             snapshot = parse_snapshot(data.get("snapshot"))
         except RequestError as error:

@@ -83,8 +83,9 @@ recreates releases its lease before the new one leases). An EnvRunner that dies 
 its env (its actor killed) does not give its lease back.
 
 Multi-agent environments (one policy per agent, or per RLAgent class, through
-``policy_mapping_fn``) are each a :class:`RemoteMultiAgentEnv`, set up by
-:func:`multi_agent_config_for` (in :mod:`rlenv_client.rllib_agents`, importable from here).
+``policy_mapping_fn``) are each a :class:`~rlenv_client.rllib_agents.RemoteMultiAgentEnv`, set
+up by :func:`~rlenv_client.rllib_agents.multi_agent_config_for` (in
+:mod:`rlenv_client.rllib_agents`, importable from here).
 
 Only people who use RLlib import this module; the rest of ``rlenv_client`` never imports ray,
 and here only :func:`register`, :func:`config_for` and a ``pool`` import it.

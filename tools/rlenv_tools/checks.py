@@ -215,7 +215,7 @@ def run_checks(target: str, timeout: float = 30.0, compliance: bool = False,
     Args:
         target: the server to check.
         timeout: seconds to wait for any answer.
-        compliance: also run the hostile-input compliance suite (:func:`rlenv_client
+        compliance: also run the hostile-input compliance suite (:func:`rlenv_tools
             .compliance.check_server`); the server must have no other controller.
         token: the server's token, if it requires one.
 

@@ -40,6 +40,7 @@ from collections.abc import Callable
 import numpy as np
 
 from rlenv_client import Client, ServerProcess
+from rlenv_client.launcher import end_process
 from rlenv_tools.bench import ENDLESS
 
 CARTPOLE = "examples.cartpole:CartPoleEnvironment"
@@ -77,8 +78,7 @@ class Gateway:
         return created["id"]
 
     def close(self) -> None:
-        self.process.terminate()
-        self.process.wait(10)
+        end_process(self.process, 10.0)
 
 
 class RawHTTP:

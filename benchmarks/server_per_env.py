@@ -42,6 +42,7 @@ from procfs import memory_kib
 
 import rlenv_client  # noqa: F401  (registers rlenv/CartPole-v1)
 from rlenv.examples.classic_cartpole import TARGET
+from rlenv_client.launcher import end_process
 
 ENV_ID = "rlenv/CartPole-v1"
 
@@ -122,8 +123,7 @@ def serve_until_listening(bytecode: bool) -> float:
         assert line.startswith("listening on "), line
         return time.perf_counter() - start
     finally:
-        process.terminate()
-        process.wait()
+        end_process(process, None)
 
 
 STARTUP_PHASES: dict[str, Callable[[], float]] = {

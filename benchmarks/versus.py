@@ -30,6 +30,7 @@ import numpy as np
 from procfs import cpu_seconds
 
 from rlenv_client import Client, RemoteVectorEnv
+from rlenv_client.launcher import end_process
 
 CARTPOLE = "examples.cartpole:CartPoleEnvironment"
 ENDLESS = {"world": {"track_limit": 1e9}, "agent": {"angle_limit": 1e9}}
@@ -48,8 +49,7 @@ def served(python: str, *args: str) -> Iterator[tuple[str, int]]:
         assert line.startswith("listening on "), line
         yield line.split()[-1], process.pid
     finally:
-        process.terminate()
-        process.wait(10)
+        end_process(process, 10.0)
 
 
 def single(address: str, pid: int, steps: int) -> Callable[[], tuple[float, float]]:

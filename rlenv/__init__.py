@@ -4,11 +4,13 @@ Layout (the design card's, one concept per module):
 
 - ``node``, ``signals``, ``tree``, ``timer``: the Godot-style scene tree runtime;
 - ``environment``, ``agent``, ``world`` (and their base ``rl_node``): what users subclass;
+  ``levels``: a world whose levels come from the seed or as data (``LevelWorld``);
+- ``views``: queries over a tree, bulk reads and writes (``view``);
 - ``communication``: an environment's link to its clients (``start_server``; ``run`` hosts
   an environment itself, in ``serving/self_hosting.py``);
 - ``testing``: fakes and clocks for tests (the ``rlenv`` command is the tools', ``rlenv_tools``);
 - ``scene2d/``: the 2D scene: Node2D and Marker2D, pymunk physics nodes, drawing, cameras,
-  tree views, procedural building (lattices, gradients, packed scenes);
+  procedural building (lattices, gradients, packed scenes);
 - ``protocol/``: the wire (sans-IO codec, messages, connection; spaces, errors), shared with
   ``rlenv_client``;
 - ``serving/``: the path a request takes through a server (endpoint, host, parts, instance).
@@ -43,13 +45,14 @@ _EXPORTS = {
     "Joint": "rlenv.scene2d.physics",
     "RLAgent": "rlenv.agent",
     "RLEnvWorld": "rlenv.world",
+    "LevelWorld": "rlenv.levels",
     "RLEnvironment": "rlenv.environment",
     "Server": "rlenv.serving.server",
     "Communication": "rlenv.communication",
     "run": "rlenv.serving.self_hosting",
     "Camera": "rlenv.scene2d.camera",
-    "View": "rlenv.scene2d.views",
-    "view": "rlenv.scene2d.views",
+    "View": "rlenv.views",
+    "view": "rlenv.views",
     "Node2D": "rlenv.scene2d.node2d",
     "Marker2D": "rlenv.scene2d.marker2d",
     "RaycastSensor2D": "rlenv.scene2d.raycast_sensor",
@@ -72,6 +75,7 @@ if TYPE_CHECKING:
     from rlenv.agent import RLAgent as RLAgent
     from rlenv.communication import Communication as Communication
     from rlenv.environment import RLEnvironment as RLEnvironment
+    from rlenv.levels import LevelWorld as LevelWorld
     from rlenv.node import Node as Node
     from rlenv.node import NodeNotFoundError as NodeNotFoundError
     from rlenv.node import ProcessMode as ProcessMode
@@ -88,14 +92,15 @@ if TYPE_CHECKING:
     from rlenv.scene2d.physics import RigidBody as RigidBody
     from rlenv.scene2d.physics import StaticBody as StaticBody
     from rlenv.scene2d.raycast_sensor import RaycastSensor2D as RaycastSensor2D
-    from rlenv.scene2d.views import View as View
-    from rlenv.scene2d.views import view as view
     from rlenv.serving.self_hosting import run as run
     from rlenv.serving.server import Server as Server
     from rlenv.signals import Signal as Signal
     from rlenv.timer import PhysicsFramesTimer as PhysicsFramesTimer
     from rlenv.tree import SceneTree as SceneTree
+    from rlenv.views import View as View
+    from rlenv.views import view as view
     from rlenv.world import RLEnvWorld as RLEnvWorld
 
 # Moved to the tools (rlenv_tools); the old names work, with a warning, for one release.
-forward({"rlenv.cli": "rlenv_tools.cli", "rlenv.http": "rlenv_tools.http"})
+forward({"rlenv.cli": "rlenv_tools.cli", "rlenv.http": "rlenv_tools.http",
+         "rlenv.scene2d.views": "rlenv.views"})

@@ -15,7 +15,7 @@ import importlib.util
 import sys
 import warnings
 from collections.abc import Mapping, Sequence
-from types import CodeType, ModuleType
+from types import CodeType, FrameType, ModuleType
 
 __all__ = ["forward"]
 
@@ -58,7 +58,9 @@ class _Forwarder(importlib.abc.MetaPathFinder, importlib.abc.Loader):
     def get_code(self, fullname: str) -> CodeType | None:
         """The code of the new place's module (``python -m OLD`` runs it)."""
         new = self.new_name(fullname)
-        spec = importlib.util.find_spec(new) if new is not None else None
+        if new is None:
+            return None
+        spec = importlib.util.find_spec(new)
         loader = spec.loader if spec is not None else None
         return loader.get_code(new) if isinstance(loader, importlib.abc.InspectLoader) else None
 
@@ -69,7 +71,8 @@ def _caller_level() -> int:
     ``warnings.warn`` does not count the machinery's frames (``importlib._bootstrap``); this
     does not either.
     """
-    frame, level = sys._getframe(1), 1
+    frame: FrameType | None = sys._getframe(1)
+    level = 1
     while frame is not None:
         filename = frame.f_code.co_filename
         if filename == __file__:

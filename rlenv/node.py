@@ -31,8 +31,8 @@ from enum import IntEnum
 from typing import TYPE_CHECKING, Any, ClassVar, TypeVar, cast
 
 from rlenv.duplication import copied_node, duplicate_subtree
-from rlenv.scene2d.views import View
 from rlenv.signals import Signal, SignalOwner
+from rlenv.views import View
 
 if TYPE_CHECKING:
     from rlenv.tree import SceneTree

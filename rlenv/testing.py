@@ -16,6 +16,7 @@ from typing import Any
 
 from rlenv.protocol import Connection, Hello, Role, unpack
 from rlenv.protocol.codec import HEADER
+from rlenv.transport.frames import receive_frame
 
 __all__ = ["ManualClock", "connection_pair", "frame", "read_body", "read_frame"]
 
@@ -65,16 +66,8 @@ def read_body(sock: socket.socket) -> bytes:
     Raises:
         AssertionError: the peer closed the connection first.
     """
-    (length,) = HEADER.unpack(_recv_exactly(sock, HEADER.size))
-    return _recv_exactly(sock, length)
-
-
-def _recv_exactly(sock: socket.socket, size: int) -> bytes:
-    data = bytearray()
-    while len(data) < size:
-        chunk = sock.recv(size - len(data))
-        assert chunk, "the server closed the connection without an answer"
-        data += chunk
-    return bytes(data)
+    body = receive_frame(sock)
+    assert body is not None, "the server closed the connection without an answer"
+    return body
 
 

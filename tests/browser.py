@@ -19,6 +19,8 @@ import tempfile
 import time
 from typing import Any
 
+from rlenv_client.launcher import end_process
+
 __all__ = ["Browser", "BrowserError", "find_chromium"]
 
 _NAMES = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
@@ -146,12 +148,7 @@ class Browser:
 
     def close(self) -> None:
         """End the browser and remove its profile; safe to repeat."""
-        if self._process.poll() is None:
-            try:
-                os.killpg(self._process.pid, 9)
-            except ProcessLookupError:
-                pass
-            self._process.wait(10)
+        end_process(self._process, 0.0, first=None, group=True)
         for fd in (self._commands, self._answers):
             try:
                 os.close(fd)

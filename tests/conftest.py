@@ -4,24 +4,15 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterator
-from pathlib import Path
 
 import pytest
 
 from examples.cartpole import TARGET
+from rlenv.transport.procfs import alive as alive  # the tests import it from here
 from rlenv.tree import SceneTree
 from rlenv_client import Client, ServerProcess
 
 Serve = Callable[..., ServerProcess]
-
-
-def alive(pid: int) -> bool:
-    """Whether ``pid`` runs (a zombie, dead but not yet reaped by its parent, does not)."""
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:  # gone, before or while it was read
-        return False
-    return stat.rpartition(")")[2].split()[0] != "Z"
 
 
 def wait_until(condition: Callable[[], bool], message: str, seconds: float = 30.0) -> None:

@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from rlenv_client.launcher import end_process
+
 SHUTDOWN_SECONDS = 10.0
 """SIGTERM must end the gateway within this."""
 
@@ -56,8 +58,7 @@ class Gateway:
             env={**{k: v for k, v in os.environ.items() if k != "RLENV_TOKEN"}, **(env or {})})
         line = self.process.stdout.readline()  # type: ignore[union-attr]
         if not line.startswith("listening on http://"):
-            self.process.kill()
-            self.process.wait()
+            end_process(self.process, 0.0, first=None)
             raise RuntimeError(f"the gateway did not start ({line!r}): {self.stderr()}")
         self.url = line.strip().removeprefix("listening on ")
         host, port = self.url.removeprefix("http://").rsplit(":", 1)
@@ -114,14 +115,10 @@ class Gateway:
         if self.process.poll() is not None:
             return 0.0
         started = time.monotonic()
-        self.process.send_signal(signal.SIGTERM)
         try:
-            self.process.wait(SHUTDOWN_SECONDS)
-        except subprocess.TimeoutExpired:
-            self.process.kill()
-            self.process.wait()
-            raise AssertionError(f"SIGTERM did not end the gateway in {SHUTDOWN_SECONDS} s: "
-                                 f"{self.stderr()}") from None
+            if end_process(self.process, SHUTDOWN_SECONDS) == -signal.SIGKILL:
+                raise AssertionError(f"SIGTERM did not end the gateway in {SHUTDOWN_SECONDS} s: "
+                                     f"{self.stderr()}")
         finally:
             self.process.stdout.close()  # type: ignore[union-attr]
             self._stderr.close()

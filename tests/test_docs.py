@@ -57,7 +57,7 @@ EXPECTED = {
     "rlenv.scene2d.physics.joint.Joint.pivot": ["world coordinates"],
     "rlenv.scene2d.camera.Camera": ["row 0", "pixels"],
     "rlenv.scene2d.render.draw_list": [],
-    "rlenv.scene2d.views.View": [],
+    "rlenv.views.View": [],
     "rlenv.serving.server.Server": ["instances"],
     "rlenv_client.base.BaseClient.step": ["repeat_action"],
     "rlenv_client.client.Client": ["timeout", "shared_memory"],

@@ -118,3 +118,44 @@ def test_png_refuses_what_is_not_an_image() -> None:
                 np.zeros((0, 2, 3), np.uint8), np.zeros(4, np.uint8)):
         with pytest.raises(ValueError):
             encode_png(bad)
+
+
+@pytest.mark.parametrize("space", TESTING_SPACES, ids=str)
+def test_the_gateway_and_onnx_policies_read_each_others_space(space: spaces.Space) -> None:
+    from rlenv.protocol import space_json
+    from rlenv.serving import onnx_policy
+    from rlenv_tools import policies
+
+    assert space_json.space_from_json is onnx_policy.space_from_json  # what a policy file reads
+    assert space_json.space_to_json_text is policies.space_to_json_text  # what export_onnx writes
+    served = json.loads(dumps({"space": space_to_json(space)}))["space"]  # the gateway's
+    assert space_json.space_from_json(served) == space  # read as a policy's file is
+    stored = space_json.space_to_json_text(space)  # as export_onnx stores it
+    assert space_from_json(json.loads(stored)) == space == space_from_json(stored)
+    assert json.loads(stored) == served  # one form
+
+
+def test_the_specs_that_rlenv_0_1s_policies_hold_are_read() -> None:
+    from rlenv.protocol.space_json import space_from_json as read
+
+    assert read('{"type": "Box", "dtype": "<f4", "low": ["-inf", "-inf"], "high": [1.0, 1.0]}') \
+        == spaces.Box(-np.inf, 1.0, (2,), np.float32)
+    assert read('{"type": "Discrete", "n": 3, "start": -1, "dtype": "<i8"}') == \
+        spaces.Discrete(3, start=-1)
+    assert read('{"type": "MultiDiscrete", "dtype": "<i8", "nvec": [2, 3], "start": [0, 0]}') \
+        == spaces.MultiDiscrete([2, 3])
+    with pytest.raises(ValueError, match="not a space in JSON"):
+        read("{not json")
+
+
+def test_the_old_names_in_protocol_spaces_warn_and_keep_their_text() -> None:
+    from rlenv.protocol import space_json
+    from rlenv.protocol import spaces as protocol_spaces
+
+    with pytest.warns(DeprecationWarning, match="moved to rlenv.protocol.space_json.space_to_"):
+        old_writer = protocol_spaces.space_to_json
+    with pytest.warns(DeprecationWarning, match="moved to rlenv.protocol.space_json.space_from"):
+        old_reader = protocol_spaces.space_from_json
+    box = spaces.Box(0.0, 1.0, (3,), np.float32)
+    assert old_writer is space_json.space_to_json_text and isinstance(old_writer(box), str)
+    assert old_reader(old_writer(box)) == box

@@ -1,4 +1,4 @@
-"""Levels from the seed or as data (examples/levels.py), the same tests for Plinko and Maze."""
+"""Levels from the seed or as data (rlenv.LevelWorld), the same tests for Plinko and Maze."""
 
 from __future__ import annotations
 
@@ -200,3 +200,13 @@ def test_an_int_level_is_the_level_its_seed_resets_to_and_a_negative_one_is_refu
             assert refused.value.message.startswith(
                 f"edit_level: {world}._edit_level refused the level: "), refused.value.message
             assert why in refused.value.message
+
+
+def test_level_world_is_rlenv_api_and_the_examples_old_name_the_same_class() -> None:
+    import rlenv
+    from examples import levels
+    from rlenv.levels import LevelWorld
+
+    assert rlenv.LevelWorld is LevelWorld is levels.LevelWorld
+    assert issubclass(plinko.PlinkoWorld, LevelWorld) and issubclass(maze.MazeWorld, LevelWorld)
+    assert issubclass(LevelWorld, rlenv.RLEnvWorld)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from rlenv.protocol.errors import RemoteError
-from rlenv.protocol.spaces import space_from_json
+from rlenv.protocol.space_json import space_from_json
 from rlenv_client import Client
 
 pytestmark = pytest.mark.onnx

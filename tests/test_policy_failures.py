@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from rlenv.protocol.errors import RemoteError
-from rlenv.protocol.spaces import space_to_json
+from rlenv.protocol.space_json import space_to_json_text
 from rlenv_client import Client
 from tests.conftest import Serve, wait_until
 
@@ -59,8 +59,8 @@ def _write(path: Path, nodes: list, observation_space: gym.spaces.Box,
         initializer=list(initializers))
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
     model.ir_version = 8
-    helper.set_model_props(model, {OBSERVATION_SPACE_KEY: space_to_json(observation_space),
-                                   ACTION_SPACE_KEY: space_to_json(action_space)})
+    helper.set_model_props(model, {OBSERVATION_SPACE_KEY: space_to_json_text(observation_space),
+                                   ACTION_SPACE_KEY: space_to_json_text(action_space)})
     path.write_bytes(model.SerializeToString())
     return path
 

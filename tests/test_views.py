@@ -6,8 +6,8 @@ import pytest
 
 from rlenv.node import Node
 from rlenv.scene2d.physics import CollisionShape, Joint, PhysicsWorld, RigidBody, StaticBody
-from rlenv.scene2d.views import View, view
 from rlenv.tree import SceneTree
+from rlenv.views import View, view
 
 
 @pytest.fixture
@@ -87,3 +87,20 @@ def test_overlapping_views_hold_each_node_once_in_tree_order() -> None:
     upper.add_child(lower)
     lower.add_child(leaf)
     assert list(view(lower, upper, lower).all) == [upper, lower, leaf]
+
+
+
+def test_the_old_import_path_warns_and_the_package_names_do_not() -> None:
+    import importlib
+    import sys
+    import warnings
+
+    import rlenv
+
+    sys.modules.pop("rlenv.scene2d.views", None)
+    with pytest.warns(DeprecationWarning, match="rlenv.scene2d.views moved to rlenv.views"):
+        old = importlib.import_module("rlenv.scene2d.views")
+    assert old.View is View and old.view is view
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert rlenv.View is View and rlenv.view is view

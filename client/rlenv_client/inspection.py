@@ -21,12 +21,13 @@ from rlenv.protocol.spaces import codec_for
 from rlenv_client.replay import EpisodeFile
 
 __all__ = ["CLAIMS_SINCE", "EPISODES_SINCE", "PAGED_EPISODES_SINCE", "Inspection", "config_request",
-           "episode_files", "fetch_episodes"]
+           "episode_files", "episodes_refusal", "fetch_episodes"]
 
 EPISODES_SINCE = (2, 5)
+"""The protocol version that brought the ``episodes`` part (:meth:`Inspection.episodes`)."""
+
 AGENT_SETTINGS_SINCE = (2, 6)
 """The protocol whose ``config.agent`` may set one agent, keyed by its name."""
-"""The protocol version that brought the ``episodes`` part (:meth:`Inspection.episodes`)."""
 
 CLAIMS_SINCE = (2, 6)
 """The protocol version that brought the ``claim`` part (:meth:`Inspection.claim`)."""
@@ -152,9 +153,9 @@ class Inspection:
                 ``last`` is not an integer >= 1.
         """
         hello = self.hello
-        if hello.protocol < EPISODES_SINCE:
-            raise RemoteError(ErrorCode.BAD_REQUEST, "the server speaks protocol {}.{}; recent "
-                              "episodes need 2.5".format(*hello.protocol))
+        refusal = episodes_refusal(hello)
+        if refusal is not None:
+            raise RemoteError(ErrorCode.BAD_REQUEST, refusal)
         if last is not None and (type(last) is not int or last < 1):
             raise RemoteError(ErrorCode.BAD_REQUEST,
                               f"episodes.last must be an integer >= 1, got {last!r:.40}")
@@ -229,6 +230,19 @@ class Inspection:
         """
         frame = np.asarray(self._part(self._response(reply), "render"))
         return frame if frame.flags.writeable else frame.copy()
+
+
+def episodes_refusal(hello: Hello, server: str = "the server") -> str | None:
+    """Why the server of ``hello`` cannot serve recent episodes (older than 2.5), or ``None``.
+
+    Args:
+        hello: the server's hello.
+        server: how the message names the server.
+    """
+    if hello.protocol >= EPISODES_SINCE:
+        return None
+    return "{} speaks protocol {}.{}; recent episodes need {}.{}".format(
+        server, *hello.protocol, *EPISODES_SINCE)
 
 
 def fetch_episodes(ask: Callable[[dict[str, Any]], Response], hello: Hello,

@@ -21,11 +21,12 @@ import threading
 import time
 import weakref
 from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
 
 from rlenv.protocol.errors import ConnectionLost, RlenvError
 from rlenv_client.addresses import format_address, parse_address
 
-__all__ = ["ServerProcess", "ServerStartError", "with_server_story"]
+__all__ = ["ServerProcess", "ServerStartError", "end_process", "with_server_story"]
 
 logger = logging.getLogger(__name__)
 
@@ -192,20 +193,47 @@ def _terminate(
     except OSError:  # closed already
         pass
     if process.poll() is None:
-        _signal_group(process, timeout)
+        end_process(process, timeout, group=True)
     pump.join(timeout)  # the output pipe reaches its end once the group is gone
     if process.stdout is not None and not pump.is_alive():
         process.stdout.close()
 
 
-def _signal_group(process: subprocess.Popen[str], timeout: float) -> None:
-    for sig in (signal.SIGTERM, signal.SIGKILL):
-        try:
+def end_process(process: subprocess.Popen[Any], timeout: float | None = 5.0, *,
+                first: int | None = signal.SIGTERM, group: bool = False) -> int:
+    """End the child ``process`` and reap it: every layer's one way to end a process it started.
+
+    Sends ``first`` (SIGTERM), waits up to ``timeout`` seconds (``None``: as long as it takes)
+    for the process to end, then sends SIGKILL and reaps it. A process that ended already is
+    only reaped.
+
+    Args:
+        process: a child of this process.
+        timeout: how long it has to end once asked; 0 kills it at once.
+        first: the signal that asks it to end; ``None`` where it ends by itself (its input or
+            its socket closed before the call) and is only waited for.
+        group: signal its whole process group (a process started with
+            ``start_new_session=True`` leads one) rather than the process alone.
+
+    Returns:
+        Its exit code (``-SIGKILL`` where it had to be killed).
+    """
+    if first is not None:
+        _send_signal(process, first, group)
+    try:
+        return process.wait(timeout)
+    except subprocess.TimeoutExpired:
+        _send_signal(process, signal.SIGKILL, group)
+        return process.wait()
+
+
+def _send_signal(process: subprocess.Popen[Any], sig: int, group: bool) -> None:
+    if process.poll() is not None:
+        return  # reaped: its pid (and group id) may be another's by now
+    try:
+        if group:
             os.killpg(process.pid, sig)
-        except ProcessLookupError:
-            return
-        try:
-            process.wait(timeout)
-            return
-        except subprocess.TimeoutExpired:
-            continue
+        else:
+            process.send_signal(sig)
+    except ProcessLookupError:  # gone meanwhile
+        pass

@@ -80,9 +80,8 @@ from rlenv import (
     RLEnvironment,
     StaticBody,
 )
+from rlenv.levels import LevelWorld
 from rlenv.protocol.errors import ErrorCode, RequestError
-
-from ..levels import LevelWorld
 
 __all__ = [
     "ACTIONS",

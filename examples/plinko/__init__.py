@@ -77,9 +77,8 @@ from rlenv import (
     gradient,
     view,
 )
+from rlenv.levels import LevelWorld
 from rlenv.protocol.errors import ErrorCode, RequestError
-
-from ..levels import LevelWorld
 
 __all__ = [
     "LEVEL_CLASSES",

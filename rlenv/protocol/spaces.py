@@ -22,7 +22,6 @@ Supported: Box, Discrete, MultiDiscrete, MultiBinary, Tuple and Dict (nested fre
 from __future__ import annotations
 
 import cmath
-import json
 import math
 from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
@@ -40,8 +39,6 @@ __all__ = [
     "compile_check",
     "find_non_finite",
     "space_from_spec",
-    "space_from_json",
-    "space_to_json",
     "space_to_spec",
 ]
 
@@ -710,57 +707,16 @@ def find_non_finite(value: Any, path: str = "") -> str | None:
     return None
 
 
-def space_to_json(space: spaces.Space) -> str:
-    """:func:`space_to_spec` as JSON text (arrays as nested lists, infinities as strings).
+def __getattr__(name: str) -> Any:
+    """The JSON form's old names here, for one release, with a warning (see space_json)."""
+    if name not in ("space_to_json", "space_from_json"):
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    import importlib
+    import warnings
 
-    Raises:
-        TypeError: the space type cannot travel on the wire.
-    """
-    return json.dumps(_jsonable(space_to_spec(space)), allow_nan=False)
-
-
-def space_from_json(text: str) -> spaces.Space:
-    """The space that :func:`space_to_json` wrote.
-
-    Raises:
-        ValueError: ``text`` is not JSON, or not a valid description of a supported space.
-    """
-    try:
-        spec = json.loads(text)
-    except (TypeError, ValueError) as error:
-        raise ValueError(f"not a space in JSON: {error}") from None
-    return space_from_spec(_arrays(spec))
-
-
-_ARRAYS = {"Box": ("low", "high"), "MultiDiscrete": ("nvec", "start")}
-"""The keys whose values a spec carries as arrays (of the spec's dtype), by space type."""
-
-
-def _arrays(spec: Any) -> Any:
-    """A spec read from JSON with its arrays back (the inverse of :func:`_jsonable`)."""
-    if not isinstance(spec, Mapping):
-        return spec
-    inner = spec.get("spaces")
-    if isinstance(inner, list):
-        return {**spec, "spaces": [_arrays(item) for item in inner]}
-    if isinstance(inner, Mapping):
-        return {**spec, "spaces": {key: _arrays(item) for key, item in inner.items()}}
-    keys = _ARRAYS.get(spec.get("type"), ())  # type: ignore[arg-type]
-    try:
-        return {**spec, **{key: np.array(spec[key], dtype=np.dtype(spec["dtype"]))
-                           for key in keys if key in spec}}
-    except (KeyError, TypeError, ValueError) as error:
-        raise ValueError(f"invalid {spec.get('type')} space spec: {error}") from None
-
-
-def _jsonable(value: Any) -> Any:
-    """A spec with its arrays as nested lists, infinities and NaN as strings (``"inf"``)."""
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, Mapping):
-        return {key: _jsonable(item) for key, item in value.items()}
-    if isinstance(value, list | tuple):
-        return [_jsonable(item) for item in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return str(value)
-    return value
+    space_json = importlib.import_module("rlenv.protocol.space_json")  # (it imports this one)
+    new = "space_from_json" if name == "space_from_json" else "space_to_json_text"  # text
+    warnings.warn(f"rlenv.protocol.spaces.{name} moved to rlenv.protocol.space_json.{new} (a "
+                  "space's one JSON form); the old name goes in the next release",
+                  DeprecationWarning, stacklevel=2)
+    return getattr(space_json, new)

@@ -10,6 +10,7 @@
   :mod:`~rlenv.scene2d.pymunk_data`): subtrees as plain data and back;
 - :mod:`~rlenv.scene2d.render`: frames and vector draw lists of the pymunk shapes (numpy only);
 - :mod:`~rlenv.scene2d.camera`: a camera node whose frames can be observations, and films;
-- :mod:`~rlenv.scene2d.recording`: writing frames to a video file;
-- :mod:`~rlenv.scene2d.views`: querying a built tree, and reading or setting many nodes at once.
+- :mod:`~rlenv.scene2d.recording`: writing frames to a video file.
+
+Querying a built tree (``view``) is not 2D: :mod:`rlenv.views`.
 """

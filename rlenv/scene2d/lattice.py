@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from rlenv.scene2d.views import View
+from rlenv.views import View
 
 if TYPE_CHECKING:  # node2d.py imports this module
     from rlenv.node import Node

@@ -31,7 +31,7 @@ from rlenv.node import Node, ProcessMode
 from rlenv.scene2d.lattice import lattice
 
 if TYPE_CHECKING:
-    from rlenv.scene2d.views import View
+    from rlenv.views import View
 
 __all__ = ["Node2D", "Pose", "Vec", "frame_of"]
 

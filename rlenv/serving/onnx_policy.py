@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from rlenv.protocol.spaces import space_from_json
+from rlenv.protocol.space_json import space_from_json
 
 __all__ = ["ACTION_SPACE_KEY", "OBSERVATION_SPACE_KEY", "POLICY_DEADLINE", "POLICY_MEMORY",
            "OnnxPolicy", "PolicyError", "fit_action"]

@@ -5,7 +5,9 @@
   that gives its core away when another process wants it, then a blocking read);
 - :mod:`~rlenv.transport.lanes`: a shared-memory lane's block and doorbell (setting it up,
   ringing, waiting on the lane and its socket together); which requests fit its slots is
-  :mod:`rlenv.protocol.shared_memory`'s business.
+  :mod:`rlenv.protocol.shared_memory`'s business;
+- :mod:`~rlenv.transport.frames`: one whole frame from a blocking socket, for simple peers;
+- :mod:`~rlenv.transport.procfs`: what one process reads of another in ``/proc`` (the one reader).
 
 The server's endpoint (:mod:`rlenv.serving.endpoint`) and the TCP client
 (``rlenv_client.client``) use both. Importing this package loads neither the runtime nor pymunk.

@@ -40,7 +40,6 @@ import json
 import logging
 import socket
 import statistics
-import struct
 import subprocess
 import sys
 import time
@@ -51,7 +50,10 @@ from typing import Any
 import msgpack
 import numpy as np
 
+from rlenv.protocol.codec import HEADER
 from rlenv.targets import module_name
+from rlenv.transport import procfs
+from rlenv_client.launcher import end_process
 
 __all__ = ["Figure", "HandWrittenServer", "HandWrittenVector", "Rate", "format_table",
            "interleaved", "random_steps", "random_steps_of", "run_benchmarks", "to_json"]
@@ -67,6 +69,8 @@ ENDLESS = {"world": {"track_limit": 1e9}, "agent": {"angle_limit": 1e9}}
 """CartPole's configuration for the bench: one episode for the whole run, no resets."""
 
 _ECHO_SERVER = """
+# The floor: a server of a few lines of Python, run by "python -c", that imports nothing of
+# rlenv (its frames are the codec's: a 4-byte big-endian length, then the body).
 import socket, struct, sys
 listener = socket.create_server(("127.0.0.1", 0))
 sys.stdout.write(str(listener.getsockname()[1]) + chr(10))
@@ -169,20 +173,26 @@ def _calls(call: Callable[[], object], latencies: list[float] | None = None,
 
 
 def _frame(message: object) -> bytes:
-    """``message`` packed by msgpack, behind its 4-byte big-endian length."""
+    """``message`` packed by msgpack, behind the codec's 4-byte length (:data:`HEADER`)."""
     body = msgpack.packb(message)
-    return struct.pack(">I", len(body)) + body
+    return HEADER.pack(len(body)) + body
 
 
 def _receive_frame(sock: socket.socket) -> bytes:
-    """The body of the next frame on ``sock``: recv until the whole frame is in."""
+    """The body of the next frame on ``sock``: recv until the whole frame is in.
+
+    The hand-written client's reader, not :func:`rlenv.transport.frames.receive_frame`: it does
+    what any client must and no more, one ``recv`` for a whole answer (that one reads the
+    length first, a second ``recv`` per answer on the floor the figures are measured against).
+    It reads nothing beyond the answer because the hand-written server sends nothing unasked.
+    """
     data = sock.recv(65536)
-    while len(data) < 4 or len(data) < 4 + struct.unpack_from(">I", data)[0]:
+    while len(data) < HEADER.size or len(data) < HEADER.size + HEADER.unpack_from(data)[0]:
         chunk = sock.recv(65536)
         if not chunk:
             raise ConnectionError("the server closed the connection")
         data += chunk
-    return data[4:]
+    return data[HEADER.size:]
 
 
 class _PingPong:
@@ -197,19 +207,18 @@ class _PingPong:
         self.process.stdin.close()
         self.sock = socket.create_connection(("127.0.0.1", port))
         self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        self.reply_size = len(reply) - 4
+        self.reply_size = len(reply) - HEADER.size
 
     def round_trip(self, request: bytes) -> None:
         self.sock.sendall(request)
         data = self.sock.recv(65536)
-        while len(data) < self.reply_size + 4:
+        while len(data) < self.reply_size + HEADER.size:
             data += self.sock.recv(65536)
-        msgpack.unpackb(data[4:])
+        msgpack.unpackb(data[HEADER.size:])
 
     def close(self) -> None:
         self.sock.close()
-        self.process.kill()
-        self.process.wait()
+        end_process(self.process, 0.0, first=None)
 
     def __enter__(self) -> _PingPong:
         return self
@@ -237,8 +246,7 @@ class HandWrittenServer:
             host, _, port = line.removeprefix("listening on ").strip().rpartition(":")
             self.sock = socket.create_connection((host, int(port)))
         except BaseException:
-            self.process.kill()
-            self.process.wait()
+            end_process(self.process, 0.0, first=None)
             raise
         self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self.ids = itertools.count(1)
@@ -258,8 +266,7 @@ class HandWrittenServer:
     def close(self) -> None:
         """Close the connection and stop the server."""
         self.sock.close()
-        self.process.kill()
-        self.process.wait()
+        end_process(self.process, 0.0, first=None)
 
     def __enter__(self) -> HandWrittenServer:
         return self
@@ -321,11 +328,10 @@ def _step_reply(observation: np.ndarray) -> bytes:
 
 
 def _rss_kib(pid: int) -> int:
-    with open(f"/proc/{pid}/status") as status:
-        for line in status:
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1])
-    raise RuntimeError("no VmRSS")
+    rss = procfs.status_kib(pid, "VmRSS")
+    if rss is None:
+        raise RuntimeError("no VmRSS")
+    return rss
 
 
 def run_benchmarks(

@@ -319,8 +319,10 @@ def _serve(args: argparse.Namespace) -> int:
             pass
         finally:
             if inspector is not None:
+                from rlenv_client.launcher import end_process
+
                 inspector.stdin.close()  # type: ignore[union-attr]  # it exits at EOF
-                inspector.wait()
+                end_process(inspector, None, first=None)
     return 0
 
 

@@ -8,10 +8,14 @@ sleeping bodies, the generators, every Python object), which no snapshot taken a
 and it costs about a millisecond however large the scene. Timelines park such copies as
 checkpoints (:mod:`rlenv_tools.timeline`).
 
-Every call is a msgpack frame (:mod:`rlenv.protocol.codec`) naming one of a few operations;
-nothing is ever unpickled. A process ends when its socket closes, so closing the owner's end
-ends it. POSIX only (``os.fork``); the environment must not rely on threads of its own, which a
-fork does not copy.
+Every call is a frame of the protocol's codec (:func:`rlenv.protocol.codec.frame`, read with
+:func:`rlenv.transport.frames.receive_frame` and :func:`~rlenv.protocol.codec.unpack`) naming
+one of a few operations (``call`` a method of the LocalClient, ``run`` many steps, ``fork``),
+and every answer ``[status, value]``; nothing is ever unpickled. These are not the protocol's
+requests: a call reaches the LocalClient's own methods (``snapshot``, ``restore``, ``tree``
+...) between two processes of one owner, and a fork answers with a file descriptor. A process
+ends when its socket closes, so closing the owner's end ends it. POSIX only (``os.fork``); the
+environment must not rely on threads of its own, which a fork does not copy.
 
 Every copy dies with its owner, whatever it is doing (a hung ``step`` included): the first
 process and all its copies form a process group of their own, and hold the read end of a pipe,
@@ -38,10 +42,12 @@ import traceback
 from collections.abc import Sequence
 from typing import Any, NoReturn
 
-from rlenv.protocol.codec import HEADER, frame, unpack
+from rlenv.protocol.codec import frame, unpack
 from rlenv.protocol.errors import RemoteError
 from rlenv.protocol.messages import Hello
-from rlenv_client.launcher import ServerStartError
+from rlenv.transport import procfs
+from rlenv.transport.frames import receive_frame
+from rlenv_client.launcher import ServerStartError, end_process
 
 __all__ = ["ForkedEnvironment", "StepRecord"]
 
@@ -169,11 +175,7 @@ class ForkedEnvironment:
             os.close(self._lifeline)
             self._lifeline = None
         if self._process is not None:
-            try:
-                self._process.wait(5.0)
-            except subprocess.TimeoutExpired:
-                self._process.kill()
-                self._process.wait()
+            end_process(self._process, 5.0, first=None)  # it ends once its socket closes
 
     def end(self) -> None:
         """Close, and make sure the process is gone (killed after a few seconds)."""
@@ -187,13 +189,9 @@ class ForkedEnvironment:
         0 where ``/proc`` says none (not Linux, or the process is gone).
         """
         try:
-            with open(f"/proc/{self.pid}/smaps_rollup", "rb") as rollup:
-                for line in rollup:
-                    if line.startswith(b"Pss:"):
-                        return int(line.split()[1]) * 1024
+            return procfs.rollup_kib(self.pid).get("Pss", 0) * 1024
         except OSError:
-            pass
-        return 0
+            return 0
 
     def _send(self, message: Any) -> None:
         if self.closed:
@@ -205,26 +203,22 @@ class ForkedEnvironment:
 
     def _receive(self) -> Any:
         try:
-            (size,) = HEADER.unpack(self._exactly(HEADER.size))
-            status, value = unpack(self._exactly(size))
+            body = receive_frame(self._socket)
+            if body is None:
+                raise ConnectionResetError("the environment process ended")
+            status, value = unpack(body)
         except OSError as error:
             self._lost(error)
         if status == "error":
             raise RemoteError(*value)
         return value
 
-    def _exactly(self, size: int) -> bytes:
-        data = _read(self._socket, size)
-        if data is None:
-            raise ConnectionResetError("the environment process ended")
-        return data
-
     def _lost(self, error: OSError) -> NoReturn:
         what = "did not answer in time" if isinstance(error, TimeoutError) else f"is gone ({error})"
         if self._process is None:
             _kill(self.pid)
         else:
-            self._process.kill()
+            end_process(self._process, 0.0, first=None)
         self.close()
         raise ConnectionError(f"the environment process {self.pid} {what}") from None
 
@@ -239,19 +233,11 @@ def _kill(pid: int) -> None:
 def _wait_gone(pid: int, timeout: float = 5.0) -> None:
     """Wait for a process that is not our child to end; kill it at the deadline."""
     deadline = time.monotonic() + timeout
-    while _exists(pid):
+    while procfs.alive(pid):
         if time.monotonic() > deadline:
             _kill(pid)
             deadline = float("inf")
         time.sleep(0.001)
-
-
-def _exists(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat", "rb") as stat:
-            return stat.read().rsplit(b")", 1)[1].split()[0] != b"Z"
-    except (FileNotFoundError, ProcessLookupError):  # gone before or while it was read
-        return False
 
 
 def _serve(sock: socket.socket, target: str) -> None:
@@ -339,23 +325,8 @@ def _fork(sock: socket.socket) -> socket.socket | None:
 
 
 def _request(sock: socket.socket) -> Any:
-    header = _read(sock, HEADER.size)
-    if header is None:
-        return None
-    body = _read(sock, HEADER.unpack(header)[0])
+    body = receive_frame(sock)
     return None if body is None else unpack(body)
-
-
-def _read(sock: socket.socket, size: int) -> bytes | None:
-    """``size`` bytes from ``sock``, or ``None`` if it closes first."""
-    chunks = []
-    while size:
-        chunk = sock.recv(min(size, 1 << 20))
-        if not chunk:
-            return None
-        chunks.append(chunk)
-        size -= len(chunk)
-    return b"".join(chunks)
 
 
 def _reply(sock: socket.socket, status: str, value: Any) -> None:

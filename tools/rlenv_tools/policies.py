@@ -7,8 +7,8 @@ space's dtype): deterministic actions, post-processed inside the graph as Stable
 clipped to its bounds, or unscaled from [-1, 1] when the policy squashes, as SAC's). The
 observation and action spaces travel in the file's ``metadata_props``
 (:data:`~rlenv.serving.onnx_policy.OBSERVATION_SPACE_KEY`,
-:data:`~rlenv.serving.onnx_policy.ACTION_SPACE_KEY`), as rlenv's space specs in JSON
-(:func:`rlenv.protocol.spaces.space_to_json`), so that ``rlenv serve --policy AGENT=FILE``
+:data:`~rlenv.serving.onnx_policy.ACTION_SPACE_KEY`), in the space's one JSON form
+(:func:`rlenv.protocol.space_json.space_to_json_text`), so that ``rlenv serve --policy AGENT=FILE``
 can check them against the agent's.
 
 Before it returns, the export runs the file with onnxruntime on a seeded batch of observations
@@ -25,7 +25,8 @@ from typing import Any, cast
 import numpy as np
 from gymnasium import spaces
 
-from rlenv.protocol.spaces import space_from_spec, space_to_json, space_to_spec
+from rlenv.protocol.space_json import space_to_json_text
+from rlenv.protocol.spaces import space_from_spec, space_to_spec
 from rlenv.serving.onnx_policy import ACTION_SPACE_KEY, OBSERVATION_SPACE_KEY, OnnxPolicy
 
 __all__ = ["CHECKED_OBSERVATIONS", "TOLERANCE", "ExportMismatch", "export_onnx"]
@@ -92,8 +93,9 @@ def export_onnx(model: Any, path: str | Path, observation_space: spaces.Space | 
                           dynamic_axes={"observation": {0: "batch"}, "action": {0: "batch"}},
                           dynamo=False)
     graph = onnx.load(str(path))
-    onnx.helper.set_model_props(graph, {OBSERVATION_SPACE_KEY: space_to_json(observation_space),
-                                        ACTION_SPACE_KEY: space_to_json(action_space)})
+    onnx.helper.set_model_props(graph, {
+        OBSERVATION_SPACE_KEY: space_to_json_text(observation_space),
+        ACTION_SPACE_KEY: space_to_json_text(action_space)})
     onnx.checker.check_model(graph)
     onnx.save(graph, str(path))
     try:

@@ -35,6 +35,7 @@ from typing import Any
 
 import gymnasium
 
+from rlenv_client.launcher import end_process
 from rlenv_tools.bench import Rate, interleaved
 
 __all__ = ["PPO_CONFIGS", "Measure", "Row", "busy_process", "format_rows", "measure_training",
@@ -258,8 +259,7 @@ def measure_training(
                                progress=progress)
     finally:
         if hog is not None:
-            hog.kill()
-            hog.wait()
+            end_process(hog, 0.0, first=None)
 
 
 def rows_to_json(rows: Sequence[Row]) -> str:

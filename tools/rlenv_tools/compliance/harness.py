@@ -22,6 +22,7 @@ from rlenv.protocol import pack
 from rlenv.protocol.codec import HEADER, NDARRAY_EXT
 from rlenv.protocol.errors import ErrorCode, RemoteError
 from rlenv.testing import frame, read_body
+from rlenv.transport import procfs
 from rlenv_client.client import Client
 
 if TYPE_CHECKING:
@@ -106,7 +107,10 @@ class TappedClient(Client):
 
     It overrides :meth:`Client._recv`, the one place the client's received bytes pass (the
     hook is documented there): the tap sees the hello too, as the override is in place before
-    :class:`Client` connects.
+    :class:`Client` connects. It splits the bytes into frames by the codec's :data:`HEADER`
+    itself rather than through a :class:`~rlenv.protocol.Connection` (which the client reads
+    with already): the tap wants each body undecoded, to decode it with its own ext hook and
+    note what the client's strict decoding would refuse before anything saw it.
     """
 
     def __init__(self, tap: ReplyTap, where: str, host: str, port: int, **kwargs: Any) -> None:
@@ -285,13 +289,4 @@ def assert_error(reply: dict[str, Any], code: ErrorCode, words: str, *, fatal: b
 
 def peak_rss_kib(pid: int | None) -> int | None:
     """The peak resident memory of process ``pid``, in KiB (Linux only; else ``None``)."""
-    if pid is None:
-        return None
-    try:
-        with open(f"/proc/{pid}/status") as status:
-            for line in status:
-                if line.startswith("VmHWM:"):
-                    return int(line.split()[1])
-    except OSError:
-        return None
-    return None
+    return None if pid is None else procfs.status_kib(pid, "VmHWM")

@@ -1,10 +1,8 @@
 """Spaces and values as JSON: gymnasium's terms, a JSON Schema beside each space.
 
-- :func:`space_to_json` describes a space as gymnasium names it, from the wire spec of
-  :mod:`rlenv.protocol.spaces` (``{"type": "Box", "shape", "low", "high", "dtype"}``,
-  ``Discrete``, ``MultiDiscrete``, ``MultiBinary``, ``Tuple``, ``Dict``); a bound shared by
-  every element is one number, and infinities are the strings ``"Infinity"`` and
-  ``"-Infinity"``. :func:`space_from_json` reads it back.
+- :func:`space_to_json` describes a space as gymnasium names it, and :func:`space_from_json`
+  reads it back: the space's one JSON form, :mod:`rlenv.protocol.space_json`'s (ONNX policies
+  store it too), re-exported here.
 - :func:`json_schema` gives the JSON Schema (2020-12) of the space's values as they travel:
   arrays as (nested) JSON lists, Discrete as an integer, Tuple as a list, Dict as an object.
 - **Images** travel as base64 PNG strings, never as nested lists: an image is a uint8 array of
@@ -29,7 +27,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from rlenv.protocol.spaces import space_from_spec, space_to_spec
+from rlenv.protocol.space_json import json_number, space_from_json, space_to_json
 from rlenv_tools.http.png import encode_png
 
 __all__ = ["action_decoder", "dumps", "is_image", "json_schema", "space_from_json",
@@ -38,106 +36,7 @@ __all__ = ["action_decoder", "dumps", "is_image", "json_schema", "space_from_jso
 _PER_ELEMENT = 64
 """1-D arrays up to this size get per-element bounds in their schema; larger ones, and arrays
 of more dimensions, the loosest bounds of their elements."""
-_NON_FINITE = {math.inf: "Infinity", -math.inf: "-Infinity"}
-_FROM_TEXT = {"Infinity": math.inf, "-Infinity": -math.inf, "NaN": math.nan}
 _encode = json.JSONEncoder(separators=(",", ":"), allow_nan=False).encode
-
-
-# --- spaces ---------------------------------------------------------------------------------
-
-
-def space_to_json(space: spaces.Space) -> dict[str, Any]:
-    """``space`` in gymnasium's terms, as a JSON object (see the module docstring).
-
-    Raises:
-        TypeError: the space cannot travel (see :func:`rlenv.protocol.spaces.space_to_spec`).
-    """
-    return _spec_to_json(space_to_spec(space))
-
-
-def _spec_to_json(spec: Mapping[str, Any]) -> dict[str, Any]:
-    kind = spec["type"]
-    if kind == "Box":
-        low, high = np.asarray(spec["low"]), np.asarray(spec["high"])
-        return {"type": kind, "shape": list(low.shape), "low": _bound(low),
-                "high": _bound(high), "dtype": np.dtype(spec["dtype"]).name}
-    if kind == "Tuple":
-        return {"type": kind, "spaces": [_spec_to_json(s) for s in spec["spaces"]]}
-    if kind == "Dict":
-        return {"type": kind, "spaces": {k: _spec_to_json(s) for k, s in spec["spaces"].items()}}
-    described: dict[str, Any] = {"type": kind}
-    for key, value in spec.items():
-        if key == "dtype":
-            described[key] = np.dtype(value).name
-        elif key != "type":
-            described[key] = value.tolist() if isinstance(value, np.ndarray) else value
-    return described
-
-
-def _bound(array: np.ndarray) -> Any:
-    """One number when every element shares it, else a list in the array's shape."""
-    flat = array.reshape(-1)
-    if flat.size and (flat == flat[0]).all():
-        return _number(flat[0].item())
-    return to_json(array.tolist())
-
-
-def _number(value: Any) -> Any:
-    if isinstance(value, float) and not math.isfinite(value):
-        return _NON_FINITE.get(value, "NaN")
-    return value
-
-
-def space_from_json(described: Any) -> spaces.Space:
-    """The gymnasium space :func:`space_to_json` described.
-
-    Raises:
-        ValueError: not a description of a supported space.
-    """
-    try:
-        return space_from_spec(_json_to_spec(described))
-    except (KeyError, TypeError, AttributeError) as error:
-        raise ValueError(f"not a space: {error!r}") from None
-
-
-def _json_to_spec(described: Any) -> dict[str, Any]:
-    if not isinstance(described, Mapping):
-        raise ValueError(f"a space is an object, got {described!r:.80}")
-    kind = described.get("type")
-    if kind == "Tuple":
-        return {"type": kind, "spaces": [_json_to_spec(s) for s in described["spaces"]]}
-    if kind == "Dict":
-        return {"type": kind,
-                "spaces": {k: _json_to_spec(s) for k, s in described["spaces"].items()}}
-    spec: dict[str, Any] = {"type": kind}
-    dtype = _dtype(described["dtype"]) if "dtype" in described else None
-    if dtype is not None:
-        spec["dtype"] = dtype.str
-    if kind == "Box":
-        shape = tuple(int(n) for n in described["shape"])
-        for key in ("low", "high"):
-            spec[key] = np.broadcast_to(_array(described[key], dtype), shape).copy()
-        return spec
-    for key, value in described.items():
-        if key not in ("type", "dtype"):
-            spec[key] = np.asarray(value, np.int64) if isinstance(value, list) and \
-                kind == "MultiDiscrete" else value
-    return spec
-
-
-def _dtype(name: Any) -> np.dtype:
-    dtype = np.dtype(str(name))
-    if dtype.kind not in "biuf":
-        raise ValueError(f"dtype {name!r:.40} is not numeric")
-    return dtype
-
-
-def _array(value: Any, dtype: np.dtype | None) -> np.ndarray:
-    def number(item: Any) -> Any:
-        if isinstance(item, list):
-            return [number(i) for i in item]
-        return _FROM_TEXT[item] if isinstance(item, str) else item
-    return np.asarray(number(value), dtype)
 
 
 # --- JSON Schema ----------------------------------------------------------------------------
@@ -308,7 +207,7 @@ def to_json(value: Any) -> Any:
     if kind is str or kind is int or kind is bool or value is None:
         return value
     if kind is float:
-        return value if math.isfinite(value) else _number(value)
+        return value if math.isfinite(value) else json_number(value)
     if isinstance(value, np.ndarray):
         if _image_shape(value.dtype, value.shape):
             return _png_text(value)

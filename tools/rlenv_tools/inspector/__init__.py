@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
 
 from rlenv_client.client import Client
+from rlenv_client.launcher import end_process
 from rlenv_tools.inspector.control import Demonstrator
 from rlenv_tools.inspector.timelines import Timelines
 from rlenv_tools.inspector.watch import InspectorError, Watcher
@@ -125,11 +126,7 @@ class Inspector:
                 self._process.stdin.close()
             except OSError:  # it was gone: the pipe had unflushed lines
                 pass
-        try:
-            self._process.wait(5.0)
-        except subprocess.TimeoutExpired:
-            self._process.kill()
-            self._process.wait()
+        end_process(self._process, 5.0, first=None)
 
     def __enter__(self) -> Inspector:
         return self
@@ -197,8 +194,7 @@ def _read_url(stdout: IO[str], timeout: float, process: subprocess.Popen[str]) -
     reader.join(timeout)
     if said and said[-1].startswith(_READY):
         return said[-1][len(_READY):].strip()
-    process.kill()
-    process.wait()
+    end_process(process, 0.0, first=None)
     raise RuntimeError("rlenv inspect did not start: " + "".join(said).strip())
 
 

@@ -30,8 +30,8 @@ from rlenv_client.addresses import parse_address
 from rlenv_client.client import Client
 from rlenv_client.inspection import (
     AGENT_SETTINGS_SINCE,
-    EPISODES_SINCE,
     PAGED_EPISODES_SINCE,
+    episodes_refusal,
     fetch_episodes,
 )
 from rlenv_client.replay import EpisodeFile
@@ -192,9 +192,9 @@ class Watcher:
                 (422), or one that cannot be reached (503).
         """
         hello = self._client(server).hello
-        if hello.protocol < EPISODES_SINCE:
-            raise InspectorError(422, "server {} speaks protocol {}.{}; recent episodes need "
-                                 "2.5".format(server, *hello.protocol))
+        refusal = episodes_refusal(hello, f"server {server}")
+        if refusal is not None:
+            raise InspectorError(422, refusal)
         cache = self._watched(server).recent.setdefault(instance, {})
         return fetch_episodes(lambda part: self._ask(server, instance, {"episodes": part}),
                               hello, cache=cache)

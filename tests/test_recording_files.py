@@ -27,7 +27,7 @@ CHECKOUT = Path(__file__).resolve().parent.parent
 PLANTED = """\
 from pathlib import Path
 Path(__file__).with_name("ran").write_text("planted code ran")
-from examples.cartpole import CartPoleEnvironment as Planted
+from rlenv.examples.cartpole import CartPoleEnvironment as Planted
 NotAnEnvironment = dict
 """
 

@@ -29,6 +29,7 @@ from ray.tune.registry import ENV_CREATOR, _global_registry, register_env  # noq
 from examples.cartpole import TARGET  # noqa: E402
 from examples.tag import TARGET as TAG_TARGET  # noqa: E402
 from rlenv_client import ConnectionLost, RemoteVectorEnv  # noqa: E402
+from rlenv_client.registration import ENVIRONMENTS  # noqa: E402
 from rlenv_client.rllib import RLlibEnvCreator, config_for, register  # noqa: E402
 from rlenv_client.rllib_agents import RemoteMultiAgentEnv, multi_agent_config_for  # noqa: E402
 
@@ -123,7 +124,8 @@ def test_creator_builds_from_what_rllib_passes(no_leftovers: str) -> None:
     name = register("rlenv/CartPole-v0")
     assert name == "rllib/rlenv/CartPole-v0"
     creator = _global_registry.get(ENV_CREATOR, name)  # as EnvRunners get it: unpickled
-    assert isinstance(creator, RLlibEnvCreator) and creator.target == TARGET
+    assert isinstance(creator, RLlibEnvCreator)
+    assert creator.target == ENVIRONMENTS["rlenv/CartPole-v0"].target
     context = EnvContext({"instances_per_server": 2}, worker_index=1, num_workers=1)
     config = context | {"num_envs": 4}  # what SingleAgentEnvRunner.make_env passes
     assert type(config) is dict and not hasattr(config, "worker_index")

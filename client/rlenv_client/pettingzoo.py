@@ -50,28 +50,14 @@ class RemoteParallelEnv(ParallelEnv):
     ) -> None:
         self.session = Session(target, address=address, in_process=in_process, timeout=timeout,
                                server_args=server_args, token=token)
-        hello = self.session.client.hello
-        joint_actions, joint_observations = hello.action_space, hello.observation_space
-        if len(hello.agents) > 1 and not (isinstance(joint_actions, spaces.Dict)
-                                          and isinstance(joint_observations, spaces.Dict)):
-            self.session.close()
-            raise ValueError(f"{hello.environment} has {len(hello.agents)} agents "
-                             "but its spaces are not keyed by agent")
         try:
-            self._view = TrainerView(hello)
+            self._view = TrainerView(self.session.client.hello)
         except ValueError:
             self.session.close()
             raise
         self.possible_agents = list(self._view.agents)
         self.agents: list[str] = []
-        if self._view.joint:
-            self.action_spaces = dict(self._view.action_space.spaces)  # type: ignore[attr-defined]
-            self.observation_spaces = dict(
-                self._view.observation_space.spaces)  # type: ignore[attr-defined]
-        else:
-            name = self.possible_agents[0]
-            self.action_spaces = {name: joint_actions}
-            self.observation_spaces = {name: joint_observations}
+        self.action_spaces, self.observation_spaces = self._view.agent_spaces()
         self.repeat_action = repeat_action
         self.max_cycles = max_cycles
         self.render_mode = render_mode

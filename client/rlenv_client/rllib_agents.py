@@ -38,11 +38,11 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any, Literal
 
-from gymnasium import spaces
 from ray.rllib.env.multi_agent_env import MultiAgentEnv
 
 from rlenv_client.agent_vector import agent_classes
 from rlenv_client.session import Session
+from rlenv_client.trainer_view import TrainerView
 
 if TYPE_CHECKING:
     from ray.rllib.algorithms.algorithm_config import AlgorithmConfig
@@ -86,24 +86,16 @@ class RemoteMultiAgentEnv(MultiAgentEnv):
         self.session = Session(target, address=address, in_process=in_process, timeout=timeout,
                                server_args=[*server_args, *policies])
         hello = self.session.client.hello
-        joint_actions, joint_observations = hello.action_space, hello.observation_space
-        if len(hello.agents) > 1 and not (isinstance(joint_actions, spaces.Dict)
-                                          and isinstance(joint_observations, spaces.Dict)):
+        try:
+            view = TrainerView(hello)
+        except ValueError:
             self.session.close()
-            raise ValueError(f"{hello.environment} has {len(hello.agents)} agents but its "
-                             "spaces are not keyed by agent")
-        self._several = len(hello.agents) > 1
+            raise
+        self._several = view.joint
         self.driven = tuple(hello.driven)
-        self.possible_agents = [name for name in hello.agents if name not in self.driven]
+        self.possible_agents = list(view.agents)
         self.agents: list[str] = []
-        if self._several and isinstance(joint_actions, spaces.Dict) and \
-                isinstance(joint_observations, spaces.Dict):  # (Dicts when several: see above)
-            self.observation_spaces = {name: joint_observations[name]
-                                       for name in self.possible_agents}
-            self.action_spaces = {name: joint_actions[name] for name in self.possible_agents}
-        else:
-            self.observation_spaces = {self.possible_agents[0]: joint_observations}
-            self.action_spaces = {self.possible_agents[0]: joint_actions}
+        self.action_spaces, self.observation_spaces = view.agent_spaces()
         self.repeat_action = repeat_action
         self.max_episode_steps = max_episode_steps
         self._steps = 0

@@ -47,13 +47,18 @@ class TrainerView:
         observation_space: the trainer's joint observation space.
 
     Raises:
-        ValueError: the server drives every agent: nothing is left to act for.
+        ValueError: the server drives every agent: nothing is left to act for; or it has several
+            agents and its spaces are not keyed by agent.
     """
 
     def __init__(self, hello: Hello) -> None:
         self.driven = hello.driven
         self.joint = len(hello.agents) > 1
         self.agents = tuple(name for name in hello.agents if name not in hello.driven)
+        if self.joint and not (isinstance(hello.action_space, spaces.Dict)
+                               and isinstance(hello.observation_space, spaces.Dict)):
+            raise ValueError(f"{hello.environment} has {len(hello.agents)} agents but its "
+                             "spaces are not keyed by agent")
         if not self.agents:
             raise ValueError(f"the server drives every agent of {hello.environment} "
                              f"({', '.join(hello.driven)}; rlenv serve --policy): there is "
@@ -71,6 +76,18 @@ class TrainerView:
                                              for name in self.agents})
             self.observation_space = spaces.Dict({name: self.observation_space[name]
                                                   for name in self.agents})
+
+    def agent_spaces(self) -> tuple[dict[str, spaces.Space], dict[str, spaces.Space]]:
+        """Each of the trainer's agents' action and observation spaces, by agent name.
+
+        PettingZoo's ``action_spaces`` / ``observation_spaces`` and RLlib's per-agent maps.
+        """
+        if not self.joint:
+            name = self.agents[0]
+            return {name: self.action_space}, {name: self.observation_space}
+        actions, observations = self.action_space, self.observation_space
+        assert isinstance(actions, spaces.Dict) and isinstance(observations, spaces.Dict)
+        return dict(actions.spaces), dict(observations.spaces)
 
     def action(self, action: Any) -> Any:
         """``action`` as the server takes it; refused if it acts for a driven agent.

@@ -44,7 +44,8 @@ from rlenv_client.rows import check_shape, row, set_row
 from rlenv_client.vector import RemoteVectorEnv
 from rlenv_client.vector_servers import default_layout
 
-__all__ = ["AgentVectorEnv", "Agents", "OtherPolicy", "agent_classes", "learner_names"]
+__all__ = ["AgentVectorEnv", "Agents", "OtherPolicy", "agent_classes", "learner_names",
+           "policy_arguments"]
 
 Agents = str | type[RLAgent] | Sequence[str | type[RLAgent]]
 """Which agents learn: names, an RLAgent class (its every agent), or a list of both."""
@@ -65,6 +66,15 @@ def agent_classes(target: str) -> dict[str, type[RLAgent]]:
     with LocalClient(target) as probe:
         assert probe.host is not None
         return {agent.name: type(agent) for agent in probe.host.instances[0].agents}
+
+
+def policy_arguments(policies: Mapping[str, str]) -> list[str]:
+    """``rlenv serve``'s ``--policy NAME=POLICY`` arguments, one pair per driven agent.
+
+    ``POLICY`` is an ONNX file or ``"heuristic"``.
+    """
+    return [argument for name, policy in policies.items()
+            for argument in ("--policy", f"{name}={policy}")]
 
 
 def learner_names(agents: Agents, names: Sequence[str],
@@ -173,8 +183,7 @@ class AgentVectorEnv(VectorEnv):
                     f"start no server here: give others={{{name!r}: callable}}, or serve it "
                     f"with rlenv serve --policy {name}={policy}")
             if vector is None:
-                server_args = [argument for name, policy in self.driven_by_server.items()
-                               for argument in ("--policy", f"{name}={policy}")]
+                server_args = policy_arguments(self.driven_by_server)
                 if instances_per_server is None and not in_process:
                     instances_per_server = default_layout(instances or 1,
                                                           trainer_cores=trainer_cores)[0]

@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 from ray.rllib.env.multi_agent_env import MultiAgentEnv
 
-from rlenv_client.agent_vector import agent_classes
+from rlenv_client.agent_vector import agent_classes, policy_arguments
 from rlenv_client.session import Session
 from rlenv_client.trainer_view import TrainerView
 
@@ -78,8 +78,7 @@ class RemoteMultiAgentEnv(MultiAgentEnv):
         server_args: Sequence[str] = (),
     ) -> None:
         super().__init__()
-        policies = [argument for name, policy in (others or {}).items()
-                    for argument in ("--policy", f"{name}={policy}")]
+        policies = policy_arguments(others or {})
         if policies and (address is not None or in_process):
             raise ValueError("others are driven by the server this environment starts: not "
                              "with an address or in_process")

@@ -25,6 +25,7 @@ build of torch first).
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Mapping, Sequence
 from typing import Any, cast
@@ -46,6 +47,8 @@ from rlenv_client.vector import RemoteVectorEnv
 from rlenv_client.vector_servers import default_layout
 
 __all__ = ["CurriculumCallback", "SB3VecEnv", "SelfPlayCallback"]
+
+logger = logging.getLogger(__name__)
 
 
 class SB3VecEnv(VecEnv):
@@ -263,7 +266,7 @@ class SelfPlayCallback(BaseCallback):
     Args:
         frozen: the copy that ``others`` gives the opponents.
         every: steps between refreshes (at least 1).
-        verbose: SB3's verbosity (1: say each refresh).
+        verbose: SB3's verbosity (1: log each refresh, at INFO, on ``rlenv_client.sb3``).
 
     Raises:
         ValueError: ``every`` is smaller than 1.
@@ -289,7 +292,7 @@ class SelfPlayCallback(BaseCallback):
         self.frozen.refresh(self.model.policy, self.num_timesteps)
         self._last = self.num_timesteps
         if self.verbose:
-            print(f"self-play: the opponents' copy refreshed at step {self.num_timesteps}")
+            logger.info("self-play: the opponents' copy refreshed at step %d", self.num_timesteps)
 
 
 def _split_infos(infos: dict[str, Any], num_envs: int) -> list[dict[str, Any]]:

@@ -32,7 +32,7 @@ import traceback
 from collections.abc import Callable, Mapping
 from enum import Enum
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from gymnasium import spaces
 from gymnasium.utils import seeding
@@ -48,6 +48,7 @@ from rlenv.serving.actions import ActionCheck
 from rlenv.serving.claims import Claims, Requester
 from rlenv.serving.observing import Observer, check_text_keys
 from rlenv.serving.onnx_policy import PolicyError
+from rlenv.serving.policy_driver import HEURISTIC, DrivenAgents
 from rlenv.serving.recent import KEEP_EPISODES, KEEP_EVENTS, RecentEpisodes
 from rlenv.serving.settings import Settings
 from rlenv.serving.snapshots import EpisodeLog
@@ -55,9 +56,6 @@ from rlenv.serving.stats import EpisodeStats
 from rlenv.serving.target_hints import explain_target_error
 from rlenv.targets import import_module
 from rlenv.tree import SceneTree
-
-if TYPE_CHECKING:
-    from rlenv.serving.policy_driver import DrivenAgents
 
 __all__ = ["Answer", "Episode", "Instance", "Plan", "failure", "load_environment"]
 
@@ -435,8 +433,6 @@ class Instance:
     def _heuristics(self) -> DrivenAgents:
         """Every agent that has a heuristic, driven by it (for a request's ``heuristic``)."""
         if self._heuristic_agents is None:
-            from rlenv.serving.policy_driver import HEURISTIC, DrivenAgents
-
             self._heuristic_agents = DrivenAgents(
                 {a.name: HEURISTIC for a in self.agents if a.has_heuristic()}, self.agents)
         return self._heuristic_agents

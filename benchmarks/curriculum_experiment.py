@@ -74,7 +74,7 @@ from rlenv.examples import maze
 from rlenv.examples.plinko import BOUNCINESS, follow
 from rlenv_client.curriculum import CurriculumVectorEnv, EnvironmentParameters, LevelSampler
 from rlenv_client.sb3 import CurriculumCallback, SB3VecEnv
-from rlenv_tools.http.png import encode_png
+from rlenv_tools.http._png import encode_png
 
 METHODS = ("dr", "plr", "robust_plr", "accel", "sfl")
 ENVS = {"plinko": "rlenv/Plinko-v0", "maze": "rlenv/Maze-v0"}

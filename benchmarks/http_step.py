@@ -41,7 +41,7 @@ import numpy as np
 
 from rlenv_client import Client, ServerProcess
 from rlenv_client.launcher import end_process
-from rlenv_tools.bench import ENDLESS
+from rlenv_tools._bench import ENDLESS
 
 CARTPOLE = "examples.cartpole:CartPoleEnvironment"
 STEP_BODY = json.dumps({"action": [0.0], "repeat_action": 4}).encode()

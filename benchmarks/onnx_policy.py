@@ -23,7 +23,7 @@ import numpy as np
 import torch
 from stable_baselines3 import PPO
 
-from rlenv.serving.host import Host
+from rlenv.serving._host import Host
 from rlenv.serving.onnx_policy import OnnxPolicy
 from rlenv_client import Client, ServerProcess
 from rlenv_tools.policies import export_onnx

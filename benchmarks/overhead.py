@@ -3,7 +3,7 @@
 Prints, in one run, each figure beside its floor (rounds taken in turns, medians and minimums):
 
 - **framework per tick and per request**, in this process: a step through the host's one door
-  (:meth:`rlenv.serving.host.Host.answer`: checks, plan, tree, timer, answer) against the
+  (:meth:`rlenv.serving._host.Host.answer`: checks, plan, tree, timer, answer) against the
   floor: what a hand-written server does for the same step (decode the action from its bytes,
   the agent's ``set_action``, per tick ``_physics_process``, ``space.step`` and
   ``_after_physics_tick``, then ``get_data`` and the observation's bytes), at repeat_action 1,
@@ -28,7 +28,7 @@ import numpy as np
 from rlenv.examples.cartpole import CartPoleEnvironment
 from rlenv.protocol import Connection, Request, Role
 from rlenv.scene2d.physics import PhysicsWorld
-from rlenv.serving.host import Host
+from rlenv.serving._host import Host
 from rlenv_client.base import BaseClient
 
 STEPS = 20_000

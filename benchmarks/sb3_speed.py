@@ -37,7 +37,7 @@ import numpy as np
 
 import rlenv_client  # noqa: F401  (registers rlenv/CartPole-v0)
 from rlenv.examples.cartpole import CartPoleAgent
-from rlenv_tools.bench import HandWrittenServer
+from rlenv_tools._bench import HandWrittenServer
 
 ON_SOCKET = "rlenv/CartPole-v0 on the socket"
 ENVIRONMENTS = ("rlenv/CartPole-v0", "CartPole-v1", "handwritten/CartPole-v0",

@@ -37,7 +37,7 @@ from procfs import cpu_seconds
 
 import rlenv_client  # noqa: F401  (registers rlenv/CartPole-v0)
 from rlenv_client.vector_servers import default_layout
-from rlenv_tools.bench import HandWrittenVector, random_steps, random_steps_of
+from rlenv_tools._bench import HandWrittenVector, random_steps, random_steps_of
 
 
 @dataclass

@@ -25,6 +25,7 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 from rlenv._deprecation import forward
+from rlenv._moves import MOVES
 
 __version__ = "0.1.0"
 """The package's version: its one place (pyproject.toml reads it; ``rlenv_client.__version__`` is
@@ -101,6 +102,5 @@ if TYPE_CHECKING:
     from rlenv.views import view as view
     from rlenv.world import RLEnvWorld as RLEnvWorld
 
-# Moved to the tools (rlenv_tools); the old names work, with a warning, for one release.
-forward({"rlenv.cli": "rlenv_tools.cli", "rlenv.http": "rlenv_tools.http",
-         "rlenv.scene2d.views": "rlenv.views"})
+# Moved modules keep their old names, with a warning, for one release.
+forward(MOVES)

@@ -27,7 +27,19 @@ class _Forwarder(importlib.abc.MetaPathFinder, importlib.abc.Loader):
         self.moves: dict[str, str] = {}
 
     def new_name(self, name: str) -> str | None:
-        """The new name of module ``name``, or None when it did not move."""
+        """The new name of module ``name``, or None when it did not move.
+
+        A module moved twice resolves to its last place in one step.
+        """
+        moved = None
+        for _ in range(len(self.moves)):  # no chain is longer than the table
+            step = self._moved_once(moved or name)
+            if step is None:
+                break
+            moved = step
+        return moved
+
+    def _moved_once(self, name: str) -> str | None:
         for old, new in self.moves.items():
             if name == old or name.startswith(old + "."):
                 return new + name[len(old):]

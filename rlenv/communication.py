@@ -38,7 +38,7 @@ logger = logging.getLogger(__name__)
 
 
 class Served(Protocol):
-    """What serves an environment's requests (:class:`rlenv.serving.instance.Instance`)."""
+    """What serves an environment's requests (:class:`rlenv.serving._instance.Instance`)."""
 
     def dispatch(self, request: Mapping[str, Any]) -> None:
         """Apply every part of a checked request in order, and answer it."""
@@ -89,7 +89,7 @@ class Communication(Node):
 
         Raises:
             OSError: the address cannot be bound (the port is in use, say).
-            rlenv.serving.endpoint.InsecureBindError: a non-loopback ``host`` without a token.
+            rlenv.serving._endpoint.InsecureBindError: a non-loopback ``host`` without a token.
         """
         if self._self_hosting is None:
             logger.info("%s asked to listen on %s:%s; it is hosted by a server whose address "

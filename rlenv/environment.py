@@ -163,7 +163,7 @@ class RLEnvironment(RLNode):
         ``repeat_action``, ``real_time``, ``record`` and its :attr:`configurable` attributes),
         of the agents (:attr:`AGENT_KEY`: settings of every agent, or keyed by an agent's or
         a class's name those of that agent or class, see
-        :func:`~rlenv.serving.settings.agent_settings`) and of the world (:attr:`WORLD_KEY`).
+        :func:`~rlenv.serving._settings.agent_settings`) and of the world (:attr:`WORLD_KEY`).
         Settings last across episodes. Override to react to a configuration, and call
         ``super()._configure(configuration_request)``.
         """

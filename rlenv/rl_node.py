@@ -14,7 +14,7 @@ import numpy as np
 
 from rlenv.node import NOTIFICATION_EXIT_TREE, Node
 from rlenv.protocol.errors import ErrorCode, RequestError
-from rlenv.serving.properties import conform
+from rlenv.serving._properties import conform
 
 if TYPE_CHECKING:
     from rlenv.environment import RLEnvironment

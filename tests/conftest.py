@@ -8,7 +8,7 @@ from collections.abc import Callable, Iterator
 import pytest
 
 from examples.cartpole import TARGET
-from rlenv.transport.procfs import alive as alive  # the tests import it from here
+from rlenv.transport._procfs import alive as alive  # the tests import it from here
 from rlenv.tree import SceneTree
 from rlenv_client import Client, ServerProcess
 

@@ -84,7 +84,7 @@ def _sb3(addresses: list[str]) -> dict[str, Any]:
 
 def _watcher(addresses: list[str]) -> dict[str, Any]:
     from rlenv_client import Client
-    from rlenv_tools.inspector.watch import Watcher
+    from rlenv_tools.inspector._watch import Watcher
 
     host, port = addresses[0].rsplit(":", 1)
     controller = Client(host, int(port), timeout=30)

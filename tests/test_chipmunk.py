@@ -9,7 +9,7 @@ import sys
 
 import pymunk
 
-from rlenv.scene2d import chipmunk
+from rlenv.scene2d import _chipmunk as chipmunk
 
 _EPISODES = """
 import hashlib, json, logging, sys
@@ -17,7 +17,7 @@ logging.basicConfig(level=logging.WARNING, stream=sys.stderr)
 import pymunk
 if sys.argv[1] != "installed":
     pymunk.version = sys.argv[1]  # as if another pymunk were installed
-from rlenv.scene2d import chipmunk
+from rlenv.scene2d import _chipmunk as chipmunk
 from rlenv_client import LocalClient
 digests = {}
 for target in ("examples.plinko:PlinkoEnvironment", "examples.pair:PairEnvironment",

@@ -14,7 +14,7 @@ from conftest import Serve
 
 from rlenv.protocol import pack
 from rlenv_tools.compliance import check_server
-from rlenv_tools.compliance.harness import ReplyTap
+from rlenv_tools.compliance._harness import ReplyTap
 
 TESTS = Path(__file__).parent
 TOKEN = "s3cret"

@@ -15,7 +15,7 @@ from gymnasium.vector import AutoresetMode
 from examples.cartpole import CartPoleEnvironment
 from rlenv.protocol import Request
 from rlenv.protocol.errors import RemoteError
-from rlenv.serving.lean import LeanSteps
+from rlenv.serving._lean import LeanSteps
 from rlenv_client import LocalClient, RemoteVectorEnv
 from rlenv_client.curriculum import CurriculumVectorEnv, LevelSampler, learnability
 

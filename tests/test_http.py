@@ -22,7 +22,7 @@ from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
 from rlenv_client import LocalClient
-from rlenv_tools.bench import ENDLESS
+from rlenv_tools._bench import ENDLESS
 from rlenv_tools.http.json_spaces import space_from_json
 
 CARTPOLE = "examples.cartpole:CartPoleEnvironment"

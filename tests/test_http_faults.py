@@ -24,7 +24,7 @@ import pytest
 from conftest import Serve, wait_until
 from http_gateway import Gateway, assert_problem
 
-from rlenv.serving.penalties import FREE_FAILURES
+from rlenv.serving._penalties import FREE_FAILURES
 
 CARTPOLE = "examples.cartpole:CartPoleEnvironment"
 

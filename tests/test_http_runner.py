@@ -1,4 +1,4 @@
-"""The HTTP gateway's runner of a session's calls (``rlenv_tools.http.runners``)."""
+"""The HTTP gateway's runner of a session's calls (``rlenv_tools.http._runners``)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 
 pytest.importorskip("starlette")
 
-from rlenv_tools.http.runners import EnvironmentTimeout, Runner  # noqa: E402
+from rlenv_tools.http._runners import EnvironmentTimeout, Runner  # noqa: E402
 
 
 def test_a_call_given_no_time_is_late_at_once_not_given_the_default() -> None:

@@ -13,6 +13,7 @@ from gymnasium import spaces
 from http_gateway import decode_png
 from spaces_catalog import TESTING_SPACES
 
+from rlenv_tools.http._png import encode_png
 from rlenv_tools.http.json_spaces import (
     action_decoder,
     dumps,
@@ -23,7 +24,6 @@ from rlenv_tools.http.json_spaces import (
     to_json,
     value_encoder,
 )
-from rlenv_tools.http.png import encode_png
 
 
 @pytest.mark.parametrize("space", TESTING_SPACES, ids=str)

@@ -28,7 +28,7 @@ from rlenv_tools.inspector import (
     Watcher,
     inspect_recordings,
 )
-from rlenv_tools.inspector.timelines import episode_id
+from rlenv_tools.inspector._timelines import episode_id
 from rlenv_tools.timeline import Timeline
 
 BIAS = 0.03  # a controller pushing a little too far right: the pole falls at step 20

@@ -37,7 +37,7 @@ def _mlp(inputs: int, outputs: int, seed: int = 0) -> torch.nn.Module:
 
 
 def _agent_spaces(target: str) -> tuple[gym.spaces.Space, gym.spaces.Space]:
-    from rlenv.serving.host import Host
+    from rlenv.serving._host import Host
     host = Host(target)
     agent = host.instances[0].agents[-1]
     spaces = agent.observation_space, agent.action_space

@@ -17,7 +17,7 @@ import rlenv
 import rlenv_client
 from rlenv import targets
 from rlenv.protocol import PROTOCOL_VERSION
-from rlenv.serving.instance import load_environment
+from rlenv.serving._instance import load_environment
 from rlenv_client.registration import ENVIRONMENTS
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -1,4 +1,4 @@
-"""Tests of request parts (``rlenv.serving.parts``), served by a Host in this process.
+"""Tests of request parts (``rlenv.serving._parts``), served by a Host in this process.
 
 The protocol only checks a request's envelope (an integer id, a string token: see
 ``test_protocol.py``); what its parts may hold, and in which company, is the server's part
@@ -20,8 +20,8 @@ from examples.cartpole import TARGET, CartPoleEnvironment
 from examples.plinko import TARGET as PLINKO
 from rlenv.protocol import BatchResponse, ErrorReply, Reply, Request, Response, StepsResponse, pack
 from rlenv.protocol.errors import ErrorCode
-from rlenv.serving.host import Host
-from rlenv.serving.parts import PARTS, takes_control
+from rlenv.serving._host import Host
+from rlenv.serving._parts import PARTS, takes_control
 from rlenv_client import LocalClient, RemoteError
 
 # CartPole: action Box(-1, 1, (1,), float32), observation Box((5,), float32).

@@ -13,7 +13,7 @@ from conftest import Serve
 from examples.cartpole import TARGET
 from rlenv.protocol.errors import ErrorCode, RemoteError
 from rlenv_client import Client
-from rlenv_tools.bench import ENDLESS
+from rlenv_tools._bench import ENDLESS
 
 PER_CLIENT = ["--per-client"]
 

@@ -1,4 +1,4 @@
-"""rlenv.transport.procfs, the one reader of /proc, against real processes."""
+"""rlenv.transport._procfs, the one reader of /proc, against real processes."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import subprocess
 import sys
 import time
 
-from rlenv.transport import procfs
+from rlenv.transport import _procfs as procfs
 
 
 def test_a_running_process_is_alive_and_its_figures_are_read() -> None:

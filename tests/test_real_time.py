@@ -128,7 +128,7 @@ def test_every_answer_reports_the_ticks_since_the_previous_one(
 def test_an_answer_to_an_observer_leaves_the_ticks_to_the_controller(clock: ManualClock) -> None:
     """What the host runs for a client that does not control the environment reports no
     reward nor ticks: they stay for the controller's next answer, none lost, none twice."""
-    from rlenv.serving.host import Host
+    from rlenv.serving._host import Host
 
     host = Host(TARGET, clock=clock, real_time=True)
     host.answer(Request(1, {"reset": {"seed": 0}}))
@@ -218,7 +218,7 @@ def test_an_inspector_switching_a_lockstep_server_to_real_time_starts_its_clock(
 
 
 def test_a_steps_request_starting_real_time_starts_the_clock(clock: ManualClock) -> None:
-    from rlenv.serving.host import Host
+    from rlenv.serving._host import Host
 
     host = Host(TARGET, 2, clock=clock)
     real_time = {"config": {"environment": {"real_time": True}}, "reset": {"seed": 3}}
@@ -258,7 +258,7 @@ def test_several_agents_follow_the_clock_an_observer_switched_on(clock: ManualCl
     """The same with two agents (examples/pair): an inspector's switch, whoever sends it, is the
     host's to follow; each agent's outcome counts the ticks."""
     from examples.pair import TARGET as PAIR
-    from rlenv.serving.host import Host
+    from rlenv.serving._host import Host
 
     host = Host(PAIR, clock=clock)
     host.answer(Request(1, {"reset": {"seed": 2}}))

@@ -15,12 +15,12 @@ from examples.cartpole import TARGET, CartPoleEnvironment
 from examples.pair import NAMES, chase
 from examples.pair import TARGET as PAIR
 from rlenv.protocol import ErrorReply, Request
-from rlenv.serving import snapshots
-from rlenv.serving.host import Host, target_of
+from rlenv.serving import _snapshots as snapshots
+from rlenv.serving._host import Host, target_of
 from rlenv.testing import ManualClock
 from rlenv_client import Client, ErrorCode, LocalClient, RemoteError
 from rlenv_client.replay import EpisodeFile, digest, replay
-from rlenv_tools.inspector.watch import InspectorError, Watcher
+from rlenv_tools.inspector._watch import InspectorError, Watcher
 
 FAULTY = "examples.faulty:FaultyEnvironment"
 LEFT, RIGHT = np.array([-1.0], np.float32), np.array([1.0], np.float32)
@@ -309,7 +309,7 @@ def test_nothing_is_kept_until_a_client_asks() -> None:
 
 def test_what_a_server_keeps_is_bounded_in_events_shared_by_its_instances(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    from rlenv.serving import host as hosting
+    from rlenv.serving import _host as hosting
     monkeypatch.setattr(hosting, "KEEP_EVENTS", 10)  # 5 events for each of two instances
     host = Host(CartPoleEnvironment, count=2, keep_episodes=8)
     for steps in (2, 2, 2, 6, 2):
@@ -328,7 +328,7 @@ def test_what_a_server_keeps_is_bounded_in_events_shared_by_its_instances(
 def test_a_90000_step_episode_is_served_in_pages_no_answer_over_a_frame() -> None:
     """Its whole snapshot is refused as one answer, clearly; its pages rebuild it exactly."""
     from rlenv.protocol.codec import MAX_FRAME_OBJECTS, count_objects, pack
-    from rlenv.serving.recent import PAGE_EVENTS, WHOLE_EVENTS
+    from rlenv.serving._recent import PAGE_EVENTS, WHOLE_EVENTS
 
     host = Host(CartPoleEnvironment, keep_episodes=1)
     instance = host.instances[0]

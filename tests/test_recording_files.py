@@ -20,7 +20,7 @@ from rlenv_client.recordings import MAX_RECORDING_BYTES
 from rlenv_client.replay import EpisodeFile, digest
 from rlenv_client.trusted_targets import UntrustedTargetError
 from rlenv_tools.inspector import Timelines
-from rlenv_tools.inspector.watch import InspectorError
+from rlenv_tools.inspector._watch import InspectorError
 from rlenv_tools.timeline import Timeline
 
 CHECKOUT = Path(__file__).resolve().parent.parent

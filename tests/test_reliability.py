@@ -21,12 +21,12 @@ from conftest import Serve, wait_until
 from rlenv.protocol import ErrorReply, Hello, Response
 from rlenv.protocol.codec import pack
 from rlenv.protocol.errors import ErrorCode
-from rlenv.serving.endpoint import Endpoint, Limits
-from rlenv.serving.penalties import FREE_FAILURES, MAX_HELD, MAX_PENALTY
+from rlenv.serving._endpoint import Endpoint, Limits
+from rlenv.serving._penalties import FREE_FAILURES, MAX_HELD, MAX_PENALTY
 from rlenv.testing import ManualClock, frame, read_frame
 from rlenv_client import Client, ConnectionLost, RemoteEnv, RemoteError
 from rlenv_tools.compliance import check_server
-from rlenv_tools.compliance.harness import peak_rss_kib
+from rlenv_tools.compliance._harness import peak_rss_kib
 
 
 def test_compliance_suite_on_cartpole(serve: Serve, figures: dict[str, str]) -> None:
@@ -264,7 +264,7 @@ def test_wrong_tokens_slow_the_guesser_never_the_token_holder(
     def answered(sock: socket.socket) -> bool:
         return select.select([sock], [], [], 0)[0] != []
 
-    caplog.set_level(logging.WARNING, logger="rlenv.serving.penalties")
+    caplog.set_level(logging.WARNING, logger="rlenv.serving._penalties")
     try:
         for _ in range(FREE_FAILURES):  # a person mistyping: answered at once
             sock = send("guess")

@@ -599,7 +599,7 @@ def test_slots_of_an_unknown_kind_are_refused_on_the_socket(serve: Serve) -> Non
 
 _LANE_WITHOUT_DESCRIPTORS = textwrap.dedent("""
     import errno, os, resource
-    from rlenv.serving.host import Host
+    from rlenv.serving._host import Host
     from rlenv.transport.lanes import KEY_SIZE, open_lane
     hello = Host("examples.cartpole:CartPoleEnvironment").hello
     resource.setrlimit(resource.RLIMIT_NOFILE, (64, 64))

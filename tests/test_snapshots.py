@@ -11,7 +11,7 @@ from conftest import Serve
 
 from examples.cartpole import TARGET
 from examples.pair import NAMES, chase
-from rlenv.serving import snapshots
+from rlenv.serving import _snapshots as snapshots
 from rlenv_client import Client, ErrorCode, LocalClient, RemoteError
 
 CARTPOLE_ACTIONS = [np.array([0.4 * np.sin(t / 2.0)], np.float32) for t in range(60)]

@@ -20,11 +20,9 @@ SHARED = ("rlenv", "rlenv.protocol", "rlenv.transport")
 EXCEPTIONS = {
     # python -m rlenv is the rlenv command, which is the tools'.
     ("rlenv.__main__", "rlenv_tools.cli"),
-    # The helper that keeps the old names of moved modules working, with a warning.
-    ("rlenv_client", "rlenv._deprecation"),
     # LocalClient hosts an environment in the trainer's process: the runtime's host, imported
     # inside its functions only when one is made.
-    ("rlenv_client.local", "rlenv.serving.host"),
+    ("rlenv_client.local", "rlenv.serving._host"),
     ("rlenv_client.local", "rlenv.serving.policy_driver"),
     # agents= and others= name an environment's RLAgent classes, and "heuristic" their own policy.
     ("rlenv_client.agent_vector", "rlenv.agent"),
@@ -134,10 +132,10 @@ def test_each_layer_imports_only_the_layers_below_it() -> None:
 
 def test_the_layers_check_finds_an_upward_import_inside_a_function(tmp_path: Path) -> None:
     sources = {"rlenv.node": "def f():\n    from rlenv_tools import cli\n",
-               "rlenv.serving.host": "",
+               "rlenv.serving._host": "",
                "rlenv.protocol": "",
                "rlenv_client.base": "import rlenv.protocol\n"
-                                    "def g():\n    from rlenv.serving import host\n",
+                                    "def g():\n    from rlenv.serving import _host as host\n",
                "rlenv_tools": "",
                "rlenv_tools.cli": "import rlenv.node\nimport rlenv_client.base\n"}
     modules = {}
@@ -147,7 +145,7 @@ def test_the_layers_check_finds_an_upward_import_inside_a_function(tmp_path: Pat
     graph = {name: _imports(name, path, modules) for name, path in modules.items()}
     assert graph["rlenv.node"] == {"rlenv_tools.cli"}
     assert _crossings(graph) == {("rlenv.node", "rlenv_tools.cli"),
-                                 ("rlenv_client.base", "rlenv.serving.host")}
+                                 ("rlenv_client.base", "rlenv.serving._host")}
 
 
 def test_importing_the_client_loads_no_tool_no_http_framework_no_onnxruntime() -> None:
@@ -161,8 +159,9 @@ def test_importing_the_client_loads_no_tool_no_http_framework_no_onnxruntime() -
         "pymunk"}}
     assert "http.server" not in loaded  # the inspector's server
     runtime = {name for name in loaded if name.split(".")[0] == "rlenv"}
-    assert runtime - {"rlenv", "rlenv._deprecation", "rlenv.protocol", "rlenv.transport"} \
-        <= {name for name in runtime if name.startswith(("rlenv.protocol.", "rlenv.transport."))}
+    wire = {name for name in runtime if name.startswith(("rlenv.protocol.", "rlenv.transport."))}
+    assert runtime - {"rlenv", "rlenv._deprecation", "rlenv._moves", "rlenv.protocol",
+                      "rlenv.transport"} <= wire
     assert {"rlenv.protocol", "rlenv.transport"} <= runtime
 
 
@@ -182,3 +181,32 @@ def test_the_check_finds_a_circle_through_a_function_level_import(tmp_path: Path
     graph = {name: _imports(name, path, modules) for name, path in modules.items()}
     assert graph == {"a": {"b"}, "b": {"a"}, "c": set()}
     assert _cycles(graph) == [["a", "b"]]
+
+
+def _documented_modules() -> set[str]:
+    pages = (ROOT / "docs" / "reference").glob("*.md")
+    return {line.removeprefix("::: ").strip() for page in pages
+            for line in page.read_text().splitlines() if line.startswith("::: ")}
+
+
+def _public_modules() -> set[str]:
+    """Each module whose dotted name has no part with a leading underscore (packages' faces and
+    ``__main__`` aside: a package is public through its ``__init__``, ``-m`` through its main)."""
+    public = set()
+    for package, folder in PACKAGES.items():
+        for path in folder.rglob("*.py"):
+            parts = [package, *path.relative_to(folder).with_suffix("").parts]
+            if parts[-1] in ("__init__", "__main__"):
+                continue
+            if not any(part.startswith("_") for part in parts):
+                public.add(".".join(parts))
+    return public
+
+
+def test_the_public_modules_are_those_the_reference_documents() -> None:
+    documented = _documented_modules()
+    assert _public_modules() - documented == set()  # private ones take a leading underscore
+    packages = {"rlenv.protocol", "rlenv.transport", "rlenv.scene2d.physics",
+                "rlenv_tools.compliance"}
+    assert {name for name in documented if name.count(".")} - _public_modules() - packages \
+        == set()  # each page's modules exist

@@ -17,7 +17,7 @@ from examples.cartpole import controller
 from rlenv_client import Client
 from rlenv_client.replay import EpisodeFile, digest
 from rlenv_tools.inspector import Timelines
-from rlenv_tools.inspector.watch import InspectorError
+from rlenv_tools.inspector._watch import InspectorError
 from rlenv_tools.timeline import Timeline
 
 CHECKOUT = Path(__file__).resolve().parent.parent

@@ -12,7 +12,7 @@ pytest.importorskip("uvicorn")
 import uvicorn  # noqa: E402
 from http_gateway import Gateway  # noqa: E402
 
-from rlenv_tools.http import uvicorn_protocol  # noqa: E402
+from rlenv_tools.http import _uvicorn_protocol as uvicorn_protocol  # noqa: E402
 
 CARTPOLE = "examples.cartpole:CartPoleEnvironment"
 

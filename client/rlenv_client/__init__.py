@@ -13,7 +13,6 @@ the inspector, timelines, compliance, benchmarks, datasets, policies) unless ask
 """
 
 from rlenv import __version__ as __version__
-from rlenv._deprecation import forward
 from rlenv.protocol.errors import ConnectionLost as ConnectionLost
 from rlenv.protocol.errors import ErrorCode as ErrorCode
 from rlenv.protocol.errors import ProtocolVersionError as ProtocolVersionError
@@ -49,7 +48,3 @@ __all__ = [
 
 register_environments()
 
-# Moved to the tools (rlenv_tools); the old names work, with a warning, for one release.
-forward({f"rlenv_client.{name}": f"rlenv_tools.{name}" for name in (
-    "bench", "checks", "compliance", "datasets", "demonstrations", "forking", "inspector",
-    "observations", "onnx_actors", "origins", "policies", "timeline", "training_speed")})

@@ -40,7 +40,7 @@ from gymnasium.vector.utils import batch_space, create_empty_array
 
 from rlenv.agent import RLAgent
 from rlenv.serving.policy_driver import HEURISTIC
-from rlenv_client.rows import check_shape, row, set_row
+from rlenv_client._rows import check_shape, row, set_row
 from rlenv_client.vector import RemoteVectorEnv
 from rlenv_client.vector_servers import default_layout
 
@@ -59,7 +59,7 @@ def agent_classes(target: str) -> dict[str, type[RLAgent]]:
 
     Raises:
         ImportError, ValueError, TypeError: ``target`` does not load (see
-            :func:`rlenv.serving.instance.load_environment`).
+            :func:`rlenv.serving._instance.load_environment`).
     """
     from rlenv_client.local import LocalClient
 

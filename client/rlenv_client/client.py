@@ -49,7 +49,7 @@ from rlenv.protocol.errors import (
 from rlenv.protocol.shared_memory import STEP, STEPS, lane_unavailable
 from rlenv.transport.lanes import Lane, LaneClosed, accept_lane, listen_for_lane, wait_for
 from rlenv.transport.sockets import AnswerWaiter, configure_socket, is_loopback, readable_now
-from rlenv_client.addresses import format_address, parse_address
+from rlenv_client._addresses import format_address, parse_address
 from rlenv_client.base import AGENT_ONLY, BaseClient, StepResult
 
 __all__ = ["Client", "StepResult"]
@@ -410,7 +410,7 @@ class Client(BaseClient):
 
         All the client reads comes through here, in order, the hello included: a subclass may
         override it to watch the byte stream, calling this one for the bytes (the compliance
-        suite's :class:`~rlenv_tools.compliance.harness.TappedClient` does). It is on every
+        suite's :class:`~rlenv_tools.compliance._harness.TappedClient` does). It is on every
         step's path: keep an override cheap.
         """
         sock = self._sock

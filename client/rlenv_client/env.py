@@ -27,8 +27,8 @@ from typing import TYPE_CHECKING, Any
 import gymnasium
 import numpy as np
 
+from rlenv_client._display import Display, display_available
 from rlenv_client.base import BaseClient, StepResult
-from rlenv_client.display import Display, display_available
 from rlenv_client.launcher import ServerProcess
 from rlenv_client.session import LOST, Session
 from rlenv_client.time_limits import truncate_agents

@@ -74,7 +74,7 @@ class Inspection:
         Call it again to change the held action. The controller's steps then act for the agent
         with the held action instead of the controller's own, and the episode records it; the
         claim lasts until :meth:`release_claim`, until this client takes control, or until it
-        disconnects (protocol 2.6, the ``claim`` part; see :mod:`rlenv.serving.claims`).
+        disconnects (protocol 2.6, the ``claim`` part; see :mod:`rlenv.serving._claims`).
 
         Returns:
             The agents claimed now, by any client (as the controller's ``info["claimed"]``).
@@ -103,7 +103,7 @@ class Inspection:
         self._call(claim=None)
 
     def snapshot(self) -> dict[str, Any]:
-        """The environment's state as data (see :mod:`rlenv.serving.snapshots`).
+        """The environment's state as data (see :mod:`rlenv.serving._snapshots`).
 
         Restore it later with :meth:`restore`.
 
@@ -133,7 +133,7 @@ class Inspection:
         """The environment's last finished episodes, as recordings, oldest first.
 
         The server keeps each instance's last few once a client asks for them (this call does;
-        ``rlenv serve --keep-episodes N`` from the start; see :mod:`rlenv.serving.recent`) at
+        ``rlenv serve --keep-episodes N`` from the start; see :mod:`rlenv.serving._recent`) at
         no cost to the steps; any client may ask, an observer beside a trainer included
         (protocol 2.5, the ``episodes`` part; from a 2.6 server by index and in pages). Each
         snapshot restores the episode's start on any server of the environment and replays to
@@ -197,7 +197,7 @@ class Inspection:
     def stats(self, since: int = 0) -> dict[str, Any]:
         """The controller's episodes as the server counted them, numbered ``since`` and later.
 
-        See :mod:`rlenv.serving.stats` (totals, the episode under way).
+        See :mod:`rlenv.serving._stats` (totals, the episode under way).
         """
         return dict(self._call(inspect={"stats": {"since": since}}).info["stats"])
 

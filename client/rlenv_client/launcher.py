@@ -24,7 +24,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 from rlenv.protocol.errors import ConnectionLost, RlenvError
-from rlenv_client.addresses import format_address, parse_address
+from rlenv_client._addresses import format_address, parse_address
 
 __all__ = ["ServerProcess", "ServerStartError", "end_process", "with_server_story"]
 

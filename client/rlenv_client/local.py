@@ -1,7 +1,7 @@
 """LocalClient: the same client API, with the environment inside this process and no socket.
 
 The environment runs exactly as under ``rlenv serve``: requests enter the same
-:class:`~rlenv.serving.host.Host` by the same door (checks, order, repeat_action, episode
+:class:`~rlenv.serving._host.Host` by the same door (checks, order, repeat_action, episode
 state, values in packed form); only the transport differs. Use it to debug an environment with
 a debugger and breakpoints, and as the baseline that remote figures are compared with. It
 imports the server runtime (and pymunk) only when created. With ``instances=K`` it holds K
@@ -23,7 +23,7 @@ from rlenv_client.base import BaseClient
 
 if TYPE_CHECKING:
     from rlenv.environment import RLEnvironment
-    from rlenv.serving.host import Host
+    from rlenv.serving._host import Host
 
 __all__ = ["LocalClient"]
 
@@ -50,7 +50,7 @@ class LocalClient(BaseClient):
         clock: Callable[[], float] | None = None, instances: int = 1,
         policies: Mapping[str, str | Path] | None = None,
     ) -> None:
-        from rlenv.serving.host import Host
+        from rlenv.serving._host import Host
         from rlenv.serving.policy_driver import load_policies
 
         super().__init__(world_data=world_data)

@@ -1,7 +1,7 @@
 """Exact replays: record episodes as seed + configuration + actions, re-run them, compare.
 
 An episode file holds the server's snapshot of the episode (its configuration, generator state,
-reset options and every action, see :mod:`rlenv.serving.snapshots`), a digest of every
+reset options and every action, see :mod:`rlenv.serving._snapshots`), a digest of every
 observation the client saw, and how the episode ended (``terminated``, ``truncated``: what the
 last step returned, time limits included; recordings made before these two were added lack
 them and still load, with ``None``). Replaying restores the start of the episode on a fresh server,

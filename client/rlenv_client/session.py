@@ -15,7 +15,7 @@ from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
 from rlenv.protocol.errors import ConnectionLost, RequestTimeout
-from rlenv_client.addresses import parse_address
+from rlenv_client._addresses import parse_address
 from rlenv_client.base import BaseClient
 from rlenv_client.client import Client
 from rlenv_client.launcher import ServerProcess, with_server_story

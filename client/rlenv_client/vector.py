@@ -54,10 +54,10 @@ from gymnasium.vector.utils import batch_space, create_empty_array
 
 from rlenv.protocol import ErrorReply, Request, Response
 from rlenv.protocol.errors import RemoteError
+from rlenv_client._rows import check_shape, empty_like, row, rows, set_row, set_rows
 from rlenv_client.base import BaseClient
 from rlenv_client.inspection import config_request
 from rlenv_client.launcher import ServerProcess
-from rlenv_client.rows import check_shape, empty_like, row, rows, set_row, set_rows
 from rlenv_client.session import LOST, ServerSource, Session
 from rlenv_client.time_limits import truncate_agents
 from rlenv_client.trainer_view import TrainerView

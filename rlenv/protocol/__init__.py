@@ -10,7 +10,7 @@ Three layers, one module each:
 - :mod:`~rlenv.protocol.connection`: the state machine (:class:`Connection`), with its
   transitions in one table.
 
-What a request's parts mean is the server's business (:mod:`rlenv.serving.parts`); how values
+What a request's parts mean is the server's business (:mod:`rlenv.serving._parts`); how values
 of a space travel is :mod:`rlenv.protocol.spaces`'. A client on the server's machine may carry
 its steps through shared memory instead (protocol 2.3): :mod:`~rlenv.protocol.shared_memory`
 says which requests and answers fit the slots, :mod:`~rlenv.transport.lanes` does the I/O.

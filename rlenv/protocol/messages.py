@@ -13,7 +13,7 @@
 
 A request is an envelope (``id``, and ``token`` where the server asks for one) around **parts**.
 The protocol leaves the parts to the server, which checks and applies each one by the record
-of its kind (:mod:`rlenv.serving.parts`); :class:`Request` carries them as a map. Replies are
+of its kind (:mod:`rlenv.serving._parts`); :class:`Request` carries them as a map. Replies are
 built by the server directly as these records and read back by the client with validation.
 
 Columns of a steps reply (rewards, flags, tick counts) travel as raw little-endian bytes, one
@@ -190,7 +190,7 @@ class Request:
     """One request: its id, its parts (a map from part name to value) and maybe a token.
 
     The server applies the parts it knows in its own order and refuses unknown ones; see
-    ``docs/protocol.md`` for the parts and :mod:`rlenv.serving.parts` for how each is served.
+    ``docs/protocol.md`` for the parts and :mod:`rlenv.serving._parts` for how each is served.
     """
 
     id: int

@@ -10,7 +10,7 @@ a reset, the generator's state as JSON, the reset's options and the events since
 
 :func:`parse_snapshot` checks the structure (a server before it restores one, a client before
 it keeps a recording); what it means, the environment checks when it restores
-(:mod:`rlenv.serving.snapshots` records and replays them).
+(:mod:`rlenv.serving._snapshots` records and replays them).
 """
 
 from __future__ import annotations

@@ -6,8 +6,8 @@
 - :mod:`~rlenv.scene2d.physics`: the world (a pymunk space), bodies, collision shapes, joints;
 - :mod:`~rlenv.scene2d.lattice`, :mod:`~rlenv.scene2d.colors`: copies along a pattern, and
   colours and gradients;
-- :mod:`~rlenv.scene2d.packed_scene` (with :mod:`~rlenv.scene2d.scene_codecs` and
-  :mod:`~rlenv.scene2d.pymunk_data`): subtrees as plain data and back;
+- :mod:`~rlenv.scene2d.packed_scene` (with :mod:`~rlenv.scene2d._scene_codecs` and
+  :mod:`~rlenv.scene2d._pymunk_data`): subtrees as plain data and back;
 - :mod:`~rlenv.scene2d.render`: frames and vector draw lists of the pymunk shapes (numpy only);
 - :mod:`~rlenv.scene2d.camera`: a camera node whose frames can be observations, and films;
 - :mod:`~rlenv.scene2d.recording`: writing frames to a video file.

@@ -55,7 +55,7 @@ from typing import Any
 import numpy as np
 
 from rlenv.node import Node, _check_name
-from rlenv.scene2d.scene_codecs import OWN_CLASSES, Codec, codec_for
+from rlenv.scene2d._scene_codecs import OWN_CLASSES, Codec, codec_for
 from rlenv.signals import Signal
 
 __all__ = ["CONNECTABLE", "FORMAT", "MAX_DEPTH", "MAX_NODES", "PackedScene", "PackedSceneError",

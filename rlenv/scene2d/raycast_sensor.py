@@ -22,11 +22,11 @@ import numpy as np
 import pymunk
 
 from rlenv.node import Node
+from rlenv.scene2d._pymunk_data import integer, number
 from rlenv.scene2d.node2d import Node2D, Vec
+from rlenv.scene2d.physics._space_owner import world_of
 from rlenv.scene2d.physics.body import PhysicsBody
 from rlenv.scene2d.physics.collision_shape import CollisionShape
-from rlenv.scene2d.physics.space_owner import world_of
-from rlenv.scene2d.pymunk_data import integer, number
 
 __all__ = ["ALL_LAYERS", "MAX_RAYS", "RaycastSensor2D", "check_settings"]
 

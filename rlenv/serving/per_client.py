@@ -3,7 +3,7 @@
 Several environments a trainer makes one by one (``gymnasium.make`` in a loop, SB3's
 ``make_vec_env``, CleanRL's ``SyncVectorEnv``) step one after the other. With a server each,
 every step wakes another process; here they share one, which stays awake between them. Each
-connection gets a :class:`~rlenv.serving.host.Host` of its own, built when the client's first
+connection gets a :class:`~rlenv.serving._host.Host` of its own, built when the client's first
 request comes and closed when the client leaves: the client controls it alone, and sees the
 same hello, answers and errors as from a server of its own. Only the process is shared: what
 one client's environment does to the process (a crash, a loop) its neighbours feel.
@@ -16,8 +16,8 @@ from collections.abc import Callable
 
 from rlenv.protocol import ErrorReply, Request
 from rlenv.protocol.errors import ErrorCode
-from rlenv.serving.endpoint import Endpoint, Peer
-from rlenv.serving.host import Host
+from rlenv.serving._endpoint import Endpoint, Peer
+from rlenv.serving._host import Host
 
 __all__ = ["HostPerClient"]
 

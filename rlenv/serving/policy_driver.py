@@ -7,7 +7,7 @@
 **Who acts.** A driven agent's action is its policy's, computed inside each step from the
 agent's own observation (``get_data({})``) just before the action applies
 (:meth:`DrivenAgents.complete`, called by :meth:`Instance.act
-<rlenv.serving.instance.Instance.act>`). Two cases follow:
+<rlenv.serving._instance.Instance.act>`). Two cases follow:
 
 - **Every agent driven**: no client controls the environment. :class:`PolicyDriver` plays
   episodes one after the other inside the server's loop, between requests: episode ``n``
@@ -165,7 +165,7 @@ class PolicyDriver:
     """Episodes one after another on an instance whose every agent a policy drives.
 
     Args:
-        answer: the host's door (:meth:`Host.answer <rlenv.serving.host.Host.answer>`).
+        answer: the host's door (:meth:`Host.answer <rlenv.serving._host.Host.answer>`).
         instance: the instance it plays (the host's only one).
         driven: its driven agents (every agent).
         max_episode_steps: steps after which an episode is cut short (``None``: never).

@@ -2,7 +2,7 @@
 
 The environment's ``_ready`` calls ``self.communication.start_server(port, host)`` (the Godot
 seed's way); :func:`run` builds its tree, runs the main loop and serves every request through
-the same path as ``rlenv serve`` (:class:`~rlenv.serving.host.Host`: the same checks, episode
+the same path as ``rlenv serve`` (:class:`~rlenv.serving._host.Host`: the same checks, episode
 state, hooks and answers; there is no second server). In the loop the tree stays paused between
 actions and the communication node polls in its ``_process`` (process mode ``ALWAYS``), blocking
 until a request comes (in lockstep) or the next tick is due (in real time); each request is
@@ -25,9 +25,9 @@ from types import FrameType
 from typing import TYPE_CHECKING
 
 from rlenv.protocol import Request
-from rlenv.serving.access import InsecureBindError
-from rlenv.serving.endpoint import Endpoint, Limits, Peer
-from rlenv.serving.host import Host
+from rlenv.serving._access import InsecureBindError
+from rlenv.serving._endpoint import Endpoint, Limits, Peer
+from rlenv.serving._host import Host
 
 if TYPE_CHECKING:
     from rlenv.environment import RLEnvironment

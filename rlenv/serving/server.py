@@ -7,8 +7,8 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from rlenv.environment import RLEnvironment
-from rlenv.serving.endpoint import DEFAULT_HOST, Endpoint, Limits
-from rlenv.serving.host import Host
+from rlenv.serving._endpoint import DEFAULT_HOST, Endpoint, Limits
+from rlenv.serving._host import Host
 from rlenv.serving.per_client import HostPerClient
 from rlenv.serving.policy_driver import load_policies
 
@@ -23,7 +23,7 @@ class Server:
     The server hosts ``instances`` independent copies of the environment (each its own tree
     and pymunk space) behind one socket: a plain request goes to the first, a ``batch`` carries
     one request per instance, and a ``steps`` request steps them all in columns (see
-    :mod:`rlenv.serving.host`).
+    :mod:`rlenv.serving._host`).
 
     Args:
         environment: the environment class, ``MODULE:CLASS``, or (for one instance) an
@@ -34,7 +34,7 @@ class Server:
         lifeline: read end of a pipe whose write end the starting process holds; the server
             exits when that process is gone (see ``rlenv_client.ServerProcess``).
         token: the secret clients must present; required to bind a non-loopback address.
-        limits: frame sizes and deadlines (see :class:`~rlenv.serving.endpoint.Limits`); the
+        limits: frame sizes and deadlines (see :class:`~rlenv.serving._endpoint.Limits`); the
             defaults if ``None``.
         instances: how many environment instances to host.
         record_dir: where clients may have the environment record videos (``None``: nowhere).

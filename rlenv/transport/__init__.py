@@ -7,8 +7,8 @@
   ringing, waiting on the lane and its socket together); which requests fit its slots is
   :mod:`rlenv.protocol.shared_memory`'s business;
 - :mod:`~rlenv.transport.frames`: one whole frame from a blocking socket, for simple peers;
-- :mod:`~rlenv.transport.procfs`: what one process reads of another in ``/proc`` (the one reader).
+- :mod:`~rlenv.transport._procfs`: what one process reads of another in ``/proc`` (the one reader).
 
-The server's endpoint (:mod:`rlenv.serving.endpoint`) and the TCP client
+The server's endpoint (:mod:`rlenv.serving._endpoint`) and the TCP client
 (``rlenv_client.client``) use both. Importing this package loads neither the runtime nor pymunk.
 """

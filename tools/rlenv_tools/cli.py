@@ -16,8 +16,8 @@ from types import FrameType
 from typing import cast
 
 from rlenv.protocol.errors import RlenvError
-from rlenv.serving.endpoint import DEFAULT_HOST, Limits
-from rlenv.serving.recent import KEEP_EPISODES
+from rlenv.serving._endpoint import DEFAULT_HOST, Limits
+from rlenv.serving._recent import KEEP_EPISODES
 from rlenv.transport.sockets import format_address
 
 __all__ = ["main", "serve_command"]
@@ -409,7 +409,7 @@ def _colour_wanted() -> bool:
 
 
 def _check(args: argparse.Namespace) -> int:
-    from rlenv_tools.checks import run_checks
+    from rlenv_tools._checks import run_checks
 
     results = run_checks(args.target, timeout=args.timeout, compliance=args.compliance,
                          token=args.token)
@@ -438,7 +438,7 @@ def _bench(args: argparse.Namespace) -> int:
                                 native=args.native, progress=progress)
         table, as_json = format_rows(rows), rows_to_json(rows)
     else:
-        from rlenv_tools.bench import format_table, run_benchmarks, to_json
+        from rlenv_tools._bench import format_table, run_benchmarks, to_json
 
         figures = run_benchmarks(rounds=args.rounds, steps=args.steps or 2000,
                                  quick=args.quick, progress=progress)

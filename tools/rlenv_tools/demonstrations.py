@@ -4,7 +4,7 @@ Each episode is written as :class:`~rlenv_client.replay.RecordEpisodes` writes i
 ``episode-NNNN.rlenv`` file that ``rlenv replay`` re-runs bit for bit), numbered after the
 directory's existing ones, so several sessions fill one dataset. A person plays from the
 inspector's page (``rlenv inspect HOST:PORT --record-demonstrations DIR``, see
-:mod:`rlenv_tools.inspector.control`); a script with :func:`record`::
+:mod:`rlenv_tools.inspector._control`); a script with :func:`record`::
 
     from rlenv_tools.demonstrations import record
     record("examples.cartpole:CartPoleEnvironment", my_controller, 10, "demos/", seed=0)

@@ -45,7 +45,7 @@ from typing import Any, NoReturn
 from rlenv.protocol.codec import frame, unpack
 from rlenv.protocol.errors import RemoteError
 from rlenv.protocol.messages import Hello
-from rlenv.transport import procfs
+from rlenv.transport import _procfs as procfs
 from rlenv.transport.frames import receive_frame
 from rlenv_client.launcher import ServerStartError, end_process
 

@@ -70,7 +70,7 @@ def export_onnx(model: Any, path: str | Path, observation_space: spaces.Space | 
     import onnx
     import torch
 
-    from rlenv_tools.onnx_actors import Actor
+    from rlenv_tools._onnx_actors import Actor
 
     policy = getattr(model, "policy", model)
     sb3 = hasattr(policy, "predict") and hasattr(policy, "observation_space")

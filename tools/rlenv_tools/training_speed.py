@@ -36,7 +36,7 @@ from typing import Any
 import gymnasium
 
 from rlenv_client.launcher import end_process
-from rlenv_tools.bench import Rate, interleaved
+from rlenv_tools._bench import Rate, interleaved
 
 __all__ = ["PPO_CONFIGS", "Measure", "Row", "busy_process", "format_rows", "measure_training",
            "ppo_rows", "resolve_target", "rows_to_json", "sync_vector_rows"]
@@ -53,8 +53,8 @@ instead of its linear schedules), and one that spends most of its time collectin
 class Measure(Rate):
     """One way of running a trainer: ``run(steps)`` trains or steps ``steps`` environment steps.
 
-    A :class:`~rlenv_tools.bench.Rate` (its rounds taken in turns by
-    :func:`~rlenv_tools.bench.interleaved`) that knows how to free what it holds.
+    A :class:`~rlenv_tools._bench.Rate` (its rounds taken in turns by
+    :func:`~rlenv_tools._bench.interleaved`) that knows how to free what it holds.
 
     Args:
         name: what the row says.

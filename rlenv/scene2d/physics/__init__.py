@@ -40,11 +40,11 @@ sets them.
 One module per family, as Godot's ``scene/2d/physics``: :mod:`~rlenv.scene2d.physics.world`
 (the world and its space), :mod:`~rlenv.scene2d.physics.body` (the bodies),
 :mod:`~rlenv.scene2d.physics.collision_shape`, :mod:`~rlenv.scene2d.physics.joint`;
-:mod:`~rlenv.scene2d.physics.space_owner` is what the last three know of a world. What reaches
-below pymunk's public API is in :mod:`rlenv.scene2d.chipmunk`.
+:mod:`~rlenv.scene2d.physics._space_owner` is what the last three know of a world. What reaches
+below pymunk's public API is in :mod:`rlenv.scene2d._chipmunk`.
 """
 
-from rlenv.scene2d.chipmunk import step_space
+from rlenv.scene2d._chipmunk import step_space
 from rlenv.scene2d.physics.body import KinematicBody, PhysicsBody, RigidBody, StaticBody
 from rlenv.scene2d.physics.collision_shape import CollisionShape
 from rlenv.scene2d.physics.joint import Joint

@@ -12,7 +12,7 @@ import pymunk
 from pymunk import Vec2d
 
 from rlenv.node import Node
-from rlenv.scene2d.chipmunk import (
+from rlenv.scene2d._chipmunk import (
     angle_of,
     angular_velocity_of,
     apply_force_at_world_point_of,
@@ -25,10 +25,10 @@ from rlenv.scene2d.chipmunk import (
     set_velocity_of,
     velocity_of,
 )
+from rlenv.scene2d._pymunk_data import copy_body
 from rlenv.scene2d.colors import RGB, Color
 from rlenv.scene2d.node2d import Node2D, Pose, compose, frame_of, relative_pose
-from rlenv.scene2d.physics.space_owner import SpaceOwner, Vec, world_of
-from rlenv.scene2d.pymunk_data import copy_body
+from rlenv.scene2d.physics._space_owner import SpaceOwner, Vec, world_of
 from rlenv.signals import Signal
 
 __all__ = ["KinematicBody", "PhysicsBody", "RigidBody", "StaticBody"]

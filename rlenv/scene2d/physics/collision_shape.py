@@ -8,10 +8,10 @@ from typing import Any, ClassVar
 import pymunk
 
 from rlenv.node import Node
+from rlenv.scene2d._pymunk_data import copy_shape, number
 from rlenv.scene2d.colors import RGB, Color, to_rgb
+from rlenv.scene2d.physics._space_owner import SpaceOwner, Vec, world_of
 from rlenv.scene2d.physics.body import PhysicsBody
-from rlenv.scene2d.physics.space_owner import SpaceOwner, Vec, world_of
-from rlenv.scene2d.pymunk_data import copy_shape, number
 from rlenv.signals import Signal
 
 __all__ = ["CollisionShape"]

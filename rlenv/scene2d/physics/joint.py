@@ -8,11 +8,11 @@ from typing import Any, cast
 import pymunk
 
 from rlenv.node import Node
-from rlenv.scene2d.chipmunk import refresh_constraint
+from rlenv.scene2d._chipmunk import refresh_constraint
+from rlenv.scene2d._pymunk_data import ConstraintRecipe, number
 from rlenv.scene2d.node2d import frame_of
+from rlenv.scene2d.physics._space_owner import SpaceOwner, Vec, world_of
 from rlenv.scene2d.physics.body import PhysicsBody
-from rlenv.scene2d.physics.space_owner import SpaceOwner, Vec, world_of
-from rlenv.scene2d.pymunk_data import ConstraintRecipe, number
 
 __all__ = ["ConstraintFactory", "Joint"]
 
@@ -38,7 +38,7 @@ class Joint(Node):
         node_a: path to the first body node (body a).
         node_b: path to the second body node (body b).
         make: builds the constraint from the two ``pymunk.Body`` objects, a's first (a
-            :class:`~rlenv.scene2d.pymunk_data.ConstraintRecipe`, or any callable).
+            :class:`~rlenv.scene2d._pymunk_data.ConstraintRecipe`, or any callable).
         collide_bodies: whether the two bodies still collide with each other.
         max_force: the most force the constraint may apply (for a motor, the most torque).
         name: the node name.

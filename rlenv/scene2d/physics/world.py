@@ -13,7 +13,7 @@ from typing import Any, ClassVar, cast
 import pymunk
 
 from rlenv.node import Node, ProcessMode
-from rlenv.scene2d.chipmunk import (
+from rlenv.scene2d._chipmunk import (
     FAST,
     Refill,
     bodies_to_check,
@@ -21,11 +21,11 @@ from rlenv.scene2d.chipmunk import (
     renumber,
     step_space,
 )
+from rlenv.scene2d._pymunk_data import integer, number, vector
+from rlenv.scene2d.physics._space_owner import SpaceOwner, Vec
 from rlenv.scene2d.physics.body import PhysicsBody
 from rlenv.scene2d.physics.collision_shape import CollisionShape
 from rlenv.scene2d.physics.joint import Joint
-from rlenv.scene2d.physics.space_owner import SpaceOwner, Vec
-from rlenv.scene2d.pymunk_data import integer, number, vector
 from rlenv.signals import Signal
 
 __all__ = ["PhysicsWorld"]

@@ -19,13 +19,13 @@ the server (no token given, no writable property) is reported skipped, with why.
 Here is the public API, :class:`ComplianceReport` and :func:`check_server`, which runs the
 probes in a fixed order (the random frames, actions and seeds follow from ``seed``). The rest:
 
-- :mod:`~rlenv_tools.compliance.harness`: what every probe runs in: the controller and the
+- :mod:`~rlenv_tools.compliance._harness`: what every probe runs in: the controller and the
   state of a run (running a probe, stepping the controller after it), raw connections and
   their frames, and the reply tap that checks every frame the server sends for ext types;
-- :mod:`~rlenv_tools.compliance.hostile`: the hostile-input probes: raw frames, malformed
+- :mod:`~rlenv_tools.compliance._hostile`: the hostile-input probes: raw frames, malformed
   requests, random frames, a frame cut short, a slow drip, and the refusals the controller
   gets;
-- :mod:`~rlenv_tools.compliance.contract`: the contract probes: control, determinism after
+- :mod:`~rlenv_tools.compliance._contract`: the contract probes: control, determinism after
   sets, repeated restores, ext types, the token rule, with the trajectories they compare.
 """
 
@@ -36,9 +36,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from rlenv_tools.compliance.contract import ContractProbes
-from rlenv_tools.compliance.harness import Harness, ReplyTap, TappedClient, peak_rss_kib
-from rlenv_tools.compliance.hostile import HostileProbes
+from rlenv_tools.compliance._contract import ContractProbes
+from rlenv_tools.compliance._harness import Harness, ReplyTap, TappedClient, peak_rss_kib
+from rlenv_tools.compliance._hostile import HostileProbes
 
 __all__ = ["ComplianceReport", "check_server"]
 

@@ -8,17 +8,18 @@ OpenAPI 3.1 document generated from the route table. ``docs/http.md`` is the gui
 One module per job (importing this package imports none of them, nor Starlette):
 
 - :mod:`~rlenv_tools.http.app`: the Starlette application and uvicorn's server (``serve``);
-  :mod:`~rlenv_tools.http.uvicorn_protocol`: one write per response, a deadline
+  :mod:`~rlenv_tools.http._uvicorn_protocol`: one write per response, a deadline
   on request heads, a bound on connections (uvicorn's internals, on tested versions only);
-- :mod:`~rlenv_tools.http.guard`: Host, Origin, token and body size, checked before any route;
-- :mod:`~rlenv_tools.http.endpoints`: the route record, JSON bodies in and out;
-- :mod:`~rlenv_tools.http.routes`: the ``/v1`` session API; :mod:`~rlenv_tools.http.bevy`: bevy_rl's
-  routes; :mod:`~rlenv_tools.http.streams`: the WebSocket and the event stream;
-- :mod:`~rlenv_tools.http.openapi`: the OpenAPI document from the route table;
-- :mod:`~rlenv_tools.http.sessions`: sessions, limits, the idle reaper;
-- :mod:`~rlenv_tools.http.targets`: what an ``env_id`` names and where its environment runs;
-- :mod:`~rlenv_tools.http.runners`: how a call reaches an environment, under a deadline;
+- :mod:`~rlenv_tools.http._guard`: Host, Origin, token and body size, checked before any route;
+- :mod:`~rlenv_tools.http._endpoints`: the route record, JSON bodies in and out;
+- :mod:`~rlenv_tools.http._routes`: the ``/v1`` session API;
+  :mod:`~rlenv_tools.http._bevy`: bevy_rl's routes;
+  :mod:`~rlenv_tools.http._streams`: the WebSocket and the event stream;
+- :mod:`~rlenv_tools.http._openapi`: the OpenAPI document from the route table;
+- :mod:`~rlenv_tools.http._sessions`: sessions, limits, the idle reaper;
+- :mod:`~rlenv_tools.http._targets`: what an ``env_id`` names and where its environment runs;
+- :mod:`~rlenv_tools.http._runners`: how a call reaches an environment, under a deadline;
 - :mod:`~rlenv_tools.http.problems`: errors as problem details;
 - :mod:`~rlenv_tools.http.json_spaces`: spaces, JSON Schemas and values as JSON;
-  :mod:`~rlenv_tools.http.png`: PNG images.
+  :mod:`~rlenv_tools.http._png`: PNG images.
 """

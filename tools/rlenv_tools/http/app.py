@@ -1,8 +1,8 @@
 """The gateway as a Starlette application, and ``rlenv http``'s server (uvicorn).
 
-:func:`create_app` assembles the route tables (:mod:`~rlenv_tools.http.routes`,
-:mod:`~rlenv_tools.http.streams`, :mod:`~rlenv_tools.http.bevy`, ``/openapi.json``) behind the
-:class:`~rlenv_tools.http.guard.Guard`, with every error answered as a problem (unknown routes,
+:func:`create_app` assembles the route tables (:mod:`~rlenv_tools.http._routes`,
+:mod:`~rlenv_tools.http._streams`, :mod:`~rlenv_tools.http._bevy`, ``/openapi.json``) behind the
+:class:`~rlenv_tools.http._guard.Guard`, with every error answered as a problem (unknown routes,
 methods, and the gateway's own bugs included: never an HTML page). :func:`serve` binds the
 socket, says where, and runs uvicorn until SIGTERM or SIGINT: open streams end, sessions close
 (their server subprocesses too), and the process exits.
@@ -28,21 +28,21 @@ from starlette.responses import Response
 from starlette.routing import BaseRoute, Route, WebSocketRoute
 
 from rlenv.protocol import PROTOCOL_VERSION, Hello
-from rlenv.serving.access import bind_error
-from rlenv.serving.endpoint import DEFAULT_HOST, InsecureBindError
+from rlenv.serving._access import bind_error
+from rlenv.serving._endpoint import DEFAULT_HOST, InsecureBindError
 from rlenv.transport.sockets import is_loopback
-from rlenv_tools.http.bevy import bevy_endpoints
-from rlenv_tools.http.endpoints import Answer, Endpoint, JSONRoute
-from rlenv_tools.http.guard import Guard
+from rlenv_tools._origins import OriginPolicy, host_names
+from rlenv_tools.http._bevy import bevy_endpoints
+from rlenv_tools.http._endpoints import Answer, Endpoint, JSONRoute
+from rlenv_tools.http._guard import Guard
+from rlenv_tools.http._openapi import openapi_document
+from rlenv_tools.http._routes import component_schemas, session_endpoints, target_schemas
+from rlenv_tools.http._sessions import MAX_SESSIONS_PER_CLIENT, Sessions
+from rlenv_tools.http._streams import stream_endpoints
+from rlenv_tools.http._targets import Catalog
+from rlenv_tools.http._uvicorn_protocol import connection_limit, http_protocol
 from rlenv_tools.http.json_spaces import dumps
-from rlenv_tools.http.openapi import openapi_document
 from rlenv_tools.http.problems import COMMON_HEADERS, PROBLEMS, Problem
-from rlenv_tools.http.routes import component_schemas, session_endpoints, target_schemas
-from rlenv_tools.http.sessions import MAX_SESSIONS_PER_CLIENT, Sessions
-from rlenv_tools.http.streams import stream_endpoints
-from rlenv_tools.http.targets import Catalog
-from rlenv_tools.http.uvicorn_protocol import connection_limit, http_protocol
-from rlenv_tools.origins import OriginPolicy, host_names
 
 __all__ = ["Gateway", "Settings", "create_app", "serve"]
 

@@ -28,7 +28,7 @@ import numpy as np
 from gymnasium import spaces
 
 from rlenv.protocol.space_json import json_number, space_from_json, space_to_json
-from rlenv_tools.http.png import encode_png
+from rlenv_tools.http._png import encode_png
 
 __all__ = ["action_decoder", "dumps", "is_image", "json_schema", "space_from_json",
            "space_to_json", "to_json", "value_encoder"]

@@ -8,12 +8,12 @@ lists the node tree (every second) and the selected node's properties (several t
 editable: a setting lasts, any other property lasts its episode), shows camera observations as
 images and plots the episodes' returns and lengths, steps per second and restarts. Started with
 ``--record-demonstrations DIR``, it also lets a person take control and play from the keyboard,
-recording their episodes (:mod:`~rlenv_tools.inspector.control`).
+recording their episodes (:mod:`~rlenv_tools.inspector._control`).
 
-- :mod:`~rlenv_tools.inspector.watch`: the observer connections (what the page can ask);
-- :mod:`~rlenv_tools.inspector.web`: the HTTP server and its safety rules;
-- :mod:`~rlenv_tools.inspector.control`: a person's control, recorded (demonstrations);
-- :mod:`~rlenv_tools.inspector.timelines`: recordings as timelines to scrub, step, tick,
+- :mod:`~rlenv_tools.inspector._watch`: the observer connections (what the page can ask);
+- :mod:`~rlenv_tools.inspector._web`: the HTTP server and its safety rules;
+- :mod:`~rlenv_tools.inspector._control`: a person's control, recorded (demonstrations);
+- :mod:`~rlenv_tools.inspector._timelines`: recordings as timelines to scrub, step, tick,
   branch and compare (``rlenv replay FILE --inspect``, or a watched instance's recent
   episodes; see docs/time-travel.md);
 - ``static/``: the page (one HTML file, its script and its style; no build step).
@@ -33,10 +33,10 @@ from typing import IO, TYPE_CHECKING, Any
 
 from rlenv_client.client import Client
 from rlenv_client.launcher import end_process
-from rlenv_tools.inspector.control import Demonstrator
-from rlenv_tools.inspector.timelines import Timelines
-from rlenv_tools.inspector.watch import InspectorError, Watcher
-from rlenv_tools.inspector.web import InspectorServer
+from rlenv_tools.inspector._control import Demonstrator
+from rlenv_tools.inspector._timelines import Timelines
+from rlenv_tools.inspector._watch import InspectorError, Watcher
+from rlenv_tools.inspector._web import InspectorServer
 
 if TYPE_CHECKING:
     from rlenv_client.session import Session
@@ -174,7 +174,7 @@ def inspect_recordings(paths: Sequence[str | Path], *,
     Its address (:attr:`InspectorServer.url`) is logged as a warning; :meth:`~InspectorServer.
     close` ends it and the timelines' processes.
 
-    ``target`` and ``trust_target``: see :class:`~rlenv_tools.inspector.timelines.Timelines`.
+    ``target`` and ``trust_target``: see :class:`~rlenv_tools.inspector._timelines.Timelines`.
 
     Raises:
         ValueError: a file is not an rlenv episode.
@@ -224,7 +224,7 @@ def serve(addresses: Sequence[str], *, token: str | None, port: int, follow_stdi
     ``recordings`` (``rlenv replay FILE --inspect``): episode files the page opens as timelines
     (with the watched instances' recent episodes), re-simulated on ``target`` (default: each
     episode's, where it is installed or ``trust_target``); ``policies`` and ``unavailable``: see
-    :class:`~rlenv_tools.inspector.timelines.Timelines`.
+    :class:`~rlenv_tools.inspector._timelines.Timelines`.
 
     Raises:
         ValueError: an address is not ``HOST:PORT``, the rate is not positive, or a recording

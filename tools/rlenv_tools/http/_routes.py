@@ -1,0 +1,310 @@
+"""The session API under ``/v1``, gym-http-api's routes done right.
+
+==========  ====================================  =============================================
+method      path                                  answer
+==========  ====================================  =============================================
+POST        /v1/envs                              201 ``{"id", "env_id", "action_space",
+                                                  "observation_space"}``
+GET         /v1/envs                              ``{"envs": [session, ...]}``
+GET         /v1/envs/{id}                         the session: status, episode, step ...
+DELETE      /v1/envs/{id}                         204
+POST        /v1/envs/{id}/reset                   ``{"observation", "info"}``
+POST        /v1/envs/{id}/step                    ``{"observation", "reward", "terminated",
+                                                  "truncated", "info"}``
+GET         /v1/envs/{id}/render                  ``image/png`` (or raw bytes)
+GET         /v1/envs/{id}/action_space            ``{"space", "schema"}``
+GET         /v1/envs/{id}/observation_space       ``{"space", "schema"}``
+POST        /v1/envs/{id}/action_space/sample     ``{"action"}``
+POST        /v1/envs/{id}/action_space/contains   ``{"member"}`` (and ``"reason"`` when not)
+GET         /v1/envs/{id}/snapshot                ``{"snapshot"}``
+POST        /v1/envs/{id}/restore                 ``{"observation", "info"}``
+GET         /v1                                   versions and capabilities
+==========  ====================================  =============================================
+
+Every refusal is a problem (:mod:`rlenv_tools.http.problems`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
+
+from starlette.requests import Request
+from starlette.responses import Response
+
+from rlenv.protocol.errors import ErrorCode
+from rlenv.protocol.messages import MAX_RENDER_SIZE
+from rlenv.protocol.spaces import SpaceMismatch, check
+from rlenv.serving._actions import MAX_REPEAT_ACTION
+from rlenv_tools.http._endpoints import (
+    Answer,
+    Endpoint,
+    Parameter,
+    json_response,
+    object_body,
+    read_json,
+)
+from rlenv_tools.http._png import encode_png
+from rlenv_tools.http.json_spaces import json_schema, space_to_json
+from rlenv_tools.http.problems import COMMON_HEADERS, Problem
+
+if TYPE_CHECKING:
+    from rlenv_tools.http._sessions import Session
+    from rlenv_tools.http.app import Gateway
+
+__all__ = ["component_schemas", "session_endpoints", "target_schemas"]
+
+_CREATE_KEYS = frozenset({"env_id", "kwargs"})
+_RESET_KEYS = frozenset({"seed", "options"})
+_STEP_KEYS = frozenset({"action", "repeat_action"})
+_ACTION = frozenset({"action"})
+_RESTORE_KEYS = frozenset({"snapshot"})
+_RAW = "application/octet-stream"
+
+_ENV = ("unknown_session",)
+_CALL = (*_ENV, "environment_error", "environment_lost", ErrorCode.TIMEOUT)
+
+
+def session_endpoints(gateway: Gateway) -> list[Endpoint]:
+    """The ``/v1`` routes, served from ``gateway``'s sessions (the hot ones first)."""
+    sessions = gateway.sessions
+
+    def session_at(path: Mapping[str, str]) -> Session:
+        session = sessions.get(path["id"])
+        session.touch()
+        return session
+
+    async def step(path: Mapping[str, str], body: Any) -> Any:
+        session = session_at(path)
+        body = object_body(body, _STEP_KEYS, _ACTION)
+        return await session.step(body["action"], body.get("repeat_action"))
+
+    async def reset(path: Mapping[str, str], body: Any) -> Any:
+        session = session_at(path)
+        body = object_body(body, _RESET_KEYS)
+        return await session.reset(body.get("seed"), body.get("options"))
+
+    async def create(request: Request) -> Response:
+        body = object_body(await read_json(request, required=False), _CREATE_KEYS)
+        env_id = body.get("env_id", gateway.catalog.target)
+        if env_id is None:
+            raise Problem(ErrorCode.BAD_REQUEST, f"env_id is required: one of "
+                                                 f"{gateway.catalog.ids()}")
+        settings = body.get("kwargs")
+        if settings is not None and type(settings) is not dict:
+            raise Problem(ErrorCode.BAD_REQUEST, "kwargs must be a JSON object of settings "
+                                                 "(as BaseClient.configure takes them)")
+        client = request.client
+        session = await sessions.create(env_id, settings,
+                                        owner=None if client is None else client.host)
+        if await request.is_disconnected():  # abandoned mid-request: nobody knows its id
+            await sessions.abandon(session)
+        return json_response({"id": session.id, "env_id": session.env_id, **session.spaces()},
+                             201, headers={"Location": f"/v1/envs/{session.id}"})
+
+    async def list_sessions(request: Request) -> Response:
+        return json_response({"envs": [session.describe() for session in sessions.all()]})
+
+    async def get_session(request: Request) -> Response:
+        return json_response(session_at(request.path_params).describe())
+
+    async def delete_session(request: Request) -> Response:
+        await sessions.delete(request.path_params["id"])
+        return Response(status_code=204, headers=COMMON_HEADERS)
+
+    async def render(request: Request) -> Response:
+        session = session_at(request.path_params)
+        width, height = _size(request, "width"), _size(request, "height")
+        frame = await session.render(width, height)
+        if _RAW in request.headers.get("accept", ""):
+            return Response(frame.tobytes(), headers={
+                **COMMON_HEADERS, "X-Shape": ",".join(map(str, frame.shape)),
+                "X-Dtype": frame.dtype.name}, media_type=_RAW)
+        png = await asyncio.to_thread(encode_png, frame)  # zlib lets the loop go on meanwhile
+        return Response(png, headers=COMMON_HEADERS, media_type="image/png")
+
+    async def action_space(request: Request) -> Response:
+        space = session_at(request.path_params).client.action_space
+        return json_response({"space": space_to_json(space),
+                              "schema": json_schema(space, images=False)})
+
+    async def observation_space(request: Request) -> Response:
+        space = session_at(request.path_params).client.observation_space
+        return json_response({"space": space_to_json(space), "schema": json_schema(space)})
+
+    async def sample(request: Request) -> Response:
+        return json_response({"action": session_at(request.path_params).sample()})
+
+    async def contains(request: Request) -> Response:
+        session = session_at(request.path_params)
+        body = object_body(await read_json(request), _ACTION, _ACTION)
+        try:
+            check(session.client.action_space, body["action"])
+        except SpaceMismatch as mismatch:
+            return json_response({"member": False, "reason": str(mismatch)})
+        return json_response({"member": True})
+
+    async def snapshot(request: Request) -> Response:
+        return json_response({"snapshot": await session_at(request.path_params).snapshot()})
+
+    async def restore(request: Request) -> Response:
+        session = session_at(request.path_params)
+        body = object_body(await read_json(request), _RESTORE_KEYS, _RESTORE_KEYS)
+        return json_response(await session.restore(body["snapshot"]))
+
+    async def versions(request: Request) -> Response:
+        return json_response(gateway.about())
+
+    one = "/v1/envs/{id}"
+    return [
+        Endpoint("POST", f"{one}/step", step, "step", "Act for repeat_action physics ticks",
+                 "sessions", {200: Answer("the transition; info.frames: the ticks that ran",
+                                          "Step")},
+                 body="StepBody", body_required=True, json=True,
+                 problems=(*_CALL, ErrorCode.BAD_REQUEST, ErrorCode.RESET_REQUIRED,
+                           ErrorCode.INVALID_ACTION, ErrorCode.BUSY),
+                 description="A step before a reset, or after the episode ended, is refused "
+                             "(409); an action outside the space too (422), naming the field."),
+        Endpoint("POST", f"{one}/reset", reset, "reset", "Start an episode (seed 0 is a seed)",
+                 "sessions", {200: Answer("the first observation", "Reset")}, body="ResetBody",
+                 json=True, problems=(*_CALL, ErrorCode.BAD_REQUEST, ErrorCode.BUSY)),
+        Endpoint("POST", "/v1/envs", create, "create_session", "Create a session", "sessions",
+                 {201: Answer("the session's id and spaces", "Created")}, body="CreateBody",
+                 problems=(ErrorCode.BAD_REQUEST, "session_limit", "environment_error",
+                           "environment_lost", ErrorCode.INVALID_CONFIG, ErrorCode.TIMEOUT,
+                           ErrorCode.BUSY),
+                 description="env_id: the command line's TARGET (the default) or a registered "
+                             "id; kwargs: settings, as BaseClient.configure takes them."),
+        Endpoint("GET", "/v1/envs", list_sessions, "list_sessions", "List the sessions",
+                 "sessions", {200: Answer("every session", "SessionList")}),
+        Endpoint("GET", one, get_session, "get_session", "A session's status, episode and step",
+                 "sessions", {200: Answer("the session", "Session")}, problems=_ENV),
+        Endpoint("DELETE", one, delete_session, "delete_session",
+                 "Close a session and its environment", "sessions",
+                 {204: Answer("closed", media_type="")}, problems=_ENV),
+        Endpoint("GET", f"{one}/render", render, "render", "Draw the current state", "sessions",
+                 {200: Answer("a PNG image, or with Accept: application/octet-stream the raw "
+                              "uint8 bytes (X-Shape: height,width,3 and X-Dtype headers)",
+                              {"type": "string", "contentMediaType": "image/png"}, "image/png")},
+                 problems=(*_CALL, ErrorCode.BAD_REQUEST, ErrorCode.RESET_REQUIRED),
+                 query=(Parameter("width", {"type": "integer", "minimum": 1,
+                                            "maximum": MAX_RENDER_SIZE}, "pixels"),
+                        Parameter("height", {"type": "integer", "minimum": 1,
+                                             "maximum": MAX_RENDER_SIZE}, "pixels"))),
+        Endpoint("GET", f"{one}/action_space", action_space, "action_space",
+                 "The action space and the JSON Schema of actions", "sessions",
+                 {200: Answer("the space in gymnasium's terms, and its schema", "SpaceAnswer")},
+                 problems=_ENV),
+        Endpoint("GET", f"{one}/observation_space", observation_space, "observation_space",
+                 "The observation space and the JSON Schema of observations", "sessions",
+                 {200: Answer("the space in gymnasium's terms, and its schema", "SpaceAnswer")},
+                 problems=_ENV),
+        Endpoint("POST", f"{one}/action_space/sample", sample, "sample_action",
+                 "A random action", "sessions", {200: Answer("an action", "Sample")},
+                 problems=_ENV),
+        Endpoint("POST", f"{one}/action_space/contains", contains, "action_space_contains",
+                 "Whether an action belongs to the action space (checked as a step would)",
+                 "sessions", {200: Answer("member, and the reason when not", "Contains")},
+                 body="Sample", body_required=True, problems=_ENV),
+        Endpoint("GET", f"{one}/snapshot", snapshot, "snapshot",
+                 "The state as data, to restore here or in another session", "sessions",
+                 {200: Answer("the snapshot", "SnapshotBody")},
+                 problems=(*_CALL, ErrorCode.RESET_REQUIRED, ErrorCode.BAD_REQUEST)),
+        Endpoint("POST", f"{one}/restore", restore, "restore",
+                 "Bring the environment to a snapshot's state", "sessions",
+                 {200: Answer("the observation in the restored state", "Reset")},
+                 body="SnapshotBody", body_required=True,
+                 problems=(*_CALL, ErrorCode.BAD_REQUEST, ErrorCode.INVALID_ACTION,
+                           ErrorCode.INVALID_CONFIG, ErrorCode.BUSY)),
+        Endpoint("GET", "/v1", versions, "versions", "Versions, capabilities and limits",
+                 "gateway", {200: Answer("what this gateway serves", {"type": "object"})}),
+    ]
+
+
+def _size(request: Request, name: str) -> int | None:
+    text = request.query_params.get(name)
+    if text is None:
+        return None
+    if not text.isdigit() or not 1 <= int(text) <= MAX_RENDER_SIZE:
+        raise Problem(ErrorCode.BAD_REQUEST, f"{name} must be an integer in [1, "
+                                             f"{MAX_RENDER_SIZE}], got {text!r:.20}")
+    return int(text)
+
+
+def component_schemas(observation: dict[str, Any], action: dict[str, Any]) -> dict[str, Any]:
+    """The component schemas the session routes name (for :mod:`rlenv_tools.http._openapi`).
+
+    Args:
+        observation: the JSON Schema of observations (the TARGET's, or any value).
+        action: the JSON Schema of actions.
+    """
+    info = {"type": "object", "description": "the environment's info; frames: the physics "
+                                             "ticks that ran; agents: each agent's reward and "
+                                             "flags (several agents)",
+            "properties": {"frames": {"type": "integer", "minimum": 0}}}
+    space = {"type": "object", "required": ["type"],
+             "properties": {"type": {"enum": ["Box", "Discrete", "MultiDiscrete", "MultiBinary",
+                                              "Tuple", "Dict"]}},
+             "description": "a gymnasium space: {\"type\": \"Box\", \"shape\", \"low\", "
+                            "\"high\", \"dtype\"}, {\"type\": \"Discrete\", \"n\", \"start\"}, "
+                            "{\"type\": \"Dict\", \"spaces\"} ..."}
+    session = {"type": "object", "required": ["id", "env_id", "status", "episode", "step"],
+               "properties": {
+                   "id": {"type": "string"}, "env_id": {"type": "string"},
+                   "status": {"enum": ["ready", "running", "ended", "timed_out", "lost"]},
+                   "episode": {"type": "integer"}, "step": {"type": "integer"},
+                   "agents": {"type": "array", "items": {"type": "string"}},
+                   "idle_seconds": {"type": "number"}, "created": {"type": "string"},
+                   "max_episode_steps": {"type": "integer"},
+                   "problem": {"$ref": "#/components/schemas/Problem"}}}
+    return {
+        "Observation": observation,
+        "Action": action,
+        "Info": info,
+        "Space": space,
+        "CreateBody": {"type": "object", "additionalProperties": False, "properties": {
+            "env_id": {"type": "string"}, "kwargs": {"type": "object"}}},
+        "Created": {"type": "object", "required": ["id", "env_id", "action_space",
+                                                  "observation_space"], "properties": {
+            "id": {"type": "string"}, "env_id": {"type": "string"},
+            "action_space": {"$ref": "#/components/schemas/Space"},
+            "observation_space": {"$ref": "#/components/schemas/Space"}}},
+        "Session": session,
+        "SessionList": {"type": "object", "properties": {
+            "envs": {"type": "array", "items": {"$ref": "#/components/schemas/Session"}}}},
+        "ResetBody": {"type": "object", "additionalProperties": False, "properties": {
+            "seed": {"type": ["integer", "null"], "minimum": 0},
+            "options": {"type": ["object", "null"]}}},
+        "Reset": {"type": "object", "required": ["observation", "info"], "properties": {
+            "observation": {"$ref": "#/components/schemas/Observation"},
+            "info": {"$ref": "#/components/schemas/Info"}}},
+        "StepBody": {"type": "object", "required": ["action"], "additionalProperties": False,
+                     "properties": {"action": {"$ref": "#/components/schemas/Action"},
+                                    "repeat_action": {"type": "integer", "minimum": 1,
+                                                      "maximum": MAX_REPEAT_ACTION}}},
+        "Step": {"type": "object", "required": ["observation", "reward", "terminated",
+                                                "truncated", "info"], "properties": {
+            "observation": {"$ref": "#/components/schemas/Observation"},
+            "reward": {"type": "number"}, "terminated": {"type": "boolean"},
+            "truncated": {"type": "boolean"}, "info": {"$ref": "#/components/schemas/Info"}}},
+        "SpaceAnswer": {"type": "object", "required": ["space", "schema"], "properties": {
+            "space": {"$ref": "#/components/schemas/Space"},
+            "schema": {"type": "object", "description": "a JSON Schema (2020-12)"}}},
+        "Sample": {"type": "object", "required": ["action"], "properties": {
+            "action": {"$ref": "#/components/schemas/Action"}}},
+        "Contains": {"type": "object", "required": ["member"], "properties": {
+            "member": {"type": "boolean"}, "reason": {"type": "string"}}},
+        "SnapshotBody": {"type": "object", "required": ["snapshot"], "properties": {
+            "snapshot": {"type": "object", "description": "the state as data: configuration, "
+                                                          "generator, actions since the reset"}}},
+    }
+
+
+def target_schemas(gateway: Gateway) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The observation and action schemas of the TARGET's environment (any value without)."""
+    hello = gateway.hello
+    if hello is None:
+        return ({"description": "a value of the session's observation space"},
+                {"description": "a value of the session's action space"})
+    return json_schema(hello.observation_space), json_schema(hello.action_space, images=False)

@@ -1,0 +1,570 @@
+"""The inspector's timelines: recordings to scrub, step, tick, branch and compare from the page.
+
+:class:`Timelines` holds the :class:`~rlenv_tools.timeline.Timeline` of each recording the page
+can open (files given to ``rlenv replay FILE --inspect``, or the recent episodes of a watched
+instance, see :meth:`Timelines.open_recent`), each with its tree of branches, numbered in the
+order they were made (branch 0 is the episode itself). A timeline is not thread-safe, and a
+root and its branches share its processes: every call on one of them holds its root's lock. A
+timeline is opened (its environment started, the episode re-simulated once) when the page
+first asks for it.
+
+Branches are made from the page with the agent's keys (its ``demonstration_keys``, the map the
+page's Take control uses, :func:`~rlenv_tools.inspector._control.key_map`): the first key
+press makes a branch of one action at the scrubbed step, each next press lengthens it by one
+action (``branch(len(b), [action])``: the tree keeps it under its branch point); or with a
+policy: ``policies={"name": callable}`` given from Python, or ``--policy FILE.onnx`` on the
+command line (:class:`~rlenv.serving.onnx_policy.OnnxPolicy`, loaded once).
+
+What the page gets is JSON: see :meth:`Timelines.step`, :meth:`Timelines.ticks`,
+:meth:`Timelines.compare` and :meth:`Timelines.describe`.
+
+The page's timelines are bounded: at most ``max_recent`` recent episodes and ``max_files``
+recordings from files are open at once (past either, the oldest opened is closed: a recent
+episode leaves the list, a file stays in it and is opened again when asked), and each open
+timeline holds at most its share of the page's ``max_processes`` and ``max_memory``. A
+recording's target is imported only where it is installed, unless the page was given a
+``target`` or ``trust_target`` (:mod:`rlenv_client.trusted_targets`).
+"""
+
+from __future__ import annotations
+
+import functools
+import threading
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from gymnasium import spaces
+
+from rlenv.protocol.errors import RemoteError
+from rlenv_client.launcher import ServerStartError
+from rlenv_client.replay import EpisodeFile, digest
+from rlenv_client.session import LOST
+from rlenv_tools.inspector._control import key_map
+from rlenv_tools.inspector._watch import InspectorError, _shown, to_json
+from rlenv_tools.timeline import Timeline
+
+__all__ = ["MAX_BRANCH_STEPS", "MAX_TICKS", "Timelines", "episode_id"]
+
+MAX_BRANCH_STEPS = 100_000
+"""The most steps a policy's branch may take (``max_steps``)."""
+MAX_TICKS = 100
+"""The most ticks one answer of the tick view holds (``count``; a page of a long step)."""
+
+Policy = Callable[[Any], Any]
+_LISTED = 32  # recent episodes remembered per instance once the page was shown them
+
+
+@dataclass
+class _Branch:
+    """One node of a timeline's tree: a branch (or the episode itself, number 0)."""
+
+    number: int
+    parent: int | None
+    at: int  # the branch point: the last step it shares with its parent
+    how: str  # "episode", "keys" or "policy"
+    timeline: Timeline
+    actions: list[str] = field(default_factory=list)  # the keys pressed, or the policy's name
+
+    def describe(self) -> dict[str, Any]:
+        label = {"episode": "the episode", "policy": f"policy {''.join(self.actions)}"}.get(
+            self.how, f"keys {' '.join(_key_name(k) for k in self.actions[-6:])}" +
+            (" …" if len(self.actions) > 6 else ""))
+        return {"branch": self.number, "parent": self.parent, "at": self.at, "how": self.how,
+                "label": label, "length": len(self.timeline), "ended": self.timeline.ended}
+
+
+class _Root:
+    """A recording, its timeline once opened, its branches, and the lock they share."""
+
+    def __init__(self, number: int, name: str, load: Callable[[], EpisodeFile],
+                 origin: dict[str, Any]) -> None:
+        self.number = number
+        self.name = name
+        self.load = load
+        self.origin = origin
+        self.lock = threading.Lock()
+        self.branches: dict[int, _Branch] = {}
+        self.keys: dict[str, Any] = {}
+        self.keys_error = ""
+        self.agents: list[str] = []
+        self.diffs: dict[tuple[int, int], tuple[Timeline, Timeline, Any]] = {}
+        self.error = ""
+        self.closed = False
+        self.opened = 0  # when it was last opened (the order of openings), 0: not open
+
+    @property
+    def timeline(self) -> Timeline | None:
+        branch = self.branches.get(0)
+        return None if branch is None else branch.timeline
+
+
+class Timelines:
+    """The timelines the page can open, their branches, and the policies to branch with.
+
+    Args:
+        paths: recordings (``episode-NNNN.rlenv`` files) to offer.
+        policies: policies to branch with, by name (``callable(observation) -> action``).
+        unavailable: policies that could not be loaded, by name: why (the page says so).
+        target: the environment to serve (``MODULE:CLASS``; default: each recording's, where
+            it is an installed package).
+        trust_target: import each recording's target whatever it is (``--trust-target``).
+        checkpoint_every: see :class:`~rlenv_tools.timeline.Timeline` (default: its own).
+        max_recent: how many recent episodes of live instances stay open at once (the oldest
+            opened is closed, with its branches, to make room).
+        max_files: how many recordings from files stay open at once (the oldest opened is
+            closed, with its branches; it stays offered, and opens again when asked).
+        max_processes: the most processes the page's timelines hold in all (each open one
+            gets an equal share).
+        max_memory: the most memory (PSS, bytes) they hold in all (shared the same way).
+    """
+
+    def __init__(self, paths: Iterable[str | Path] = (), *,
+                 policies: Mapping[str, Policy] | None = None,
+                 unavailable: Mapping[str, str] | None = None, target: str | None = None,
+                 trust_target: bool = False, checkpoint_every: int | None = None,
+                 max_recent: int = 3, max_files: int = 3, max_processes: int = 1024,
+                 max_memory: int = 4 << 30) -> None:
+        self.policies = dict(policies or {})
+        self.unavailable = dict(unavailable or {})
+        self._target = target
+        self._trust = trust_target
+        self._every = checkpoint_every
+        self._max_recent = max_recent
+        self._max_files = max_files
+        self._share = {"max_processes": max_processes // (max_recent + max_files),
+                       "max_memory": max_memory // (max_recent + max_files)}
+        self._openings = 0
+        self._lock = threading.Lock()  # the registry; each root has its own
+        self._roots: dict[int, _Root] = {}
+        self._listed: dict[tuple[int, int], dict[str, EpisodeFile]] = {}
+        self._next = 0
+        for path in paths:
+            self.add_file(path)
+
+    # --- which timelines -----------------------------------------------------------------------
+
+    def add_file(self, path: str | Path) -> int:
+        """Offer the recording at ``path`` (read now, opened when first asked); its number.
+
+        Raises:
+            ValueError: the file is not an rlenv episode.
+        """
+        episode = EpisodeFile.load(path)
+        number = self._add(Path(path).name, lambda: episode, {"file": str(path)})
+        with self._lock:
+            files = [root for root in self._roots.values() if "file" in root.origin]
+            for root, name in zip(files, _distinct([Path(r.origin["file"]) for r in files]),
+                                  strict=True):
+                root.name = name
+        return number
+
+    def add_episode(self, episode: EpisodeFile, name: str, origin: Mapping[str, Any]) -> int:
+        """Offer ``episode`` (a live instance's recent one, say) as ``name``; its number."""
+        return self._add(name, lambda: episode, dict(origin))
+
+    def open_recent(self, episodes: list[EpisodeFile], server: int, instance: int,
+                    identifier: str) -> dict[str, Any]:
+        """Offer the recent episode whose :func:`episode_id` is ``identifier``; its description.
+
+        An identifier, not a place in ``episodes``: the list moves on as episodes finish. It is
+        looked for in ``episodes`` (the server's now), then in those last :meth:`listed`. The
+        oldest recent one opened is closed past ``max_recent`` (and leaves the list).
+
+        Raises:
+            InspectorError: 404, no such episode (or no longer kept).
+        """
+        with self._lock:
+            listed = self._listed.get((server, instance), {})
+        found = [episode for episode in episodes if episode_id(episode) == identifier]
+        if not found and identifier in listed:
+            found = [listed[identifier]]
+        if not found:
+            raise InspectorError(404, f"instance {instance} of server {server} keeps no episode "
+                                      f"{identifier!r:.40} (any more: newer ones replaced it)")
+        origin = {"server": server, "instance": instance, "recent": identifier}
+        steps = sum(event[0] == "action" for event in found[0].snapshot["events"])
+        number = self.add_episode(found[0], f"server {server} · instance {instance} · "
+                                  f"recent episode of {steps} steps ({identifier[:6]})", origin)
+        return self.describe(number)
+
+    def listed(self, server: int, instance: int, episodes: list[EpisodeFile]) -> None:
+        """Remember the recent ``episodes`` the page was shown for an instance (the last 32).
+
+        :meth:`open_recent` finds them even once the server has dropped them (a fast trainer
+        finishes several episodes while a person reads the list).
+        """
+        with self._lock:
+            kept = self._listed.setdefault((server, instance), {})
+            for episode in episodes:
+                kept[episode_id(episode)] = episode
+            for identifier in list(kept)[:max(0, len(kept) - _LISTED)]:
+                del kept[identifier]  # the oldest listed first
+
+    def list(self) -> dict[str, Any]:
+        """Every timeline offered (number, name, origin, whether open), and the policies."""
+        with self._lock:
+            roots = list(self._roots.values())
+        return {"timelines": [{"timeline": root.number, "name": root.name,
+                               "origin": root.origin, "open": root.timeline is not None,
+                               "error": root.error} for root in roots],
+                "policies": sorted(self.policies),
+                "unavailable": dict(self.unavailable)}
+
+    def describe(self, number: int) -> dict[str, Any]:
+        """One timeline (opened if it was not): its length, keys and tree of branches.
+
+        Raises:
+            InspectorError: 404 no such timeline; 422 its environment did not start, or
+                re-simulated the recording differently.
+        """
+        with self._using(number) as root:
+            self._opened(root)
+            return self._describe(root)
+
+    # --- what the page shows ---------------------------------------------------------------------
+
+    def step(self, number: int, branch: int, step: int) -> dict[str, Any]:
+        """The state after ``step`` of ``branch``: what the page draws and lists.
+
+        ``{"timeline", "branch", "step", "length", "reward", "terminated", "truncated",
+        "info", "observation" (by agent, as the live page shows it), "draw" (the scene's draw
+        list), "properties" (every node's exported values, by path)}``.
+
+        Raises:
+            InspectorError: 404 no such timeline or branch; 400 no such step; 422 the
+                timeline's environment failed.
+        """
+        with self._using(number) as root:
+            timeline = self._branch(root, branch).timeline
+            state = self._call(lambda: timeline.at(_step(timeline, step)))
+            return {"timeline": number, "branch": branch, "step": step,
+                    "length": len(timeline), "reward": to_json(state.reward),
+                    "terminated": state.terminated, "truncated": state.truncated,
+                    "info": to_json(state.info), "observation": self._shown(root,
+                                                                           state.observation),
+                    "draw": to_json(state.draw), "properties": to_json(state.properties)}
+
+    def ticks(self, number: int, branch: int, step: int, first: int = 1,
+              count: int = MAX_TICKS) -> dict[str, Any]:
+        """A page of the physics ticks inside ``step``'s action: ``count`` from tick ``first``.
+
+        ``{"timeline", "branch", "step", "frames" (the ticks the action asked for), "first",
+        "next" (the first tick of the next page, ``None`` after the last), "ticks": [...]}``,
+        each tick with ``tick``, ``reward``, ``terminated``, ``truncated``, ``info``,
+        ``observation``, ``properties`` and ``draw`` (the scene after the tick). A page holds
+        at most :data:`MAX_TICKS`, so no answer (nor the timeline's lock) lasts long whatever
+        the step's ``repeat_action``.
+
+        Raises:
+            InspectorError: as :meth:`step` (step 0 has no ticks: 400; ``first`` past the
+                step's ticks, or ``count`` outside 1 to :data:`MAX_TICKS`: 400).
+        """
+        if not 1 <= count <= MAX_TICKS:
+            raise InspectorError(400, f"count must be 1 to {MAX_TICKS}")
+        with self._using(number) as root:
+            timeline = self._branch(root, branch).timeline
+            if not 1 <= step <= len(timeline):
+                raise InspectorError(400, f"step {step} has no action: steps 1 to "
+                                          f"{len(timeline)} have")
+            frames = timeline.frames(step)
+            ticks = self._call(lambda: timeline.ticks(step, first=first, count=count))
+            more = len(ticks) == count and first + count <= frames and \
+                not (ticks[-1].terminated or ticks[-1].truncated)
+            return {"timeline": number, "branch": branch, "step": step, "frames": frames,
+                    "first": first, "next": first + count if more else None, "ticks": [
+                        {"tick": tick.tick, "reward": to_json(tick.reward),
+                         "terminated": tick.terminated, "truncated": tick.truncated,
+                         "info": to_json(tick.info),
+                         "observation": self._shown(root, tick.observation),
+                         "properties": to_json(tick.properties), "draw": to_json(tick.draw)}
+                        for tick in ticks]}
+
+    def compare(self, number: int, first: int, second: int, step: int) -> dict[str, Any]:
+        """Two branches side by side (``a``: ``first``, ``b``: ``second``).
+
+        Each one's reward at every step, their first difference
+        (:meth:`~rlenv_tools.timeline.Timeline.diff`), and at ``step`` each one's observation
+        and reward and the second's observation minus the first's (``None`` where a branch does
+        not reach ``step``).
+
+        Raises:
+            InspectorError: as :meth:`step` (a step neither reaches: 400).
+        """
+        with self._using(number) as root:
+            a, b = self._branch(root, first), self._branch(root, second)
+            if not 0 <= step <= max(len(a.timeline), len(b.timeline)):
+                raise InspectorError(400, f"no step {step}: the branches have steps 0 to "
+                                          f"{max(len(a.timeline), len(b.timeline))}")
+            diff = self._diff(root, a, b)
+            sides = {}
+            for name, branch in (("a", a), ("b", b)):
+                rewards = branch.timeline.rewards
+                state = self._call(functools.partial(branch.timeline.at, step)) \
+                    if step <= len(branch.timeline) else None
+                sides[name] = {"branch": branch.number, "label": branch.describe()["label"],
+                               "length": len(branch.timeline), "rewards": to_json(rewards),
+                               "return": to_json(sum(rewards)),
+                               "observation": None if state is None else
+                               self._shown(root, state.observation),
+                               "reward": None if state is None else to_json(state.reward)}
+            reached = step < len(diff.observations)
+            return {"timeline": number, "step": step, "a": sides["a"], "b": sides["b"],
+                    "first_difference": diff.first_difference,
+                    "difference": self._shown(root, diff.observations[step]) if reached
+                    else None}
+
+    # --- branching -------------------------------------------------------------------------------
+
+    def branch_keys(self, number: int, branch: int, step: int, key: str) -> dict[str, Any]:
+        """A new branch of ``branch`` at ``step``: one action, the agent's for ``key``.
+
+        Returns the timeline's description with ``"branch"``: the new one's number.
+
+        Raises:
+            InspectorError: as :meth:`step`; 422 a key outside the agent's map (or none).
+        """
+        with self._using(number) as root:
+            parent = self._branch(root, branch)
+            action = self._action(root, key)
+            _step(parent.timeline, step)
+            made = self._call(lambda: parent.timeline.branch(step, [action]))
+            new = self._add_branch(root, branch, step, "keys", made, [key])
+            return {**self._describe(root), "branch": new.number}
+
+    def extend(self, number: int, branch: int, key: str) -> dict[str, Any]:
+        """Lengthen a key branch by one action, the agent's for ``key``.
+
+        It keeps its number and its place in the tree.
+
+        Raises:
+            InspectorError: as :meth:`branch_keys`; 409 not a key branch, or its episode ended.
+        """
+        with self._using(number) as root:
+            node = self._branch(root, branch)
+            if node.how != "keys":
+                raise InspectorError(409, f"branch {branch} is {node.describe()['label']}: "
+                                          "only a key branch grows key by key")
+            if node.timeline.ended:
+                raise InspectorError(409, f"branch {branch}'s episode ended at step "
+                                          f"{len(node.timeline)}: branch from an earlier step")
+            action = self._action(root, key)
+            timeline = node.timeline
+            node.timeline = self._call(lambda: timeline.branch(len(timeline), [action]))
+            node.actions.append(key)
+            return {**self._describe(root), "branch": node.number}
+
+    def branch_policy(self, number: int, branch: int, step: int, policy: str,
+                      max_steps: int) -> dict[str, Any]:
+        """A new branch of ``branch`` at ``step``, its actions chosen by ``policy``.
+
+        At most ``max_steps`` of them; fewer where its episode ends.
+
+        Raises:
+            InspectorError: as :meth:`step`; 404 no such policy (or 422 one that could not be
+                loaded, saying why); 422 the policy failed.
+        """
+        if policy not in self.policies:
+            if policy in self.unavailable:
+                raise InspectorError(422, f"policy {policy} is unavailable: "
+                                          f"{self.unavailable[policy]}")
+            known = ", ".join(sorted(self.policies)) or "none (rlenv replay FILE --inspect " \
+                                                        "--policy FILE.onnx gives one)"
+            raise InspectorError(404, f"no policy {policy!r:.40}: the policies are {known}")
+        if not 1 <= max_steps <= MAX_BRANCH_STEPS:
+            raise InspectorError(400, f"max_steps must be 1 to {MAX_BRANCH_STEPS}")
+        chosen = self.policies[policy]
+        with self._using(number) as root:
+            parent = self._branch(root, branch)
+            _step(parent.timeline, step)
+            try:
+                made = self._call(lambda: parent.timeline.branch(step, policy=chosen,
+                                                                 max_steps=max_steps))
+            except InspectorError:
+                raise
+            except Exception as error:  # the policy's own failure: the page says which
+                raise InspectorError(422, f"policy {policy} failed: {error!r:.200}") from None
+            new = self._add_branch(root, branch, step, "policy", made, [policy])
+            return {**self._describe(root), "branch": new.number}
+
+    def close(self) -> None:
+        """Close every timeline (its processes end); safe to repeat."""
+        with self._lock:
+            roots = list(self._roots.values())
+        for root in roots:
+            self._remove(root)
+
+    # --- inside ----------------------------------------------------------------------------------
+
+    def _add(self, name: str, load: Callable[[], EpisodeFile], origin: dict[str, Any]) -> int:
+        with self._lock:
+            number, self._next = self._next, self._next + 1
+            self._roots[number] = _Root(number, name, load, origin)
+            return number
+
+    def _remove(self, root: _Root) -> None:
+        with self._lock:
+            self._roots.pop(root.number, None)
+        with root.lock:
+            root.closed = True
+            self._shut(root)
+
+    @staticmethod
+    def _shut(root: _Root) -> None:
+        """End the root's timeline and branches (its lock held)."""
+        if root.timeline is not None:
+            root.timeline.close()
+        root.branches.clear()
+        root.diffs.clear()
+        root.opened = 0
+
+    @contextmanager
+    def _using(self, number: int) -> Iterator[_Root]:
+        """The root ``number``, its lock held; then the oldest opened closed past the bounds."""
+        root = self._root(number)
+        try:
+            with root.lock:
+                yield root
+        finally:
+            self._make_room()
+
+    def _make_room(self) -> None:
+        """Close the oldest opened timelines past ``max_recent`` and ``max_files``.
+
+        A recent episode leaves the list; a file stays in it, to open again.
+        """
+        with self._lock:
+            opened = sorted((root for root in self._roots.values() if root.opened),
+                            key=lambda root: root.opened)
+        recent = [root for root in opened if "recent" in root.origin]
+        files = [root for root in opened if "recent" not in root.origin]
+        for root in recent[:max(0, len(recent) - self._max_recent)]:
+            self._remove(root)
+        for root in files[:max(0, len(files) - self._max_files)]:
+            with root.lock:
+                self._shut(root)
+
+    def _root(self, number: int) -> _Root:
+        with self._lock:
+            root = self._roots.get(number)
+        if root is None:
+            raise InspectorError(404, f"no timeline {number}: see api/timelines")
+        return root
+
+    def _opened(self, root: _Root) -> Timeline:
+        """The root's timeline, opened (its environment started) on first use."""
+        if root.closed:
+            raise InspectorError(404, f"timeline {root.number} was closed")
+        if root.timeline is not None:
+            return root.timeline
+        try:  # a live server's recent episode has no digests: the timeline records them
+            timeline = Timeline(root.load(), target=self._target, trust_target=self._trust,
+                                checkpoint_every=self._every, **self._share)
+        except (ValueError, ServerStartError, RuntimeError, OSError, RemoteError,
+                *LOST) as error:
+            root.error = f"cannot open {root.name}: {error}"
+            raise InspectorError(422, root.error) from None
+        root.error = ""
+        with self._lock:
+            self._openings += 1
+            root.opened = self._openings
+        root.branches[0] = _Branch(0, None, 0, "episode", timeline)
+        self._learn_keys(root, timeline)
+        return timeline
+
+    @staticmethod
+    def _learn_keys(root: _Root, timeline: Timeline) -> None:
+        """The agent's key map and names, from the timeline's hello and node tree."""
+        try:
+            hello = timeline.hello
+            root.agents = list(hello.agents)
+            space: spaces.Space = hello.action_space
+            root.keys = key_map(timeline.tree(0), space)
+        except InspectorError as error:
+            root.keys, root.keys_error = {}, str(error)
+        except Exception as error:  # the page still scrubs; it says why keys are off
+            root.keys, root.keys_error = {}, f"the timeline did not say: {error!r:.200}"
+
+    def _branch(self, root: _Root, number: int) -> _Branch:
+        self._opened(root)
+        branch = root.branches.get(number)
+        if branch is None:
+            raise InspectorError(404, f"timeline {root.number} has no branch {number} "
+                                      f"(branches 0 to {max(root.branches)})")
+        return branch
+
+    def _add_branch(self, root: _Root, parent: int, at: int, how: str, timeline: Timeline,
+                    actions: Sequence[str]) -> _Branch:
+        number = max(root.branches) + 1
+        root.branches[number] = _Branch(number, parent, at, how, timeline, list(actions))
+        return root.branches[number]
+
+    def _action(self, root: _Root, key: str) -> Any:
+        if key not in root.keys:
+            if not root.keys:
+                raise InspectorError(422, f"no keys to branch with: {root.keys_error}")
+            raise InspectorError(422, f"{key!r:.20} is none of the agent's keys "
+                                      f"({', '.join(map(_key_name, root.keys))})")
+        return root.keys[key]
+
+    def _describe(self, root: _Root) -> dict[str, Any]:
+        timeline = self._opened(root)
+        return {"timeline": root.number, "name": root.name, "origin": root.origin,
+                "target": timeline.episode.target, "length": len(timeline),
+                "ended": timeline.ended, "agents": root.agents,
+                "keys": list(root.keys), "keys_error": root.keys_error,
+                "policies": sorted(self.policies), "unavailable": dict(self.unavailable),
+                "branches": [branch.describe() for branch in root.branches.values()]}
+
+    def _diff(self, root: _Root, a: _Branch, b: _Branch) -> Any:
+        kept = root.diffs.get((a.number, b.number))
+        if kept is None or kept[0] is not a.timeline or kept[1] is not b.timeline:
+            kept = (a.timeline, b.timeline, self._call(lambda: a.timeline.diff(b.timeline)))
+            root.diffs[(a.number, b.number)] = kept
+        return kept[2]
+
+    def _shown(self, root: _Root, observation: Any) -> dict[str, Any]:
+        """An observation as the live page shows it, by agent."""
+        if len(root.agents) > 1 and isinstance(observation, Mapping):
+            return {name: _shown(observation[name]) for name in root.agents}
+        return {root.agents[0] if root.agents else "agent": _shown(observation)}
+
+    @staticmethod
+    def _call(compute: Callable[[], Any]) -> Any:
+        """``compute()``, its timeline's failures as the page's errors."""
+        try:
+            return compute()
+        except IndexError as error:
+            raise InspectorError(400, str(error)) from None
+        except (RuntimeError, RemoteError, *LOST) as error:
+            raise InspectorError(422, f"the timeline's environment failed: {error}") from None
+
+
+def episode_id(episode: EpisodeFile) -> str:
+    """A recent episode's identifier: the digest of its snapshot (the same at every asking)."""
+    return digest(episode.snapshot)
+
+
+def _distinct(paths: list[Path]) -> list[str]:
+    """Each file's name, with as much of its folder as tells apart files of the same name."""
+    resolved = [path.resolve().parts for path in paths]
+    names = []
+    for parts in resolved:
+        depth = 1
+        while depth < len(parts) and sum(other[-depth:] == parts[-depth:]
+                                         for other in resolved) > 1:
+            depth += 1
+        names.append("/".join(parts[-depth:]).lstrip("/"))
+    return names
+
+
+def _step(timeline: Timeline, step: int) -> int:
+    if not 0 <= step <= len(timeline):
+        raise InspectorError(400, f"no step {step}: the timeline has steps 0 to {len(timeline)}")
+    return step
+
+
+def _key_name(key: str) -> str:
+    return "Space" if key == " " else key

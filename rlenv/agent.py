@@ -7,6 +7,7 @@ from typing import Any, ClassVar
 
 from gymnasium import spaces
 
+from rlenv.demonstration_keys import idle_action
 from rlenv.rl_node import RLNode
 
 __all__ = ["RLAgent"]
@@ -37,6 +38,17 @@ class RLAgent(RLNode):
             each answer).
         terminated: the episode reached a terminal state of the task.
         truncated: the episode was cut short by something outside the task (a time limit).
+        decision_period: physics ticks between the agent's decisions (ML-Agents'
+            ``DecisionRequester.DecisionPeriod``); ``None``, the default, decides at every
+            answer, every ``repeat_action`` ticks. An agent not due for a decision is absent
+            from that answer and needs no action (docs/several-agents.md, "Decision periods").
+        decision_offset: the tick, within each period, at which the agent decides (ML-Agents'
+            ``DecisionStep``): it decides at the episode's ticks ``t`` with
+            ``(t - decision_offset) % decision_period == 0``; staggers agents of one period.
+        act_between_decisions: whether the agent's last action goes on applying on the ticks
+            between its decisions (the default, ML-Agents' ``TakeActionsBetweenDecisions``).
+            When ``False`` the action applies on the decision's first tick only, and the agent
+            gets :meth:`no_action` on the others.
         demonstration_keys: the keys a person acts with from the inspector's page (``rlenv
             inspect --record-demonstrations DIR``): key names as the browser's
             ``KeyboardEvent.key`` gives them (``"ArrowLeft"``, ``"a"``, ``" "``) mapped to
@@ -53,6 +65,9 @@ class RLAgent(RLNode):
     action_space: spaces.Space
     observation_space: spaces.Space
     demonstration_keys: ClassVar[Mapping[str, Any] | None] = None
+    decision_period: int | None = None
+    decision_offset: int = 0
+    act_between_decisions: bool = True
 
     def __init__(self, name: str | None = None) -> None:
         super().__init__(name)
@@ -67,6 +82,15 @@ class RLAgent(RLNode):
         ``_physics_process`` on every tick (forces are cleared after each physics step).
         """
         raise NotImplementedError(f"{type(self).__name__} must implement set_action")
+
+    def no_action(self) -> Any:
+        """The action an agent that does not act between its decisions gets on those ticks.
+
+        By default the idle action of :attr:`action_space` (zero force: 0, clipped into a
+        ``Box``'s bounds; a ``Discrete``'s ``start``). Override it when the idle action of
+        your space does something.
+        """
+        return idle_action(self.action_space)
 
     def reset(self, arguments: Any) -> None:
         """Put the agent in its initial state, at the start of every episode.

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-__all__ = ["default_keys", "keys_of"]
+__all__ = ["default_keys", "idle_action", "keys_of"]
 
 _ARROWS = (("ArrowLeft", "ArrowRight"), ("ArrowDown", "ArrowUp"))  # per axis: (-, +)
 
@@ -38,7 +38,7 @@ def default_keys(space: spaces.Space) -> dict[str, Any]:
             keys["ArrowDown"] = start + 1
         return keys
     if isinstance(space, spaces.Box) and space.shape in ((1,), (2,)):
-        idle = np.clip(np.zeros(space.shape), space.low, space.high)
+        idle = idle_action(space).astype(np.float64)
         keys = {}
         for axis in range(space.shape[0]):
             for key, bound, fallback in ((_ARROWS[axis][0], space.low[axis], -1.0),
@@ -48,6 +48,32 @@ def default_keys(space: spaces.Space) -> dict[str, Any]:
                 keys[key] = action.astype(space.dtype)
         return keys
     return {}
+
+
+def idle_action(space: spaces.Space) -> Any:
+    """The space's idle action: 0 (clipped into a ``Box``'s bounds), a ``Discrete``'s ``start``.
+
+    What a person's agent does while no key is held, and what an agent that does not act
+    between its decisions gets (:meth:`~rlenv.agent.RLAgent.no_action`).
+
+    ``Tuple`` and ``Dict`` spaces get their items' idle actions.
+
+    Raises:
+        ValueError: a space with no such action (a ``Text``, a ``Graph``...).
+    """
+    if isinstance(space, spaces.Discrete):
+        return int(space.start)
+    if isinstance(space, spaces.Box):
+        return np.clip(np.zeros(space.shape), space.low, space.high).astype(space.dtype)
+    if isinstance(space, spaces.MultiDiscrete):
+        return np.array(space.start, dtype=space.dtype)
+    if isinstance(space, spaces.MultiBinary):
+        return np.zeros(space.shape, dtype=space.dtype)
+    if isinstance(space, spaces.Tuple):
+        return tuple(idle_action(item) for item in space.spaces)
+    if isinstance(space, spaces.Dict):
+        return {key: idle_action(item) for key, item in space.spaces.items()}
+    raise ValueError(f"{space} has no idle action")
 
 
 def keys_of(agent: Any) -> dict[str, Any]:

@@ -16,19 +16,20 @@ called by rlenv).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
 from gymnasium.utils import seeding
 
 from rlenv.agent import RLAgent
 from rlenv.communication import Communication
+from rlenv.node import Node
 from rlenv.rl_node import RLNode
 from rlenv.scene2d.render import draw, draw_list
 from rlenv.timer import PhysicsFramesTimer
 from rlenv.world import RLEnvWorld
 
-__all__ = ["RLEnvironment", "give_action"]
+__all__ = ["AgentWatch", "RLEnvironment", "give_action"]
 
 
 class RLEnvironment(RLNode):
@@ -66,8 +67,18 @@ class RLEnvironment(RLNode):
             (constructor, entering the tree, ``_ready``) at the reset after its code raised
             while serving, keeping its configuration and random generator; the reset's
             ``info["rebuilt"]`` says why. Set it to ``False`` to keep the same objects.
+        possible_agents: every agent that may appear in an episode, a map from its name to
+            its RLAgent class (PettingZoo's ``possible_agents``), or ``None`` (the default):
+            the agents present once ``_ready`` ran are all there is. Declare it to let agents
+            join during an episode (``add_child`` in a hook, a signal handler or a deferred
+            call) and leave it (``queue_free``, ``remove_child``): the hello lists each one's
+            spaces, so that clients size their buffers before the first spawn. Agents still
+            need their spaces as class attributes. See docs/several-agents.md, "Agents that
+            come and go".
         agent: the agent node (the first of :attr:`agents`).
-        agents: every agent; several make the spaces ``Dict`` spaces keyed by agent name.
+        agents: the agents in play; several (or :attr:`possible_agents`) make the spaces
+            ``Dict`` spaces keyed by agent name. While agents come and go, rlenv keeps this
+            list: an agent joins it when added, and leaves it when its episode ends.
         world: the world node.
         physics_frames_timer: counts the ticks of the running action.
         communication: the environment's server (:class:`~rlenv.communication.Communication`).
@@ -92,6 +103,7 @@ class RLEnvironment(RLNode):
     exported: ClassVar[tuple[str, ...]] = ("real_time",)
     reset_options: ClassVar[tuple[str, ...] | None] = None
     rebuild_after_error: ClassVar[bool] = True
+    possible_agents: ClassVar[Mapping[str, type[RLAgent]] | None] = None
     _IS_ENVIRONMENT: ClassVar[bool] = True
 
     def __init__(self, name: str | None = None, *, repeat_action: int = 4) -> None:
@@ -104,6 +116,7 @@ class RLEnvironment(RLNode):
         self.communication = Communication()
         self.repeat_action = repeat_action
         self.__np_random: np.random.Generator | None = None
+        self._agent_watch: AgentWatch | None = None  # the server's (rlenv.serving)
 
     @property
     def np_random(self) -> np.random.Generator:
@@ -124,7 +137,36 @@ class RLEnvironment(RLNode):
     @property
     def multi_agent(self) -> bool:
         """Whether the environment has several agents (spaces and outcomes keyed by name)."""
-        return len(self.agents) > 1
+        return len(self.agents) > 1 or self.possible_agents is not None
+
+    def add_child(self, node: Node) -> None:
+        """Add ``node`` (see :meth:`Node.add_child`); an RLAgent added in an episode joins it.
+
+        Raises:
+            ValueError: an agent that may not join: its name is used already in this episode
+                (checked before the tree would make it unique), or the environment's
+                :attr:`possible_agents` does not name it or names another class.
+        """
+        watch = self._agent_watch
+        if watch is None or not isinstance(node, RLAgent):
+            super().add_child(node)
+            return
+        watch.joining(node)
+        super().add_child(node)
+        if node.get_parent() is self:  # not deferred to the end of the pass
+            watch.joined(node)
+
+    def remove_child(self, node: Node) -> None:
+        """Remove ``node`` (see :meth:`Node.remove_child`); an agent in play leaves the episode.
+
+        Its last observation is taken first, while it is still in the tree.
+        """
+        watch = self._agent_watch
+        tree = self.get_tree() if self.is_inside_tree() else None
+        if (watch is not None and isinstance(node, RLAgent) and node.get_parent() is self
+                and not (tree is not None and tree.is_processing())):
+            watch.leaving(node)
+        super().remove_child(node)
 
     def _ready(self) -> None:
         if not self.agents:
@@ -236,6 +278,19 @@ class RLEnvironment(RLNode):
         else.
         """
         return draw_list(self, self.render_view)
+
+
+class AgentWatch(Protocol):
+    """What the server does when an agent joins or leaves an episode (set by rlenv.serving)."""
+
+    def joining(self, agent: RLAgent) -> None:
+        """Refuse ``agent`` (raise ``ValueError``, saying why) unless it may join now."""
+
+    def joined(self, agent: RLAgent) -> None:
+        """``agent`` is in the tree: it joins the episode at the next answer."""
+
+    def leaving(self, agent: RLAgent) -> None:
+        """``agent`` is about to leave the tree: its last transition is taken now."""
 
 
 def give_action(agents: list[RLAgent], action: Any) -> None:

@@ -143,6 +143,10 @@ class SceneTree(SignalOwner):
 
     # --- deferred calls, groups -------------------------------------------------------------
 
+    def is_processing(self) -> bool:
+        """Whether a pass is under way: changes to the tree wait for its end (deferred)."""
+        return self._running is not None
+
     def call_deferred(self, callback: Callable[..., Any], *args: Any) -> None:
         """Call ``callback(*args)`` after the current pass, in the order deferred."""
         self._deferred.append((callback, args))

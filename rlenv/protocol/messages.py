@@ -84,6 +84,10 @@ class Hello:
     ``driven`` (protocol 2.6) names the agents the server drives itself (``rlenv serve
     --policy``: a policy file or the agent's heuristic), in ``agents``' order; empty when none
     is, or from an older server. A trainer leaves them out: it needs no actions for them.
+    ``possible_agents`` (protocol 2.6) maps each name that may appear in an episode to its
+    class's name, in ``agents``' order, when agents come and go or decide at their own pace:
+    then an answer holds only the agents due to decide and those that left (docs/protocol.md,
+    "Agents that come and go"). ``None`` when every agent is in every answer.
     """
 
     environment: str
@@ -99,6 +103,7 @@ class Hello:
     limits: dict[str, Any] = field(default_factory=dict)
     target: str | None = None
     driven: tuple[str, ...] = ()
+    possible_agents: dict[str, str] | None = None
     protocol: tuple[int, int] = PROTOCOL_VERSION
 
     def to_wire(self) -> dict[str, Any]:
@@ -119,6 +124,7 @@ class Hello:
                 "limits": self.limits,
                 "target": self.target,
                 "driven": list(self.driven),
+                "possible_agents": self.possible_agents,
             }
         }
 
@@ -156,10 +162,22 @@ class Hello:
                 limits=dict(body.get("limits", {})),
                 target=_target(body.get("target")),
                 driven=_driven(body.get("driven", []), body["agents"]),
+                possible_agents=_possible(body.get("possible_agents"), body["agents"]),
                 protocol=(int(version[0]), int(version[1])),
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise RemoteProtocolError(f"invalid hello: {exc!r}") from None
+
+
+def _possible(value: Any, agents: Any) -> dict[str, str] | None:
+    """A hello's possible agents: nil, or a map from each of ``agents`` to a class name."""
+    if value is None:
+        return None
+    if not (isinstance(value, Mapping) and list(value) == list(agents)
+            and all(isinstance(name, str) for name in value.values())):
+        raise TypeError(f"possible_agents must map each of agents, in order, to a class name, "
+                        f"got {value!r:.80}")
+    return dict(value)
 
 
 def _target(value: Any) -> str | None:

@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
+from rlenv.demonstration_keys import idle_action
 from rlenv.protocol import ErrorReply, Request, Response
 from rlenv.protocol.errors import RemoteError
 from rlenv.protocol.spaces import codec_for
@@ -53,7 +54,7 @@ from rlenv_client.replay import EpisodeFile, digest, next_episode_path
 from rlenv_client.session import LOST
 from rlenv_tools.inspector._watch import InspectorError, Watcher, to_json
 
-__all__ = ["Demonstrator", "held_action", "idle_action", "key_map"]
+__all__ = ["Demonstrator", "held_action", "key_map"]
 
 
 class _Control:
@@ -398,29 +399,6 @@ def _action(space: spaces.Space, value: Any) -> Any:
     if isinstance(space, spaces.Box | spaces.MultiDiscrete | spaces.MultiBinary):
         return np.asarray(to_json(value), dtype=space.dtype).reshape(space.shape)
     return value
-
-
-def idle_action(space: spaces.Space) -> Any:
-    """The action while no key is held: 0 (clipped into a ``Box``'s bounds), ``start``.
-
-    ``Tuple`` and ``Dict`` spaces get their items' idle actions.
-
-    Raises:
-        ValueError: a space with no such action (a ``Text``, a ``Graph``...).
-    """
-    if isinstance(space, spaces.Discrete):
-        return int(space.start)
-    if isinstance(space, spaces.Box):
-        return np.clip(np.zeros(space.shape), space.low, space.high).astype(space.dtype)
-    if isinstance(space, spaces.MultiDiscrete):
-        return np.array(space.start, dtype=space.dtype)
-    if isinstance(space, spaces.MultiBinary):
-        return np.zeros(space.shape, dtype=space.dtype)
-    if isinstance(space, spaces.Tuple):
-        return tuple(idle_action(item) for item in space.spaces)
-    if isinstance(space, spaces.Dict):
-        return {key: idle_action(item) for key, item in space.spaces.items()}
-    raise ValueError(f"{space} has no idle action for demonstrations")
 
 
 def held_action(space: spaces.Space, actions: Sequence[Any]) -> Any:

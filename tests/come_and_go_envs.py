@@ -1,0 +1,175 @@
+"""Environments whose agents come and go, and decide at their own pace (issue 42).
+
+``Walker``: a point on a line; its action (``Discrete(3)``: -1, 0, +1) is its velocity per tick;
+it observes its position and the episode's tick, and earns 1 per tick in play. Everything is
+deterministic, so a test can say which tick did what.
+
+``ComeAndGoEnvironment`` (possible agents A, B, C, D): A and B start; C is added at tick 6 (in
+``_physics_process``: deferred to the end of the pass), B is freed at tick 10 (``queue_free``),
+A terminates at tick 20 (``set_terminated``, it stays in the tree), C is truncated at tick 30;
+then no one is left. ``world`` settings ask for hostile changes at tick 3: ``add_again`` (an
+agent under a used name), ``add_undeclared``, ``add_wrong_class``.
+
+``PacedEnvironment``: ``Fast`` decides every 2 ticks, ``Slow`` every 6 ticks at offset 3, and
+``Plain`` at every answer (no period); ``Jerky`` (period 4) does not act between decisions.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from rlenv import RLAgent, RLEnvironment, RLEnvWorld
+
+__all__ = ["ComeAndGoEnvironment", "FixedEnvironment", "PacedEnvironment", "Walker"]
+
+
+class Walker(RLAgent):
+    """A point on a line that walks at its action's velocity."""
+
+    action_space = spaces.Discrete(3)
+    observation_space = spaces.Box(-1000.0, 1000.0, (2,), np.float32)
+
+    def __init__(self, name: str) -> None:
+        super().__init__(name)
+        self.position = 0.0
+        self.velocity = 0.0
+        self.actions: list[tuple[int, Any]] = []  # (tick, action) as set_action got them
+        self.observed_at: list[int] = []  # the ticks get_data ran at
+
+    def set_action(self, action: Any) -> None:
+        self.actions.append((_tick(self), action))
+        self.velocity = float(action) - 1.0 if action is not None else 0.0
+
+    def no_action(self) -> Any:
+        return None  # no velocity at all (the idle action would be -1: Discrete's start)
+
+    def reset(self, arguments: Any) -> None:
+        self.position = 0.0
+        self.velocity = 0.0
+
+    def _physics_process(self, delta: float) -> None:
+        self.position += self.velocity
+
+    def _after_physics_tick(self, delta: float) -> None:
+        self.add_reward(1.0)
+
+    def get_data(self, observation_request: Mapping[str, Any]) -> np.ndarray:
+        assert self.is_inside_tree(), f"{self.name} observed outside the tree"
+        self.observed_at.append(_tick(self))
+        return np.array([self.position, _tick(self)], dtype=np.float32)
+
+
+class Sprinter(Walker):
+    """A Walker of another class (the declaration names Walker for D: a mismatch)."""
+
+
+def _tick(agent: RLAgent) -> int:
+    environment = agent.get_parent()
+    return getattr(environment, "ticks", 0)
+
+
+class LineWorld(RLEnvWorld):
+    """Nothing but settings: which hostile change the environment makes at tick 3."""
+
+    configurable = ("add_again", "add_undeclared", "add_wrong_class")
+
+    def __init__(self) -> None:
+        super().__init__("World")
+        self.add_again = self.add_undeclared = self.add_wrong_class = False
+
+    def reset(self, options: Mapping[str, Any]) -> None:
+        pass
+
+    def get_data(self, observation_request: Mapping[str, Any]) -> Any:
+        return {}
+
+
+class ComeAndGoEnvironment(RLEnvironment):
+    """A and B start, C joins at tick 6, B is freed at 10, A terminates at 20, C truncated at 30."""
+
+    possible_agents = {"A": Walker, "B": Walker, "C": Walker, "D": Walker}
+
+    def __init__(self) -> None:
+        super().__init__("ComeAndGo", repeat_action=4)
+        self.add_child(LineWorld())
+        self.ticks = 0
+
+    def _reset(self, options: Mapping[str, Any]) -> None:
+        for node in list(self.get_children()):
+            if isinstance(node, Walker):
+                self.remove_child(node)
+                node.queue_free()
+        self.ticks = 0
+        self.add_child(Walker("A"))
+        self.add_child(Walker("B"))
+
+    def _physics_process(self, delta: float) -> None:
+        self.ticks += 1
+        world = self.world
+        assert isinstance(world, LineWorld)
+        if self.ticks == 3:
+            if world.add_again:
+                self.add_child(Walker("A"))
+            if world.add_undeclared:
+                self.add_child(Walker("E"))
+            if world.add_wrong_class:
+                self.add_child(Sprinter("D"))
+        if self.ticks == 6:
+            self.add_child(Walker("C"))
+        if self.ticks == 10:
+            self.get_node("B").queue_free()
+        if self.ticks == 20:
+            self.get_node("A").set_terminated()
+        if self.ticks == 30:
+            self.get_node("C").set_truncated()
+
+
+class PacedEnvironment(RLEnvironment):
+    """Four agents, three paces: Fast every 2 ticks, Slow every 6 at 3, Plain every answer."""
+
+    def __init__(self) -> None:
+        super().__init__("Paced", repeat_action=4)
+        fast, slow, plain, jerky = (Walker(name) for name in ("Fast", "Slow", "Plain", "Jerky"))
+        fast.decision_period = 2
+        slow.decision_period, slow.decision_offset = 6, 3
+        jerky.decision_period, jerky.act_between_decisions = 4, False
+        for agent in (fast, slow, plain, jerky):
+            self.add_child(agent)
+        self.add_child(LineWorld())
+        self.ticks = 0
+
+    def _reset(self, options: Mapping[str, Any]) -> None:
+        self.ticks = 0
+        for agent in self.agents:
+            agent.reset(None)
+
+    def _physics_process(self, delta: float) -> None:
+        self.ticks += 1
+        if self.ticks >= 24:
+            for agent in self.agents:
+                agent.set_truncated()
+
+
+class FixedEnvironment(RLEnvironment):
+    """Two walkers, no declaration, no periods: every agent at every answer, as ever."""
+
+    def __init__(self) -> None:
+        super().__init__("Fixed", repeat_action=4)
+        self.add_child(Walker("A"))
+        self.add_child(Walker("B"))
+        self.add_child(LineWorld())
+        self.ticks = 0
+
+    def _reset(self, options: Mapping[str, Any]) -> None:
+        self.ticks = 0
+        for agent in self.agents:
+            agent.reset(None)
+
+    def _physics_process(self, delta: float) -> None:
+        self.ticks += 1
+        if self.ticks == 6:
+            self.add_child(Walker("C"))

@@ -1,4 +1,4 @@
-"""Instance: one environment in a scene tree of its own, and the state of its episode.
+"""Instance: one environment in a scene tree of its own, serving its episodes' requests.
 
 The host (:mod:`rlenv.serving._host`) hands an instance each request as a **plan**: a map from
 each part of the request to its checked value, in the order they apply (:mod:`rlenv.serving._parts`

@@ -30,6 +30,7 @@ from collections.abc import Callable, Iterator
 from enum import IntEnum
 from typing import TYPE_CHECKING, Any, ClassVar, TypeVar, cast
 
+from rlenv._node_paths import ancestry, check_name, relative_path, unique_name, walk
 from rlenv.duplication import copied_node, duplicate_subtree
 from rlenv.signals import Signal, SignalOwner
 from rlenv.views import View
@@ -56,8 +57,6 @@ NOTIFICATION_EXIT_TREE = 11
 NOTIFICATION_READY = 13
 NOTIFICATION_PARENTED = 18
 NOTIFICATION_UNPARENTED = 19
-
-_INVALID_NAME_CHARACTERS = frozenset('/:@%."')
 
 N = TypeVar("N", bound="Node")
 
@@ -124,7 +123,7 @@ class Node(SignalOwner):
     body's space, say)."""
 
     def __init__(self, name: str | None = None, *, process_mode: ProcessMode = ProcessMode.INHERIT):
-        self._name = _check_name(name if name is not None else type(self).__name__)
+        self._name = check_name(name if name is not None else type(self).__name__)
         self._parent: Node | None = None
         self._children: list[Node] = []
         self._children_by_name: dict[str, Node] = {}
@@ -150,13 +149,13 @@ class Node(SignalOwner):
 
     @name.setter
     def name(self, value: str) -> None:
-        value = _check_name(value)
+        value = check_name(value)
         if value == self._name:
             return
         if self._parent is not None:
             siblings = self._parent._children_by_name
             del siblings[self._name]
-            value = self._parent._unique_name(value)
+            value = unique_name(value, siblings)
             siblings[value] = self
         self._name = value
         self._emit("renamed")
@@ -230,7 +229,7 @@ class Node(SignalOwner):
             if ancestor is node:
                 raise ValueError(f"cannot add {node._name!r} under itself")
             ancestor = ancestor._parent
-        node._name = self._unique_name(node._name)
+        node._name = unique_name(node._name, self._children_by_name)
         node._parent = self
         self._children.append(node)
         self._children_by_name[node._name] = node
@@ -372,25 +371,11 @@ class Node(SignalOwner):
         """
         if self._tree is None:
             raise RuntimeError(f"{self._name!r} is not inside a tree, so it has no path")
-        names = []
-        node: Node | None = self
-        while node is not None:
-            names.append(node._name)
-            node = node._parent
-        return "/" + "/".join(reversed(names))
+        return "/" + "/".join(node._name for node in ancestry(self))
 
     def get_path_to(self, node: Node) -> str:
         """The relative path from this node to ``node`` (both in the same tree)."""
-        mine = self._ancestry()
-        theirs = node._ancestry()
-        common = 0
-        while common < min(len(mine), len(theirs)) and mine[common] is theirs[common]:
-            common += 1
-        if common == 0:
-            raise ValueError(f"{self._name!r} and {node._name!r} are not in the same tree")
-        ups = [".."] * (len(mine) - common)
-        downs = [n._name for n in theirs[common:]]
-        return "/".join(ups + downs) or "."
+        return relative_path(self, node)
 
     def get_node(self, path: str) -> Node:
         """The node at ``path``, relative (``World/Cart``, ``../Agent``) or absolute.
@@ -400,7 +385,7 @@ class Node(SignalOwner):
         Raises:
             NodeNotFoundError: nothing at that path; the message says where the walk stopped.
         """
-        node, stopped_at, missing = self._walk(path)
+        node, stopped_at, missing = walk(self, path)
         if node is None:
             where = stopped_at.get_path() if stopped_at._tree else repr(stopped_at._name)
             raise NodeNotFoundError(
@@ -410,29 +395,7 @@ class Node(SignalOwner):
 
     def get_node_or_null(self, path: str) -> Node | None:
         """Like :meth:`get_node`, but ``None`` when nothing is there."""
-        return self._walk(path)[0]
-
-    def _walk(self, path: str) -> tuple[Node | None, Node, str]:
-        """Follow ``path``: (the node or None, the last node reached, the missing step)."""
-        if not path:
-            return None, self, ""
-        node: Node = self
-        names = path.split("/")
-        if path.startswith("/"):
-            if self._tree is None:
-                return None, self, "/ (it is not inside a tree)"
-            root = self._tree.root
-            if names[1] != root._name:
-                return None, root, names[1]
-            node, names = root, names[2:]
-        for part in names:
-            if part in ("", "."):
-                continue
-            step = node._parent if part == ".." else node._children_by_name.get(part)
-            if step is None:
-                return None, node, part
-            node = step
-        return node, node, ""
+        return walk(self, path)[0]
 
     def has_node(self, path: str) -> bool:
         """Whether a node exists at ``path``."""
@@ -629,23 +592,6 @@ class Node(SignalOwner):
             return True
         return False
 
-    def _unique_name(self, name: str) -> str:
-        if name not in self._children_by_name:
-            return name
-        stem = name.rstrip("0123456789") or name
-        number = int(name[len(stem) :] or 1) + 1
-        while f"{stem}{number}" in self._children_by_name:
-            number += 1
-        return f"{stem}{number}"
-
-    def _ancestry(self) -> list[Node]:
-        chain = []
-        node: Node | None = self
-        while node is not None:
-            chain.append(node)
-            node = node._parent
-        return chain[::-1]
-
     def _propagate_process_mode(self) -> None:
         for node in self.iter_subtree():
             node._resolve_process_mode()
@@ -743,12 +689,3 @@ def check_initialised(node: Node) -> None:
 
 def _overrides(node: Node, method: str) -> bool:
     return getattr(type(node), method) is not getattr(Node, method)
-
-
-def _check_name(name: object) -> str:
-    if not isinstance(name, str) or not name or name in (".", ".."):
-        raise ValueError(f"invalid node name {name!r}")
-    bad = _INVALID_NAME_CHARACTERS.intersection(name)
-    if bad:
-        raise ValueError(f"node name {name!r} contains {''.join(sorted(bad))!r}")
-    return name

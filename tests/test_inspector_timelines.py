@@ -78,7 +78,7 @@ def test_inspect_recordings_serves_them_with_python_policies(recording: Path) ->
         status, made = post(page.url, "api/timeline/policy", {
             "timeline": 0, "branch": 0, "step": 2, "policy": "push-left", "max_steps": 3})
         assert status == 200 and made["branches"][1]["length"] <= 5  # type: ignore[index]
-        timeline = page.timelines._roots[0].timeline
+        timeline = page.timelines._recordings.roots()[0].timeline
         assert timeline is not None and timeline.processes
         pids = timeline.processes
     finally:

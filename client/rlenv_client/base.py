@@ -25,7 +25,6 @@ from typing import Any, TypeVar
 
 import numpy as np
 from gymnasium import spaces
-from gymnasium.vector.utils import batch_space
 
 from rlenv.protocol import (
     BatchResponse,
@@ -38,6 +37,7 @@ from rlenv.protocol import (
 )
 from rlenv.protocol.errors import ConnectionLost, RemoteError
 from rlenv.protocol.spaces import Codec, codec_for
+from rlenv_client._messages import Requests, answer_info
 from rlenv_client.inspection import Inspection, config_request
 
 __all__ = ["BaseClient", "StepResult"]
@@ -77,9 +77,8 @@ class BaseClient(Inspection, ABC):
         self.hello = hello
         self.action_space: spaces.Space = hello.action_space
         self.observation_space: spaces.Space = hello.observation_space
-        self._actions: Codec = codec_for(hello.action_space)
+        self._requests = Requests(hello, self._observation_request)
         self._observations: Codec = codec_for(hello.observation_space)
-        self._columns: tuple[Codec, Codec] | None = None  # (actions, observations) of K
 
     # --- the API ----------------------------------------------------------------------------
 
@@ -164,8 +163,7 @@ class BaseClient(Inspection, ABC):
         Raises:
             RemoteError: ``reset_required`` before the first reset.
         """
-        self._post(Request(next(self._ids), {"action": None,
-                                            "observation": self._observation_request}))
+        self._post(self._requests.poll(next(self._ids)))
         return self.step_result(self._reply())  # type: ignore[arg-type]
 
     def step_result(self, reply: Response | ErrorReply, *, writable: bool = True) -> StepResult:
@@ -201,23 +199,14 @@ class BaseClient(Inspection, ABC):
     def step_request(self, action: Any, repeat_action: int | None = None, *,
                      request_id: int = 0) -> Request:
         """The request :meth:`send_step` sends, for a batch (whose parts need no id)."""
-        parts = {"action": self._actions.pack_exact(action),
-                 "observation": self._observation_request}
-        if repeat_action is not None:
-            parts["repeat_action"] = repeat_action
-        return Request(request_id, parts)
+        return self._requests.step(action, repeat_action, request_id)
 
     def reset_request(
         self, seed: int | None = None, options: Mapping[str, Any] | None = None, *,
         request_id: int = 0,
     ) -> Request:
         """The request :meth:`send_reset` sends, for a batch (whose parts need no id)."""
-        reset: dict[str, Any] = {}
-        if seed is not None:
-            reset["seed"] = seed
-        if options is not None:
-            reset["options"] = dict(options)
-        return Request(request_id, {"reset": reset, "observation": self._observation_request})
+        return self._requests.reset(seed, options, request_id)
 
     def send_request(self, request: Request) -> None:
         """Send a prepared request (see :meth:`step_request`); its id is assigned here."""
@@ -226,10 +215,9 @@ class BaseClient(Inspection, ABC):
     def receive_reply(self) -> Response | ErrorReply:
         """Wait for the answer to :meth:`send_request`; an error reply is returned, not raised."""
         message = self._reply()
-        if message.__class__ is not Response and message.__class__ is not ErrorReply:
-            self.close()
-            raise ConnectionLost(f"{self.address} answered a request with {message!r:.80}")
-        if message.__class__ is ErrorReply and message.fatal:
+        if message.__class__ is not ErrorReply:
+            return self._response(message)  # type: ignore[arg-type]  # checks it is a Response
+        if message.fatal:
             self.close()
         return message
 
@@ -260,17 +248,8 @@ class BaseClient(Inspection, ABC):
         optional), for an instance that ``reset`` marks. Without entries (or with only
         ``None``) the request is as without ``reset_with``.
         """
-        actions, _ = self._column_codecs()
-        steps: dict[str, Any] = {"action": actions.pack_exact(action)}
-        if reset is not None:
-            steps["reset"] = np.asarray(reset, np.bool_).tobytes() if \
-                isinstance(reset, np.ndarray) else reset
-        if repeat_action is not None:
-            steps["repeat_action"] = repeat_action
-        if reset_with is not None and any(entry is not None for entry in reset_with):
-            steps["reset_with"] = [None if entry is None else dict(entry)
-                                   for entry in reset_with]
-        self._post(Request(next(self._ids), {"steps": steps}))
+        self._post(self._requests.steps(action, reset, repeat_action, reset_with,
+                                        next(self._ids)))
 
     def receive_steps(self, *, copy: bool = True) -> StepsResponse:
         """Wait for the answer to :meth:`send_steps`.
@@ -284,7 +263,7 @@ class BaseClient(Inspection, ABC):
             RemoteError: the whole request was refused (nothing changed).
         """
         answer = self._receive_answer(StepsResponse, "steps", copy)
-        _, observations = self._column_codecs()
+        _, observations = self._requests.column_codecs()
         try:
             answer.observation = observations.unpack(answer.observation, writable=False)
         except (KeyError, TypeError, ValueError) as error:
@@ -383,14 +362,6 @@ class BaseClient(Inspection, ABC):
             logger.info("%s: dropped the answer to request %d, whose caller gave up on it",
                         self.address, reply_id)
 
-    def _column_codecs(self) -> tuple[Codec, Codec]:
-        """The codecs of K actions and K observations (K: the server's instances)."""
-        if self._columns is None:
-            count = self.hello.instances
-            self._columns = (codec_for(batch_space(self.action_space, count)),
-                             codec_for(batch_space(self.observation_space, count)))
-        return self._columns
-
     def _receive_answer(self, kind: type[_Answer], asked: str, copy: bool = True) -> _Answer:
         """The answer to a batch or steps request, ``kind``; raises a refusal of it whole."""
         message = self._reply(copy)
@@ -428,12 +399,4 @@ class BaseClient(Inspection, ABC):
             raise ConnectionLost(f"{self.address} broke the protocol: no {part!r} observation")
         return observation[part]
 
-    def _info(self, response: Response) -> dict[str, Any]:
-        info = dict(response.info)
-        info["frames"] = response.frames
-        if response.agents is not None:
-            info["agents"] = response.agents
-        observation = response.observation
-        if observation is not None and "world" in observation:
-            info["world"] = observation["world"]
-        return info
+    _info = staticmethod(answer_info)  # an answer's info, frames and all

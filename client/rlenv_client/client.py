@@ -46,10 +46,11 @@ from rlenv.protocol.errors import (
     RemoteError,
     RequestTimeout,
 )
-from rlenv.protocol.shared_memory import STEP, STEPS, lane_unavailable
-from rlenv.transport.lanes import Lane, LaneClosed, accept_lane, listen_for_lane, wait_for
-from rlenv.transport.sockets import AnswerWaiter, configure_socket, is_loopback, readable_now
+from rlenv.protocol.shared_memory import STEP, STEPS
+from rlenv.transport.lanes import Lane, LaneClosed, wait_for
+from rlenv.transport.sockets import AnswerWaiter, configure_socket, readable_now
 from rlenv_client._addresses import format_address, parse_address
+from rlenv_client._lane_opening import open_lane
 from rlenv_client.base import AGENT_ONLY, BaseClient, StepResult
 
 __all__ = ["Client", "StepResult"]
@@ -57,7 +58,6 @@ __all__ = ["Client", "StepResult"]
 logger = logging.getLogger(__name__)
 
 _READ_SIZE = 64 * 1024
-_LANES_SINCE = (2, 3)
 
 
 class Client(BaseClient):
@@ -136,7 +136,10 @@ class Client(BaseClient):
             self._response(self.receive_reply())
         if shared_memory is not False:
             try:
-                self._open_lane(host, required=shared_memory is True)
+                self._lane = open_lane(
+                    message, host, self._sock, address=self.address, timeout=timeout,
+                    required=shared_memory is True,
+                    ask=lambda lane: self._call(shared_memory=lane))
             except BaseException:
                 self.close()
                 raise
@@ -145,48 +148,6 @@ class Client(BaseClient):
     def shared_memory(self) -> bool:
         """Whether steps go through a shared-memory lane (see the module docstring)."""
         return self._lane is not None
-
-    def _open_lane(self, host: str, required: bool) -> None:
-        """Ask the server for a lane; without one, steps stay on the socket (unless required)."""
-        hello = self.hello
-        why = lane_unavailable(hello)
-        if not is_loopback(host):
-            why = f"the server is at {host}, not on this machine"
-        elif hello.protocol < _LANES_SINCE:
-            why = "the server speaks protocol {}.{} (lanes came with 2.3)".format(*hello.protocol)
-        elif not required and os.environ.get("RLENV_SHARED_MEMORY") == "0":
-            why = "RLENV_SHARED_MEMORY=0"
-        if why is not None:
-            if required:
-                raise ValueError(f"shared_memory=True, but {why}")
-            logger.debug("%s: steps go on the socket: %s", self.address, why)
-            return
-        try:
-            listener, name, key = listen_for_lane()
-        except OSError as error:  # no Unix sockets here (a sandbox, say)
-            if required:
-                raise
-            logger.info("%s: steps go on the socket: %s", self.address, error)
-            return
-        try:
-            try:
-                self._call(shared_memory={"address": name, "key": key})
-            except RemoteError as error:
-                if required:
-                    raise
-                logger.info("%s: steps go on the socket: %s", self.address, error)
-                return
-            assert self._sock is not None
-            try:
-                self._lane = accept_lane(listener, key, hello, self._sock, self.timeout)
-            except OSError as error:  # the server's end closes when it finds ours gone
-                if required:
-                    raise ConnectionLost(f"{self.address} did not open the shared-memory lane "
-                                         f"it offered: {error}") from None
-                logger.warning("%s: the shared-memory lane failed (%s); steps go on the "
-                               "socket", self.address, error)
-        finally:
-            listener.close()
 
     def close(self) -> None:
         """Close the connection (and the lane); safe to repeat."""

@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping, Sequence
+from itertools import accumulate
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -54,9 +55,11 @@ from gymnasium.vector.utils import batch_space, create_empty_array
 
 from rlenv.protocol import ErrorReply, Request, Response
 from rlenv.protocol.errors import RemoteError
-from rlenv_client._rows import check_shape, empty_like, row, rows, set_row, set_rows
+from rlenv_client._rows import check_shape, empty_like, row, rows
+from rlenv_client._step_columns import StepColumns
+from rlenv_client._vector_infos import BatchedInfos
+from rlenv_client._vector_resets import Resets
 from rlenv_client.base import BaseClient
-from rlenv_client.inspection import config_request
 from rlenv_client.launcher import ServerProcess
 from rlenv_client.session import LOST, ServerSource, Session
 from rlenv_client.time_limits import truncate_agents
@@ -139,11 +142,9 @@ class RemoteVectorEnv(VectorEnv):
                                instances_per_server, server_args)
         connect_sessions(self.sessions, places, timeout=timeout, max_restarts=max_restarts,
                          shared_memory=shared_memory)
-        self._groups: list[range] = []  # the sub-environments each session hosts
-        start = 0
-        for session in self.sessions:
-            self._groups.append(range(start, start + session.client.hello.instances))
-            start += session.client.hello.instances
+        sizes = [session.client.hello.instances for session in self.sessions]
+        self._groups = [range(end - size, end)  # the sub-environments each session hosts
+                        for size, end in zip(sizes, accumulate(sizes), strict=True)]
         self._owner = [number for number, group in enumerate(self._groups) for _ in group]
         # The order in which a step's answers are awaited: the server that answered last comes
         # first, so that this process sleeps until all have answered rather than waking for
@@ -151,13 +152,11 @@ class RemoteVectorEnv(VectorEnv):
         self._gather_order = list(range(len(self.sessions)))[::-1]
         hello = self.clients[0].hello
         for client in self.clients[1:]:
-            if (client.action_space, client.observation_space) != (
-                hello.action_space, hello.observation_space
-            ):
+            if (client.action_space, client.observation_space) != (hello.action_space,
+                                                                   hello.observation_space):
                 self.close()
-                raise ValueError(
-                    f"{client.address} has other spaces than {self.clients[0].address}"
-                )
+                raise ValueError(f"{client.address} has other spaces than "
+                                 f"{self.clients[0].address}")
         if num_envs is not None and (addresses is not None or pool is not None) and \
                 num_envs != len(self._owner):
             self.close()
@@ -180,12 +179,11 @@ class RemoteVectorEnv(VectorEnv):
         self.repeat_action = repeat_action
         self.max_episode_steps = max_episode_steps
         self._autoreset = np.zeros(self.num_envs, dtype=np.bool_)
-        self._all_envs = np.ones(self.num_envs, dtype=np.bool_)
+        self._infos = BatchedInfos(self._add_info, self.num_envs)
         self._observations_template = create_empty_array(self.single_observation_space,
                                                          self.num_envs)
         self._steps = np.zeros(self.num_envs, dtype=np.int64)
-        self._starts: list[dict[str, Any] | None] = [None] * self.num_envs  # set_next_reset's
-        self._pending_starts = 0  # how many of them are set
+        self._resets = Resets(self.sessions, self._groups, self._client_of)
         self._last: Any = None  # the last batch of observations returned
         self._interrupted: str | None = None  # what interrupted the last step or reset
         if inspector:
@@ -235,20 +233,14 @@ class RemoteVectorEnv(VectorEnv):
             if len(seeds) != self.num_envs:
                 raise ValueError(f"{len(seeds)} seeds for {self.num_envs} environments")
         super().reset(seed=seed if isinstance(seed, int) else None)
-        plan: list[Request | None] = [self._reset_request(i, seeds[i], options)
-                                      for i in range(self.num_envs)]
-        replies = exchange(self.sessions, self._groups, plan)
         observations = create_empty_array(self.single_observation_space, self.num_envs)
-        env_infos, frames = [], np.zeros(self.num_envs, np.int64)
-        for index, reply in enumerate(replies):
-            observation, info = self._client_of(index).reset_result(sure_reply(index, reply))
-            set_row(observations, index, observation)
-            frames[index] = info.pop("frames")
-            env_infos.append(info)
+        frames = np.zeros(self.num_envs, np.int64)
+        infos = self._resets.reset(range(self.num_envs), observations, frames, seeds, options)
         self._autoreset[:] = False
         self._steps[:] = 0
         self._last = observations
-        return observations, self._merge_infos({}, env_infos, frames)
+        return observations, self._infos.merge({}, [infos[i] for i in range(self.num_envs)],
+                                               frames)
 
     def step(
         self, actions: Any
@@ -300,20 +292,16 @@ class RemoteVectorEnv(VectorEnv):
                     infos, {"final_obs": row(observations, index), "final_info": final_info},
                     int(index),
                 )
-            plan = [self._reset_request(i) if ended[i] else None for i in range(self.num_envs)]
-            for i, reply in enumerate(exchange(self.sessions, self._groups, plan)):
-                if ended[i]:
-                    observation, env_infos[i] = self._client_of(i).reset_result(
-                        sure_reply(i, reply))
-                    set_row(observations, i, observation)
-                    frames[i] = env_infos[i].pop("frames")
-                    self._steps[i] = 0
+            restarted = self._resets.reset(np.flatnonzero(ended), observations, frames)
+            for reset_index, info in restarted.items():
+                env_infos[reset_index] = info
+                self._steps[reset_index] = 0
         self._autoreset = ended
         self._last = observations
         return observations, rewards, terminations, truncations, \
-            self._merge_infos(infos, env_infos, frames)
+            self._infos.merge(infos, env_infos, frames)
 
-    def _step_everywhere(self, actions: Any, resetting: np.ndarray) -> tuple[Any, ...]:
+    def _step_everywhere(self, actions: Any, resetting: np.ndarray) -> StepColumns:
         """Send every server its share of the step, then gather the answers into columns.
 
         A server that is lost and restarted gives its sub-environments their last observation,
@@ -322,7 +310,7 @@ class RemoteVectorEnv(VectorEnv):
         """
         if self._interrupted is not None:
             return self._after_interruption()
-        starts = self._take_starts(resetting) if self._pending_starts else None
+        starts = self._resets.take_marked(resetting)
         actions = self._view.full_actions(actions, self.num_envs)
         for session, group in zip(self.sessions, self._groups, strict=True):
             try:
@@ -332,12 +320,8 @@ class RemoteVectorEnv(VectorEnv):
                                           starts[group.start:group.stop])
             except LOST as error:
                 raise session.failure(error) from None
-        observations = empty_like(self._observations_template)  # every row is written below
-        rewards = np.zeros(self.num_envs, np.float64)
-        terminations = np.zeros(self.num_envs, np.bool_)
-        truncations = np.zeros(self.num_envs, np.bool_)
-        frames = np.zeros(self.num_envs, np.int64)
-        env_infos: list[dict[str, Any]] = [{}] * self.num_envs
+        # every row of the observations is written below
+        columns = StepColumns(empty_like(self._observations_template), self.num_envs)
         refusals: dict[int, RemoteError] = {}  # by server: the first one's is raised
         order = self._gather_order
         late: list[int] = []
@@ -346,49 +330,37 @@ class RemoteVectorEnv(VectorEnv):
                 late = [other for other in order[1:]
                         if not self.sessions[other].client.answer_arrived()]
             session, group = self.sessions[number], self._groups[number]
-            span = slice(group.start, group.stop)
             try:
                 answer = session.client.receive_steps(copy=False)  # copied into columns
-                set_rows(observations, group.start, answer.observation)
-                rewards[span], terminations[span] = answer.reward, answer.terminated
-                truncations[span], frames[span] = answer.truncated, answer.frames
-                env_infos[span] = answer.info
-                for refused in answer.errors or ():
-                    if refused is not None:
-                        refusals.setdefault(number, RemoteError(refused.code, refused.message,
-                                                                refused.fatal))
+                refused = columns.fill(group, answer)
+                if refused is not None:
+                    refusals[number] = refused
             except RemoteError as error:  # read every server's answer before raising
                 refusals[number] = error
             except LOST as error:
                 if self._last is None:
                     raise session.failure(error) from None
-                reason = session.restart(error)
-                for index in group:
-                    set_row(observations, index, row(self._last, index))
-                    truncations[index] = True
-                    env_infos[index] = {"server_restarted": reason}
+                columns.cut_short(group, self._last, {"server_restarted": session.restart(error)})
         if late:  # it answered after the one awaited first: await it first next time
             self._gather_order = [late[-1], *(n for n in order if n != late[-1])]
         if refusals:
             raise refusals[min(refusals)]
         if self._view.driven:  # the trainer's agents' rewards and ends, not every agent's
-            for index, info in enumerate(env_infos):
+            for index, info in enumerate(columns.env_infos):
                 if "agents" in info:  # not in a lost server's
-                    rewards[index], terminations[index], truncations[index] = \
-                        self._view.outcome(info)
-        return observations, rewards, terminations, truncations, frames, env_infos
+                    columns.rewards[index], columns.terminations[index], \
+                        columns.truncations[index] = self._view.outcome(info)
+        return columns
 
-    def _after_interruption(self) -> tuple[Any, ...]:
+    def _after_interruption(self) -> StepColumns:
         """The step after an interrupted one: every episode ends, truncated (see the module)."""
         why = f"the previous step or reset was interrupted ({self._interrupted})"
         self._interrupted = None
         if self._last is None:
             raise RuntimeError(f"{why} before any observation: call reset()")
-        observations = create_empty_array(self.single_observation_space, self.num_envs)
-        set_rows(observations, 0, self._last)
-        return (observations, np.zeros(self.num_envs, np.float64),
-                np.zeros(self.num_envs, np.bool_), np.ones(self.num_envs, np.bool_),
-                np.zeros(self.num_envs, np.int64), [{"interrupted": why}] * self.num_envs)
+        columns = StepColumns(empty_like(self._observations_template), self.num_envs)
+        columns.cut_short(range(self.num_envs), self._last, {"interrupted": why})
+        return columns
 
     def _note_interruption(self, error: BaseException) -> None:
         """Remember an interruption (not an error) that escaped a step or reset, for the next."""
@@ -417,20 +389,7 @@ class RemoteVectorEnv(VectorEnv):
         """
         if not 0 <= index < self.num_envs:
             raise IndexError(f"sub-environment {index} of {self.num_envs}")
-        reset: dict[str, Any] = {}
-        if seed is not None:
-            reset["seed"] = int(seed)
-        if options is not None:
-            reset["options"] = dict(options)
-        start: dict[str, Any] = {"reset": reset}
-        if config:
-            arguments = dict(config)
-            start["config"] = config_request(
-                {key: value for key, value in arguments.items() if key not in ("agent", "world")},
-                arguments.get("agent"), arguments.get("world"))
-        if self._starts[index] is None:
-            self._pending_starts += 1
-        self._starts[index] = start
+        self._resets.set_next(index, seed, options, config)
 
     def render(self) -> tuple[np.ndarray, ...] | None:
         """One frame per sub-environment (``rgb_array``)."""
@@ -464,60 +423,3 @@ class RemoteVectorEnv(VectorEnv):
 
     def _client_of(self, index: int) -> BaseClient:
         return self.sessions[self._owner[index]].client
-
-    def _reset_request(self, index: int, seed: int | None = None,
-                       options: Mapping[str, Any] | None = None) -> Request:
-        """The request that resets sub-environment ``index``: its next start if set, once."""
-        client = self._client_of(index)
-        start = self._starts[index]
-        if start is None:
-            return client.reset_request(seed, options)
-        self._starts[index] = None
-        self._pending_starts -= 1
-        reset = start["reset"]
-        request = client.reset_request(reset.get("seed"), reset.get("options"))
-        if "config" in start:
-            request = Request(request.id, {"config": start["config"], **request.parts})
-        return request
-
-    def _take_starts(self, resetting: np.ndarray) -> list[dict[str, Any] | None] | None:
-        """The starts of the sub-environments ``resetting`` marks (taken), or ``None``."""
-        starts: list[dict[str, Any] | None] = [None] * self.num_envs
-        for index in np.flatnonzero(resetting):
-            start = self._starts[index]
-            if start is not None:
-                starts[index] = start
-                self._starts[index] = None
-                self._pending_starts -= 1
-        return starts if any(start is not None for start in starts) else None
-
-    def _agent_columns(self, env_infos: list[dict[str, Any]]) -> dict[str, Any]:
-        """``agents`` batched as gymnasium's ``_add_info`` batches it, a column per outcome."""
-        every = self._all_envs
-        columns: dict[str, Any] = {}
-        for name in env_infos[0]["agents"]:
-            outcomes = [info["agents"][name] for info in env_infos]
-            columns[name] = {
-                "reward": np.array([o["reward"] for o in outcomes], np.float64),
-                "_reward": every.copy(),
-                "terminated": np.array([o["terminated"] for o in outcomes], np.bool_),
-                "_terminated": every.copy(),
-                "truncated": np.array([o["truncated"] for o in outcomes], np.bool_),
-                "_truncated": every.copy()}
-            columns[f"_{name}"] = every.copy()
-        return columns
-
-    def _merge_infos(self, infos: dict[str, Any], env_infos: list[dict[str, Any]],
-                     frames: np.ndarray) -> dict:
-        """Gymnasium's batched infos, ``frames`` included; without a loop in the common cases.
-
-        Those are: no info, and several agents' outcomes alone (``agents``, built in columns).
-        """
-        if not infos and not any(env_infos):
-            return {"frames": frames, "_frames": self._all_envs.copy()}
-        if not infos and all(info.keys() == {"agents"} for info in env_infos):
-            return {"agents": self._agent_columns(env_infos), "_agents": self._all_envs.copy(),
-                    "frames": frames, "_frames": self._all_envs.copy()}
-        for index, info in enumerate(env_infos):
-            infos = self._add_info(infos, {**info, "frames": int(frames[index])}, index)
-        return infos

@@ -29,6 +29,8 @@ from typing import Any, ClassVar
 import numpy as np
 from gymnasium import spaces
 
+from rlenv.protocol._moved_names import moved_name
+
 __all__ = [
     "KINDS",
     "Codec",
@@ -709,14 +711,4 @@ def find_non_finite(value: Any, path: str = "") -> str | None:
 
 def __getattr__(name: str) -> Any:
     """The JSON form's old names here, for one release, with a warning (see space_json)."""
-    if name not in ("space_to_json", "space_from_json"):
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    import importlib
-    import warnings
-
-    space_json = importlib.import_module("rlenv.protocol.space_json")  # (it imports this one)
-    new = "space_from_json" if name == "space_from_json" else "space_to_json_text"  # text
-    warnings.warn(f"rlenv.protocol.spaces.{name} moved to rlenv.protocol.space_json.{new} (a "
-                  "space's one JSON form); the old name goes in the next release",
-                  DeprecationWarning, stacklevel=2)
-    return getattr(space_json, new)
+    return moved_name(__name__, name)

@@ -54,7 +54,8 @@ from typing import Any
 
 import numpy as np
 
-from rlenv.node import Node, _check_name
+from rlenv._node_paths import check_name
+from rlenv.node import Node
 from rlenv.scene2d._scene_codecs import OWN_CLASSES, Codec, codec_for
 from rlenv.signals import Signal
 
@@ -362,7 +363,7 @@ def _compile_node(entry: Any, registry: Mapping[str, type[Node]], parent: _Plan 
                                f"; it has {sorted(_NODE_KEYS)}")
     name = entry.get("name")
     try:
-        name = _check_name(name)
+        name = check_name(name)
     except ValueError as error:
         raise PackedSceneError(f"{where or 'root'}: {error}") from None
     where = f"{where}/{name}" if where else name

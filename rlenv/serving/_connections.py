@@ -15,8 +15,6 @@ the lane when they fit (else on the socket).
 
 from __future__ import annotations
 
-import heapq
-import hmac
 import logging
 import os
 import select
@@ -29,7 +27,7 @@ from dataclasses import replace
 from rlenv.protocol import Connection, ErrorReply, Hello, Reply, Request, Response, Role
 from rlenv.protocol.errors import ErrorCode, LocalProtocolError
 from rlenv.serving._access import Limits
-from rlenv.serving._penalties import Penalties
+from rlenv.serving._token_check import TokenCheck
 from rlenv.transport.lanes import Lane, LaneClosed, open_lane, wait_for
 from rlenv.transport.sockets import (
     REQUEST_SPIN_WINDOW,
@@ -46,7 +44,6 @@ HOUSEKEEPING_INTERVAL = 0.01
 """Seconds between looks at everything but the controller while the controller is busy."""
 _READ_SIZE = 64 * 1024
 _PROBE_READS = 16
-_HELD_IN_ALL = 64  # wrong-token answers held at once, all addresses together
 
 
 class Peer:
@@ -108,7 +105,7 @@ class Connections:
         self._spin_poll = select.poll()
         self._by_fd: dict[int, Peer] = {}
         self._token = token
-        self._penalties = Penalties(clock)
+        self._token_check = TokenCheck(token, clock)
         self._hello: Hello | None = None
         if hello is not None:
             self.hello = hello
@@ -122,8 +119,6 @@ class Connections:
         self._lifeline: int | None = None
         self._housekeeping_at = 0.0
         self._backlog = False  # frames may be buffered on other peers than the controller
-        self._held: list[tuple[float, int, Peer, ErrorReply]] = []  # wrong tokens' answers
-        self._held_count = 0  # a tie-breaker for the heap
 
     @property
     def hello(self) -> Hello | None:
@@ -150,9 +145,7 @@ class Connections:
         """Disconnect every client and stop listening."""
         for peer in list(self._peers.values()):
             self._drop(peer, "server closing")
-        for _, _, peer, _ in self._held:
-            peer.sock.close()
-        self._held.clear()
+        self._token_check.close()
         if self._listener is not None:
             self._selector.unregister(self._listener)
             self._listener.close()
@@ -260,19 +253,7 @@ class Connections:
     def _open_lane(self, peer: Peer, request: Request) -> None:
         """Answer a ``shared_memory`` request: hand the client a lane, or say why not."""
         value = request.parts["shared_memory"]
-        try:
-            host = peer.sock.getpeername()[0]
-        except OSError:  # it left meanwhile: the refusal's send drops it
-            host = "an address no longer connected"
-        why = None
-        if len(request.parts) != 1:
-            why = "'shared_memory' goes alone in a request"
-        elif not isinstance(value, dict):
-            why = "'shared_memory' must be a map with 'address' and 'key'"
-        elif not is_loopback(host):
-            why = f"shared memory is for clients on this machine; this one is at {host}"
-        elif peer.lane is not None:
-            why = "this connection has a shared-memory lane already"
+        why = _lane_refusal(peer, request)
         if why is None:
             assert self._hello is not None
             try:
@@ -344,57 +325,31 @@ class Connections:
         address sent before. A wrong one's refusal is held as long as its address's penalty
         says (:mod:`rlenv.serving._penalties`), the connection out of its slot meanwhile.
         """
-        if self._token is not None:
-            why, delay = self._token_refusal(peer, request.token)
-            if why is not None:
-                refusal = ErrorReply(request.id, ErrorCode.UNAUTHORIZED, why, fatal=True)
-                if delay > 0.0:
-                    self._hold(peer, refusal, delay)
-                else:
-                    self._send(peer, refusal)
-                return False
+        why, delay = self._token_check.refusal(peer, request.token)
+        if why is not None:
+            refusal = ErrorReply(request.id, ErrorCode.UNAUTHORIZED, why, fatal=True)
+            if delay > 0.0:
+                self._forget(peer, "wrong token (its answer held)")
+                self._token_check.hold(peer, refusal, delay)
+            else:
+                self._send(peer, refusal)
+            return False
         peer.authenticated = True
         peer.connection.max_frame_size = self.limits.max_frame_size
         return True
 
     def _may_compare(self, peer: Peer) -> bool:
         """Whether ``peer``'s token may be compared now (its address holds few answers)."""
-        return len(self._held) < _HELD_IN_ALL and self._penalties.may_compare(peer.host)
-
-    def _token_refusal(self, peer: Peer, token: str | None) -> tuple[str | None, float]:
-        """Why ``token`` is refused, or None; and how long to hold the refusal (seconds)."""
-        assert self._token is not None
-        if token is None:
-            logger.warning("client %s: refused, no token", peer.address)
-            return "this server requires a token: pass token=... to the client (or set " \
-                   "RLENV_TOKEN)", 0.0
-        if not hmac.compare_digest(token.encode(), self._token.encode()):
-            return "wrong token", self._penalties.failed(peer.host)
-        return None, 0.0
-
-    def _hold(self, peer: Peer, refusal: ErrorReply, delay: float) -> None:
-        """Answer ``peer``'s wrong token after ``delay`` seconds; it leaves its slot now."""
-        self._forget(peer, "wrong token (its answer held)")
-        self._penalties.hold(peer.host)
-        self._held_count += 1
-        heapq.heappush(self._held, (self._clock() + delay, self._held_count, peer, refusal))
+        return self._token_check.may_compare(peer)
 
     def _release_held(self) -> None:
         """Send the held refusals that are due, and close their connections."""
-        now = self._clock()
-        while self._held and self._held[0][0] <= now:
-            _, _, peer, refusal = heapq.heappop(self._held)
-            try:
-                peer.sock.sendall(peer.connection.send(refusal))
-            except (OSError, LocalProtocolError):
-                pass  # it left meanwhile: nothing to tell
-            peer.sock.close()
-            self._penalties.release(peer.host)
+        if self._token_check.release_due():
             self._backlog = True  # tokens that waited for this may be compared now
 
     def _next_release(self) -> float | None:
         """When the next held refusal is due."""
-        return self._held[0][0] if self._held else None
+        return self._token_check.next_release()
 
 
     # --- writing ----------------------------------------------------------------------------
@@ -460,3 +415,20 @@ class Connections:
             logger.info("client %s disconnected: %s", peer.address, reason)
         if self._controller is peer:
             self._controller = None
+
+
+def _lane_refusal(peer: Peer, request: Request) -> str | None:
+    """Why ``peer``'s ``shared_memory`` request is refused before its lane is opened, or None."""
+    try:
+        host = peer.sock.getpeername()[0]
+    except OSError:  # it left meanwhile: the refusal's send drops it
+        host = "an address no longer connected"
+    if len(request.parts) != 1:
+        return "'shared_memory' goes alone in a request"
+    if not isinstance(request.parts["shared_memory"], dict):
+        return "'shared_memory' must be a map with 'address' and 'key'"
+    if not is_loopback(host):
+        return f"shared memory is for clients on this machine; this one is at {host}"
+    if peer.lane is not None:
+        return "this connection has a shared-memory lane already"
+    return None

@@ -335,7 +335,7 @@ class Host:
             self.requester.peer = None
 
     def release_claims(self, peer: object) -> None:
-        """End the claims ``peer`` holds (it left, or took control; :mod:`.claims`)."""
+        """End the claims ``peer`` holds (it left, or took control; :mod:`._claims`)."""
         for instance in self.instances:
             if instance.claims is not None:
                 instance.release_claim(peer)

@@ -24,14 +24,40 @@ __all__ = ["main", "serve_command"]
 
 logger = logging.getLogger(__name__)
 
+_Commands = argparse._SubParsersAction  # what add_subparsers returns: each builder adds to it
+
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``rlenv`` command line; returns the exit code."""
+    args = _parser().parse_args(argv)
+    logging.basicConfig(level=args.log_level, stream=sys.stderr,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    if os.getcwd() not in sys.path and "" not in sys.path:
+        sys.path.insert(0, os.getcwd())  # MODULE:CLASS from here, as ``python -m`` finds it
+    try:
+        return args.run(args)
+    except KeyboardInterrupt:
+        return 130
+    except Exception as error:  # one clear line; the traceback with --log-level DEBUG
+        logger.debug("rlenv %s failed", args.command, exc_info=error)
+        print(f"rlenv {args.command}: {_in_words(error)}", file=sys.stderr)
+        return 2
+
+
+def _parser() -> argparse.ArgumentParser:
+    """The ``rlenv`` command's parser: the subcommands, each from its own builder."""
     parser = argparse.ArgumentParser(prog="rlenv", description=__doc__)
     parser.add_argument("--log-level", default="WARNING",
                         choices=["DEBUG", "INFO", "WARNING", "ERROR"], help="default: WARNING")
     commands = parser.add_subparsers(dest="command", required=True)
+    for add in (_add_serve, _add_http, _add_inspect, _add_check, _add_bench, _add_replay,
+                _add_dataset, _add_demo):
+        add(commands)
+    return parser
 
+
+def _add_serve(commands: _Commands) -> None:
+    """``rlenv serve``: an environment over TCP."""
     serve = commands.add_parser("serve", help="serve an environment over TCP")
     serve.add_argument("target", help="the environment class, as MODULE:CLASS")
     serve.add_argument("--host", default=DEFAULT_HOST, help=f"address to bind (default "
@@ -88,6 +114,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                        "their episodes into DIR (as rlenv inspect --record-demonstrations)")
     serve.set_defaults(run=_serve)
 
+
+def _add_http(commands: _Commands) -> None:
+    """``rlenv http``: the HTTP/JSON gateway."""
     http = commands.add_parser(
         "http", help="serve environments over HTTP/JSON (needs the http extra)",
         description="An HTTP/JSON gateway: sessions under /v1/envs, bevy_rl's routes on TARGET, "
@@ -126,6 +155,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                       "waiting for its request head is closed)")
     http.set_defaults(run=_http)
 
+
+def _add_inspect(commands: _Commands) -> None:
+    """``rlenv inspect``: the live inspector's page."""
     inspect = commands.add_parser(
         "inspect", help="watch running servers in the browser (a page on 127.0.0.1)")
     inspect.add_argument("addresses", nargs="+", metavar="HOST:PORT",
@@ -154,6 +186,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                          "environment's real time, its ticks a second over repeat_action)")
     inspect.set_defaults(run=_inspect)
 
+
+def _add_check(commands: _Commands) -> None:
+    """``rlenv check``: a server checked the way trainers use it."""
     check = commands.add_parser("check", help="check a server the way trainers use it")
     check.add_argument("target", help="HOST:PORT of a running server, or MODULE:CLASS to start")
     check.add_argument("--timeout", type=float, default=30.0, help="seconds per answer")
@@ -164,6 +199,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                        help="the server's token (default: $RLENV_TOKEN)")
     check.set_defaults(run=_check)
 
+
+def _add_bench(commands: _Commands) -> None:
+    """``rlenv bench``: rlenv measured against same-run baselines."""
     bench = commands.add_parser("bench", help="measure rlenv against same-run baselines")
     bench.add_argument("--rounds", type=int, default=5, help="rounds per figure (median)")
     bench.add_argument("--steps", type=int, default=None,
@@ -185,6 +223,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                        "reference")
     bench.set_defaults(run=_bench)
 
+
+def _add_replay(commands: _Commands) -> None:
+    """``rlenv replay``: a recorded episode re-run and compared, or opened as timelines."""
     replay = commands.add_parser("replay", help="re-run a recorded episode and compare")
     replay.add_argument("file", nargs="+", help="an episode file (rlenv_client.replay."
                         "RecordEpisodes); several with --inspect")
@@ -208,6 +249,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     replay.add_argument("--follow-stdin", action="store_true", help=argparse.SUPPRESS)
     replay.set_defaults(run=_replay)
 
+
+def _add_dataset(commands: _Commands) -> None:
+    """``rlenv dataset create``: a Minari dataset from recordings."""
     dataset = commands.add_parser("dataset", help="Minari datasets (the minari extra)")
     dataset_commands = dataset.add_subparsers(dest="dataset_command", required=True)
     create = dataset_commands.add_parser(
@@ -228,6 +272,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     create.add_argument("--code-permalink", help="a link to the code that made it")
     create.set_defaults(run=_dataset_create)
 
+
+def _add_demo(commands: _Commands) -> None:
+    """``rlenv demo``: CartPole balanced by a controller."""
     demo = commands.add_parser("demo", help="serve CartPole and balance it with a controller")
     demo.add_argument("--episodes", type=int, default=5, help="episodes to run (default 5)")
     demo.add_argument("--repeat-action", type=int, default=1,
@@ -236,20 +283,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     demo.add_argument("--max-seconds", type=float, default=30.0,
                       help="simulated seconds after which an episode is cut short (default 30)")
     demo.set_defaults(run=_demo)
-
-    args = parser.parse_args(argv)
-    logging.basicConfig(level=args.log_level, stream=sys.stderr,
-                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    if os.getcwd() not in sys.path and "" not in sys.path:
-        sys.path.insert(0, os.getcwd())  # MODULE:CLASS from here, as ``python -m`` finds it
-    try:
-        return args.run(args)
-    except KeyboardInterrupt:
-        return 130
-    except Exception as error:  # one clear line; the traceback with --log-level DEBUG
-        logger.debug("rlenv %s failed", args.command, exc_info=error)
-        print(f"rlenv {args.command}: {_in_words(error)}", file=sys.stderr)
-        return 2
 
 
 def _in_words(error: Exception) -> str:

@@ -39,7 +39,6 @@ episode's checkpoints take at most half, each branch at most half of what is lef
 from __future__ import annotations
 
 import copy
-import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -51,24 +50,24 @@ from rlenv.protocol import Hello
 from rlenv.protocol.errors import RemoteError
 from rlenv_client.replay import EpisodeFile, digest, older_settings
 from rlenv_client.trusted_targets import check_target
+from rlenv_tools._timeline_processes import (
+    WORKING,
+    Checkpoints,
+    Mark,
+    Processes,
+    Result,
+    measured_spacing,
+)
 from rlenv_tools.forking import ForkedEnvironment, StepRecord
 
 __all__ = ["MAX_MEMORY", "MAX_PROCESSES", "Step", "Tick", "Timeline", "TimelineDiff",
            "load_policy"]
 
-_PROBE_STEPS = 8  # steps timed at a time to space the checkpoints (twice: the least spacing)
-_PROBE_ROUNDS = 4  # times they are timed
-_REPLAY_BUDGET = 0.005  # seconds of steps from a checkpoint to the step asked for, at most
-_MOST_APART = 1000  # steps between two checkpoints, at most (unless the episode is longer)
-_MOST_CHECKPOINTS = 256  # over one episode (and at most half a timeline's processes)
-_WORKING = 2  # processes besides the checkpoints: the cursor, a tick view's copy
-_MEASURE_EVERY = 8  # parks between two measures of the memory (an eighth of them, past 64)
 _SKIPPED_AT_ONCE = 10_000  # ticks a tick view takes unread in one run
 MAX_PROCESSES = 512
 """A timeline's processes at most, its branches' included (``max_processes``' default)."""
 MAX_MEMORY = 2 << 30
 """The memory a timeline's processes hold at most, in bytes (``max_memory``' default)."""
-_Result = tuple[Any, float, bool, bool, dict[str, Any]]  # observation, reward, ends, info
 
 
 @dataclass(frozen=True)
@@ -140,116 +139,6 @@ class TimelineDiff:
     rewards: list[float]
 
 
-@dataclass(frozen=True)
-class _Mark:
-    """A checkpoint: a parked copy of the environment at a step, and what that step returned."""
-
-    environment: ForkedEnvironment
-    result: _Result
-
-
-class _Checkpoints:
-    """Parked copies every ``every`` steps (the reset's at 0), as a timeline passes them.
-
-    Going to step ``k`` copies the nearest one at or before ``k`` and takes at most
-    ``every - 1`` steps from there.
-    """
-
-    def __init__(self, every: int, marks: Mapping[int, _Mark]) -> None:
-        self.every = every
-        self._marks = dict(marks)
-
-    def due(self, step: int) -> bool:
-        """Whether a checkpoint should be parked on reaching ``step``."""
-        return step % self.every == 0 and step not in self._marks
-
-    def next_due(self, step: int) -> int:
-        """The first step after ``step`` where one is due."""
-        return (step // self.every + 1) * self.every
-
-    def keep(self, step: int, mark: _Mark) -> None:
-        """Remember ``mark`` as the checkpoint at ``step``."""
-        self._marks[step] = mark
-
-    def nearest(self, step: int) -> tuple[int, _Mark]:
-        """The checkpoint at ``step`` or the latest before it."""
-        best = max(k for k in self._marks if k <= step)
-        return best, self._marks[best]
-
-    def upto(self, step: int) -> _Checkpoints:
-        """A copy holding the checkpoints at ``step`` and before (a branch's shared part)."""
-        return _Checkpoints(self.every, {k: m for k, m in self._marks.items() if k <= step})
-
-
-class _Processes:
-    """The processes of a root timeline and its branches: the first, parked copies, the cursor.
-
-    The cursor is the copy that steps; ``position`` says which timeline's step it stands at.
-    At most ``limit`` processes at once (the cursor and a tick view's copy included), holding
-    at most ``memory`` bytes (their PSS, measured every few parks): past either, no more
-    checkpoints are parked (going to a step then takes more steps from an earlier one).
-    """
-
-    def __init__(self, target: str, timeout: float, limit: int, memory: int) -> None:
-        self.first = ForkedEnvironment.start(target, timeout=timeout)
-        self.parked: list[ForkedEnvironment] = [self.first]
-        self.cursor: ForkedEnvironment | None = None
-        self.position: tuple[Timeline, int] | None = None
-        self.result: _Result | None = None
-        self.closed = False
-        self.limit = limit
-        self.memory = memory
-        self._measured = 0  # bytes, at the last measure
-        self._since = 0  # parks since
-
-    def room(self) -> int:
-        """How many more checkpoints may be parked now."""
-        if self._measured > self.memory:
-            return 0
-        return max(0, self.limit - len(self.parked) - _WORKING)
-
-    def park(self, environment: ForkedEnvironment) -> ForkedEnvironment | None:
-        """A copy of ``environment`` kept as it is now (``None``: no room left for one)."""
-        if self._since >= max(_MEASURE_EVERY, len(self.parked) // 8):
-            self._since, self._measured = 0, self.used()
-        if not self.room():
-            return None
-        copy = environment.fork()
-        self.parked.append(copy)
-        self._since += 1
-        return copy
-
-    def used(self) -> int:
-        """The memory the processes hold (PSS), in bytes."""
-        cursor = [] if self.cursor is None else [self.cursor]
-        return sum(environment.memory() for environment in self.parked + cursor)
-
-    def resume(self, mark: _Mark) -> ForkedEnvironment:
-        """A new cursor: a copy of the checkpoint's (the old cursor ends)."""
-        self.drop_cursor()
-        self.cursor = mark.environment.fork()
-        return self.cursor
-
-    def drop_cursor(self) -> None:
-        """End the cursor (its copies live on)."""
-        self.position = self.result = None
-        if self.cursor is not None:
-            self.cursor.close()
-            self.cursor = None
-
-    def close(self) -> None:
-        """End every process; wait until they are gone."""
-        if self.closed:
-            return
-        self.closed = True
-        self.drop_cursor()
-        for environment in self.parked:
-            environment.close()
-        for environment in self.parked:
-            environment.end()
-        self.parked.clear()
-
-
 class Timeline:
     """A recorded episode to re-simulate, inspect and branch (see the module docstring).
 
@@ -299,20 +188,20 @@ class Timeline:
                              folder=None if episode.path is None else episode.path.parent)
         if checkpoint_every is not None and checkpoint_every < 1:
             raise ValueError("checkpoint_every must be at least 1")
-        if max_processes < 2 * _WORKING:
-            raise ValueError(f"max_processes must be at least {2 * _WORKING}")
-        processes = _Processes(target, timeout, max_processes, max_memory)
+        if max_processes < 2 * WORKING:
+            raise ValueError(f"max_processes must be at least {2 * WORKING}")
+        processes = Processes(target, timeout, max_processes, max_memory)
         episode = replace(episode, observations=list(episode.observations))
         try:
-            unspaced = _Checkpoints(len(episode.snapshot["events"]) + 1, {})  # until measured
+            unspaced = Checkpoints(len(episode.snapshot["events"]) + 1, {})  # until measured
             self._setup(episode, processes, True, unspaced, [])
             start = {**episode.snapshot, "events": []}
             observation, info = processes.first.call("restore", start)
-            result: _Result = (observation, 0.0, False, False, info)
+            result: Result = (observation, 0.0, False, False, info)
             self._check(0, digest(observation))
-            self._checkpoints.keep(0, _Mark(processes.first, result))
-            self._checkpoints.every = max(checkpoint_every or self._measured_spacing(),
-                                          -(-len(self) // (processes.room() // 2 or 1)))
+            self._checkpoints.keep(0, Mark(processes.first, result))
+            spacing = checkpoint_every or measured_spacing(len(self), self._goto)
+            self._checkpoints.every = max(spacing, -(-len(self) // (processes.room() // 2 or 1)))
             self._goto(len(self))
         except BaseException:
             processes.close()
@@ -332,8 +221,8 @@ class Timeline:
                    checkpoint_every=checkpoint_every, timeout=timeout,
                    max_processes=max_processes, max_memory=max_memory)
 
-    def _setup(self, episode: EpisodeFile, processes: _Processes, owner: bool,
-               checkpoints: _Checkpoints, records: list[StepRecord]) -> None:
+    def _setup(self, episode: EpisodeFile, processes: Processes, owner: bool,
+               checkpoints: Checkpoints, records: list[StepRecord]) -> None:
         self.episode = episode
         # A started process has said its hello (ForkedEnvironment.start).
         self.hello = cast(Hello, processes.first.hello)
@@ -406,7 +295,7 @@ class Timeline:
             RuntimeError: the timeline is closed, or its environment failed.
         """
         observation, reward, terminated, truncated, info = self._goto(step)
-        cursor = self._cursor()
+        cursor = self._processes.stepping()
         entries = cursor.call("tree") if nodes is None else \
             [cursor.call("node", path) for path in nodes]
         properties = {node["path"]: dict(node["exported"]) for node in entries}
@@ -425,7 +314,7 @@ class Timeline:
             RuntimeError: as :meth:`at`.
         """
         self._goto(step)
-        return self._cursor().call("tree")
+        return self._processes.stepping().call("tree")
 
     def ticks(self, step: int, *, first: int = 1, count: int | None = None) -> list[Tick]:
         """Physics ticks inside the action of ``step``, re-simulated, a page at a time.
@@ -456,41 +345,13 @@ class Timeline:
             raise ValueError("count must be at least 1")
         last = frames if count is None else min(frames, first + count - 1)
         self._goto(step - 1)
-        ticking = self._cursor().fork()
+        ticking = self._processes.stepping().fork()
         try:
-            if first > 1 and self._skip(ticking, changes, action, first - 1):
-                return []  # the episode ended before ``first``
-            ticks = []
-            for tick in range(first, last + 1):
-                events = [*changes, ["action", action, 1]] if tick == 1 else [["action", action, 1]]
-                ((_, reward, terminated, truncated),), observation, info = ticking.run([events])
-                properties = {node["path"]: dict(node["exported"])
-                              for node in ticking.call("tree")}
-                ticks.append(Tick(tick, observation, reward, terminated, truncated, info,
-                                  properties, ticking.call("draw")))
-                if terminated or truncated:
-                    break
+            return _read_ticks(ticking, changes, action, first, last)
         except (ConnectionError, RemoteError) as error:
             raise RuntimeError(f"the timeline's environment failed: {error}") from None
         finally:
             ticking.end()
-        return ticks
-
-    @staticmethod
-    def _skip(ticking: ForkedEnvironment, changes: list[list[Any]], action: Any,
-              ticks: int) -> bool:
-        """Take the first ``ticks`` ticks of an action unread; whether the episode ended."""
-        taken = 0
-        while taken < ticks:
-            chunk = min(_SKIPPED_AT_ONCE, ticks - taken)
-            steps = [[["action", action, 1]] for _ in range(chunk)]
-            if taken == 0:
-                steps[0] = [*changes, *steps[0]]
-            records, _, _ = ticking.run(steps, stop_at_end=True)
-            taken += len(records)
-            if records[-1][2] or records[-1][3]:
-                return True
-        return False
 
     def branch(self, step: int, actions: Iterable[Any] | None = None, *,
                policy: Callable[[Any], Any] | str | Path | None = None,
@@ -539,24 +400,17 @@ class Timeline:
         if step == len(self) and self.ended:
             terminated, truncated = bool(self.episode.terminated), bool(self.episode.truncated)
         processes = self._processes
-        cursor = self._cursor()
+        cursor = processes.stepping()
         processes.position = None  # the cursor leaves this timeline
         try:
             if terminated or truncated:
                 pass
             elif policy is None:
                 steps = [[["action", action, repeat_action]] for action in actions or ()]
-                result = self._take(step, steps, result, checkpoints, records, branching=True)
+                result = processes.take(step, steps, result, checkpoints, records, None)
             else:
-                for _ in range(max_steps):  # type: ignore[arg-type]
-                    action = policy(result[0])
-                    observation, reward, terminated, truncated, info = cursor.call(
-                        "step", action, repeat_action)
-                    result = (observation, float(reward), bool(terminated), bool(truncated), info)
-                    records.append((digest(observation), *result[1:4]))
-                    self._park_if_due(len(records), checkpoints, result)
-                    if terminated or truncated:
-                        break
+                result = processes.play(policy, max_steps, repeat_action,  # type: ignore[arg-type]
+                                        result, checkpoints, records)
             snapshot = cursor.call("snapshot")
         except ConnectionError as error:
             raise RuntimeError(f"the timeline's environment failed: {error}") from None
@@ -599,65 +453,12 @@ class Timeline:
     def __repr__(self) -> str:
         return f"Timeline({self.episode.target}, {len(self)} steps)"
 
-    def _goto(self, step: int) -> _Result:
+    def _goto(self, step: int) -> Result:
         """Bring the cursor to ``step`` of this timeline; what that step returned."""
         if not 0 <= step <= len(self):
             raise IndexError(f"no step {step}: the timeline has steps 0 to {len(self)}")
-        processes = self._processes
-        if processes.closed:
-            raise RuntimeError("the timeline is closed")
-        base, mark = self._checkpoints.nearest(step)
-        position = processes.position
-        try:
-            if position is not None and position[0] is self and base <= position[1] <= step:
-                base, result = position[1], processes.result
-            else:
-                processes.resume(mark)
-                result = mark.result
-            result = self._take(base, self._steps[base:step], result,  # type: ignore[arg-type]
-                                self._checkpoints, self._records)
-        except (ConnectionError, RemoteError) as error:
-            processes.drop_cursor()
-            raise RuntimeError(f"the timeline's environment failed: {error}") from None
-        processes.position, processes.result = (self, step), result
-        assert result is not None
-        return result
-
-    def _take(self, step: int, steps: list[list[list[Any]]], result: _Result,
-              checkpoints: _Checkpoints, records: list[StepRecord], *,
-              branching: bool = False) -> _Result:
-        """Take ``steps`` after ``step`` on the cursor, parking checkpoints where due.
-
-        This timeline's own steps are checked against the recording (the first time through a
-        recording without digests, recorded); a branch's new steps stop where its episode ends.
-        """
-        cursor = self._cursor()
-        done = 0
-        while done < len(steps):
-            chunk = steps[done:checkpoints.next_due(step + done) - step]
-            taken, observation, info = cursor.run(chunk, stop_at_end=branching)
-            for record in taken:
-                done += 1
-                if step + done > len(records):
-                    records.append(record)
-                if not branching:
-                    self._check(step + done, record[0])
-            result = (observation, *taken[-1][1:], info)
-            self._park_if_due(step + done, checkpoints, result)
-            if branching and (result[2] or result[3]):
-                break
-        return result
-
-    def _park_if_due(self, step: int, checkpoints: _Checkpoints, result: _Result) -> None:
-        if checkpoints.due(step):
-            parked = self._processes.park(self._cursor())
-            if parked is not None:
-                checkpoints.keep(step, _Mark(parked, result))
-
-    def _cursor(self) -> ForkedEnvironment:
-        cursor = self._processes.cursor
-        assert cursor is not None
-        return cursor
+        return self._processes.goto(self, step, self._steps, self._checkpoints, self._records,
+                                    self._check)
 
     def _check(self, step: int, observed: str) -> None:
         digests = self.episode.observations
@@ -670,38 +471,10 @@ class Timeline:
                                "recording: its snapshot's settings, generator state and actions "
                                f"gave another observation{why}")
 
-    def _measured_spacing(self) -> int:
-        """Checkpoints as far apart as ~5 ms of steps, from the cost of the first few.
-
-        The first steps after a copy pay for its first writes to shared pages; the next ones
-        are timed, a few at a time, and the quickest few count (the machine's noise only ever
-        adds).
-        """
-        if len(self) < _PROBE_STEPS * (_PROBE_ROUNDS + 1):
-            return _MOST_APART
-        self._goto(_PROBE_STEPS)
-        costs = []
-        for round_ in range(2, _PROBE_ROUNDS + 2):
-            began = time.perf_counter()
-            self._goto(round_ * _PROBE_STEPS)
-            costs.append((time.perf_counter() - began) / _PROBE_STEPS)
-        spacing = min(_MOST_APART, max(2 * _PROBE_STEPS, int(_REPLAY_BUDGET / min(costs))))
-        return max(spacing, -(-len(self) // _MOST_CHECKPOINTS))
-
     def _every_observation(self) -> list[Any]:
         """Every step's observation, re-simulated from the reset in one run."""
         _, mark = self._checkpoints.nearest(0)
-        processes = self._processes
-        try:
-            cursor = processes.resume(mark)
-            observations = [mark.result[0]]
-            if self._steps:
-                observations += cursor.run(self._steps, observations=True)[1]
-        except (ConnectionError, RemoteError) as error:
-            processes.drop_cursor()
-            raise RuntimeError(f"the timeline's environment failed: {error}") from None
-        processes.position, processes.result = None, None
-        return observations
+        return self._processes.every_observation(mark, self._steps)
 
 
 def _named_by(episode: EpisodeFile) -> str:
@@ -727,3 +500,39 @@ def _subtract(mine: Any, theirs: Any) -> Any:
     if isinstance(mine, (tuple, list)):
         return [_subtract(a, b) for a, b in zip(mine, theirs, strict=True)]
     return np.asarray(theirs, np.float64) - np.asarray(mine, np.float64)
+
+
+def _read_ticks(ticking: ForkedEnvironment, changes: list[list[Any]], action: Any, first: int,
+                last: int) -> list[Tick]:
+    """Ticks ``first`` to ``last`` of an action, each taken on ``ticking`` with its own read.
+
+    ``ticking`` is a copy at the state before the step, ``changes`` the events recorded before
+    the action. Fewer ticks come back where the episode ends.
+    """
+    if first > 1 and _skip(ticking, changes, action, first - 1):
+        return []  # the episode ended before ``first``
+    ticks = []
+    for tick in range(first, last + 1):
+        events = [*changes, ["action", action, 1]] if tick == 1 else [["action", action, 1]]
+        ((_, reward, terminated, truncated),), observation, info = ticking.run([events])
+        properties = {node["path"]: dict(node["exported"]) for node in ticking.call("tree")}
+        ticks.append(Tick(tick, observation, reward, terminated, truncated, info, properties,
+                          ticking.call("draw")))
+        if terminated or truncated:
+            break
+    return ticks
+
+
+def _skip(ticking: ForkedEnvironment, changes: list[list[Any]], action: Any, ticks: int) -> bool:
+    """Take the first ``ticks`` ticks of an action unread; whether the episode ended."""
+    taken = 0
+    while taken < ticks:
+        chunk = min(_SKIPPED_AT_ONCE, ticks - taken)
+        steps = [[["action", action, 1]] for _ in range(chunk)]
+        if taken == 0:
+            steps[0] = [*changes, *steps[0]]
+        records, _, _ = ticking.run(steps, stop_at_end=True)
+        taken += len(records)
+        if records[-1][2] or records[-1][3]:
+            return True
+    return False

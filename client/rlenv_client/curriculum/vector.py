@@ -54,6 +54,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 from numpy.typing import ArrayLike
 
+from rlenv_client.curriculum._trials import Trials
 from rlenv_client.curriculum.levels import Level
 from rlenv_client.curriculum.parameters import (
     EnvironmentParameters,
@@ -106,17 +107,6 @@ class Episode:
         return (f"Episode(env={self.env}, level_id={self.level_id}, trial={self.trial}, "
                 f"steps={self.first_step}..{self.last_step}, reward={self.reward:.3g}, "
                 f"success={self.success})")
-
-
-class _Trial:
-    """A new level on trial: its results so far, and how many of its episodes are under way."""
-
-    __slots__ = ("level", "results", "under_way")
-
-    def __init__(self, level: Level) -> None:
-        self.level = level
-        self.results: list[float] = []
-        self.under_way = 0  # episodes chosen or playing, not finished yet
 
 
 class CurriculumVectorEnv(VectorWrapper):
@@ -205,10 +195,12 @@ class CurriculumVectorEnv(VectorWrapper):
         if rollouts_per_level > 1 and score == "external":
             raise ValueError("rollouts_per_level > 1 needs a score the wrapper computes "
                              "('learnability' or a callable), not 'external'")
-        self.rollouts_per_level = rollouts_per_level
+        self._trials = Trials(rollouts_per_level)
+
+    @property
+    def rollouts_per_level(self) -> int:
         """How many episodes a new level plays on trial before it is offered to the buffer."""
-        self._trials: dict[int, _Trial] = {}  # the levels on trial by number, oldest first
-        self._trial_count = 0
+        return self._trials.rollouts_per_level
 
     def reset(self, *, seed: int | list[int | None] | None = None,
               options: Mapping[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
@@ -288,7 +280,7 @@ class CurriculumVectorEnv(VectorWrapper):
             since.
         """
         if episode.trial is not None:
-            results = self._rollout_done(episode, float(score))
+            results = self._trials.done(episode.trial, float(score))
             return None if results is None else self._offer(episode.level, float(np.mean(results)))
         if episode.level_id is None:
             return self._offer(episode.level, score)
@@ -357,17 +349,17 @@ class CurriculumVectorEnv(VectorWrapper):
         level_id = trial = None
         if edited is None and sampler.sample_replay_decision():
             level_id, level = sampler.sample_replay_level()
-        elif (trial := self._waiting_trial()) is not None:  # the next rollout of a level on trial
-            level = self._trials[trial].level
+        elif (trial := self._trials.waiting()) is not None:  # the next rollout of one on trial
+            level = self._trials.level(trial)
         elif edited is not None:  # ACCEL: the last replay's level, edited, as a new level
             self._edited[index] = None
             level = edited
-            trial = self._put_on_trial(level)
+            trial = self._trials.start(level)
         else:
             level = int(self._rng.integers(_SEEDS))
-            trial = self._put_on_trial(level)
+            trial = self._trials.start(level)
         if trial is not None:
-            self._trials[trial].under_way += 1
+            self._trials.chosen(trial)
         self._next[index] = (level, level_id, trial)
         config = None
         if self.parameters is not None:
@@ -425,7 +417,7 @@ class CurriculumVectorEnv(VectorWrapper):
 
     def _score_learnability(self, episode: Episode) -> None:
         if episode.trial is not None:
-            results = self._rollout_done(episode, float(episode.success))
+            results = self._trials.done(episode.trial, float(episode.success))
             if results is not None:
                 level_id = self._offer(episode.level, learnability(results))
                 if level_id is not None:
@@ -447,36 +439,10 @@ class CurriculumVectorEnv(VectorWrapper):
             self._forget_evicted()
         return level_id
 
-    def _put_on_trial(self, level: Level) -> int | None:
-        """The number of a new trial of ``level``; ``None`` when one rollout decides."""
-        if self.rollouts_per_level == 1:
-            return None
-        self._trial_count += 1
-        self._trials[self._trial_count] = _Trial(level)
-        return self._trial_count
-
-    def _waiting_trial(self) -> int | None:
-        """The oldest level on trial that needs an episode more than are under way."""
-        for number, trial in self._trials.items():
-            if len(trial.results) + trial.under_way < self.rollouts_per_level:
-                return number
-        return None
-
-    def _rollout_done(self, episode: Episode, result: float) -> list[float] | None:
-        """Add a trial episode's result; the trial's results once it has them all (it ends)."""
-        assert episode.trial is not None
-        trial = self._trials[episode.trial]
-        trial.under_way -= 1
-        trial.results.append(result)
-        if len(trial.results) < self.rollouts_per_level:
-            return None
-        del self._trials[episode.trial]
-        return trial.results
-
     def _lost(self, episode: Episode) -> None:
         """An episode ended without an outcome: its level on trial, if any, needs another."""
         if episode.trial is not None:
-            self._trials[episode.trial].under_way -= 1
+            self._trials.lost(episode.trial)
 
     def _forget_evicted(self) -> None:
         """Drop what is kept of levels no longer in the buffer (one may just have left)."""

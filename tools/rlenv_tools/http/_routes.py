@@ -66,55 +66,58 @@ _ENV = ("unknown_session",)
 _CALL = (*_ENV, "environment_error", "environment_lost", ErrorCode.TIMEOUT)
 
 
-def session_endpoints(gateway: Gateway) -> list[Endpoint]:
-    """The ``/v1`` routes, served from ``gateway``'s sessions (the hot ones first)."""
-    sessions = gateway.sessions
+class _Handlers:
+    """The ``/v1`` routes' handlers, each a request to ``gateway``'s sessions."""
 
-    def session_at(path: Mapping[str, str]) -> Session:
-        session = sessions.get(path["id"])
+    def __init__(self, gateway: Gateway) -> None:
+        self.gateway = gateway
+        self.sessions = gateway.sessions
+
+    def session_at(self, path: Mapping[str, str]) -> Session:
+        session = self.sessions.get(path["id"])
         session.touch()
         return session
 
-    async def step(path: Mapping[str, str], body: Any) -> Any:
-        session = session_at(path)
+    async def step(self, path: Mapping[str, str], body: Any) -> Any:
+        session = self.session_at(path)
         body = object_body(body, _STEP_KEYS, _ACTION)
         return await session.step(body["action"], body.get("repeat_action"))
 
-    async def reset(path: Mapping[str, str], body: Any) -> Any:
-        session = session_at(path)
+    async def reset(self, path: Mapping[str, str], body: Any) -> Any:
+        session = self.session_at(path)
         body = object_body(body, _RESET_KEYS)
         return await session.reset(body.get("seed"), body.get("options"))
 
-    async def create(request: Request) -> Response:
+    async def create(self, request: Request) -> Response:
         body = object_body(await read_json(request, required=False), _CREATE_KEYS)
-        env_id = body.get("env_id", gateway.catalog.target)
+        env_id = body.get("env_id", self.gateway.catalog.target)
         if env_id is None:
             raise Problem(ErrorCode.BAD_REQUEST, f"env_id is required: one of "
-                                                 f"{gateway.catalog.ids()}")
+                                                 f"{self.gateway.catalog.ids()}")
         settings = body.get("kwargs")
         if settings is not None and type(settings) is not dict:
             raise Problem(ErrorCode.BAD_REQUEST, "kwargs must be a JSON object of settings "
                                                  "(as BaseClient.configure takes them)")
         client = request.client
-        session = await sessions.create(env_id, settings,
-                                        owner=None if client is None else client.host)
+        session = await self.sessions.create(env_id, settings,
+                                             owner=None if client is None else client.host)
         if await request.is_disconnected():  # abandoned mid-request: nobody knows its id
-            await sessions.abandon(session)
+            await self.sessions.abandon(session)
         return json_response({"id": session.id, "env_id": session.env_id, **session.spaces()},
                              201, headers={"Location": f"/v1/envs/{session.id}"})
 
-    async def list_sessions(request: Request) -> Response:
-        return json_response({"envs": [session.describe() for session in sessions.all()]})
+    async def list_sessions(self, request: Request) -> Response:
+        return json_response({"envs": [session.describe() for session in self.sessions.all()]})
 
-    async def get_session(request: Request) -> Response:
-        return json_response(session_at(request.path_params).describe())
+    async def get_session(self, request: Request) -> Response:
+        return json_response(self.session_at(request.path_params).describe())
 
-    async def delete_session(request: Request) -> Response:
-        await sessions.delete(request.path_params["id"])
+    async def delete_session(self, request: Request) -> Response:
+        await self.sessions.delete(request.path_params["id"])
         return Response(status_code=204, headers=COMMON_HEADERS)
 
-    async def render(request: Request) -> Response:
-        session = session_at(request.path_params)
+    async def render(self, request: Request) -> Response:
+        session = self.session_at(request.path_params)
         width, height = _size(request, "width"), _size(request, "height")
         frame = await session.render(width, height)
         if _RAW in request.headers.get("accept", ""):
@@ -124,20 +127,20 @@ def session_endpoints(gateway: Gateway) -> list[Endpoint]:
         png = await asyncio.to_thread(encode_png, frame)  # zlib lets the loop go on meanwhile
         return Response(png, headers=COMMON_HEADERS, media_type="image/png")
 
-    async def action_space(request: Request) -> Response:
-        space = session_at(request.path_params).client.action_space
+    async def action_space(self, request: Request) -> Response:
+        space = self.session_at(request.path_params).client.action_space
         return json_response({"space": space_to_json(space),
                               "schema": json_schema(space, images=False)})
 
-    async def observation_space(request: Request) -> Response:
-        space = session_at(request.path_params).client.observation_space
+    async def observation_space(self, request: Request) -> Response:
+        space = self.session_at(request.path_params).client.observation_space
         return json_response({"space": space_to_json(space), "schema": json_schema(space)})
 
-    async def sample(request: Request) -> Response:
-        return json_response({"action": session_at(request.path_params).sample()})
+    async def sample(self, request: Request) -> Response:
+        return json_response({"action": self.session_at(request.path_params).sample()})
 
-    async def contains(request: Request) -> Response:
-        session = session_at(request.path_params)
+    async def contains(self, request: Request) -> Response:
+        session = self.session_at(request.path_params)
         body = object_body(await read_json(request), _ACTION, _ACTION)
         try:
             check(session.client.action_space, body["action"])
@@ -145,45 +148,53 @@ def session_endpoints(gateway: Gateway) -> list[Endpoint]:
             return json_response({"member": False, "reason": str(mismatch)})
         return json_response({"member": True})
 
-    async def snapshot(request: Request) -> Response:
-        return json_response({"snapshot": await session_at(request.path_params).snapshot()})
+    async def snapshot(self, request: Request) -> Response:
+        return json_response({"snapshot": await self.session_at(request.path_params).snapshot()})
 
-    async def restore(request: Request) -> Response:
-        session = session_at(request.path_params)
+    async def restore(self, request: Request) -> Response:
+        session = self.session_at(request.path_params)
         body = object_body(await read_json(request), _RESTORE_KEYS, _RESTORE_KEYS)
         return json_response(await session.restore(body["snapshot"]))
 
-    async def versions(request: Request) -> Response:
-        return json_response(gateway.about())
+    async def versions(self, request: Request) -> Response:
+        return json_response(self.gateway.about())
 
+
+def session_endpoints(gateway: Gateway) -> list[Endpoint]:
+    """The ``/v1`` routes, served from ``gateway``'s sessions (the hot ones first)."""
+    handlers = _Handlers(gateway)
     one = "/v1/envs/{id}"
     return [
-        Endpoint("POST", f"{one}/step", step, "step", "Act for repeat_action physics ticks",
-                 "sessions", {200: Answer("the transition; info.frames: the ticks that ran",
-                                          "Step")},
+        Endpoint("POST", f"{one}/step", handlers.step, "step",
+                 "Act for repeat_action physics ticks", "sessions",
+                 {200: Answer("the transition; info.frames: the ticks that ran", "Step")},
                  body="StepBody", body_required=True, json=True,
                  problems=(*_CALL, ErrorCode.BAD_REQUEST, ErrorCode.RESET_REQUIRED,
                            ErrorCode.INVALID_ACTION, ErrorCode.BUSY),
                  description="A step before a reset, or after the episode ended, is refused "
                              "(409); an action outside the space too (422), naming the field."),
-        Endpoint("POST", f"{one}/reset", reset, "reset", "Start an episode (seed 0 is a seed)",
-                 "sessions", {200: Answer("the first observation", "Reset")}, body="ResetBody",
+        Endpoint("POST", f"{one}/reset", handlers.reset, "reset",
+                 "Start an episode (seed 0 is a seed)", "sessions",
+                 {200: Answer("the first observation", "Reset")}, body="ResetBody",
                  json=True, problems=(*_CALL, ErrorCode.BAD_REQUEST, ErrorCode.BUSY)),
-        Endpoint("POST", "/v1/envs", create, "create_session", "Create a session", "sessions",
+        Endpoint("POST", "/v1/envs", handlers.create, "create_session", "Create a session",
+                 "sessions",
                  {201: Answer("the session's id and spaces", "Created")}, body="CreateBody",
                  problems=(ErrorCode.BAD_REQUEST, "session_limit", "environment_error",
                            "environment_lost", ErrorCode.INVALID_CONFIG, ErrorCode.TIMEOUT,
                            ErrorCode.BUSY),
                  description="env_id: the command line's TARGET (the default) or a registered "
                              "id; kwargs: settings, as BaseClient.configure takes them."),
-        Endpoint("GET", "/v1/envs", list_sessions, "list_sessions", "List the sessions",
+        Endpoint("GET", "/v1/envs", handlers.list_sessions, "list_sessions", "List the sessions",
                  "sessions", {200: Answer("every session", "SessionList")}),
-        Endpoint("GET", one, get_session, "get_session", "A session's status, episode and step",
-                 "sessions", {200: Answer("the session", "Session")}, problems=_ENV),
-        Endpoint("DELETE", one, delete_session, "delete_session",
+        Endpoint("GET", one, handlers.get_session, "get_session",
+                 "A session's status, episode and step", "sessions",
+                 {200: Answer("the session", "Session")}, problems=_ENV),
+        Endpoint("DELETE", one, handlers.delete_session, "delete_session",
                  "Close a session and its environment", "sessions",
                  {204: Answer("closed", media_type="")}, problems=_ENV),
-        Endpoint("GET", f"{one}/render", render, "render", "Draw the current state", "sessions",
+        Endpoint("GET", f"{one}/render", handlers.render, "render", "Draw the current state",
+                 "sessions",
                  {200: Answer("a PNG image, or with Accept: application/octet-stream the raw "
                               "uint8 bytes (X-Shape: height,width,3 and X-Dtype headers)",
                               {"type": "string", "contentMediaType": "image/png"}, "image/png")},
@@ -192,32 +203,32 @@ def session_endpoints(gateway: Gateway) -> list[Endpoint]:
                                             "maximum": MAX_RENDER_SIZE}, "pixels"),
                         Parameter("height", {"type": "integer", "minimum": 1,
                                              "maximum": MAX_RENDER_SIZE}, "pixels"))),
-        Endpoint("GET", f"{one}/action_space", action_space, "action_space",
+        Endpoint("GET", f"{one}/action_space", handlers.action_space, "action_space",
                  "The action space and the JSON Schema of actions", "sessions",
                  {200: Answer("the space in gymnasium's terms, and its schema", "SpaceAnswer")},
                  problems=_ENV),
-        Endpoint("GET", f"{one}/observation_space", observation_space, "observation_space",
+        Endpoint("GET", f"{one}/observation_space", handlers.observation_space, "observation_space",
                  "The observation space and the JSON Schema of observations", "sessions",
                  {200: Answer("the space in gymnasium's terms, and its schema", "SpaceAnswer")},
                  problems=_ENV),
-        Endpoint("POST", f"{one}/action_space/sample", sample, "sample_action",
+        Endpoint("POST", f"{one}/action_space/sample", handlers.sample, "sample_action",
                  "A random action", "sessions", {200: Answer("an action", "Sample")},
                  problems=_ENV),
-        Endpoint("POST", f"{one}/action_space/contains", contains, "action_space_contains",
+        Endpoint("POST", f"{one}/action_space/contains", handlers.contains, "action_space_contains",
                  "Whether an action belongs to the action space (checked as a step would)",
                  "sessions", {200: Answer("member, and the reason when not", "Contains")},
                  body="Sample", body_required=True, problems=_ENV),
-        Endpoint("GET", f"{one}/snapshot", snapshot, "snapshot",
+        Endpoint("GET", f"{one}/snapshot", handlers.snapshot, "snapshot",
                  "The state as data, to restore here or in another session", "sessions",
                  {200: Answer("the snapshot", "SnapshotBody")},
                  problems=(*_CALL, ErrorCode.RESET_REQUIRED, ErrorCode.BAD_REQUEST)),
-        Endpoint("POST", f"{one}/restore", restore, "restore",
+        Endpoint("POST", f"{one}/restore", handlers.restore, "restore",
                  "Bring the environment to a snapshot's state", "sessions",
                  {200: Answer("the observation in the restored state", "Reset")},
                  body="SnapshotBody", body_required=True,
                  problems=(*_CALL, ErrorCode.BAD_REQUEST, ErrorCode.INVALID_ACTION,
                            ErrorCode.INVALID_CONFIG, ErrorCode.BUSY)),
-        Endpoint("GET", "/v1", versions, "versions", "Versions, capabilities and limits",
+        Endpoint("GET", "/v1", handlers.versions, "versions", "Versions, capabilities and limits",
                  "gateway", {200: Answer("what this gateway serves", {"type": "object"})}),
     ]
 

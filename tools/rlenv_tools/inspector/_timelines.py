@@ -29,20 +29,14 @@ recording's target is imported only where it is installed, unless the page was g
 from __future__ import annotations
 
 import functools
-import threading
-from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from contextlib import contextmanager
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from gymnasium import spaces
-
 from rlenv.protocol.errors import RemoteError
-from rlenv_client.launcher import ServerStartError
-from rlenv_client.replay import EpisodeFile, digest
+from rlenv_client.replay import EpisodeFile
 from rlenv_client.session import LOST
-from rlenv_tools.inspector._control import key_map
+from rlenv_tools.inspector._recordings import Branch, Recordings, Root, episode_id, key_name
 from rlenv_tools.inspector._watch import InspectorError, _shown, to_json
 from rlenv_tools.timeline import Timeline
 
@@ -54,51 +48,6 @@ MAX_TICKS = 100
 """The most ticks one answer of the tick view holds (``count``; a page of a long step)."""
 
 Policy = Callable[[Any], Any]
-_LISTED = 32  # recent episodes remembered per instance once the page was shown them
-
-
-@dataclass
-class _Branch:
-    """One node of a timeline's tree: a branch (or the episode itself, number 0)."""
-
-    number: int
-    parent: int | None
-    at: int  # the branch point: the last step it shares with its parent
-    how: str  # "episode", "keys" or "policy"
-    timeline: Timeline
-    actions: list[str] = field(default_factory=list)  # the keys pressed, or the policy's name
-
-    def describe(self) -> dict[str, Any]:
-        label = {"episode": "the episode", "policy": f"policy {''.join(self.actions)}"}.get(
-            self.how, f"keys {' '.join(_key_name(k) for k in self.actions[-6:])}" +
-            (" …" if len(self.actions) > 6 else ""))
-        return {"branch": self.number, "parent": self.parent, "at": self.at, "how": self.how,
-                "label": label, "length": len(self.timeline), "ended": self.timeline.ended}
-
-
-class _Root:
-    """A recording, its timeline once opened, its branches, and the lock they share."""
-
-    def __init__(self, number: int, name: str, load: Callable[[], EpisodeFile],
-                 origin: dict[str, Any]) -> None:
-        self.number = number
-        self.name = name
-        self.load = load
-        self.origin = origin
-        self.lock = threading.Lock()
-        self.branches: dict[int, _Branch] = {}
-        self.keys: dict[str, Any] = {}
-        self.keys_error = ""
-        self.agents: list[str] = []
-        self.diffs: dict[tuple[int, int], tuple[Timeline, Timeline, Any]] = {}
-        self.error = ""
-        self.closed = False
-        self.opened = 0  # when it was last opened (the order of openings), 0: not open
-
-    @property
-    def timeline(self) -> Timeline | None:
-        branch = self.branches.get(0)
-        return None if branch is None else branch.timeline
 
 
 class Timelines:
@@ -129,18 +78,10 @@ class Timelines:
                  max_memory: int = 4 << 30) -> None:
         self.policies = dict(policies or {})
         self.unavailable = dict(unavailable or {})
-        self._target = target
-        self._trust = trust_target
-        self._every = checkpoint_every
-        self._max_recent = max_recent
-        self._max_files = max_files
-        self._share = {"max_processes": max_processes // (max_recent + max_files),
-                       "max_memory": max_memory // (max_recent + max_files)}
-        self._openings = 0
-        self._lock = threading.Lock()  # the registry; each root has its own
-        self._roots: dict[int, _Root] = {}
-        self._listed: dict[tuple[int, int], dict[str, EpisodeFile]] = {}
-        self._next = 0
+        self._recordings = Recordings(target=target, trust_target=trust_target,
+                                      checkpoint_every=checkpoint_every, max_recent=max_recent,
+                                      max_files=max_files, max_processes=max_processes,
+                                      max_memory=max_memory)
         for path in paths:
             self.add_file(path)
 
@@ -152,18 +93,11 @@ class Timelines:
         Raises:
             ValueError: the file is not an rlenv episode.
         """
-        episode = EpisodeFile.load(path)
-        number = self._add(Path(path).name, lambda: episode, {"file": str(path)})
-        with self._lock:
-            files = [root for root in self._roots.values() if "file" in root.origin]
-            for root, name in zip(files, _distinct([Path(r.origin["file"]) for r in files]),
-                                  strict=True):
-                root.name = name
-        return number
+        return self._recordings.add_file(path)
 
     def add_episode(self, episode: EpisodeFile, name: str, origin: Mapping[str, Any]) -> int:
         """Offer ``episode`` (a live instance's recent one, say) as ``name``; its number."""
-        return self._add(name, lambda: episode, dict(origin))
+        return self._recordings.add(name, lambda: episode, dict(origin))
 
     def open_recent(self, episodes: list[EpisodeFile], server: int, instance: int,
                     identifier: str) -> dict[str, Any]:
@@ -176,17 +110,10 @@ class Timelines:
         Raises:
             InspectorError: 404, no such episode (or no longer kept).
         """
-        with self._lock:
-            listed = self._listed.get((server, instance), {})
-        found = [episode for episode in episodes if episode_id(episode) == identifier]
-        if not found and identifier in listed:
-            found = [listed[identifier]]
-        if not found:
-            raise InspectorError(404, f"instance {instance} of server {server} keeps no episode "
-                                      f"{identifier!r:.40} (any more: newer ones replaced it)")
+        found = self._recordings.find_recent(episodes, server, instance, identifier)
         origin = {"server": server, "instance": instance, "recent": identifier}
-        steps = sum(event[0] == "action" for event in found[0].snapshot["events"])
-        number = self.add_episode(found[0], f"server {server} · instance {instance} · "
+        steps = sum(event[0] == "action" for event in found.snapshot["events"])
+        number = self.add_episode(found, f"server {server} · instance {instance} · "
                                   f"recent episode of {steps} steps ({identifier[:6]})", origin)
         return self.describe(number)
 
@@ -196,17 +123,11 @@ class Timelines:
         :meth:`open_recent` finds them even once the server has dropped them (a fast trainer
         finishes several episodes while a person reads the list).
         """
-        with self._lock:
-            kept = self._listed.setdefault((server, instance), {})
-            for episode in episodes:
-                kept[episode_id(episode)] = episode
-            for identifier in list(kept)[:max(0, len(kept) - _LISTED)]:
-                del kept[identifier]  # the oldest listed first
+        self._recordings.listed(server, instance, episodes)
 
     def list(self) -> dict[str, Any]:
         """Every timeline offered (number, name, origin, whether open), and the policies."""
-        with self._lock:
-            roots = list(self._roots.values())
+        roots = self._recordings.roots()
         return {"timelines": [{"timeline": root.number, "name": root.name,
                                "origin": root.origin, "open": root.timeline is not None,
                                "error": root.error} for root in roots],
@@ -220,8 +141,7 @@ class Timelines:
             InspectorError: 404 no such timeline; 422 its environment did not start, or
                 re-simulated the recording differently.
         """
-        with self._using(number) as root:
-            self._opened(root)
+        with self._recordings.using(number) as root:
             return self._describe(root)
 
     # --- what the page shows ---------------------------------------------------------------------
@@ -237,7 +157,7 @@ class Timelines:
             InspectorError: 404 no such timeline or branch; 400 no such step; 422 the
                 timeline's environment failed.
         """
-        with self._using(number) as root:
+        with self._recordings.using(number) as root:
             timeline = self._branch(root, branch).timeline
             state = self._call(lambda: timeline.at(_step(timeline, step)))
             return {"timeline": number, "branch": branch, "step": step,
@@ -264,7 +184,7 @@ class Timelines:
         """
         if not 1 <= count <= MAX_TICKS:
             raise InspectorError(400, f"count must be 1 to {MAX_TICKS}")
-        with self._using(number) as root:
+        with self._recordings.using(number) as root:
             timeline = self._branch(root, branch).timeline
             if not 1 <= step <= len(timeline):
                 raise InspectorError(400, f"step {step} has no action: steps 1 to "
@@ -293,7 +213,7 @@ class Timelines:
         Raises:
             InspectorError: as :meth:`step` (a step neither reaches: 400).
         """
-        with self._using(number) as root:
+        with self._recordings.using(number) as root:
             a, b = self._branch(root, first), self._branch(root, second)
             if not 0 <= step <= max(len(a.timeline), len(b.timeline)):
                 raise InspectorError(400, f"no step {step}: the branches have steps 0 to "
@@ -326,7 +246,7 @@ class Timelines:
         Raises:
             InspectorError: as :meth:`step`; 422 a key outside the agent's map (or none).
         """
-        with self._using(number) as root:
+        with self._recordings.using(number) as root:
             parent = self._branch(root, branch)
             action = self._action(root, key)
             _step(parent.timeline, step)
@@ -342,7 +262,7 @@ class Timelines:
         Raises:
             InspectorError: as :meth:`branch_keys`; 409 not a key branch, or its episode ended.
         """
-        with self._using(number) as root:
+        with self._recordings.using(number) as root:
             node = self._branch(root, branch)
             if node.how != "keys":
                 raise InspectorError(409, f"branch {branch} is {node.describe()['label']}: "
@@ -376,7 +296,7 @@ class Timelines:
         if not 1 <= max_steps <= MAX_BRANCH_STEPS:
             raise InspectorError(400, f"max_steps must be 1 to {MAX_BRANCH_STEPS}")
         chosen = self.policies[policy]
-        with self._using(number) as root:
+        with self._recordings.using(number) as root:
             parent = self._branch(root, branch)
             _step(parent.timeline, step)
             try:
@@ -391,126 +311,34 @@ class Timelines:
 
     def close(self) -> None:
         """Close every timeline (its processes end); safe to repeat."""
-        with self._lock:
-            roots = list(self._roots.values())
-        for root in roots:
-            self._remove(root)
+        self._recordings.close()
 
     # --- inside ----------------------------------------------------------------------------------
 
-    def _add(self, name: str, load: Callable[[], EpisodeFile], origin: dict[str, Any]) -> int:
-        with self._lock:
-            number, self._next = self._next, self._next + 1
-            self._roots[number] = _Root(number, name, load, origin)
-            return number
-
-    def _remove(self, root: _Root) -> None:
-        with self._lock:
-            self._roots.pop(root.number, None)
-        with root.lock:
-            root.closed = True
-            self._shut(root)
-
-    @staticmethod
-    def _shut(root: _Root) -> None:
-        """End the root's timeline and branches (its lock held)."""
-        if root.timeline is not None:
-            root.timeline.close()
-        root.branches.clear()
-        root.diffs.clear()
-        root.opened = 0
-
-    @contextmanager
-    def _using(self, number: int) -> Iterator[_Root]:
-        """The root ``number``, its lock held; then the oldest opened closed past the bounds."""
-        root = self._root(number)
-        try:
-            with root.lock:
-                yield root
-        finally:
-            self._make_room()
-
-    def _make_room(self) -> None:
-        """Close the oldest opened timelines past ``max_recent`` and ``max_files``.
-
-        A recent episode leaves the list; a file stays in it, to open again.
-        """
-        with self._lock:
-            opened = sorted((root for root in self._roots.values() if root.opened),
-                            key=lambda root: root.opened)
-        recent = [root for root in opened if "recent" in root.origin]
-        files = [root for root in opened if "recent" not in root.origin]
-        for root in recent[:max(0, len(recent) - self._max_recent)]:
-            self._remove(root)
-        for root in files[:max(0, len(files) - self._max_files)]:
-            with root.lock:
-                self._shut(root)
-
-    def _root(self, number: int) -> _Root:
-        with self._lock:
-            root = self._roots.get(number)
-        if root is None:
-            raise InspectorError(404, f"no timeline {number}: see api/timelines")
-        return root
-
-    def _opened(self, root: _Root) -> Timeline:
-        """The root's timeline, opened (its environment started) on first use."""
-        if root.closed:
-            raise InspectorError(404, f"timeline {root.number} was closed")
-        if root.timeline is not None:
-            return root.timeline
-        try:  # a live server's recent episode has no digests: the timeline records them
-            timeline = Timeline(root.load(), target=self._target, trust_target=self._trust,
-                                checkpoint_every=self._every, **self._share)
-        except (ValueError, ServerStartError, RuntimeError, OSError, RemoteError,
-                *LOST) as error:
-            root.error = f"cannot open {root.name}: {error}"
-            raise InspectorError(422, root.error) from None
-        root.error = ""
-        with self._lock:
-            self._openings += 1
-            root.opened = self._openings
-        root.branches[0] = _Branch(0, None, 0, "episode", timeline)
-        self._learn_keys(root, timeline)
-        return timeline
-
-    @staticmethod
-    def _learn_keys(root: _Root, timeline: Timeline) -> None:
-        """The agent's key map and names, from the timeline's hello and node tree."""
-        try:
-            hello = timeline.hello
-            root.agents = list(hello.agents)
-            space: spaces.Space = hello.action_space
-            root.keys = key_map(timeline.tree(0), space)
-        except InspectorError as error:
-            root.keys, root.keys_error = {}, str(error)
-        except Exception as error:  # the page still scrubs; it says why keys are off
-            root.keys, root.keys_error = {}, f"the timeline did not say: {error!r:.200}"
-
-    def _branch(self, root: _Root, number: int) -> _Branch:
-        self._opened(root)
+    def _branch(self, root: Root, number: int) -> Branch:
+        self._recordings.opened(root)
         branch = root.branches.get(number)
         if branch is None:
             raise InspectorError(404, f"timeline {root.number} has no branch {number} "
                                       f"(branches 0 to {max(root.branches)})")
         return branch
 
-    def _add_branch(self, root: _Root, parent: int, at: int, how: str, timeline: Timeline,
-                    actions: Sequence[str]) -> _Branch:
+    def _add_branch(self, root: Root, parent: int, at: int, how: str, timeline: Timeline,
+                    actions: Sequence[str]) -> Branch:
         number = max(root.branches) + 1
-        root.branches[number] = _Branch(number, parent, at, how, timeline, list(actions))
+        root.branches[number] = Branch(number, parent, at, how, timeline, list(actions))
         return root.branches[number]
 
-    def _action(self, root: _Root, key: str) -> Any:
+    def _action(self, root: Root, key: str) -> Any:
         if key not in root.keys:
             if not root.keys:
                 raise InspectorError(422, f"no keys to branch with: {root.keys_error}")
             raise InspectorError(422, f"{key!r:.20} is none of the agent's keys "
-                                      f"({', '.join(map(_key_name, root.keys))})")
+                                      f"({', '.join(map(key_name, root.keys))})")
         return root.keys[key]
 
-    def _describe(self, root: _Root) -> dict[str, Any]:
-        timeline = self._opened(root)
+    def _describe(self, root: Root) -> dict[str, Any]:
+        timeline = self._recordings.opened(root)
         return {"timeline": root.number, "name": root.name, "origin": root.origin,
                 "target": timeline.episode.target, "length": len(timeline),
                 "ended": timeline.ended, "agents": root.agents,
@@ -518,14 +346,14 @@ class Timelines:
                 "policies": sorted(self.policies), "unavailable": dict(self.unavailable),
                 "branches": [branch.describe() for branch in root.branches.values()]}
 
-    def _diff(self, root: _Root, a: _Branch, b: _Branch) -> Any:
+    def _diff(self, root: Root, a: Branch, b: Branch) -> Any:
         kept = root.diffs.get((a.number, b.number))
         if kept is None or kept[0] is not a.timeline or kept[1] is not b.timeline:
             kept = (a.timeline, b.timeline, self._call(lambda: a.timeline.diff(b.timeline)))
             root.diffs[(a.number, b.number)] = kept
         return kept[2]
 
-    def _shown(self, root: _Root, observation: Any) -> dict[str, Any]:
+    def _shown(self, root: Root, observation: Any) -> dict[str, Any]:
         """An observation as the live page shows it, by agent."""
         if len(root.agents) > 1 and isinstance(observation, Mapping):
             return {name: _shown(observation[name]) for name in root.agents}
@@ -542,29 +370,8 @@ class Timelines:
             raise InspectorError(422, f"the timeline's environment failed: {error}") from None
 
 
-def episode_id(episode: EpisodeFile) -> str:
-    """A recent episode's identifier: the digest of its snapshot (the same at every asking)."""
-    return digest(episode.snapshot)
-
-
-def _distinct(paths: list[Path]) -> list[str]:
-    """Each file's name, with as much of its folder as tells apart files of the same name."""
-    resolved = [path.resolve().parts for path in paths]
-    names = []
-    for parts in resolved:
-        depth = 1
-        while depth < len(parts) and sum(other[-depth:] == parts[-depth:]
-                                         for other in resolved) > 1:
-            depth += 1
-        names.append("/".join(parts[-depth:]).lstrip("/"))
-    return names
-
-
 def _step(timeline: Timeline, step: int) -> int:
     if not 0 <= step <= len(timeline):
         raise InspectorError(400, f"no step {step}: the timeline has steps 0 to {len(timeline)}")
     return step
 
-
-def _key_name(key: str) -> str:
-    return "Space" if key == " " else key

@@ -1,0 +1,63 @@
+"""A vector's infos batched as gymnasium batches them, in columns where it can.
+
+:class:`BatchedInfos` merges the sub-environments' infos of a
+:class:`~rlenv_client.vector.RemoteVectorEnv`'s step or reset into gymnasium's batched form
+(each key an array, with its ``_key`` mask), ``frames`` included, without a loop over the
+sub-environments in the common cases: no info, and several agents' outcomes alone.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+__all__ = ["BatchedInfos"]
+
+AddInfo = Callable[[dict[str, Any], dict[str, Any], int], dict[str, Any]]
+"""gymnasium's ``VectorEnv._add_info``: one sub-environment's info added to the batch."""
+
+
+class BatchedInfos:
+    """The batched infos of ``num_envs`` sub-environments (see the module docstring).
+
+    Args:
+        add_info: the vector's ``_add_info``, for the infos of other forms.
+        num_envs: how many sub-environments.
+    """
+
+    def __init__(self, add_info: AddInfo, num_envs: int) -> None:
+        self._add_info = add_info
+        self._all_envs = np.ones(num_envs, dtype=np.bool_)
+
+    def merge(self, infos: dict[str, Any], env_infos: list[dict[str, Any]],
+              frames: np.ndarray) -> dict:
+        """Gymnasium's batched infos, ``frames`` included; without a loop in the common cases.
+
+        Those are: no info, and several agents' outcomes alone (``agents``, built in columns).
+        """
+        if not infos and not any(env_infos):
+            return {"frames": frames, "_frames": self._all_envs.copy()}
+        if not infos and all(info.keys() == {"agents"} for info in env_infos):
+            return {"agents": self._agent_columns(env_infos), "_agents": self._all_envs.copy(),
+                    "frames": frames, "_frames": self._all_envs.copy()}
+        for index, info in enumerate(env_infos):
+            infos = self._add_info(infos, {**info, "frames": int(frames[index])}, index)
+        return infos
+
+    def _agent_columns(self, env_infos: list[dict[str, Any]]) -> dict[str, Any]:
+        """``agents`` batched as gymnasium's ``_add_info`` batches it, a column per outcome."""
+        every = self._all_envs
+        columns: dict[str, Any] = {}
+        for name in env_infos[0]["agents"]:
+            outcomes = [info["agents"][name] for info in env_infos]
+            columns[name] = {
+                "reward": np.array([o["reward"] for o in outcomes], np.float64),
+                "_reward": every.copy(),
+                "terminated": np.array([o["terminated"] for o in outcomes], np.bool_),
+                "_terminated": every.copy(),
+                "truncated": np.array([o["truncated"] for o in outcomes], np.bool_),
+                "_truncated": every.copy()}
+            columns[f"_{name}"] = every.copy()
+        return columns

@@ -1,0 +1,121 @@
+"""Roster: the agents of one instance's environment, and how each fares through an episode.
+
+An environment's agents are checked once it is ready (each has its spaces; the environment
+has a world), and their spaces make the instance's: the one agent's own, or a ``Dict`` keyed
+by agent name with several. Through an episode the roster keeps what each agent earned and
+how it ended: it clears them at a reset, runs each agent's end of tick, says when every agent
+ended, and gives what an answer reports (each agent's reward since the previous answer, its
+flags, and the joint end: :func:`rlenv.protocol.messages.joint_end`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from gymnasium import spaces
+
+from rlenv.agent import RLAgent
+from rlenv.environment import RLEnvironment
+from rlenv.protocol.messages import joint_end
+
+__all__ = ["Outcome", "Roster"]
+
+Outcome = tuple[float, bool, bool, dict[str, dict[str, Any]] | None]
+"""What an answer reports of the agents: the reward, the flags, and each agent's with several
+(its ``reward``, ``terminated`` and ``truncated``; ``None`` with one agent)."""
+
+
+class Roster:
+    """The agents of an environment (:meth:`of` checks them) and their episode's bookkeeping.
+
+    Attributes:
+        agents: the environment's agents, in its order.
+        several: whether there are several (their spaces and outcomes are keyed by name).
+    """
+
+    __slots__ = ("agents", "several")
+
+    def __init__(self, agents: list[RLAgent]) -> None:
+        self.agents = agents
+        self.several = len(agents) > 1
+
+    @classmethod
+    def of(cls, environment: RLEnvironment) -> Roster:
+        """The environment's agents, each with its spaces; and it must have a world.
+
+        An ``_ready`` that sets only ``self.agent`` (the seed's way) has that one agent.
+
+        Raises:
+            RuntimeError: the environment has no agent, no world, or an agent without spaces.
+        """
+        if not environment.agents and environment.agent is not None:
+            environment.agents = [environment.agent]
+        if not environment.agents:
+            raise RuntimeError(f"{environment!r} has no agent: add an RLAgent child or set "
+                               "self.agent")
+        if environment.world is None:
+            raise RuntimeError(f"{environment!r} has no world: add an RLEnvWorld child or set "
+                               "self.world")
+        for agent in environment.agents:
+            for attribute in ("action_space", "observation_space"):
+                if not isinstance(getattr(agent, attribute, None), spaces.Space):
+                    raise RuntimeError(f"{agent!r} must set {attribute} to a gymnasium space")
+        return cls(list(environment.agents))
+
+    def space(self, which: str) -> spaces.Space:
+        """The agents' ``which`` space: the agent's own, or a ``Dict`` keyed by agent name."""
+        agents = self.agents
+        if not self.several:
+            return getattr(agents[0], which)
+        return spaces.Dict({agent.name: getattr(agent, which) for agent in agents})
+
+    def begin(self) -> None:
+        """A new episode: no agent has earned anything or ended."""
+        for agent in self.agents:
+            agent.reward = 0.0
+            agent.terminated = agent.truncated = False
+
+    def after_tick(self, delta: float) -> None:
+        """The end of a tick (after pymunk stepped): each agent's ``_after_physics_tick``."""
+        for agent in self.agents:
+            agent._after_physics_tick(delta)
+
+    def ended(self) -> bool:
+        """Whether every agent terminated or was truncated (the episode is over)."""
+        for agent in self.agents:
+            if not (agent.terminated or agent.truncated):
+                return False
+        return True
+
+    def joint_end(self) -> tuple[bool, bool]:
+        """The episode's flags (terminated, truncated), as an answer reports them."""
+        if self.several:
+            terminated, truncated = joint_end([(agent.terminated, agent.truncated)
+                                                for agent in self.agents])
+            return bool(terminated), bool(truncated)
+        agent = self.agents[0]
+        return bool(agent.terminated), bool(agent.truncated)
+
+    def clear_rewards(self) -> None:
+        """Forget what the agents earned since the last answer (no one is to report it)."""
+        for agent in self.agents:
+            agent.reward = 0.0
+
+    def outcome(self, reports: bool) -> Outcome:
+        """The agents' reward (cleared if it ``reports`` it) and flags, and each one's."""
+        agents = self.agents
+        if not self.several:
+            agent = agents[0]
+            reward = float(agent.reward) if reports else 0.0
+            if reports:
+                agent.reward = 0.0
+            return reward, bool(agent.terminated), bool(agent.truncated), None
+        outcomes: dict[str, dict[str, Any]] = {
+            each.name: {"reward": float(each.reward) if reports else 0.0,
+                        "terminated": bool(each.terminated), "truncated": bool(each.truncated)}
+            for each in agents}
+        terminated, truncated = joint_end([(o["terminated"], o["truncated"])
+                                            for o in outcomes.values()])
+        if reports:
+            self.clear_rewards()
+        return sum(o["reward"] for o in outcomes.values()), terminated, truncated, outcomes

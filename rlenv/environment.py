@@ -163,8 +163,12 @@ class RLEnvironment(RLNode):
         """
         watch = self._agent_watch
         tree = self.get_tree() if self.is_inside_tree() else None
-        if (watch is not None and isinstance(node, RLAgent) and node.get_parent() is self
-                and not (tree is not None and tree.is_processing())):
+        if (
+            watch is not None
+            and isinstance(node, RLAgent)
+            and node.get_parent() is self
+            and not (tree is not None and tree.is_processing())
+        ):
             watch.leaving(node)
         super().remove_child(node)
 

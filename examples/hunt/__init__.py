@@ -111,8 +111,9 @@ class HuntWorld(RLEnvWorld):
 
 def _disc(name: str, color: tuple[int, int, int]) -> RigidBody:
     disc = RigidBody(name=f"{name}Disc")
-    disc.add_child(CollisionShape.circle(RADIUS, mass=1.0, elasticity=0.5, color=color,
-                                         name="Body"))
+    disc.add_child(
+        CollisionShape.circle(RADIUS, mass=1.0, elasticity=0.5, color=color, name="Body")
+    )
     return disc
 
 
@@ -158,10 +159,13 @@ class Hunter(_Mover):
     max_force = 10.0
     decision_period = 4
     observation_space = spaces.Box(
-        low=np.array([-HALF, -HALF, -_SPEED, -_SPEED] + [-2 * HALF, -2 * HALF, 0.0] * NEAREST,
-                     dtype=np.float32),
-        high=np.array([HALF, HALF, _SPEED, _SPEED] + [2 * HALF, 2 * HALF, 1.0] * NEAREST,
-                      dtype=np.float32),
+        low=np.array(
+            [-HALF, -HALF, -_SPEED, -_SPEED] + [-2 * HALF, -2 * HALF, 0.0] * NEAREST,
+            dtype=np.float32,
+        ),
+        high=np.array(
+            [HALF, HALF, _SPEED, _SPEED] + [2 * HALF, 2 * HALF, 1.0] * NEAREST, dtype=np.float32
+        ),
         dtype=np.float32,
     )
 
@@ -193,14 +197,18 @@ class Hunter(_Mover):
     def get_data(self, observation_request: Mapping[str, Any]) -> np.ndarray:
         """Own position and velocity; the three nearest prey, relative to the hunter."""
         position, velocity = self._own()
-        others = sorted((np.array(disc.body.position) - position
-                         for disc in self.world.prey_discs.values()),
-                        key=lambda relative: float(np.hypot(*relative)))[:NEAREST]
+        others = sorted(
+            (np.array(disc.body.position) - position for disc in self.world.prey_discs.values()),
+            key=lambda relative: float(np.hypot(*relative)),
+        )[:NEAREST]
         values = [*position, *velocity]
         for slot in range(NEAREST):
             values += [*others[slot], 1.0] if slot < len(others) else [0.0, 0.0, 0.0]
-        return np.clip(np.array(values, dtype=np.float32), self.observation_space.low,
-                       self.observation_space.high)
+        return np.clip(
+            np.array(values, dtype=np.float32),
+            self.observation_space.low,
+            self.observation_space.high,
+        )
 
     def heuristic(self, observation: np.ndarray) -> np.ndarray:
         """Run at the nearest prey, braking a little."""
@@ -215,10 +223,13 @@ class Prey(_Mover):
 
     decision_period = 8
     observation_space = spaces.Box(
-        low=np.array([-HALF, -HALF, -_SPEED, -_SPEED, -2 * HALF, -2 * HALF, -_SPEED, -_SPEED],
-                     dtype=np.float32),
-        high=np.array([HALF, HALF, _SPEED, _SPEED, 2 * HALF, 2 * HALF, _SPEED, _SPEED],
-                      dtype=np.float32),
+        low=np.array(
+            [-HALF, -HALF, -_SPEED, -_SPEED, -2 * HALF, -2 * HALF, -_SPEED, -_SPEED],
+            dtype=np.float32,
+        ),
+        high=np.array(
+            [HALF, HALF, _SPEED, _SPEED, 2 * HALF, 2 * HALF, _SPEED, _SPEED], dtype=np.float32
+        ),
         dtype=np.float32,
     )
 
@@ -263,8 +274,15 @@ class Prey(_Mover):
         position, velocity = self._own()
         hunter = self.world.hunter_disc
         assert hunter is not None
-        values = np.array((*position, *velocity, *(np.array(hunter.body.position) - position),
-                           *hunter.body.velocity), dtype=np.float32)
+        values = np.array(
+            (
+                *position,
+                *velocity,
+                *(np.array(hunter.body.position) - position),
+                *hunter.body.velocity,
+            ),
+            dtype=np.float32,
+        )
         return np.clip(values, self.observation_space.low, self.observation_space.high)
 
     def heuristic(self, observation: np.ndarray) -> np.ndarray:
@@ -318,4 +336,6 @@ class HuntEnvironment(RLEnvironment):
     def _spawn(self) -> None:
         name = PREY[self.spawned]
         self.spawned += 1
-        self.add_child(Prey(name, self.world_node.spot_away_from(np.array(self.hunter.body.position))))
+        self.add_child(
+            Prey(name, self.world_node.spot_away_from(np.array(self.hunter.body.position)))
+        )

@@ -31,8 +31,7 @@ from rlenv.agent import RLAgent
 from rlenv.environment import RLEnvironment
 from rlenv.protocol.messages import MAX_REPEAT_ACTION
 
-__all__ = ["MAX_POSSIBLE_AGENTS", "Departure", "Roster", "plays_by_decisions",
-           "possible_agents"]
+__all__ = ["MAX_POSSIBLE_AGENTS", "Departure", "Roster", "plays_by_decisions", "possible_agents"]
 
 MAX_POSSIBLE_AGENTS = 1024
 """The most agents an environment may declare (each is in the hello, with its spaces)."""
@@ -40,14 +39,18 @@ MAX_POSSIBLE_AGENTS = 1024
 
 def plays_by_decisions(environment: RLEnvironment, agents: Collection[RLAgent]) -> bool:
     """Whether ``environment`` answers with the agents due (come and go, decision periods)."""
-    return environment.possible_agents is not None or any(
-        agent.decision_period is not None for agent in agents) or any(
-        cls.decision_period is not None for cls in (environment.possible_agents or {}).values())
+    return (
+        environment.possible_agents is not None
+        or any(agent.decision_period is not None for agent in agents)
+        or any(
+            cls.decision_period is not None for cls in (environment.possible_agents or {}).values()
+        )
+    )
 
 
-def possible_agents(environment: RLEnvironment,
-                    agents: Collection[RLAgent]) -> dict[str, tuple[type[RLAgent], spaces.Space,
-                                                                    spaces.Space]]:
+def possible_agents(
+    environment: RLEnvironment, agents: Collection[RLAgent]
+) -> dict[str, tuple[type[RLAgent], spaces.Space, spaces.Space]]:
     """Each possible agent's class, action space and observation space, by name.
 
     The declaration (:attr:`~rlenv.environment.RLEnvironment.possible_agents`), or the agents
@@ -66,31 +69,40 @@ def possible_agents(environment: RLEnvironment,
         found = {name: (type(agent), agent) for name, agent in present.items()}
     else:
         if not isinstance(declared, Mapping) or not declared:
-            raise TypeError(f"{where} must be a non-empty map from agent name to RLAgent class, "
-                            f"got {declared!r:.80}")
+            raise TypeError(
+                f"{where} must be a non-empty map from agent name to RLAgent class, "
+                f"got {declared!r:.80}"
+            )
         if len(declared) > MAX_POSSIBLE_AGENTS:
-            raise TypeError(f"{where} declares {len(declared)} agents; at most "
-                            f"{MAX_POSSIBLE_AGENTS}")
+            raise TypeError(
+                f"{where} declares {len(declared)} agents; at most {MAX_POSSIBLE_AGENTS}"
+            )
         for name, cls in declared.items():
             if not (isinstance(name, str) and name and "/" not in name and "@" not in name):
-                raise TypeError(f"{where}: {name!r:.40} is not an agent name (a non-empty "
-                                "str without '/' or '@')")
+                raise TypeError(
+                    f"{where}: {name!r:.40} is not an agent name (a non-empty "
+                    "str without '/' or '@')"
+                )
             if not (isinstance(cls, type) and issubclass(cls, RLAgent)):
                 raise TypeError(f"{where}[{name!r}] must be an RLAgent class, got {cls!r:.60}")
         for name, agent in present.items():
             if name not in declared:
                 raise TypeError(f"agent {name!r} is in the tree, but {where} does not name it")
             if not isinstance(agent, declared[name]):
-                raise TypeError(f"agent {name!r} is a {type(agent).__name__}, but {where} "
-                                f"declares it a {declared[name].__name__}")
+                raise TypeError(
+                    f"agent {name!r} is a {type(agent).__name__}, but {where} "
+                    f"declares it a {declared[name].__name__}"
+                )
         found = {name: (cls, present.get(name)) for name, cls in declared.items()}
     result = {}
     for name, (cls, agent) in found.items():
         holder: Any = agent if agent is not None else cls
         for which in ("action_space", "observation_space"):
             if not isinstance(getattr(holder, which, None), spaces.Space):
-                raise TypeError(f"{cls.__name__} (possible agent {name!r}) must set {which} as "
-                                "a class attribute: the hello lists it before the agent joins")
+                raise TypeError(
+                    f"{cls.__name__} (possible agent {name!r}) must set {which} as "
+                    "a class attribute: the hello lists it before the agent joins"
+                )
         _check_period(holder, name)
         result[name] = (cls, holder.action_space, holder.observation_space)
     return result
@@ -101,11 +113,15 @@ def _check_period(agent: Any, name: str) -> None:
     if period is None:
         return
     if type(period) is not int or not 1 <= period <= MAX_REPEAT_ACTION:
-        raise TypeError(f"agent {name!r}: decision_period must be None or an integer in "
-                        f"1..{MAX_REPEAT_ACTION} ticks, got {period!r:.40}")
+        raise TypeError(
+            f"agent {name!r}: decision_period must be None or an integer in "
+            f"1..{MAX_REPEAT_ACTION} ticks, got {period!r:.40}"
+        )
     if type(offset) is not int or not 0 <= offset < period:
-        raise TypeError(f"agent {name!r}: decision_offset must be an integer in "
-                        f"0..{period - 1} (within its period), got {offset!r:.40}")
+        raise TypeError(
+            f"agent {name!r}: decision_offset must be an integer in "
+            f"0..{period - 1} (within its period), got {offset!r:.40}"
+        )
 
 
 @dataclass
@@ -131,8 +147,12 @@ class Roster:
         observe: packs one agent's observation for the request being served.
     """
 
-    def __init__(self, environment: RLEnvironment, possible: Mapping[str, type[RLAgent]],
-                 observe: Callable[[RLAgent], Any]) -> None:
+    def __init__(
+        self,
+        environment: RLEnvironment,
+        possible: Mapping[str, type[RLAgent]],
+        observe: Callable[[RLAgent], Any],
+    ) -> None:
         self.environment = environment
         self.possible = dict(possible)
         self._observe = observe
@@ -149,8 +169,11 @@ class Roster:
     def begin(self) -> None:
         """A new episode: the agents the reset left in the tree start it, and all decide."""
         environment = self.environment
-        agents = [node for node in environment.get_children() if isinstance(node, RLAgent)
-                  and not node.is_queued_for_deletion()]
+        agents = [
+            node
+            for node in environment.get_children()
+            if isinstance(node, RLAgent) and not node.is_queued_for_deletion()
+        ]
         for agent in agents:
             self._check_declared(agent)
         environment.agents[:] = agents
@@ -184,9 +207,11 @@ class Roster:
             return
         name = agent.name
         if name in self.used:
-            raise ValueError(f"cannot add agent {name!r} to {self.environment.name}: the name "
-                             "was used already in this episode (an agent's name is never used "
-                             "twice in one episode)")
+            raise ValueError(
+                f"cannot add agent {name!r} to {self.environment.name}: the name "
+                "was used already in this episode (an agent's name is never used "
+                "twice in one episode)"
+            )
         self._check_declared(agent)
 
     def joined(self, agent: RLAgent) -> None:
@@ -216,8 +241,9 @@ class Roster:
         observation = self._observe(agent)
         reward = float(agent.reward)
         agent.reward = 0.0
-        self.departed[name] = Departure(observation, 0.0 if name in self.new else reward,
-                                        bool(terminated), not terminated)
+        self.departed[name] = Departure(
+            observation, 0.0 if name in self.new else reward, bool(terminated), not terminated
+        )
         self.environment.agents.remove(agent)
         environment = self.environment
         environment.agent = environment.agents[0] if environment.agents else None
@@ -233,13 +259,18 @@ class Roster:
                     f"cannot add agent {name!r} to {self.environment.name} during an episode: "
                     f"{type(self.environment).__name__} declares no possible_agents (declare "
                     "RLEnvironment.possible_agents, a map from each name that may appear to "
-                    "its RLAgent class, to let agents join)")
-            raise ValueError(f"cannot add agent {name!r} to {self.environment.name}: {where} "
-                             f"does not name it (it names {', '.join(self.possible)})")
+                    "its RLAgent class, to let agents join)"
+                )
+            raise ValueError(
+                f"cannot add agent {name!r} to {self.environment.name}: {where} "
+                f"does not name it (it names {', '.join(self.possible)})"
+            )
         if not isinstance(agent, declared):
-            raise ValueError(f"cannot add agent {name!r} to {self.environment.name}: it is a "
-                             f"{type(agent).__name__}, and {where} declares it a "
-                             f"{declared.__name__}")
+            raise ValueError(
+                f"cannot add agent {name!r} to {self.environment.name}: it is a "
+                f"{type(agent).__name__}, and {where} declares it a "
+                f"{declared.__name__}"
+            )
 
     # --- decisions ------------------------------------------------------------------------
 
@@ -260,8 +291,9 @@ class Roster:
     def _next_due(self, agent: RLAgent, repeat_action: int) -> int:
         period = agent.decision_period
         if period is None:
-            return max(self._last_decision.get(agent.name, self.tick) + repeat_action,
-                       self.tick + 1)
+            return max(
+                self._last_decision.get(agent.name, self.tick) + repeat_action, self.tick + 1
+            )
         offset = agent.decision_offset
         ahead = (offset - (self.tick + 1)) % period
         return self.tick + 1 + ahead

@@ -65,16 +65,30 @@ runpy.run_path(ppo, run_name="__main__")
 """
 
 
-def run(ppo: Path, env_id: str, seed: int, ppo_args: list[str], workdir: Path
-        ) -> tuple[list[tuple[int, float, int]], float, str]:
+def run(
+    ppo: Path, env_id: str, seed: int, ppo_args: list[str], workdir: Path
+) -> tuple[list[tuple[int, float, int]], float, str]:
     """One ppo.py run: its episodes, wall time and last SPS line."""
     episodes = workdir / f"{env_id.replace('/', '-').replace(':', '-')}-{seed}.csv"
     start = time.perf_counter()
     result = subprocess.run(
-        [sys.executable, "-c", _CHILD, str(episodes), str(ppo.resolve()), "--env-id", env_id,
-         "--seed", str(seed), *ppo_args],
-        cwd=workdir, capture_output=True, text=True,
-        env={**os.environ, "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS", "1")})
+        [
+            sys.executable,
+            "-c",
+            _CHILD,
+            str(episodes),
+            str(ppo.resolve()),
+            "--env-id",
+            env_id,
+            "--seed",
+            str(seed),
+            *ppo_args,
+        ],
+        cwd=workdir,
+        capture_output=True,
+        text=True,
+        env={**os.environ, "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS", "1")},
+    )
     seconds = time.perf_counter() - start
     if result.returncode != 0:
         raise SystemExit(f"ppo.py on {env_id} failed ({result.returncode}):\n{result.stderr}")
@@ -108,11 +122,16 @@ def main() -> None:
                 total = max(steps for steps, *_ in rows) if rows else 1
                 curves[name].append(curve(rows, args.total_timesteps))
                 last = [ret for steps, ret, _ in rows if steps > total * 0.9]
-                print(f"seed {seed} {name:6} {env_id}: ran to the end in {seconds:.0f} s "
-                      f"({sps}), {len(rows)} episodes, mean return of the last tenth "
-                      f"{statistics.mean(last) if last else float('nan'):.0f}", flush=True)
-    print(f"\nmean episodic return per tenth of {args.total_timesteps:,} steps "
-          f"(seeds {' '.join(map(str, args.seeds))})")
+                print(
+                    f"seed {seed} {name:6} {env_id}: ran to the end in {seconds:.0f} s "
+                    f"({sps}), {len(rows)} episodes, mean return of the last tenth "
+                    f"{statistics.mean(last) if last else float('nan'):.0f}",
+                    flush=True,
+                )
+    print(
+        f"\nmean episodic return per tenth of {args.total_timesteps:,} steps "
+        f"(seeds {' '.join(map(str, args.seeds))})"
+    )
     print(f"{'steps up to':>12} {'native':>8} {'rlenv':>8}")
     for bucket in range(BUCKETS):
         cells = []

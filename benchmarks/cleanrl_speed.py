@@ -33,13 +33,29 @@ def sps(ppo: Path, env_id: str, envs: int, steps: int, threads: str) -> float:
         environment["OMP_NUM_THREADS"] = threads
     with tempfile.TemporaryDirectory() as folder:
         result = subprocess.run(
-            [sys.executable, str(ppo.resolve()), "--env-id", env_id, "--num-envs", str(envs),
-             "--total-timesteps", str(steps), "--seed", "1"],
-            cwd=folder, env=environment, capture_output=True, text=True, check=False)
+            [
+                sys.executable,
+                str(ppo.resolve()),
+                "--env-id",
+                env_id,
+                "--num-envs",
+                str(envs),
+                "--total-timesteps",
+                str(steps),
+                "--seed",
+                "1",
+            ],
+            cwd=folder,
+            env=environment,
+            capture_output=True,
+            text=True,
+            check=False,
+        )
     lines = [line for line in result.stdout.splitlines() if line.startswith("SPS:")]
     if result.returncode != 0 or not lines:
-        raise RuntimeError(f"ppo.py on {env_id} failed:\n{result.stdout[-2000:]}"
-                           f"{result.stderr[-2000:]}")
+        raise RuntimeError(
+            f"ppo.py on {env_id} failed:\n{result.stdout[-2000:]}{result.stderr[-2000:]}"
+        )
     return float(lines[-1].split()[1])
 
 
@@ -57,10 +73,15 @@ def main() -> None:
             native = sps(args.ppo, ENV_IDS["native"], envs, args.steps, args.threads)
             served = sps(args.ppo, ENV_IDS["rlenv"], envs, args.steps, args.threads)
             ratios[envs].append(served / native)
-            print(f"round {round_number}, {envs} envs: native {native:,.0f} SPS, rlenv "
-                  f"{served:,.0f} SPS, ratio {served / native:.2f}", flush=True)
-    print(f"\nppo.py, threads {args.threads}: rlenv/CartPole-v1 against CartPole-v1 "
-          "(median of the per-round ratios, min)")
+            print(
+                f"round {round_number}, {envs} envs: native {native:,.0f} SPS, rlenv "
+                f"{served:,.0f} SPS, ratio {served / native:.2f}",
+                flush=True,
+            )
+    print(
+        f"\nppo.py, threads {args.threads}: rlenv/CartPole-v1 against CartPole-v1 "
+        "(median of the per-round ratios, min)"
+    )
     for envs, values in ratios.items():
         print(f"  {envs} envs: {statistics.median(values):.2f} (min {min(values):.2f})")
 

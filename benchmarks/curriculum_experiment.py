@@ -78,12 +78,26 @@ from rlenv_tools.http._png import encode_png
 
 METHODS = ("dr", "plr", "robust_plr", "accel", "sfl")
 ENVS = {"plinko": "rlenv/Plinko-v0", "maze": "rlenv/Maze-v0"}
-NAMES = {"dr": "DR", "plr": "PLR", "robust_plr": "Robust PLR", "accel": "ACCEL", "sfl": "SFL",
-         "follow": "follow (upper ref.)", "bfs": "BFS expert (upper ref.)",
-         "random": "random (lower ref.)"}
-COLOURS = {"dr": (0, 0, 0), "plr": (31, 119, 180), "robust_plr": (44, 160, 44),
-           "accel": (214, 39, 40), "sfl": (148, 103, 189), "follow": (150, 150, 150),
-           "bfs": (150, 150, 150), "random": (255, 127, 14)}
+NAMES = {
+    "dr": "DR",
+    "plr": "PLR",
+    "robust_plr": "Robust PLR",
+    "accel": "ACCEL",
+    "sfl": "SFL",
+    "follow": "follow (upper ref.)",
+    "bfs": "BFS expert (upper ref.)",
+    "random": "random (lower ref.)",
+}
+COLOURS = {
+    "dr": (0, 0, 0),
+    "plr": (31, 119, 180),
+    "robust_plr": (44, 160, 44),
+    "accel": (214, 39, 40),
+    "sfl": (148, 103, 189),
+    "follow": (150, 150, 150),
+    "bfs": (150, 150, 150),
+    "random": (255, 127, 14),
+}
 """The curves' colours (RGB): black, blue, green, red, purple; grey (the upper reference,
 ``follow`` or ``bfs``) and orange dashed."""
 HELD_OUT = 50
@@ -115,9 +129,12 @@ ENV_ID = ENVS["plinko"]
 
 
 def make_vector(num_envs: int, instances_per_server: int | None = None) -> Any:
-    return gymnasium.make_vec(ENV_ID, num_envs=num_envs,
-                              autoreset_mode=AutoresetMode.SAME_STEP,
-                              instances_per_server=instances_per_server)
+    return gymnasium.make_vec(
+        ENV_ID,
+        num_envs=num_envs,
+        autoreset_mode=AutoresetMode.SAME_STEP,
+        instances_per_server=instances_per_server,
+    )
 
 
 def hard_levels(difficulty: float) -> list[Level]:
@@ -137,7 +154,7 @@ def hard_levels(difficulty: float) -> list[Level]:
                         shape.setdefault("properties", {})["elasticity"] = BOUNCINESS[1]
             levels += [(seed + 1000 * ball, data) for ball in range(1, BALLS + 1)]
     del difficulty  # the hard levels carry their own pegs; the world's difficulty still
-    return levels   # sets the catcher's width
+    return levels  # sets the catcher's width
 
 
 # -- Maze-v0: hand-made hard mazes and a BFS expert -----------------------------------------
@@ -150,25 +167,43 @@ _MOVES = {(0, 1): 1, (0, -1): 2, (-1, 0): 3, (1, 0): 4}  # cell step -> Maze-v0 
 def _maze_layouts() -> list[tuple[str, set[maze.Cell], maze.Cell, maze.Cell]]:
     """Hand-made hard mazes (name, walls, start, goal) on the 9 x 9 inside (cells 1..9)."""
     every = range(1, 10)
-    serpentine = ({(c, 2) for c in every if c != 9} | {(c, 4) for c in every if c != 1}
-                  | {(c, 6) for c in every if c != 9} | {(c, 8) for c in every if c != 1})
+    serpentine = (
+        {(c, 2) for c in every if c != 9}
+        | {(c, 4) for c in every if c != 1}
+        | {(c, 6) for c in every if c != 9}
+        | {(c, 8) for c in every if c != 1}
+    )
     comb = {(c, r) for c in (2, 4, 6, 8) for r in range(1, 9)}
     two_rooms = {(5, r) for r in range(1, 9)} | {(c, 5) for c in (1, 2, 3, 7, 8, 9)}
     # the goal in a walled box, its door on the far side from the start
-    box = ({(c, 3) for c in range(3, 8)} | {(3, r) for r in range(3, 8)}
-           | {(7, r) for r in range(3, 8)} | {(c, 7) for c in (3, 4, 6, 7)})
+    box = (
+        {(c, 3) for c in range(3, 8)}
+        | {(3, r) for r in range(3, 8)}
+        | {(7, r) for r in range(3, 8)}
+        | {(c, 7) for c in (3, 4, 6, 7)}
+    )
     # a spiral, the goal at its centre
-    spiral = ({(c, 2) for c in range(2, 9)} | {(8, r) for r in range(2, 9)}
-              | {(c, 8) for c in range(3, 9)} | {(3, r) for r in range(4, 9)}
-              | {(c, 4) for c in range(3, 7)} | {(6, r) for r in range(4, 7)})
-    corner = ({(c, 6) for c in range(5, 10) if c != 9} | {(5, r) for r in range(6, 10)}
-              | {(c, 3) for c in range(2, 10)})
-    return [("serpentine", serpentine, (1, 1), (1, 9)),
-            ("comb", comb, (1, 1), (9, 1)),
-            ("two rooms", two_rooms, (2, 2), (8, 2)),
-            ("box", box, (5, 1), (5, 5)),
-            ("spiral", spiral, (1, 1), (5, 5)),
-            ("corner room", corner, (1, 1), (8, 8))]
+    spiral = (
+        {(c, 2) for c in range(2, 9)}
+        | {(8, r) for r in range(2, 9)}
+        | {(c, 8) for c in range(3, 9)}
+        | {(3, r) for r in range(4, 9)}
+        | {(c, 4) for c in range(3, 7)}
+        | {(6, r) for r in range(4, 7)}
+    )
+    corner = (
+        {(c, 6) for c in range(5, 10) if c != 9}
+        | {(5, r) for r in range(6, 10)}
+        | {(c, 3) for c in range(2, 10)}
+    )
+    return [
+        ("serpentine", serpentine, (1, 1), (1, 9)),
+        ("comb", comb, (1, 1), (9, 1)),
+        ("two rooms", two_rooms, (2, 2), (8, 2)),
+        ("box", box, (5, 1), (5, 5)),
+        ("spiral", spiral, (1, 1), (5, 5)),
+        ("corner room", corner, (1, 1), (8, 8)),
+    ]
 
 
 def _rotate(cell: maze.Cell) -> maze.Cell:
@@ -182,8 +217,9 @@ def hard_mazes() -> list[Level]:
     for number, (_, walls, start, goal) in enumerate(_maze_layouts()):
         for turn in range(4):
             assert maze.shortest_path(walls, start, goal) is not None
-            levels.append((HELD_OUT_START + 20_000 + 4 * number + turn,
-                           maze.make_level(walls, start, goal)))
+            levels.append(
+                (HELD_OUT_START + 20_000 + 4 * number + turn, maze.make_level(walls, start, goal))
+            )
             walls, start, goal = {_rotate(c) for c in walls}, _rotate(start), _rotate(goal)
     return levels
 
@@ -210,9 +246,13 @@ class BFSExpert:
         for level in batch:
             walls, start, goal = maze_grid(level, self.difficulty)
             path = maze.shortest_path(walls, start, goal) or [start]
-            self.plans.append([_MOVES[(b[0] - a[0], b[1] - a[1])]
-                               for a, b in zip(path, path[1:], strict=False)
-                               for _ in range(STEPS_PER_CELL)])
+            self.plans.append(
+                [
+                    _MOVES[(b[0] - a[0], b[1] - a[1])]
+                    for a, b in zip(path, path[1:], strict=False)
+                    for _ in range(STEPS_PER_CELL)
+                ]
+            )
 
     def __call__(self, observations: np.ndarray) -> np.ndarray:
         actions = np.array([plan[self.t] if self.t < len(plan) else 0 for plan in self.plans])
@@ -220,18 +260,20 @@ class BFSExpert:
         return actions
 
 
-def evaluate(policy: Policy, levels: Sequence[Level], vector: Any,
-             difficulty: float) -> np.ndarray:
+def evaluate(policy: Policy, levels: Sequence[Level], vector: Any, difficulty: float) -> np.ndarray:
     """Each level's return under ``policy``, played ``vector.num_envs`` at a time."""
     returns: list[float] = []
     n = vector.num_envs
     for start in range(0, len(levels), n):
-        batch = list(levels[start:start + n])
+        batch = list(levels[start : start + n])
         for index in range(n):
             seed, data = batch[index] if index < len(batch) else batch[-1]
-            vector.set_next_reset(index, seed=seed,
-                                  options=None if data is None else {"level": data},
-                                  config={"world": {"difficulty": difficulty}})
+            vector.set_next_reset(
+                index,
+                seed=seed,
+                options=None if data is None else {"level": data},
+                config={"world": {"difficulty": difficulty}},
+            )
         if hasattr(policy, "begin"):  # the BFS expert: it sees the levels
             policy.begin([batch[min(index, len(batch) - 1)] for index in range(n)])
         observations, _ = vector.reset()
@@ -241,7 +283,7 @@ def evaluate(policy: Policy, levels: Sequence[Level], vector: Any,
             observations, rewards, terminated, truncated, _ = vector.step(policy(observations))
             total += np.where(done, 0.0, rewards)
             done |= terminated | truncated
-        returns += total[:len(batch)].tolist()
+        returns += total[: len(batch)].tolist()
     return np.array(returns)
 
 
@@ -259,8 +301,7 @@ def random_policy(seed: int) -> Policy:
 class HeldOutCurve(BaseCallback):
     """Evaluates on the held-out seeds every ``every`` env-steps (and at step 0)."""
 
-    def __init__(self, every: int, levels: Sequence[Level], vector: Any,
-                 difficulty: float) -> None:
+    def __init__(self, every: int, levels: Sequence[Level], vector: Any, difficulty: float) -> None:
         super().__init__()
         self.every, self.levels, self.vector, self.difficulty = every, levels, vector, difficulty
         self.points: list[tuple[int, float]] = []
@@ -271,8 +312,7 @@ class HeldOutCurve(BaseCallback):
 
     def _on_rollout_start(self) -> None:
         if self.num_timesteps >= self._next:
-            score = float(evaluate(self._policy, self.levels, self.vector,
-                                   self.difficulty).mean())
+            score = float(evaluate(self._policy, self.levels, self.vector, self.difficulty).mean())
             self.points.append((self.num_timesteps, score))
             self._next += self.every
 
@@ -280,8 +320,16 @@ class HeldOutCurve(BaseCallback):
         return True
 
 
-def train(method: str, seed: int, steps: int, num_envs: int, difficulty: float,
-          eval_every: int, eval_vector: Any, held_out: Sequence[Level]) -> tuple[PPO, list]:
+def train(
+    method: str,
+    seed: int,
+    steps: int,
+    num_envs: int,
+    difficulty: float,
+    eval_every: int,
+    eval_vector: Any,
+    held_out: Sequence[Level],
+) -> tuple[PPO, list]:
     """One PPO run; returns the model and its held-out curve."""
     vector = make_vector(num_envs)
     parameters = EnvironmentParameters({"difficulty": difficulty}, seed=seed)
@@ -300,22 +348,37 @@ def train(method: str, seed: int, steps: int, num_envs: int, difficulty: float,
         ppo["normalize_advantage"] = False
         edits = ACCEL_EDITS if method == "accel" else 0
     elif method == "sfl":
-        sampler = LevelSampler(CAPACITY, replay_prob=REPLAY_PROB, prioritization="topk",
-                               k=SFL_K, staleness_coeff=0.0, seed=seed)
+        sampler = LevelSampler(
+            CAPACITY,
+            replay_prob=REPLAY_PROB,
+            prioritization="topk",
+            k=SFL_K,
+            staleness_coeff=0.0,
+            seed=seed,
+        )
         score = "learnability"
         rollouts = SFL_ROLLOUTS
     else:
         raise ValueError(f"unknown method {method!r}: one of {', '.join(METHODS)}")
-    wrapper = CurriculumVectorEnv(vector, sampler, parameters, score, seed=seed,
-                                  edit_levels=edits, rollouts_per_level=rollouts)
+    wrapper = CurriculumVectorEnv(
+        vector,
+        sampler,
+        parameters,
+        score,
+        seed=seed,
+        edit_levels=edits,
+        rollouts_per_level=rollouts,
+    )
     if score == "external":
-        callbacks.append(CurriculumCallback(wrapper, "max_mc" if method == "accel"
-                                            else "positive_value_loss"))
+        callbacks.append(
+            CurriculumCallback(wrapper, "max_mc" if method == "accel" else "positive_value_loss")
+        )
     curve = HeldOutCurve(eval_every, held_out, eval_vector, difficulty)
     callbacks.append(curve)
     env = SB3VecEnv(vector=wrapper)
-    model = PPO("MlpPolicy", env, n_steps=N_STEPS, batch_size=256, seed=seed, verbose=0,
-                device="cpu", **ppo)
+    model = PPO(
+        "MlpPolicy", env, n_steps=N_STEPS, batch_size=256, seed=seed, verbose=0, device="cpu", **ppo
+    )
     try:
         model.learn(steps, callback=CallbackList(callbacks))
     finally:
@@ -328,19 +391,30 @@ def train(method: str, seed: int, steps: int, num_envs: int, difficulty: float,
 WIDTH, HEIGHT, LEFT, RIGHT, TOP, BOTTOM = 800, 500, 60, 20, 20, 50
 
 
-def _line(image: np.ndarray, x0: float, y0: float, x1: float, y1: float,
-          colour: tuple[int, int, int], width: int = 2, dash: int = 0) -> None:
+def _line(
+    image: np.ndarray,
+    x0: float,
+    y0: float,
+    x1: float,
+    y1: float,
+    colour: tuple[int, int, int],
+    width: int = 2,
+    dash: int = 0,
+) -> None:
     count = int(max(abs(x1 - x0), abs(y1 - y0))) + 1
     for step, t in enumerate(np.linspace(0.0, 1.0, count)):
         if dash and (step // dash) % 2:
             continue
         x, y = int(round(x0 + t * (x1 - x0))), int(round(y0 + t * (y1 - y0)))
-        image[max(y - width // 2, 0):y + (width + 1) // 2,
-              max(x - width // 2, 0):x + (width + 1) // 2] = colour
+        image[
+            max(y - width // 2, 0) : y + (width + 1) // 2,
+            max(x - width // 2, 0) : x + (width + 1) // 2,
+        ] = colour
 
 
-def draw_curves(curves: dict[str, list[tuple[int, float]]], references: dict[str, float],
-                steps: int, path: Path) -> None:
+def draw_curves(
+    curves: dict[str, list[tuple[int, float]]], references: dict[str, float], steps: int, path: Path
+) -> None:
     """Catch rate (0..1, y) against env-steps (0..steps, x): gridlines every 0.1 and every
     tenth of the steps, the axes in black, references as dashed horizontal lines."""
     image = np.full((HEIGHT, WIDTH, 3), 255, np.uint8)
@@ -363,7 +437,7 @@ def draw_curves(curves: dict[str, list[tuple[int, float]]], references: dict[str
     # the legend: a swatch per method, in METHODS' order, below the x axis
     for number, name in enumerate([*curves, *references]):
         x = LEFT + 20 + number * 100
-        image[HEIGHT - 25:HEIGHT - 10, x:x + 40] = COLOURS[name]
+        image[HEIGHT - 25 : HEIGHT - 10, x : x + 40] = COLOURS[name]
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_bytes(encode_png(image))
 
@@ -381,12 +455,25 @@ def main() -> None:
     parser.add_argument("--envs", type=int, default=8, help="sub-environments")
     parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
     parser.add_argument("--env", choices=tuple(ENVS), default="plinko")
-    parser.add_argument("--difficulty", type=float, default=None,
-                        help="world.difficulty (default: 0.7 on plinko, 0.6 on maze)")
-    parser.add_argument("--eval-every", type=int, default=0,
-                        help="env-steps between held-out evaluations (default: steps / 5)")
-    parser.add_argument("--out", type=Path, default=None, help="the curves' PNG (default: "
-                        "docs/images/curriculum-experiment.png, or curriculum-maze.png)")
+    parser.add_argument(
+        "--difficulty",
+        type=float,
+        default=None,
+        help="world.difficulty (default: 0.7 on plinko, 0.6 on maze)",
+    )
+    parser.add_argument(
+        "--eval-every",
+        type=int,
+        default=0,
+        help="env-steps between held-out evaluations (default: steps / 5)",
+    )
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="the curves' PNG (default: "
+        "docs/images/curriculum-experiment.png, or curriculum-maze.png)",
+    )
     parser.add_argument("--json", type=Path, default=None, help="also write the results here")
     arguments = parser.parse_args()
     global ENV_ID
@@ -395,8 +482,9 @@ def main() -> None:
     if arguments.difficulty is None:
         arguments.difficulty = 0.6 if is_maze else 0.7
     if arguments.out is None:
-        arguments.out = Path("docs/images/" + ("curriculum-maze.png" if is_maze
-                                               else "curriculum-experiment.png"))
+        arguments.out = Path(
+            "docs/images/" + ("curriculum-maze.png" if is_maze else "curriculum-experiment.png")
+        )
     torch.set_num_threads(1)
     began = time.perf_counter()
     steps, difficulty = arguments.steps, arguments.difficulty
@@ -408,9 +496,12 @@ def main() -> None:
     results: dict[str, dict[str, list[float]]] = {}
     curves: dict[str, list[list[tuple[int, float]]]] = {}
     with make_vector(arguments.envs) as eval_vector:
+
         def final(name: str, policy: Policy) -> None:
-            row = results.setdefault(name, {"held_out": [], "hard": [], "all": [],
-                                            "held_out_success": [], "hard_success": []})
+            row = results.setdefault(
+                name,
+                {"held_out": [], "hard": [], "all": [], "held_out_success": [], "hard_success": []},
+            )
             seeds_returns = evaluate(policy, held_out, eval_vector, difficulty)
             hard_returns = evaluate(policy, hard, eval_vector, difficulty)
             row["held_out"].append(float(seeds_returns.mean()))
@@ -425,8 +516,16 @@ def main() -> None:
         for method in arguments.methods:
             for seed in range(arguments.seeds):
                 started = time.perf_counter()
-                model, points = train(method, seed, steps, arguments.envs, difficulty,
-                                      eval_every, eval_vector, held_out)
+                model, points = train(
+                    method,
+                    seed,
+                    steps,
+                    arguments.envs,
+                    difficulty,
+                    eval_every,
+                    eval_vector,
+                    held_out,
+                )
                 trained = time.perf_counter() - started
 
                 def policy(observations: np.ndarray, model: PPO = model) -> np.ndarray:
@@ -435,17 +534,24 @@ def main() -> None:
                 final(method, policy)
                 points.append((model.num_timesteps, results[method]["held_out"][-1]))
                 curves.setdefault(method, []).append(points)
-                print(f"{NAMES[method]:>11} seed {seed}: {trained:.0f} s, "
-                      f"{model.num_timesteps / trained:.0f} env-steps/s (with evaluations), "
-                      f"held-out {results[method]['held_out'][-1]:.3f}, "
-                      f"hard {results[method]['hard'][-1]:.3f}", flush=True)
+                print(
+                    f"{NAMES[method]:>11} seed {seed}: {trained:.0f} s, "
+                    f"{model.num_timesteps / trained:.0f} env-steps/s (with evaluations), "
+                    f"held-out {results[method]['held_out'][-1]:.3f}, "
+                    f"hard {results[method]['hard'][-1]:.3f}",
+                    flush=True,
+                )
 
-    print(f"\nPPO on {ENV_ID}, {steps} env-steps per run, {arguments.envs} environments, "
-          f"difficulty {difficulty}, {arguments.seeds} seed(s); "
-          f"{'return' if is_maze else 'catch rate'}, mean ± std over seeds")
+    print(
+        f"\nPPO on {ENV_ID}, {steps} env-steps per run, {arguments.envs} environments, "
+        f"difficulty {difficulty}, {arguments.seeds} seed(s); "
+        f"{'return' if is_maze else 'catch rate'}, mean ± std over seeds"
+    )
     if is_maze:
-        print(f"{HELD_OUT} held-out seeds, {len(hard)} hand-made hard mazes "
-              f"({len(hard) // 4} x 4 quarter turns); success: the goal reached\n")
+        print(
+            f"{HELD_OUT} held-out seeds, {len(hard)} hand-made hard mazes "
+            f"({len(hard) // 4} x 4 quarter turns); success: the goal reached\n"
+        )
         print("| method | held-out return | held-out success | hard return | hard success |")
         print("| --- | --- | --- | --- | --- |")
     else:
@@ -455,28 +561,40 @@ def main() -> None:
     for name in [*arguments.methods, upper, "random"]:
         row = results[name]
         if is_maze:
-            print(f"| {NAMES[name]} | {_cell(row['held_out'])} | "
-                  f"{_cell(row['held_out_success'])} | {_cell(row['hard'])} | "
-                  f"{_cell(row['hard_success'])} |")
+            print(
+                f"| {NAMES[name]} | {_cell(row['held_out'])} | "
+                f"{_cell(row['held_out_success'])} | {_cell(row['hard'])} | "
+                f"{_cell(row['hard_success'])} |"
+            )
         else:
-            print(f"| {NAMES[name]} | {_cell(row['held_out'])} | {_cell(row['hard'])} | "
-                  f"{_cell(row['all'])} |")
+            print(
+                f"| {NAMES[name]} | {_cell(row['held_out'])} | {_cell(row['hard'])} | "
+                f"{_cell(row['all'])} |"
+            )
     mean_curves = {}
     for method, runs in curves.items():
         length = min(len(run) for run in runs)
-        mean_curves[method] = [(int(np.mean([run[i][0] for run in runs])),
-                                float(np.mean([run[i][1] for run in runs])))
-                               for i in range(length)]
-    references = {name: statistics.fmean(results[name]["held_out"])
-                  for name in (upper, "random")}
+        mean_curves[method] = [
+            (int(np.mean([run[i][0] for run in runs])), float(np.mean([run[i][1] for run in runs])))
+            for i in range(length)
+        ]
+    references = {name: statistics.fmean(results[name]["held_out"]) for name in (upper, "random")}
     right = max([steps, *(point[0] for curve in mean_curves.values() for point in curve)])
     draw_curves(mean_curves, references, max(right, 1), arguments.out)
     print(f"\ncurves: {arguments.out}; {time.perf_counter() - began:.0f} s in all")
     if arguments.json:
-        arguments.json.write_text(json.dumps({"results": results, "curves": curves,
-                                              "steps": steps, "difficulty": difficulty,
-                                              "env": ENV_ID},
-                                             indent=1))
+        arguments.json.write_text(
+            json.dumps(
+                {
+                    "results": results,
+                    "curves": curves,
+                    "steps": steps,
+                    "difficulty": difficulty,
+                    "env": ENV_ID,
+                },
+                indent=1,
+            )
+        )
 
 
 if __name__ == "__main__":

@@ -59,9 +59,13 @@ def per_message(backlog: int) -> float:
 
 def measure(python: str) -> dict[str, float]:
     """One process of ``python`` measuring every backlog, run from a folder of no checkout's."""
-    output = subprocess.run([python, os.path.abspath(__file__), "--worker"],
-                            capture_output=True, text=True, check=True,
-                            cwd=tempfile.gettempdir()).stdout
+    output = subprocess.run(
+        [python, os.path.abspath(__file__), "--worker"],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=tempfile.gettempdir(),
+    ).stdout
     return json.loads(output.splitlines()[-1])
 
 
@@ -85,14 +89,21 @@ def main() -> None:
     print(f"us per message, median of {arguments.rounds} rounds (each the median of runs of {RUN})")
     print(f"{'backlog':>10}" + "".join(f"{side:>10}" for side in sides))
     for size in map(str, BACKLOGS):
-        print(f"{int(size):>10,}" + "".join(
-            f"{statistics.median(r[size] for r in results[side]):>10.2f}" for side in sides))
+        print(
+            f"{int(size):>10,}"
+            + "".join(
+                f"{statistics.median(r[size] for r in results[side]):>10.2f}" for side in sides
+            )
+        )
     if "other" in results:
         for size in map(str, BACKLOGS):
-            ratios = [a[size] / b[size] for a, b in zip(results["this"], results["other"],
-                                                          strict=True)]
-            print(f"this / other at {int(size):,} bytes: min {min(ratios):.3f} median "
-                  f"{statistics.median(ratios):.3f}")
+            ratios = [
+                a[size] / b[size] for a, b in zip(results["this"], results["other"], strict=True)
+            ]
+            print(
+                f"this / other at {int(size):,} bytes: min {min(ratios):.3f} median "
+                f"{statistics.median(ratios):.3f}"
+            )
 
 
 if __name__ == "__main__":

@@ -88,8 +88,10 @@ class RawHTTP:
     def __init__(self, host: str, port: int, path: str, body: bytes) -> None:
         self.sock = socket.create_connection((host, port))
         self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        self.request = (f"POST {path} HTTP/1.1\r\nHost: {host}:{port}\r\nContent-Type: "
-                        f"application/json\r\nContent-Length: {len(body)}\r\n\r\n").encode() + body
+        self.request = (
+            f"POST {path} HTTP/1.1\r\nHost: {host}:{port}\r\nContent-Type: "
+            f"application/json\r\nContent-Length: {len(body)}\r\n\r\n"
+        ).encode() + body
 
     def step(self) -> bytes:
         self.sock.sendall(self.request)
@@ -102,8 +104,8 @@ class RawHTTP:
         if not data.startswith(b"HTTP/1.1 200"):
             raise RuntimeError(f"the gateway answered {data[:200]!r}")
         start = data.lower().find(b"content-length:") + len(b"content-length:")
-        length = int(data[start:data.find(b"\r\n", start)])
-        body = data[end + 4:]
+        length = int(data[start : data.find(b"\r\n", start)])
+        body = data[end + 4 :]
         while len(body) < length:
             body += self.sock.recv(65536)
         return body
@@ -120,20 +122,27 @@ class RawWebSocket:
         self.sock = socket.create_connection((host, port))
         self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         key = base64.b64encode(os.urandom(16)).decode()
-        self.sock.sendall((f"GET {path} HTTP/1.1\r\nHost: {host}:{port}\r\nUpgrade: websocket\r\n"
-                           f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
-                           "Sec-WebSocket-Version: 13\r\n\r\n").encode())
+        self.sock.sendall(
+            (
+                f"GET {path} HTTP/1.1\r\nHost: {host}:{port}\r\nUpgrade: websocket\r\n"
+                f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
+                "Sec-WebSocket-Version: 13\r\n\r\n"
+            ).encode()
+        )
         answer = b""
         while b"\r\n\r\n" not in answer:
             answer += self.sock.recv(4096)
         if not answer.startswith(b"HTTP/1.1 101"):
             raise RuntimeError(f"the WebSocket was refused: {answer[:200]!r}")
-        self.pending = answer[answer.find(b"\r\n\r\n") + 4:]
+        self.pending = answer[answer.find(b"\r\n\r\n") + 4 :]
         mask = os.urandom(4)
         masked = bytes(b ^ mask[i % 4] for i, b in enumerate(message))
         length = len(message)
-        header = bytes([0x81, 0x80 | length]) if length < 126 else \
-            bytes([0x81, 0x80 | 126]) + length.to_bytes(2, "big")
+        header = (
+            bytes([0x81, 0x80 | length])
+            if length < 126
+            else bytes([0x81, 0x80 | 126]) + length.to_bytes(2, "big")
+        )
         self.frame = header + mask + masked
 
     def step(self) -> bytes:
@@ -148,8 +157,8 @@ class RawWebSocket:
             length, start = int.from_bytes(data[2:4], "big"), 4
         while len(data) < start + length:
             data += self.sock.recv(65536)
-        self.pending = data[start + length:]
-        return data[start:start + length]
+        self.pending = data[start + length :]
+        return data[start : start + length]
 
     def close(self) -> None:
         self.sock.close()
@@ -167,8 +176,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--steps", type=int, default=2000, help="steps per round and variant")
-    parser.add_argument("--implementations", action="store_true",
-                        help="also time the gateway on asyncio's loop and on h11")
+    parser.add_argument(
+        "--implementations",
+        action="store_true",
+        help="also time the gateway on asyncio's loop and on h11",
+    )
     args = parser.parse_args()
 
     closing: list[Callable[[], None]] = []
@@ -195,8 +207,12 @@ def main() -> None:
         gateway = Gateway(CARTPOLE)
         http_variant("http", gateway)
         socket_session = gateway.session()
-        websocket = RawWebSocket(gateway.host, gateway.port, f"/v1/envs/{socket_session}/ws",
-                                 json.dumps({"type": "step", **json.loads(STEP_BODY)}).encode())
+        websocket = RawWebSocket(
+            gateway.host,
+            gateway.port,
+            f"/v1/envs/{socket_session}/ws",
+            json.dumps({"type": "step", **json.loads(STEP_BODY)}).encode(),
+        )
         closing.append(websocket.close)
         variants["ws"] = websocket.step
         relayed = ServerProcess(CARTPOLE)
@@ -215,27 +231,39 @@ def main() -> None:
             shift = round_index % len(names)
             for name in names[shift:] + names[:shift]:
                 times[name].append(timed(variants[name], args.steps))
-            print(f"round {round_index + 1}: " + ", ".join(
-                f"{name} {times[name][-1]:.0f}" for name in names), file=sys.stderr, flush=True)
+            print(
+                f"round {round_index + 1}: "
+                + ", ".join(f"{name} {times[name][-1]:.0f}" for name in names),
+                file=sys.stderr,
+                flush=True,
+            )
     finally:
         for close in reversed(closing):
             close()
 
-    print(f"{'variant':<26}{'min us':>9}{'median us':>11}{'min/min':>9}{'ratio min':>11}"
-          f"{'ratio median':>14}")
+    print(
+        f"{'variant':<26}{'min us':>9}{'median us':>11}{'min/min':>9}{'ratio min':>11}"
+        f"{'ratio median':>14}"
+    )
     for name in names:
         ratios = [mine / base for mine, base in zip(times[name], times["tcp"], strict=True)]
-        print(f"{name:<26}{min(times[name]):>9.1f}{statistics.median(times[name]):>11.1f}"
-              f"{min(times[name]) / min(times['tcp']):>9.2f}{min(ratios):>11.2f}"
-              f"{statistics.median(ratios):>14.2f}")
+        print(
+            f"{name:<26}{min(times[name]):>9.1f}{statistics.median(times[name]):>11.1f}"
+            f"{min(times[name]) / min(times['tcp']):>9.2f}{min(ratios):>11.2f}"
+            f"{statistics.median(ratios):>14.2f}"
+        )
 
 
 def serve_variant(target: str, loop: str, http_impl: str) -> None:
     """``rlenv http TARGET --port 0`` on the given uvicorn loop and HTTP implementation."""
     from rlenv_tools.http.app import Settings, serve
 
-    serve(Settings(target=target, port=0), loop=loop, http=http_impl,
-          ready=lambda url: print(f"listening on {url}", flush=True))
+    serve(
+        Settings(target=target, port=0),
+        loop=loop,
+        http=http_impl,
+        ready=lambda url: print(f"listening on {url}", flush=True),
+    )
 
 
 if __name__ == "__main__":

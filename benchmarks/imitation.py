@@ -65,8 +65,13 @@ class Task:
 
 
 TASKS = (
-    Task("cartpole", "rlenv/CartPole-v1", "examples.classic_cartpole:ClassicCartPoleEnvironment",
-         heuristic, 500),
+    Task(
+        "cartpole",
+        "rlenv/CartPole-v1",
+        "examples.classic_cartpole:ClassicCartPoleEnvironment",
+        heuristic,
+        500,
+    ),
     Task("plinko", "rlenv/Plinko-v0", "examples.plinko:PlinkoEnvironment", follow, 100),
 )
 
@@ -78,8 +83,13 @@ class Cloned(nn.Module):
         super().__init__()
         self.register_buffer("mean", torch.as_tensor(mean, dtype=torch.float32))
         self.register_buffer("std", torch.as_tensor(std, dtype=torch.float32))
-        self.net = nn.Sequential(nn.Linear(len(mean), 64), nn.Tanh(), nn.Linear(64, 64),
-                                 nn.Tanh(), nn.Linear(64, outputs))
+        self.net = nn.Sequential(
+            nn.Linear(len(mean), 64),
+            nn.Tanh(),
+            nn.Linear(64, 64),
+            nn.Tanh(),
+            nn.Linear(64, outputs),
+        )
 
     def forward(self, observation: torch.Tensor) -> torch.Tensor:
         return self.net((observation.float() - self.mean) / self.std)
@@ -105,8 +115,13 @@ def make_dataset(task: Task, episodes: int, out: Path) -> tuple[np.ndarray, np.n
     return np.concatenate(observations), np.concatenate(actions), time.perf_counter() - start
 
 
-def train(observations: np.ndarray, actions: np.ndarray, action_space: spaces.Space,
-          epochs: int, seed: int = 0) -> Cloned:
+def train(
+    observations: np.ndarray,
+    actions: np.ndarray,
+    action_space: spaces.Space,
+    epochs: int,
+    seed: int = 0,
+) -> Cloned:
     """Behaviour cloning: cross-entropy (Discrete) or mean squared error (Box), Adam."""
     torch.manual_seed(seed)
     discrete = isinstance(action_space, spaces.Discrete)
@@ -151,8 +166,10 @@ def expert_returns(task: Task, count: int) -> list[float]:
 
 def served_returns(task: Task, policy: Path, count: int, timeout: float = 600.0) -> list[float]:
     """Serve the policy file for the agent; an observer reads its first ``count`` returns."""
-    server = ServerProcess(task.target, args=["--policy", f"Agent={policy}",
-                                              "--max-episode-steps", str(task.max_episode_steps)])
+    server = ServerProcess(
+        task.target,
+        args=["--policy", f"Agent={policy}", "--max-episode-steps", str(task.max_episode_steps)],
+    )
     try:
         with Client(server.host, server.port, timeout=10) as observer:
             deadline = time.monotonic() + timeout
@@ -161,8 +178,9 @@ def served_returns(task: Task, policy: Path, count: int, timeout: float = 600.0)
                 if stats["next"] >= count:
                     break
                 if time.monotonic() > deadline:
-                    raise TimeoutError(f"{task.name}: {stats['next']} of {count} episodes "
-                                       f"after {timeout} s")
+                    raise TimeoutError(
+                        f"{task.name}: {stats['next']} of {count} episodes after {timeout} s"
+                    )
                 time.sleep(0.05)
     finally:
         server.close()
@@ -171,16 +189,29 @@ def served_returns(task: Task, policy: Path, count: int, timeout: float = 600.0)
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--episodes", type=int, default=40, help="demonstrations per example")
-    parser.add_argument("--eval-episodes", type=int, default=100,
-                        help="episodes of the expert and of the served policy")
+    parser.add_argument(
+        "--eval-episodes",
+        type=int,
+        default=100,
+        help="episodes of the expert and of the served policy",
+    )
     parser.add_argument("--epochs", type=int, default=30, help="behaviour cloning epochs")
-    parser.add_argument("--out", type=Path, default=Path("imitation-out"),
-                        help="demonstrations, datasets (DIR/minari) and policy files")
-    parser.add_argument("--only", choices=[task.name for task in TASKS], action="append",
-                        help="run only this example (repeatable)")
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=Path("imitation-out"),
+        help="demonstrations, datasets (DIR/minari) and policy files",
+    )
+    parser.add_argument(
+        "--only",
+        choices=[task.name for task in TASKS],
+        action="append",
+        help="run only this example (repeatable)",
+    )
     args = parser.parse_args()
     torch.set_num_threads(1)
     warnings.filterwarnings("ignore", module="minari")  # metadata it recommends (author, ...)
@@ -200,26 +231,43 @@ def main() -> None:
         clock = time.perf_counter()
         model = train(observations, actions, action_space, args.epochs)
         train_seconds = time.perf_counter() - clock
-        policy = export_onnx(model, args.out / task.name / "bc.onnx", observation_space,
-                             action_space)
+        policy = export_onnx(
+            model, args.out / task.name / "bc.onnx", observation_space, action_space
+        )
         clock = time.perf_counter()
         cloned = served_returns(task, policy, args.eval_episodes)
         expert = expert_returns(task, args.eval_episodes)
         eval_seconds = time.perf_counter() - clock
-        rows.append((task.name, len(observations), float(np.mean(expert)),
-                     float(np.mean(cloned)), data_seconds, train_seconds, eval_seconds,
-                     time.perf_counter() - started))
-        print(f"{task.name}: {len(observations)} steps in {args.episodes} demonstrations; "
-              f"expert {np.mean(expert):.3f}, behaviour cloning {np.mean(cloned):.3f} "
-              f"over {args.eval_episodes} episodes", flush=True)
+        rows.append(
+            (
+                task.name,
+                len(observations),
+                float(np.mean(expert)),
+                float(np.mean(cloned)),
+                data_seconds,
+                train_seconds,
+                eval_seconds,
+                time.perf_counter() - started,
+            )
+        )
+        print(
+            f"{task.name}: {len(observations)} steps in {args.episodes} demonstrations; "
+            f"expert {np.mean(expert):.3f}, behaviour cloning {np.mean(cloned):.3f} "
+            f"over {args.eval_episodes} episodes",
+            flush=True,
+        )
     print()
-    print("| example | demo steps | expert mean return | BC mean return | BC / expert | "
-          "record + dataset s | train s | evaluate s | total s |")
+    print(
+        "| example | demo steps | expert mean return | BC mean return | BC / expert | "
+        "record + dataset s | train s | evaluate s | total s |"
+    )
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
     for name, steps, expert, cloned, data_s, train_s, eval_s, total in rows:
         ratio = cloned / expert if expert else float("nan")
-        print(f"| {name} | {steps} | {expert:.3f} | {cloned:.3f} | {ratio:.2f} | {data_s:.1f} | "
-              f"{train_s:.1f} | {eval_s:.1f} | {total:.1f} |")
+        print(
+            f"| {name} | {steps} | {expert:.3f} | {cloned:.3f} | {ratio:.2f} | {data_s:.1f} | "
+            f"{train_s:.1f} | {eval_s:.1f} | {total:.1f} |"
+        )
 
 
 if __name__ == "__main__":

@@ -39,16 +39,22 @@ def train(client: Client, seconds: float, random: np.random.Generator) -> float:
     client.reset()
     while time.perf_counter() < deadline:
         for _ in range(100):
-            _, _, terminated, truncated, _ = client.step(random.uniform(-1, 1, 1)
-                                                         .astype(np.float32))
+            _, _, terminated, truncated, _ = client.step(
+                random.uniform(-1, 1, 1).astype(np.float32)
+            )
             steps += 1
             if terminated or truncated:
                 client.reset()
     return steps / (time.perf_counter() - started)
 
 
-def watched(server: ServerProcess, chromium: str, client: Client, seconds: float,
-            random: np.random.Generator) -> tuple[float, int]:
+def watched(
+    server: ServerProcess,
+    chromium: str,
+    client: Client,
+    seconds: float,
+    random: np.random.Generator,
+) -> tuple[float, int]:
     """Steps per second with the page open; and how many frames the page drew meanwhile."""
     with Inspector([f"{server.host}:{server.port}"]) as inspector, Browser(chromium) as browser:
         browser.open(inspector.url)
@@ -76,11 +82,13 @@ def main() -> None:
     cpu: dict[str, list[float]] = {"without": [], "with": []}  # server µs per step
     with ServerProcess(CARTPOLE) as server, Client(server.host, server.port) as client:
         train(client, 2.0, random)  # wake the machine up
-        print(f"{'round':>5}{'without':>10}{'with':>10}{'ratio':>8}{'frames/s':>10}"
-              f"{'server µs/step without':>24}{'with':>8}")
+        print(
+            f"{'round':>5}{'without':>10}{'with':>10}{'ratio':>8}{'frames/s':>10}"
+            f"{'server µs/step without':>24}{'with':>8}"
+        )
         for round_ in range(args.rounds):
             frames = 0
-            for kind in (("without", "with") if round_ % 2 == 0 else ("with", "without")):
+            for kind in ("without", "with") if round_ % 2 == 0 else ("with", "without"):
                 used = cpu_seconds(server.pid)
                 if kind == "with":
                     rate, frames = watched(server, chromium, client, args.seconds, random)
@@ -88,17 +96,23 @@ def main() -> None:
                     rate = train(client, args.seconds, random)
                 rates[kind].append(rate)
                 cpu[kind].append((cpu_seconds(server.pid) - used) / (rate * args.seconds) * 1e6)
-            print(f"{round_:>5}{rates['without'][-1]:>10.0f}{rates['with'][-1]:>10.0f}"
-                  f"{rates['with'][-1] / rates['without'][-1]:>8.3f}"
-                  f"{frames / args.seconds:>10.1f}{cpu['without'][-1]:>24.1f}"
-                  f"{cpu['with'][-1]:>8.1f}")
+            print(
+                f"{round_:>5}{rates['without'][-1]:>10.0f}{rates['with'][-1]:>10.0f}"
+                f"{rates['with'][-1] / rates['without'][-1]:>8.3f}"
+                f"{frames / args.seconds:>10.1f}{cpu['without'][-1]:>24.1f}"
+                f"{cpu['with'][-1]:>8.1f}"
+            )
     ratios = [w / o for w, o in zip(rates["with"], rates["without"], strict=True)]
     for kind, values in rates.items():
-        print(f"{kind:>8}: min {min(values):.0f}, median {statistics.median(values):.0f} steps/s; "
-              f"server CPU median {statistics.median(cpu[kind]):.1f} µs/step")
-    print(f"with / without, per round: min {min(ratios):.3f}, median "
-          f"{statistics.median(ratios):.3f} (a drop of "
-          f"{100 * (1 - statistics.median(ratios)):.1f}% at the median)")
+        print(
+            f"{kind:>8}: min {min(values):.0f}, median {statistics.median(values):.0f} steps/s; "
+            f"server CPU median {statistics.median(cpu[kind]):.1f} µs/step"
+        )
+    print(
+        f"with / without, per round: min {min(ratios):.3f}, median "
+        f"{statistics.median(ratios):.3f} (a drop of "
+        f"{100 * (1 - statistics.median(ratios)):.1f}% at the median)"
+    )
 
 
 if __name__ == "__main__":

@@ -86,10 +86,14 @@ def main() -> None:
             served.append(_served_rate(path, args.seconds))
         onnx_us, torch_us = (statistics.median(t) * 1e6 for t in (onnx_times, torch_times))
         print(f"onnxruntime OnnxPolicy.act:          {onnx_us:8.1f} us per step")
-        print(f"torch policy.predict(deterministic): {torch_us:8.1f} us per step "
-              f"({torch_us / onnx_us:.1f}x onnxruntime)")
-        print(f"served policy-driven CartPole:       {statistics.median(served):8.0f} steps/s "
-              f"(min {min(served):.0f}, {args.rounds} rounds of {args.seconds} s)")
+        print(
+            f"torch policy.predict(deterministic): {torch_us:8.1f} us per step "
+            f"({torch_us / onnx_us:.1f}x onnxruntime)"
+        )
+        print(
+            f"served policy-driven CartPole:       {statistics.median(served):8.0f} steps/s "
+            f"(min {min(served):.0f}, {args.rounds} rounds of {args.seconds} s)"
+        )
 
 
 if __name__ == "__main__":

@@ -61,8 +61,11 @@ def _per_step(*runs: Callable[[int], None]) -> list[tuple[float, float]]:
 
 def _host(count: int = 1) -> Host:
     host = Host(CartPoleEnvironment, count)
-    host.answer(Request(1, {"batch": [{"config": ENDLESS, "reset": {"seed": seed}}
-                                      for seed in range(count)]}))
+    host.answer(
+        Request(
+            1, {"batch": [{"config": ENDLESS, "reset": {"seed": seed}} for seed in range(count)]}
+        )
+    )
     return host
 
 
@@ -85,18 +88,21 @@ def _floor(host: Host, repeat: int) -> Callable[[int], None]:
                     agent._after_physics_tick(delta)
                 agent.reward = 0.0
                 agent.get_data({}).tobytes()
+
     return run
 
 
 def _through(host: Host, repeat: int) -> Callable[[int], None]:
     """Steps through the host's door, as a server answers them (no socket, no codec)."""
-    request = Request(2, {"action": ACTION.tobytes(), "observation": {"agent": {}},
-                          "repeat_action": repeat})
+    request = Request(
+        2, {"action": ACTION.tobytes(), "observation": {"agent": {}}, "repeat_action": repeat}
+    )
 
     def run(steps: int) -> None:
         for _ in range(steps):
             reply = host.answer(request)
         assert not (reply.terminated or reply.truncated), "the episode must not end"
+
     return run
 
 
@@ -110,8 +116,9 @@ def _codecs(host: Host) -> tuple[Callable[[int], None], Callable[[int], None]]:
 
     def ours(steps: int) -> None:
         for index in range(steps):
-            server.receive_data(client.send(endpoint.step_request(ACTION, REPEAT,
-                                                                  request_id=index)))
+            server.receive_data(
+                client.send(endpoint.step_request(ACTION, REPEAT, request_id=index))
+            )
             request = server.next_message()
             reply.id = request.id  # type: ignore[union-attr]
             client.receive_data(server.send(reply))
@@ -122,15 +129,32 @@ def _codecs(host: Host) -> tuple[Callable[[int], None], Callable[[int], None]]:
 
     def plain(steps: int) -> None:
         for index in range(steps):
-            request = msgpack.unpackb(msgpack.packb(
-                {"id": index, "action": ACTION.tobytes(), "observation": agent,
-                 "repeat_action": REPEAT}))
+            request = msgpack.unpackb(
+                msgpack.packb(
+                    {
+                        "id": index,
+                        "action": ACTION.tobytes(),
+                        "observation": agent,
+                        "repeat_action": REPEAT,
+                    }
+                )
+            )
             np.frombuffer(request["action"], np.float32)
-            answer = msgpack.unpackb(msgpack.packb(
-                {"id": request["id"], "observation": {"agent": observation.tobytes()},
-                 "reward": 4.0, "terminated": False, "truncated": False, "info": {},
-                 "frames": REPEAT}))
+            answer = msgpack.unpackb(
+                msgpack.packb(
+                    {
+                        "id": request["id"],
+                        "observation": {"agent": observation.tobytes()},
+                        "reward": 4.0,
+                        "terminated": False,
+                        "truncated": False,
+                        "info": {},
+                        "frames": REPEAT,
+                    }
+                )
+            )
             np.frombuffer(answer["observation"]["agent"], np.float32).copy()
+
     return ours, plain
 
 
@@ -157,38 +181,52 @@ def main() -> None:
     host = _host()
     repeats = (1, REPEAT, LONG)
     measured = _per_step(*(_floor(host, n) for n in repeats), *(_through(host, n) for n in repeats))
-    floors, steps = dict(zip(repeats, measured[:3], strict=True)), \
-        dict(zip(repeats, measured[3:], strict=True))
-    print(f"CartPole in this process, microseconds per step (median and min of {ROUNDS} rounds "
-          "taken in turns)")
+    floors, steps = (
+        dict(zip(repeats, measured[:3], strict=True)),
+        dict(zip(repeats, measured[3:], strict=True)),
+    )
+    print(
+        f"CartPole in this process, microseconds per step (median and min of {ROUNDS} rounds "
+        "taken in turns)"
+    )
     for n in repeats:
         (floor, floor_min), (step, step_min) = floors[n], steps[n]
-        print(f"  repeat {n:<2}  floor (a hand-written server's work) {floor:7.2f} (min "
-              f"{floor_min:.2f})   through the host {step:7.2f} (min {step_min:.2f})   "
-              f"{step / floor:.2f}x floor")
+        print(
+            f"  repeat {n:<2}  floor (a hand-written server's work) {floor:7.2f} (min "
+            f"{floor_min:.2f})   through the host {step:7.2f} (min {step_min:.2f})   "
+            f"{step / floor:.2f}x floor"
+        )
     for which, label in ((0, "medians"), (1, "minimums")):
         # Per tick: the slope over the extra ticks of LONG; per request: the rest at repeat 1.
-        tick = (steps[LONG][which] - steps[1][which] - floors[LONG][which] + floors[1][which]) \
-            / (LONG - 1)
+        tick = (steps[LONG][which] - steps[1][which] - floors[LONG][which] + floors[1][which]) / (
+            LONG - 1
+        )
         request = steps[1][which] - floors[1][which] - tick
-        print(f"  framework above the floor, from the {label:8}: {tick:5.2f} per tick, "
-              f"{request:5.2f} per request")
+        print(
+            f"  framework above the floor, from the {label:8}: {tick:5.2f} per tick, "
+            f"{request:5.2f} per request"
+        )
     ours, plain = _codecs(host)
     (codec, codec_min), (bare, bare_min) = _per_step(ours, plain)
-    print(f"  codec, both ends of a step: {codec:.2f} (min {codec_min:.2f}), "
-          f"{codec / bare:.2f}x plain msgpack ({bare:.2f}, min {bare_min:.2f})")
+    print(
+        f"  codec, both ends of a step: {codec:.2f} (min {codec_min:.2f}), "
+        f"{codec / bare:.2f}x plain msgpack ({bare:.2f}, min {bare_min:.2f})"
+    )
     columns, columns_floor = _column_step()
     print(f"column step of {INSTANCES} instances, repeat_action 1, microseconds per instance")
-    print(f"  floor {columns_floor[0]:.2f} (min {columns_floor[1]:.2f})   through the host "
-          f"(steps request) {columns[0]:.2f} (min {columns[1]:.2f})   "
-          f"{columns[0] / columns_floor[0]:.2f}x floor")
+    print(
+        f"  floor {columns_floor[0]:.2f} (min {columns_floor[1]:.2f})   through the host "
+        f"(steps request) {columns[0]:.2f} (min {columns[1]:.2f})   "
+        f"{columns[0] / columns_floor[0]:.2f}x floor"
+    )
 
 
 def _column_step() -> tuple[tuple[float, float], tuple[float, float]]:
     """Per instance: a steps request through the host, and its floor."""
     host = _host(INSTANCES)
-    request = Request(2, {"steps": {"action": np.zeros((INSTANCES, 1), np.float32).tobytes(),
-                                    "repeat_action": 1}})
+    request = Request(
+        2, {"steps": {"action": np.zeros((INSTANCES, 1), np.float32).tobytes(), "repeat_action": 1}}
+    )
 
     def through(steps: int) -> None:
         for _ in range(steps // INSTANCES):

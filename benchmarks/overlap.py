@@ -76,8 +76,9 @@ class Vector:
     def send(self, shard: Shard) -> None:
         """Send ``shard`` its actions and reset mask."""
         span = slice(shard.start, shard.stop)
-        shard.client.send_steps(self.actions[self.turn % len(self.actions)][span],
-                                self.resetting[span], REPEAT)
+        shard.client.send_steps(
+            self.actions[self.turn % len(self.actions)][span], self.resetting[span], REPEAT
+        )
 
     def receive(self, shard: Shard) -> None:
         """Gather ``shard``'s answer into the columns; mark its ended episodes to reset."""
@@ -95,8 +96,10 @@ class Vector:
 
 def start_servers(stack: ExitStack, counts: list[int]) -> tuple[list[Client], list[int]]:
     """Servers of ``counts`` instances each, connected; their clients and pids."""
-    servers = [stack.enter_context(ServerProcess(CARTPOLE, args=["--instances", str(count)]))
-               for count in counts]
+    servers = [
+        stack.enter_context(ServerProcess(CARTPOLE, args=["--instances", str(count)]))
+        for count in counts
+    ]
     clients = [stack.enter_context(Client(server.host, server.port)) for server in servers]
     return clients, [server.process.pid for server in servers]
 
@@ -113,8 +116,12 @@ def shards_of(clients: list[Client | LocalClient], counts: list[int]) -> list[Sh
 Round = Callable[[int], tuple[float, float, float]]  # vector steps -> (speed, server, client)
 
 
-def measured(step: Callable[[], None], num_envs: int, pids: list[int],
-             flush: Callable[[], None] = lambda: None) -> Round:
+def measured(
+    step: Callable[[], None],
+    num_envs: int,
+    pids: list[int],
+    flush: Callable[[], None] = lambda: None,
+) -> Round:
     """A round: ``steps`` calls of ``step`` (then ``flush``), timed and CPU counted."""
 
     def round_(steps: int) -> tuple[float, float, float]:
@@ -126,15 +133,18 @@ def measured(step: Callable[[], None], num_envs: int, pids: list[int],
         flush()
         elapsed = time.perf_counter() - start
         env_steps = steps * num_envs
-        return (env_steps / elapsed,
-                (sum(cpu_seconds(pid) for pid in pids) - servers) / env_steps * 1e6,
-                (time.process_time() - client) / env_steps * 1e6)
+        return (
+            env_steps / elapsed,
+            (sum(cpu_seconds(pid) for pid in pids) - servers) / env_steps * 1e6,
+            (time.process_time() - client) / env_steps * 1e6,
+        )
 
     return round_
 
 
-def synchronous(stack: ExitStack, counts: list[int], local: int, actions: list[np.ndarray]
-                ) -> Round:
+def synchronous(
+    stack: ExitStack, counts: list[int], local: int, actions: list[np.ndarray]
+) -> Round:
     """Servers of ``counts``, and ``local`` instances in this process stepped in between."""
     clients, pids = start_servers(stack, counts)
     everyone: list[Client | LocalClient] = list(clients)
@@ -142,7 +152,7 @@ def synchronous(stack: ExitStack, counts: list[int], local: int, actions: list[n
         everyone.append(stack.enter_context(LocalClient(CARTPOLE, instances=local)))
     shards = shards_of(everyone, [*counts, local] if local else counts)
     vector = Vector(shards, sum(counts) + local, actions)
-    remote, here = shards[:len(clients)], shards[len(clients):]
+    remote, here = shards[: len(clients)], shards[len(clients) :]
 
     def step() -> None:
         for shard in remote:
@@ -162,7 +172,7 @@ def double_buffered(stack: ExitStack, counts: list[int], actions: list[np.ndarra
     clients, pids = start_servers(stack, counts + counts)
     shards = shards_of(list(clients), counts + counts)
     vector = Vector(shards, 2 * sum(counts), actions)
-    halves = [shards[:len(counts)], shards[len(counts):]]
+    halves = [shards[: len(counts)], shards[len(counts) :]]
     in_flight: list[bool] = [False, False]
     state = {"half": 0}
 
@@ -209,8 +219,7 @@ def layouts(stack: ExitStack, num_envs: int, locals_: list[int]) -> dict[str, Ro
     found = {f"servers 2 x {half}": synchronous(stack, [half, half], 0, actions)}
     for local in locals_:
         share = (num_envs - local) // 2
-        found[f"2 x {share} + {local} local"] = synchronous(stack, [share, share], local,
-                                                             actions)
+        found[f"2 x {share} + {local} local"] = synchronous(stack, [share, share], local, actions)
     quarter = num_envs // 4
     found[f"double 2 x (2 x {quarter})"] = double_buffered(stack, [quarter, quarter], actions)
     found[f"one server x {num_envs}"] = synchronous(stack, [num_envs], 0, actions)
@@ -229,9 +238,11 @@ def compare(num_envs: int, rounds_of: dict[str, Round], rounds: int, seconds: fl
     for _ in range(rounds):
         for name, round_ in rounds_of.items():
             results[name].append(round_(sizes[name]))
-    print(f"\n{num_envs} CartPoles, repeat {REPEAT}: env-steps/s min, median; CPU us per "
-          "env-step (medians): servers, this process; cores busy; speed / first layout's, "
-          "min and median of the rounds' ratios")
+    print(
+        f"\n{num_envs} CartPoles, repeat {REPEAT}: env-steps/s min, median; CPU us per "
+        "env-step (medians): servers, this process; cores busy; speed / first layout's, "
+        "min and median of the rounds' ratios"
+    )
     baseline = results[next(iter(results))]
     for name, values in results.items():
         speeds = [v[0] for v in values]
@@ -239,10 +250,13 @@ def compare(num_envs: int, rounds_of: dict[str, Round], rounds: int, seconds: fl
         server = statistics.median(v[1] for v in values)
         client = statistics.median(v[2] for v in values)
         cores = statistics.median(v[0] * (v[1] + v[2]) / 1e6 for v in values)
-        print(f"  {name:26s} {min(speeds):7.0f} {statistics.median(speeds):7.0f}/s"
-              f"   cpu {server:5.1f} + {client:5.1f} = {server + client:5.1f} us"
-              f"  {cores:4.2f} cores"
-              f"   x{min(ratios):.2f} x{statistics.median(ratios):.2f}", flush=True)
+        print(
+            f"  {name:26s} {min(speeds):7.0f} {statistics.median(speeds):7.0f}/s"
+            f"   cpu {server:5.1f} + {client:5.1f} = {server + client:5.1f} us"
+            f"  {cores:4.2f} cores"
+            f"   x{min(ratios):.2f} x{statistics.median(ratios):.2f}",
+            flush=True,
+        )
 
 
 def main() -> None:

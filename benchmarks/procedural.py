@@ -102,6 +102,7 @@ def per_node(make: Callable[[], object], count: int, nodes: int) -> Callable[[],
     def run() -> None:
         for _ in range(count):
             make()
+
     run.per = count * nodes  # type: ignore[attr-defined]
     return run
 
@@ -115,8 +116,9 @@ def level_recipe(level: Node2D) -> list[tuple[tuple[float, float, float], list[p
     recipe = []
     for node in level.iter_subtree():
         if isinstance(node, PhysicsBody):
-            shapes = [child.shape for child in node.get_children()
-                      if isinstance(child, CollisionShape)]
+            shapes = [
+                child.shape for child in node.get_children() if isinstance(child, CollisionShape)
+            ]
             recipe.append(((*node.body.position, node.body.angle), shapes))
     return recipe
 
@@ -150,20 +152,29 @@ def main() -> None:
     rounds = parser.parse_args().rounds
 
     peg, rig = PlinkoPeg(elasticity=0.55), pendulum()
-    runs = [per_node(peg.duplicate, COPIES, 2), per_node(PlinkoPeg, COPIES, 2),
-            per_node(raw_peg, COPIES, 2), per_node(rig.duplicate, COPIES // 3, 6),
-            per_node(pendulum, COPIES // 3, 6), per_node(raw_pendulum, COPIES // 3, 6)]
+    runs = [
+        per_node(peg.duplicate, COPIES, 2),
+        per_node(PlinkoPeg, COPIES, 2),
+        per_node(raw_peg, COPIES, 2),
+        per_node(rig.duplicate, COPIES // 3, 6),
+        per_node(pendulum, COPIES // 3, 6),
+        per_node(raw_pendulum, COPIES // 3, 6),
+    ]
     (dup, new, raw, rig_dup, rig_new, rig_raw) = [
         (median / run.per * 1e6, least / run.per * 1e6)  # type: ignore[attr-defined]
-        for (median, least), run in zip(timed(*runs, rounds=rounds), runs, strict=True)]
+        for (median, least), run in zip(timed(*runs, rounds=rounds), runs, strict=True)
+    ]
     print(f"duplicate, microseconds per node (median, min of {rounds} rounds taken in turns)")
-    for label, (ours, made, bare) in (("Plinko peg (StaticBody + CollisionShape)", (dup, new, raw)),
-                                      ("pendulum (frame, 2 bodies, 2 shapes, joint)",
-                                       (rig_dup, rig_new, rig_raw))):
-        print(f"  {label}: duplicate {ours[0]:.1f} (min {ours[1]:.1f}); constructors "
-              f"{made[0]:.1f} (min {made[1]:.1f}); raw pymunk objects {bare[0]:.1f} "
-              f"(min {bare[1]:.1f}); duplicate / constructors {ours[0] / made[0]:.2f}x, "
-              f"/ raw pymunk {ours[0] / bare[0]:.1f}x")
+    for label, (ours, made, bare) in (
+        ("Plinko peg (StaticBody + CollisionShape)", (dup, new, raw)),
+        ("pendulum (frame, 2 bodies, 2 shapes, joint)", (rig_dup, rig_new, rig_raw)),
+    ):
+        print(
+            f"  {label}: duplicate {ours[0]:.1f} (min {ours[1]:.1f}); constructors "
+            f"{made[0]:.1f} (min {made[1]:.1f}); raw pymunk objects {bare[0]:.1f} "
+            f"(min {bare[1]:.1f}); duplicate / constructors {ours[0] / made[0]:.2f}x, "
+            f"/ raw pymunk {ours[0] / bare[0]:.1f}x"
+        )
 
     rng = np.random.default_rng(0)
     probe = build_level(rng, 0.5, COLUMNS, ROWS)
@@ -190,18 +201,27 @@ def main() -> None:
         client.reset(seed=next(seeds))
 
     (built, entered, whole, bare) = [
-        (median * 1e3, least * 1e3) for median, least in
-        timed(build, enter, reset, lambda: raw_level(recipe), rounds=rounds)]
-    print(f"a {bodies}-body lattice level ({COLUMNS} x {ROWS} pegs, bins on placeholders) at "
-          f"a reset, milliseconds (median, min of {rounds} rounds taken in turns)")
-    print(f"  build (lattices, jitter, gradients, placeholders) {built[0]:.1f} (min "
-          f"{built[1]:.1f}); enter the space {entered[0]:.1f} (min {entered[1]:.1f}); "
-          f"together {built[0] + entered[0]:.1f}")
-    print(f"  whole Plinko reset (board, catcher, ball, that level, observation) {whole[0]:.1f} "
-          f"(min {whole[1]:.1f})")
-    print(f"  raw pymunk, the same bodies and shapes into a new space: {bare[0]:.1f} (min "
-          f"{bare[1]:.1f}); build + enter / raw {(built[0] + entered[0]) / bare[0]:.1f}x, "
-          f"whole reset / raw {whole[0] / bare[0]:.1f}x")
+        (median * 1e3, least * 1e3)
+        for median, least in timed(build, enter, reset, lambda: raw_level(recipe), rounds=rounds)
+    ]
+    print(
+        f"a {bodies}-body lattice level ({COLUMNS} x {ROWS} pegs, bins on placeholders) at "
+        f"a reset, milliseconds (median, min of {rounds} rounds taken in turns)"
+    )
+    print(
+        f"  build (lattices, jitter, gradients, placeholders) {built[0]:.1f} (min "
+        f"{built[1]:.1f}); enter the space {entered[0]:.1f} (min {entered[1]:.1f}); "
+        f"together {built[0] + entered[0]:.1f}"
+    )
+    print(
+        f"  whole Plinko reset (board, catcher, ball, that level, observation) {whole[0]:.1f} "
+        f"(min {whole[1]:.1f})"
+    )
+    print(
+        f"  raw pymunk, the same bodies and shapes into a new space: {bare[0]:.1f} (min "
+        f"{bare[1]:.1f}); build + enter / raw {(built[0] + entered[0]) / bare[0]:.1f}x, "
+        f"whole reset / raw {whole[0] / bare[0]:.1f}x"
+    )
     client.close()
 
 

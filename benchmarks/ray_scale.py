@@ -47,16 +47,21 @@ def main() -> None:
         cluster.add_node(num_cpus=2)
     ray.init(address=cluster.address, log_to_driver=False)
     cluster.wait_for_nodes()
-    print(f"{'servers':>8}{'envs':>6}{'Ray pool min':>14}{'median':>10}"
-          f"{'local min':>12}{'median':>10}{'pool / local':>14}   (env-steps/s)")
+    print(
+        f"{'servers':>8}{'envs':>6}{'Ray pool min':>14}{'median':>10}"
+        f"{'local min':>12}{'median':>10}{'pool / local':>14}   (env-steps/s)"
+    )
     try:
         for servers in SERVERS:
             count = servers * INSTANCES
             actions = np.random.default_rng(0).uniform(-1, 1, (64, count, 1)).astype(np.float32)
-            with RayServerPool(CARTPOLE, servers, INSTANCES, cpus_per_server=0.5,
-                               progress=lambda _: None) as pool, \
-                    RemoteVectorEnv(pool=pool) as on_ray, \
-                    RemoteVectorEnv(count, CARTPOLE, instances_per_server=INSTANCES) as local:
+            with (
+                RayServerPool(
+                    CARTPOLE, servers, INSTANCES, cpus_per_server=0.5, progress=lambda _: None
+                ) as pool,
+                RemoteVectorEnv(pool=pool) as on_ray,
+                RemoteVectorEnv(count, CARTPOLE, instances_per_server=INSTANCES) as local,
+            ):
                 rates: dict[str, list[float]] = {"pool": [], "local": []}
                 for envs in (on_ray, local):
                     envs.reset(seed=0)
@@ -65,10 +70,12 @@ def main() -> None:
                     rates["pool"].append(rate(on_ray, args.steps, actions))
                     rates["local"].append(rate(local, args.steps, actions))
             pool_rates, local_rates = rates["pool"], rates["local"]
-            print(f"{servers:>8}{count:>6}{min(pool_rates):>14,.0f}"
-                  f"{statistics.median(pool_rates):>10,.0f}{min(local_rates):>12,.0f}"
-                  f"{statistics.median(local_rates):>10,.0f}"
-                  f"{statistics.median(pool_rates) / statistics.median(local_rates):>14.2f}")
+            print(
+                f"{servers:>8}{count:>6}{min(pool_rates):>14,.0f}"
+                f"{statistics.median(pool_rates):>10,.0f}{min(local_rates):>12,.0f}"
+                f"{statistics.median(local_rates):>10,.0f}"
+                f"{statistics.median(pool_rates) / statistics.median(local_rates):>14.2f}"
+            )
     finally:
         ray.shutdown()
         cluster.shutdown()

@@ -40,8 +40,13 @@ from rlenv.examples.cartpole import CartPoleAgent
 from rlenv_tools._bench import HandWrittenServer
 
 ON_SOCKET = "rlenv/CartPole-v0 on the socket"
-ENVIRONMENTS = ("rlenv/CartPole-v0", "CartPole-v1", "handwritten/CartPole-v0",
-                "rlenv/CartPole-v1", ON_SOCKET)
+ENVIRONMENTS = (
+    "rlenv/CartPole-v0",
+    "CartPole-v1",
+    "handwritten/CartPole-v0",
+    "rlenv/CartPole-v1",
+    ON_SOCKET,
+)
 MADE_AS = {ON_SOCKET: ("rlenv/CartPole-v0", {"shared_memory": False})}
 """How an environment of :data:`ENVIRONMENTS` is made, when not by its name alone."""
 
@@ -56,8 +61,9 @@ class HandWrittenCartPole(gym.Env):
     def __init__(self) -> None:
         self.server = HandWrittenServer()
 
-    def reset(self, *, seed: int | None = None,
-              options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
         reply = self.server.call({"reset": {} if seed is None else {"seed": seed}})
         return np.frombuffer(reply["observation"], np.float32).copy(), {}
@@ -110,30 +116,41 @@ def measure(rounds: int, steps: int) -> tuple[dict[str, list[float]], int]:
 def report(rates: dict[str, list[float]], steps: int) -> str:
     """The table: min and median steps/s of each environment, and the ratios."""
     ours, native, floor, like, socket = (rates[env_id] for env_id in ENVIRONMENTS)
-    lines = [f"SB3 PPO, default hyperparameters, 1 env, learn({steps}) per round, "
-             f"{len(ours)} rounds in turns",
-             f"{'environment':<32}{'min steps/s':>14}{'median steps/s':>17}"]
+    lines = [
+        f"SB3 PPO, default hyperparameters, 1 env, learn({steps}) per round, "
+        f"{len(ours)} rounds in turns",
+        f"{'environment':<32}{'min steps/s':>14}{'median steps/s':>17}",
+    ]
     for env_id in ENVIRONMENTS:
-        lines.append(f"{env_id:<32}{min(rates[env_id]):>14,.0f}"
-                     f"{statistics.median(rates[env_id]):>17,.0f}")
-    for name, mine, base in (("rlenv / gymnasium", ours, native),
-                             ("hand-written / gymnasium", floor, native),
-                             ("rlenv / hand-written", ours, floor),
-                             ("rlenv/CartPole-v1 / gymnasium", like, native),
-                             ("rlenv on the socket / gymnasium", socket, native),
-                             ("rlenv through shared memory / on the socket", ours, socket)):
+        lines.append(
+            f"{env_id:<32}{min(rates[env_id]):>14,.0f}{statistics.median(rates[env_id]):>17,.0f}"
+        )
+    for name, mine, base in (
+        ("rlenv / gymnasium", ours, native),
+        ("hand-written / gymnasium", floor, native),
+        ("rlenv / hand-written", ours, floor),
+        ("rlenv/CartPole-v1 / gymnasium", like, native),
+        ("rlenv on the socket / gymnasium", socket, native),
+        ("rlenv through shared memory / on the socket", ours, socket),
+    ):
         per_round = [a / b for a, b in zip(mine, base, strict=True)]
-        lines.append(f"ratio {name}: of the medians "
-                     f"{statistics.median(mine) / statistics.median(base):.3f}; per round min "
-                     f"{min(per_round):.3f}, median {statistics.median(per_round):.3f}")
+        lines.append(
+            f"ratio {name}: of the medians "
+            f"{statistics.median(mine) / statistics.median(base):.3f}; per round min "
+            f"{min(per_round):.3f}, median {statistics.median(per_round):.3f}"
+        )
     return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=5, help="timed rounds (after a warm-up)")
-    parser.add_argument("--steps", type=int, default=4096,
-                        help="timesteps per round, rounded up to whole rollout cycles")
+    parser.add_argument(
+        "--steps",
+        type=int,
+        default=4096,
+        help="timesteps per round, rounded up to whole rollout cycles",
+    )
     args = parser.parse_args(argv)
     try:
         import stable_baselines3  # noqa: F401

@@ -64,7 +64,11 @@ def make_vec(num_envs: int) -> gym.vector.VectorEnv:
 
 
 LAYOUTS: dict[str, Callable[[int], gym.vector.VectorEnv]] = {
-    "native": native, "gym.make": shared, "per-env": per_env, "make_vec": make_vec}
+    "native": native,
+    "gym.make": shared,
+    "per-env": per_env,
+    "make_vec": make_vec,
+}
 
 
 def server_pids(envs: gym.vector.VectorEnv) -> list[int]:
@@ -91,8 +95,13 @@ def one_round(layout: str, num_envs: int, actions: np.ndarray) -> dict[str, Any]
         rate = actions.size / (time.perf_counter() - start)
     finally:
         envs.close()
-    return {"start": started, "rate": rate, "servers": len(pids),
-            "rss": [rss for rss, _ in memory], "uss": [uss for _, uss in memory]}
+    return {
+        "start": started,
+        "rate": rate,
+        "servers": len(pids),
+        "rss": [rss for rss, _ in memory],
+        "uss": [uss for _, uss in memory],
+    }
 
 
 def environment_variables(bytecode: bool) -> dict[str, str]:
@@ -114,9 +123,12 @@ def run_python(args: list[str], bytecode: bool = True) -> float:
 def serve_until_listening(bytecode: bool) -> float:
     """Seconds from starting ``python -m rlenv serve`` to its ``listening on`` line."""
     start = time.perf_counter()
-    process = subprocess.Popen([sys.executable, "-m", "rlenv", "serve", TARGET, "--port", "0"],
-                               stdout=subprocess.PIPE, text=True,
-                               env=environment_variables(bytecode))
+    process = subprocess.Popen(
+        [sys.executable, "-m", "rlenv", "serve", TARGET, "--port", "0"],
+        stdout=subprocess.PIPE,
+        text=True,
+        env=environment_variables(bytecode),
+    )
     try:
         assert process.stdout is not None
         line = process.stdout.readline()
@@ -129,7 +141,8 @@ def serve_until_listening(bytecode: bool) -> float:
 STARTUP_PHASES: dict[str, Callable[[], float]] = {
     "python -c pass": lambda: run_python(["-c", "pass"]),
     "import numpy, gymnasium, pymunk, msgpack": lambda: run_python(
-        ["-c", "import numpy, gymnasium, pymunk, msgpack"]),
+        ["-c", "import numpy, gymnasium, pymunk, msgpack"]
+    ),
     "rlenv serve until listening": lambda: serve_until_listening(True),
     "the same, PYTHONDONTWRITEBYTECODE=1": lambda: serve_until_listening(False),
 }
@@ -148,13 +161,16 @@ def ratios(results: dict[str, list[dict[str, Any]]], key: str, of: str, over: st
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=5)
-    parser.add_argument("--env-steps", type=int, default=8000,
-                        help="environment steps per round (default 8000)")
+    parser.add_argument(
+        "--env-steps", type=int, default=8000, help="environment steps per round (default 8000)"
+    )
     parser.add_argument("--num-envs", type=int, nargs="+", default=[4, 16])
     args = parser.parse_args()
     rng = np.random.default_rng(0)
-    print(f"{os.cpu_count()} cores; PYTHONDONTWRITEBYTECODE="
-          f"{os.environ.get('PYTHONDONTWRITEBYTECODE', '(unset)')} here (servers inherit it)")
+    print(
+        f"{os.cpu_count()} cores; PYTHONDONTWRITEBYTECODE="
+        f"{os.environ.get('PYTHONDONTWRITEBYTECODE', '(unset)')} here (servers inherit it)"
+    )
     for num_envs in args.num_envs:
         actions = rng.integers(0, 2, (args.env_steps // num_envs, num_envs))
         results: dict[str, list[dict[str, Any]]] = {layout: [] for layout in LAYOUTS}
@@ -164,26 +180,36 @@ def main() -> None:
             for layout in LAYOUTS:
                 results[layout].append(one_round(layout, num_envs, actions))
         print(f"\nnum_envs={num_envs}, {args.rounds} rounds in turns, min / median")
-        print(f"{'layout':10} {'servers':>7} {'start-up (ms)':>15} {'env-steps/s':>17} "
-              f"{'RSS/server (MiB)':>17} {'USS/server (MiB)':>17}")
+        print(
+            f"{'layout':10} {'servers':>7} {'start-up (ms)':>15} {'env-steps/s':>17} "
+            f"{'RSS/server (MiB)':>17} {'USS/server (MiB)':>17}"
+        )
         for layout, rounds in results.items():
             servers = rounds[0]["servers"]
             rss = [statistics.mean(r["rss"]) / 1024 for r in rounds] if servers else [0.0]
             uss = [statistics.mean(r["uss"]) / 1024 for r in rounds] if servers else [0.0]
-            print(f"{layout:10} {servers:>7} {spread([r['start'] for r in rounds], 1000):>15} "
-                  f"{spread([r['rate'] for r in rounds]):>17} {spread(rss, digits=1):>17} "
-                  f"{spread(uss, digits=1):>17}")
+            print(
+                f"{layout:10} {servers:>7} {spread([r['start'] for r in rounds], 1000):>15} "
+                f"{spread([r['rate'] for r in rounds]):>17} {spread(rss, digits=1):>17} "
+                f"{spread(uss, digits=1):>17}"
+            )
 
-        print(f"gym.make (shared) against per-env, per round: start-up "
-              f"{ratios(results, 'start', 'gym.make', 'per-env')}x, env-steps/s "
-              f"{ratios(results, 'rate', 'gym.make', 'per-env')}x")
-        print(f"per-env against make_vec, per round: start-up "
-              f"{ratios(results, 'start', 'per-env', 'make_vec')}x, env-steps/s "
-              f"{ratios(results, 'rate', 'per-env', 'make_vec')}x")
-        print(f"against native CartPole-v1: gym.make env-steps/s "
-              f"{ratios(results, 'rate', 'gym.make', 'native')}x, per-env "
-              f"{ratios(results, 'rate', 'per-env', 'native')}x, make_vec "
-              f"{ratios(results, 'rate', 'make_vec', 'native')}x")
+        print(
+            f"gym.make (shared) against per-env, per round: start-up "
+            f"{ratios(results, 'start', 'gym.make', 'per-env')}x, env-steps/s "
+            f"{ratios(results, 'rate', 'gym.make', 'per-env')}x"
+        )
+        print(
+            f"per-env against make_vec, per round: start-up "
+            f"{ratios(results, 'start', 'per-env', 'make_vec')}x, env-steps/s "
+            f"{ratios(results, 'rate', 'per-env', 'make_vec')}x"
+        )
+        print(
+            f"against native CartPole-v1: gym.make env-steps/s "
+            f"{ratios(results, 'rate', 'gym.make', 'native')}x, per-env "
+            f"{ratios(results, 'rate', 'per-env', 'native')}x, make_vec "
+            f"{ratios(results, 'rate', 'make_vec', 'native')}x"
+        )
     print(f"\nwhere a server's start-up goes ({args.rounds} rounds in turns, ms, min / median)")
     timings: dict[str, list[float]] = {phase: [] for phase in STARTUP_PHASES}
     for _ in range(args.rounds):

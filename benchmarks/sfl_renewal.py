@@ -29,8 +29,9 @@ CAPACITY = 128
 
 def run(rollouts: int, env_steps: int, num_envs: int, seed: int) -> dict[str, Any]:
     """One run; returns its counts."""
-    sampler = LevelSampler(CAPACITY, replay_prob=0.5, prioritization="topk", k=32,
-                           staleness_coeff=0.0, seed=seed)
+    sampler = LevelSampler(
+        CAPACITY, replay_prob=0.5, prioritization="topk", k=32, staleness_coeff=0.0, seed=seed
+    )
     counts = {"offered to the full buffer": 0, "entered it": 0}
     insert = sampler.insert
 
@@ -61,9 +62,14 @@ def run(rollouts: int, env_steps: int, num_envs: int, seed: int) -> dict[str, An
     finally:
         wrapper.close()
     learnable = sum(sampler.score(level_id) > 0 for level_id in sampler.weights())
-    return {"rollouts_per_level": rollouts, "episodes": episodes, "replays": replays,
-            "buffer full at env-step": filled_at, **counts,
-            f"buffered levels scoring > 0 (of {CAPACITY})": learnable}
+    return {
+        "rollouts_per_level": rollouts,
+        "episodes": episodes,
+        "replays": replays,
+        "buffer full at env-step": filled_at,
+        **counts,
+        f"buffered levels scoring > 0 (of {CAPACITY})": learnable,
+    }
 
 
 def main() -> None:

@@ -60,10 +60,22 @@ def instructions(python: str, mode: str, requests: int) -> int:
     """The total instructions callgrind counts in one worker process."""
     with tempfile.TemporaryDirectory() as folder:
         out = os.path.join(folder, "callgrind.out")
-        subprocess.run(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}", python,
-                        os.path.abspath(__file__), "--worker", mode, str(requests)],
-                       check=True, capture_output=True, cwd=tempfile.gettempdir(),
-                       env={**os.environ, "PYTHONHASHSEED": "0"})  # the same dicts each run
+        subprocess.run(
+            [
+                "valgrind",
+                "--tool=callgrind",
+                f"--callgrind-out-file={out}",
+                python,
+                os.path.abspath(__file__),
+                "--worker",
+                mode,
+                str(requests),
+            ],
+            check=True,
+            capture_output=True,
+            cwd=tempfile.gettempdir(),
+            env={**os.environ, "PYTHONHASHSEED": "0"},
+        )  # the same dicts each run
         with open(out) as counts:
             for line in counts:
                 if line.startswith(("summary:", "totals:")):
@@ -84,8 +96,14 @@ def main() -> None:
     env_steps = (arguments.long - arguments.short) * INSTANCES
     print(f"instructions per env-step ({INSTANCES} CartPoles, repeat 4): " + ", ".join(MODES))
     for python in [sys.executable, *arguments.other_python]:
-        figures = [(instructions(python, mode, arguments.long)
-                    - instructions(python, mode, arguments.short)) / env_steps for mode in MODES]
+        figures = [
+            (
+                instructions(python, mode, arguments.long)
+                - instructions(python, mode, arguments.short)
+            )
+            / env_steps
+            for mode in MODES
+        ]
         print(python, "  ".join(f"{figure / 1e3:.1f}K" for figure in figures))
 
 

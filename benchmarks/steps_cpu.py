@@ -43,8 +43,11 @@ def worker(instances: int, requests: int, action: float | None = None) -> float:
 
     def step() -> None:
         nonlocal reset
-        actions = rng.uniform(-1, 1, (instances, 1)) if action is None else \
-            np.full((instances, 1), action)
+        actions = (
+            rng.uniform(-1, 1, (instances, 1))
+            if action is None
+            else np.full((instances, 1), action)
+        )
         client.send_steps(actions.astype(np.float32), reset, 4)
         answer = client.receive_steps()
         steps[:] += 1
@@ -63,10 +66,20 @@ def worker(instances: int, requests: int, action: float | None = None) -> float:
 def measure(python: str, instances: int, requests: int, action: float | None) -> float:
     """One round in a new process run by ``python``."""
     # From a folder of no checkout's, so that each interpreter imports its own rlenv.
-    output = subprocess.run([python, __file__, "--worker", str(instances), str(requests),
-                             "" if action is None else str(action)],
-                            capture_output=True, text=True, check=True,
-                            cwd=tempfile.gettempdir()).stdout
+    output = subprocess.run(
+        [
+            python,
+            __file__,
+            "--worker",
+            str(instances),
+            str(requests),
+            "" if action is None else str(action),
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=tempfile.gettempdir(),
+    ).stdout
     return float(output)
 
 
@@ -81,19 +94,26 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=8)
     parser.add_argument("--requests", type=int, default=1000)
     parser.add_argument("--instances", type=int, default=32)
-    parser.add_argument("--action", type=float, default=None,
-                        help="one fixed action for every step (as the issue measures: about "
-                             "0.18 episode ends per env-step) instead of random ones")
+    parser.add_argument(
+        "--action",
+        type=float,
+        default=None,
+        help="one fixed action for every step (as the issue measures: about "
+        "0.18 episode ends per env-step) instead of random ones",
+    )
     arguments = parser.parse_args()
     sides = {"this": sys.executable, "other": arguments.other_python}
     results: dict[str, list[float]] = {"this": [], "other": []}
     for turn in range(arguments.rounds):
-        for side in (("this", "other") if turn % 2 == 0 else ("other", "this")):
-            results[side].append(measure(sides[side], arguments.instances, arguments.requests,
-                                         arguments.action))
+        for side in ("this", "other") if turn % 2 == 0 else ("other", "this"):
+            results[side].append(
+                measure(sides[side], arguments.instances, arguments.requests, arguments.action)
+            )
     actions = "random actions" if arguments.action is None else f"action {arguments.action}"
-    print(f"steps of {arguments.instances} CartPoles in process, repeat 4, {actions}: "
-          "CPU us per env-step")
+    print(
+        f"steps of {arguments.instances} CartPoles in process, repeat 4, {actions}: "
+        "CPU us per env-step"
+    )
     for side, values in results.items():
         print(f"  {side:5s}  {min(values):6.1f} min {statistics.median(values):6.1f} median")
     ratios = [a / b for a, b in zip(results["this"], results["other"], strict=True)]

@@ -61,11 +61,16 @@ class EndlessPlinko(PlinkoEnvironment):
 
 
 ENVIRONMENTS = {
-    "cartpole": ("examples.cartpole:CartPoleEnvironment",
-                 {"environment": {}, "world": {"track_limit": 1e9}, "agent": {"angle_limit": 1e9}},
-                 controller),
-    "plinko": ("benchmarks.time_travel:EndlessPlinko",
-               {"environment": {}, "world": {"difficulty": 1.0}, "agent": {}}, follow),
+    "cartpole": (
+        "examples.cartpole:CartPoleEnvironment",
+        {"environment": {}, "world": {"track_limit": 1e9}, "agent": {"angle_limit": 1e9}},
+        controller,
+    ),
+    "plinko": (
+        "benchmarks.time_travel:EndlessPlinko",
+        {"environment": {}, "world": {"difficulty": 1.0}, "agent": {}},
+        follow,
+    ),
 }
 
 
@@ -104,8 +109,10 @@ def private_megabytes(pids: list[int]) -> float:
 def summary(seconds: list[float]) -> str:
     ordered = sorted(seconds)
     p95 = ordered[min(len(ordered) - 1, int(0.95 * len(ordered)))]
-    return (f"min {1e3 * ordered[0]:7.2f} ms  median {1e3 * statistics.median(ordered):7.2f} ms  "
-            f"p95 {1e3 * p95:7.2f} ms  max {1e3 * ordered[-1]:7.2f} ms")
+    return (
+        f"min {1e3 * ordered[0]:7.2f} ms  median {1e3 * statistics.median(ordered):7.2f} ms  "
+        f"p95 {1e3 * p95:7.2f} ms  max {1e3 * ordered[-1]:7.2f} ms"
+    )
 
 
 def measure(name: str, jumps: int, baselines: int) -> None:
@@ -123,19 +130,22 @@ def measure(name: str, jumps: int, baselines: int) -> None:
         try:
             every = timeline._checkpoints.every
             pids = timeline.processes
-            print(f"{name}: {len(timeline)} steps recorded in {recorded:.1f} s; opened (every "
-                  f"step re-simulated and checked) in {opened:.1f} s; a checkpoint every "
-                  f"{every} steps: {len(pids)} processes holding "
-                  f"{private_megabytes(pids):.0f} MiB of their own")
+            print(
+                f"{name}: {len(timeline)} steps recorded in {recorded:.1f} s; opened (every "
+                f"step re-simulated and checked) in {opened:.1f} s; a checkpoint every "
+                f"{every} steps: {len(pids)} processes holding "
+                f"{private_megabytes(pids):.0f} MiB of their own"
+            )
             rng = random.Random(7)
             random_steps = [rng.randrange(len(timeline) + 1) for _ in range(jumps)]
             start = rng.randrange(len(timeline) // 2, len(timeline))
             dragged_back = [max(0, start - 3 * k) for k in range(jumps)]
             agent = [path for path in timeline.at(0).properties if path.endswith("/Agent")]
             for pattern, steps, nodes in (
-                    ("random steps", random_steps, None),
-                    ("random steps, the agent's properties only", random_steps, agent),
-                    ("a drag back, 3 steps apart", dragged_back, None)):
+                ("random steps", random_steps, None),
+                ("random steps, the agent's properties only", random_steps, agent),
+                ("a drag back, 3 steps apart", dragged_back, None),
+            ):
                 jumped, replays = [], []
                 for index, step in enumerate(steps):
                     began = time.perf_counter()
@@ -145,10 +155,14 @@ def measure(name: str, jumps: int, baselines: int) -> None:
                     if index % (jumps // baselines) == 0:
                         replays.append(replayed(episode, baseline, step))
                 ratio = statistics.median(replays) / statistics.median(jumped)
-                print(f"  {pattern}: timeline.at(step) x {jumps}: {summary(jumped)}; "
-                      f"over 50 ms: {sum(s > 0.05 for s in jumped)}")
-                print(f"    the baseline, snapshot replayed from the reset, x {len(replays)}: "
-                      f"{summary(replays)}; ratio of medians {ratio:.0f}x")
+                print(
+                    f"  {pattern}: timeline.at(step) x {jumps}: {summary(jumped)}; "
+                    f"over 50 ms: {sum(s > 0.05 for s in jumped)}"
+                )
+                print(
+                    f"    the baseline, snapshot replayed from the reset, x {len(replays)}: "
+                    f"{summary(replays)}; ratio of medians {ratio:.0f}x"
+                )
         finally:
             baseline.end()
             timeline.close()

@@ -57,7 +57,8 @@ def _variants(instances: int) -> dict[str, Callable[[], SB3VecEnv]]:
         "rewrite (scripted runners)": make(SCRIPTED),
         "multi-agent, runners served (heuristic)": make(TAG, agents=CHASER),
         "multi-agent, runners called in the trainer": make(
-            TAG, agents=CHASER, others=dict.fromkeys(RUNNERS, run_away)),
+            TAG, agents=CHASER, others=dict.fromkeys(RUNNERS, run_away)
+        ),
     }
 
 
@@ -82,8 +83,9 @@ def _rates(make: Callable[[], SB3VecEnv], steps: int, seed: int) -> tuple[float,
         envs.close()
 
 
-def _play(envs: SB3VecEnv, act: Callable[[np.ndarray], np.ndarray], episodes: int,
-          seed: int) -> tuple[float, float]:
+def _play(
+    envs: SB3VecEnv, act: Callable[[np.ndarray], np.ndarray], episodes: int, seed: int
+) -> tuple[float, float]:
     """Mean return and tags per episode of the chaser played by ``act``, episode by episode."""
     returns, tags = [], []
     for episode in range(episodes):
@@ -118,13 +120,16 @@ def main() -> None:
     learning: dict[str, list[float]] = {name: [] for name in names}
     stepping: dict[str, list[float]] = {name: [] for name in names}
     for round_number in range(args.rounds):
-        order = names[round_number % len(names):] + names[:round_number % len(names)]
+        order = names[round_number % len(names) :] + names[: round_number % len(names)]
         for name in order:
             learned, stepped = _rates(variants[name], args.round_steps, round_number)
             learning[name].append(learned)
             stepping[name].append(stepped)
-            print(f"round {round_number + 1}: {name}: PPO {learned:7.0f}, stepping "
-                  f"{stepped:7.0f} env-steps/s", flush=True)
+            print(
+                f"round {round_number + 1}: {name}: PPO {learned:7.0f}, stepping "
+                f"{stepped:7.0f} env-steps/s",
+                flush=True,
+            )
 
     figures: list[dict[str, Any]] = []
     print(f"\n{args.instances} instances, {args.rounds} rounds of {args.round_steps} env-steps")
@@ -133,11 +138,20 @@ def main() -> None:
         for name in names:
             baseline = names[0]
             ratio = statistics.median(rates[name]) / statistics.median(rates[baseline])
-            print(f"  {name:45s} {min(rates[name]):7.0f} / {statistics.median(rates[name]):7.0f}"
-                  f"   x{ratio:.2f} of '{baseline}'")
-            figures.append({"name": f"{kind}: {name}", "min": min(rates[name]),
-                            "median": statistics.median(rates[name]), "unit": "env-steps/s",
-                            "baseline_name": baseline, "ratio": ratio})
+            print(
+                f"  {name:45s} {min(rates[name]):7.0f} / {statistics.median(rates[name]):7.0f}"
+                f"   x{ratio:.2f} of '{baseline}'"
+            )
+            figures.append(
+                {
+                    "name": f"{kind}: {name}",
+                    "min": min(rates[name]),
+                    "median": statistics.median(rates[name]),
+                    "unit": "env-steps/s",
+                    "baseline_name": baseline,
+                    "ratio": ratio,
+                }
+            )
 
     envs = SB3VecEnv(args.instances, TAG, agents=CHASER, max_episode_steps=MAX_STEPS)
     try:
@@ -150,20 +164,35 @@ def main() -> None:
     evaluation = SB3VecEnv(1, TAG, agents=CHASER, max_episode_steps=MAX_STEPS)
     try:
         rng = np.random.default_rng(0)
-        trained = _play(evaluation, lambda obs: model.predict(obs, deterministic=True)[0],
-                        args.episodes, 1000)
-        random = _play(evaluation, lambda obs: rng.uniform(-1, 1, (1, 2)).astype(np.float32),
-                       args.episodes, 1000)
+        trained = _play(
+            evaluation, lambda obs: model.predict(obs, deterministic=True)[0], args.episodes, 1000
+        )
+        random = _play(
+            evaluation,
+            lambda obs: rng.uniform(-1, 1, (1, 2)).astype(np.float32),
+            args.episodes,
+            1000,
+        )
     finally:
         evaluation.close()
-    print(f"\nthe chaser trained from the multi-agent env for {args.train_steps} env-steps "
-          f"({seconds:.0f} s), {args.episodes} episodes each:")
+    print(
+        f"\nthe chaser trained from the multi-agent env for {args.train_steps} env-steps "
+        f"({seconds:.0f} s), {args.episodes} episodes each:"
+    )
     print(f"  trained: return {trained[0]:7.2f}, tags per episode {trained[1]:.2f} of 2")
     print(f"  random:  return {random[0]:7.2f}, tags per episode {random[1]:.2f} of 2")
-    figures.append({"name": "trained chaser: mean return", "value": trained[0],
-                    "baseline_name": "random chaser", "baseline": random[0],
-                    "tags": trained[1], "baseline_tags": random[1],
-                    "train_steps": args.train_steps, "episodes": args.episodes})
+    figures.append(
+        {
+            "name": "trained chaser: mean return",
+            "value": trained[0],
+            "baseline_name": "random chaser",
+            "baseline": random[0],
+            "tags": trained[1],
+            "baseline_tags": random[1],
+            "train_steps": args.train_steps,
+            "episodes": args.episodes,
+        }
+    )
     if args.json:
         with open(args.json, "w") as file:
             json.dump(figures, file, indent=1)

@@ -40,9 +40,24 @@ def main() -> None:
         for condition, options in CONDITIONS.items():
             path = Path(folder) / "rows.json"
             print(f"## {condition}\n", flush=True)
-            subprocess.run([sys.executable, "-m", "rlenv", "bench", "--train", args.target,
-                            "--rounds", str(args.rounds), "--native", "CartPole-v1",
-                            "--json", str(path), *options], check=True)
+            subprocess.run(
+                [
+                    sys.executable,
+                    "-m",
+                    "rlenv",
+                    "bench",
+                    "--train",
+                    args.target,
+                    "--rounds",
+                    str(args.rounds),
+                    "--native",
+                    "CartPole-v1",
+                    "--json",
+                    str(path),
+                    *options,
+                ],
+                check=True,
+            )
             results[condition] = json.loads(path.read_text())
             print(flush=True)
     print("## the ratios side by side (median of the per-round ratios; min in brackets)\n")
@@ -51,8 +66,10 @@ def main() -> None:
     print("|---|" + "---:|" * len(names))
     first = results[names[0]]
     for index, row in enumerate(first):
-        cells = [f"{results[name][index]['ratio']:.2f} ({results[name][index]['ratio_min']:.2f})"
-                 for name in names]
+        cells = [
+            f"{results[name][index]['ratio']:.2f} ({results[name][index]['ratio_min']:.2f})"
+            for name in names
+        ]
         print(f"| {row['group']}: {row['name']} | " + " | ".join(cells) + " |")
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=2) + "\n")

@@ -64,14 +64,16 @@ class Subject:
         elapsed = time.perf_counter() - start
         env_steps = steps * self.envs
         self.rates.append(env_steps / elapsed)
-        used = sum(cpu_seconds(pid) - before for pid, before in zip(self.pids, servers,
-                                                                    strict=True))
+        used = sum(
+            cpu_seconds(pid) - before for pid, before in zip(self.pids, servers, strict=True)
+        )
         self.server_cpu.append(used / env_steps * 1e6)
         self.client_cpu.append((time.process_time() - client) / env_steps * 1e6)
 
 
-def steps_of(step: Callable[[Any], object], envs: Any,
-             action: float | None) -> Callable[[int], None]:
+def steps_of(
+    step: Callable[[Any], object], envs: Any, action: float | None
+) -> Callable[[int], None]:
     """``run(n)``: ``n`` calls of ``step``, with random actions or ``action`` for every env."""
     if action is None:
         return random_steps_of(step, envs)
@@ -80,11 +82,13 @@ def steps_of(step: Callable[[Any], object], envs: Any,
     def run(n: int) -> None:
         for _ in range(n):
             step(actions)
+
     return run
 
 
-def _made(stack: ExitStack, envs: int, action: float | None,
-          **kwargs: Any) -> tuple[Callable[[int], None], list[int]]:
+def _made(
+    stack: ExitStack, envs: int, action: float | None, **kwargs: Any
+) -> tuple[Callable[[int], None], list[int]]:
     made = gym.make_vec("rlenv/CartPole-v0", num_envs=envs, **kwargs)
     stack.callback(made.close)
     made.reset(seed=0)
@@ -101,33 +105,51 @@ def subjects(stack: ExitStack, action: float | None = None) -> list[Subject]:
             measured.append(Subject(f"make_vec({envs}), {how}", step, envs, pids))
     async_envs = gym.vector.AsyncVectorEnv([lambda: gym.make("CartPole-v1")] * 8)
     stack.callback(async_envs.close)
-    measured.append(Subject("AsyncVectorEnv(8) CartPole-v1", random_steps(async_envs), 8,
-                            [process.pid for process in async_envs.processes]))
+    measured.append(
+        Subject(
+            "AsyncVectorEnv(8) CartPole-v1",
+            random_steps(async_envs),
+            8,
+            [process.pid for process in async_envs.processes],
+        )
+    )
     layout = default_layout(64)
     floor = HandWrittenVector(len(layout), layout[0])
     stack.callback(floor.close)
-    actions = SimpleNamespace(action_space=gym.vector.utils.batch_space(
-        gym.spaces.Box(-1, 1, (1,), np.float32), 64))  # all random_steps_of asks of a vector
-    measured.append(Subject(f"hand-written {len(layout)} x {layout[0]}",
-                            steps_of(floor.step, actions, action), 64,
-                            [server.process.pid for server in floor.servers]))
+    actions = SimpleNamespace(
+        action_space=gym.vector.utils.batch_space(gym.spaces.Box(-1, 1, (1,), np.float32), 64)
+    )  # all random_steps_of asks of a vector
+    measured.append(
+        Subject(
+            f"hand-written {len(layout)} x {layout[0]}",
+            steps_of(floor.step, actions, action),
+            64,
+            [server.process.pid for server in floor.servers],
+        )
+    )
     return measured
 
 
 def ratio_line(name: str, mine: Subject, base: Subject) -> str:
     """The ratio of two subjects' rates: of the medians, and min and median per round."""
     per_round = [a / b for a, b in zip(mine.rates, base.rates, strict=True)]
-    return (f"{name:<44} {statistics.median(mine.rates) / statistics.median(base.rates):6.2f}"
-            f"   per round min {min(per_round):.2f}, median {statistics.median(per_round):.2f}")
+    return (
+        f"{name:<44} {statistics.median(mine.rates) / statistics.median(base.rates):6.2f}"
+        f"   per round min {min(per_round):.2f}, median {statistics.median(per_round):.2f}"
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=7, help="timed rounds (after a warm-up)")
     parser.add_argument("--seconds", type=float, default=2.0, help="seconds per subject a round")
-    parser.add_argument("--action", type=float, default=None,
-                        help="one fixed action for the rlenv vectors and the floor (the issue's "
-                             "0.5) instead of random ones")
+    parser.add_argument(
+        "--action",
+        type=float,
+        default=None,
+        help="one fixed action for the rlenv vectors and the floor (the issue's "
+        "0.5) instead of random ones",
+    )
     args = parser.parse_args(argv)
     with ExitStack() as stack:
         measured = subjects(stack, args.action)
@@ -140,14 +162,17 @@ def main(argv: list[str] | None = None) -> int:
             for subject in measured:
                 subject.round(args.seconds)
     actions = "random actions" if args.action is None else f"action {args.action}"
-    print(f"{args.rounds} rounds of {args.seconds} s in turns, {actions}; CPU per env-step "
-          "from /proc")
+    print(
+        f"{args.rounds} rounds of {args.seconds} s in turns, {actions}; CPU per env-step from /proc"
+    )
     print(f"{'':<34}{'env-steps/s min':>16}{'median':>10}{'server us':>11}{'client us':>11}")
     for subject in measured:
-        print(f"{subject.name:<34}{min(subject.rates):>16,.0f}"
-              f"{statistics.median(subject.rates):>10,.0f}"
-              f"{statistics.median(subject.server_cpu):>11.1f}"
-              f"{statistics.median(subject.client_cpu):>11.1f}")
+        print(
+            f"{subject.name:<34}{min(subject.rates):>16,.0f}"
+            f"{statistics.median(subject.rates):>10,.0f}"
+            f"{statistics.median(subject.server_cpu):>11.1f}"
+            f"{statistics.median(subject.client_cpu):>11.1f}"
+        )
     by_name = {subject.name: subject for subject in measured}
     async_8 = by_name["AsyncVectorEnv(8) CartPole-v1"]
     floor = measured[-1]
@@ -155,8 +180,9 @@ def main(argv: list[str] | None = None) -> int:
         lanes, sockets = by_name[f"make_vec({envs}), lanes"], by_name[f"make_vec({envs}), sockets"]
         print(ratio_line(f"make_vec({envs}) lanes / AsyncVectorEnv(8)", lanes, async_8))
         print(ratio_line(f"make_vec({envs}) lanes / sockets", lanes, sockets))
-    print(ratio_line("make_vec(64) lanes / hand-written floor", by_name["make_vec(64), lanes"],
-                     floor))
+    print(
+        ratio_line("make_vec(64) lanes / hand-written floor", by_name["make_vec(64), lanes"], floor)
+    )
     return 0
 
 

@@ -41,9 +41,14 @@ def served(python: str, *args: str) -> Iterator[tuple[str, int]]:
     """``rlenv serve CARTPOLE`` run by ``python``; its (address, pid)."""
     # From a folder of no checkout's: ``python -m`` puts the working directory first on the
     # path, which would run this checkout's rlenv with the other's interpreter.
-    process = subprocess.Popen([python, "-m", "rlenv", "serve", CARTPOLE, "--port", "0", *args],
-                               stdout=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
-                               start_new_session=True, cwd=tempfile.gettempdir())
+    process = subprocess.Popen(
+        [python, "-m", "rlenv", "serve", CARTPOLE, "--port", "0", *args],
+        stdout=subprocess.PIPE,
+        text=True,
+        stdin=subprocess.DEVNULL,
+        start_new_session=True,
+        cwd=tempfile.gettempdir(),
+    )
     try:
         line = process.stdout.readline()  # type: ignore[union-attr]
         assert line.startswith("listening on "), line
@@ -89,8 +94,12 @@ def vector(addresses: list[str], pids: list[int], steps: int) -> Callable[[], tu
     return round_
 
 
-def compare(name: str, ours: Callable[[], tuple[float, float]],
-            theirs: Callable[[], tuple[float, float]], rounds: int) -> None:
+def compare(
+    name: str,
+    ours: Callable[[], tuple[float, float]],
+    theirs: Callable[[], tuple[float, float]],
+    rounds: int,
+) -> None:
     """Rounds in turns after a warm-up each; print min, median and the ratios."""
     ours(), theirs()
     results: dict[str, list[tuple[float, float]]] = {"this": [], "other": []}
@@ -100,12 +109,16 @@ def compare(name: str, ours: Callable[[], tuple[float, float]],
     print(f"\n{name}")
     for side, values in results.items():
         speeds, cpus = [v[0] for v in values], [v[1] for v in values]
-        print(f"  {side:5s}  {min(speeds):9.0f} min {statistics.median(speeds):9.0f} median /s;"
-              f"  server CPU {min(cpus):6.1f} min {statistics.median(cpus):6.1f} median us")
+        print(
+            f"  {side:5s}  {min(speeds):9.0f} min {statistics.median(speeds):9.0f} median /s;"
+            f"  server CPU {min(cpus):6.1f} min {statistics.median(cpus):6.1f} median us"
+        )
     ratios = [a[0] / b[0] for a, b in zip(results["this"], results["other"], strict=True)]
     cpu_ratios = [a[1] / b[1] for a, b in zip(results["this"], results["other"], strict=True)]
-    print(f"  this / other: speed min {min(ratios):.2f} median {statistics.median(ratios):.2f};"
-          f"  server CPU min {min(cpu_ratios):.2f} median {statistics.median(cpu_ratios):.2f}")
+    print(
+        f"  this / other: speed min {min(ratios):.2f} median {statistics.median(ratios):.2f};"
+        f"  server CPU min {min(cpu_ratios):.2f} median {statistics.median(cpu_ratios):.2f}"
+    )
 
 
 def main() -> None:
@@ -118,18 +131,27 @@ def main() -> None:
     with ExitStack() as stack:
         ours = stack.enter_context(served(sys.executable))
         theirs = stack.enter_context(served(arguments.other_python))
-        compare("Client.step, CartPole, repeat 4", single(*ours, arguments.steps),
-                single(*theirs, arguments.steps), arguments.rounds)
+        compare(
+            "Client.step, CartPole, repeat 4",
+            single(*ours, arguments.steps),
+            single(*theirs, arguments.steps),
+            arguments.rounds,
+        )
     with ExitStack() as stack:
-        ours_v = [stack.enter_context(served(sys.executable, "--instances", "32"))
-                  for _ in range(2)]
-        theirs_v = [stack.enter_context(served(arguments.other_python, "--instances", "32"))
-                    for _ in range(2)]
+        ours_v = [
+            stack.enter_context(served(sys.executable, "--instances", "32")) for _ in range(2)
+        ]
+        theirs_v = [
+            stack.enter_context(served(arguments.other_python, "--instances", "32"))
+            for _ in range(2)
+        ]
         steps = max(arguments.steps // 20, 20)
-        compare("vector step, 64 CartPoles in 2 servers, repeat 4",
-                vector([a for a, _ in ours_v], [p for _, p in ours_v], steps),
-                vector([a for a, _ in theirs_v], [p for _, p in theirs_v], steps),
-                arguments.rounds)
+        compare(
+            "vector step, 64 CartPoles in 2 servers, repeat 4",
+            vector([a for a, _ in ours_v], [p for _, p in ours_v], steps),
+            vector([a for a, _ in theirs_v], [p for _, p in theirs_v], steps),
+            arguments.rounds,
+        )
 
 
 if __name__ == "__main__":

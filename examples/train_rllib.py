@@ -35,13 +35,15 @@ def main() -> int:
 
     from rlenv_client.rllib import config_for
 
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--env", default=ENV_ID, help=f"rlenv id or MODULE:CLASS ({ENV_ID})")
     parser.add_argument("--goal", type=float, default=400.0, help="mean return to reach")
     parser.add_argument("--max-iterations", type=int, default=40)
-    parser.add_argument("--env-runners", type=int, default=1,
-                        help="EnvRunner actors (0: sample in this process)")
+    parser.add_argument(
+        "--env-runners", type=int, default=1, help="EnvRunner actors (0: sample in this process)"
+    )
     parser.add_argument("--envs", type=int, default=8, help="sub-environments per EnvRunner")
     parser.add_argument("--servers", type=int, default=1, help="servers per EnvRunner")
     parser.add_argument("--seed", type=int, default=0)
@@ -55,7 +57,9 @@ def main() -> int:
     ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)
     try:
         config = config_for(
-            PPOConfig(), args.env, num_env_runners=args.env_runners,
+            PPOConfig(),
+            args.env,
+            num_env_runners=args.env_runners,
             num_envs_per_env_runner=args.envs,
             instances_per_server=-(-args.envs // args.servers),
         ).debugging(seed=args.seed)
@@ -67,9 +71,11 @@ def main() -> int:
                 result = algo.train()
                 mean_return = float(result["env_runners"].get("episode_return_mean", "nan"))
                 steps = int(result.get("num_env_steps_sampled_lifetime", 0))
-                print(f"iteration {iteration:3d}  {steps:7d} steps  "
-                      f"{time.perf_counter() - start:6.1f} s  mean return {mean_return:7.1f}",
-                      flush=True)
+                print(
+                    f"iteration {iteration:3d}  {steps:7d} steps  "
+                    f"{time.perf_counter() - start:6.1f} s  mean return {mean_return:7.1f}",
+                    flush=True,
+                )
                 if mean_return >= args.goal:
                     break
         finally:
@@ -77,9 +83,11 @@ def main() -> int:
     finally:
         ray.shutdown()
     reached = mean_return >= args.goal
-    print(f"{'reached' if reached else 'did not reach'} the goal of {args.goal:.0f}: mean return "
-          f"{mean_return:.1f} after {steps} steps in {time.perf_counter() - start:.1f} s",
-          flush=True)
+    print(
+        f"{'reached' if reached else 'did not reach'} the goal of {args.goal:.0f}: mean return "
+        f"{mean_return:.1f} after {steps} steps in {time.perf_counter() - start:.1f} s",
+        flush=True,
+    )
     return 0 if reached else 1
 
 

@@ -42,26 +42,31 @@ class _Forwarder(importlib.abc.MetaPathFinder, importlib.abc.Loader):
     def _moved_once(self, name: str) -> str | None:
         for old, new in self.moves.items():
             if name == old or name.startswith(old + "."):
-                return new + name[len(old):]
+                return new + name[len(old) :]
         return None
 
-    def find_spec(self, fullname: str, path: Sequence[str] | None = None,
-                  target: ModuleType | None = None) -> importlib.machinery.ModuleSpec | None:
+    def find_spec(
+        self, fullname: str, path: Sequence[str] | None = None, target: ModuleType | None = None
+    ) -> importlib.machinery.ModuleSpec | None:
         """A spec that this loader fulfils for a moved name; None for any other."""
         new = self.new_name(fullname)
         found = importlib.util.find_spec(new) if new is not None else None
         if found is None:
             return None
         spec = importlib.machinery.ModuleSpec(
-            fullname, self, is_package=found.submodule_search_locations is not None)
+            fullname, self, is_package=found.submodule_search_locations is not None
+        )
         spec.loader_state = new
         return spec
 
     def create_module(self, spec: importlib.machinery.ModuleSpec) -> ModuleType:
         """The module at its new place, with a warning that names it."""
         new = spec.loader_state
-        warnings.warn(f"{spec.name} moved to {new}; the old name goes in the next release",
-                      DeprecationWarning, stacklevel=_caller_level())
+        warnings.warn(
+            f"{spec.name} moved to {new}; the old name goes in the next release",
+            DeprecationWarning,
+            stacklevel=_caller_level(),
+        )
         return importlib.import_module(new)
 
     def exec_module(self, module: ModuleType) -> None:

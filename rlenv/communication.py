@@ -92,9 +92,13 @@ class Communication(Node):
             rlenv.serving._endpoint.InsecureBindError: a non-loopback ``host`` without a token.
         """
         if self._self_hosting is None:
-            logger.info("%s asked to listen on %s:%s; it is hosted by a server whose address "
-                        "wins, so nothing more is bound", self.name if self.parent is None
-                        else self.parent.name, host, port)
+            logger.info(
+                "%s asked to listen on %s:%s; it is hosted by a server whose address "
+                "wins, so nothing more is bound",
+                self.name if self.parent is None else self.parent.name,
+                host,
+                port,
+            )
             return
         self.address = self._self_hosting.listen(port, host)
 
@@ -152,6 +156,8 @@ class Communication(Node):
 
     def _serving(self) -> Served:
         if self._served is None:
-            raise RuntimeError("the environment is not served: host it with rlenv.run, "
-                               "rlenv serve or a client (LocalClient, RemoteEnv)")
+            raise RuntimeError(
+                "the environment is not served: host it with rlenv.run, "
+                "rlenv serve or a client (LocalClient, RemoteEnv)"
+            )
         return self._served

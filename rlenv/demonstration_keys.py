@@ -41,8 +41,10 @@ def default_keys(space: spaces.Space) -> dict[str, Any]:
         idle = np.clip(np.zeros(space.shape), space.low, space.high)
         keys = {}
         for axis in range(space.shape[0]):
-            for key, bound, fallback in ((_ARROWS[axis][0], space.low[axis], -1.0),
-                                         (_ARROWS[axis][1], space.high[axis], 1.0)):
+            for key, bound, fallback in (
+                (_ARROWS[axis][0], space.low[axis], -1.0),
+                (_ARROWS[axis][1], space.high[axis], 1.0),
+            ):
                 action = idle.copy()
                 action[axis] = bound if np.isfinite(bound) else fallback
                 keys[key] = action.astype(space.dtype)
@@ -60,6 +62,8 @@ def keys_of(agent: Any) -> dict[str, Any]:
     if keys is None:
         return default_keys(agent.action_space)
     if not isinstance(keys, Mapping) or not all(isinstance(key, str) for key in keys):
-        raise TypeError(f"{type(agent).__name__}.demonstration_keys must map key names "
-                        f"(text, as KeyboardEvent.key gives them) to actions, got {keys!r:.80}")
+        raise TypeError(
+            f"{type(agent).__name__}.demonstration_keys must map key names "
+            f"(text, as KeyboardEvent.key gives them) to actions, got {keys!r:.80}"
+        )
     return dict(keys)

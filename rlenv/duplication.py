@@ -62,8 +62,9 @@ def duplicate_subtree(root: N, outside_a_tree: Mapping[str, Any]) -> N:
     copies[0]._parent = None
     for node, blank in zip(originals, copies, strict=True):
         if node._signals:
-            blank._signals = {name: _copied_signal(bound, blank, memo)
-                              for name, bound in node._signals.items()}
+            blank._signals = {
+                name: _copied_signal(bound, blank, memo) for name, bound in node._signals.items()
+            }
     for node, blank in zip(originals, copies, strict=True):
         blank._duplicated(node)
     return cast(N, copies[0])  # a blank of type(root)
@@ -80,8 +81,9 @@ def copied_node(node: Node, memo: dict[int, Any]) -> Node:
     return node.duplicate()
 
 
-def _copy_state(node: Node, blank: Node, memo: dict[int, Any],
-                outside_a_tree: Mapping[str, Any]) -> None:
+def _copy_state(
+    node: Node, blank: Node, memo: dict[int, Any], outside_a_tree: Mapping[str, Any]
+) -> None:
     kind = type(node)
     skipped = _SKIPPED.get(kind)
     if skipped is None:
@@ -102,8 +104,9 @@ def _copy_state(node: Node, blank: Node, memo: dict[int, Any],
     state["_groups"] = set(node._groups)
     state["_parent"] = mapped(id(node._parent))
     state["_children"] = [memo[id(child)] for child in node._children]
-    state["_children_by_name"] = {name: memo[id(child)]
-                                  for name, child in node._children_by_name.items()}
+    state["_children_by_name"] = {
+        name: memo[id(child)] for name, child in node._children_by_name.items()
+    }
     state["_signals"] = {}
     state.update(outside_a_tree)
 
@@ -121,8 +124,9 @@ def _immutable(value: Any) -> bool:
 
 def _copied_signal(bound: BoundSignal, owner: Node, memo: dict[int, Any]) -> BoundSignal:
     signal = BoundSignal(owner, bound.name)
-    signal._connections = tuple((_remapped(callback, memo), one_shot)
-                                for callback, one_shot in bound._connections)
+    signal._connections = tuple(
+        (_remapped(callback, memo), one_shot) for callback, one_shot in bound._connections
+    )
     signal._one_shots = bound._one_shots
     return signal
 

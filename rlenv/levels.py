@@ -58,8 +58,9 @@ class LevelWorld(RLEnvWorld):
         """
         raise NotImplementedError(f"{type(self).__name__} has no build_level")
 
-    def edit_level_data(self, data: dict[str, Any], rng: np.random.Generator,
-                        n_edits: int) -> dict[str, Any]:
+    def edit_level_data(
+        self, data: dict[str, Any], rng: np.random.Generator, n_edits: int
+    ) -> dict[str, Any]:
         """Override: ``n_edits`` random edits of a level's data (checked already; not changed).
 
         A world whose module has such a function may set ``edit_level_data =
@@ -127,8 +128,11 @@ class LevelWorld(RLEnvWorld):
         checked, self._checked = self._checked, None
         level = None
         if given is not None:
-            level = checked[1] if checked is not None and checked[0] is given else \
-                self._given_level(given)
+            level = (
+                checked[1]
+                if checked is not None and checked[0] is given
+                else self._given_level(given)
+            )
         rng = self.np_random
         drawn = self.draw_before_level(rng)
         return drawn, level if level is not None else self.build_level(rng)

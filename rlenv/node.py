@@ -114,10 +114,21 @@ class Node(SignalOwner):
     renamed = Signal()
     """``renamed()``: the node's name changed."""
 
-    _TREE_STATE: ClassVar[frozenset[str]] = frozenset({
-        "_parent", "_children", "_children_by_name", "_tree", "_signals", "_resolved_mode",
-        "_processes_when", "_is_ready", "_ready_requested", "_queued_for_deletion", "_freed",
-    })
+    _TREE_STATE: ClassVar[frozenset[str]] = frozenset(
+        {
+            "_parent",
+            "_children",
+            "_children_by_name",
+            "_tree",
+            "_signals",
+            "_resolved_mode",
+            "_processes_when",
+            "_is_ready",
+            "_ready_requested",
+            "_queued_for_deletion",
+            "_freed",
+        }
+    )
     """Attributes that belong to the node's place in a tree, not to the node: a duplicate and
     a packed scene rebuild them rather than copy them. Subclasses add theirs (a physics
     body's space, say)."""
@@ -273,8 +284,9 @@ class Node(SignalOwner):
         if node._parent is not self:
             raise ValueError(f"{node._name!r} is not a child of {self._name!r}")
         self._children.remove(node)
-        self._children.insert(to_index if to_index >= 0 else len(self._children) + 1 + to_index,
-                              node)
+        self._children.insert(
+            to_index if to_index >= 0 else len(self._children) + 1 + to_index, node
+        )
         if self._tree is not None:
             self._tree._plan_changed()
 
@@ -668,9 +680,13 @@ _CAN_PROCESS = {
     ProcessMode.DISABLED: (False, False),
 }
 _OUTSIDE_A_TREE = {
-    "_tree": None, "_resolved_mode": ProcessMode.PAUSABLE,
-    "_processes_when": _CAN_PROCESS[ProcessMode.PAUSABLE], "_is_ready": False,
-    "_ready_requested": False, "_queued_for_deletion": False, "_freed": False,
+    "_tree": None,
+    "_resolved_mode": ProcessMode.PAUSABLE,
+    "_processes_when": _CAN_PROCESS[ProcessMode.PAUSABLE],
+    "_is_ready": False,
+    "_ready_requested": False,
+    "_queued_for_deletion": False,
+    "_freed": False,
 }
 """The tree state of a node that never entered a tree (a duplicate's)."""
 
@@ -683,8 +699,9 @@ def check_initialised(node: Node) -> None:
     """
     if isinstance(node, Node) and "_children" not in vars(node):
         name = type(node).__name__
-        raise TypeError(f"{name} was not set up as a node: call super().__init__() in "
-                        f"{name}.__init__")
+        raise TypeError(
+            f"{name} was not set up as a node: call super().__init__() in {name}.__init__"
+        )
 
 
 def _overrides(node: Node, method: str) -> bool:

@@ -93,8 +93,10 @@ class RLNode(Node):
         owner = type(self).__name__
         if key not in self.configurable:
             accepted = ", ".join(map(str, self.configurable)) or "nothing"
-            raise RequestError(ErrorCode.INVALID_CONFIG,
-                               f"{owner} has no configurable {key!r}; it accepts {accepted}")
+            raise RequestError(
+                ErrorCode.INVALID_CONFIG,
+                f"{owner} has no configurable {key!r}; it accepts {accepted}",
+            )
         try:
             return conform(getattr(self, key), value)
         except TypeError as error:

@@ -152,9 +152,7 @@ class SignalOwner:
             raise ValueError(f"{type(self).__name__} already has a member called {name!r}")
         self._signals[name] = BoundSignal(self, name)
 
-    def connect(
-        self, signal: str, callback: Callable[..., Any], *, one_shot: bool = False
-    ) -> None:
+    def connect(self, signal: str, callback: Callable[..., Any], *, one_shot: bool = False) -> None:
         """Connect ``callback`` to the signal called ``signal``."""
         self.get_signal(signal).connect(callback, one_shot=one_shot)
 

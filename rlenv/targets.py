@@ -40,7 +40,7 @@ def _split(name: str) -> tuple[str, str] | None:
     """``(package, rest)`` when ``name`` is an example's module under either name, else None."""
     for package in (EXAMPLES, CHECKOUT_EXAMPLES):
         if name == package or name.startswith(f"{package}."):
-            return package, name[len(package):]
+            return package, name[len(package) :]
     return None
 
 

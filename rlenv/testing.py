@@ -69,5 +69,3 @@ def read_body(sock: socket.socket) -> bytes:
     body = receive_frame(sock)
     assert body is not None, "the server closed the connection without an answer"
     return body
-
-

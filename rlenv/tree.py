@@ -331,8 +331,15 @@ class _TickPlan:
         process: ``_process`` of the nodes that process and can run.
     """
 
-    __slots__ = ("_physics_nodes", "_process_nodes", "_step_nodes", "paused", "physics",
-                 "process", "steps")
+    __slots__ = (
+        "_physics_nodes",
+        "_process_nodes",
+        "_step_nodes",
+        "paused",
+        "physics",
+        "process",
+        "steps",
+    )
 
     def __init__(self, root: Node, paused: bool) -> None:
         order = [node for node in root.iter_subtree() if node._processes_when[paused]]
@@ -341,20 +348,29 @@ class _TickPlan:
         self._step_nodes = [node for node in order if _simulates(node)]
         self._process_nodes = [node for node in order if node._processing]
         self.physics: list[Callable[[float], None]] = [
-            node._physics_process for node in self._physics_nodes]
+            node._physics_process for node in self._physics_nodes
+        ]
         self.steps: list[Callable[[float], None]] = [
-            node._physics_step for node in self._step_nodes]
+            node._physics_step for node in self._step_nodes
+        ]
         self.process: list[Callable[[float], None]] = [
-            node._process for node in self._process_nodes]
+            node._process for node in self._process_nodes
+        ]
 
     def skip_stopped(self) -> None:
         """Turn into no-ops the calls of nodes that can no longer run (a change mid-pass)."""
         paused = self.paused
-        _skip_unless(self.physics, self._physics_nodes,
-                     lambda node: node._physics_processing and node._processes_when[paused])
+        _skip_unless(
+            self.physics,
+            self._physics_nodes,
+            lambda node: node._physics_processing and node._processes_when[paused],
+        )
         _skip_unless(self.steps, self._step_nodes, lambda node: node._processes_when[paused])
-        _skip_unless(self.process, self._process_nodes,
-                     lambda node: node._processing and node._processes_when[paused])
+        _skip_unless(
+            self.process,
+            self._process_nodes,
+            lambda node: node._processing and node._processes_when[paused],
+        )
 
 
 def _skip_unless(

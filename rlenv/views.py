@@ -61,8 +61,9 @@ class View:
     @property
     def parent(self) -> View:
         """The parents of the nodes of this view."""
-        return self._step("parent", (node.parent for node in self._nodes
-                                     if node.parent is not None))
+        return self._step(
+            "parent", (node.parent for node in self._nodes if node.parent is not None)
+        )
 
     @property
     def bodies(self) -> View:
@@ -82,8 +83,15 @@ class View:
     @property
     def placeholders(self) -> View:
         """The Marker2D nodes below the nodes of this view (their mounting points)."""
-        return self._step("placeholders", (n for node in self._nodes for n in node.iter_subtree()
-                                           if n is not node and _is_a(n, _MARKER)))
+        return self._step(
+            "placeholders",
+            (
+                n
+                for node in self._nodes
+                for n in node.iter_subtree()
+                if n is not node and _is_a(n, _MARKER)
+            ),
+        )
 
     def of_type(self, kind: type[Any] | tuple[type[Any], ...]) -> View:
         """The nodes of this view that are instances of ``kind``."""
@@ -92,8 +100,9 @@ class View:
 
     def named(self, pattern: str) -> View:
         """The nodes of this view whose name matches the glob ``pattern``."""
-        return self._step(f"[{pattern!r}]", (n for n in self._nodes
-                                             if fnmatch.fnmatchcase(n.name, pattern)))
+        return self._step(
+            f"[{pattern!r}]", (n for n in self._nodes if fnmatch.fnmatchcase(n.name, pattern))
+        )
 
     def in_group(self, group: str) -> View:
         """The nodes of this view in ``group``."""
@@ -135,8 +144,10 @@ class View:
             raise AttributeError(name)
         missing = [n for n in self._nodes if not hasattr(n, name)]
         if missing:
-            raise AttributeError(f"{missing[0]!r} (and {len(missing) - 1} more) in {self!r} have "
-                                 f"no attribute {name!r}")
+            raise AttributeError(
+                f"{missing[0]!r} (and {len(missing) - 1} more) in {self!r} have "
+                f"no attribute {name!r}"
+            )
         return [getattr(node, name) for node in self._nodes]
 
     def __setattr__(self, name: str, value: Any) -> None:
@@ -144,8 +155,9 @@ class View:
             raise AttributeError(f"{name} is read-only")
         missing = [n for n in self._nodes if not hasattr(n, name)]
         if missing:
-            raise AttributeError(f"{missing[0]!r} in {self!r} has no attribute {name!r}; "
-                                 "nothing was set")
+            raise AttributeError(
+                f"{missing[0]!r} in {self!r} has no attribute {name!r}; nothing was set"
+            )
         for node in self._nodes:
             setattr(node, name, value)
 
@@ -173,10 +185,13 @@ class View:
         """
         strangers = [n for n in self._nodes if not _is_a(n, _MARKER)]
         if strangers:
-            raise TypeError(f"{strangers[0]!r} in {self!r} is not a Marker2D: attach puts "
-                            "copies on markers only; nothing was attached")
-        return View([marker.attach(node) for marker in self._nodes],
-                    f"{self._label}.attach({node.name})")
+            raise TypeError(
+                f"{strangers[0]!r} in {self!r} is not a Marker2D: attach puts "
+                "copies on markers only; nothing was attached"
+            )
+        return View(
+            [marker.attach(node) for marker in self._nodes], f"{self._label}.attach({node.name})"
+        )
 
     # --- internals --------------------------------------------------------------------------
 
@@ -184,8 +199,9 @@ class View:
         return View(_tree_order(nodes), f"{self._label}.{step}" if self._label else step)
 
     def _typed(self, step: str, kind: str) -> View:
-        return self._step(step, (c for node in self._nodes for c in node.get_children()
-                                 if _is_a(c, kind)))
+        return self._step(
+            step, (c for node in self._nodes for c in node.get_children() if _is_a(c, kind))
+        )
 
 
 _BODY = "rlenv.scene2d.physics.body.PhysicsBody"
@@ -240,8 +256,9 @@ def _tree_order(nodes: Iterable[Node]) -> list[Node]:
             assert parent is not None
             index = indices.get(id(parent))
             if index is None:
-                index = indices[id(parent)] = {id(child): position for position, child
-                                               in enumerate(parent._children)}
+                index = indices[id(parent)] = {
+                    id(child): position for position, child in enumerate(parent._children)
+                }
             path = keys[id(step)] = (*path, index[id(step)])
         return path
 

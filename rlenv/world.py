@@ -94,4 +94,3 @@ class RLEnvWorld(RLNode):
                 ``environment_error``, and the episode goes on.
         """
         raise NotImplementedError(f"{type(self).__name__} has no _edit_level")
-

@@ -50,18 +50,31 @@ class Browser:
             rebinds to loopback, say).
     """
 
-    def __init__(self, executable: str, width: int = 1400, height: int = 1000,
-                 host_rules: str | None = None) -> None:
+    def __init__(
+        self, executable: str, width: int = 1400, height: int = 1000, host_rules: str | None = None
+    ) -> None:
         self._profile = tempfile.mkdtemp(prefix="rlenv-chromium-")
         commands_read, self._commands = os.pipe()
         self._answers, answers_write = os.pipe()
-        arguments = [executable, "--headless=new", "--remote-debugging-pipe", "--no-sandbox",
-                     "--disable-gpu", "--no-first-run", "--no-default-browser-check",
-                     "--disable-extensions", "--disable-background-networking",
-                     "--disable-dev-shm-usage", "--mute-audio",
-                     "--disable-background-timer-throttling", "--disable-renderer-backgrounding",
-                     "--disable-backgrounding-occluded-windows", f"--user-data-dir={self._profile}",
-                     f"--window-size={width},{height}", "about:blank"]
+        arguments = [
+            executable,
+            "--headless=new",
+            "--remote-debugging-pipe",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--no-first-run",
+            "--no-default-browser-check",
+            "--disable-extensions",
+            "--disable-background-networking",
+            "--disable-dev-shm-usage",
+            "--mute-audio",
+            "--disable-background-timer-throttling",
+            "--disable-renderer-backgrounding",
+            "--disable-backgrounding-occluded-windows",
+            f"--user-data-dir={self._profile}",
+            f"--window-size={width},{height}",
+            "about:blank",
+        ]
         if host_rules:
             arguments.insert(1, f"--host-resolver-rules={host_rules}")
 
@@ -71,9 +84,14 @@ class Browser:
             os.dup2(write, 4)
 
         self._process = subprocess.Popen(
-            arguments, preexec_fn=pipes_as_fd_3_and_4, pass_fds=(3, 4),
-            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-            start_new_session=True)
+            arguments,
+            preexec_fn=pipes_as_fd_3_and_4,
+            pass_fds=(3, 4),
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            start_new_session=True,
+        )
         os.close(commands_read)
         os.close(answers_write)
         self._ids = itertools.count(1)
@@ -81,18 +99,26 @@ class Browser:
         self.console: list[str] = []
         try:
             target = self.command("Target.createTarget", url="about:blank")["targetId"]
-            self._session = self.command("Target.attachToTarget", targetId=target,
-                                         flatten=True)["sessionId"]
+            self._session = self.command("Target.attachToTarget", targetId=target, flatten=True)[
+                "sessionId"
+            ]
             self.command("Page.enable", session=True)
             self.command("Runtime.enable", session=True)
-            self.command("Emulation.setDeviceMetricsOverride", session=True, width=width,
-                         height=height, deviceScaleFactor=1, mobile=False)
+            self.command(
+                "Emulation.setDeviceMetricsOverride",
+                session=True,
+                width=width,
+                height=height,
+                deviceScaleFactor=1,
+                mobile=False,
+            )
         except BaseException:
             self.close()
             raise
 
-    def command(self, method: str, *, session: bool = False, timeout: float = 30.0,
-                **params: Any) -> dict[str, Any]:
+    def command(
+        self, method: str, *, session: bool = False, timeout: float = 30.0, **params: Any
+    ) -> dict[str, Any]:
         """Send a DevTools command (to the page with ``session``); its result."""
         number = next(self._ids)
         message: dict[str, Any] = {"id": number, "method": method, "params": params}
@@ -103,8 +129,12 @@ class Browser:
         while True:
             answer = self._next(deadline)
             if answer.get("method") == "Runtime.consoleAPICalled":
-                self.console.append(" ".join(str(arg.get("value", arg.get("description")))
-                                             for arg in answer["params"]["args"]))
+                self.console.append(
+                    " ".join(
+                        str(arg.get("value", arg.get("description")))
+                        for arg in answer["params"]["args"]
+                    )
+                )
             if answer.get("id") == number:
                 if "error" in answer:
                     raise BrowserError(f"{method}: {answer['error']}")
@@ -120,12 +150,18 @@ class Browser:
         Raises:
             BrowserError: the expression threw.
         """
-        result = self.command("Runtime.evaluate", session=True, expression=expression,
-                              awaitPromise=True, returnByValue=True)
+        result = self.command(
+            "Runtime.evaluate",
+            session=True,
+            expression=expression,
+            awaitPromise=True,
+            returnByValue=True,
+        )
         if "exceptionDetails" in result:
             details = result["exceptionDetails"]
-            raise BrowserError(details.get("exception", {}).get("description") or
-                               details.get("text"))
+            raise BrowserError(
+                details.get("exception", {}).get("description") or details.get("text")
+            )
         return result["result"].get("value")
 
     def wait_for(self, expression: str, message: str, seconds: float = 30.0) -> Any:
@@ -143,8 +179,9 @@ class Browser:
 
     def screenshot(self) -> bytes:
         """The page as a PNG."""
-        return base64.b64decode(self.command("Page.captureScreenshot", session=True,
-                                             format="png")["data"])
+        return base64.b64decode(
+            self.command("Page.captureScreenshot", session=True, format="png")["data"]
+        )
 
     def close(self) -> None:
         """End the browser and remove its profile; safe to repeat."""

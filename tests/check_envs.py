@@ -42,8 +42,9 @@ class _CountingAgent(RLAgent):
 
 class _TupleAgent(_CountingAgent):
     action_space = spaces.Box(-2.0, 2.0, (1,), np.float32)  # not normalized: gymnasium warns
-    observation_space = spaces.Tuple((spaces.Discrete(4),
-                                      spaces.Box(-1.0, 1.0, (2, 2), np.float32)))
+    observation_space = spaces.Tuple(
+        (spaces.Discrete(4), spaces.Box(-1.0, 1.0, (2, 2), np.float32))
+    )
 
     def get_data(self, observation_request: Mapping[str, Any]) -> tuple[int, np.ndarray]:
         """The ticks modulo 4, and a 2x2 array of their fraction of 100."""

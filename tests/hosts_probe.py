@@ -46,15 +46,19 @@ def serve_cartpole(host: str, port: int, token: str | None) -> dict[str, Any]:
     try:
         with Client(host, port, timeout=TIMEOUT, token=token) as client:
             observation, _ = client.reset(seed=0)
-            after, reward, terminated, truncated, info = client.step(
-                np.array([0.5], np.float32))
+            after, reward, terminated, truncated, info = client.step(np.array([0.5], np.float32))
     except RemoteError as error:
-        return {"refused": {"code": str(error.code), "message": error.message,
-                            "fatal": error.fatal}}
-    return {"observation": np.asarray(observation).tolist(),
-            "stepped": np.asarray(after).tolist(), "reward": float(reward),
-            "terminated": bool(terminated), "truncated": bool(truncated),
-            "frames": int(info["frames"])}
+        return {
+            "refused": {"code": str(error.code), "message": error.message, "fatal": error.fatal}
+        }
+    return {
+        "observation": np.asarray(observation).tolist(),
+        "stepped": np.asarray(after).tolist(),
+        "reward": float(reward),
+        "terminated": bool(terminated),
+        "truncated": bool(truncated),
+        "frames": int(info["frames"]),
+    }
 
 
 def _receive_exactly(sock: socket.socket, size: int) -> bytes | None:
@@ -93,8 +97,10 @@ def summary(reply: dict[str, Any] | None) -> dict[str, Any] | None:
         return None
     if "error" in reply:
         error = reply["error"]
-        return {"id": reply.get("id"), "error": {key: error.get(key)
-                                                 for key in ("code", "message", "fatal")}}
+        return {
+            "id": reply.get("id"),
+            "error": {key: error.get(key) for key in ("code", "message", "fatal")},
+        }
     return {"id": reply.get("id"), "error": None}
 
 
@@ -114,10 +120,13 @@ def raw(host: str, port: int, mode: str, args: list[str], token: str) -> dict[st
         sock.settimeout(TIMEOUT)
         hello = receive(sock)
         assert hello is not None and "hello" in hello, hello
-        result: dict[str, Any] = {"hello": {
-            "token_required": hello["hello"].get("token_required"),
-            "max_first_frame_size": hello["hello"]["limits"]["max_first_frame_size"],
-            "max_frame_size": hello["hello"]["limits"]["max_frame_size"]}}
+        result: dict[str, Any] = {
+            "hello": {
+                "token_required": hello["hello"].get("token_required"),
+                "max_first_frame_size": hello["hello"]["limits"]["max_first_frame_size"],
+                "max_frame_size": hello["hello"]["limits"]["max_frame_size"],
+            }
+        }
         if mode == "request":
             request: dict[str, Any] = {"id": 1, "reset": {"seed": 0}}
             if args[0] != "-":

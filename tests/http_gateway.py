@@ -54,8 +54,11 @@ class Gateway:
         self._stderr = tempfile.TemporaryFile()
         self.process = subprocess.Popen(
             [sys.executable, "-m", "rlenv", "http", *args, "--port", "0"],
-            stdout=subprocess.PIPE, stderr=self._stderr, text=True,
-            env={**{k: v for k, v in os.environ.items() if k != "RLENV_TOKEN"}, **(env or {})})
+            stdout=subprocess.PIPE,
+            stderr=self._stderr,
+            text=True,
+            env={**{k: v for k, v in os.environ.items() if k != "RLENV_TOKEN"}, **(env or {})},
+        )
         line = self.process.stdout.readline()  # type: ignore[union-attr]
         if not line.startswith("listening on http://"):
             end_process(self.process, 0.0, first=None)
@@ -68,17 +71,25 @@ class Gateway:
         self._stderr.seek(0)
         return self._stderr.read().decode(errors="replace")
 
-    def request(self, method: str, path: str, body: Any = None, *,
-                headers: dict[str, str] | None = None, raw: bytes | None = None,
-                timeout: float = 30.0) -> Reply:
+    def request(
+        self,
+        method: str,
+        path: str,
+        body: Any = None,
+        *,
+        headers: dict[str, str] | None = None,
+        raw: bytes | None = None,
+        timeout: float = 30.0,
+    ) -> Reply:
         """``method path`` with ``body`` as JSON (or ``raw`` bytes as they are)."""
         connection = http.client.HTTPConnection(self.host, self.port, timeout=timeout)
         try:
             data = raw if raw is not None else None if body is None else json.dumps(body)
             connection.request(method, path, data, headers=headers or {})
             answer = connection.getresponse()
-            return Reply(answer.status, {k.lower(): v for k, v in answer.getheaders()},
-                         answer.read())
+            return Reply(
+                answer.status, {k.lower(): v for k, v in answer.getheaders()}, answer.read()
+            )
         finally:
             connection.close()
 
@@ -117,8 +128,9 @@ class Gateway:
         started = time.monotonic()
         try:
             if end_process(self.process, SHUTDOWN_SECONDS) == -signal.SIGKILL:
-                raise AssertionError(f"SIGTERM did not end the gateway in {SHUTDOWN_SECONDS} s: "
-                                     f"{self.stderr()}")
+                raise AssertionError(
+                    f"SIGTERM did not end the gateway in {SHUTDOWN_SECONDS} s: {self.stderr()}"
+                )
         finally:
             self.process.stdout.close()  # type: ignore[union-attr]
             self._stderr.close()
@@ -141,9 +153,9 @@ def decode_png(data: bytes) -> np.ndarray:
     assert data[:8] == b"\x89PNG\r\n\x1a\n"
     position, chunks, idat = 8, {}, b""
     while position < len(data):
-        length, kind = struct.unpack(">I4s", data[position:position + 8])
-        body = data[position + 8:position + 8 + length]
-        crc, = struct.unpack(">I", data[position + 8 + length:position + 12 + length])
+        length, kind = struct.unpack(">I4s", data[position : position + 8])
+        body = data[position + 8 : position + 8 + length]
+        (crc,) = struct.unpack(">I", data[position + 8 + length : position + 12 + length])
         assert crc == zlib.crc32(kind + body), kind
         chunks[kind] = body
         if kind == b"IDAT":

@@ -13,9 +13,15 @@ import numpy as np
 from rlenv_client import Client
 
 
-def fetch(url: str, path: str = "", *, method: str = "GET", body: Any = None,
-          headers: dict[str, str] | None = None, raw: bytes | None = None,
-          ) -> tuple[int, dict[str, str], Any]:
+def fetch(
+    url: str,
+    path: str = "",
+    *,
+    method: str = "GET",
+    body: Any = None,
+    headers: dict[str, str] | None = None,
+    raw: bytes | None = None,
+) -> tuple[int, dict[str, str], Any]:
     """``method`` of ``url + path``: (status, headers, JSON body or bytes).
 
     ``headers`` may replace ``Host`` (sent as given, unlike urllib's).

@@ -31,9 +31,13 @@ def _client(addresses: list[str]) -> dict[str, Any]:
     interrupted = _wait_then(lambda: client.step(ACTION, repeat_action=8))
     observation, info = client.reset(seed=5)
     after = client.step(ACTION, repeat_action=2)
-    return {"interrupted": interrupted, "reset": observation.tolist(),
-            "reset_frames": info["frames"], "step": after[0].tolist(),
-            "step_frames": after[4]["frames"]}
+    return {
+        "interrupted": interrupted,
+        "reset": observation.tolist(),
+        "reset_frames": info["frames"],
+        "step": after[0].tolist(),
+        "step_frames": after[4]["frames"],
+    }
 
 
 def _env(addresses: list[str]) -> dict[str, Any]:
@@ -45,9 +49,13 @@ def _env(addresses: list[str]) -> dict[str, Any]:
     interrupted = _wait_then(lambda: env.step(ACTION))
     observation, _ = env.reset(seed=5)
     after = env.step(ACTION)
-    return {"interrupted": interrupted, "reset": observation.tolist(),
-            "step": after[0].tolist(), "step_frames": after[4]["frames"],
-            "restarted": "server_restarted" in after[4]}
+    return {
+        "interrupted": interrupted,
+        "reset": observation.tolist(),
+        "step": after[0].tolist(),
+        "step_frames": after[4]["frames"],
+        "restarted": "server_restarted" in after[4],
+    }
 
 
 def _vector(addresses: list[str]) -> dict[str, Any]:
@@ -61,10 +69,16 @@ def _vector(addresses: list[str]) -> dict[str, Any]:
     observations, _, _, truncations, infos = envs.step(actions)
     reset, rewards, _, after_truncations, reset_infos = envs.step(actions)
     stepped, *_ = envs.step(actions)
-    return {"interrupted": interrupted, "after": observations.tolist(),
-            "truncated": truncations.tolist(), "why": list(infos["interrupted"]),
-            "reset": reset.tolist(), "reset_truncated": after_truncations.tolist(),
-            "reset_frames": reset_infos["frames"].tolist(), "stepped": stepped.tolist()}
+    return {
+        "interrupted": interrupted,
+        "after": observations.tolist(),
+        "truncated": truncations.tolist(),
+        "why": list(infos["interrupted"]),
+        "reset": reset.tolist(),
+        "reset_truncated": after_truncations.tolist(),
+        "reset_frames": reset_infos["frames"].tolist(),
+        "stepped": stepped.tolist(),
+    }
 
 
 def _sb3(addresses: list[str]) -> dict[str, Any]:
@@ -77,9 +91,13 @@ def _sb3(addresses: list[str]) -> dict[str, Any]:
     interrupted = _wait_then(lambda: venv.step(actions))
     observations, _, dones, infos = venv.step(actions)
     stepped, *_ = venv.step(actions)
-    return {"interrupted": interrupted, "after": observations.tolist(),
-            "dones": dones.tolist(), "why": [info.get("interrupted") for info in infos],
-            "stepped": stepped.tolist()}
+    return {
+        "interrupted": interrupted,
+        "after": observations.tolist(),
+        "dones": dones.tolist(),
+        "why": [info.get("interrupted") for info in infos],
+        "stepped": stepped.tolist(),
+    }
 
 
 def _watcher(addresses: list[str]) -> dict[str, Any]:
@@ -95,8 +113,7 @@ def _watcher(addresses: list[str]) -> dict[str, Any]:
     interrupted = _wait_then(lambda: watcher.snapshot(0, 0))
     stats = watcher.stats(0, 0, 0)
     node = watcher.node(0, 0, "World")
-    return {"interrupted": interrupted, "stats_keys": sorted(stats),
-            "node_path": node["path"]}
+    return {"interrupted": interrupted, "stats_keys": sorted(stats), "node_path": node["path"]}
 
 
 def _wait_then(call: Any) -> str:

@@ -103,8 +103,11 @@ class ChaserAgent(_ChaseAgent):
 
     def get_data(self, observation_request: Mapping[str, Any]) -> np.ndarray:
         """Own position and velocity, then the nearest runner still running, relative."""
-        running = [a.name for a in self.environment.agents
-                   if isinstance(a, RunnerAgent) and not a.terminated] or ["Runner1"]
+        running = [
+            a.name
+            for a in self.environment.agents
+            if isinstance(a, RunnerAgent) and not a.terminated
+        ] or ["Runner1"]
         nearest = min(running, key=lambda name: np.hypot(*self._sees(name, 2 * HALF)))
         return np.array((*self._own(), *self._sees(nearest, 2 * HALF)), dtype=np.float32)
 

@@ -176,8 +176,9 @@ def from_tagged(tagged: Any) -> Any:
     if "$ext" in tagged:
         code, data = tagged["$ext"], bytes.fromhex(tagged["hex"])
         return msgpack.Timestamp.from_bytes(data) if code == -1 else msgpack.ExtType(code, data)
-    return {key[1:] if key.startswith("$") else key: from_tagged(item)
-            for key, item in tagged.items()}
+    return {
+        key[1:] if key.startswith("$") else key: from_tagged(item) for key, item in tagged.items()
+    }
 
 
 def encode_value(tagged: Any) -> bytes:
@@ -209,8 +210,7 @@ def dumps(document: Any) -> str:
 def _dumps(value: Any, indent: int, before: int = 0) -> str:
     """``value`` at ``indent``, after ``before`` characters of its line (a key)."""
     inline = json.dumps(value, ensure_ascii=False, allow_nan=False)
-    if not isinstance(value, dict | list) or not value or \
-            indent + before + len(inline) <= _WIDTH:
+    if not isinstance(value, dict | list) or not value or indent + before + len(inline) <= _WIDTH:
         return inline
     pad = " " * (indent + 2)
     if isinstance(value, dict):
@@ -269,12 +269,20 @@ class Recording:
                 del exchange["connection"]
         return {"title": title, "server": server, "exchanges": self.exchanges}
 
-    def record(self, link: Link, sender: str, note: str, data: bytes, *,
-               varies: Sequence[str] = (), closes: bool = False) -> dict[str, Any]:
+    def record(
+        self,
+        link: Link,
+        sender: str,
+        note: str,
+        data: bytes,
+        *,
+        varies: Sequence[str] = (),
+        closes: bool = False,
+    ) -> dict[str, Any]:
         """Add one frame (or a deliberately broken one) to the recording."""
         exchange: dict[str, Any] = {"from": sender, "connection": link.number, "note": note}
         exchange["hex"] = data.hex()
-        body = data[HEADER.size:]
+        body = data[HEADER.size :]
         if len(data) >= HEADER.size and HEADER.unpack_from(data)[0] == len(body):
             try:
                 exchange["value"] = to_tagged(decode_value(body))
@@ -315,13 +323,21 @@ class Link:
         body = self._read(HEADER.unpack(header)[0])
         if closes:
             self.expect_closed()
-        exchange = self.recording.record(self, "server", note, header + body, varies=varies,
-                                         closes=closes)
+        exchange = self.recording.record(
+            self, "server", note, header + body, varies=varies, closes=closes
+        )
         assert "value" in exchange, f"the server sent a frame that is not msgpack: {body!r:.200}"
         return from_tagged(exchange["value"])
 
-    def request(self, message: Any, note: str, answer: str = "", *,
-                varies: Sequence[str] = (), closes: bool = False) -> Any:
+    def request(
+        self,
+        message: Any,
+        note: str,
+        answer: str = "",
+        *,
+        varies: Sequence[str] = (),
+        closes: bool = False,
+    ) -> Any:
         """Send ``message``, then receive the answer (noted ``answer``); returns the answer."""
         self.send(message, note)
         return self.receive(answer, varies=varies, closes=closes)
@@ -384,7 +400,11 @@ SCENARIOS: list[Scenario] = []
 
 
 def scenario(
-    file: str, title: str, target: str = CARTPOLE, *args: str, shared: bool = False,
+    file: str,
+    title: str,
+    target: str = CARTPOLE,
+    *args: str,
+    shared: bool = False,
 ) -> Callable[[Callable[[Recording], None]], Callable[[Recording], None]]:
     """Declare the function below as the scenario of ``file`` (see :class:`Scenario`)."""
 
@@ -409,52 +429,90 @@ def _hello(recording: Recording) -> None:
     link.hello("the server speaks first: the hello, before any request")
 
 
-@scenario("spaces.json", "Every kind of space: hello, packed Dict and Tuple values, steps",
-          SPACES, "--instances", "2")
+@scenario(
+    "spaces.json",
+    "Every kind of space: hello, packed Dict and Tuple values, steps",
+    SPACES,
+    "--instances",
+    "2",
+)
 def _spaces(recording: Recording) -> None:
     link = recording.connect()
-    link.hello("action space: a Dict of Discrete (start 1), MultiDiscrete, MultiBinary and a Tuple"
-               " of Discrete and Box; observation space: a Tuple of Discrete, MultiBinary and a "
-               "Dict")
-    link.request({"id": 1, "batch": [{"reset": {"seed": 3}, "observation": AGENT},
-                                     {"reset": {"seed": 4}}]},
-                 "reset both instances; the first one's observation too",
-                 "the packed Tuple: an integer, a bin of int8, a map")
-    action = {"dial": np.array([1, 2], "<i8").tobytes(), "gear": 3,
-              "lights": np.array([1, 0, 1], "|i1").tobytes(),
-              "pair": [1, f4(0.5, -0.25)]}
-    link.request({"id": 2, "action": action, "observation": AGENT},
-                 "a packed Dict action (to instance 0): Discrete as an integer, MultiDiscrete as "
-                 "a bin of <i8, MultiBinary as a bin of int8, the Tuple as an array",
-                 "the observation after 2 ticks")
-    actions = {"dial": np.array([[0, 1], [1, 0]], "<i8").tobytes(),
-               "gear": np.array([2, 1], "<i8").tobytes(),
-               "lights": np.array([[0, 1, 1], [1, 1, 1]], "|i1").tobytes(),
-               "pair": [np.array([0, 1], "<i8").tobytes(), f4(0.0, 1.0, -1.0, 0.5)]}
-    link.request({"id": 3, "steps": {"action": actions, "reset": [False, True]}},
-                 "steps: 2 actions packed as batch_space(action_space, 2): Discrete as a bin of "
-                 "2 × <i8, each array with a leading dimension 2; instance 1 resets instead",
-                 "columns: the observations packed as batch_space(observation_space, 2)")
+    link.hello(
+        "action space: a Dict of Discrete (start 1), MultiDiscrete, MultiBinary and a Tuple"
+        " of Discrete and Box; observation space: a Tuple of Discrete, MultiBinary and a "
+        "Dict"
+    )
+    link.request(
+        {"id": 1, "batch": [{"reset": {"seed": 3}, "observation": AGENT}, {"reset": {"seed": 4}}]},
+        "reset both instances; the first one's observation too",
+        "the packed Tuple: an integer, a bin of int8, a map",
+    )
+    action = {
+        "dial": np.array([1, 2], "<i8").tobytes(),
+        "gear": 3,
+        "lights": np.array([1, 0, 1], "|i1").tobytes(),
+        "pair": [1, f4(0.5, -0.25)],
+    }
+    link.request(
+        {"id": 2, "action": action, "observation": AGENT},
+        "a packed Dict action (to instance 0): Discrete as an integer, MultiDiscrete as "
+        "a bin of <i8, MultiBinary as a bin of int8, the Tuple as an array",
+        "the observation after 2 ticks",
+    )
+    actions = {
+        "dial": np.array([[0, 1], [1, 0]], "<i8").tobytes(),
+        "gear": np.array([2, 1], "<i8").tobytes(),
+        "lights": np.array([[0, 1, 1], [1, 1, 1]], "|i1").tobytes(),
+        "pair": [np.array([0, 1], "<i8").tobytes(), f4(0.0, 1.0, -1.0, 0.5)],
+    }
+    link.request(
+        {"id": 3, "steps": {"action": actions, "reset": [False, True]}},
+        "steps: 2 actions packed as batch_space(action_space, 2): Discrete as a bin of "
+        "2 × <i8, each array with a leading dimension 2; instance 1 resets instead",
+        "columns: the observations packed as batch_space(observation_space, 2)",
+    )
 
 
 @scenario("reset_step.json", "Reset and step CartPole")
 def _reset_step(recording: Recording) -> None:
     link = recording.connect()
     link.hello()
-    link.request({"id": 1, "reset": {"seed": 0}, "observation": AGENT},
-                 "reset with a seed, asking for the agent observation",
-                 "the observation: 5 × <f4, packed")
-    link.request({"id": 2, "action": f4(0.5), "observation": AGENT},
-                 "a packed action: 4 bytes, one <f4 (0.5)", "4 ticks ran (repeat_action 4)")
-    link.request({"id": 3, "action": [-0.5], "observation": AGENT},
-                 "the action as a list of numbers", "converted to the space's dtype")
-    link.request({"id": 4, "action": f4(0.0), "repeat_action": 1},
-                 "one tick only, and no observation asked", "observation nil, frames 1")
-    body = (b"\x83" + pack("id") + b"\xce\x00\x00\x00\x05" + pack("action")
-            + b"\x91\xca" + struct.pack(">f", 0.25) + pack("observation") + pack(AGENT))
-    link.send(raw=HEADER.pack(len(body)) + body,
-              note="the same map may use other valid encodings: id 5 as a uint 32 and the "
-                   "action [0.25] as a float 32")
+    link.request(
+        {"id": 1, "reset": {"seed": 0}, "observation": AGENT},
+        "reset with a seed, asking for the agent observation",
+        "the observation: 5 × <f4, packed",
+    )
+    link.request(
+        {"id": 2, "action": f4(0.5), "observation": AGENT},
+        "a packed action: 4 bytes, one <f4 (0.5)",
+        "4 ticks ran (repeat_action 4)",
+    )
+    link.request(
+        {"id": 3, "action": [-0.5], "observation": AGENT},
+        "the action as a list of numbers",
+        "converted to the space's dtype",
+    )
+    link.request(
+        {"id": 4, "action": f4(0.0), "repeat_action": 1},
+        "one tick only, and no observation asked",
+        "observation nil, frames 1",
+    )
+    body = (
+        b"\x83"
+        + pack("id")
+        + b"\xce\x00\x00\x00\x05"
+        + pack("action")
+        + b"\x91\xca"
+        + struct.pack(">f", 0.25)
+        + pack("observation")
+        + pack(AGENT)
+    )
+    link.send(
+        raw=HEADER.pack(len(body)) + body,
+        note="the same map may use other valid encodings: id 5 as a uint 32 and the "
+        "action [0.25] as a float 32",
+    )
     link.receive("accepted as any other encoding of the same value")
 
 
@@ -463,65 +521,109 @@ def _observation(recording: Recording) -> None:
     link = recording.connect()
     link.hello()
     link.request({"id": 1, "reset": {"seed": 0}}, "reset", "observation nil: none was asked")
-    link.request({"id": 2, "observation": {"agent": {}, "world": {},
-                                           "render": {"width": 4, "height": 3}}},
-                 "every observation: agent, world data and a 4 × 3 render",
-                 "the render: an ext type 1 array, |u1 of shape (3, 4, 3)")
+    link.request(
+        {"id": 2, "observation": {"agent": {}, "world": {}, "render": {"width": 4, "height": 3}}},
+        "every observation: agent, world data and a 4 × 3 render",
+        "the render: an ext type 1 array, |u1 of shape (3, 4, 3)",
+    )
 
 
 @scenario("config.json", "Configuration")
 def _config(recording: Recording) -> None:
     link = recording.connect()
     link.hello()
-    link.request({"id": 1, "config": {"environment": {"repeat_action": 2},
-                                      "agent": {"max_force": 5.0},
-                                      "world": {"damping": 0.5}}},
-                 "configure the environment, every agent and the world",
-                 "an empty response")
-    link.request({"id": 2, "reset": {"seed": 0}, "action": f4(1.0), "observation": AGENT},
-                 "reset and act in one request", "2 ticks: the configured repeat_action")
+    link.request(
+        {
+            "id": 1,
+            "config": {
+                "environment": {"repeat_action": 2},
+                "agent": {"max_force": 5.0},
+                "world": {"damping": 0.5},
+            },
+        },
+        "configure the environment, every agent and the world",
+        "an empty response",
+    )
+    link.request(
+        {"id": 2, "reset": {"seed": 0}, "action": f4(1.0), "observation": AGENT},
+        "reset and act in one request",
+        "2 ticks: the configured repeat_action",
+    )
 
 
-@scenario("agent_settings.json", "Settings per agent (protocol 2.6): every agent, a class, one "
-          "agent", CHASE)
+@scenario(
+    "agent_settings.json",
+    "Settings per agent (protocol 2.6): every agent, a class, one agent",
+    CHASE,
+)
 def _agent_settings(recording: Recording) -> None:
     link = recording.connect()
-    link.hello("three agents of two classes: Chaser (ChaserAgent), Runner1 and Runner2 "
-               "(RunnerAgent)")
-    link.request({"id": 1, "config": {"agent": {"max_force": 9.0, "RunnerAgent": {"sight": 3.0},
-                                                "Runner1": {"max_force": 6.0}}}},
-                 "a setting for every agent, one for a class, one for an agent: the more "
-                 "precise wins", "an empty response")
+    link.hello(
+        "three agents of two classes: Chaser (ChaserAgent), Runner1 and Runner2 (RunnerAgent)"
+    )
+    link.request(
+        {
+            "id": 1,
+            "config": {
+                "agent": {
+                    "max_force": 9.0,
+                    "RunnerAgent": {"sight": 3.0},
+                    "Runner1": {"max_force": 6.0},
+                }
+            },
+        },
+        "a setting for every agent, one for a class, one for an agent: the more precise wins",
+        "an empty response",
+    )
     link.request({"id": 2, "reset": {"seed": 0}}, "reset")
-    link.request({"id": 3, "snapshot": {}}, "take a snapshot",
-                 "info.snapshot.config.agent: each agent's settings, by name")
-    link.request({"id": 4, "config": {"agent": {"Runner3": {"max_force": 1.0}}}},
-                 "a key that is neither a setting nor an agent",
-                 "invalid_config naming the settings, the agents and their classes")
+    link.request(
+        {"id": 3, "snapshot": {}},
+        "take a snapshot",
+        "info.snapshot.config.agent: each agent's settings, by name",
+    )
+    link.request(
+        {"id": 4, "config": {"agent": {"Runner3": {"max_force": 1.0}}}},
+        "a key that is neither a setting nor an agent",
+        "invalid_config naming the settings, the agents and their classes",
+    )
 
 
-@scenario("claim.json", "An observer plays one agent beside the controller: claims (protocol "
-          "2.6)", TAG)
+@scenario(
+    "claim.json", "An observer plays one agent beside the controller: claims (protocol 2.6)", TAG
+)
 def _claim(recording: Recording) -> None:
     controller = recording.connect()
     controller.hello("three agents: Chaser, Runner1 and Runner2, each a Box(-1, 1, (2,))")
     controller.request({"id": 1, "reset": {"seed": 0}}, "the controller starts an episode")
     person = recording.connect()
     person.hello()
-    person.request({"id": 1, "claim": {"agent": "Runner1", "action": f4(1.0, -0.5)}},
-                   "claim Runner1, holding an action for it: no control taken",
-                   "info.claimed: the agents claimed now")
+    person.request(
+        {"id": 1, "claim": {"agent": "Runner1", "action": f4(1.0, -0.5)}},
+        "claim Runner1, holding an action for it: no control taken",
+        "info.claimed: the agents claimed now",
+    )
     whole = {"Chaser": f4(0.0, 1.0), "Runner1": f4(-1.0, 0.0), "Runner2": f4(0.0, 0.0)}
-    controller.request({"id": 2, "action": whole, "observation": AGENT},
-                       "a whole action, as ever",
-                       "info.claimed: Runner1 moved by the held action, not by this entry")
-    person.request({"id": 2, "claim": {"agent": "Runner2", "action": f4(0.0, 0.0)}},
-                   "a second agent", "bad_request: one claim per client")
-    controller.request({"id": 3, "claim": {"agent": "Runner2", "action": f4(0.0, 0.0)}},
-                       "the controller claims", "bad_request: it acts for every agent already")
+    controller.request(
+        {"id": 2, "action": whole, "observation": AGENT},
+        "a whole action, as ever",
+        "info.claimed: Runner1 moved by the held action, not by this entry",
+    )
+    person.request(
+        {"id": 2, "claim": {"agent": "Runner2", "action": f4(0.0, 0.0)}},
+        "a second agent",
+        "bad_request: one claim per client",
+    )
+    controller.request(
+        {"id": 3, "claim": {"agent": "Runner2", "action": f4(0.0, 0.0)}},
+        "the controller claims",
+        "bad_request: it acts for every agent already",
+    )
     person.request({"id": 3, "claim": None}, "release the claim", "an empty response")
-    controller.request({"id": 4, "action": whole, "observation": AGENT},
-                       "Runner1 is the controller's again", "no claimed in info")
+    controller.request(
+        {"id": 4, "action": whole, "observation": AGENT},
+        "Runner1 is the controller's again",
+        "no claimed in info",
+    )
 
 
 @scenario("snapshot.json", "Snapshot and restore")
@@ -531,11 +633,17 @@ def _snapshot(recording: Recording) -> None:
     link.request({"id": 1, "reset": {"seed": 0}}, "reset")
     link.request({"id": 2, "action": f4(0.5), "repeat_action": 2}, "a packed action, 2 ticks")
     link.request({"id": 3, "action": [-1.0]}, "an action as a list")
-    answer = link.request({"id": 4, "snapshot": {}, "observation": AGENT}, "take a snapshot",
-                          "info.snapshot: the configuration, the generator's state, the events")
+    answer = link.request(
+        {"id": 4, "snapshot": {}, "observation": AGENT},
+        "take a snapshot",
+        "info.snapshot: the configuration, the generator's state, the events",
+    )
     link.request({"id": 5, "reset": {"seed": 1}}, "another episode")
-    link.request({"id": 6, "restore": answer["info"]["snapshot"], "observation": AGENT},
-                 "restore the snapshot as it came", "the same observation as at the snapshot")
+    link.request(
+        {"id": 6, "restore": answer["info"]["snapshot"], "observation": AGENT},
+        "restore the snapshot as it came",
+        "the same observation as at the snapshot",
+    )
 
 
 @scenario("inspect.json", "Introspection: tree, get, set")
@@ -543,22 +651,40 @@ def _inspect(recording: Recording) -> None:
     link = recording.connect()
     link.hello()
     link.request({"id": 1, "reset": {"seed": 0}}, "reset")
-    link.request({"id": 2, "inspect": {"tree": {}}}, "the node tree",
-                 "info.tree: every node with its exported properties")
-    link.request({"id": 3, "inspect": {"get": {"path": "Agent", "property": "max_force"}}},
-                 "read one property (a path relative to the environment)", "info.value")
-    link.request({"id": 4, "inspect": {"set": {"path": "/root/CartPole/World",
-                                               "property": "damping", "value": 0.5}}},
-                 "set one (an absolute path)")
-    link.request({"id": 5, "inspect": {"get": {"path": "World", "property": "damping"}}},
-                 "read it back")
+    link.request(
+        {"id": 2, "inspect": {"tree": {}}},
+        "the node tree",
+        "info.tree: every node with its exported properties",
+    )
+    link.request(
+        {"id": 3, "inspect": {"get": {"path": "Agent", "property": "max_force"}}},
+        "read one property (a path relative to the environment)",
+        "info.value",
+    )
+    link.request(
+        {
+            "id": 4,
+            "inspect": {
+                "set": {"path": "/root/CartPole/World", "property": "damping", "value": 0.5}
+            },
+        },
+        "set one (an absolute path)",
+    )
+    link.request(
+        {"id": 5, "inspect": {"get": {"path": "World", "property": "damping"}}}, "read it back"
+    )
     link.request({"id": 6, "reset": {"seed": 0}}, "a new episode")
-    link.request({"id": 7, "inspect": {"get": {"path": "World", "property": "damping"}}},
-                 "a set lasts one episode", "the value from before the set again")
+    link.request(
+        {"id": 7, "inspect": {"get": {"path": "World", "property": "damping"}}},
+        "a set lasts one episode",
+        "the value from before the set again",
+    )
 
 
-@scenario("inspector.json", "An inspector beside the controller: draw lists, statistics, edits "
-          "(protocol 2.2)")
+@scenario(
+    "inspector.json",
+    "An inspector beside the controller: draw lists, statistics, edits (protocol 2.2)",
+)
 def _inspector(recording: Recording) -> None:
     controller = recording.connect()
     controller.hello()
@@ -566,32 +692,65 @@ def _inspector(recording: Recording) -> None:
     controller.request({"id": 2, "action": f4(0.0)}, "and steps once", "reward 4.0, frames 4")
     inspector = recording.connect()
     inspector.hello()
-    inspector.request({"id": 1, "observation": {"draw": {}}}, "the scene as a draw list",
-                      "observation.draw: the view, then segment (track), polygon (cart), "
-                      "segment (pole); colours 0xRRGGBB")
-    inspector.request({"id": 2, "inspect": {"node": {"path": "World"}}}, "one node",
-                      "info.node: the world, with its config section and configurable names")
-    inspector.request({"id": 3, "inspect": {"set": {"path": "World/Physics/Pole",
-                                                    "property": "angular_velocity",
-                                                    "value": 1.0}}},
-                      "an edit for this episode: no control taken", "an empty answer")
-    inspector.request({"id": 4, "inspect": {"configure": {"world": {"gravity": [0.0, -5.0]}}}},
-                      "an edit of a setting: it lasts across episodes", "an empty answer")
-    controller.request({"id": 3, "action": f4(0.0)}, "the controller steps on, in the edited "
-                       "world", "its reward is its own (the inspector's answers carried 0.0)")
-    controller.request({"id": 4, "snapshot": {}}, "the controller's snapshot",
-                       "events: both actions, the set and the config, in order")
-    controller.request({"id": 5, "reset": {"seed": 1}}, "a new episode ends the first (its "
-                       "return is the controller's rewards)")
-    inspector.request({"id": 5, "inspect": {"stats": {}}}, "the episodes so far",
-                      "info.stats: episode 0 ended by a reset after 2 actions; the new one "
-                      "under way")
-    inspector.request({"id": 6, "inspect": {"stats": {"since": 1}}},
-                      "only the episodes numbered 1 and later", "none yet")
+    inspector.request(
+        {"id": 1, "observation": {"draw": {}}},
+        "the scene as a draw list",
+        "observation.draw: the view, then segment (track), polygon (cart), "
+        "segment (pole); colours 0xRRGGBB",
+    )
+    inspector.request(
+        {"id": 2, "inspect": {"node": {"path": "World"}}},
+        "one node",
+        "info.node: the world, with its config section and configurable names",
+    )
+    inspector.request(
+        {
+            "id": 3,
+            "inspect": {
+                "set": {"path": "World/Physics/Pole", "property": "angular_velocity", "value": 1.0}
+            },
+        },
+        "an edit for this episode: no control taken",
+        "an empty answer",
+    )
+    inspector.request(
+        {"id": 4, "inspect": {"configure": {"world": {"gravity": [0.0, -5.0]}}}},
+        "an edit of a setting: it lasts across episodes",
+        "an empty answer",
+    )
+    controller.request(
+        {"id": 3, "action": f4(0.0)},
+        "the controller steps on, in the edited world",
+        "its reward is its own (the inspector's answers carried 0.0)",
+    )
+    controller.request(
+        {"id": 4, "snapshot": {}},
+        "the controller's snapshot",
+        "events: both actions, the set and the config, in order",
+    )
+    controller.request(
+        {"id": 5, "reset": {"seed": 1}},
+        "a new episode ends the first (its return is the controller's rewards)",
+    )
+    inspector.request(
+        {"id": 5, "inspect": {"stats": {}}},
+        "the episodes so far",
+        "info.stats: episode 0 ended by a reset after 2 actions; the new one under way",
+    )
+    inspector.request(
+        {"id": 6, "inspect": {"stats": {"since": 1}}},
+        "only the episodes numbered 1 and later",
+        "none yet",
+    )
 
 
-@scenario("episodes.json", "Recent episodes, fetched by an observer (protocol 2.5)", CARTPOLE,
-          "--keep-episodes", "2")
+@scenario(
+    "episodes.json",
+    "Recent episodes, fetched by an observer (protocol 2.5)",
+    CARTPOLE,
+    "--keep-episodes",
+    "2",
+)
 def _episodes(recording: Recording) -> None:
     controller = recording.connect()
     controller.hello()
@@ -602,13 +761,17 @@ def _episodes(recording: Recording) -> None:
     controller.request({"id": 5, "action": f4(0.5), "repeat_action": 2}, "another, 2 ticks")
     controller.request({"id": 6, "reset": {"seed": 2}}, "the second finished")
     controller.request({"id": 7, "action": f4(0.0)}, "one step")
-    controller.request({"id": 8, "reset": {"seed": 3}}, "the third finished: the server keeps "
-                       "2 (--keep-episodes 2), the first is dropped")
+    controller.request(
+        {"id": 8, "reset": {"seed": 3}},
+        "the third finished: the server keeps 2 (--keep-episodes 2), the first is dropped",
+    )
     observer = recording.connect()
     observer.hello()
-    observer.request({"id": 1, "episodes": {}}, "the kept episodes: no control taken",
-                     "info.episodes: the second and third, oldest first, each a snapshot "
-                     "and how it ended")
+    observer.request(
+        {"id": 1, "episodes": {}},
+        "the kept episodes: no control taken",
+        "info.episodes: the second and third, oldest first, each a snapshot and how it ended",
+    )
     observer.request({"id": 2, "episodes": {"last": 1}}, "only the most recent one")
     observer.request({"id": 3, "episodes": {"last": 0}}, "a bad argument", "bad_request")
 
@@ -618,102 +781,136 @@ def _empty(recording: Recording) -> None:
     link = recording.connect()
     link.hello()
     link.request({"id": 1}, "a request with only an id", "an empty response")
-    link.request({"id": 2, "action": None}, "action nil: no action, no episode needed",
-                 "an ordinary (empty) response")
+    link.request(
+        {"id": 2, "action": None},
+        "action nil: no action, no episode needed",
+        "an ordinary (empty) response",
+    )
 
 
 @scenario("batch_steps.json", "Several instances: batch and steps", CARTPOLE, "--instances", "2")
 def _batch_steps(recording: Recording) -> None:
     link = recording.connect()
     link.hello()
-    link.request({"id": 1, "batch": [{"reset": {"seed": 1}}, {"reset": {"seed": 2}}]},
-                 "reset both instances", "one response per instance, each with the batch's id")
-    link.request({"id": 2, "steps": {"action": f4(0.5, -0.5), "reset": [False, True]}},
-                 "steps: instance 0 acts, instance 1 resets (its action is checked, then "
-                 "ignored); the actions packed as one bin of shape (2, 1)",
-                 "columns: observation (2, 5) <f4, reward 2 × <f8, terminated and truncated 2 "
-                 "bytes, frames 2 × <i8, info a list")
-    link.request({"id": 3, "steps": {"action": [[0.25], [0.0]], "reset": b"\x00\x00",
-                                     "repeat_action": 1}},
-                 "steps with the actions as nested lists and the flags as a bin, one tick")
-    link.request({"id": 4, "batch": [None, {"action": [2.0], "observation": AGENT}]},
-                 "a batch leaving instance 0 alone; instance 1's action is refused",
-                 "nil for instance 0, an error in instance 1's slot")
-    link.request({"id": 5, "batch": [{"observation": AGENT}, {"observation": AGENT}]},
-                 "observe both")
-    link.request({"id": 6, "batch": [{"observation": AGENT}]},
-                 "a batch shorter than K leaves the instances beyond its end alone",
-                 "one slot")
+    link.request(
+        {"id": 1, "batch": [{"reset": {"seed": 1}}, {"reset": {"seed": 2}}]},
+        "reset both instances",
+        "one response per instance, each with the batch's id",
+    )
+    link.request(
+        {"id": 2, "steps": {"action": f4(0.5, -0.5), "reset": [False, True]}},
+        "steps: instance 0 acts, instance 1 resets (its action is checked, then "
+        "ignored); the actions packed as one bin of shape (2, 1)",
+        "columns: observation (2, 5) <f4, reward 2 × <f8, terminated and truncated 2 "
+        "bytes, frames 2 × <i8, info a list",
+    )
+    link.request(
+        {"id": 3, "steps": {"action": [[0.25], [0.0]], "reset": b"\x00\x00", "repeat_action": 1}},
+        "steps with the actions as nested lists and the flags as a bin, one tick",
+    )
+    link.request(
+        {"id": 4, "batch": [None, {"action": [2.0], "observation": AGENT}]},
+        "a batch leaving instance 0 alone; instance 1's action is refused",
+        "nil for instance 0, an error in instance 1's slot",
+    )
+    link.request(
+        {"id": 5, "batch": [{"observation": AGENT}, {"observation": AGENT}]}, "observe both"
+    )
+    link.request(
+        {"id": 6, "batch": [{"observation": AGENT}]},
+        "a batch shorter than K leaves the instances beyond its end alone",
+        "one slot",
+    )
 
 
 @scenario("token.json", "A server that requires a token", CARTPOLE, "--token", "s3cret")
 def _token(recording: Recording) -> None:
     link = recording.connect()
     link.hello("token_required is true")
-    link.request({"id": 1, "token": "s3cret"}, "the token alone, as the Python client sends it",
-                 "an empty response")
+    link.request(
+        {"id": 1, "token": "s3cret"},
+        "the token alone, as the Python client sends it",
+        "an empty response",
+    )
     link.request({"id": 2, "reset": {"seed": 0}}, "later requests need no token")
     wrong = recording.connect()
     wrong.hello()
-    wrong.request({"id": 1, "token": "guess", "reset": {"seed": 0}}, "a wrong token",
-                  "unauthorized, fatal: the server closes the connection", closes=True)
+    wrong.request(
+        {"id": 1, "token": "guess", "reset": {"seed": 0}},
+        "a wrong token",
+        "unauthorized, fatal: the server closes the connection",
+        closes=True,
+    )
     missing = recording.connect()
     missing.hello()
     missing.request({"id": 1, "observation": AGENT}, "no token", closes=True)
     late = recording.connect()
     late.hello()
-    late.request({"id": "one", "observation": AGENT},
-                 "a frame that is not read as a request (no integer id) does not count",
-                 "non-fatal bad_request")
-    late.request({"id": 2, "token": "s3cret", "observation": AGENT},
-                 "the next request must carry the token", "observing is open to every client")
+    late.request(
+        {"id": "one", "observation": AGENT},
+        "a frame that is not read as a request (no integer id) does not count",
+        "non-fatal bad_request",
+    )
+    late.request(
+        {"id": 2, "token": "s3cret", "observation": AGENT},
+        "the next request must carry the token",
+        "observing is open to every client",
+    )
 
 
-@scenario("error_bad_frame.json", "bad_frame: frames that are not a request map",
-          shared=True)
+@scenario("error_bad_frame.json", "bad_frame: frames that are not a request map", shared=True)
 def _bad_frame(recording: Recording) -> None:
     link = recording.connect()
     link.hello()
     raw = bytes.fromhex("c1")
     link.send(raw=HEADER.pack(len(raw)) + raw, note="invalid msgpack: 0xc1 is never used")
     link.receive("non-fatal; the frame is consumed and the connection goes on")
-    link.request({"id": 2, "action": msgpack.ExtType(5, b"\x00")},
-                 "a foreign ext type (5) inside a request")
+    link.request(
+        {"id": 2, "action": msgpack.ExtType(5, b"\x00")}, "a foreign ext type (5) inside a request"
+    )
     timestamp = pack({"id": 3, "action": msgpack.Timestamp(0)})
     assert bytes.fromhex("d6ff00000000") in timestamp  # fixext 4, type -1, 4 bytes
-    link.send(raw=HEADER.pack(len(timestamp)) + timestamp,
-              note="a msgpack timestamp (ext type -1, fixext 4: d6 ff + 4 bytes) inside a request")
+    link.send(
+        raw=HEADER.pack(len(timestamp)) + timestamp,
+        note="a msgpack timestamp (ext type -1, fixext 4: d6 ff + 4 bytes) inside a request",
+    )
     link.receive("")
     raw = pack({"id": 4}) + b"\xc0"
     link.send(raw=HEADER.pack(len(raw)) + raw, note="trailing bytes: the map {id: 4}, then nil")
     link.receive("")
     link.request([1, 2], "not a map: an array")
     bad_dtype = b"\x03\x01<O8" + struct.pack("<Q", 1) + bytes(8)
-    link.request({"id": 6, "action": msgpack.ExtType(NDARRAY_EXT, bad_dtype)},
-                 "a malformed array: ext type 1 of dtype <O8 (objects)")
+    link.request(
+        {"id": 6, "action": msgpack.ExtType(NDARRAY_EXT, bad_dtype)},
+        "a malformed array: ext type 1 of dtype <O8 (objects)",
+    )
     other_spelling = b"\x03\x01=f4" + struct.pack("<Q", 1) + f4(0.5)
-    link.request({"id": 7, "action": msgpack.ExtType(NDARRAY_EXT, other_spelling)},
-                 "an ext type 1 array whose dtype is not spelled as numpy's dtype.str (=f4, "
-                 "not <f4)")
+    link.request(
+        {"id": 7, "action": msgpack.ExtType(NDARRAY_EXT, other_spelling)},
+        "an ext type 1 array whose dtype is not spelled as numpy's dtype.str (=f4, not <f4)",
+    )
     for raw, note in [
         (pack({"id": 9, b"reset": {}}), "a bin map key (b'reset'): every map key is a str"),
         (pack({b"id": 10}), "a bin key where the id belongs"),
-        (pack({"id": 11, "reset": {"seed": 0, "options": {b"k": 1}}}),
-         "a bin map key deep inside a part (reset.options)"),
+        (
+            pack({"id": 11, "reset": {"seed": 0, "options": {b"k": 1}}}),
+            "a bin map key deep inside a part (reset.options)",
+        ),
     ]:
         link.send(raw=HEADER.pack(len(raw)) + raw, note=note)
         link.receive("bad_frame with id nil: the frame could not be read as a request")
     link.request({"id": 12}, "the connection goes on", "an empty response")
     too_long = recording.connect()
     too_long.hello()
-    too_long.send(raw=HEADER.pack(64 * 1024 + 1),
-                  note="a length prefix over the limit before the first request (64 KiB + 1); "
-                       "no body follows")
+    too_long.send(
+        raw=HEADER.pack(64 * 1024 + 1),
+        note="a length prefix over the limit before the first request (64 KiB + 1); "
+        "no body follows",
+    )
     too_long.receive("fatal, id nil: the stream cannot be resynchronised", closes=True)
 
 
-@scenario("error_bad_request.json", "bad_request: maps that are not valid requests",
-          shared=True)
+@scenario("error_bad_request.json", "bad_request: maps that are not valid requests", shared=True)
 def _bad_request(recording: Recording) -> None:
     link = recording.connect()
     link.hello()
@@ -725,59 +922,112 @@ def _bad_request(recording: Recording) -> None:
     link.request({"id": 6, "snapshot": {}, "reset": {}}, "parts that may not go together")
     link.request({"id": 7, "repeat_action": 2}, "repeat_action without an action")
     link.request({"id": 8, "token": 8}, "a token that is not a string")
-    raw = pack({"id": 9, "inspect": {"set": {"path": "World", "property": "damping",
-                                             "value": math.inf}}})
-    link.send(raw=HEADER.pack(len(raw)) + raw,
-              note="inspect set of a value that is not finite (infinity)")
+    raw = pack(
+        {"id": 9, "inspect": {"set": {"path": "World", "property": "damping", "value": math.inf}}}
+    )
+    link.send(
+        raw=HEADER.pack(len(raw)) + raw, note="inspect set of a value that is not finite (infinity)"
+    )
     link.receive("refused like a value of the wrong sort")
 
 
-@scenario("shared_memory.json", "shared_memory (protocol 2.3): requests for a lane the server "
-          "refuses, on the socket", shared=True)
+@scenario(
+    "shared_memory.json",
+    "shared_memory (protocol 2.3): requests for a lane the server refuses, on the socket",
+    shared=True,
+)
 def _shared_memory(recording: Recording) -> None:
     link = recording.connect()
     link.hello()
     key = bytes(range(16))
-    link.request({"id": 1, "shared_memory": {"address": "/run/docker.sock", "key": key}},
-                 "an address that is not a lane's name", "only 'rlenv-lane-' and 32 hex digits")
-    link.request({"id": 2, "shared_memory": {"address": "rlenv-lane-" + "0" * 32,
-                                             "key": b"short"}}, "a key of another size")
-    link.request({"id": 3, "shared_memory": {"address": "rlenv-lane-" + "0" * 32, "key": key}},
-                 "no client listens on that name", "the lane cannot be reached")
-    link.request({"id": 4, "shared_memory": {"address": "rlenv-lane-" + "0" * 32, "key": key},
-                  "reset": {}}, "with another part", "it goes alone")
+    link.request(
+        {"id": 1, "shared_memory": {"address": "/run/docker.sock", "key": key}},
+        "an address that is not a lane's name",
+        "only 'rlenv-lane-' and 32 hex digits",
+    )
+    link.request(
+        {"id": 2, "shared_memory": {"address": "rlenv-lane-" + "0" * 32, "key": b"short"}},
+        "a key of another size",
+    )
+    link.request(
+        {"id": 3, "shared_memory": {"address": "rlenv-lane-" + "0" * 32, "key": key}},
+        "no client listens on that name",
+        "the lane cannot be reached",
+    )
+    link.request(
+        {"id": 4, "shared_memory": {"address": "rlenv-lane-" + "0" * 32, "key": key}, "reset": {}},
+        "with another part",
+        "it goes alone",
+    )
 
 
 def _peg(name: str, x: float) -> dict[str, Any]:
     """A Plinko peg as level data (what ``PackedScene.to_data`` gives)."""
-    return {"class": "Peg", "name": name, "properties": {"position": [x, 0.0]}, "children": [
-        {"class": "CollisionShape", "name": "Skin", "properties": {
-            "shape": {"kind": "circle", "radius": 0.1, "offset": [0.0, 0.0]},
-            "friction": 0.2, "elasticity": 0.5}}]}
+    return {
+        "class": "Peg",
+        "name": name,
+        "properties": {"position": [x, 0.0]},
+        "children": [
+            {
+                "class": "CollisionShape",
+                "name": "Skin",
+                "properties": {
+                    "shape": {"kind": "circle", "radius": 0.1, "offset": [0.0, 0.0]},
+                    "friction": 0.2,
+                    "elasticity": 0.5,
+                },
+            }
+        ],
+    }
 
 
-TWO_PEGS = {"format": "rlenv.PackedScene", "version": 1, "root": {
-    "class": "Node2D", "name": "Level", "properties": {"position": [0.0, 0.0]}, "children": [
-        {"class": "Node2D", "name": "Pegs", "properties": {"position": [0.0, 6.0]},
-         "children": [_peg("Peg", 0.0), _peg("Peg2", 1.0)]}]}}
+TWO_PEGS = {
+    "format": "rlenv.PackedScene",
+    "version": 1,
+    "root": {
+        "class": "Node2D",
+        "name": "Level",
+        "properties": {"position": [0.0, 0.0]},
+        "children": [
+            {
+                "class": "Node2D",
+                "name": "Pegs",
+                "properties": {"position": [0.0, 6.0]},
+                "children": [_peg("Peg", 0.0), _peg("Peg2", 1.0)],
+            }
+        ],
+    },
+}
 """A Plinko level of two pegs, as data."""
 
 
-@scenario("edit_level.json", "edit_level (protocol 2.4): Plinko edits a level of two pegs",
-          PLINKO)
+@scenario("edit_level.json", "edit_level (protocol 2.4): Plinko edits a level of two pegs", PLINKO)
 def _edit_level(recording: Recording) -> None:
     link = recording.connect()
     link.hello()
-    link.request({"id": 1, "edit_level": {"level": TWO_PEGS, "seed": 3, "n_edits": 2}},
-                 "two edits, with no episode and no control", "info.level: the edited level")
-    link.request({"id": 2, "edit_level": {"level": TWO_PEGS, "seed": 3, "n_edits": 2}},
-                 "the same seed", "the same edit")
-    link.request({"id": 3, "edit_level": {"level": TWO_PEGS, "seed": 3, "n_edits": 0}},
-                 "n_edits out of [1, 64]", "bad_request")
-    link.request({"id": 4, "edit_level": {"level": "a level?", "seed": 3}},
-                 "a level the environment refuses", "bad_request naming its _edit_level")
-    link.request({"id": 5, "reset": {"seed": 0, "options": {"level": TWO_PEGS}}},
-                 "the level, played")
+    link.request(
+        {"id": 1, "edit_level": {"level": TWO_PEGS, "seed": 3, "n_edits": 2}},
+        "two edits, with no episode and no control",
+        "info.level: the edited level",
+    )
+    link.request(
+        {"id": 2, "edit_level": {"level": TWO_PEGS, "seed": 3, "n_edits": 2}},
+        "the same seed",
+        "the same edit",
+    )
+    link.request(
+        {"id": 3, "edit_level": {"level": TWO_PEGS, "seed": 3, "n_edits": 0}},
+        "n_edits out of [1, 64]",
+        "bad_request",
+    )
+    link.request(
+        {"id": 4, "edit_level": {"level": "a level?", "seed": 3}},
+        "a level the environment refuses",
+        "bad_request naming its _edit_level",
+    )
+    link.request(
+        {"id": 5, "reset": {"seed": 0, "options": {"level": TWO_PEGS}}}, "the level, played"
+    )
 
 
 @scenario("error_invalid_action.json", "invalid_action: actions outside the action space")
@@ -792,24 +1042,34 @@ def _invalid_action(recording: Recording) -> None:
     link.request({"id": 6, "action": 0.5}, "a plain number: nothing is broadcast to shape (1,)")
 
 
-@scenario("error_invalid_config.json", "invalid_config: configuration the environment refuses",
-          shared=True)
+@scenario(
+    "error_invalid_config.json",
+    "invalid_config: configuration the environment refuses",
+    shared=True,
+)
 def _invalid_config(recording: Recording) -> None:
     link = recording.connect()
     link.hello()
-    link.request({"id": 1, "config": {"world": {"gravity": 1.0}}}, "a key the world does not "
-                 "declare configurable")
-    link.request({"id": 2, "config": {"agent": {"max_force": "strong"}}},
-                 "a value of the wrong sort")
-    link.request({"id": 3, "config": {"environment": {"repeat_action": 0}}},
-                 "repeat_action below 1")
-    link.request({"id": 4, "config": {"physics": {}}},
-                 "a map of the wrong shape is a bad_request instead")
+    link.request(
+        {"id": 1, "config": {"world": {"gravity": 1.0}}},
+        "a key the world does not declare configurable",
+    )
+    link.request(
+        {"id": 2, "config": {"agent": {"max_force": "strong"}}}, "a value of the wrong sort"
+    )
+    link.request(
+        {"id": 3, "config": {"environment": {"repeat_action": 0}}}, "repeat_action below 1"
+    )
+    link.request(
+        {"id": 4, "config": {"physics": {}}}, "a map of the wrong shape is a bad_request instead"
+    )
     for request_id, value, name in [(5, math.nan, "NaN"), (6, math.inf, "infinity")]:
         raw = pack({"id": request_id, "config": {"world": {"gravity": [0.0, value]}}})
-        link.send(raw=HEADER.pack(len(raw)) + raw,
-                  note=f"a setting holding {name} (gravity [0, {name}]): a configuration "
-                       "outlives resets, so it is refused")
+        link.send(
+            raw=HEADER.pack(len(raw)) + raw,
+            note=f"a setting holding {name} (gravity [0, {name}]): a configuration "
+            "outlives resets, so it is refused",
+        )
         link.receive("invalid_config naming the key")
 
 
@@ -820,64 +1080,98 @@ def _reset_required(recording: Recording) -> None:
     link.request({"id": 1, "action": f4(0.0)}, "an action before the first reset")
     link.request({"id": 2, "observation": AGENT}, "an observation before the first reset")
     link.request({"id": 3, "snapshot": {}}, "a snapshot before any episode")
-    link.request({"id": 4, "reset": {"seed": 0}, "action": f4(1.0), "repeat_action": 100},
-                 "reset and push hard for up to 100 ticks", "the pole fell: terminated, fewer "
-                 "ticks ran")
+    link.request(
+        {"id": 4, "reset": {"seed": 0}, "action": f4(1.0), "repeat_action": 100},
+        "reset and push hard for up to 100 ticks",
+        "the pole fell: terminated, fewer ticks ran",
+    )
     link.request({"id": 5, "action": f4(0.0)}, "an action after the episode ended")
     link.request({"id": 6, "observation": AGENT}, "observing an ended episode is allowed")
 
 
-@scenario("error_busy.json", "busy: another client controls the environment; too many clients",
-          CARTPOLE, "--max-connections", "2")
+@scenario(
+    "error_busy.json",
+    "busy: another client controls the environment; too many clients",
+    CARTPOLE,
+    "--max-connections",
+    "2",
+)
 def _busy(recording: Recording) -> None:
     first = recording.connect()
     first.hello()
     first.request({"id": 1, "reset": {"seed": 0}}, "the first client takes control")
     second = recording.connect()
     second.hello()
-    second.request({"id": 1, "reset": {"seed": 0}}, "a second client tries to take control",
-                   "non-fatal; the message names the controller's address",
-                   varies=["error.message"])
+    second.request(
+        {"id": 1, "reset": {"seed": 0}},
+        "a second client tries to take control",
+        "non-fatal; the message names the controller's address",
+        varies=["error.message"],
+    )
     second.request({"id": 2, "observation": AGENT}, "observing is open to every client")
     third = recording.connect()
-    third.receive("a third client, over --max-connections: fatal busy instead of the hello",
-                  closes=True)
+    third.receive(
+        "a third client, over --max-connections: fatal busy instead of the hello", closes=True
+    )
 
 
-@scenario("error_timeout.json", "timeout: incomplete frames and idle clients", CARTPOLE,
-          "--idle-timeout", "0.5", "--frame-deadline", "0.2")
+@scenario(
+    "error_timeout.json",
+    "timeout: incomplete frames and idle clients",
+    CARTPOLE,
+    "--idle-timeout",
+    "0.5",
+    "--frame-deadline",
+    "0.2",
+)
 def _timeout(recording: Recording) -> None:
     slow = recording.connect()
     idle = recording.connect()
     slow.hello()
     idle.hello()
     whole = pack({"id": 1})
-    slow.send(raw=HEADER.pack(len(whole)) + whole[:2],
-              note=f"the start of a frame (its prefix announces {len(whole)} bytes, 2 follow), "
-                   "then nothing")
-    slow.receive("the frame is not complete within 0.2 s (--frame-deadline): fatal",
-                 closes=True)
-    idle.receive("a client that sends nothing for 0.5 s (--idle-timeout): unsolicited, fatal",
-                 closes=True)
+    slow.send(
+        raw=HEADER.pack(len(whole)) + whole[:2],
+        note=f"the start of a frame (its prefix announces {len(whole)} bytes, 2 follow), "
+        "then nothing",
+    )
+    slow.receive("the frame is not complete within 0.2 s (--frame-deadline): fatal", closes=True)
+    idle.receive(
+        "a client that sends nothing for 0.5 s (--idle-timeout): unsolicited, fatal", closes=True
+    )
 
 
-@scenario("error_environment_error.json", "environment_error: user code raises", FAULTY,
-          "--instances", "2")
+@scenario(
+    "error_environment_error.json",
+    "environment_error: user code raises",
+    FAULTY,
+    "--instances",
+    "2",
+)
 def _environment_error(recording: Recording) -> None:
     link = recording.connect()
     link.hello()
     link.request({"id": 1, "reset": {"seed": 0}, "observation": AGENT}, "reset instance 0")
-    link.request({"id": 2, "action": 1}, "action 1 makes the agent's tick raise",
-                 "the message names the node and carries the traceback", varies=["error.message"])
+    link.request(
+        {"id": 2, "action": 1},
+        "action 1 makes the agent's tick raise",
+        "the message names the node and carries the traceback",
+        varies=["error.message"],
+    )
     link.request({"id": 3, "action": 0}, "the instance needs a reset now")
-    link.request({"id": 4, "reset": {"seed": 0}, "action": 0, "observation": AGENT},
-                 "a reset recovers")
-    link.request({"id": 5, "batch": [{"reset": {"seed": 0}}, {"reset": {"seed": 1}}]},
-                 "reset both instances")
-    link.request({"id": 6, "steps": {"action": np.array([0, 1], "<i8").tobytes()}},
-                 "steps: instance 1's action raises", "errors: nil for instance 0, instance "
-                 "1's environment_error; its row of the other columns is zeros",
-                 varies=["steps.errors.1.message"])
+    link.request(
+        {"id": 4, "reset": {"seed": 0}, "action": 0, "observation": AGENT}, "a reset recovers"
+    )
+    link.request(
+        {"id": 5, "batch": [{"reset": {"seed": 0}}, {"reset": {"seed": 1}}]}, "reset both instances"
+    )
+    link.request(
+        {"id": 6, "steps": {"action": np.array([0, 1], "<i8").tobytes()}},
+        "steps: instance 1's action raises",
+        "errors: nil for instance 0, instance "
+        "1's environment_error; its row of the other columns is zeros",
+        varies=["steps.errors.1.message"],
+    )
 
 
 # --- the environment whose spaces cover every kind -----------------------------------------------
@@ -897,18 +1191,26 @@ class SpacesWorld(RLEnvWorld):
 class SpacesAgent(RLAgent):
     """Its action and observation spaces hold every kind of space; its observation echoes."""
 
-    action_space = spaces.Dict({
-        "gear": spaces.Discrete(3, start=1),
-        "dial": spaces.MultiDiscrete([2, 3]),
-        "lights": spaces.MultiBinary(3),
-        "pair": spaces.Tuple((spaces.Discrete(2), spaces.Box(-1.0, 1.0, (2,), np.float32))),
-    })
-    observation_space = spaces.Tuple((
-        spaces.Discrete(4),
-        spaces.MultiBinary([2, 2]),
-        spaces.Dict({"gear": spaces.Discrete(3, start=1),
-                     "level": spaces.Box(-8.0, 8.0, (2,), np.float32)}),
-    ))
+    action_space = spaces.Dict(
+        {
+            "gear": spaces.Discrete(3, start=1),
+            "dial": spaces.MultiDiscrete([2, 3]),
+            "lights": spaces.MultiBinary(3),
+            "pair": spaces.Tuple((spaces.Discrete(2), spaces.Box(-1.0, 1.0, (2,), np.float32))),
+        }
+    )
+    observation_space = spaces.Tuple(
+        (
+            spaces.Discrete(4),
+            spaces.MultiBinary([2, 2]),
+            spaces.Dict(
+                {
+                    "gear": spaces.Discrete(3, start=1),
+                    "level": spaces.Box(-8.0, 8.0, (2,), np.float32),
+                }
+            ),
+        )
+    )
 
     def __init__(self) -> None:
         super().__init__("Agent")
@@ -932,12 +1234,18 @@ class SpacesAgent(RLAgent):
         """(count mod 4, lights and the pair's switch as 2 × 2 bits, gear and 2 × the levels)."""
         action = self.action
         if action is None:
-            return self.count % 4, np.zeros((2, 2), np.int8), \
-                {"gear": 1, "level": np.zeros(2, np.float32)}
+            return (
+                self.count % 4,
+                np.zeros((2, 2), np.int8),
+                {"gear": 1, "level": np.zeros(2, np.float32)},
+            )
         bits = [*np.asarray(action["lights"]).tolist(), int(action["pair"][0])]
         level = np.asarray(action["pair"][1], np.float32) * 2
-        return self.count % 4, np.array(bits, np.int8).reshape(2, 2), \
-            {"gear": int(action["gear"]), "level": level}
+        return (
+            self.count % 4,
+            np.array(bits, np.int8).reshape(2, 2),
+            {"gear": int(action["gear"]), "level": level},
+        )
 
 
 class SpacesEnvironment(RLEnvironment):

@@ -10,5 +10,4 @@ from rlenv_client.ray import RayServerPool
 
 def server_pids(servers: RayServerPool) -> list[int]:
     """The process ids of a pool's servers now."""
-    return ray.get([servers.actor(index).server_pid.remote()
-                    for index in range(servers.servers)])
+    return ray.get([servers.actor(index).server_pid.remote() for index in range(servers.servers)])

@@ -32,8 +32,9 @@ class DropWorld(RLEnvWorld):
         super().__init__("World")
         self.physics = PhysicsWorld(gravity=(0.0, -9.81), name="Physics")
         floor = StaticBody(name="Floor")
-        floor.add_child(CollisionShape.segment((-10.0, 0.0), (10.0, 0.0), 0.1, name="Line",
-                                               elasticity=0.3))
+        floor.add_child(
+            CollisionShape.segment((-10.0, 0.0), (10.0, 0.0), 0.1, name="Line", elasticity=0.3)
+        )
         self.ball = RigidBody(position=(0.0, 1.0), name="Ball")
         self.ball.add_child(CollisionShape.circle(0.2, mass=1.0, elasticity=0.3, name="Skin"))
         self.physics.add_child(floor)

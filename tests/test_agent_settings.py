@@ -32,10 +32,15 @@ from rlenv_tools.timeline import Timeline
 TESTS = Path(__file__).parent
 CHASE = "per_agent_envs:ChaseEnvironment"
 CARTPOLE = "examples.cartpole:CartPoleEnvironment"
-KEYS = {"Chaser": ("max_force",), "Runner1": ("max_force", "sight"),
-        "Runner2": ("max_force", "sight")}
-UNKNOWN = ("config.agent has no setting or agent 'speed'; its settings: max_force, sight; its "
-           "agents: Chaser, Runner1, Runner2 (classes: ChaserAgent, RunnerAgent)")
+KEYS = {
+    "Chaser": ("max_force",),
+    "Runner1": ("max_force", "sight"),
+    "Runner2": ("max_force", "sight"),
+}
+UNKNOWN = (
+    "config.agent has no setting or agent 'speed'; its settings: max_force, sight; its "
+    "agents: Chaser, Runner1, Runner2 (classes: ChaserAgent, RunnerAgent)"
+)
 
 
 @pytest.fixture
@@ -56,14 +61,17 @@ def _path() -> str:
 
 def settings_of(client: Client) -> dict[str, dict[str, Any]]:
     """Each agent's settings, as the server reads them now."""
-    return {name: {key: client.get_property(name, key) for key in keys}
-            for name, keys in KEYS.items()}
+    return {
+        name: {key: client.get_property(name, key) for key in keys} for name, keys in KEYS.items()
+    }
 
 
 def joint_action(step: int) -> dict[str, np.ndarray]:
     """Every agent pushes hard, each its own way (so any agent's force shows at once)."""
-    return {name: np.array([np.sin(step / 3 + index), np.cos(step / 4 + index)], np.float32)
-            for index, name in enumerate(NAMES)}
+    return {
+        name: np.array([np.sin(step / 3 + index), np.cos(step / 4 + index)], np.float32)
+        for index, name in enumerate(NAMES)
+    }
 
 
 def play(client: Client, seed: int, steps: int) -> list[dict[str, np.ndarray]]:
@@ -84,25 +92,36 @@ def same(first: list[dict[str, np.ndarray]], second: list[dict[str, np.ndarray]]
 def test_every_agent_a_class_and_one_agent_the_more_precise_winning(serve_chase: Any) -> None:
     server = serve_chase()
     with Client(server.host, server.port) as client:
-        assert settings_of(client) == {"Chaser": {"max_force": 10.0},  # each class its own
-                                       "Runner1": {"max_force": 8.0, "sight": 10.0},
-                                       "Runner2": {"max_force": 8.0, "sight": 10.0}}
+        assert settings_of(client) == {
+            "Chaser": {"max_force": 10.0},  # each class its own
+            "Runner1": {"max_force": 8.0, "sight": 10.0},
+            "Runner2": {"max_force": 8.0, "sight": 10.0},
+        }
         client.configure(agent={"Runner1": {"max_force": 6.0}})  # one agent
         assert settings_of(client)["Runner1"]["max_force"] == 6.0
         assert settings_of(client)["Runner2"]["max_force"] == 8.0
         assert settings_of(client)["Chaser"]["max_force"] == 10.0
         client.configure(agent={"RunnerAgent": {"sight": 3.0}})  # a class
-        assert [settings_of(client)[name]["sight"] for name in ("Runner1", "Runner2")] == [3.0,
-                                                                                          3.0]
+        assert [settings_of(client)[name]["sight"] for name in ("Runner1", "Runner2")] == [3.0, 3.0]
         client.configure(agent={"max_force": 9.0})  # every agent, as before
-        assert {name: values["max_force"] for name, values in settings_of(client).items()} == \
-            {"Chaser": 9.0, "Runner1": 9.0, "Runner2": 9.0}
+        assert {name: values["max_force"] for name, values in settings_of(client).items()} == {
+            "Chaser": 9.0,
+            "Runner1": 9.0,
+            "Runner2": 9.0,
+        }
         # every agent < class < name, whatever the order of the keys
-        client.configure(agent={"Runner2": {"max_force": 5.0}, "RunnerAgent": {"max_force": 7.0},
-                                "max_force": 11.0})
-        assert settings_of(client) == {"Chaser": {"max_force": 11.0},
-                                       "Runner1": {"max_force": 7.0, "sight": 3.0},
-                                       "Runner2": {"max_force": 5.0, "sight": 3.0}}
+        client.configure(
+            agent={
+                "Runner2": {"max_force": 5.0},
+                "RunnerAgent": {"max_force": 7.0},
+                "max_force": 11.0,
+            }
+        )
+        assert settings_of(client) == {
+            "Chaser": {"max_force": 11.0},
+            "Runner1": {"max_force": 7.0, "sight": 3.0},
+            "Runner2": {"max_force": 5.0, "sight": 3.0},
+        }
         client.inspect_configure(agent={"Chaser": {"max_force": 12.0}})  # as an inspector
         assert settings_of(client)["Chaser"]["max_force"] == 12.0
 
@@ -113,18 +132,33 @@ def test_a_key_neither_a_setting_nor_an_agent_is_refused_naming_both(serve_chase
         refusals = [
             ({"speed": 1.0}, ErrorCode.INVALID_CONFIG, UNKNOWN),
             ({"Runner1": {"max_force": 6.0}, "speed": 1.0}, ErrorCode.INVALID_CONFIG, UNKNOWN),
-            ({"Runner1": 6.0}, ErrorCode.BAD_REQUEST,
-             "config.agent.Runner1 must be a map of that agent's settings"),
-            ({"RunnerAgent": [1]}, ErrorCode.BAD_REQUEST,
-             "config.agent.RunnerAgent must be a map of that class's settings"),
-            ({"Chaser": {"sight": 2.0}}, ErrorCode.INVALID_CONFIG,
-             "config.agent: Chaser: ChaserAgent has no configurable 'sight'; it accepts "
-             "max_force"),
-            ({"sight": 2.0}, ErrorCode.INVALID_CONFIG,  # a setting the chaser has not
-             "config.agent: Chaser: ChaserAgent has no configurable 'sight'; it accepts "
-             "max_force"),
-            ({"Runner2": {"max_force": "fast"}}, ErrorCode.INVALID_CONFIG,
-             "config.agent: Runner2: RunnerAgent.max_force"),
+            (
+                {"Runner1": 6.0},
+                ErrorCode.BAD_REQUEST,
+                "config.agent.Runner1 must be a map of that agent's settings",
+            ),
+            (
+                {"RunnerAgent": [1]},
+                ErrorCode.BAD_REQUEST,
+                "config.agent.RunnerAgent must be a map of that class's settings",
+            ),
+            (
+                {"Chaser": {"sight": 2.0}},
+                ErrorCode.INVALID_CONFIG,
+                "config.agent: Chaser: ChaserAgent has no configurable 'sight'; it accepts "
+                "max_force",
+            ),
+            (
+                {"sight": 2.0},
+                ErrorCode.INVALID_CONFIG,  # a setting the chaser has not
+                "config.agent: Chaser: ChaserAgent has no configurable 'sight'; it accepts "
+                "max_force",
+            ),
+            (
+                {"Runner2": {"max_force": "fast"}},
+                ErrorCode.INVALID_CONFIG,
+                "config.agent: Runner2: RunnerAgent.max_force",
+            ),
         ]
         for config, code, message in refusals:
             with pytest.raises(RemoteError) as refused:
@@ -152,11 +186,13 @@ def test_one_agent_alone_keeps_its_flat_map_and_may_be_named(serve: Serve) -> No
         assert str(refused.value).endswith(
             "config.agent has no setting or agent 'max_forse'; its settings: angle_limit, "
             "max_force; its "
-            "agents: Agent (classes: CartPoleAgent)")
+            "agents: Agent (classes: CartPoleAgent)"
+        )
 
 
 def test_the_http_gateway_takes_both_forms_and_its_snapshots_keep_each_agents(
-        tests_on_path: None) -> None:
+    tests_on_path: None,
+) -> None:
     gateway = Gateway(CHASE)
     try:
         tuned = gateway.session(agent={"max_force": 9.0, "Runner1": {"max_force": 6.0}})
@@ -165,12 +201,16 @@ def test_the_http_gateway_takes_both_forms_and_its_snapshots_keep_each_agents(
         action = {name: [0.5, -1.0] for name in NAMES}
         gateway.post(f"/v1/envs/{tuned}/step", {"action": action})
         snapshot = gateway.get(f"/v1/envs/{tuned}/snapshot")["snapshot"]
-        assert snapshot["config"]["agent"] == {"Chaser": {"max_force": 9.0},
-                                               "Runner1": {"max_force": 6.0, "sight": 10.0},
-                                               "Runner2": {"max_force": 9.0, "sight": 10.0}}
+        assert snapshot["config"]["agent"] == {
+            "Chaser": {"max_force": 9.0},
+            "Runner1": {"max_force": 6.0, "sight": 10.0},
+            "Runner2": {"max_force": 9.0, "sight": 10.0},
+        }
         gateway.post(f"/v1/envs/{plain}/restore", {"snapshot": snapshot})
-        steps = [gateway.post(f"/v1/envs/{session}/step", {"action": action})
-                 for session in (tuned, plain)]
+        steps = [
+            gateway.post(f"/v1/envs/{session}/step", {"action": action})
+            for session in (tuned, plain)
+        ]
         assert steps[0] == steps[1]  # the restored session pushes with each agent's force
         refused = gateway.request("POST", "/v1/envs", {"kwargs": {"agent": {"speed": 1.0}}})
         assert assert_problem(refused, 422, "invalid_config")["detail"].endswith(UNKNOWN)
@@ -187,9 +227,11 @@ def test_a_snapshot_keeps_each_agents_settings_and_restores_them(serve_chase: An
         original.configure(agent={"Runner2": {"max_force": 5.0, "sight": 2.5}})
         before = play(original, 3, 6)
         snapshot = original.snapshot()
-        assert snapshot["config"]["agent"] == {"Chaser": {"max_force": 10.0},
-                                               "Runner1": {"max_force": 8.0, "sight": 10.0},
-                                               "Runner2": {"max_force": 5.0, "sight": 2.5}}
+        assert snapshot["config"]["agent"] == {
+            "Chaser": {"max_force": 10.0},
+            "Runner1": {"max_force": 8.0, "sight": 10.0},
+            "Runner2": {"max_force": 5.0, "sight": 2.5},
+        }
         after = [original.step(joint_action(6 + step))[0] for step in range(8)]
         restored, _ = copy.restore(snapshot)
         assert digest(restored) == digest(before[-1])
@@ -200,16 +242,18 @@ def test_a_snapshot_keeps_each_agents_settings_and_restores_them(serve_chase: An
         assert settings_of(copy)["Runner2"] == {"max_force": 5.0, "sight": 2.5}
 
 
-def test_an_older_snapshot_with_one_agent_map_restores_it_on_every_agent(
-        serve_chase: Any) -> None:
+def test_an_older_snapshot_with_one_agent_map_restores_it_on_every_agent(serve_chase: Any) -> None:
     server = serve_chase()
     with Client(server.host, server.port) as client:
         play(client, 4, 2)
         snapshot = client.snapshot()
         snapshot["config"]["agent"] = {"max_force": 10.0}  # as a 2.5 server kept it: the first's
         client.restore(snapshot)
-        assert {name: values["max_force"] for name, values in settings_of(client).items()} == \
-            {"Chaser": 10.0, "Runner1": 10.0, "Runner2": 10.0}
+        assert {name: values["max_force"] for name, values in settings_of(client).items()} == {
+            "Chaser": 10.0,
+            "Runner1": 10.0,
+            "Runner2": 10.0,
+        }
 
 
 def test_a_request_that_fails_gives_each_agent_back_its_own_settings(serve_chase: Any) -> None:
@@ -244,14 +288,19 @@ def record(directory: Path, steps: int = 40) -> Path:
     return directory / "episode-0001.rlenv"
 
 
-def test_a_game_whose_classes_differ_replays_bit_for_bit(tmp_path: Path,
-                                                         tests_on_path: None) -> None:
+def test_a_game_whose_classes_differ_replays_bit_for_bit(
+    tmp_path: Path, tests_on_path: None
+) -> None:
     path = record(tmp_path)
     episode = EpisodeFile.load(path)
     assert episode.snapshot["config"]["agent"]["Chaser"] == {"max_force": 10.0}
     assert episode.snapshot["config"]["agent"]["Runner2"] == {"max_force": 5.0, "sight": 3.0}
-    replayed = subprocess.run([sys.executable, "-m", "rlenv", "replay", str(path)],
-                              capture_output=True, text=True, timeout=120)
+    replayed = subprocess.run(
+        [sys.executable, "-m", "rlenv", "replay", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert replayed.returncode == 0, replayed.stdout + replayed.stderr
     assert "replayed 40 steps" in replayed.stdout
     assert "every observation identical" in replayed.stdout
@@ -260,20 +309,27 @@ def test_a_game_whose_classes_differ_replays_bit_for_bit(tmp_path: Path,
             assert digest(timeline.at(step).observation) == episode.observations[step], step
 
 
-def test_an_older_recording_that_cannot_replay_says_why(tmp_path: Path,
-                                                        tests_on_path: None) -> None:
+def test_an_older_recording_that_cannot_replay_says_why(
+    tmp_path: Path, tests_on_path: None
+) -> None:
     """A recording made before settings per agent kept the first agent's settings only: where
     the agents' differed it diverges, and the message says so instead of blaming the game."""
     episode = EpisodeFile.load(record(tmp_path))
     episode.snapshot["config"]["agent"] = {"max_force": 10.0}  # as a 2.5 server kept it
     older = tmp_path / "older.rlenv"
     episode.save(older)
-    replayed = subprocess.run([sys.executable, "-m", "rlenv", "replay", str(older)],
-                              capture_output=True, text=True, timeout=120)
+    replayed = subprocess.run(
+        [sys.executable, "-m", "rlenv", "replay", str(older)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert replayed.returncode == 1
-    note = ("the recording predates settings per agent, protocol 2.6: it kept one agent's "
-            "settings, {'max_force': 10.0}, which replay on every agent; if the agents' "
-            "settings differed, it cannot replay")
+    note = (
+        "the recording predates settings per agent, protocol 2.6: it kept one agent's "
+        "settings, {'max_force': 10.0}, which replay on every agent; if the agents' "
+        "settings differed, it cannot replay"
+    )
     # Runner2 saw the chaser within 3 m: the first observation already differs
     assert f"the first observation (after the reset) differs ({note})" in replayed.stdout
     with pytest.raises(RuntimeError, match="step 0: .*predates settings per agent"):
@@ -287,8 +343,9 @@ def test_tags_recordings_replay_bit_for_bit_with_its_classes_own_settings(tmp_pa
     try:
         for episode in range(2):
             if episode == 1:
-                env.unwrapped.configure(agent={"Runner": {"max_force": 7.0},
-                                               "Runner2": {"max_force": 5.0}})
+                env.unwrapped.configure(
+                    agent={"Runner": {"max_force": 7.0}, "Runner2": {"max_force": 5.0}}
+                )
             env.reset(seed=20 + episode)
             for step in range(25):
                 _, _, terminated, truncated, _ = env.step(joint_action(step))
@@ -296,42 +353,74 @@ def test_tags_recordings_replay_bit_for_bit_with_its_classes_own_settings(tmp_pa
                     break
     finally:
         env.close()
-    kept = [EpisodeFile.load(path).snapshot["config"]["agent"]
-            for path in sorted(tmp_path.glob("*.rlenv"))]
-    assert kept == [{"Chaser": {"max_force": 10.0}, "Runner1": {"max_force": 8.0},
-                     "Runner2": {"max_force": 8.0}},
-                    {"Chaser": {"max_force": 10.0}, "Runner1": {"max_force": 7.0},
-                     "Runner2": {"max_force": 5.0}}]
+    kept = [
+        EpisodeFile.load(path).snapshot["config"]["agent"]
+        for path in sorted(tmp_path.glob("*.rlenv"))
+    ]
+    assert kept == [
+        {
+            "Chaser": {"max_force": 10.0},
+            "Runner1": {"max_force": 8.0},
+            "Runner2": {"max_force": 8.0},
+        },
+        {
+            "Chaser": {"max_force": 10.0},
+            "Runner1": {"max_force": 7.0},
+            "Runner2": {"max_force": 5.0},
+        },
+    ]
     for path in sorted(tmp_path.glob("*.rlenv")):
-        replayed = subprocess.run([sys.executable, "-m", "rlenv", "replay", str(path)],
-                                  capture_output=True, text=True, timeout=120)
+        replayed = subprocess.run(
+            [sys.executable, "-m", "rlenv", "replay", str(path)],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
         assert replayed.returncode == 0, replayed.stdout + replayed.stderr
         assert "every observation identical" in replayed.stdout
 
 
 def test_the_compliance_suite_passes_on_a_game_whose_classes_differ(
-        serve_chase: Any, tests_on_path: None) -> None:
+    serve_chase: Any, tests_on_path: None
+) -> None:
     """Its set and restore probes replay bit for bit (they diverged at step 1 when a restore
     gave every agent the first agent's settings), as a library call and in ``rlenv check``."""
     server = serve_chase()
     report = check_server(server.host, server.port, random_frames=20)
     assert report.passed, "\n".join(report.failures)
-    checked = subprocess.run([sys.executable, "-m", "rlenv", "check", "--compliance", CHASE],
-                             capture_output=True, text=True, timeout=300)
+    checked = subprocess.run(
+        [sys.executable, "-m", "rlenv", "check", "--compliance", CHASE],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     line = next(line for line in checked.stdout.splitlines() if "compliance" in line)
     assert re.search(r"PASS\S*\s+compliance under hostile input .* 0 failures", line), line
 
 
 @pytest.mark.minari
-def test_a_dataset_of_a_game_whose_classes_differ(tmp_path: Path, tests_on_path: None,
-                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_dataset_of_a_game_whose_classes_differ(
+    tmp_path: Path, tests_on_path: None, monkeypatch: pytest.MonkeyPatch
+) -> None:
     minari = pytest.importorskip("minari")
     pytest.importorskip("h5py")
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "datasets"))
     path = record(tmp_path / "episodes")
-    created = subprocess.run([sys.executable, "-m", "rlenv", "dataset", "create",
-                              "chase/per-agent-v0", "--from", str(path.parent)],
-                             capture_output=True, text=True, timeout=300)
+    created = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "rlenv",
+            "dataset",
+            "create",
+            "chase/per-agent-v0",
+            "--from",
+            str(path.parent),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert created.returncode == 0, created.stdout + created.stderr
     (stored,) = list(minari.load_dataset("chase/per-agent-v0").iterate_episodes())
     episode = EpisodeFile.load(path)

@@ -31,10 +31,21 @@ def stand_still(observation: np.ndarray) -> np.ndarray:
 
 def test_the_chaser_alone_plays_the_scripted_rewrite_bit_for_bit() -> None:
     """Training the chaser from Tag sees exactly what the single-agent rewrite gives."""
-    alone = AgentVectorEnv(2, TAG, agents=CHASER, others=dict.fromkeys(RUNNERS, run_away),
-                           max_episode_steps=120, instances_per_server=2)
-    rewrite = RemoteVectorEnv(2, SCRIPTED, autoreset_mode=AutoresetMode.SAME_STEP,
-                              max_episode_steps=120, instances_per_server=2)
+    alone = AgentVectorEnv(
+        2,
+        TAG,
+        agents=CHASER,
+        others=dict.fromkeys(RUNNERS, run_away),
+        max_episode_steps=120,
+        instances_per_server=2,
+    )
+    rewrite = RemoteVectorEnv(
+        2,
+        SCRIPTED,
+        autoreset_mode=AutoresetMode.SAME_STEP,
+        max_episode_steps=120,
+        instances_per_server=2,
+    )
     try:
         assert alone.num_envs == 2 and alone.learners == [CHASER]
         assert alone.single_observation_space == rewrite.single_observation_space
@@ -45,8 +56,11 @@ def test_the_chaser_alone_plays_the_scripted_rewrite_bit_for_bit() -> None:
         rng = np.random.default_rng(0)
         ends = 0
         for step in range(300):
-            actions = np.array([_chaser.heuristic(row) for row in seen]) if step % 4 else \
-                rng.uniform(-1, 1, (2, 2)).astype(np.float32)
+            actions = (
+                np.array([_chaser.heuristic(row) for row in seen])
+                if step % 4
+                else rng.uniform(-1, 1, (2, 2)).astype(np.float32)
+            )
             seen, *ours, info = alone.step(actions)
             expected, *theirs, their_info = rewrite.step(actions)
             assert np.array_equal(seen, expected), step
@@ -66,8 +80,13 @@ def test_by_default_the_servers_drive_the_others_by_their_heuristics() -> None:
     """``agents="Chaser"`` alone: each runner's heuristic runs in the server, beside the
     physics (``--policy Runner1=heuristic``), and the chaser sees the rewrite's game."""
     alone = AgentVectorEnv(2, TAG, agents=CHASER, max_episode_steps=60)
-    rewrite = RemoteVectorEnv(2, SCRIPTED, autoreset_mode=AutoresetMode.SAME_STEP,
-                              max_episode_steps=60, instances_per_server=2)
+    rewrite = RemoteVectorEnv(
+        2,
+        SCRIPTED,
+        autoreset_mode=AutoresetMode.SAME_STEP,
+        max_episode_steps=60,
+        instances_per_server=2,
+    )
     try:
         assert alone.driven_by_server == dict.fromkeys(RUNNERS, "heuristic")
         assert alone.driven_here == {}
@@ -87,8 +106,7 @@ def test_by_default_the_servers_drive_the_others_by_their_heuristics() -> None:
 
 
 def test_a_class_makes_each_of_its_agents_a_sub_environment_sharing_one_policy() -> None:
-    team = AgentVectorEnv(2, TAG, agents=Runner, others={CHASER: stand_still},
-                          in_process=True)
+    team = AgentVectorEnv(2, TAG, agents=Runner, others={CHASER: stand_still}, in_process=True)
     joint = RemoteVectorEnv(2, TAG, in_process=True)
     try:
         assert team.learners == list(RUNNERS) and team.num_envs == 4
@@ -106,15 +124,22 @@ def test_a_class_makes_each_of_its_agents_a_sub_environment_sharing_one_policy()
 def test_a_learner_that_ends_first_waits_for_its_instance_to_reset() -> None:
     """A tagged runner's episode ends; it waits (reward 0, its last observation) until the
     chaser ends the instance's episode, and that wait ends as truncated, marked waiting."""
-    team = AgentVectorEnv(1, TAG, agents=Runner, in_process=True, max_episode_steps=300,
-                          others={CHASER: lambda observation: _chaser.heuristic(observation)})
+    team = AgentVectorEnv(
+        1,
+        TAG,
+        agents=Runner,
+        in_process=True,
+        max_episode_steps=300,
+        others={CHASER: lambda observation: _chaser.heuristic(observation)},
+    )
     try:
         observations, _ = team.reset(seed=1)
         waits: list[int] = []
         for _ in range(300):
             previous = observations
             observations, rewards, terminated, truncated, info = team.step(
-                np.zeros((2, 2), np.float32))
+                np.zeros((2, 2), np.float32)
+            )
             waiting = info.get("waiting", np.zeros(2, np.bool_))
             last = bool(truncated.any() or terminated.all())  # the instance's episode ended
             for index in np.flatnonzero(terminated):  # tagged: -10 this step, then it waits
@@ -158,17 +183,32 @@ def test_agent_classes_reads_each_agents_class_from_the_target() -> None:
     assert agent_classes(TAG) == {CHASER: Chaser, "Runner1": Runner, "Runner2": Runner}
 
 
-@pytest.mark.parametrize(("agents", "others", "message"), [
-    ("Red", None, "agent 'Blue' neither learns nor has a policy in others, and its class has no "
-                  "heuristic: give others={'Blue': 'policy.onnx'} or a callable, or define "
-                  "PairAgent.heuristic"),
-    ("Green", None, "agents: the environment has no agent 'Green'; its agents: Red, Blue"),
-    (Chaser, None, "agents: no agent is a Chaser; its agents: Red (PairAgent), Blue (PairAgent)"),
-    ("Red", {"Green": chase}, "others: the environment has no agent 'Green'; its agents: "
-                              "Red (PairAgent), Blue (PairAgent)"),
-    (PairAgent, {"Red": chase}, "others: agent 'Red' is a learner (agents selects it)"),
-    ("Red", {"Blue": "nowhere.onnx"}, "others['Blue']: no such policy file: nowhere.onnx"),
-])
+@pytest.mark.parametrize(
+    ("agents", "others", "message"),
+    [
+        (
+            "Red",
+            None,
+            "agent 'Blue' neither learns nor has a policy in others, and its class has no "
+            "heuristic: give others={'Blue': 'policy.onnx'} or a callable, or define "
+            "PairAgent.heuristic",
+        ),
+        ("Green", None, "agents: the environment has no agent 'Green'; its agents: Red, Blue"),
+        (
+            Chaser,
+            None,
+            "agents: no agent is a Chaser; its agents: Red (PairAgent), Blue (PairAgent)",
+        ),
+        (
+            "Red",
+            {"Green": chase},
+            "others: the environment has no agent 'Green'; its agents: "
+            "Red (PairAgent), Blue (PairAgent)",
+        ),
+        (PairAgent, {"Red": chase}, "others: agent 'Red' is a learner (agents selects it)"),
+        ("Red", {"Blue": "nowhere.onnx"}, "others['Blue']: no such policy file: nowhere.onnx"),
+    ],
+)
 def test_refusals_name_the_agent(agents: object, others: object, message: str) -> None:
     with pytest.raises(ValueError) as refused:
         AgentVectorEnv(1, PAIR, agents=agents, others=others)  # type: ignore[arg-type]
@@ -176,10 +216,12 @@ def test_refusals_name_the_agent(agents: object, others: object, message: str) -
 
 
 def test_learners_sharing_a_policy_must_share_spaces() -> None:
-    with pytest.raises(ValueError, match="agents 'Chaser' and 'Runner1' learn one policy but "
-                                         "have different spaces"):
-        AgentVectorEnv(1, TAG, agents=[CHASER, "Runner1"], in_process=True,
-                       others={"Runner2": run_away})
+    with pytest.raises(
+        ValueError, match="agents 'Chaser' and 'Runner1' learn one policy but have different spaces"
+    ):
+        AgentVectorEnv(
+            1, TAG, agents=[CHASER, "Runner1"], in_process=True, others={"Runner2": run_away}
+        )
 
 
 def test_running_servers_cannot_be_given_server_side_policies(serve: Serve) -> None:
@@ -189,17 +231,22 @@ def test_running_servers_cannot_be_given_server_side_policies(serve: Serve) -> N
     assert str(refused.value) == (
         "agent 'Runner1' is to be driven by 'heuristic' in its server, and servers given by "
         "address start no server here: give others={'Runner1': callable}, or serve it with "
-        "rlenv serve --policy Runner1=heuristic")
-    with AgentVectorEnv(None, TAG, agents=CHASER, addresses=[server.address],
-                        others=dict.fromkeys(RUNNERS, run_away)) as alone:
+        "rlenv serve --policy Runner1=heuristic"
+    )
+    with AgentVectorEnv(
+        None,
+        TAG,
+        agents=CHASER,
+        addresses=[server.address],
+        others=dict.fromkeys(RUNNERS, run_away),
+    ) as alone:
         assert alone.num_envs == 1
         observations, _ = alone.reset(seed=0)
         assert alone.step(np.zeros((1, 2), np.float32))[0].shape == (1, 10)
 
 
 def test_others_may_name_a_class_for_all_its_agents() -> None:
-    with AgentVectorEnv(1, TAG, agents=CHASER, others={Runner: run_away},
-                        in_process=True) as alone:
+    with AgentVectorEnv(1, TAG, agents=CHASER, others={Runner: run_away}, in_process=True) as alone:
         assert alone.driven_here == dict.fromkeys(RUNNERS, run_away)
         assert alone.driven_by_server == {}
         alone.reset(seed=0)
@@ -210,11 +257,18 @@ def _batched_by_gymnasium(vector: RemoteVectorEnv, infos: dict) -> dict:
     """``infos`` batched again, one sub-environment at a time, by gymnasium's ``_add_info``."""
     batched: dict = {}
     for index in range(vector.num_envs):
-        agents = {name: {key: column[index].item() for key, column in outcome.items()
-                         if not key.startswith("_")}
-                  for name, outcome in infos["agents"].items() if not name.startswith("_")}
-        batched = vector._add_info(batched, {"agents": agents,
-                                             "frames": int(infos["frames"][index])}, index)
+        agents = {
+            name: {
+                key: column[index].item()
+                for key, column in outcome.items()
+                if not key.startswith("_")
+            }
+            for name, outcome in infos["agents"].items()
+            if not name.startswith("_")
+        }
+        batched = vector._add_info(
+            batched, {"agents": agents, "frames": int(infos["frames"][index])}, index
+        )
     return batched
 
 

@@ -28,9 +28,11 @@ class RawClient:
     """``python -m examples.handwritten`` in a subprocess, and a raw msgpack client to it."""
 
     def __init__(self, instances: int = 1) -> None:
-        self.process = subprocess.Popen([sys.executable, "-m", "examples.handwritten",
-                                         str(instances)],
-                                        stdout=subprocess.PIPE, text=True)
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "examples.handwritten", str(instances)],
+            stdout=subprocess.PIPE,
+            text=True,
+        )
         assert self.process.stdout is not None
         line = self.process.stdout.readline()
         assert line.startswith("listening on "), line
@@ -117,8 +119,12 @@ def test_same_trajectory_as_rlenv_in_process(seed: int = 3) -> None:
 
     cartpole = CartPole()
     with LocalClient(CARTPOLE) as local:
-        ended = _compare(lambda **kwargs: _rlenv_call(local, **kwargs), _caller(cartpole), seed,
-                         lambda: _assert_same_state(local, cartpole))
+        ended = _compare(
+            lambda **kwargs: _rlenv_call(local, **kwargs),
+            _caller(cartpole),
+            seed,
+            lambda: _assert_same_state(local, cartpole),
+        )
     assert ended >= 2
 
 
@@ -146,10 +152,12 @@ def test_same_trajectory_as_rlenv_when_endless() -> None:
 
 def _caller(cartpole: Any) -> Callable[..., dict[str, Any]]:
     """Requests to a hand-written ``CartPole`` in this process, answered as its server does."""
+
     def call(**parts: Any) -> dict[str, Any]:
         reply = cartpole.answer({"id": 0, **parts})
         reply["observation"] = np.frombuffer(reply["observation"], np.float32)
         return reply
+
     return call
 
 
@@ -162,32 +170,58 @@ def _assert_same_state(local: Any, cartpole: Any) -> None:
             assert expected == (list(got) if isinstance(expected, list) else got), (node, name)
 
 
-def _rlenv_call(client: Any, *, reset: dict[str, Any] | None = None,
-                action: bytes | None = None, repeat_action: int = REPEAT) -> dict[str, Any]:
+def _rlenv_call(
+    client: Any,
+    *,
+    reset: dict[str, Any] | None = None,
+    action: bytes | None = None,
+    repeat_action: int = REPEAT,
+) -> dict[str, Any]:
     """``client.reset`` or ``client.step``, answered like the hand-written server answers."""
     if reset is not None:
         observation, info = client.reset(**reset)
-        return {"observation": observation, "reward": 0.0, "terminated": False,
-                "truncated": False, "frames": 0}
+        return {
+            "observation": observation,
+            "reward": 0.0,
+            "terminated": False,
+            "truncated": False,
+            "frames": 0,
+        }
     observation, reward, terminated, truncated, info = client.step(
-        np.frombuffer(action, np.float32).copy(), repeat_action)
-    return {"observation": observation, "reward": reward, "terminated": terminated,
-            "truncated": truncated, "frames": info["frames"]}
+        np.frombuffer(action, np.float32).copy(), repeat_action
+    )
+    return {
+        "observation": observation,
+        "reward": reward,
+        "terminated": terminated,
+        "truncated": truncated,
+        "frames": info["frames"],
+    }
 
 
-def _compare(rlenv: Any, hand_written: Any, seed: int,
-             check: Callable[[], None] = lambda: None) -> int:
+def _compare(
+    rlenv: Any, hand_written: Any, seed: int, check: Callable[[], None] = lambda: None
+) -> int:
     """Drive both with the same seed and actions, resetting when the pole falls; the episodes
     that ended. Resets after the first continue the seeded generator, as gymnasium's do.
     ``check`` runs after every request."""
     ended, ended_now = 0, False
     for number, action in enumerate([None, *_actions(seed)]):
-        request = {"reset": {"seed": seed}} if number == 0 else \
-            {"reset": {}} if ended_now else {"action": action.tobytes()}
+        request = (
+            {"reset": {"seed": seed}}
+            if number == 0
+            else {"reset": {}}
+            if ended_now
+            else {"action": action.tobytes()}
+        )
         expected, got = rlenv(**request), hand_written(**request)
         assert expected["observation"].dtype == got["observation"].dtype == np.float32
-        assert expected["observation"].tobytes() == got["observation"].tobytes(), \
-            (number, request, expected, got)
+        assert expected["observation"].tobytes() == got["observation"].tobytes(), (
+            number,
+            request,
+            expected,
+            got,
+        )
         for key in ("reward", "terminated", "truncated", "frames"):
             assert expected[key] == got[key], (number, key, expected, got)
         check()
@@ -218,11 +252,19 @@ def test_hand_written_columns_step_each_cartpole_as_alone() -> None:
                     cartpole.reset()
                     expected = {"reward": 0.0, "terminated": False, "frames": 0}
                 else:
-                    expected = cartpole.answer({"id": number, "action": actions[index:index + 1]
-                                                .tobytes(), "repeat_action": REPEAT})
+                    expected = cartpole.answer(
+                        {
+                            "id": number,
+                            "action": actions[index : index + 1].tobytes(),
+                            "repeat_action": REPEAT,
+                        }
+                    )
                 assert observations[index].tobytes() == cartpole.observe(), (number, index)
-                assert (rewards[index], bool(reply["terminated"][index]), frames[index]) == \
-                    (expected["reward"], expected["terminated"], expected["frames"])
+                assert (rewards[index], bool(reply["terminated"][index]), frames[index]) == (
+                    expected["reward"],
+                    expected["terminated"],
+                    expected["frames"],
+                )
             resets = [bool(fell) for fell in reply["terminated"]]
             ended += sum(resets)
         assert ended >= 3  # columns were reset, and stepped again

@@ -39,8 +39,14 @@ def _environ(**extra: str) -> dict[str, str]:
 
 def check(*args: str) -> subprocess.CompletedProcess[str]:
     """``rlenv check ARGS`` with its output on pipes."""
-    return subprocess.run([sys.executable, "-m", "rlenv", "check", *args], capture_output=True,
-                          text=True, timeout=300, stdin=subprocess.DEVNULL, env=_environ())
+    return subprocess.run(
+        [sys.executable, "-m", "rlenv", "check", *args],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        stdin=subprocess.DEVNULL,
+        env=_environ(),
+    )
 
 
 def line_of(output: str, name: str) -> str:
@@ -53,8 +59,12 @@ def line_of(output: str, name: str) -> str:
 def test_the_pair_example_passes() -> None:
     result = check(PAIR)
     assert result.returncode == 0, result.stdout + result.stderr
-    for name in ("gymnasium check_env", "seeded reset is reproducible",
-                 "step returns gymnasium types", "a bad action is refused and changes nothing"):
+    for name in (
+        "gymnasium check_env",
+        "seeded reset is reproducible",
+        "step returns gymnasium types",
+        "a bad action is refused and changes nothing",
+    ):
         assert line_of(result.stdout, name).startswith("PASS  "), result.stdout
     sb3 = line_of(result.stdout, "stable-baselines3 check_env")
     assert sb3.startswith("SKIP  ") and "the action space is a Dict" in sb3
@@ -87,8 +97,12 @@ def test_a_served_pair_with_a_token_passes_every_check() -> None:
     with ServerProcess(PAIR, args=["--token", token]) as server:
         result = subprocess.run(
             [sys.executable, "-m", "rlenv", "check", server.address, "--token", token],
-            capture_output=True, text=True, timeout=300, stdin=subprocess.DEVNULL,
-            env={key: value for key, value in environ.items() if key != "RLENV_TOKEN"})
+            capture_output=True,
+            text=True,
+            timeout=300,
+            stdin=subprocess.DEVNULL,
+            env={key: value for key, value in environ.items() if key != "RLENV_TOKEN"},
+        )
     assert result.returncode == 0, result.stdout + result.stderr
     if HAS_PETTINGZOO:
         assert line_of(result.stdout, "pettingzoo parallel_api_test").startswith("PASS  ")
@@ -99,8 +113,9 @@ def test_agents_of_different_classes_pass() -> None:
     assert result.returncode == 0, result.stdout + result.stderr
     assert line_of(result.stdout, "seeded reset is reproducible").startswith("PASS  ")
     if HAS_PETTINGZOO:
-        assert "agents Chaser, Runner1, Runner2" in \
-            line_of(result.stdout, "pettingzoo parallel_api_test")
+        assert "agents Chaser, Runner1, Runner2" in line_of(
+            result.stdout, "pettingzoo parallel_api_test"
+        )
 
 
 def test_a_served_tag_passes_with_compliance(serve: Serve) -> None:
@@ -117,8 +132,9 @@ def test_observations_are_compared_member_by_member() -> None:
     reset = line_of(drifting.stdout, "seeded reset is reproducible")
     assert reset.startswith("FAIL  ") and "at ['Blue']: [" in reset, reset
     assert "ambiguous" not in drifting.stdout
-    assert line_of(drifting.stdout, "a bad action is refused and changes nothing") \
-        .startswith("PASS  ")
+    assert line_of(drifting.stdout, "a bad action is refused and changes nothing").startswith(
+        "PASS  "
+    )
     tuple_env = check("check_envs:TupleEnvironment")
     assert tuple_env.returncode == 0, tuple_env.stdout + tuple_env.stderr
     assert line_of(tuple_env.stdout, "seeded reset is reproducible").startswith("PASS  ")
@@ -139,9 +155,13 @@ def _on_a_terminal(*args: str, **environ: str) -> str:
     """``rlenv check ARGS``'s standard output, written to a terminal (a pty)."""
     leader, follower = pty.openpty()
     try:
-        process = subprocess.Popen([sys.executable, "-m", "rlenv", "check", *args],
-                                   stdout=follower, stderr=subprocess.DEVNULL,
-                                   stdin=subprocess.DEVNULL, env=_environ(**environ))
+        process = subprocess.Popen(
+            [sys.executable, "-m", "rlenv", "check", *args],
+            stdout=follower,
+            stderr=subprocess.DEVNULL,
+            stdin=subprocess.DEVNULL,
+            env=_environ(**environ),
+        )
     finally:
         os.close(follower)
     chunks = []
@@ -181,10 +201,13 @@ def test_colour_codes_only_on_a_terminal_and_never_with_no_color() -> None:
 def test_observation_difference_names_the_member() -> None:
     """The one comparison of the checks: maps and tuples member by member, arrays by bits."""
     one = {"Red": np.array([1.0, 2.0], np.float32), "Blue": (3, np.zeros((2, 2)))}
-    assert observation_difference(one, {"Red": one["Red"].copy(), "Blue": (3, np.zeros((2, 2)))}) \
+    assert (
+        observation_difference(one, {"Red": one["Red"].copy(), "Blue": (3, np.zeros((2, 2)))})
         is None
-    assert observation_difference(one, {**one, "Blue": (4, np.zeros((2, 2)))}) == \
-        "['Blue'][0]: 3 != 4"
+    )
+    assert (
+        observation_difference(one, {**one, "Blue": (4, np.zeros((2, 2)))}) == "['Blue'][0]: 3 != 4"
+    )
     assert observation_difference(one, {"Red": one["Red"]}).startswith("the observation: keys")
     assert observation_difference(np.float32(np.nan), np.float32(np.nan)) is None
     assert observation_difference(np.zeros(2), -np.zeros(2)) is not None  # bits differ

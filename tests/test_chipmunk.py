@@ -40,8 +40,13 @@ print(json.dumps({"fast": chipmunk.FAST, "digests": digests}))
 
 
 def _episodes(version: str) -> tuple[dict, str]:
-    run = subprocess.run([sys.executable, "-c", _EPISODES, version], capture_output=True,
-                         text=True, timeout=120, check=True)
+    run = subprocess.run(
+        [sys.executable, "-c", _EPISODES, version],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=True,
+    )
     return json.loads(run.stdout), run.stderr
 
 

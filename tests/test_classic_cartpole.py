@@ -31,8 +31,9 @@ def _random(observation: np.ndarray, rng: np.random.Generator) -> int:
     return int(rng.integers(2))
 
 
-def _episode(env: gym.Env, policy: Policy, seed: int, rng: np.random.Generator
-             ) -> tuple[list[float], bool, bool, list[np.ndarray]]:
+def _episode(
+    env: gym.Env, policy: Policy, seed: int, rng: np.random.Generator
+) -> tuple[list[float], bool, bool, list[np.ndarray]]:
     observation, _ = env.reset(seed=seed)
     observations, rewards = [observation], []
     while True:
@@ -58,8 +59,9 @@ def test_the_spaces_and_limit_are_gymnasium_cartpole_v1s(env: gym.Env) -> None:
 
 
 def test_every_step_pays_one_and_the_pole_falls_past_twelve_degrees(env: gym.Env) -> None:
-    rewards, terminated, truncated, observations = _episode(env, lambda *_: 1, 3,
-                                                            np.random.default_rng(0))
+    rewards, terminated, truncated, observations = _episode(
+        env, lambda *_: 1, 3, np.random.default_rng(0)
+    )
     assert terminated and not truncated
     assert rewards == [1.0] * len(rewards)  # the step on which the pole falls pays too
     assert 5 < len(rewards) < 60  # always pushing right drops the pole quickly
@@ -75,8 +77,7 @@ def test_the_cart_leaving_the_track_ends_the_episode(env: gym.Env) -> None:
         """Keep the pole up, leaning it a little: the cart runs off the track's end."""
         return int(observation[2] + 0.5 * observation[3] + 0.05 > 0)
 
-    rewards, terminated, truncated, observations = _episode(env, drift, 0,
-                                                            np.random.default_rng(0))
+    rewards, terminated, truncated, observations = _episode(env, drift, 0, np.random.default_rng(0))
     assert terminated and not truncated and len(rewards) < 500
     *before, last = observations
     assert last[0] < -2.4 and abs(last[2]) <= ANGLE_LIMIT, last
@@ -84,8 +85,9 @@ def test_the_cart_leaving_the_track_ends_the_episode(env: gym.Env) -> None:
 
 
 def test_a_balanced_pole_is_truncated_at_500_steps(env: gym.Env) -> None:
-    rewards, terminated, truncated, _ = _episode(env, lambda o, _: heuristic(o), 0,
-                                                 np.random.default_rng(0))
+    rewards, terminated, truncated, _ = _episode(
+        env, lambda o, _: heuristic(o), 0, np.random.default_rng(0)
+    )
     assert truncated and not terminated
     assert len(rewards) == 500 and sum(rewards) == 500.0
 
@@ -110,12 +112,15 @@ def test_a_heuristic_survives_far_longer_than_random_as_on_gymnasium(env: gym.En
     try:
         lengths = {}
         for name, made in (("rlenv", env), ("native", native)):
-            for policy_name, policy in (("heuristic", lambda o, _: heuristic(o)),
-                                        ("random", _random)):
+            for policy_name, policy in (
+                ("heuristic", lambda o, _: heuristic(o)),
+                ("random", _random),
+            ):
                 rng = np.random.default_rng(1)
                 episodes = 5 if policy_name == "heuristic" else 30
                 lengths[name, policy_name] = np.mean(
-                    [len(_episode(made, policy, seed, rng)[0]) for seed in range(episodes)])
+                    [len(_episode(made, policy, seed, rng)[0]) for seed in range(episodes)]
+                )
     finally:
         native.close()
     for name in ("rlenv", "native"):
@@ -144,7 +149,8 @@ def test_a_script_that_cannot_import_rlenv_client_names_the_module() -> None:
         "print(env.spec.id, env.action_space, observation.shape, env.step(1)[1])\n"
         "env.close()\n"
     )
-    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                            timeout=60)
+    result = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=60
+    )
     assert result.returncode == 0, result.stderr
     assert result.stdout.split() == ["rlenv/CartPole-v1", "Discrete(2)", "(4,)", "1.0"]

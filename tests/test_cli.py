@@ -18,8 +18,13 @@ ROOT = Path(__file__).parent.parent
 
 
 def run(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "rlenv", *args], capture_output=True, text=True,
-                          timeout=timeout, stdin=subprocess.DEVNULL)
+    return subprocess.run(
+        [sys.executable, "-m", "rlenv", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        stdin=subprocess.DEVNULL,
+    )
 
 
 def test_demo_balances_the_pole_and_prints_each_return() -> None:
@@ -45,13 +50,16 @@ def test_serve_prints_where_it_listens(serve: Serve) -> None:
 
 
 def test_the_client_imports_no_physics_no_server_and_no_ray() -> None:
-    code = ("import sys, rlenv_client, rlenv_client.rllib; "
-            "print(sorted(m for m in sys.modules if m.split('.')[0] in "
-            "('pymunk', 'examples', 'ray', 'torch') or m in ('rlenv.node', "
-            "'rlenv.environment', 'rlenv.agent', 'rlenv.world', 'rlenv.rl_node', "
-            "'rlenv.serving', 'rlenv.scene2d')))")
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                            timeout=60, check=True)
+    code = (
+        "import sys, rlenv_client, rlenv_client.rllib; "
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in "
+        "('pymunk', 'examples', 'ray', 'torch') or m in ('rlenv.node', "
+        "'rlenv.environment', 'rlenv.agent', 'rlenv.world', 'rlenv.rl_node', "
+        "'rlenv.serving', 'rlenv.scene2d')))"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True
+    )
     assert result.stdout.strip() == "[]"
 
 
@@ -62,8 +70,10 @@ def test_the_readme_example_environment_serves(serve: Serve, tmp_path: Path) -> 
     (tmp_path / "readme_push.py").write_text(code)
     from rlenv_client import ServerProcess
 
-    with ServerProcess("readme_push:PushEnvironment", env={"PYTHONPATH": str(tmp_path)}) \
-            as server, Client(server.host, server.port, timeout=10) as client:
+    with (
+        ServerProcess("readme_push:PushEnvironment", env={"PYTHONPATH": str(tmp_path)}) as server,
+        Client(server.host, server.port, timeout=10) as client,
+    ):
         observation, _ = client.reset(seed=1)
         start = float(np.linalg.norm(observation))
         toward_centre = np.clip(-observation, -1, 1).astype(np.float32)
@@ -78,8 +88,10 @@ def test_check_reports_a_good_environment() -> None:
     lines = result.stdout.splitlines()
     assert lines[0].startswith("PASS  connect")
     assert any(line.startswith("PASS  gymnasium check_env") for line in lines)
-    assert any(line.startswith("PASS  compliance under hostile input") and "0 failures" in line
-               for line in lines)
+    assert any(
+        line.startswith("PASS  compliance under hostile input") and "0 failures" in line
+        for line in lines
+    )
     assert re.search(r"^\d+ passed, 0 failed$", lines[-1])
 
 
@@ -95,17 +107,22 @@ def test_check_fails_a_broken_environment(serve: Serve) -> None:
 
 def test_bench_prints_every_figure_with_its_baseline(tmp_path: Path) -> None:
     out = tmp_path / "figures.json"
-    result = run("bench", "--rounds", "1", "--steps", "40", "--quick", "--json", str(out),
-                 timeout=300)
+    result = run(
+        "bench", "--rounds", "1", "--steps", "40", "--quick", "--json", str(out), timeout=300
+    )
     assert result.returncode == 0, result.stderr
     assert "... (a, b, c, g) ping-pong" in result.stderr  # progress on stderr
     figures = {figure["name"]: figure for figure in json.loads(out.read_text())}
-    for name in ("msgpack ping-pong over loopback", "remote CartPole Client.step (repeat 4)",
-                 "remote 84x84x3 observation step", "gymnasium AsyncVectorEnv(8) CartPole-v1",
-                 "RemoteVectorEnv 64 envs, 2 servers x 32 (repeat 1, zero actions)",
-                 "make_vec('rlenv/CartPole-v0', 64) against the floor",
-                 "p99 remote step latency (repeat 4)",
-                 "one more CartPole instance in a process"):
+    for name in (
+        "msgpack ping-pong over loopback",
+        "remote CartPole Client.step (repeat 4)",
+        "remote 84x84x3 observation step",
+        "gymnasium AsyncVectorEnv(8) CartPole-v1",
+        "RemoteVectorEnv 64 envs, 2 servers x 32 (repeat 1, zero actions)",
+        "make_vec('rlenv/CartPole-v0', 64) against the floor",
+        "p99 remote step latency (repeat 4)",
+        "one more CartPole instance in a process",
+    ):
         assert name in figures and figures[name]["value"] > 0, name
         assert name in result.stdout
     step = figures["remote CartPole Client.step (repeat 4)"]

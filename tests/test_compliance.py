@@ -30,8 +30,7 @@ def test_cartpole_keeps_the_contract_with_a_token_and_two_instances(
     """Every probe runs (CartPole exports World/Physics:gravity; the token is given): none is
     skipped and none fails."""
     server = serve(args=["--token", TOKEN, "--instances", "2"])
-    report = check_server(server.host, server.port, token=TOKEN, pid=server.pid,
-                          random_frames=30)
+    report = check_server(server.host, server.port, token=TOKEN, pid=server.pid, random_frames=30)
     figures["compliance (CartPole x 2, token)"] = report.summary()
     assert report.passed, "\n".join(report.failures)
     assert report.skipped == []
@@ -62,7 +61,9 @@ def test_a_server_that_breaks_the_contract_fails_those_probes_precisely(serve: S
         r"reset\(seed=\d+\), the same actions gave another trajectory than before the set, at "
         r"the first observation: expected observation \[(\d+)\.0, 0\.0\], got observation "
         r"\[(\d+)\.0, 0\.0\]; a snapshot taken right after that reset, restored, gave another "
-        r"trajectory", determinism), determinism
+        r"trajectory",
+        determinism,
+    ), determinism
     assert "the first restore of a snapshot taken after reset(seed=" in restores
     assert "inspect set /root/Drifting/Agent:gain = 2.0" in restores
     assert "the two restores differ from each other, at the first observation" in restores
@@ -71,8 +72,10 @@ def test_a_server_that_breaks_the_contract_fails_those_probes_precisely(serve: S
 def test_the_reply_tap_finds_timestamps_and_foreign_ext_types() -> None:
     """The check behind "the server sends no ext type but 1", on frames made here."""
     tap = ReplyTap()
-    assert tap.read(pack({"id": 1, "info": {"x": [1.0]}}), "a test") == \
-        {"id": 1, "info": {"x": [1.0]}}
+    assert tap.read(pack({"id": 1, "info": {"x": [1.0]}}), "a test") == {
+        "id": 1,
+        "info": {"x": [1.0]},
+    }
     assert tap.unreported() == []
     stamped = msgpack.packb({"id": 2, "info": {"when": msgpack.Timestamp(5)}})
     foreign = msgpack.packb({"id": 3, "info": [msgpack.ExtType(5, b"ab")]})
@@ -80,7 +83,8 @@ def test_the_reply_tap_finds_timestamps_and_foreign_ext_types() -> None:
     tap.read(foreign, "a test")
     tap.read(foreign, "a test")  # each code is reported once
     found = tap.unreported()
-    assert [line.split(" (", 1)[0] for line in found] == \
-        ["the server sent ext type -1", "the server sent ext type 5"]
+    assert [line.split(" (", 1)[0] for line in found] == [
+        "the server sent ext type -1",
+        "the server sent ext type 5",
+    ]
     assert tap.unreported() == [] and tap.frames == 4
-

@@ -215,8 +215,7 @@ def test_a_restored_sampler_continues_bit_for_bit(codec: str) -> None:
     original = _sampler(11)
     _episodes(original, 60, 0)
     state = original.state_dict()
-    carried = (unpack(pack(state)) if codec == "msgpack"
-               else json.loads(json.dumps(state)))
+    carried = unpack(pack(state)) if codec == "msgpack" else json.loads(json.dumps(state))
     restored = _sampler(None)
     restored.load_state_dict(carried)
     assert restored.weights() == original.weights()
@@ -247,12 +246,15 @@ def test_learnability_is_p_times_one_minus_p() -> None:
     assert learnability([1, 1, 1]) == 0.0
 
 
-@pytest.mark.parametrize(("score", "values", "name"), [
-    (positive_value_loss, [], "advantages"),
-    (lambda values: max_mc(1.0, values), [], "values"),
-    (learnability, [], "successes"),
-    (learnability, [1, 0.5], "successes"),
-])
+@pytest.mark.parametrize(
+    ("score", "values", "name"),
+    [
+        (positive_value_loss, [], "advantages"),
+        (lambda values: max_mc(1.0, values), [], "values"),
+        (learnability, [], "successes"),
+        (learnability, [1, 0.5], "successes"),
+    ],
+)
 def test_scores_refuse_what_is_not_an_episode(score: Any, values: list[float], name: str) -> None:
     with pytest.raises(ValueError, match=name):
         score(values)
@@ -261,17 +263,20 @@ def test_scores_refuse_what_is_not_an_episode(score: Any, values: list[float], n
 # --- errors -------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize(("options", "name"), [
-    ({"capacity": 0}, "capacity"),
-    ({"capacity": 2.5}, "capacity"),
-    ({"replay_prob": 1.5}, "replay_prob"),
-    ({"replay_prob": -0.1}, "replay_prob"),
-    ({"staleness_coeff": 2}, "staleness_coeff"),
-    ({"prioritization": "proportional"}, "prioritization"),
-    ({"temperature": 0}, "temperature"),
-    ({"k": 0}, "k"),
-    ({"minimum_fill_ratio": 1.1}, "minimum_fill_ratio"),
-])
+@pytest.mark.parametrize(
+    ("options", "name"),
+    [
+        ({"capacity": 0}, "capacity"),
+        ({"capacity": 2.5}, "capacity"),
+        ({"replay_prob": 1.5}, "replay_prob"),
+        ({"replay_prob": -0.1}, "replay_prob"),
+        ({"staleness_coeff": 2}, "staleness_coeff"),
+        ({"prioritization": "proportional"}, "prioritization"),
+        ({"temperature": 0}, "temperature"),
+        ({"k": 0}, "k"),
+        ({"minimum_fill_ratio": 1.1}, "minimum_fill_ratio"),
+    ],
+)
 def test_bad_arguments_are_named(options: dict[str, Any], name: str) -> None:
     arguments = {"capacity": 4, **options}
     with pytest.raises(ValueError, match=f"^{name} "):
@@ -292,7 +297,11 @@ def test_a_score_must_be_a_finite_number(score: Any) -> None:
 
 def test_an_unknown_level_id_is_a_key_error() -> None:
     sampler = _filled([1.0])
-    for call in (lambda: sampler.update(7, 1.0), lambda: sampler.level(7),
-                 lambda: sampler.score(7), lambda: sampler.level("0")):
+    for call in (
+        lambda: sampler.update(7, 1.0),
+        lambda: sampler.level(7),
+        lambda: sampler.score(7),
+        lambda: sampler.level("0"),
+    ):
         with pytest.raises(KeyError, match="level_id"):
             call()

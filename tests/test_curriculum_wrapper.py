@@ -55,7 +55,8 @@ def two_on_one() -> Iterator[gymnasium.vector.VectorEnv]:
 
 
 def test_a_new_level_then_replays_with_their_infos_and_masks(
-        two_on_one: gymnasium.vector.VectorEnv) -> None:
+    two_on_one: gymnasium.vector.VectorEnv,
+) -> None:
     sampler = LevelSampler(2, replay_prob=1.0, seed=0)
     wrapper = CurriculumVectorEnv(two_on_one, sampler, seed=1)
     observations, info = wrapper.reset(seed=3)
@@ -117,7 +118,8 @@ def test_learnability_scores_reach_the_buffer(two_on_one: gymnasium.vector.Vecto
 
 
 def test_accel_plays_an_edit_of_each_replayed_level_next(
-        two_on_one: gymnasium.vector.VectorEnv) -> None:
+    two_on_one: gymnasium.vector.VectorEnv,
+) -> None:
     """With edit_levels, a replay is followed by its level edited (data), played as new."""
     sampler = LevelSampler(2, replay_prob=1.0, seed=0)
     wrapper = CurriculumVectorEnv(two_on_one, sampler, seed=4, edit_levels=2)
@@ -126,8 +128,11 @@ def test_accel_plays_an_edit_of_each_replayed_level_next(
     for _ in range(1500):
         if "replayed" in info:
             for index in np.flatnonzero(info["_replayed"]):
-                replays[index].append("replay" if info["replayed"][index] else
-                                      type(wrapper._playing[index].level).__name__)
+                replays[index].append(
+                    "replay"
+                    if info["replayed"][index]
+                    else type(wrapper._playing[index].level).__name__
+                )
         observations, _, _, _, info = wrapper.step(follow(observations))
         if sum(kind == "dict" for played in replays for kind in played) >= 2:
             break
@@ -149,7 +154,8 @@ def test_edit_levels_must_be_a_count() -> None:
 
 
 def test_a_replayed_seed_replays_the_first_observation_bit_for_bit(
-        two_on_one: gymnasium.vector.VectorEnv) -> None:
+    two_on_one: gymnasium.vector.VectorEnv,
+) -> None:
     sampler = LevelSampler(1, replay_prob=1.0, seed=0)
     wrapper = CurriculumVectorEnv(two_on_one, sampler, seed=4)
     observations, info = wrapper.reset()
@@ -196,10 +202,10 @@ def test_a_replayed_data_level_is_played_bit_for_bit() -> None:
 
 
 @pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
-def test_two_sub_environments_get_other_levels_at_the_same_autoreset(
-        mode: AutoresetMode) -> None:
-    with RemoteVectorEnv(2, PLINKO, instances_per_server=2, max_episode_steps=3,
-                         autoreset_mode=mode) as envs:
+def test_two_sub_environments_get_other_levels_at_the_same_autoreset(mode: AutoresetMode) -> None:
+    with RemoteVectorEnv(
+        2, PLINKO, instances_per_server=2, max_episode_steps=3, autoreset_mode=mode
+    ) as envs:
         observations, _ = envs.reset(seed=[11, 12])
         first = observations.copy()
         default = difficulties(envs)
@@ -232,8 +238,9 @@ def test_steps_without_reset_with_stay_on_the_lean_path() -> None:
         client.receive_steps()
         client.send_steps(actions, np.array([True, False]), reset_with=[None, None])
         client.receive_steps()
-        client.send_steps(actions, np.array([True, False]),
-                          reset_with=[{"reset": {"seed": 7}}, None])
+        client.send_steps(
+            actions, np.array([True, False]), reset_with=[{"reset": {"seed": 7}}, None]
+        )
         answers.append(client.receive_steps())
     assert counting.runs == 2  # the two requests without entries
     one, other = answers  # row 1 was reset unseeded: its generator differs on each host
@@ -244,12 +251,15 @@ def test_steps_without_reset_with_stay_on_the_lean_path() -> None:
     assert one.observation[0].tobytes() == observation.tobytes()
 
 
-@pytest.mark.parametrize("reset_with, message", [
-    ([{"reset": {}}], "a list of 2 entries"),
-    ([{"reset": {}}, {"reset": {}}], "instance 1 does not reset"),
-    ([{"reset": {"seed": -1}}, None], "steps.reset_with[0]: reset.seed"),
-    ([{"seed": 1}, None], "unknown key 'seed' in steps.reset_with[0]"),
-])
+@pytest.mark.parametrize(
+    "reset_with, message",
+    [
+        ([{"reset": {}}], "a list of 2 entries"),
+        ([{"reset": {}}, {"reset": {}}], "instance 1 does not reset"),
+        ([{"reset": {"seed": -1}}, None], "steps.reset_with[0]: reset.seed"),
+        ([{"seed": 1}, None], "unknown key 'seed' in steps.reset_with[0]"),
+    ],
+)
 def test_bad_reset_with_is_refused_whole(reset_with: list[Any], message: str) -> None:
     actions = np.zeros((2, 1), np.float32)
     with LocalClient(CartPoleEnvironment, instances=2) as client:
@@ -264,25 +274,40 @@ def test_the_sb3_callback_scores_a_ppo_rollout() -> None:
     sb3 = pytest.importorskip("stable_baselines3")
     from rlenv_client.sb3 import CurriculumCallback, SB3VecEnv
 
-    with RemoteVectorEnv(2, PLINKO, instances_per_server=2, max_episode_steps=40,
-                         autoreset_mode=AutoresetMode.SAME_STEP) as envs:
+    with RemoteVectorEnv(
+        2,
+        PLINKO,
+        instances_per_server=2,
+        max_episode_steps=40,
+        autoreset_mode=AutoresetMode.SAME_STEP,
+    ) as envs:
         sampler = LevelSampler(8, replay_prob=0.5, minimum_fill_ratio=0.25, robust=True, seed=0)
         wrapper = CurriculumVectorEnv(envs, sampler, score="external", seed=0)
         callback = CurriculumCallback(wrapper)
-        model = sb3.PPO("MlpPolicy", SB3VecEnv(vector=wrapper), n_steps=128, batch_size=64,
-                        n_epochs=1, normalize_advantage=False, seed=0, device="cpu")
+        model = sb3.PPO(
+            "MlpPolicy",
+            SB3VecEnv(vector=wrapper),
+            n_steps=128,
+            batch_size=64,
+            n_epochs=1,
+            normalize_advantage=False,
+            seed=0,
+            device="cpu",
+        )
         model.learn(256, callback=callback)
         assert callback.scored >= 4
         assert len(sampler) >= 2
         assert any(score > 0 for score in (sampler.score(i) for i in sampler.weights()))
         with pytest.raises(ValueError, match="normalize_advantage=False"):
             sb3.PPO("MlpPolicy", SB3VecEnv(vector=wrapper), n_steps=64, device="cpu").learn(
-                64, callback=CurriculumCallback(wrapper))
+                64, callback=CurriculumCallback(wrapper)
+            )
 
 
 @pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
 def test_a_level_on_trial_is_played_n_times_then_offered_with_their_mean(
-        mode: AutoresetMode) -> None:
+    mode: AutoresetMode,
+) -> None:
     """rollouts_per_level=3: a new level's 3 episodes (on either sub-env) come before its score."""
     with RemoteVectorEnv(2, PLINKO, instances_per_server=2, autoreset_mode=mode) as envs:
         sampler = LevelSampler(100, replay_prob=0.0, seed=0)
@@ -310,8 +335,9 @@ def test_a_level_on_trial_is_played_n_times_then_offered_with_their_mean(
                 continue
             observations, _, _, _, info = wrapper.step(follow(observations))
             assert len(wrapper._trials) <= 2 * wrapper.num_envs
-            held = [e.trial for e in wrapper._playing if e is not None] + \
-                [chosen[2] for chosen in wrapper._next if chosen is not None]
+            held = [e.trial for e in wrapper._playing if e is not None] + [
+                chosen[2] for chosen in wrapper._next if chosen is not None
+            ]
             for number, trial in wrapper._trials.items():  # no trial is lost or overplayed
                 assert trial.under_way == held.count(number)
                 assert len(trial.results) + trial.under_way <= 3
@@ -325,14 +351,16 @@ def test_a_level_on_trial_is_played_n_times_then_offered_with_their_mean(
             if len(sampler) >= 4 and any(len(played) == 2 for played in players.values()):
                 break
         assert len(sampler) >= 4, "fewer than 4 levels were offered"
-        assert any(len(played) == 2 for played in players.values()), \
+        assert any(len(played) == 2 for played in players.values()), (
             "no level's trial went on another sub-env"
+        )
         assert all(len(observed) == 1 for observed in firsts.values())  # the level, replayed
 
 
 @pytest.mark.parametrize("rollouts", [1, 2])
 def test_with_several_rollouts_learnable_levels_enter_a_full_buffer(
-        two_on_one: gymnasium.vector.VectorEnv, rollouts: int) -> None:
+    two_on_one: gymnasium.vector.VectorEnv, rollouts: int
+) -> None:
     """The first 2 levels are always caught (learnability 0); each later level is caught on
     its first rollout only (0.25 over 2): with one rollout no level enters the full buffer."""
     sampler = LevelSampler(2, replay_prob=0.5, seed=0)
@@ -363,8 +391,7 @@ def test_with_several_rollouts_learnable_levels_enter_a_full_buffer(
             if len(outcomes[trial]) == rollouts:  # offered now: in the buffer if it entered
                 buffered = {sampler.level(i): sampler.score(i) for i in sampler.weights()}
                 if levels[trial] in buffered:
-                    assert buffered[levels[trial]] == pytest.approx(
-                        learnability(outcomes[trial]))
+                    assert buffered[levels[trial]] == pytest.approx(learnability(outcomes[trial]))
         if new_levels >= 40 and (rollouts == 1 or max(sampler.weights()) >= 4):
             break
     if rollouts == 1:
@@ -375,10 +402,13 @@ def test_with_several_rollouts_learnable_levels_enter_a_full_buffer(
         assert max(sampler.weights()) >= 4, "fewer than 3 levels entered the full buffer"
 
 
-@pytest.mark.parametrize("options, message", [
-    ({"rollouts_per_level": 0}, "rollouts_per_level must be an int >= 1, got 0"),
-    ({"rollouts_per_level": 2, "score": "external"}, "not 'external'"),
-])
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        ({"rollouts_per_level": 0}, "rollouts_per_level must be an int >= 1, got 0"),
+        ({"rollouts_per_level": 2, "score": "external"}, "not 'external'"),
+    ],
+)
 def test_rollouts_per_level_is_checked(options: dict[str, Any], message: str) -> None:
     envs = gymnasium.make_vec("rlenv/Plinko-v0", num_envs=1)
     try:
@@ -390,8 +420,7 @@ def test_rollouts_per_level_is_checked(options: dict[str, Any], message: str) ->
 
 def test_accel_edits_go_on_trial_like_new_levels(two_on_one: gymnasium.vector.VectorEnv) -> None:
     sampler = LevelSampler(2, replay_prob=1.0, seed=0)
-    wrapper = CurriculumVectorEnv(two_on_one, sampler, seed=4, edit_levels=2,
-                                  rollouts_per_level=2)
+    wrapper = CurriculumVectorEnv(two_on_one, sampler, seed=4, edit_levels=2, rollouts_per_level=2)
     observations, info = wrapper.reset()
     plays: dict[bytes, int] = {}  # an edited level (packed) -> its episodes started
     for _ in range(3000):

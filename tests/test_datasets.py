@@ -43,13 +43,13 @@ def datasets_path(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     return path
 
 
-def record(directory: Path, env_id: str, policies: list[Policy],
-           **kwargs: Any) -> list[Seen]:
+def record(directory: Path, env_id: str, policies: list[Policy], **kwargs: Any) -> list[Seen]:
     """Record one episode per policy (given the episode, the step, the observation), for real."""
     env = RecordEpisodes(gym.make(env_id, **kwargs), directory)
     try:
-        return [play(env, policy, number, 100 + number, 1000)
-                for number, policy in enumerate(policies)]
+        return [
+            play(env, policy, number, 100 + number, 1000) for number, policy in enumerate(policies)
+        ]
     finally:
         env.close()
 
@@ -71,14 +71,19 @@ def play(env: gym.Env, policy: Policy, number: int, seed: int, steps: int) -> Se
 
 
 def rlenv(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "rlenv", *args], capture_output=True,
-                          text=True, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "rlenv", *args], capture_output=True, text=True, timeout=300
+    )
 
 
 def minari_show(dataset_id: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-c", "from minari.cli import app; app()", "show",
-                           dataset_id], capture_output=True, text=True, timeout=300,
-                          env={**os.environ, "COLUMNS": "200"})
+    return subprocess.run(
+        [sys.executable, "-c", "from minari.cli import app; app()", "show", dataset_id],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={**os.environ, "COLUMNS": "200"},
+    )
 
 
 def push(number: int, t: int, observation: Any) -> int:
@@ -112,11 +117,17 @@ def assert_same(dataset: Any, seen: list[Seen]) -> None:
 
 
 def test_cartpole_recordings_become_a_dataset(tmp_path: Path) -> None:
-    seen = record(tmp_path / "episodes", "rlenv/CartPole-v1", [push, push],
-                  max_episode_steps=30)
+    seen = record(tmp_path / "episodes", "rlenv/CartPole-v1", [push, push], max_episode_steps=30)
     assert [(s.terminated, s.truncated) for s in seen] == [(True, False), (False, True)]
-    result = rlenv("dataset", "create", "cartpole/recorded-v0", "--from",
-                   str(tmp_path / "episodes"), "--author", "rlenv tests")
+    result = rlenv(
+        "dataset",
+        "create",
+        "cartpole/recorded-v0",
+        "--from",
+        str(tmp_path / "episodes"),
+        "--author",
+        "rlenv tests",
+    )
     assert result.returncode == 0, result.stderr
     steps = sum(len(s.actions) for s in seen)
     assert f"wrote dataset cartpole/recorded-v0: 2 episodes, {steps} steps" in result.stdout
@@ -136,25 +147,32 @@ def test_cartpole_recordings_become_a_dataset(tmp_path: Path) -> None:
         env.close()
     shown = minari_show("cartpole/recorded-v0")
     assert shown.returncode == 0, shown.stdout + shown.stderr
-    for text in ("cartpole/recorded-v0", f"Total Steps               │ {steps}",
-                 "Total Episodes            │ 2", "Discrete(2)", "rlenv/CartPole-v1",
-                 "rlenv tests"):
+    for text in (
+        "cartpole/recorded-v0",
+        f"Total Steps               │ {steps}",
+        "Total Episodes            │ 2",
+        "Discrete(2)",
+        "rlenv/CartPole-v1",
+        "rlenv tests",
+    ):
         assert text in shown.stdout, shown.stdout
 
 
 def test_a_box_action_environment_and_older_recordings(tmp_path: Path) -> None:
-    seen = record(tmp_path / "episodes", "rlenv/Reacher-v0", [sweep, sweep],
-                  max_episode_steps=25)
+    seen = record(tmp_path / "episodes", "rlenv/Reacher-v0", [sweep, sweep], max_episode_steps=25)
     older = tmp_path / "episodes" / "episode-0002.rlenv"
     episode = EpisodeFile.load(older)
     assert (episode.terminated, episode.truncated) == (seen[1].terminated, seen[1].truncated)
     episode.terminated = episode.truncated = None  # as recorded before they were kept
     episode.save(older)
-    result = rlenv("dataset", "create", "rlenv/reacher/sweep-v3", "--from",
-                   str(tmp_path / "episodes"))
+    result = rlenv(
+        "dataset", "create", "rlenv/reacher/sweep-v3", "--from", str(tmp_path / "episodes")
+    )
     assert result.returncode == 0, result.stderr
-    assert "note: episode-0002.rlenv is an older recording, without its end: truncated, " \
-           "as re-simulated" in result.stdout
+    assert (
+        "note: episode-0002.rlenv is an older recording, without its end: truncated, "
+        "as re-simulated" in result.stdout
+    )
     dataset = minari.load_dataset("rlenv/reacher/sweep-v3")
     assert_same(dataset, seen)
     assert dataset.spec.action_space == gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
@@ -171,46 +189,62 @@ def test_data_collector_around_an_rlenv_environment(tmp_path: Path) -> None:
     env = minari.DataCollector(gym.make("rlenv/CartPole-v1", max_episode_steps=20))
     try:
         seen = [play(env, push, number, number, 100) for number in range(2)]
-        env.create_dataset("cartpole/collected-v0", algorithm_name="push",
-                           author="rlenv tests", author_email="-", code_permalink="-",
-                           description="DataCollector test", eval_env="rlenv/CartPole-v1")
+        env.create_dataset(
+            "cartpole/collected-v0",
+            algorithm_name="push",
+            author="rlenv tests",
+            author_email="-",
+            code_permalink="-",
+            description="DataCollector test",
+            eval_env="rlenv/CartPole-v1",
+        )
     finally:
         env.close()
     assert_same(minari.load_dataset("cartpole/collected-v0"), seen)
 
 
-@pytest.mark.parametrize(("dataset_id", "form"), [
-    ("cartpole", "ENV/NAME-vN or NAMESPACE/ENV/NAME-vN"),
-    ("cartpole/expert", "ENV/NAME-vN or NAMESPACE/ENV/NAME-vN"),
-    ("cart pole/expert-v0", "ENV/NAME-vN or NAMESPACE/ENV/NAME-vN"),
-])
-def test_a_dataset_id_of_another_form_is_refused(tmp_path: Path, dataset_id: str,
-                                                 form: str) -> None:
+@pytest.mark.parametrize(
+    ("dataset_id", "form"),
+    [
+        ("cartpole", "ENV/NAME-vN or NAMESPACE/ENV/NAME-vN"),
+        ("cartpole/expert", "ENV/NAME-vN or NAMESPACE/ENV/NAME-vN"),
+        ("cart pole/expert-v0", "ENV/NAME-vN or NAMESPACE/ENV/NAME-vN"),
+    ],
+)
+def test_a_dataset_id_of_another_form_is_refused(
+    tmp_path: Path, dataset_id: str, form: str
+) -> None:
     result = rlenv("dataset", "create", dataset_id, "--from", str(tmp_path))
     assert result.returncode == 2
-    assert result.stderr.strip() == (f"rlenv dataset: dataset id {dataset_id!r} is not of the "
-                                     f"form {form} (for example cartpole/expert-v0)")
+    assert result.stderr.strip() == (
+        f"rlenv dataset: dataset id {dataset_id!r} is not of the "
+        f"form {form} (for example cartpole/expert-v0)"
+    )
 
 
 def test_an_empty_folder_is_refused(tmp_path: Path) -> None:
     (tmp_path / "empty").mkdir()
     result = rlenv("dataset", "create", "cartpole/none-v0", "--from", str(tmp_path / "empty"))
     assert result.returncode == 2
-    assert result.stderr.strip() == (f"rlenv dataset: {tmp_path / 'empty'} holds no recordings "
-                                     f"(*.rlenv files written by RecordEpisodes)")
+    assert result.stderr.strip() == (
+        f"rlenv dataset: {tmp_path / 'empty'} holds no recordings "
+        f"(*.rlenv files written by RecordEpisodes)"
+    )
 
 
-def test_a_recording_that_no_longer_replays_names_its_step(tmp_path: Path,
-                                                          datasets_path: Path) -> None:
+def test_a_recording_that_no_longer_replays_names_its_step(
+    tmp_path: Path, datasets_path: Path
+) -> None:
     record(tmp_path / "episodes", "rlenv/CartPole-v1", [push])
     path = tmp_path / "episodes" / "episode-0001.rlenv"
     episode = EpisodeFile.load(path)
     actions = [event for event in episode.snapshot["events"] if event[0] == "action"]
     actions[3][1] = 0  # step 4 pushed the other way: the cart's velocity differs
     episode.save(path)
-    result = rlenv("dataset", "create", "cartpole/changed-v0", "--from",
-                   str(tmp_path / "episodes"))
+    result = rlenv("dataset", "create", "cartpole/changed-v0", "--from", str(tmp_path / "episodes"))
     assert result.returncode == 2
-    assert result.stderr.strip() == (f"rlenv dataset: {path} no longer replays: step 4: the "
-                                     f"observation differs from the recording")
+    assert result.stderr.strip() == (
+        f"rlenv dataset: {path} no longer replays: step 4: the "
+        f"observation differs from the recording"
+    )
     assert not (datasets_path / "cartpole" / "changed-v0").exists()

@@ -52,8 +52,9 @@ EXPECTED = {
     "rlenv.scene2d.physics.collision_shape.CollisionShape.box": ["width", "height", "mass"],
     "rlenv.scene2d.physics.collision_shape.CollisionShape.segment": ["radius", "body's frame"],
     "rlenv.scene2d.physics.collision_shape.CollisionShape.circle": ["radius"],
-    "rlenv.scene2d.physics.collision_shape.CollisionShape.collision_started":
-        ["collision_started(shape)"],
+    "rlenv.scene2d.physics.collision_shape.CollisionShape.collision_started": [
+        "collision_started(shape)"
+    ],
     "rlenv.scene2d.physics.joint.Joint.pivot": ["world coordinates"],
     "rlenv.scene2d.camera.Camera": ["row 0", "pixels"],
     "rlenv.scene2d.render.draw_list": [],
@@ -83,9 +84,21 @@ def build(config: Path, site: Path) -> subprocess.CompletedProcess[str]:
     if importlib.util.find_spec("mkdocs") is None:
         pytest.fail("mkdocs is not installed: `make docs` installs the docs extra")
     return subprocess.run(
-        [sys.executable, "-m", "mkdocs", "build", "--strict", "--config-file", str(config),
-         "--site-dir", str(site)],
-        cwd=config.parent, capture_output=True, text=True, timeout=BUILD_TIMEOUT,
+        [
+            sys.executable,
+            "-m",
+            "mkdocs",
+            "build",
+            "--strict",
+            "--config-file",
+            str(config),
+            "--site-dir",
+            str(site),
+        ],
+        cwd=config.parent,
+        capture_output=True,
+        text=True,
+        timeout=BUILD_TIMEOUT,
         env={**os.environ, "NO_MKDOCS_2_WARNING": "1"},
     )
 
@@ -116,13 +129,19 @@ def entry_text(site: Path, page: str, identifier: str) -> str:
     document = (site / page / "index.html").read_text(encoding="utf-8")
     start = document.index(f'id="{identifier}" class="doc doc-heading"')
     end = document.find('class="doc doc-heading"', start + len(identifier) + 30)
-    text = re.sub(r"<[^>]+>", "", document[start:end if end > 0 else None])
+    text = re.sub(r"<[^>]+>", "", document[start : end if end > 0 else None])
     return html.unescape(re.sub(r"\s+", " ", text))
 
 
 def test_the_site_builds_without_a_warning_and_has_every_page(site: Path) -> None:
-    for page in ("index.html", "architecture/index.html", "protocol/index.html",
-                 "protocol/vectors/index.html", "reference/index.html", "changelog/index.html"):
+    for page in (
+        "index.html",
+        "architecture/index.html",
+        "protocol/index.html",
+        "protocol/vectors/index.html",
+        "reference/index.html",
+        "changelog/index.html",
+    ):
         assert (site / page).is_file(), page
     home = (site / "index.html").read_text(encoding="utf-8")
     assert "Writing an environment" in home  # the README is the home page
@@ -141,8 +160,11 @@ def test_the_reference_documents_what_users_touch(site: Path, identifier: str) -
 
 
 def test_no_sphinx_role_is_left_as_text(site: Path) -> None:
-    leaks = [str(page.relative_to(site)) for page in site.rglob("*.html")
-             if re.search(r":(class|meth|func|attr|mod|data|exc|obj):", page.read_text("utf-8"))]
+    leaks = [
+        str(page.relative_to(site))
+        for page in site.rglob("*.html")
+        if re.search(r":(class|meth|func|attr|mod|data|exc|obj):", page.read_text("utf-8"))
+    ]
     assert leaks == []
     physics = (site / "reference" / "scene2d" / "index.html").read_text(encoding="utf-8")
     assert 'href="#rlenv.scene2d.physics.world.PhysicsWorld"' in physics  # roles became links
@@ -151,7 +173,8 @@ def test_no_sphinx_role_is_left_as_text(site: Path) -> None:
 def test_a_reference_to_a_missing_name_fails_the_build(tmp_path: Path) -> None:
     package = tmp_path / "src" / "sample"
     package.mkdir(parents=True)
-    (package / "__init__.py").write_text(textwrap.dedent('''
+    (package / "__init__.py").write_text(
+        textwrap.dedent('''
         """A sample package."""
 
 
@@ -161,10 +184,12 @@ def test_a_reference_to_a_missing_name_fails_the_build(tmp_path: Path) -> None:
 
         def caller() -> None:
             """Calls :func:`present`, then :func:`vanished`."""
-    '''))
+    ''')
+    )
     (tmp_path / "docs").mkdir()
     (tmp_path / "docs" / "index.md").write_text("# Sample\n\n::: sample\n")
-    (tmp_path / "mkdocs.yml").write_text(textwrap.dedent(f"""
+    (tmp_path / "mkdocs.yml").write_text(
+        textwrap.dedent(f"""
         site_name: sample
         plugins:
           - mkdocstrings:
@@ -175,7 +200,8 @@ def test_a_reference_to_a_missing_name_fails_the_build(tmp_path: Path) -> None:
                     extensions:
                       - {ROOT / "docs" / "hooks" / "sphinx_roles.py"}:SphinxRoles:
                           checked: [sample]
-    """))
+    """)
+    )
     result = build(tmp_path / "mkdocs.yml", tmp_path / "site")
     output = result.stdout + result.stderr
     assert result.returncode != 0, output

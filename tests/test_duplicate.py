@@ -54,8 +54,11 @@ def pendulum(origin: tuple[float, float] = (0.0, 3.0)) -> Node2D:
     anchor = StaticBody(name="Anchor")
     anchor.add_child(CollisionShape.circle(0.05, sensor=True))
     bob = RigidBody(name="Bob", position=(1.0, 0.0))
-    bob.add_child(CollisionShape.circle(0.1, mass=1.0, friction=0.9, elasticity=0.4,
-                                        color="teal", name="Skin"))
+    bob.add_child(
+        CollisionShape.circle(
+            0.1, mass=1.0, friction=0.9, elasticity=0.4, color="teal", name="Skin"
+        )
+    )
     rig.add_child(anchor)
     rig.add_child(bob)
     rig.add_child(Joint.pivot("../Anchor", "../Bob", (0.0, 0.0), name="Hinge"))

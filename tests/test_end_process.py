@@ -14,8 +14,13 @@ _READY = "import sys; print('ready', flush=True); "
 
 
 def _child(code: str, **options: object) -> subprocess.Popen[str]:
-    process = subprocess.Popen([sys.executable, "-c", _READY + code], stdout=subprocess.PIPE,
-                               stdin=subprocess.PIPE, text=True, **options)  # type: ignore[call-overload]
+    process = subprocess.Popen(
+        [sys.executable, "-c", _READY + code],
+        stdout=subprocess.PIPE,
+        stdin=subprocess.PIPE,
+        text=True,
+        **options,
+    )  # type: ignore[call-overload]
     assert process.stdout is not None and process.stdout.readline() == "ready\n"
     return process
 
@@ -27,8 +32,10 @@ def test_sigterm_ends_a_process_that_obeys_it() -> None:
 
 
 def test_one_that_ignores_sigterm_is_killed_at_the_deadline() -> None:
-    process = _child("import signal; signal.signal(signal.SIGTERM, signal.SIG_IGN); "
-                     "print('ignoring', flush=True); sys.stdin.read()")
+    process = _child(
+        "import signal; signal.signal(signal.SIGTERM, signal.SIG_IGN); "
+        "print('ignoring', flush=True); sys.stdin.read()"
+    )
     assert process.stdout is not None and process.stdout.readline() == "ignoring\n"
     assert end_process(process, 0.2) == -signal.SIGKILL
     assert not alive(process.pid)
@@ -43,9 +50,12 @@ def test_without_a_first_signal_it_waits_for_the_process_to_end_by_itself() -> N
 
 
 def test_a_group_ends_with_its_leader() -> None:
-    leader = _child("import subprocess; child = subprocess.Popen([sys.executable, '-c', "
-                    "'import time; time.sleep(600)']); print(child.pid, flush=True); "
-                    "sys.stdin.read()", start_new_session=True)
+    leader = _child(
+        "import subprocess; child = subprocess.Popen([sys.executable, '-c', "
+        "'import time; time.sleep(600)']); print(child.pid, flush=True); "
+        "sys.stdin.read()",
+        start_new_session=True,
+    )
     assert leader.stdout is not None
     grandchild = int(leader.stdout.readline())
     assert alive(grandchild)

@@ -35,18 +35,20 @@ SEED = 3  # Red catches its apple at step 15, Blue (chasing too) at step 17
 def _serve_timed(serve: Serve, target: str, instances: int = 1) -> str:
     """A server of ``target`` (from ``tests/``) with ``instances`` instances: its address."""
     path = os.pathsep.join(filter(None, [str(TESTS), os.environ.get("PYTHONPATH")]))
-    return serve(target, env={"PYTHONPATH": path},
-                 args=["--instances", str(instances)]).address
+    return serve(target, env={"PYTHONPATH": path}, args=["--instances", str(instances)]).address
 
 
 def _actions(observation: dict[str, np.ndarray], blue_chases: bool) -> dict[str, np.ndarray]:
     """Red chases its apple; Blue chases too, or stands still (then it times out)."""
-    return {"Red": chase(observation["Red"]),
-            "Blue": chase(observation["Blue"]) if blue_chases else STILL}
+    return {
+        "Red": chase(observation["Red"]),
+        "Blue": chase(observation["Blue"]) if blue_chases else STILL,
+    }
 
 
-def _play(reset: Callable[[], Any], step: Callable[[Any], tuple[Any, ...]],
-          blue_chases: bool) -> Iterator[tuple[bool, bool, dict[str, dict[str, Any]]]]:
+def _play(
+    reset: Callable[[], Any], step: Callable[[Any], tuple[Any, ...]], blue_chases: bool
+) -> Iterator[tuple[bool, bool, dict[str, dict[str, Any]]]]:
     """Each step's joint flags and agents' outcomes, until the joint episode ends."""
     observation = reset()
     for _ in range(STEPS):
@@ -57,8 +59,9 @@ def _play(reset: Callable[[], Any], step: Callable[[Any], tuple[Any, ...]],
     raise AssertionError(f"the episode did not end in {STEPS} steps")
 
 
-def _assert_ends(flags: list[tuple[bool, bool, dict[str, dict[str, Any]]]],
-                 blue_chases: bool) -> None:
+def _assert_ends(
+    flags: list[tuple[bool, bool, dict[str, dict[str, Any]]]], blue_chases: bool
+) -> None:
     """Before the last step nothing ended jointly; the last is terminated or truncated."""
     *before, (terminated, truncated, agents) = flags
     assert all(not ended and not cut for ended, cut, _ in before)
@@ -68,8 +71,11 @@ def _assert_ends(flags: list[tuple[bool, bool, dict[str, dict[str, Any]]]],
         assert agents["Blue"]["terminated"] and not agents["Blue"]["truncated"]
     else:  # Red was caught first, then Blue timed out
         assert (terminated, truncated) == (False, True)
-        assert agents["Blue"] == {"reward": pytest.approx(-0.04), "terminated": False,
-                                  "truncated": True}
+        assert agents["Blue"] == {
+            "reward": pytest.approx(-0.04),
+            "terminated": False,
+            "truncated": True,
+        }
         assert len(flags) == STEPS
         assert any(outcome["Red"]["terminated"] for *_, outcome in before)  # caught earlier
 
@@ -79,12 +85,14 @@ def test_the_protocols_answer_and_remote_env(serve: Serve, blue_chases: bool) ->
     address = _serve_timed(serve, TIMED_PAIR)
     host, port = address.rsplit(":", 1)
     with Client(host, int(port), timeout=10) as client:
-        _assert_ends(list(_play(lambda: client.reset(seed=SEED)[0], client.step, blue_chases)),
-                     blue_chases)
+        _assert_ends(
+            list(_play(lambda: client.reset(seed=SEED)[0], client.step, blue_chases)), blue_chases
+        )
     env = RemoteEnv(address=address, timeout=10)
     try:
-        _assert_ends(list(_play(lambda: env.reset(seed=SEED)[0], env.step, blue_chases)),
-                     blue_chases)
+        _assert_ends(
+            list(_play(lambda: env.reset(seed=SEED)[0], env.step, blue_chases)), blue_chases
+        )
     finally:
         env.close()
 
@@ -97,7 +105,8 @@ def test_one_agent_s_flags_are_passed_on_unchanged(serve: Serve) -> None:
             observation, _ = env.reset(seed=SEED)
             for _ in range(STEPS):
                 observation, _, terminated, truncated, info = env.step(
-                    chase(observation) if chases else STILL)
+                    chase(observation) if chases else STILL
+                )
                 if terminated or truncated:
                     break
             assert (terminated, truncated) == expected and "agents" not in info
@@ -112,12 +121,16 @@ def test_the_vector_s_steps_columns(serve: Serve) -> None:
         observations, _ = envs.reset(seed=SEED)
         ended: dict[int, tuple[bool, bool, dict[str, Any]]] = {}
         for _ in range(STEPS):
-            actions = {"Red": np.stack([chase(observations["Red"][i]) for i in range(2)]),
-                       "Blue": np.stack([STILL, chase(observations["Blue"][1])])}
+            actions = {
+                "Red": np.stack([chase(observations["Red"][i]) for i in range(2)]),
+                "Blue": np.stack([STILL, chase(observations["Blue"][1])]),
+            }
             observations, _, terminations, truncations, infos = envs.step(actions)
             for index in np.flatnonzero(terminations | truncations):
-                ended.setdefault(int(index), (bool(terminations[index]),
-                                              bool(truncations[index]), _agents_of(infos, index)))
+                ended.setdefault(
+                    int(index),
+                    (bool(terminations[index]), bool(truncations[index]), _agents_of(infos, index)),
+                )
             if len(ended) == 2:
                 break
         assert ended[0][:2] == (False, True) and ended[1][:2] == (True, False)
@@ -127,8 +140,10 @@ def test_the_vector_s_steps_columns(serve: Serve) -> None:
 def _agents_of(infos: dict[str, Any], index: int) -> dict[str, dict[str, bool]]:
     """Sub-env ``index``'s agents' flags, from a vector's info of arrays."""
     agents = infos["agents"]
-    return {name: {flag: bool(agents[name][flag][index]) for flag in ("terminated", "truncated")}
-            for name in ("Red", "Blue")}
+    return {
+        name: {flag: bool(agents[name][flag][index]) for flag in ("terminated", "truncated")}
+        for name in ("Red", "Blue")
+    }
 
 
 def test_sb3_s_vec_env(serve: Serve) -> None:
@@ -142,8 +157,10 @@ def test_sb3_s_vec_env(serve: Serve) -> None:
         observations = envs.reset()
         ended: dict[int, dict[str, Any]] = {}
         for _ in range(STEPS):
-            actions = {"Red": np.stack([chase(observations["Red"][i]) for i in range(2)]),
-                       "Blue": np.stack([STILL, chase(observations["Blue"][1])])}
+            actions = {
+                "Red": np.stack([chase(observations["Red"][i]) for i in range(2)]),
+                "Blue": np.stack([STILL, chase(observations["Blue"][1])]),
+            }
             observations, _, dones, infos = envs.step(actions)
             for index in np.flatnonzero(dones):
                 ended.setdefault(int(index), infos[index])
@@ -164,8 +181,10 @@ def test_pettingzoo_s_agents(serve: Serve) -> None:
         observations, _ = env.reset(seed=SEED)
         ends: dict[str, tuple[bool, bool]] = {}
         while env.agents:
-            actions = {agent: chase(observations[agent]) if agent == "Red" else STILL
-                       for agent in env.agents}
+            actions = {
+                agent: chase(observations[agent]) if agent == "Red" else STILL
+                for agent in env.agents
+            }
             observations, _, terminations, truncations, _ = env.step(actions)
             for agent in actions:
                 if terminations[agent] or truncations[agent]:
@@ -195,8 +214,10 @@ def test_a_client_side_time_limit_truncates_every_agent_still_playing() -> None:
             actions = {"Red": chase(observations["Red"][0])[None], "Blue": STILL[None]}
             observations, _, terminations, truncations, infos = envs.step(actions)
         assert (bool(terminations[0]), bool(truncations[0])) == (False, True)
-        assert _agents_of(infos, 0) == {"Red": {"terminated": True, "truncated": False},
-                                        "Blue": {"terminated": False, "truncated": True}}
+        assert _agents_of(infos, 0) == {
+            "Red": {"terminated": True, "truncated": False},
+            "Blue": {"terminated": False, "truncated": True},
+        }
 
 
 def test_the_registered_multi_agent_id_gives_remote_env_its_time_limit() -> None:
@@ -220,17 +241,30 @@ def test_a_runner_caught_then_the_time_limit_is_a_time_out_in_tag() -> None:
             terminated = truncated = False
             steps = 0
             while not (terminated or truncated):  # gym.make's TimeLimit ends it at 300 at most
-                observation, _, terminated, truncated, info = env.step({
-                    name: (chaser if name == CHASER else runner).heuristic(value)
-                    for name, value in observation.items()})
+                observation, _, terminated, truncated, info = env.step(
+                    {
+                        name: (chaser if name == CHASER else runner).heuristic(value)
+                        for name, value in observation.items()
+                    }
+                )
                 steps += 1
-            ends[seed] = (steps, terminated, truncated, {
-                name: (outcome["terminated"], outcome["truncated"])
-                for name, outcome in info["agents"].items()})
+            ends[seed] = (
+                steps,
+                terminated,
+                truncated,
+                {
+                    name: (outcome["terminated"], outcome["truncated"])
+                    for name, outcome in info["agents"].items()
+                },
+            )
     finally:
         env.close()
-    assert ends[2] == (300, False, True, {"Chaser": (False, True), "Runner1": (False, True),
-                                          "Runner2": (True, False)})
+    assert ends[2] == (
+        300,
+        False,
+        True,
+        {"Chaser": (False, True), "Runner1": (False, True), "Runner2": (True, False)},
+    )
     steps, terminated, truncated, agents = ends[0]
     assert steps < 300 and (terminated, truncated) == (True, False)
     assert agents == dict.fromkeys(agents, (True, False))

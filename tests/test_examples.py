@@ -68,12 +68,27 @@ def test_the_reacher_reaches_and_pays_for_effort(serve: Serve) -> None:
         assert costly < reward  # effort is charged
 
 
-@pytest.mark.parametrize("name", ["cartpole", "classic_cartpole", "seeker", "pixels", "reacher",
-                                  "pair", "tag", "plinko", "maze"])
+@pytest.mark.parametrize(
+    "name",
+    [
+        "cartpole",
+        "classic_cartpole",
+        "seeker",
+        "pixels",
+        "reacher",
+        "pair",
+        "tag",
+        "plinko",
+        "maze",
+    ],
+)
 def test_every_example_serves_as_a_module(name: str) -> None:
     process = subprocess.Popen(
-        [sys.executable, "-m", f"examples.{name}", "--port", "0"], stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT, text=True, start_new_session=True,
+        [sys.executable, "-m", f"examples.{name}", "--port", "0"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        start_new_session=True,
     )
     try:
         assert process.stdout is not None

@@ -44,10 +44,16 @@ def _raw(client: Client) -> socket.socket:
 # --- map keys are str, both ways ------------------------------------------------------------
 
 
-@pytest.mark.parametrize("request_map", [
-    {"id": 3, b"reset": {}}, {b"id": 1}, {"id": 4, "reset": {"seed": 0, "options": {b"k": 1}}},
-    {"id": 5, "inspect": {"get": {b"path": "World", "property": "gravity"}}},
-], ids=["top", "id", "reset options", "inspect"])
+@pytest.mark.parametrize(
+    "request_map",
+    [
+        {"id": 3, b"reset": {}},
+        {b"id": 1},
+        {"id": 4, "reset": {"seed": 0, "options": {b"k": 1}}},
+        {"id": 5, "inspect": {"get": {b"path": "World", "property": "gravity"}}},
+    ],
+    ids=["top", "id", "reset options", "inspect"],
+)
 def test_a_bin_map_key_at_any_depth_is_a_bad_frame(lander: Client, request_map: dict) -> None:
     with _raw(lander) as sock:
         sock.sendall(frame(pack(request_map)))
@@ -63,8 +69,9 @@ def test_the_server_sends_no_map_key_that_is_not_a_str(lander: Client) -> None:
     with pytest.raises(RemoteError) as error:
         lander.step(1)  # the environment's info holds b"raw"
     assert error.value.code == ErrorCode.ENVIRONMENT_ERROR
-    assert "_get_info() returned data that cannot travel: map key b'raw' is bin" in \
-        error.value.message
+    assert (
+        "_get_info() returned data that cannot travel: map key b'raw' is bin" in error.value.message
+    )
     lander.reset(seed=0)
     with _raw(lander) as sock:  # what a strict client reads: only str keys, at every depth
         sock.sendall(frame(pack({"id": 1, "snapshot": {}})))
@@ -76,7 +83,8 @@ def test_the_server_sends_no_map_key_that_is_not_a_str(lander: Client) -> None:
 
 @pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf])
 def test_a_setting_that_is_not_finite_is_refused_and_later_episodes_run(
-        lander: Client, value: float) -> None:
+    lander: Client, value: float
+) -> None:
     with pytest.raises(RemoteError) as error:
         lander.configure(world={"gravity": value})
     assert error.value.code == ErrorCode.INVALID_CONFIG
@@ -117,8 +125,7 @@ def test_a_configuration_that_fails_half_way_leaves_nothing_applied(lander: Clie
     lander.reset(seed=0)
     with pytest.raises(RemoteError) as error:
         lander.configure(world={"gravity": -5.0, "wind": 13.0})  # gravity set, then it raised
-    assert error.value.code == ErrorCode.ENVIRONMENT_ERROR and "unlucky wind" in \
-        error.value.message
+    assert error.value.code == ErrorCode.ENVIRONMENT_ERROR and "unlucky wind" in error.value.message
     assert lander.get_property("World", "gravity") == -1.0
     lander.reset(seed=0)
     snapshot = lander.snapshot()
@@ -169,16 +176,28 @@ def test_a_vector_names_the_users_batch_when_its_shape_is_wrong(serve: Serve) ->
 
 
 def _rlenv(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([str(RLENV), *args], capture_output=True, text=True, timeout=60,
-                          cwd=cwd, stdin=subprocess.DEVNULL)
+    return subprocess.run(
+        [str(RLENV), *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=cwd,
+        stdin=subprocess.DEVNULL,
+    )
 
 
 def test_the_console_script_serves_a_module_from_the_current_folder(tmp_path: Path) -> None:
     (tmp_path / "mymodule.py").write_text(
-        "from rlenv.examples.cartpole import CartPoleEnvironment as PushEnvironment\n")
-    process = subprocess.Popen([str(RLENV), "serve", "mymodule:PushEnvironment", "--port", "0"],
-                               cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                               text=True, stdin=subprocess.DEVNULL)
+        "from rlenv.examples.cartpole import CartPoleEnvironment as PushEnvironment\n"
+    )
+    process = subprocess.Popen(
+        [str(RLENV), "serve", "mymodule:PushEnvironment", "--port", "0"],
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        stdin=subprocess.DEVNULL,
+    )
     try:
         line = process.stdout.readline()
         assert line.startswith("listening on "), process.stderr.read()
@@ -187,16 +206,26 @@ def test_the_console_script_serves_a_module_from_the_current_folder(tmp_path: Pa
         process.wait(timeout=10)
 
 
-@pytest.mark.parametrize(("args", "first_line"), [
-    (["serve", "examples.cartpole:Nope"],
-     "rlenv serve: module 'examples.cartpole' has no attribute 'Nope'"),
-    (["serve", "nomodule:Env"], "rlenv serve: No module named 'nomodule': run rlenv from the "
-                                "folder that holds the module"),
-    (["serve", "examples.cartpole:CartPoleEnvironment", "--port", "99999"],
-     "rlenv serve: error: argument --port: 99999 is not a port"),
-], ids=["attribute", "module", "port out of range"])
-def test_the_command_line_says_in_one_line_why_it_failed(args: list[str],
-                                                          first_line: str) -> None:
+@pytest.mark.parametrize(
+    ("args", "first_line"),
+    [
+        (
+            ["serve", "examples.cartpole:Nope"],
+            "rlenv serve: module 'examples.cartpole' has no attribute 'Nope'",
+        ),
+        (
+            ["serve", "nomodule:Env"],
+            "rlenv serve: No module named 'nomodule': run rlenv from the "
+            "folder that holds the module",
+        ),
+        (
+            ["serve", "examples.cartpole:CartPoleEnvironment", "--port", "99999"],
+            "rlenv serve: error: argument --port: 99999 is not a port",
+        ),
+    ],
+    ids=["attribute", "module", "port out of range"],
+)
+def test_the_command_line_says_in_one_line_why_it_failed(args: list[str], first_line: str) -> None:
     result = _rlenv(*args)
     assert result.returncode == 2
     lines = [line for line in result.stderr.splitlines() if not line.startswith(("usage:", " "))]
@@ -211,9 +240,11 @@ def test_a_port_in_use_is_said_in_one_line_and_the_traceback_needs_debug() -> No
         assert result.returncode == 2
         assert result.stderr.splitlines() == [
             f"rlenv serve: port {port} is in use on 127.0.0.1 (by another server?): choose "
-            "another port, or 0 for a free one"]
-        debug = _rlenv("--log-level", "DEBUG", "serve", "examples.cartpole:CartPoleEnvironment",
-                       "--port", port)
+            "another port, or 0 for a free one"
+        ]
+        debug = _rlenv(
+            "--log-level", "DEBUG", "serve", "examples.cartpole:CartPoleEnvironment", "--port", port
+        )
         assert "Traceback" in debug.stderr and debug.returncode == 2
 
 
@@ -223,5 +254,7 @@ def test_a_server_that_cannot_start_says_why_first(tmp_path: Path) -> None:
     with pytest.raises(ServerStartError) as error:
         ServerProcess("examples.cartpole:Nope")
     first = str(error.value).splitlines()[0]
-    assert first == ("server examples.cartpole:Nope could not start: module "
-                     "'examples.cartpole' has no attribute 'Nope'")
+    assert first == (
+        "server examples.cartpole:Nope could not start: module "
+        "'examples.cartpole' has no attribute 'Nope'"
+    )

@@ -33,8 +33,7 @@ ROOT = Path(__file__).resolve().parent.parent
 # --- a recorded episode names its target ------------------------------------------------------
 
 
-def test_an_episode_recorded_from_a_remote_env_replays_with_no_target_given(
-        tmp_path: Path) -> None:
+def test_an_episode_recorded_from_a_remote_env_replays_with_no_target_given(tmp_path: Path) -> None:
     env = RecordEpisodes(RemoteEnv(TARGET, repeat_action=2), tmp_path)
     try:
         env.reset(seed=3)
@@ -43,9 +42,13 @@ def test_an_episode_recorded_from_a_remote_env_replays_with_no_target_given(
             _, _, terminated, truncated, _ = env.step(np.array([0.5], np.float32))
     finally:
         env.close()
-    result = subprocess.run([sys.executable, "-m", "rlenv", "replay",
-                             str(tmp_path / "episode-0001.rlenv")],
-                            capture_output=True, text=True, timeout=120, cwd=ROOT)
+    result = subprocess.run(
+        [sys.executable, "-m", "rlenv", "replay", str(tmp_path / "episode-0001.rlenv")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=ROOT,
+    )
     assert result.returncode == 0, result.stderr
     assert "every observation identical" in result.stdout
 
@@ -55,20 +58,27 @@ def test_an_episode_recorded_from_a_remote_env_replays_with_no_target_given(
 
 def test_a_client_takes_the_address_a_server_process_gives(serve: Serve) -> None:
     server = serve()
-    with Client(server.address, timeout=10) as joined, \
-            Client(server.host, server.port, timeout=10) as split:
+    with (
+        Client(server.address, timeout=10) as joined,
+        Client(server.host, server.port, timeout=10) as split,
+    ):
         assert joined.address == split.address == server.address
         assert joined.hello.environment == split.hello.environment
 
 
-@pytest.mark.parametrize(("address", "message"), [
-    ("127.0.0.1", "expected HOST:PORT, e.g. 127.0.0.1:5000, got '127.0.0.1'"),
-    ("127.0.0.1:http", "expected HOST:PORT, e.g. 127.0.0.1:5000, got '127.0.0.1:http'"),
-    (":5000", "expected HOST:PORT, e.g. 127.0.0.1:5000, got ':5000'"),
-    ("127.0.0.1:70000", "'127.0.0.1:70000' has no port: ports run from 1 to 65535"),
-    ("::1:5000", "expected HOST:PORT, got '::1:5000': an IPv6 host goes in brackets, as in "
-                 "[::1]:5000"),
-])
+@pytest.mark.parametrize(
+    ("address", "message"),
+    [
+        ("127.0.0.1", "expected HOST:PORT, e.g. 127.0.0.1:5000, got '127.0.0.1'"),
+        ("127.0.0.1:http", "expected HOST:PORT, e.g. 127.0.0.1:5000, got '127.0.0.1:http'"),
+        (":5000", "expected HOST:PORT, e.g. 127.0.0.1:5000, got ':5000'"),
+        ("127.0.0.1:70000", "'127.0.0.1:70000' has no port: ports run from 1 to 65535"),
+        (
+            "::1:5000",
+            "expected HOST:PORT, got '::1:5000': an IPv6 host goes in brackets, as in [::1]:5000",
+        ),
+    ],
+)
 def test_a_malformed_address_is_refused_before_connecting(address: str, message: str) -> None:
     with pytest.raises(ValueError) as error:
         Client(address)
@@ -118,8 +128,9 @@ def test_rlenv_serve_listens_on_an_ipv6_address(serve) -> None:
 
 
 def test_a_lane_closed_with_rings_unread_is_a_close_not_a_failure() -> None:
-    hello = Hello("Test", spaces.Box(-1.0, 1.0, (1,), np.float32),
-                  spaces.Box(-1.0, 1.0, (1,), np.float32))
+    hello = Hello(
+        "Test", spaces.Box(-1.0, 1.0, (1,), np.float32), spaces.Box(-1.0, 1.0, (1,), np.float32)
+    )
     layout = Layout.for_hello(hello)
     ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
     tcp_ours, tcp_theirs = socket.socketpair()
@@ -141,8 +152,10 @@ def test_a_lane_closed_with_rings_unread_is_a_close_not_a_failure() -> None:
 
 
 def _in_use_line(command: str, port: int) -> str:
-    return (f"{command}: port {port} is in use on 127.0.0.1 (by another server?): choose "
-            "another port, or 0 for a free one")
+    return (
+        f"{command}: port {port} is in use on 127.0.0.1 (by another server?): choose "
+        "another port, or 0 for a free one"
+    )
 
 
 @pytest.mark.parametrize("command", ["rlenv http", "rlenv.run"])
@@ -151,19 +164,32 @@ def test_a_port_in_use_is_one_line_everywhere(command: str) -> None:
         pytest.importorskip("uvicorn")
     with socket.create_server(("127.0.0.1", 0)) as taken:
         port = taken.getsockname()[1]
-        args = ["-m", "rlenv", "http", TARGET, "--port", str(port)] if command == "rlenv http" \
+        args = (
+            ["-m", "rlenv", "http", TARGET, "--port", str(port)]
+            if command == "rlenv http"
             else ["-m", "examples.pusher", str(port)]
-        result = subprocess.run([sys.executable, *args], capture_output=True, text=True,
-                                timeout=120, cwd=ROOT)
+        )
+        result = subprocess.run(
+            [sys.executable, *args], capture_output=True, text=True, timeout=120, cwd=ROOT
+        )
     assert result.returncode == 2
     assert result.stderr.splitlines() == [_in_use_line(command, port)]
 
 
-@pytest.mark.parametrize("args", [["-m", "rlenv", "serve", TARGET], ["-m", "examples.pusher", "0"]],
-                         ids=["rlenv serve", "rlenv.run"])
+@pytest.mark.parametrize(
+    "args",
+    [["-m", "rlenv", "serve", TARGET], ["-m", "examples.pusher", "0"]],
+    ids=["rlenv serve", "rlenv.run"],
+)
 def test_ctrl_c_as_soon_as_it_listens_exits_with_status_0(args: list[str]) -> None:
-    process = subprocess.Popen([sys.executable, *args], cwd=ROOT, stdin=subprocess.DEVNULL,
-                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    process = subprocess.Popen(
+        [sys.executable, *args],
+        cwd=ROOT,
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     try:
         assert process.stdout is not None
         seen = []
@@ -184,30 +210,50 @@ def test_ctrl_c_as_soon_as_it_listens_exits_with_status_0(args: list[str]) -> No
 # --- MODULE:CLASS: a file path, a near miss ---------------------------------------------------
 
 
-@pytest.mark.parametrize(("target", "line"), [
-    ("examples/cartpole.py:CartPoleEnvironment",
-     "rlenv serve: 'examples/cartpole.py:CartPoleEnvironment' names a file; MODULE:CLASS names a "
-     "module as Python imports it: drop .py (examples.cartpole:CartPoleEnvironment)"),
-    ("examples.cartpole:CartpoleEnvironment",
-     "rlenv serve: module 'examples.cartpole' has no attribute 'CartpoleEnvironment': did you "
-     "mean CartPoleEnvironment?"),
-    ("examples.cartpole:Nope", "rlenv serve: module 'examples.cartpole' has no attribute 'Nope'"),
-], ids=["file path", "near miss", "nothing near"])
+@pytest.mark.parametrize(
+    ("target", "line"),
+    [
+        (
+            "examples/cartpole.py:CartPoleEnvironment",
+            "rlenv serve: 'examples/cartpole.py:CartPoleEnvironment' names a file; MODULE:CLASS "
+            "names a module as Python imports it: drop .py (examples.cartpole:CartPoleEnvironment)",
+        ),
+        (
+            "examples.cartpole:CartpoleEnvironment",
+            "rlenv serve: module 'examples.cartpole' has no attribute 'CartpoleEnvironment': did "
+            "you mean CartPoleEnvironment?",
+        ),
+        (
+            "examples.cartpole:Nope",
+            "rlenv serve: module 'examples.cartpole' has no attribute 'Nope'",
+        ),
+    ],
+    ids=["file path", "near miss", "nothing near"],
+)
 def test_a_target_that_does_not_load_gets_the_hint_that_helps(target: str, line: str) -> None:
-    result = subprocess.run([sys.executable, "-m", "rlenv", "serve", target], capture_output=True,
-                            text=True, timeout=120, cwd=ROOT)
+    result = subprocess.run(
+        [sys.executable, "-m", "rlenv", "serve", target],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=ROOT,
+    )
     assert result.returncode == 2
     assert result.stderr.splitlines() == [line]
 
 
-@pytest.mark.parametrize("target", ["examples/cartpole.py:CartPoleEnvironment",
-                                    "examples.cartpole:CartpoleEnvironment"])
+@pytest.mark.parametrize(
+    "target", ["examples/cartpole.py:CartPoleEnvironment", "examples.cartpole:CartpoleEnvironment"]
+)
 def test_the_python_api_gives_the_same_hint(target: str) -> None:
     import rlenv
     from rlenv_client import LocalClient
 
-    hint = "drop .py" if target.endswith(".py:CartPoleEnvironment") else \
-        "did you mean CartPoleEnvironment?"
+    hint = (
+        "drop .py"
+        if target.endswith(".py:CartPoleEnvironment")
+        else "did you mean CartPoleEnvironment?"
+    )
     for start in (rlenv.Server, LocalClient):
         with pytest.raises(ImportError, match=re.escape(hint)):
             start(target)

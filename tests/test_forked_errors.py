@@ -48,6 +48,11 @@ def test_a_fork_leaves_nothing_frozen_in_the_original() -> None:
     # gc.freeze() before the fork keeps the copy's collector off the shared pages; left in
     # place, the original (a timeline forks it again and again) would never collect again
     # whatever it held at the fork.
-    result = subprocess.run([sys.executable, "-c", _FORK_AND_COUNT], capture_output=True,
-                            text=True, timeout=120, check=True)
+    result = subprocess.run(
+        [sys.executable, "-c", _FORK_AND_COUNT],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=True,
+    )
     assert result.stdout.split() == ["0", "0"]

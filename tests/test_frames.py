@@ -13,9 +13,12 @@ def test_a_frame_sent_in_pieces_is_read_whole_and_the_next_after_it() -> None:
     mine, theirs = socket.socketpair()
     with mine, theirs:
         first, second = frame({"id": 1, "data": b"x" * 300_000}), frame({"id": 2})
-        sender = threading.Thread(target=lambda: [theirs.sendall(first[i:i + 7000]) for i in
-                                                  range(0, len(first), 7000)]
-                                  + [theirs.sendall(second)])
+        sender = threading.Thread(
+            target=lambda: (
+                [theirs.sendall(first[i : i + 7000]) for i in range(0, len(first), 7000)]
+                + [theirs.sendall(second)]
+            )
+        )
         sender.start()
         body = receive_frame(mine)
         sender.join(60)

@@ -157,8 +157,9 @@ def test_vector_env_matches_gymnasium_sync_vector_env() -> None:
                     mask = expected[4]["_final_obs"]
                     assert np.array_equal(got[4]["_final_obs"], mask)
                     for index in np.flatnonzero(mask):
-                        assert np.array_equal(got[4]["final_obs"][index],
-                                              expected[4]["final_obs"][index])
+                        assert np.array_equal(
+                            got[4]["final_obs"][index], expected[4]["final_obs"][index]
+                        )
                 ended += int((got[2] | got[3]).sum())
             assert ended > 3  # resets really happened
         finally:
@@ -181,7 +182,8 @@ def test_make_vec_builds_a_remote_vector_env_that_runs_long() -> None:
             actions = np.stack([controller(o) for o in observations])
             noise = envs.unwrapped.np_random.uniform(-1, 1, actions.shape) * noise_scale
             observations, rewards, terminated, truncated, _ = envs.step(
-                np.clip(actions + noise.astype(np.float32), -1, 1))
+                np.clip(actions + noise.astype(np.float32), -1, 1)
+            )
             assert observations.shape == (4, 5) and rewards.dtype == np.float64
             # a copy that ended last step was reset instead: its starting state, no reward
             assert not (terminated | truncated)[ended].any()
@@ -241,16 +243,19 @@ def test_human_mode_shows_a_window_on_a_virtual_display(tmp_path: Path) -> None:
     if xvfb is None:
         pytest.skip("Xvfb is not installed (apt-get install xvfb)")
     display = f":{90 + os.getpid() % 100}"
-    screen = subprocess.Popen([xvfb, display, "-screen", "0", "800x600x24"],
-                              stderr=subprocess.DEVNULL)
+    screen = subprocess.Popen(
+        [xvfb, display, "-screen", "0", "800x600x24"], stderr=subprocess.DEVNULL
+    )
     try:
-        code = ("from rlenv_client import RemoteEnv; import numpy as np\n"
-                "env = RemoteEnv('examples.cartpole:CartPoleEnvironment', render_mode='human',"
-                " in_process=True)\n"
-                "env.reset(seed=0)\n"
-                "for _ in range(5): env.step(np.zeros(1, np.float32))\n"
-                "print(env._display._root.winfo_exists(), env._display._image.width())\n"
-                "env.close()\n")
+        code = (
+            "from rlenv_client import RemoteEnv; import numpy as np\n"
+            "env = RemoteEnv('examples.cartpole:CartPoleEnvironment', render_mode='human',"
+            " in_process=True)\n"
+            "env.reset(seed=0)\n"
+            "for _ in range(5): env.step(np.zeros(1, np.float32))\n"
+            "print(env._display._root.winfo_exists(), env._display._image.width())\n"
+            "env.close()\n"
+        )
         result = _run_with_display(code, display, deadline=30)
         assert result.stdout.split() == ["1", "600"], result.stderr
     finally:
@@ -262,7 +267,8 @@ def test_record_video_writes_a_video_that_decodes(tmp_path: Path) -> None:
     pytest.importorskip("moviepy")
     imageio = pytest.importorskip("imageio.v2")
     env = gym.wrappers.RecordVideo(
-        gym.make(CARTPOLE, render_mode="rgb_array"), str(tmp_path / "videos"),
+        gym.make(CARTPOLE, render_mode="rgb_array"),
+        str(tmp_path / "videos"),
         episode_trigger=lambda e: True,
         disable_logger=True,
     )
@@ -287,10 +293,12 @@ def test_no_server_outlives_close_or_a_killed_client() -> None:
     with RemoteEnv(TARGET) as env:
         server = env.server
     assert server is not None and not server.is_alive()
-    code = ("from rlenv_client import RemoteVectorEnv; import time\n"
-            "envs = RemoteVectorEnv(2, 'examples.cartpole:CartPoleEnvironment')\n"
-            "print(' '.join(str(s.pid) for s in envs.servers), flush=True)\n"
-            "time.sleep(60)\n")
+    code = (
+        "from rlenv_client import RemoteVectorEnv; import time\n"
+        "envs = RemoteVectorEnv(2, 'examples.cartpole:CartPoleEnvironment')\n"
+        "print(' '.join(str(s.pid) for s in envs.servers), flush=True)\n"
+        "time.sleep(60)\n"
+    )
     client = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
     assert client.stdout is not None
     pids = [int(pid) for pid in client.stdout.readline().split()]
@@ -327,10 +335,18 @@ def _run_with_display(code: str, display: str, deadline: float) -> subprocess.Co
     """Run ``code`` once the X server answers (polled with a deadline)."""
     end = time.monotonic() + deadline
     while True:
-        result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                                env={**os.environ, "DISPLAY": display}, timeout=deadline)
-        if result.returncode == 0 or "couldn't connect to display" not in result.stderr \
-                or time.monotonic() > end:
+        result = subprocess.run(
+            [sys.executable, "-c", code],
+            capture_output=True,
+            text=True,
+            env={**os.environ, "DISPLAY": display},
+            timeout=deadline,
+        )
+        if (
+            result.returncode == 0
+            or "couldn't connect to display" not in result.stderr
+            or time.monotonic() > end
+        ):
             return result
 
 
@@ -395,17 +411,28 @@ def test_vector_layouts_give_identical_results(target: str) -> None:
     and actions give the same observations, rewards and flags, resets included; Dict spaces
     (two agents) too."""
     runs = []
-    for servers, layout in [(1, {"instances_per_server": 4}), (4, {"instances_per_server": 1}),
-                            (0, {"in_process": True})]:
+    for servers, layout in [
+        (1, {"instances_per_server": 4}),
+        (4, {"instances_per_server": 1}),
+        (0, {"in_process": True}),
+    ]:
         with RemoteVectorEnv(4, target, max_episode_steps=15, **layout) as envs:
             assert len(envs.servers) == servers and len(envs.sessions) == max(servers, 1)
             envs.action_space.seed(8)
             seen = [_bytes(envs.reset(seed=30)[0])]
             for _ in range(40):
                 observations, rewards, terminated, truncated, infos = envs.step(
-                    envs.action_space.sample())
-                seen.append((_bytes(observations), rewards.tobytes(), terminated.tobytes(),
-                             truncated.tobytes(), infos["frames"].tobytes()))
+                    envs.action_space.sample()
+                )
+                seen.append(
+                    (
+                        _bytes(observations),
+                        rewards.tobytes(),
+                        terminated.tobytes(),
+                        truncated.tobytes(),
+                        infos["frames"].tobytes(),
+                    )
+                )
             runs.append(seen)
     assert runs[0] == runs[1] == runs[2]
 
@@ -415,8 +442,9 @@ def test_a_vector_awaits_first_the_server_that_answers_last(serve: Serve) -> Non
     rather than waking for each (on a small machine it shares a core with a server): with a
     slow server (32 CartPoles) and a quick one (1), the slow one comes to be awaited first."""
     slow, quick = serve(TARGET, args=("--instances", "32")), serve(TARGET)
-    with RemoteVectorEnv(addresses=[f"{slow.host}:{slow.port}",
-                                    f"{quick.host}:{quick.port}"]) as envs:
+    with RemoteVectorEnv(
+        addresses=[f"{slow.host}:{slow.port}", f"{quick.host}:{quick.port}"]
+    ) as envs:
         assert envs._gather_order == [1, 0]  # at first the last server is the last rung
         envs.reset(seed=0)
         for _ in range(20):  # the first step shows it, unless the quick server was held up
@@ -471,8 +499,13 @@ def test_a_server_of_an_older_protocol_is_refused_clearly() -> None:
 
     from rlenv.protocol import Connection, Hello, Role
 
-    hello = Hello("Old", CartPoleAgent.action_space, CartPoleAgent.observation_space,
-                  instances=2, protocol=(1, 0))
+    hello = Hello(
+        "Old",
+        CartPoleAgent.action_space,
+        CartPoleAgent.observation_space,
+        instances=2,
+        protocol=(1, 0),
+    )
     listener = socket.create_server(("127.0.0.1", 0))
 
     def serve_hello() -> None:
@@ -485,8 +518,9 @@ def test_a_server_of_an_older_protocol_is_refused_clearly() -> None:
     thread.start()
     try:
         host, port = listener.getsockname()
-        with pytest.raises(ProtocolVersionError,
-                           match=r"server speaks rlenv protocol 1.0, this client speaks 2\.6"):
+        with pytest.raises(
+            ProtocolVersionError, match=r"server speaks rlenv protocol 1.0, this client speaks 2\.6"
+        ):
             RemoteVectorEnv(addresses=[f"{host}:{port}"])
     finally:
         thread.join(timeout=10)
@@ -495,8 +529,14 @@ def test_a_server_of_an_older_protocol_is_refused_clearly() -> None:
 
 def test_cartpole_v0_is_not_called_an_outdated_cartpole_v1() -> None:
     """v0 and v1 are two environments: gymnasium's 'out of date' warning would mislead."""
-    code = ("import gymnasium as gym, rlenv_client\n"
-            "gym.make('rlenv/CartPole-v0', in_process=True).close()\n")
-    result = subprocess.run([sys.executable, "-W", "error::DeprecationWarning", "-c", code],
-                            capture_output=True, text=True, timeout=60)
+    code = (
+        "import gymnasium as gym, rlenv_client\n"
+        "gym.make('rlenv/CartPole-v0', in_process=True).close()\n"
+    )
+    result = subprocess.run(
+        [sys.executable, "-W", "error::DeprecationWarning", "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert result.returncode == 0, result.stderr

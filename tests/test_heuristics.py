@@ -19,8 +19,9 @@ from rlenv_client import Client, LocalClient
 CHASING_PAIR = "heuristic_envs:ChasingPair"
 SEEKER = "heuristic_envs:HeuristicSeeker"
 PAIR = "examples.pair:PairEnvironment"
-HERE_TOO = {"PYTHONPATH": os.pathsep.join([str(Path(__file__).parent),
-                                           os.environ.get("PYTHONPATH", "")])}
+HERE_TOO = {
+    "PYTHONPATH": os.pathsep.join([str(Path(__file__).parent), os.environ.get("PYTHONPATH", "")])
+}
 """A server's environment that finds heuristic_envs."""
 
 
@@ -40,8 +41,10 @@ def test_a_heuristic_plays_one_agent_as_if_its_actions_were_sent(serve) -> None:
     reds = [rng.uniform(-1, 1, 2).astype(np.float32) for _ in range(40)]
     driven = serve(CHASING_PAIR, args=["--policy", "Blue=heuristic"], env=HERE_TOO)
     plain = serve(PAIR)
-    with Client(driven.host, driven.port, timeout=10) as learner, \
-            Client(plain.host, plain.port, timeout=10) as both:
+    with (
+        Client(driven.host, driven.port, timeout=10) as learner,
+        Client(plain.host, plain.port, timeout=10) as both,
+    ):
         assert learner.hello.driven == ("Blue",) and both.hello.driven == ()
         observation, _ = learner.reset(seed=5)
         mirrored, _ = both.reset(seed=5)
@@ -56,9 +59,14 @@ def test_a_heuristic_plays_one_agent_as_if_its_actions_were_sent(serve) -> None:
 
 def _serve_refused(*args: str) -> str:
     """The one line ``rlenv serve ARGS`` exits 2 with (it finds heuristic_envs)."""
-    result = subprocess.run([sys.executable, "-m", "rlenv", "serve", *args], timeout=120,
-                            capture_output=True, text=True, stdin=subprocess.DEVNULL,
-                            env={**os.environ, **HERE_TOO})
+    result = subprocess.run(
+        [sys.executable, "-m", "rlenv", "serve", *args],
+        timeout=120,
+        capture_output=True,
+        text=True,
+        stdin=subprocess.DEVNULL,
+        env={**os.environ, **HERE_TOO},
+    )
     assert result.returncode == 2, result.stdout + result.stderr
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1, result.stderr
@@ -67,18 +75,22 @@ def _serve_refused(*args: str) -> str:
 
 def test_a_heuristic_for_an_agent_without_one_is_refused_at_start_naming_its_class() -> None:
     line = _serve_refused(PAIR, "--policy", "Red=heuristic")
-    assert line == ("rlenv serve: --policy Red=heuristic: agent 'Red' (class PairAgent) has "
-                    "no heuristic; define PairAgent.heuristic(observation)")
+    assert line == (
+        "rlenv serve: --policy Red=heuristic: agent 'Red' (class PairAgent) has "
+        "no heuristic; define PairAgent.heuristic(observation)"
+    )
     with pytest.raises(ValueError, match=r"agent 'Red' \(class PairAgent\) has no heuristic"):
         LocalClient(CHASING_PAIR, policies={"Blue": "heuristic", "Red": "heuristic"})
-    with pytest.raises(ValueError, match="the environment has no agent 'Green'; its agents: "
-                                         "Red, Blue"):
+    with pytest.raises(
+        ValueError, match="the environment has no agent 'Green'; its agents: Red, Blue"
+    ):
         LocalClient(CHASING_PAIR, policies={"Green": "heuristic"})
 
 
 def test_a_heuristic_plays_a_single_agent_environment_by_itself(serve) -> None:
-    server = serve(SEEKER, args=["--policy", "Agent=heuristic", "--max-episode-steps", "200"],
-                   env=HERE_TOO)
+    server = serve(
+        SEEKER, args=["--policy", "Agent=heuristic", "--max-episode-steps", "200"], env=HERE_TOO
+    )
     with Client(server.host, server.port, timeout=10) as observer:
         assert observer.hello.driven == ("Agent",)
         deadline = time.monotonic() + 60
@@ -108,8 +120,11 @@ def test_in_process_a_heuristic_drives_its_agent_and_replays_exactly() -> None:
 def test_a_heuristic_answering_outside_its_space_is_an_environment_error_naming_it() -> None:
     with LocalClient("heuristic_envs:WrongHeuristicPair", policies={"Blue": "heuristic"}) as env:
         env.reset(seed=0)
-        with pytest.raises(RemoteError, match=r"WrongPairAgent.heuristic of agent 'Blue' gave "
-                                              r"array\(\[0., 0., 0.\]"):
+        with pytest.raises(
+            RemoteError,
+            match=r"WrongPairAgent.heuristic of agent 'Blue' gave "
+            r"array\(\[0., 0., 0.\]",
+        ):
             env.step({"Red": np.zeros(2, np.float32)})
         env.reset(seed=0)  # the server goes on
 
@@ -120,6 +135,7 @@ def test_every_agent_driven_is_refused_in_process() -> None:
 
 
 # --- the trainer's view: driven agents left out -----------------------------------------------
+
 
 def test_remote_env_leaves_the_driven_agent_out_of_its_spaces_actions_and_rewards(serve) -> None:
     from gymnasium.utils.env_checker import check_env
@@ -133,14 +149,16 @@ def test_remote_env_leaves_the_driven_agent_out_of_its_spaces_actions_and_reward
         assert list(env.observation_space.keys()) == ["Red"]
         observation, _ = env.reset(seed=2)
         assert list(observation) == ["Red"] and observation in env.observation_space
-        with pytest.raises(ValueError, match="agent 'Blue' is driven by the server .* act for "
-                                             "Red only"):
+        with pytest.raises(
+            ValueError, match="agent 'Blue' is driven by the server .* act for Red only"
+        ):
             env.step({"Red": np.zeros(2, np.float32), "Blue": np.zeros(2, np.float32)})
         terminated = truncated = False
         steps = 0
         while not (terminated or truncated):
             observation, reward, terminated, truncated, info = env.step(
-                {"Red": chase(observation["Red"])})
+                {"Red": chase(observation["Red"])}
+            )
             assert list(observation) == ["Red"]
             assert reward == pytest.approx(info["agents"]["Red"]["reward"])
             assert set(info["agents"]) == {"Red", "Blue"}  # the server's report, whole
@@ -167,7 +185,8 @@ def test_a_parallel_env_lists_only_the_agents_it_acts_for(serve) -> None:
         with pytest.raises(ValueError, match="agent 'Blue' is driven by the server"):
             env.step({"Red": np.zeros(2, np.float32), "Blue": np.zeros(2, np.float32)})
         observations, rewards, terminations, truncations, _ = env.step(
-            {"Red": np.zeros(2, np.float32)})  # no action for Blue is needed
+            {"Red": np.zeros(2, np.float32)}
+        )  # no action for Blue is needed
         assert list(observations) == list(rewards) == list(terminations) == ["Red"]
         parallel_api_test(env, num_cycles=30)
     finally:
@@ -178,8 +197,11 @@ def test_a_server_driving_every_agent_leaves_a_trainer_nothing_and_says_so(serve
     from rlenv_client import RemoteEnv
 
     server = serve(SEEKER, args=["--policy", "Agent=heuristic"], env=HERE_TOO)
-    with pytest.raises(ValueError, match=r"the server drives every agent of Seeker \(Agent; "
-                                         r"rlenv serve --policy\): there is nothing to act for"):
+    with pytest.raises(
+        ValueError,
+        match=r"the server drives every agent of Seeker \(Agent; "
+        r"rlenv serve --policy\): there is nothing to act for",
+    ):
         RemoteEnv(address=f"{server.host}:{server.port}")
 
 
@@ -187,19 +209,18 @@ def test_a_vector_env_steps_only_the_trainers_agents_of_several_instances(serve)
     """Two instances, Blue driven: Red's view matches a plain vector whose Blue we push."""
     from rlenv_client import RemoteVectorEnv
 
-    driven = serve(CHASING_PAIR, args=["--instances", "2", "--policy", "Blue=heuristic"],
-                   env=HERE_TOO)
+    driven = serve(
+        CHASING_PAIR, args=["--instances", "2", "--policy", "Blue=heuristic"], env=HERE_TOO
+    )
     plain = serve(PAIR, args=["--instances", "2"])
     vector = RemoteVectorEnv(addresses=[f"{driven.host}:{driven.port}"])
     mirror = RemoteVectorEnv(addresses=[f"{plain.host}:{plain.port}"])
     try:
-        assert list(vector.single_action_space) == list(vector.single_observation_space) == \
-            ["Red"]
+        assert list(vector.single_action_space) == list(vector.single_observation_space) == ["Red"]
         observations, _ = vector.reset(seed=[4, 9])
         mirrored, _ = mirror.reset(seed=[4, 9])
         with pytest.raises(ValueError, match="agent 'Blue' is driven by the server"):
-            vector.step({"Red": np.zeros((2, 2), np.float32),
-                         "Blue": np.zeros((2, 2), np.float32)})
+            vector.step({"Red": np.zeros((2, 2), np.float32), "Blue": np.zeros((2, 2), np.float32)})
         for _ in range(300):  # until Red catches its apple somewhere (then autoresets differ)
             reds = np.stack([chase(row) for row in observations["Red"]])
             blues = np.stack([chase(row) for row in mirrored["Blue"]])
@@ -222,13 +243,16 @@ def test_a_vector_env_steps_only_the_trainers_agents_of_several_instances(serve)
 
 # --- gym.make(..., server_args=["--policy", ...]): the shared per-client server ---------------
 
+
 def test_environments_sharing_a_server_each_drive_their_own_agent(monkeypatch) -> None:
     from rlenv_client import RemoteEnv
 
     monkeypatch.setenv("PYTHONPATH", HERE_TOO["PYTHONPATH"])
     args = ["--policy", "Blue=heuristic"]
-    first, second = RemoteEnv(CHASING_PAIR, server_args=args), \
-        RemoteEnv(CHASING_PAIR, server_args=args)
+    first, second = (
+        RemoteEnv(CHASING_PAIR, server_args=args),
+        RemoteEnv(CHASING_PAIR, server_args=args),
+    )
     try:
         assert first.server is second.server  # one --per-client server, two environments
         assert list(first.action_space) == list(second.action_space) == ["Red"]
@@ -254,19 +278,25 @@ def test_gym_make_passes_policy_to_the_shared_server_which_checks_it() -> None:
 
     from rlenv_client.launcher import ServerStartError
 
-    with pytest.raises(ServerStartError, match=r"agent 'Red' \(class PairAgent\) has no "
-                                               r"heuristic"):
+    with pytest.raises(
+        ServerStartError,
+        match=r"agent 'Red' \(class PairAgent\) has no "
+        r"heuristic",
+    ):
         gymnasium.make("rlenv/Pair-v0", server_args=["--policy", "Red=heuristic"])
 
 
 def test_a_per_client_server_driving_every_agent_is_refused_at_start() -> None:
-    line = _serve_refused("examples.seeker:SeekerEnvironment", "--per-client", "--policy",
-                          "Agent=heuristic")
+    line = _serve_refused(
+        "examples.seeker:SeekerEnvironment", "--per-client", "--policy", "Agent=heuristic"
+    )
     assert "has no heuristic" in line  # the seeker's agent has none: checked first
     line = _serve_refused(SEEKER, "--per-client", "--policy", "Agent=heuristic")
-    assert line == ("rlenv serve: --policy drives every agent, so the server plays its "
-                    "episodes itself and no client controls them: leave out --per-client, or "
-                    "drive fewer agents")
+    assert line == (
+        "rlenv serve: --policy drives every agent, so the server plays its "
+        "episodes itself and no client controls them: leave out --per-client, or "
+        "drive fewer agents"
+    )
 
 
 # --- examples.tag: one chaser, two runners, each class with a heuristic -----------------------
@@ -288,7 +318,8 @@ def test_gym_make_trains_the_chaser_against_the_runners_heuristics() -> None:
         runners, terminated, truncated = 0.0, False, False
         while not (terminated or truncated):
             observation, reward, terminated, truncated, info = env.step(
-                {"Chaser": chaser.heuristic(observation["Chaser"])})
+                {"Chaser": chaser.heuristic(observation["Chaser"])}
+            )
             assert list(observation) == ["Chaser"]
             assert reward == pytest.approx(info["agents"]["Chaser"]["reward"])
             runners += info["agents"]["Runner1"]["reward"] + info["agents"]["Runner2"]["reward"]
@@ -318,8 +349,13 @@ def test_make_vec_starts_servers_that_drive_the_runners() -> None:
     from examples.tag import Chaser
 
     chaser = Chaser()
-    vector = gymnasium.make_vec("rlenv/Tag-v0", num_envs=2, vectorization_mode="vector_entry_point",
-                                server_args=RUNNERS_DRIVEN, instances_per_server=1)
+    vector = gymnasium.make_vec(
+        "rlenv/Tag-v0",
+        num_envs=2,
+        vectorization_mode="vector_entry_point",
+        server_args=RUNNERS_DRIVEN,
+        instances_per_server=1,
+    )
     try:
         assert list(vector.single_action_space) == ["Chaser"]
         observations, _ = vector.reset(seed=3)

@@ -74,16 +74,21 @@ pytestmark = pytest.mark.skipif(_why_skip() is not None, reason=_why_skip() or "
 def ip(*args: str) -> subprocess.CompletedProcess[str]:
     """Run ``ip ARGS``; the completed process (never raises on a failure exit)."""
     assert IP is not None
-    return subprocess.run([IP, *args], capture_output=True, text=True, timeout=DEADLINE,
-                          check=False, stdin=subprocess.DEVNULL)
+    return subprocess.run(
+        [IP, *args],
+        capture_output=True,
+        text=True,
+        timeout=DEADLINE,
+        check=False,
+        stdin=subprocess.DEVNULL,
+    )
 
 
 def ip_ok(*args: str) -> str:
     """Run ``ip ARGS``; its output. Raises ``RuntimeError`` with ``ip``'s message on failure."""
     done = ip(*args)
     if done.returncode != 0:
-        raise RuntimeError(f"ip {' '.join(args)} failed ({done.returncode}): "
-                           f"{done.stderr.strip()}")
+        raise RuntimeError(f"ip {' '.join(args)} failed ({done.returncode}): {done.stderr.strip()}")
     return done.stdout
 
 
@@ -103,6 +108,7 @@ def namespace_pids(name: str) -> list[int]:
 
 def delete_namespace(name: str) -> None:
     """Kill every process in namespace ``name``, then delete it."""
+
     def emptied() -> bool:
         pids = namespace_pids(name)
         for pid in pids:
@@ -161,18 +167,34 @@ def hosts() -> Iterator[Hosts]:
         for name in (pair.a, pair.b):
             done = ip("netns", "add", name)
             if done.returncode != 0:
-                pytest.skip(f"cannot create a network namespace ({done.stderr.strip()}); "
-                            "needs CAP_SYS_ADMIN outside a restricted container")
+                pytest.skip(
+                    f"cannot create a network namespace ({done.stderr.strip()}); "
+                    "needs CAP_SYS_ADMIN outside a restricted container"
+                )
             created.append(name)
-        ip_ok("-n", pair.a, "link", "add", "veth-a", "type", "veth", "peer", "name", "veth-b",
-              "netns", pair.b)
+        ip_ok(
+            "-n",
+            pair.a,
+            "link",
+            "add",
+            "veth-a",
+            "type",
+            "veth",
+            "peer",
+            "name",
+            "veth-b",
+            "netns",
+            pair.b,
+        )
         for name, device, address in ((pair.a, "veth-a", HOST_A), (pair.b, "veth-b", HOST_B)):
             ip_ok("-n", name, "addr", "add", f"{address}/{NETMASK}", "dev", device)
             ip_ok("-n", name, "link", "set", "lo", "up")
             ip_ok("-n", name, "link", "set", device, "up")
         for name, device in ((pair.a, "veth-a"), (pair.b, "veth-b")):
-            poll(lambda name=name, device=device: _link_up(name, device),
-                 f"{device} in {name} coming up")
+            poll(
+                lambda name=name, device=device: _link_up(name, device),
+                f"{device} in {name} coming up",
+            )
         yield pair
     finally:
         for name in reversed(created):
@@ -192,14 +214,34 @@ class NamespacedServer:
 
     def __init__(self, hosts: Hosts, namespace: str, host: str, token: str | None) -> None:
         lifeline, self._lifeline = os.pipe()
-        command = hosts.run(namespace, sys.executable, "-m", "rlenv", "serve", TARGET,
-                            "--host", host, "--port", "0", "--lifeline", str(lifeline),
-                            *([f"--token={token}"] if token is not None else []))
+        command = hosts.run(
+            namespace,
+            sys.executable,
+            "-m",
+            "rlenv",
+            "serve",
+            TARGET,
+            "--host",
+            host,
+            "--port",
+            "0",
+            "--lifeline",
+            str(lifeline),
+            *([f"--token={token}"] if token is not None else []),
+        )
         try:
             self.process = subprocess.Popen(
-                command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                stdin=subprocess.DEVNULL, text=True, bufsize=1, start_new_session=True,
-                pass_fds=(lifeline,), cwd=ROOT, env=CHILD_ENV)
+                command,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT,
+                stdin=subprocess.DEVNULL,
+                text=True,
+                bufsize=1,
+                start_new_session=True,
+                pass_fds=(lifeline,),
+                cwd=ROOT,
+                env=CHILD_ENV,
+            )
         finally:
             os.close(lifeline)
         self.lines: list[str] = []
@@ -225,8 +267,9 @@ class NamespacedServer:
         try:
             line = self._listening.get(timeout=timeout)
         except queue.Empty:
-            raise TimeoutError(f"the server did not listen within {timeout}s; its output:\n"
-                               f"{self.output}") from None
+            raise TimeoutError(
+                f"the server did not listen within {timeout}s; its output:\n{self.output}"
+            ) from None
         if line is None:
             return None
         host, _, port = line.removeprefix("listening on ").strip().rpartition(":")
@@ -285,9 +328,16 @@ def guarded(hosts: Hosts) -> Iterator[Guarded]:
 
 def probe(hosts: Hosts, namespace: str, *argv: str) -> dict[str, Any]:
     """Run ``tests/hosts_probe.py ARGV`` inside ``namespace``; its JSON report."""
-    done = subprocess.run(hosts.run(namespace, sys.executable, str(PROBE), *argv),
-                          capture_output=True, text=True, timeout=DEADLINE, check=False,
-                          cwd=ROOT, env=CHILD_ENV, stdin=subprocess.DEVNULL)
+    done = subprocess.run(
+        hosts.run(namespace, sys.executable, str(PROBE), *argv),
+        capture_output=True,
+        text=True,
+        timeout=DEADLINE,
+        check=False,
+        cwd=ROOT,
+        env=CHILD_ENV,
+        stdin=subprocess.DEVNULL,
+    )
     assert done.returncode == 0, f"probe {argv} failed ({done.returncode}):\n{done.stderr}"
     return json.loads(done.stdout.strip().splitlines()[-1])
 
@@ -308,8 +358,9 @@ def assert_served(result: dict[str, Any]) -> None:
     assert result["frames"] >= 1 and result["reward"] >= 0.0, result
 
 
-def assert_refused(reply: dict[str, Any] | None, code: str, request_id: int | None,
-                   message: str | None = None) -> None:
+def assert_refused(
+    reply: dict[str, Any] | None, code: str, request_id: int | None, message: str | None = None
+) -> None:
     """``reply`` is a fatal error ``code`` for ``request_id`` (containing ``message``)."""
     assert reply is not None, "the server closed the connection without an answer"
     assert reply["id"] == request_id, reply

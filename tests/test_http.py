@@ -36,9 +36,9 @@ def gateway() -> Iterator[Gateway]:
     started.close()
 
 
-
 def test_two_sessions_reset_with_one_seed_observe_the_same_and_are_isolated(
-        gateway: Gateway) -> None:
+    gateway: Gateway,
+) -> None:
     first, second = gateway.session(), gateway.session(CARTPOLE)
     one = gateway.post(f"/v1/envs/{first}/reset", {"seed": 3})
     other = gateway.post(f"/v1/envs/{second}/reset", {"seed": 3})
@@ -90,16 +90,15 @@ def test_render_is_a_png_or_raw_bytes(gateway: Gateway) -> None:
     assert png.status == 200 and png.content_type == "image/png"
     pixels = decode_png(png.body)
     assert pixels.shape == (400, 600, 3) and pixels.std() > 0  # something is drawn
-    raw = gateway.request("GET", f"/v1/envs/{session}/render",
-                          headers={"Accept": "application/octet-stream"})
+    raw = gateway.request(
+        "GET", f"/v1/envs/{session}/render", headers={"Accept": "application/octet-stream"}
+    )
     assert raw.content_type == "application/octet-stream"
     assert raw.headers["x-shape"] == "400,600,3" and raw.headers["x-dtype"] == "uint8"
     assert np.array_equal(np.frombuffer(raw.body, np.uint8).reshape(400, 600, 3), pixels)
-    small = decode_png(gateway.request("GET", f"/v1/envs/{session}/render?width=60&height=40")
-                       .body)
+    small = decode_png(gateway.request("GET", f"/v1/envs/{session}/render?width=60&height=40").body)
     assert small.shape == (40, 60, 3)
-    assert_problem(gateway.request("GET", f"/v1/envs/{session}/render?width=0"), 400,
-                   "bad_request")
+    assert_problem(gateway.request("GET", f"/v1/envs/{session}/render?width=0"), 400, "bad_request")
 
 
 def test_spaces_come_with_their_json_schema(gateway: Gateway) -> None:
@@ -111,8 +110,11 @@ def test_spaces_come_with_their_json_schema(gateway: Gateway) -> None:
     session = body["id"]
     action = gateway.get(f"/v1/envs/{session}/action_space")
     observation = gateway.get(f"/v1/envs/{session}/observation_space")
-    assert action["space"] == body["action_space"] == {
-        "type": "Box", "shape": [1], "low": -1.0, "high": 1.0, "dtype": "float32"}
+    assert (
+        action["space"]
+        == body["action_space"]
+        == {"type": "Box", "shape": [1], "low": -1.0, "high": 1.0, "dtype": "float32"}
+    )
     assert observation["space"] == body["observation_space"]
     action_space = space_from_json(action["space"])
     for _ in range(5):
@@ -125,8 +127,9 @@ def test_spaces_come_with_their_json_schema(gateway: Gateway) -> None:
     assert gateway.post(contains, {"action": [0.5]}) == {"member": True}
     refused = gateway.post(contains, {"action": [2.0]})
     assert refused["member"] is False and "outside the bounds" in refused["reason"]
-    jsonschema.validate(gateway.post(f"/v1/envs/{session}/reset")["observation"],
-                        observation["schema"])
+    jsonschema.validate(
+        gateway.post(f"/v1/envs/{session}/reset")["observation"], observation["schema"]
+    )
 
 
 def test_several_agents_and_images(gateway: Gateway) -> None:
@@ -137,11 +140,15 @@ def test_several_agents_and_images(gateway: Gateway) -> None:
     assert space["type"] == "Dict" and set(space["spaces"]) == {"Red", "Blue"}
     first = gateway.post(f"/v1/envs/{pair}/reset", {"seed": 0})["observation"]
     assert set(first) == {"Red", "Blue"} and len(first["Red"]) == 8
-    step = gateway.post(f"/v1/envs/{pair}/step",
-                        {"action": {"Red": [1.0, 0.0], "Blue": [0.0, -1.0]}})
+    step = gateway.post(
+        f"/v1/envs/{pair}/step", {"action": {"Red": [1.0, 0.0], "Blue": [0.0, -1.0]}}
+    )
     assert set(step["info"]["agents"]) == {"Red", "Blue"}
-    assert_problem(gateway.request("POST", f"/v1/envs/{pair}/step",
-                                   {"action": {"Red": [1.0, 0.0]}}), 422, "invalid_action")
+    assert_problem(
+        gateway.request("POST", f"/v1/envs/{pair}/step", {"action": {"Red": [1.0, 0.0]}}),
+        422,
+        "invalid_action",
+    )
 
     pixels = gateway.session("rlenv/Pixels-v0")
     schema = gateway.get(f"/v1/envs/{pixels}/observation_space")["schema"]
@@ -172,8 +179,9 @@ def test_the_time_limit_truncates_every_agent_still_playing(gateway: Gateway) ->
     observation = gateway.post(f"/v1/envs/{session}/reset", {"seed": 3})["observation"]
     for _ in range(300):
         red = chase(np.array(observation["Red"], np.float32)).tolist()
-        step = gateway.post(f"/v1/envs/{session}/step",
-                            {"action": {"Red": red, "Blue": [0.0, 0.0]}})
+        step = gateway.post(
+            f"/v1/envs/{session}/step", {"action": {"Red": red, "Blue": [0.0, 0.0]}}
+        )
         observation = step["observation"]
         if step["terminated"] or step["truncated"]:
             break
@@ -222,15 +230,26 @@ def test_openapi_is_generated_from_the_routes(gateway: Gateway) -> None:
     assert document["openapi"] == "3.1.0"
     paths = document["paths"]
     expected = {
-        "/v1/envs": {"get", "post"}, "/v1/envs/{id}": {"get", "delete"},
-        "/v1/envs/{id}/reset": {"post"}, "/v1/envs/{id}/step": {"post"},
-        "/v1/envs/{id}/render": {"get"}, "/v1/envs/{id}/action_space": {"get"},
-        "/v1/envs/{id}/observation_space": {"get"}, "/v1/envs/{id}/action_space/sample": {"post"},
+        "/v1/envs": {"get", "post"},
+        "/v1/envs/{id}": {"get", "delete"},
+        "/v1/envs/{id}/reset": {"post"},
+        "/v1/envs/{id}/step": {"post"},
+        "/v1/envs/{id}/render": {"get"},
+        "/v1/envs/{id}/action_space": {"get"},
+        "/v1/envs/{id}/observation_space": {"get"},
+        "/v1/envs/{id}/action_space/sample": {"post"},
         "/v1/envs/{id}/action_space/contains": {"post"},
-        "/v1/envs/{id}/snapshot": {"get"}, "/v1/envs/{id}/restore": {"post"},
-        "/v1/envs/{id}/ws": {"get"}, "/v1/envs/{id}/events": {"get"}, "/v1": {"get"},
-        "/state": {"get"}, "/visual_observations": {"get"}, "/reset": {"get", "post"},
-        "/step": {"get"}, "/openapi.json": {"get"}}
+        "/v1/envs/{id}/snapshot": {"get"},
+        "/v1/envs/{id}/restore": {"post"},
+        "/v1/envs/{id}/ws": {"get"},
+        "/v1/envs/{id}/events": {"get"},
+        "/v1": {"get"},
+        "/state": {"get"},
+        "/visual_observations": {"get"},
+        "/reset": {"get", "post"},
+        "/step": {"get"},
+        "/openapi.json": {"get"},
+    }
     assert {path: set(item) for path, item in paths.items()} == expected
     step = paths["/v1/envs/{id}/step"]["post"]
     assert {"200", "400", "404", "409", "422", "502", "504"} <= set(step["responses"])
@@ -249,16 +268,18 @@ def test_bevy_rl_routes_in_bevy_rl_formats(gateway: Gateway) -> None:
     assert frame.content_type == "image/png" and decode_png(frame.body).shape == (400, 600, 3)
     for method in ("POST", "GET"):
         reset = gateway.request(method, "/reset")
-        assert reset.status == 200 and reset.json() == [{"reward": 0.0,
-                                                         "is_terminated": False}]
+        assert reset.status == 200 and reset.json() == [{"reward": 0.0, "is_terminated": False}]
     payload = urllib.parse.quote(json.dumps([{"action": json.dumps([0.5])}]))
     step = gateway.request("GET", f"/step?payload={payload}")
     assert step.status == 200 and step.content_type == "application/json"
     assert step.json() == [{"reward": 4.0, "is_terminated": False}]
     assert gateway.get("/state") != state.json()
     seeded = gateway.request("POST", "/reset?seed=3")
-    assert seeded.status == 200 and gateway.get("/state") == gateway.post(
-        f"/v1/envs/{gateway.session()}/reset", {"seed": 3})["observation"]
+    assert (
+        seeded.status == 200
+        and gateway.get("/state")
+        == gateway.post(f"/v1/envs/{gateway.session()}/reset", {"seed": 3})["observation"]
+    )
     for bad in ("nope", urllib.parse.quote("[]"), urllib.parse.quote('[{"action": "[0.5"}]')):
         assert_problem(gateway.request("GET", f"/step?payload={bad}"), 400, "bad_request")
     assert_problem(gateway.request("GET", "/step"), 400, "bad_request")
@@ -278,8 +299,9 @@ def test_bevy_rl_routes_with_several_agents() -> None:
     pair = Gateway("examples.pair:PairEnvironment")
     try:
         assert set(pair.get("/state")) == {"Red", "Blue"}
-        payload = urllib.parse.quote(json.dumps([{"action": "[1.0, 0.0]"},
-                                                 {"action": "[0.0, 1.0]"}]))
+        payload = urllib.parse.quote(
+            json.dumps([{"action": "[1.0, 0.0]"}, {"action": "[0.0, 1.0]"}])
+        )
         states = pair.get(f"/step?payload={payload}")
         assert len(states) == 2 and all(set(s) == {"reward", "is_terminated"} for s in states)
         one = urllib.parse.quote(json.dumps([{"action": "[1.0, 0.0]"}]))
@@ -308,9 +330,12 @@ def test_the_websocket_carries_typed_messages(gateway: Gateway) -> None:
         websocket.send(json.dumps({"type": "step", "action": [0.5], "repeat_action": 2}))
         step = json.loads(websocket.recv(timeout=10))
         assert step["type"] == "step" and step["info"]["frames"] == 2
-        for bad, status in (("not json", 400), (json.dumps({"type": "jump"}), 400),
-                            (json.dumps({"type": "step", "action": [float("nan")]}), 400),
-                            (json.dumps({"type": "step", "action": [9.0]}), 422)):
+        for bad, status in (
+            ("not json", 400),
+            (json.dumps({"type": "jump"}), 400),
+            (json.dumps({"type": "step", "action": [float("nan")]}), 400),
+            (json.dumps({"type": "step", "action": [9.0]}), 422),
+        ):
             websocket.send(bad)
             error = json.loads(websocket.recv(timeout=10))
             assert error["type"] == "error" and error["problem"]["status"] == status
@@ -339,8 +364,7 @@ def test_watchers_follow_a_session_as_server_sent_events(gateway: Gateway) -> No
     gateway.post(f"/v1/envs/{session}/step", {"action": [0.0]})
     gateway.post(f"/v1/envs/{session}/step", {"action": [0.0]})
     events = [_event(answer) for _ in range(3)]
-    assert [(e["id"], e["event"]) for e in events] == [("0", "reset"), ("1", "step"),
-                                                       ("2", "step")]
+    assert [(e["id"], e["event"]) for e in events] == [("0", "reset"), ("1", "step"), ("2", "step")]
     data = json.loads(events[2]["data"])
     assert data["episode"] == 1 and data["step"] == 2 and data["info"]["frames"] == 4
     assert gateway.request("DELETE", f"/v1/envs/{session}").status == 204
@@ -379,8 +403,10 @@ def test_an_answer_leaves_in_one_write(gateway: Gateway) -> None:
     session = gateway.session(**ENDLESS)
     gateway.post(f"/v1/envs/{session}/reset")
     body = json.dumps({"action": [0.0]}).encode()
-    request = (f"POST /v1/envs/{session}/step HTTP/1.1\r\nHost: {gateway.host}:{gateway.port}"
-               f"\r\nContent-Length: {len(body)}\r\n\r\n").encode() + body
+    request = (
+        f"POST /v1/envs/{session}/step HTTP/1.1\r\nHost: {gateway.host}:{gateway.port}"
+        f"\r\nContent-Length: {len(body)}\r\n\r\n"
+    ).encode() + body
     with socket.create_connection((gateway.host, gateway.port), timeout=30) as connection:
         connection.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         for _ in range(30):

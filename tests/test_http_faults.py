@@ -36,12 +36,15 @@ def gateway() -> Iterator[Gateway]:
     started.close()
 
 
-
 def test_bad_bodies_are_400(gateway: Gateway) -> None:
     session = gateway.session()
     step = f"/v1/envs/{session}/step"
-    assert "not JSON" in assert_problem(gateway.request("POST", step, raw=b'{"action": '),
-                                        400, "bad_request")["detail"]
+    assert (
+        "not JSON"
+        in assert_problem(gateway.request("POST", step, raw=b'{"action": '), 400, "bad_request")[
+            "detail"
+        ]
+    )
     assert_problem(gateway.request("POST", step, raw=b'{"action": [NaN]}'), 400, "bad_request")
     assert_problem(gateway.request("POST", step), 400, "bad_request")  # no body
     assert_problem(gateway.request("POST", step, [0.5]), 400, "bad_request")
@@ -49,12 +52,15 @@ def test_bad_bodies_are_400(gateway: Gateway) -> None:
     assert "'repeat'" in assert_problem(unknown, 400, "bad_request")["detail"]
     assert_problem(gateway.request("POST", step, {"repeat_action": 2}), 400, "bad_request")
     gateway.post(f"/v1/envs/{session}/reset")
-    assert_problem(gateway.request("POST", step, {"action": [0.5], "repeat_action": 0}), 400,
-                   "bad_request")
-    assert_problem(gateway.request("POST", f"/v1/envs/{session}/reset", {"seed": -1}), 400,
-                   "bad_request")
-    assert_problem(gateway.request("POST", f"/v1/envs/{session}/reset", {"seed": True}), 400,
-                   "bad_request")
+    assert_problem(
+        gateway.request("POST", step, {"action": [0.5], "repeat_action": 0}), 400, "bad_request"
+    )
+    assert_problem(
+        gateway.request("POST", f"/v1/envs/{session}/reset", {"seed": -1}), 400, "bad_request"
+    )
+    assert_problem(
+        gateway.request("POST", f"/v1/envs/{session}/reset", {"seed": True}), 400, "bad_request"
+    )
     unknown_id = gateway.request("POST", "/v1/envs", {"env_id": "os:system"})
     assert "rlenv/CartPole-v0" in assert_problem(unknown_id, 400, "bad_request")["detail"]
     assert gateway.post(step, {"action": [0.5]})["info"]["frames"] == 4  # served after all that
@@ -74,10 +80,14 @@ def test_a_repeat_action_beyond_the_limit_is_400_at_once_and_the_session_steps_o
 
 
 def test_unknown_sessions_and_routes_are_404_and_methods_405(gateway: Gateway) -> None:
-    for method, path in (("GET", "/v1/envs/nope"), ("POST", "/v1/envs/nope/step"),
-                         ("POST", "/v1/envs/nope/reset"), ("GET", "/v1/envs/nope/render"),
-                         ("GET", "/v1/envs/nope/action_space"),
-                         ("POST", "/v1/envs/nope/action_space/sample")):
+    for method, path in (
+        ("GET", "/v1/envs/nope"),
+        ("POST", "/v1/envs/nope/step"),
+        ("POST", "/v1/envs/nope/reset"),
+        ("GET", "/v1/envs/nope/render"),
+        ("GET", "/v1/envs/nope/action_space"),
+        ("POST", "/v1/envs/nope/action_space/sample"),
+    ):
         assert_problem(gateway.request(method, path, {"action": [0.0]}), 404, "unknown_session")
     assert_problem(gateway.request("GET", "/no/such/route"), 404, "not_found")
     wrong = gateway.request("PUT", "/v1/envs")
@@ -105,8 +115,12 @@ def test_steps_before_a_reset_and_after_the_end_are_409(gateway: Gateway) -> Non
 def test_actions_outside_the_space_are_422(gateway: Gateway) -> None:
     session = gateway.session()
     gateway.post(f"/v1/envs/{session}/reset", {"seed": 0})
-    for action, words in (([2.0], "outside the bounds"), ([0.1, 0.2], "shape"),
-                          ("left", "array"), ([None], "")):
+    for action, words in (
+        ([2.0], "outside the bounds"),
+        ([0.1, 0.2], "shape"),
+        ("left", "array"),
+        ([None], ""),
+    ):
         reply = gateway.request("POST", f"/v1/envs/{session}/step", {"action": action})
         assert words in assert_problem(reply, 422, "invalid_action")["detail"]
     assert gateway.get(f"/v1/envs/{session}")["step"] == 0  # a refused action changed nothing
@@ -127,16 +141,20 @@ def test_the_session_limit_is_503_with_retry_after() -> None:
 
 
 def test_one_client_holds_at_most_its_share_of_the_sessions() -> None:
-    limited = Gateway(CARTPOLE, "--max-sessions", "4", "--max-sessions-per-client", "2",
-                      "--idle-timeout", "120")
+    limited = Gateway(
+        CARTPOLE, "--max-sessions", "4", "--max-sessions-per-client", "2", "--idle-timeout", "120"
+    )
     try:
         first, _ = limited.session(), limited.session()
         greedy = limited.request("POST", "/v1/envs", {})
-        assert "2 sessions per client, and 127.0.0.1 has as many" in \
-            assert_problem(greedy, 503, "session_limit")["detail"]
+        assert (
+            "2 sessions per client, and 127.0.0.1 has as many"
+            in assert_problem(greedy, 503, "session_limit")["detail"]
+        )
         assert 1 <= int(greedy.headers["retry-after"]) <= 120
-        other = http.client.HTTPConnection("127.0.0.1", limited.port, timeout=60,
-                                           source_address=("127.0.0.2", 0))
+        other = http.client.HTTPConnection(
+            "127.0.0.1", limited.port, timeout=60, source_address=("127.0.0.2", 0)
+        )
         try:  # another client still finds room
             other.request("POST", "/v1/envs", "{}")
             assert other.getresponse().status == 201
@@ -154,14 +172,19 @@ def test_a_creation_abandoned_mid_request_frees_its_slot() -> None:
     try:
         body = b"{}"
         with socket.create_connection((limited.host, limited.port), timeout=30) as abandoned:
-            abandoned.sendall(f"POST /v1/envs HTTP/1.1\r\nHost: {limited.host}:{limited.port}"
-                              f"\r\nContent-Length: {len(body)}\r\n\r\n".encode() + body)
+            abandoned.sendall(
+                f"POST /v1/envs HTTP/1.1\r\nHost: {limited.host}:{limited.port}"
+                f"\r\nContent-Length: {len(body)}\r\n\r\n".encode()
+                + body
+            )
+
         # it left before its answer: the session is deleted as soon as it is made, not reaped
         # 600 s later; meanwhile the slot may be taken (503) or free
         def created() -> bool:
             reply = limited.request("POST", "/v1/envs", {})
             assert reply.status in (201, 503), reply
             return reply.status == 201
+
         wait_until(created, "the abandoned creation kept the only slot", seconds=60)
         assert len(limited.get("/v1/envs")["envs"]) == 1
         assert "its client left before it was told of it" in limited.stderr()
@@ -173,8 +196,9 @@ def test_idle_sessions_are_reaped() -> None:
     reaping = Gateway(CARTPOLE, "--idle-timeout", "0.5")
     try:
         session = reaping.session()
-        wait_until(lambda: not reaping.get("/v1/envs")["envs"], "the idle session stayed",
-                   seconds=20)
+        wait_until(
+            lambda: not reaping.get("/v1/envs")["envs"], "the idle session stayed", seconds=20
+        )
         assert_problem(reaping.request("GET", f"/v1/envs/{session}"), 404, "unknown_session")
     finally:
         reaping.close()
@@ -192,8 +216,9 @@ def test_an_environment_that_hangs_is_504_and_the_others_go_on() -> None:
         assert time.monotonic() - started < 30
         described = slow.get(f"/v1/envs/{hung}")
         assert described["status"] == "timed_out" and described["problem"]["status"] == 504
-        assert_problem(slow.request("POST", f"/v1/envs/{hung}/step", {"action": 0}), 504,
-                       "timeout")  # the session says so until it is deleted
+        assert_problem(
+            slow.request("POST", f"/v1/envs/{hung}/step", {"action": 0}), 504, "timeout"
+        )  # the session says so until it is deleted
         assert slow.post(f"/v1/envs/{fine}/step", {"action": 0})["observation"] == [1]
         assert slow.request("DELETE", f"/v1/envs/{hung}").status == 204
     finally:
@@ -206,8 +231,7 @@ def test_an_isolated_environment_that_hangs_is_504() -> None:
         hung, fine = slow.session(), slow.session()
         for session in (hung, fine):
             slow.post(f"/v1/envs/{session}/reset", {"seed": 0})
-        assert_problem(slow.request("POST", f"/v1/envs/{hung}/step", {"action": 1}), 504,
-                       "timeout")
+        assert_problem(slow.request("POST", f"/v1/envs/{hung}/step", {"action": 1}), 504, "timeout")
         assert slow.get(f"/v1/envs/{hung}")["status"] == "timed_out"
         assert slow.post(f"/v1/envs/{fine}/step", {"action": 0})["observation"] == [1]
         assert slow.get("/v1")["hosting"] == "isolated"
@@ -241,9 +265,12 @@ def test_a_slow_session_never_stalls_the_others() -> None:
         body = b'{"action": 2}'  # sleeps 5 s in a collision callback: 504 after 2 s
         pending = socket.create_connection((gateway.host, gateway.port), timeout=30)
         try:
-            pending.sendall(f"POST /v1/envs/{slow}/step HTTP/1.1\r\nHost: {gateway.host}:"
-                            f"{gateway.port}\r\nContent-Length: {len(body)}\r\n"
-                            "Connection: close\r\n\r\n".encode() + body)
+            pending.sendall(
+                f"POST /v1/envs/{slow}/step HTTP/1.1\r\nHost: {gateway.host}:"
+                f"{gateway.port}\r\nContent-Length: {len(body)}\r\n"
+                "Connection: close\r\n\r\n".encode()
+                + body
+            )
             started = time.monotonic()
             for tick in range(1, 21):
                 step = gateway.post(f"/v1/envs/{fast}/step", {"action": 0})
@@ -264,8 +291,9 @@ def test_an_environment_whose_server_dies_is_502_and_the_others_go_on() -> None:
         lost, fine = dying.session(), dying.session()
         for session in (lost, fine):
             dying.post(f"/v1/envs/{session}/reset", {"seed": 0})
-        assert_problem(dying.request("POST", f"/v1/envs/{lost}/step", {"action": 1}), 502,
-                       "environment_lost")
+        assert_problem(
+            dying.request("POST", f"/v1/envs/{lost}/step", {"action": 1}), 502, "environment_lost"
+        )
         described = dying.get(f"/v1/envs/{lost}")
         assert described["status"] == "lost" and described["problem"]["status"] == 502
         assert_problem(dying.request("POST", f"/v1/envs/{lost}/reset"), 502, "environment_lost")
@@ -282,8 +310,7 @@ def test_an_environment_that_calls_exit_ends_its_session_not_the_gateway() -> No
         for session in (exiting, fine):
             hosting.post(f"/v1/envs/{session}/reset")
         exited = hosting.request("POST", f"/v1/envs/{exiting}/step", {"action": 2})
-        assert "closed the connection" in assert_problem(exited, 502,
-                                                         "environment_lost")["detail"]
+        assert "closed the connection" in assert_problem(exited, 502, "environment_lost")["detail"]
         assert hosting.get(f"/v1/envs/{exiting}")["status"] == "lost"
         assert hosting.post(f"/v1/envs/{fine}/step", {"action": 0})["observation"] == [1]
     finally:
@@ -300,8 +327,11 @@ def test_a_relayed_server_that_dies_is_502(serve: Serve) -> None:
         second = relay.session()  # the server's one environment has one controller
         assert_problem(relay.request("POST", f"/v1/envs/{second}/reset"), 409, "busy")
         server.close()
-        assert_problem(relay.request("POST", f"/v1/envs/{session}/step", {"action": [0.0]}),
-                       502, "environment_lost")
+        assert_problem(
+            relay.request("POST", f"/v1/envs/{session}/step", {"action": [0.0]}),
+            502,
+            "environment_lost",
+        )
         assert relay.get(f"/v1/envs/{session}")["status"] == "lost"
         assert relay.get("/v1")["target"] == server.address
     finally:
@@ -314,8 +344,7 @@ def test_an_environment_that_raises_is_500_and_recovers() -> None:
         session = faulty.session()
         faulty.post(f"/v1/envs/{session}/reset")
         raised = faulty.request("POST", f"/v1/envs/{session}/step", {"action": 1})
-        assert "tripped over action 1" in assert_problem(raised, 500,
-                                                         "environment_error")["detail"]
+        assert "tripped over action 1" in assert_problem(raised, 500, "environment_error")["detail"]
         faulty.post(f"/v1/envs/{session}/reset")
         assert faulty.post(f"/v1/envs/{session}/step", {"action": 0})["info"]["frames"] == 3
     finally:
@@ -324,29 +353,40 @@ def test_an_environment_that_raises_is_500_and_recovers() -> None:
 
 def test_foreign_hosts_and_origins_are_403(gateway: Gateway) -> None:
     port = gateway.port
-    for headers in ({"Host": "attacker.example"}, {"Host": f"attacker.example:{port}"},
-                    {"Host": f"127.0.0.1.attacker.example:{port}"}, {"Host": "127.0.0.1:1"},
-                    {"Origin": "http://attacker.example"},
-                    {"Origin": f"http://127.0.0.1:{port + 1}"}):
+    for headers in (
+        {"Host": "attacker.example"},
+        {"Host": f"attacker.example:{port}"},
+        {"Host": f"127.0.0.1.attacker.example:{port}"},
+        {"Host": "127.0.0.1:1"},
+        {"Origin": "http://attacker.example"},
+        {"Origin": f"http://127.0.0.1:{port + 1}"},
+    ):
         refused = gateway.request("GET", "/v1/envs", headers=headers)
         assert "refused" in assert_problem(refused, 403, "forbidden")["detail"]
     for host in (f"localhost:{port}", f"127.0.0.1:{port}", f"[::1]:{port}"):
         assert gateway.request("GET", "/v1", headers={"Host": host}).status == 200
-    assert gateway.request("GET", "/v1", headers={"Origin": f"http://localhost:{port}"}).status \
-        == 200
+    assert (
+        gateway.request("GET", "/v1", headers={"Origin": f"http://localhost:{port}"}).status == 200
+    )
     with pytest.raises(Exception, match="403"):
         from websockets.sync.client import connect
 
-        connect(f"ws://{gateway.host}:{port}/v1/envs/{gateway.session()}/ws",
-                origin="http://attacker.example").close()  # type: ignore[arg-type]
+        connect(
+            f"ws://{gateway.host}:{port}/v1/envs/{gateway.session()}/ws",
+            origin="http://attacker.example",
+        ).close()  # type: ignore[arg-type]
 
 
 def test_requests_a_page_of_another_origin_made_are_403() -> None:
     bevy = Gateway(CARTPOLE)
     try:
         for site in ("cross-site", "same-site"):  # what an <img src> sends: no Origin
-            for path in ("/step?payload=%5B%7B%22action%22%3A%22%5B0.0%5D%22%7D%5D", "/reset",
-                         "/state", "/v1/envs"):
+            for path in (
+                "/step?payload=%5B%7B%22action%22%3A%22%5B0.0%5D%22%7D%5D",
+                "/reset",
+                "/state",
+                "/v1/envs",
+            ):
                 refused = bevy.request("GET", path, headers={"Sec-Fetch-Site": site})
                 assert "Sec-Fetch-Site" in assert_problem(refused, 403, "forbidden")["detail"]
         assert bevy.get("/v1/envs")["envs"] == []  # nothing was created, nor stepped
@@ -362,8 +402,10 @@ def test_bodies_are_limited(gateway: Gateway) -> None:
     assert_problem(large, 413, "payload_too_large")
     connection = socket.create_connection((gateway.host, gateway.port))
     try:  # a chunked body that grows past the limit
-        connection.sendall(f"POST /v1/envs/{session}/step HTTP/1.1\r\nHost: {gateway.host}:"
-                           f"{gateway.port}\r\nTransfer-Encoding: chunked\r\n\r\n".encode())
+        connection.sendall(
+            f"POST /v1/envs/{session}/step HTTP/1.1\r\nHost: {gateway.host}:"
+            f"{gateway.port}\r\nTransfer-Encoding: chunked\r\n\r\n".encode()
+        )
         for _ in range(3):
             connection.sendall(b"800\r\n" + b" " * 2048 + b"\r\n")
         connection.sendall(b"0\r\n\r\n")
@@ -375,9 +417,12 @@ def test_bodies_are_limited(gateway: Gateway) -> None:
 
 
 def test_garbage_on_the_socket_never_stops_it(gateway: Gateway) -> None:
-    for garbage in (b"GARBAGE\r\n\r\n", b"\x16\x03\x01\x02\x00\x01\x00\x01\xfc\x03\x03",
-                    b"GET / HTTP/1.1\r\nHost: " + b"x" * 100_000 + b"\r\n\r\n",
-                    b"POST /v1/envs HTTP/1.1\r\nContent-Length: 10\r\n\r\n{"):
+    for garbage in (
+        b"GARBAGE\r\n\r\n",
+        b"\x16\x03\x01\x02\x00\x01\x00\x01\xfc\x03\x03",
+        b"GET / HTTP/1.1\r\nHost: " + b"x" * 100_000 + b"\r\n\r\n",
+        b"POST /v1/envs HTTP/1.1\r\nContent-Length: 10\r\n\r\n{",
+    ):
         connection = socket.create_connection((gateway.host, gateway.port), timeout=30)
         try:
             connection.sendall(garbage)
@@ -435,8 +480,11 @@ def _read_all(connection: socket.socket) -> bytes:
 def test_binding_beyond_loopback_needs_a_token() -> None:
     result = subprocess.run(
         [sys.executable, "-m", "rlenv", "http", CARTPOLE, "--host", "0.0.0.0", "--port", "0"],
-        capture_output=True, text=True, timeout=60,
-        env={k: v for k, v in os.environ.items() if k != "RLENV_TOKEN"})
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={k: v for k, v in os.environ.items() if k != "RLENV_TOKEN"},
+    )
     assert result.returncode == 2
     assert "refusing to listen on 0.0.0.0" in result.stderr and "RLENV_TOKEN" in result.stderr
 
@@ -470,8 +518,12 @@ def test_wrong_tokens_slow_the_guesser_never_the_token_holder() -> None:
         guarded.host = "127.0.0.1"
         wrong, good = {"Authorization": "Bearer nope"}, {"Authorization": "Bearer s3cret"}
         for _ in range(FREE_FAILURES):
-            assert assert_problem(guarded.request("GET", "/v1", headers=wrong), 401,
-                                  "unauthorized")["detail"] == "wrong token"
+            assert (
+                assert_problem(guarded.request("GET", "/v1", headers=wrong), 401, "unauthorized")[
+                    "detail"
+                ]
+                == "wrong token"
+            )
         session = guarded.request("POST", "/v1/envs", {}, headers=good).json()["id"]
         answered = []  # the guesses' answers, from four guessers at once
         stop = threading.Event()
@@ -491,11 +543,13 @@ def test_wrong_tokens_slow_the_guesser_never_the_token_holder() -> None:
             for _ in range(20):
                 if ended:
                     guarded.request("POST", f"/v1/envs/{session}/reset", {}, headers=good)
-                step = guarded.request("POST", f"/v1/envs/{session}/step", {"action": [0.0]},
-                                       headers=good)
+                step = guarded.request(
+                    "POST", f"/v1/envs/{session}/step", {"action": [0.0]}, headers=good
+                )
                 statuses.append(step.status)
-                ended = step.status == 200 and (step.json()["terminated"] or
-                                                step.json()["truncated"])
+                ended = step.status == 200 and (
+                    step.json()["terminated"] or step.json()["truncated"]
+                )
             assert statuses == [200] * 20  # never refused for the guessers' failures
             wait_until(lambda: time.monotonic() - started >= 3.0, "no time passed")
         finally:
@@ -507,8 +561,9 @@ def test_wrong_tokens_slow_the_guesser_never_the_token_holder() -> None:
         assert all(took >= 1.0 for _, took in answered), answered  # each one held
         # Held 1, 2, 4, 8 s ...: four guessers get at most one answer each per second held
         assert len(answered) <= 4 * (elapsed + 1), (len(answered), elapsed)
-        other = http.client.HTTPConnection("127.0.0.1", guarded.port, timeout=30,
-                                           source_address=("127.0.0.2", 0))
+        other = http.client.HTTPConnection(
+            "127.0.0.1", guarded.port, timeout=30, source_address=("127.0.0.2", 0)
+        )
         try:  # another address is not affected
             other.request("GET", "/v1", headers=wrong)
             assert other.getresponse().status == 401
@@ -516,8 +571,7 @@ def test_wrong_tokens_slow_the_guesser_never_the_token_holder() -> None:
             other.close()
         log = guarded.stderr()
         assert "wrong token from 127.0.0.1 (1 in a row)" in log
-        assert f"wrong token from 127.0.0.1 ({FREE_FAILURES + 1} in a row): answered in " \
-               "1 s" in log
+        assert f"wrong token from 127.0.0.1 ({FREE_FAILURES + 1} in a row): answered in 1 s" in log
         assert "wrong token from 127.0.0.2 (1 in a row)" in log
         assert "nope" not in log and "s3cret" not in log
     finally:
@@ -526,6 +580,17 @@ def test_wrong_tokens_slow_the_guesser_never_the_token_holder() -> None:
 
 def test_an_unknown_target_is_refused_at_start() -> None:
     result = subprocess.run(
-        [sys.executable, "-m", "rlenv", "http", "examples.cartpole:NoSuchEnvironment",
-         "--port", "0"], capture_output=True, text=True, timeout=60)
+        [
+            sys.executable,
+            "-m",
+            "rlenv",
+            "http",
+            "examples.cartpole:NoSuchEnvironment",
+            "--port",
+            "0",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert result.returncode == 2 and "NoSuchEnvironment" in result.stderr

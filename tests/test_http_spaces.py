@@ -44,21 +44,40 @@ def test_every_value_matches_its_schema_and_outsiders_do_not(space: spaces.Space
     if not is_image(space):  # actions: the same schema, images as lists
         assert json_schema(space, images=False) == schema
     with pytest.raises(jsonschema.ValidationError):
-        jsonschema.validate({"not": "a value"} if not isinstance(space, spaces.Dict) else [],
-                            schema)
+        jsonschema.validate(
+            {"not": "a value"} if not isinstance(space, spaces.Dict) else [], schema
+        )
 
 
 def test_a_box_is_described_in_gymnasium_terms() -> None:
     box = spaces.Box(np.array([-1.0, -np.inf], np.float32), np.array([1.0, np.inf], np.float32))
-    assert space_to_json(box) == {"type": "Box", "shape": [2], "low": [-1.0, "-Infinity"],
-                                  "high": [1.0, "Infinity"], "dtype": "float32"}
+    assert space_to_json(box) == {
+        "type": "Box",
+        "shape": [2],
+        "low": [-1.0, "-Infinity"],
+        "high": [1.0, "Infinity"],
+        "dtype": "float32",
+    }
     assert space_to_json(spaces.Box(0, 255, (2, 3), np.uint8)) == {
-        "type": "Box", "shape": [2, 3], "low": 0, "high": 255, "dtype": "uint8"}
-    assert space_to_json(spaces.Discrete(3, start=-1)) == {"type": "Discrete", "n": 3,
-                                                           "start": -1, "dtype": "int64"}
-    assert json_schema(box) == {"type": "array", "prefixItems": [
-        {"type": "number", "minimum": -1.0, "maximum": 1.0}, {"type": "number"}],
-        "items": False, "minItems": 2, "maxItems": 2}
+        "type": "Box",
+        "shape": [2, 3],
+        "low": 0,
+        "high": 255,
+        "dtype": "uint8",
+    }
+    assert space_to_json(spaces.Discrete(3, start=-1)) == {
+        "type": "Discrete",
+        "n": 3,
+        "start": -1,
+        "dtype": "int64",
+    }
+    assert json_schema(box) == {
+        "type": "array",
+        "prefixItems": [{"type": "number", "minimum": -1.0, "maximum": 1.0}, {"type": "number"}],
+        "items": False,
+        "minItems": 2,
+        "maxItems": 2,
+    }
 
 
 def test_images_travel_as_png_and_actions_as_lists() -> None:
@@ -69,16 +88,26 @@ def test_images_travel_as_png_and_actions_as_lists() -> None:
     assert value_encoder(space, images=False)(image) == image.tolist()
     assert json_schema(space)["contentMediaType"] == "image/png"
     assert json_schema(space, images=False)["items"]["items"]["items"]["maximum"] == 255
-    assert np.array_equal(decode_png(base64.b64decode(to_json({"frame": image})["frame"])),
-                          image)
+    assert np.array_equal(decode_png(base64.b64decode(to_json({"frame": image})["frame"])), image)
 
 
 def test_values_json_lacks_are_converted() -> None:
-    info = {"nan": math.nan, "arrays": np.array([1.0, np.inf]), "scalar": np.float32(0.5),
-            "bytes": b"\x00\x01", 3: (np.int64(2), True), "none": None}
+    info = {
+        "nan": math.nan,
+        "arrays": np.array([1.0, np.inf]),
+        "scalar": np.float32(0.5),
+        "bytes": b"\x00\x01",
+        3: (np.int64(2), True),
+        "none": None,
+    }
     assert json.loads(dumps(info)) == {
-        "nan": "NaN", "arrays": [1.0, "Infinity"], "scalar": 0.5, "bytes": "AAE=",
-        "3": [2, True], "none": None}
+        "nan": "NaN",
+        "arrays": [1.0, "Infinity"],
+        "scalar": 0.5,
+        "bytes": "AAE=",
+        "3": [2, True],
+        "none": None,
+    }
     assert dumps({"plain": [1, 2.5]}) == b'{"plain":[1,2.5]}'
 
 
@@ -91,8 +120,9 @@ def test_json_actions_become_arrays_only_when_the_check_would_convert_them() -> 
     grid = action_decoder(spaces.Box(-1.0, 1.0, (2, 2), np.float64))
     assert grid([[0, 1], [1, 0]]).dtype == np.float64
     assert grid([[0, 1], [1]]) == [[0, 1], [1]]
-    joint = action_decoder(spaces.Dict({"a": spaces.Box(-1.0, 1.0, (1,), np.float32),
-                                        "b": spaces.Discrete(2)}))
+    joint = action_decoder(
+        spaces.Dict({"a": spaces.Box(-1.0, 1.0, (1,), np.float32), "b": spaces.Discrete(2)})
+    )
     decoded = joint({"a": [0.25], "b": 1})
     assert decoded["a"].dtype == np.float32 and decoded["b"] == 1
     integers = action_decoder(spaces.Box(0, 255, (1,), np.uint8))
@@ -100,8 +130,12 @@ def test_json_actions_become_arrays_only_when_the_check_would_convert_them() -> 
 
 
 def test_space_descriptions_that_are_not_spaces_are_refused() -> None:
-    for bad in ([], {"type": "Box"}, {"type": "Nope"},
-                {"type": "Box", "shape": [1], "low": 0, "high": 1, "dtype": "object"}):
+    for bad in (
+        [],
+        {"type": "Box"},
+        {"type": "Nope"},
+        {"type": "Box", "shape": [1], "low": 0, "high": 1, "dtype": "object"},
+    ):
         with pytest.raises(ValueError):
             space_from_json(bad)
 
@@ -114,8 +148,12 @@ def test_png_encodes_every_channel_count(shape: tuple[int, ...]) -> None:
 
 
 def test_png_refuses_what_is_not_an_image() -> None:
-    for bad in (np.zeros((2, 2, 3), np.float32), np.zeros((2, 2, 5), np.uint8),
-                np.zeros((0, 2, 3), np.uint8), np.zeros(4, np.uint8)):
+    for bad in (
+        np.zeros((2, 2, 3), np.float32),
+        np.zeros((2, 2, 5), np.uint8),
+        np.zeros((0, 2, 3), np.uint8),
+        np.zeros(4, np.uint8),
+    ):
         with pytest.raises(ValueError):
             encode_png(bad)
 
@@ -138,12 +176,15 @@ def test_the_gateway_and_onnx_policies_read_each_others_space(space: spaces.Spac
 def test_the_specs_that_rlenv_0_1s_policies_hold_are_read() -> None:
     from rlenv.protocol.space_json import space_from_json as read
 
-    assert read('{"type": "Box", "dtype": "<f4", "low": ["-inf", "-inf"], "high": [1.0, 1.0]}') \
-        == spaces.Box(-np.inf, 1.0, (2,), np.float32)
-    assert read('{"type": "Discrete", "n": 3, "start": -1, "dtype": "<i8"}') == \
-        spaces.Discrete(3, start=-1)
-    assert read('{"type": "MultiDiscrete", "dtype": "<i8", "nvec": [2, 3], "start": [0, 0]}') \
-        == spaces.MultiDiscrete([2, 3])
+    assert read(
+        '{"type": "Box", "dtype": "<f4", "low": ["-inf", "-inf"], "high": [1.0, 1.0]}'
+    ) == spaces.Box(-np.inf, 1.0, (2,), np.float32)
+    assert read('{"type": "Discrete", "n": 3, "start": -1, "dtype": "<i8"}') == spaces.Discrete(
+        3, start=-1
+    )
+    assert read(
+        '{"type": "MultiDiscrete", "dtype": "<i8", "nvec": [2, 3], "start": [0, 0]}'
+    ) == spaces.MultiDiscrete([2, 3])
     with pytest.raises(ValueError, match="not a space in JSON"):
         read("{not json")
 

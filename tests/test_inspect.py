@@ -47,11 +47,15 @@ def test_bad_inspection_gets_precise_errors_and_changes_nothing(client: Client) 
         (lambda: client.get_property("World/Nowhere", "angle"), "no node at path 'World/Nowhere'"),
         (lambda: client.get_property(POLE, "mass"), "exports no 'mass'; it exports position"),
         (lambda: client.set_property(POLE, "angle", "steep"), "RigidBody.angle must be a float"),
-        (lambda: client.set_property(POLE, "position", [1.0, 2.0, 3.0]),
-         "must be a list of 2 numbers like"),
+        (
+            lambda: client.set_property(POLE, "position", [1.0, 2.0, 3.0]),
+            "must be a list of 2 numbers like",
+        ),
         (lambda: client.set_property(POLE, "angle", True), "must be a float like"),
-        (lambda: client.set_property("World/Physics/Pole/Stick", "sensor", 1),
-         "must be a bool like"),
+        (
+            lambda: client.set_property("World/Physics/Pole/Stick", "sensor", 1),
+            "must be a bool like",
+        ),
         (lambda: client._call(inspect={"delete": {}}), "inspect must be one of"),
         (lambda: client._call(inspect={"get": {"path": POLE}}), "takes exactly"),
         (lambda: client._call(inspect={"stats": {"since": -1}}), "since must be an integer"),
@@ -82,8 +86,10 @@ def test_an_observer_edits_while_the_controller_steps(server: object, client: Cl
         assert error.value.code == ErrorCode.BUSY
     assert client.observe()["agent"][4] == pytest.approx(-2.5)
     events = client.snapshot()["events"]
-    assert events[-2:] == [["set", POLE, "angular_velocity", 2.5],
-                           ["config", {"world": {"gravity": [0.0, -20.0]}}]]
+    assert events[-2:] == [
+        ["set", POLE, "angular_velocity", 2.5],
+        ["config", {"world": {"gravity": [0.0, -20.0]}}],
+    ]
     observation, _ = client.reset(seed=0)  # the set lasted its episode; the setting stays
     assert abs(observation[4]) < 0.05  # a fresh start, not the set
     assert client.get_property("World/Physics", "gravity") == [0.0, -20.0]
@@ -190,13 +196,11 @@ def test_a_restore_whose_set_is_refused_changes_nothing(client: Client) -> None:
     client.step(np.zeros(1, np.float32), 2)
     snapshot = client.snapshot()
     before = client.observe()["agent"].tobytes()
-    bad = {**snapshot, "events": [*snapshot["events"],
-                                  ["set", "World/Physics", "gravity", "down"]]}
+    bad = {**snapshot, "events": [*snapshot["events"], ["set", "World/Physics", "gravity", "down"]]}
     with pytest.raises(RemoteError) as error:
         client.restore(bad)
     assert error.value.code == ErrorCode.BAD_REQUEST
-    assert "restore: events[1]: inspect: PhysicsWorld.gravity must be a list" in \
-        error.value.message
+    assert "restore: events[1]: inspect: PhysicsWorld.gravity must be a list" in error.value.message
     assert client.observe()["agent"].tobytes() == before
     client.step(np.zeros(1, np.float32), 2)  # the episode goes on
 
@@ -206,14 +210,14 @@ def test_a_set_refused_during_the_replay_needs_a_reset(client: Client) -> None:
     nothing, so the answer says the episode needs a reset."""
     client.reset(seed=1)
     snapshot = client.snapshot()
-    client._call(inspect={"set": {"path": "World/Physics", "property": "gravity",
-                                  "value": [0, 0]}})
+    client._call(inspect={"set": {"path": "World/Physics", "property": "gravity", "value": [0, 0]}})
     bad = {**snapshot, "events": [["set", "World/Physics/Spawned", "angle", 1.0]]}
     with pytest.raises(RemoteError) as error:
         client.restore(bad)
     assert error.value.code == ErrorCode.BAD_REQUEST
     assert error.value.message.startswith(
-        "restore: events[0]: inspect: no node at path 'World/Physics/Spawned'")
+        "restore: events[0]: inspect: no node at path 'World/Physics/Spawned'"
+    )
     assert error.value.message.endswith("reset required")
     with pytest.raises(RemoteError) as refused:
         client.step(np.zeros(1, np.float32))

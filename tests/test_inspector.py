@@ -55,7 +55,7 @@ def _port(url: str) -> int:
 def test_the_page_and_its_assets_come_with_safe_headers(page: str) -> None:
     status, headers, html = fetch(page)
     assert status == 200 and headers["content-type"].startswith("text/html")
-    assert b'src="static/inspector.js"' in html and b"<canvas id=\"scene\"" in html
+    assert b'src="static/inspector.js"' in html and b'<canvas id="scene"' in html
     for name, kind in (("inspector.js", "text/javascript"), ("inspector.css", "text/css")):
         status, headers, _ = fetch(page, f"static/{name}")
         assert status == 200 and headers["content-type"].startswith(kind)
@@ -87,18 +87,27 @@ def test_foreign_hosts_origins_and_missing_keys_are_refused(page: str) -> None:
         assert fetch(page, "api/servers", headers={"Host": host})[0] == 200
     assert fetch(page, "api/servers", headers={"Origin": f"http://localhost:{port}"})[0] == 200
     edit = {"server": 0, "instance": 0, "path": "World", "property": "damping", "value": 0.5}
-    status, _, body = fetch(page, "api/edit", method="POST", body=edit,
-                            headers={"Origin": "http://attacker.example"})
+    status, _, body = fetch(
+        page, "api/edit", method="POST", body=edit, headers={"Origin": "http://attacker.example"}
+    )
     assert status == 403
     status, _, body = fetch(base + "nokey/", "api/edit", method="POST", body=edit)
     assert status == 403
     assert fetch(page, "api/edit")[0] == 404  # a change is a POST
-    status, _, body = fetch(page, "api/edit", method="POST", raw=b"damping=0.5",
-                            headers={"Content-Type": "application/x-www-form-urlencoded"})
+    status, _, body = fetch(
+        page,
+        "api/edit",
+        method="POST",
+        raw=b"damping=0.5",
+        headers={"Content-Type": "application/x-www-form-urlencoded"},
+    )
     assert status == 415  # what a cross-site form could send
-    status, headers, _ = fetch(page, "api/edit", method="OPTIONS",
-                               headers={"Origin": "http://attacker.example",
-                                        "Access-Control-Request-Method": "POST"})
+    status, headers, _ = fetch(
+        page,
+        "api/edit",
+        method="OPTIONS",
+        headers={"Origin": "http://attacker.example", "Access-Control-Request-Method": "POST"},
+    )
     assert status in (403, 405) and not [h for h in headers if h.startswith("access-control")]
     assert fetch(page, "api/edit", method="PUT", body=edit)[0] == 405
     assert key not in str(fetch(base, "api/servers")[2])  # a refusal never tells the key
@@ -109,10 +118,14 @@ def test_malformed_edits_get_precise_errors(page: str, client: Client) -> None:
     cases = [
         (b"{not json", "not JSON"),
         (b'{"server": 0}', "exactly"),
-        (b'{"server": -1, "instance": 0, "path": "World", "property": "damping", "value": 1}',
-         "server must be an integer >= 0"),
-        (b'{"server": 0, "instance": 0, "path": 3, "property": "damping", "value": 1}',
-         "path must be a string"),
+        (
+            b'{"server": -1, "instance": 0, "path": "World", "property": "damping", "value": 1}',
+            "server must be an integer >= 0",
+        ),
+        (
+            b'{"server": 0, "instance": 0, "path": 3, "property": "damping", "value": 1}',
+            "path must be a string",
+        ),
     ]
     for raw, words in cases:
         status, _, body = fetch(page, "api/edit", method="POST", raw=raw)
@@ -120,11 +133,13 @@ def test_malformed_edits_get_precise_errors(page: str, client: Client) -> None:
     edit = {"server": 0, "instance": 0, "path": POLE, "property": "angle", "value": "steep"}
     status, _, body = fetch(page, "api/edit", method="POST", body=edit)
     assert status == 422 and "RigidBody.angle must be a float" in body["error"]
-    status, _, body = fetch(page, "api/edit", method="POST", raw=json.dumps(
-        {**edit, "value": float("nan")}).encode())
+    status, _, body = fetch(
+        page, "api/edit", method="POST", raw=json.dumps({**edit, "value": float("nan")}).encode()
+    )
     assert status == 400 and "NaN is not a value an edit may carry" in body["error"]
-    status, _, body = fetch(page, "api/edit", method="POST", raw=b"{}",
-                            headers={"Content-Length": "abc"})
+    status, _, body = fetch(
+        page, "api/edit", method="POST", raw=b"{}", headers={"Content-Length": "abc"}
+    )
     assert status == 400 and "Content-Length" in body["error"]
     edit = {**edit, "server": 3}
     assert fetch(page, "api/edit", method="POST", body=edit)[0] == 404
@@ -133,8 +148,7 @@ def test_malformed_edits_get_precise_errors(page: str, client: Client) -> None:
     assert fetch(page, "api/frame?instance=1")[0] == 404
 
 
-def test_it_watches_a_trainer_and_edits_between_its_steps(server: ServerProcess,
-                                                          page: str) -> None:
+def test_it_watches_a_trainer_and_edits_between_its_steps(server: ServerProcess, page: str) -> None:
     with Trainer(server.host, server.port) as trainer:
         wait_until(lambda: trainer.episodes > 3, "the trainer did not run")
         status, _, servers = fetch(page, "api/servers")
@@ -146,9 +160,21 @@ def test_it_watches_a_trainer_and_edits_between_its_steps(server: ServerProcess,
         assert len(frames[0]["observation"]["Agent"]["numbers"]) == 5
         tree = fetch(page, "api/tree")[2]
         assert {node["path"].rpartition("/")[2] for node in tree} >= {
-            "CartPole", "Agent", "World", "Physics", "Cart", "Pole", "Hinge"}
-        edit = {"server": 0, "instance": 0, "path": "/root/CartPole/World",
-                "property": "gravity", "value": [0.0, -20.0]}
+            "CartPole",
+            "Agent",
+            "World",
+            "Physics",
+            "Cart",
+            "Pole",
+            "Hinge",
+        }
+        edit = {
+            "server": 0,
+            "instance": 0,
+            "path": "/root/CartPole/World",
+            "property": "gravity",
+            "value": [0.0, -20.0],
+        }
         status, _, body = fetch(page, "api/edit", method="POST", body=edit)
         assert (status, body) == (200, {"scope": "setting"})
         edit = {**edit, "path": POLE, "property": "angular_velocity", "value": 1.0}
@@ -159,8 +185,9 @@ def test_it_watches_a_trainer_and_edits_between_its_steps(server: ServerProcess,
         stats = fetch(page, "api/stats")[2]
         assert trainer.error is None
     assert fetch(page, "api/node?path=World/Physics")[2]["exported"]["gravity"] == [0.0, -20.0]
-    assert ["config", {"world": {"gravity": [0.0, -20.0]}}] in snapshot["events"] or \
-        snapshot["config"]["world"]["gravity"] == [0.0, -20.0]  # a reset came in between
+    assert ["config", {"world": {"gravity": [0.0, -20.0]}}] in snapshot["events"] or snapshot[
+        "config"
+    ]["world"]["gravity"] == [0.0, -20.0]  # a reset came in between
     assert stats["next"] >= 3 and stats["steps"] > 0 and stats["restarts"] == 0
     assert all(e["end"] in ("terminated", "truncated", "reset") for e in stats["episodes"])
     assert sum(e["length"] for e in stats["episodes"]) <= stats["steps"]
@@ -171,13 +198,25 @@ def test_it_watches_a_trainer_and_edits_between_its_steps(server: ServerProcess,
 def test_the_token_stays_out_of_the_page(serve: Serve) -> None:
     token = "s3cret-token-for-the-inspector-test"
     server = serve(args=["--token", token])
-    with watching(server, token) as url, \
-            Client(server.host, server.port, token=token) as controller:
+    with (
+        watching(server, token) as url,
+        Client(server.host, server.port, token=token) as controller,
+    ):
         controller.reset(seed=0)
         controller.step(np.zeros(1, np.float32))
-        bodies = [fetch(url, path)[2] for path in (
-            "", "static/inspector.js", "api/servers", "api/frame", "api/tree",
-            "api/node?path=World", "api/stats", "api/snapshot")]
+        bodies = [
+            fetch(url, path)[2]
+            for path in (
+                "",
+                "static/inspector.js",
+                "api/servers",
+                "api/frame",
+                "api/tree",
+                "api/node?path=World",
+                "api/stats",
+                "api/snapshot",
+            )
+        ]
     assert all(token not in str(body) for body in bodies)
     assert "error" not in bodies[2][0] and bodies[3]["draw"]["shapes"]
     with watching(server, token="") as url:
@@ -195,11 +234,18 @@ def test_several_instances_are_chosen_one_by_one(serve: Serve) -> None:
             second = fetch(url, "api/frame?instance=1")[2]
             assert first["observation"] != second["observation"]  # other seeds
             assert fetch(url, "api/frame?instance=2")[0] == 404
-            edit = {"server": 0, "instance": 1, "path": "Agent", "property": "max_force",
-                    "value": 3.0}
+            edit = {
+                "server": 0,
+                "instance": 1,
+                "path": "Agent",
+                "property": "max_force",
+                "value": 3.0,
+            }
             fetch(url, "api/edit", method="POST", body=edit)
-            forces = [fetch(url, f"api/node?path=Agent&instance={i}")[2]["exported"]
-                      ["max_force"] for i in (0, 1)]
+            forces = [
+                fetch(url, f"api/node?path=Agent&instance={i}")[2]["exported"]["max_force"]
+                for i in (0, 1)
+            ]
             assert forces == [10.0, 3.0]
 
 
@@ -214,10 +260,17 @@ def test_camera_observations_come_as_images(serve: Serve) -> None:
     assert [shape[0] for shape in frame["draw"]["shapes"]] == ["polygon", "polygon"]
 
 
-@pytest.mark.parametrize("target", [
-    "examples.cartpole:CartPoleEnvironment", "examples.seeker:SeekerEnvironment",
-    "examples.seeker:SeekerPixelsEnvironment", "examples.reacher:ReacherEnvironment",
-    "examples.pair:PairEnvironment", "examples.pixels:PixelsEnvironment"])
+@pytest.mark.parametrize(
+    "target",
+    [
+        "examples.cartpole:CartPoleEnvironment",
+        "examples.seeker:SeekerEnvironment",
+        "examples.seeker:SeekerPixelsEnvironment",
+        "examples.reacher:ReacherEnvironment",
+        "examples.pair:PairEnvironment",
+        "examples.pixels:PixelsEnvironment",
+    ],
+)
 def test_every_example_can_be_watched(serve: Serve, target: str) -> None:
     server = serve(target)
     with watching(server) as url:
@@ -247,8 +300,7 @@ def test_an_agents_setting_is_its_own_among_several(serve: Serve) -> None:
             red = fetch(url, "api/node?path=Red")[2]
             assert red["configurable"] == ["gain"] and red["settings"] == ["gain"]
             edit = {"server": 0, "instance": 0, "path": "Red", "property": "gain", "value": 5.0}
-            assert fetch(url, "api/edit", method="POST", body=edit)[2] == {
-                "scope": "setting"}
+            assert fetch(url, "api/edit", method="POST", body=edit)[2] == {"scope": "setting"}
             controller.reset(seed=1)  # a setting outlives the episode
             gains = [controller.get_property(name, "gain") for name in ("Red", "Blue")]
             kept = controller.snapshot()["config"]["agent"]
@@ -270,8 +322,7 @@ def test_a_dead_inspector_never_stops_the_training() -> None:
             observation, _ = env.reset(seed=1)
             total = 0.0
             for _ in range(steps):
-                observation, reward, terminated, truncated, info = env.step(
-                    controller(observation))
+                observation, reward, terminated, truncated, info = env.step(controller(observation))
                 assert info["frames"] == 4 and not truncated
                 total += reward
                 if terminated:
@@ -296,8 +347,12 @@ def test_rlenv_inspect_prints_its_page_and_ends_with_its_parent(server: ServerPr
         assert fetch(inspector.url, "api/servers")[2][0]["environment"] == "CartPole"
         process = inspector._process
     assert process.returncode is not None  # closing its standard input ended it
-    bad = subprocess.run([sys.executable, "-m", "rlenv", "inspect", "nowhere"],
-                         capture_output=True, text=True, timeout=30)
+    bad = subprocess.run(
+        [sys.executable, "-m", "rlenv", "inspect", "nowhere"],
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
     assert bad.returncode == 2 and "HOST:PORT" in bad.stderr
 
 
@@ -318,6 +373,7 @@ def test_a_remote_env_inspector_follows_a_restarted_server() -> None:
         def moved() -> bool:
             described = fetch(url, "api/servers")[2][0]
             return described["address"] == env.client.address and "error" not in described
+
         wait_until(moved, "the inspector did not follow the restarted server")
         assert fetch(url, "api/servers")[2][0]["restarts"] == 1
         assert fetch(url, "api/frame")[0] == 200
@@ -328,8 +384,10 @@ def test_a_remote_env_inspector_follows_a_restarted_server() -> None:
 
 def test_rlenv_serve_inspect_starts_an_inspector_that_ends_with_it(serve: Serve) -> None:
     server = serve(args=["--inspect"])
-    wait_until(lambda: "inspector on " in server.output,
-               "rlenv serve --inspect printed no inspector address")
+    wait_until(
+        lambda: "inspector on " in server.output,
+        "rlenv serve --inspect printed no inspector address",
+    )
     url = server.output.split("inspector on ", 1)[1].split()[0]
     assert fetch(url, "api/servers")[2][0]["address"] == f"{server.host}:{server.port}"
     server.close()
@@ -338,13 +396,26 @@ def test_rlenv_serve_inspect_starts_an_inspector_that_ends_with_it(serve: Serve)
 
 def test_rlenv_serve_inspect_may_record_demonstrations(serve: Serve, tmp_path: Path) -> None:
     server = serve(args=["--inspect", "--record-demonstrations", str(tmp_path)])
-    wait_until(lambda: "inspector on " in server.output,
-               "rlenv serve --inspect printed no inspector address")
+    wait_until(
+        lambda: "inspector on " in server.output,
+        "rlenv serve --inspect printed no inspector address",
+    )
     url = server.output.split("inspector on ", 1)[1].split()[0]
     assert fetch(url, "api/control")[2]["enabled"] is True
-    alone = subprocess.run([sys.executable, "-m", "rlenv", "serve",
-                            "examples.cartpole:CartPoleEnvironment", "--record-demonstrations",
-                            str(tmp_path)], capture_output=True, text=True, timeout=60)
+    alone = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "rlenv",
+            "serve",
+            "examples.cartpole:CartPoleEnvironment",
+            "--record-demonstrations",
+            str(tmp_path),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert alone.returncode == 2 and "it goes with --inspect" in alone.stderr
 
 
@@ -368,8 +439,10 @@ def test_restarts_count_new_processes_not_idle_reconnections(serve: Serve) -> No
             connection = watcher._servers[0].client
             assert connection is not None and connection._sock is not None
             idle = connection._sock
-            wait_until(lambda: select.select([idle], [], [], 0)[0] != [],
-                       "the server kept an idle connection")
+            wait_until(
+                lambda: select.select([idle], [], [], 0)[0] != [],
+                "the server kept an idle connection",
+            )
             wait_until(lambda: _answers(watcher), "the inspector did not reconnect")
             assert watcher.stats(0, 0, 0)["restarts"] == 0  # the same server: no restart
         port = first.port

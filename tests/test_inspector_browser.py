@@ -33,17 +33,22 @@ REBOUND = "rebound.example"  # a DNS name the browser resolves to 127.0.0.1
 @pytest.fixture
 def browser() -> Iterator[Browser]:
     if CHROMIUM is None:
-        pytest.skip("no Chromium found (apt-get install chromium; .ci/run tries it): the "
-                    "browser tests need one, the HTTP-level ones (test_inspector.py) do not")
+        pytest.skip(
+            "no Chromium found (apt-get install chromium; .ci/run tries it): the "
+            "browser tests need one, the HTTP-level ones (test_inspector.py) do not"
+        )
     with Browser(CHROMIUM, host_rules=f"MAP {REBOUND} 127.0.0.1") as opened:
         yield opened
 
 
-def test_the_page_shows_a_training_run_and_edits_it(server: ServerProcess,
-                                                    browser: Browser) -> None:
-    with Trainer(server.host, server.port) as trainer, \
-            Inspector([f"{server.host}:{server.port}"]) as inspector, \
-            Client(server.host, server.port) as observer:
+def test_the_page_shows_a_training_run_and_edits_it(
+    server: ServerProcess, browser: Browser
+) -> None:
+    with (
+        Trainer(server.host, server.port) as trainer,
+        Inspector([f"{server.host}:{server.port}"]) as inspector,
+        Client(server.host, server.port) as observer,
+    ):
         wait_until(lambda: trainer.episodes > 1, "the trainer did not start")
         browser.open(inspector.url)
         # the scene: drawn, and redrawn differently as the cart moves
@@ -60,17 +65,25 @@ def test_the_page_shows_a_training_run_and_edits_it(server: ServerProcess,
             return n; })()""")
         assert painted > 500  # the track, the cart and the pole, not a blank canvas
         # the tree
-        paths = browser.wait_for("""(() => { const p = [...document.querySelectorAll('#tree li')]
-            .map(li => li.dataset.path); return p.length > 5 && p; })()""", "no tree")
+        paths = browser.wait_for(
+            """(() => { const p = [...document.querySelectorAll('#tree li')]
+            .map(li => li.dataset.path); return p.length > 5 && p; })()""",
+            "no tree",
+        )
         for name in ("Agent", "World", "World/Physics/Cart", "World/Physics/Pole"):
             assert f"/root/CartPole/{name}" in paths
         # a property edit: World's gravity, a setting
-        browser.evaluate("document.querySelector('#tree li[data-path=\"/root/CartPole/World\"]')"
-                         ".click()")
-        browser.wait_for("!!document.querySelector('#properties input[name=gravity]')",
-                         "World's properties did not show")
-        browser.wait_for("document.querySelector('#properties input[name=gravity]').value"
-                         " === '[0,-9.81]'", "gravity is not shown")
+        browser.evaluate(
+            "document.querySelector('#tree li[data-path=\"/root/CartPole/World\"]').click()"
+        )
+        browser.wait_for(
+            "!!document.querySelector('#properties input[name=gravity]')",
+            "World's properties did not show",
+        )
+        browser.wait_for(
+            "document.querySelector('#properties input[name=gravity]').value === '[0,-9.81]'",
+            "gravity is not shown",
+        )
         note = type_into(browser, "gravity", "[0, -3.5]", "t.includes('gravity')")
         assert "kept across episodes" in note
         assert observer.get_property("World/Physics", "gravity") == [0.0, -3.5]
@@ -99,19 +112,28 @@ def type_into(browser: Browser, name: str, text: str, answered: str) -> str:
         document.querySelector('#properties input[name={name}]');
         input.focus(); input.value = {json.dumps(text)};
         input.dispatchEvent(new Event('change')); }})()""")
-    return str(browser.wait_for(f"(() => {{ const t = document.getElementById('edit-status')"
-                                f".textContent; return ({answered}) && t; }})()",
-                                f"the edit of {name} was not answered"))
+    return str(
+        browser.wait_for(
+            f"(() => {{ const t = document.getElementById('edit-status')"
+            f".textContent; return ({answered}) && t; }})()",
+            f"the edit of {name} was not answered",
+        )
+    )
 
 
 def test_a_camera_observation_is_shown_as_an_image(serve: Serve, browser: Browser) -> None:
     server = serve("examples.pixels:PixelsEnvironment")
-    with Inspector([f"{server.host}:{server.port}"]) as inspector, \
-            Client(server.host, server.port) as controller:
+    with (
+        Inspector([f"{server.host}:{server.port}"]) as inspector,
+        Client(server.host, server.port) as controller,
+    ):
         controller.reset(seed=0)
         browser.open(inspector.url)
-        size = browser.wait_for("""(() => { const c = document.querySelector(
-            '#observations canvas'); return c && [c.width, c.height]; })()""", "no image shown")
+        size = browser.wait_for(
+            """(() => { const c = document.querySelector(
+            '#observations canvas'); return c && [c.width, c.height]; })()""",
+            "no image shown",
+        )
         assert size == [84, 84]
         white = browser.evaluate("""(() => { const c = document.querySelector(
             '#observations canvas'); const d = c.getContext('2d').getImageData(0, 0, 84, 84).data;
@@ -119,11 +141,12 @@ def test_a_camera_observation_is_shown_as_an_image(serve: Serve, browser: Browse
         assert white == 9  # the 3x3 dot on the black screen
 
 
-def test_properties_stay_shown_across_clicks_and_instances(serve: Serve,
-                                                          browser: Browser) -> None:
+def test_properties_stay_shown_across_clicks_and_instances(serve: Serve, browser: Browser) -> None:
     server = serve(args=["--instances", "2"])
-    with Inspector([f"{server.host}:{server.port}"]) as inspector, \
-            Client(server.host, server.port) as controller:
+    with (
+        Inspector([f"{server.host}:{server.port}"]) as inspector,
+        Client(server.host, server.port) as controller,
+    ):
         controller.send_batch([controller.reset_request(1), controller.reset_request(2)])
         controller.receive_batch()
         browser.open(inspector.url)
@@ -141,10 +164,13 @@ def test_properties_stay_shown_across_clicks_and_instances(serve: Serve,
         assert browser.wait_for(rows, "the properties went blank on instance 1") == 5
 
 
-def test_the_browser_cannot_reach_it_from_elsewhere(server: ServerProcess,
-                                                    browser: Browser) -> None:
-    with Inspector([f"{server.host}:{server.port}"]) as inspector, \
-            Client(server.host, server.port) as controller:
+def test_the_browser_cannot_reach_it_from_elsewhere(
+    server: ServerProcess, browser: Browser
+) -> None:
+    with (
+        Inspector([f"{server.host}:{server.port}"]) as inspector,
+        Client(server.host, server.port) as controller,
+    ):
         controller.reset(seed=0)
         parts = urlsplit(inspector.url)
         body = "document.body.innerText"
@@ -157,9 +183,10 @@ def test_the_browser_cannot_reach_it_from_elsewhere(server: ServerProcess,
         # a page of another origin posting an edit
         browser.open(f"http://{REBOUND}:{parts.port}/elsewhere")
         browser.wait_for(body, "the other origin's page did not load")
-        edit = json.dumps({"server": 0, "instance": 0, "path": "World", "property": "damping",
-                           "value": 0.9})
-        outcome = browser.evaluate(f"""fetch({json.dumps(inspector.url + 'api/edit')}, {{
+        edit = json.dumps(
+            {"server": 0, "instance": 0, "path": "World", "property": "damping", "value": 0.9}
+        )
+        outcome = browser.evaluate(f"""fetch({json.dumps(inspector.url + "api/edit")}, {{
             method: 'POST', mode: 'no-cors', headers: {{'Content-Type': 'text/plain'}},
             body: {json.dumps(edit)}}}).then(() => 'sent', (e) => 'failed: ' + e)""")
         assert outcome in ("sent", "failed: TypeError: Failed to fetch")
@@ -169,26 +196,42 @@ def test_the_browser_cannot_reach_it_from_elsewhere(server: ServerProcess,
 def press(browser: Browser, key: str, kind: str) -> None:
     """A real key event (``keyDown`` or ``keyUp``) from the browser's input pipeline."""
     codes = {"ArrowLeft": 37, "ArrowRight": 39}
-    browser.command("Input.dispatchKeyEvent", session=True, type=kind, key=key, code=key,
-                    windowsVirtualKeyCode=codes[key])
+    browser.command(
+        "Input.dispatchKeyEvent",
+        session=True,
+        type=kind,
+        key=key,
+        code=key,
+        windowsVirtualKeyCode=codes[key],
+    )
 
 
-def test_a_person_takes_control_and_their_episode_is_recorded(server: ServerProcess,
-                                                              browser: Browser,
-                                                              tmp_path: Path) -> None:
-    with Inspector([f"{server.host}:{server.port}"], record_demonstrations=tmp_path,
-                   target="examples.cartpole:CartPoleEnvironment",
-                   demonstration_rate=120) as inspector:
+def test_a_person_takes_control_and_their_episode_is_recorded(
+    server: ServerProcess, browser: Browser, tmp_path: Path
+) -> None:
+    with Inspector(
+        [f"{server.host}:{server.port}"],
+        record_demonstrations=tmp_path,
+        target="examples.cartpole:CartPoleEnvironment",
+        demonstration_rate=120,
+    ) as inspector:
         browser.open(inspector.url)
-        browser.wait_for("!document.getElementById('take-control').disabled && "
-                         "!document.getElementById('control').hidden", "no Take control")
+        browser.wait_for(
+            "!document.getElementById('take-control').disabled && "
+            "!document.getElementById('control').hidden",
+            "no Take control",
+        )
         browser.evaluate("document.getElementById('take-control').click()")
-        browser.wait_for("document.getElementById('control-status').textContent"
-                         ".includes('you control it')", "control was not taken")
+        browser.wait_for(
+            "document.getElementById('control-status').textContent.includes('you control it')",
+            "control was not taken",
+        )
         status = "document.getElementById('control-status').dataset"
         press(browser, "ArrowLeft", "keyDown")
-        held = browser.wait_for(f"{status}.held === 'ArrowLeft' && {status}.episodes",
-                                "the key did not reach the inspector")
+        held = browser.wait_for(
+            f"{status}.held === 'ArrowLeft' && {status}.episodes",
+            "the key did not reach the inspector",
+        )
         browser.wait_for(f"{status}.episodes > {int(held) + 1}", "no episode recorded")
         press(browser, "ArrowLeft", "keyUp")
         browser.evaluate("document.getElementById('release-control').click()")
@@ -200,23 +243,33 @@ def test_a_person_takes_control_and_their_episode_is_recorded(server: ServerProc
         trainer.reset()
 
 
-def test_a_person_chooses_the_agent_to_play_from_the_page(serve: Serve, browser: Browser,
-                                                          tmp_path: Path) -> None:
+def test_a_person_chooses_the_agent_to_play_from_the_page(
+    serve: Serve, browser: Browser, tmp_path: Path
+) -> None:
     """examples.tag, Runner2 driven by the server: the menu offers Chaser and Runner1."""
     server = serve("examples.tag:TagEnvironment", args=["--policy", "Runner2=heuristic"])
-    with Inspector([f"{server.host}:{server.port}"], record_demonstrations=tmp_path,
-                   target="examples.tag:TagEnvironment", demonstration_rate=120) as inspector:
+    with Inspector(
+        [f"{server.host}:{server.port}"],
+        record_demonstrations=tmp_path,
+        target="examples.tag:TagEnvironment",
+        demonstration_rate=120,
+    ) as inspector:
         browser.open(inspector.url)
-        browser.wait_for("!document.getElementById('control-agent').hidden && "
-                         "!document.getElementById('take-control').disabled",
-                         "no menu of agents")
-        offered = browser.evaluate("[...document.getElementById('control-agent').options]"
-                                   ".map((o) => o.value).join(',')")
+        browser.wait_for(
+            "!document.getElementById('control-agent').hidden && "
+            "!document.getElementById('take-control').disabled",
+            "no menu of agents",
+        )
+        offered = browser.evaluate(
+            "[...document.getElementById('control-agent').options].map((o) => o.value).join(',')"
+        )
         assert offered == "Chaser,Runner1"
         browser.evaluate("document.getElementById('control-agent').value = 'Runner1'")
         browser.evaluate("document.getElementById('take-control').click()")
-        browser.wait_for("document.getElementById('control-status').textContent"
-                         ".includes('you control Runner1')", "control was not taken")
+        browser.wait_for(
+            "document.getElementById('control-status').textContent.includes('you control Runner1')",
+            "control was not taken",
+        )
         assert browser.evaluate("document.getElementById('control-agent').hidden")
         browser.evaluate("document.getElementById('release-control').click()")
         browser.wait_for("!document.getElementById('take-control').hidden", "not released")
@@ -232,6 +285,7 @@ def failure(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The docs' example: the drifting controller's CartPole episode (the cart leaves the
     track at step 86)."""
     from examples.time_travel import record_failure
+
     return record_failure(tmp_path_factory.mktemp("failure"))
 
 
@@ -240,9 +294,15 @@ def key(browser: Browser, name: str, shift: bool = False) -> None:
     codes = {"ArrowLeft": 37, "ArrowRight": 39, "Escape": 27, " ": 32}
     modifiers = 8 if shift else 0
     for kind in ("keyDown", "keyUp"):
-        browser.command("Input.dispatchKeyEvent", session=True, type=kind, key=name,
-                        code="Space" if name == " " else name,
-                        windowsVirtualKeyCode=codes[name], modifiers=modifiers)
+        browser.command(
+            "Input.dispatchKeyEvent",
+            session=True,
+            type=kind,
+            key=name,
+            code="Space" if name == " " else name,
+            windowsVirtualKeyCode=codes[name],
+            modifiers=modifiers,
+        )
 
 
 def scrub(browser: Browser, step: int) -> None:
@@ -253,16 +313,22 @@ def scrub(browser: Browser, step: int) -> None:
 
 
 def at(browser: Browser, step: int, tick: int = 0, branch: int = 0) -> None:
-    browser.wait_for(f"{POSITION}.step === '{step}' && {POSITION}.tick === '{tick}' && "
-                     f"{POSITION}.branch === '{branch}' && !window.timeline.inflight",
-                     f"the page did not show step {step} tick {tick} of branch {branch}")
+    browser.wait_for(
+        f"{POSITION}.step === '{step}' && {POSITION}.tick === '{tick}' && "
+        f"{POSITION}.branch === '{branch}' && !window.timeline.inflight",
+        f"the page did not show step {step} tick {tick} of branch {branch}",
+    )
 
 
 def shown(browser: Browser, name: str) -> str:
     """The shown value of the selected node's property ``name``."""
-    return str(browser.wait_for(f"(() => {{ const i = document.querySelector("
-                                f"'#properties input[name={name}]'); return i && i.value; }})()",
-                                f"no property {name} shown"))
+    return str(
+        browser.wait_for(
+            f"(() => {{ const i = document.querySelector("
+            f"'#properties input[name={name}]'); return i && i.value; }})()",
+            f"no property {name} shown",
+        )
+    )
 
 
 def save_screenshot(browser: Browser, name: str) -> None:
@@ -270,18 +336,32 @@ def save_screenshot(browser: Browser, name: str) -> None:
     folder = os.environ.get("RLENV_SCREENSHOT_DIR")
     if folder:
         height = browser.evaluate("document.documentElement.scrollHeight")
-        browser.command("Emulation.setDeviceMetricsOverride", session=True, width=1400,
-                        height=height, deviceScaleFactor=1, mobile=False)  # no scroll bar
+        browser.command(
+            "Emulation.setDeviceMetricsOverride",
+            session=True,
+            width=1400,
+            height=height,
+            deviceScaleFactor=1,
+            mobile=False,
+        )  # no scroll bar
         try:
             Path(folder, name).write_bytes(browser.screenshot())
         finally:
-            browser.command("Emulation.setDeviceMetricsOverride", session=True, width=1400,
-                            height=1000, deviceScaleFactor=1, mobile=False)
+            browser.command(
+                "Emulation.setDeviceMetricsOverride",
+                session=True,
+                width=1400,
+                height=1000,
+                deviceScaleFactor=1,
+                mobile=False,
+            )
 
 
-def test_time_travel_scrubs_steps_ticks_and_plays_a_recording(failure: Path, browser: Browser,
-                                                              tmp_path: Path) -> None:
+def test_time_travel_scrubs_steps_ticks_and_plays_a_recording(
+    failure: Path, browser: Browser, tmp_path: Path
+) -> None:
     from examples.time_travel import record_failure
+
     sooner = record_failure(tmp_path, bias=0.03)  # a second file: the pole falls at step 20
     with Inspector([], recordings=[failure, sooner]) as inspector:  # rlenv replay ... --inspect
         browser.open(inspector.url)
@@ -293,11 +373,14 @@ def test_time_travel_scrubs_steps_ticks_and_plays_a_recording(failure: Path, bro
         browser.evaluate(f"{cart}.click()")
         # scrub: the scene and the properties are those of the scrubbed step
         scrub(browser, 80)
-        late, scene80 = shown(browser, "position"), browser.evaluate(
-            "document.getElementById('scene').toDataURL()")
+        late, scene80 = (
+            shown(browser, "position"),
+            browser.evaluate("document.getElementById('scene').toDataURL()"),
+        )
         assert float(json.loads(late)[0]) == pytest.approx(-2.2152, abs=1e-3)
         assert "step 80" in browser.evaluate(
-            "document.getElementById('properties').tBodies[0].dataset.moment")
+            "document.getElementById('properties').tBodies[0].dataset.moment"
+        )
         scrub(browser, 40)
         assert shown(browser, "position") != late
         assert browser.evaluate("document.getElementById('scene').toDataURL()") != scene80
@@ -320,7 +403,8 @@ def test_time_travel_scrubs_steps_ticks_and_plays_a_recording(failure: Path, bro
         key(browser, "ArrowRight", shift=True)
         at(browser, 61, tick=1)
         assert "tick 1 of step 62" in browser.evaluate(
-            "document.getElementById('properties').tBodies[0].dataset.moment")
+            "document.getElementById('properties').tBodies[0].dataset.moment"
+        )
         tick1 = shown(browser, "position")
         assert tick1 != at61
         for tick in (2, 3):
@@ -336,8 +420,10 @@ def test_time_travel_scrubs_steps_ticks_and_plays_a_recording(failure: Path, bro
         browser.evaluate("document.getElementById('play').click()")
         browser.wait_for(f"+{POSITION}.step > 66", "playing did not step on")
         browser.evaluate("document.getElementById('play').click()")
-        browser.wait_for("!window.timeline.inflight && window.timeline.wanted === null",
-                         "the last step did not arrive")
+        browser.wait_for(
+            "!window.timeline.inflight && window.timeline.wanted === null",
+            "the last step did not arrive",
+        )
         paused = browser.evaluate(f"{POSITION}.step")
         browser.evaluate("new Promise((done) => setTimeout(done, 400))")  # four play intervals
         assert browser.evaluate(f"{POSITION}.step") == paused
@@ -345,21 +431,27 @@ def test_time_travel_scrubs_steps_ticks_and_plays_a_recording(failure: Path, bro
         scrub(browser, 83)
         key(browser, " ")  # Space: play
         at(browser, 86)
-        browser.wait_for("document.getElementById('play').dataset.playing === 'false'",
-                         "playing did not stop at the end")
+        browser.wait_for(
+            "document.getElementById('play').dataset.playing === 'false'",
+            "playing did not stop at the end",
+        )
         assert "terminated" in browser.evaluate("document.getElementById('position').textContent")
         # the other file
         browser.evaluate("""(() => { const s = document.getElementById('timeline-select');
             s.value = '1'; s.dispatchEvent(new Event('change')); })()""")
-        browser.wait_for("window.timeline.number === 1 && "
-                         "document.getElementById('scrubber').max === '20'", "no second file")
+        browser.wait_for(
+            "window.timeline.number === 1 && document.getElementById('scrubber').max === '20'",
+            "no second file",
+        )
         at(browser, 0)
 
 
-def test_time_travel_branches_with_keys_and_a_policy_side_by_side(failure: Path,
-                                                                 browser: Browser) -> None:
-    inspector = InspectorServer(Watcher([]), timelines=Timelines(
-        [failure], policies={"controller": controller}))
+def test_time_travel_branches_with_keys_and_a_policy_side_by_side(
+    failure: Path, browser: Browser
+) -> None:
+    inspector = InspectorServer(
+        Watcher([]), timelines=Timelines([failure], policies={"controller": controller})
+    )
     inspector.start()
     try:
         browser.open(inspector.url)
@@ -373,20 +465,29 @@ def test_time_travel_branches_with_keys_and_a_policy_side_by_side(failure: Path,
         # branch with the keys at step 70: each press one more action
         scrub(browser, 70)
         browser.evaluate("document.getElementById('branch-here').click()")
-        browser.wait_for("document.getElementById('branch-status').textContent"
-                         ".includes('ArrowLeft, ArrowRight')", "branching did not start")
+        browser.wait_for(
+            "document.getElementById('branch-status').textContent"
+            ".includes('ArrowLeft, ArrowRight')",
+            "branching did not start",
+        )
         key(browser, "ArrowRight")
         at(browser, 71, branch=1)
         key(browser, "ArrowRight")
         at(browser, 72, branch=1)
         tree = "document.getElementById('branches')"
         assert browser.evaluate(f"{tree}.dataset.count") == "2"
-        assert browser.evaluate(f"{tree}.querySelector('li[data-branch=\"0\"] > ul > "
-                                "li[data-branch=\"1\"] > span').textContent") == \
-            "#1 keys ArrowRight ArrowRight · from step 70 · 72 steps"
+        assert (
+            browser.evaluate(
+                f'{tree}.querySelector(\'li[data-branch="0"] > ul > '
+                'li[data-branch="1"] > span\').textContent'
+            )
+            == "#1 keys ArrowRight ArrowRight · from step 70 · 72 steps"
+        )
         compare = "document.getElementById('compare').dataset"
-        browser.wait_for(f"{compare}.firstDifference === '71' && {compare}.step === '72'",
-                         "the episode and the key branch are not side by side")
+        browser.wait_for(
+            f"{compare}.firstDifference === '71' && {compare}.step === '72'",
+            "the episode and the key branch are not side by side",
+        )
         assert browser.evaluate(f"[{compare}.a, {compare}.b]") == ["0", "1"]
         key(browser, "Escape")
         browser.wait_for("document.getElementById('branch-done').hidden", "still branching")
@@ -398,16 +499,24 @@ def test_time_travel_branches_with_keys_and_a_policy_side_by_side(failure: Path,
         browser.evaluate("document.getElementById('branch-policy').click()")
         browser.wait_for(f"{tree}.dataset.count === '3'", "no policy branch")
         at(browser, 60, branch=2)
-        assert browser.evaluate(f"{tree}.querySelector('li[data-branch=\"0\"] > ul > "
-                                "li[data-branch=\"2\"] > span').textContent") == \
-            "#2 policy controller · from step 60 · 160 steps"
-        browser.wait_for(f"{compare}.firstDifference === '61' && {compare}.b === '2'",
-                         "the policy branch is not side by side")
+        assert (
+            browser.evaluate(
+                f'{tree}.querySelector(\'li[data-branch="0"] > ul > '
+                'li[data-branch="2"] > span\').textContent'
+            )
+            == "#2 policy controller · from step 60 · 160 steps"
+        )
+        browser.wait_for(
+            f"{compare}.firstDifference === '61' && {compare}.b === '2'",
+            "the policy branch is not side by side",
+        )
         key(browser, "ArrowRight")
         at(browser, 61, branch=2)
         browser.wait_for(f"{compare}.step === '61'", "the side by side did not follow")
-        rows = browser.evaluate("[...document.querySelectorAll('#compare-table tr')].map("
-                                "r => [...r.cells].map(c => c.textContent))")
+        rows = browser.evaluate(
+            "[...document.querySelectorAll('#compare-table tr')].map("
+            "r => [...r.cells].map(c => c.textContent))"
+        )
         assert rows[0] == ["", "A #0", "B #2", "B − A"] and rows[1][0] == "reward"
         assert [row[0] for row in rows[2:]] == [f"Agent[{i}]" for i in range(5)]
         assert any(float(row[3]) != 0 for row in rows[2:])
@@ -416,22 +525,27 @@ def test_time_travel_branches_with_keys_and_a_policy_side_by_side(failure: Path,
         # two branches: the key branch against the policy's
         browser.evaluate("""(() => { const a = document.getElementById('compare-a');
             a.value = '1'; a.dispatchEvent(new Event('change')); })()""")
-        browser.wait_for(f"{compare}.a === '1' && {compare}.firstDifference === '61'",
-                         "the two branches are not side by side")
+        browser.wait_for(
+            f"{compare}.a === '1' && {compare}.firstDifference === '61'",
+            "the two branches are not side by side",
+        )
         # the episode against the policy's branch where the episode ends
         browser.evaluate("""(() => { const a = document.getElementById('compare-a');
             a.value = '0'; a.dispatchEvent(new Event('change')); })()""")
         browser.evaluate("""(() => { const s = document.getElementById('scrubber');
             s.value = 86; s.dispatchEvent(new Event('input')); })()""")
         at(browser, 86, branch=2)
-        browser.wait_for(f"{compare}.a === '0' && {compare}.step === '86'",
-                         "the side by side did not follow to step 86")
-        rows = browser.evaluate("[...document.querySelectorAll('#compare-table tr')].map("
-                                "r => [...r.cells].map(c => c.textContent))")
+        browser.wait_for(
+            f"{compare}.a === '0' && {compare}.step === '86'",
+            "the side by side did not follow to step 86",
+        )
+        rows = browser.evaluate(
+            "[...document.querySelectorAll('#compare-table tr')].map("
+            "r => [...r.cells].map(c => c.textContent))"
+        )
         assert rows[1] == ["reward", "2", "4", "2"]  # the episode's last step: half a reward
         for plotted in ("compare-rewards", "compare-returns"):  # 87 and 161 steps' points
-            assert browser.evaluate(f"document.getElementById('{plotted}').dataset.points") \
-                == "248"
+            assert browser.evaluate(f"document.getElementById('{plotted}').dataset.points") == "248"
         save_screenshot(browser, "time-travel-branches.png")
         assert browser.console == [] or not any("rror" in line for line in browser.console)
     finally:
@@ -439,32 +553,41 @@ def test_time_travel_branches_with_keys_and_a_policy_side_by_side(failure: Path,
 
 
 def test_time_travel_says_why_a_recording_did_not_open_and_tells_twins_apart(
-        failure: Path, browser: Browser, tmp_path: Path) -> None:
+    failure: Path, browser: Browser, tmp_path: Path
+) -> None:
     broken = EpisodeFile.load(failure)
     broken.target = "examples.nothing:Nothing"
     broken.save(tmp_path / "broken.rlenv")
     twin = tmp_path / "elsewhere" / failure.name
     twin.parent.mkdir()
     twin.write_bytes(failure.read_bytes())
-    timelines = Timelines([tmp_path / "broken.rlenv", failure, twin],
-                          policies={"controller": controller})
+    timelines = Timelines(
+        [tmp_path / "broken.rlenv", failure, twin], policies={"controller": controller}
+    )
     timelines.branch_policy(1, 0, 60, "controller", 20)  # made before the page opens it
     inspector = InspectorServer(Watcher([]), timelines=timelines)
     inspector.start()
     try:
         browser.open(inspector.url)
         status = "document.getElementById('timeline-status')"
-        browser.wait_for(f"{status}.textContent.includes('examples.nothing')",
-                         "the page did not say why the first recording did not open")
+        browser.wait_for(
+            f"{status}.textContent.includes('examples.nothing')",
+            "the page did not say why the first recording did not open",
+        )
         assert browser.evaluate(f"{status}.classList.contains('bad')")
         assert not browser.evaluate("document.getElementById('timeline').hidden")
         assert browser.evaluate("document.getElementById('timeline-body').hidden")
-        options = browser.wait_for("""(() => { const o = [...document.querySelectorAll(
+        options = browser.wait_for(
+            """(() => { const o = [...document.querySelectorAll(
             '#timeline-select option')].map(o => o.textContent);
-            return o[0].includes('did not open') && o; })()""", "the menu did not mark it")
-        assert options == ["broken.rlenv (did not open)",
-                           f"{failure.parent.name}/{failure.name}",
-                           f"elsewhere/{failure.name}"]
+            return o[0].includes('did not open') && o; })()""",
+            "the menu did not mark it",
+        )
+        assert options == [
+            "broken.rlenv (did not open)",
+            f"{failure.parent.name}/{failure.name}",
+            f"elsewhere/{failure.name}",
+        ]
         # the menu is still there: another recording opens, with its episode and newest
         # branch side by side
         browser.evaluate("""(() => { const s = document.getElementById('timeline-select');
@@ -472,8 +595,10 @@ def test_time_travel_says_why_a_recording_did_not_open_and_tells_twins_apart(
         at(browser, 0)
         assert not browser.evaluate("document.getElementById('timeline-body').hidden")
         compare = "document.getElementById('compare').dataset"
-        browser.wait_for(f"{compare}.a === '0' && {compare}.b === '1'",
-                         "side by side did not start at the episode and the newest branch")
+        browser.wait_for(
+            f"{compare}.a === '0' && {compare}.b === '1'",
+            "side by side did not start at the episode and the newest branch",
+        )
         assert browser.evaluate(f"{compare}.firstDifference") == "61"
         browser.evaluate("""(() => { const s = document.getElementById('timeline-select');
             s.value = '2'; s.dispatchEvent(new Event('change')); })()""")
@@ -484,12 +609,15 @@ def test_time_travel_says_why_a_recording_did_not_open_and_tells_twins_apart(
         inspector.close()
 
 
-def test_time_travel_on_a_live_run_opens_a_recent_episode(server: ServerProcess,
-                                                          browser: Browser) -> None:
+def test_time_travel_on_a_live_run_opens_a_recent_episode(
+    server: ServerProcess, browser: Browser
+) -> None:
     """The live page lists the watched instance's recent episodes (the server keeps its last 8)
     and opens one as a timeline; Back to live returns to the live scene."""
-    with Trainer(server.host, server.port) as trainer, \
-            Inspector([f"{server.host}:{server.port}"]) as inspector:
+    with (
+        Trainer(server.host, server.port) as trainer,
+        Inspector([f"{server.host}:{server.port}"]) as inspector,
+    ):
         wait_until(lambda: trainer.episodes > 3, "the trainer did not finish episodes")
         browser.open(inspector.url)
         browser.wait_for("window.inspector.frames > 3", "no live frame")
@@ -507,10 +635,10 @@ def test_time_travel_on_a_live_run_opens_a_recent_episode(server: ServerProcess,
         key(browser, "ArrowRight")
         at(browser, steps)
         assert "terminated" in browser.evaluate(
-            "document.getElementById('position').textContent")  # the pole fell: it was kept
+            "document.getElementById('position').textContent"
+        )  # the pole fell: it was kept
         assert browser.evaluate("window.inspector.frames") == frames  # the live scene rests
         browser.evaluate("document.getElementById('timeline-live').click()")
-        browser.wait_for(f"window.inspector.frames > {frames + 3}",
-                         "live frames did not resume")
+        browser.wait_for(f"window.inspector.frames > {frames + 3}", "live frames did not resume")
         browser.wait_for("!document.getElementById('recent').hidden", "no recent list again")
         assert trainer.error is None

@@ -81,8 +81,12 @@ def interrupt(path: str, addresses: Sequence[str], held: ServerProcess, transpor
     environment = {**os.environ, "RLENV_SHARED_MEMORY": "0" if transport == "socket" else "1"}
     process = subprocess.Popen(
         [sys.executable, str(TESTS / "interrupted.py"), path, *addresses],
-        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        env=environment)
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=environment,
+    )
     try:
         assert process.stdout.readline().strip() == "ready", process.stderr.read()
         os.kill(held.pid, signal.SIGSTOP)
@@ -93,8 +97,10 @@ def interrupt(path: str, addresses: Sequence[str], held: ServerProcess, transpor
         if transport == "socket":
             until(lambda: queued_bytes(held.port) > queued, "the request to reach the server")
         else:  # the request is in memory once sent; the client then sleeps on the doorbell
-            until(lambda: all(sleeps_in_poll(process.pid) for _ in range(3)),
-                  "the client to wait for the held answer")
+            until(
+                lambda: all(sleeps_in_poll(process.pid) for _ in range(3)),
+                "the client to wait for the held answer",
+            )
         process.send_signal(signal.SIGINT)
         assert process.stdout.readline().strip() == "interrupted"
         os.kill(held.pid, signal.SIGCONT)  # the held answer comes now, before the next ones

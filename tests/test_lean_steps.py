@@ -72,22 +72,33 @@ def _clients(environment: type) -> tuple[LocalClient, LocalClient]:
 def _answer(client: LocalClient, actions: Any, reset: np.ndarray) -> dict[str, Any]:
     client.send_steps(actions, reset, 2)
     answer = client.receive_steps()
-    errors = [None if e is None else (e.code, e.message.split("\n")[0])
-              for e in answer.errors or [None] * K]
-    return {"observation": np.asarray(answer.observation).tobytes(),
-            "reward": answer.reward.tolist(), "terminated": answer.terminated.tolist(),
-            "truncated": answer.truncated.tolist(), "frames": answer.frames.tolist(),
-            "info": list(answer.info), "errors": errors}
+    errors = [
+        None if e is None else (e.code, e.message.split("\n")[0])
+        for e in answer.errors or [None] * K
+    ]
+    return {
+        "observation": np.asarray(answer.observation).tobytes(),
+        "reward": answer.reward.tolist(),
+        "terminated": answer.terminated.tolist(),
+        "truncated": answer.truncated.tolist(),
+        "frames": answer.frames.tolist(),
+        "info": list(answer.info),
+        "errors": errors,
+    }
 
 
-@pytest.mark.parametrize(("environment", "actions"), [
-    (CartPoleEnvironment, lambda rng: rng.uniform(-1, 1, (K, 1)).astype(np.float32)),
-    (InfoCartPole, lambda rng: rng.uniform(-1, 1, (K, 1)).astype(np.float32)),
-    (CountingEnvironment, lambda rng: rng.choice(2, K, p=[0.9, 0.1])),  # 1: NaN observed
-    (SharedBufferCounting, lambda rng: rng.choice(2, K, p=[0.8, 0.2])),
-    (FaultyEnvironment, lambda rng: rng.choice(3, K, p=[0.8, 0.1, 0.1])),  # 1, 2 raise
-    (WrongShapeEnvironment, lambda rng: rng.choice(3, K)),
-], ids=["cartpole", "info", "counting", "shared buffer", "faulty", "wrong shape"])
+@pytest.mark.parametrize(
+    ("environment", "actions"),
+    [
+        (CartPoleEnvironment, lambda rng: rng.uniform(-1, 1, (K, 1)).astype(np.float32)),
+        (InfoCartPole, lambda rng: rng.uniform(-1, 1, (K, 1)).astype(np.float32)),
+        (CountingEnvironment, lambda rng: rng.choice(2, K, p=[0.9, 0.1])),  # 1: NaN observed
+        (SharedBufferCounting, lambda rng: rng.choice(2, K, p=[0.8, 0.2])),
+        (FaultyEnvironment, lambda rng: rng.choice(3, K, p=[0.8, 0.1, 0.1])),  # 1, 2 raise
+        (WrongShapeEnvironment, lambda rng: rng.choice(3, K)),
+    ],
+    ids=["cartpole", "info", "counting", "shared buffer", "faulty", "wrong shape"],
+)
 def test_the_lean_path_answers_as_the_general_path(environment: type, actions: Any) -> None:
     lean, general = _clients(environment)
     rng = np.random.default_rng(7)
@@ -103,10 +114,15 @@ def test_the_lean_path_answers_as_the_general_path(environment: type, actions: A
         failed = np.array([error is not None for error in answers[0]["errors"]])
         failures += failed.sum()
         reset = np.array(answers[0]["terminated"]) | np.array(answers[0]["truncated"]) | failed
-    assert [i.stats.since(0)["steps"] for i in lean.host.instances] == \
-        [i.stats.since(0)["steps"] for i in general.host.instances]
-    if environment in (CountingEnvironment, SharedBufferCounting, FaultyEnvironment,
-                       WrongShapeEnvironment):
+    assert [i.stats.since(0)["steps"] for i in lean.host.instances] == [
+        i.stats.since(0)["steps"] for i in general.host.instances
+    ]
+    if environment in (
+        CountingEnvironment,
+        SharedBufferCounting,
+        FaultyEnvironment,
+        WrongShapeEnvironment,
+    ):
         assert failures > 0  # the failing rows were compared too
 
 

@@ -35,23 +35,42 @@ class Levels:
 _MAZE_ACTIONS = np.random.default_rng(0).integers(5, size=60)
 
 EXAMPLES = [
-    pytest.param(Levels(plinko.TARGET, 200, lambda observation, _: plinko.follow(observation),
-                        True, frozenset({"Peg", "Marker2D", "Divider", "BinFloor"}), True),
-                 id="plinko"),
-    pytest.param(Levels(maze.TARGET, 60, lambda _, step: int(_MAZE_ACTIONS[step]), False,
-                        frozenset({"Wall", "Goal", "Marker2D"}), False), id="maze"),
+    pytest.param(
+        Levels(
+            plinko.TARGET,
+            200,
+            lambda observation, _: plinko.follow(observation),
+            True,
+            frozenset({"Peg", "Marker2D", "Divider", "BinFloor"}),
+            True,
+        ),
+        id="plinko",
+    ),
+    pytest.param(
+        Levels(
+            maze.TARGET,
+            60,
+            lambda _, step: int(_MAZE_ACTIONS[step]),
+            False,
+            frozenset({"Wall", "Goal", "Marker2D"}),
+            False,
+        ),
+        id="maze",
+    ),
 ]
 
 
-def play(client: Client | LocalClient, example: Levels, steps: int | None = None,
-         **reset: Any) -> list[Any]:
+def play(
+    client: Client | LocalClient, example: Levels, steps: int | None = None, **reset: Any
+) -> list[Any]:
     """Reset, then the example's policy until the episode ends or ``steps`` (the example's by
     default) were taken: every observation's bytes."""
     observation, info = client.reset(**reset)
     seen: list[Any] = [observation.tobytes(), info["world"]["level"]]
     for step in range(example.steps if steps is None else steps):
         observation, reward, terminated, truncated, _ = client.step(
-            example.policy(observation, step))
+            example.policy(observation, step)
+        )
         seen.append((observation.tobytes(), reward, terminated, truncated))
         if terminated or truncated:
             break
@@ -66,11 +85,12 @@ def _entries(entry: dict[str, Any]) -> list[dict[str, Any]]:
 
 
 @pytest.mark.parametrize("example", EXAMPLES)
-def test_the_seed_makes_the_level_and_episode_on_any_server(serve: Serve,
-                                                            example: Levels) -> None:
+def test_the_seed_makes_the_level_and_episode_on_any_server(serve: Serve, example: Levels) -> None:
     first, second = serve(example.target), serve(example.target)
-    with Client(first.host, first.port, timeout=20, world_data=True) as a, \
-            Client(second.host, second.port, timeout=20, world_data=True) as b:
+    with (
+        Client(first.host, first.port, timeout=20, world_data=True) as a,
+        Client(second.host, second.port, timeout=20, world_data=True) as b,
+    ):
         b.reset(seed=11)  # another history first: it must not matter
         play(b, example, steps=5)
         run = play(a, example, seed=5)
@@ -90,8 +110,10 @@ def test_the_seed_makes_the_level_and_episode_on_any_server(serve: Serve,
 @pytest.mark.parametrize("example", EXAMPLES)
 def test_a_level_given_as_data_is_played(serve: Serve, example: Levels) -> None:
     first, second = serve(example.target), serve(example.target)
-    with Client(first.host, first.port, timeout=20, world_data=True) as a, \
-            Client(second.host, second.port, timeout=20, world_data=True) as b:
+    with (
+        Client(first.host, first.port, timeout=20, world_data=True) as a,
+        Client(second.host, second.port, timeout=20, world_data=True) as b,
+    ):
         run = play(a, example, seed=5)
         level = msgpack.unpackb(msgpack.packb(a.get_property("World", "level")))
         # what a reset draws before the level is drawn before it: the same seed on the given
@@ -117,13 +139,17 @@ def _deep(depth: int) -> dict[str, Any]:
 def _wide(nodes: int) -> dict[str, Any]:
     """A level of ``nodes`` plain Node2D: a root and its children."""
     children = [{"class": "Node2D", "name": f"N{index}"} for index in range(nodes - 1)]
-    return {"format": "rlenv.PackedScene", "version": 1,
-            "root": {"class": "Node2D", "name": "Level", "children": children}}
+    return {
+        "format": "rlenv.PackedScene",
+        "version": 1,
+        "root": {"class": "Node2D", "name": "Level", "children": children},
+    }
 
 
 @pytest.mark.parametrize("example", EXAMPLES)
 def test_a_refused_level_costs_nothing_and_the_episode_goes_on(
-    serve: Serve, example: Levels,
+    serve: Serve,
+    example: Levels,
 ) -> None:
     """Level data that fails its checks (a foreign class, a Maze level without its Goal, more
     nodes or deeper than the hello's limits) is refused with ``bad_request`` before anything
@@ -131,9 +157,11 @@ def test_a_refused_level_costs_nothing_and_the_episode_goes_on(
     watcher still observes it. Before, the reset had begun: ``environment_error ... reset
     required``, and the watcher was refused too."""
     first, second = serve(example.target), serve(example.target)
-    with Client(first.host, first.port, timeout=20) as client, \
-            Client(first.host, first.port, timeout=20) as watcher, \
-            Client(second.host, second.port, timeout=20) as alone:
+    with (
+        Client(first.host, first.port, timeout=20) as client,
+        Client(first.host, first.port, timeout=20) as watcher,
+        Client(second.host, second.port, timeout=20) as alone,
+    ):
         limits = client.hello.limits
         assert (limits["max_level_nodes"], limits["max_level_depth"]) == (1024, 64)
         observation, _ = client.reset(seed=5)
@@ -141,12 +169,15 @@ def test_a_refused_level_costs_nothing_and_the_episode_goes_on(
         foreign = copy.deepcopy(level)
         foreign["root"]["children"][0]["children"][0]["class"] = "Evil"
         hollow = copy.deepcopy(level)  # no Goal for Maze; for Plinko no Pegs, which it allows
-        hollow["root"]["children"] = [child for child in hollow["root"]["children"]
-                                      if child["name"] != "Goal"]
-        refusals = [(foreign, "class 'Evil' is not allowed"),
-                    (_wide(1025), "a scene holds at most 1,024 nodes"),
-                    (_deep(66), "nodes nested more than 64 deep"),
-                    (_deep(250), "nodes nested more than 64 deep")]
+        hollow["root"]["children"] = [
+            child for child in hollow["root"]["children"] if child["name"] != "Goal"
+        ]
+        refusals = [
+            (foreign, "class 'Evil' is not allowed"),
+            (_wide(1025), "a scene holds at most 1,024 nodes"),
+            (_deep(66), "nodes nested more than 64 deep"),
+            (_deep(250), "nodes nested more than 64 deep"),
+        ]
         if example.target == maze.TARGET:
             refusals.append((hollow, "the level has no Goal"))
         seen = [observation.tobytes()]
@@ -188,17 +219,24 @@ def test_an_int_level_is_the_level_its_seed_resets_to_and_a_negative_one_is_refu
         _, info = client.reset(seed=1, options={"level": edited})
         assert client.get_property("World", "level") == edited
         assert info["world"]["level"] != client.reset(seed=7)[1]["world"]["level"]
-        for wrong, why in ((-5, "a seed must be >= 0, got -5"),
-                           ({"root": {}}, "a scene's data is a map with exactly 'format', "
-                                          "'version' and 'root'"),
-                           (level | {"root": level["root"] | {"children": [
-                               level["root"]["children"][0] | {"class": "Evil"}]}},
-                            "class 'Evil' is not allowed")):
+        for wrong, why in (
+            (-5, "a seed must be >= 0, got -5"),
+            ({"root": {}}, "a scene's data is a map with exactly 'format', 'version' and 'root'"),
+            (
+                level
+                | {
+                    "root": level["root"]
+                    | {"children": [level["root"]["children"][0] | {"class": "Evil"}]}
+                },
+                "class 'Evil' is not allowed",
+            ),
+        ):
             with pytest.raises(RemoteError) as refused:
                 client.edit_level(wrong, seed=3)
             assert refused.value.code == ErrorCode.BAD_REQUEST
             assert refused.value.message.startswith(
-                f"edit_level: {world}._edit_level refused the level: "), refused.value.message
+                f"edit_level: {world}._edit_level refused the level: "
+            ), refused.value.message
             assert why in refused.value.message
 
 

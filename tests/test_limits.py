@@ -80,12 +80,14 @@ def test_the_measure_counts_lines_of_classes_functions_and_modules() -> None:
     def body(lines: int) -> str:
         return "".join(f"    x{i} = {i}\n" for i in range(lines))
 
-    source = (f"class Small:\n{body(349)}"  # 350 lines with its def: at the limit
-              f"class Large:\n{body(350)}"
-              f"    def method(self):\n{body(80).replace('    ', '        ')}"
-              f"async def handler():\n{body(79)}"
-              f"def outer():\n    def inner():\n{body(80).replace('    ', '        ')}"
-              f"    return inner\n")
+    source = (
+        f"class Small:\n{body(349)}"  # 350 lines with its def: at the limit
+        f"class Large:\n{body(350)}"
+        f"    def method(self):\n{body(80).replace('    ', '        ')}"
+        f"async def handler():\n{body(79)}"
+        f"def outer():\n    def inner():\n{body(80).replace('    ', '        ')}"
+        f"    return inner\n"
+    )
     found = over_the_limits("pkg/m.py", source)
     assert found == {
         ("module", "pkg/m.py"): "945 lines, over 720",
@@ -96,4 +98,5 @@ def test_the_measure_counts_lines_of_classes_functions_and_modules() -> None:
     }
     assert over_the_limits("rlenv/node.py", f"class Node:\n{body(699)}") == {}
     assert over_the_limits("rlenv/node.py", f"class Node:\n{body(700)}") == {
-        ("class", "rlenv/node.py:Node"): "701 lines, over 700"}
+        ("class", "rlenv/node.py:Node"): "701 lines, over 700"
+    }

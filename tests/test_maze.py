@@ -43,8 +43,9 @@ def toward(position: list[float], here: Any, there: Any) -> int:
     return UP if ty > y else DOWN
 
 
-def drive(client: Client | LocalClient, level: dict[str, Any] | None = None,
-          **reset: Any) -> tuple[int, float, bool, dict[str, Any]]:
+def drive(
+    client: Client | LocalClient, level: dict[str, Any] | None = None, **reset: Any
+) -> tuple[int, float, bool, dict[str, Any]]:
     """Play the level to its goal along a BFS path, from the level's data and the agent's
     position (world data): the steps taken, the last reward, terminated, the level."""
     options = {"options": {"level": level}} if level is not None else {}
@@ -89,7 +90,7 @@ def test_the_goal_is_seen_only_along_a_clear_ray() -> None:
         assert observation[8] == pytest.approx(1.5 / 6, abs=1e-5)  # the border, past cell 1
         # a wall between: the goal is out of sight, the wall 1.5 cells away
         observation, _ = client.reset(options={"level": make_level({(4, 5)}, (2, 5), (5, 5))})
-        assert not observation[RAYS:2 * RAYS].any()
+        assert not observation[RAYS : 2 * RAYS].any()
         assert observation[0] == pytest.approx(1.5 / 6, abs=1e-5)
 
 
@@ -118,8 +119,15 @@ def test_edits_are_deterministic_keep_the_goal_reachable_and_play(serve: Serve) 
             assert client.edit_level(level, seed=seed, n_edits=1) == edited
             cells, begin, end = grid_of(edited)
             assert begin == start and shortest_path(cells, begin, end) is not None
-            kinds.add("add" if len(cells) > len(walls) else "remove" if len(cells) < len(walls)
-                      else "goal" if end != goal else "none")
+            kinds.add(
+                "add"
+                if len(cells) > len(walls)
+                else "remove"
+                if len(cells) < len(walls)
+                else "goal"
+                if end != goal
+                else "none"
+            )
         assert {"add", "remove", "goal"} <= kinds
         many = client.edit_level(3, seed=1, n_edits=20)  # an int level is its seed's level
         cells, begin, end = grid_of(many)

@@ -26,7 +26,8 @@ def test_spaces_and_outcomes_are_keyed_by_agent(serve: Serve) -> None:
         for step in range(300):
             live = [n for n in NAMES if n not in done]
             observation, reward, terminated, truncated, info = client.step(
-                {n: chase(observation[n]) for n in live})
+                {n: chase(observation[n]) for n in live}
+            )
             outcomes = info["agents"]
             assert reward == pytest.approx(sum(o["reward"] for o in outcomes.values()))
             for name in live:
@@ -84,7 +85,8 @@ def test_pettingzoo_agents_leave_when_done() -> None:
         finished = []
         while env.agents:
             observations, rewards, terminations, _, _ = env.step(
-                {agent: chase(observations[agent]) for agent in env.agents})
+                {agent: chase(observations[agent]) for agent in env.agents}
+            )
             finished += [agent for agent, done in terminations.items() if done]
             assert set(env.agents).isdisjoint(finished)
         assert sorted(finished) == sorted(NAMES)

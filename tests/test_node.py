@@ -278,8 +278,17 @@ def test_get_node_works_on_detached_subtree() -> None:
 
 
 @pytest.mark.parametrize(
-    "path", ["", "Nope", "Player/Nope", "Player/Gun/Deeper", "/root/Nope", "/notroot/Level",
-             "/", "../../../.."]
+    "path",
+    [
+        "",
+        "Nope",
+        "Player/Nope",
+        "Player/Gun/Deeper",
+        "/root/Nope",
+        "/notroot/Level",
+        "/",
+        "../../../..",
+    ],
 )
 def test_get_node_or_null_and_has_node_for_missing(scene: dict[str, Node], path: str) -> None:
     level = scene["Level"]
@@ -348,7 +357,13 @@ def test_get_path_to_other_tree_rejected(scene: dict[str, Node]) -> None:
 
 def test_find_children_all_in_tree_order(scene: dict[str, Node]) -> None:
     assert names(scene["Level"].find_children()) == [
-        "Player", "Sprite", "Gun", "Enemies", "Goblin", "Orc", "BigBoss",
+        "Player",
+        "Sprite",
+        "Gun",
+        "Enemies",
+        "Goblin",
+        "Orc",
+        "BigBoss",
     ]
 
 
@@ -376,7 +391,9 @@ def test_find_children_not_recursive(scene: dict[str, Node]) -> None:
     assert level.find_children("Gun", recursive=False) == []
     assert level.find_children("*", Enemy, recursive=False) == []
     assert names(scene["Enemies"].find_children("*", Enemy, recursive=False)) == [
-        "Goblin", "Orc", "BigBoss",
+        "Goblin",
+        "Orc",
+        "BigBoss",
     ]
 
 
@@ -758,8 +775,14 @@ def test_enter_tree_preorder_ready_children_first(tree: SceneTree, log: list) ->
     assert log == []  # nothing happens outside a tree
     tree.root.add_child(nodes["A"])
     assert log == [
-        ("enter", "A"), ("enter", "B"), ("enter", "D"), ("enter", "C"),
-        ("ready", "D"), ("ready", "B"), ("ready", "C"), ("ready", "A"),
+        ("enter", "A"),
+        ("enter", "B"),
+        ("enter", "D"),
+        ("enter", "C"),
+        ("ready", "D"),
+        ("ready", "B"),
+        ("ready", "C"),
+        ("ready", "A"),
     ]
     assert all(node.is_node_ready() and node.is_inside_tree() for node in nodes.values())
     assert all(node.get_tree() is tree for node in nodes.values())
@@ -831,8 +854,12 @@ def test_subtree_built_in_ready_enters_once(tree: SceneTree, log: list) -> None:
             self.add_child(Rec("Built", self.log))
 
     tree.root.add_child(Builder("Builder", log))
-    assert log == [("enter", "Builder"), ("ready", "Builder"), ("enter", "Built"),
-                   ("ready", "Built")]
+    assert log == [
+        ("enter", "Builder"),
+        ("ready", "Builder"),
+        ("enter", "Built"),
+        ("ready", "Built"),
+    ]
 
 
 def test_child_added_in_enter_tree_enters_once(tree: SceneTree, log: list) -> None:
@@ -859,8 +886,10 @@ def test_notifications(tree: SceneTree, log: list) -> None:
     log.clear()
     tree.root.add_child(parent)
     assert log == [
-        ("enter", "N"), ("note", "N", "ENTER_TREE"),
-        ("ready", "N"), ("note", "N", "READY"),
+        ("enter", "N"),
+        ("note", "N", "ENTER_TREE"),
+        ("ready", "N"),
+        ("note", "N", "READY"),
     ]
     log.clear()
     tree.root.remove_child(parent)
@@ -876,7 +905,13 @@ def test_notifications_when_added_directly(tree: SceneTree, log: list) -> None:
     tree.root.remove_child(node)
     tree.root.add_child(node)
     assert [entry[2] for entry in log if entry[0] == "note"] == [
-        "PARENTED", "ENTER_TREE", "READY", "EXIT_TREE", "UNPARENTED", "PARENTED", "ENTER_TREE",
+        "PARENTED",
+        "ENTER_TREE",
+        "READY",
+        "EXIT_TREE",
+        "UNPARENTED",
+        "PARENTED",
+        "ENTER_TREE",
     ]
 
 
@@ -947,8 +982,12 @@ def test_queue_free_twice_frees_once(tree: SceneTree, log: list) -> None:
     tree.process(0.0)
     node.queue_free()  # already freed: nothing happens
     tree.process(0.0)
-    assert log == [("exit", "N"), ("note", "N", "EXIT_TREE"), ("note", "N", "UNPARENTED"),
-                   ("note", "N", "PREDELETE")]
+    assert log == [
+        ("exit", "N"),
+        ("note", "N", "EXIT_TREE"),
+        ("note", "N", "UNPARENTED"),
+        ("note", "N", "PREDELETE"),
+    ]
 
 
 def test_freed_nodes_cannot_be_added(tree: SceneTree) -> None:
@@ -1088,8 +1127,10 @@ class _NoSuperInit(Node):
 
 
 def test_a_node_without_super_init_is_named_when_added() -> None:
-    message = r"_NoSuperInit was not set up as a node: call super\(\)\.__init__\(\) in " \
-              r"_NoSuperInit\.__init__"
+    message = (
+        r"_NoSuperInit was not set up as a node: call super\(\)\.__init__\(\) in "
+        r"_NoSuperInit\.__init__"
+    )
     with pytest.raises(TypeError, match=message):
         Node("Parent").add_child(_NoSuperInit())
     with pytest.raises(TypeError, match=message):
@@ -1113,8 +1154,11 @@ def test_an_agent_or_environment_without_super_init_is_named() -> None:
             super().__init__()
             self.add_child(AgentNoSuperInit())
 
-    with pytest.raises(TypeError, match=r"AgentNoSuperInit was not set up as a node: call "
-                                        r"super\(\)\.__init__\(\) in AgentNoSuperInit"):
+    with pytest.raises(
+        TypeError,
+        match=r"AgentNoSuperInit was not set up as a node: call "
+        r"super\(\)\.__init__\(\) in AgentNoSuperInit",
+    ):
         LocalClient(Hosting)
     with pytest.raises(TypeError, match=r"EnvironmentNoSuperInit was not set up as a node"):
         LocalClient(EnvironmentNoSuperInit)

@@ -32,12 +32,14 @@ from tests.policy_spaces import (  # noqa: E402
 
 def _mlp(inputs: int, outputs: int, seed: int = 0) -> torch.nn.Module:
     torch.manual_seed(seed)
-    return torch.nn.Sequential(torch.nn.Linear(inputs, 16), torch.nn.Tanh(),
-                               torch.nn.Linear(16, outputs))
+    return torch.nn.Sequential(
+        torch.nn.Linear(inputs, 16), torch.nn.Tanh(), torch.nn.Linear(16, outputs)
+    )
 
 
 def _agent_spaces(target: str) -> tuple[gym.spaces.Space, gym.spaces.Space]:
     from rlenv.serving._host import Host
+
     host = Host(target)
     agent = host.instances[0].agents[-1]
     spaces = agent.observation_space, agent.action_space
@@ -48,15 +50,23 @@ def _agent_spaces(target: str) -> tuple[gym.spaces.Space, gym.spaces.Space]:
 @pytest.fixture(scope="module")
 def cartpole_policy(tmp_path_factory: pytest.TempPathFactory) -> Path:
     observation_space, action_space = _agent_spaces(CARTPOLE)
-    return export_onnx(_mlp(5, 1), tmp_path_factory.mktemp("onnx") / "cartpole.onnx",
-                       observation_space, action_space)
+    return export_onnx(
+        _mlp(5, 1),
+        tmp_path_factory.mktemp("onnx") / "cartpole.onnx",
+        observation_space,
+        action_space,
+    )
 
 
 @pytest.fixture(scope="module")
 def pair_policy(tmp_path_factory: pytest.TempPathFactory) -> Path:
     observation_space, action_space = _agent_spaces(PAIR)
-    return export_onnx(_mlp(8, 2, seed=1), tmp_path_factory.mktemp("onnx") / "blue.onnx",
-                       observation_space, action_space)
+    return export_onnx(
+        _mlp(8, 2, seed=1),
+        tmp_path_factory.mktemp("onnx") / "blue.onnx",
+        observation_space,
+        action_space,
+    )
 
 
 def _session(path: Path) -> onnxruntime.InferenceSession:
@@ -69,13 +79,19 @@ def _metadata(path: Path) -> dict[str, str]:
 
 # --- export -----------------------------------------------------------------------------------
 
-SB3_CASES = [("PPO", "Pendulum-v1"), ("PPO", "CartPole-v1"), ("A2C", "Pendulum-v1"),
-             ("DQN", "CartPole-v1"), ("SAC", "Pendulum-v1")]
+SB3_CASES = [
+    ("PPO", "Pendulum-v1"),
+    ("PPO", "CartPole-v1"),
+    ("A2C", "Pendulum-v1"),
+    ("DQN", "CartPole-v1"),
+    ("SAC", "Pendulum-v1"),
+]
 
 
 @pytest.mark.parametrize(("algorithm", "env_id"), SB3_CASES)
-def test_sb3_export_gives_predict_deterministic(algorithm: str, env_id: str,
-                                                tmp_path: Path) -> None:
+def test_sb3_export_gives_predict_deterministic(
+    algorithm: str, env_id: str, tmp_path: Path
+) -> None:
     sb3 = pytest.importorskip("stable_baselines3")
     model = getattr(sb3, algorithm)("MlpPolicy", env_id, seed=0, device="cpu")
     torch.manual_seed(0)
@@ -109,8 +125,7 @@ def test_sac_squashing_reaches_the_bounds(tmp_path: Path) -> None:
     observations = np.array([[1.0, 0.0, 8.0], [1.0, 0.0, -8.0]], np.float32)
     got = _session(path).run(["action"], {"observation": observations})[0]
     np.testing.assert_allclose(np.abs(got), 2.0, atol=1e-5)
-    np.testing.assert_allclose(got, model.predict(observations, deterministic=True)[0],
-                               atol=1e-5)
+    np.testing.assert_allclose(got, model.predict(observations, deterministic=True)[0], atol=1e-5)
 
 
 def test_cleanrl_style_discrete_actor_exports_argmax(tmp_path: Path) -> None:
@@ -142,16 +157,18 @@ def test_cleanrl_style_box_actor_is_clipped(tmp_path: Path) -> None:
 
 def test_metadata_spaces_round_trip_with_bounds_and_dtype(tmp_path: Path) -> None:
     observation_space = gym.spaces.Box(
-        np.array([-np.inf, 0.0, -3.5]), np.array([np.inf, 1.0, 2.25]), dtype=np.float64)
-    action_space = gym.spaces.Box(np.array([-1.0, -0.5], np.float32),
-                                  np.array([1.0, 0.25], np.float32))
-    path = export_onnx(_mlp(3, 2).double(), tmp_path / "a.onnx", observation_space,
-                       action_space)
+        np.array([-np.inf, 0.0, -3.5]), np.array([np.inf, 1.0, 2.25]), dtype=np.float64
+    )
+    action_space = gym.spaces.Box(
+        np.array([-1.0, -0.5], np.float32), np.array([1.0, 0.25], np.float32)
+    )
+    path = export_onnx(_mlp(3, 2).double(), tmp_path / "a.onnx", observation_space, action_space)
     metadata = _metadata(path)
     policy = OnnxPolicy(path)
-    for key, space, loaded in (("rlenv.observation_space", observation_space,
-                                policy.observation_space),
-                               ("rlenv.action_space", action_space, policy.action_space)):
+    for key, space, loaded in (
+        ("rlenv.observation_space", observation_space, policy.observation_space),
+        ("rlenv.action_space", action_space, policy.action_space),
+    ):
         for read in (space_from_json(metadata[key]), loaded):
             assert read == space and read.dtype == space.dtype
             assert np.array_equal(read.low, space.low) and np.array_equal(read.high, space.high)
@@ -170,8 +187,7 @@ class _TwoFaced(torch.nn.Module):
         return action + 0.25 if torch.onnx.is_in_onnx_export() else action
 
 
-def test_a_graph_unlike_its_module_is_refused_naming_the_largest_difference(
-        tmp_path: Path) -> None:
+def test_a_graph_unlike_its_module_is_refused_naming_the_largest_difference(tmp_path: Path) -> None:
     path = tmp_path / "wrong.onnx"
     with pytest.raises(ExportMismatch, match=r"largest difference is 0\.25\b") as caught:
         export_onnx(_TwoFaced(), path, CARTPOLE_OBSERVATION, STEERING)
@@ -188,6 +204,7 @@ def test_a_file_that_is_not_onnx_is_refused(tmp_path: Path) -> None:
 
 # --- rlenv serve --policy ---------------------------------------------------------------------
 
+
 def _wait_for_episodes(client: Client, count: int, timeout: float = 60.0) -> dict:
     deadline = time.monotonic() + timeout
     while True:
@@ -203,8 +220,7 @@ def test_a_policy_plays_episodes_an_observer_counts(serve, cartpole_policy: Path
         stats = _wait_for_episodes(observer, 5)
         episodes = stats["episodes"]
         assert [e["episode"] for e in episodes[:5]] == list(range(5))
-        assert all(e["end"] in ("terminated", "truncated") and e["length"] > 0
-                   for e in episodes)
+        assert all(e["end"] in ("terminated", "truncated") and e["length"] > 0 for e in episodes)
         assert stats["steps"] >= sum(e["length"] for e in episodes)
         later = _wait_for_episodes(observer, stats["next"] + 1)
         assert later["steps"] > stats["steps"]  # it goes on with nobody but an observer
@@ -214,8 +230,9 @@ def test_a_policy_plays_episodes_an_observer_counts(serve, cartpole_policy: Path
 
 
 def test_max_episode_steps_truncates(serve, cartpole_policy: Path) -> None:
-    server = serve(CARTPOLE, args=["--policy", f"Agent={cartpole_policy}",
-                                   "--max-episode-steps", "3"])
+    server = serve(
+        CARTPOLE, args=["--policy", f"Agent={cartpole_policy}", "--max-episode-steps", "3"]
+    )
     with Client(server.host, server.port, timeout=10) as observer:
         episodes = _wait_for_episodes(observer, 6)["episodes"]
     assert all(e["length"] <= 3 for e in episodes)
@@ -228,14 +245,23 @@ def test_episodes_are_seeded_by_their_number(serve, cartpole_policy: Path) -> No
     runs = []
     for server in (first, second):
         with Client(server.host, server.port, timeout=10) as observer:
-            runs.append([(e["length"], e["return"]) for e in
-                         _wait_for_episodes(observer, 4)["episodes"][:4]])
+            runs.append(
+                [
+                    (e["length"], e["return"])
+                    for e in _wait_for_episodes(observer, 4)["episodes"][:4]
+                ]
+            )
     assert runs[0] == runs[1]
 
 
 def _serve_refused(*args: str) -> str:
-    result = subprocess.run([sys.executable, "-m", "rlenv", "serve", *args], timeout=120,
-                            capture_output=True, text=True, stdin=subprocess.DEVNULL)
+    result = subprocess.run(
+        [sys.executable, "-m", "rlenv", "serve", *args],
+        timeout=120,
+        capture_output=True,
+        text=True,
+        stdin=subprocess.DEVNULL,
+    )
     assert result.returncode == 2, result.stdout + result.stderr
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1, result.stderr
@@ -244,8 +270,9 @@ def _serve_refused(*args: str) -> str:
 
 def test_mismatched_spaces_are_refused_at_start_naming_both(pair_policy: Path) -> None:
     line = _serve_refused(CARTPOLE, "--policy", f"Agent={pair_policy}")
-    assert line.startswith(f"rlenv serve: --policy Agent={pair_policy}: the file's "
-                           "observation space is Box(")
+    assert line.startswith(
+        f"rlenv serve: --policy Agent={pair_policy}: the file's observation space is Box("
+    )
     assert "(8,), float32" in line and "agent 'Agent''s is Box(" in line and "(5,)" in line
 
 
@@ -276,8 +303,10 @@ def test_a_learner_plays_against_a_policy_opponent(serve, pair_policy: Path) -> 
     reds = [rng.uniform(-1, 1, 2).astype(np.float32) for _ in range(40)]
     driven = serve(PAIR, args=["--policy", f"Blue={pair_policy}"])
     plain = serve(PAIR)
-    with Client(driven.host, driven.port, timeout=10) as learner, \
-            Client(plain.host, plain.port, timeout=10) as both:
+    with (
+        Client(driven.host, driven.port, timeout=10) as learner,
+        Client(plain.host, plain.port, timeout=10) as both,
+    ):
         observation, _ = learner.reset(seed=5)
         mirrored, _ = both.reset(seed=5)
         moved = 0.0
@@ -320,10 +349,12 @@ def test_an_onnx_file_in_others_drives_that_agent_in_the_server(pair_policy: Pat
     from rlenv.serving.onnx_policy import OnnxPolicy
     from rlenv_client.agent_vector import AgentVectorEnv
 
-    served = AgentVectorEnv(1, PAIR, agents="Red", others={"Blue": pair_policy},
-                            max_episode_steps=40)
-    called = AgentVectorEnv(1, PAIR, agents="Red", others={"Blue": OnnxPolicy(pair_policy).act},
-                            max_episode_steps=40)
+    served = AgentVectorEnv(
+        1, PAIR, agents="Red", others={"Blue": pair_policy}, max_episode_steps=40
+    )
+    called = AgentVectorEnv(
+        1, PAIR, agents="Red", others={"Blue": OnnxPolicy(pair_policy).act}, max_episode_steps=40
+    )
     try:
         assert served.driven_by_server == {"Blue": str(pair_policy)}
         assert served.vector.clients[0].hello.driven == ("Blue",)

@@ -27,29 +27,42 @@ SETUPTOOLS = PYPROJECT["tool"]["setuptools"]
 
 def _folders(package: str, folder: Path) -> set[str]:
     """Every package under ``folder`` (a folder with an ``__init__.py``), named from ``package``."""
-    return {".".join([package, *init.parent.relative_to(folder).parts])
-            for init in folder.rglob("__init__.py") if "__pycache__" not in init.parts}
+    return {
+        ".".join([package, *init.parent.relative_to(folder).parts])
+        for init in folder.rglob("__init__.py")
+        if "__pycache__" not in init.parts
+    }
 
 
 def test_the_distribution_installs_one_package_a_layer_at_the_top() -> None:
     packages = SETUPTOOLS["packages"]
-    assert {package.split(".")[0] for package in packages} == {"rlenv", "rlenv_client",
-                                                               "rlenv_tools"}
-    assert SETUPTOOLS["package-dir"] == {"rlenv": "rlenv", "rlenv.examples": "examples",
-                                         "rlenv_client": "client/rlenv_client",
-                                         "rlenv_tools": "tools/rlenv_tools"}
+    assert {package.split(".")[0] for package in packages} == {
+        "rlenv",
+        "rlenv_client",
+        "rlenv_tools",
+    }
+    assert SETUPTOOLS["package-dir"] == {
+        "rlenv": "rlenv",
+        "rlenv.examples": "examples",
+        "rlenv_client": "client/rlenv_client",
+        "rlenv_tools": "tools/rlenv_tools",
+    }
     assert PYPROJECT["project"]["scripts"] == {"rlenv": "rlenv_tools.cli:main"}
     assert "examples" in PYPROJECT["tool"]["ruff"]["lint"]["isort"]["known-first-party"]
 
 
 def test_every_package_folder_is_listed_and_the_examples_are_rlenv_examples() -> None:
-    folders = (_folders("rlenv", ROOT / "rlenv") | _folders("rlenv.examples", ROOT / "examples")
-               | _folders("rlenv_client", ROOT / "client" / "rlenv_client")
-               | _folders("rlenv_tools", ROOT / "tools" / "rlenv_tools"))
+    folders = (
+        _folders("rlenv", ROOT / "rlenv")
+        | _folders("rlenv.examples", ROOT / "examples")
+        | _folders("rlenv_client", ROOT / "client" / "rlenv_client")
+        | _folders("rlenv_tools", ROOT / "tools" / "rlenv_tools")
+    )
     pages = {"rlenv_tools.inspector.static"}  # the inspector's page: files, no __init__.py
     assert set(SETUPTOOLS["packages"]) == folders | pages
-    examples = {path.name for path in (ROOT / "examples").iterdir()
-                if (path / "__init__.py").is_file()}
+    examples = {
+        path.name for path in (ROOT / "examples").iterdir() if (path / "__init__.py").is_file()
+    }
     assert {"cartpole", "classic_cartpole", "maze", "plinko"} <= examples
     assert {f"rlenv.examples.{name}" for name in examples} <= set(SETUPTOOLS["packages"])
 
@@ -58,7 +71,7 @@ def test_the_license_is_mit_and_goes_into_the_distributions() -> None:
     text = (ROOT / "LICENSE").read_text(encoding="utf-8")
     assert text.startswith("MIT License\n")
     assert "Copyright (c) 2026 The rlenv contributors" in text
-    assert "THE SOFTWARE IS PROVIDED \"AS IS\", WITHOUT WARRANTY OF ANY KIND" in text
+    assert 'THE SOFTWARE IS PROVIDED "AS IS", WITHOUT WARRANTY OF ANY KIND' in text
     assert PYPROJECT["project"]["license"] == "MIT"
     assert PYPROJECT["project"]["license-files"] == ["LICENSE"]
 
@@ -69,10 +82,16 @@ def test_the_version_has_one_place() -> None:
     assert SETUPTOOLS["dynamic"]["version"] == {"attr": "rlenv.__version__"}
     assert re.fullmatch(r"\d+\.\d+\.\d+", rlenv.__version__)
     assert rlenv_client.__version__ == rlenv.__version__
-    sources = [path for folder in ("rlenv", "client", "tools", "examples")
-               for path in (ROOT / folder).rglob("*.py")]
-    literals = [path for path in sources
-                if re.search(r"^__version__ = ['\"]", path.read_text(encoding="utf-8"), re.M)]
+    sources = [
+        path
+        for folder in ("rlenv", "client", "tools", "examples")
+        for path in (ROOT / folder).rglob("*.py")
+    ]
+    literals = [
+        path
+        for path in sources
+        if re.search(r"^__version__ = ['\"]", path.read_text(encoding="utf-8"), re.M)
+    ]
     assert literals == [ROOT / "rlenv" / "__init__.py"]
 
 
@@ -89,8 +108,9 @@ def test_the_changelog_keeps_a_changelog_with_the_protocol_versions() -> None:
     assert kinds <= {"Added", "Changed", "Deprecated", "Removed", "Fixed", "Security"}
     major, minor = PROTOCOL_VERSION
     for version in [f"{major}.{number}" for number in range(minor + 1)]:
-        assert re.search(rf"\*\*Protocol {re.escape(version)}\*\* \(\d{{4}}-\d\d-\d\d\)", text), \
+        assert re.search(rf"\*\*Protocol {re.escape(version)}\*\* \(\d{{4}}-\d\d-\d\d\)", text), (
             version
+        )
     assert "(CHANGELOG.md)" in (ROOT / "README.md").read_text(encoding="utf-8")
     nav = (ROOT / "mkdocs.yml").read_text(encoding="utf-8")
     assert "- Changelog: changelog.md" in nav
@@ -102,16 +122,22 @@ def test_ci_builds_checks_and_installs_the_wheel() -> None:
     assert "make test-package" in (ROOT / ".ci" / "run").read_text(encoding="utf-8")
     assert re.search(r"^test-package: ", (ROOT / "Makefile").read_text(encoding="utf-8"), re.M)
     text = script.read_text(encoding="utf-8")
-    for step in ("-m build", "twine check", "-m venv", "demo", " check rlenv.examples.",
-                 'gym.make("rlenv/CartPole-v1")', " http --port 0"):
+    for step in (
+        "-m build",
+        "twine check",
+        "-m venv",
+        "demo",
+        " check rlenv.examples.",
+        'gym.make("rlenv/CartPole-v1")',
+        " http --port 0",
+    ):
         assert step in text, step
     release = PYPROJECT["project"]["optional-dependencies"]["release"]
     assert all(re.fullmatch(r"(build|twine)>=[0-9.]+,<=[0-9.]+", pin) for pin in release)
 
 
 def test_ci_type_checks_the_runtime_and_the_client_without_silencing_errors() -> None:
-    assert re.search(r"^make typecheck$", (ROOT / ".ci" / "run").read_text(encoding="utf-8"),
-                     re.M)
+    assert re.search(r"^make typecheck$", (ROOT / ".ci" / "run").read_text(encoding="utf-8"), re.M)
     makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
     assert re.search(r"^typecheck: .*\n.*\[test,typecheck\].*\n\t\$\(BIN\)/mypy$", makefile, re.M)
     assert not re.search(r"^test: .*typecheck", makefile, re.M)  # make test does without it
@@ -121,11 +147,14 @@ def test_ci_type_checks_the_runtime_and_the_client_without_silencing_errors() ->
     for override in mypy["overrides"]:  # only named libraries' missing types, nothing of ours
         assert set(override) == {"module", "ignore_missing_imports"}, override
         assert not [name for name in override["module"] if name.startswith("rlenv")]
-    assert all(re.fullmatch(r"[a-zA-Z-]+>=[0-9.]+(,<=[0-9.]+)?", pin)
-               for pin in PYPROJECT["project"]["optional-dependencies"]["typecheck"])
+    assert all(
+        re.fullmatch(r"[a-zA-Z-]+>=[0-9.]+(,<=[0-9.]+)?", pin)
+        for pin in PYPROJECT["project"]["optional-dependencies"]["typecheck"]
+    )
 
 
 # The examples' two names, in this checkout: one module per example in a process.
+
 
 def test_registered_ids_name_the_installed_examples() -> None:
     for registration in ENVIRONMENTS.values():
@@ -154,7 +183,8 @@ def test_the_examples_name_their_target_by_the_name_they_were_loaded_under() -> 
 
 
 def test_elsewhere_the_installed_name_is_kept_and_checkout_names_fall_back(
-        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
     installed = tmp_path / "site-packages" / "rlenv"
     (installed / "examples").mkdir(parents=True)
     monkeypatch.setattr(targets, "_RLENV_DIR", installed)  # as an installed rlenv is laid out
@@ -175,7 +205,8 @@ def test_elsewhere_the_installed_name_is_kept_and_checkout_names_fall_back(
 
 
 def test_an_example_missing_its_own_imports_is_not_taken_for_a_missing_example(
-        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
     import examples
 
     (tmp_path / "needs_more.py").write_text("import no_such_library_anywhere\n", encoding="utf-8")
@@ -186,11 +217,15 @@ def test_an_example_missing_its_own_imports_is_not_taken_for_a_missing_example(
 
 
 def test_targets_compare_across_the_two_names() -> None:
-    assert targets.same_target("examples.cartpole:CartPoleEnvironment",
-                               "rlenv.examples.cartpole:CartPoleEnvironment")
-    assert targets.same_target("rlenv.examples.maze:MazeEnvironment",
-                               "rlenv.examples.maze:MazeEnvironment")
-    assert not targets.same_target("examples.cartpole:CartPoleEnvironment",
-                                   "examples.cartpole:Other")
-    assert not targets.same_target("myexamples.cartpole:CartPoleEnvironment",
-                                   "rlenv.examples.cartpole:CartPoleEnvironment")
+    assert targets.same_target(
+        "examples.cartpole:CartPoleEnvironment", "rlenv.examples.cartpole:CartPoleEnvironment"
+    )
+    assert targets.same_target(
+        "rlenv.examples.maze:MazeEnvironment", "rlenv.examples.maze:MazeEnvironment"
+    )
+    assert not targets.same_target(
+        "examples.cartpole:CartPoleEnvironment", "examples.cartpole:Other"
+    )
+    assert not targets.same_target(
+        "myexamples.cartpole:CartPoleEnvironment", "rlenv.examples.cartpole:CartPoleEnvironment"
+    )

@@ -88,8 +88,7 @@ def level() -> Node2D:
     bob.add_child(CollisionShape.circle(0.2, density=3.0, elasticity=0.7))
     root.add_child(anchor)
     root.add_child(bob)
-    root.add_child(Joint.pivot("../Anchor", "../Bob", (3.0, 3.0), max_force=1e4,
-                               name="Hinge"))
+    root.add_child(Joint.pivot("../Anchor", "../Bob", (3.0, 3.0), max_force=1e4, name="Hinge"))
     root.add_child(Node("Idle", process_mode=ProcessMode.DISABLED))
     return root
 
@@ -97,13 +96,23 @@ def level() -> Node2D:
 def summary(root: Node) -> list[tuple[Any, ...]]:
     rows = []
     for node in root.iter_subtree():
-        row: tuple[Any, ...] = (type(node).__name__, node.name, tuple(node.get_groups()),
-                                node.process_mode)
+        row: tuple[Any, ...] = (
+            type(node).__name__,
+            node.name,
+            tuple(node.get_groups()),
+            node.process_mode,
+        )
         if isinstance(node, Node2D):
             row += (tuple(node.position), node.rotation)
         if isinstance(node, CollisionShape):
-            row += (type(node.shape).__name__, node.shape.mass, node.friction,
-                    node.elasticity, node.sensor, node.color)
+            row += (
+                type(node.shape).__name__,
+                node.shape.mass,
+                node.friction,
+                node.elasticity,
+                node.sensor,
+                node.color,
+            )
         if isinstance(node, RigidBody):
             row += (tuple(node.velocity),)
         rows.append(row)
@@ -143,8 +152,7 @@ def test_instances_simulate_as_the_original(tree: SceneTree) -> None:
     tree.paused = False
     for _ in range(120):
         tree.physics_tick()
-    states = [[(*b.position, *b.velocity, b.angle) for b in world.space.bodies]
-              for world in worlds]
+    states = [[(*b.position, *b.velocity, b.angle) for b in world.space.bodies] for world in worlds]
     assert states[0] == states[1]
     hinges = [world.get_node("Level/Hinge") for world in worlds]
     assert all(h.constraint.b is h.get_node("../Bob").body for h in hinges)
@@ -153,9 +161,15 @@ def test_instances_simulate_as_the_original(tree: SceneTree) -> None:
 def test_instances_share_nothing(tree: SceneTree) -> None:
     scene = PackedScene.pack(level())
     first, second = scene.instantiate(), scene.instantiate()
-    ours = [{id(getattr(n, a)) for n in root.iter_subtree() for a in ("body", "shape")
-             if isinstance(getattr(n, a, None), pymunk.Body | pymunk.Shape)}
-            for root in (first, second)]
+    ours = [
+        {
+            id(getattr(n, a))
+            for n in root.iter_subtree()
+            for a in ("body", "shape")
+            if isinstance(getattr(n, a, None), pymunk.Body | pymunk.Shape)
+        }
+        for root in (first, second)
+    ]
     assert ours[0] and not ours[0] & ours[1]
     first.get_node("Pegs/Peg").scores["a"].append(3)
     assert second.get_node("Pegs/Peg").scores["a"] == [1, 2]
@@ -186,8 +200,11 @@ def test_a_class_it_was_not_allowed_is_refused(tree: SceneTree) -> None:
         PackedScene.from_data(data)
     with pytest.raises(PackedSceneError, match=r"Level/Pegs/Peg: class 'Peg' is not allowed"):
         PackedScene.from_data(data, allowed=(Tally,))
-    forged = {"format": "rlenv.PackedScene", "version": 1,
-              "root": {"class": "os.system", "name": "Evil", "attributes": {"cmd": "true"}}}
+    forged = {
+        "format": "rlenv.PackedScene",
+        "version": 1,
+        "root": {"class": "os.system", "name": "Evil", "attributes": {"cmd": "true"}},
+    }
     with pytest.raises(PackedSceneError, match="'os.system' is not allowed"):
         PackedScene.from_data(forged)
     with pytest.raises(TypeError, match="not a Node class"):
@@ -211,46 +228,86 @@ for name in ("xml.dom.minidom:Node", "tkinter.Tk", "http.server.HTTPServer", "Po
 new = {m for m in set(sys.modules) - before if m.split(".")[0] in ("xml", "tkinter", "http")}
 print(sorted(new))
 """
-    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                            timeout=60, check=True)
+    result = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=60, check=True
+    )
     assert result.stdout.strip() == "[]"
 
 
 def _node(**entry: Any) -> dict[str, Any]:
-    return {"format": "rlenv.PackedScene", "version": 1,
-            "root": {"class": "Node2D", "name": "Root", **entry}}
+    return {
+        "format": "rlenv.PackedScene",
+        "version": 1,
+        "root": {"class": "Node2D", "name": "Root", **entry},
+    }
 
 
-@pytest.mark.parametrize(("data", "match"), [
-    ([], "a map with exactly"),
-    ({"format": "rlenv.PackedScene", "version": 2, "root": {}}, "version 1"),
-    (_node(extra=1), "a node has no 'extra'"),
-    (_node(name="a/b"), "contains"),
-    (_node(properties={"position": [1, "x"]}), "position must be a number"),
-    (_node(properties={"position": [1, math.nan]}), "position must be a number finite"),
-    (_node(properties={"speed": 1}), "no property 'speed'"),
-    (_node(children=[{"class": "Node", "name": "A"}, {"class": "Node", "name": "A"}]),
-     "two children named 'A'"),
-    (_node(children=[{"class": "CollisionShape", "name": "S",
-                      "properties": {"shape": {"kind": "poly",
-                                               "vertices": [[0, 0], [1, 1], [1, 0], [0, 1]]}}}]),
-     "counter-clockwise round a convex polygon"),
-    (_node(children=[{"class": "CollisionShape", "name": "S",
-                      "properties": {"shape": {"kind": "spline"}}}]), "shape kind 'spline'"),
-    (_node(children=[{"class": "Joint", "name": "J",
-                      "properties": {"a": "A", "b": "B", "constraint": {"kind": "rope"}}}]),
-     "constraint kind 'rope'"),
-    (_node(children=[{"class": "RigidBody", "name": "B", "properties": {"mass": -1}}]),
-     "mass must be"),
-    (_node(attributes={"_parent": None}), "not an attribute a scene may set"),
-    (_node(attributes={"__class__": "x"}), "not an attribute a scene may set"),
-    (_node(attributes={"lattice": 1}), "would hide Node2D.lattice"),
-    (_node(attributes={"x": {1, 2}}), "holds a set"),
-    (_node(nodes={"other": "../Elsewhere"}), "not a node of the scene"),
-    (_node(connections=[["renamed", ".", "queue_freee", False]]), "has no method"),
-    (_node(connections=[["no_such", ".", "queue_free", False]]), "has no signal"),
-    (_node(connections=[["renamed", ".", "__init__", False]]), "not a method name"),
-])
+@pytest.mark.parametrize(
+    ("data", "match"),
+    [
+        ([], "a map with exactly"),
+        ({"format": "rlenv.PackedScene", "version": 2, "root": {}}, "version 1"),
+        (_node(extra=1), "a node has no 'extra'"),
+        (_node(name="a/b"), "contains"),
+        (_node(properties={"position": [1, "x"]}), "position must be a number"),
+        (_node(properties={"position": [1, math.nan]}), "position must be a number finite"),
+        (_node(properties={"speed": 1}), "no property 'speed'"),
+        (
+            _node(children=[{"class": "Node", "name": "A"}, {"class": "Node", "name": "A"}]),
+            "two children named 'A'",
+        ),
+        (
+            _node(
+                children=[
+                    {
+                        "class": "CollisionShape",
+                        "name": "S",
+                        "properties": {
+                            "shape": {"kind": "poly", "vertices": [[0, 0], [1, 1], [1, 0], [0, 1]]}
+                        },
+                    }
+                ]
+            ),
+            "counter-clockwise round a convex polygon",
+        ),
+        (
+            _node(
+                children=[
+                    {
+                        "class": "CollisionShape",
+                        "name": "S",
+                        "properties": {"shape": {"kind": "spline"}},
+                    }
+                ]
+            ),
+            "shape kind 'spline'",
+        ),
+        (
+            _node(
+                children=[
+                    {
+                        "class": "Joint",
+                        "name": "J",
+                        "properties": {"a": "A", "b": "B", "constraint": {"kind": "rope"}},
+                    }
+                ]
+            ),
+            "constraint kind 'rope'",
+        ),
+        (
+            _node(children=[{"class": "RigidBody", "name": "B", "properties": {"mass": -1}}]),
+            "mass must be",
+        ),
+        (_node(attributes={"_parent": None}), "not an attribute a scene may set"),
+        (_node(attributes={"__class__": "x"}), "not an attribute a scene may set"),
+        (_node(attributes={"lattice": 1}), "would hide Node2D.lattice"),
+        (_node(attributes={"x": {1, 2}}), "holds a set"),
+        (_node(nodes={"other": "../Elsewhere"}), "not a node of the scene"),
+        (_node(connections=[["renamed", ".", "queue_freee", False]]), "has no method"),
+        (_node(connections=[["no_such", ".", "queue_free", False]]), "has no signal"),
+        (_node(connections=[["renamed", ".", "__init__", False]]), "not a method name"),
+    ],
+)
 def test_malformed_data_is_refused_precisely(data: Any, match: str) -> None:
     with pytest.raises(PackedSceneError, match=match):
         PackedScene.from_data(data)

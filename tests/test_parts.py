@@ -66,8 +66,9 @@ def _continuation(host: Host) -> list[bytes]:
     return [pack(reply.to_wire()) for reply in replies]
 
 
-def _twin_check(parts: Mapping[str, Any], *, count: int = 1, started: bool = True,
-                target: str = TARGET) -> tuple[Reply, bool]:
+def _twin_check(
+    parts: Mapping[str, Any], *, count: int = 1, started: bool = True, target: str = TARGET
+) -> tuple[Reply, bool]:
     """Answer ``parts`` on one host of two twins; (the answer, whether the twins still agree).
 
     The twins serve ``target``, CartPole by default (its actions: ``[x]``, x in [-1, 1]).
@@ -91,8 +92,14 @@ def _twin_check(parts: Mapping[str, Any], *, count: int = 1, started: bool = Tru
     return reply, _continuation(host) == _continuation(twin)
 
 
-def assert_refused(parts: Mapping[str, Any], code: ErrorCode, fragment: str, *,
-                   count: int = 1, started: bool = True) -> ErrorReply:
+def assert_refused(
+    parts: Mapping[str, Any],
+    code: ErrorCode,
+    fragment: str,
+    *,
+    count: int = 1,
+    started: bool = True,
+) -> ErrorReply:
     """``parts`` is refused with ``code``, a message holding ``fragment``; nothing changed."""
     reply, unchanged = _twin_check(parts, count=count, started=started)
     assert isinstance(reply, ErrorReply), reply
@@ -113,11 +120,13 @@ def assert_refused(parts: Mapping[str, Any], code: ErrorCode, fragment: str, *,
         pytest.param({"action": ACTION, "repeat_action": 1}, 1, id="action-1-tick"),
         pytest.param({"config": {"environment": {"repeat_action": 2}}}, 1, id="config"),
         pytest.param({"config": {"agent": {"max_force": 11.0}}}, 1, id="config-agent"),
-        pytest.param({"inspect": {"set": {"path": "Agent", "property": "max_force", "value": 9.0}}},
-                     1, id="inspect-set"),
+        pytest.param(
+            {"inspect": {"set": {"path": "Agent", "property": "max_force", "value": 9.0}}},
+            1,
+            id="inspect-set",
+        ),
         pytest.param({"batch": [None, {"action": ACTION}]}, 2, id="batch-second"),
-        pytest.param({"steps": {"action": [[0.0], [0.0]], "reset": [True, False]}}, 2,
-                     id="steps"),
+        pytest.param({"steps": {"action": [[0.0], [0.0]], "reset": [True, False]}}, 2, id="steps"),
     ],
 )
 def test_the_twin_check_sees_every_accepted_change(parts: dict[str, Any], count: int) -> None:
@@ -131,12 +140,15 @@ def test_the_twin_check_sees_every_accepted_change(parts: dict[str, Any], count:
     "parts",
     [
         pytest.param({"observation": {"agent": {}}}, id="observation"),
-        pytest.param({"observation": {"agent": {}, "world": {}, "render": {"width": 8}}},
-                     id="observation-render"),
+        pytest.param(
+            {"observation": {"agent": {}, "world": {}, "render": {"width": 8}}},
+            id="observation-render",
+        ),
         pytest.param({"snapshot": {}}, id="snapshot"),
         pytest.param({"inspect": {"tree": {}}}, id="inspect-tree"),
-        pytest.param({"inspect": {"get": {"path": "Agent", "property": "max_force"}}},
-                     id="inspect-get"),
+        pytest.param(
+            {"inspect": {"get": {"path": "Agent", "property": "max_force"}}}, id="inspect-get"
+        ),
         pytest.param({"action": None, "observation": {"agent": {}}}, id="nil-action"),
     ],
 )
@@ -149,13 +161,16 @@ def test_requests_that_only_read_change_nothing(parts: dict[str, Any]) -> None:
 _EDIT = {"level": 3, "seed": 5, "n_edits": 4}
 
 
-@pytest.mark.parametrize(("parts", "started"), [
-    pytest.param({"edit_level": _EDIT}, True, id="plain"),
-    pytest.param({"edit_level": _EDIT}, False, id="plain-no-episode"),
-    pytest.param({"edit_level": _EDIT, "observation": {"agent": {}}}, True, id="observed"),
-    pytest.param({"batch": [None, {"edit_level": _EDIT}]}, True, id="batch"),
-    pytest.param({"batch": [None, {"edit_level": _EDIT}]}, False, id="batch-no-episode"),
-])
+@pytest.mark.parametrize(
+    ("parts", "started"),
+    [
+        pytest.param({"edit_level": _EDIT}, True, id="plain"),
+        pytest.param({"edit_level": _EDIT}, False, id="plain-no-episode"),
+        pytest.param({"edit_level": _EDIT, "observation": {"agent": {}}}, True, id="observed"),
+        pytest.param({"batch": [None, {"edit_level": _EDIT}]}, True, id="batch"),
+        pytest.param({"batch": [None, {"edit_level": _EDIT}]}, False, id="batch-no-episode"),
+    ],
+)
 def test_an_edit_of_a_level_changes_nothing(parts: dict[str, Any], started: bool) -> None:
     reply, unchanged = _twin_check(parts, count=2, started=started, target=PLINKO)
     answer = reply.replies[1] if isinstance(reply, BatchResponse) else reply
@@ -165,8 +180,12 @@ def test_an_edit_of_a_level_changes_nothing(parts: dict[str, Any], started: bool
 
 
 def test_an_environment_without_edits_refuses_them_changing_nothing() -> None:
-    assert_refused({"edit_level": {"level": 0, "seed": 0}}, ErrorCode.BAD_REQUEST,
-                   "edit_level: CartPoleWorld has no _edit_level", count=2)
+    assert_refused(
+        {"edit_level": {"level": 0, "seed": 0}},
+        ErrorCode.BAD_REQUEST,
+        "edit_level: CartPoleWorld has no _edit_level",
+        count=2,
+    )
 
 
 # --- empty requests --------------------------------------------------------------------------
@@ -214,8 +233,9 @@ def test_unknown_keys_are_refused_listing_the_expected_keys(
 
 
 def test_unknown_key_in_a_batch_slot_lists_the_keys_of_one_instance() -> None:
-    reply = assert_refused({"batch": [None, {"bogus": 1}]}, ErrorCode.BAD_REQUEST,
-                           "batch[1]", count=2)
+    reply = assert_refused(
+        {"batch": [None, {"bogus": 1}]}, ErrorCode.BAD_REQUEST, "batch[1]", count=2
+    )
     assert "'bogus'" in reply.message
     assert _expected_keys(reply.message) == set(PARTS) - {"batch", "steps"}
 
@@ -224,12 +244,17 @@ def test_unknown_key_in_a_batch_slot_lists_the_keys_of_one_instance() -> None:
     ("parts", "fragment"),
     [
         pytest.param({"reset": {"bogus": 1}}, "unknown key 'bogus' in reset", id="reset"),
-        pytest.param({"observation": {"agent": {}, "pixels": {}}},
-                     "unknown key 'pixels' in observation", id="observation"),
-        pytest.param({"observation": {"render": {"width": 8, "depth": 3}}},
-                     "unknown key 'depth' in observation.render", id="render"),
-        pytest.param({"config": {"physics": {}}}, "unknown key 'physics' in config",
-                     id="config"),
+        pytest.param(
+            {"observation": {"agent": {}, "pixels": {}}},
+            "unknown key 'pixels' in observation",
+            id="observation",
+        ),
+        pytest.param(
+            {"observation": {"render": {"width": 8, "depth": 3}}},
+            "unknown key 'depth' in observation.render",
+            id="render",
+        ),
+        pytest.param({"config": {"physics": {}}}, "unknown key 'physics' in config", id="config"),
     ],
 )
 def test_unknown_keys_inside_a_part_are_refused(parts: dict[str, Any], fragment: str) -> None:
@@ -248,11 +273,15 @@ def test_parts_that_must_be_maps(name: str, value: Any) -> None:
 @pytest.mark.parametrize(
     ("parts", "fragment"),
     [
-        pytest.param({"config": {"environment": [1]}}, "config.environment must be a map",
-                     id="config-environment"),
+        pytest.param(
+            {"config": {"environment": [1]}},
+            "config.environment must be a map",
+            id="config-environment",
+        ),
         pytest.param({"reset": {"options": [1]}}, "reset.options must be a map", id="options"),
-        pytest.param({"observation": {"render": 64}}, "observation.render must be a map",
-                     id="render"),
+        pytest.param(
+            {"observation": {"render": 64}}, "observation.render must be a map", id="render"
+        ),
         pytest.param({"snapshot": {"x": 1}}, "snapshot takes an empty map", id="snapshot"),
     ],
 )
@@ -262,20 +291,27 @@ def test_nested_maps_are_checked(parts: dict[str, Any], fragment: str) -> None:
 
 @pytest.mark.parametrize("seed", [-1, 1.5, "7", True, [1]], ids=repr)
 def test_reset_seed_must_be_a_non_negative_integer(seed: Any) -> None:
-    assert_refused({"reset": {"seed": seed}}, ErrorCode.BAD_REQUEST,
-                   "reset.seed must be an integer >= 0")
+    assert_refused(
+        {"reset": {"seed": seed}}, ErrorCode.BAD_REQUEST, "reset.seed must be an integer >= 0"
+    )
 
 
 @pytest.mark.parametrize("size", [0, -1, 4097, 8.0, "8", True], ids=repr)
 def test_render_size_is_checked(size: Any) -> None:
-    assert_refused({"observation": {"render": {"width": size}}}, ErrorCode.BAD_REQUEST,
-                   "observation.render.width must be an integer in [1, 4096]")
+    assert_refused(
+        {"observation": {"render": {"width": size}}},
+        ErrorCode.BAD_REQUEST,
+        "observation.render.width must be an integer in [1, 4096]",
+    )
 
 
 @pytest.mark.parametrize("value", [0, 1.5, "x", True], ids=repr)
 def test_config_values_are_checked(value: Any) -> None:
-    assert_refused({"config": {"environment": {"repeat_action": value}}},
-                   ErrorCode.INVALID_CONFIG, "repeat_action must be an integer >= 1")
+    assert_refused(
+        {"config": {"environment": {"repeat_action": value}}},
+        ErrorCode.INVALID_CONFIG,
+        "repeat_action must be an integer >= 1",
+    )
 
 
 # --- repeat_action ---------------------------------------------------------------------------
@@ -283,29 +319,62 @@ def test_config_values_are_checked(value: Any) -> None:
 
 @pytest.mark.parametrize("repeat", [0, -3, 2.0, True, "4", None], ids=repr)
 def test_repeat_action_must_be_an_integer_of_at_least_one(repeat: Any) -> None:
-    assert_refused({"action": ACTION, "repeat_action": repeat}, ErrorCode.BAD_REQUEST,
-                   f"'repeat_action' must be an integer >= 1, got {repeat!r}")
+    assert_refused(
+        {"action": ACTION, "repeat_action": repeat},
+        ErrorCode.BAD_REQUEST,
+        f"'repeat_action' must be an integer >= 1, got {repeat!r}",
+    )
 
 
 _BEYOND = 10_001  # one tick over the hello's limits.max_repeat_action
 
 
-@pytest.mark.parametrize(("parts", "count", "code", "fragment"), [
-    pytest.param({"action": ACTION, "repeat_action": _BEYOND}, 1, ErrorCode.BAD_REQUEST,
-                 "'repeat_action' must be at most 10000 ticks (the hello's "
-                 "limits.max_repeat_action), got 10001", id="request"),
-    pytest.param({"action": ACTION, "repeat_action": 2**40}, 1, ErrorCode.BAD_REQUEST,
-                 "got 1099511627776", id="request-huge"),
-    pytest.param({"batch": [None, {"action": ACTION, "repeat_action": _BEYOND}]}, 2,
-                 ErrorCode.BAD_REQUEST, "'repeat_action' must be at most 10000", id="batch"),
-    pytest.param({"steps": {"action": [[0.1], [0.1]], "repeat_action": _BEYOND}}, 2,
-                 ErrorCode.BAD_REQUEST, "steps.repeat_action must be at most 10000",
-                 id="steps"),
-    pytest.param({"config": {"environment": {"repeat_action": _BEYOND}}}, 1,
-                 ErrorCode.INVALID_CONFIG, "repeat_action must be at most 10000", id="config"),
-])
+@pytest.mark.parametrize(
+    ("parts", "count", "code", "fragment"),
+    [
+        pytest.param(
+            {"action": ACTION, "repeat_action": _BEYOND},
+            1,
+            ErrorCode.BAD_REQUEST,
+            "'repeat_action' must be at most 10000 ticks (the hello's "
+            "limits.max_repeat_action), got 10001",
+            id="request",
+        ),
+        pytest.param(
+            {"action": ACTION, "repeat_action": 2**40},
+            1,
+            ErrorCode.BAD_REQUEST,
+            "got 1099511627776",
+            id="request-huge",
+        ),
+        pytest.param(
+            {"batch": [None, {"action": ACTION, "repeat_action": _BEYOND}]},
+            2,
+            ErrorCode.BAD_REQUEST,
+            "'repeat_action' must be at most 10000",
+            id="batch",
+        ),
+        pytest.param(
+            {"steps": {"action": [[0.1], [0.1]], "repeat_action": _BEYOND}},
+            2,
+            ErrorCode.BAD_REQUEST,
+            "steps.repeat_action must be at most 10000",
+            id="steps",
+        ),
+        pytest.param(
+            {"config": {"environment": {"repeat_action": _BEYOND}}},
+            1,
+            ErrorCode.INVALID_CONFIG,
+            "repeat_action must be at most 10000",
+            id="config",
+        ),
+    ],
+)
 def test_repeat_action_is_bounded_by_the_hello_s_limit(
-    parts: dict[str, Any], count: int, code: ErrorCode, fragment: str,
+    parts: dict[str, Any],
+    count: int,
+    code: ErrorCode,
+    fragment: str,
 ) -> None:
     """Before, any number went: one request kept the server's loop for as long as it asked."""
     reply, unchanged = _twin_check(parts, count=count)
@@ -315,8 +384,9 @@ def test_repeat_action_is_bounded_by_the_hello_s_limit(
     assert unchanged
     host = Host(TARGET)
     assert host.hello.limits["max_repeat_action"] == 10_000
-    assert isinstance(_ask(host, {"reset": {}, "action": ACTION, "repeat_action": 10_000}),
-                      Response)  # the limit itself is served
+    assert isinstance(
+        _ask(host, {"reset": {}, "action": ACTION, "repeat_action": 10_000}), Response
+    )  # the limit itself is served
     host.close()
 
 
@@ -393,25 +463,44 @@ def test_before_any_reset_an_episode_is_required(parts: dict[str, Any]) -> None:
 
 def test_every_part_is_checked_before_any_applies() -> None:
     """A valid reset or config in a request whose action is refused is not applied either."""
-    assert_refused({"reset": {"seed": 99}, "action": [9.0]}, ErrorCode.INVALID_ACTION,
-                   "action[0] is 9.0")
-    assert_refused({"config": {"environment": {"repeat_action": 2}}, "reset": {"seed": 99},
-                    "observation": {"bogus": {}}}, ErrorCode.BAD_REQUEST, "'bogus'")
-    assert_refused({"reset": {}, "observation": {"render": {"width": 0}}},
-                   ErrorCode.BAD_REQUEST, "observation.render.width")
+    assert_refused(
+        {"reset": {"seed": 99}, "action": [9.0]}, ErrorCode.INVALID_ACTION, "action[0] is 9.0"
+    )
+    assert_refused(
+        {
+            "config": {"environment": {"repeat_action": 2}},
+            "reset": {"seed": 99},
+            "observation": {"bogus": {}},
+        },
+        ErrorCode.BAD_REQUEST,
+        "'bogus'",
+    )
+    assert_refused(
+        {"reset": {}, "observation": {"render": {"width": 0}}},
+        ErrorCode.BAD_REQUEST,
+        "observation.render.width",
+    )
 
 
 def test_parts_apply_in_the_table_order_whatever_the_order_of_the_keys() -> None:
     """config, then reset, then action, then observation, as :data:`PARTS` lists them."""
     ordered, shuffled = Host(TARGET), Host(TARGET)
-    parts = {"config": {"environment": {"repeat_action": 3}}, "reset": {"seed": 3},
-             "action": ACTION, "observation": {"agent": {}}}
+    parts = {
+        "config": {"environment": {"repeat_action": 3}},
+        "reset": {"seed": 3},
+        "action": ACTION,
+        "observation": {"agent": {}},
+    }
     first = _ask(ordered, parts)
     second = _ask(shuffled, dict(reversed(list(parts.items()))))
     assert isinstance(first, Response) and first.frames == 3
     assert pack(first.to_wire()) == pack(second.to_wire())
-    assert list(PARTS).index("config") < list(PARTS).index("reset") < \
-        list(PARTS).index("action") < list(PARTS).index("observation")
+    assert (
+        list(PARTS).index("config")
+        < list(PARTS).index("reset")
+        < list(PARTS).index("action")
+        < list(PARTS).index("observation")
+    )
 
 
 # --- parts that go alone ---------------------------------------------------------------------
@@ -421,31 +510,44 @@ def test_parts_apply_in_the_table_order_whatever_the_order_of_the_keys() -> None
     ("parts", "fragment"),
     [
         pytest.param({"snapshot": {}, "reset": {}}, "snapshot goes alone", id="snapshot-reset"),
-        pytest.param({"snapshot": {}, "action": ACTION}, "snapshot goes alone",
-                     id="snapshot-action"),
+        pytest.param(
+            {"snapshot": {}, "action": ACTION}, "snapshot goes alone", id="snapshot-action"
+        ),
         pytest.param({"restore": {}, "config": {}}, "restore goes alone", id="restore-config"),
-        pytest.param({"inspect": {"tree": {}}, "reset": {}}, "inspect goes alone",
-                     id="inspect-reset"),
-        pytest.param({"inspect": {"tree": {}}, "repeat_action": 2}, "inspect goes alone",
-                     id="inspect-repeat"),
-        pytest.param({"restore": {}, "snapshot": {}}, "restore or snapshot, not both",
-                     id="restore-snapshot"),
-        pytest.param({"inspect": {"tree": {}}, "snapshot": {}}, "not both",
-                     id="inspect-snapshot"),
-        pytest.param({"steps": {"action": [[0.0]]}, "reset": {}},
-                     "a 'steps' request carries nothing else but its id", id="steps-reset"),
-        pytest.param({"batch": [{"reset": {}}], "observation": {}},
-                     "a 'batch' request carries nothing else but its id", id="batch-observation"),
-        pytest.param({"batch": [{"reset": {}}], "steps": {"action": [[0.0]]}},
-                     "carries nothing else but its id", id="batch-steps"),
+        pytest.param(
+            {"inspect": {"tree": {}}, "reset": {}}, "inspect goes alone", id="inspect-reset"
+        ),
+        pytest.param(
+            {"inspect": {"tree": {}}, "repeat_action": 2}, "inspect goes alone", id="inspect-repeat"
+        ),
+        pytest.param(
+            {"restore": {}, "snapshot": {}}, "restore or snapshot, not both", id="restore-snapshot"
+        ),
+        pytest.param({"inspect": {"tree": {}}, "snapshot": {}}, "not both", id="inspect-snapshot"),
+        pytest.param(
+            {"steps": {"action": [[0.0]]}, "reset": {}},
+            "a 'steps' request carries nothing else but its id",
+            id="steps-reset",
+        ),
+        pytest.param(
+            {"batch": [{"reset": {}}], "observation": {}},
+            "a 'batch' request carries nothing else but its id",
+            id="batch-observation",
+        ),
+        pytest.param(
+            {"batch": [{"reset": {}}], "steps": {"action": [[0.0]]}},
+            "carries nothing else but its id",
+            id="batch-steps",
+        ),
     ],
 )
 def test_parts_that_go_alone(parts: dict[str, Any], fragment: str) -> None:
     assert_refused(parts, ErrorCode.BAD_REQUEST, fragment)
 
 
-@pytest.mark.parametrize("alone", [{"snapshot": {}}, {"inspect": {"tree": {}}}],
-                         ids=["snapshot", "inspect"])
+@pytest.mark.parametrize(
+    "alone", [{"snapshot": {}}, {"inspect": {"tree": {}}}], ids=["snapshot", "inspect"]
+)
 def test_parts_that_go_alone_may_bring_an_observation(alone: dict[str, Any]) -> None:
     host = Host(TARGET)
     _start(host)
@@ -464,42 +566,102 @@ _STEP = [[0.1], [-0.1]]  # one action per instance, for two
         pytest.param([1, 2], ErrorCode.BAD_REQUEST, "'steps' must be a map", id="list"),
         pytest.param("go", ErrorCode.BAD_REQUEST, "'steps' must be a map", id="str"),
         pytest.param(None, ErrorCode.BAD_REQUEST, "'steps' must be a map", id="nil"),
-        pytest.param({"reset": [True, True]}, ErrorCode.BAD_REQUEST,
-                     "'steps' needs an 'action'", id="no-action"),
-        pytest.param({"action": None}, ErrorCode.BAD_REQUEST, "'steps' needs an 'action'",
-                     id="nil-action"),
-        pytest.param({"action": _STEP, "jump": 1}, ErrorCode.BAD_REQUEST,
-                     "unknown key 'jump' in steps", id="unknown-key"),
-        pytest.param({"action": _STEP, "reset": [1, 0]}, ErrorCode.BAD_REQUEST,
-                     "steps.reset must be a list of booleans", id="reset-ints"),
-        pytest.param({"action": _STEP, "reset": "yes"}, ErrorCode.BAD_REQUEST,
-                     "steps.reset must be a list of booleans", id="reset-str"),
-        pytest.param({"action": _STEP, "reset": b"\x00\x02"}, ErrorCode.BAD_REQUEST,
-                     "steps.reset must be a list of booleans", id="reset-bytes-2"),
-        pytest.param({"action": _STEP, "reset": np.zeros((2, 1), np.bool_)},
-                     ErrorCode.BAD_REQUEST, "steps.reset must be a list of booleans",
-                     id="reset-2d"),
-        pytest.param({"action": _STEP, "reset": [True]}, ErrorCode.BAD_REQUEST,
-                     "steps.reset has 1 flags for 2 instances", id="reset-short"),
-        pytest.param({"action": _STEP, "reset": b"\x01"}, ErrorCode.BAD_REQUEST,
-                     "steps.reset has 1 flags for 2 instances", id="reset-bytes-short"),
-        pytest.param({"action": _STEP, "reset": np.zeros(3, np.uint8)}, ErrorCode.BAD_REQUEST,
-                     "steps.reset has 3 flags for 2 instances", id="reset-array-long"),
-        pytest.param({"action": _STEP, "reset": np.array([0, 2], np.uint8)},
-                     ErrorCode.BAD_REQUEST, "steps.reset must be a list of booleans",
-                     id="reset-array-2"),
-        pytest.param({"action": _STEP, "reset": np.zeros(2, np.int64)}, ErrorCode.BAD_REQUEST,
-                     "steps.reset must be a list of booleans", id="reset-array-int64"),
-        pytest.param({"action": _STEP, "reset": bytearray(2)}, ErrorCode.BAD_REQUEST,
-                     "steps.reset must be a list of booleans", id="reset-bytearray"),
-        pytest.param({"action": _STEP, "repeat_action": 0}, ErrorCode.BAD_REQUEST,
-                     "steps.repeat_action must be an integer >= 1", id="repeat-zero"),
-        pytest.param({"action": _STEP, "repeat_action": 1.0}, ErrorCode.BAD_REQUEST,
-                     "steps.repeat_action must be an integer >= 1", id="repeat-float"),
-        pytest.param({"action": [[0.1]]}, ErrorCode.INVALID_ACTION, "steps.action",
-                     id="one-action-for-two"),
-        pytest.param({"action": [[0.1], [3.0]]}, ErrorCode.INVALID_ACTION,
-                     "steps.action[1, 0]", id="out-of-bounds"),
+        pytest.param(
+            {"reset": [True, True]},
+            ErrorCode.BAD_REQUEST,
+            "'steps' needs an 'action'",
+            id="no-action",
+        ),
+        pytest.param(
+            {"action": None}, ErrorCode.BAD_REQUEST, "'steps' needs an 'action'", id="nil-action"
+        ),
+        pytest.param(
+            {"action": _STEP, "jump": 1},
+            ErrorCode.BAD_REQUEST,
+            "unknown key 'jump' in steps",
+            id="unknown-key",
+        ),
+        pytest.param(
+            {"action": _STEP, "reset": [1, 0]},
+            ErrorCode.BAD_REQUEST,
+            "steps.reset must be a list of booleans",
+            id="reset-ints",
+        ),
+        pytest.param(
+            {"action": _STEP, "reset": "yes"},
+            ErrorCode.BAD_REQUEST,
+            "steps.reset must be a list of booleans",
+            id="reset-str",
+        ),
+        pytest.param(
+            {"action": _STEP, "reset": b"\x00\x02"},
+            ErrorCode.BAD_REQUEST,
+            "steps.reset must be a list of booleans",
+            id="reset-bytes-2",
+        ),
+        pytest.param(
+            {"action": _STEP, "reset": np.zeros((2, 1), np.bool_)},
+            ErrorCode.BAD_REQUEST,
+            "steps.reset must be a list of booleans",
+            id="reset-2d",
+        ),
+        pytest.param(
+            {"action": _STEP, "reset": [True]},
+            ErrorCode.BAD_REQUEST,
+            "steps.reset has 1 flags for 2 instances",
+            id="reset-short",
+        ),
+        pytest.param(
+            {"action": _STEP, "reset": b"\x01"},
+            ErrorCode.BAD_REQUEST,
+            "steps.reset has 1 flags for 2 instances",
+            id="reset-bytes-short",
+        ),
+        pytest.param(
+            {"action": _STEP, "reset": np.zeros(3, np.uint8)},
+            ErrorCode.BAD_REQUEST,
+            "steps.reset has 3 flags for 2 instances",
+            id="reset-array-long",
+        ),
+        pytest.param(
+            {"action": _STEP, "reset": np.array([0, 2], np.uint8)},
+            ErrorCode.BAD_REQUEST,
+            "steps.reset must be a list of booleans",
+            id="reset-array-2",
+        ),
+        pytest.param(
+            {"action": _STEP, "reset": np.zeros(2, np.int64)},
+            ErrorCode.BAD_REQUEST,
+            "steps.reset must be a list of booleans",
+            id="reset-array-int64",
+        ),
+        pytest.param(
+            {"action": _STEP, "reset": bytearray(2)},
+            ErrorCode.BAD_REQUEST,
+            "steps.reset must be a list of booleans",
+            id="reset-bytearray",
+        ),
+        pytest.param(
+            {"action": _STEP, "repeat_action": 0},
+            ErrorCode.BAD_REQUEST,
+            "steps.repeat_action must be an integer >= 1",
+            id="repeat-zero",
+        ),
+        pytest.param(
+            {"action": _STEP, "repeat_action": 1.0},
+            ErrorCode.BAD_REQUEST,
+            "steps.repeat_action must be an integer >= 1",
+            id="repeat-float",
+        ),
+        pytest.param(
+            {"action": [[0.1]]}, ErrorCode.INVALID_ACTION, "steps.action", id="one-action-for-two"
+        ),
+        pytest.param(
+            {"action": [[0.1], [3.0]]},
+            ErrorCode.INVALID_ACTION,
+            "steps.action[1, 0]",
+            id="out-of-bounds",
+        ),
     ],
 )
 def test_malformed_steps_are_refused(steps: Any, code: ErrorCode, fragment: str) -> None:
@@ -507,15 +669,21 @@ def test_malformed_steps_are_refused(steps: Any, code: ErrorCode, fragment: str)
 
 
 def test_steps_before_a_reset_are_refused_naming_the_instance() -> None:
-    assert_refused({"steps": {"action": _STEP}}, ErrorCode.RESET_REQUIRED, "steps: instance 0",
-                   count=2, started=False)
+    assert_refused(
+        {"steps": {"action": _STEP}},
+        ErrorCode.RESET_REQUIRED,
+        "steps: instance 0",
+        count=2,
+        started=False,
+    )
 
 
 def test_steps_after_an_episode_ended_are_refused_naming_the_instance() -> None:
     host = Host(TARGET, 2)
     _start(host)
-    ended = _ask(host, {"batch": [None, {"config": {"agent": {"angle_limit": 0.0}},
-                                         "action": [0.1]}]})
+    ended = _ask(
+        host, {"batch": [None, {"config": {"agent": {"angle_limit": 0.0}}, "action": [0.1]}]}
+    )
     assert isinstance(ended, BatchResponse) and ended.replies[1].terminated
     reply = _ask(host, {"steps": {"action": _STEP}})
     assert isinstance(reply, ErrorReply) and reply.code == ErrorCode.RESET_REQUIRED
@@ -562,14 +730,18 @@ def test_steps_with_every_instance_resetting_need_no_episode() -> None:
         pytest.param([None, None, None], "a batch of 3 requests for 2 instances", id="too-long"),
         pytest.param([None, 3], "batch[1] must be a map or nil", id="slot-int"),
         pytest.param([[{}], None], "batch[0] must be a map or nil", id="slot-list"),
-        pytest.param([{"steps": {"action": _STEP}}, None], "unknown request key batch[0].",
-                     id="steps-in-slot"),
-        pytest.param([None, {"batch": [None]}], "unknown request key batch[1].",
-                     id="batch-in-slot"),
-        pytest.param([None, {"token": "t"}], "unknown request key batch[1].",
-                     id="token-in-slot"),
-        pytest.param([{"snapshot": {}, "reset": {}}, None], "snapshot goes alone",
-                     id="slot-not-alone"),
+        pytest.param(
+            [{"steps": {"action": _STEP}}, None],
+            "unknown request key batch[0].",
+            id="steps-in-slot",
+        ),
+        pytest.param(
+            [None, {"batch": [None]}], "unknown request key batch[1].", id="batch-in-slot"
+        ),
+        pytest.param([None, {"token": "t"}], "unknown request key batch[1].", id="token-in-slot"),
+        pytest.param(
+            [{"snapshot": {}, "reset": {}}, None], "snapshot goes alone", id="slot-not-alone"
+        ),
         pytest.param([{"reset": {}}, {"jump": 1}], "batch[1]", id="good-then-bad"),
     ],
 )
@@ -624,25 +796,25 @@ _GET = {"get": {"path": "Agent", "property": "max_force"}}
         pytest.param({"restore": {}}, True, id="restore"),
         pytest.param({"steps": {"action": _STEP}}, True, id="steps"),
         pytest.param({"batch": [None, {"reset": {}}]}, True, id="batch-reset"),
-        pytest.param({"batch": [{"observation": {}}, {"action": ACTION}]}, True,
-                     id="batch-action"),
+        pytest.param({"batch": [{"observation": {}}, {"action": ACTION}]}, True, id="batch-action"),
         pytest.param({}, False, id="empty"),
         pytest.param({"observation": {"agent": {}, "world": {}}}, False, id="observation"),
         pytest.param({"snapshot": {}}, False, id="snapshot"),
         pytest.param({"inspect": {"tree": {}}}, False, id="inspect-tree"),
         pytest.param({"inspect": _GET}, False, id="inspect-get"),
         pytest.param({"inspect": _SET}, False, id="inspect-set"),  # an inspector's edit (2.2)
-        pytest.param({"inspect": {"configure": {"agent": {"max_force": 9.0}}}}, False,
-                     id="inspect-configure"),
+        pytest.param(
+            {"inspect": {"configure": {"agent": {"max_force": 9.0}}}}, False, id="inspect-configure"
+        ),
         pytest.param({"batch": [{"inspect": _SET}]}, False, id="batch-inspect-set"),
         pytest.param({"repeat_action": 2}, False, id="repeat-action-alone"),
         pytest.param({"action": None}, False, id="nil-action"),
-        pytest.param({"action": None, "observation": {"agent": {}}}, False,
-                     id="nil-action-observation"),
+        pytest.param(
+            {"action": None, "observation": {"agent": {}}}, False, id="nil-action-observation"
+        ),
         pytest.param({"batch": [None, {"observation": {}}]}, False, id="batch-observation"),
         pytest.param({"batch": [None, None]}, False, id="batch-nothing"),
-        pytest.param({"batch": [{"action": None}, {"inspect": _GET}]}, False,
-                     id="batch-read-only"),
+        pytest.param({"batch": [{"action": None}, {"inspect": _GET}]}, False, id="batch-read-only"),
         pytest.param({"bogus": 1}, False, id="unknown"),
     ],
 )

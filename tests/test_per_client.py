@@ -24,8 +24,11 @@ def trajectory(client: Client, seed: int, actions: np.ndarray) -> list[bytes]:
     seen = [observation.tobytes()]
     for action in actions:
         observation, reward, terminated, truncated, info = client.step(action)
-        seen.append(observation.tobytes() + np.float64(reward).tobytes() +
-                    bytes([terminated, truncated, info["frames"]]))
+        seen.append(
+            observation.tobytes()
+            + np.float64(reward).tobytes()
+            + bytes([terminated, truncated, info["frames"]])
+        )
     return seen
 
 
@@ -36,18 +39,21 @@ def test_interleaved_clients_step_exactly_as_alone(serve: Serve, shared_memory: 
     with Client(alone.host, alone.port, shared_memory=shared_memory) as client:
         expected = {seed: trajectory(client, seed, actions) for seed in (1, 2, 3)}
     server = serve(args=PER_CLIENT)
-    clients = {seed: Client(server.host, server.port, shared_memory=shared_memory)
-               for seed in (1, 2, 3)}
+    clients = {
+        seed: Client(server.host, server.port, shared_memory=shared_memory) for seed in (1, 2, 3)
+    }
     try:
         for client in clients.values():
             client.configure(**ENDLESS)
-        seen = {seed: [client.reset(seed=seed)[0].tobytes()]
-                for seed, client in clients.items()}
+        seen = {seed: [client.reset(seed=seed)[0].tobytes()] for seed, client in clients.items()}
         for action in actions:  # one step each, in turn: none sees another's
             for seed, client in clients.items():
                 observation, reward, terminated, truncated, info = client.step(action)
-                seen[seed].append(observation.tobytes() + np.float64(reward).tobytes() +
-                                  bytes([terminated, truncated, info["frames"]]))
+                seen[seed].append(
+                    observation.tobytes()
+                    + np.float64(reward).tobytes()
+                    + bytes([terminated, truncated, info["frames"]])
+                )
     finally:
         for client in clients.values():
             client.close()
@@ -88,23 +94,33 @@ def test_a_client_that_leaves_frees_its_place_and_the_next_starts_afresh(serve: 
 
 
 def test_a_client_whose_environment_cannot_be_built_is_told_and_the_others_go_on(
-        serve: Serve) -> None:
-    server = serve("per_client_envs:OnlyOneEnvironment", args=PER_CLIENT,
-                   env={"PYTHONPATH": os.path.dirname(__file__)})
+    serve: Serve,
+) -> None:
+    server = serve(
+        "per_client_envs:OnlyOneEnvironment",
+        args=PER_CLIENT,
+        env={"PYTHONPATH": os.path.dirname(__file__)},
+    )
     with Client(server.host, server.port) as first:
         first.reset(seed=0)
         second = Client(server.host, server.port)
         with pytest.raises(RemoteError) as error:
             second.reset(seed=0)
         assert error.value.code == ErrorCode.ENVIRONMENT_ERROR and error.value.fatal
-        assert "could not build an environment for this client: only one of these fits" in \
-            error.value.message
+        assert (
+            "could not build an environment for this client: only one of these fits"
+            in error.value.message
+        )
         first.step(np.zeros(1, np.float32))
 
 
 def test_per_client_and_inspect_are_refused_together() -> None:
-    result = subprocess.run([sys.executable, "-m", "rlenv", "serve", TARGET, "--per-client",
-                             "--inspect"], capture_output=True, text=True, timeout=60,
-                            stdin=subprocess.DEVNULL)
+    result = subprocess.run(
+        [sys.executable, "-m", "rlenv", "serve", TARGET, "--per-client", "--inspect"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        stdin=subprocess.DEVNULL,
+    )
     assert result.returncode == 2
     assert "rlenv serve: --inspect watches the environment of a controller" in result.stderr

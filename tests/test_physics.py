@@ -332,12 +332,14 @@ def test_collision_started_on_both_shapes_and_bodies(
     contact = until(tree, lambda: bool(log))
     # the ball (radius 0.5, starting 2 above the floor) needs about 0.5 s to touch it
     assert 25 < contact < 40
-    assert sorted(log) == sorted([
-        ("collision_started", "BallShape", "FloorShape", contact),
-        ("collision_started", "FloorShape", "BallShape", contact),
-        ("body_entered", "Ball", "Floor", contact),
-        ("body_entered", "Floor", "Ball", contact),
-    ])
+    assert sorted(log) == sorted(
+        [
+            ("collision_started", "BallShape", "FloorShape", contact),
+            ("collision_started", "FloorShape", "BallShape", contact),
+            ("body_entered", "Ball", "Floor", contact),
+            ("body_entered", "Floor", "Ball", contact),
+        ]
+    )
     # resting on the floor: no more signals, the ball stays on top of it (within pymunk's
     # collision slop of 0.1)
     log.clear()
@@ -368,28 +370,30 @@ def test_collision_ended_when_ball_bounces_away(
     assert separation > contact
     assert falling.velocity.y > 0  # it bounced up
     ended = sorted(entry for entry in log if entry[3] == separation)
-    assert ended == sorted([
-        ("collision_ended", "BallShape", "FloorShape", separation),
-        ("collision_ended", "FloorShape", "BallShape", separation),
-        ("body_exited", "Ball", "Floor", separation),
-        ("body_exited", "Floor", "Ball", separation),
-    ])
+    assert ended == sorted(
+        [
+            ("collision_ended", "BallShape", "FloorShape", separation),
+            ("collision_ended", "FloorShape", "BallShape", separation),
+            ("body_exited", "Ball", "Floor", separation),
+            ("body_exited", "Floor", "Ball", separation),
+        ]
+    )
 
 
-def test_collision_ended_when_ball_removed(
-    tree: SceneTree, world: PhysicsWorld, log: list
-) -> None:
+def test_collision_ended_when_ball_removed(tree: SceneTree, world: PhysicsWorld, log: list) -> None:
     _, falling, _, _ = drop_ball(tree, world, log)
     until(tree, lambda: bool(log))
     ticks(tree, 5)  # resting on the floor
     log.clear()
     world.remove_child(falling)
-    assert sorted(entry[:3] for entry in log) == sorted([
-        ("collision_ended", "BallShape", "FloorShape"),
-        ("collision_ended", "FloorShape", "BallShape"),
-        ("body_exited", "Ball", "Floor"),
-        ("body_exited", "Floor", "Ball"),
-    ])
+    assert sorted(entry[:3] for entry in log) == sorted(
+        [
+            ("collision_ended", "BallShape", "FloorShape"),
+            ("collision_ended", "FloorShape", "BallShape"),
+            ("body_exited", "Ball", "Floor"),
+            ("body_exited", "Floor", "Ball"),
+        ]
+    )
 
 
 def test_removal_from_collision_handler_is_deferred(
@@ -425,9 +429,7 @@ def test_sensor_reports_but_does_not_stop_ball(
 # --- joints ----------------------------------------------------------------------------------
 
 
-def pendulum(
-    joint_first: bool, origin=(0.0, 0.0)
-) -> tuple[Node, StaticBody, RigidBody, Joint]:
+def pendulum(joint_first: bool, origin=(0.0, 0.0)) -> tuple[Node, StaticBody, RigidBody, Joint]:
     """Model/{Anchor, Bob, Hinge}: a 1 m pendulum hinged at ``origin``, starting horizontal."""
     x, y = origin
     model = Node("Model")
@@ -493,9 +495,7 @@ def test_joint_before_bodies_reattaches_after_readding(
     assert list(world.space.constraints) == [hinge.constraint]
 
 
-def test_joint_after_bodies_reattaches_after_readding(
-    tree: SceneTree, world: PhysicsWorld
-) -> None:
+def test_joint_after_bodies_reattaches_after_readding(tree: SceneTree, world: PhysicsWorld) -> None:
     model, _, bob, hinge = pendulum(joint_first=False)
     world.add_child(model)
     world.remove_child(model)
@@ -515,8 +515,12 @@ def build_scene() -> tuple[SceneTree, list[RigidBody]]:
     world.add_child(floor(elasticity=0.5, friction=0.7))
     bodies = []
     for index in range(6):
-        body = ball(f"Ball{index}", position=(0.3 * index - 0.7, 1.0 + 1.1 * index),
-                    radius=0.4, elasticity=0.5)
+        body = ball(
+            f"Ball{index}",
+            position=(0.3 * index - 0.7, 1.0 + 1.1 * index),
+            radius=0.4,
+            elasticity=0.5,
+        )
         body.angular_velocity = 0.3 * index
         world.add_child(body)
         bodies.append(body)
@@ -580,12 +584,13 @@ def jointed_scene(kind: str) -> tuple[SceneTree, list[RigidBody], Joint]:
     world.add_child(wheel)
     joints = {
         "pivot": lambda: Joint.pivot("../Base", "../Wheel", (0.2, 0.1), name="Joint"),
-        "groove": lambda: Joint.groove("../Base", "../Wheel", (-2.0, 0.5), (2.0, 0.5),
-                                       name="Joint"),
-        "motor": lambda: Joint.motor("../Base", "../Wheel", rate=3.0, max_force=5.0,
-                                     name="Joint"),
-        "spring": lambda: Joint.spring("../Base", "../Wheel", (0.0, 0.0), (0.0, 0.0), 0.5,
-                                       40.0, 0.8, name="Joint"),
+        "groove": lambda: Joint.groove(
+            "../Base", "../Wheel", (-2.0, 0.5), (2.0, 0.5), name="Joint"
+        ),
+        "motor": lambda: Joint.motor("../Base", "../Wheel", rate=3.0, max_force=5.0, name="Joint"),
+        "spring": lambda: Joint.spring(
+            "../Base", "../Wheel", (0.0, 0.0), (0.0, 0.0), 0.5, 40.0, 0.8, name="Joint"
+        ),
     }
     joint = joints[kind]()
     world.add_child(joint)
@@ -608,7 +613,8 @@ def test_a_restart_refreshes_each_kind_of_joint_in_place(kind: str) -> None:
     tree.root.get_child(0).restart()
     assert joint.constraint is constraint and constraint.impulse == 0.0
     assert constraint.error_bias == 0.5 and constraint.max_force == (
-        5.0 if kind == "motor" else math.inf)
+        5.0 if kind == "motor" else math.inf
+    )
     ticks(tree, 120)
     ticks(fresh_tree, 120)
     assert state(bodies) == state(fresh_bodies)  # bit-identical, not approximately equal
@@ -657,17 +663,24 @@ def test_a_restart_in_place_leaves_pymunk_s_records_as_a_new_space_has_them() ->
     assert isinstance(world, PhysicsWorld)
     fresh_tree, _, _ = jointed_scene("groove")
     fresh = fresh_tree.root.get_child(0).space
-    names = {id(node.body): node.name for node in world.iter_subtree()
-             if isinstance(node, StaticBody | RigidBody)}
-    fresh_names = {id(node.body): node.name for node in fresh_tree.root.get_child(0).iter_subtree()
-                   if isinstance(node, StaticBody | RigidBody)}
+    names = {
+        id(node.body): node.name
+        for node in world.iter_subtree()
+        if isinstance(node, StaticBody | RigidBody)
+    }
+    fresh_names = {
+        id(node.body): node.name
+        for node in fresh_tree.root.get_child(0).iter_subtree()
+        if isinstance(node, StaticBody | RigidBody)
+    }
     for turn in range(3):
         ticks(tree, 20)
         world.restart()
         space = world.space
         assert [names[id(b)] for b in space.bodies] == [fresh_names[id(b)] for b in fresh.bodies]
-        assert [names[id(s.body)] for s in space.shapes] == \
-            [fresh_names[id(s.body)] for s in fresh.shapes]
+        assert [names[id(s.body)] for s in space.shapes] == [
+            fresh_names[id(s.body)] for s in fresh.shapes
+        ]
         assert list(space.constraints) == [joint.constraint]
         assert all(body.space is space for body in space.bodies)
         # The first restart re-adds through pymunk (which checks at the next step); the others
@@ -689,8 +702,10 @@ def test_a_restart_leaves_a_body_without_a_valid_mass_to_pymunk_s_check() -> Non
     base.body_type = pymunk.Body.DYNAMIC
     world.restart()
     assert world.space._bodies_to_check == {base}
-    with pytest.raises(ValueError, match=re.escape(
-            "<StaticBody /root/PhysicsWorld/Base> has mass 0.0 and moment 0.0")):
+    with pytest.raises(
+        ValueError,
+        match=re.escape("<StaticBody /root/PhysicsWorld/Base> has mass 0.0 and moment 0.0"),
+    ):
         ticks(tree, 1)
 
 
@@ -737,27 +752,30 @@ tree.physics_tick()
 
 def test_a_body_or_shape_entering_its_space_twice_is_an_error_not_an_abort() -> None:
     # In a process of its own: before, Chipmunk's assertion aborted it (status -6).
-    run = subprocess.run([sys.executable, "-c", _TWICE], capture_output=True, text=True,
-                         timeout=60)
+    run = subprocess.run([sys.executable, "-c", _TWICE], capture_output=True, text=True, timeout=60)
     assert run.returncode == 0, run.stderr
     assert run.stdout.splitlines() == [
         "<CollisionShape /root/World/Peg/Skin>: its shape is in a space already (was "
         "_enter_tree called outside the tree's lifecycle?)",
         "<StaticBody /root/World/Peg>: its body is in a space already (was _enter_tree "
-        "called outside the tree's lifecycle?)"]
+        "called outside the tree's lifecycle?)",
+    ]
 
 
-@pytest.mark.parametrize(("make", "message"), [
-    (lambda: PhysicsWorld(iterations=0), "iterations must be an integer in [1,"),
-    (lambda: PhysicsWorld(damping=-1.0), "damping must be a number finite and >= 0"),
-    (lambda: PhysicsWorld(gravity=(math.nan, 0.0)), "gravity must be a number finite"),
-    (lambda: CollisionShape.circle(-0.1), "radius must be a number finite and >= 0"),
-    (lambda: CollisionShape.segment((0, 0), (1, 0), -0.1), "radius must be"),
-    (lambda: CollisionShape.circle(0.1, friction=-1.0), "friction must be"),
-    (lambda: CollisionShape.circle(0.1, elasticity=math.inf), "elasticity must be"),
-    (lambda: CollisionShape.circle(0.1, mass=-1.0), "mass must be"),
-    (lambda: Joint.pivot("../A", "../B", (0, 0), max_force=-1.0), "max_force must be"),
-])
+@pytest.mark.parametrize(
+    ("make", "message"),
+    [
+        (lambda: PhysicsWorld(iterations=0), "iterations must be an integer in [1,"),
+        (lambda: PhysicsWorld(damping=-1.0), "damping must be a number finite and >= 0"),
+        (lambda: PhysicsWorld(gravity=(math.nan, 0.0)), "gravity must be a number finite"),
+        (lambda: CollisionShape.circle(-0.1), "radius must be a number finite and >= 0"),
+        (lambda: CollisionShape.segment((0, 0), (1, 0), -0.1), "radius must be"),
+        (lambda: CollisionShape.circle(0.1, friction=-1.0), "friction must be"),
+        (lambda: CollisionShape.circle(0.1, elasticity=math.inf), "elasticity must be"),
+        (lambda: CollisionShape.circle(0.1, mass=-1.0), "mass must be"),
+        (lambda: Joint.pivot("../A", "../B", (0, 0), max_force=-1.0), "max_force must be"),
+    ],
+)
 def test_values_chipmunk_refuses_are_refused_by_name(make, message: str) -> None:
     with pytest.raises(ValueError, match=re.escape(message)):
         make()
@@ -767,8 +785,10 @@ def test_setting_what_chipmunk_refuses_names_the_node(world: PhysicsWorld) -> No
     body = floor()
     world.add_child(body)
     shape = body.get_node("FloorShape")
-    with pytest.raises(ValueError, match=re.escape(
-            "<CollisionShape /root/World/Floor/FloorShape>: friction must be a number")):
+    with pytest.raises(
+        ValueError,
+        match=re.escape("<CollisionShape /root/World/Floor/FloorShape>: friction must be a number"),
+    ):
         shape.friction = -0.5
     with pytest.raises(ValueError, match=re.escape("<PhysicsWorld /root/World>: damping")):
         world.damping = -1.0
@@ -791,31 +811,41 @@ def test_a_client_setting_a_negative_damping_is_refused_and_the_server_serves_on
 
 
 def test_a_dynamic_body_without_mass_is_named_at_its_first_step(
-    tree: SceneTree, world: PhysicsWorld,
+    tree: SceneTree,
+    world: PhysicsWorld,
 ) -> None:
     body = RigidBody(name="Ghost")
     body.add_child(CollisionShape.circle(0.5))  # no mass, no density
     world.add_child(body)
-    with pytest.raises(ValueError, match=re.escape(
-            "<RigidBody /root/World/Ghost> has mass 0.0 and moment 0.0")):
+    with pytest.raises(
+        ValueError, match=re.escape("<RigidBody /root/World/Ghost> has mass 0.0 and moment 0.0")
+    ):
         tree.physics_tick()
 
 
 def test_a_second_physics_world_beside_the_first_is_logged(
-    world: PhysicsWorld, caplog: pytest.LogCaptureFixture,
+    world: PhysicsWorld,
+    caplog: pytest.LogCaptureFixture,
 ) -> None:
     with caplog.at_level(logging.WARNING, "rlenv.scene2d.physics"):
         world.parent.add_child(PhysicsWorld(name="World"))
     assert "<PhysicsWorld /root/World2> enters beside World" in caplog.text
 
 
-_SPACE_SETTINGS = {"collision_slop": 0.3, "collision_bias": 0.2, "collision_persistence": 5,
-                   "idle_speed_threshold": 0.01, "iterations": 25, "damping": 0.9}
+_SPACE_SETTINGS = {
+    "collision_slop": 0.3,
+    "collision_bias": 0.2,
+    "collision_persistence": 5,
+    "idle_speed_threshold": 0.01,
+    "iterations": 25,
+    "damping": 0.9,
+}
 
 
 def _space_settings(space: pymunk.Space) -> dict[str, object]:
-    return {name: getattr(space, name) for name in [*_SPACE_SETTINGS, "gravity",
-                                                    "sleep_time_threshold"]}
+    return {
+        name: getattr(space, name) for name in [*_SPACE_SETTINGS, "gravity", "sleep_time_threshold"]
+    }
 
 
 @pytest.mark.parametrize("slop", [0.1, 0.0])
@@ -881,8 +911,9 @@ def test_a_restart_gives_the_same_space_whether_or_not_the_episode_saw_a_contact
             setattr(world.space, name, value)
         solved: list[int] = []
         if handler:
-            world.space.on_collision(0, 0, post_solve=lambda arbiter, space, data, seen=solved:
-                                     seen.append(1))
+            world.space.on_collision(
+                0, 0, post_solve=lambda arbiter, space, data, seen=solved: seen.append(1)
+            )
         world.restart()
         if contact:
             ticks(tree, 60)
@@ -891,8 +922,11 @@ def test_a_restart_gives_the_same_space_whether_or_not_the_episode_saw_a_contact
         ticks(tree, 120)
         runs.append((_space_settings(world.space), state(bodies), len(solved)))
     assert runs[0] == runs[1]  # bit for bit
-    assert runs[0][0] == {**_space_settings(pymunk.Space()), **_SPACE_SETTINGS,
-                          "gravity": (0.0, -9.81)}
+    assert runs[0][0] == {
+        **_space_settings(pymunk.Space()),
+        **_SPACE_SETTINGS,
+        "gravity": (0.0, -9.81),
+    }
     assert runs[0][2] > 0 if handler else runs[0][2] == 0
 
 
@@ -910,16 +944,19 @@ def _landing(tree: SceneTree, world: PhysicsWorld) -> tuple[RigidBody, list[obje
 
 
 def test_a_user_s_handler_without_collision_types_runs_beside_rlenv_s_signals(
-    tree: SceneTree, world: PhysicsWorld,
+    tree: SceneTree,
+    world: PhysicsWorld,
 ) -> None:
     """pymunk's catch-all handler is rlenv's, which emits the signals: a user's ``begin`` or
     ``separate`` there used to replace it, and ``body_entered`` stopped firing."""
     body, signals = _landing(tree, world)
     theirs: list[object] = []
-    world.space.on_collision(begin=lambda arbiter, space, data: theirs.append(("begin", data)),
-                             separate=lambda arbiter, space, data: theirs.append(("end", data)),
-                             post_solve=lambda arbiter, space, data: theirs.append(data),
-                             data="mine")
+    world.space.on_collision(
+        begin=lambda arbiter, space, data: theirs.append(("begin", data)),
+        separate=lambda arbiter, space, data: theirs.append(("end", data)),
+        post_solve=lambda arbiter, space, data: theirs.append(data),
+        data="mine",
+    )
     ticks(tree, 30)
     assert signals[0] == ("entered", "Floor") and theirs[0] == ("begin", "mine")
     assert "mine" in theirs  # post_solve, with the user's data

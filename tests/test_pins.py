@@ -29,15 +29,19 @@ def _lowest() -> dict[str, str]:
 
 
 def test_ci_tests_the_lowest_version_of_everything_rlenv_imports() -> None:
-    imported = {**_specs(PROJECT["dependencies"]),
-                **_specs(PROJECT["optional-dependencies"]["http"])}
+    imported = {
+        **_specs(PROJECT["dependencies"]),
+        **_specs(PROJECT["optional-dependencies"]["http"]),
+    }
     floors = {name: Version(re.search(r">=([0-9.]+)", spec)[1]) for name, spec in imported.items()}
     assert _lowest() == floors
 
 
 def test_the_libraries_whose_internals_rlenv_uses_are_capped_at_a_tested_version() -> None:
-    allowed = {**_specs(PROJECT["dependencies"]),
-               **_specs(PROJECT["optional-dependencies"]["http"]),
-               **_specs(PROJECT["optional-dependencies"]["test"])}
+    allowed = {
+        **_specs(PROJECT["dependencies"]),
+        **_specs(PROJECT["optional-dependencies"]["http"]),
+        **_specs(PROJECT["optional-dependencies"]["test"]),
+    }
     for name in ("pymunk", "uvicorn", "starlette"):
         assert re.search(r"<=[0-9.]+", allowed[name]), (name, allowed[name])

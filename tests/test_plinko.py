@@ -46,8 +46,10 @@ def colors_of(level: dict[str, Any]) -> set[tuple[int, ...]]:
 
 def test_a_snapshot_restores_exactly_on_the_other_server(serve: Serve) -> None:
     first, second = serve(TARGET), serve(TARGET)
-    with Client(first.host, first.port, timeout=20) as a, \
-            Client(second.host, second.port, timeout=20) as b:
+    with (
+        Client(first.host, first.port, timeout=20) as a,
+        Client(second.host, second.port, timeout=20) as b,
+    ):
         a.configure(world={"difficulty": 0.8})
         observation, _ = a.reset(seed=5)
         for _ in range(6):
@@ -86,8 +88,7 @@ def test_difficulty_changes_the_levels_and_following_the_ball_pays() -> None:
         pegs = {}
         for difficulty in (0.0, 1.0):
             client.configure(world={"difficulty": difficulty})
-            pegs[difficulty] = [client.reset(seed=seed)[1]["world"]["pegs"]
-                                for seed in range(5)]
+            pegs[difficulty] = [client.reset(seed=seed)[1]["world"]["pegs"] for seed in range(5)]
         assert max(pegs[0.0]) < min(pegs[1.0])
         caught = {"follow": 0.0, "still": 0.0}
         for seed in range(10):
@@ -105,18 +106,36 @@ def _level_wiring(owner: str, signal: str, target: str, method: str) -> dict:
     """A peg (a body and its shape, "Skin") with ``owner``'s ``signal`` wired, as data, to the
     ``method`` of the node at ``target`` (a path from ``owner``)."""
     connection = [[signal, target, method, False]]
-    return {"format": "rlenv.PackedScene", "version": 1, "root": {
-        "class": "StaticBody", "name": "Peg",
-        "connections": connection if owner == "Peg" else [], "children": [{
-            "class": "CollisionShape", "name": "Skin",
-            "properties": {"shape": {"kind": "circle", "radius": 0.1}},
-            "connections": connection if owner == "Skin" else []}]}}
+    return {
+        "format": "rlenv.PackedScene",
+        "version": 1,
+        "root": {
+            "class": "StaticBody",
+            "name": "Peg",
+            "connections": connection if owner == "Peg" else [],
+            "children": [
+                {
+                    "class": "CollisionShape",
+                    "name": "Skin",
+                    "properties": {"shape": {"kind": "circle", "radius": 0.1}},
+                    "connections": connection if owner == "Skin" else [],
+                }
+            ],
+        },
+    }
 
 
 def _members(kind: type, signals: bool) -> list[str]:
-    return sorted(name for name in dir(kind) if not name.startswith("__") and (
-        isinstance(getattr(kind, name), Signal) if signals
-        else inspect.isfunction(inspect.getattr_static(kind, name))))
+    return sorted(
+        name
+        for name in dir(kind)
+        if not name.startswith("__")
+        and (
+            isinstance(getattr(kind, name), Signal)
+            if signals
+            else inspect.isfunction(inspect.getattr_static(kind, name))
+        )
+    )
 
 
 def test_level_data_wiring_any_signal_to_any_method_never_breaks_the_server(
@@ -129,8 +148,12 @@ def test_level_data_wiring_any_signal_to_any_method_never_breaks_the_server(
     may connect only to what a level needs; whatever it tries, a normal reset works after it.
     """
     kinds = {"Peg": StaticBody, "Skin": CollisionShape}
-    paths = {("Peg", "Peg"): ".", ("Peg", "Skin"): "Skin", ("Skin", "Skin"): ".",
-             ("Skin", "Peg"): ".."}
+    paths = {
+        ("Peg", "Peg"): ".",
+        ("Peg", "Skin"): "Skin",
+        ("Skin", "Skin"): ".",
+        ("Skin", "Peg"): "..",
+    }
     assert "_enter_tree" in _members(CollisionShape, False)
     assert "remove_child" in _members(StaticBody, False)
     server = serve(TARGET)
@@ -141,12 +164,14 @@ def test_level_data_wiring_any_signal_to_any_method_never_breaks_the_server(
                 for method in _members(kinds[target], False):
                     tried += 1
                     try:
-                        client.reset(seed=1, options={
-                            "level": _level_wiring(owner, signal, path, method)})
+                        client.reset(
+                            seed=1, options={"level": _level_wiring(owner, signal, path, method)}
+                        )
                     except RemoteError as error:
-                        assert "data may not connect to" in error.message or \
-                            "does not take" in error.message, \
-                            (owner, signal, method, error.message)
+                        assert (
+                            "data may not connect to" in error.message
+                            or "does not take" in error.message
+                        ), (owner, signal, method, error.message)
                         continue
                     accepted.add(method)
                     client.step(STILL)

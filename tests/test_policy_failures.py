@@ -44,29 +44,52 @@ from tests.policy_spaces import (  # noqa: E402
 )
 
 
-def _write(path: Path, nodes: list, observation_space: gym.spaces.Box,
-           action_space: gym.spaces.Space, initializers: tuple = ()) -> Path:
+def _write(
+    path: Path,
+    nodes: list,
+    observation_space: gym.spaces.Box,
+    action_space: gym.spaces.Space,
+    initializers: tuple = (),
+) -> Path:
     """A policy file of these nodes: input ``observation``, output ``action`` (any shape)."""
     graph = helper.make_graph(
-        nodes, "policy",
-        [helper.make_tensor_value_info("observation", TensorProto.FLOAT,
-                                       [None, observation_space.shape[0]])],
+        nodes,
+        "policy",
+        [
+            helper.make_tensor_value_info(
+                "observation", TensorProto.FLOAT, [None, observation_space.shape[0]]
+            )
+        ],
         [helper.make_tensor_value_info("action", TensorProto.FLOAT, None)],
-        initializer=list(initializers))
+        initializer=list(initializers),
+    )
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
     model.ir_version = 8
-    helper.set_model_props(model, {OBSERVATION_SPACE_KEY: space_to_json_text(observation_space),
-                                   ACTION_SPACE_KEY: space_to_json_text(action_space)})
+    helper.set_model_props(
+        model,
+        {
+            OBSERVATION_SPACE_KEY: space_to_json_text(observation_space),
+            ACTION_SPACE_KEY: space_to_json_text(action_space),
+        },
+    )
     path.write_bytes(model.SerializeToString())
     return path
 
 
-def _constant(path: Path, values: list[float], observation_space: gym.spaces.Box,
-              action_space: gym.spaces.Space) -> Path:
+def _constant(
+    path: Path,
+    values: list[float],
+    observation_space: gym.spaces.Box,
+    action_space: gym.spaces.Space,
+) -> Path:
     """A policy that answers ``values`` whatever it sees (its batch of one)."""
     value = numpy_helper.from_array(np.array([values], np.float32), "value")
-    return _write(path, [helper.make_node("Constant", [], ["action"], value=value)],
-                  observation_space, action_space)
+    return _write(
+        path,
+        [helper.make_node("Constant", [], ["action"], value=value)],
+        observation_space,
+        action_space,
+    )
 
 
 def _huge(path: Path, observation_space: gym.spaces.Box, action_space: gym.spaces.Space) -> Path:
@@ -76,30 +99,48 @@ def _huge(path: Path, observation_space: gym.spaces.Box, action_space: gym.space
     """
     scale = numpy_helper.from_array(np.array([1 << 14, 1 << 12], np.int64), "scale")
     one = numpy_helper.from_array(np.array([1.0], np.float32))
-    return _write(path, [helper.make_node("Shape", ["observation"], ["shape"]),
-                         helper.make_node("Mul", ["shape", "scale"], ["big"]),
-                         helper.make_node("ConstantOfShape", ["big"], ["action"], value=one)],
-                  observation_space, action_space, (scale,))
+    return _write(
+        path,
+        [
+            helper.make_node("Shape", ["observation"], ["shape"]),
+            helper.make_node("Mul", ["shape", "scale"], ["big"]),
+            helper.make_node("ConstantOfShape", ["big"], ["action"], value=one),
+        ],
+        observation_space,
+        action_space,
+        (scale,),
+    )
 
 
-def _endless(path: Path, observation_space: gym.spaces.Box,
-             action_space: gym.spaces.Space) -> Path:
+def _endless(path: Path, observation_space: gym.spaces.Box, action_space: gym.spaces.Space) -> Path:
     """A policy that loops 2^62 times (adding one to its observation each time)."""
     body = helper.make_graph(
-        [helper.make_node("Identity", ["going"], ["going_on"]),
-         helper.make_node("Add", ["x", "one"], ["x_next"])],
+        [
+            helper.make_node("Identity", ["going"], ["going_on"]),
+            helper.make_node("Add", ["x", "one"], ["x_next"]),
+        ],
         "body",
-        [helper.make_tensor_value_info("i", TensorProto.INT64, []),
-         helper.make_tensor_value_info("going", TensorProto.BOOL, []),
-         helper.make_tensor_value_info("x", TensorProto.FLOAT, None)],
-        [helper.make_tensor_value_info("going_on", TensorProto.BOOL, []),
-         helper.make_tensor_value_info("x_next", TensorProto.FLOAT, None)],
-        initializer=[numpy_helper.from_array(np.float32(1.0), "one")])
-    return _write(path, [helper.make_node("Loop", ["trips", "always", "observation"],
-                                          ["action"], body=body)],
-                  observation_space, action_space,
-                  (numpy_helper.from_array(np.int64(1 << 62), "trips"),
-                   numpy_helper.from_array(np.bool_(True), "always")))
+        [
+            helper.make_tensor_value_info("i", TensorProto.INT64, []),
+            helper.make_tensor_value_info("going", TensorProto.BOOL, []),
+            helper.make_tensor_value_info("x", TensorProto.FLOAT, None),
+        ],
+        [
+            helper.make_tensor_value_info("going_on", TensorProto.BOOL, []),
+            helper.make_tensor_value_info("x_next", TensorProto.FLOAT, None),
+        ],
+        initializer=[numpy_helper.from_array(np.float32(1.0), "one")],
+    )
+    return _write(
+        path,
+        [helper.make_node("Loop", ["trips", "always", "observation"], ["action"], body=body)],
+        observation_space,
+        action_space,
+        (
+            numpy_helper.from_array(np.int64(1 << 62), "trips"),
+            numpy_helper.from_array(np.bool_(True), "always"),
+        ),
+    )
 
 
 def _peak_rss_mib(pid: int) -> float:
@@ -124,16 +165,18 @@ def _failed_episodes(observer: Client, count: int) -> dict:
 
 # --- the output, checked against the space ----------------------------------------------------
 
+
 def test_box_actions_are_clipped_and_nan_or_a_wrong_shape_refused(tmp_path: Path) -> None:
-    forceful = OnnxPolicy(_constant(tmp_path / "forceful.onnx", [1e30, -np.inf],
-                                    PAIR_OBSERVATION, PUSHING))
+    forceful = OnnxPolicy(
+        _constant(tmp_path / "forceful.onnx", [1e30, -np.inf], PAIR_OBSERVATION, PUSHING)
+    )
     assert forceful.act(np.zeros(8, np.float32)).tolist() == [1.0, -1.0]
-    three = OnnxPolicy(_constant(tmp_path / "three.onnx", [0.1, 0.2, 0.3], PAIR_OBSERVATION,
-                                 PUSHING))
+    three = OnnxPolicy(
+        _constant(tmp_path / "three.onnx", [0.1, 0.2, 0.3], PAIR_OBSERVATION, PUSHING)
+    )
     with pytest.raises(PolicyError, match=r"three.onnx gave \[0.1 +0.2 +0.3\].*Box"):
         three.act(np.zeros(8, np.float32))
-    nan = OnnxPolicy(_constant(tmp_path / "nan.onnx", [np.nan], CARTPOLE_OBSERVATION,
-                               STEERING))
+    nan = OnnxPolicy(_constant(tmp_path / "nan.onnx", [np.nan], CARTPOLE_OBSERVATION, STEERING))
     with pytest.raises(PolicyError, match="nan.onnx gave NaN"):
         nan.act(np.zeros(5, np.float32))
 
@@ -161,6 +204,7 @@ def test_a_forceful_policy_plays_clipped_episodes(serve: Serve, tmp_path: Path) 
 
 # --- failures cost the episode, not the server ------------------------------------------------
 
+
 def test_a_nan_policy_fails_its_episodes_and_is_logged_once(serve: Serve, tmp_path: Path) -> None:
     policy = _constant(tmp_path / "nan.onnx", [np.nan], CARTPOLE_OBSERVATION, STEERING)
     server = serve(CARTPOLE, args=["--policy", f"Agent={policy}"])
@@ -172,7 +216,8 @@ def test_a_nan_policy_fails_its_episodes_and_is_logged_once(serve: Serve, tmp_pa
 
 
 def test_every_pair_agent_with_a_wrong_or_huge_output_fails_episodes_in_bounded_memory(
-        serve: Serve, tmp_path: Path) -> None:
+    serve: Serve, tmp_path: Path
+) -> None:
     huge = _huge(tmp_path / "huge.onnx", PAIR_OBSERVATION, PUSHING)
     three = _constant(tmp_path / "three.onnx", [0.1, 0.2, 0.3], PAIR_OBSERVATION, PUSHING)
     for policies in ([f"Red={huge}", f"Blue={huge}"], [f"Red={three}", f"Blue={huge}"]):
@@ -186,7 +231,8 @@ def test_every_pair_agent_with_a_wrong_or_huge_output_fails_episodes_in_bounded_
 
 
 def test_a_learner_beside_a_failing_policy_gets_an_environment_error(
-        serve: Serve, tmp_path: Path) -> None:
+    serve: Serve, tmp_path: Path
+) -> None:
     three = _constant(tmp_path / "three.onnx", [0.1, 0.2, 0.3], PAIR_OBSERVATION, PUSHING)
     server = serve(PAIR, args=["--policy", f"Blue={three}"])
     with Client(server.host, server.port, timeout=30) as learner:
@@ -200,7 +246,8 @@ def test_a_learner_beside_a_failing_policy_gets_an_environment_error(
 
 
 def test_an_endless_policy_leaves_observers_and_sigterm_answered(
-        serve: Serve, tmp_path: Path) -> None:
+    serve: Serve, tmp_path: Path
+) -> None:
     policy = _endless(tmp_path / "endless.onnx", CARTPOLE_OBSERVATION, STEERING)
     server = serve(CARTPOLE, args=["--policy", f"Agent={policy}"])
     with Client(server.host, server.port, timeout=30) as observer:
@@ -212,5 +259,4 @@ def test_an_endless_policy_leaves_observers_and_sigterm_answered(
             assert time.monotonic() - started < 10 * POLICY_DEADLINE + 20
     assert "ran past its deadline" in server.output, server.output
     server.process.send_signal(signal.SIGTERM)
-    wait_until(lambda: not server.is_alive(), "SIGTERM did not end a driven server",
-               seconds=30)
+    wait_until(lambda: not server.is_alive(), "SIGTERM did not end a driven server", seconds=30)

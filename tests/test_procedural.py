@@ -133,20 +133,28 @@ def test_gradients_go_from_first_to_last_exactly() -> None:
     reds = [step[0] for step in steps]
     assert reds == sorted(reds, reverse=True)  # monotone on the way
     assert gradient("#ff0000", (0, 255, 0), "blue", n_steps=5) == [
-        (255, 0, 0), (128, 128, 0), (0, 255, 0), (0, 128, 128), (0, 0, 255)]
+        (255, 0, 0),
+        (128, 128, 0),
+        (0, 255, 0),
+        (0, 128, 128),
+        (0, 0, 255),
+    ]
     assert gradient("Teal", n_steps=3) == [(0, 128, 128)] * 3
     assert gradient("red", "blue", n_steps=1) == [(255, 0, 0)]
     assert to_rgb("#f30") == (255, 51, 0) and len(CSS_COLORS) == 148
 
 
-@pytest.mark.parametrize(("colors", "steps", "error", "match"), [
-    (("notacolor",), 3, ValueError, "CSS colour name"),
-    (("#12345",), 3, ValueError, "#rrggbb"),
-    (((1, 2, 300),), 3, ValueError, r"\[0, 255\]"),
-    (((1.5, 2, 3),), 3, TypeError, "integers"),
-    ((), 3, ValueError, "at least one colour"),
-    (("red",), 0, ValueError, "at least 1"),
-])
+@pytest.mark.parametrize(
+    ("colors", "steps", "error", "match"),
+    [
+        (("notacolor",), 3, ValueError, "CSS colour name"),
+        (("#12345",), 3, ValueError, "#rrggbb"),
+        (((1, 2, 300),), 3, ValueError, r"\[0, 255\]"),
+        (((1.5, 2, 3),), 3, TypeError, "integers"),
+        ((), 3, ValueError, "at least one colour"),
+        (("red",), 0, ValueError, "at least 1"),
+    ],
+)
 def test_bad_colours_are_refused(colors: tuple, steps: int, error: type, match: str) -> None:
     with pytest.raises(error, match=match):
         gradient(*colors, n_steps=steps)

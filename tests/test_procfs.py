@@ -11,8 +11,9 @@ from rlenv.transport import _procfs as procfs
 
 
 def test_a_running_process_is_alive_and_its_figures_are_read() -> None:
-    child = subprocess.Popen([sys.executable, "-c", "import sys; sys.stdin.read()"],
-                             stdin=subprocess.PIPE)
+    child = subprocess.Popen(
+        [sys.executable, "-c", "import sys; sys.stdin.read()"], stdin=subprocess.PIPE
+    )
     try:
         assert procfs.alive(child.pid)
         assert procfs.cpu_seconds(child.pid) >= 0.0

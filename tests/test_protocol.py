@@ -266,7 +266,9 @@ def test_ndarray_ext_layout() -> None:
     encoded = msgpack.unpackb(pack(original))
     assert encoded.code == 1
     expected = (
-        struct.pack("<BB", 3, 2) + b">i2" + struct.pack("<2Q", 3, 2)
+        struct.pack("<BB", 3, 2)
+        + b">i2"
+        + struct.pack("<2Q", 3, 2)
         + np.ascontiguousarray(original).tobytes()
     )
     assert encoded.data == expected
@@ -293,8 +295,10 @@ def test_arrays_of_unsupported_dtypes_refuse_to_encode(array: np.ndarray) -> Non
         pack({"nested": [1, array]})
 
 
-@pytest.mark.skipif(np.lib.NumpyVersion(np.__version__) < "2.0.0",
-                    reason="numpy 1 makes no array of more than 32 dimensions")
+@pytest.mark.skipif(
+    np.lib.NumpyVersion(np.__version__) < "2.0.0",
+    reason="numpy 1 makes no array of more than 32 dimensions",
+)
 def test_array_with_too_many_dimensions_refuses_to_encode() -> None:
     assert unpack(pack(np.zeros((1,) * 32))).shape == (1,) * 32
     with pytest.raises(TypeError, match="more than 32 dimensions"):
@@ -380,10 +384,17 @@ def test_ndarray_ext_helper_builds_decodable_arrays() -> None:
 @pytest.mark.parametrize(
     ("body", "message"),
     [
-        pytest.param(b"\xc1", "frame is not valid msgpack: a byte that begins no msgpack "
-                     "value (such as 0xc1, never used)", id="reserved-byte"),
-        pytest.param(b"\x91" * 5000 + b"\x00", "frame is not valid msgpack: containers "
-                     "nested deeper than the decoder allows", id="too-deep"),
+        pytest.param(
+            b"\xc1",
+            "frame is not valid msgpack: a byte that begins no msgpack "
+            "value (such as 0xc1, never used)",
+            id="reserved-byte",
+        ),
+        pytest.param(
+            b"\x91" * 5000 + b"\x00",
+            "frame is not valid msgpack: containers nested deeper than the decoder allows",
+            id="too-deep",
+        ),
         pytest.param(b"", "frame is not valid msgpack", id="empty"),
         pytest.param(b"\x92\x01", "frame is not valid msgpack", id="truncated-array"),
         pytest.param(b"\xa5abc", "frame is not valid msgpack", id="truncated-str"),
@@ -391,17 +402,33 @@ def test_ndarray_ext_helper_builds_decodable_arrays() -> None:
         pytest.param(
             msgpack.packb({"a": 1}) + msgpack.packb({"b": 2}), "trailing bytes", id="two-maps"
         ),
-        pytest.param(msgpack.packb(msgpack.ExtType(5, b"abc")),
-                     "ext type 5 is not allowed: the only ext type is 1", id="ext-5"),
-        pytest.param(msgpack.packb({"reset": {"options": {"at": msgpack.Timestamp(1)}}}),
-                     "ext type -1 (msgpack's timestamp) is not allowed", id="timestamp-32"),
-        pytest.param(b"\x91\xd7\xff" + bytes(8),
-                     "ext type -1 (msgpack's timestamp) is not allowed", id="timestamp-64"),
-        pytest.param(b"\x91\xc7\x0c\xff" + bytes(12),
-                     "ext type -1 (msgpack's timestamp) is not allowed", id="timestamp-96"),
-        pytest.param(b"\x91\xd4\xff\x00",  # msgpack says what is wrong from 1.2.2 on
-                     "invalid timestamp data" if msgpack.version >= (1, 2, 2)
-                     else "frame is not valid msgpack", id="timestamp-invalid"),
+        pytest.param(
+            msgpack.packb(msgpack.ExtType(5, b"abc")),
+            "ext type 5 is not allowed: the only ext type is 1",
+            id="ext-5",
+        ),
+        pytest.param(
+            msgpack.packb({"reset": {"options": {"at": msgpack.Timestamp(1)}}}),
+            "ext type -1 (msgpack's timestamp) is not allowed",
+            id="timestamp-32",
+        ),
+        pytest.param(
+            b"\x91\xd7\xff" + bytes(8),
+            "ext type -1 (msgpack's timestamp) is not allowed",
+            id="timestamp-64",
+        ),
+        pytest.param(
+            b"\x91\xc7\x0c\xff" + bytes(12),
+            "ext type -1 (msgpack's timestamp) is not allowed",
+            id="timestamp-96",
+        ),
+        pytest.param(
+            b"\x91\xd4\xff\x00",  # msgpack says what is wrong from 1.2.2 on
+            "invalid timestamp data"
+            if msgpack.version >= (1, 2, 2)
+            else "frame is not valid msgpack",
+            id="timestamp-invalid",
+        ),
         pytest.param(
             msgpack.packb({"x": msgpack.ExtType(42, b"")}),
             "ext type 42 is not allowed: the only ext type is 1",
@@ -433,14 +460,21 @@ def test_ndarray_ext_helper_builds_decodable_arrays() -> None:
             "ndarray dtype object is not allowed on the wire",
             id="object-dtype-short",
         ),
-        pytest.param(_ndarray_ext(b"float32", (2,), b"\x00" * 8),
-                     "ndarray dtype 'float32' is not written as numpy's dtype.str ('<f4')",
-                     id="dtype-name"),
-        pytest.param(_ndarray_ext(b"<f16", (1,), b"\x00" * 16),
-                     "ndarray dtype float128 is not allowed on the wire", id="long-double"),
-        pytest.param(_ndarray_ext(b"<u1", (2,), b"\x00" * 2),
-                     "ndarray dtype '<u1' is not written as numpy's dtype.str ('|u1')",
-                     id="dtype-byte-order-of-a-byte"),
+        pytest.param(
+            _ndarray_ext(b"float32", (2,), b"\x00" * 8),
+            "ndarray dtype 'float32' is not written as numpy's dtype.str ('<f4')",
+            id="dtype-name",
+        ),
+        pytest.param(
+            _ndarray_ext(b"<f16", (1,), b"\x00" * 16),
+            "ndarray dtype float128 is not allowed on the wire",
+            id="long-double",
+        ),
+        pytest.param(
+            _ndarray_ext(b"<u1", (2,), b"\x00" * 2),
+            "ndarray dtype '<u1' is not written as numpy's dtype.str ('|u1')",
+            id="dtype-byte-order-of-a-byte",
+        ),
         pytest.param(
             _ndarray_ext(b"V8", (1,), b"\x00" * 8),
             "ndarray dtype |V8 is not allowed on the wire",
@@ -693,8 +727,11 @@ def test_client_refuses_a_first_message_that_is_not_a_hello(pair: Pair) -> None:
         pytest.param(lambda h: h.update(instances="two"), "invalid hello", id="instances-str"),
         pytest.param(lambda h: h.update(target=3), "invalid hello", id="target-int"),
         pytest.param(lambda h: h.update(driven="agent"), "invalid hello", id="driven-str"),
-        pytest.param(lambda h: h.update(driven=["other"]), "driven must list some of the "
-                     "agents", id="driven-unknown"),
+        pytest.param(
+            lambda h: h.update(driven=["other"]),
+            "driven must list some of the agents",
+            id="driven-unknown",
+        ),
     ],
 )
 def test_invalid_hello_is_a_remote_protocol_error(
@@ -792,7 +829,10 @@ def test_client_closes_on_a_non_fatal_error_instead_of_the_hello(pair: Pair) -> 
 
 _SEND_EVENTS = (Event.SEND_HELLO, Event.SEND_REQUEST, Event.SEND_REPLY, Event.SEND_FATAL_ERROR)
 _RECEIVE_EVENTS = (
-    Event.RECEIVE_HELLO, Event.RECEIVE_REQUEST, Event.RECEIVE_REPLY, Event.RECEIVE_FATAL_ERROR
+    Event.RECEIVE_HELLO,
+    Event.RECEIVE_REQUEST,
+    Event.RECEIVE_REPLY,
+    Event.RECEIVE_FATAL_ERROR,
 )
 _RECEIVED: dict[Event, Event] = {
     Event.SEND_HELLO: Event.RECEIVE_HELLO,
@@ -840,8 +880,11 @@ def _wire_for(event: Event, state: State) -> dict[str, Any]:
 
 
 # A client whose framing breaks closes at once: only a server is ever BROKEN.
-_ALL = [(role, state, event) for role, state, event in itertools.product(Role, State, Event)
-        if not (role is Role.CLIENT and state is State.BROKEN)]
+_ALL = [
+    (role, state, event)
+    for role, state, event in itertools.product(Role, State, Event)
+    if not (role is Role.CLIENT and state is State.BROKEN)
+]
 
 
 @pytest.mark.parametrize(
@@ -892,8 +935,7 @@ def test_receiving_follows_the_table(role: Role, state: State, event: Event) -> 
         assert conn.state is after
 
 
-@pytest.mark.parametrize(("role", "state"), sorted({key[:2] for key in _ALL}),
-                         ids=lambda v: v.name)
+@pytest.mark.parametrize(("role", "state"), sorted({key[:2] for key in _ALL}), ids=lambda v: v.name)
 def test_end_of_stream_closes_in_any_state(role: Role, state: State) -> None:
     assert TRANSITIONS[(role, state, Event.END)] is State.CLOSED
     conn = _connection_in(role, state)
@@ -933,9 +975,13 @@ class _Recorder:
         self.seen.add((conn.role, before, event))
 
     def send(self, sender: Connection, receiver: Connection, message: Any) -> Any:
-        sent = (Event.SEND_FATAL_ERROR if isinstance(message, ErrorReply) and message.fatal
-                else {Hello: Event.SEND_HELLO, Request: Event.SEND_REQUEST}.get(
-                    type(message), Event.SEND_REPLY))
+        sent = (
+            Event.SEND_FATAL_ERROR
+            if isinstance(message, ErrorReply) and message.fatal
+            else {Hello: Event.SEND_HELLO, Request: Event.SEND_REQUEST}.get(
+                type(message), Event.SEND_REPLY
+            )
+        )
         before, receiver_before = sender.state, receiver.state
         data = sender.send(message)
         self.saw(sender, before, sent)
@@ -980,8 +1026,15 @@ def test_the_table_is_exhaustive_over_what_a_well_behaved_pair_does() -> None:
     record.send(server, client, Response(1))
     record.send(server, client, ErrorReply(2, ErrorCode.INVALID_ACTION, "no"))
     record.send(server, client, BatchResponse(3, (Response(3), None)))
-    steps = StepsResponse(4, b"", np.zeros(1), np.zeros(1, np.bool_), np.zeros(1, np.bool_),
-                          np.zeros(1, np.int64), ({},))
+    steps = StepsResponse(
+        4,
+        b"",
+        np.zeros(1),
+        np.zeros(1, np.bool_),
+        np.zeros(1, np.bool_),
+        np.zeros(1, np.int64),
+        ({},),
+    )
     record.send(server, client, steps)
     record.send(server, client, ErrorReply(5, ErrorCode.ENVIRONMENT_ERROR, "boom", fatal=True))
     record.end(client, server)
@@ -993,8 +1046,11 @@ def test_the_table_is_exhaustive_over_what_a_well_behaved_pair_does() -> None:
     record.end(*connection_pair(make_hello()))
     # Broken framing: the server says why, once; a client closes.
     for ready in (False, True):
-        client, server = connection_pair(make_hello()) if ready else \
-            (Connection(Role.CLIENT), Connection(Role.SERVER))
+        client, server = (
+            connection_pair(make_hello())
+            if ready
+            else (Connection(Role.CLIENT), Connection(Role.SERVER))
+        )
         record.broken(server)
         if ready:
             record.send(server, client, ErrorReply(None, ErrorCode.BAD_FRAME, "no", fatal=True))
@@ -1355,8 +1411,9 @@ def test_a_hello_without_limits_leaves_the_protocols(pair: Pair) -> None:
 
 def test_send_larger_than_the_protocol_frame_limit_is_refused(ready: Pair) -> None:
     ready.send(ready.client, Request(id=1))
-    with pytest.raises(LocalProtocolError, match=f"exceeds the peer's frame limit of "
-                                                 f"{DEFAULT_MAX_FRAME_SIZE}"):
+    with pytest.raises(
+        LocalProtocolError, match=f"exceeds the peer's frame limit of {DEFAULT_MAX_FRAME_SIZE}"
+    ):
         ready.server.send(Response(id=1, info={"blob": b"x" * DEFAULT_MAX_FRAME_SIZE}))
     assert ready.server.outstanding == (1,)
     assert ready.server.state is State.READY
@@ -1581,13 +1638,26 @@ def test_eof_before_hello_is_connection_closed(pair: Pair) -> None:
         pytest.param(pack(np.zeros(2)), "a frame must hold a map, got ndarray", id="array"),
         pytest.param(b"\xc1", "not valid msgpack", id="invalid-msgpack"),
         pytest.param(pack({"id": 1}) + b"\x00", "trailing bytes", id="trailing-bytes"),
-        pytest.param(pack({"id": msgpack.ExtType(9, b"")}),
-                     "ext type 9 is not allowed: the only ext type is 1", id="foreign-ext"),
-        pytest.param(pack({"id": 1, "reset": {"options": {"at": [msgpack.Timestamp(0, 5)]}}}),
-                     "ext type -1 (msgpack's timestamp) is not allowed", id="timestamp"),
-        pytest.param(pack({"id": 1, "reset": {"options": {"at": msgpack.Timestamp(0, 5),
-                                                          "big": bytes(1 << 20)}}}),
-                     "ext type -1 (msgpack's timestamp) is not allowed", id="timestamp-big"),
+        pytest.param(
+            pack({"id": msgpack.ExtType(9, b"")}),
+            "ext type 9 is not allowed: the only ext type is 1",
+            id="foreign-ext",
+        ),
+        pytest.param(
+            pack({"id": 1, "reset": {"options": {"at": [msgpack.Timestamp(0, 5)]}}}),
+            "ext type -1 (msgpack's timestamp) is not allowed",
+            id="timestamp",
+        ),
+        pytest.param(
+            pack(
+                {
+                    "id": 1,
+                    "reset": {"options": {"at": msgpack.Timestamp(0, 5), "big": bytes(1 << 20)}},
+                }
+            ),
+            "ext type -1 (msgpack's timestamp) is not allowed",
+            id="timestamp-big",
+        ),
     ],
 )
 def test_bad_frame_body_is_an_error_and_the_server_goes_on(
@@ -1613,13 +1683,20 @@ def _nested_unfinished_arrays(levels: int, items: bytes, count: int) -> bytes:
     return b"\x82\xa2id\x01\xa5reset\x81\xa7options\x81\xa1a" + level * levels + b"\x90" * levels
 
 
-@pytest.mark.parametrize("body", [
-    pytest.param(b"\x81\xa1a\xdd" + struct.pack(">I", MAX_FRAME_OBJECTS) +
-                 b"\x90" * MAX_FRAME_OBJECTS, id="empty-arrays"),
-    pytest.param(_nested_unfinished_arrays(8, b"\xa2ab", MAX_FRAME_OBJECTS // 6),
-                 id="unfinished-arrays-of-strings"),
-    pytest.param(_nested_unfinished_arrays(1000, b"\xc0", 2000), id="deep-nils"),
-])
+@pytest.mark.parametrize(
+    "body",
+    [
+        pytest.param(
+            b"\x81\xa1a\xdd" + struct.pack(">I", MAX_FRAME_OBJECTS) + b"\x90" * MAX_FRAME_OBJECTS,
+            id="empty-arrays",
+        ),
+        pytest.param(
+            _nested_unfinished_arrays(8, b"\xa2ab", MAX_FRAME_OBJECTS // 6),
+            id="unfinished-arrays-of-strings",
+        ),
+        pytest.param(_nested_unfinished_arrays(1000, b"\xc0", 2000), id="deep-nils"),
+    ],
+)
 def test_a_frame_of_too_many_objects_is_refused_before_it_is_decoded(
     ready: Pair, body: bytes
 ) -> None:
@@ -1629,10 +1706,15 @@ def test_a_frame_of_too_many_objects_is_refused_before_it_is_decoded(
     server.receive_data(raw_frame(body) + frame({"id": 2}))
     with pytest.raises(RemoteProtocolError) as info:
         server.next_message()
-    assert str(info.value) == f"frame holds more than {MAX_FRAME_OBJECTS} msgpack objects, " \
-                              "the limit of a frame"
-    assert (info.value.code, info.value.fatal, info.value.request_id) == \
-        (ErrorCode.BAD_FRAME, False, None)
+    assert (
+        str(info.value) == f"frame holds more than {MAX_FRAME_OBJECTS} msgpack objects, "
+        "the limit of a frame"
+    )
+    assert (info.value.code, info.value.fatal, info.value.request_id) == (
+        ErrorCode.BAD_FRAME,
+        False,
+        None,
+    )
     assert server.next_message() == Request(id=2)  # the frame was consumed; the rest goes on
 
 
@@ -1640,21 +1722,51 @@ def test_objects_are_counted_exactly_whatever_their_type() -> None:
     """Every kind of msgpack object, then padding: exactly the limit decodes, one more does not
     (on both sides, for the client decodes with the same codec)."""
     array = np.arange(3, dtype=np.uint8)
-    kinds = [b"\x05", b"\xe0", b"\xc0", b"\xc2", b"\xc3", b"\xcc\xff", b"\xcd\x01\x00",
-             b"\xce" + bytes(4), b"\xcf" + bytes(8), b"\xd0\x80", b"\xd1" + bytes(2),
-             b"\xd2" + bytes(4), b"\xd3" + bytes(8), b"\xca" + bytes(4), b"\xcb" + bytes(8),
-             b"\xa3abc", b"\xd9\x05hello", b"\xda\x01\x00" + b"s" * 256,
-             b"\xdb" + struct.pack(">I", 70_000) + b"t" * 70_000, b"\xc4\x00",
-             b"\xc5\x01\x00" + bytes(256), b"\xc6" + struct.pack(">I", 70_000) + bytes(70_000),
-             pack(array), pack(np.zeros((), np.float64)), pack(np.zeros(300, np.uint8)),
-             pack(np.zeros(70_000, np.uint8)), b"\x80", b"\x90", b"\x81\xa1k\x01",
-             b"\xdc\x00\x01\x01", b"\xde\x00\x00", b"\xdf" + bytes(4), b"\xdd" + bytes(4)]
-    assert {kind[0] for kind in kinds} >= {0xd8, 0xc7, 0xc8, 0xc9}  # the arrays' ext sizes
+    kinds = [
+        b"\x05",
+        b"\xe0",
+        b"\xc0",
+        b"\xc2",
+        b"\xc3",
+        b"\xcc\xff",
+        b"\xcd\x01\x00",
+        b"\xce" + bytes(4),
+        b"\xcf" + bytes(8),
+        b"\xd0\x80",
+        b"\xd1" + bytes(2),
+        b"\xd2" + bytes(4),
+        b"\xd3" + bytes(8),
+        b"\xca" + bytes(4),
+        b"\xcb" + bytes(8),
+        b"\xa3abc",
+        b"\xd9\x05hello",
+        b"\xda\x01\x00" + b"s" * 256,
+        b"\xdb" + struct.pack(">I", 70_000) + b"t" * 70_000,
+        b"\xc4\x00",
+        b"\xc5\x01\x00" + bytes(256),
+        b"\xc6" + struct.pack(">I", 70_000) + bytes(70_000),
+        pack(array),
+        pack(np.zeros((), np.float64)),
+        pack(np.zeros(300, np.uint8)),
+        pack(np.zeros(70_000, np.uint8)),
+        b"\x80",
+        b"\x90",
+        b"\x81\xa1k\x01",
+        b"\xdc\x00\x01\x01",
+        b"\xde\x00\x00",
+        b"\xdf" + bytes(4),
+        b"\xdd" + bytes(4),
+    ]
+    assert {kind[0] for kind in kinds} >= {0xD8, 0xC7, 0xC8, 0xC9}  # the arrays' ext sizes
     objects_in_kinds = len(kinds) + 3  # the map {"k": 1} holds two more, the array16 one
     for extra, refused in ((0, False), (1, True)):
         padding = MAX_FRAME_OBJECTS - 3 - objects_in_kinds + extra
-        body = b"\x81\xa1a\xdd" + struct.pack(">I", len(kinds) + padding) + b"".join(kinds) + \
-            b"\x00" * padding
+        body = (
+            b"\x81\xa1a\xdd"
+            + struct.pack(">I", len(kinds) + padding)
+            + b"".join(kinds)
+            + b"\x00" * padding
+        )
         for strict in (True, False):
             if refused:
                 with pytest.raises(RemoteProtocolError, match="more than 1048576 msgpack"):
@@ -1798,8 +1910,9 @@ def test_reply_without_an_id_on_the_client_is_a_remote_protocol_error(
 
 def test_batch_response_round_trips(ready: Pair) -> None:
     ready.send(ready.client, Request(8, {"batch": [{"reset": {}}, None, {"action": 9}]}))
-    answer = BatchResponse(8, (Response(8, frames=0), None,
-                               ErrorReply(8, ErrorCode.INVALID_ACTION, "no")))
+    answer = BatchResponse(
+        8, (Response(8, frames=0), None, ErrorReply(8, ErrorCode.INVALID_ACTION, "no"))
+    )
     (got,) = ready.send(ready.server, answer)
     assert got == BatchResponse(8, (Response(8), None, ErrorReply(8, "invalid_action", "no")))
     assert ready.client.outstanding == ()
@@ -1826,8 +1939,10 @@ def test_batch_response_from_wire_rejects_malformed_replies(batch: Any, message:
     "wire",
     [
         pytest.param({"batch": []}, id="no-id"),
-        pytest.param({"id": 1, "batch": [{k: v for k, v in _RESPONSE.items() if k != "id"}]},
-                     id="reply-without-id"),
+        pytest.param(
+            {"id": 1, "batch": [{k: v for k, v in _RESPONSE.items() if k != "id"}]},
+            id="reply-without-id",
+        ),
     ],
 )
 def test_batch_response_without_an_id_is_a_remote_protocol_error(wire: dict) -> None:
@@ -1859,8 +1974,7 @@ def test_steps_request_and_answer_round_trip(ready: Pair) -> None:
     actions = np.array([[0.5], [-1.0], [0.0]], dtype=np.float32)
     reset = np.array([False, True, False])
     (got,) = ready.send(
-        ready.client, Request(9, {"steps": {"action": actions, "reset": reset,
-                                            "repeat_action": 2}})
+        ready.client, Request(9, {"steps": {"action": actions, "reset": reset, "repeat_action": 2}})
     )
     steps = got.parts["steps"]
     _assert_bit_exact(steps["action"], actions)
@@ -1870,8 +1984,9 @@ def test_steps_request_and_answer_round_trip(ready: Pair) -> None:
     (back,) = ready.send(ready.server, answer)
     assert isinstance(back, StepsResponse) and back.id == 9
     batched = codec_for(batch_space(spaces.Box(-10.0, 10.0, (5,), np.float32), 3))
-    np.testing.assert_array_equal(batched.unpack(back.observation),
-                                  np.arange(15, dtype=np.float32).reshape(3, 5))
+    np.testing.assert_array_equal(
+        batched.unpack(back.observation), np.arange(15, dtype=np.float32).reshape(3, 5)
+    )
     assert back.reward.dtype == np.float64 and back.reward.tolist() == [1.0, 0.0, 2.5]
     assert back.frames.dtype == np.int64 and back.frames.tolist() == [2, 0, 1]
     assert back.terminated.dtype == np.bool_ and back.terminated.tolist() == [False, False, True]
@@ -1947,8 +2062,9 @@ def test_steps_response_that_is_not_a_map_is_refused(steps: Any) -> None:
 
 
 def test_steps_response_of_zero_instances_round_trips() -> None:
-    empty = StepsResponse(1, b"", np.zeros(0), np.zeros(0, np.bool_), np.zeros(0, np.bool_),
-                          np.zeros(0, np.int64), ())
+    empty = StepsResponse(
+        1, b"", np.zeros(0), np.zeros(0, np.bool_), np.zeros(0, np.bool_), np.zeros(0, np.int64), ()
+    )
     got = StepsResponse.from_wire(unpack(pack(empty.to_wire())))
     assert got.reward.shape == (0,) and got.info == () and got.errors is None
 
@@ -1959,7 +2075,7 @@ def test_a_message_of_more_objects_than_a_frame_may_hold_is_not_sent(ready: Pair
     with pytest.raises(LocalProtocolError, match=f"more than {MAX_FRAME_OBJECTS} msgpack "):
         ready.server.send(Response(id=1, info={"many": many}))
     assert ready.server.outstanding == (1,) and ready.server.state is State.READY
-    fewer = ready.server.send(Response(id=1, info={"many": many[:MAX_FRAME_OBJECTS - 100]}))
+    fewer = ready.server.send(Response(id=1, info={"many": many[: MAX_FRAME_OBJECTS - 100]}))
     ready.client.receive_data(fewer)
     (response,) = drain(ready.client)
     assert len(response.info["many"]) == MAX_FRAME_OBJECTS - 100
@@ -1979,8 +2095,9 @@ def test_pipelined_frames_in_any_pieces_come_out_whole_and_in_order(ready: Pair)
         if rng.random() < 0.5:  # sometimes several pieces arrive before anything is read
             got += drain(ready.server)
     got += drain(ready.server)
-    assert [(r.id, bytes(r.parts["blob"])) for r in got] == \
-        [(r.id, r.parts["blob"]) for r in requests]
+    assert [(r.id, bytes(r.parts["blob"])) for r in got] == [
+        (r.id, r.parts["blob"]) for r in requests
+    ]
     assert ready.server.buffered == 0
     assert ready.server.outstanding == tuple(range(1, len(sizes) + 1))
 

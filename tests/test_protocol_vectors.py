@@ -51,7 +51,7 @@ def _same(a: Any, b: Any) -> bool:
 def _body(exchange: Exchange) -> tuple[bytes, bool]:
     """The bytes after the length prefix, and whether the prefix gives their length."""
     data = bytes.fromhex(exchange["hex"])
-    body = data[HEADER.size:]
+    body = data[HEADER.size :]
     return body, len(data) >= HEADER.size and HEADER.unpack_from(data)[0] == len(body)
 
 
@@ -71,8 +71,16 @@ def test_files_are_written_as_the_generator_writes_them(name: str) -> None:
     assert set(document) == {"title", "server", "exchanges"}
     for exchange in document["exchanges"]:
         assert exchange["from"] in ("client", "server")
-        assert set(exchange) <= {"from", "connection", "note", "hex", "value", "canonical",
-                                 "varies", "closes"}
+        assert set(exchange) <= {
+            "from",
+            "connection",
+            "note",
+            "hex",
+            "value",
+            "canonical",
+            "varies",
+            "closes",
+        }
         if exchange["from"] == "client":
             assert "varies" not in exchange and "closes" not in exchange
     numbered = {"connection" in exchange for exchange in document["exchanges"]}
@@ -121,8 +129,11 @@ def test_canonical_encoding_gives_the_bytes(name: str, index: int, exchange: Exc
 def test_the_tagged_notation_round_trips_odd_keys() -> None:
     value = {"$bin": b"\x01", "$$x": [1.0, 2, None], "plain": {"$ext": "not a tag"}}
     tagged = to_tagged(value)
-    assert tagged == {"$$bin": {"$bin": "01"}, "$$$x": [1.0, 2, None],
-                      "plain": {"$$ext": "not a tag"}}
+    assert tagged == {
+        "$$bin": {"$bin": "01"},
+        "$$$x": [1.0, 2, None],
+        "plain": {"$$ext": "not a tag"},
+    }
     assert from_tagged(tagged) == value
 
 
@@ -147,7 +158,8 @@ def regenerated() -> dict[str, dict[str, Any]]:
 
 @pytest.mark.parametrize("name", FILES)
 def test_regenerating_gives_the_committed_file(
-    regenerated: dict[str, dict[str, Any]], name: str,
+    regenerated: dict[str, dict[str, Any]],
+    name: str,
 ) -> None:
     """(b) The same frames, byte for byte, but for the paths a vector says vary."""
     assert _comparable(regenerated[name]) == _comparable(_load(name))

@@ -37,8 +37,9 @@ def cluster() -> Iterator[None]:
 @pytest.fixture
 def pool() -> Iterator[RayServerPool]:
     """Two servers of two CartPoles; afterwards, none of its server processes may be left."""
-    with RayServerPool(CARTPOLE, servers=2, instances_per_server=2,
-                       cpus_per_server=0.5, progress=lambda _: None) as servers:
+    with RayServerPool(
+        CARTPOLE, servers=2, instances_per_server=2, cpus_per_server=0.5, progress=lambda _: None
+    ) as servers:
         yield servers
         pids = server_pids(servers)
     wait_until(lambda: not any(alive(pid) for pid in pids), "a closed pool left servers")
@@ -53,8 +54,9 @@ def trajectory(envs: Any, actions: np.ndarray) -> list[tuple[bytes, ...]]:
     rows = [(observations.tobytes(),)]
     for action in actions:
         observations, rewards, terminated, truncated, _ = envs.step(action)
-        rows.append((observations.tobytes(), rewards.tobytes(), terminated.tobytes(),
-                     truncated.tobytes()))
+        rows.append(
+            (observations.tobytes(), rewards.tobytes(), terminated.tobytes(), truncated.tobytes())
+        )
     return rows
 
 
@@ -120,6 +122,7 @@ def test_a_killed_server_process_is_restarted_by_its_actor(pool: RayServerPool) 
         pid = ray.get(pool.actor(1).server_pid.remote())
         os.kill(pid, signal.SIGKILL)
         return pid
+
     lost_and_back(pool, kill)
 
 
@@ -128,6 +131,7 @@ def test_a_killed_actor_is_restarted_by_ray(pool: RayServerPool) -> None:
         pid = ray.get(pool.actor(1).server_pid.remote())  # dies with its actor (lifeline)
         ray.kill(pool.actor(1), no_restart=False)
         return pid
+
     lost_and_back(pool, kill)
 
 
@@ -142,19 +146,30 @@ def test_past_the_restart_budget_the_error_names_the_server(pool: RayServerPool)
             if envs.sessions[0].restarts == 0:
                 assert envs.step(still)[3].tolist() == [True, True, False, False]
                 continue
-            with pytest.raises(ServerLost, match=r"server 0 of pool examples\.cartpole:"
-                                                 r"CartPoleEnvironment on node \w+ lost .* after "
-                                                 r"1 restarts; max_restarts is 1"):
+            with pytest.raises(
+                ServerLost,
+                match=r"server 0 of pool examples\.cartpole:"
+                r"CartPoleEnvironment on node \w+ lost .* after "
+                r"1 restarts; max_restarts is 1",
+            ):
                 envs.step(still)
 
 
 def test_a_named_pool_is_leased_out_and_given_back() -> None:
-    with RayServerPool(CARTPOLE, servers=2, instances_per_server=1, cpus_per_server=0.5,
-                       name="leased", progress=lambda _: None) as pool:
+    with RayServerPool(
+        CARTPOLE,
+        servers=2,
+        instances_per_server=1,
+        cpus_per_server=0.5,
+        name="leased",
+        progress=lambda _: None,
+    ) as pool:
         pids = server_pids(pool)
         first = RayServerPool.lease("leased", servers=1)
-        with RayServerPool.lease("leased", servers=1) as second, \
-                RemoteVectorEnv(pool=second) as envs:
+        with (
+            RayServerPool.lease("leased", servers=1) as second,
+            RemoteVectorEnv(pool=second) as envs,
+        ):
             assert envs.num_envs == 1 and envs.reset(seed=0)[0].shape == (1, 5)
             with pytest.raises(ValueError, match="1 servers asked, 0 of 2 free"):
                 RayServerPool.lease("leased", servers=1)

@@ -31,8 +31,7 @@ STILL = np.zeros((16, 1), np.float32)
 def cluster() -> Iterator[Any]:
     """A head (0 CPUs) and two workers of 4 CPUs each, all in this machine."""
     fake = cluster_utils.Cluster(initialize_head=True, head_node_args={"num_cpus": 0})
-    workers = [fake.add_node(num_cpus=4, resources={f"worker{index}": 1})
-               for index in range(2)]
+    workers = [fake.add_node(num_cpus=4, resources={f"worker{index}": 1}) for index in range(2)]
     try:
         ray.init(address=fake.address, log_to_driver=False)
         fake.wait_for_nodes()
@@ -43,16 +42,20 @@ def cluster() -> Iterator[Any]:
 
 
 def node_ids(fake: Any) -> set[str]:
-    return {node["NodeID"] for node in ray.nodes() if node["Alive"] and
-            node["Resources"].get("CPU", 0) > 0}
+    return {
+        node["NodeID"]
+        for node in ray.nodes()
+        if node["Alive"] and node["Resources"].get("CPU", 0) > 0
+    }
 
 
 def test_sixteen_cartpoles_in_four_servers_spread_over_two_nodes_survive_faults(
-    cluster: tuple[Any, list[Any]]
+    cluster: tuple[Any, list[Any]],
 ) -> None:
     fake, workers = cluster
-    with RayServerPool(CARTPOLE, servers=4, instances_per_server=4,
-                       progress=lambda _: None) as pool:
+    with RayServerPool(
+        CARTPOLE, servers=4, instances_per_server=4, progress=lambda _: None
+    ) as pool:
         pids = server_pids(pool)
         assert len(set(pool.nodes)) == 2 and set(pool.nodes) == node_ids(fake)
         assert sorted(pool.nodes.count(node) for node in set(pool.nodes)) == [2, 2]
@@ -73,12 +76,14 @@ def test_sixteen_cartpoles_in_four_servers_spread_over_two_nodes_survive_faults(
             assert envs.step(STILL)[4]["frames"].tolist() == [4] * 8 + [0] * 4 + [4] * 4
 
             # A whole node removed: its servers come back on the other one.
-            lost = [index for index, node in enumerate(pool.nodes)
-                    if node == workers[0].node_id]
+            lost = [index for index, node in enumerate(pool.nodes) if node == workers[0].node_id]
             doomed = [pids[index] if index != 2 else server_pids(pool)[2] for index in lost]
             fake.remove_node(workers[0])
-            wait_until(lambda: not any(alive(pid) for pid in doomed),
-                       "the removed node's servers lived on", seconds=60)
+            wait_until(
+                lambda: not any(alive(pid) for pid in doomed),
+                "the removed node's servers lived on",
+                seconds=60,
+            )
             _, _, _, truncated, info = envs.step(STILL)
             expected = [env for index in lost for env in range(4 * index, 4 * index + 4)]
             assert np.flatnonzero(truncated).tolist() == expected

@@ -46,8 +46,12 @@ def test_each_ray_reads_the_distance_to_the_nearest_wall(world: PhysicsWorld) ->
     assert distances.dtype == np.float32 and distances.shape == (4,)
     # +x, +y, -x, -y from (0.5, 0): the disc's own circle is left out
     np.testing.assert_allclose(distances, [1.5, 2.0, 2.5, 2.0], rtol=1e-6)
-    assert [hit.name if hit else None for hit in eyes.hits()] == ["Wall1", "Wall2", "Wall3",
-                                                                  "Wall0"]
+    assert [hit.name if hit else None for hit in eyes.hits()] == [
+        "Wall1",
+        "Wall2",
+        "Wall3",
+        "Wall0",
+    ]
 
 
 def test_a_ray_that_hits_nothing_reads_its_length(world: PhysicsWorld) -> None:
@@ -69,10 +73,12 @@ def test_the_rays_turn_with_the_body(world: PhysicsWorld) -> None:
 
 
 def test_a_cone_spreads_its_rays_evenly_and_a_full_turn_starts_straight_ahead() -> None:
-    np.testing.assert_allclose(RaycastSensor2D(n_rays=3, cone_width=math.pi / 2).angles(),
-                               [-math.pi / 4, 0.0, math.pi / 4])
-    np.testing.assert_allclose(RaycastSensor2D(n_rays=4).angles(),
-                               [0.0, math.pi / 2, math.pi, 3 * math.pi / 2])
+    np.testing.assert_allclose(
+        RaycastSensor2D(n_rays=3, cone_width=math.pi / 2).angles(), [-math.pi / 4, 0.0, math.pi / 4]
+    )
+    np.testing.assert_allclose(
+        RaycastSensor2D(n_rays=4).angles(), [0.0, math.pi / 2, math.pi, 3 * math.pi / 2]
+    )
     assert RaycastSensor2D(n_rays=1, cone_width=1.0).angles().tolist() == [0.0]
 
 
@@ -140,16 +146,19 @@ def test_reading_a_sensor_leaves_the_simulation_bit_for_bit_the_same(tree: Scene
     assert run(read=True) == run(read=False)
 
 
-@pytest.mark.parametrize(("arguments", "message"), [
-    ({"n_rays": 0}, r"n_rays must be an integer in \[1, 1024\]"),
-    ({"n_rays": 2.5}, "n_rays must be an integer"),
-    ({"n_rays": 10**9}, "n_rays must be an integer"),
-    ({"ray_length": 0.0}, "ray_length must be more than 0"),
-    ({"ray_length": math.nan}, "ray_length"),
-    ({"cone_width": -1.0}, "cone_width"),
-    ({"collision_mask": -1}, "collision_mask must be an integer"),
-    ({"exclude_parent": 1}, "exclude_parent must be true or false"),
-])
+@pytest.mark.parametrize(
+    ("arguments", "message"),
+    [
+        ({"n_rays": 0}, r"n_rays must be an integer in \[1, 1024\]"),
+        ({"n_rays": 2.5}, "n_rays must be an integer"),
+        ({"n_rays": 10**9}, "n_rays must be an integer"),
+        ({"ray_length": 0.0}, "ray_length must be more than 0"),
+        ({"ray_length": math.nan}, "ray_length"),
+        ({"cone_width": -1.0}, "cone_width"),
+        ({"collision_mask": -1}, "collision_mask must be an integer"),
+        ({"exclude_parent": 1}, "exclude_parent must be true or false"),
+    ],
+)
 def test_bad_arguments_are_refused_by_name(arguments: dict[str, object], message: str) -> None:
     with pytest.raises(ValueError, match=message):
         RaycastSensor2D(**arguments)  # type: ignore[arg-type]
@@ -164,15 +173,26 @@ def test_a_sensor_outside_a_world_says_so(tree: SceneTree) -> None:
 
 def test_a_sensor_packs_as_data_and_comes_back_the_same(world: PhysicsWorld) -> None:
     world.add_child(_walls())
-    disc = _disc((0.5, 0.0), n_rays=5, ray_length=3.0, cone_width=1.0, collision_mask=0b11,
-                 collide_with_sensors=True)
+    disc = _disc(
+        (0.5, 0.0),
+        n_rays=5,
+        ray_length=3.0,
+        cone_width=1.0,
+        collision_mask=0b11,
+        collide_with_sensors=True,
+    )
     world.add_child(disc)
     data = PackedScene.pack(disc).to_data()
     eyes = next(child for child in data["root"]["children"] if child["name"] == "Eyes")
     assert eyes["class"] == "RaycastSensor2D"
-    assert eyes["properties"] == {"position": [0.0, 0.0], "n_rays": 5, "ray_length": 3.0,
-                                  "cone_width": 1.0, "collision_mask": 3,
-                                  "collide_with_sensors": True}
+    assert eyes["properties"] == {
+        "position": [0.0, 0.0],
+        "n_rays": 5,
+        "ray_length": 3.0,
+        "cone_width": 1.0,
+        "collision_mask": 3,
+        "collide_with_sensors": True,
+    }
     world.remove_child(disc)
     copy = PackedScene.from_data(data).instantiate()
     world.add_child(copy)

@@ -94,8 +94,10 @@ def test_a_real_time_server_keeps_running(serve: Serve) -> None:
 def test_steps_in_columns_follow_the_clock_too(clock: ManualClock) -> None:
     """Steps run the ticks due by the clock first, as a plain request does: the same frames,
     rewards and lateness."""
-    with LocalClient(TARGET, clock=clock, instances=2) as many, \
-            LocalClient(TARGET, clock=clock) as one:
+    with (
+        LocalClient(TARGET, clock=clock, instances=2) as many,
+        LocalClient(TARGET, clock=clock) as one,
+    ):
         one.configure(real_time=True)
         real_time = Request(0, {"config": {"environment": {"real_time": True}}})
         for request in (real_time, many.reset_request(seed=4)):
@@ -143,12 +145,12 @@ def test_an_answer_to_an_observer_leaves_the_ticks_to_the_controller(clock: Manu
     host.close()
 
 
-def test_observers_of_a_real_time_server_take_no_ticks_from_the_controller(
-    serve: Serve
-) -> None:
+def test_observers_of_a_real_time_server_take_no_ticks_from_the_controller(serve: Serve) -> None:
     server = serve(args=["--real-time"])
-    with Client(server.host, server.port, timeout=10) as controller, \
-            Client(server.host, server.port, timeout=10) as observer:
+    with (
+        Client(server.host, server.port, timeout=10) as controller,
+        Client(server.host, server.port, timeout=10) as observer,
+    ):
         start, _ = controller.reset(seed=0)
         observed, deadline = start, time.monotonic() + 10
         while observed.tobytes() == start.tobytes():  # until the server ticked (no sleep)
@@ -171,15 +173,15 @@ def _ticks_run(client: Client, at_least: int, message: str) -> None:
         assert time.monotonic() < deadline, message
 
 
-def test_an_observer_switching_one_of_two_instances_to_lockstep_ends_nothing(
-    serve: Serve
-) -> None:
+def test_an_observer_switching_one_of_two_instances_to_lockstep_ends_nothing(serve: Serve) -> None:
     """Before, the host kept its list of instances in real time apart, and rebuilt it for
     ``config``, ``batch`` and ``restore`` only: the next wait took ``min(float, None)`` and the
     process ended."""
     server = serve(args=["--instances", "2", "--real-time"])
-    with Client(server.host, server.port, timeout=10) as controller, \
-            Client(server.host, server.port, timeout=10) as observer:
+    with (
+        Client(server.host, server.port, timeout=10) as controller,
+        Client(server.host, server.port, timeout=10) as observer,
+    ):
         controller.reset(seed=0)
         observer.inspect_configure(real_time=False)
         assert observer.get_property(".", "real_time") is False
@@ -194,8 +196,10 @@ def test_an_observer_switching_one_of_two_instances_to_lockstep_ends_nothing(
 def test_a_per_client_server_survives_one_client_switching_real_time(serve: Serve) -> None:
     """Every client's environments shared the process that the crash ended."""
     server = serve(args=["--per-client", "--instances", "2", "--real-time"])
-    with Client(server.host, server.port, timeout=10) as first, \
-            Client(server.host, server.port, timeout=10) as second:
+    with (
+        Client(server.host, server.port, timeout=10) as first,
+        Client(server.host, server.port, timeout=10) as second,
+    ):
         first.reset(seed=0)
         second.reset(seed=0)
         first.inspect_configure(real_time=False)
@@ -206,12 +210,14 @@ def test_a_per_client_server_survives_one_client_switching_real_time(serve: Serv
 
 
 def test_an_inspector_switching_a_lockstep_server_to_real_time_starts_its_clock(
-    serve: Serve
+    serve: Serve,
 ) -> None:
     """Before, the clock stayed stopped: 0 ticks in a second."""
     server = serve()
-    with Client(server.host, server.port, timeout=10) as controller, \
-            Client(server.host, server.port, timeout=10) as observer:
+    with (
+        Client(server.host, server.port, timeout=10) as controller,
+        Client(server.host, server.port, timeout=10) as observer,
+    ):
         controller.reset(seed=0)
         observer.inspect_configure(real_time=True)
         _ticks_run(controller, 30, "switched to real time by an inspector, the server never ticked")
@@ -222,9 +228,18 @@ def test_a_steps_request_starting_real_time_starts_the_clock(clock: ManualClock)
 
     host = Host(TARGET, 2, clock=clock)
     real_time = {"config": {"environment": {"real_time": True}}, "reset": {"seed": 3}}
-    host.answer(Request(1, {"steps": {"action": np.zeros((2, 1), np.float32),
-                                      "reset": [True, True],
-                                      "reset_with": [real_time, None]}}))
+    host.answer(
+        Request(
+            1,
+            {
+                "steps": {
+                    "action": np.zeros((2, 1), np.float32),
+                    "reset": [True, True],
+                    "reset_with": [real_time, None],
+                }
+            },
+        )
+    )
     assert host.time_to_next_tick() is not None  # the host follows the clock of instance 0
     clock.advance(0.1)
     host.catch_up()
@@ -233,9 +248,7 @@ def test_a_steps_request_starting_real_time_starts_the_clock(clock: ManualClock)
     host.close()
 
 
-def test_a_tick_that_raises_between_requests_ends_the_episode_not_the_server(
-    serve: Serve
-) -> None:
+def test_a_tick_that_raises_between_requests_ends_the_episode_not_the_server(serve: Serve) -> None:
     """In real time user code runs between requests too: an exception there is the episode's,
     not the process's."""
     server = serve("examples.faulty:FaultyEnvironment", args=["--real-time"])
@@ -262,8 +275,9 @@ def test_several_agents_follow_the_clock_an_observer_switched_on(clock: ManualCl
 
     host = Host(PAIR, clock=clock)
     host.answer(Request(1, {"reset": {"seed": 2}}))
-    switch = host.prepare(Request(2, {"inspect": {"configure": {"environment":
-                                                                {"real_time": True}}}}))
+    switch = host.prepare(
+        Request(2, {"inspect": {"configure": {"environment": {"real_time": True}}}})
+    )
     host.run(switch, reports=False)  # type: ignore[arg-type]  # as to an observer
     assert host.time_to_next_tick() is not None
     clock.advance(0.1)

@@ -26,8 +26,11 @@ FAULTY = "examples.faulty:FaultyEnvironment"
 LEFT, RIGHT = np.array([-1.0], np.float32), np.array([1.0], np.float32)
 
 
-def play(client: Client | LocalClient, seed: int, actions: list[np.ndarray],
-         ) -> tuple[list[str], bool, bool]:
+def play(
+    client: Client | LocalClient,
+    seed: int,
+    actions: list[np.ndarray],
+) -> tuple[list[str], bool, bool]:
     """One episode: the digests of what it saw, and how its last step ended."""
     observation, _ = client.reset(seed=seed)
     seen = [digest(observation)]
@@ -75,17 +78,29 @@ def test_an_observer_fetches_them_while_a_trainer_steps(serve: Serve) -> None:
     address = f"{live.host}:{live.port}"
     watcher = Watcher([address])
     lived: dict[int, list[list[str]]] = {0: [], 1: []}
-    with Client(live.address, timeout=10) as trainer, \
-            Client(live.address, timeout=10) as observer:
+    with Client(live.address, timeout=10) as trainer, Client(live.address, timeout=10) as observer:
         for seed in range(3):
-            trainer.send_batch([Request(0, {"reset": {"seed": seed + 10 * i},
-                                            "observation": {"agent": {}}}) for i in (0, 1)])
+            trainer.send_batch(
+                [
+                    Request(0, {"reset": {"seed": seed + 10 * i}, "observation": {"agent": {}}})
+                    for i in (0, 1)
+                ]
+            )
             answers = trainer.receive_batch()
             seen = {i: [digest(trainer.observation_result(answers[i]))] for i in (0, 1)}
             for step in range(3 + seed):
-                trainer.send_batch([Request(0, {"action": [0.3 * (i + 1)] if step % 2 else
-                                                [-0.2], "observation": {"agent": {}}})
-                                    for i in (0, 1)])
+                trainer.send_batch(
+                    [
+                        Request(
+                            0,
+                            {
+                                "action": [0.3 * (i + 1)] if step % 2 else [-0.2],
+                                "observation": {"agent": {}},
+                            },
+                        )
+                        for i in (0, 1)
+                    ]
+                )
                 for i, answer in enumerate(trainer.receive_batch()):
                     seen[i].append(digest(trainer.observation_result(answer)))
                 # between two of the trainer's steps: no control taken, no reward taken
@@ -130,22 +145,25 @@ def test_refusals_name_what_is_wrong(serve: Serve) -> None:
                 client.episodes(last=last)  # type: ignore[arg-type]
             assert bad.value.code == ErrorCode.BAD_REQUEST
         for parts, message in (
-                ({"episodes": {"since": 1}}, "unknown key 'since' in episodes"),
-                ({"episodes": []}, "'episodes' must be a map"),
-                ({"episodes": {}, "reset": {}}, "episodes goes alone"),
-                ({"episodes": {}, "snapshot": {}}, "not both")):
+            ({"episodes": {"since": 1}}, "unknown key 'since' in episodes"),
+            ({"episodes": []}, "'episodes' must be a map"),
+            ({"episodes": {}, "reset": {}}, "episodes goes alone"),
+            ({"episodes": {}, "snapshot": {}}, "not both"),
+        ):
             client.send_request(Request(1, parts))
             reply = client.receive_reply()
             assert isinstance(reply, ErrorReply) and reply.code == ErrorCode.BAD_REQUEST
             assert message in reply.message
         client.hello.protocol = (2, 4)  # what an older server says
-        with pytest.raises(RemoteError, match="the server speaks protocol 2.4; recent "
-                                              "episodes need 2.5"):
+        with pytest.raises(
+            RemoteError, match="the server speaks protocol 2.4; recent episodes need 2.5"
+        ):
             client.episodes()
     watcher.servers()  # connects
     watcher._servers[0].client.hello.protocol = (2, 4)  # type: ignore[union-attr]
-    with pytest.raises(InspectorError, match="server 0 speaks protocol 2.4; recent episodes "
-                                             "need 2.5") as old:
+    with pytest.raises(
+        InspectorError, match="server 0 speaks protocol 2.4; recent episodes need 2.5"
+    ) as old:
         watcher.recent_episodes(0, 0)
     assert old.value.status == 422
     watcher.close()
@@ -167,8 +185,9 @@ def test_only_replayable_episodes_with_actions_are_kept() -> None:
         for _ in range(4):
             local.step(0)  # ends at tick 10: terminated
         local.reset(seed=4)
-        assert [(len(e.snapshot["events"]), e.terminated, e.truncated) for e in local.episodes()] \
-            == [(4, True, False)]
+        assert [
+            (len(e.snapshot["events"]), e.terminated, e.truncated) for e in local.episodes()
+        ] == [(4, True, False)]
         assert local.episodes()[0].target == FAULTY
 
 
@@ -221,8 +240,12 @@ def test_memory_is_bounded_by_n() -> None:
     host.answer(Request(3, {"reset": {}}))
     assert len({id(log) for log in logs}) == 6 and len(instance.recent) == 2
     answer = host.answer(Request(4, {"episodes": {}}))
-    assert [entry["snapshot"] for entry in answer.info["episodes"]] == [  # type: ignore[union-attr]
-        log.snapshot() for log in logs[-2:]]
+    assert (
+        [entry["snapshot"] for entry in answer.info["episodes"]]
+        == [  # type: ignore[union-attr]
+            log.snapshot() for log in logs[-2:]
+        ]
+    )
     host.close()
     with pytest.raises(ValueError, match="keep_episodes must be >= 0"):
         Host(CartPoleEnvironment, keep_episodes=-1)
@@ -245,7 +268,6 @@ def test_the_hello_names_the_target_when_it_can() -> None:
         assert [e.target for e in local.episodes()] == [TARGET]
 
 
-
 def test_several_agents_episodes_end_as_their_answers_said() -> None:
     """With several agents, the end is the answers' (every agent done; terminated if any did)."""
     with LocalClient(PAIR) as local:
@@ -257,7 +279,8 @@ def test_several_agents_episodes_end_as_their_answers_said() -> None:
             terminated = truncated = False
             for _ in range(300):
                 observation, _, terminated, truncated, _ = local.step(
-                    {name: chase(observation[name]) for name in NAMES})
+                    {name: chase(observation[name]) for name in NAMES}
+                )
                 seen.append(digest(observation))
                 if terminated or truncated:
                     break
@@ -289,6 +312,7 @@ def test_a_vectors_autoresets_finish_episodes_too() -> None:
 
 # --- bounds: what is kept, what one answer holds ------------------------------------------------
 
+
 def test_nothing_is_kept_until_a_client_asks() -> None:
     """A server no inspector asked keeps nothing (gym.make's shared servers, say)."""
     host = Host(CartPoleEnvironment, count=2)
@@ -308,8 +332,10 @@ def test_nothing_is_kept_until_a_client_asks() -> None:
 
 
 def test_what_a_server_keeps_is_bounded_in_events_shared_by_its_instances(
-        monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     from rlenv.serving import _host as hosting
+
     monkeypatch.setattr(hosting, "KEEP_EVENTS", 10)  # 5 events for each of two instances
     host = Host(CartPoleEnvironment, count=2, keep_episodes=8)
     for steps in (2, 2, 2, 6, 2):
@@ -345,8 +371,9 @@ def test_a_90000_step_episode_is_served_in_pages_no_answer_over_a_frame() -> Non
     assert (entry["steps"], entry["events"]) == (90_000, 90_000)
     events, pages = [], 0
     while len(events) < entry["events"]:
-        answer = host.answer(Request(6, {"episodes": {"episode": entry["id"],
-                                                      "from": len(events)}}))
+        answer = host.answer(
+            Request(6, {"episodes": {"episode": entry["id"], "from": len(events)}})
+        )
         body = pack(answer.to_wire())
         assert count_objects(body) <= MAX_FRAME_OBJECTS and len(body) < 4 << 20
         page = answer.info["episode"]  # type: ignore[union-attr]
@@ -362,11 +389,13 @@ def test_a_90000_step_episode_is_served_in_pages_no_answer_over_a_frame() -> Non
 
 def test_paged_forms_refuse_what_is_wrong() -> None:
     host = Host(CartPoleEnvironment)
-    for part, message in (({"index": False}, "episodes.index must be true"),
-                          ({"episode": -1}, "episodes.episode must be an integer >= 0"),
-                          ({"episode": 0, "from": 1.5}, "episodes.from must be an integer"),
-                          ({"from": 3}, "episodes.from goes with episodes.episode"),
-                          ({"index": True, "last": 2}, "one of last, index and episode")):
+    for part, message in (
+        ({"index": False}, "episodes.index must be true"),
+        ({"episode": -1}, "episodes.episode must be an integer >= 0"),
+        ({"episode": 0, "from": 1.5}, "episodes.from must be an integer"),
+        ({"from": 3}, "episodes.from goes with episodes.episode"),
+        ({"index": True, "last": 2}, "one of last, index and episode"),
+    ):
         reply = host.answer(Request(1, {"episodes": part}))
         assert isinstance(reply, ErrorReply) and reply.code == ErrorCode.BAD_REQUEST
         assert message in reply.message, reply.message

@@ -39,15 +39,16 @@ def _break(client: BaseClient) -> None:
 
 def test_a_served_instance_is_rebuilt_after_a_failed_reset(serve: Serve) -> None:
     broken, fresh = serve(TARGET), serve(TARGET)
-    with Client(broken.host, broken.port, timeout=10) as client, \
-            Client(fresh.host, fresh.port, timeout=10) as reference:
+    with (
+        Client(broken.host, broken.port, timeout=10) as client,
+        Client(fresh.host, fresh.port, timeout=10) as reference,
+    ):
         client.configure(repeat_action=3)
         reference.configure(repeat_action=3)
         _break(client)
         observations, info = _episode(client, seed=7)
         expected, reference_info = _episode(reference, seed=7)
-        assert info["rebuilt"] == "ValueError: this level is refused (asked with " \
-                                  "options['fail'])"
+        assert info["rebuilt"] == "ValueError: this level is refused (asked with options['fail'])"
         assert "rebuilt" not in reference_info
         assert all(np.array_equal(a, b) for a, b in zip(observations, expected, strict=True))
         assert client.step(0)[4]["frames"] == 3  # the configuration carried over
@@ -77,8 +78,10 @@ def test_a_reset_without_a_seed_after_the_rebuild_continues_the_generator() -> N
 
 def test_in_steps_one_instance_is_rebuilt_and_its_neighbours_go_on(serve: Serve) -> None:
     server, fresh = (serve(TARGET, args=("--instances", "3")) for _ in range(2))
-    with Client(server.host, server.port, timeout=10) as client, \
-            Client(fresh.host, fresh.port, timeout=10) as reference:
+    with (
+        Client(server.host, server.port, timeout=10) as client,
+        Client(fresh.host, fresh.port, timeout=10) as reference,
+    ):
         _one_rebuilt_in_steps(client, reference)
 
 
@@ -90,8 +93,10 @@ class _RespondingEnvironment(BrittleEnvironment):
 
 
 def test_in_steps_on_the_general_path_one_instance_is_rebuilt() -> None:
-    with LocalClient(_RespondingEnvironment, instances=3) as client, \
-            LocalClient(_RespondingEnvironment, instances=3) as reference:
+    with (
+        LocalClient(_RespondingEnvironment, instances=3) as client,
+        LocalClient(_RespondingEnvironment, instances=3) as reference,
+    ):
         assert client.host is not None and client.host.lean is None
         _one_rebuilt_in_steps(client, reference)
 
@@ -117,8 +122,10 @@ def _one_rebuilt_in_steps(client: BaseClient, reference: BaseClient) -> None:
     for _ in range(3):
         client.send_steps(np.array([0, 1, 1]))
         reference.send_steps(np.array([0, 1, 1]))
-        assert np.array_equal(client.receive_steps().observation[[0, 2]],
-                              reference.receive_steps().observation[[0, 2]])
+        assert np.array_equal(
+            client.receive_steps().observation[[0, 2]],
+            reference.receive_steps().observation[[0, 2]],
+        )
 
 
 class _KeptEnvironment(BrittleEnvironment):
@@ -142,8 +149,9 @@ def test_unknown_reset_options_are_refused_naming_the_known_ones(serve: Serve) -
         with pytest.raises(RemoteError) as error:
             client.reset(seed=1, options={"levle": 1})
         assert error.value.code == ErrorCode.BAD_REQUEST
-        assert error.value.message == ("reset.options: PlinkoEnvironment has no reset option "
-                                       "'levle'; it accepts level")
+        assert error.value.message == (
+            "reset.options: PlinkoEnvironment has no reset option 'levle'; it accepts level"
+        )
         client.reset(seed=1)  # still serving
         level = client.get_property("World", "level")
         client.reset(seed=2, options={"level": level})

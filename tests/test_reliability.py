@@ -31,25 +31,27 @@ from rlenv_tools.compliance._harness import peak_rss_kib
 
 def test_compliance_suite_on_cartpole(serve: Serve, figures: dict[str, str]) -> None:
     server = serve(args=["--frame-deadline", "0.5"])
-    report = check_server(server.host, server.port, pid=server.pid, frame_deadline=0.5,
-                          random_frames=300)
+    report = check_server(
+        server.host, server.port, pid=server.pid, frame_deadline=0.5, random_frames=300
+    )
     figures["compliance (CartPole)"] = report.summary()
     assert report.passed, "\n".join(report.failures)
     assert report.frames_tried >= 300 and report.controller_steps == report.probes
     assert report.rss_growth_kib is not None and report.rss_growth_kib < 8 * 1024
 
 
-def test_compliance_suite_on_a_discrete_environment(
-    serve: Serve, figures: dict[str, str]
-) -> None:
+def test_compliance_suite_on_a_discrete_environment(serve: Serve, figures: dict[str, str]) -> None:
     server = serve("examples.faulty:CountingEnvironment")
     report = check_server(server.host, server.port, random_frames=50, action=lambda: 0)
     figures["compliance (Discrete actions)"] = report.summary()
     assert report.passed, "\n".join(report.failures)
 
 
-@pytest.mark.parametrize("target", ["examples.cartpole:CartPoleEnvironment",
-                                    "examples.pair:PairEnvironment"], ids=["box", "dict"])
+@pytest.mark.parametrize(
+    "target",
+    ["examples.cartpole:CartPoleEnvironment", "examples.pair:PairEnvironment"],
+    ids=["box", "dict"],
+)
 def test_compliance_suite_on_a_multi_instance_server(
     serve: Serve, figures: dict[str, str], target: str
 ) -> None:
@@ -88,16 +90,27 @@ def test_frames_stay_small_until_authenticated(serve: Serve) -> None:
 
 def test_binding_beyond_loopback_needs_a_token() -> None:
     result = subprocess.run(
-        [sys.executable, "-m", "rlenv", "serve", "examples.cartpole:CartPoleEnvironment",
-         "--host", "0.0.0.0"], capture_output=True, text=True, timeout=60,
+        [
+            sys.executable,
+            "-m",
+            "rlenv",
+            "serve",
+            "examples.cartpole:CartPoleEnvironment",
+            "--host",
+            "0.0.0.0",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
         env={k: v for k, v in os.environ.items() if k != "RLENV_TOKEN"},
     )
     assert result.returncode == 2
     assert "refusing to listen on 0.0.0.0" in result.stderr and "--token" in result.stderr
 
 
-def test_a_server_on_all_interfaces_with_a_token(serve: Serve,
-                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_server_on_all_interfaces_with_a_token(
+    serve: Serve, monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.delenv("RLENV_TOKEN", raising=False)
     loopback_only = serve()
     with pytest.raises(ConnectionLost):  # 127.0.0.2 does not reach a server on 127.0.0.1 ...
@@ -169,19 +182,22 @@ def test_silent_connections_make_room_for_a_client_with_the_token(serve: Serve) 
     try:
         for sock in silent:
             read_frame(sock)  # the hello; then nothing
-        with Client(server.host, server.port, token="t0ken", timeout=10) as first, \
-                Client(server.host, server.port, token="t0ken", timeout=10) as second:
+        with (
+            Client(server.host, server.port, token="t0ken", timeout=10) as first,
+            Client(server.host, server.port, token="t0ken", timeout=10) as second,
+        ):
             first.reset(seed=0)  # each got in at once, in the place of the oldest silent one
             second.observe()
             for sock in silent:
                 error = read_frame(sock)["error"]
                 assert (error["code"], error["fatal"]) == (ErrorCode.BUSY, True)
-                assert "full (2 clients) and this connection had sent no request: a newer one " \
-                       "took its place" == error["message"][len("this server is "):]
+                assert (
+                    "full (2 clients) and this connection had sent no request: a newer one "
+                    "took its place" == error["message"][len("this server is ") :]
+                )
             with pytest.raises(RemoteError) as full:  # clients with the token keep their place
                 Client(server.host, server.port, token="t0ken", timeout=10)
-            assert full.value.code == ErrorCode.BUSY and "2 clients connected" in \
-                full.value.message
+            assert full.value.code == ErrorCode.BUSY and "2 clients connected" in full.value.message
             first.step(np.zeros(1, np.float32))
     finally:
         for sock in silent:
@@ -195,8 +211,9 @@ def test_a_connection_without_its_first_request_is_dropped_soon() -> None:
 
     clock = ManualClock()
     hello = Hello("T", CartPoleAgent.action_space, CartPoleAgent.observation_space)
-    endpoint = Endpoint(hello, Limits(first_request_timeout=2.0, idle_timeout=100.0),
-                        token="t0ken", clock=clock)
+    endpoint = Endpoint(
+        hello, Limits(first_request_timeout=2.0, idle_timeout=100.0), token="t0ken", clock=clock
+    )
     host, port = endpoint.start_server()
     try:
         silent = socket.create_connection((host, port), timeout=5)
@@ -222,7 +239,8 @@ def test_a_connection_without_its_first_request_is_dropped_soon() -> None:
 
 
 def test_wrong_tokens_slow_the_guesser_never_the_token_holder(
-        caplog: pytest.LogCaptureFixture) -> None:
+    caplog: pytest.LogCaptureFixture,
+) -> None:
     """Past FREE_FAILURES wrong tokens, each wrong token's refusal is held (1 s, 2 s ...) out of
     any slot; the right token from the same address is let in at once; an address compares no
     token while MAX_HELD of its refusals are held; every wrong token is logged with the
@@ -282,18 +300,24 @@ def test_wrong_tokens_slow_the_guesser_never_the_token_holder(
         clock.advance(1.0)
         assert served(waiting)  # the first held refusal went out: the token is compared
         error = read_frame(held[0])["error"]
-        assert (error["code"], error["fatal"], error["message"]) == \
-            (ErrorCode.UNAUTHORIZED, True, "wrong token")
+        assert (error["code"], error["fatal"], error["message"]) == (
+            ErrorCode.UNAUTHORIZED,
+            True,
+            "wrong token",
+        )
         assert not any(answered(sock) for sock in held[1:])
         clock.advance(MAX_PENALTY)
         assert endpoint.receive(0) is None
         assert all(read_frame(sock)["error"]["message"] == "wrong token" for sock in held[1:])
         lines = [record.getMessage() for record in caplog.records]
-        assert lines[:FREE_FAILURES] == [f"wrong token from 127.0.0.1 ({n} in a row)"
-                                         for n in range(1, FREE_FAILURES + 1)]
+        assert lines[:FREE_FAILURES] == [
+            f"wrong token from 127.0.0.1 ({n} in a row)" for n in range(1, FREE_FAILURES + 1)
+        ]
         assert lines[FREE_FAILURES:] == [
             f"wrong token from 127.0.0.1 ({FREE_FAILURES + n} in a row): answered in "
-            f"{2 ** (n - 1)} s" for n in range(1, MAX_HELD + 1)]
+            f"{2 ** (n - 1)} s"
+            for n in range(1, MAX_HELD + 1)
+        ]
         assert not any("guess" in line or "t0ken" in line for line in lines)
     finally:
         for sock in opened:
@@ -306,8 +330,11 @@ def test_a_frame_that_would_expand_is_refused_and_the_server_keeps_its_memory(
 ) -> None:
     server = serve()
     empties = 4 << 20  # 4 MiB of empty arrays: some 300 MB of Python lists, if decoded
-    crafted = b"\x82\xa2id\x02\xa5reset\x81\xa7options\x81\xa1a\xdd" + \
-        struct.pack(">I", empties) + b"\x90" * empties
+    crafted = (
+        b"\x82\xa2id\x02\xa5reset\x81\xa7options\x81\xa1a\xdd"
+        + struct.pack(">I", empties)
+        + b"\x90" * empties
+    )
     with socket.create_connection((server.host, server.port), timeout=10) as raw:
         read_frame(raw)
         raw.sendall(frame(pack({"id": 1})))  # the first request: larger frames are allowed next
@@ -316,8 +343,10 @@ def test_a_frame_that_would_expand_is_refused_and_the_server_keeps_its_memory(
         raw.sendall(frame(crafted))
         error = read_frame(raw)["error"]
         assert (error["code"], error["fatal"]) == (ErrorCode.BAD_FRAME, False)
-        assert error["message"] == "frame holds more than 1048576 msgpack objects, the limit " \
-                                   "of a frame"
+        assert (
+            error["message"] == "frame holds more than 1048576 msgpack objects, the limit "
+            "of a frame"
+        )
         growth = peak_rss_kib(server.pid) - before
         assert growth < 32 * 1024, f"the server's peak memory grew {growth} KiB"
         raw.sendall(frame(pack({"id": 3, "reset": {"seed": 0}})))
@@ -376,9 +405,11 @@ def test_kills_and_stops_at_random_points_lose_and_duplicate_nothing(
             observation, _ = env.reset(seed=0)
     finally:
         env.close()
-    figures["fault harness"] = (f"{faults} faults (SIGKILL/SIGSTOP), {survived} server losses "
-                                f"survived, {transitions} transitions checked, {lost} lost, "
-                                f"{duplicated} duplicated")
+    figures["fault harness"] = (
+        f"{faults} faults (SIGKILL/SIGSTOP), {survived} server losses "
+        f"survived, {transitions} transitions checked, {lost} lost, "
+        f"{duplicated} duplicated"
+    )
     assert lost == 0 and duplicated == 0
     assert survived >= faults // 2
 
@@ -444,14 +475,19 @@ def test_random_requests_get_one_answer_each_and_the_environment_stays_sane() ->
     from rlenv_client import LocalClient
 
     values = st.recursive(
-        st.none() | st.booleans() | st.integers(-3, 10) | st.floats(allow_nan=True)
+        st.none()
+        | st.booleans()
+        | st.integers(-3, 10)
+        | st.floats(allow_nan=True)
         | st.text(max_size=4),
-        lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=6), inner,
-                                                                     max_size=3),
+        lambda inner: (
+            st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=6), inner, max_size=3)
+        ),
         max_leaves=6,
     )
-    calls = st.lists(st.tuples(st.sampled_from(["reset", "step", "configure", "observe"]),
-                               values), max_size=12)
+    calls = st.lists(
+        st.tuples(st.sampled_from(["reset", "step", "configure", "observe"]), values), max_size=12
+    )
 
     @hypothesis.settings(max_examples=150, deadline=None)
     @hypothesis.given(calls)
@@ -460,8 +496,7 @@ def test_random_requests_get_one_answer_each_and_the_environment_stays_sane() ->
             for name, value in sequence:
                 try:
                     if name == "reset":
-                        client.reset(seed=value if isinstance(value, int) and value >= 0
-                                     else None)
+                        client.reset(seed=value if isinstance(value, int) and value >= 0 else None)
                     elif name == "step" and value is None:
                         with pytest.raises(TypeError, match="call poll"):
                             client.step(value)
@@ -473,8 +508,10 @@ def test_random_requests_get_one_answer_each_and_the_environment_stays_sane() ->
                         try:
                             client.configure(**settings)
                         except TypeError:  # agent= or world= that is not a map: refused here
-                            assert any(not isinstance(settings.get(part, {}), dict)
-                                       for part in ("agent", "world"))
+                            assert any(
+                                not isinstance(settings.get(part, {}), dict)
+                                for part in ("agent", "world")
+                            )
                     else:
                         client.observe()
                 except RemoteError as error:
@@ -485,7 +522,6 @@ def test_random_requests_get_one_answer_each_and_the_environment_stays_sane() ->
             assert info["frames"] >= 1
 
     run()
-
 
 
 def test_an_answer_that_cannot_travel_is_an_environment_error(serve: Serve) -> None:
@@ -502,8 +538,10 @@ def test_an_answer_that_cannot_travel_is_an_environment_error(serve: Serve) -> N
 def test_a_refused_request_takes_no_control(serve: Serve) -> None:
     """Whole or in a batch's slot: another client may still take control afterwards."""
     server = serve()
-    with Client(server.host, server.port, timeout=10) as first, \
-            Client(server.host, server.port, timeout=10) as second:
+    with (
+        Client(server.host, server.port, timeout=10) as first,
+        Client(server.host, server.port, timeout=10) as second,
+    ):
         with pytest.raises(RemoteError, match="reset.seed"):
             first.reset(seed=-1)
         first.send_batch([first.reset_request(seed=-1)])
@@ -524,8 +562,14 @@ def test_requests_pipelined_behind_a_slow_one_are_all_answered(serve: Serve) -> 
         for attempt in range(5):
             sock.sendall(frame(pack({"id": 3 * attempt + 1, "reset": {"seed": 0}})))
             assert read_frame(sock)["id"] == 3 * attempt + 1
-            slow = pack({"id": 3 * attempt + 2, "action": 0, "repeat_action": 10_000,
-                         "observation": {"agent": {}}})  # the most ticks one action may run
+            slow = pack(
+                {
+                    "id": 3 * attempt + 2,
+                    "action": 0,
+                    "repeat_action": 10_000,
+                    "observation": {"agent": {}},
+                }
+            )  # the most ticks one action may run
             quick = pack({"id": 3 * attempt + 3, "observation": {"agent": {}}})
             sock.sendall(frame(slow) + frame(quick))  # one write: they arrive together
             assert read_frame(sock)["frames"] == 10_000
@@ -533,8 +577,9 @@ def test_requests_pipelined_behind_a_slow_one_are_all_answered(serve: Serve) -> 
 
 
 @pytest.mark.parametrize("shared_memory", [None, False], ids=["lane", "socket"])
-def test_answer_arrived_says_whether_receiving_would_wait(serve: Serve,
-                                                          shared_memory: bool | None) -> None:
+def test_answer_arrived_says_whether_receiving_would_wait(
+    serve: Serve, shared_memory: bool | None
+) -> None:
     """A hint a vector uses to await its slowest server first: false while the server works
     (here: forever, its tick hangs), true once the answer is there to take."""
     server = serve("examples.faulty:SlowEnvironment")

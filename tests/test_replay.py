@@ -33,8 +33,12 @@ def record(directory: Path, episodes: int = 2) -> list[Path]:
 
 
 def run_replay(path: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "rlenv", "replay", str(path)],
-                          capture_output=True, text=True, timeout=120)
+    return subprocess.run(
+        [sys.executable, "-m", "rlenv", "replay", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
 
 
 def test_recorded_episodes_replay_bit_for_bit(tmp_path: Path) -> None:
@@ -43,8 +47,9 @@ def test_recorded_episodes_replay_bit_for_bit(tmp_path: Path) -> None:
     episode = EpisodeFile.load(files[0])
     assert episode.target == "rlenv.examples.cartpole:CartPoleEnvironment"  # the id's target
     assert episode.snapshot["config"]["agent"]["max_force"] == 8.0
-    assert len(episode.observations) == 1 + sum(e[0] == "action"
-                                                for e in episode.snapshot["events"])
+    assert len(episode.observations) == 1 + sum(
+        e[0] == "action" for e in episode.snapshot["events"]
+    )
     for path in files:
         result = run_replay(path)
         assert result.returncode == 0, result.stdout + result.stderr
@@ -81,8 +86,9 @@ def test_replay_refuses_what_is_not_an_episode(tmp_path: Path) -> None:
 
 
 def test_an_inspectors_edits_are_replayed(tmp_path: Path) -> None:
-    env = RecordEpisodes(gym.make("rlenv/CartPole-v0", repeat_action=2,
-                                  share_server=False), tmp_path)
+    env = RecordEpisodes(
+        gym.make("rlenv/CartPole-v0", repeat_action=2, share_server=False), tmp_path
+    )
     try:
         address = env.unwrapped.client.address
         host, _, port = address.rpartition(":")

@@ -78,8 +78,13 @@ def cluster() -> Iterator[str]:
     """A local Ray instance of 2 CPUs for this module; yields the tag of its processes."""
     tag = uuid.uuid4().hex
     os.environ[TAG] = tag  # inherited by Ray's processes and the servers they start
-    ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False,
-             configure_logging=False)
+    ray.init(
+        address="local",
+        num_cpus=2,
+        include_dashboard=False,
+        log_to_driver=False,
+        configure_logging=False,
+    )
     try:
         yield tag
     finally:
@@ -100,9 +105,12 @@ def small_ppo(name: str, *, num_env_runners: int, num_envs: int, **env_config: A
     return (
         PPOConfig()
         .environment(name, env_config=env_config)
-        .env_runners(num_env_runners=num_env_runners, num_envs_per_env_runner=num_envs,
-                     gym_env_vectorize_mode=gym.VectorizeMode.VECTOR_ENTRY_POINT,
-                     rollout_fragment_length=50)
+        .env_runners(
+            num_env_runners=num_env_runners,
+            num_envs_per_env_runner=num_envs,
+            gym_env_vectorize_mode=gym.VectorizeMode.VECTOR_ENTRY_POINT,
+            rollout_fragment_length=50,
+        )
         .training(train_batch_size_per_learner=50 * num_envs, minibatch_size=50, num_epochs=1)
         .fault_tolerance(restart_failed_sub_environments=True)
         .debugging(seed=0)
@@ -168,8 +176,9 @@ def test_creator_refuses_what_rllib_cannot_use(serve: Any) -> None:
     with pytest.raises(ValueError, match="not an rlenv id"):
         register("CartPole-v1")
     server = serve(args=["--instances", "2"])
-    with pytest.raises(ValueError, match="2 sub-environments and RLlib expects "
-                                         "num_envs_per_env_runner=3"):
+    with pytest.raises(
+        ValueError, match="2 sub-environments and RLlib expects num_envs_per_env_runner=3"
+    ):
         creator({"num_envs": 3, "addresses": [server.address]})
     with pytest.raises(ValueError, match="pool_servers is only for pool"):
         creator({"num_envs": 2, "pool_servers": 2})
@@ -187,8 +196,9 @@ def test_ppo_trains_one_iteration_in_the_driver(no_leftovers: str) -> None:
         return vector
 
     register_env("rlenv-recording", recording)
-    algo = small_ppo("rlenv-recording", num_env_runners=0, num_envs=4,
-                     instances_per_server=2).build_algo()
+    algo = small_ppo(
+        "rlenv-recording", num_env_runners=0, num_envs=4, instances_per_server=2
+    ).build_algo()
     try:
         vector = algo.env_runner.env.unwrapped
         assert isinstance(vector, RemoteVectorEnv) and vector.num_envs == 4
@@ -204,8 +214,13 @@ def test_ppo_trains_one_iteration_in_the_driver(no_leftovers: str) -> None:
 
 
 def test_config_for_sets_what_the_creator_needs() -> None:
-    config = config_for(PPOConfig(), "rlenv/CartPole-v0", num_envs_per_env_runner=3,
-                        num_env_runners=1, repeat_action=2)
+    config = config_for(
+        PPOConfig(),
+        "rlenv/CartPole-v0",
+        num_envs_per_env_runner=3,
+        num_env_runners=1,
+        repeat_action=2,
+    )
     assert config.env == "rllib/rlenv/CartPole-v0"
     assert config.gym_env_vectorize_mode is gym.VectorizeMode.VECTOR_ENTRY_POINT
     assert config.num_envs_per_env_runner == 3 and config.num_env_runners == 1
@@ -218,8 +233,9 @@ def test_config_for_sets_what_the_creator_needs() -> None:
 def test_lost_server_makes_rllib_recreate_the_vector(no_leftovers: str) -> None:
     """max_restarts=0: ConnectionLost from step; RLlib closes the vector and builds another."""
     name = register(TARGET, name="rlenv-no-restarts", max_episode_steps=500)
-    algo = small_ppo(name, num_env_runners=1, num_envs=2, instances_per_server=1,
-                     max_restarts=0).build_algo()
+    algo = small_ppo(
+        name, num_env_runners=1, num_envs=2, instances_per_server=1, max_restarts=0
+    ).build_algo()
     try:
         algo.train()
         [before] = runner_servers(algo)
@@ -257,16 +273,18 @@ def test_lost_server_is_restarted_by_the_vector(no_leftovers: str) -> None:
         algo.stop()
 
 
-def test_connection_lost_is_an_exception_rllib_catches(no_leftovers: str,
-                                                       caplog: pytest.LogCaptureFixture) -> None:
+def test_connection_lost_is_an_exception_rllib_catches(
+    no_leftovers: str, caplog: pytest.LogCaptureFixture
+) -> None:
     """A server lost more often than max_restarts: step raises ConnectionLost, which RLlib's
     EnvRunner._try_env_step catches (``except Exception``), then it builds the vector anew."""
     from ray.rllib.env.env_runner import ENV_STEP_FAILURE
     from ray.rllib.env.single_agent_env_runner import SingleAgentEnvRunner
 
     name = register(TARGET, name="rlenv-one-restart", max_episode_steps=500)
-    runner = SingleAgentEnvRunner(config=small_ppo(name, num_env_runners=0, num_envs=1,
-                                                   max_restarts=1))
+    runner = SingleAgentEnvRunner(
+        config=small_ppo(name, num_env_runners=0, num_envs=1, max_restarts=1)
+    )
     try:
         runner.sample(num_timesteps=20, random_actions=True)
         actions = np.zeros((1, 1), np.float32)
@@ -301,8 +319,14 @@ def pool(no_leftovers: str) -> Iterator[Any]:
     """A named pool of one server of two CartPoles."""
     from rlenv_client.ray import RayServerPool
 
-    with RayServerPool(TARGET, servers=1, instances_per_server=2, cpus_per_server=0.5,
-                       name="rllib-test-pool", progress=lambda _: None) as servers:
+    with RayServerPool(
+        TARGET,
+        servers=1,
+        instances_per_server=2,
+        cpus_per_server=0.5,
+        name="rllib-test-pool",
+        progress=lambda _: None,
+    ) as servers:
         yield servers
 
 
@@ -321,8 +345,9 @@ def test_pool_creator_refuses_and_gives_back(pool: Any) -> None:
     creator = RLlibEnvCreator(TARGET, pool="rllib-test-pool")
     with pytest.raises(ValueError, match="instances_per_server cannot be used with pool"):
         creator({"num_envs": 2, "instances_per_server": 2})
-    with pytest.raises(ValueError, match="pool_servers=1 gives 2, and RLlib expects "
-                                         "num_envs_per_env_runner=4"):
+    with pytest.raises(
+        ValueError, match="pool_servers=1 gives 2, and RLlib expects num_envs_per_env_runner=4"
+    ):
         creator({"num_envs": 4})
     assert lease_is_free()
     vector = creator({"num_envs": 2})
@@ -338,8 +363,9 @@ def test_pool_creator_refuses_and_gives_back(pool: Any) -> None:
 def test_ppo_on_leased_servers_recovers_a_lost_one(pool: Any) -> None:
     """max_restarts=0: ServerLost; RLlib closes the vector (its lease goes back) and the
     creator leases the pool's only server again, which its actor has restarted."""
-    name = register("rlenv/CartPole-v0", name="rlenv-pooled", pool="rllib-test-pool",
-                    max_restarts=0)
+    name = register(
+        "rlenv/CartPole-v0", name="rlenv-pooled", pool="rllib-test-pool", max_restarts=0
+    )
     algo = small_ppo(name, num_env_runners=1, num_envs=2).build_algo()
     try:
         algo.train()
@@ -359,15 +385,21 @@ def test_ppo_on_leased_servers_recovers_a_lost_one(pool: Any) -> None:
 
 
 def test_two_policies_train_the_chaser_and_the_runners_of_tag(no_leftovers: str) -> None:
-    config = multi_agent_config_for(PPOConfig(), TAG_TARGET, per="class", num_env_runners=1,
-                                    max_episode_steps=100)
-    config = (config.env_runners(rollout_fragment_length=100)
-              .training(train_batch_size_per_learner=200, minibatch_size=50, num_epochs=1)
-              .debugging(seed=0))
+    config = multi_agent_config_for(
+        PPOConfig(), TAG_TARGET, per="class", num_env_runners=1, max_episode_steps=100
+    )
+    config = (
+        config.env_runners(rollout_fragment_length=100)
+        .training(train_batch_size_per_learner=200, minibatch_size=50, num_epochs=1)
+        .debugging(seed=0)
+    )
     assert config.policies.keys() == {"Chaser", "Runner"}
     mapping = config.policy_mapping_fn
-    assert [mapping(name, None) for name in ("Chaser", "Runner1", "Runner2")] == \
-        ["Chaser", "Runner", "Runner"]
+    assert [mapping(name, None) for name in ("Chaser", "Runner1", "Runner2")] == [
+        "Chaser",
+        "Runner",
+        "Runner",
+    ]
     algo = config.build_algo()
     try:
         before = algo.learner_group.get_weights()
@@ -379,27 +411,31 @@ def test_two_policies_train_the_chaser_and_the_runners_of_tag(no_leftovers: str)
         assert set(runners["agent_episode_returns_mean"]) == {"Chaser", "Runner1", "Runner2"}
         assert {"Chaser", "Runner"} <= set(result["learners"])
         for module in ("Chaser", "Runner"):  # each policy learned from its own agents
-            assert any(not np.array_equal(np.asarray(after[module][key]),
-                                          np.asarray(before[module][key]))
-                       for key in before[module]), module
+            assert any(
+                not np.array_equal(np.asarray(after[module][key]), np.asarray(before[module][key]))
+                for key in before[module]
+            ), module
         servers = algo.env_runner_group.foreach_env_runner(
             lambda runner: [env.unwrapped.session.server.pid for env in runner.env.envs],
-            local_env_runner=False)
+            local_env_runner=False,
+        )
         assert servers and all(servers)
     finally:
         algo.stop()
 
 
 def test_the_server_drives_what_rllib_does_not_train(no_leftovers: str) -> None:
-    env = RemoteMultiAgentEnv(TAG_TARGET, others={"Runner1": "heuristic", "Runner2": "heuristic"},
-                              max_episode_steps=5)
+    env = RemoteMultiAgentEnv(
+        TAG_TARGET, others={"Runner1": "heuristic", "Runner2": "heuristic"}, max_episode_steps=5
+    )
     try:
         assert env.possible_agents == ["Chaser"] and env.driven == ("Runner1", "Runner2")
         observations, _ = env.reset(seed=0)
         assert list(observations) == ["Chaser"]
         for _ in range(5):
             observations, rewards, terminateds, truncateds, _ = env.step(
-                {"Chaser": np.zeros(2, np.float32)})
+                {"Chaser": np.zeros(2, np.float32)}
+            )
         assert truncateds == {"Chaser": True, "__all__": True}
         assert terminateds == {"Chaser": False, "__all__": False}
     finally:

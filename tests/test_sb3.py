@@ -106,8 +106,9 @@ def test_sb3_vec_env_fills_episode_statistics_as_monitor_does() -> None:
             assert set(episode) == {"r", "l", "t"} and episode["t"] >= 0
             assert episode["l"] == length and episode["r"] == pytest.approx(episode_return)
         monitored = _episodes(VecMonitor(envs), 12)  # wrapped anyway: the same figures, once
-        assert [(e["l"], pytest.approx(e["r"])) for e, _, _ in monitored] == \
-            [(e["l"], e["r"]) for e, _, _ in finished]
+        assert [(e["l"], pytest.approx(e["r"])) for e, _, _ in monitored] == [
+            (e["l"], e["r"]) for e, _, _ in finished
+        ]
     finally:
         envs.close()
 
@@ -115,8 +116,7 @@ def test_sb3_vec_env_fills_episode_statistics_as_monitor_does() -> None:
 def test_ppo_logs_episode_returns_without_vec_monitor() -> None:
     envs = SB3VecEnv(2, TARGET, max_episode_steps=20, in_process=True)
     try:
-        model = PPO("MlpPolicy", envs, seed=0, n_steps=64, batch_size=64, n_epochs=1,
-                    verbose=0)
+        model = PPO("MlpPolicy", envs, seed=0, n_steps=64, batch_size=64, n_epochs=1, verbose=0)
         model.learn(total_timesteps=128)
         assert len(model.ep_info_buffer) >= 6  # what ep_rew_mean and ep_len_mean average
         assert all(info["l"] <= 20 for info in model.ep_info_buffer)
@@ -144,8 +144,14 @@ def test_sb3_trains_the_chaser_straight_from_the_multi_agent_tag() -> None:
 def test_sb3_counts_a_team_members_wait_as_no_episode() -> None:
     """Runners share one policy; a tagged runner's episode is counted once, at its tag."""
     chaser = Chaser()
-    envs = SB3VecEnv(1, TAG, agents=Runner, others={CHASER: chaser.heuristic},
-                     max_episode_steps=300, in_process=True)
+    envs = SB3VecEnv(
+        1,
+        TAG,
+        agents=Runner,
+        others={CHASER: chaser.heuristic},
+        max_episode_steps=300,
+        in_process=True,
+    )
     try:
         envs.seed(1)
         envs.reset()
@@ -181,10 +187,12 @@ def test_self_play_refreshes_a_frozen_copy_of_the_learner_every_n_steps() -> Non
         copied = [p.detach().clone() for p in frozen.policy.parameters()]
         assert any(not (a == b).all() for a, b in zip(copied, initial, strict=True))
         model.learn(total_timesteps=128, reset_num_timesteps=False)  # without the callback
-        assert all((a == b).all() for a, b in zip(copied, frozen.policy.parameters(),
-                                                  strict=True))  # frozen: left as copied
-        assert any(not (a == b).all() for a, b in zip(copied, model.policy.parameters(),
-                                                      strict=True))
+        assert all(
+            (a == b).all() for a, b in zip(copied, frozen.policy.parameters(), strict=True)
+        )  # frozen: left as copied
+        assert any(
+            not (a == b).all() for a, b in zip(copied, model.policy.parameters(), strict=True)
+        )
     finally:
         envs.close()
 
@@ -193,8 +201,13 @@ def test_the_frozen_copy_plays_its_agent() -> None:
     """Runner2's moves are the copy's actions on its own observations (checked by replaying
     them into the joint env)."""
     frozen, chaser = FrozenPolicy(deterministic=True), Chaser()
-    envs = SB3VecEnv(1, TAG, agents="Runner1", in_process=True,
-                     others={"Runner2": frozen, CHASER: chaser.heuristic})
+    envs = SB3VecEnv(
+        1,
+        TAG,
+        agents="Runner1",
+        in_process=True,
+        others={"Runner2": frozen, CHASER: chaser.heuristic},
+    )
     joint = RemoteVectorEnv(1, TAG, in_process=True, autoreset_mode="SameStep")
     try:
         model = PPO("MlpPolicy", envs, seed=0, n_steps=64, batch_size=64, verbose=0)
@@ -204,8 +217,11 @@ def test_the_frozen_copy_plays_its_agent() -> None:
         observations, _ = joint.reset(seed=3)
         for _ in range(30):  # Runner1 is not tagged yet
             mine = np.array([[0.5, -0.5]], np.float32)
-            actions = {"Runner1": mine, "Runner2": np.array([frozen(observations["Runner2"][0])]),
-                       "Chaser": np.array([chaser.heuristic(observations["Chaser"][0])])}
+            actions = {
+                "Runner1": mine,
+                "Runner2": np.array([frozen(observations["Runner2"][0])]),
+                "Chaser": np.array([chaser.heuristic(observations["Chaser"][0])]),
+            }
             envs.step_async(mine)
             ours, _, dones, _ = envs.step_wait()
             observations, *_ = joint.step(actions)

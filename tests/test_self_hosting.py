@@ -35,9 +35,14 @@ class SelfHosted:
 
     def __init__(self, *args: str) -> None:
         self.process = subprocess.Popen(
-            [sys.executable, *args], cwd=ROOT, stdin=subprocess.DEVNULL,
-            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-            env={**os.environ, "PYTHONPATH": str(TESTS)})
+            [sys.executable, *args],
+            cwd=ROOT,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+            env={**os.environ, "PYTHONPATH": str(TESTS)},
+        )
         self.lines: list[str] = []
         while True:
             line = self.process.stderr.readline()
@@ -82,13 +87,26 @@ def _episode(client: Client) -> list[str]:
 
 
 EXPECTED = [
-    "_on_got_connection:config", "_configure:agent", "_send_response:-", "_after_send_response",
-    "_on_got_connection:reset,observation", "_reset", "_send_response:agent",
+    "_on_got_connection:config",
+    "_configure:agent",
+    "_send_response:-",
     "_after_send_response",
-    *["_on_got_connection:repeat_action,action,observation", "_step:4", "_send_response:agent",
-      "_after_send_response"] * 3,
-    "_on_got_connection:observation", "_send_response:agent,world", "_after_send_response",
-    "_on_got_connection:action,observation", "_send_response:agent",
+    "_on_got_connection:reset,observation",
+    "_reset",
+    "_send_response:agent",
+    "_after_send_response",
+    *[
+        "_on_got_connection:repeat_action,action,observation",
+        "_step:4",
+        "_send_response:agent",
+        "_after_send_response",
+    ]
+    * 3,
+    "_on_got_connection:observation",
+    "_send_response:agent,world",
+    "_after_send_response",
+    "_on_got_connection:action,observation",
+    "_send_response:agent",
 ]
 
 
@@ -162,13 +180,18 @@ def test_a_self_hosted_environment_in_real_time_ticks_by_the_clock() -> None:
 
 def test_rlenv_run_needs_start_server_in_ready(tmp_path: Path) -> None:
     script = tmp_path / "forgot.py"
-    script.write_text("import rlenv\nfrom rlenv.examples.cartpole import CartPoleEnvironment\n"
-                      "rlenv.run(CartPoleEnvironment())\n")
-    result = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
-                            timeout=60, cwd=ROOT)
+    script.write_text(
+        "import rlenv\nfrom rlenv.examples.cartpole import CartPoleEnvironment\n"
+        "rlenv.run(CartPoleEnvironment())\n"
+    )
+    result = subprocess.run(
+        [sys.executable, str(script)], capture_output=True, text=True, timeout=60, cwd=ROOT
+    )
     assert result.returncode != 0
-    assert "CartPoleEnvironment._ready did not call self.communication.start_server(port, " \
-           "host)" in result.stderr
+    assert (
+        "CartPoleEnvironment._ready did not call self.communication.start_server(port, "
+        "host)" in result.stderr
+    )
 
 
 def test_a_hook_that_forgets_super_gets_a_clear_error(serve: Serve) -> None:
@@ -177,8 +200,10 @@ def test_a_hook_that_forgets_super_gets_a_clear_error(serve: Serve) -> None:
         with pytest.raises(RemoteError) as error:
             client.reset(seed=0)
         assert error.value.code == ErrorCode.ENVIRONMENT_ERROR
-        assert "SilentEnvironment._on_got_connection sent no answer: call " \
-               "super()._on_got_connection(request)" in error.value.message
+        assert (
+            "SilentEnvironment._on_got_connection sent no answer: call "
+            "super()._on_got_connection(request)" in error.value.message
+        )
 
 
 def test_an_after_send_response_that_raises_ends_the_episode(serve: Serve) -> None:
@@ -189,21 +214,33 @@ def test_an_after_send_response_that_raises_ends_the_episode(serve: Serve) -> No
         with pytest.raises(RemoteError) as error:
             client.step(ACTION)
         assert error.value.code == ErrorCode.RESET_REQUIRED
-        assert "_after_send_response raised RuntimeError: the trail would not clear" in \
-            error.value.message
+        assert (
+            "_after_send_response raised RuntimeError: the trail would not clear"
+            in error.value.message
+        )
         client.reset(seed=0)
         client.step(ACTION)
 
 
 def test_the_seeds_constants_and_the_design_cards_layout() -> None:
-    keys = {"CONFIG_KEY": "config", "RESET_KEY": "reset", "ACTION_KEY": "action",
-            "OBSERVATION_KEY": "observation", "WORLD_KEY": "world", "AGENT_KEY": "agent",
-            "ENVIRONMENT_KEY": "environment"}
+    keys = {
+        "CONFIG_KEY": "config",
+        "RESET_KEY": "reset",
+        "ACTION_KEY": "action",
+        "OBSERVATION_KEY": "observation",
+        "WORLD_KEY": "world",
+        "AGENT_KEY": "agent",
+        "ENVIRONMENT_KEY": "environment",
+    }
     for name, value in keys.items():
         assert getattr(rlenv.RLEnvironment, name) == value
-    for module, name in [("rlenv.node", "Node"), ("rlenv.environment", "RLEnvironment"),
-                         ("rlenv.agent", "RLAgent"), ("rlenv.world", "RLEnvWorld"),
-                         ("rlenv.communication", "Communication")]:
+    for module, name in [
+        ("rlenv.node", "Node"),
+        ("rlenv.environment", "RLEnvironment"),
+        ("rlenv.agent", "RLAgent"),
+        ("rlenv.world", "RLEnvWorld"),
+        ("rlenv.communication", "Communication"),
+    ]:
         cls = getattr(importlib.import_module(module), name)
         assert cls.__module__ == module and getattr(rlenv, name) is cls
     assert isinstance(rlenv.RLEnvironment().communication, rlenv.Communication)

@@ -39,11 +39,19 @@ def test_hello_describes_the_environment(client: Client) -> None:
     assert client.action_space == CartPoleAgent.action_space
     assert client.observation_space == CartPoleAgent.observation_space
     assert client.hello.limits == {
-        "max_frame_size": 64 * 1024 * 1024, "max_first_frame_size": 64 * 1024,
-        "max_reply_size": 64 * 1024 * 1024, "max_frame_objects": 1 << 20, "frame_deadline": 10.0,
-        "first_request_timeout": 10.0, "idle_timeout": 3600.0, "write_timeout": 10.0,
-        "max_connections": 8, "max_repeat_action": 10_000, "max_level_nodes": 1024,
-        "max_level_depth": 64}
+        "max_frame_size": 64 * 1024 * 1024,
+        "max_first_frame_size": 64 * 1024,
+        "max_reply_size": 64 * 1024 * 1024,
+        "max_frame_objects": 1 << 20,
+        "frame_deadline": 10.0,
+        "first_request_timeout": 10.0,
+        "idle_timeout": 3600.0,
+        "write_timeout": 10.0,
+        "max_connections": 8,
+        "max_repeat_action": 10_000,
+        "max_level_nodes": 1024,
+        "max_level_depth": 64,
+    }
 
 
 def test_a_huge_repeat_action_is_refused_at_once_and_others_are_served(serve: Serve) -> None:
@@ -61,12 +69,26 @@ def test_a_huge_repeat_action_is_refused_at_once_and_others_are_served(serve: Se
 
 
 def test_the_hello_announces_the_limits_the_server_was_started_with(serve: Serve) -> None:
-    server = serve(args=["--max-frame-size", "5000", "--idle-timeout", "0",
-                         "--max-connections", "3", "--frame-deadline", "2.5"])
+    server = serve(
+        args=[
+            "--max-frame-size",
+            "5000",
+            "--idle-timeout",
+            "0",
+            "--max-connections",
+            "3",
+            "--frame-deadline",
+            "2.5",
+        ]
+    )
     with Client(server.host, server.port) as client:
         limits = client.hello.limits
-        assert (limits["max_frame_size"], limits["idle_timeout"], limits["max_connections"],
-                limits["frame_deadline"]) == (5000, None, 3, 2.5)
+        assert (
+            limits["max_frame_size"],
+            limits["idle_timeout"],
+            limits["max_connections"],
+            limits["frame_deadline"],
+        ) == (5000, None, 3, 2.5)
         assert limits["max_first_frame_size"] == 5000  # never more than max_frame_size
     with socket.create_connection((server.host, server.port), timeout=10) as raw:
         read_frame(raw)
@@ -90,8 +112,10 @@ def test_reset_returns_an_observation_of_the_space(client: Client) -> None:
 @pytest.mark.parametrize("repeat", [1, 4, 7])
 def test_an_action_runs_exactly_repeat_action_ticks(serve: Serve, repeat: int) -> None:
     """The reported count is the real count: k single ticks reach the very same state."""
-    with Client(*_address(serve()), timeout=10) as stepped, \
-            Client(*_address(serve()), timeout=10) as ticked:
+    with (
+        Client(*_address(serve()), timeout=10) as stepped,
+        Client(*_address(serve()), timeout=10) as ticked,
+    ):
         stepped.reset(seed=7)
         ticked.reset(seed=7)
         observation, reward, terminated, _, info = stepped.step(PUSH, repeat_action=repeat)
@@ -267,15 +291,16 @@ def test_reset_with_a_seed_does_not_depend_on_history(client: Client) -> None:
     assert other.tobytes() != first[0]
 
 
-def test_a_second_client_may_observe_but_not_control(
-    server: ServerProcess, client: Client
-) -> None:
+def test_a_second_client_may_observe_but_not_control(server: ServerProcess, client: Client) -> None:
     client.reset(seed=0)
     with Client(server.host, server.port, timeout=5) as second:
         seen = second.observe()  # observing is open to everyone
         assert seen["agent"].tobytes() == client.observe()["agent"].tobytes()
-        for control in (lambda: second.reset(seed=1), lambda: second.step(PUSH),
-                        lambda: second.configure(repeat_action=2)):
+        for control in (
+            lambda: second.reset(seed=1),
+            lambda: second.step(PUSH),
+            lambda: second.configure(repeat_action=2),
+        ):
             with pytest.raises(RemoteError) as error:
                 control()
             assert error.value.code == ErrorCode.BUSY and not error.value.fatal
@@ -381,8 +406,7 @@ def test_a_client_that_leaves_mid_episode_loses_nothing_for_the_next(
     connection = Connection(Role.CLIENT)
     connection.receive_data(raw.recv(65536))
     connection.next_message()
-    raw.sendall(connection.send(Request(1, {"reset": {"seed": 3},
-                                            "observation": {"agent": {}}})))
+    raw.sendall(connection.send(Request(1, {"reset": {"seed": 3}, "observation": {"agent": {}}})))
     raw.sendall(connection.send(Request(2, {"action": PUSH, "repeat_action": 7})))
     raw.close()  # gone before the answers
     with LocalClient(TARGET) as reference:  # the same requests, answered
@@ -415,8 +439,7 @@ def test_errors_in_user_code_are_reported_and_reset_recovers(serve: Serve) -> No
         with pytest.raises(RemoteError) as error:
             client.step(0)
         assert error.value.code == ErrorCode.RESET_REQUIRED
-        assert error.value.message == \
-            "the episode was stopped by an environment_error; reset first"
+        assert error.value.message == "the episode was stopped by an environment_error; reset first"
         client.reset()
         with pytest.raises(RemoteError, match="no observation for action 2"):
             client.step(2)
@@ -433,12 +456,17 @@ def test_errors_in_user_code_are_reported_and_reset_recovers(serve: Serve) -> No
 def test_discrete_actions_are_checked(serve: Serve) -> None:
     with Client(*_address(serve("examples.faulty:FaultyEnvironment")), timeout=10) as client:
         client.reset()
-        for action, message in [(3, "action is 3, outside [0, 2]"),
-                                (0.0, "action must be an integer, got float"),
-                                (True, "action must be an integer, got bool"),
-                                (np.array([1]), "action must be an integer (a Discrete value is "
-                                 "one integer, not an array), got an array of shape (1,) and "
-                                 "dtype int64")]:
+        for action, message in [
+            (3, "action is 3, outside [0, 2]"),
+            (0.0, "action must be an integer, got float"),
+            (True, "action must be an integer, got bool"),
+            (
+                np.array([1]),
+                "action must be an integer (a Discrete value is "
+                "one integer, not an array), got an array of shape (1,) and "
+                "dtype int64",
+            ),
+        ]:
             with pytest.raises(RemoteError) as error:
                 client.step(action)
             assert error.value.message == message
@@ -467,8 +495,6 @@ def _address(server: ServerProcess) -> tuple[str, int]:
     return server.host, server.port
 
 
-
-
 def test_a_server_hosts_several_instances_stepped_by_one_batch(serve: Serve) -> None:
     multi, single = serve(args=["--instances", "3"]), serve()
     with Client(multi.host, multi.port) as many, Client(single.host, single.port) as one:
@@ -478,8 +504,7 @@ def test_a_server_hosts_several_instances_stepped_by_one_batch(serve: Serve) -> 
         for seed, (observation, _) in zip((10, 11, 12), resets, strict=True):
             assert observation.tobytes() == one.reset(seed=seed)[0].tobytes()  # same episodes
         # one instance's bad action is that instance's error; the others step
-        many.send_batch([many.step_request(PUSH), many.step_request(np.zeros(2, np.float32)),
-                         None])
+        many.send_batch([many.step_request(PUSH), many.step_request(np.zeros(2, np.float32)), None])
         first, second, third = many.receive_batch()
         assert many.step_result(first)[4]["frames"] == 4
         with pytest.raises(RemoteError, match=r"shape \(2,\)"):
@@ -515,9 +540,12 @@ def test_steps_step_every_instance_in_columns_as_plain_requests_would(serve: Ser
             one.reset(seed=seed)
             observation, reward, terminated, truncated, info = one.step(actions[index], 3)
             assert columns.observation[index].tobytes() == observation.tobytes()
-            assert (columns.reward[index], columns.terminated[index],
-                    columns.truncated[index], columns.frames[index]) == \
-                (reward, terminated, truncated, info["frames"])
+            assert (
+                columns.reward[index],
+                columns.terminated[index],
+                columns.truncated[index],
+                columns.frames[index],
+            ) == (reward, terminated, truncated, info["frames"])
         # reset where the mask says so (the action of that row is ignored), step the others
         many.send_steps(actions, reset=np.array([False, True, False]))
         mixed = many.receive_steps()
@@ -561,8 +589,9 @@ def test_a_failing_instance_fails_alone_in_columns(serve: Serve) -> None:
         assert "tripped over action 1" in columns.errors[1].message
         assert columns.observation[0].tolist() == [3] and columns.frames[0] == 3
         many.send_steps(np.array([0, 0]))
-        with pytest.raises(RemoteError, match="steps: instance 1: the episode was stopped by an "
-                                                "environment_error"):
+        with pytest.raises(
+            RemoteError, match="steps: instance 1: the episode was stopped by an environment_error"
+        ):
             many.receive_steps()
         many.send_steps(np.array([0, 5]), reset=np.array([False, True]))
         with pytest.raises(RemoteError, match=r"steps.action\[1\] is 5, outside \[0, 2\]"):
@@ -581,13 +610,16 @@ def test_a_non_finite_observation_fails_its_instance_alone_in_columns(serve: Ser
         columns = many.receive_steps()
         assert columns.errors is not None and columns.errors[0] is None is columns.errors[2]
         assert columns.errors[1].code == ErrorCode.ENVIRONMENT_ERROR
-        assert "the observation of /root/Counting/Agent is not finite at [0]" in \
-            columns.errors[1].message
+        assert (
+            "the observation of /root/Counting/Agent is not finite at [0]"
+            in columns.errors[1].message
+        )
         assert columns.observation[[0, 2], 0].tolist() == [2.0, 2.0]
         assert np.isfinite(columns.observation).all()  # the failed row is blank, not NaN
         many.send_steps(np.zeros(3, np.int64))
-        with pytest.raises(RemoteError, match="steps: instance 1: the episode was stopped by an "
-                                                "environment_error"):
+        with pytest.raises(
+            RemoteError, match="steps: instance 1: the episode was stopped by an environment_error"
+        ):
             many.receive_steps()
 
 
@@ -599,8 +631,10 @@ def test_joint_actions_in_columns_are_checked_whole(serve: Serve) -> None:
         many.send_steps(rows, reset=np.ones(2, np.bool_))
         assert many.receive_steps().errors is None
         for bad, words in [
-            ({**rows, "Blue": np.zeros((3, 2), np.float32)},
-             r"steps.action\['Blue'\] has shape \(3, 2\), expected \(2, 2\)"),
+            (
+                {**rows, "Blue": np.zeros((3, 2), np.float32)},
+                r"steps.action\['Blue'\] has shape \(3, 2\), expected \(2, 2\)",
+            ),
             ({"Blue": rows["Blue"]}, r"missing keys \['Red'\]"),
             (np.zeros((2, 2), np.float32), r"must be a map with keys \['Blue', 'Red'\]"),
         ]:
@@ -617,8 +651,10 @@ def test_a_single_instance_server_takes_batches_and_steps_as_a_host_of_one(
     serve: Serve,
 ) -> None:
     """No request form depends on how many instances a server hosts."""
-    with Client(*_address(serve()), timeout=10) as steps, \
-            Client(*_address(serve()), timeout=10) as plain:
+    with (
+        Client(*_address(serve()), timeout=10) as steps,
+        Client(*_address(serve()), timeout=10) as plain,
+    ):
         steps.send_batch([steps.reset_request(seed=3)])
         (reply,) = steps.receive_batch()
         observation, _ = plain.reset(seed=3)
@@ -629,8 +665,11 @@ def test_a_single_instance_server_takes_batches_and_steps_as_a_host_of_one(
             observation, reward, terminated, _, info = plain.step(PUSH, 2)
             assert columns.observation.shape == (1, 5) and columns.errors is None
             assert columns.observation[0].tobytes() == observation.tobytes()
-            assert (columns.reward[0], columns.terminated[0], columns.frames[0]) == \
-                (reward, terminated, info["frames"])
+            assert (columns.reward[0], columns.terminated[0], columns.frames[0]) == (
+                reward,
+                terminated,
+                info["frames"],
+            )
 
 
 def test_batches_are_validated_part_by_part(server: ServerProcess) -> None:
@@ -660,8 +699,10 @@ def test_the_token_is_checked_on_every_request_until_one_carries_it(serve: Serve
 
     with socket.create_connection((server.host, server.port), timeout=10) as raw:
         assert read_frame(raw)["hello"]["token_required"] is True
-        for malformed, code in [({"id": "one", "token": "s3cret"}, ErrorCode.BAD_REQUEST),
-                                ({"id": 1, "token": 7}, ErrorCode.BAD_REQUEST)]:
+        for malformed, code in [
+            ({"id": "one", "token": "s3cret"}, ErrorCode.BAD_REQUEST),
+            ({"id": 1, "token": 7}, ErrorCode.BAD_REQUEST),
+        ]:
             reply = call(raw, malformed)
             assert reply["error"]["code"] == code and not reply["error"]["fatal"], reply
         raw.sendall(struct.pack(">I", 1) + b"\xc1")  # not even msgpack
@@ -690,8 +731,9 @@ def test_a_row_that_failed_counts_its_ticks_afresh_after_its_reset(
         failed = client.receive_steps()
         assert failed.errors is not None and failed.errors[1].code == ErrorCode.ENVIRONMENT_ERROR
         if reset_by == "steps":
-            client.send_steps(np.zeros(3, np.int64), reset=np.array([False, True, False]),
-                              repeat_action=3)
+            client.send_steps(
+                np.zeros(3, np.int64), reset=np.array([False, True, False]), repeat_action=3
+            )
             client.receive_steps()
         else:
             client.send_batch([None, Request(0, {"reset": {}})])
@@ -709,19 +751,22 @@ def test_a_failed_request_leaves_no_ticks_nor_reward_to_later_answers(serve: Ser
     """An action that fails after 3 ticks: its ticks and reward belong to no answer, and its
     episode cannot be snapshotted (restoring it would fail the same way)."""
     server = serve("examples.faulty:FaultyEnvironment")
-    with Client(server.host, server.port) as client, \
-            Client(server.host, server.port) as observer:
+    with Client(server.host, server.port) as client, Client(server.host, server.port) as observer:
         client.reset(seed=0)
         with pytest.raises(RemoteError) as error:
             client._call(action=2, observation={"agent": {}})  # fails when observed
         assert error.value.code == ErrorCode.ENVIRONMENT_ERROR
-        for answer in (client._call(action=None), client._call(config={}),
-                       observer._call(inspect={"tree": {}})):
+        for answer in (
+            client._call(action=None),
+            client._call(config={}),
+            observer._call(inspect={"tree": {}}),
+        ):
             assert (answer.frames, answer.reward) == (0, 0.0)
         with pytest.raises(RemoteError) as refused:
             client.snapshot()
         assert refused.value.code == ErrorCode.RESET_REQUIRED
-        assert refused.value.message == \
-            "the episode was stopped by an environment_error; reset first"
+        assert (
+            refused.value.message == "the episode was stopped by an environment_error; reset first"
+        )
         client.reset(seed=0)
         assert client.step(0)[4]["frames"] == 3

@@ -28,15 +28,15 @@ from rlenv_client import Client, RemoteVectorEnv
 
 pytestmark = pytest.mark.skipif(
     lane_unavailable(Hello("x", spaces.Box(0, 1, (1,)), spaces.Box(0, 1, (1,)))) is not None,
-    reason="no shared-memory lanes on this platform")
+    reason="no shared-memory lanes on this platform",
+)
 
 BOX = spaces.Box(-1.0, 1.0, (3,), np.float32)
 ENDLESS = {"world": {"track_limit": 1e9}, "agent": {"angle_limit": 1e9}}
 FAULTY = "examples.faulty:{}"
 
 
-def slots_for(action: spaces.Space, observation: spaces.Space = BOX,
-              instances: int = 4) -> Slots:
+def slots_for(action: spaces.Space, observation: spaces.Space = BOX, instances: int = 4) -> Slots:
     hello = Hello("Test", action, observation, instances=instances)
     layout = Layout.for_hello(hello)
     return Slots(mmap.mmap(-1, layout.size), layout, hello)
@@ -46,8 +46,14 @@ def slots_for(action: spaces.Space, observation: spaces.Space = BOX,
 
 
 def test_the_layout_puts_every_region_on_8_bytes_and_in_order() -> None:
-    layout = Layout.for_hello(Hello("T", spaces.Box(0, 1, (3,), np.float32),
-                                    spaces.Box(0, 255, (5, 7), np.uint8), instances=3))
+    layout = Layout.for_hello(
+        Hello(
+            "T",
+            spaces.Box(0, 1, (3,), np.float32),
+            spaces.Box(0, 255, (5, 7), np.uint8),
+            instances=3,
+        )
+    )
     wire = layout.to_wire()
     order = ["actions", "reset", "observation", "reward", "frames", "terminated", "truncated"]
     offsets = [wire[name] for name in order]
@@ -58,28 +64,57 @@ def test_the_layout_puts_every_region_on_8_bytes_and_in_order() -> None:
     assert wire["size"] % 64 == 0 and wire["size"] >= wire["truncated"] + 3
 
 
-@pytest.mark.parametrize(("hello", "why"), [
-    (Hello("T", BOX, spaces.Dict({"a": BOX})), "observation space (Dict) has no fixed-size"),
-    (Hello("T", spaces.Tuple([BOX]), BOX), "action space (Tuple) has no fixed-size"),
-    (Hello("T", BOX, spaces.Discrete(3)), "observation space (Discrete) has no fixed-size"),
-    (Hello("T", BOX, BOX, agents=("a", "b")), "has 2 agents"),
-])
+@pytest.mark.parametrize(
+    ("hello", "why"),
+    [
+        (Hello("T", BOX, spaces.Dict({"a": BOX})), "observation space (Dict) has no fixed-size"),
+        (Hello("T", spaces.Tuple([BOX]), BOX), "action space (Tuple) has no fixed-size"),
+        (Hello("T", BOX, spaces.Discrete(3)), "observation space (Discrete) has no fixed-size"),
+        (Hello("T", BOX, BOX, agents=("a", "b")), "has 2 agents"),
+    ],
+)
 def test_a_lane_says_why_it_cannot_carry_a_server(hello: Hello, why: str) -> None:
     assert why in (lane_unavailable(hello) or "")
     with pytest.raises(ValueError, match=why.replace("(", r"\(").replace(")", r"\)")):
         Layout.for_hello(hello)
 
 
-@pytest.mark.parametrize("request_", [
-    Request(7, {"action": np.arange(3, dtype=np.float32).tobytes(),
-                "observation": {"agent": {}}}),
-    Request(8, {"action": np.ones(3, np.float32).tobytes(), "observation": {"agent": {}},
-                "repeat_action": 9}),
-    Request(9, {"steps": {"action": np.arange(12, dtype=np.float32).tobytes(),
-                          "reset": bytes([0, 1, 0, 1])}}),
-    Request(10, {"steps": {"action": np.zeros(12, np.float32).tobytes(),
-                           "reset": bytes(4), "repeat_action": 2}}),
-], ids=["step", "step-repeat", "steps", "steps-repeat"])
+@pytest.mark.parametrize(
+    "request_",
+    [
+        Request(
+            7, {"action": np.arange(3, dtype=np.float32).tobytes(), "observation": {"agent": {}}}
+        ),
+        Request(
+            8,
+            {
+                "action": np.ones(3, np.float32).tobytes(),
+                "observation": {"agent": {}},
+                "repeat_action": 9,
+            },
+        ),
+        Request(
+            9,
+            {
+                "steps": {
+                    "action": np.arange(12, dtype=np.float32).tobytes(),
+                    "reset": bytes([0, 1, 0, 1]),
+                }
+            },
+        ),
+        Request(
+            10,
+            {
+                "steps": {
+                    "action": np.zeros(12, np.float32).tobytes(),
+                    "reset": bytes(4),
+                    "repeat_action": 2,
+                }
+            },
+        ),
+    ],
+    ids=["step", "step-repeat", "steps", "steps-repeat"],
+)
 def test_a_request_that_fits_reads_back_as_it_was_written(request_: Request) -> None:
     slots = slots_for(BOX)
     before = slots.request_sequence
@@ -96,49 +131,67 @@ def test_a_steps_request_without_reset_flags_reads_back_with_none_set() -> None:
     assert slots.read_request() == Request(3, {"steps": {"action": action, "reset": bytes(4)}})
 
 
-@pytest.mark.parametrize(("reset", "repeat"), [
-    (np.array([False, True, False, True]), None), (None, 2)], ids=["reset-flags", "repeat"])
+@pytest.mark.parametrize(
+    ("reset", "repeat"),
+    [(np.array([False, True, False, True]), None), (None, 2)],
+    ids=["reset-flags", "repeat"],
+)
 def test_steps_written_as_columns_read_back_as_the_request_they_stand_for(
-        reset: np.ndarray | None, repeat: int | None) -> None:
+    reset: np.ndarray | None, repeat: int | None
+) -> None:
     slots = slots_for(BOX)
     action = np.arange(12, dtype=np.float32).reshape(4, 3)
     assert slots.write_steps(5, action, reset, repeat) and slots.request_sequence == 1
-    steps = {"action": action.tobytes(),
-             "reset": bytes(4) if reset is None else reset.astype(np.uint8).tobytes()}
+    steps = {
+        "action": action.tobytes(),
+        "reset": bytes(4) if reset is None else reset.astype(np.uint8).tobytes(),
+    }
     if repeat is not None:
         steps["repeat_action"] = repeat
     assert slots.read_request() == Request(5, {"steps": steps})
 
 
-@pytest.mark.parametrize(("action", "reset", "repeat"), [
-    (np.zeros((4, 3), np.float64), None, None),
-    (np.zeros((3, 3), np.float32), None, None),
-    (np.zeros(12, np.float32), None, None),
-    (np.zeros((4, 3), np.float32).tolist(), None, None),
-    (np.zeros((4, 3), np.float32), np.zeros(4, np.uint8), None),
-    (np.zeros((4, 3), np.float32), [False] * 4, None),
-    (np.zeros((4, 3), np.float32), None, 0),
-], ids=["dtype", "count", "flat", "list", "uint8-flags", "list-flags", "repeat-0"])
-def test_columns_that_do_not_fit_are_left_to_write_request(action: object, reset: object,
-                                                           repeat: int | None) -> None:
+@pytest.mark.parametrize(
+    ("action", "reset", "repeat"),
+    [
+        (np.zeros((4, 3), np.float64), None, None),
+        (np.zeros((3, 3), np.float32), None, None),
+        (np.zeros(12, np.float32), None, None),
+        (np.zeros((4, 3), np.float32).tolist(), None, None),
+        (np.zeros((4, 3), np.float32), np.zeros(4, np.uint8), None),
+        (np.zeros((4, 3), np.float32), [False] * 4, None),
+        (np.zeros((4, 3), np.float32), None, 0),
+    ],
+    ids=["dtype", "count", "flat", "list", "uint8-flags", "list-flags", "repeat-0"],
+)
+def test_columns_that_do_not_fit_are_left_to_write_request(
+    action: object, reset: object, repeat: int | None
+) -> None:
     slots = slots_for(BOX)
     assert not slots.write_steps(5, action, reset, repeat)
     assert slots.request_sequence == 0  # nothing written
 
 
-@pytest.mark.parametrize(("space", "action", "repeat"), [
-    (BOX, np.array([0.5, -0.25, 1.0], np.float32), None),
-    (BOX, np.array([0.5, -0.25, 1.0], np.float32), 3),
-    (spaces.Discrete(5, start=-2), -2, None),
-    (spaces.Discrete(5, start=-2), np.int64(2), 4),
-    (spaces.Discrete(3, dtype=np.int8), np.int8(1), None),
-], ids=["box", "box-repeat", "discrete-int", "discrete-numpy", "discrete-int8"])
+@pytest.mark.parametrize(
+    ("space", "action", "repeat"),
+    [
+        (BOX, np.array([0.5, -0.25, 1.0], np.float32), None),
+        (BOX, np.array([0.5, -0.25, 1.0], np.float32), 3),
+        (spaces.Discrete(5, start=-2), -2, None),
+        (spaces.Discrete(5, start=-2), np.int64(2), 4),
+        (spaces.Discrete(3, dtype=np.int8), np.int8(1), None),
+    ],
+    ids=["box", "box-repeat", "discrete-int", "discrete-numpy", "discrete-int8"],
+)
 def test_a_step_written_in_place_is_the_request_write_request_writes(
-        space: spaces.Space, action: object, repeat: int | None) -> None:
+    space: spaces.Space, action: object, repeat: int | None
+) -> None:
     in_place, by_request = slots_for(space), slots_for(space)
     assert in_place.write_step(7, action, repeat)
-    parts = {"action": int(action) if isinstance(space, spaces.Discrete) else action.tobytes(),
-             "observation": {"agent": {}}}
+    parts = {
+        "action": int(action) if isinstance(space, spaces.Discrete) else action.tobytes(),
+        "observation": {"agent": {}},
+    }
     if repeat is not None:
         parts["repeat_action"] = repeat
     assert by_request.write_request(Request(7, parts)) == STEP
@@ -146,18 +199,23 @@ def test_a_step_written_in_place_is_the_request_write_request_writes(
     assert in_place.read_request() == Request(7, parts)
 
 
-@pytest.mark.parametrize(("space", "action", "repeat"), [
-    (BOX, np.zeros(3, np.float64), None),
-    (BOX, np.zeros((1, 3), np.float32), None),
-    (BOX, [0.0, 0.0, 0.0], None),
-    (BOX, np.zeros(3, np.float32), 0),
-    (BOX, None, None),
-    (spaces.Discrete(3), 3, None),
-    (spaces.Discrete(3), True, None),
-    (spaces.Discrete(3), 1.0, None),
-], ids=["dtype", "shape", "list", "repeat-0", "none", "out-of-range", "bool", "float"])
-def test_a_step_that_does_not_fit_is_left_to_write_request(space: spaces.Space, action: object,
-                                                           repeat: int | None) -> None:
+@pytest.mark.parametrize(
+    ("space", "action", "repeat"),
+    [
+        (BOX, np.zeros(3, np.float64), None),
+        (BOX, np.zeros((1, 3), np.float32), None),
+        (BOX, [0.0, 0.0, 0.0], None),
+        (BOX, np.zeros(3, np.float32), 0),
+        (BOX, None, None),
+        (spaces.Discrete(3), 3, None),
+        (spaces.Discrete(3), True, None),
+        (spaces.Discrete(3), 1.0, None),
+    ],
+    ids=["dtype", "shape", "list", "repeat-0", "none", "out-of-range", "bool", "float"],
+)
+def test_a_step_that_does_not_fit_is_left_to_write_request(
+    space: spaces.Space, action: object, repeat: int | None
+) -> None:
     slots = slots_for(space)
     assert not slots.write_step(7, action, repeat)
     assert slots.request_sequence == 0 and not any(bytes(slots._buffer))
@@ -173,27 +231,61 @@ def test_a_discrete_action_travels_as_its_dtype() -> None:
     assert slots.read_request().parts["steps"]["action"] == batch
 
 
-@pytest.mark.parametrize("request_", [
-    Request(1, {"action": np.zeros(3, np.float32).tobytes(), "observation": {"agent": {}}},
-            token="secret"),
-    Request(1, {"action": np.zeros(3, np.float32).tobytes(),
-                "observation": {"agent": {}, "world": {}}}),
-    Request(1, {"action": np.zeros(3, np.float32).tobytes()}),
-    Request(1, {"action": np.zeros(2, np.float32).tobytes(), "observation": {"agent": {}}}),
-    Request(1, {"action": [0.0, 0.0, 0.0], "observation": {"agent": {}}}),
-    Request(1, {"action": np.zeros(3, np.float32).tobytes(), "observation": {"agent": {}},
-                "repeat_action": 0}),
-    Request(1, {"action": np.zeros(3, np.float32).tobytes(), "observation": {"agent": {}},
-                "reset": {}}),
-    Request(1, {"steps": {"action": np.zeros(12, np.float32).tobytes(), "reset": [True] * 4}}),
-    Request(1, {"steps": {"action": np.zeros(12, np.float32).tobytes(), "extra": 1}}),
-    Request(1, {"steps": {"action": np.zeros(12, np.float32).tobytes(),
-                          "repeat_action": 1.5}}),
-    Request(1, {"steps": {"action": np.zeros(9, np.float32).tobytes()}}),
-    Request(1, {"reset": {"seed": 0}, "observation": {"agent": {}}}),
-], ids=["token", "world", "no-observation", "short-action", "list-action", "repeat-0",
-        "with-reset", "reset-list", "steps-extra-key", "steps-repeat-float", "steps-short",
-        "reset"])
+@pytest.mark.parametrize(
+    "request_",
+    [
+        Request(
+            1,
+            {"action": np.zeros(3, np.float32).tobytes(), "observation": {"agent": {}}},
+            token="secret",
+        ),
+        Request(
+            1,
+            {
+                "action": np.zeros(3, np.float32).tobytes(),
+                "observation": {"agent": {}, "world": {}},
+            },
+        ),
+        Request(1, {"action": np.zeros(3, np.float32).tobytes()}),
+        Request(1, {"action": np.zeros(2, np.float32).tobytes(), "observation": {"agent": {}}}),
+        Request(1, {"action": [0.0, 0.0, 0.0], "observation": {"agent": {}}}),
+        Request(
+            1,
+            {
+                "action": np.zeros(3, np.float32).tobytes(),
+                "observation": {"agent": {}},
+                "repeat_action": 0,
+            },
+        ),
+        Request(
+            1,
+            {
+                "action": np.zeros(3, np.float32).tobytes(),
+                "observation": {"agent": {}},
+                "reset": {},
+            },
+        ),
+        Request(1, {"steps": {"action": np.zeros(12, np.float32).tobytes(), "reset": [True] * 4}}),
+        Request(1, {"steps": {"action": np.zeros(12, np.float32).tobytes(), "extra": 1}}),
+        Request(1, {"steps": {"action": np.zeros(12, np.float32).tobytes(), "repeat_action": 1.5}}),
+        Request(1, {"steps": {"action": np.zeros(9, np.float32).tobytes()}}),
+        Request(1, {"reset": {"seed": 0}, "observation": {"agent": {}}}),
+    ],
+    ids=[
+        "token",
+        "world",
+        "no-observation",
+        "short-action",
+        "list-action",
+        "repeat-0",
+        "with-reset",
+        "reset-list",
+        "steps-extra-key",
+        "steps-repeat-float",
+        "steps-short",
+        "reset",
+    ],
+)
 def test_anything_else_stays_for_the_socket(request_: Request) -> None:
     slots = slots_for(BOX)
     before = slots.request_sequence
@@ -214,10 +306,15 @@ def test_answers_that_fit_read_back_as_they_were_written() -> None:
     assert slots.write_answer(response, STEP) and slots.answer_sequence == 1
     assert slots.read_answer(STEP) == response
     column = np.arange(12, dtype=np.float32).tobytes()
-    steps = StepsResponse(12, column, np.array([1.0, 2.0, 0.0, -1.0]),
-                          np.array([True, False, False, True]),
-                          np.array([False, True, False, False]), np.array([4, 4, 1, 2]),
-                          ({},) * 4)
+    steps = StepsResponse(
+        12,
+        column,
+        np.array([1.0, 2.0, 0.0, -1.0]),
+        np.array([True, False, False, True]),
+        np.array([False, True, False, False]),
+        np.array([4, 4, 1, 2]),
+        ({},) * 4,
+    )
     assert slots.write_answer(steps, STEPS) and slots.answer_sequence == 2
     back = slots.read_answer(STEPS)
     assert back.id == 12 and back.observation == column and back.info == steps.info
@@ -231,11 +328,15 @@ def test_a_steps_answer_read_without_copy_is_read_only_views_of_the_slots() -> N
     slots = slots_for(BOX)
     for answer_id in (1, 2):  # the views show the answer written last
         column = np.arange(12, dtype=np.float32) * answer_id
-        steps = StepsResponse(answer_id, column.tobytes(),
-                              np.array([1.0, 2.0, 0.0, -1.0]) * answer_id,
-                              np.array([True, False, False, answer_id == 2]),
-                              np.array([False, True, False, False]),
-                              np.array([4, 4, 1, answer_id]), ({},) * 4)
+        steps = StepsResponse(
+            answer_id,
+            column.tobytes(),
+            np.array([1.0, 2.0, 0.0, -1.0]) * answer_id,
+            np.array([True, False, False, answer_id == 2]),
+            np.array([False, True, False, False]),
+            np.array([4, 4, 1, answer_id]),
+            ({},) * 4,
+        )
         assert slots.write_answer(steps, STEPS)
         if answer_id == 1:
             views = slots.read_answer(STEPS, copy=False)
@@ -246,22 +347,46 @@ def test_a_steps_answer_read_without_copy_is_read_only_views_of_the_slots() -> N
             assert getattr(views, name).dtype == getattr(copies, name).dtype
     assert views.id == 1 and views.info == steps.info and views.errors is None
     assert copies.observation == (np.arange(12, dtype=np.float32)).tobytes()  # its own copy
-    for array in (views.observation, views.reward, views.terminated, views.truncated,
-                  views.frames):
+    for array in (views.observation, views.reward, views.terminated, views.truncated, views.frames):
         assert not array.flags.writeable
 
 
-@pytest.mark.parametrize(("reply", "kind"), [
-    (Response(1, {"agent": bytes(12)}, info={"late": True}), STEP),
-    (Response(1, {"agent": bytes(12), "world": {}}), STEP),
-    (Response(1, {"agent": bytes(8)}), STEP),
-    (Response(1, None), STEP),
-    (StepsResponse(1, bytes(48), np.zeros(4), np.zeros(4, bool), np.zeros(4, bool),
-                   np.zeros(4, np.int64), ({}, {"x": 1}, {}, {})), STEPS),
-    (StepsResponse(1, bytes(48), np.zeros(4), np.zeros(4, bool), np.zeros(4, bool),
-                   np.zeros(4, np.int64), ({},) * 4, (None, None, None, None)), STEPS),
-    (Response(1, {"agent": bytes(12)}), STEPS),
-], ids=["info", "world", "short", "no-observation", "steps-info", "steps-errors", "kind"])
+@pytest.mark.parametrize(
+    ("reply", "kind"),
+    [
+        (Response(1, {"agent": bytes(12)}, info={"late": True}), STEP),
+        (Response(1, {"agent": bytes(12), "world": {}}), STEP),
+        (Response(1, {"agent": bytes(8)}), STEP),
+        (Response(1, None), STEP),
+        (
+            StepsResponse(
+                1,
+                bytes(48),
+                np.zeros(4),
+                np.zeros(4, bool),
+                np.zeros(4, bool),
+                np.zeros(4, np.int64),
+                ({}, {"x": 1}, {}, {}),
+            ),
+            STEPS,
+        ),
+        (
+            StepsResponse(
+                1,
+                bytes(48),
+                np.zeros(4),
+                np.zeros(4, bool),
+                np.zeros(4, bool),
+                np.zeros(4, np.int64),
+                ({},) * 4,
+                (None, None, None, None),
+            ),
+            STEPS,
+        ),
+        (Response(1, {"agent": bytes(12)}), STEPS),
+    ],
+    ids=["info", "world", "short", "no-observation", "steps-info", "steps-errors", "kind"],
+)
 def test_answers_that_do_not_fit_leave_the_slots_alone(reply: object, kind: int) -> None:
     slots = slots_for(BOX)
     assert not slots.write_answer(reply, kind)  # type: ignore[arg-type]
@@ -279,7 +404,8 @@ def episodes(client: Client, seed: int, actions: list[float]) -> list[tuple]:
     results.append(("reset", observation.tobytes()))
     for action in actions:
         observation, reward, terminated, truncated, info = client.step(
-            np.array([action], np.float32), repeat_action=3)
+            np.array([action], np.float32), repeat_action=3
+        )
         results.append((observation.tobytes(), reward, terminated, truncated, info))
         if terminated or truncated:
             observation, _ = client.reset()
@@ -310,15 +436,21 @@ def steps_of(client: Client, seed: int, rounds: int, copy: bool = True) -> list[
     for _ in range(rounds):
         client.send_steps(rng.uniform(-1, 1, (count, 1)).astype(np.float32), resetting, 2)
         answer = client.receive_steps(copy=copy)
-        results.append((answer.observation.tobytes(), answer.reward.tolist(),
-                        answer.terminated.tolist(), answer.truncated.tolist(),
-                        answer.frames.tolist(), answer.info))
+        results.append(
+            (
+                answer.observation.tobytes(),
+                answer.reward.tolist(),
+                answer.terminated.tolist(),
+                answer.truncated.tolist(),
+                answer.frames.tolist(),
+                answer.info,
+            )
+        )
         resetting = answer.terminated | answer.truncated
     return results
 
 
-def test_steps_of_many_instances_through_a_lane_are_those_through_the_socket(
-        serve: Serve) -> None:
+def test_steps_of_many_instances_through_a_lane_are_those_through_the_socket(serve: Serve) -> None:
     server = serve(args=["--instances", "5"])
     with Client(server.host, server.port, shared_memory=True) as lane:
         through_lane = steps_of(lane, 11, 150)
@@ -341,11 +473,13 @@ def test_a_discrete_environment_steps_through_a_lane(serve: Serve) -> None:
 
 
 def test_discrete_steps_of_many_instances_go_through_the_slots_as_through_the_socket(
-        serve: Serve) -> None:
+    serve: Serve,
+) -> None:
     """K Discrete actions (int64, as gymnasium batches them) are written into the slots as
     they are; the episodes are those stepped on the socket."""
-    server = serve("examples.classic_cartpole:ClassicCartPoleEnvironment",
-                   args=["--instances", "3"])
+    server = serve(
+        "examples.classic_cartpole:ClassicCartPoleEnvironment", args=["--instances", "3"]
+    )
     results = []
     for shared_memory in (True, False):
         with Client(server.host, server.port, shared_memory=shared_memory) as client:
@@ -355,8 +489,14 @@ def test_discrete_steps_of_many_instances_go_through_the_slots_as_through_the_so
             for step in range(60):
                 client.send_steps(np.array([step % 2, 1, 0], np.int64), resetting)
                 answer = client.receive_steps(copy=False)
-                seen.append((answer.observation.tobytes(), answer.reward.tolist(),
-                             answer.terminated.tolist(), answer.frames.tolist()))
+                seen.append(
+                    (
+                        answer.observation.tobytes(),
+                        answer.reward.tolist(),
+                        answer.terminated.tolist(),
+                        answer.frames.tolist(),
+                    )
+                )
                 resetting = answer.terminated | answer.truncated
             results.append(seen)
     assert results[0] == results[1]
@@ -379,9 +519,17 @@ def test_views_of_an_answer_outlive_their_client(serve: Serve) -> None:
 def faulty_session(client: Client) -> list[object]:
     """A refusal, a failure and steps, as results or errors (code and message)."""
     outcomes: list[object] = []
-    for call in (lambda: client.step(0), lambda: client.reset(seed=0), lambda: client.step(7),
-                 lambda: client.step(2), lambda: client.reset(seed=0), lambda: client.step(0),
-                 lambda: client.step(1), lambda: client.reset(seed=0), lambda: client.step(0)):
+    for call in (
+        lambda: client.step(0),
+        lambda: client.reset(seed=0),
+        lambda: client.step(7),
+        lambda: client.step(2),
+        lambda: client.reset(seed=0),
+        lambda: client.step(0),
+        lambda: client.step(1),
+        lambda: client.reset(seed=0),
+        lambda: client.step(0),
+    ):
         try:
             outcomes.append(str(call()))
         except RemoteError as error:
@@ -390,16 +538,17 @@ def faulty_session(client: Client) -> list[object]:
 
 
 def test_refusals_and_failures_come_as_they_would_on_the_socket(serve: Serve) -> None:
-    server, other = serve(FAULTY.format("FaultyEnvironment")), \
-        serve(FAULTY.format("FaultyEnvironment"))
+    server, other = (
+        serve(FAULTY.format("FaultyEnvironment")),
+        serve(FAULTY.format("FaultyEnvironment")),
+    )
     with Client(server.host, server.port, shared_memory=True) as client:
         through_lane = faulty_session(client)
         assert client.shared_memory  # the lane stays
     with Client(other.host, other.port, shared_memory=False) as client:
         assert faulty_session(client) == through_lane
     codes = [outcome[0] for outcome in through_lane if isinstance(outcome, tuple)]
-    assert codes == ["reset_required", "invalid_action", "environment_error",
-                     "environment_error"]
+    assert codes == ["reset_required", "invalid_action", "environment_error", "environment_error"]
 
 
 def test_an_answer_with_an_info_comes_on_the_socket(serve: Serve) -> None:
@@ -447,8 +596,9 @@ _KILLED_CLIENT = textwrap.dedent("""
 
 def test_a_client_killed_mid_lane_leaves_the_server_serving(serve: Serve) -> None:
     server = serve()
-    process = subprocess.Popen([sys.executable, "-c", _KILLED_CLIENT, str(server.port)],
-                               stdout=subprocess.PIPE, text=True)
+    process = subprocess.Popen(
+        [sys.executable, "-c", _KILLED_CLIENT, str(server.port)], stdout=subprocess.PIPE, text=True
+    )
     try:
         assert process.stdout is not None
         assert process.stdout.readline() == "stepping\n"
@@ -487,7 +637,8 @@ def test_an_interrupted_wait_drops_its_answer_and_keeps_order(serve: Serve) -> N
 
 
 def test_rlenv_shared_memory_0_keeps_steps_on_the_socket(
-        serve: Serve, monkeypatch: pytest.MonkeyPatch) -> None:
+    serve: Serve, monkeypatch: pytest.MonkeyPatch
+) -> None:
     server = serve()
     monkeypatch.setenv("RLENV_SHARED_MEMORY", "0")
     with Client(server.host, server.port) as client:
@@ -518,14 +669,18 @@ def ask(port: int, parts: dict) -> object:
         return client.receive_reply()
 
 
-@pytest.mark.parametrize(("value", "message"), [
-    ({"address": "/run/docker.sock", "key": bytes(16)}, "must be 'rlenv-lane-'"),
-    ({"address": "rlenv-lane-" + "0" * 32, "key": b"short"}, "must be 16 bytes"),
-    ({"address": "rlenv-lane-" + "0" * 32, "key": bytes(16)}, "cannot be reached"),
-    ([], "must be a map"),
-])
-def test_the_server_refuses_a_lane_it_cannot_open(serve: Serve, value: object,
-                                                  message: str) -> None:
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ({"address": "/run/docker.sock", "key": bytes(16)}, "must be 'rlenv-lane-'"),
+        ({"address": "rlenv-lane-" + "0" * 32, "key": b"short"}, "must be 16 bytes"),
+        ({"address": "rlenv-lane-" + "0" * 32, "key": bytes(16)}, "cannot be reached"),
+        ([], "must be a map"),
+    ],
+)
+def test_the_server_refuses_a_lane_it_cannot_open(
+    serve: Serve, value: object, message: str
+) -> None:
     server = serve()
     reply = ask(server.port, {"shared_memory": value})
     assert reply.code == "bad_request" and message in reply.message  # type: ignore[attr-defined]
@@ -535,8 +690,7 @@ def test_a_lane_goes_alone_in_a_request(serve: Serve) -> None:
     server = serve()
     listener, name, key = listen_for_lane()
     with listener:
-        reply = ask(server.port, {"shared_memory": {"address": name, "key": key},
-                                  "reset": {}})
+        reply = ask(server.port, {"shared_memory": {"address": name, "key": key}, "reset": {}})
     assert reply.code == "bad_request"  # type: ignore[attr-defined]
     assert "goes alone" in reply.message  # type: ignore[attr-defined]
 
@@ -622,6 +776,11 @@ _LANE_WITHOUT_DESCRIPTORS = textwrap.dedent("""
 
 
 def test_a_lane_that_cannot_open_leaves_no_descriptor_behind() -> None:
-    result = subprocess.run([sys.executable, "-c", _LANE_WITHOUT_DESCRIPTORS],
-                            capture_output=True, text=True, timeout=120, check=True)
+    result = subprocess.run(
+        [sys.executable, "-c", _LANE_WITHOUT_DESCRIPTORS],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=True,
+    )
     assert result.stdout.split() == ["EMFILE", "free"]

@@ -83,7 +83,8 @@ def test_a_forked_child_starts_servers_of_its_own() -> None:
 
 
 def test_a_server_that_starts_holds_up_only_those_that_wait_for_it(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     # A target whose import waits for a gate file: its server takes as long as the test says.
     started, gate = tmp_path / "started", tmp_path / "gate"
     (tmp_path / "gated_cartpole.py").write_text(
@@ -92,9 +93,11 @@ def test_a_server_that_starts_holds_up_only_those_that_wait_for_it(
         "deadline = time.monotonic() + 120\n"
         f"while not pathlib.Path({str(gate)!r}).exists() and time.monotonic() < deadline:\n"
         "    time.sleep(0.01)\n"
-        "from examples.cartpole import CartPoleEnvironment\n")
-    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(tmp_path),
-                                                      os.environ.get("PYTHONPATH", "")]))
+        "from examples.cartpole import CartPoleEnvironment\n"
+    )
+    monkeypatch.setenv(
+        "PYTHONPATH", os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")])
+    )
     shared = SharedServers()
     leased: dict[str, ServerProcess] = {}
 
@@ -106,8 +109,9 @@ def test_a_server_that_starts_holds_up_only_those_that_wait_for_it(
     first.start()
     try:
         wait_until(started.exists, "the gated server did not start")
-        other = threading.Thread(target=lease,
-                                 args=("other", "examples.cartpole:CartPoleEnvironment"))
+        other = threading.Thread(
+            target=lease, args=("other", "examples.cartpole:CartPoleEnvironment")
+        )
         other.start()
         other.join(timeout=60)
         assert not other.is_alive() and first.is_alive()  # served while the first still starts

@@ -29,8 +29,7 @@ def steps(client: Client, actions: list[Any], repeat: int | None = None) -> list
 
 def test_a_snapshot_restored_in_another_server_steps_on_identically(serve: Serve) -> None:
     first, second = serve(), serve()
-    with Client(first.host, first.port) as original, \
-            Client(second.host, second.port) as copy:
+    with Client(first.host, first.port) as original, Client(second.host, second.port) as copy:
         original.configure(agent={"max_force": 12.0}, repeat_action=3)
         original.reset(seed=21)
         steps(original, CARTPOLE_ACTIONS[:7])
@@ -59,8 +58,9 @@ def test_snapshots_survive_mid_episode_configuration(client: Client) -> None:
     client.configure(agent={"max_force": 5.0})
     steps(client, CARTPOLE_ACTIONS[3:6], repeat=1)
     snapshot = client.snapshot()
-    assert [event[0] for event in snapshot["events"]] == ["action"] * 3 + ["config"] + \
-        ["action"] * 3
+    assert [event[0] for event in snapshot["events"]] == ["action"] * 3 + ["config"] + [
+        "action"
+    ] * 3
     after = steps(client, CARTPOLE_ACTIONS[6:15], repeat=1)
     assert len(after) == 9
     client.configure(agent={"max_force": 10.0})
@@ -100,11 +100,13 @@ def test_bad_snapshots_are_refused_and_change_nothing(client: Client) -> None:
         (_tampered(good, rng="__import__('os')"), ErrorCode.BAD_REQUEST, "invalid rng state"),
         (_tampered(good, rng=evil_rng), ErrorCode.BAD_REQUEST, "invalid rng state"),
         (_tampered(good, events=[["exec", "print(1)"]]), ErrorCode.BAD_REQUEST, "events[0]"),
-        (_tampered(good, events=[["action", np.zeros(3, np.float32), 1]]),
-         ErrorCode.INVALID_ACTION, "events[0]: action has shape (3,)"),
+        (
+            _tampered(good, events=[["action", np.zeros(3, np.float32), 1]]),
+            ErrorCode.INVALID_ACTION,
+            "events[0]: action has shape (3,)",
+        ),
         (_tampered(good, events=[["action", [0.1], 0]]), ErrorCode.BAD_REQUEST, "events[0]"),
-        (_tampered(good, config={"agent": {"gravity": 1}}), ErrorCode.INVALID_CONFIG,
-         "'gravity'"),
+        (_tampered(good, config={"agent": {"gravity": 1}}), ErrorCode.INVALID_CONFIG, "'gravity'"),
     ]
     for snapshot, code, words in cases:
         with pytest.raises(RemoteError) as error:
@@ -169,15 +171,18 @@ def test_the_log_of_an_endless_episode_stays_bounded(monkeypatch: pytest.MonkeyP
 def test_a_snapshot_taken_after_one_agent_ended_restores() -> None:
     """The log holds the actions of the agents still in the episode; the replay takes them."""
     still = np.zeros(2, np.float32)
-    with LocalClient("examples.pair:PairEnvironment") as local, \
-            LocalClient("examples.pair:PairEnvironment") as other:
+    with (
+        LocalClient("examples.pair:PairEnvironment") as local,
+        LocalClient("examples.pair:PairEnvironment") as other,
+    ):
         observation, _ = local.reset(seed=2)
         info: dict[str, Any] = {"agents": {"Blue": {"terminated": False}}}
         for _ in range(300):  # Blue chases its apple, Red stands still
             if info["agents"]["Blue"]["terminated"]:
                 break
-            observation, _, _, _, info = local.step({"Blue": chase(observation["Blue"]),
-                                                     "Red": still})
+            observation, _, _, _, info = local.step(
+                {"Blue": chase(observation["Blue"]), "Red": still}
+            )
         assert info["agents"]["Blue"]["terminated"] and not info["agents"]["Red"]["terminated"]
         red_only = {"Red": still}
         local.step(red_only)
@@ -220,10 +225,18 @@ def test_a_snapshot_holds_the_configuration_of_the_reset_read_as_the_nodes_are_n
         world = instance.environment.world
         local.reset(seed=1)
         config = local.snapshot()["config"]
-        assert config == instance.settings.state() == {
-            part: {key: getattr(nodes[0], key) for key in nodes[0].configurable}
-            for part, nodes in (("environment", [instance.environment]),
-                                ("agent", instance.agents), ("world", [world]))}
+        assert (
+            config
+            == instance.settings.state()
+            == {
+                part: {key: getattr(nodes[0], key) for key in nodes[0].configurable}
+                for part, nodes in (
+                    ("environment", [instance.environment]),
+                    ("agent", instance.agents),
+                    ("world", [world]),
+                )
+            }
+        )
         world.track_limit = 9.0  # user code, mid-episode: the episode began with 2.4
         assert local.snapshot()["config"]["world"]["track_limit"] == 2.4
         world.configurable = ("track_limit",)  # this node's own, from now on

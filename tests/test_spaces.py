@@ -112,8 +112,10 @@ def test_box_spec_keeps_infinite_bounds_and_dtype() -> None:
 
 def test_spec_is_plain_data() -> None:
     spec = space_to_spec(spaces.Dict({"a": spaces.Discrete(3, start=2)}))
-    assert spec == {"type": "Dict", "spaces": {"a": {"type": "Discrete", "n": 3, "start": 2,
-                                                     "dtype": "<i8"}}}
+    assert spec == {
+        "type": "Dict",
+        "spaces": {"a": {"type": "Discrete", "n": 3, "start": 2, "dtype": "<i8"}},
+    }
     assert type(spec["spaces"]["a"]["n"]) is int
 
 
@@ -369,10 +371,18 @@ _REJECTED: list[tuple[spaces.Space, Any, str]] = [
     (spaces.Discrete(5), 1.0, "action must be an integer, got float"),
     (spaces.Discrete(5), "1", "action must be an integer, got str"),
     (spaces.Discrete(5), [1], "action must be an integer, got list"),
-    (spaces.Discrete(5), np.array([1]), "action must be an integer (a Discrete value is one "
-     "integer, not an array), got an array of shape (1,) and dtype int64"),
-    (spaces.Discrete(5), np.zeros((2, 3), np.float32), "action must be an integer (a Discrete "
-     "value is one integer, not an array), got an array of shape (2, 3) and dtype float32"),
+    (
+        spaces.Discrete(5),
+        np.array([1]),
+        "action must be an integer (a Discrete value is one "
+        "integer, not an array), got an array of shape (1,) and dtype int64",
+    ),
+    (
+        spaces.Discrete(5),
+        np.zeros((2, 3), np.float32),
+        "action must be an integer (a Discrete "
+        "value is one integer, not an array), got an array of shape (2, 3) and dtype float32",
+    ),
     (spaces.Discrete(5), 5, "action is 5, outside [0, 4]"),
     (spaces.Discrete(5), -1, "action is -1, outside [0, 4]"),
     (spaces.Discrete(3, start=-1), 2, "action is 2, outside [-1, 1]"),

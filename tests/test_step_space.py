@@ -80,9 +80,14 @@ class Pile:
 
     def state(self) -> list[Any]:
         """Every body's pose and velocities, bit for bit, in the space's order; the log."""
-        return [[_bits((*body.position, *body.velocity, body.angle, body.angular_velocity))
-                 for body in self.space.bodies], len(self.space.shapes),
-                sorted(self.log, key=repr)]
+        return [
+            [
+                _bits((*body.position, *body.velocity, body.angle, body.angular_velocity))
+                for body in self.space.bodies
+            ],
+            len(self.space.shapes),
+            sorted(self.log, key=repr),
+        ]
 
 
 def _where(shape: pymunk.Shape) -> bytes | None:
@@ -130,8 +135,13 @@ def test_step_space_adds_and_removes_during_the_step_like_space_step() -> None:
         body = pymunk.Body(1.0, 1.0)
         shape = pymunk.Circle(body, 0.1)
 
-        def add_and_remove(arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any,
-                           body: pymunk.Body = body, shape: pymunk.Circle = shape) -> None:
+        def add_and_remove(
+            arbiter: pymunk.Arbiter,
+            space: pymunk.Space,
+            data: Any,
+            body: pymunk.Body = body,
+            shape: pymunk.Circle = shape,
+        ) -> None:
             if body.space is None and shape not in space._add_later:
                 space.add(body, shape)
                 space.remove(arbiter.shapes[1])
@@ -141,7 +151,7 @@ def test_step_space_adds_and_removes_during_the_step_like_space_step() -> None:
         for _ in range(200):
             step(space, DELTA)
         seen.append((len(space.bodies), len(space.shapes)))
-    assert seen[: len(seen) // 2] == seen[len(seen) // 2:]
+    assert seen[: len(seen) // 2] == seen[len(seen) // 2 :]
     assert seen[-1] == (13, 13)  # the new body in, one ball's shape out
 
 

@@ -11,8 +11,11 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-PACKAGES = {"rlenv": ROOT / "rlenv", "rlenv_client": ROOT / "client" / "rlenv_client",
-            "rlenv_tools": ROOT / "tools" / "rlenv_tools"}
+PACKAGES = {
+    "rlenv": ROOT / "rlenv",
+    "rlenv_client": ROOT / "client" / "rlenv_client",
+    "rlenv_tools": ROOT / "tools" / "rlenv_tools",
+}
 LAYERS = ["rlenv", "rlenv_client", "rlenv_tools"]
 """The runtime, the client a trainer imports, the tools above both: each imports only below."""
 SHARED = ("rlenv", "rlenv.protocol", "rlenv.transport")
@@ -47,9 +50,12 @@ def _modules() -> dict[str, Path]:
 def _imports(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
     """The project's modules that ``name`` imports when its code runs, anywhere in it."""
     tree = ast.parse(path.read_text(encoding="utf-8"))
-    type_checking = {id(node) for block in ast.walk(tree) if isinstance(block, ast.If)
-                     and getattr(block.test, "id", None) == "TYPE_CHECKING"
-                     for node in ast.walk(block)}
+    type_checking = {
+        id(node)
+        for block in ast.walk(tree)
+        if isinstance(block, ast.If) and getattr(block.test, "id", None) == "TYPE_CHECKING"
+        for node in ast.walk(block)
+    }
 
     def known(dotted: str) -> str | None:
         while dotted and dotted not in modules:
@@ -109,17 +115,28 @@ def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 
 def _crossings(graph: dict[str, set[str]]) -> set[tuple[str, str]]:
     """The imports that break the layers' rule: upward, or the client's of the runtime's inside."""
+
     def layer(module: str) -> int:
         return LAYERS.index(module.split(".")[0])
 
     def shared(module: str) -> bool:
-        return module == "rlenv" or module.startswith(tuple(f"{name}." for name in SHARED[1:])) \
+        return (
+            module == "rlenv"
+            or module.startswith(tuple(f"{name}." for name in SHARED[1:]))
             or module in SHARED
+        )
 
-    return {(importer, imported) for importer, imports in graph.items() for imported in imports
-            if layer(imported) > layer(importer)
-            or (importer.startswith("rlenv_client") and imported.split(".")[0] == "rlenv"
-                and not shared(imported))}
+    return {
+        (importer, imported)
+        for importer, imports in graph.items()
+        for imported in imports
+        if layer(imported) > layer(importer)
+        or (
+            importer.startswith("rlenv_client")
+            and imported.split(".")[0] == "rlenv"
+            and not shared(imported)
+        )
+    }
 
 
 def test_each_layer_imports_only_the_layers_below_it() -> None:
@@ -131,37 +148,60 @@ def test_each_layer_imports_only_the_layers_below_it() -> None:
 
 
 def test_the_layers_check_finds_an_upward_import_inside_a_function(tmp_path: Path) -> None:
-    sources = {"rlenv.node": "def f():\n    from rlenv_tools import cli\n",
-               "rlenv.serving._host": "",
-               "rlenv.protocol": "",
-               "rlenv_client.base": "import rlenv.protocol\n"
-                                    "def g():\n    from rlenv.serving import _host as host\n",
-               "rlenv_tools": "",
-               "rlenv_tools.cli": "import rlenv.node\nimport rlenv_client.base\n"}
+    sources = {
+        "rlenv.node": "def f():\n    from rlenv_tools import cli\n",
+        "rlenv.serving._host": "",
+        "rlenv.protocol": "",
+        "rlenv_client.base": "import rlenv.protocol\n"
+        "def g():\n    from rlenv.serving import _host as host\n",
+        "rlenv_tools": "",
+        "rlenv_tools.cli": "import rlenv.node\nimport rlenv_client.base\n",
+    }
     modules = {}
     for name, text in sources.items():
         modules[name] = tmp_path / f"{name}.py"
         modules[name].write_text(text)
     graph = {name: _imports(name, path, modules) for name, path in modules.items()}
     assert graph["rlenv.node"] == {"rlenv_tools.cli"}
-    assert _crossings(graph) == {("rlenv.node", "rlenv_tools.cli"),
-                                 ("rlenv_client.base", "rlenv.serving._host")}
+    assert _crossings(graph) == {
+        ("rlenv.node", "rlenv_tools.cli"),
+        ("rlenv_client.base", "rlenv.serving._host"),
+    }
 
 
 def test_importing_the_client_loads_no_tool_no_http_framework_no_onnxruntime() -> None:
-    code = ("import json, sys\nimport rlenv_client\n"
-            "print(json.dumps(sorted(sys.modules)))")
-    loaded = set(json.loads(subprocess.run([sys.executable, "-c", code], check=True,
-                                           capture_output=True, text=True).stdout))
+    code = "import json, sys\nimport rlenv_client\nprint(json.dumps(sorted(sys.modules)))"
+    loaded = set(
+        json.loads(
+            subprocess.run(
+                [sys.executable, "-c", code], check=True, capture_output=True, text=True
+            ).stdout
+        )
+    )
     assert "rlenv_client.client" in loaded
-    assert not {name for name in loaded if name.split(".")[0] in {
-        "rlenv_tools", "starlette", "uvicorn", "httptools", "websockets", "onnxruntime", "onnx",
-        "pymunk"}}
+    assert not {
+        name
+        for name in loaded
+        if name.split(".")[0]
+        in {
+            "rlenv_tools",
+            "starlette",
+            "uvicorn",
+            "httptools",
+            "websockets",
+            "onnxruntime",
+            "onnx",
+            "pymunk",
+        }
+    }
     assert "http.server" not in loaded  # the inspector's server
     runtime = {name for name in loaded if name.split(".")[0] == "rlenv"}
     wire = {name for name in runtime if name.startswith(("rlenv.protocol.", "rlenv.transport."))}
-    assert runtime - {"rlenv", "rlenv._deprecation", "rlenv._moves", "rlenv.protocol",
-                      "rlenv.transport"} <= wire
+    assert (
+        runtime
+        - {"rlenv", "rlenv._deprecation", "rlenv._moves", "rlenv.protocol", "rlenv.transport"}
+        <= wire
+    )
     assert {"rlenv.protocol", "rlenv.transport"} <= runtime
 
 
@@ -175,8 +215,9 @@ def test_no_module_imports_one_that_imports_it_back() -> None:
 def test_the_check_finds_a_circle_through_a_function_level_import(tmp_path: Path) -> None:
     (tmp_path / "a.py").write_text("import b\n")
     (tmp_path / "b.py").write_text("def f():\n    import a\n")
-    (tmp_path / "c.py").write_text("from typing import TYPE_CHECKING\n"
-                                   "if TYPE_CHECKING:\n    import a\n")
+    (tmp_path / "c.py").write_text(
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    import a\n"
+    )
     modules = {name: tmp_path / f"{name}.py" for name in "abc"}
     graph = {name: _imports(name, path, modules) for name, path in modules.items()}
     assert graph == {"a": {"b"}, "b": {"a"}, "c": set()}
@@ -185,8 +226,12 @@ def test_the_check_finds_a_circle_through_a_function_level_import(tmp_path: Path
 
 def _documented_modules() -> set[str]:
     pages = (ROOT / "docs" / "reference").glob("*.md")
-    return {line.removeprefix("::: ").strip() for page in pages
-            for line in page.read_text().splitlines() if line.startswith("::: ")}
+    return {
+        line.removeprefix("::: ").strip()
+        for page in pages
+        for line in page.read_text().splitlines()
+        if line.startswith("::: ")
+    }
 
 
 def _public_modules() -> set[str]:
@@ -206,7 +251,12 @@ def _public_modules() -> set[str]:
 def test_the_public_modules_are_those_the_reference_documents() -> None:
     documented = _documented_modules()
     assert _public_modules() - documented == set()  # private ones take a leading underscore
-    packages = {"rlenv.protocol", "rlenv.transport", "rlenv.scene2d.physics",
-                "rlenv_tools.compliance"}
-    assert {name for name in documented if name.count(".")} - _public_modules() - packages \
-        == set()  # each page's modules exist
+    packages = {
+        "rlenv.protocol",
+        "rlenv.transport",
+        "rlenv.scene2d.physics",
+        "rlenv_tools.compliance",
+    }
+    assert {
+        name for name in documented if name.count(".")
+    } - _public_modules() - packages == set()  # each page's modules exist

@@ -25,8 +25,9 @@ def _play(client: Client, seed: int, policy: Policy, steps: int = 300) -> dict[s
     returns = dict.fromkeys((CHASER, *RUNNERS), 0.0)
     ended: dict[str, str] = {}
     for _ in range(steps):
-        action = {name: policy(name, value) for name, value in observation.items()
-                  if name not in ended}
+        action = {
+            name: policy(name, value) for name, value in observation.items() if name not in ended
+        }
         observation, _, terminated, truncated, info = client.step(action)
         for name, outcome in info["agents"].items():
             returns[name] += outcome["reward"]

@@ -83,8 +83,10 @@ def test_the_ticks_of_a_step_add_up_to_the_step(tmp_path: Path, target: str) -> 
             assert sum(tick.reward for tick in ticks) == pytest.approx(state.reward)
             assert ticks[-1].properties == state.properties
             assert ticks[-1].draw == state.draw and ticks[0].draw["shapes"]
-            assert (ticks[-1].terminated, ticks[-1].truncated) == (state.terminated,
-                                                                  state.truncated)
+            assert (ticks[-1].terminated, ticks[-1].truncated) == (
+                state.terminated,
+                state.truncated,
+            )
             assert not any(tick.terminated or tick.truncated for tick in ticks[:-1])
         assert digest(timeline.at(8).observation) == timeline.episode.observations[8]
         with pytest.raises(IndexError):
@@ -117,13 +119,13 @@ def test_branches_share_their_start_and_end_with_the_episode(tmp_path: Path) -> 
         push = [np.ones(1, np.float32)] * 1000
         falls = timeline.branch(2, push)
         assert len(falls) < 2 + 1000 and falls.episode.terminated
-        steered = timeline.branch(2, policy=lambda observation: np.ones(1, np.float32),
-                                  max_steps=1000)
+        steered = timeline.branch(
+            2, policy=lambda observation: np.ones(1, np.float32), max_steps=1000
+        )
         assert timeline.diff(steered).first_difference is not None
         assert falls.diff(steered).first_difference is None  # the same actions, by policy
 
-        deeper = falls.branch(len(falls) - 1, policy=lambda o: -np.ones(1, np.float32),
-                              max_steps=3)
+        deeper = falls.branch(len(falls) - 1, policy=lambda o: -np.ones(1, np.float32), max_steps=3)
         assert len(deeper) <= len(falls) + 2
         assert falls.diff(deeper).first_difference == len(falls)
         assert len(timeline.branch(len(timeline), push)) == len(timeline)  # it had ended
@@ -187,8 +189,7 @@ def recorded(serve: Serve, target: str, actions: list[int], path: Path) -> Path:
 def test_an_episode_without_digests_gets_them_on_the_first_pass(tmp_path: Path) -> None:
     path = record(tmp_path, PLINKO)
     episode = EpisodeFile.load(path)
-    bare = EpisodeFile(episode.target, episode.snapshot, [], episode.terminated,
-                       episode.truncated)
+    bare = EpisodeFile(episode.target, episode.snapshot, [], episode.terminated, episode.truncated)
     with Timeline(bare) as timeline:
         assert timeline.episode.observations == episode.observations
         assert bare.observations == []  # the caller's recording is left as it was
@@ -207,10 +208,13 @@ def test_a_step_can_read_a_few_nodes_only(tmp_path: Path) -> None:
         assert few.draw == everything.draw
 
 
-@pytest.mark.parametrize(("target", "timeout"), [("examples.faulty:DyingEnvironment", 60.0),
-                                               ("examples.faulty:SlowEnvironment", 10.0)])
+@pytest.mark.parametrize(
+    ("target", "timeout"),
+    [("examples.faulty:DyingEnvironment", 60.0), ("examples.faulty:SlowEnvironment", 10.0)],
+)
 def test_a_crash_or_a_hang_fails_one_call_and_the_timeline_goes_on(
-        tmp_path: Path, serve: Serve, target: str, timeout: float) -> None:
+    tmp_path: Path, serve: Serve, target: str, timeout: float
+) -> None:
     # The timeout also bounds each process's start: a crash is seen at once (no need to wait),
     # a hang costs the whole timeout, which must still leave a loaded machine time to start one
     path = recorded(serve, target, [0] * 8, tmp_path / "episode.rlenv")
@@ -224,9 +228,9 @@ def test_a_crash_or_a_hang_fails_one_call_and_the_timeline_goes_on(
 
 
 def test_an_action_the_environment_raises_on_is_refused_and_the_timeline_goes_on(
-        tmp_path: Path, serve: Serve) -> None:
-    path = recorded(serve, "examples.faulty:FaultyEnvironment", [0] * 4,
-                    tmp_path / "episode.rlenv")
+    tmp_path: Path, serve: Serve
+) -> None:
+    path = recorded(serve, "examples.faulty:FaultyEnvironment", [0] * 4, tmp_path / "episode.rlenv")
     with Timeline.open(path) as timeline:
         with pytest.raises(RemoteError, match="environment_error"):
             timeline.branch(2, [1])

@@ -24,8 +24,9 @@ CHECKOUT = Path(__file__).resolve().parent.parent
 CARTPOLE = "examples.cartpole:CartPoleEnvironment"
 
 
-def recorded(serve: Serve, target: str, actions: list[object], path: Path,
-             frames: int | None = None) -> Path:
+def recorded(
+    serve: Serve, target: str, actions: list[object], path: Path, frames: int | None = None
+) -> Path:
     """An episode of ``target`` taking ``actions`` (``frames`` ticks each) over a real server,
     written to ``path``."""
     server = serve(target)
@@ -59,8 +60,11 @@ def group(pgid: int) -> list[int]:
 
 def timelines_here() -> list[int]:
     """The first process of each timeline this process opened (each leads a group)."""
-    return [pid for pid, (parent, of) in processes().items()
-            if parent == os.getpid() and of == pid and b"rlenv_tools.forking" in _command(pid)]
+    return [
+        pid
+        for pid, (parent, of) in processes().items()
+        if parent == os.getpid() and of == pid and b"rlenv_tools.forking" in _command(pid)
+    ]
 
 
 def _command(pid: int) -> bytes:
@@ -86,8 +90,9 @@ def cartpole(serve: Serve, tmp_path: Path) -> Path:
 def test_a_timeline_keeps_to_its_processes_however_long_its_branches(cartpole: Path) -> None:
     with Timeline.open(cartpole, checkpoint_every=1, max_processes=12) as timeline:
         assert len(timeline.processes) <= 12
-        branches = [timeline.branch(step, policy=controller, max_steps=300)
-                    for step in (5, 10, 20, 30)]
+        branches = [
+            timeline.branch(step, policy=controller, max_steps=300) for step in (5, 10, 20, 30)
+        ]
         assert len(timeline.processes) <= 12  # unbounded: one a step, over a thousand
         assert len(group(timeline.processes[0])) <= 12
         for branch in branches:  # fewer checkpoints: every step still re-simulates exactly
@@ -105,18 +110,22 @@ def test_a_timeline_stops_parking_past_its_memory(cartpole: Path) -> None:
         assert digest(branch.at(50).observation) == branch.episode.observations[50]
 
 
-def test_the_pages_timelines_share_its_bound_and_close_the_oldest(cartpole: Path,
-                                                                   tmp_path: Path) -> None:
+def test_the_pages_timelines_share_its_bound_and_close_the_oldest(
+    cartpole: Path, tmp_path: Path
+) -> None:
     other = tmp_path / "other"
     other.mkdir()
     second = other / "episode-0001.rlenv"
     second.write_bytes(cartpole.read_bytes())
-    timelines = Timelines([cartpole, second], checkpoint_every=1, max_recent=1, max_files=1,
-                          max_processes=24)  # 12 a timeline
+    timelines = Timelines(
+        [cartpole, second], checkpoint_every=1, max_recent=1, max_files=1, max_processes=24
+    )  # 12 a timeline
     try:
         names = [entry["name"] for entry in timelines.list()["timelines"]]
-        assert names == [f"{cartpole.parent.name}/episode-0001.rlenv",
-                         "other/episode-0001.rlenv"]  # the same file name, told apart
+        assert names == [
+            f"{cartpole.parent.name}/episode-0001.rlenv",
+            "other/episode-0001.rlenv",
+        ]  # the same file name, told apart
         timelines.policies["controller"] = controller
         for step in (2, 8, 16):
             timelines.branch_policy(0, 0, step, "controller", 300)
@@ -143,17 +152,23 @@ threading.Event().wait()
 
 
 def test_every_process_dies_with_an_owner_killed_while_its_environment_spins(
-        serve: Serve, tmp_path: Path) -> None:
-    path = recorded(serve, "examples.faulty:StuckEnvironment", [0] * 4,
-                    tmp_path / "episode-0001.rlenv")
+    serve: Serve, tmp_path: Path
+) -> None:
+    path = recorded(
+        serve, "examples.faulty:StuckEnvironment", [0] * 4, tmp_path / "episode-0001.rlenv"
+    )
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(CHECKOUT), str(CHECKOUT / "client")])}
-    owner = subprocess.Popen([sys.executable, "-c", OWNER, str(path)], stdout=subprocess.PIPE,
-                             text=True, env=env)
+    owner = subprocess.Popen(
+        [sys.executable, "-c", OWNER, str(path)], stdout=subprocess.PIPE, text=True, env=env
+    )
     try:
         assert owner.stdout is not None
         pgid = int(owner.stdout.readline())
-        wait_until(lambda: any(cpu_seconds(pid) > 0.5 for pid in group(pgid)),
-                   "no process of the timeline spins", seconds=60)
+        wait_until(
+            lambda: any(cpu_seconds(pid) > 0.5 for pid in group(pgid)),
+            "no process of the timeline spins",
+            seconds=60,
+        )
         assert len(group(pgid)) >= 3  # the first, checkpoints, the spinning cursor
         owner.send_signal(signal.SIGKILL)
         owner.wait(30)
@@ -164,16 +179,22 @@ def test_every_process_dies_with_an_owner_killed_while_its_environment_spins(
 
 
 def test_a_long_steps_ticks_come_a_page_at_a_time(serve: Serve, tmp_path: Path) -> None:
-    path = recorded(serve, "examples.faulty:CountingEnvironment", [0, 0],
-                    tmp_path / "episode-0001.rlenv", 250)  # it observes the ticks it counted
+    path = recorded(
+        serve, "examples.faulty:CountingEnvironment", [0, 0], tmp_path / "episode-0001.rlenv", 250
+    )  # it observes the ticks it counted
     timelines = Timelines([path])
     try:
         page = timelines.ticks(0, 0, 1)
-        assert (page["frames"], page["first"], page["next"], len(page["ticks"])) == \
-            (250, 1, 101, 100)
+        assert (page["frames"], page["first"], page["next"], len(page["ticks"])) == (
+            250,
+            1,
+            101,
+            100,
+        )
         assert [tick["tick"] for tick in page["ticks"]] == list(range(1, 101))
-        assert [tick["observation"]["Agent"]["numbers"] for tick in page["ticks"]] == \
-            [[k] for k in range(1, 101)]
+        assert [tick["observation"]["Agent"]["numbers"] for tick in page["ticks"]] == [
+            [k] for k in range(1, 101)
+        ]
         middle = timelines.ticks(0, 0, 1, first=101, count=100)
         assert middle["next"] == 201 and middle["ticks"][0]["tick"] == 101
         assert middle["ticks"][0]["observation"]["Agent"]["numbers"] == [101]
@@ -182,8 +203,9 @@ def test_a_long_steps_ticks_come_a_page_at_a_time(serve: Serve, tmp_path: Path) 
         with Timeline.open(path) as timeline:  # pages are slices of the whole, bit for bit
             every = timeline.ticks(1)
             assert [tick.tick for tick in every] == list(range(1, 251))
-            assert digest(every[150].observation) == \
-                digest(timeline.ticks(1, first=151, count=1)[0].observation)
+            assert digest(every[150].observation) == digest(
+                timeline.ticks(1, first=151, count=1)[0].observation
+            )
             assert digest(every[-1].observation) == timeline.episode.observations[1]
         with pytest.raises(InspectorError, match="count must be 1 to 100"):
             timelines.ticks(0, 0, 1, count=101)
@@ -193,8 +215,9 @@ def test_a_long_steps_ticks_come_a_page_at_a_time(serve: Serve, tmp_path: Path) 
         timelines.close()
 
 
-def test_two_agents_ticks_page_by_agent_under_a_bounded_timeline(serve: Serve,
-                                                                 tmp_path: Path) -> None:
+def test_two_agents_ticks_page_by_agent_under_a_bounded_timeline(
+    serve: Serve, tmp_path: Path
+) -> None:
     from examples.pair import TARGET as PAIR
 
     server = serve(PAIR)
@@ -204,8 +227,10 @@ def test_two_agents_ticks_page_by_agent_under_a_bounded_timeline(serve: Serve,
         agents = list(client.hello.agents)
         digests = [digest(observation)]
         for k in range(30):
-            action = {name: np.array([np.sin(k + i), np.cos(k)], np.float32)
-                      for i, name in enumerate(agents)}
+            action = {
+                name: np.array([np.sin(k + i), np.cos(k)], np.float32)
+                for i, name in enumerate(agents)
+            }
             digests.append(digest(client.step(action, 6)[0]))
         EpisodeFile(PAIR, client.snapshot(), digests, False, False).save(path)
     timelines = Timelines([path], checkpoint_every=1, max_processes=60)  # 10 a timeline
@@ -218,7 +243,8 @@ def test_two_agents_ticks_page_by_agent_under_a_bounded_timeline(serve: Serve,
         with Timeline.open(path) as timeline:
             whole = timeline.ticks(30)
             assert digest(whole[-1].observation) == timeline.episode.observations[30]
-            assert [digest(tick.observation) for tick in whole[3:5]] == \
-                [digest(tick.observation) for tick in timeline.ticks(30, first=4, count=2)]
+            assert [digest(tick.observation) for tick in whole[3:5]] == [
+                digest(tick.observation) for tick in timeline.ticks(30, first=4, count=2)
+            ]
     finally:
         timelines.close()

@@ -99,7 +99,11 @@ def test_frame_signals_come_first(tree: SceneTree, log: list) -> None:
     tree.process_frame.connect(lambda: log.append(("process_frame",)))
     tree.iteration()
     assert [entry[0] for entry in log] == [
-        "physics_frame", "physics", "step", "process_frame", "process",
+        "physics_frame",
+        "physics",
+        "step",
+        "process_frame",
+        "process",
     ]
 
 
@@ -264,8 +268,10 @@ def test_physics_tick_while_paused_runs_only_unpausable_nodes(tree: SceneTree, l
     tree.paused = True
     tree.physics_tick()
     assert [entry[:2] for entry in log] == [
-        ("physics", "Always"), ("physics", "WhenPaused"),
-        ("step", "Always"), ("step", "WhenPaused"),
+        ("physics", "Always"),
+        ("physics", "WhenPaused"),
+        ("step", "Always"),
+        ("step", "WhenPaused"),
     ]
     assert tree.physics_frames == 1
 
@@ -324,9 +330,7 @@ def test_disabling_processing_during_pass_skips_later_node(
     assert log == []
 
 
-def test_process_mode_change_during_pass_applies_to_later_node(
-    tree: SceneTree, log: list
-) -> None:
+def test_process_mode_change_during_pass_applies_to_later_node(tree: SceneTree, log: list) -> None:
     class Disabler(Node):
         def _process(self, delta: float) -> None:
             self.get_node("../Later").process_mode = DISABLED
@@ -511,11 +515,14 @@ def test_tick_end_runs_after_steps_and_before_deferred_calls(tree: SceneTree, lo
     tree.on_physics_tick_end = lambda delta: log.append(("tick end", "tree", delta))
     tree.iteration()
     assert log == [
-        ("physics", "A", 1 / 60), ("physics", "B", 1 / 60),
-        ("step", "A", 1 / 60), ("step", "B", 1 / 60),
+        ("physics", "A", 1 / 60),
+        ("physics", "B", 1 / 60),
+        ("step", "A", 1 / 60),
+        ("step", "B", 1 / 60),
         ("tick end", "tree", 1 / 60),
         ("deferred", "A"),
-        ("process", "A", 1 / 60), ("process", "B", 1 / 60),
+        ("process", "A", 1 / 60),
+        ("process", "B", 1 / 60),
     ]
 
 
@@ -751,8 +758,10 @@ def test_timer_fires_at_end_of_tick(tree: SceneTree, log: list) -> None:
     log.clear()
     tree.physics_tick()
     assert [entry[:2] for entry in log] == [
-        ("physics", "Before"), ("physics", "After"),
-        ("step", "Before"), ("step", "After"),
+        ("physics", "Before"),
+        ("physics", "After"),
+        ("step", "Before"),
+        ("step", "After"),
         ("timeout", 2),
     ]
 

@@ -25,10 +25,10 @@ def test_the_installed_uvicorn_is_a_tested_one() -> None:
     assert uvicorn_protocol.connection_limit(8) is None  # the protocol bounds them itself
 
 
-def test_another_uvicorn_serves_with_its_public_api_and_says_what_it_lacks(
-        tmp_path: Path) -> None:
+def test_another_uvicorn_serves_with_its_public_api_and_says_what_it_lacks(tmp_path: Path) -> None:
     (tmp_path / "sitecustomize.py").write_text(
-        "import uvicorn\nuvicorn.__version__ = '0.99.0'  # as if another were installed\n")
+        "import uvicorn\nuvicorn.__version__ = '0.99.0'  # as if another were installed\n"
+    )
     path = os.pathsep.join([str(tmp_path), *filter(None, [os.environ.get("PYTHONPATH")])])
     gateway = Gateway(CARTPOLE, "--max-connections", "8", env={"PYTHONPATH": path})
     try:
@@ -39,5 +39,7 @@ def test_another_uvicorn_serves_with_its_public_api_and_says_what_it_lacks(
         said = gateway.stderr()
     finally:
         gateway.close()
-    assert ("uvicorn 0.99.0 is not a version rlenv was tested with (0.30.0 to 0.54.0): "
-            "responses take two writes, and request heads have no deadline") in said
+    assert (
+        "uvicorn 0.99.0 is not a version rlenv was tested with (0.30.0 to 0.54.0): "
+        "responses take two writes, and request heads have no deadline"
+    ) in said

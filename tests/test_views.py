@@ -89,7 +89,6 @@ def test_overlapping_views_hold_each_node_once_in_tree_order() -> None:
     assert list(view(lower, upper, lower).all) == [upper, lower, leaf]
 
 
-
 def test_the_old_import_path_warns_and_the_package_names_do_not() -> None:
     import importlib
     import sys

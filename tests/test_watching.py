@@ -10,9 +10,14 @@ from conftest import Serve
 from examples.cartpole import CartPoleEnvironment
 from rlenv_client import Client, ErrorCode, LocalClient, RemoteError
 
-EXAMPLES = ["examples.cartpole:CartPoleEnvironment", "examples.seeker:SeekerEnvironment",
-            "examples.seeker:SeekerPixelsEnvironment", "examples.reacher:ReacherEnvironment",
-            "examples.pair:PairEnvironment", "examples.pixels:PixelsEnvironment"]
+EXAMPLES = [
+    "examples.cartpole:CartPoleEnvironment",
+    "examples.seeker:SeekerEnvironment",
+    "examples.seeker:SeekerPixelsEnvironment",
+    "examples.reacher:ReacherEnvironment",
+    "examples.pair:PairEnvironment",
+    "examples.pixels:PixelsEnvironment",
+]
 _GEOMETRY = {"circle": 4, "segment": 5, "polygon": 2}  # numbers after kind and colour
 
 
@@ -80,7 +85,8 @@ def test_stats_count_what_the_controller_was_given(client: Client) -> None:
 
 
 def test_an_observer_reading_stats_takes_no_reward_from_the_controller(
-        server: object, client: Client) -> None:
+    server: object, client: Client
+) -> None:
     client.reset(seed=0)
     client.step(np.zeros(1, np.float32))
     with Client(server.host, server.port) as inspector:  # type: ignore[attr-defined]
@@ -119,11 +125,12 @@ def test_stats_keep_returns_per_agent(serve: Serve) -> None:
     assert current["return"] == pytest.approx(sum(seen.values()))
 
 
-def test_an_observers_failing_request_leaves_the_episode_to_its_controller(
-        serve: Serve) -> None:
+def test_an_observers_failing_request_leaves_the_episode_to_its_controller(serve: Serve) -> None:
     server = serve("examples.faulty:FaultyEnvironment")
-    with Client(server.host, server.port) as controller, \
-            Client(server.host, server.port) as inspector:
+    with (
+        Client(server.host, server.port) as controller,
+        Client(server.host, server.port) as inspector,
+    ):
         controller.reset(seed=0)
         controller.step(0)
         with pytest.raises(RemoteError, match="cannot draw; the episode goes on") as error:

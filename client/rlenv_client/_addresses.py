@@ -18,8 +18,9 @@ def parse_address(address: str) -> tuple[str, int]:
     if host.startswith("[") and host.endswith("]"):
         host = host[1:-1]
     elif ":" in host:
-        raise ValueError(f"expected HOST:PORT, got {address!r}: an IPv6 host goes in brackets, "
-                         "as in [::1]:5000")
+        raise ValueError(
+            f"expected HOST:PORT, got {address!r}: an IPv6 host goes in brackets, as in [::1]:5000"
+        )
     if not colon or not host or not port.isdigit():
         raise ValueError(f"expected HOST:PORT, e.g. 127.0.0.1:5000, got {address!r}")
     if not 0 < int(port) <= 65535:

@@ -44,8 +44,14 @@ def lane_refusal(hello: Hello, host: str, required: bool) -> str | None:
 
 
 def open_lane(
-    hello: Hello, host: str, sock: socket.socket, *, address: str, timeout: float,
-    required: bool, ask: Callable[[dict[str, Any]], object],
+    hello: Hello,
+    host: str,
+    sock: socket.socket,
+    *,
+    address: str,
+    timeout: float,
+    required: bool,
+    ask: Callable[[dict[str, Any]], object],
 ) -> Lane | None:
     """Ask the server for a lane; without one, steps stay on the socket (unless required).
 
@@ -92,10 +98,12 @@ def open_lane(
             return accept_lane(listener, key, hello, sock, timeout)
         except OSError as error:  # the server's end closes when it finds ours gone
             if required:
-                raise ConnectionLost(f"{address} did not open the shared-memory lane "
-                                     f"it offered: {error}") from None
-            logger.warning("%s: the shared-memory lane failed (%s); steps go on the "
-                           "socket", address, error)
+                raise ConnectionLost(
+                    f"{address} did not open the shared-memory lane it offered: {error}"
+                ) from None
+            logger.warning(
+                "%s: the shared-memory lane failed (%s); steps go on the socket", address, error
+            )
             return None
     finally:
         listener.close()

@@ -24,8 +24,7 @@ from rlenv.protocol.spaces import Codec, codec_for
 __all__ = ["Requests", "answer_info", "reset_part"]
 
 
-def reset_part(seed: int | None = None,
-               options: Mapping[str, Any] | None = None) -> dict[str, Any]:
+def reset_part(seed: int | None = None, options: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """A request's ``reset`` part: the seed and the options, those given."""
     reset: dict[str, Any] = {}
     if seed is not None:
@@ -68,36 +67,45 @@ class Requests:
             parts["repeat_action"] = repeat_action
         return Request(request_id, parts)
 
-    def reset(self, seed: int | None, options: Mapping[str, Any] | None,
-              request_id: int) -> Request:
+    def reset(
+        self, seed: int | None, options: Mapping[str, Any] | None, request_id: int
+    ) -> Request:
         """A reset with ``seed`` and ``options``, those given."""
-        return Request(request_id, {"reset": reset_part(seed, options),
-                                    "observation": self._observation})
+        return Request(
+            request_id, {"reset": reset_part(seed, options), "observation": self._observation}
+        )
 
     def poll(self, request_id: int) -> Request:
         """A look at the episode's state without acting: the protocol's ``action: nil``."""
         return Request(request_id, {"action": None, "observation": self._observation})
 
-    def steps(self, action: Any, reset: np.ndarray | None, repeat_action: int | None,
-              reset_with: Sequence[Mapping[str, Any] | None] | None,
-              request_id: int) -> Request:
+    def steps(
+        self,
+        action: Any,
+        reset: np.ndarray | None,
+        repeat_action: int | None,
+        reset_with: Sequence[Mapping[str, Any] | None] | None,
+        request_id: int,
+    ) -> Request:
         """A ``steps`` request: every instance's action in columns (see ``send_steps``)."""
         actions, _ = self.column_codecs()
         steps: dict[str, Any] = {"action": actions.pack_exact(action)}
         if reset is not None:
-            steps["reset"] = np.asarray(reset, np.bool_).tobytes() if \
-                isinstance(reset, np.ndarray) else reset
+            steps["reset"] = (
+                np.asarray(reset, np.bool_).tobytes() if isinstance(reset, np.ndarray) else reset
+            )
         if repeat_action is not None:
             steps["repeat_action"] = repeat_action
         if reset_with is not None and any(entry is not None for entry in reset_with):
-            steps["reset_with"] = [None if entry is None else dict(entry)
-                                   for entry in reset_with]
+            steps["reset_with"] = [None if entry is None else dict(entry) for entry in reset_with]
         return Request(request_id, {"steps": steps})
 
     def column_codecs(self) -> tuple[Codec, Codec]:
         """The codecs of K actions and K observations (K: the server's instances)."""
         if self._columns is None:
             hello, count = self._hello, self._hello.instances
-            self._columns = (codec_for(batch_space(hello.action_space, count)),
-                             codec_for(batch_space(hello.observation_space, count)))
+            self._columns = (
+                codec_for(batch_space(hello.action_space, count)),
+                codec_for(batch_space(hello.observation_space, count)),
+            )
         return self._columns

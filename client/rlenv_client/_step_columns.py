@@ -43,8 +43,16 @@ class StepColumns:
         self.env_infos: list[dict[str, Any]] = [{}] * num_envs
 
     def __iter__(self) -> Iterator[Any]:
-        return iter((self.observations, self.rewards, self.terminations, self.truncations,
-                     self.frames, self.env_infos))
+        return iter(
+            (
+                self.observations,
+                self.rewards,
+                self.terminations,
+                self.truncations,
+                self.frames,
+                self.env_infos,
+            )
+        )
 
     def fill(self, group: range, answer: StepsResponse) -> RemoteError | None:
         """Write a server's answer in the rows of its sub-environments, ``group``.

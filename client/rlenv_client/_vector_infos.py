@@ -31,8 +31,9 @@ class BatchedInfos:
         self._add_info = add_info
         self._all_envs = np.ones(num_envs, dtype=np.bool_)
 
-    def merge(self, infos: dict[str, Any], env_infos: list[dict[str, Any]],
-              frames: np.ndarray) -> dict:
+    def merge(
+        self, infos: dict[str, Any], env_infos: list[dict[str, Any]], frames: np.ndarray
+    ) -> dict:
         """Gymnasium's batched infos, ``frames`` included; without a loop in the common cases.
 
         Those are: no info, and several agents' outcomes alone (``agents``, built in columns).
@@ -40,8 +41,12 @@ class BatchedInfos:
         if not infos and not any(env_infos):
             return {"frames": frames, "_frames": self._all_envs.copy()}
         if not infos and all(info.keys() == {"agents"} for info in env_infos):
-            return {"agents": self._agent_columns(env_infos), "_agents": self._all_envs.copy(),
-                    "frames": frames, "_frames": self._all_envs.copy()}
+            return {
+                "agents": self._agent_columns(env_infos),
+                "_agents": self._all_envs.copy(),
+                "frames": frames,
+                "_frames": self._all_envs.copy(),
+            }
         for index, info in enumerate(env_infos):
             infos = self._add_info(infos, {**info, "frames": int(frames[index])}, index)
         return infos
@@ -58,6 +63,7 @@ class BatchedInfos:
                 "terminated": np.array([o["terminated"] for o in outcomes], np.bool_),
                 "_terminated": every.copy(),
                 "truncated": np.array([o["truncated"] for o in outcomes], np.bool_),
-                "_truncated": every.copy()}
+                "_truncated": every.copy(),
+            }
             columns[f"_{name}"] = every.copy()
         return columns

@@ -35,30 +35,42 @@ class Resets:
         client_of: the client of a sub-environment's server.
     """
 
-    def __init__(self, sessions: list[Session], groups: list[range],
-                 client_of: Callable[[int], BaseClient]) -> None:
+    def __init__(
+        self, sessions: list[Session], groups: list[range], client_of: Callable[[int], BaseClient]
+    ) -> None:
         self._sessions, self._groups, self._client_of = sessions, groups, client_of
         count = sum(len(group) for group in groups)
         self._starts: list[dict[str, Any] | None] = [None] * count  # set_next_reset's
         self._pending = 0  # how many of them are set
 
-    def set_next(self, index: int, seed: int | None, options: Mapping[str, Any] | None,
-                 config: Mapping[str, Any] | None) -> None:
+    def set_next(
+        self,
+        index: int,
+        seed: int | None,
+        options: Mapping[str, Any] | None,
+        config: Mapping[str, Any] | None,
+    ) -> None:
         """Sub-environment ``index``'s next start (see ``RemoteVectorEnv.set_next_reset``)."""
-        start: dict[str, Any] = {"reset": reset_part(None if seed is None else int(seed),
-                                                     options)}
+        start: dict[str, Any] = {"reset": reset_part(None if seed is None else int(seed), options)}
         if config:
             arguments = dict(config)
             start["config"] = config_request(
                 {key: value for key, value in arguments.items() if key not in ("agent", "world")},
-                arguments.get("agent"), arguments.get("world"))
+                arguments.get("agent"),
+                arguments.get("world"),
+            )
         if self._starts[index] is None:
             self._pending += 1
         self._starts[index] = start
 
-    def reset(self, indices: Iterable[int], observations: Any, frames: np.ndarray,
-              seeds: Sequence[int | None] | None = None,
-              options: Mapping[str, Any] | None = None) -> dict[int, dict[str, Any]]:
+    def reset(
+        self,
+        indices: Iterable[int],
+        observations: Any,
+        frames: np.ndarray,
+        seeds: Sequence[int | None] | None = None,
+        options: Mapping[str, Any] | None = None,
+    ) -> dict[int, dict[str, Any]]:
         """Reset the sub-environments ``indices``, a batch per server, each with its next start.
 
         A sub-environment without a start set resets with ``seeds[index]`` and ``options``.
@@ -96,8 +108,7 @@ class Resets:
             starts[index] = self._take(int(index))
         return starts if any(start is not None for start in starts) else None
 
-    def _request(self, index: int, seed: int | None,
-                 options: Mapping[str, Any] | None) -> Request:
+    def _request(self, index: int, seed: int | None, options: Mapping[str, Any] | None) -> Request:
         """The request that resets sub-environment ``index``: its next start if set, once."""
         client = self._client_of(index)
         start = self._take(index)

@@ -44,8 +44,14 @@ from rlenv_client._rows import check_shape, row, set_row
 from rlenv_client.vector import RemoteVectorEnv
 from rlenv_client.vector_servers import default_layout
 
-__all__ = ["AgentVectorEnv", "Agents", "OtherPolicy", "agent_classes", "learner_names",
-           "policy_arguments"]
+__all__ = [
+    "AgentVectorEnv",
+    "Agents",
+    "OtherPolicy",
+    "agent_classes",
+    "learner_names",
+    "policy_arguments",
+]
 
 Agents = str | type[RLAgent] | Sequence[str | type[RLAgent]]
 """Which agents learn: names, an RLAgent class (its every agent), or a list of both."""
@@ -73,12 +79,16 @@ def policy_arguments(policies: Mapping[str, str]) -> list[str]:
 
     ``POLICY`` is an ONNX file or ``"heuristic"``.
     """
-    return [argument for name, policy in policies.items()
-            for argument in ("--policy", f"{name}={policy}")]
+    return [
+        argument
+        for name, policy in policies.items()
+        for argument in ("--policy", f"{name}={policy}")
+    ]
 
 
-def learner_names(agents: Agents, names: Sequence[str],
-                  classes: Mapping[str, type[RLAgent]] | None) -> list[str]:
+def learner_names(
+    agents: Agents, names: Sequence[str], classes: Mapping[str, type[RLAgent]] | None
+) -> list[str]:
     """The learning agents ``agents`` selects, in the environment's order.
 
     Raises:
@@ -89,17 +99,21 @@ def learner_names(agents: Agents, names: Sequence[str],
     for item in wanted:
         if isinstance(item, str):
             if item not in names:
-                raise ValueError(f"agents: the environment has no agent {item!r}; its agents: "
-                                 f"{', '.join(names)}")
+                raise ValueError(
+                    f"agents: the environment has no agent {item!r}; its agents: {', '.join(names)}"
+                )
             chosen.add(item)
         elif isinstance(item, type) and issubclass(item, RLAgent):
             if classes is None:
-                raise ValueError(f"agents: cannot tell which agents are {item.__name__}s "
-                                 "without the environment's target; name them instead")
+                raise ValueError(
+                    f"agents: cannot tell which agents are {item.__name__}s "
+                    "without the environment's target; name them instead"
+                )
             found = [name for name, cls in classes.items() if issubclass(cls, item)]
             if not found:
-                raise ValueError(f"agents: no agent is a {item.__name__}; its agents: "
-                                 f"{_roster(names, classes)}")
+                raise ValueError(
+                    f"agents: no agent is a {item.__name__}; its agents: {_roster(names, classes)}"
+                )
             chosen.update(found)
         else:
             raise TypeError(f"agents holds agent names or RLAgent classes, not {item!r}")
@@ -148,19 +162,33 @@ class AgentVectorEnv(VectorEnv):
     metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": ["rgb_array"]}
 
     def __init__(
-        self, instances: int | None = None, target: str | None = None, *, agents: Agents,
+        self,
+        instances: int | None = None,
+        target: str | None = None,
+        *,
+        agents: Agents,
         others: Mapping[str | type[RLAgent], OtherPolicy] | None = None,
-        addresses: Sequence[str] | None = None, repeat_action: int | None = None,
-        max_episode_steps: int | None = None, in_process: bool = False,
-        instances_per_server: int | None = None, render_mode: str | None = None,
-        timeout: float = 30.0, token: str | None = None, max_restarts: int = 3,
+        addresses: Sequence[str] | None = None,
+        repeat_action: int | None = None,
+        max_episode_steps: int | None = None,
+        in_process: bool = False,
+        instances_per_server: int | None = None,
+        render_mode: str | None = None,
+        timeout: float = 30.0,
+        token: str | None = None,
+        max_restarts: int = 3,
         trainer_cores: int = 0,
     ) -> None:
         vector: RemoteVectorEnv | None = None  # self.vector once built
         options: dict[str, Any] = {
-            "repeat_action": repeat_action, "max_episode_steps": max_episode_steps,
-            "autoreset_mode": AutoresetMode.SAME_STEP, "render_mode": render_mode,
-            "timeout": timeout, "token": token, "max_restarts": max_restarts}
+            "repeat_action": repeat_action,
+            "max_episode_steps": max_episode_steps,
+            "autoreset_mode": AutoresetMode.SAME_STEP,
+            "render_mode": render_mode,
+            "timeout": timeout,
+            "token": token,
+            "max_restarts": max_restarts,
+        }
         try:
             if addresses is not None:  # running servers: their hello says who they are
                 vector = RemoteVectorEnv(instances, target, addresses=addresses, **options)
@@ -174,23 +202,30 @@ class AgentVectorEnv(VectorEnv):
                 names, already = list(classes), set()
             self.learners = learner_names(agents, names, classes)
             self.driven_here, self.driven_by_server = _plan_others(
-                names, self.learners, classes, dict(others or {}), already)
+                names, self.learners, classes, dict(others or {}), already
+            )
             if self.driven_by_server and (addresses is not None or in_process):
                 where = "servers given by address" if addresses is not None else "in_process"
                 name, policy = next(iter(self.driven_by_server.items()))
                 raise ValueError(
                     f"agent {name!r} is to be driven by {policy!r} in its server, and {where} "
                     f"start no server here: give others={{{name!r}: callable}}, or serve it "
-                    f"with rlenv serve --policy {name}={policy}")
+                    f"with rlenv serve --policy {name}={policy}"
+                )
             if vector is None:
                 server_args = policy_arguments(self.driven_by_server)
                 if instances_per_server is None and not in_process:
-                    instances_per_server = default_layout(instances or 1,
-                                                          trainer_cores=trainer_cores)[0]
+                    instances_per_server = default_layout(
+                        instances or 1, trainer_cores=trainer_cores
+                    )[0]
                 vector = RemoteVectorEnv(
-                    instances, target, in_process=in_process,
-                    instances_per_server=instances_per_server, server_args=server_args,
-                    **options)
+                    instances,
+                    target,
+                    in_process=in_process,
+                    instances_per_server=instances_per_server,
+                    server_args=server_args,
+                    **options,
+                )
             self.vector: RemoteVectorEnv = vector
             self._set_spaces()
         except BaseException:
@@ -203,22 +238,30 @@ class AgentVectorEnv(VectorEnv):
     def _set_spaces(self) -> None:
         vector = self.vector
         self.instances = vector.num_envs
-        joint_actions, joint_observations = vector.single_action_space, \
-            vector.single_observation_space
-        self._several = isinstance(joint_actions, spaces.Dict) and \
-            len(vector.clients[0].hello.agents) > 1
+        joint_actions, joint_observations = (
+            vector.single_action_space,
+            vector.single_observation_space,
+        )
+        self._several = (
+            isinstance(joint_actions, spaces.Dict) and len(vector.clients[0].hello.agents) > 1
+        )
         first = self.learners[0]
-        action_space, observation_space = self._agent_space(joint_actions, first), \
-            self._agent_space(joint_observations, first)
+        action_space, observation_space = (
+            self._agent_space(joint_actions, first),
+            self._agent_space(joint_observations, first),
+        )
         for name in self.learners[1:]:
-            if (self._agent_space(joint_actions, name), self._agent_space(
-                    joint_observations, name)) != (action_space, observation_space):
-                raise ValueError(f"agents {first!r} and {name!r} learn one policy but have "
-                                 "different spaces; train them apart")
+            if (
+                self._agent_space(joint_actions, name),
+                self._agent_space(joint_observations, name),
+            ) != (action_space, observation_space):
+                raise ValueError(
+                    f"agents {first!r} and {name!r} learn one policy but have "
+                    "different spaces; train them apart"
+                )
         k = len(self.learners)
         self.num_envs = self.instances * k
-        self.single_action_space, self.single_observation_space = action_space, \
-            observation_space
+        self.single_action_space, self.single_observation_space = action_space, observation_space
         self.action_space = batch_space(action_space, self.num_envs)
         self.observation_space = batch_space(observation_space, self.num_envs)
         self._joint_action = create_empty_array(joint_actions, self.instances)
@@ -236,8 +279,12 @@ class AgentVectorEnv(VectorEnv):
         """Agent ``name``'s share of a joint batch (or of one joint value)."""
         return joint_batch[name] if self._several else joint_batch
 
-    def reset(self, *, seed: int | Sequence[int | None] | None = None,
-              options: Mapping[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+    def reset(
+        self,
+        *,
+        seed: int | Sequence[int | None] | None = None,
+        options: Mapping[str, Any] | None = None,
+    ) -> tuple[Any, dict[str, Any]]:
         """Reset every instance (an int ``seed`` seeds instance ``i`` with ``seed + i``).
 
         A list of seeds holds one per instance, or one per sub-environment (as SB3 gives
@@ -247,7 +294,7 @@ class AgentVectorEnv(VectorEnv):
             ValueError: a list of seeds of another length.
         """
         if seed is not None and not isinstance(seed, int) and len(seed) == self.num_envs:
-            seed = list(seed)[::len(self.learners)]
+            seed = list(seed)[:: len(self.learners)]
         joint, infos = self.vector.reset(seed=seed, options=options)
         self._joint_observation = joint
         for done in self._others_done.values():
@@ -258,8 +305,7 @@ class AgentVectorEnv(VectorEnv):
         self._last = observations
         return observations, self._spread(infos)
 
-    def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray,
-                                          dict[str, Any]]:
+    def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step every instance with the learners' ``actions`` and the others' policies.
 
         Raises:
@@ -282,8 +328,9 @@ class AgentVectorEnv(VectorEnv):
         self._joint_observation = joint_obs
         return self._outcomes(joint_obs, tuple(flags), infos)
 
-    def _agent_outcome(self, name: str, joint: tuple[np.ndarray, ...], ended: np.ndarray,
-                       infos: Mapping[str, Any]) -> tuple[np.ndarray, ...]:
+    def _agent_outcome(
+        self, name: str, joint: tuple[np.ndarray, ...], ended: np.ndarray, infos: Mapping[str, Any]
+    ) -> tuple[np.ndarray, ...]:
         """``(reward, terminated, truncated)`` columns of agent ``name`` over the instances.
 
         Those of the last step of an instance that ended (its ``final_info``), not its reset.
@@ -296,9 +343,9 @@ class AgentVectorEnv(VectorEnv):
         final = _columns(infos["final_info"]["agents"][name])
         return tuple(np.where(ended, last, now) for last, now in zip(final, step, strict=True))
 
-    def _outcomes(self, joint_obs: Any, joint: tuple[np.ndarray, ...],
-                  infos: dict[str, Any]) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray,
-                                                  dict[str, Any]]:
+    def _outcomes(
+        self, joint_obs: Any, joint: tuple[np.ndarray, ...], infos: dict[str, Any]
+    ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         k = len(self.learners)
         ended = joint[1] | joint[2]
         self._steps += 1
@@ -321,8 +368,9 @@ class AgentVectorEnv(VectorEnv):
             was_waiting = waiting[span].copy()
             rewards[span] = np.where(was_waiting, 0.0, reward)
             terminated[span] = done_t & ~was_waiting
-            truncated[span] = ((done_c | timed_out | (ended & ~done_t)) & ~was_waiting) | \
-                (was_waiting & ended)
+            truncated[span] = ((done_c | timed_out | (ended & ~done_t)) & ~was_waiting) | (
+                was_waiting & ended
+            )
         finished = terminated | truncated
         for index in np.flatnonzero(finished):
             instance = index // k
@@ -335,8 +383,14 @@ class AgentVectorEnv(VectorEnv):
             else:
                 final_obs = row(observations, index)
                 final_info = {}
-            out = self._add_info(out, {"final_obs": final_obs, "final_info": {
-                **final_info, "agent": name, "instance": int(instance)}}, int(index))
+            out = self._add_info(
+                out,
+                {
+                    "final_obs": final_obs,
+                    "final_info": {**final_info, "agent": name, "instance": int(instance)},
+                },
+                int(index),
+            )
             if not self._waiting[index] and not ended[instance]:
                 self._waiting[index] = True  # it waits for its instance to reset
         instance_ended = np.repeat(ended, k)
@@ -361,9 +415,12 @@ class AgentVectorEnv(VectorEnv):
     def _spread(self, infos: Mapping[str, Any]) -> dict[str, Any]:
         """The instances' infos, each repeated for its learners (``agents`` and finals left)."""
         k = len(self.learners)
-        return {key: _repeat(value, k) for key, value in infos.items()
-                if key not in ("agents", "_agents", "final_obs", "_final_obs", "final_info",
-                               "_final_info")}
+        return {
+            key: _repeat(value, k)
+            for key, value in infos.items()
+            if key
+            not in ("agents", "_agents", "final_obs", "_final_obs", "final_info", "_final_info")
+        }
 
     def render(self) -> tuple[np.ndarray, ...] | None:
         """One frame per sub-environment: its instance's (``rgb_array``)."""
@@ -399,10 +456,13 @@ def _roster(names: Sequence[str], classes: Mapping[str, type[RLAgent]] | None) -
     return ", ".join(f"{name} ({classes[name].__name__})" for name in names)
 
 
-def _plan_others(names: Sequence[str], learners: Sequence[str],
-                 classes: Mapping[str, type[RLAgent]] | None,
-                 others: dict[Any, OtherPolicy],
-                 already: set[str]) -> tuple[dict[str, Callable[[Any], Any]], dict[str, str]]:
+def _plan_others(
+    names: Sequence[str],
+    learners: Sequence[str],
+    classes: Mapping[str, type[RLAgent]] | None,
+    others: dict[Any, OtherPolicy],
+    already: set[str],
+) -> tuple[dict[str, Callable[[Any], Any]], dict[str, str]]:
     """Who drives each non-learning agent: callables here, and policies for the servers.
 
     Raises:
@@ -412,8 +472,10 @@ def _plan_others(names: Sequence[str], learners: Sequence[str],
     for key, policy in others.items():
         if isinstance(key, str):
             if key not in names:
-                raise ValueError(f"others: the environment has no agent {key!r}; its agents: "
-                                 f"{_roster(names, classes)}")
+                raise ValueError(
+                    f"others: the environment has no agent {key!r}; its agents: "
+                    f"{_roster(names, classes)}"
+                )
             by_name[key] = policy
         else:
             found = learner_names(key, names, classes)
@@ -432,12 +494,16 @@ def _plan_others(names: Sequence[str], learners: Sequence[str],
             here[name] = policy
         elif policy == HEURISTIC:
             if classes is None or not classes[name].has_heuristic():
-                what = "its class has no heuristic" if classes is not None else \
-                    "its heuristic cannot be checked without the environment's target"
+                what = (
+                    "its class has no heuristic"
+                    if classes is not None
+                    else "its heuristic cannot be checked without the environment's target"
+                )
                 raise ValueError(
                     f"agent {name!r} neither learns nor has a policy in others, and {what}: "
                     f"give others={{{name!r}: 'policy.onnx'}} or a callable, or define "
-                    f"{classes[name].__name__ if classes else 'its class'}.heuristic")
+                    f"{classes[name].__name__ if classes else 'its class'}.heuristic"
+                )
             served[name] = HEURISTIC
         elif isinstance(policy, str | os.PathLike):
             path = os.fspath(policy)
@@ -445,19 +511,24 @@ def _plan_others(names: Sequence[str], learners: Sequence[str],
                 raise ValueError(f"others[{name!r}]: no such policy file: {path}")
             served[name] = os.path.abspath(path)
         else:
-            raise TypeError(f"others[{name!r}] must be 'heuristic', an ONNX file or a "
-                            f"callable, not {policy!r}")
+            raise TypeError(
+                f"others[{name!r}] must be 'heuristic', an ONNX file or a callable, not {policy!r}"
+            )
     return here, served
 
 
 def _columns(outcome: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(reward, terminated, truncated)`` of one agent's batched outcome map."""
-    return (np.asarray(outcome["reward"], np.float64),
-            np.asarray(outcome["terminated"], np.bool_), np.asarray(outcome["truncated"], np.bool_))
+    return (
+        np.asarray(outcome["reward"], np.float64),
+        np.asarray(outcome["terminated"], np.bool_),
+        np.asarray(outcome["truncated"], np.bool_),
+    )
 
 
-def _final_info(final_info: Mapping[str, Any], instance: SupportsIndex,
-                name: str) -> dict[str, Any]:
+def _final_info(
+    final_info: Mapping[str, Any], instance: SupportsIndex, name: str
+) -> dict[str, Any]:
     """The last info of agent ``name`` in ``instance``: the instance's, less the other agents."""
     info: dict[str, Any] = {}
     for key, value in final_info.items():

@@ -83,7 +83,10 @@ class BaseClient(Inspection, ABC):
     # --- the API ----------------------------------------------------------------------------
 
     def configure(
-        self, *, agent: Mapping[str, Any] | None = None, world: Mapping[str, Any] | None = None,
+        self,
+        *,
+        agent: Mapping[str, Any] | None = None,
+        world: Mapping[str, Any] | None = None,
         **environment: Any,
     ) -> None:
         """Configure the environment (keywords), the agents and the world.
@@ -145,8 +148,10 @@ class BaseClient(Inspection, ABC):
             TypeError: ``action`` is ``None``.
         """
         if action is None:
-            raise TypeError("step() needs an action, got None; to read the episode's state "
-                            "without acting, call poll()")
+            raise TypeError(
+                "step() needs an action, got None; to read the episode's state "
+                "without acting, call poll()"
+            )
         self._post(self.step_request(action, repeat_action, request_id=next(self._ids)))
 
     def receive_step(self) -> StepResult:
@@ -176,8 +181,13 @@ class BaseClient(Inspection, ABC):
             RemoteError: the answer is an error.
         """
         response = reply if reply.__class__ is Response else self._response(reply)
-        return (self._observation(response, writable), response.reward,
-                response.terminated, response.truncated, self._info(response))
+        return (
+            self._observation(response, writable),
+            response.reward,
+            response.terminated,
+            response.truncated,
+            self._info(response),
+        )
 
     def reset_result(self, reply: Response | ErrorReply) -> tuple[Any, dict[str, Any]]:
         """A reset's answer as ``(observation, info)``.
@@ -196,13 +206,17 @@ class BaseClient(Inspection, ABC):
         """
         return self._observation(self._response(reply), writable=False)
 
-    def step_request(self, action: Any, repeat_action: int | None = None, *,
-                     request_id: int = 0) -> Request:
+    def step_request(
+        self, action: Any, repeat_action: int | None = None, *, request_id: int = 0
+    ) -> Request:
         """The request :meth:`send_step` sends, for a batch (whose parts need no id)."""
         return self._requests.step(action, repeat_action, request_id)
 
     def reset_request(
-        self, seed: int | None = None, options: Mapping[str, Any] | None = None, *,
+        self,
+        seed: int | None = None,
+        options: Mapping[str, Any] | None = None,
+        *,
         request_id: int = 0,
     ) -> Request:
         """The request :meth:`send_reset` sends, for a batch (whose parts need no id)."""
@@ -223,8 +237,12 @@ class BaseClient(Inspection, ABC):
 
     def send_batch(self, requests: Sequence[Request | None]) -> None:
         """Send one request per instance of the server (``None``: skip one)."""
-        self._post(Request(next(self._ids), {"batch": [
-            None if request is None else request.parts for request in requests]}))
+        self._post(
+            Request(
+                next(self._ids),
+                {"batch": [None if request is None else request.parts for request in requests]},
+            )
+        )
 
     def receive_batch(self) -> tuple[Response | ErrorReply | None, ...]:
         """Wait for the answer to :meth:`send_batch`: one reply per instance.
@@ -234,9 +252,13 @@ class BaseClient(Inspection, ABC):
         """
         return self._receive_answer(BatchResponse, "a batch").replies
 
-    def send_steps(self, action: Any, reset: np.ndarray | None = None,
-                   repeat_action: int | None = None,
-                   reset_with: Sequence[Mapping[str, Any] | None] | None = None) -> None:
+    def send_steps(
+        self,
+        action: Any,
+        reset: np.ndarray | None = None,
+        repeat_action: int | None = None,
+        reset_with: Sequence[Mapping[str, Any] | None] | None = None,
+    ) -> None:
         """Step every instance of the server at once, in columns.
 
         ``action`` stacks one action per instance (gymnasium's ``batch_space`` layout);
@@ -248,8 +270,7 @@ class BaseClient(Inspection, ABC):
         optional), for an instance that ``reset`` marks. Without entries (or with only
         ``None``) the request is as without ``reset_with``.
         """
-        self._post(self._requests.steps(action, reset, repeat_action, reset_with,
-                                        next(self._ids)))
+        self._post(self._requests.steps(action, reset, repeat_action, reset_with, next(self._ids)))
 
     def receive_steps(self, *, copy: bool = True) -> StepsResponse:
         """Wait for the answer to :meth:`send_steps`.
@@ -359,8 +380,11 @@ class BaseClient(Inspection, ABC):
             reply_id = message.id
             if reply_id is None or reply_id >= self._awaited:
                 return message
-            logger.info("%s: dropped the answer to request %d, whose caller gave up on it",
-                        self.address, reply_id)
+            logger.info(
+                "%s: dropped the answer to request %d, whose caller gave up on it",
+                self.address,
+                reply_id,
+            )
 
     def _receive_answer(self, kind: type[_Answer], asked: str, copy: bool = True) -> _Answer:
         """The answer to a batch or steps request, ``kind``; raises a refusal of it whole."""

@@ -92,8 +92,14 @@ class Client(BaseClient):
     """
 
     def __init__(
-        self, host: str, port: int | None = None, *, timeout: float = 30.0,
-        world_data: bool = False, token: str | None = None, shared_memory: bool | None = None,
+        self,
+        host: str,
+        port: int | None = None,
+        *,
+        timeout: float = 30.0,
+        world_data: bool = False,
+        token: str | None = None,
+        shared_memory: bool | None = None,
     ) -> None:
         if port is None:
             host, port = parse_address(host)
@@ -109,8 +115,9 @@ class Client(BaseClient):
         try:
             self._sock: socket.socket | None = socket.create_connection((host, port), timeout)
         except TimeoutError:
-            raise RequestTimeout(f"connecting to {self.address} took longer than {timeout}s")\
-                from None
+            raise RequestTimeout(
+                f"connecting to {self.address} took longer than {timeout}s"
+            ) from None
         except OSError as error:
             raise ConnectionLost(f"cannot connect to {self.address}: {error}") from None
         configure_socket(self._sock, timeout, timeout)
@@ -130,16 +137,24 @@ class Client(BaseClient):
             token = token if token is not None else os.environ.get("RLENV_TOKEN")
             if token is None:
                 self.close()
-                raise RemoteError(ErrorCode.UNAUTHORIZED, f"{self.address} requires a token: "
-                                  "pass token=... (or set RLENV_TOKEN)", fatal=True)
+                raise RemoteError(
+                    ErrorCode.UNAUTHORIZED,
+                    f"{self.address} requires a token: pass token=... (or set RLENV_TOKEN)",
+                    fatal=True,
+                )
             self._post(Request(next(self._ids), token=token))
             self._response(self.receive_reply())
         if shared_memory is not False:
             try:
                 self._lane = open_lane(
-                    message, host, self._sock, address=self.address, timeout=timeout,
+                    message,
+                    host,
+                    self._sock,
+                    address=self.address,
+                    timeout=timeout,
                     required=shared_memory is True,
-                    ask=lambda lane: self._call(shared_memory=lane))
+                    ask=lambda lane: self._call(shared_memory=lane),
+                )
             except BaseException:
                 self.close()
                 raise
@@ -207,8 +222,9 @@ class Client(BaseClient):
     def _send(self, request: Request) -> None:
         sock = self._sock
         if sock is None:
-            raise ConnectionLost(f"the connection to {self.address} is closed"
-                                 f"{self._closed_because}")
+            raise ConnectionLost(
+                f"the connection to {self.address} is closed{self._closed_because}"
+            )
         lane = self._lane
         if lane is not None:
             self._settle()
@@ -222,15 +238,18 @@ class Client(BaseClient):
             self._waiter.sent()
         except BlockingIOError:
             self.close()
-            raise RequestTimeout(f"sending to {self.address} took longer than {self.timeout}s; "
-                                 "connection closed") from None
+            raise RequestTimeout(
+                f"sending to {self.address} took longer than {self.timeout}s; connection closed"
+            ) from None
         except OSError as error:
             self.close()
             raise ConnectionLost(f"sending to {self.address} failed: {error}") from None
         except BaseException as error:  # interrupted (KeyboardInterrupt): the frame may be cut
             self.close()
-            self._closed_because = (f": a request was interrupted ({type(error).__name__}) "
-                                    "while it was being sent; connect again")
+            self._closed_because = (
+                f": a request was interrupted ({type(error).__name__}) "
+                "while it was being sent; connect again"
+            )
             raise
 
     def send_step(self, action: Any, repeat_action: int | None = None) -> None:
@@ -240,8 +259,12 @@ class Client(BaseClient):
         integer) is written straight into its slot.
         """
         lane = self._lane
-        if lane is not None and self._sock is not None and not self._connection.outstanding \
-                and self._observation_request is AGENT_ONLY:
+        if (
+            lane is not None
+            and self._sock is not None
+            and not self._connection.outstanding
+            and self._observation_request is AGENT_ONLY
+        ):
             request_id = next(self._ids)
             if lane.slots.write_step(request_id, action, repeat_action):
                 self._awaited = request_id
@@ -249,9 +272,13 @@ class Client(BaseClient):
                 return
         super().send_step(action, repeat_action)
 
-    def send_steps(self, action: Any, reset: np.ndarray | None = None,
-                   repeat_action: int | None = None,
-                   reset_with: Sequence[Mapping[str, Any] | None] | None = None) -> None:
+    def send_steps(
+        self,
+        action: Any,
+        reset: np.ndarray | None = None,
+        repeat_action: int | None = None,
+        reset_with: Sequence[Mapping[str, Any] | None] | None = None,
+    ) -> None:
         """Step every instance of the server at once, in columns (see :class:`BaseClient`).
 
         Through the lane, an array of the K actions' exact dtype and shape (and boolean reset
@@ -259,8 +286,12 @@ class Client(BaseClient):
         on the socket.
         """
         lane = self._lane
-        if lane is not None and self._sock is not None and not self._connection.outstanding \
-                and (reset_with is None or all(entry is None for entry in reset_with)):
+        if (
+            lane is not None
+            and self._sock is not None
+            and not self._connection.outstanding
+            and (reset_with is None or all(entry is None for entry in reset_with))
+        ):
             request_id = next(self._ids)
             if lane.slots.write_steps(request_id, action, reset, repeat_action):
                 self._awaited = request_id
@@ -304,8 +335,11 @@ class Client(BaseClient):
         start of a frame) or reached its end; false while the server is still at work.
         """
         lane = self._lane
-        if self._lane_kind and lane is not None and \
-                lane.slots.answer_sequence != self._lane_answers:
+        if (
+            self._lane_kind
+            and lane is not None
+            and lane.slots.answer_sequence != self._lane_answers
+        ):
             return True
         sock = self._sock
         return self._connection.buffered > 0 or sock is None or readable_now(sock)
@@ -317,12 +351,17 @@ class Client(BaseClient):
         """
         lane, sock = self._lane, self._sock
         if lane is None or sock is None:
-            raise ConnectionLost(f"the connection to {self.address} is closed"
-                                 f"{self._closed_because}")
+            raise ConnectionLost(
+                f"the connection to {self.address} is closed{self._closed_because}"
+            )
         slots = lane.slots
         try:
-            return wait_for(lambda: slots.answer_sequence != self._lane_answers, lane,
-                            self._waiter, self.timeout)
+            return wait_for(
+                lambda: slots.answer_sequence != self._lane_answers,
+                lane,
+                self._waiter,
+                self.timeout,
+            )
         except BlockingIOError:
             self._timed_out()
         except LaneClosed:
@@ -340,8 +379,11 @@ class Client(BaseClient):
         """
         while self._connection.outstanding:
             message = self._receive()
-            logger.info("%s: dropped the answer to request %s, whose caller gave up on it",
-                        self.address, message.id)
+            logger.info(
+                "%s: dropped the answer to request %s, whose caller gave up on it",
+                self.address,
+                message.id,
+            )
 
     def _next_message(self) -> Message:
         connection = self._connection
@@ -376,8 +418,9 @@ class Client(BaseClient):
         """
         sock = self._sock
         if sock is None:
-            raise ConnectionLost(f"the connection to {self.address} is closed"
-                                 f"{self._closed_because}")
+            raise ConnectionLost(
+                f"the connection to {self.address} is closed{self._closed_because}"
+            )
         try:
             return self._waiter.recv(sock, _READ_SIZE)
         except BlockingIOError:
@@ -389,4 +432,5 @@ class Client(BaseClient):
     def _timed_out(self) -> NoReturn:
         self.close()
         raise RequestTimeout(
-            f"{self.address} did not answer within {self.timeout}s; connection closed")
+            f"{self.address} did not answer within {self.timeout}s; connection closed"
+        )

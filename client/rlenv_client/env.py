@@ -85,30 +85,49 @@ class RemoteEnv(gymnasium.Env):
     metadata: dict[str, Any] = {"render_modes": ["rgb_array", "human"], "render_fps": 15}
 
     def __init__(
-        self, target: str | None = None, *, address: str | None = None,
-        repeat_action: int | None = None, render_mode: str | None = None,
-        in_process: bool = False, timeout: float = 30.0, server_args: Sequence[str] = (),
-        render_size: tuple[int, int] | None = None, token: str | None = None,
-        max_restarts: int = 3, inspector: bool = False, shared_memory: bool | None = None,
-        share_server: bool = True, max_episode_steps: int | None = None,
+        self,
+        target: str | None = None,
+        *,
+        address: str | None = None,
+        repeat_action: int | None = None,
+        render_mode: str | None = None,
+        in_process: bool = False,
+        timeout: float = 30.0,
+        server_args: Sequence[str] = (),
+        render_size: tuple[int, int] | None = None,
+        token: str | None = None,
+        max_restarts: int = 3,
+        inspector: bool = False,
+        shared_memory: bool | None = None,
+        share_server: bool = True,
+        max_episode_steps: int | None = None,
     ) -> None:
         self.metadata = {"render_modes": ["rgb_array"], "render_fps": 15}
         if display_available():
             self.metadata["render_modes"].append("human")
         if render_mode is not None and render_mode not in ("rgb_array", "human"):
-            raise ValueError(f"render_mode must be 'rgb_array', 'human' or None, got "
-                             f"{render_mode!r}")
+            raise ValueError(
+                f"render_mode must be 'rgb_array', 'human' or None, got {render_mode!r}"
+            )
         if max_episode_steps is not None and max_episode_steps < 1:
             raise ValueError(f"max_episode_steps must be at least 1, got {max_episode_steps}")
         if render_mode == "human" and not display_available():
-            raise RuntimeError("render_mode='human' needs a display, and none is available "
-                               "(DISPLAY is not set); use render_mode='rgb_array' instead")
+            raise RuntimeError(
+                "render_mode='human' needs a display, and none is available "
+                "(DISPLAY is not set); use render_mode='rgb_array' instead"
+            )
         self.target = target
-        self.session = Session(target, address=address, in_process=in_process,
-                               max_restarts=max_restarts, timeout=timeout,
-                               server_args=server_args, token=token,
-                               shared_memory=shared_memory,
-                               share_server=share_server and not inspector)
+        self.session = Session(
+            target,
+            address=address,
+            in_process=in_process,
+            max_restarts=max_restarts,
+            timeout=timeout,
+            server_args=server_args,
+            token=token,
+            shared_memory=shared_memory,
+            share_server=share_server and not inspector,
+        )
         hello = self.client.hello
         try:
             self._view = TrainerView(hello)
@@ -192,8 +211,13 @@ class RemoteEnv(gymnasium.Env):
             if self._last_observation is None:
                 raise self.session.failure(error) from None
             reason = self.session.restart(error)
-            return copy.deepcopy(self._last_observation), 0.0, False, True, {
-                "frames": 0, "server_restarted": reason}
+            return (
+                copy.deepcopy(self._last_observation),
+                0.0,
+                False,
+                True,
+                {"frames": 0, "server_restarted": reason},
+            )
         result = self._view.result(result)
         self._last_observation = result[0]
         self._steps += 1

@@ -20,8 +20,16 @@ from rlenv.protocol.snapshots import WHOLE_EVENTS
 from rlenv.protocol.spaces import codec_for
 from rlenv_client.replay import EpisodeFile
 
-__all__ = ["CLAIMS_SINCE", "EPISODES_SINCE", "PAGED_EPISODES_SINCE", "Inspection", "config_request",
-           "episode_files", "episodes_refusal", "fetch_episodes"]
+__all__ = [
+    "CLAIMS_SINCE",
+    "EPISODES_SINCE",
+    "PAGED_EPISODES_SINCE",
+    "Inspection",
+    "config_request",
+    "episode_files",
+    "episodes_refusal",
+    "fetch_episodes",
+]
 
 EPISODES_SINCE = (2, 5)
 """The protocol version that brought the ``episodes`` part (:meth:`Inspection.episodes`)."""
@@ -52,7 +60,10 @@ class Inspection:
         def receive_reply(self) -> Response | ErrorReply: ...  # noqa: D102
 
     def inspect_configure(
-        self, *, agent: Mapping[str, Any] | None = None, world: Mapping[str, Any] | None = None,
+        self,
+        *,
+        agent: Mapping[str, Any] | None = None,
+        world: Mapping[str, Any] | None = None,
         **environment: Any,
     ) -> None:
         """Change settings as ``configure`` does (``agent`` by name too), but as an inspector.
@@ -87,8 +98,10 @@ class Inspection:
         """
         hello = self.hello
         if hello.protocol < CLAIMS_SINCE:
-            raise RemoteError(ErrorCode.BAD_REQUEST, "the server speaks protocol {}.{}; claims "
-                              "need 2.6".format(*hello.protocol))
+            raise RemoteError(
+                ErrorCode.BAD_REQUEST,
+                "the server speaks protocol {}.{}; claims need 2.6".format(*hello.protocol),
+            )
         space = hello.action_space
         packed = action
         if len(hello.agents) > 1 and agent in hello.agents:
@@ -157,8 +170,9 @@ class Inspection:
         if refusal is not None:
             raise RemoteError(ErrorCode.BAD_REQUEST, refusal)
         if last is not None and (type(last) is not int or last < 1):
-            raise RemoteError(ErrorCode.BAD_REQUEST,
-                              f"episodes.last must be an integer >= 1, got {last!r:.40}")
+            raise RemoteError(
+                ErrorCode.BAD_REQUEST, f"episodes.last must be an integer >= 1, got {last!r:.40}"
+            )
         return fetch_episodes(lambda part: self._call(episodes=part), hello, last)
 
     def tree(self) -> list[dict[str, Any]]:
@@ -242,12 +256,16 @@ def episodes_refusal(hello: Hello, server: str = "the server") -> str | None:
     if hello.protocol >= EPISODES_SINCE:
         return None
     return "{} speaks protocol {}.{}; recent episodes need {}.{}".format(
-        server, *hello.protocol, *EPISODES_SINCE)
+        server, *hello.protocol, *EPISODES_SINCE
+    )
 
 
-def fetch_episodes(ask: Callable[[dict[str, Any]], Response], hello: Hello,
-                   last: int | None = None,
-                   cache: MutableMapping[int, EpisodeFile] | None = None) -> list[EpisodeFile]:
+def fetch_episodes(
+    ask: Callable[[dict[str, Any]], Response],
+    hello: Hello,
+    last: int | None = None,
+    cache: MutableMapping[int, EpisodeFile] | None = None,
+) -> list[EpisodeFile]:
     """An instance's kept episodes (the ``last`` ones), oldest first, as recordings.
 
     From a 2.6 server, by index and in pages (no answer holds more than a page, and each
@@ -279,8 +297,9 @@ def fetch_episodes(ask: Callable[[dict[str, Any]], Response], hello: Hello,
             if error.code != ErrorCode.BAD_REQUEST:
                 raise
         else:
-            files = [cache.setdefault(entry["id"], _episode_file(entry, hello.target))
-                     for entry in whole]
+            files = [
+                cache.setdefault(entry["id"], _episode_file(entry, hello.target)) for entry in whole
+            ]
             if last is None:  # what the index listed and is gone since
                 for identifier in set(cache) - {entry["id"] for entry in whole}:
                     del cache[identifier]
@@ -298,8 +317,9 @@ def fetch_episodes(ask: Callable[[dict[str, Any]], Response], hello: Hello,
     return files
 
 
-def _fetch_episode(ask: Callable[[dict[str, Any]], Response], identifier: int,
-                   target: str | None) -> EpisodeFile | None:
+def _fetch_episode(
+    ask: Callable[[dict[str, Any]], Response], identifier: int, target: str | None
+) -> EpisodeFile | None:
     """One kept episode, page by page (``None``: no longer kept)."""
     events: list[Any] = []
     while True:
@@ -311,8 +331,9 @@ def _fetch_episode(ask: Callable[[dict[str, Any]], Response], identifier: int,
         events.extend(got)
         if not got or len(events) >= page["events"]:
             snapshot["events"] = events
-            return EpisodeFile(target, snapshot, [], bool(page["terminated"]),
-                               bool(page["truncated"]))
+            return EpisodeFile(
+                target, snapshot, [], bool(page["terminated"]), bool(page["truncated"])
+            )
 
 
 def episode_files(entries: list[Mapping[str, Any]], target: str | None) -> list[EpisodeFile]:
@@ -321,12 +342,14 @@ def episode_files(entries: list[Mapping[str, Any]], target: str | None) -> list[
 
 
 def _episode_file(entry: Mapping[str, Any], target: str | None) -> EpisodeFile:
-    return EpisodeFile(target, dict(entry["snapshot"]), [], bool(entry["terminated"]),
-                       bool(entry["truncated"]))
+    return EpisodeFile(
+        target, dict(entry["snapshot"]), [], bool(entry["terminated"]), bool(entry["truncated"])
+    )
 
 
-def config_request(environment: Mapping[str, Any], agent: Mapping[str, Any] | None,
-                   world: Mapping[str, Any] | None) -> dict[str, Any]:
+def config_request(
+    environment: Mapping[str, Any], agent: Mapping[str, Any] | None, world: Mapping[str, Any] | None
+) -> dict[str, Any]:
     """A ``config`` part from ``configure``'s arguments.
 
     Its keys: ``environment`` (the environment's settings), ``agent`` and ``world``.

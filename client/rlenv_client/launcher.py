@@ -70,36 +70,60 @@ class ServerProcess:
     """
 
     def __init__(
-        self, target: str, *, host: str = "127.0.0.1", port: int = 0,
-        startup_timeout: float = 60.0, args: Sequence[str] = (),
+        self,
+        target: str,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        startup_timeout: float = 60.0,
+        args: Sequence[str] = (),
         env: Mapping[str, str] | None = None,
     ) -> None:
         self.target = target
         lifeline, self._lifeline = os.pipe()  # the server exits when this process is gone
-        command = [sys.executable, "-m", "rlenv", "serve", target, "--host", host,
-                   "--port", str(port), "--lifeline", str(lifeline), *args]
+        command = [
+            sys.executable,
+            "-m",
+            "rlenv",
+            "serve",
+            target,
+            "--host",
+            host,
+            "--port",
+            str(port),
+            "--lifeline",
+            str(lifeline),
+            *args,
+        ]
         self._lines: collections.deque[str] = collections.deque(maxlen=_KEPT_LINES)
         self._events: queue.Queue[str | None] = queue.Queue()
         try:
             self.process = subprocess.Popen(
-                command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                stdin=subprocess.DEVNULL, text=True, bufsize=1, start_new_session=True,
-                env={**os.environ, **(env or {})}, pass_fds=(lifeline,),
+                command,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT,
+                stdin=subprocess.DEVNULL,
+                text=True,
+                bufsize=1,
+                start_new_session=True,
+                env={**os.environ, **(env or {})},
+                pass_fds=(lifeline,),
             )
         finally:
             os.close(lifeline)
-        self._pump_thread = threading.Thread(target=self._pump, daemon=True,
-                                             name=f"rlenv-server-{self.pid}")
-        self._finalizer = weakref.finalize(self, _terminate, self.process, self._lifeline,
-                                           self._pump_thread)
+        self._pump_thread = threading.Thread(
+            target=self._pump, daemon=True, name=f"rlenv-server-{self.pid}"
+        )
+        self._finalizer = weakref.finalize(
+            self, _terminate, self.process, self._lifeline, self._pump_thread
+        )
         self._pump_thread.start()
         try:
             self.host, self.port = self._wait_until_listening(startup_timeout)
         except BaseException:
             self.close()
             raise
-        logger.info("server %s (pid %d) listening on %s:%d", target, self.pid, self.host,
-                    self.port)
+        logger.info("server %s (pid %d) listening on %s:%d", target, self.pid, self.host, self.port)
 
     @property
     def pid(self) -> int:
@@ -126,8 +150,10 @@ class ServerProcess:
         except subprocess.TimeoutExpired:
             return None
         self._pump_thread.join(wait)
-        return f"server {self.target} (pid {self.pid}) exited with code {code}; its last " \
-               f"output:\n{self.output}"
+        return (
+            f"server {self.target} (pid {self.pid}) exited with code {code}; its last "
+            f"output:\n{self.output}"
+        )
 
     def is_alive(self) -> bool:
         """Whether the server process is still running."""
@@ -168,13 +194,15 @@ class ServerProcess:
             if line is None:
                 code = self.process.wait()
                 self._pump_thread.join(1.0)
-                reasons = [line[len(_FAILED):].strip() for line in self._lines
-                           if line.startswith(_FAILED)]
-                first = f"could not start: {reasons[-1]}" if reasons else \
-                    "exited before listening"
-                raise ServerStartError(f"server {self.target} {first}\n(exit code {code}; its "
-                                       f"output:\n{self.output.rstrip()})")
-            return parse_address(line[len(_LISTENING):].strip())
+                reasons = [
+                    line[len(_FAILED) :].strip() for line in self._lines if line.startswith(_FAILED)
+                ]
+                first = f"could not start: {reasons[-1]}" if reasons else "exited before listening"
+                raise ServerStartError(
+                    f"server {self.target} {first}\n(exit code {code}; its "
+                    f"output:\n{self.output.rstrip()})"
+                )
+            return parse_address(line[len(_LISTENING) :].strip())
 
 
 def with_server_story(error: ConnectionLost, servers: Iterable[ServerProcess]) -> ConnectionLost:
@@ -199,8 +227,13 @@ def _terminate(
         process.stdout.close()
 
 
-def end_process(process: subprocess.Popen[Any], timeout: float | None = 5.0, *,
-                first: int | None = signal.SIGTERM, group: bool = False) -> int:
+def end_process(
+    process: subprocess.Popen[Any],
+    timeout: float | None = 5.0,
+    *,
+    first: int | None = signal.SIGTERM,
+    group: bool = False,
+) -> int:
     """End the child ``process`` and reap it: every layer's one way to end a process it started.
 
     Sends ``first`` (SIGTERM), waits up to ``timeout`` seconds (``None``: as long as it takes)

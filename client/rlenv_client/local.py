@@ -46,20 +46,30 @@ class LocalClient(BaseClient):
     """
 
     def __init__(
-        self, environment: RLEnvironment | type[RLEnvironment] | str, *, world_data: bool = False,
-        clock: Callable[[], float] | None = None, instances: int = 1,
+        self,
+        environment: RLEnvironment | type[RLEnvironment] | str,
+        *,
+        world_data: bool = False,
+        clock: Callable[[], float] | None = None,
+        instances: int = 1,
         policies: Mapping[str, str | Path] | None = None,
     ) -> None:
         from rlenv.serving._host import Host
         from rlenv.serving.policy_driver import load_policies
 
         super().__init__(world_data=world_data)
-        self.host: Host | None = Host(environment, instances, clock=clock or time.monotonic,
-                                      policies=load_policies(policies or {}))
+        self.host: Host | None = Host(
+            environment,
+            instances,
+            clock=clock or time.monotonic,
+            policies=load_policies(policies or {}),
+        )
         if self.host.driver is not None:
             self.host.close()
-            raise ValueError("policies drive every agent, so nothing is left to control in "
-                             "process; serve it (rlenv serve --policy) to watch it play")
+            raise ValueError(
+                "policies drive every agent, so nothing is left to control in "
+                "process; serve it (rlenv serve --policy) to watch it play"
+            )
         self._replies: deque[Reply] = deque()  # answers not received yet
         self._first = self.host.instances[0]
         self._set_hello(self.host.hello)
@@ -86,8 +96,10 @@ class LocalClient(BaseClient):
         try:
             reply = host.answer(request)
         except BaseException as error:  # interrupted (KeyboardInterrupt) half way
-            host.abandon(f"a request was interrupted ({type(error).__name__}) while the "
-                         "environment served it")
+            host.abandon(
+                f"a request was interrupted ({type(error).__name__}) while the "
+                "environment served it"
+            )
             raise
         self._replies.append(reply)
 

@@ -43,13 +43,26 @@ class RemoteParallelEnv(ParallelEnv):
     metadata = {"name": "rlenv_parallel", "render_modes": ["rgb_array"]}
 
     def __init__(
-        self, target: str | None = None, *, address: str | None = None,
-        repeat_action: int | None = None, max_cycles: int | None = None,
-        in_process: bool = False, render_mode: str | None = None, timeout: float = 30.0,
-        server_args: Sequence[str] = (), token: str | None = None,
+        self,
+        target: str | None = None,
+        *,
+        address: str | None = None,
+        repeat_action: int | None = None,
+        max_cycles: int | None = None,
+        in_process: bool = False,
+        render_mode: str | None = None,
+        timeout: float = 30.0,
+        server_args: Sequence[str] = (),
+        token: str | None = None,
     ) -> None:
-        self.session = Session(target, address=address, in_process=in_process, timeout=timeout,
-                               server_args=server_args, token=token)
+        self.session = Session(
+            target,
+            address=address,
+            in_process=in_process,
+            timeout=timeout,
+            server_args=server_args,
+            token=token,
+        )
         try:
             self._view = TrainerView(self.session.client.hello)
         except ValueError:
@@ -101,16 +114,18 @@ class RemoteParallelEnv(ParallelEnv):
         """
         live = list(self.agents)
         self._view.refuse_driven(actions)
-        joint = {agent: actions[agent] for agent in live} if self._view.joint \
-            else actions[live[0]]
+        joint = {agent: actions[agent] for agent in live} if self._view.joint else actions[live[0]]
         observation, reward, terminated, truncated, info = self.session.client.step(
-            joint, self.repeat_action)
+            joint, self.repeat_action
+        )
         self._cycles += 1
-        outcomes = info.get("agents") or {live[0]: {"reward": reward, "terminated": terminated,
-                                                    "truncated": truncated}}
+        outcomes = info.get("agents") or {
+            live[0]: {"reward": reward, "terminated": terminated, "truncated": truncated}
+        }
         cut = self.max_cycles is not None and self._cycles >= self.max_cycles
-        observations = {agent: value for agent, value in self._split(observation).items()
-                        if agent in live}
+        observations = {
+            agent: value for agent, value in self._split(observation).items() if agent in live
+        }
         rewards = {agent: float(outcomes[agent]["reward"]) for agent in live}
         terminations = {agent: bool(outcomes[agent]["terminated"]) for agent in live}
         truncations = {agent: bool(outcomes[agent]["truncated"]) or cut for agent in live}
@@ -118,8 +133,7 @@ class RemoteParallelEnv(ParallelEnv):
         for agent in info.get("claimed", ()):  # a person played it (protocol 2.6 claims)
             if agent in infos:
                 infos[agent]["claimed"] = True
-        self.agents = [agent for agent in live
-                       if not (terminations[agent] or truncations[agent])]
+        self.agents = [agent for agent in live if not (terminations[agent] or truncations[agent])]
         return observations, rewards, terminations, truncations, infos
 
     def render(self) -> np.ndarray | None:

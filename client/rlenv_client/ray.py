@@ -68,17 +68,26 @@ class ServerActor:
     actor is the server's restart too.
     """
 
-    def __init__(self, target: str, instances: int, token: str, server_args: Sequence[str],
-                 startup_timeout: float) -> None:
+    def __init__(
+        self,
+        target: str,
+        instances: int,
+        token: str,
+        server_args: Sequence[str],
+        startup_timeout: float,
+    ) -> None:
         self._start_args = (target, instances, token, tuple(server_args), startup_timeout)
         self._server = self._start()
 
     def _start(self) -> ServerProcess:
         target, instances, token, server_args, startup_timeout = self._start_args
-        return ServerProcess(target, host=ray.util.get_node_ip_address(),
-                             startup_timeout=startup_timeout,
-                             args=["--instances", str(instances), *server_args],
-                             env={"RLENV_TOKEN": token})
+        return ServerProcess(
+            target,
+            host=ray.util.get_node_ip_address(),
+            startup_timeout=startup_timeout,
+            args=["--instances", str(instances), *server_args],
+            env={"RLENV_TOKEN": token},
+        )
 
     def address(self) -> tuple[str, str]:
         """``HOST:PORT`` of the server, started anew if it died; and this node's id."""
@@ -112,8 +121,9 @@ class _Registry:
 
     def lease(self, servers: int) -> tuple[list[int], list[Any], str, int]:
         if servers > len(self._free):
-            raise ValueError(f"{servers} servers asked, {len(self._free)} of "
-                             f"{len(self._actors)} free")
+            raise ValueError(
+                f"{servers} servers asked, {len(self._free)} of {len(self._actors)} free"
+            )
         taken, self._free = self._free[:servers], self._free[servers:]
         return taken, [self._actors[index] for index in taken], self._token, self._instances
 
@@ -124,8 +134,9 @@ class _Registry:
 class _Servers:
     """What pools and leases share: server actors, their token, and where each one is."""
 
-    def __init__(self, actors: list[Any], token: str, instances_per_server: int,
-                 labels: list[str]) -> None:
+    def __init__(
+        self, actors: list[Any], token: str, instances_per_server: int, labels: list[str]
+    ) -> None:
         self._actors = actors
         self.token = token
         self.instances_per_server = instances_per_server
@@ -193,10 +204,18 @@ class RayServerPool(_Servers):
     """
 
     def __init__(
-        self, target: str, servers: int, instances_per_server: int = 1, *,
-        cpus_per_server: float = 1.0, strategy: str = "SPREAD", max_restarts: int = 3,
-        server_args: Sequence[str] = (), name: str | None = None,
-        startup_timeout: float = 120.0, progress: Callable[[str], None] | None = None,
+        self,
+        target: str,
+        servers: int,
+        instances_per_server: int = 1,
+        *,
+        cpus_per_server: float = 1.0,
+        strategy: str = "SPREAD",
+        max_restarts: int = 3,
+        server_args: Sequence[str] = (),
+        name: str | None = None,
+        startup_timeout: float = 120.0,
+        progress: Callable[[str], None] | None = None,
     ) -> None:
         if servers < 1 or instances_per_server < 1:
             raise ValueError("a pool needs at least one server of at least one instance")
@@ -207,33 +226,46 @@ class RayServerPool(_Servers):
         self._group = placement_group([{"CPU": cpus_per_server}] * servers, strategy=strategy)
         self._registry: Any = None
         actors: list[Any] = []
-        super().__init__(actors, token, instances_per_server,
-                         [f"pool {name or target}"] * servers)
+        super().__init__(actors, token, instances_per_server, [f"pool {name or target}"] * servers)
         deadline = time.monotonic() + startup_timeout
         try:
             tell(f"rlenv: placing {servers} servers of {target} on the Ray cluster")
             ray.get(self._group.ready(), timeout=startup_timeout)
             for index in range(servers):
                 # @ray.remote made the class an actor class (mypy sees the class as written).
-                actors.append(cast(Any, ServerActor).options(
-                    num_cpus=cpus_per_server, max_restarts=max_restarts, max_task_retries=-1,
-                    scheduling_strategy=PlacementGroupSchedulingStrategy(
-                        self._group, placement_group_bundle_index=index),
-                ).remote(target, instances_per_server, token, server_args, startup_timeout))
+                actors.append(
+                    cast(Any, ServerActor)
+                    .options(
+                        num_cpus=cpus_per_server,
+                        max_restarts=max_restarts,
+                        max_task_retries=-1,
+                        scheduling_strategy=PlacementGroupSchedulingStrategy(
+                            self._group, placement_group_bundle_index=index
+                        ),
+                    )
+                    .remote(target, instances_per_server, token, server_args, startup_timeout)
+                )
             pending = {actor.address.remote(): index for index, actor in enumerate(actors)}
             while pending:
                 left = deadline - time.monotonic()
                 done, _ = ray.wait(list(pending), timeout=max(left, 0))
                 if not done:
-                    raise TimeoutError(f"{len(pending)} of {servers} servers of {target} were "
-                                       f"not up after {startup_timeout} s")
+                    raise TimeoutError(
+                        f"{len(pending)} of {servers} servers of {target} were "
+                        f"not up after {startup_timeout} s"
+                    )
                 for ref in done:
                     _, self._nodes[pending.pop(ref)] = ray.get(ref)
-                tell(f"rlenv: {servers - len(pending)} of {servers} servers up on "
-                     f"{len(set(self._nodes.values()))} nodes")
+                tell(
+                    f"rlenv: {servers - len(pending)} of {servers} servers up on "
+                    f"{len(set(self._nodes.values()))} nodes"
+                )
             if name is not None:
-                self._registry = cast(Any, _Registry).options(name=_REGISTRY.format(name)).remote(
-                    actors, token, instances_per_server)
+                self._registry = (
+                    cast(Any, _Registry)
+                    .options(name=_REGISTRY.format(name))
+                    .remote(actors, token, instances_per_server)
+                )
         except BaseException:
             self.close()
             raise
@@ -264,8 +296,9 @@ class RayServerPool(_Servers):
         """Stop every server and actor, on every node, and free their resources."""
         actors, self._actors = self._actors, []
         if actors:
-            ray.wait([actor.close.remote() for actor in actors], num_returns=len(actors),
-                     timeout=10)
+            ray.wait(
+                [actor.close.remote() for actor in actors], num_returns=len(actors), timeout=10
+            )
         for actor in [*actors, self._registry]:
             if actor is not None:
                 ray.kill(actor, no_restart=True)
@@ -282,10 +315,21 @@ class RayServerPool(_Servers):
 class PoolLease(_Servers):
     """Servers leased from a named :class:`RayServerPool`, until :meth:`release`."""
 
-    def __init__(self, registry: Any, name: str, indices: list[int], actors: list[Any],
-                 token: str, instances_per_server: int) -> None:
-        super().__init__(actors, token, instances_per_server,
-                         [f"pool {name} (its server {index})" for index in indices])
+    def __init__(
+        self,
+        registry: Any,
+        name: str,
+        indices: list[int],
+        actors: list[Any],
+        token: str,
+        instances_per_server: int,
+    ) -> None:
+        super().__init__(
+            actors,
+            token,
+            instances_per_server,
+            [f"pool {name} (its server {index})" for index in indices],
+        )
         self._registry = registry
         self._indices = indices
 

@@ -31,8 +31,13 @@ MAX_RECORDING_BYTES = DEFAULT_MAX_FRAME_SIZE
 and holds at most a frame's objects)."""
 
 
-_KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a device"),
-          (stat.S_ISBLK, "a device"), (stat.S_ISSOCK, "a socket"))
+_KINDS = (
+    (stat.S_ISDIR, "a folder"),
+    (stat.S_ISFIFO, "a FIFO"),
+    (stat.S_ISCHR, "a device"),
+    (stat.S_ISBLK, "a device"),
+    (stat.S_ISSOCK, "a socket"),
+)
 
 
 def read_recording(path: str | Path, limit: int = MAX_RECORDING_BYTES) -> bytes:
@@ -49,8 +54,9 @@ def read_recording(path: str | Path, limit: int = MAX_RECORDING_BYTES) -> bytes:
             kind = next((name for test, name in _KINDS if test(mode.st_mode)), "no regular file")
             raise ValueError(f"{path} is {kind}: a recording is a regular file")
         if mode.st_size > limit:
-            raise ValueError(f"{path} holds {mode.st_size:,} bytes: a recording holds at most "
-                             f"{limit:,}")
+            raise ValueError(
+                f"{path} holds {mode.st_size:,} bytes: a recording holds at most {limit:,}"
+            )
         chunks, size = [], 0
         while size <= limit:
             chunk = os.read(fd, min(1 << 20, limit + 1 - size))
@@ -61,8 +67,10 @@ def read_recording(path: str | Path, limit: int = MAX_RECORDING_BYTES) -> bytes:
     finally:
         os.close(fd)
     if size > limit:
-        raise ValueError(f"{path} grew past {limit:,} bytes while it was read: a recording "
-                         f"holds at most {limit:,}")
+        raise ValueError(
+            f"{path} grew past {limit:,} bytes while it was read: a recording "
+            f"holds at most {limit:,}"
+        )
     return b"".join(chunks)
 
 
@@ -74,5 +82,7 @@ def check_frames(events: list[Any], where: str) -> None:
     """
     for index, event in enumerate(events):
         if event[0] == "action" and event[2] > MAX_REPEAT_ACTION:
-            raise ValueError(f"{where}: events[{index}] asks for {event[2]:,} ticks; a recorded "
-                             f"action runs at most {MAX_REPEAT_ACTION:,}")
+            raise ValueError(
+                f"{where}: events[{index}] asks for {event[2]:,} ticks; a recorded "
+                f"action runs at most {MAX_REPEAT_ACTION:,}"
+            )

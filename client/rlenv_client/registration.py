@@ -29,15 +29,14 @@ class _Registration:
 ENVIRONMENTS = {
     "rlenv/CartPole-v0": _Registration("rlenv.examples.cartpole:CartPoleEnvironment", 500),
     "rlenv/CartPole-v1": _Registration(
-        "rlenv.examples.classic_cartpole:ClassicCartPoleEnvironment", 500),
+        "rlenv.examples.classic_cartpole:ClassicCartPoleEnvironment", 500
+    ),
     "rlenv/Maze-v0": _Registration("rlenv.examples.maze:MazeEnvironment", 250),
-    "rlenv/Pair-v0": _Registration("rlenv.examples.pair:PairEnvironment", 300,
-                                   several_agents=True),
+    "rlenv/Pair-v0": _Registration("rlenv.examples.pair:PairEnvironment", 300, several_agents=True),
     "rlenv/Pixels-v0": _Registration("rlenv.examples.pixels:PixelsEnvironment", 1000),
     "rlenv/Plinko-v0": _Registration("rlenv.examples.plinko:PlinkoEnvironment", 100),
     "rlenv/Reacher-v0": _Registration("rlenv.examples.reacher:ReacherEnvironment", 200),
-    "rlenv/Tag-v0": _Registration("rlenv.examples.tag:TagEnvironment", 300,
-                                  several_agents=True),
+    "rlenv/Tag-v0": _Registration("rlenv.examples.tag:TagEnvironment", 300, several_agents=True),
     "rlenv/Seeker-v0": _Registration("rlenv.examples.seeker:SeekerEnvironment", 250),
     "rlenv/SeekerPixels-v0": _Registration("rlenv.examples.seeker:SeekerPixelsEnvironment", 250),
 }
@@ -57,8 +56,12 @@ def register_environments() -> None:
     ``rlenv/CartPole-v0`` is not an older ``rlenv/CartPole-v1`` but another environment (a
     continuous push, 4 ticks a step), so that one warning is silenced.
     """
-    warnings.filterwarnings("ignore", message=r".*The environment rlenv/CartPole-v0 is out of "
-                            r"date", category=DeprecationWarning)
+    warnings.filterwarnings(
+        "ignore",
+        message=r".*The environment rlenv/CartPole-v0 is out of "
+        r"date",
+        category=DeprecationWarning,
+    )
     for env_id, registration in ENVIRONMENTS.items():
         if env_id in gymnasium.registry:
             continue
@@ -66,8 +69,13 @@ def register_environments() -> None:
             id=env_id,
             entry_point="rlenv_client.env:RemoteEnv",
             vector_entry_point="rlenv_client.vector:RemoteVectorEnv",
-            kwargs={"target": registration.target, **(
-                {"max_episode_steps": registration.max_episode_steps}
-                if registration.several_agents else {})},
+            kwargs={
+                "target": registration.target,
+                **(
+                    {"max_episode_steps": registration.max_episode_steps}
+                    if registration.several_agents
+                    else {}
+                ),
+            },
             max_episode_steps=registration.max_episode_steps,
         )

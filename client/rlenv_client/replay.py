@@ -33,22 +33,35 @@ from rlenv_client.recordings import check_frames, read_recording
 if TYPE_CHECKING:  # only named: base.py's Inspection builds EpisodeFiles
     from rlenv_client.base import BaseClient
 
-__all__ = ["EpisodeFile", "RecordEpisodes", "ReplayResult", "Trajectory", "apply_change", "digest",
-           "next_episode_path", "older_settings", "replay"]
+__all__ = [
+    "EpisodeFile",
+    "RecordEpisodes",
+    "ReplayResult",
+    "Trajectory",
+    "apply_change",
+    "digest",
+    "next_episode_path",
+    "older_settings",
+    "replay",
+]
 
 _FORMAT = "rlenv-episode"
 _VERSION = 1
 _NAME = re.compile(r"episode-(\d+)\.rlenv")
 
+
 def digest(observation: Any) -> str:
     """A short fingerprint of an observation's exact bytes (dtype and shape included)."""
     return hashlib.blake2b(pack(observation), digest_size=16).hexdigest()
 
+
 def next_episode_path(directory: Path) -> Path:
     """``directory/episode-NNNN.rlenv``, numbered after the highest one there."""
-    numbers = [int(match.group(1)) for path in directory.iterdir()
-               if (match := _NAME.fullmatch(path.name))]
+    numbers = [
+        int(match.group(1)) for path in directory.iterdir() if (match := _NAME.fullmatch(path.name))
+    ]
     return directory / f"episode-{max(numbers, default=0) + 1:04d}.rlenv"
+
 
 @dataclass
 class EpisodeFile:
@@ -70,8 +83,13 @@ class EpisodeFile:
 
     def save(self, path: str | Path) -> None:
         """Write the episode to ``path`` (the end only when known: older readers skip it)."""
-        data = {"format": _FORMAT, "version": _VERSION, "target": self.target,
-                "snapshot": self.snapshot, "observations": self.observations}
+        data = {
+            "format": _FORMAT,
+            "version": _VERSION,
+            "target": self.target,
+            "snapshot": self.snapshot,
+            "observations": self.observations,
+        }
         if self.terminated is not None and self.truncated is not None:
             data.update(terminated=self.terminated, truncated=self.truncated)
         if self.agent is not None:
@@ -98,14 +116,22 @@ class EpisodeFile:
             data = unpack(raw)
         except Exception as error:
             raise ValueError(f"{path} is not an rlenv episode: {error}") from None
-        if not isinstance(data, dict) or data.get("format") != _FORMAT or \
-                data.get("version") != _VERSION:
+        if (
+            not isinstance(data, dict)
+            or data.get("format") != _FORMAT
+            or data.get("version") != _VERSION
+        ):
             raise ValueError(f"{path} is not an rlenv episode (version {_VERSION})")
         target, observations = data.get("target"), data.get("observations")
-        if not (target is None or isinstance(target, str)) or not isinstance(observations, list) \
-                or not all(isinstance(seen, str) for seen in observations):
-            raise ValueError(f"{path} is not an rlenv episode: its target must be a string and "
-                             "its observations a list of digests")
+        if (
+            not (target is None or isinstance(target, str))
+            or not isinstance(observations, list)
+            or not all(isinstance(seen, str) for seen in observations)
+        ):
+            raise ValueError(
+                f"{path} is not an rlenv episode: its target must be a string and "
+                "its observations a list of digests"
+            )
 
         try:
             snapshot = parse_snapshot(data.get("snapshot"))
@@ -115,8 +141,16 @@ class EpisodeFile:
         agent = data.get("agent")
         if not (agent is None or isinstance(agent, str)):
             raise ValueError(f"{path} is not an rlenv episode: its agent must be a name")
-        return cls(target, snapshot, observations, data.get("terminated"),
-                   data.get("truncated"), agent, Path(path))
+        return cls(
+            target,
+            snapshot,
+            observations,
+            data.get("terminated"),
+            data.get("truncated"),
+            agent,
+            Path(path),
+        )
+
 
 class RecordEpisodes(gymnasium.Wrapper):
     """Write every episode of an rlenv environment to ``directory`` when it ends.
@@ -148,9 +182,11 @@ class RecordEpisodes(gymnasium.Wrapper):
             remote = self.env.unwrapped
             client: BaseClient = remote.client  # type: ignore[attr-defined]
             target: str | None = remote.target  # type: ignore[attr-defined]
-            EpisodeFile(target, client.snapshot(), self._observations, bool(terminated),
-                        bool(truncated)).save(self.directory / f"episode-{self.episodes:04d}.rlenv")
+            EpisodeFile(
+                target, client.snapshot(), self._observations, bool(terminated), bool(truncated)
+            ).save(self.directory / f"episode-{self.episodes:04d}.rlenv")
         return observation, reward, terminated, truncated, info
+
 
 @dataclass
 class Trajectory:
@@ -166,6 +202,7 @@ class Trajectory:
     terminated: bool = False
     truncated: bool = False
 
+
 @dataclass(frozen=True)
 class ReplayResult:
     """What a replay found: ``divergence`` is ``None`` when every observation matched.
@@ -176,6 +213,7 @@ class ReplayResult:
     steps: int
     divergence: str | None
     trajectory: Trajectory | None = None
+
 
 def apply_change(client: BaseClient, event: Sequence[Any]) -> None:
     """Make on ``client`` a change a snapshot's events recorded between two actions.
@@ -191,6 +229,7 @@ def apply_change(client: BaseClient, event: Sequence[Any]) -> None:
     else:
         client.set_property(*event[1:])
 
+
 def older_settings(snapshot: Mapping[str, Any], agents: Sequence[str]) -> str:
     """Why a recording of several agents may not replay: it predates their settings by name.
 
@@ -201,9 +240,12 @@ def older_settings(snapshot: Mapping[str, Any], agents: Sequence[str]) -> str:
     kept = snapshot.get("config", {}).get("agent") or {}
     if len(agents) < 2 or not kept or any(name in kept for name in agents):
         return ""
-    return (" (the recording predates settings per agent, protocol 2.6: it kept one agent's "
-            f"settings, {dict(kept)!r:.60}, which replay on every agent; if the agents' "
-            "settings differed, it cannot replay)")
+    return (
+        " (the recording predates settings per agent, protocol 2.6: it kept one agent's "
+        f"settings, {dict(kept)!r:.60}, which replay on every agent; if the agents' "
+        "settings differed, it cannot replay)"
+    )
+
 
 def replay(episode: EpisodeFile, client: BaseClient, *, keep: bool = False) -> ReplayResult:
     """Re-run ``episode`` on ``client``'s environment and compare every observation.
@@ -217,8 +259,11 @@ def replay(episode: EpisodeFile, client: BaseClient, *, keep: bool = False) -> R
     observation, _ = client.restore(start)
     expected = iter(episode.observations)
     if digest(observation) != next(expected, None):
-        return ReplayResult(0, "the first observation (after the reset) differs"
-                            + older_settings(episode.snapshot, client.hello.agents))
+        return ReplayResult(
+            0,
+            "the first observation (after the reset) differs"
+            + older_settings(episode.snapshot, client.hello.agents),
+        )
     kept = Trajectory([observation]) if keep else None
     steps = 0
     for event in episode.snapshot["events"]:
@@ -231,8 +276,11 @@ def replay(episode: EpisodeFile, client: BaseClient, *, keep: bool = False) -> R
         if recorded is None:
             break
         if digest(observation) != recorded:
-            return ReplayResult(steps, f"step {steps}: the observation differs from the "
-                                f"recording{older_settings(episode.snapshot, client.hello.agents)}")
+            return ReplayResult(
+                steps,
+                f"step {steps}: the observation differs from the "
+                f"recording{older_settings(episode.snapshot, client.hello.agents)}",
+            )
         if kept is not None:
             kept.observations.append(observation)
             kept.actions.append(event[1])

@@ -108,8 +108,14 @@ if TYPE_CHECKING:
 
 __all__ = ["LeasedVectorEnv", "RLlibEnvCreator", "config_for", "register", "vector_options"]
 
-_MULTI_AGENT = ("AgentMapping", "RemoteMultiAgentEnv", "multi_agent_config_for",
-                "policy_per_agent", "policy_per_class", "register_multi_agent")
+_MULTI_AGENT = (
+    "AgentMapping",
+    "RemoteMultiAgentEnv",
+    "multi_agent_config_for",
+    "policy_per_agent",
+    "policy_per_class",
+    "register_multi_agent",
+)
 
 
 def __getattr__(name: str) -> Any:
@@ -119,6 +125,7 @@ def __getattr__(name: str) -> Any:
 
         return getattr(rllib_agents, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 _VECTOR_ENTRY = "rlenv_client.vector:RemoteVectorEnv"
 _NOT_WITH_POOL = ("addresses", "in_process", "instances_per_server", "token")
@@ -130,8 +137,7 @@ def vector_options() -> tuple[str, ...]:
     Read from ``RemoteVectorEnv``'s signature, so new options are accepted as they come.
     """
     parameters = inspect.signature(RemoteVectorEnv.__init__).parameters
-    return tuple(name for name in parameters if name not in ("self", "num_envs", "target",
-                                                                 "pool"))
+    return tuple(name for name in parameters if name not in ("self", "num_envs", "target", "pool"))
 
 
 def _resolve(env: str) -> tuple[str, int | None]:
@@ -140,13 +146,17 @@ def _resolve(env: str) -> tuple[str, int | None]:
         spec = gymnasium.registry[env]
         target = spec.kwargs.get("target")
         if spec.vector_entry_point != _VECTOR_ENTRY or not isinstance(target, str):
-            raise ValueError(f"{env!r} is not an rlenv id (its vector entry point is "
-                             f"{spec.vector_entry_point!r}); give an rlenv id or MODULE:CLASS")
+            raise ValueError(
+                f"{env!r} is not an rlenv id (its vector entry point is "
+                f"{spec.vector_entry_point!r}); give an rlenv id or MODULE:CLASS"
+            )
         return target, spec.max_episode_steps
     module, _, name = env.partition(":")
     if not module or not name:
-        raise ValueError(f"expected an rlenv gymnasium id (e.g. 'rlenv/CartPole-v0') or a "
-                         f"target 'MODULE:CLASS', got {env!r}")
+        raise ValueError(
+            f"expected an rlenv gymnasium id (e.g. 'rlenv/CartPole-v0') or a "
+            f"target 'MODULE:CLASS', got {env!r}"
+        )
     return env, None
 
 
@@ -166,8 +176,7 @@ class RLlibEnvCreator:
         ValueError: an unknown option, or one RLlib cannot use.
     """
 
-    def __init__(self, target: str, max_episode_steps: int | None = None,
-                 **options: Any) -> None:
+    def __init__(self, target: str, max_episode_steps: int | None = None, **options: Any) -> None:
         self.target = target
         self.options: dict[str, Any] = {"max_episode_steps": max_episode_steps}
         self.options.update(self._checked(options, "register()"))
@@ -195,8 +204,9 @@ class RLlibEnvCreator:
         pool = options.pop("pool", None)
         pool_servers = options.pop("pool_servers", None)
         if pool is not None:
-            return self._leased(pool, 1 if pool_servers is None else pool_servers, num_envs,
-                                options)
+            return self._leased(
+                pool, 1 if pool_servers is None else pool_servers, num_envs, options
+            )
         if pool_servers is not None:
             raise ValueError("pool_servers is only for pool='NAME'")
         if options.get("addresses") is None:
@@ -212,8 +222,9 @@ class RLlibEnvCreator:
             )
         return vector
 
-    def _leased(self, pool: str, servers: int, num_envs: int,
-                options: dict[str, Any]) -> RemoteVectorEnv:
+    def _leased(
+        self, pool: str, servers: int, num_envs: int, options: dict[str, Any]
+    ) -> RemoteVectorEnv:
         """A vector over ``servers`` servers leased from the named pool (see module docstring).
 
         Raises:
@@ -223,8 +234,10 @@ class RLlibEnvCreator:
         """
         clashing = sorted(key for key in _NOT_WITH_POOL if key in options)
         if clashing:
-            raise ValueError(f"{', '.join(clashing)} cannot be used with pool= (the pool's "
-                             f"servers fix where and how many sub-environments run)")
+            raise ValueError(
+                f"{', '.join(clashing)} cannot be used with pool= (the pool's "
+                f"servers fix where and how many sub-environments run)"
+            )
         try:
             from rlenv_client.ray import RayServerPool
         except ModuleNotFoundError as error:
@@ -291,8 +304,7 @@ class LeasedVectorEnv(RemoteVectorEnv):
             self.lease.release()
 
 
-def register(env: str = "rlenv/CartPole-v0", name: str | None = None,
-             **options: Any) -> str:
+def register(env: str = "rlenv/CartPole-v0", name: str | None = None, **options: Any) -> str:
     """Register an rlenv environment with RLlib; returns the name for ``config.environment``.
 
     Args:
@@ -316,9 +328,14 @@ def register(env: str = "rlenv/CartPole-v0", name: str | None = None,
 
 
 def config_for(
-    config: AlgorithmConfig, env: str = "rlenv/CartPole-v0", *, num_envs_per_env_runner: int = 8,
-    num_env_runners: int | None = None, restart_failed_sub_environments: bool = True,
-    name: str | None = None, **options: Any,
+    config: AlgorithmConfig,
+    env: str = "rlenv/CartPole-v0",
+    *,
+    num_envs_per_env_runner: int = 8,
+    num_env_runners: int | None = None,
+    restart_failed_sub_environments: bool = True,
+    name: str | None = None,
+    **options: Any,
 ) -> AlgorithmConfig:
     """``config`` set up to sample from rlenv vectors (see the module docstring).
 

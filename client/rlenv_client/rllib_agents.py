@@ -47,8 +47,14 @@ from rlenv_client.trainer_view import TrainerView
 if TYPE_CHECKING:
     from ray.rllib.algorithms.algorithm_config import AlgorithmConfig
 
-__all__ = ["AgentMapping", "RemoteMultiAgentEnv", "multi_agent_config_for", "policy_per_agent",
-           "policy_per_class", "register_multi_agent"]
+__all__ = [
+    "AgentMapping",
+    "RemoteMultiAgentEnv",
+    "multi_agent_config_for",
+    "policy_per_agent",
+    "policy_per_class",
+    "register_multi_agent",
+]
 
 _ALL = "__all__"
 
@@ -72,18 +78,31 @@ class RemoteMultiAgentEnv(MultiAgentEnv):
     """
 
     def __init__(
-        self, target: str | None = None, *, address: str | None = None,
-        others: Mapping[str, str] | None = None, repeat_action: int | None = None,
-        max_episode_steps: int | None = None, in_process: bool = False, timeout: float = 30.0,
+        self,
+        target: str | None = None,
+        *,
+        address: str | None = None,
+        others: Mapping[str, str] | None = None,
+        repeat_action: int | None = None,
+        max_episode_steps: int | None = None,
+        in_process: bool = False,
+        timeout: float = 30.0,
         server_args: Sequence[str] = (),
     ) -> None:
         super().__init__()
         policies = policy_arguments(others or {})
         if policies and (address is not None or in_process):
-            raise ValueError("others are driven by the server this environment starts: not "
-                             "with an address or in_process")
-        self.session = Session(target, address=address, in_process=in_process, timeout=timeout,
-                               server_args=[*server_args, *policies])
+            raise ValueError(
+                "others are driven by the server this environment starts: not "
+                "with an address or in_process"
+            )
+        self.session = Session(
+            target,
+            address=address,
+            in_process=in_process,
+            timeout=timeout,
+            server_args=[*server_args, *policies],
+        )
         hello = self.session.client.hello
         try:
             view = TrainerView(hello)
@@ -99,16 +118,18 @@ class RemoteMultiAgentEnv(MultiAgentEnv):
         self.max_episode_steps = max_episode_steps
         self._steps = 0
 
-    def reset(self, *, seed: int | None = None,
-              options: dict[str, Any] | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, Any], dict[str, Any]]:
         """Start an episode: every agent's first observation."""
         super().reset(seed=seed, options=options)
         observation, _ = self.session.client.reset(seed=seed, options=options)
         self.agents = list(self.possible_agents)
         self._steps = 0
         observations = self._split(observation)
-        return {name: observations[name] for name in self.agents}, \
-            {name: {} for name in self.agents}
+        return {name: observations[name] for name in self.agents}, {
+            name: {} for name in self.agents
+        }
 
     def step(self, action_dict: dict[str, Any]) -> tuple[dict[str, Any], ...]:
         """Act for the agents in the episode; RLlib's five dicts (``"__all__"`` included).
@@ -120,21 +141,25 @@ class RemoteMultiAgentEnv(MultiAgentEnv):
         missing = [name for name in live if name not in action_dict]
         if missing:
             raise ValueError(f"no action for agent {missing[0]!r}, which is in the episode")
-        joint = {name: action_dict[name] for name in live} if self._several \
-            else action_dict[live[0]]
+        joint = (
+            {name: action_dict[name] for name in live} if self._several else action_dict[live[0]]
+        )
         observation, reward, terminated, truncated, info = self.session.client.step(
-            joint, self.repeat_action)
+            joint, self.repeat_action
+        )
         self._steps += 1
         cut = self.max_episode_steps is not None and self._steps >= self.max_episode_steps
-        outcomes = info.get("agents") or {live[0]: {"reward": reward, "terminated": terminated,
-                                                    "truncated": truncated}}
+        outcomes = info.get("agents") or {
+            live[0]: {"reward": reward, "terminated": terminated, "truncated": truncated}
+        }
         observations = self._split(observation)
         obs = {name: observations[name] for name in live}
         rewards = {name: float(outcomes[name]["reward"]) for name in live}
         terminateds: dict[str, bool] = {name: bool(outcomes[name]["terminated"]) for name in live}
         truncateds: dict[str, bool] = {
             name: bool(outcomes[name]["truncated"]) or (cut and not terminateds[name])
-            for name in live}
+            for name in live
+        }
         if terminated or truncated or cut:  # the episode ended: whoever was left is cut
             for name in live:
                 truncateds[name] = truncateds[name] or not terminateds[name]
@@ -172,8 +197,9 @@ class AgentMapping:
         try:
             return self.policies[agent_id]
         except KeyError:
-            raise KeyError(f"no policy for agent {agent_id!r}; mapped: "
-                           f"{', '.join(self.policies)}") from None
+            raise KeyError(
+                f"no policy for agent {agent_id!r}; mapped: {', '.join(self.policies)}"
+            ) from None
 
     def __repr__(self) -> str:
         return f"AgentMapping({self.policies!r})"
@@ -222,9 +248,14 @@ class MultiAgentCreator:
 
 
 def multi_agent_config_for(
-    config: AlgorithmConfig, target: str, *, per: Literal["class", "agent"] = "class",
-    num_envs_per_env_runner: int = 1, num_env_runners: int | None = None,
-    name: str | None = None, **options: Any,
+    config: AlgorithmConfig,
+    target: str,
+    *,
+    per: Literal["class", "agent"] = "class",
+    num_envs_per_env_runner: int = 1,
+    num_env_runners: int | None = None,
+    name: str | None = None,
+    **options: Any,
 ) -> AlgorithmConfig:
     """``config`` set up to train a policy per agent class (or per agent) of ``target``.
 
@@ -249,8 +280,9 @@ def multi_agent_config_for(
         raise ValueError(f"per must be 'class' or 'agent', not {per!r}")
     mapping = (policy_per_class if per == "class" else policy_per_agent)(target)
     driven = set(options.get("others") or {})
-    mapping = AgentMapping({agent: policy for agent, policy in mapping.policies.items()
-                            if agent not in driven})
+    mapping = AgentMapping(
+        {agent: policy for agent, policy in mapping.policies.items() if agent not in driven}
+    )
     runners: dict[str, Any] = {"num_envs_per_env_runner": num_envs_per_env_runner}
     if num_env_runners is not None:
         runners["num_env_runners"] = num_env_runners

@@ -83,42 +83,64 @@ class SB3VecEnv(VecEnv):
     """
 
     def __init__(
-        self, num_envs: int = 1, target: str | None = None, *,
-        addresses: Sequence[str] | None = None, repeat_action: int | None = None,
-        max_episode_steps: int | None = None, in_process: bool = False,
-        render_mode: str | None = None, instances_per_server: int | None = None,
-        vector: VectorEnv | None = None, agents: Agents | None = None,
+        self,
+        num_envs: int = 1,
+        target: str | None = None,
+        *,
+        addresses: Sequence[str] | None = None,
+        repeat_action: int | None = None,
+        max_episode_steps: int | None = None,
+        in_process: bool = False,
+        render_mode: str | None = None,
+        instances_per_server: int | None = None,
+        vector: VectorEnv | None = None,
+        agents: Agents | None = None,
         others: Mapping[Any, OtherPolicy] | None = None,
     ) -> None:
         if others is not None and agents is None:
-            raise ValueError("others says what drives the agents that do not learn: give "
-                             "agents= too")
+            raise ValueError(
+                "others says what drives the agents that do not learn: give agents= too"
+            )
         if agents is not None and vector is not None:
             raise ValueError("agents= makes the vector: give agents or vector, not both")
         if agents is not None:
             vector = AgentVectorEnv(
-                None if addresses is not None else num_envs, target, agents=agents,
-                others=others, addresses=addresses, repeat_action=repeat_action,
-                max_episode_steps=max_episode_steps, in_process=in_process,
-                render_mode=render_mode, instances_per_server=instances_per_server,
-                trainer_cores=1)
+                None if addresses is not None else num_envs,
+                target,
+                agents=agents,
+                others=others,
+                addresses=addresses,
+                repeat_action=repeat_action,
+                max_episode_steps=max_episode_steps,
+                in_process=in_process,
+                render_mode=render_mode,
+                instances_per_server=instances_per_server,
+                trainer_cores=1,
+            )
         if vector is not None:
             if vector.metadata.get("autoreset_mode") is not AutoresetMode.SAME_STEP:
-                raise ValueError("SB3VecEnv needs a vector with SAME_STEP autoreset (SB3's "
-                                 f"convention), not {vector.metadata.get('autoreset_mode')}")
+                raise ValueError(
+                    "SB3VecEnv needs a vector with SAME_STEP autoreset (SB3's "
+                    f"convention), not {vector.metadata.get('autoreset_mode')}"
+                )
             self.venv: VectorEnv = vector
         else:
             if instances_per_server is None and addresses is None and not in_process:
                 instances_per_server = default_layout(num_envs, trainer_cores=1)[0]
             self.venv = RemoteVectorEnv(
-                None if addresses is not None else num_envs, target, addresses=addresses,
+                None if addresses is not None else num_envs,
+                target,
+                addresses=addresses,
                 repeat_action=repeat_action,
-                max_episode_steps=max_episode_steps, autoreset_mode=AutoresetMode.SAME_STEP,
-                in_process=in_process, render_mode=render_mode,
+                max_episode_steps=max_episode_steps,
+                autoreset_mode=AutoresetMode.SAME_STEP,
+                in_process=in_process,
+                render_mode=render_mode,
                 instances_per_server=instances_per_server,
             )
-        super().__init__(self.venv.num_envs, self.venv.single_observation_space,
-                         self.venv.single_action_space)
+        super().__init__(
+            self.venv.num_envs, self.venv.single_observation_space, self.venv.single_action_space
+        )
         self.render_mode = render_mode
         self._actions: np.ndarray | None = None
         self._started = time.time()
@@ -157,13 +179,13 @@ class SB3VecEnv(VecEnv):
         for index in np.flatnonzero(dones):
             per_env[index] = {**per_env[index], **final[index]}  # the last step's, as SB3 has it
             per_env[index]["terminal_observation"] = infos["final_obs"][index]
-            per_env[index]["TimeLimit.truncated"] = bool(truncated[index] and
-                                                         not terminated[index])
+            per_env[index]["TimeLimit.truncated"] = bool(truncated[index] and not terminated[index])
             if not final[index].get("waiting"):  # a learner's wait ends: no episode to count
                 per_env[index]["episode"] = {
                     "r": round(float(self._episode_returns[index]), 6),
                     "l": int(self._episode_lengths[index]),
-                    "t": round(time.time() - self._started, 6)}
+                    "t": round(time.time() - self._started, 6),
+                }
             self._episode_returns[index] = 0
             self._episode_lengths[index] = 0
         return observations, rewards.astype(np.float32), dones, per_env
@@ -187,8 +209,13 @@ class SB3VecEnv(VecEnv):
         """Not supported: the environments live in other processes."""
         raise AttributeError(f"cannot set {attr_name!r} on remote environments")
 
-    def env_method(self, method_name: str, *method_args: Any, indices: VecEnvIndices = None,
-                   **method_kwargs: Any) -> list[Any]:
+    def env_method(
+        self,
+        method_name: str,
+        *method_args: Any,
+        indices: VecEnvIndices = None,
+        **method_kwargs: Any,
+    ) -> list[Any]:
         """Not supported: the environments live in other processes."""
         raise AttributeError(f"cannot call {method_name!r} on remote environments")
 
@@ -218,12 +245,15 @@ class CurriculumCallback(BaseCallback):
         ValueError: the wrapper scores episodes itself, or ``score`` is unknown.
     """
 
-    def __init__(self, wrapper: CurriculumVectorEnv, score: str = "positive_value_loss",
-                 verbose: int = 0) -> None:
+    def __init__(
+        self, wrapper: CurriculumVectorEnv, score: str = "positive_value_loss", verbose: int = 0
+    ) -> None:
         super().__init__(verbose)
         if wrapper.score != "external":
-            raise ValueError("CurriculumCallback scores the episodes: make the wrapper with "
-                             f"score='external', not {wrapper.score!r}")
+            raise ValueError(
+                "CurriculumCallback scores the episodes: make the wrapper with "
+                f"score='external', not {wrapper.score!r}"
+            )
         if score not in ("positive_value_loss", "max_mc"):
             raise ValueError(f"score must be 'positive_value_loss' or 'max_mc', not {score!r}")
         self.wrapper = wrapper
@@ -234,8 +264,10 @@ class CurriculumCallback(BaseCallback):
 
     def _on_training_start(self) -> None:
         if self.wrapper.sampler.robust and getattr(self.model, "normalize_advantage", False):
-            raise ValueError("Robust PLR with SB3 needs normalize_advantage=False: normalised "
-                             "advantages of new levels would not stay 0")
+            raise ValueError(
+                "Robust PLR with SB3 needs normalize_advantage=False: normalised "
+                "advantages of new levels would not stay 0"
+            )
 
     def _on_rollout_start(self) -> None:
         self._masks = []
@@ -248,8 +280,9 @@ class CurriculumCallback(BaseCallback):
         buffer = self.model.rollout_buffer
         steps = buffer.buffer_size if buffer.full else buffer.pos
         advantages = buffer.advantages[:steps]
-        self.scored += len(self.wrapper.score_rollout(advantages, buffer.values[:steps],
-                                                      self.score))
+        self.scored += len(
+            self.wrapper.score_rollout(advantages, buffer.values[:steps], self.score)
+        )
         if self.wrapper.sampler.robust and len(self._masks) == steps:
             ignored = ~np.stack(self._masks)
             buffer.advantages[:steps][ignored] = 0.0

@@ -70,8 +70,10 @@ class FrozenPolicy:
         """
         policy = self.policy
         if policy is None:
-            raise RuntimeError("FrozenPolicy has no copy yet: call refresh(policy) first (an "
-                               "SB3 SelfPlayCallback does at the start of training)")
+            raise RuntimeError(
+                "FrozenPolicy has no copy yet: call refresh(policy) first (an "
+                "SB3 SelfPlayCallback does at the start of training)"
+            )
         if hasattr(policy, "predict"):
             return policy.predict(observation, deterministic=self.deterministic)[0]
         return policy(observation)

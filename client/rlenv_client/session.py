@@ -55,10 +55,19 @@ class ServerSource(Protocol):
 
 
 def connect(
-    target: str | None = None, *, address: str | None = None, in_process: bool = False,
-    timeout: float = 30.0, server_args: Sequence[str] = (), startup_timeout: float = 60.0,
-    token: str | None = None, instances: int = 1, pool: ServerSource | None = None,
-    index: int = 0, shared_memory: bool | None = None, share_server: bool = False,
+    target: str | None = None,
+    *,
+    address: str | None = None,
+    in_process: bool = False,
+    timeout: float = 30.0,
+    server_args: Sequence[str] = (),
+    startup_timeout: float = 60.0,
+    token: str | None = None,
+    instances: int = 1,
+    pool: ServerSource | None = None,
+    index: int = 0,
+    shared_memory: bool | None = None,
+    share_server: bool = False,
 ) -> tuple[BaseClient, ServerProcess | None]:
     """Reach an environment the way :class:`RemoteEnv` does.
 
@@ -80,13 +89,15 @@ def connect(
     """
     if pool is not None:
         host, port = parse_address(pool.address(index))
-        return Client(host, port, timeout=timeout, token=pool.token,
-                      shared_memory=shared_memory), None
+        return Client(
+            host, port, timeout=timeout, token=pool.token, shared_memory=shared_memory
+        ), None
     if address is not None:
         if in_process:
             raise ValueError("in_process=True needs a target, not an address")
-        return Client(*parse_address(address), timeout=timeout, token=token,
-                      shared_memory=shared_memory), None
+        return Client(
+            *parse_address(address), timeout=timeout, token=token, shared_memory=shared_memory
+        ), None
     if target is None:
         raise ValueError("give target='MODULE:CLASS' or address='HOST:PORT'")
     if in_process:
@@ -96,8 +107,9 @@ def connect(
     if share_server and instances == 1:
         server = shared_servers.lease(target, server_args)
         try:
-            return Client(server.host, server.port, timeout=timeout,
-                          shared_memory=shared_memory), server
+            return Client(
+                server.host, server.port, timeout=timeout, shared_memory=shared_memory
+            ), server
         except BaseException:
             shared_servers.release(server)
             raise
@@ -105,8 +117,9 @@ def connect(
         server_args = [*server_args, "--instances", str(instances)]
     server = ServerProcess(target, startup_timeout=startup_timeout, args=server_args)
     try:
-        return Client(server.host, server.port, timeout=timeout,
-                      shared_memory=shared_memory), server
+        return Client(
+            server.host, server.port, timeout=timeout, shared_memory=shared_memory
+        ), server
     except BaseException:
         server.close()
         raise
@@ -134,16 +147,35 @@ class Session:
     """
 
     def __init__(
-        self, target: str | None = None, *, address: str | None = None, in_process: bool = False,
-        max_restarts: int = 0, timeout: float = 30.0, server_args: Sequence[str] = (),
-        token: str | None = None, instances: int = 1, pool: ServerSource | None = None,
-        index: int = 0, shared_memory: bool | None = None, share_server: bool = False,
+        self,
+        target: str | None = None,
+        *,
+        address: str | None = None,
+        in_process: bool = False,
+        max_restarts: int = 0,
+        timeout: float = 30.0,
+        server_args: Sequence[str] = (),
+        token: str | None = None,
+        instances: int = 1,
+        pool: ServerSource | None = None,
+        index: int = 0,
+        shared_memory: bool | None = None,
+        share_server: bool = False,
     ) -> None:
         # connect's keyword arguments, as given.
         self._place: dict[str, Any] = {
-            "target": target, "address": address, "in_process": in_process, "timeout": timeout,
-            "server_args": server_args, "token": token, "instances": instances, "pool": pool,
-            "index": index, "shared_memory": shared_memory, "share_server": share_server}
+            "target": target,
+            "address": address,
+            "in_process": in_process,
+            "timeout": timeout,
+            "server_args": server_args,
+            "token": token,
+            "instances": instances,
+            "pool": pool,
+            "index": index,
+            "shared_memory": shared_memory,
+            "share_server": share_server,
+        }
         self._pool = pool
         self._connect()
         self.max_restarts = max_restarts
@@ -158,8 +190,9 @@ class Session:
 
     def can_restart(self) -> bool:
         """Whether the server is ours (or a pool's) and the budget allows one more restart."""
-        return (self.server is not None or self._pool is not None) and \
-            self.restarts < self.max_restarts
+        return (
+            self.server is not None or self._pool is not None
+        ) and self.restarts < self.max_restarts
 
     def restart(self, error: Exception) -> str:
         """Replace the lost server with a new one; returns why, for ``info``.
@@ -171,9 +204,11 @@ class Session:
         story = self.failure(error)
         if not self.can_restart():
             if self._pool is not None:
-                raise ServerLost(f"{self._pool.describe(self._place['index'])} lost ({error}) "
-                                 f"after {self.restarts} restarts; max_restarts is "
-                                 f"{self.max_restarts}") from None
+                raise ServerLost(
+                    f"{self._pool.describe(self._place['index'])} lost ({error}) "
+                    f"after {self.restarts} restarts; max_restarts is "
+                    f"{self.max_restarts}"
+                ) from None
             raise story
         self.restarts += 1
         reason = f"server lost ({error}); restarted ({self.restarts} of {self.max_restarts})"
@@ -212,4 +247,3 @@ class Session:
 def as_lost(error: Exception) -> ConnectionLost:
     """A :data:`LOST` error as a ConnectionLost (a timeout keeps its message)."""
     return error if isinstance(error, ConnectionLost) else ConnectionLost(str(error))
-

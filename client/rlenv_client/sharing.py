@@ -59,8 +59,14 @@ class SharedServers:
         key = (target, tuple(server_args))
         while True:
             with self._lock:
-                place = next((entry for entry in self._servers.get(key, ())
-                              if entry.users < MAX_CLIENTS and entry.server.is_alive()), None)
+                place = next(
+                    (
+                        entry
+                        for entry in self._servers.get(key, ())
+                        if entry.users < MAX_CLIENTS and entry.server.is_alive()
+                    ),
+                    None,
+                )
                 if place is not None:
                     place.users += 1
                     return place.server
@@ -71,8 +77,10 @@ class SharedServers:
             starting.wait()
         try:
             server = ServerProcess(
-                target, startup_timeout=self.startup_timeout,
-                args=[*server_args, "--per-client", "--max-connections", str(MAX_CLIENTS)])
+                target,
+                startup_timeout=self.startup_timeout,
+                args=[*server_args, "--per-client", "--max-connections", str(MAX_CLIENTS)],
+            )
             with self._lock:
                 self._servers.setdefault(key, []).append(_Shared(server, users=1))
                 self._keys[server] = key

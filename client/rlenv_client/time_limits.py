@@ -23,6 +23,12 @@ def truncate_agents(info: dict[str, Any]) -> dict[str, Any]:
     agents = info.get("agents")
     if not agents:
         return info
-    return {**info, "agents": {
-        name: outcome if outcome["terminated"] or outcome["truncated"] else
-        {**outcome, "truncated": True} for name, outcome in agents.items()}}
+    return {
+        **info,
+        "agents": {
+            name: outcome
+            if outcome["terminated"] or outcome["truncated"]
+            else {**outcome, "truncated": True}
+            for name, outcome in agents.items()
+        },
+    }

@@ -55,15 +55,21 @@ class TrainerView:
         self.driven = hello.driven
         self.joint = len(hello.agents) > 1
         self.agents = tuple(name for name in hello.agents if name not in hello.driven)
-        if self.joint and not (isinstance(hello.action_space, spaces.Dict)
-                               and isinstance(hello.observation_space, spaces.Dict)):
-            raise ValueError(f"{hello.environment} has {len(hello.agents)} agents but its "
-                             "spaces are not keyed by agent")
+        if self.joint and not (
+            isinstance(hello.action_space, spaces.Dict)
+            and isinstance(hello.observation_space, spaces.Dict)
+        ):
+            raise ValueError(
+                f"{hello.environment} has {len(hello.agents)} agents but its "
+                "spaces are not keyed by agent"
+            )
         if not self.agents:
-            raise ValueError(f"the server drives every agent of {hello.environment} "
-                             f"({', '.join(hello.driven)}; rlenv serve --policy): there is "
-                             "nothing to act for; watch it (rlenv inspect), or serve it with "
-                             "fewer --policy")
+            raise ValueError(
+                f"the server drives every agent of {hello.environment} "
+                f"({', '.join(hello.driven)}; rlenv serve --policy): there is "
+                "nothing to act for; watch it (rlenv inspect), or serve it with "
+                "fewer --policy"
+            )
         self.action_space: spaces.Space = hello.action_space
         self.observation_space: spaces.Space = hello.observation_space
         self._driven_actions: dict[str, spaces.Space] = {}
@@ -72,10 +78,10 @@ class TrainerView:
             assert isinstance(self.action_space, spaces.Dict)
             assert isinstance(self.observation_space, spaces.Dict)
             self._driven_actions = {name: self.action_space[name] for name in self.driven}
-            self.action_space = spaces.Dict({name: self.action_space[name]
-                                             for name in self.agents})
-            self.observation_space = spaces.Dict({name: self.observation_space[name]
-                                                  for name in self.agents})
+            self.action_space = spaces.Dict({name: self.action_space[name] for name in self.agents})
+            self.observation_space = spaces.Dict(
+                {name: self.observation_space[name] for name in self.agents}
+            )
 
     def agent_spaces(self) -> tuple[dict[str, spaces.Space], dict[str, spaces.Space]]:
         """Each of the trainer's agents' action and observation spaces, by agent name.
@@ -107,9 +113,11 @@ class TrainerView:
         """
         for name in actions:
             if name in self.driven:
-                raise ValueError(f"agent {name!r} is driven by the server (rlenv serve "
-                                 f"--policy {name}=...): it takes no action from here; act "
-                                 f"for {', '.join(self.agents)} only")
+                raise ValueError(
+                    f"agent {name!r} is driven by the server (rlenv serve "
+                    f"--policy {name}=...): it takes no action from here; act "
+                    f"for {', '.join(self.agents)} only"
+                )
 
     def observation(self, observation: Any) -> Any:
         """``observation`` without the driven agents' (a map by agent name, or one batch)."""
@@ -142,7 +150,8 @@ class TrainerView:
         stand_ins = self._stand_ins.get(count)
         if stand_ins is None:
             stand_ins = self._stand_ins[count] = {
-                name: _stand_in(space, count) for name, space in self._driven_actions.items()}
+                name: _stand_in(space, count) for name, space in self._driven_actions.items()
+            }
         return {**actions, **stand_ins}
 
 
@@ -153,4 +162,3 @@ def _stand_in(space: spaces.Space, count: int) -> Any:
     one = space.sample()
     out = cast(Any, create_empty_array(space, count))  # an action space: never None
     return concatenate(space, [one] * count, out)
-

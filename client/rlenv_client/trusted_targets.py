@@ -38,9 +38,11 @@ __all__ = ["UntrustedTargetError", "check_target"]
 
 _RLENV = Path(rlenv.__file__).resolve().parent
 _OWN = frozenset({_RLENV, _RLENV / "examples", _RLENV.parent / "examples"})  # rlenv's own files
-_LOADERS = ((importlib.machinery.ExtensionFileLoader, importlib.machinery.EXTENSION_SUFFIXES),
-            (importlib.machinery.SourceFileLoader, importlib.machinery.SOURCE_SUFFIXES),
-            (importlib.machinery.SourcelessFileLoader, importlib.machinery.BYTECODE_SUFFIXES))
+_LOADERS = (
+    (importlib.machinery.ExtensionFileLoader, importlib.machinery.EXTENSION_SUFFIXES),
+    (importlib.machinery.SourceFileLoader, importlib.machinery.SOURCE_SUFFIXES),
+    (importlib.machinery.SourcelessFileLoader, importlib.machinery.BYTECODE_SUFFIXES),
+)
 
 
 class UntrustedTargetError(ValueError):
@@ -73,7 +75,8 @@ def check_target(target: str, *, named_by: str, folder: Path | None) -> None:
         raise UntrustedTargetError(
             f"{named_by} names the target {target!r:.120}: {why}, and importing it would run "
             "its code. Name the environment to run with --target MODULE:CLASS (target= in "
-            "Python), or trust the file with --trust-target (trust_target=True)")
+            "Python), or trust the file with --trust-target (trust_target=True)"
+        )
 
 
 def _untrusted_folders(folder: Path | None) -> list[Path]:

@@ -116,14 +116,23 @@ class RemoteVectorEnv(VectorEnv):
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array"]}
 
     def __init__(
-        self, num_envs: int | None = None, target: str | None = None, *,
-        addresses: Sequence[str] | None = None, pool: ServerSource | None = None,
+        self,
+        num_envs: int | None = None,
+        target: str | None = None,
+        *,
+        addresses: Sequence[str] | None = None,
+        pool: ServerSource | None = None,
         repeat_action: int | None = None,
         max_episode_steps: int | None = None,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
-        in_process: bool = False, render_mode: str | None = None, timeout: float = 30.0,
-        token: str | None = None, max_restarts: int = 3, instances_per_server: int | None = None,
-        inspector: bool = False, shared_memory: bool | None = None,
+        in_process: bool = False,
+        render_mode: str | None = None,
+        timeout: float = 30.0,
+        token: str | None = None,
+        max_restarts: int = 3,
+        instances_per_server: int | None = None,
+        inspector: bool = False,
+        shared_memory: bool | None = None,
         server_args: Sequence[str] = (),
     ) -> None:
         self.sessions: list[Session] = []  # first: closing a half-built vector closes these
@@ -136,15 +145,25 @@ class RemoteVectorEnv(VectorEnv):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
         if server_args and (addresses is not None or pool is not None or in_process):
-            raise ValueError("server_args are for the servers a vector starts, not for "
-                             "addresses, a pool or in_process")
-        places = server_places(num_envs, target, addresses, pool, in_process, token,
-                               instances_per_server, server_args)
-        connect_sessions(self.sessions, places, timeout=timeout, max_restarts=max_restarts,
-                         shared_memory=shared_memory)
+            raise ValueError(
+                "server_args are for the servers a vector starts, not for "
+                "addresses, a pool or in_process"
+            )
+        places = server_places(
+            num_envs, target, addresses, pool, in_process, token, instances_per_server, server_args
+        )
+        connect_sessions(
+            self.sessions,
+            places,
+            timeout=timeout,
+            max_restarts=max_restarts,
+            shared_memory=shared_memory,
+        )
         sizes = [session.client.hello.instances for session in self.sessions]
-        self._groups = [range(end - size, end)  # the sub-environments each session hosts
-                        for size, end in zip(sizes, accumulate(sizes), strict=True)]
+        self._groups = [
+            range(end - size, end)  # the sub-environments each session hosts
+            for size, end in zip(sizes, accumulate(sizes), strict=True)
+        ]
         self._owner = [number for number, group in enumerate(self._groups) for _ in group]
         # The order in which a step's answers are awaited: the server that answered last comes
         # first, so that this process sleeps until all have answered rather than waking for
@@ -152,16 +171,24 @@ class RemoteVectorEnv(VectorEnv):
         self._gather_order = list(range(len(self.sessions)))[::-1]
         hello = self.clients[0].hello
         for client in self.clients[1:]:
-            if (client.action_space, client.observation_space) != (hello.action_space,
-                                                                   hello.observation_space):
+            if (client.action_space, client.observation_space) != (
+                hello.action_space,
+                hello.observation_space,
+            ):
                 self.close()
-                raise ValueError(f"{client.address} has other spaces than "
-                                 f"{self.clients[0].address}")
-        if num_envs is not None and (addresses is not None or pool is not None) and \
-                num_envs != len(self._owner):
+                raise ValueError(
+                    f"{client.address} has other spaces than {self.clients[0].address}"
+                )
+        if (
+            num_envs is not None
+            and (addresses is not None or pool is not None)
+            and num_envs != len(self._owner)
+        ):
             self.close()
-            raise ValueError(f"num_envs={num_envs}, but the servers given host "
-                             f"{len(self._owner)} sub-environments")
+            raise ValueError(
+                f"num_envs={num_envs}, but the servers given host "
+                f"{len(self._owner)} sub-environments"
+            )
         self.num_envs = len(self._owner)
         try:
             self._view = TrainerView(hello)
@@ -172,16 +199,19 @@ class RemoteVectorEnv(VectorEnv):
         self.single_observation_space = self._view.observation_space
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-        self.metadata = {**self.metadata, "autoreset_mode": mode,
-                         "render_fps": hello.physics_ticks_per_second
-                         / (repeat_action or hello.repeat_action)}
+        self.metadata = {
+            **self.metadata,
+            "autoreset_mode": mode,
+            "render_fps": hello.physics_ticks_per_second / (repeat_action or hello.repeat_action),
+        }
         self.render_mode = render_mode
         self.repeat_action = repeat_action
         self.max_episode_steps = max_episode_steps
         self._autoreset = np.zeros(self.num_envs, dtype=np.bool_)
         self._infos = BatchedInfos(self._add_info, self.num_envs)
-        self._observations_template = create_empty_array(self.single_observation_space,
-                                                         self.num_envs)
+        self._observations_template = create_empty_array(
+            self.single_observation_space, self.num_envs
+        )
         self._steps = np.zeros(self.num_envs, dtype=np.int64)
         self._resets = Resets(self.sessions, self._groups, self._client_of)
         self._last: Any = None  # the last batch of observations returned
@@ -206,7 +236,9 @@ class RemoteVectorEnv(VectorEnv):
         return [session.server for session in self.sessions if session.server is not None]
 
     def reset(
-        self, *, seed: int | Sequence[int | None] | None = None,
+        self,
+        *,
+        seed: int | Sequence[int | None] | None = None,
         options: Mapping[str, Any] | None = None,
     ) -> tuple[Any, dict[str, Any]]:
         """Reset every sub-environment; an int ``seed`` seeds them ``seed``, ``seed + 1`` ...
@@ -222,8 +254,9 @@ class RemoteVectorEnv(VectorEnv):
             self._note_interruption(error)
             raise
 
-    def _reset(self, seed: int | Sequence[int | None] | None,
-               options: Mapping[str, Any] | None) -> tuple[Any, dict[str, Any]]:
+    def _reset(
+        self, seed: int | Sequence[int | None] | None, options: Mapping[str, Any] | None
+    ) -> tuple[Any, dict[str, Any]]:
         if seed is None or isinstance(seed, int):
             seeds: list[int | None] = [
                 None if seed is None else seed + i for i in range(self.num_envs)
@@ -239,12 +272,9 @@ class RemoteVectorEnv(VectorEnv):
         self._autoreset[:] = False
         self._steps[:] = 0
         self._last = observations
-        return observations, self._infos.merge({}, [infos[i] for i in range(self.num_envs)],
-                                               frames)
+        return observations, self._infos.merge({}, [infos[i] for i in range(self.num_envs)], frames)
 
-    def step(
-        self, actions: Any
-    ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+    def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step every sub-environment (resetting those that ended, per the autoreset mode).
 
         Every server gets one ``steps`` request (actions in, observations, rewards and flags
@@ -259,8 +289,9 @@ class RemoteVectorEnv(VectorEnv):
             ConnectionLost: a server went away and cannot be restarted (with how it exited).
         """
         if actions is None:
-            raise TypeError(f"step() needs an action for each of the {self.num_envs} "
-                            "sub-environments, got None")
+            raise TypeError(
+                f"step() needs an action for each of the {self.num_envs} sub-environments, got None"
+            )
         self._view.action(actions)
         check_shape(self.action_space, actions, "actions")
         try:
@@ -269,12 +300,15 @@ class RemoteVectorEnv(VectorEnv):
             self._note_interruption(error)
             raise
 
-    def _step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray,
-                                             dict[str, Any]]:
-        resetting = self._autoreset if self._mode is AutoresetMode.NEXT_STEP else \
-            np.zeros(self.num_envs, dtype=np.bool_)
-        observations, rewards, terminations, truncations, frames, env_infos = \
-            self._step_everywhere(actions, resetting)
+    def _step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        resetting = (
+            self._autoreset
+            if self._mode is AutoresetMode.NEXT_STEP
+            else np.zeros(self.num_envs, dtype=np.bool_)
+        )
+        observations, rewards, terminations, truncations, frames, env_infos = self._step_everywhere(
+            actions, resetting
+        )
         steps = self._steps
         steps += 1
         steps[resetting] = 0  # these started an episode instead
@@ -289,7 +323,8 @@ class RemoteVectorEnv(VectorEnv):
             for index in np.flatnonzero(ended):
                 final_info = {**env_infos[index], "frames": int(frames[index])}
                 infos = self._add_info(
-                    infos, {"final_obs": row(observations, index), "final_info": final_info},
+                    infos,
+                    {"final_obs": row(observations, index), "final_info": final_info},
                     int(index),
                 )
             restarted = self._resets.reset(np.flatnonzero(ended), observations, frames)
@@ -298,8 +333,13 @@ class RemoteVectorEnv(VectorEnv):
                 self._steps[reset_index] = 0
         self._autoreset = ended
         self._last = observations
-        return observations, rewards, terminations, truncations, \
-            self._infos.merge(infos, env_infos, frames)
+        return (
+            observations,
+            rewards,
+            terminations,
+            truncations,
+            self._infos.merge(infos, env_infos, frames),
+        )
 
     def _step_everywhere(self, actions: Any, resetting: np.ndarray) -> StepColumns:
         """Send every server its share of the step, then gather the answers into columns.
@@ -314,10 +354,12 @@ class RemoteVectorEnv(VectorEnv):
         actions = self._view.full_actions(actions, self.num_envs)
         for session, group in zip(self.sessions, self._groups, strict=True):
             try:
-                session.client.send_steps(rows(actions, group.start, group.stop),
-                                          resetting[group.start:group.stop], self.repeat_action,
-                                          None if starts is None else
-                                          starts[group.start:group.stop])
+                session.client.send_steps(
+                    rows(actions, group.start, group.stop),
+                    resetting[group.start : group.stop],
+                    self.repeat_action,
+                    None if starts is None else starts[group.start : group.stop],
+                )
             except LOST as error:
                 raise session.failure(error) from None
         # every row of the observations is written below
@@ -327,8 +369,9 @@ class RemoteVectorEnv(VectorEnv):
         late: list[int] = []
         for turn, number in enumerate(order):
             if turn == 1:  # the first awaited answered: are any of the others still at work?
-                late = [other for other in order[1:]
-                        if not self.sessions[other].client.answer_arrived()]
+                late = [
+                    other for other in order[1:] if not self.sessions[other].client.answer_arrived()
+                ]
             session, group = self.sessions[number], self._groups[number]
             try:
                 answer = session.client.receive_steps(copy=False)  # copied into columns
@@ -348,8 +391,11 @@ class RemoteVectorEnv(VectorEnv):
         if self._view.driven:  # the trainer's agents' rewards and ends, not every agent's
             for index, info in enumerate(columns.env_infos):
                 if "agents" in info:  # not in a lost server's
-                    columns.rewards[index], columns.terminations[index], \
-                        columns.truncations[index] = self._view.outcome(info)
+                    (
+                        columns.rewards[index],
+                        columns.terminations[index],
+                        columns.truncations[index],
+                    ) = self._view.outcome(info)
         return columns
 
     def _after_interruption(self) -> StepColumns:
@@ -367,9 +413,14 @@ class RemoteVectorEnv(VectorEnv):
         if not isinstance(error, Exception):
             self._interrupted = type(error).__name__
 
-    def set_next_reset(self, index: int, *, seed: int | None = None,
-                       options: Mapping[str, Any] | None = None,
-                       config: Mapping[str, Any] | None = None) -> None:
+    def set_next_reset(
+        self,
+        index: int,
+        *,
+        seed: int | None = None,
+        options: Mapping[str, Any] | None = None,
+        config: Mapping[str, Any] | None = None,
+    ) -> None:
         """Give sub-environment ``index``'s next reset a seed, options and settings of its own.
 
         They apply once, at its next autoreset (inside a step, as the ``steps`` request's
@@ -395,11 +446,14 @@ class RemoteVectorEnv(VectorEnv):
         """One frame per sub-environment (``rgb_array``)."""
         if self.render_mode is None:
             return None
-        plan: list[Request | None] = [self._client_of(i).render_request()
-                                      for i in range(self.num_envs)]
+        plan: list[Request | None] = [
+            self._client_of(i).render_request() for i in range(self.num_envs)
+        ]
         replies = exchange(self.sessions, self._groups, plan)
-        return tuple(self._client_of(index).render_result(sure_reply(index, reply))
-                     for index, reply in enumerate(replies))
+        return tuple(
+            self._client_of(index).render_result(sure_reply(index, reply))
+            for index, reply in enumerate(replies)
+        )
 
     def __enter__(self) -> RemoteVectorEnv:
         return self

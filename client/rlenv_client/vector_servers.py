@@ -33,10 +33,16 @@ def default_layout(num_envs: int, cores: int | None = None, trainer_cores: int =
     return [min(share, num_envs - start) for start in range(0, num_envs, share)]
 
 
-def server_places(num_envs: int | None, target: str | None, addresses: Sequence[str] | None,
-                  pool: ServerSource | None, in_process: bool, token: str | None,
-                  instances_per_server: int | None,
-                  server_args: Sequence[str] = ()) -> list[dict[str, Any]]:
+def server_places(
+    num_envs: int | None,
+    target: str | None,
+    addresses: Sequence[str] | None,
+    pool: ServerSource | None,
+    in_process: bool,
+    token: str | None,
+    instances_per_server: int | None,
+    server_args: Sequence[str] = (),
+) -> list[dict[str, Any]]:
     """Where each server's share of a vector is: the :class:`Session` arguments of each.
 
     A pool's servers, running servers by address, or servers to start (``instances_per_server``
@@ -46,26 +52,35 @@ def server_places(num_envs: int | None, target: str | None, addresses: Sequence[
         ValueError: no sub-environment at all.
     """
     if pool is not None:
-        places: list[dict[str, Any]] = [{"pool": pool, "index": index}
-                                        for index in range(pool.servers)]
+        places: list[dict[str, Any]] = [
+            {"pool": pool, "index": index} for index in range(pool.servers)
+        ]
     elif addresses is not None:
         places = [{"address": address, "token": token} for address in addresses]
     else:
         num_envs = 1 if num_envs is None else num_envs
         if instances_per_server is not None:
-            layout = [min(instances_per_server, num_envs - start)
-                      for start in range(0, num_envs, instances_per_server)]
+            layout = [
+                min(instances_per_server, num_envs - start)
+                for start in range(0, num_envs, instances_per_server)
+            ]
         else:  # in this process: all in one group; else one server per core
             layout = [num_envs] if in_process else default_layout(num_envs)
-        places = [{"target": target, "in_process": in_process, "instances": count,
-                   "server_args": server_args} for count in layout]
+        places = [
+            {
+                "target": target,
+                "in_process": in_process,
+                "instances": count,
+                "server_args": server_args,
+            }
+            for count in layout
+        ]
     if not places:
         raise ValueError("a vector environment needs at least one sub-environment")
     return places
 
 
-def connect_sessions(sessions: list[Session], places: list[dict[str, Any]],
-                     **options: Any) -> None:
+def connect_sessions(sessions: list[Session], places: list[dict[str, Any]], **options: Any) -> None:
     """Open a :class:`Session` for each of ``places`` (in parallel), appended to ``sessions``.
 
     If any fails, every one opened is closed and the first failure raised: nothing leaks.
@@ -84,8 +99,9 @@ def connect_sessions(sessions: list[Session], places: list[dict[str, Any]],
         raise failure
 
 
-def exchange(sessions: Sequence[Session], groups: Sequence[range],
-             plan: list[Request | None]) -> list[Reply | None]:
+def exchange(
+    sessions: Sequence[Session], groups: Sequence[range], plan: list[Request | None]
+) -> list[Reply | None]:
     """Send every server its share of ``plan`` as a batch, then gather the replies.
 
     ``groups[i]`` are the sub-environments of ``sessions[i]``; the replies come in

@@ -81,8 +81,13 @@ class SphinxRoles(Extension):
         path = self._resolve(obj, target.lstrip("."), loader)
         if path is None:
             where = obj.relative_filepath if obj.filepath else obj.path
-            logger.warning("%s:%s: the docstring of %s names %r, which does not exist", where,
-                           obj.lineno or 0, obj.path, target)
+            logger.warning(
+                "%s:%s: the docstring of %s names %r, which does not exist",
+                where,
+                obj.lineno or 0,
+                obj.path,
+                target,
+            )
             return code
         return f'<autoref optional identifier="{html.escape(path)}">{code}</autoref>'
 
@@ -139,6 +144,9 @@ def _objects(root: Object) -> list[Object]:
     while stack:
         obj = stack.pop()
         found.append(obj)
-        stack.extend(member for member in reversed(list(obj.members.values()))
-                     if not isinstance(member, Alias))
+        stack.extend(
+            member
+            for member in reversed(list(obj.members.values()))
+            if not isinstance(member, Alias)
+        )
     return found

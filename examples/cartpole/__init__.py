@@ -123,22 +123,35 @@ class CartPoleWorld(RLEnvWorld):
             self.physics.queue_free()
         physics = PhysicsWorld(gravity=self._gravity, damping=self.damping, name="Physics")
         track = StaticBody(name="Track")
-        track.add_child(CollisionShape.segment(  # drawn, never touched
-            (-self.track_limit, -0.2), (self.track_limit, -0.2), 0.01, sensor=True,
-            color=(120, 120, 120), name="Line",
-        ))
+        track.add_child(
+            CollisionShape.segment(  # drawn, never touched
+                (-self.track_limit, -0.2),
+                (self.track_limit, -0.2),
+                0.01,
+                sensor=True,
+                color=(120, 120, 120),
+                name="Line",
+            )
+        )
         physics.add_child(track)
         self.cart = RigidBody(self.cart_mass, math.inf, name="Cart")
         self.cart.add_child(CollisionShape.box(0.5, 0.25, name="Box"))
         self.pole = RigidBody(name="Pole")
         self.pole.add_child(
-            CollisionShape.segment((0.0, 0.0), (0.0, POLE_LENGTH), 0.02, mass=self.pole_mass,
-                                   color=(215, 120, 50), name="Stick")
+            CollisionShape.segment(
+                (0.0, 0.0),
+                (0.0, POLE_LENGTH),
+                0.02,
+                mass=self.pole_mass,
+                color=(215, 120, 50),
+                name="Stick",
+            )
         )
         physics.add_child(self.cart)
         physics.add_child(self.pole)
-        physics.add_child(Joint.groove("../Track", "../Cart", (-100.0, 0.0), (100.0, 0.0),
-                                       name="Rail"))
+        physics.add_child(
+            Joint.groove("../Track", "../Cart", (-100.0, 0.0), (100.0, 0.0), name="Rail")
+        )
         physics.add_child(Joint.pivot("../Cart", "../Pole", (0.0, 0.0), name="Hinge"))
         self.physics = physics
         self.add_child(physics)
@@ -211,8 +224,10 @@ class CartPoleAgent(RLAgent):
 
     def _after_physics_tick(self, delta: float) -> None:
         assert self._cart is not None and self._pole is not None
-        if abs(self._pole.rotation) > self.angle_limit or \
-                abs(self._cart.position.x) > self._track_limit:
+        if (
+            abs(self._pole.rotation) > self.angle_limit
+            or abs(self._cart.position.x) > self._track_limit
+        ):
             self.set_terminated()
         else:
             self.add_reward(1.0)

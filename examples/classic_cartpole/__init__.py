@@ -59,8 +59,14 @@ from rlenv import RLEnvironment
 
 from ..cartpole import POLE_LENGTH, CartPoleAgent, CartPoleWorld
 
-__all__ = ["TARGET", "ClassicCartPoleAgent", "ClassicCartPoleEnvironment", "ClassicCartPoleWorld",
-           "heuristic", "main"]
+__all__ = [
+    "TARGET",
+    "ClassicCartPoleAgent",
+    "ClassicCartPoleEnvironment",
+    "ClassicCartPoleWorld",
+    "heuristic",
+    "main",
+]
 
 TARGET = f"{__name__}:ClassicCartPoleEnvironment"
 """What ``rlenv serve`` takes to serve this environment."""
@@ -91,10 +97,17 @@ class ClassicCartPoleWorld(CartPoleWorld):
             ValueError: ``low`` is above ``high``, or either is not a number.
         """
         low, high = options.get("low", -_BOUND), options.get("high", _BOUND)
-        if not all(isinstance(bound, int | float) and not isinstance(bound, bool)
-                   for bound in (low, high)) or not low <= high:
-            raise ValueError(f"reset options low and high must be numbers with low <= high, "
-                             f"got low={low!r}, high={high!r}")
+        if (
+            not all(
+                isinstance(bound, int | float) and not isinstance(bound, bool)
+                for bound in (low, high)
+            )
+            or not low <= high
+        ):
+            raise ValueError(
+                f"reset options low and high must be numbers with low <= high, "
+                f"got low={low!r}, high={high!r}"
+            )
         self._bounds = (float(low), float(high))
         super().reset(options)
 
@@ -120,8 +133,10 @@ class ClassicCartPoleAgent(CartPoleAgent):
         assert self._pole is not None
         _, velocity, angle, angular_velocity = arguments.tolist()
         half = POLE_LENGTH / 2
-        self._pole.velocity = (velocity + half * angular_velocity * math.cos(angle),
-                               -half * angular_velocity * math.sin(angle))
+        self._pole.velocity = (
+            velocity + half * angular_velocity * math.cos(angle),
+            -half * angular_velocity * math.sin(angle),
+        )
 
     def set_action(self, action: Any) -> None:
         """Push with ``max_force`` to the right for 1, to the left for 0."""
@@ -130,16 +145,20 @@ class ClassicCartPoleAgent(CartPoleAgent):
     def _after_physics_tick(self, delta: float) -> None:
         assert self._cart is not None and self._pole is not None
         self.add_reward(1.0)
-        if abs(self._pole.angle) > self.angle_limit or \
-                abs(self._cart.position.x) > self._track_limit:
+        if (
+            abs(self._pole.angle) > self.angle_limit
+            or abs(self._cart.position.x) > self._track_limit
+        ):
             self.set_terminated()
 
     def get_data(self, observation_request: Mapping[str, Any]) -> np.ndarray:
         """Cart x, cart velocity, pole angle, pole angular velocity (gymnasium's order)."""
         cart, pole = self._cart, self._pole
         assert cart is not None and pole is not None
-        return np.array((cart.position.x, cart.velocity.x, -pole.angle, -pole.angular_velocity),
-                        dtype=np.float32)
+        return np.array(
+            (cart.position.x, cart.velocity.x, -pole.angle, -pole.angular_velocity),
+            dtype=np.float32,
+        )
 
 
 class ClassicCartPoleEnvironment(RLEnvironment):

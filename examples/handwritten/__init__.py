@@ -77,8 +77,9 @@ class CartPole:
             self.cart.apply_force_at_local_point((force, 0.0))
             self.space.step(TICK)
             frames += 1
-            fell = abs(self.pole.angle) > self.angle_limit or \
-                abs(self.cart.position.x) > self.limit_x
+            fell = (
+                abs(self.pole.angle) > self.angle_limit or abs(self.cart.position.x) > self.limit_x
+            )
             reward += 0.0 if fell else 1.0
         return reward, fell, frames
 
@@ -86,8 +87,10 @@ class CartPole:
         """Cart x, pole centre x, pole angle, cart velocity, pole angular velocity."""
         cart, pole = self.cart, self.pole
         x_pole = pole.position.x - POLE_LENGTH / 2 * math.sin(pole.angle)
-        return np.array((cart.position.x, x_pole, -pole.angle, cart.velocity.x,
-                         -pole.angular_velocity), dtype=np.float32).tobytes()
+        return np.array(
+            (cart.position.x, x_pole, -pole.angle, cart.velocity.x, -pole.angular_velocity),
+            dtype=np.float32,
+        ).tobytes()
 
     def answer(self, request: dict[str, Any]) -> dict[str, Any]:
         """Apply ``config``, ``reset`` and ``action`` in turn; the observation and outcome."""
@@ -99,8 +102,15 @@ class CartPole:
         reward, fell, frames = 0.0, False, 0
         if "action" in request:
             reward, fell, frames = self.step(request["action"], request.get("repeat_action", 4))
-        return {"id": request["id"], "observation": self.observe(), "reward": reward,
-                "terminated": fell, "truncated": False, "info": {}, "frames": frames}
+        return {
+            "id": request["id"],
+            "observation": self.observe(),
+            "reward": reward,
+            "terminated": fell,
+            "truncated": False,
+            "info": {},
+            "frames": frames,
+        }
 
 
 def _receive(conn: socket.socket, size: int) -> bytes | None:
@@ -136,14 +146,18 @@ class CartPoles:
                 pole.reset()
                 outcome = (0.0, False, 0)
             else:
-                outcome = pole.step(actions[4 * index:4 * index + 4], request["repeat_action"])
+                outcome = pole.step(actions[4 * index : 4 * index + 4], request["repeat_action"])
             observations.append(pole.observe())
             rewards.append(outcome[0])
             fell.append(outcome[1])
             frames.append(outcome[2])
-        return {"id": request["id"], "observation": b"".join(observations),
-                "reward": np.array(rewards).tobytes(), "terminated": bytes(fell),
-                "frames": np.array(frames).tobytes()}
+        return {
+            "id": request["id"],
+            "observation": b"".join(observations),
+            "reward": np.array(rewards).tobytes(),
+            "terminated": bytes(fell),
+            "frames": np.array(frames).tobytes(),
+        }
 
 
 def serve(listener: socket.socket, instances: int = 1) -> None:

@@ -170,8 +170,7 @@ class Wall(StaticBody):
 
     def __init__(self, name: str = "Wall") -> None:
         super().__init__(name=name)
-        self.add_child(CollisionShape.box(1.0, 1.0, friction=0.0, color="dimgray",
-                                          name="Block"))
+        self.add_child(CollisionShape.box(1.0, 1.0, friction=0.0, color="dimgray", name="Block"))
 
 
 class Goal(StaticBody):
@@ -179,8 +178,9 @@ class Goal(StaticBody):
 
     def __init__(self, name: str = "Goal") -> None:
         super().__init__(name=name)
-        self.add_child(CollisionShape.box(GOAL_SIZE, GOAL_SIZE, sensor=True, color="limegreen",
-                                          name="Patch"))
+        self.add_child(
+            CollisionShape.box(GOAL_SIZE, GOAL_SIZE, sensor=True, color="limegreen", name="Patch")
+        )
 
 
 LEVEL_CLASSES = (Wall, Goal)
@@ -355,8 +355,10 @@ class MazeWorld(LevelWorld):
         """
         super().check_config(config)
         if "difficulty" in config and not 0.0 <= float(config["difficulty"]) <= 1.0:
-            raise RequestError(ErrorCode.INVALID_CONFIG, "MazeWorld.difficulty must be in "
-                               f"[0, 1], got {config['difficulty']!r:.40}")
+            raise RequestError(
+                ErrorCode.INVALID_CONFIG,
+                f"MazeWorld.difficulty must be in [0, 1], got {config['difficulty']!r:.40}",
+            )
 
     def reset(self, options: Mapping[str, Any]) -> None:
         """Build the border, a level (new, or the given one) and the agent on its start.
@@ -373,8 +375,11 @@ class MazeWorld(LevelWorld):
         physics.add_child(self._border())
         physics.add_child(level)
         body = self.body = RigidBody(position=tuple(start.global_position), name="Body")
-        body.add_child(CollisionShape.circle(AGENT_RADIUS, mass=1.0, friction=0.0,
-                                             color="crimson", name="Skin"))
+        body.add_child(
+            CollisionShape.circle(
+                AGENT_RADIUS, mass=1.0, friction=0.0, color="crimson", name="Skin"
+            )
+        )
         body.add_child(RaycastSensor2D(n_rays=RAYS, ray_length=RAY_LENGTH, name="Eyes"))
         physics.add_child(body)
         self.goal = goal
@@ -391,33 +396,46 @@ class MazeWorld(LevelWorld):
         Raises:
             ValueError: it has none.
         """
-        if not isinstance(level.get_node_or_null("Goal"), Goal) or \
-                not isinstance(level.get_node_or_null("Start"), Node2D):
+        if not isinstance(level.get_node_or_null("Goal"), Goal) or not isinstance(
+            level.get_node_or_null("Start"), Node2D
+        ):
             raise ValueError("the level has no Goal (a Goal) or no Start: it is not a Maze level")
 
     def build_level(self, rng: np.random.Generator) -> Node2D:
         """A new level (:func:`build_level`) at the world's difficulty."""
         return build_level(rng, self.difficulty)
 
-
     def get_data(self, observation_request: Mapping[str, Any]) -> dict[str, Any]:
         """The agent's position, the level's walls and fingerprint (its data's digest)."""
         assert self.body is not None and self.level_node is not None
         walls = self.level_node.get_node_or_null("Walls")
-        return {"agent": list(self.body.position),
-                "walls": walls.get_child_count() if walls is not None else 0,
-                "level": self.level_id}
+        return {
+            "agent": list(self.body.position),
+            "walls": walls.get_child_count() if walls is not None else 0,
+            "level": self.level_id,
+        }
 
     def _border(self) -> StaticBody:
         border = StaticBody(name="Border")
         for name, (x, y), (w, h) in (
-                ("Bottom", (0.0, 0.5 - HALF), (SIZE, 1.0)),
-                ("Top", (0.0, HALF - 0.5), (SIZE, 1.0)),
-                ("Left", (0.5 - HALF, 0.0), (1.0, SIZE - 2.0)),
-                ("Right", (HALF - 0.5, 0.0), (1.0, SIZE - 2.0))):
-            border.add_child(CollisionShape.poly(
-                [(x - w / 2, y - h / 2), (x + w / 2, y - h / 2), (x + w / 2, y + h / 2),
-                 (x - w / 2, y + h / 2)], friction=0.0, color="dimgray", name=name))
+            ("Bottom", (0.0, 0.5 - HALF), (SIZE, 1.0)),
+            ("Top", (0.0, HALF - 0.5), (SIZE, 1.0)),
+            ("Left", (0.5 - HALF, 0.0), (1.0, SIZE - 2.0)),
+            ("Right", (HALF - 0.5, 0.0), (1.0, SIZE - 2.0)),
+        ):
+            border.add_child(
+                CollisionShape.poly(
+                    [
+                        (x - w / 2, y - h / 2),
+                        (x + w / 2, y - h / 2),
+                        (x + w / 2, y + h / 2),
+                        (x - w / 2, y + h / 2),
+                    ],
+                    friction=0.0,
+                    color="dimgray",
+                    name=name,
+                )
+            )
         return border
 
     def _on_goal_touched(self, other: CollisionShape) -> None:
@@ -452,8 +470,7 @@ class MazeAgent(RLAgent):
     def _physics_process(self, delta: float) -> None:
         body = self._world().body
         if body is not None:
-            body.velocity = (self.direction[0] * self.max_speed,
-                             self.direction[1] * self.max_speed)
+            body.velocity = (self.direction[0] * self.max_speed, self.direction[1] * self.max_speed)
 
     def _after_physics_tick(self, delta: float) -> None:
         world = self._world()
@@ -475,7 +492,7 @@ class MazeAgent(RLAgent):
             observation[RAYS + index] = 1.0 - seen / RAY_LENGTH if seen < wall else 0.0
         vx, vy = world.body.velocity
         scale = 2.0 * self.max_speed
-        observation[2 * RAYS:] = (vx / scale + 0.5, vy / scale + 0.5)
+        observation[2 * RAYS :] = (vx / scale + 0.5, vy / scale + 0.5)
         return np.clip(observation, 0.0, 1.0)
 
     def _world(self) -> MazeWorld:

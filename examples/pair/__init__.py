@@ -84,8 +84,9 @@ class PairWorld(RLEnvWorld):
         physics.add_child(room_walls())
         for name in NAMES:
             disc = RigidBody(name=f"{name}Disc")
-            disc.add_child(CollisionShape.circle(RADIUS, mass=1.0, color=_COLORS[name],
-                                                 name="Body"))
+            disc.add_child(
+                CollisionShape.circle(RADIUS, mass=1.0, color=_COLORS[name], name="Body")
+            )
             apple = StaticBody(position=tuple(random_spot(self.np_random)), name=f"{name}Apple")
             skin = CollisionShape.circle(0.25, sensor=True, color=_COLORS[name], name="Skin")
             skin.collision_started.connect(self._touched(name))
@@ -109,6 +110,7 @@ class PairWorld(RLEnvWorld):
         def on_contact(other: CollisionShape) -> None:
             if other.body_node is self.discs.get(name):
                 self.caught.emit(name)
+
         return on_contact
 
 
@@ -174,8 +176,10 @@ class PairAgent(RLAgent):
         x, y = disc.position
         apple_x, apple_y = apple.position
         other_x, other_y = other_disc.position
-        return np.array((x, y, *disc.velocity, apple_x - x, apple_y - y, other_x - x,
-                         other_y - y), dtype=np.float32)
+        return np.array(
+            (x, y, *disc.velocity, apple_x - x, apple_y - y, other_x - x, other_y - y),
+            dtype=np.float32,
+        )
 
 
 class PairEnvironment(RLEnvironment):

@@ -74,7 +74,7 @@ class Dot(RLAgent):
     def get_data(self, observation_request: Mapping[str, Any]) -> np.ndarray:
         """The screen, with the dot drawn on it."""
         screen = np.zeros((SIZE, SIZE, 3), dtype=np.uint8)
-        screen[self.row - 1:self.row + 2, self.column - 1:self.column + 2] = 255
+        screen[self.row - 1 : self.row + 2, self.column - 1 : self.column + 2] = 255
         return screen
 
 
@@ -89,9 +89,15 @@ class PixelsEnvironment(RLEnvironment):
 
     def _draw(self) -> dict[str, Any]:
         """The screen and the dot as a draw list (there is no pymunk space to describe)."""
+
         def square(row: float, column: float, half: float) -> list[float]:
             y, x = SIZE - row, column  # rows grow downwards, y upwards
             return [x - half, y - half, x + half, y - half, x + half, y + half, x - half, y + half]
-        return {"view": [0, 0, SIZE, SIZE], "shapes": [
-            ["polygon", 0x000000, 0.0, square(SIZE / 2, SIZE / 2, SIZE / 2)],
-            ["polygon", 0xFFFFFF, 0.0, square(self.dot.row + 0.5, self.dot.column + 0.5, 1.5)]]}
+
+        return {
+            "view": [0, 0, SIZE, SIZE],
+            "shapes": [
+                ["polygon", 0x000000, 0.0, square(SIZE / 2, SIZE / 2, SIZE / 2)],
+                ["polygon", 0xFFFFFF, 0.0, square(self.dot.row + 0.5, self.dot.column + 0.5, 1.5)],
+            ],
+        }

@@ -111,8 +111,20 @@ DIVIDER_HEIGHT = 0.8
 BOUNCINESS = (0.3, 0.8)  # a peg's elasticity: build_level's at difficulty 0 and 1
 PEG_EDGE = HALF_WIDTH - 0.05 - 2 * BALL_RADIUS - PEG_RADIUS  # the ball passes a wall and a peg
 PEG_GAP = 2 * (PEG_RADIUS + BALL_RADIUS)  # centre to centre: the ball passes between two pegs
-PALETTE = ("purple", "blue", "teal", "seagreen", "darkorange", "crimson", "gold", "deeppink",
-           "royalblue", "mediumvioletred", "limegreen", "sienna")
+PALETTE = (
+    "purple",
+    "blue",
+    "teal",
+    "seagreen",
+    "darkorange",
+    "crimson",
+    "gold",
+    "deeppink",
+    "royalblue",
+    "mediumvioletred",
+    "limegreen",
+    "sienna",
+)
 """The colours a level's gradients go between."""
 
 
@@ -125,11 +137,13 @@ def follow(observation: np.ndarray) -> np.ndarray:
 class Peg(StaticBody):
     """A round peg: a static body with one circle."""
 
-    def __init__(self, radius: float = PEG_RADIUS, elasticity: float = 0.5,
-                 name: str = "Peg") -> None:
+    def __init__(
+        self, radius: float = PEG_RADIUS, elasticity: float = 0.5, name: str = "Peg"
+    ) -> None:
         super().__init__(name=name)
-        self.add_child(CollisionShape.circle(radius, elasticity=elasticity, friction=0.2,
-                                             name="Skin"))
+        self.add_child(
+            CollisionShape.circle(radius, elasticity=elasticity, friction=0.2, name="Skin")
+        )
 
 
 class Divider(StaticBody):
@@ -137,8 +151,11 @@ class Divider(StaticBody):
 
     def __init__(self, height: float = DIVIDER_HEIGHT, name: str = "Divider") -> None:
         super().__init__(name=name)
-        self.add_child(CollisionShape.segment((0.0, 0.0), (0.0, height), 0.04, elasticity=0.2,
-                                              color="dimgray", name="Wall"))
+        self.add_child(
+            CollisionShape.segment(
+                (0.0, 0.0), (0.0, height), 0.04, elasticity=0.2, color="dimgray", name="Wall"
+            )
+        )
 
 
 class BinFloor(StaticBody):
@@ -153,8 +170,9 @@ LEVEL_CLASSES = (Peg, Divider, BinFloor)
 """The classes a level's data may name besides rlenv's own."""
 
 
-def build_level(rng: np.random.Generator, difficulty: float, columns: int = 8,
-                rows: int | None = None) -> Node2D:
+def build_level(
+    rng: np.random.Generator, difficulty: float, columns: int = 8, rows: int | None = None
+) -> Node2D:
     """A new level: staggered jittered pegs coloured by rows, bins on placeholders.
 
     Args:
@@ -180,13 +198,16 @@ def build_level(rng: np.random.Generator, difficulty: float, columns: int = 8,
     narrow = narrow_peg.lattice([(0.0, -2 * dy), (dx, 0.0)], (rows // 2, columns - 1))
     row_colors = gradient(colors[0], colors[1], n_steps=rows)
     wide.shapes.set("color", [row_colors[2 * (k // columns)] for k in range(len(wide))])
-    narrow.shapes.set("color", [row_colors[2 * (k // (columns - 1)) + 1]
-                                for k in range(len(narrow))])
+    narrow.shapes.set(
+        "color", [row_colors[2 * (k // (columns - 1)) + 1] for k in range(len(narrow))]
+    )
     every_peg = view(pegs).children
     shifts = rng.normal(0.0, 0.03 + 0.09 * difficulty, size=(len(every_peg), 2))
     shifts /= np.maximum(np.hypot(shifts[:, 0], shifts[:, 1]) / MAX_JITTER, 1.0)[:, np.newaxis]
-    every_peg.set("position", [(x + sx, y + sy) for (x, y), (sx, sy)
-                               in zip(every_peg.position, shifts, strict=True)])
+    every_peg.set(
+        "position",
+        [(x + sx, y + sy) for (x, y), (sx, sy) in zip(every_peg.position, shifts, strict=True)],
+    )
 
     bins = Node2D("Bins")
     level.add_child(bins)
@@ -232,17 +253,19 @@ def edit_level(level: dict[str, Any], rng: np.random.Generator, n_edits: int) ->
     """
     edited = copy.deepcopy(level)
     root = edited["root"]
-    pegs = next((child for child in root.get("children", []) if child.get("name") == "Pegs"),
-                None)
+    pegs = next((child for child in root.get("children", []) if child.get("name") == "Pegs"), None)
     if pegs is None:
         raise ValueError("the level has no Pegs node: it is not a Plinko level")
     for node in (root, pegs):
         if node.get("properties", {}).get("rotation", 0.0):
-            raise ValueError(f"the level's {node['name']} is rotated: an edit places pegs on an "
-                             "upright board")
+            raise ValueError(
+                f"the level's {node['name']} is rotated: an edit places pegs on an upright board"
+            )
     children: list[dict[str, Any]] = pegs.setdefault("children", [])
-    origin = np.add(root.get("properties", {}).get("position", (0.0, 0.0)),
-                    pegs.get("properties", {}).get("position", (0.0, 0.0)))
+    origin = np.add(
+        root.get("properties", {}).get("position", (0.0, 0.0)),
+        pegs.get("properties", {}).get("position", (0.0, 0.0)),
+    )
     for _ in range(n_edits):
         every = [child for child in children if child["class"] == "Peg" and _skin(child)]
         if not every:
@@ -253,8 +276,9 @@ def edit_level(level: dict[str, Any], rng: np.random.Generator, n_edits: int) ->
             continue
         peg = every[int(rng.integers(len(every)))]
         if kind in ("move", "add"):
-            others = [_position(other) + origin for other in every
-                      if other is not peg or kind == "add"]
+            others = [
+                _position(other) + origin for other in every if other is not peg or kind == "add"
+            ]
             start = _position(peg) + origin
             spot = _free_spot(rng, others, start if kind == "move" else None)
             if spot is not None:
@@ -272,22 +296,27 @@ def edit_level(level: dict[str, Any], rng: np.random.Generator, n_edits: int) ->
 
 def _skin(peg: dict[str, Any]) -> dict[str, Any] | None:
     """The peg's shape (its first CollisionShape), or ``None``."""
-    return next((child for child in peg.get("children", [])
-                 if child["class"] == "CollisionShape"), None)
+    return next(
+        (child for child in peg.get("children", []) if child["class"] == "CollisionShape"), None
+    )
 
 
 def _position(peg: dict[str, Any]) -> np.ndarray:
     return np.asarray(peg.get("properties", {}).get("position", (0.0, 0.0)), dtype=float)
 
 
-def _free_spot(rng: np.random.Generator, others: list[np.ndarray],
-               start: np.ndarray | None) -> np.ndarray | None:
+def _free_spot(
+    rng: np.random.Generator, others: list[np.ndarray], start: np.ndarray | None
+) -> np.ndarray | None:
     """A board position at least PEG_GAP from ``others``: near ``start``, or anywhere."""
     low = np.array([-PEG_EDGE, PEG_BOTTOM - MAX_JITTER])
     high = np.array([PEG_EDGE, PEG_TOP + MAX_JITTER])
     for _ in range(_PLACES_TRIED):
-        spot = (rng.uniform(low, high) if start is None
-                else np.clip(start + rng.normal(0.0, _MOVE_SCALE, 2), low, high))
+        spot = (
+            rng.uniform(low, high)
+            if start is None
+            else np.clip(start + rng.normal(0.0, _MOVE_SCALE, 2), low, high)
+        )
         if all(np.hypot(*(spot - other)) >= PEG_GAP for other in others):
             return spot
     return None
@@ -335,8 +364,10 @@ class PlinkoWorld(LevelWorld):
         """
         super().check_config(config)
         if "difficulty" in config and not 0.0 <= float(config["difficulty"]) <= 1.0:
-            raise RequestError(ErrorCode.INVALID_CONFIG, "PlinkoWorld.difficulty must be in "
-                               f"[0, 1], got {config['difficulty']!r:.40}")
+            raise RequestError(
+                ErrorCode.INVALID_CONFIG,
+                f"PlinkoWorld.difficulty must be in [0, 1], got {config['difficulty']!r:.40}",
+            )
 
     def reset(self, options: Mapping[str, Any]) -> None:
         """Build the board, the catcher and the ball, then a level (new, or the given one).
@@ -353,8 +384,11 @@ class PlinkoWorld(LevelWorld):
         self.catcher = self._catcher(self.catcher_half_width)
         physics.add_child(self.catcher)
         ball = self.ball = RigidBody(position=(start_x, TOP - 0.3), name="Ball")
-        ball.add_child(CollisionShape.circle(BALL_RADIUS, mass=1.0, elasticity=0.3, friction=0.3,
-                                             color="crimson", name="Skin"))
+        ball.add_child(
+            CollisionShape.circle(
+                BALL_RADIUS, mass=1.0, elasticity=0.3, friction=0.3, color="crimson", name="Skin"
+            )
+        )
         ball.velocity = (start_speed, 0.0)
         physics.add_child(ball)
         physics.add_child(level)
@@ -370,37 +404,53 @@ class PlinkoWorld(LevelWorld):
         """A new level (:func:`build_level`) at the world's difficulty, columns and rows."""
         return build_level(rng, self.difficulty, self.columns, self.rows)
 
-
     def get_data(self, observation_request: Mapping[str, Any]) -> dict[str, Any]:
         """The ball and the catcher, the level's size and fingerprint (its data's digest)."""
         assert self.ball is not None and self.catcher is not None
         assert self.level_node is not None
         pegs = self.level_node.get_node_or_null("Pegs")
-        return {"ball": list(self.ball.position), "catcher": list(self.catcher.position),
-                "pegs": pegs.get_child_count() if pegs is not None else 0,
-                "level": self.level_id}
+        return {
+            "ball": list(self.ball.position),
+            "catcher": list(self.catcher.position),
+            "pegs": pegs.get_child_count() if pegs is not None else 0,
+            "level": self.level_id,
+        }
 
     def _walls(self) -> StaticBody:
         walls = StaticBody(name="Walls")
-        for index, (a, b) in enumerate([((-HALF_WIDTH, 0.0), (-HALF_WIDTH, TOP + 1.0)),
-                                        ((HALF_WIDTH, 0.0), (HALF_WIDTH, TOP + 1.0))]):
-            walls.add_child(CollisionShape.segment(a, b, 0.05, elasticity=0.3, color="dimgray",
-                                                   name=f"Side{index}"))
-        floor = CollisionShape.segment((-HALF_WIDTH, 0.0), (HALF_WIDTH, 0.0), 0.05,
-                                       color="dimgray", name="Floor")
+        for index, (a, b) in enumerate(
+            [
+                ((-HALF_WIDTH, 0.0), (-HALF_WIDTH, TOP + 1.0)),
+                ((HALF_WIDTH, 0.0), (HALF_WIDTH, TOP + 1.0)),
+            ]
+        ):
+            walls.add_child(
+                CollisionShape.segment(
+                    a, b, 0.05, elasticity=0.3, color="dimgray", name=f"Side{index}"
+                )
+            )
+        floor = CollisionShape.segment(
+            (-HALF_WIDTH, 0.0), (HALF_WIDTH, 0.0), 0.05, color="dimgray", name="Floor"
+        )
         floor.collision_started.connect(self._on_floor_touched)
         walls.add_child(floor)
         return walls
 
     def _catcher(self, half: float) -> KinematicBody:
         catcher = KinematicBody(position=(0.0, CATCHER_HEIGHT), name="Catcher")
-        for name, a, b in (("Bottom", (-half, 0.0), (half, 0.0)),
-                           ("Left", (-half, 0.0), (-half, 0.35)),
-                           ("Right", (half, 0.0), (half, 0.35))):
+        for name, a, b in (
+            ("Bottom", (-half, 0.0), (half, 0.0)),
+            ("Left", (-half, 0.0), (-half, 0.35)),
+            ("Right", (half, 0.0), (half, 0.35)),
+        ):
             catcher.add_child(CollisionShape.segment(a, b, 0.04, color="goldenrod", name=name))
         inner = half - 0.06
-        pocket = CollisionShape.poly([(-inner, 0.02), (inner, 0.02), (inner, 0.2), (-inner, 0.2)],
-                                     sensor=True, color="khaki", name="Pocket")
+        pocket = CollisionShape.poly(
+            [(-inner, 0.02), (inner, 0.02), (inner, 0.2), (-inner, 0.2)],
+            sensor=True,
+            color="khaki",
+            name="Pocket",
+        )
         pocket.collision_started.connect(self._on_pocket_touched)
         catcher.add_child(pocket)
         return catcher
@@ -465,8 +515,10 @@ class PlinkoAgent(RLAgent):
         world = self._world()
         assert world.catcher is not None and world.ball is not None
         ball = world.ball.body
-        observation = np.array((world.catcher.position.x, world.catcher.velocity.x,
-                                *ball.position, *ball.velocity), dtype=np.float32)
+        observation = np.array(
+            (world.catcher.position.x, world.catcher.velocity.x, *ball.position, *ball.velocity),
+            dtype=np.float32,
+        )
         space = self.observation_space
         return np.clip(observation, space.low, space.high)  # type: ignore[attr-defined]
 

@@ -139,8 +139,7 @@ class PusherAgent(RLAgent):
         world = self.environment.world
         relative = np.array(world.puck.position) - world.goal
         velocity = np.array(world.puck.velocity)
-        return np.clip(np.concatenate([relative, velocity]), -2 * HALF, 2 * HALF) \
-            .astype(np.float32)
+        return np.clip(np.concatenate([relative, velocity]), -2 * HALF, 2 * HALF).astype(np.float32)
 
     def _distance(self) -> float:
         world = self.environment.world

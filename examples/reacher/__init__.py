@@ -69,10 +69,12 @@ def reach(observation: np.ndarray) -> np.ndarray:
     error = -observation[8:10]  # target minus fingertip
     angle1 = math.atan2(sin1, cos1)
     angle12 = angle1 + math.atan2(sin2, cos2)
-    jacobian = np.array([
-        [-LINK * math.sin(angle1) - LINK * math.sin(angle12), -LINK * math.sin(angle12)],
-        [LINK * math.cos(angle1) + LINK * math.cos(angle12), LINK * math.cos(angle12)],
-    ])
+    jacobian = np.array(
+        [
+            [-LINK * math.sin(angle1) - LINK * math.sin(angle12), -LINK * math.sin(angle12)],
+            [LINK * math.cos(angle1) + LINK * math.cos(angle12), LINK * math.cos(angle12)],
+        ]
+    )
     speeds = np.linalg.pinv(jacobian, rcond=0.05) @ (3.0 * error)
     return np.clip(speeds / 4.0, -1.0, 1.0).astype(np.float32)
 
@@ -101,25 +103,27 @@ class ReacherWorld(RLEnvWorld):
         base.add_child(CollisionShape.circle(0.06, sensor=True, color=(90, 90, 90), name="Hub"))
         physics.add_child(base)
         self.upper = RigidBody(name="Upper")
-        self.upper.add_child(CollisionShape.segment((0, 0), (LINK, 0), 0.03, mass=0.5,
-                                                    name="Bone"))
+        self.upper.add_child(CollisionShape.segment((0, 0), (LINK, 0), 0.03, mass=0.5, name="Bone"))
         self.lower = RigidBody(position=(LINK, 0.0), name="Lower")
-        self.lower.add_child(CollisionShape.segment((0, 0), (LINK, 0), 0.03, mass=0.5,
-                                                    name="Bone"))
-        self.lower.add_child(CollisionShape.circle(0.04, (LINK, 0), mass=0.05,
-                                                   color=(40, 40, 40), name="Fingertip"))
+        self.lower.add_child(CollisionShape.segment((0, 0), (LINK, 0), 0.03, mass=0.5, name="Bone"))
+        self.lower.add_child(
+            CollisionShape.circle(0.04, (LINK, 0), mass=0.05, color=(40, 40, 40), name="Fingertip")
+        )
         radius = self.np_random.uniform(0.2, 0.9)
         bearing = self.np_random.uniform(-math.pi, math.pi)
-        self.target = StaticBody(position=(radius * math.cos(bearing),
-                                           radius * math.sin(bearing)), name="Target")
-        self.target.add_child(CollisionShape.circle(0.05, sensor=True, color=(200, 40, 40),
-                                                    name="Mark"))
+        self.target = StaticBody(
+            position=(radius * math.cos(bearing), radius * math.sin(bearing)), name="Target"
+        )
+        self.target.add_child(
+            CollisionShape.circle(0.05, sensor=True, color=(200, 40, 40), name="Mark")
+        )
         for node in (self.upper, self.lower, self.target):
             physics.add_child(node)
         physics.add_child(Joint.pivot("../Base", "../Upper", (0.0, 0.0), name="Shoulder"))
         physics.add_child(Joint.pivot("../Upper", "../Lower", (LINK, 0.0), name="Elbow"))
-        shoulder = Joint.motor("../Base", "../Upper", max_force=self.max_torque,
-                               name="ShoulderMotor")
+        shoulder = Joint.motor(
+            "../Base", "../Upper", max_force=self.max_torque, name="ShoulderMotor"
+        )
         elbow = Joint.motor("../Upper", "../Lower", max_force=self.max_torque, name="ElbowMotor")
         physics.add_child(shoulder)
         physics.add_child(elbow)
@@ -191,9 +195,16 @@ class ReacherAgent(RLAgent):
         upper, lower = self._world.upper.body, self._world.lower.body
         shoulder, elbow = upper.angle, lower.angle - upper.angle
         return np.array(
-            (math.cos(shoulder), math.sin(shoulder), math.cos(elbow), math.sin(elbow),
-             *self._world.target.position, upper.angular_velocity,
-             lower.angular_velocity - upper.angular_velocity, *self._fingertip_to_target()),
+            (
+                math.cos(shoulder),
+                math.sin(shoulder),
+                math.cos(elbow),
+                math.sin(elbow),
+                *self._world.target.position,
+                upper.angular_velocity,
+                lower.angular_velocity - upper.angular_velocity,
+                *self._fingertip_to_target(),
+            ),
             dtype=np.float32,
         )
 

@@ -50,8 +50,16 @@ from rlenv.signals import Signal
 
 from ..seeker import HALF, RADIUS, random_spot, room_walls
 
-__all__ = ["CHASER", "RUNNERS", "TARGET", "Chaser", "Runner", "TagAgent", "TagEnvironment",
-           "TagWorld"]
+__all__ = [
+    "CHASER",
+    "RUNNERS",
+    "TARGET",
+    "Chaser",
+    "Runner",
+    "TagAgent",
+    "TagEnvironment",
+    "TagWorld",
+]
 
 TARGET = f"{__name__}:TagEnvironment"
 CHASER = "Chaser"
@@ -82,8 +90,9 @@ class TagWorld(RLEnvWorld):
         self.discs = {}
         for name in (CHASER, *RUNNERS):
             disc = RigidBody(name=f"{name}Disc")
-            skin = CollisionShape.circle(RADIUS, mass=1.0, elasticity=0.5, color=_COLORS[name],
-                                         name="Body")
+            skin = CollisionShape.circle(
+                RADIUS, mass=1.0, elasticity=0.5, color=_COLORS[name], name="Body"
+            )
             disc.add_child(skin)
             physics.add_child(disc)
             self.discs[name] = disc
@@ -164,10 +173,12 @@ class Chaser(TagAgent):
 
     max_force = 10.0
     observation_space = spaces.Box(
-        low=np.array([-HALF, -HALF, -_SPEED, -_SPEED] + [-2 * HALF, -2 * HALF, 0.0] * 2,
-                     dtype=np.float32),
-        high=np.array([HALF, HALF, _SPEED, _SPEED] + [2 * HALF, 2 * HALF, 1.0] * 2,
-                      dtype=np.float32),
+        low=np.array(
+            [-HALF, -HALF, -_SPEED, -_SPEED] + [-2 * HALF, -2 * HALF, 0.0] * 2, dtype=np.float32
+        ),
+        high=np.array(
+            [HALF, HALF, _SPEED, _SPEED] + [2 * HALF, 2 * HALF, 1.0] * 2, dtype=np.float32
+        ),
         dtype=np.float32,
     )
 
@@ -204,8 +215,11 @@ class Chaser(TagAgent):
     def heuristic(self, observation: np.ndarray) -> np.ndarray:
         """Run at the nearest runner still running, braking a little."""
         velocity = observation[2:4]
-        targets = [observation[4 + 3 * i: 6 + 3 * i] for i in range(len(RUNNERS))
-                   if observation[6 + 3 * i] > 0.5]
+        targets = [
+            observation[4 + 3 * i : 6 + 3 * i]
+            for i in range(len(RUNNERS))
+            if observation[6 + 3 * i] > 0.5
+        ]
         if not targets:
             return np.zeros(2, np.float32)
         nearest = min(targets, key=lambda relative: float(np.hypot(*relative)))
@@ -216,10 +230,13 @@ class Runner(TagAgent):
     """A runner: rewarded for every tick it stays untagged."""
 
     observation_space = spaces.Box(
-        low=np.array([-HALF, -HALF, -_SPEED, -_SPEED, -2 * HALF, -2 * HALF, -_SPEED, -_SPEED],
-                     dtype=np.float32),
-        high=np.array([HALF, HALF, _SPEED, _SPEED, 2 * HALF, 2 * HALF, _SPEED, _SPEED],
-                      dtype=np.float32),
+        low=np.array(
+            [-HALF, -HALF, -_SPEED, -_SPEED, -2 * HALF, -2 * HALF, -_SPEED, -_SPEED],
+            dtype=np.float32,
+        ),
+        high=np.array(
+            [HALF, HALF, _SPEED, _SPEED, 2 * HALF, 2 * HALF, _SPEED, _SPEED], dtype=np.float32
+        ),
         dtype=np.float32,
     )
 
@@ -237,8 +254,10 @@ class Runner(TagAgent):
         """Own position and velocity; the chaser relative to this runner, and its velocity."""
         position, velocity = self._own()
         chaser = self.world.discs[CHASER].body
-        return np.array((*position, *velocity, *(np.array(chaser.position) - position),
-                         *chaser.velocity), dtype=np.float32)
+        return np.array(
+            (*position, *velocity, *(np.array(chaser.position) - position), *chaser.velocity),
+            dtype=np.float32,
+        )
 
     def heuristic(self, observation: np.ndarray) -> np.ndarray:
         """Run away from the chaser, and away from the walls when close to one."""

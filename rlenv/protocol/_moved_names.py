@@ -17,10 +17,16 @@ __all__ = ["MOVED_NAMES", "moved_name"]
 
 MOVED_NAMES: dict[str, dict[str, tuple[str, str, str]]] = {
     "rlenv.protocol.spaces": {
-        "space_to_json": ("rlenv.protocol.space_json", "space_to_json_text",  # (the text)
-                          "a space's one JSON form"),
-        "space_from_json": ("rlenv.protocol.space_json", "space_from_json",
-                            "a space's one JSON form"),
+        "space_to_json": (
+            "rlenv.protocol.space_json",
+            "space_to_json_text",  # (the text)
+            "a space's one JSON form",
+        ),
+        "space_from_json": (
+            "rlenv.protocol.space_json",
+            "space_from_json",
+            "a space's one JSON form",
+        ),
     },
 }
 """By old module, each moved name's new module, its new name, and why it moved."""
@@ -40,6 +46,10 @@ def moved_name(module: str, name: str) -> Any:
         raise AttributeError(f"module {module!r} has no attribute {name!r}")
     new_module, new_name, why = moved
     place = importlib.import_module(new_module)
-    warnings.warn(f"{module}.{name} moved to {new_module}.{new_name} ({why}); the old name goes "
-                  "in the next release", DeprecationWarning, stacklevel=3)
+    warnings.warn(
+        f"{module}.{name} moved to {new_module}.{new_name} ({why}); the old name goes "
+        "in the next release",
+        DeprecationWarning,
+        stacklevel=3,
+    )
     return getattr(place, new_name)

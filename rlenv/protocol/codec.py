@@ -63,8 +63,10 @@ def encode_ndarray(array: np.ndarray) -> msgpack.ExtType:
     key = (array.dtype, array.shape)
     header = _ENCODED_HEADERS.get(key)
     if header is None:
-        if array.dtype.itemsize not in _ITEM_SIZES.get(array.dtype.kind, ()) or \
-                array.dtype.fields is not None:
+        if (
+            array.dtype.itemsize not in _ITEM_SIZES.get(array.dtype.kind, ())
+            or array.dtype.fields is not None
+        ):
             raise TypeError(f"arrays of dtype {array.dtype} cannot travel on the wire")
         if array.ndim > _MAX_NDIM:
             raise TypeError(f"arrays of more than {_MAX_NDIM} dimensions cannot travel on the wire")
@@ -110,12 +112,16 @@ def _parse_header(data: bytes) -> tuple[np.dtype, tuple[int, ...], int, int]:
         shape = struct.unpack_from(f"<{ndim}Q", data, _ARRAY_HEADER.size + dtype_len)
     except (struct.error, UnicodeDecodeError, TypeError, ValueError) as exc:
         raise ValueError(f"malformed ndarray header: {exc}") from None
-    if dtype.itemsize not in _ITEM_SIZES.get(dtype.kind, ()) or dtype.fields is not None or \
-            dtype.subdtype is not None:
+    if (
+        dtype.itemsize not in _ITEM_SIZES.get(dtype.kind, ())
+        or dtype.fields is not None
+        or dtype.subdtype is not None
+    ):
         raise ValueError(f"ndarray dtype {dtype} is not allowed on the wire")
     if dtype.str != text:
-        raise ValueError(f"ndarray dtype {text!r:.40} is not written as numpy's dtype.str "
-                         f"({dtype.str!r})")
+        raise ValueError(
+            f"ndarray dtype {text!r:.40} is not written as numpy's dtype.str ({dtype.str!r})"
+        )
     count = 1
     for n in shape:
         count *= n
@@ -139,8 +145,9 @@ def _ext_hook(code: int, data: bytes) -> Any:
     return decode_ndarray(data)
 
 
-pack: Callable[[Any], bytes] = msgpack.Packer(default=_default, use_bin_type=True,
-                                              autoreset=True).pack
+pack: Callable[[Any], bytes] = msgpack.Packer(
+    default=_default, use_bin_type=True, autoreset=True
+).pack
 """Encode an object as msgpack, numpy arrays and scalars included (no framing).
 
 Raises ``TypeError`` when it holds something that cannot travel on the wire. (The packer's own
@@ -178,11 +185,13 @@ def unpack(body: bytes | bytearray | memoryview, *, strict: bool = True) -> Any:
             :data:`MAX_FRAME_OBJECTS`.
     """
     if len(body) > MAX_FRAME_OBJECTS and count_objects(body) > MAX_FRAME_OBJECTS:
-        raise RemoteProtocolError(f"frame holds more than {MAX_FRAME_OBJECTS} msgpack objects, "
-                                  "the limit of a frame")
+        raise RemoteProtocolError(
+            f"frame holds more than {MAX_FRAME_OBJECTS} msgpack objects, the limit of a frame"
+        )
     try:
-        value = msgpack.unpackb(body, ext_hook=_ext_hook,
-                                object_hook=_text_keys if strict else None)
+        value = msgpack.unpackb(
+            body, ext_hook=_ext_hook, object_hook=_text_keys if strict else None
+        )
     except msgpack.ExtraData:
         raise RemoteProtocolError("trailing bytes after the message in the frame") from None
     except (ValueError, TypeError, msgpack.UnpackException, RecursionError) as exc:
@@ -206,7 +215,7 @@ def _object_sizes() -> tuple[list[int], dict[int, tuple[struct.Struct, int]]]:
     for first, skip in ((0xC4, 1), (0xC7, 2), (0xD9, 1)):  # bin; ext (a type byte); str
         for index, form in enumerate((">B", ">H", ">I")):
             sizes[first + index] = 0
-            lengths[first + index] = (struct.Struct(form), skip + 2 ** index)
+            lengths[first + index] = (struct.Struct(form), skip + 2**index)
     return sizes, lengths
 
 

@@ -36,8 +36,7 @@ from rlenv.protocol.messages import (
     StepsResponse,
 )
 
-__all__ = ["CONNECTION_CLOSED", "NEED_DATA", "TRANSITIONS", "Connection", "Event", "Role",
-           "State"]
+__all__ = ["CONNECTION_CLOSED", "NEED_DATA", "TRANSITIONS", "Connection", "Event", "Role", "State"]
 
 
 class _Sentinel:
@@ -113,8 +112,12 @@ TRANSITIONS: Final[dict[tuple[Role, State, Event], State]] = {
     (_CLIENT, _AWAIT, Event.BREAK): _CLOSED,
     (_CLIENT, _READY, Event.BREAK): _CLOSED,
     # The end of the stream ends everything, in any state (a client is never BROKEN).
-    **{(role, state, Event.END): _CLOSED for role in Role for state in State
-       if (role, state) != (_CLIENT, _BROKEN)},
+    **{
+        (role, state, Event.END): _CLOSED
+        for role in Role
+        for state in State
+        if (role, state) != (_CLIENT, _BROKEN)
+    },
 }
 """(role, state, event) -> the next state. Nothing else may happen."""
 
@@ -124,14 +127,19 @@ _read_prefix = HEADER.unpack_from
 _write_prefix = HEADER.pack
 
 _SENT: Final[dict[type, Event]] = {
-    Hello: Event.SEND_HELLO, Request: Event.SEND_REQUEST, Response: Event.SEND_REPLY,
-    BatchResponse: Event.SEND_REPLY, StepsResponse: Event.SEND_REPLY,
+    Hello: Event.SEND_HELLO,
+    Request: Event.SEND_REQUEST,
+    Response: Event.SEND_REPLY,
+    BatchResponse: Event.SEND_REPLY,
+    StepsResponse: Event.SEND_REPLY,
     ErrorReply: Event.SEND_REPLY,
 }
 _NEXT: Final[dict[tuple[Role, State], dict[Event, State]]] = {
-    (role, state): {event: after for (r, s, event), after in TRANSITIONS.items()
-                    if (r, s) == (role, state)}
-    for role in Role for state in State
+    (role, state): {
+        event: after for (r, s, event), after in TRANSITIONS.items() if (r, s) == (role, state)
+    }
+    for role in Role
+    for state in State
 }
 """The table, by (role, state): what may happen next, and where it leads."""
 
@@ -262,15 +270,20 @@ class Connection:
         outstanding = self._outstanding
         reply_id = None if kind is Hello or kind is Request else message.id  # type: ignore[union-attr]
         if reply_id is not None and (not outstanding or outstanding[0] != reply_id):
-            raise LocalProtocolError(f"reply to request {reply_id} out of order; "
-                                     f"outstanding: {list(outstanding)}")
+            raise LocalProtocolError(
+                f"reply to request {reply_id} out of order; outstanding: {list(outstanding)}"
+            )
         body = pack(message.to_wire())
         if len(body) > self.max_send_size:
-            raise LocalProtocolError(f"message of {len(body)} bytes exceeds the peer's frame "
-                                     f"limit of {self.max_send_size}")
+            raise LocalProtocolError(
+                f"message of {len(body)} bytes exceeds the peer's frame "
+                f"limit of {self.max_send_size}"
+            )
         if len(body) > MAX_FRAME_OBJECTS and count_objects(body) > MAX_FRAME_OBJECTS:
-            raise LocalProtocolError(f"message holds more than {MAX_FRAME_OBJECTS} msgpack "
-                                     "objects, the limit of a frame the peer reads")
+            raise LocalProtocolError(
+                f"message holds more than {MAX_FRAME_OBJECTS} msgpack "
+                "objects, the limit of a frame the peer reads"
+            )
         if message.__class__ is Request:
             outstanding.append(message.id)
         elif reply_id is not None:
@@ -288,8 +301,9 @@ class Connection:
             LocalProtocolError: the connection is not ready for requests.
         """
         if self.state is not _READY:
-            raise LocalProtocolError(f"no request may go while the connection is "
-                                     f"{self.state.value}")
+            raise LocalProtocolError(
+                f"no request may go while the connection is {self.state.value}"
+            )
         self._outstanding.append(request_id)
 
     def note_reply(self, reply_id: int) -> None:
@@ -300,8 +314,9 @@ class Connection:
         """
         outstanding = self._outstanding
         if not outstanding or outstanding[0] != reply_id:
-            raise LocalProtocolError(f"reply to request {reply_id} out of order; "
-                                     f"outstanding: {list(outstanding)}")
+            raise LocalProtocolError(
+                f"reply to request {reply_id} out of order; outstanding: {list(outstanding)}"
+            )
         outstanding.popleft()
 
     # --- internals --------------------------------------------------------------------------
@@ -329,7 +344,9 @@ class Connection:
                 self._enter(self._next.get(_BREAK, _CLOSED))
                 raise RemoteProtocolError(
                     f"frame length {length} exceeds the limit of {self.max_frame_size} bytes "
-                    "(is the peer speaking the rlenv protocol?)", fatal=True)
+                    "(is the peer speaking the rlenv protocol?)",
+                    fatal=True,
+                )
             begin = start + _PREFIX
             end = begin + length
             if size == end:  # the last frame buffered (usually the only one of a read)
@@ -344,7 +361,8 @@ class Connection:
         if buffered:
             raise RemoteProtocolError(
                 f"connection closed in the middle of a frame ({buffered} bytes buffered)",
-                fatal=True)
+                fatal=True,
+            )
         return CONNECTION_CLOSED
 
     def _reply(self, wire: dict[str, Any]) -> Message:
@@ -377,8 +395,9 @@ class Connection:
             if not outstanding or outstanding[0] != reply_id:
                 self._enter(_CLOSED)
                 expected = outstanding[0] if outstanding else "none"
-                raise RemoteProtocolError(f"reply to request {reply_id}, expected {expected}",
-                                          fatal=True)
+                raise RemoteProtocolError(
+                    f"reply to request {reply_id}, expected {expected}", fatal=True
+                )
             outstanding.popleft()
         if state is not self.state:
             self._enter(state)

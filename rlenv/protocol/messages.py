@@ -172,8 +172,7 @@ def _target(value: Any) -> str | None:
 def _driven(value: Any, agents: Any) -> tuple[str, ...]:
     """A hello's driven agents: names among its ``agents`` (absent from servers before 2.6)."""
     if not isinstance(value, list) or not all(name in agents for name in value):
-        raise ValueError(f"driven must list some of the agents {agents!r:.80}, got "
-                         f"{value!r:.80}")
+        raise ValueError(f"driven must list some of the agents {agents!r:.80}, got {value!r:.80}")
     return tuple(value)
 
 
@@ -214,12 +213,14 @@ class Request:
         """
         request_id = wire.pop("id", None)
         if type(request_id) is not int:
-            raise RemoteProtocolError(f"request 'id' must be an integer, got {request_id!r:.40}",
-                                      ErrorCode.BAD_REQUEST)
+            raise RemoteProtocolError(
+                f"request 'id' must be an integer, got {request_id!r:.40}", ErrorCode.BAD_REQUEST
+            )
         token = wire.pop("token", None)
         if token is not None and type(token) is not str:
-            raise RemoteProtocolError("'token' must be a string", ErrorCode.BAD_REQUEST,
-                                      request_id=request_id)
+            raise RemoteProtocolError(
+                "'token' must be a string", ErrorCode.BAD_REQUEST, request_id=request_id
+            )
         return cls(request_id, wire, token)
 
     def __repr__(self) -> str:  # never show a token in logs
@@ -249,9 +250,15 @@ class Response:
 
     def to_wire(self) -> dict[str, Any]:
         """The message as a msgpack-ready map."""
-        wire = {"id": self.id, "observation": self.observation, "reward": self.reward,
-                "terminated": self.terminated, "truncated": self.truncated, "info": self.info,
-                "frames": self.frames}
+        wire = {
+            "id": self.id,
+            "observation": self.observation,
+            "reward": self.reward,
+            "terminated": self.terminated,
+            "truncated": self.truncated,
+            "info": self.info,
+            "frames": self.frames,
+        }
         if self.agents is not None:
             wire["agents"] = self.agents
         return wire
@@ -279,8 +286,9 @@ class Response:
             raise _wrong("terminated and truncated", (terminated, truncated))
         if info.__class__ is not dict:
             raise _wrong("info", info)
-        if not (observation is None or observation.__class__ is dict) or \
-                not (agents is None or agents.__class__ is dict):
+        if not (observation is None or observation.__class__ is dict) or not (
+            agents is None or agents.__class__ is dict
+        ):
             raise _wrong("observation and agents", (observation, agents))
         return cls(reply_id, observation, reward, terminated, truncated, info, frames, agents)
 
@@ -300,8 +308,10 @@ class ErrorReply:
 
     def to_wire(self) -> dict[str, Any]:
         """The message as a msgpack-ready map."""
-        return {"id": self.id,
-                "error": {"code": str(self.code), "message": self.message, "fatal": self.fatal}}
+        return {
+            "id": self.id,
+            "error": {"code": str(self.code), "message": self.message, "fatal": self.fatal},
+        }
 
     @classmethod
     def from_wire(cls, wire: Mapping[str, Any]) -> ErrorReply:
@@ -312,8 +322,12 @@ class ErrorReply:
         """
         try:
             error = wire["error"]
-            return cls(id=wire.get("id"), code=str(error["code"]), message=str(error["message"]),
-                       fatal=bool(error.get("fatal", False)))
+            return cls(
+                id=wire.get("id"),
+                code=str(error["code"]),
+                message=str(error["message"]),
+                fatal=bool(error.get("fatal", False)),
+            )
         except (KeyError, TypeError) as exc:
             raise RemoteProtocolError(f"invalid error reply: {exc!r}") from None
 
@@ -327,8 +341,10 @@ class BatchResponse:
 
     def to_wire(self) -> dict[str, Any]:
         """The message as a msgpack-ready map."""
-        return {"id": self.id,
-                "batch": [None if reply is None else reply.to_wire() for reply in self.replies]}
+        return {
+            "id": self.id,
+            "batch": [None if reply is None else reply.to_wire() for reply in self.replies],
+        }
 
     @classmethod
     def from_wire(cls, wire: Mapping[str, Any]) -> BatchResponse:
@@ -347,8 +363,9 @@ class BatchResponse:
             elif not isinstance(reply, Mapping):
                 raise RemoteProtocolError("invalid batch response: a reply is not a map")
             else:
-                replies.append(ErrorReply.from_wire(reply) if "error" in reply
-                               else Response.from_wire(reply))
+                replies.append(
+                    ErrorReply.from_wire(reply) if "error" in reply else Response.from_wire(reply)
+                )
         return cls(id=reply_id, replies=tuple(replies))
 
 
@@ -385,8 +402,9 @@ class StepsResponse:
             "info": list(self.info),
         }
         if self.errors is not None:
-            columns["errors"] = [None if error is None else error.to_wire()["error"]
-                                 for error in self.errors]
+            columns["errors"] = [
+                None if error is None else error.to_wire()["error"] for error in self.errors
+            ]
         return {"id": self.id, "steps": columns}
 
     @classmethod
@@ -401,21 +419,33 @@ class StepsResponse:
             info = columns["info"]
             size = len(info)
             reward = _column(columns["reward"], _REWARD, size)
-            terminated, truncated = (_column(columns[name], _FLAG, size).astype(np.bool_)
-                                     for name in ("terminated", "truncated"))
+            terminated, truncated = (
+                _column(columns[name], _FLAG, size).astype(np.bool_)
+                for name in ("terminated", "truncated")
+            )
             frames = _column(columns["frames"], _FRAMES, size)
             errors = columns.get("errors")
             if errors is not None:
                 if len(errors) != size:
                     raise ValueError(f"{len(errors)} errors for {size} instances")
-                errors = tuple(None if error is None else
-                               ErrorReply.from_wire({"id": wire["id"], "error": error})
-                               for error in errors)
+                errors = tuple(
+                    None
+                    if error is None
+                    else ErrorReply.from_wire({"id": wire["id"], "error": error})
+                    for error in errors
+                )
             if not all(type(item) is dict for item in info):
                 raise ValueError("an info that is not a map")
-            return cls(id=wire["id"], observation=columns["observation"], reward=reward,
-                       terminated=terminated, truncated=truncated, frames=frames,
-                       info=tuple(info), errors=errors)
+            return cls(
+                id=wire["id"],
+                observation=columns["observation"],
+                reward=reward,
+                terminated=terminated,
+                truncated=truncated,
+                frames=frames,
+                info=tuple(info),
+                errors=errors,
+            )
         except (KeyError, TypeError, ValueError, RemoteProtocolError) as exc:
             raise RemoteProtocolError(f"invalid steps response: {exc!r}") from None
 

@@ -71,7 +71,7 @@ def _repeat(repeat: Any) -> int:
     """``repeat_action`` as the slot holds it: 0 when absent, -1 when it does not fit."""
     if repeat is None:
         return 0
-    return repeat if repeat.__class__ is int and 1 <= repeat < 2 ** 62 else -1
+    return repeat if repeat.__class__ is int and 1 <= repeat < 2**62 else -1
 
 
 def _read_only(array: np.ndarray) -> np.ndarray:
@@ -86,10 +86,10 @@ def lane_unavailable(hello: Hello) -> str | None:
         return f"shared memory lanes need Linux (this is {sys.platform})"
     if platform.machine().lower() not in ("x86_64", "amd64"):
         return f"shared memory lanes need x86-64 (this is {platform.machine()})"
-    for name, space in (("action", hello.action_space),
-                        ("observation", hello.observation_space)):
+    for name, space in (("action", hello.action_space), ("observation", hello.observation_space)):
         if not isinstance(space, _RAW_BYTES) and not (
-                name == "action" and isinstance(space, spaces.Discrete)):
+            name == "action" and isinstance(space, spaces.Discrete)
+        ):
             return f"the {name} space ({type(space).__name__}) has no fixed-size packed form"
     if len(hello.agents) != 1:
         return f"the environment has {len(hello.agents)} agents (a lane carries one's steps)"
@@ -149,16 +149,34 @@ class Layout:
         terminated = frames + 8 * count
         truncated = terminated + count
         size = (truncated + count + 63) // 64 * 64
-        return cls(count, action_size, observation_size, reset, observations, reward, frames,
-                   terminated, truncated, size)
+        return cls(
+            count,
+            action_size,
+            observation_size,
+            reset,
+            observations,
+            reward,
+            frames,
+            terminated,
+            truncated,
+            size,
+        )
 
     def to_wire(self) -> dict[str, int]:
         """The layout as the server's answer to ``shared_memory`` carries it."""
-        return {"size": self.size, "instances": self.instances,
-                "action_size": self.action_size, "observation_size": self.observation_size,
-                "actions": _ACTIONS, "reset": self.reset, "observation": self.observation,
-                "reward": self.reward, "frames": self.frames, "terminated": self.terminated,
-                "truncated": self.truncated}
+        return {
+            "size": self.size,
+            "instances": self.instances,
+            "action_size": self.action_size,
+            "observation_size": self.observation_size,
+            "actions": _ACTIONS,
+            "reset": self.reset,
+            "observation": self.observation,
+            "reward": self.reward,
+            "frames": self.frames,
+            "terminated": self.terminated,
+            "truncated": self.truncated,
+        }
 
 
 class Slots:
@@ -175,16 +193,17 @@ class Slots:
         count = layout.instances
         self._buffer = memoryview(buffer)
         self._request = self._buffer[:32].cast("q")
-        self._answer = self._buffer[_ANSWER:_ANSWER + 32].cast("q")
+        self._answer = self._buffer[_ANSWER : _ANSWER + 32].cast("q")
         action = hello.action_space
         self._discrete = isinstance(action, spaces.Discrete)
         self._action_dtype = action.dtype
         if isinstance(action, spaces.Discrete):
             self._first, self._end = int(action.start), int(action.start + action.n)
-        self._actions = self._buffer[_ACTIONS:_ACTIONS + count * layout.action_size]
-        self._reset = self._buffer[layout.reset:layout.reset + count]
+        self._actions = self._buffer[_ACTIONS : _ACTIONS + count * layout.action_size]
+        self._reset = self._buffer[layout.reset : layout.reset + count]
         self._observations = self._buffer[
-            layout.observation:layout.observation + count * layout.observation_size]
+            layout.observation : layout.observation + count * layout.observation_size
+        ]
         self._rewards = np.frombuffer(buffer, _REWARD, count, layout.reward)
         self._frames = np.frombuffer(buffer, _FRAMES, count, layout.frames)
         self._terminated = np.frombuffer(buffer, _FLAG, count, layout.terminated)
@@ -193,10 +212,16 @@ class Slots:
         # The steps slots as arrays, for clients that write and read columns in place.
         self._action_columns = _columns(buffer, _ACTIONS, count, action)
         self._reset_flags = np.frombuffer(buffer, np.bool_, count, layout.reset)
-        self._answer_views = tuple(_read_only(view) for view in (
-            _columns(buffer, layout.observation, count, hello.observation_space),
-            self._rewards, self._terminated.view(np.bool_), self._truncated.view(np.bool_),
-            self._frames))
+        self._answer_views = tuple(
+            _read_only(view)
+            for view in (
+                _columns(buffer, layout.observation, count, hello.observation_space),
+                self._rewards,
+                self._terminated.view(np.bool_),
+                self._truncated.view(np.bool_),
+                self._frames,
+            )
+        )
 
     # --- the request (the client writes, the server reads) ----------------------------------
 
@@ -249,8 +274,11 @@ class Slots:
         action, reset = steps.get("action"), steps.get("reset")
         repeat = _repeat(steps.get("repeat_action"))
         count = self.layout.instances
-        if action.__class__ is not bytes or len(action) != count * self.layout.action_size or \
-                repeat < 0:
+        if (
+            action.__class__ is not bytes
+            or len(action) != count * self.layout.action_size
+            or repeat < 0
+        ):
             return 0
         if reset is None:
             flags = bytes(count)
@@ -281,16 +309,20 @@ class Slots:
                 return False
             if not self._first <= action < self._end:
                 return False
-        elif action.__class__ is not np.ndarray or action.dtype != slot.dtype or \
-                action.shape != slot.shape[1:]:
+        elif (
+            action.__class__ is not np.ndarray
+            or action.dtype != slot.dtype
+            or action.shape != slot.shape[1:]
+        ):
             return False
         slot[0] = action
         self._request[3] = repeat
         self._post(request_id, STEP)
         return True
 
-    def write_steps(self, request_id: int, action: Any, reset: Any,
-                    repeat_action: int | None) -> bool:
+    def write_steps(
+        self, request_id: int, action: Any, reset: Any, repeat_action: int | None
+    ) -> bool:
         """Write a ``steps`` request given as columns, in place; whether it fit.
 
         ``action`` must be an array of exactly the K actions' dtype and shape and ``reset``
@@ -299,11 +331,17 @@ class Slots:
         would be, read back by :meth:`read_request` as such.
         """
         actions, flags = self._action_columns, self._reset_flags
-        if action.__class__ is not np.ndarray or action.dtype != actions.dtype or \
-                action.shape != actions.shape:
+        if (
+            action.__class__ is not np.ndarray
+            or action.dtype != actions.dtype
+            or action.shape != actions.shape
+        ):
             return False
-        if reset is not None and (reset.__class__ is not np.ndarray or
-                                  reset.dtype != np.bool_ or reset.shape != flags.shape):
+        if reset is not None and (
+            reset.__class__ is not np.ndarray
+            or reset.dtype != np.bool_
+            or reset.shape != flags.shape
+        ):
             return False
         repeat = _repeat(repeat_action)
         if repeat < 0:
@@ -331,8 +369,10 @@ class Slots:
         header = self._request
         request_id, kind, repeat = header[1], header[2], header[3]
         if kind != STEP and kind != STEPS:
-            raise ValueError(f"the lane's request {request_id} is of kind {kind}; a lane carries "
-                             f"kinds {STEP} (step) and {STEPS} (steps)")
+            raise ValueError(
+                f"the lane's request {request_id} is of kind {kind}; a lane carries "
+                f"kinds {STEP} (step) and {STEPS} (steps)"
+            )
         size = self.layout.action_size
         if kind == STEP:
             action: Any = bytes(self._actions[:size])
@@ -395,8 +435,7 @@ class Slots:
         return True
 
     def _fill_steps(self, reply: Reply) -> bool:
-        if reply.__class__ is not StepsResponse or reply.errors is not None or \
-                any(reply.info):
+        if reply.__class__ is not StepsResponse or reply.errors is not None or any(reply.info):
             return False
         observation = reply.observation
         if observation.__class__ is not bytes or len(observation) != len(self._observations):
@@ -417,22 +456,41 @@ class Slots:
         reply_id = self._answer[1]
         if kind == STEP:
             size = self.layout.observation_size
-            return Response(reply_id, {"agent": bytes(self._observations[:size])},
-                            float(self._rewards[0]), bool(self._terminated[0]),
-                            bool(self._truncated[0]), {}, int(self._frames[0]))
+            return Response(
+                reply_id,
+                {"agent": bytes(self._observations[:size])},
+                float(self._rewards[0]),
+                bool(self._terminated[0]),
+                bool(self._truncated[0]),
+                {},
+                int(self._frames[0]),
+            )
         if not copy:
             observation, reward, terminated, truncated, frames = self._answer_views
-            return StepsResponse(reply_id, observation, reward, terminated, truncated, frames,
-                                 self._no_infos)
-        return StepsResponse(reply_id, bytes(self._observations), self._rewards.copy(),
-                             self._terminated.astype(np.bool_), self._truncated.astype(np.bool_),
-                             self._frames.copy(), self._no_infos)
+            return StepsResponse(
+                reply_id, observation, reward, terminated, truncated, frames, self._no_infos
+            )
+        return StepsResponse(
+            reply_id,
+            bytes(self._observations),
+            self._rewards.copy(),
+            self._terminated.astype(np.bool_),
+            self._truncated.astype(np.bool_),
+            self._frames.copy(),
+            self._no_infos,
+        )
 
     def release(self) -> None:
         """Let go of the block (before it is unmapped)."""
-        for view in (self._request, self._answer, self._actions, self._reset,
-                     self._observations):
+        for view in (self._request, self._answer, self._actions, self._reset, self._observations):
             view.release()
         self._buffer.release()
-        del self._rewards, self._frames, self._terminated, self._truncated, \
-            self._action_columns, self._reset_flags, self._answer_views
+        del (
+            self._rewards,
+            self._frames,
+            self._terminated,
+            self._truncated,
+            self._action_columns,
+            self._reset_flags,
+            self._answer_views,
+        )

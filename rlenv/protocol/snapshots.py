@@ -41,6 +41,7 @@ def parse_snapshot(snapshot: Any) -> dict[str, Any]:
     Raises:
         RequestError: ``bad_request`` naming the field.
     """
+
     def bad(message: str) -> RequestError:
         return RequestError(ErrorCode.BAD_REQUEST, f"restore: {message}")
 
@@ -62,12 +63,19 @@ def parse_snapshot(snapshot: Any) -> dict[str, Any]:
     for index, event in enumerate(events):
         valid = isinstance(event, list) and (
             (len(event) == 2 and event[0] == "config" and isinstance(event[1], Mapping))
-            or (len(event) == 3 and event[0] == "action" and type(event[2]) is int
-                and event[2] >= 1)
-            or (len(event) == 4 and event[0] == "set" and isinstance(event[1], str)
-                and isinstance(event[2], str))
+            or (
+                len(event) == 3 and event[0] == "action" and type(event[2]) is int and event[2] >= 1
+            )
+            or (
+                len(event) == 4
+                and event[0] == "set"
+                and isinstance(event[1], str)
+                and isinstance(event[2], str)
+            )
         )
         if not valid:
-            raise bad(f"events[{index}] must be ['config', map], ['action', action, frames] "
-                      "or ['set', path, property, value]")
+            raise bad(
+                f"events[{index}] must be ['config', map], ['action', action, frames] "
+                "or ['set', path, property, value]"
+            )
     return dict(snapshot)

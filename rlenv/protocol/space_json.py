@@ -25,8 +25,14 @@ from rlenv.protocol.spaces import space_from_spec, space_to_spec
 __all__ = ["json_number", "space_from_json", "space_to_json", "space_to_json_text"]
 
 _NON_FINITE = {math.inf: "Infinity", -math.inf: "-Infinity"}
-_FROM_TEXT = {"Infinity": math.inf, "-Infinity": -math.inf, "NaN": math.nan,
-              "inf": math.inf, "-inf": -math.inf, "nan": math.nan}  # (the older form's)
+_FROM_TEXT = {
+    "Infinity": math.inf,
+    "-Infinity": -math.inf,
+    "NaN": math.nan,
+    "inf": math.inf,
+    "-inf": -math.inf,
+    "nan": math.nan,
+}  # (the older form's)
 
 
 def json_number(value: Any) -> Any:
@@ -58,8 +64,13 @@ def _spec_to_json(spec: Mapping[str, Any]) -> dict[str, Any]:
     kind = spec["type"]
     if kind == "Box":
         low, high = np.asarray(spec["low"]), np.asarray(spec["high"])
-        return {"type": kind, "shape": list(low.shape), "low": _bound(low),
-                "high": _bound(high), "dtype": np.dtype(spec["dtype"]).name}
+        return {
+            "type": kind,
+            "shape": list(low.shape),
+            "low": _bound(low),
+            "high": _bound(high),
+            "dtype": np.dtype(spec["dtype"]).name,
+        }
     if kind == "Tuple":
         return {"type": kind, "spaces": [_spec_to_json(s) for s in spec["spaces"]]}
     if kind == "Dict":
@@ -109,23 +120,31 @@ def _json_to_spec(described: Any) -> dict[str, Any]:
     if kind == "Tuple":
         return {"type": kind, "spaces": [_json_to_spec(s) for s in described["spaces"]]}
     if kind == "Dict":
-        return {"type": kind,
-                "spaces": {k: _json_to_spec(s) for k, s in described["spaces"].items()}}
+        return {
+            "type": kind,
+            "spaces": {k: _json_to_spec(s) for k, s in described["spaces"].items()},
+        }
     spec: dict[str, Any] = {"type": kind}
     dtype = _dtype(described["dtype"]) if "dtype" in described else None
     if dtype is not None:
         spec["dtype"] = dtype.str
     if kind == "Box":
         bounds = {key: _array(described[key], dtype) for key in ("low", "high")}
-        shape = tuple(int(n) for n in described["shape"]) if "shape" in described else \
-            bounds["low"].shape  # the older form lists every bound
+        shape = (
+            tuple(int(n) for n in described["shape"])
+            if "shape" in described
+            else bounds["low"].shape
+        )  # the older form lists every bound
         for key, bound in bounds.items():
             spec[key] = np.broadcast_to(bound, shape).copy()
         return spec
     for key, value in described.items():
         if key not in ("type", "dtype"):
-            spec[key] = np.asarray(value, np.int64) if isinstance(value, list) and \
-                kind == "MultiDiscrete" else value
+            spec[key] = (
+                np.asarray(value, np.int64)
+                if isinstance(value, list) and kind == "MultiDiscrete"
+                else value
+            )
     return spec
 
 
@@ -141,4 +160,5 @@ def _array(value: Any, dtype: np.dtype | None) -> np.ndarray:
         if isinstance(item, list):
             return [number(i) for i in item]
         return _FROM_TEXT[item] if isinstance(item, str) else item
+
     return np.asarray(number(value), dtype)

@@ -163,8 +163,10 @@ def _check_bounds(array: np.ndarray, low: np.ndarray, high: np.ndarray, path: st
     outside = (array < low) | (array > high)
     if outside.any():
         flat = int(np.flatnonzero(outside)[0])
-        raise SpaceMismatch(f"{path}{_first(outside)} is {array.flat[flat]}, outside the bounds "
-                            f"[{low.flat[flat]}, {high.flat[flat]}]")
+        raise SpaceMismatch(
+            f"{path}{_first(outside)} is {array.flat[flat]}, outside the bounds "
+            f"[{low.flat[flat]}, {high.flat[flat]}]"
+        )
 
 
 class _ArrayKind(SpaceKind):
@@ -190,8 +192,10 @@ class _ArrayKind(SpaceKind):
             kind = value.__class__
             if kind is bytes:
                 if len(value) != nbytes:
-                    raise SpaceMismatch(f"{path} is {len(value)} bytes, expected {nbytes}: the "
-                                        f"packed form of shape {shape} and dtype {dtype}")
+                    raise SpaceMismatch(
+                        f"{path} is {len(value)} bytes, expected {nbytes}: the "
+                        f"packed form of shape {shape} and dtype {dtype}"
+                    )
                 value = np.frombuffer(value, dtype)
                 if not flat:
                     value = value.reshape(shape)
@@ -200,6 +204,7 @@ class _ArrayKind(SpaceKind):
             if in_bounds(value):
                 return value
             return careful(space, value, path)
+
         return check_value
 
     def codec(self, space: Any) -> Codec:
@@ -221,6 +226,7 @@ def _bounds_test(low: np.ndarray, high: np.ndarray, dtype: np.dtype) -> Callable
         def one(array: np.ndarray) -> bool:
             v = array.item()
             return lo <= v <= hi and not (test_finite and not math.isfinite(v))
+
         return one
     if len(lows) <= _SMALL:
         bounds = list(zip(lows, highs, strict=True))
@@ -230,12 +236,14 @@ def _bounds_test(low: np.ndarray, high: np.ndarray, dtype: np.dtype) -> Callable
             if test_finite and not math.isfinite(sum(values)):
                 return False
             return all(lo <= v <= hi for v, (lo, hi) in zip(values, bounds, strict=True))
+
         return few
 
     def many(array: np.ndarray) -> bool:
         if test_finite and not np.isfinite(array.sum(dtype=np.float64)):
             return False
         return bool(((array >= low) & (array <= high)).all())
+
     return many
 
 
@@ -282,14 +290,19 @@ class _MultiDiscrete(_ArrayKind):
     space_class = spaces.MultiDiscrete
 
     def to_spec(self, space: spaces.MultiDiscrete) -> Spec:
-        return {"type": "MultiDiscrete", "dtype": space.dtype.str, "nvec": space.nvec,
-                "start": space.start}
+        return {
+            "type": "MultiDiscrete",
+            "dtype": space.dtype.str,
+            "nvec": space.nvec,
+            "start": space.start,
+        }
 
     def from_spec(self, spec: Spec) -> spaces.MultiDiscrete[Any]:  # of the dtype spec names
         if not (np.asarray(spec["nvec"]) > 0).all():
             raise ValueError(f"nvec (counts) must be positive, got {spec['nvec']!r:.80}")
-        return spaces.MultiDiscrete(spec["nvec"], dtype=np.dtype(spec["dtype"]),
-                                    start=spec["start"])
+        return spaces.MultiDiscrete(
+            spec["nvec"], dtype=np.dtype(spec["dtype"]), start=spec["start"]
+        )
 
     def bounds(self, space: spaces.MultiDiscrete) -> tuple[np.ndarray, np.ndarray]:
         return space.start, space.start + space.nvec - 1
@@ -314,8 +327,10 @@ class _MultiBinary(_ArrayKind):
 
     def to_spec(self, space: spaces.MultiBinary) -> Spec:
         n = space.n
-        return {"type": "MultiBinary",
-                "n": int(n) if isinstance(n, int | np.integer) else [int(k) for k in n]}
+        return {
+            "type": "MultiBinary",
+            "n": int(n) if isinstance(n, int | np.integer) else [int(k) for k in n],
+        }
 
     def from_spec(self, spec: Spec) -> spaces.MultiBinary:
         return spaces.MultiBinary(spec["n"])
@@ -329,8 +344,9 @@ class _MultiBinary(_ArrayKind):
         _check_integers(array, path)
         outside = (array != 0) & (array != 1)
         if outside.any():
-            raise SpaceMismatch(f"{path}{_first(outside)} is {array[outside].flat[0]}, "
-                                "expected 0 or 1")
+            raise SpaceMismatch(
+                f"{path}{_first(outside)} is {array[outside].flat[0]}, expected 0 or 1"
+            )
         return array.astype(space.dtype, copy=False)
 
 
@@ -347,8 +363,11 @@ class _ArrayCodec(Codec):
         self.flat = len(shape) == 1  # frombuffer's own shape
 
     def pack(self, value: Any) -> bytes:
-        if value.__class__ is np.ndarray and value.dtype == self.dtype and \
-                value.shape == self.shape:
+        if (
+            value.__class__ is np.ndarray
+            and value.dtype == self.dtype
+            and value.shape == self.shape
+        ):
             array = value
         else:
             try:
@@ -369,8 +388,11 @@ class _ArrayCodec(Codec):
         return array.tobytes()
 
     def pack_exact(self, value: Any) -> Any:
-        if value.__class__ is np.ndarray and value.dtype == self.dtype and \
-                value.shape == self.shape:
+        if (
+            value.__class__ is np.ndarray
+            and value.dtype == self.dtype
+            and value.shape == self.shape
+        ):
             return value.tobytes()
         return value
 
@@ -392,8 +414,12 @@ class _Discrete(SpaceKind):
     space_class = spaces.Discrete
 
     def to_spec(self, space: spaces.Discrete) -> Spec:
-        return {"type": "Discrete", "n": int(space.n), "start": int(space.start),
-                "dtype": space.dtype.str}
+        return {
+            "type": "Discrete",
+            "n": int(space.n),
+            "start": int(space.start),
+            "dtype": space.dtype.str,
+        }
 
     def from_spec(self, spec: Spec) -> spaces.Discrete[Any]:  # of the dtype spec names
         return spaces.Discrete(spec["n"], start=spec["start"], dtype=np.dtype(spec["dtype"]))
@@ -402,9 +428,11 @@ class _Discrete(SpaceKind):
         if isinstance(value, np.ndarray) and value.shape == ():
             value = value[()]
         if isinstance(value, np.ndarray):
-            raise SpaceMismatch(f"{path} must be an integer (a Discrete value is one integer, "
-                                f"not an array), got an array of shape {value.shape} and dtype "
-                                f"{value.dtype}")
+            raise SpaceMismatch(
+                f"{path} must be an integer (a Discrete value is one integer, "
+                f"not an array), got an array of shape {value.shape} and dtype "
+                f"{value.dtype}"
+            )
         if isinstance(value, bool | np.bool_) or not isinstance(value, int | np.integer):
             raise SpaceMismatch(f"{path} must be an integer, got {type(value).__name__}")
         if not space.start <= value < space.start + space.n:
@@ -420,6 +448,7 @@ class _Discrete(SpaceKind):
             if value.__class__ is int and first <= value < end:
                 return native(value)
             return self.check(space, value, path)
+
         return check_value
 
     def codec(self, space: spaces.Discrete) -> Codec:
@@ -436,9 +465,13 @@ class _IntegerCodec(Codec):
         self.dtype, self.native = dtype, dtype.type
 
     def pack(self, value: Any) -> int:
-        if isinstance(value, bool | np.bool_) or not isinstance(value, int | np.integer) and \
-                not (isinstance(value, np.ndarray) and value.shape == () and
-                     value.dtype.kind in "iu"):
+        if (
+            isinstance(value, bool | np.bool_)
+            or not isinstance(value, int | np.integer)
+            and not (
+                isinstance(value, np.ndarray) and value.shape == () and value.dtype.kind in "iu"
+            )
+        ):
             raise SpaceMismatch(f"is not an integer: {value!r:.40}")
         return int(value)
 
@@ -479,6 +512,7 @@ class _Tuple(SpaceKind):
             if value.__class__ not in (list, tuple) or len(value) != len(items):
                 return self.check(space, value, path)
             return tuple(item(v) for item, v in zip(items, value, strict=True))
+
         return check_value
 
     def codec(self, space: spaces.Tuple) -> Codec:
@@ -509,8 +543,7 @@ class _TupleCodec(Codec):
         return tuple(item.unpack(v, writable) for item, v in zip(self.items, wire, strict=True))
 
     def join(self, packed: list[Any]) -> list[Any]:
-        return [item.join([row[index] for row in packed])
-                for index, item in enumerate(self.items)]
+        return [item.join([row[index] for row in packed]) for index, item in enumerate(self.items)]
 
 
 class _Dict(SpaceKind):
@@ -539,6 +572,7 @@ class _Dict(SpaceKind):
             if value.__class__ is not dict or value.keys() != keys:
                 return self.check(space, value, path)
             return {k: item(value[k]) for k, item in items.items()}
+
         return check_value
 
     def codec(self, space: spaces.Dict) -> Codec:

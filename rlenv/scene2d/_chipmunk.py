@@ -41,11 +41,27 @@ from typing import Any
 import pymunk
 from pymunk._chipmunk_cffi import ffi, lib
 
-__all__ = ["FAST", "TESTED", "Refill", "angle_of", "angular_velocity_of",
-           "apply_force_at_world_point_of", "bodies_to_check",
-           "center_of_gravity_of", "collision_handlers", "handle", "local_to_world_of",
-           "place_at_rest", "position_of", "refresh_constraint", "renumber",
-           "set_angular_velocity_of", "set_velocity_of", "step_space", "velocity_of"]
+__all__ = [
+    "FAST",
+    "TESTED",
+    "Refill",
+    "angle_of",
+    "angular_velocity_of",
+    "apply_force_at_world_point_of",
+    "bodies_to_check",
+    "center_of_gravity_of",
+    "collision_handlers",
+    "handle",
+    "local_to_world_of",
+    "place_at_rest",
+    "position_of",
+    "refresh_constraint",
+    "renumber",
+    "set_angular_velocity_of",
+    "set_velocity_of",
+    "step_space",
+    "velocity_of",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -60,9 +76,12 @@ def _version(text: str) -> tuple[int, ...]:
 FAST = TESTED[0] <= _version(pymunk.version) <= TESTED[1]
 """Whether the private ways are taken (pymunk's version is in :data:`TESTED`)."""
 if not FAST:
-    logger.warning("pymunk %s is not a version rlenv was tested with (%s to %s): rlenv uses "
-                   "pymunk's public API only, which is slower", pymunk.version,
-                   *(".".join(map(str, version)) for version in TESTED))
+    logger.warning(
+        "pymunk %s is not a version rlenv was tested with (%s to %s): rlenv uses "
+        "pymunk's public API only, which is slower",
+        pymunk.version,
+        *(".".join(map(str, version)) for version in TESTED),
+    )
 
 _STATIC = pymunk.Body.STATIC
 _DYNAMIC = pymunk.Body.DYNAMIC
@@ -110,14 +129,20 @@ def _place_at_rest(pointer: Any, x: float, y: float, angle: float) -> int:
 
 # Each sets a constraint's struct up again: its pointer, the same cast to its kind, its bodies.
 def _pivot(pointer: Any, joint: Any, a: Any, b: Any) -> None:
-    lib.cpPivotJointInit(joint, a, b, lib.cpPivotJointGetAnchorA(pointer),
-                         lib.cpPivotJointGetAnchorB(pointer))
+    lib.cpPivotJointInit(
+        joint, a, b, lib.cpPivotJointGetAnchorA(pointer), lib.cpPivotJointGetAnchorB(pointer)
+    )
 
 
 def _groove(pointer: Any, joint: Any, a: Any, b: Any) -> None:
-    lib.cpGrooveJointInit(joint, a, b, lib.cpGrooveJointGetGrooveA(pointer),
-                          lib.cpGrooveJointGetGrooveB(pointer),
-                          lib.cpGrooveJointGetAnchorB(pointer))
+    lib.cpGrooveJointInit(
+        joint,
+        a,
+        b,
+        lib.cpGrooveJointGetGrooveA(pointer),
+        lib.cpGrooveJointGetGrooveB(pointer),
+        lib.cpGrooveJointGetAnchorB(pointer),
+    )
 
 
 def _motor(pointer: Any, joint: Any, a: Any, b: Any) -> None:
@@ -126,12 +151,16 @@ def _motor(pointer: Any, joint: Any, a: Any, b: Any) -> None:
 
 def _spring(pointer: Any, joint: Any, a: Any, b: Any) -> None:
     force = lib.cpDampedSpringGetSpringForceFunc(pointer)
-    lib.cpDampedSpringInit(joint, a, b,
-                           lib.cpDampedSpringGetAnchorA(pointer),
-                           lib.cpDampedSpringGetAnchorB(pointer),
-                           lib.cpDampedSpringGetRestLength(pointer),
-                           lib.cpDampedSpringGetStiffness(pointer),
-                           lib.cpDampedSpringGetDamping(pointer))
+    lib.cpDampedSpringInit(
+        joint,
+        a,
+        b,
+        lib.cpDampedSpringGetAnchorA(pointer),
+        lib.cpDampedSpringGetAnchorB(pointer),
+        lib.cpDampedSpringGetRestLength(pointer),
+        lib.cpDampedSpringGetStiffness(pointer),
+        lib.cpDampedSpringGetDamping(pointer),
+    )
     lib.cpDampedSpringSetSpringForceFunc(pointer, force)
 
 
@@ -176,16 +205,26 @@ def _refresh(pointer: Any, joint: Any, a: Any, b: Any, init: _Init) -> None:
                 put(pointer, value)
 
 
-_SETTERS = (lib.cpConstraintSetMaxForce, lib.cpConstraintSetErrorBias,
-            lib.cpConstraintSetMaxBias, lib.cpConstraintSetCollideBodies,
-            lib.cpConstraintSetPreSolveFunc, lib.cpConstraintSetPostSolveFunc)
+_SETTERS = (
+    lib.cpConstraintSetMaxForce,
+    lib.cpConstraintSetErrorBias,
+    lib.cpConstraintSetMaxBias,
+    lib.cpConstraintSetCollideBodies,
+    lib.cpConstraintSetPreSolveFunc,
+    lib.cpConstraintSetPostSolveFunc,
+)
 
 
 def _settings(pointer: Any) -> tuple[Any, ...]:
     """What ``cpConstraintInit`` sets back to its defaults, in the order of :data:`_SETTERS`."""
-    return (lib.cpConstraintGetMaxForce(pointer), lib.cpConstraintGetErrorBias(pointer),
-            lib.cpConstraintGetMaxBias(pointer), lib.cpConstraintGetCollideBodies(pointer),
-            lib.cpConstraintGetPreSolveFunc(pointer), lib.cpConstraintGetPostSolveFunc(pointer))
+    return (
+        lib.cpConstraintGetMaxForce(pointer),
+        lib.cpConstraintGetErrorBias(pointer),
+        lib.cpConstraintGetMaxBias(pointer),
+        lib.cpConstraintGetCollideBodies(pointer),
+        lib.cpConstraintGetPreSolveFunc(pointer),
+        lib.cpConstraintGetPostSolveFunc(pointer),
+    )
 
 
 _DEFAULTS = _settings(pymunk.SimpleMotor(pymunk.Body(), pymunk.Body(), 0.0)._constraint)
@@ -235,14 +274,19 @@ class Refill:
         poses: where each body goes back to: ``(x, y, angle)``.
     """
 
-    def __init__(self, bodies: list[pymunk.Body], shapes: list[pymunk.Shape],
-                 constraints: list[pymunk.Constraint],
-                 poses: list[tuple[float, float, float]]) -> None:
+    def __init__(
+        self,
+        bodies: list[pymunk.Body],
+        shapes: list[pymunk.Shape],
+        constraints: list[pymunk.Constraint],
+        poses: list[tuple[float, float, float]],
+    ) -> None:
         self.bodies, self.shapes, self.constraints = bodies, shapes, constraints
         self._places = [(body._body, *pose) for body, pose in zip(bodies, poses, strict=True)]
         self._shapes = [shape._shape for shape in shapes]
-        refreshers = [_refresher(c) if FAST and c.a in bodies and c.b in bodies else None
-                      for c in constraints]
+        refreshers = [
+            _refresher(c) if FAST and c.a in bodies and c.b in bodies else None for c in constraints
+        ]
         known = [refresher for refresher in refreshers if refresher is not None]
         self._constraints = known if len(known) == len(refreshers) else None
 
@@ -255,9 +299,13 @@ class Refill:
         always without :data:`FAST`.
         """
         constraints = self._constraints
-        if not FAST or constraints is None or list(space._bodies) != self.bodies or \
-                list(space._shapes) != self.shapes or \
-                list(space._constraints) != self.constraints:
+        if (
+            not FAST
+            or constraints is None
+            or list(space._bodies) != self.bodies
+            or list(space._shapes) != self.shapes
+            or list(space._constraints) != self.constraints
+        ):
             return False
         pointer = space._space
         for constraint, *_ in constraints:
@@ -271,8 +319,9 @@ class Refill:
         for refresh in constraints:
             _refresh(*refresh)
             lib.cpSpaceAddConstraint(pointer, refresh[0])
-        for body, body_type, (body_pointer, *_) in zip(self.bodies, types, self._places,
-                                                       strict=True):
+        for body, body_type, (body_pointer, *_) in zip(
+            self.bodies, types, self._places, strict=True
+        ):
             # Once the shapes are back: a body's mass may come from its shapes.
             if body_type == _DYNAMIC and not _valid_mass(body_pointer):
                 space._bodies_to_check.add(body)  # pymunk's step refuses it, as after add
@@ -308,8 +357,9 @@ def collision_handlers(space: pymunk.Space) -> Mapping[tuple[int | None, int | N
 _cp_space_step = lib.cpSpaceStep
 
 
-def step_space(space: pymunk.Space, delta: float,
-               before_checks: Callable[[], None] | None = None) -> None:
+def step_space(
+    space: pymunk.Space, delta: float, before_checks: Callable[[], None] | None = None
+) -> None:
     """``space.step(delta)``, without pymunk's Python work around Chipmunk's step when it has none.
 
     ``Space.step`` checks the bodies added since the last step, then steps (Chipmunk's
@@ -365,6 +415,7 @@ def _after_step(space: pymunk.Space) -> None:
 # (a vector read has ``x`` and ``y``).
 
 if FAST:
+
     def handle(body: pymunk.Body) -> Any:
         """What the functions below take for ``body``: its Chipmunk body (``cpBody *``)."""
         return body._body
@@ -379,6 +430,7 @@ if FAST:
     local_to_world_of = lib.cpBodyLocalToWorld  # (handle, point): the point in the world
     apply_force_at_world_point_of = lib.cpBodyApplyForceAtWorldPoint  # (handle, force, point)
 else:
+
     def handle(body: pymunk.Body) -> Any:  # noqa: D103
         return body
 
@@ -395,4 +447,3 @@ else:
 
     def set_angular_velocity_of(body: pymunk.Body, value: float) -> None:  # noqa: D103
         body.angular_velocity = value
-

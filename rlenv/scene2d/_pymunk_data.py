@@ -91,8 +91,12 @@ def _copy_material(shape: pymunk.Shape, copy: pymunk.Shape) -> None:
 
 
 _MATERIAL_DEFAULTS = (
-    ("friction", 0.0), ("elasticity", 0.0), ("sensor", False), ("collision_type", 0),
-    ("filter", pymunk.ShapeFilter()), ("surface_velocity", (0.0, 0.0)),
+    ("friction", 0.0),
+    ("elasticity", 0.0),
+    ("sensor", False),
+    ("collision_type", 0),
+    ("filter", pymunk.ShapeFilter()),
+    ("surface_velocity", (0.0, 0.0)),
 )
 
 
@@ -107,13 +111,19 @@ def shape_to_data(shape: pymunk.Shape) -> dict[str, Any]:
             polygons do).
     """
     if isinstance(shape, pymunk.Circle):
-        data: dict[str, Any] = {"kind": "circle", "radius": shape.radius,
-                                "offset": list(shape.offset)}
+        data: dict[str, Any] = {
+            "kind": "circle",
+            "radius": shape.radius,
+            "offset": list(shape.offset),
+        }
     elif isinstance(shape, pymunk.Segment):
         data = {"kind": "segment", "a": list(shape.a), "b": list(shape.b), "radius": shape.radius}
     elif isinstance(shape, pymunk.Poly):
-        data = {"kind": "poly", "vertices": [list(v) for v in shape.get_vertices()],
-                "radius": shape.radius}
+        data = {
+            "kind": "poly",
+            "vertices": [list(v) for v in shape.get_vertices()],
+            "radius": shape.radius,
+        }
     else:
         raise TypeError(f"a {type(shape).__name__} cannot be described as data")
     if shape.mass > 0:
@@ -154,11 +164,11 @@ def shape_from_data(data: Any) -> pymunk.Shape:
         raise ValueError(f"a {kind} has no {sorted(map(str, unknown))[0]!r:.40}")
     radius = number(data.get("radius", 0.0), "radius", low=0.0)
     if kind == "circle":
-        shape: pymunk.Shape = pymunk.Circle(None, radius, vector(data.get("offset", (0, 0)),
-                                                                 "offset"))
+        shape: pymunk.Shape = pymunk.Circle(
+            None, radius, vector(data.get("offset", (0, 0)), "offset")
+        )
     elif kind == "segment":
-        shape = pymunk.Segment(None, vector(data.get("a"), "a"), vector(data.get("b"), "b"),
-                               radius)
+        shape = pymunk.Segment(None, vector(data.get("a"), "a"), vector(data.get("b"), "b"), radius)
     else:
         shape = _checked_poly(data.get("vertices"), radius)
     if "mass" in data:
@@ -195,9 +205,11 @@ def _same_cycle(hull: list[tuple[float, ...]], points: Sequence[tuple[float, ...
 def _triple(value: Any) -> tuple[int, int, int]:
     if not isinstance(value, list | tuple) or len(value) != 3:
         raise ValueError("a shape's filter is [group, categories, mask]")
-    return (integer(value[0], "filter group", 0, 2**63 - 1),
-            integer(value[1], "filter categories", 0, 2**32 - 1),
-            integer(value[2], "filter mask", 0, 2**32 - 1))
+    return (
+        integer(value[0], "filter group", 0, 2**63 - 1),
+        integer(value[1], "filter categories", 0, 2**32 - 1),
+        integer(value[2], "filter mask", 0, 2**32 - 1),
+    )
 
 
 # --- checked plain values -----------------------------------------------------------------------
@@ -264,8 +276,13 @@ class ConstraintRecipe:
         "pivot": (("anchor", "vector"),),
         "groove": (("groove_a", "vector"), ("groove_b", "vector"), ("anchor_b", "vector")),
         "motor": (("rate", "number"),),
-        "spring": (("anchor_a", "vector"), ("anchor_b", "vector"), ("rest_length", "number"),
-                   ("stiffness", "number"), ("damping", "number")),
+        "spring": (
+            ("anchor_a", "vector"),
+            ("anchor_b", "vector"),
+            ("rest_length", "number"),
+            ("stiffness", "number"),
+            ("damping", "number"),
+        ),
     }
     """Each kind's arguments: name and sort (``vector``: a point; ``number``)."""
 
@@ -281,8 +298,11 @@ class ConstraintRecipe:
         self.kind = kind
         # Each value as KINDS says: a point (tuple[float, float]) or a number (float).
         self.arguments: dict[str, Any] = {
-            name: vector(arguments[name], f"{kind}.{name}") if sort == "vector"
-            else number(arguments[name], f"{kind}.{name}") for name, sort in spec}
+            name: vector(arguments[name], f"{kind}.{name}")
+            if sort == "vector"
+            else number(arguments[name], f"{kind}.{name}")
+            for name, sort in spec
+        }
 
     def __call__(self, a: pymunk.Body, b: pymunk.Body) -> pymunk.Constraint:
         """The constraint between ``a`` and ``b``, its points in the world's frame."""
@@ -296,18 +316,30 @@ class ConstraintRecipe:
             anchor = arguments["anchor"]
             return pymunk.PivotJoint(a, b, anchor if frame is None else apply(frame, *anchor))
         if kind == "groove":
-            return pymunk.GrooveJoint(a, b, arguments["groove_a"], arguments["groove_b"],
-                                      arguments["anchor_b"])
+            return pymunk.GrooveJoint(
+                a, b, arguments["groove_a"], arguments["groove_b"], arguments["anchor_b"]
+            )
         if kind == "motor":
             return pymunk.SimpleMotor(a, b, arguments["rate"])
-        return pymunk.DampedSpring(a, b, arguments["anchor_a"], arguments["anchor_b"],
-                                   arguments["rest_length"], arguments["stiffness"],
-                                   arguments["damping"])
+        return pymunk.DampedSpring(
+            a,
+            b,
+            arguments["anchor_a"],
+            arguments["anchor_b"],
+            arguments["rest_length"],
+            arguments["stiffness"],
+            arguments["damping"],
+        )
 
     def to_data(self) -> dict[str, Any]:
         """``{"kind": ..., argument: value, ...}`` (points as lists)."""
-        return {"kind": self.kind, **{name: list(value) if isinstance(value, tuple) else value
-                                      for name, value in self.arguments.items()}}
+        return {
+            "kind": self.kind,
+            **{
+                name: list(value) if isinstance(value, tuple) else value
+                for name, value in self.arguments.items()
+            },
+        }
 
     @classmethod
     def from_data(cls, data: Any) -> ConstraintRecipe:
@@ -324,8 +356,11 @@ class ConstraintRecipe:
         return cls(data["kind"], **arguments)
 
     def __eq__(self, other: object) -> bool:
-        return (isinstance(other, ConstraintRecipe) and other.kind == self.kind
-                and other.arguments == self.arguments)
+        return (
+            isinstance(other, ConstraintRecipe)
+            and other.kind == self.kind
+            and other.arguments == self.arguments
+        )
 
     def __hash__(self) -> int:
         return hash((self.kind, tuple(self.arguments.items())))

@@ -57,8 +57,7 @@ class Codec:
     """
 
     keys = frozenset({"process_mode", "process", "physics_process"})
-    handled = frozenset({"_name", "_groups", "_process_mode", "_processing",
-                         "_physics_processing"})
+    handled = frozenset({"_name", "_groups", "_process_mode", "_processing", "_physics_processing"})
 
     def __init__(self, base: type[Node]) -> None:
         self.base = base
@@ -82,15 +81,18 @@ class Codec:
         """
         unknown = set(properties) - self.keys
         if unknown:
-            raise ValueError(f"no property {sorted(map(str, unknown))[0]!r:.40}; the properties "
-                             f"are {', '.join(sorted(self.keys))}")
+            raise ValueError(
+                f"no property {sorted(map(str, unknown))[0]!r:.40}; the properties "
+                f"are {', '.join(sorted(self.keys))}"
+            )
         return self._checked(properties)
 
     def _checked(self, properties: Mapping[str, Any]) -> dict[str, Any]:
         checked: dict[str, Any] = {}
         if "process_mode" in properties:
             checked["process_mode"] = ProcessMode(
-                integer(properties["process_mode"], "process_mode", 0, len(ProcessMode) - 1))
+                integer(properties["process_mode"], "process_mode", 0, len(ProcessMode) - 1)
+            )
         for flag in ("process", "physics_process"):
             if flag in properties:
                 checked[flag] = _boolean(properties[flag], flag)
@@ -138,20 +140,37 @@ class Node2DCodec(Codec):
 
     def construct(self, node: Node, name: str, properties: Mapping[str, Any]) -> None:
         """See :meth:`Codec.construct`."""
-        self.base.__init__(node, name, position=properties["position"],  # type: ignore[call-arg]
-                           rotation=properties["rotation"])
+        self.base.__init__(
+            node,
+            name,
+            position=properties["position"],  # type: ignore[call-arg]
+            rotation=properties["rotation"],
+        )
 
 
 class SensorCodec(Node2DCodec):
     """RaycastSensor2D: the pose and the rays' settings (checked: level data may hold one)."""
 
-    settings = frozenset({"n_rays", "ray_length", "cone_width", "collision_mask",
-                          "collide_with_sensors", "exclude_parent"})
+    settings = frozenset(
+        {
+            "n_rays",
+            "ray_length",
+            "cone_width",
+            "collision_mask",
+            "collide_with_sensors",
+            "exclude_parent",
+        }
+    )
     keys = Node2DCodec.keys | settings
     handled = Node2DCodec.handled | settings | {"_hits"}
-    _defaults = {"n_rays": 16, "ray_length": 5.0, "cone_width": math.tau,
-                 "collision_mask": raycast_sensor.ALL_LAYERS, "collide_with_sensors": False,
-                 "exclude_parent": True}
+    _defaults = {
+        "n_rays": 16,
+        "ray_length": 5.0,
+        "cone_width": math.tau,
+        "collision_mask": raycast_sensor.ALL_LAYERS,
+        "collide_with_sensors": False,
+        "exclude_parent": True,
+    }
 
     def pack(self, node: Node) -> dict[str, Any]:
         """See :meth:`Codec.pack`."""
@@ -164,20 +183,32 @@ class SensorCodec(Node2DCodec):
 
     def _checked(self, properties: Mapping[str, Any]) -> dict[str, Any]:
         checked = super()._checked(properties)
-        checked.update(raycast_sensor.check_settings({**self._defaults, **{
-            key: value for key, value in properties.items() if key in self.settings}}))
+        checked.update(
+            raycast_sensor.check_settings(
+                {
+                    **self._defaults,
+                    **{key: value for key, value in properties.items() if key in self.settings},
+                }
+            )
+        )
         return checked
 
     def construct(self, node: Node, name: str, properties: Mapping[str, Any]) -> None:
         """See :meth:`Codec.construct`."""
-        RaycastSensor2D.__init__(node, name,  # type: ignore[arg-type]
-                                 **{key: properties[key] for key in self.settings},
-                                 position=properties["position"],
-                                 rotation=properties["rotation"])
+        RaycastSensor2D.__init__(
+            node,  # type: ignore[arg-type]
+            name,
+            **{key: properties[key] for key in self.settings},
+            position=properties["position"],
+            rotation=properties["rotation"],
+        )
 
 
-_BODY_TYPES = {"dynamic": pymunk.Body.DYNAMIC, "kinematic": pymunk.Body.KINEMATIC,
-               "static": pymunk.Body.STATIC}
+_BODY_TYPES = {
+    "dynamic": pymunk.Body.DYNAMIC,
+    "kinematic": pymunk.Body.KINEMATIC,
+    "static": pymunk.Body.STATIC,
+}
 _IMPLIED_TYPES = {RigidBody: "dynamic", KinematicBody: "kinematic", StaticBody: "static"}
 
 
@@ -218,22 +249,30 @@ class BodyCodec(Node2DCodec):
             raise ValueError(f"type must be {expected}, got {kind!r:.40}")
         checked["type"] = kind
         checked["mass"] = number(properties.get("mass", 0.0), "mass", low=0.0)
-        checked["moment"] = number(properties.get("moment", 0.0), "moment", low=0.0,
-                                   finite=False)
+        checked["moment"] = number(properties.get("moment", 0.0), "moment", low=0.0, finite=False)
         if kind != "dynamic" and (checked["mass"] or checked["moment"]):
             raise ValueError(f"a {kind} body has no mass nor moment")
         checked["velocity"] = vector(properties.get("velocity", (0.0, 0.0)), "velocity")
-        checked["angular_velocity"] = number(properties.get("angular_velocity", 0.0),
-                                             "angular_velocity")
+        checked["angular_velocity"] = number(
+            properties.get("angular_velocity", 0.0), "angular_velocity"
+        )
         return checked
 
     def construct(self, node: Node, name: str, properties: Mapping[str, Any]) -> None:
         """See :meth:`Codec.construct`."""
         kind = properties["type"]
-        body = (pymunk.Body(properties["mass"], properties["moment"]) if kind == "dynamic"
-                else pymunk.Body(body_type=_BODY_TYPES[kind]))
-        PhysicsBody.__init__(node, body, position=properties["position"],  # type: ignore[arg-type]
-                             rotation=properties["rotation"], name=name)
+        body = (
+            pymunk.Body(properties["mass"], properties["moment"])
+            if kind == "dynamic"
+            else pymunk.Body(body_type=_BODY_TYPES[kind])
+        )
+        PhysicsBody.__init__(
+            node,  # type: ignore[arg-type]
+            body,
+            position=properties["position"],
+            rotation=properties["rotation"],
+            name=name,
+        )
 
     def restore(self, node: Node, properties: Mapping[str, Any]) -> None:
         """See :meth:`Codec.restore`."""
@@ -270,9 +309,13 @@ class WorldCodec(Codec):
 
     def construct(self, node: Node, name: str, properties: Mapping[str, Any]) -> None:
         """See :meth:`Codec.construct`."""
-        PhysicsWorld.__init__(node, properties["gravity"],  # type: ignore[arg-type]
-                              iterations=properties["iterations"],
-                              damping=properties["damping"], name=name)
+        PhysicsWorld.__init__(
+            node,  # type: ignore[arg-type]
+            properties["gravity"],
+            iterations=properties["iterations"],
+            damping=properties["damping"],
+            name=name,
+        )
 
 
 class ShapeCodec(Codec):
@@ -302,8 +345,7 @@ class ShapeCodec(Codec):
             raise ValueError("a CollisionShape needs its shape")
         checked["shape"] = shape_from_data(properties["shape"])  # a template, copied per build
         checked["friction"] = number(properties.get("friction", 0.5), "friction", low=0.0)
-        checked["elasticity"] = number(properties.get("elasticity", 0.0), "elasticity",
-                                       low=0.0)
+        checked["elasticity"] = number(properties.get("elasticity", 0.0), "elasticity", low=0.0)
         checked["sensor"] = _boolean(properties.get("sensor", False), "sensor")
         color = properties.get("color")
         try:
@@ -314,11 +356,15 @@ class ShapeCodec(Codec):
 
     def construct(self, node: Node, name: str, properties: Mapping[str, Any]) -> None:
         """See :meth:`Codec.construct`."""
-        CollisionShape.__init__(node, copy_shape(properties["shape"]),  # type: ignore[arg-type]
-                                friction=properties["friction"],
-                                elasticity=properties["elasticity"],
-                                sensor=properties["sensor"], color=properties["color"],
-                                name=name)
+        CollisionShape.__init__(
+            node,  # type: ignore[arg-type]
+            copy_shape(properties["shape"]),
+            friction=properties["friction"],
+            elasticity=properties["elasticity"],
+            sensor=properties["sensor"],
+            color=properties["color"],
+            name=name,
+        )
 
 
 class JointCodec(Codec):
@@ -333,8 +379,10 @@ class JointCodec(Codec):
         assert isinstance(node, Joint)
         recipe = node.recipe
         if recipe is None:
-            raise ValueError("its constraint comes from a factory function, which is code, not "
-                             "data: build it with Joint.pivot, groove, motor or spring")
+            raise ValueError(
+                "its constraint comes from a factory function, which is code, not "
+                "data: build it with Joint.pivot, groove, motor or spring"
+            )
         properties.update(a=node.node_a, b=node.node_b, constraint=recipe.to_data())
         if node._collide_bodies:
             properties["collide_bodies"] = True
@@ -350,17 +398,25 @@ class JointCodec(Codec):
                 raise ValueError(f"{key} must be the path of a body node, got {path!r:.40}")
             checked[key] = path
         checked["constraint"] = ConstraintRecipe.from_data(properties.get("constraint"))
-        checked["collide_bodies"] = _boolean(properties.get("collide_bodies", False),
-                                             "collide_bodies")
-        checked["max_force"] = number(properties.get("max_force", math.inf), "max_force",
-                                      low=0.0, finite=False)
+        checked["collide_bodies"] = _boolean(
+            properties.get("collide_bodies", False), "collide_bodies"
+        )
+        checked["max_force"] = number(
+            properties.get("max_force", math.inf), "max_force", low=0.0, finite=False
+        )
         return checked
 
     def construct(self, node: Node, name: str, properties: Mapping[str, Any]) -> None:
         """See :meth:`Codec.construct`."""
-        Joint.__init__(node, properties["a"], properties["b"],  # type: ignore[arg-type]
-                       properties["constraint"], collide_bodies=properties["collide_bodies"],
-                       max_force=properties["max_force"], name=name)
+        Joint.__init__(
+            node,  # type: ignore[arg-type]
+            properties["a"],
+            properties["b"],
+            properties["constraint"],
+            collide_bodies=properties["collide_bodies"],
+            max_force=properties["max_force"],
+            name=name,
+        )
 
 
 def _boolean(value: Any, what: str) -> bool:

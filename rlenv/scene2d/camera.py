@@ -56,8 +56,12 @@ class Camera(Node):
     _TREE_STATE: ClassVar[frozenset[str]] = Node._TREE_STATE | {"_recorder"}
 
     def __init__(
-        self, view: View | None = None, size: tuple[int, int] = (84, 84), *,
-        follow: str | None = None, background: tuple[int, int, int] = BACKGROUND,
+        self,
+        view: View | None = None,
+        size: tuple[int, int] = (84, 84),
+        *,
+        follow: str | None = None,
+        background: tuple[int, int, int] = BACKGROUND,
         name: str | None = None,
     ) -> None:
         super().__init__(name)

@@ -30,8 +30,10 @@ def lattice(node: Node2D, offsets: Any, counts: int | Sequence[int]) -> View:
     """
     parent = node.parent
     if parent is None:
-        raise ValueError(f"{node.name!r} has no parent: a lattice puts its copies beside it, "
-                         "under the same parent; add it to one first")
+        raise ValueError(
+            f"{node.name!r} has no parent: a lattice puts its copies beside it, "
+            "under the same parent; add it to one first"
+        )
     vectors = _vectors(offsets)
     sizes = _sizes(counts, len(vectors))
     total = math.prod(sizes)
@@ -46,8 +48,10 @@ def lattice(node: Node2D, offsets: Any, counts: int | Sequence[int]) -> View:
     next(cells)  # (0, 0, ...): the node itself
     for number, cell in enumerate(cells, start=1):
         copy = node.duplicate()
-        copy.position = (x0 + sum(i * dx for i, (dx, _) in zip(cell, vectors, strict=True)),
-                         y0 + sum(i * dy for i, (_, dy) in zip(cell, vectors, strict=True)))
+        copy.position = (
+            x0 + sum(i * dx for i, (dx, _) in zip(cell, vectors, strict=True)),
+            y0 + sum(i * dy for i, (_, dy) in zip(cell, vectors, strict=True)),
+        )
         copy._name = names[number - 1]
         parent.add_child(copy)
         if not last:
@@ -60,13 +64,16 @@ def _vectors(offsets: Any) -> list[tuple[float, float]]:
     try:
         array = np.asarray(offsets, dtype=float)
     except (TypeError, ValueError):
-        raise ValueError(f"offsets must be a vector (dx, dy) or one vector per dimension, got "
-                         f"{offsets!r:.60}") from None
+        raise ValueError(
+            f"offsets must be a vector (dx, dy) or one vector per dimension, got {offsets!r:.60}"
+        ) from None
     if array.shape == (2,):
         array = array[np.newaxis]
     if array.ndim != 2 or array.shape[1] != 2 or array.shape[0] == 0:
-        raise ValueError(f"offsets must be a vector (dx, dy) or one vector per dimension, got "
-                         f"an array of shape {array.shape}")
+        raise ValueError(
+            f"offsets must be a vector (dx, dy) or one vector per dimension, got "
+            f"an array of shape {array.shape}"
+        )
     if not np.isfinite(array).all():
         raise ValueError("offsets must be finite")
     return [(float(dx), float(dy)) for dx, dy in array]
@@ -74,14 +81,19 @@ def _vectors(offsets: Any) -> list[tuple[float, float]]:
 
 def _sizes(counts: int | Sequence[int], dimensions: int) -> tuple[int, ...]:
     try:
-        sizes = (operator.index(counts),) if not isinstance(counts, Sequence) else tuple(
-            operator.index(count) for count in counts)
+        sizes = (
+            (operator.index(counts),)
+            if not isinstance(counts, Sequence)
+            else tuple(operator.index(count) for count in counts)
+        )
     except TypeError:
-        raise ValueError(f"counts must be an int or one int per dimension, got "
-                         f"{counts!r:.60}") from None
+        raise ValueError(
+            f"counts must be an int or one int per dimension, got {counts!r:.60}"
+        ) from None
     if len(sizes) != dimensions:
-        raise ValueError(f"{len(sizes)} counts for {dimensions} offset vectors: give one count "
-                         "per vector")
+        raise ValueError(
+            f"{len(sizes)} counts for {dimensions} offset vectors: give one count per vector"
+        )
     if min(sizes) < 1:
         raise ValueError(f"every count must be at least 1, got {sizes}")
     return sizes
@@ -90,7 +102,7 @@ def _sizes(counts: int | Sequence[int], dimensions: int) -> tuple[int, ...]:
 def _free_names(name: str, parent: Node, count: int) -> list[str]:
     """``count`` names ``Stem2``, ``Stem3``... not taken under ``parent`` (in one pass)."""
     stem = name.rstrip("0123456789") or name
-    number = int(name[len(stem):] or 1)
+    number = int(name[len(stem) :] or 1)
     taken = parent._children_by_name
     names: list[str] = []
     while len(names) < count:

@@ -53,7 +53,11 @@ class Node2D(Node):
     exported: ClassVar[tuple[str, ...]] = ("position", "rotation")
 
     def __init__(
-        self, name: str | None = None, *, position: Vec = (0.0, 0.0), rotation: float = 0.0,
+        self,
+        name: str | None = None,
+        *,
+        position: Vec = (0.0, 0.0),
+        rotation: float = 0.0,
         process_mode: ProcessMode = ProcessMode.INHERIT,
     ) -> None:
         super().__init__(name, process_mode=process_mode)
@@ -173,8 +177,11 @@ class Node2D(Node):
 
     def _bodies_below(self) -> list[Any]:
         """The nodes below this one simulated in a space (they do not follow a frame alone)."""
-        return [node for node in self.iter_subtree()
-                if node is not self and getattr(node, "_in_space", False)]
+        return [
+            node
+            for node in self.iter_subtree()
+            if node is not self and getattr(node, "_in_space", False)
+        ]
 
     def _to_parent_frame(self, x: float, y: float) -> tuple[float, float]:
         frame = frame_of(self)

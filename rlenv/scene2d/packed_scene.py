@@ -59,8 +59,15 @@ from rlenv.node import Node
 from rlenv.scene2d._scene_codecs import OWN_CLASSES, Codec, codec_for
 from rlenv.signals import Signal
 
-__all__ = ["CONNECTABLE", "FORMAT", "MAX_DEPTH", "MAX_NODES", "PackedScene", "PackedSceneError",
-           "check_size"]
+__all__ = [
+    "CONNECTABLE",
+    "FORMAT",
+    "MAX_DEPTH",
+    "MAX_NODES",
+    "PackedScene",
+    "PackedSceneError",
+    "check_size",
+]
 
 FORMAT = "rlenv.PackedScene"
 VERSION = 1
@@ -78,8 +85,20 @@ held the server's loop for 7.7 s. Pass ``max_nodes`` to read larger scenes of yo
 CONNECTABLE = frozenset({"queue_free"})
 """The methods of rlenv's own classes that a scene's data may connect a signal to."""
 
-_NODE_KEYS = frozenset({"class", "name", "properties", "attributes", "tuples", "nodes", "groups",
-                        "signals", "connections", "children"})
+_NODE_KEYS = frozenset(
+    {
+        "class",
+        "name",
+        "properties",
+        "attributes",
+        "tuples",
+        "nodes",
+        "groups",
+        "signals",
+        "connections",
+        "children",
+    }
+)
 _PLAIN: tuple[type, ...] = (bool, int, float, str, bytes, type(None))
 
 
@@ -90,11 +109,24 @@ class PackedSceneError(ValueError):
 class _Plan:
     """One node of a checked scene: everything needed to build it, nothing left to check."""
 
-    __slots__ = ("attributes", "children", "codec", "connections", "groups", "kind", "name",
-                 "nodes", "parent", "properties", "signals", "where")
+    __slots__ = (
+        "attributes",
+        "children",
+        "codec",
+        "connections",
+        "groups",
+        "kind",
+        "name",
+        "nodes",
+        "parent",
+        "properties",
+        "signals",
+        "where",
+    )
 
-    def __init__(self, kind: type[Node], codec: Codec, name: str, where: str,
-                 parent: _Plan | None) -> None:
+    def __init__(
+        self, kind: type[Node], codec: Codec, name: str, where: str, parent: _Plan | None
+    ) -> None:
         self.kind = kind
         self.codec = codec
         self.name = name
@@ -144,8 +176,10 @@ class PackedScene:
         for member in subtree:
             kind = type(member)
             if classes.setdefault(kind.__name__, kind) is not kind:
-                raise PackedSceneError(f"two classes named {kind.__name__!r} in the subtree of "
-                                       f"{node.name!r}: a packed scene names classes by name")
+                raise PackedSceneError(
+                    f"two classes named {kind.__name__!r} in the subtree of "
+                    f"{node.name!r}: a packed scene names classes by name"
+                )
         inside = {id(member) for member in subtree}
         data = {"format": FORMAT, "version": VERSION, "root": _packed(node, inside)}
         self._root = _compile(data, {**OWN_CLASSES, **classes})
@@ -153,8 +187,14 @@ class PackedScene:
         return self
 
     @classmethod
-    def from_data(cls, data: Any, allowed: Iterable[type[Node]] = (), *,
-                  max_nodes: int = MAX_NODES, max_depth: int = MAX_DEPTH) -> PackedScene:
+    def from_data(
+        cls,
+        data: Any,
+        allowed: Iterable[type[Node]] = (),
+        *,
+        max_nodes: int = MAX_NODES,
+        max_depth: int = MAX_DEPTH,
+    ) -> PackedScene:
         """The scene ``data`` describes (see :meth:`to_data`), checked all through.
 
         Its nodes are counted first (:func:`check_size`), before anything else is read.
@@ -236,17 +276,23 @@ def _packed(node: Node, inside: set[int]) -> dict[str, Any]:
             continue
         if isinstance(value, Node):
             if id(value) not in inside:
-                raise PackedSceneError(f"{where}: attribute {key!r} refers to {value!r}, "
-                                       "outside the packed subtree")
+                raise PackedSceneError(
+                    f"{where}: attribute {key!r} refers to {value!r}, outside the packed subtree"
+                )
             references[key] = node.get_path_to(value)
             continue
         attributes[key] = _plain(value, f"{where}: attribute {key!r}", 0)
         if isinstance(value, tuple):
             tuples.append(key)
-    for name, value in (("attributes", attributes), ("tuples", tuples), ("nodes", references),
-                        ("groups", node.get_groups()), ("signals", _user_signals(node)),
-                        ("connections", _connections(node, inside)),
-                        ("children", [_packed(child, inside) for child in node._children])):
+    for name, value in (
+        ("attributes", attributes),
+        ("tuples", tuples),
+        ("nodes", references),
+        ("groups", node.get_groups()),
+        ("signals", _user_signals(node)),
+        ("connections", _connections(node, inside)),
+        ("children", [_packed(child, inside) for child in node._children]),
+    ):
         if value:
             entry[name] = value
     return entry
@@ -266,11 +312,15 @@ def _plain(value: Any, where: str, depth: int) -> Any:
     if isinstance(value, list | tuple):
         return [_plain(item, where, depth + 1) for item in value]
     if isinstance(value, dict):
-        return {_plain(key, where, depth + 1): _plain(item, where, depth + 1)
-                for key, item in value.items()}
-    raise PackedSceneError(f"{where} holds a {type(value).__name__}, which a packed scene cannot "
-                           "hold: keep plain data there (numbers, strings, lists, tuples, maps) "
-                           "or a node of the scene")
+        return {
+            _plain(key, where, depth + 1): _plain(item, where, depth + 1)
+            for key, item in value.items()
+        }
+    raise PackedSceneError(
+        f"{where} holds a {type(value).__name__}, which a packed scene cannot "
+        "hold: keep plain data there (numbers, strings, lists, tuples, maps) "
+        "or a node of the scene"
+    )
 
 
 def _user_signals(node: Node) -> list[str]:
@@ -284,8 +334,11 @@ def _connections(node: Node, inside: set[int]) -> list[list[Any]]:
     for name, bound in node._signals.items():
         for callback, one_shot in bound._connections:
             target = getattr(callback, "__self__", None)
-            if not (isinstance(callback, types.MethodType) and isinstance(target, Node)
-                    and id(target) in inside):
+            if not (
+                isinstance(callback, types.MethodType)
+                and isinstance(target, Node)
+                and id(target) in inside
+            ):
                 continue
             method = callback.__func__.__name__
             if getattr(type(target), method, None) is not callback.__func__:
@@ -329,38 +382,47 @@ def check_size(data: Any, max_nodes: int = MAX_NODES, max_depth: int = MAX_DEPTH
         entry, depth = waiting.pop()
         count += 1
         if depth > max_depth:
-            raise PackedSceneError(f"nodes nested more than {max_depth} deep: a scene's data "
-                                   f"nests at most {max_depth} (limits.max_level_depth)")
+            raise PackedSceneError(
+                f"nodes nested more than {max_depth} deep: a scene's data "
+                f"nests at most {max_depth} (limits.max_level_depth)"
+            )
         children = entry.get("children") if isinstance(entry, Mapping) else None
         if isinstance(children, list | tuple):
             waiting.extend((child, depth + 1) for child in children)
         if count + len(waiting) > max_nodes:
-            raise PackedSceneError(f"a scene holds at most {max_nodes:,} nodes "
-                                   "(limits.max_level_nodes)")
+            raise PackedSceneError(
+                f"a scene holds at most {max_nodes:,} nodes (limits.max_level_nodes)"
+            )
 
 
 def _compile(data: Any, registry: Mapping[str, type[Node]]) -> _Plan:
     """Check ``data`` all through; the plan that builds it."""
     if not isinstance(data, Mapping) or set(data) != {"format", "version", "root"}:
-        raise PackedSceneError("a scene's data is a map with exactly 'format', 'version' and "
-                               "'root'")
+        raise PackedSceneError(
+            "a scene's data is a map with exactly 'format', 'version' and 'root'"
+        )
     if data["format"] != FORMAT or data["version"] != VERSION:
-        raise PackedSceneError(f"this reads {FORMAT!r} version {VERSION}, not "
-                               f"{data['format']!r:.40} version {data['version']!r:.20}")
+        raise PackedSceneError(
+            f"this reads {FORMAT!r} version {VERSION}, not "
+            f"{data['format']!r:.40} version {data['version']!r:.20}"
+        )
     root = _compile_node(data["root"], registry, None, "")
     _check_links(root)
     return root
 
 
-def _compile_node(entry: Any, registry: Mapping[str, type[Node]], parent: _Plan | None,
-                  where: str) -> _Plan:
+def _compile_node(
+    entry: Any, registry: Mapping[str, type[Node]], parent: _Plan | None, where: str
+) -> _Plan:
     """One node's plan and its children's (data from outside was sized by check_size)."""
     if not isinstance(entry, Mapping):
         raise PackedSceneError(f"{where or 'root'}: a node is a map")
     unknown = set(entry) - _NODE_KEYS
     if unknown:
-        raise PackedSceneError(f"{where or 'root'}: a node has no {sorted(map(str, unknown))[0]!r}"
-                               f"; it has {sorted(_NODE_KEYS)}")
+        raise PackedSceneError(
+            f"{where or 'root'}: a node has no {sorted(map(str, unknown))[0]!r}"
+            f"; it has {sorted(_NODE_KEYS)}"
+        )
     name = entry.get("name")
     try:
         name = check_name(name)
@@ -373,7 +435,8 @@ def _compile_node(entry: Any, registry: Mapping[str, type[Node]], parent: _Plan 
         raise PackedSceneError(
             f"{where}: class {class_name!r:.60} is not allowed; this scene may build "
             f"{', '.join(sorted(registry))} (an environment allows its own classes with "
-            "PackedScene.from_data(data, allowed=...))")
+            "PackedScene.from_data(data, allowed=...))"
+        )
     codec = codec_for(kind)
     plan = _Plan(kind, codec, name, where, parent)
     try:
@@ -413,8 +476,9 @@ def _compile_members(plan: _Plan, entry: Mapping[str, Any]) -> None:
         plan.groups.append(group)
     for signal in _list(entry.get("signals", []), f"{where}: signals"):
         if not _identifier(signal) or hasattr(kind, signal) or signal in plan.signals:
-            raise PackedSceneError(f"{where}: {signal!r:.40} cannot be a user signal of "
-                                   f"{kind.__name__}")
+            raise PackedSceneError(
+                f"{where}: {signal!r:.40} cannot be a user signal of {kind.__name__}"
+            )
         plan.signals.append(signal)
     for connection in _list(entry.get("connections", []), f"{where}: connections"):
         plan.connections.append(_connection(plan, connection))
@@ -422,8 +486,9 @@ def _compile_members(plan: _Plan, entry: Mapping[str, Any]) -> None:
 
 def _check_attribute_name(kind: type, key: Any, reserved: frozenset[str], where: str) -> None:
     if not _identifier(key) or key.startswith("__") or key in reserved:
-        raise PackedSceneError(f"{where}: {key!r:.40} is not an attribute a scene may set on a "
-                               f"{kind.__name__}")
+        raise PackedSceneError(
+            f"{where}: {key!r:.40} is not an attribute a scene may set on a {kind.__name__}"
+        )
     found = inspect.getattr_static(kind, key, None)
     if callable(found) or hasattr(found, "__get__") or isinstance(found, Signal):
         raise PackedSceneError(f"{where}: attribute {key!r} would hide {kind.__name__}.{key}")
@@ -455,12 +520,15 @@ def _check_links(root: _Plan) -> None:
         for signal, path, method, _ in plan.connections:
             target = _resolve(plan, path, f"{plan.where}: connection {signal}")
             if not inspect.isfunction(inspect.getattr_static(target.kind, method, None)):
-                raise PackedSceneError(f"{plan.where}: connection {signal}: "
-                                       f"{target.kind.__name__} has no method {method!r}")
+                raise PackedSceneError(
+                    f"{plan.where}: connection {signal}: "
+                    f"{target.kind.__name__} has no method {method!r}"
+                )
             why = _not_connectable(target.kind, method)
             if why is not None:
-                raise PackedSceneError(f"{plan.where}: connection {signal}: "
-                                       f"{target.kind.__name__}.{method} is {why}")
+                raise PackedSceneError(
+                    f"{plan.where}: connection {signal}: {target.kind.__name__}.{method} is {why}"
+                )
             declared = getattr(plan.kind, signal, None)
             if isinstance(declared, Signal):  # a user signal's arguments are its emitter's
                 _check_arguments(declared, target.kind, method, plan.where)
@@ -473,8 +541,10 @@ def _check_arguments(signal: Signal, kind: type, method: str, where: str) -> Non
         inspect.signature(function).bind(None, *signal.arguments)
     except TypeError:
         passes = ", ".join(signal.arguments) or "no arguments"
-        raise PackedSceneError(f"{where}: connection {signal.name}: it passes ({passes}), which "
-                               f"{kind.__name__}.{method} does not take") from None
+        raise PackedSceneError(
+            f"{where}: connection {signal.name}: it passes ({passes}), which "
+            f"{kind.__name__}.{method} does not take"
+        ) from None
 
 
 def _resolve(plan: _Plan, path: str, where: str) -> _Plan:
@@ -483,8 +553,11 @@ def _resolve(plan: _Plan, path: str, where: str) -> _Plan:
         if part in ("", "."):
             continue
         if node is not None:
-            node = node.parent if part == ".." else next(
-                (child for child in node.children if child.name == part), None)
+            node = (
+                node.parent
+                if part == ".."
+                else next((child for child in node.children if child.name == part), None)
+            )
         if node is None:
             raise PackedSceneError(f"{where}: {path!r:.60} is not a node of the scene")
     assert node is not None
@@ -522,10 +595,14 @@ def _checked_plain(value: Any, where: str, depth: int) -> Any:
     if value.__class__ in (list, tuple):
         return [_checked_plain(item, where, depth + 1) for item in value]
     if value.__class__ is dict:
-        return {_checked_plain(key, where, depth + 1): _checked_plain(item, where, depth + 1)
-                for key, item in value.items()}
-    raise PackedSceneError(f"{where} holds a {type(value).__name__}: a scene's data holds plain "
-                           "data only (maps, lists, numbers, strings, bytes, booleans, nil)")
+        return {
+            _checked_plain(key, where, depth + 1): _checked_plain(item, where, depth + 1)
+            for key, item in value.items()
+        }
+    raise PackedSceneError(
+        f"{where} holds a {type(value).__name__}: a scene's data holds plain "
+        "data only (maps, lists, numbers, strings, bytes, booleans, nil)"
+    )
 
 
 def _tuples(value: Any) -> Any:
@@ -547,8 +624,12 @@ def _build(plan: _Plan, built: dict[int, Node]) -> Node:
     kind = plan.kind
     node = kind.__new__(kind)
     plan.codec.build(node, plan.name, plan.properties)
-    node.__dict__.update({key: _plain_copy(value) if isinstance(value, list | dict) else value
-                          for key, value in plan.attributes.items()})
+    node.__dict__.update(
+        {
+            key: _plain_copy(value) if isinstance(value, list | dict) else value
+            for key, value in plan.attributes.items()
+        }
+    )
     node._groups = set(plan.groups)
     for signal in plan.signals:
         node.add_user_signal(signal)
@@ -570,4 +651,3 @@ def _link(root: _Plan, built: dict[int, Node]) -> None:
         for signal, path, method, one_shot in plan.connections:
             target = built[id(_resolve(plan, path, plan.where))]
             node.get_signal(signal).connect(getattr(target, method), one_shot=one_shot)
-

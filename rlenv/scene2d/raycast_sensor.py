@@ -69,15 +69,31 @@ class RaycastSensor2D(Node2D):
         exclude_parent: whether the body the sensor is mounted on is left out.
     """
 
-    def __init__(self, name: str | None = None, *, n_rays: int = 16, ray_length: float = 5.0,
-                 cone_width: float = math.tau, collision_mask: int = ALL_LAYERS,
-                 collide_with_sensors: bool = False, exclude_parent: bool = True,
-                 position: Vec = (0.0, 0.0), rotation: float = 0.0) -> None:
+    def __init__(
+        self,
+        name: str | None = None,
+        *,
+        n_rays: int = 16,
+        ray_length: float = 5.0,
+        cone_width: float = math.tau,
+        collision_mask: int = ALL_LAYERS,
+        collide_with_sensors: bool = False,
+        exclude_parent: bool = True,
+        position: Vec = (0.0, 0.0),
+        rotation: float = 0.0,
+    ) -> None:
         super().__init__(name, position=position, rotation=rotation)
-        settings = check_settings({
-            "n_rays": n_rays, "ray_length": ray_length, "cone_width": cone_width,
-            "collision_mask": collision_mask, "collide_with_sensors": collide_with_sensors,
-            "exclude_parent": exclude_parent}, f"{self!r}: ")
+        settings = check_settings(
+            {
+                "n_rays": n_rays,
+                "ray_length": ray_length,
+                "cone_width": cone_width,
+                "collision_mask": collision_mask,
+                "collide_with_sensors": collide_with_sensors,
+                "exclude_parent": exclude_parent,
+            },
+            f"{self!r}: ",
+        )
         self.n_rays: int = settings["n_rays"]
         self.ray_length: float = settings["ray_length"]
         self.cone_width: float = settings["cone_width"]
@@ -109,8 +125,10 @@ class RaycastSensor2D(Node2D):
         distances = np.full(self.n_rays, length, dtype=np.float32)
         hits: list[CollisionShape | None] = [None] * self.n_rays
         for index, crossed in enumerate(self._crossings()):
-            stop = next(((alpha, node) for alpha, shape, node in crossed
-                         if sensors or not shape.sensor), None)
+            stop = next(
+                ((alpha, node) for alpha, shape, node in crossed if sensors or not shape.sensor),
+                None,
+            )
             if stop is not None:
                 distances[index] = stop[0] * length
                 hits[index] = stop[1]
@@ -132,8 +150,9 @@ class RaycastSensor2D(Node2D):
             RuntimeError: the sensor is not below a PhysicsWorld.
         """
         length = self.ray_length
-        return [[(alpha * length, node) for alpha, _, node in crossed]
-                for crossed in self._crossings()]
+        return [
+            [(alpha * length, node) for alpha, _, node in crossed] for crossed in self._crossings()
+        ]
 
     def _crossings(self) -> list[list[tuple[float, pymunk.Shape, CollisionShape]]]:
         """Each ray's crossings, nearest first: (fraction of the ray, shape, its node)."""
@@ -147,12 +166,12 @@ class RaycastSensor2D(Node2D):
         rays = []
         for angle in self.angles():
             direction = rotation + float(angle)
-            end = (origin_x + math.cos(direction) * length,
-                   origin_y + math.sin(direction) * length)
-            crossed = [(hit.alpha, hit.shape, shape_nodes[hit.shape])
-                       for hit in space.segment_query(origin, end, 0.0, query_filter)
-                       if hit.shape is not None and hit.shape not in excluded
-                       and hit.shape in shape_nodes]
+            end = (origin_x + math.cos(direction) * length, origin_y + math.sin(direction) * length)
+            crossed = [
+                (hit.alpha, hit.shape, shape_nodes[hit.shape])
+                for hit in space.segment_query(origin, end, 0.0, query_filter)
+                if hit.shape is not None and hit.shape not in excluded and hit.shape in shape_nodes
+            ]
             crossed.sort(key=lambda crossing: crossing[0])
             rays.append(crossed)
         return rays
@@ -176,8 +195,9 @@ def check_settings(settings: Mapping[str, Any], where: str = "") -> dict[str, An
     if checked["ray_length"] == 0.0:
         raise ValueError(f"{where}ray_length must be more than 0")
     checked["cone_width"] = number(settings["cone_width"], f"{where}cone_width", low=0.0)
-    checked["collision_mask"] = integer(settings["collision_mask"], f"{where}collision_mask",
-                                        0, ALL_LAYERS)
+    checked["collision_mask"] = integer(
+        settings["collision_mask"], f"{where}collision_mask", 0, ALL_LAYERS
+    )
     for flag in ("collide_with_sensors", "exclude_parent"):
         if not isinstance(settings[flag], bool):
             raise ValueError(f"{where}{flag} must be true or false, got {settings[flag]!r:.40}")

@@ -28,8 +28,9 @@ class VideoRecorder:
         try:
             import imageio.v2 as imageio
         except ImportError:
-            raise RuntimeError("recording needs imageio and imageio-ffmpeg: "
-                               "pip install 'rlenv[video]'") from None
+            raise RuntimeError(
+                "recording needs imageio and imageio-ffmpeg: pip install 'rlenv[video]'"
+            ) from None
         self.path = Path(path)
         self._writer: Any = imageio.get_writer(str(path), fps=fps, macro_block_size=1)
         self.frames = 0

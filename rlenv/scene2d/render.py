@@ -38,7 +38,10 @@ _MIN_HALF_WIDTH = 0.75  # pixels: thin segments stay visible
 
 
 def draw(
-    root: Node, width: int, height: int, view: View | None = None,
+    root: Node,
+    width: int,
+    height: int,
+    view: View | None = None,
     background: tuple[int, int, int] = BACKGROUND,
 ) -> np.ndarray:
     """Draw every PhysicsWorld at or below ``root`` into a ``(height, width, 3)`` uint8 array.
@@ -88,8 +91,12 @@ def draw_list(root: Node, view: View | None = None) -> dict[str, Any]:
     shapes = list(_shapes(root))
     if view is None:
         view = fit_view([shape for shape, _ in shapes])
-    return {"view": list(view), "shapes": [
-        item for shape, color in shapes if (item := _described(shape, color)) is not None]}
+    return {
+        "view": list(view),
+        "shapes": [
+            item for shape, color in shapes if (item := _described(shape, color)) is not None
+        ],
+    }
 
 
 def _described(shape: pymunk.Shape, color: tuple[int, int, int]) -> list[Any] | None:
@@ -102,9 +109,16 @@ def _described(shape: pymunk.Shape, color: tuple[int, int, int]) -> list[Any] | 
         (ax, ay), (bx, by) = body.local_to_world(shape.a), body.local_to_world(shape.b)
         return ["segment", rgb, ax, ay, bx, by, shape.radius]
     if isinstance(shape, pymunk.Poly):
-        return ["polygon", rgb, shape.radius, [
-            coordinate for vertex in shape.get_vertices()
-            for coordinate in body.local_to_world(vertex)]]
+        return [
+            "polygon",
+            rgb,
+            shape.radius,
+            [
+                coordinate
+                for vertex in shape.get_vertices()
+                for coordinate in body.local_to_world(vertex)
+            ],
+        ]
     return None
 
 
@@ -153,20 +167,28 @@ def _transform(view: View, width: int, height: int) -> tuple[float, float, float
     return centre_x - width / (2 * scale), centre_y + height / (2 * scale), scale
 
 
-def _draw_shape(image: np.ndarray, shape: pymunk.Shape, color: tuple[int, int, int],
-                x0: float, y0: float, scale: float) -> None:
+def _draw_shape(
+    image: np.ndarray,
+    shape: pymunk.Shape,
+    color: tuple[int, int, int],
+    x0: float,
+    y0: float,
+    scale: float,
+) -> None:
     box = shape.cache_bb()
     half_pixel = _MIN_HALF_WIDTH / scale
-    cols = _pixel_range(box.left - half_pixel - x0, box.right + half_pixel - x0, scale,
-                        image.shape[1])
-    rows = _pixel_range(y0 - box.top - half_pixel, y0 - box.bottom + half_pixel, scale,
-                        image.shape[0])
+    cols = _pixel_range(
+        box.left - half_pixel - x0, box.right + half_pixel - x0, scale, image.shape[1]
+    )
+    rows = _pixel_range(
+        y0 - box.top - half_pixel, y0 - box.bottom + half_pixel, scale, image.shape[0]
+    )
     if cols is None or rows is None:
         return
     x = (x0 + (np.arange(*cols) + 0.5) / scale)[np.newaxis, :]  # broadcast, never a grid
     y = (y0 - (np.arange(*rows) + 0.5) / scale)[:, np.newaxis]
     mask = np.broadcast_to(_inside(shape, x, y, half_pixel), (rows[1] - rows[0], cols[1] - cols[0]))
-    image[rows[0]:rows[1], cols[0]:cols[1]][mask] = color
+    image[rows[0] : rows[1], cols[0] : cols[1]][mask] = color
 
 
 def _pixel_range(low: float, high: float, scale: float, size: int) -> tuple[int, int] | None:
@@ -190,8 +212,9 @@ def _inside(shape: pymunk.Shape, x: np.ndarray, y: np.ndarray, half_pixel: float
     return np.zeros((1, 1), dtype=bool)
 
 
-def _capsule(x: np.ndarray, y: np.ndarray, a: Sequence[float], b: Sequence[float],
-             radius: float) -> np.ndarray:
+def _capsule(
+    x: np.ndarray, y: np.ndarray, a: Sequence[float], b: Sequence[float], radius: float
+) -> np.ndarray:
     ax, ay = a
     dx, dy = b[0] - ax, b[1] - ay
     length2 = dx * dx + dy * dy
@@ -199,8 +222,9 @@ def _capsule(x: np.ndarray, y: np.ndarray, a: Sequence[float], b: Sequence[float
     return (x - ax - t * dx) ** 2 + (y - ay - t * dy) ** 2 <= radius * radius
 
 
-def _convex(x: np.ndarray, y: np.ndarray, vertices: Sequence[Sequence[float]],
-            radius: float) -> np.ndarray:
+def _convex(
+    x: np.ndarray, y: np.ndarray, vertices: Sequence[Sequence[float]], radius: float
+) -> np.ndarray:
     mask: np.ndarray | bool = True
     count = len(vertices)
     for index in range(count):

@@ -54,14 +54,17 @@ class Limits:
 
     def to_wire(self) -> dict[str, Any]:
         """The limits as the hello announces them (see :class:`rlenv.protocol.Hello`)."""
-        return {"max_frame_size": self.max_frame_size,
-                "max_first_frame_size": self.max_first_frame_size,
-                "max_reply_size": DEFAULT_MAX_FRAME_SIZE,
-                "max_frame_objects": MAX_FRAME_OBJECTS,
-                "frame_deadline": self.frame_deadline,
-                "first_request_timeout": self.first_request_timeout,
-                "idle_timeout": self.idle_timeout,
-                "write_timeout": self.write_timeout, "max_connections": self.max_connections}
+        return {
+            "max_frame_size": self.max_frame_size,
+            "max_first_frame_size": self.max_first_frame_size,
+            "max_reply_size": DEFAULT_MAX_FRAME_SIZE,
+            "max_frame_objects": MAX_FRAME_OBJECTS,
+            "frame_deadline": self.frame_deadline,
+            "first_request_timeout": self.first_request_timeout,
+            "idle_timeout": self.idle_timeout,
+            "write_timeout": self.write_timeout,
+            "max_connections": self.max_connections,
+        }
 
 
 class InsecureBindError(RuntimeError):
@@ -72,7 +75,7 @@ def bind_error(error: OSError, host: str, port: int) -> OSError:
     """``error`` (from binding ``host:port``) with its cause said first, in words."""
     reasons = {
         errno.EADDRINUSE: f"port {port} is in use on {host} (by another server?): choose "
-                          "another port, or 0 for a free one",
+        "another port, or 0 for a free one",
         errno.EADDRNOTAVAIL: f"{host} is not an address of this machine",
         errno.EACCES: f"port {port} on {host} needs privileges: choose a port above 1023",
     }

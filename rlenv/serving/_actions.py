@@ -24,6 +24,7 @@ from rlenv.protocol.spaces import SpaceMismatch, compile_check
 
 __all__ = ["MAX_REPEAT_ACTION", "ActionCheck", "check_repeat_action"]
 
+
 def check_repeat_action(repeat: Any, name: str, code: ErrorCode = ErrorCode.BAD_REQUEST) -> int:
     """``repeat`` if it is a number of ticks an action may run: an int in 1..MAX_REPEAT_ACTION.
 
@@ -33,8 +34,11 @@ def check_repeat_action(repeat: Any, name: str, code: ErrorCode = ErrorCode.BAD_
     if type(repeat) is not int or repeat < 1:
         raise RequestError(code, f"{name} must be an integer >= 1, got {repeat!r:.40}")
     if repeat > MAX_REPEAT_ACTION:
-        raise RequestError(code, f"{name} must be at most {MAX_REPEAT_ACTION} ticks (the "
-                                 f"hello's limits.max_repeat_action), got {repeat}")
+        raise RequestError(
+            code,
+            f"{name} must be at most {MAX_REPEAT_ACTION} ticks (the "
+            f"hello's limits.max_repeat_action), got {repeat}",
+        )
     return repeat
 
 
@@ -47,18 +51,24 @@ class ActionCheck:
         driven: the agents a policy drives (with several agents): no action is needed for them.
     """
 
-    def __init__(self, agents: Sequence[RLAgent], space: spaces.Space,
-                 driven: frozenset[str] = frozenset()) -> None:
+    def __init__(
+        self, agents: Sequence[RLAgent], space: spaces.Space, driven: frozenset[str] = frozenset()
+    ) -> None:
         self._every = list(agents)
         self._agents = [agent for agent in agents if agent.name not in driven]
         self._driven = driven
         self._several = len(agents) > 1
         self._one = compile_check(space, "action")
-        self._each = {a.name: compile_check(a.action_space, f"action[{a.name!r}]")
-                      for a in agents}
+        self._each = {a.name: compile_check(a.action_space, f"action[{a.name!r}]") for a in agents}
 
-    def __call__(self, action: Any, fresh: bool, where: str = "",
-                 replayed: bool = False, heuristic: frozenset[str] = frozenset()) -> Any:
+    def __call__(
+        self,
+        action: Any,
+        fresh: bool,
+        where: str = "",
+        replayed: bool = False,
+        heuristic: frozenset[str] = frozenset(),
+    ) -> Any:
         """``action`` in its space's native form.
 
         ``fresh``: the request starts an episode first (every agent takes an action). A
@@ -75,22 +85,29 @@ class ActionCheck:
                 return self._one(action)
             agents = self._agents
             if not isinstance(action, Mapping):
-                raise SpaceMismatch(f"action must be a map from agent name to action, one per "
-                                    f"agent in the episode: {[a.name for a in agents]}")
+                raise SpaceMismatch(
+                    f"action must be a map from agent name to action, one per "
+                    f"agent in the episode: {[a.name for a in agents]}"
+                )
             unknown = sorted(map(str, action.keys() - self._each.keys()))
             if unknown:
                 raise SpaceMismatch(f"action for unknown agent {unknown[0]!r}")
             if replayed:
-                return {a.name: self._each[a.name](action[a.name]) for a in self._every
-                        if a.name in action}
+                return {
+                    a.name: self._each[a.name](action[a.name])
+                    for a in self._every
+                    if a.name in action
+                }
             if self._driven:
                 action = {k: v for k, v in action.items() if k not in self._driven}
             if heuristic:
                 both = sorted(heuristic & action.keys())
                 if both:
-                    raise SpaceMismatch(f"an action for agent {both[0]!r}, whose heuristic "
-                                        "acts in this step (the heuristic part): one or the "
-                                        "other")
+                    raise SpaceMismatch(
+                        f"an action for agent {both[0]!r}, whose heuristic "
+                        "acts in this step (the heuristic part): one or the "
+                        "other"
+                    )
                 agents = [a for a in agents if a.name not in heuristic]
             live = [a.name for a in agents if fresh or not (a.terminated or a.truncated)]
             missing = sorted(set(live) - action.keys())

@@ -29,8 +29,7 @@ class Heuristic(Part):
 
     name = "heuristic"
 
-    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
-              where: str) -> Any:
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool, where: str) -> Any:
         names = parts["heuristic"]
         agents = {agent.name: agent for agent in instance.agents}
         if not (isinstance(names, list) and all(isinstance(n, str) for n in names)):
@@ -38,20 +37,27 @@ class Heuristic(Part):
         if parts.get("action") is None:
             raise bad(f"{where}'heuristic' given without an 'action'")
         if not instance.multi_agent:
-            raise bad(f"{where}'heuristic' names agents of an action of several; to let a "
-                       "lone agent's heuristic play, serve it with --policy NAME=heuristic")
+            raise bad(
+                f"{where}'heuristic' names agents of an action of several; to let a "
+                "lone agent's heuristic play, serve it with --policy NAME=heuristic"
+            )
         driven = instance.driven.names if instance.driven is not None else frozenset()
         for name in names:
             agent = agents.get(name)
             if agent is None:
-                raise bad(f"{where}heuristic: no agent {name!r:.40}; the agents: "
-                           f"{', '.join(agents)}")
+                raise bad(
+                    f"{where}heuristic: no agent {name!r:.40}; the agents: {', '.join(agents)}"
+                )
             if not agent.has_heuristic():
-                raise bad(f"{where}heuristic: agent {name!r} (class {type(agent).__name__}) "
-                           "has no heuristic")
+                raise bad(
+                    f"{where}heuristic: agent {name!r} (class {type(agent).__name__}) "
+                    "has no heuristic"
+                )
             if name in driven:
-                raise bad(f"{where}heuristic: agent {name!r} is driven by the server "
-                           "already (rlenv serve --policy)")
+                raise bad(
+                    f"{where}heuristic: agent {name!r} is driven by the server "
+                    "already (rlenv serve --policy)"
+                )
         return frozenset(names)
 
 
@@ -68,8 +74,7 @@ class Claim(Part):
     alone = True
     _KEYS = frozenset({"agent", "action"})
 
-    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
-              where: str) -> Any:
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool, where: str) -> Any:
         claim, owner = parts["claim"], instance.requester.peer
         if owner is None:
             raise bad(f"{where}claim: a claim comes from a client's connection")
@@ -79,37 +84,46 @@ class Claim(Part):
         check_keys(claim, self._KEYS, f"{where}claim")
         agents = [agent.name for agent in instance.agents]
         if not instance.multi_agent:
-            raise bad(f"{where}claim: this environment has one agent ({agents[0]}), and the "
-                       "client that controls the environment owns it: claims are for "
-                       "environments of several agents")
+            raise bad(
+                f"{where}claim: this environment has one agent ({agents[0]}), and the "
+                "client that controls the environment owns it: claims are for "
+                "environments of several agents"
+            )
         name = claim.get("agent")
         if name not in agents:
-            raise bad(f"{where}claim.agent: no agent {name!r:.40}; the agents: "
-                       f"{', '.join(agents)}")
+            raise bad(f"{where}claim.agent: no agent {name!r:.40}; the agents: {', '.join(agents)}")
         if instance.driven is not None and name in instance.driven.names:
-            raise bad(f"{where}claim: agent {name!r} is driven by the server (rlenv serve "
-                       "--policy); claim another")
+            raise bad(
+                f"{where}claim: agent {name!r} is driven by the server (rlenv serve "
+                "--policy); claim another"
+            )
         claims = instance.claims
         if claims is not None:
             holder = claims.owners.get(name)
             if holder is not None and holder is not owner:
-                raise RequestError(ErrorCode.BUSY, f"{where}claim: agent {name!r} is claimed "
-                                   f"by another client ({getattr(holder, 'address', '?')}): "
-                                   "one claim per agent")
+                raise RequestError(
+                    ErrorCode.BUSY,
+                    f"{where}claim: agent {name!r} is claimed "
+                    f"by another client ({getattr(holder, 'address', '?')}): "
+                    "one claim per agent",
+                )
             mine = claims.of(owner)
             if mine is not None and mine != name:
-                raise bad(f"{where}claim: this client plays {mine!r} already (one claim per "
-                           f"client): release it first (claim: nil) to play {name!r}")
+                raise bad(
+                    f"{where}claim: this client plays {mine!r} already (one claim per "
+                    f"client): release it first (claim: nil) to play {name!r}"
+                )
         if "action" not in claim:
             raise bad(f"{where}claim.action: the action to hold for {name!r} is missing")
-        return name, instance.checked_action.of_agent(name, claim["action"],
-                                                      f"{where}claim.")
+        return name, instance.checked_action.of_agent(name, claim["action"], f"{where}claim.")
 
     def apply(self, instance: Instance, value: Any, request: Plan) -> None:
         owner = instance.requester.peer
         if instance.answer.reports:  # type: ignore[union-attr]
-            raise bad("claim: this client controls the environment and acts for every agent "
-                       "itself; claims are for the clients that observe it")
+            raise bad(
+                "claim: this client controls the environment and acts for every agent "
+                "itself; claims are for the clients that observe it"
+            )
         if value is None:
             instance.release_claim(owner)
         else:

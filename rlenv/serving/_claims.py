@@ -60,16 +60,18 @@ class Claims:
             del self.owners[name], self.actions[name]
         return bool(self.owners)
 
-    def complete(self, action: dict[str, Any],
-                 heuristic: frozenset[str]) -> tuple[dict[str, Any], frozenset[str]]:
+    def complete(
+        self, action: dict[str, Any], heuristic: frozenset[str]
+    ) -> tuple[dict[str, Any], frozenset[str]]:
         """The action with each claimed agent's held action, and the heuristic agents left.
 
         A claimed agent acts only while it is in the episode (it has an entry, or the step
         names it in ``heuristic``); its held action replaces the controller's entry, and its
         heuristic does not run.
         """
-        claimed = {name: held for name, held in self.actions.items()
-                   if name in action or name in heuristic}
+        claimed = {
+            name: held for name, held in self.actions.items() if name in action or name in heuristic
+        }
         if heuristic:
             heuristic = heuristic.difference(self.actions)
         return {**action, **claimed}, heuristic

@@ -29,8 +29,11 @@ class Columns:
     def __init__(self, observation_space: spaces.Space) -> None:
         self._codec = codec_for(observation_space)
         # The packed observation of zeros, for the rows of instances that failed.
-        zeros = next(iter(iterate(batch_space(observation_space, 1),
-                                  create_empty_array(observation_space, 1))))
+        zeros = next(
+            iter(
+                iterate(batch_space(observation_space, 1), create_empty_array(observation_space, 1))
+            )
+        )
         self._blank = self._codec.pack(zeros)
 
     def stack(self, reply_id: int, replies: list[Response | ErrorReply]) -> StepsResponse:
@@ -51,11 +54,27 @@ class Columns:
                 continue
             assert isinstance(reply, Response) and reply.observation is not None
             observations.append(reply.observation["agent"])
-            reward[row], terminated[row], truncated[row], frames[row] = \
-                reply.reward, reply.terminated, reply.truncated, reply.frames
-            info.append(reply.info if reply.agents is None else
-                        {**reply.info, "agents": reply.agents})
-        errors = tuple(reply if reply.__class__ is ErrorReply else None
-                       for reply in replies) if failed else None
-        return StepsResponse(reply_id, self._codec.join(observations), reward, terminated,
-                             truncated, frames, tuple(info), errors)
+            reward[row], terminated[row], truncated[row], frames[row] = (
+                reply.reward,
+                reply.terminated,
+                reply.truncated,
+                reply.frames,
+            )
+            info.append(
+                reply.info if reply.agents is None else {**reply.info, "agents": reply.agents}
+            )
+        errors = (
+            tuple(reply if reply.__class__ is ErrorReply else None for reply in replies)
+            if failed
+            else None
+        )
+        return StepsResponse(
+            reply_id,
+            self._codec.join(observations),
+            reward,
+            terminated,
+            truncated,
+            frames,
+            tuple(info),
+            errors,
+        )

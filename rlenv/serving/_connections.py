@@ -54,11 +54,24 @@ class Peer:
         lane_kind: the kind of the request taken from the lane and not answered yet (0: none).
     """
 
-    __slots__ = ("active", "address", "authenticated", "connection", "frame_started", "host",
-                 "lane", "lane_kind", "lane_seen", "last_request", "sock", "waiter")
+    __slots__ = (
+        "active",
+        "address",
+        "authenticated",
+        "connection",
+        "frame_started",
+        "host",
+        "lane",
+        "lane_kind",
+        "lane_seen",
+        "last_request",
+        "sock",
+        "waiter",
+    )
 
-    def __init__(self, sock: socket.socket, host: str, port: int, max_frame_size: int,
-                 now: float) -> None:
+    def __init__(
+        self, sock: socket.socket, host: str, port: int, max_frame_size: int, now: float
+    ) -> None:
         self.sock = sock
         self.host = host
         self.address = f"{host}:{port}"
@@ -95,8 +108,12 @@ class Connections:
     """
 
     def __init__(
-        self, hello: Hello | None, limits: Limits | None = None, token: str | None = None,
-        clock: Callable[[], float] = time.monotonic, per_client: bool = False,
+        self,
+        hello: Hello | None,
+        limits: Limits | None = None,
+        token: str | None = None,
+        clock: Callable[[], float] = time.monotonic,
+        per_client: bool = False,
     ) -> None:
         self.limits = limits or Limits()
         self.per_client = per_client
@@ -127,9 +144,11 @@ class Connections:
 
     @hello.setter
     def hello(self, hello: Hello) -> None:
-        self._hello = replace(hello, token_required=hello.token_required or
-                              self._token is not None,
-                              limits={**hello.limits, **self.limits.to_wire()})
+        self._hello = replace(
+            hello,
+            token_required=hello.token_required or self._token is not None,
+            limits={**hello.limits, **self.limits.to_wire()},
+        )
 
     @property
     def connections(self) -> int:
@@ -151,7 +170,6 @@ class Connections:
             self._listener.close()
             self._listener = None
         self._selector.close()
-
 
     # --- connections -----------------------------------------------------------------------
 
@@ -177,9 +195,16 @@ class Connections:
             self._make_room()
         if len(self._peers) >= self.limits.max_connections:
             logger.info("refused %s: %d clients connected", address, len(self._peers))
-            self._send(peer, ErrorReply(
-                None, ErrorCode.BUSY, f"this server already has {len(self._peers)} clients "
-                "connected, its limit; close one or start another server", fatal=True))
+            self._send(
+                peer,
+                ErrorReply(
+                    None,
+                    ErrorCode.BUSY,
+                    f"this server already has {len(self._peers)} clients "
+                    "connected, its limit; close one or start another server",
+                    fatal=True,
+                ),
+            )
             return
         self._peers[sock] = peer
         self._order.append(peer)
@@ -200,10 +225,17 @@ class Connections:
         waiting = next((peer for peer in self._order if not peer.authenticated), None)
         # (a client whose wrong token was compared is held apart, in no slot: see _hold)
         if waiting is not None:
-            self._send(waiting, ErrorReply(
-                None, ErrorCode.BUSY, f"this server is full ({self.limits.max_connections} "
-                "clients) and this connection had sent no request: a newer one took its place",
-                fatal=True), "made room for a newer connection")
+            self._send(
+                waiting,
+                ErrorReply(
+                    None,
+                    ErrorCode.BUSY,
+                    f"this server is full ({self.limits.max_connections} "
+                    "clients) and this connection had sent no request: a newer one took its place",
+                    fatal=True,
+                ),
+                "made room for a newer connection",
+            )
 
     def _check_lifeline(self, fd: int) -> None:
         if not os.read(fd, 4096):
@@ -247,7 +279,6 @@ class Connections:
         if not block:  # a look around: whatever came is served in turn, before blocking again
             self._backlog = True
 
-
     # --- shared-memory lanes ----------------------------------------------------------------
 
     def _open_lane(self, peer: Peer, request: Request) -> None:
@@ -257,8 +288,9 @@ class Connections:
         if why is None:
             assert self._hello is not None
             try:
-                peer.lane = open_lane(value.get("address"), value.get("key"), self._hello,
-                                      peer.sock)
+                peer.lane = open_lane(
+                    value.get("address"), value.get("key"), self._hello, peer.sock
+                )
             except ValueError as error:
                 why = str(error)
             except OSError as error:
@@ -270,8 +302,9 @@ class Connections:
         peer.lane_seen = peer.lane.slots.request_sequence
         self._selector.register(peer.lane.doorbell, selectors.EVENT_READ)
         logger.info("client %s steps through shared memory", peer.address)
-        self._send(peer, Response(request.id, info={
-            "shared_memory": peer.lane.slots.layout.to_wire()}))
+        self._send(
+            peer, Response(request.id, info={"shared_memory": peer.lane.slots.layout.to_wire()})
+        )
 
     def _lane_request(self, peer: Peer) -> Request | None:
         """Take the request waiting on ``peer``'s lane.
@@ -351,11 +384,11 @@ class Connections:
         """When the next held refusal is due."""
         return self._token_check.next_release()
 
-
     # --- writing ----------------------------------------------------------------------------
 
-    def _send(self, peer: Peer, message: Reply,
-              why_fatal: str = "error reply closed the connection") -> None:
+    def _send(
+        self, peer: Peer, message: Reply, why_fatal: str = "error reply closed the connection"
+    ) -> None:
         """Send ``message``; a fatal error reply then closes the connection (``why_fatal``)."""
         kind = peer.lane_kind
         if kind and message.id is not None:  # the answer to the lane's request
@@ -376,9 +409,13 @@ class Connections:
                 # A value in the answer that cannot travel, or an answer over the frame
                 # limit: the client learns why instead of waiting for an answer.
                 logger.error("answer to %s not sent: %s", peer.address, error)
-                data = peer.connection.send(ErrorReply(
-                    message.id, ErrorCode.ENVIRONMENT_ERROR,
-                    f"the answer could not be sent: {error}"))
+                data = peer.connection.send(
+                    ErrorReply(
+                        message.id,
+                        ErrorCode.ENVIRONMENT_ERROR,
+                        f"the answer could not be sent: {error}",
+                    )
+                )
             peer.sock.sendall(data)
             peer.waiter.sent()
             self._waiter.sent()

@@ -47,8 +47,14 @@ from rlenv.serving._access import DEFAULT_HOST, InsecureBindError, Limits, bind_
 from rlenv.serving._connections import HOUSEKEEPING_INTERVAL, Connections, Peer
 from rlenv.transport.sockets import address_family, format_address, is_loopback
 
-__all__ = ["DEFAULT_HOST", "HOUSEKEEPING_INTERVAL", "Endpoint", "InsecureBindError", "Limits",
-           "Peer"]
+__all__ = [
+    "DEFAULT_HOST",
+    "HOUSEKEEPING_INTERVAL",
+    "Endpoint",
+    "InsecureBindError",
+    "Limits",
+    "Peer",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -82,15 +88,17 @@ class Endpoint(Connections):
                 "must present, or bind 127.0.0.1"
             )
         try:
-            listener = socket.create_server((host, port), family=address_family(host),
-                                            backlog=16)
+            listener = socket.create_server((host, port), family=address_family(host), backlog=16)
         except OSError as error:
             raise bind_error(error, host, port) from None
         listener.setblocking(False)
         self._listener = listener
         self._selector.register(listener, selectors.EVENT_READ)
-        logger.info("listening on %s%s", format_address(*self.address),
-                    " (token required)" if self._token else "")
+        logger.info(
+            "listening on %s%s",
+            format_address(*self.address),
+            " (token required)" if self._token else "",
+        )
         return self.address
 
     @property
@@ -128,8 +136,12 @@ class Endpoint(Connections):
                 if got is not None:
                     return got
             controller = self._controller
-            if deadline is None and controller is not None and controller.active and \
-                    self._clock() < self._housekeeping_at:
+            if (
+                deadline is None
+                and controller is not None
+                and controller.active
+                and self._clock() < self._housekeeping_at
+            ):
                 if not controller.connection.buffered and not controller.lane_ready():
                     self._read(controller, block=True)  # nothing pipelined: wait for it
                 request = self._request_from(controller)
@@ -194,9 +206,14 @@ class Endpoint(Connections):
         answered ``busy`` (and this returns False), as everyone is after :meth:`reserve`.
         """
         if self._reserved is not None:
-            self._send(peer, ErrorReply(request_id, ErrorCode.BUSY,
-                                        f"this environment cannot be controlled: "
-                                        f"{self._reserved}"))
+            self._send(
+                peer,
+                ErrorReply(
+                    request_id,
+                    ErrorCode.BUSY,
+                    f"this environment cannot be controlled: {self._reserved}",
+                ),
+            )
             return False
         controller = self._controller
         if controller is peer or self.per_client:
@@ -208,13 +225,16 @@ class Endpoint(Connections):
             self._controller = peer
             logger.info("client %s controls the environment", peer.address)
             return True
-        self._send(peer, ErrorReply(
-            request_id, ErrorCode.BUSY,
-            f"this environment is controlled by another client ({controller.address}); only "
-            "observing is open to others. Start another server for another trainer",
-        ))
+        self._send(
+            peer,
+            ErrorReply(
+                request_id,
+                ErrorCode.BUSY,
+                f"this environment is controlled by another client ({controller.address}); only "
+                "observing is open to others. Start another server for another trainer",
+            ),
+        )
         return False
-
 
     # --- waiting ----------------------------------------------------------------------------
 
@@ -229,8 +249,9 @@ class Endpoint(Connections):
     def _look_around(self, timeout: float | None) -> None:
         """Everything but the controller's fast path: reads, accepts, the lifeline, deadlines."""
         ready = {key.fileobj for key, _ in self._selector.select(timeout)}
-        for peer in [peer for peer in self._order if peer.lane is not None and
-                     peer.lane.doorbell in ready]:
+        for peer in [
+            peer for peer in self._order if peer.lane is not None and peer.lane.doorbell in ready
+        ]:
             self._ring_heard(peer)
         for peer in [peer for peer in self._order if peer.sock in ready]:
             self._read(peer, block=False)  # before accepting: a client may leave as one comes
@@ -270,19 +291,24 @@ class Endpoint(Connections):
             due = self._due(peer)
             if due is None or now < due:
                 continue
-            if not peer.authenticated and self._token is not None and \
-                    now >= peer.last_request + self.limits.first_request_timeout:
-                message = (f"no request with the right token within "
-                           f"{self.limits.first_request_timeout} s of connecting")
+            if (
+                not peer.authenticated
+                and self._token is not None
+                and now >= peer.last_request + self.limits.first_request_timeout
+            ):
+                message = (
+                    f"no request with the right token within "
+                    f"{self.limits.first_request_timeout} s of connecting"
+                )
             elif peer.frame_started is not None:
-                message = (f"a frame was not completed within {self.limits.frame_deadline} s "
-                           f"({peer.connection.buffered} bytes received); is the client stalled?")
+                message = (
+                    f"a frame was not completed within {self.limits.frame_deadline} s "
+                    f"({peer.connection.buffered} bytes received); is the client stalled?"
+                )
             else:
                 message = f"no request for {self.limits.idle_timeout} s"
             logger.info("client %s timed out: %s", peer.address, message)
-            self._send(peer, ErrorReply(None, ErrorCode.TIMEOUT, message, fatal=True),
-                       "timed out")
-
+            self._send(peer, ErrorReply(None, ErrorCode.TIMEOUT, message, fatal=True), "timed out")
 
     # --- requests ---------------------------------------------------------------------------
 
@@ -307,8 +333,12 @@ class Endpoint(Connections):
             if request is not None:
                 return request
         connection = peer.connection
-        if not peer.authenticated and self._token is not None and connection.buffered and \
-                not self._may_compare(peer):
+        if (
+            not peer.authenticated
+            and self._token is not None
+            and connection.buffered
+            and not self._may_compare(peer)
+        ):
             return None  # its address's wrong answers are held: compared once one goes out
         while peer.sock in self._peers:
             try:
@@ -319,8 +349,11 @@ class Endpoint(Connections):
                 if connection.peer_closed:  # it hung up in the middle of a frame
                     self._drop(peer, "client closed the connection mid-frame")
                     return None
-                self._send(peer, ErrorReply(error.request_id, error.code, str(error),
-                                            fatal=error.fatal), "broken framing")
+                self._send(
+                    peer,
+                    ErrorReply(error.request_id, error.code, str(error), fatal=error.fatal),
+                    "broken framing",
+                )
                 continue
             if message is NEED_DATA:
                 if connection.buffered and peer.frame_started is None:

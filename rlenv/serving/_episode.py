@@ -78,9 +78,16 @@ class EpisodeRun:
             the one before it; ``late_actions`` counts those of the episode.
     """
 
-    def __init__(self, environment: RLEnvironment, tree: SceneTree, roster: Roster,
-                 settings: Settings, stats: EpisodeStats, recent: RecentEpisodes,
-                 broken: Callable[[BaseException], None]) -> None:
+    def __init__(
+        self,
+        environment: RLEnvironment,
+        tree: SceneTree,
+        roster: Roster,
+        settings: Settings,
+        stats: EpisodeStats,
+        recent: RecentEpisodes,
+        broken: Callable[[BaseException], None],
+    ) -> None:
         self.settings, self.stats, self.recent = settings, stats, recent
         self._broken = broken
         self.log = EpisodeLog()
@@ -193,7 +200,8 @@ class EpisodeRun:
         """The end of a tick (after pymunk stepped): rewards, flags, the end of the episode."""
         state = self.state
         if state is not _ACTING and not (
-                state is _RUNNING and self.tree.real_time and not self._ended_unseen):
+            state is _RUNNING and self.tree.real_time and not self._ended_unseen
+        ):
             return
         self._ticks += 1
         roster = self.roster
@@ -223,8 +231,7 @@ class EpisodeRun:
         except Exception as error:  # user code raised between two requests: nobody to tell
             logger.error("a tick in real time raised", exc_info=error)
             self._broken(error)
-            self.abandon(f"the episode was stopped: a tick raised {type(error).__name__}: "
-                         f"{error}")
+            self.abandon(f"the episode was stopped: a tick raised {type(error).__name__}: {error}")
 
     def report(self, reports: bool, acted: bool) -> tuple[float, bool, bool, int, Any]:
         """What an answer reports: reward, flags, ticks, and each agent's with several.
@@ -239,8 +246,9 @@ class EpisodeRun:
             if outcomes is None:
                 self.stats.reported(reward, frames, acted)
             else:
-                self.stats.reported_agents({name: o["reward"] for name, o in outcomes.items()},
-                                           frames, acted)
+                self.stats.reported_agents(
+                    {name: o["reward"] for name, o in outcomes.items()}, frames, acted
+                )
             if terminated or truncated:
                 self.stats.end("terminated" if terminated else "truncated")
         if terminated or truncated:  # real time: the client now knows the episode ended

@@ -28,8 +28,7 @@ class Snapshot(Part):
     name = "snapshot"
     alone = True
 
-    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
-              where: str) -> Any:
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool, where: str) -> Any:
         if as_map(parts["snapshot"], "snapshot", where):
             raise bad("snapshot takes an empty map")
         _need_lockstep(instance)
@@ -57,14 +56,12 @@ class Episodes(Part):
     alone = True
     _KEYS = frozenset({"last", "index", "episode", "from"})
 
-    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
-              where: str) -> Any:
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool, where: str) -> Any:
         episodes = as_map(parts["episodes"], "episodes", where)
         check_keys(episodes, self._KEYS, "episodes")
         forms = [key for key in ("last", "index", "episode") if key in episodes]
         if len(forms) > 1:
-            raise bad(f"episodes takes one of last, index and episode, got "
-                       f"{' and '.join(forms)}")
+            raise bad(f"episodes takes one of last, index and episode, got {' and '.join(forms)}")
         if "from" in episodes and "episode" not in episodes:
             raise bad("episodes.from goes with episodes.episode (a page of that episode)")
         if "index" in episodes:
@@ -105,8 +102,7 @@ class Restore(Part):
     takes_control = True
     alone = True
 
-    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
-              where: str) -> Any:
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool, where: str) -> Any:
         snapshot = parse_snapshot(as_map(parts["restore"], "restore", where))
         _need_lockstep(instance)
         for config in [snapshot["config"]] + [e[1] for e in snapshot["events"] if e[0] == "config"]:
@@ -123,12 +119,14 @@ class Restore(Part):
                 instance.settings.check(event[1])
             elif event[0] == "action":
                 check_repeat_action(event[2], f"{where}the action's frames")
-                actions.append(instance.checked_action(event[1], fresh=True, replayed=True,
-                                                       where=where))
+                actions.append(
+                    instance.checked_action(event[1], fresh=True, replayed=True, where=where)
+                )
             elif instance.environment.get_node_or_null(event[1]) is not None:
                 # A node the episode builds later is checked when the replay sets it.
-                _prefixed(where, inspector.set_property, instance.environment, *event[1:],
-                          dry_run=True)
+                _prefixed(
+                    where, inspector.set_property, instance.environment, *event[1:], dry_run=True
+                )
         return snapshot, actions, generator_from_state(snapshot["rng"])
 
     def apply(self, instance: Instance, value: Any, request: Plan) -> None:

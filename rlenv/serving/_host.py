@@ -44,8 +44,11 @@ __all__ = ["REQUEST_LIMITS", "Host", "Prepared", "target_of"]
 
 logger = logging.getLogger(__name__)
 
-REQUEST_LIMITS: Mapping[str, int] = {"max_repeat_action": MAX_REPEAT_ACTION,
-                                     "max_level_nodes": MAX_NODES, "max_level_depth": MAX_DEPTH}
+REQUEST_LIMITS: Mapping[str, int] = {
+    "max_repeat_action": MAX_REPEAT_ACTION,
+    "max_level_nodes": MAX_NODES,
+    "max_level_depth": MAX_DEPTH,
+}
 """What one request may ask of an environment, as the hello's ``limits`` announce it (2.6)
 beside the endpoint's sizes and deadlines: the ticks of one action, and a level's nodes and
 their nesting (:mod:`rlenv.scene2d.packed_scene`); beyond them a request is refused with
@@ -122,12 +125,18 @@ class Host:
             heuristic for an agent whose class defines none.
     """
 
-    def __init__(self, environment: RLEnvironment | type[RLEnvironment] | str, count: int = 1,
-                 *, clock: Callable[[], float] = time.monotonic,
-                 record_dir: Path | None = None, real_time: bool = False,
-                 policies: Mapping[str, Policy] | None = None,
-                 max_episode_steps: int | None = None,
-                 keep_episodes: int | None = None) -> None:
+    def __init__(
+        self,
+        environment: RLEnvironment | type[RLEnvironment] | str,
+        count: int = 1,
+        *,
+        clock: Callable[[], float] = time.monotonic,
+        record_dir: Path | None = None,
+        real_time: bool = False,
+        policies: Mapping[str, Policy] | None = None,
+        max_episode_steps: int | None = None,
+        keep_episodes: int | None = None,
+    ) -> None:
         target = target_of(environment)
         if isinstance(environment, str):
             environment = load_environment(environment)
@@ -135,8 +144,10 @@ class Host:
             raise ValueError("a host holds at least one instance")
         if count > 1 and not isinstance(environment, type):
             raise TypeError("several instances need the environment class, not an instance")
-        self.instances = [Instance(environment, dispatch, clock, record_dir, keep_episodes,
-                                   KEEP_EVENTS // count) for _ in range(count)]
+        self.instances = [
+            Instance(environment, dispatch, clock, record_dir, keep_episodes, KEEP_EVENTS // count)
+            for _ in range(count)
+        ]
         self.requester = Requester()  # who sent the request being served (for claims)
         for instance in self.instances:
             instance.requester = self.requester
@@ -168,8 +179,9 @@ class Host:
         if policies:
             self._drive(policies, max_episode_steps, real_time)
 
-    def _drive(self, policies: Mapping[str, Policy], max_episode_steps: int | None,
-               real_time: bool) -> None:
+    def _drive(
+        self, policies: Mapping[str, Policy], max_episode_steps: int | None, real_time: bool
+    ) -> None:
         """Let ``policies`` drive their agents in every instance; a driver when they drive all."""
         if real_time:
             raise ValueError("--policy drives agents in lockstep: leave out --real-time")
@@ -177,12 +189,15 @@ class Host:
         for instance, agents in zip(self.instances, driven, strict=True):
             instance.drive(agents)
         first = self.instances[0]
-        self.hello.driven = tuple(agent.name for agent in first.agents
-                                  if agent.name in driven[0].names)
+        self.hello.driven = tuple(
+            agent.name for agent in first.agents if agent.name in driven[0].names
+        )
         if driven[0].every_agent:
             if len(self.instances) > 1:
-                raise ValueError("--policy drives every agent, so the server plays one "
-                                 "instance itself: leave out --instances")
+                raise ValueError(
+                    "--policy drives every agent, so the server plays one "
+                    "instance itself: leave out --instances"
+                )
             self.driver = PolicyDriver(self.answer, first, driven[0], max_episode_steps)
 
     def answer(self, request: Request) -> Reply:
@@ -215,8 +230,9 @@ class Host:
         except RequestError as error:
             return ErrorReply(request.id, error.code, str(error))
         except Exception as error:  # user code (a check_config of its own) raised
-            return failure(request.id, error, "raised while checking the request; nothing "
-                           "was applied")
+            return failure(
+                request.id, error, "raised while checking the request; nothing was applied"
+            )
 
     def run(self, prepared: Prepared, reports: bool = True) -> Reply:
         """Serve a checked request; its answer.
@@ -261,8 +277,9 @@ class Host:
 
     def time_to_next_tick(self) -> float | None:
         """Seconds until the next tick of an instance in real time (``None``: none is)."""
-        waits = [wait for instance in self._clocked
-                 if (wait := instance.time_to_next_tick()) is not None]
+        waits = [
+            wait for instance in self._clocked if (wait := instance.time_to_next_tick()) is not None
+        ]
         return min(waits, default=None)
 
     def _follow_real_time(self) -> None:
@@ -278,8 +295,9 @@ class Host:
         endpoint.on_drop = self.release_claims
         driver = self.driver
         if driver is not None:
-            endpoint.reserve("its agents are driven by policies (rlenv serve --policy); only "
-                             "observing is open")
+            endpoint.reserve(
+                "its agents are driven by policies (rlenv serve --policy); only observing is open"
+            )
             while True:
                 got = endpoint.receive(driver.wait())
                 if got is None:
@@ -327,10 +345,15 @@ class Host:
         except Exception as error:  # the last resort: this request fails, not the server
             logger.error("serving request %r raised", request.id, exc_info=error)
             if not answered:  # one answer per request, or the client loses the thread
-                endpoint.reply(peer, ErrorReply(
-                    request.id, ErrorCode.ENVIRONMENT_ERROR,
-                    f"the server failed answering this request ({type(error).__name__}: "
-                    f"{error}); it serves on, but what the request changed is not known"))
+                endpoint.reply(
+                    peer,
+                    ErrorReply(
+                        request.id,
+                        ErrorCode.ENVIRONMENT_ERROR,
+                        f"the server failed answering this request ({type(error).__name__}: "
+                        f"{error}); it serves on, but what the request changed is not known",
+                    ),
+                )
         finally:
             self.requester.peer = None
 

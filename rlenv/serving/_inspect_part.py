@@ -29,8 +29,7 @@ class Inspect(Part):
     name = "inspect"
     alone = True
 
-    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
-              where: str) -> Any:
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool, where: str) -> Any:
         operation, arguments = inspector.check_inspect(parts["inspect"])
         environment = instance.environment
         if operation == "get":
@@ -38,8 +37,13 @@ class Inspect(Part):
         elif operation == "node":
             inspector.node_at(environment, arguments["path"])
         elif operation == "set":
-            inspector.set_property(environment, arguments["path"], arguments["property"],
-                                   arguments["value"], dry_run=True)
+            inspector.set_property(
+                environment,
+                arguments["path"],
+                arguments["property"],
+                arguments["value"],
+                dry_run=True,
+            )
         elif operation == "configure":
             instance.settings.check(arguments)
         return operation, arguments
@@ -53,8 +57,11 @@ class Inspect(Part):
         elif operation == "node":
             answer.info = {"node": inspector.node_of(environment, arguments["path"])}
         elif operation == "get":
-            answer.info = {"value": inspector.get_property(environment, arguments["path"],
-                                                           arguments["property"])}
+            answer.info = {
+                "value": inspector.get_property(
+                    environment, arguments["path"], arguments["property"]
+                )
+            }
         elif operation == "set":
             instance.set_property(arguments["path"], arguments["property"], arguments["value"])
         elif operation == "configure":

@@ -28,19 +28,29 @@ from rlenv.node import Node
 from rlenv.protocol.errors import ErrorCode, RequestError
 from rlenv.serving._properties import conform, exported_of, exported_values, to_wire
 
-__all__ = ["check_inspect", "get_property", "node_at", "node_entry", "node_of", "set_property",
-           "tree"]
+__all__ = [
+    "check_inspect",
+    "get_property",
+    "node_at",
+    "node_entry",
+    "node_of",
+    "set_property",
+    "tree",
+]
 
 _PATH = frozenset({"path"})
 _ARGUMENTS: dict[str, tuple[frozenset[str], frozenset[str]]] = {  # required, optional
-    "tree": (frozenset(), frozenset()), "node": (_PATH, frozenset()),
+    "tree": (frozenset(), frozenset()),
+    "node": (_PATH, frozenset()),
     "get": (frozenset({"path", "property"}), frozenset()),
     "set": (frozenset({"path", "property", "value"}), frozenset()),
     "configure": (frozenset(), frozenset({"environment", "agent", "world"})),
     "stats": (frozenset(), frozenset({"since"})),
 }
-_USAGE = ("inspect must be one of {'tree': {}}, {'node': {path}}, {'get': {path, property}}, "
-          "{'set': {path, property, value}}, {'configure': <config>} or {'stats': {since}}")
+_USAGE = (
+    "inspect must be one of {'tree': {}}, {'node': {path}}, {'get': {path, property}}, "
+    "{'set': {path, property, value}}, {'configure': <config>} or {'stats': {since}}"
+)
 
 
 def check_inspect(spec: Any) -> tuple[str, Mapping[str, Any]]:
@@ -53,15 +63,19 @@ def check_inspect(spec: Any) -> tuple[str, Mapping[str, Any]]:
         raise RequestError(ErrorCode.BAD_REQUEST, _USAGE)
     operation, arguments = next(iter(spec.items()))
     required, optional = _ARGUMENTS[operation]
-    if not isinstance(arguments, Mapping) or not required <= arguments.keys() <= \
-            required | optional:
+    if (
+        not isinstance(arguments, Mapping)
+        or not required <= arguments.keys() <= required | optional
+    ):
         expected = sorted(required) + [f"{name} (optional)" for name in sorted(optional)]
-        raise RequestError(ErrorCode.BAD_REQUEST, f"inspect.{operation} takes exactly "
-                           f"{expected or 'an empty map'}")
+        raise RequestError(
+            ErrorCode.BAD_REQUEST, f"inspect.{operation} takes exactly {expected or 'an empty map'}"
+        )
     since = arguments.get("since", 0)
     if type(since) is not int or since < 0:
-        raise RequestError(ErrorCode.BAD_REQUEST,
-                           f"inspect.stats.since must be an integer >= 0, got {since!r:.40}")
+        raise RequestError(
+            ErrorCode.BAD_REQUEST, f"inspect.stats.since must be an integer >= 0, got {since!r:.40}"
+        )
     return operation, arguments
 
 
@@ -81,8 +95,12 @@ def node_entry(node: Node, section: str | None = None) -> dict[str, Any]:
     :mod:`rlenv.demonstration_keys`) and whether their class has a ``heuristic`` (2.6).
     """
     exported = exported_values(node)
-    entry = {"path": node.get_path(), "type": type(node).__name__, "exported": exported,
-             "read_only": [name for name in exported if _read_only(node, name)]}
+    entry = {
+        "path": node.get_path(),
+        "type": type(node).__name__,
+        "exported": exported,
+        "read_only": [name for name in exported if _read_only(node, name)],
+    }
     if section is not None:
         entry["config"] = section
         entry["configurable"] = list(getattr(node, "configurable", ()))
@@ -126,8 +144,9 @@ def get_property(root: Node, path: Any, name: Any) -> Any:
     return to_wire(getattr(node, _exported(node, name)))
 
 
-def set_property(root: Node, path: Any, name: Any, value: Any, *,
-                 dry_run: bool = False) -> tuple[Node, str, Any]:
+def set_property(
+    root: Node, path: Any, name: Any, value: Any, *, dry_run: bool = False
+) -> tuple[Node, str, Any]:
     """Set the exported property ``name`` of the node at ``path`` to ``value`` (type-checked).
 
     With ``dry_run`` everything is checked and nothing is set. Returns the node, the property's
@@ -141,21 +160,24 @@ def set_property(root: Node, path: Any, name: Any, value: Any, *,
     node = node_at(root, path)
     prop = _exported(node, name)
     if _read_only(node, prop):
-        raise RequestError(ErrorCode.BAD_REQUEST,
-                           f"inspect: {type(node).__name__}.{prop} is read-only")
+        raise RequestError(
+            ErrorCode.BAD_REQUEST, f"inspect: {type(node).__name__}.{prop} is read-only"
+        )
     try:
         conformed = conform(getattr(node, prop), value)
     except TypeError as error:
-        raise RequestError(ErrorCode.BAD_REQUEST,
-                           f"inspect: {type(node).__name__}.{prop} {error}") from None
+        raise RequestError(
+            ErrorCode.BAD_REQUEST, f"inspect: {type(node).__name__}.{prop} {error}"
+        ) from None
     previous = getattr(node, prop)
     if not dry_run:
         previous = copy.deepcopy(previous)
         try:
             setattr(node, prop, conformed)
         except ValueError as error:
-            raise RequestError(ErrorCode.BAD_REQUEST,
-                               f"inspect: {type(node).__name__}.{prop}: {error}") from None
+            raise RequestError(
+                ErrorCode.BAD_REQUEST, f"inspect: {type(node).__name__}.{prop}: {error}"
+            ) from None
     return node, prop, previous
 
 

@@ -67,8 +67,9 @@ def load_environment(target: str) -> type[RLEnvironment]:
     """
     module_name, _, class_name = target.partition(":")
     if not module_name or not class_name:
-        raise ValueError(f"expected MODULE:CLASS, e.g. examples.cartpole:CartPoleEnvironment, "
-                         f"got {target!r}")
+        raise ValueError(
+            f"expected MODULE:CLASS, e.g. examples.cartpole:CartPoleEnvironment, got {target!r}"
+        )
     try:
         module = import_module(module_name)
         if not hasattr(module, class_name):
@@ -151,10 +152,15 @@ class Instance:
     action_space: spaces.Space
     observation_space: spaces.Space
 
-    def __init__(self, environment: RLEnvironment | type[RLEnvironment] | str,
-                 dispatch: Dispatch, clock: Callable[[], float] = time.monotonic,
-                 record_dir: Path | None = None, keep_episodes: int | None = None,
-                 keep_events: int = KEEP_EVENTS) -> None:
+    def __init__(
+        self,
+        environment: RLEnvironment | type[RLEnvironment] | str,
+        dispatch: Dispatch,
+        clock: Callable[[], float] = time.monotonic,
+        record_dir: Path | None = None,
+        keep_episodes: int | None = None,
+        keep_events: int = KEEP_EVENTS,
+    ) -> None:
         if isinstance(environment, str):
             environment = load_environment(environment)
         self._class: type[RLEnvironment] | None = None  # what a rebuild builds (or none)
@@ -164,8 +170,11 @@ class Instance:
         self._dispatch = dispatch
         self._clock = clock
         self.answer: Answer | None = None  # the answer to the request being served
-        hooks = {name for name in _HOOKS
-                 if getattr(type(environment), name) is not getattr(RLEnvironment, name)}
+        hooks = {
+            name
+            for name in _HOOKS
+            if getattr(type(environment), name) is not getattr(RLEnvironment, name)
+        }
         self.dispatches_itself = "_on_got_connection" in hooks
         self.configures_itself = "_configure" in hooks
         self.responds_itself = "_send_response" in hooks
@@ -177,12 +186,21 @@ class Instance:
         self._enter(environment)
         self.broken: str | None = None  # why the next reset rebuilds the environment
         self.settings = Settings(self, record_dir)
-        self.recent = RecentEpisodes(KEEP_EPISODES if keep_episodes is None else keep_episodes,
-                                     keep_events, eager=keep_episodes is not None)
+        self.recent = RecentEpisodes(
+            KEEP_EPISODES if keep_episodes is None else keep_episodes,
+            keep_events,
+            eager=keep_episodes is not None,
+        )
         self.stats = EpisodeStats([a.name for a in self.agents] if self.multi_agent else None)
-        episode = self.episode = EpisodeRun(self.environment, self.tree, self.roster,
-                                            self.settings, self.stats, self.recent,
-                                            self.mark_broken)
+        episode = self.episode = EpisodeRun(
+            self.environment,
+            self.tree,
+            self.roster,
+            self.settings,
+            self.stats,
+            self.recent,
+            self.mark_broken,
+        )
         self.begin_episode, self.check_can_act = episode.begin, episode.check_can_act
         self.report, self.abandon_episode = episode.report, episode.abandon
         self.refuse_without_episode = episode.refuse_without_episode
@@ -210,15 +228,20 @@ class Instance:
         action_space = roster.space("action_space")
         observation_space = roster.space("observation_space")
         if replacing and (action_space, observation_space) != (
-                self.action_space, self.observation_space):
-            raise RuntimeError(f"the rebuilt {type(environment).__name__} has other spaces "
-                               "than the one it replaces; clients hold the first ones")
+            self.action_space,
+            self.observation_space,
+        ):
+            raise RuntimeError(
+                f"the rebuilt {type(environment).__name__} has other spaces "
+                "than the one it replaces; clients hold the first ones"
+            )
         agents = roster.agents
         self.environment, self.tree, self.roster, self.agents = environment, tree, roster, agents
         self.multi_agent = roster.several
         self.action_space, self.observation_space = action_space, observation_space
-        self.checked_action = ActionCheck(agents, action_space,
-                                          self.driven.names if self.driven else frozenset())
+        self.checked_action = ActionCheck(
+            agents, action_space, self.driven.names if self.driven else frozenset()
+        )
         self.observe = Observer(environment, agents).observe
 
     # --- one way in -------------------------------------------------------------------------
@@ -247,8 +270,10 @@ class Instance:
             else:
                 self.dispatch(request)
             if answer.reply is None:
-                raise RuntimeError(f"{type(self.environment).__name__}._on_got_connection sent "
-                                   "no answer: call super()._on_got_connection(request)")
+                raise RuntimeError(
+                    f"{type(self.environment).__name__}._on_got_connection sent "
+                    "no answer: call super()._on_got_connection(request)"
+                )
             return answer.reply
         except RequestError as error:
             self.settings.undo(answer)
@@ -304,8 +329,10 @@ class Instance:
         except Exception as error:
             logger.error("_after_send_response raised", exc_info=error)
             self.mark_broken(error)
-            self.abandon_episode(f"the episode was stopped: _after_send_response raised "
-                                 f"{type(error).__name__}: {error}")
+            self.abandon_episode(
+                f"the episode was stopped: _after_send_response raised "
+                f"{type(error).__name__}: {error}"
+            )
 
     def time_to_next_tick(self) -> float | None:
         """Seconds until this instance's next tick is due (``None`` in lockstep)."""
@@ -333,8 +360,9 @@ class Instance:
             RuntimeError: the instance has no class to rebuild from.
         """
         if self._class is None:
-            raise RuntimeError("this instance was given an environment object: it has no "
-                               "class to rebuild it from")
+            raise RuntimeError(
+                "this instance was given an environment object: it has no class to rebuild it from"
+            )
         why = self.broken or "asked"
         old, old_tree = self.environment, self.tree
         config = self.settings.state()
@@ -348,8 +376,9 @@ class Instance:
         try:
             old_tree.root.remove_child(old)
         except Exception as error:  # the broken environment's _exit_tree: its own business
-            logger.warning("the replaced %s raised leaving its tree", type(old).__name__,
-                           exc_info=error)
+            logger.warning(
+                "the replaced %s raised leaving its tree", type(old).__name__, exc_info=error
+            )
         logger.warning("%s rebuilt from its class after %s", type(old).__name__, why)
         return why
 
@@ -416,18 +445,28 @@ class Instance:
                 action = self.players.complete(action, heuristic, self.agents)
             except PolicyError as error:  # a failed episode; the environment is intact
                 self.abandon_episode(f"the episode failed: {error}")
-                raise RequestError(ErrorCode.ENVIRONMENT_ERROR, f"{error}; reset required") \
-                    from None
+                raise RequestError(
+                    ErrorCode.ENVIRONMENT_ERROR, f"{error}; reset required"
+                ) from None
         self.episode.act(action, frames, self.replaying)
 
     # --- answers ----------------------------------------------------------------------------
 
     def _response(self, answer: Answer, observation: dict[str, Any] | None) -> Response:
         """The answer: what was observed, the flags, and the rewards and ticks since the last."""
-        reward, terminated, truncated, frames, outcomes = self.episode.report(answer.reports,
-                                                                              answer.acted)
-        return Response(answer.reply_id, observation, reward, terminated, truncated,
-                        self.info(answer.acted, answer.info), frames, outcomes)
+        reward, terminated, truncated, frames, outcomes = self.episode.report(
+            answer.reports, answer.acted
+        )
+        return Response(
+            answer.reply_id,
+            observation,
+            reward,
+            terminated,
+            truncated,
+            self.info(answer.acted, answer.info),
+            frames,
+            outcomes,
+        )
 
     def info(self, acted: bool, extra: dict[str, Any] | None) -> dict[str, Any]:
         """An answer's ``info``: ``_get_info()`` while an episode exists, real time's, ``extra``.
@@ -451,6 +490,7 @@ class Instance:
         self.mark_broken(error)
         self.abandon_episode("the episode was stopped by an environment_error")
         return failure(reply_id, error, "reset required")
+
 
 def failure(reply_id: int | None, error: BaseException, consequence: str) -> ErrorReply:
     """The ``environment_error`` answer for an exception in user code, with its traceback.

@@ -56,16 +56,20 @@ class LeanSteps:
         self._column = np.zeros((len(instances), *self.shape), self.dtype)
         self._floats = self.dtype.kind in "fc"
         self._narrow = self.dtype.kind == "f" and self.dtype.itemsize <= 4
-        self._infos = [type(i.environment)._get_info is not RLEnvironment._get_info
-                       for i in instances]
+        self._infos = [
+            type(i.environment)._get_info is not RLEnvironment._get_info for i in instances
+        ]
 
     @staticmethod
     def serves(instances: Sequence[Instance]) -> bool:
         """Whether the lean path can serve these instances (in lockstep)."""
-        return all(not instance.multi_agent and not instance.dispatches_itself and
-                   not instance.responds_itself and
-                   isinstance(instance.observation_space, _PACKED_AS_BYTES)
-                   for instance in instances)
+        return all(
+            not instance.multi_agent
+            and not instance.dispatches_itself
+            and not instance.responds_itself
+            and isinstance(instance.observation_space, _PACKED_AS_BYTES)
+            for instance in instances
+        )
 
     def run(self, reply_id: int, plan: StepsPlan) -> StepsResponse:
         """Serve every instance its row of the checked plan (an action, or a reset); the answer."""
@@ -76,8 +80,9 @@ class LeanSteps:
         errors: list[ErrorReply | None] | None = None
         rebuilt: list[dict[str, Any] | None] | None = None  # rows rebuilt before their reset
         repeat = plan.repeat
-        for row, (instance, action, resets) in enumerate(zip(self.instances, plan.actions,
-                                                             plan.resets, strict=True)):
+        for row, (instance, action, resets) in enumerate(
+            zip(self.instances, plan.actions, plan.resets, strict=True)
+        ):
             try:
                 if resets:
                     if instance.broken is not None:
@@ -89,9 +94,11 @@ class LeanSteps:
                     acted[row] = True
                 agent = instance.agents[0]
                 value = data[row] = agent.get_data(_AGENT_ONLY)
-                if value.__class__ is np.ndarray and (value.dtype is dtype or
-                                                      value.dtype == dtype) and \
-                        value.shape == shape:
+                if (
+                    value.__class__ is np.ndarray
+                    and (value.dtype is dtype or value.dtype == dtype)
+                    and value.shape == shape
+                ):
                     column[row] = value
                 else:  # the general path's conversion and refusals
                     packed = packed_observation(agent, self._codec, _AGENT_ONLY)
@@ -107,13 +114,13 @@ class LeanSteps:
         truncated = [False] * count
         frames = [0] * count
         infos: list[dict[str, Any]] = [_EMPTY] * count
-        for row, (instance, has_info) in enumerate(zip(self.instances, self._infos,
-                                                       strict=True)):
+        for row, (instance, has_info) in enumerate(zip(self.instances, self._infos, strict=True)):
             if errors is not None and errors[row] is not None:
                 continue
             try:
-                reward[row], terminated[row], truncated[row], frames[row], _ = \
-                    instance.report(True, acted[row])
+                reward[row], terminated[row], truncated[row], frames[row], _ = instance.report(
+                    True, acted[row]
+                )
                 extra = None if rebuilt is None else rebuilt[row]
                 if has_info or extra is not None:
                     infos[row] = instance.info(acted[row], extra)
@@ -122,14 +129,24 @@ class LeanSteps:
                 errors[row] = instance.environment_error(reply_id, error)
                 column[row] = 0
                 reward[row], terminated[row], truncated[row], frames[row] = 0.0, False, False, 0
-        return StepsResponse(reply_id, column.tobytes(), np.array(reward, np.float64),
-                             np.array(terminated, np.bool_), np.array(truncated, np.bool_),
-                             np.array(frames, np.int64), tuple(infos),
-                             None if errors is None else tuple(errors))
+        return StepsResponse(
+            reply_id,
+            column.tobytes(),
+            np.array(reward, np.float64),
+            np.array(terminated, np.bool_),
+            np.array(truncated, np.bool_),
+            np.array(frames, np.int64),
+            tuple(infos),
+            None if errors is None else tuple(errors),
+        )
 
-    def _refuse_non_finite(self, reply_id: int, column: np.ndarray, data: list[Any],
-                           errors: list[ErrorReply | None] | None,
-                           ) -> list[ErrorReply | None] | None:
+    def _refuse_non_finite(
+        self,
+        reply_id: int,
+        column: np.ndarray,
+        data: list[Any],
+        errors: list[ErrorReply | None] | None,
+    ) -> list[ErrorReply | None] | None:
         """Fail the rows whose observation holds NaN or infinity, as the general path does."""
         total = column.sum(dtype=np.float64) if self._narrow else None
         if total is not None and np.isfinite(total):
@@ -142,9 +159,11 @@ class LeanSteps:
             agent = instance.agents[0]
             # Where, in what get_data gave; in the row as written if that is finite by now (an
             # array the environment reuses, changed by a later row's get_data).
-            error = non_finite_observation(agent, data[row]) or \
-                non_finite_observation(agent, column[row].copy()) or \
-                FloatingPointError(f"the observation of {agent.get_path()} is not finite")
+            error = (
+                non_finite_observation(agent, data[row])
+                or non_finite_observation(agent, column[row].copy())
+                or FloatingPointError(f"the observation of {agent.get_path()} is not finite")
+            )
             errors = errors or [None] * len(column)
             errors[row] = instance.environment_error(reply_id, error)
             column[row] = 0

@@ -47,8 +47,7 @@ class EditLevel(Part):
     alone = True
     _KEYS = frozenset({"level", "seed", "n_edits"})
 
-    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
-              where: str) -> Any:
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool, where: str) -> Any:
         edit = as_map(parts["edit_level"], "edit_level", where)
         check_keys(edit, self._KEYS, "edit_level")
         if "level" not in edit:
@@ -57,12 +56,16 @@ class EditLevel(Part):
         if type(seed) is not int or seed < 0:
             raise bad(f"edit_level.seed must be an integer >= 0, got {seed!r:.40}")
         if type(n_edits) is not int or not 1 <= n_edits <= MAX_LEVEL_EDITS:
-            raise bad(f"edit_level.n_edits must be an integer in [1, {MAX_LEVEL_EDITS}], "
-                       f"got {n_edits!r:.40}")
+            raise bad(
+                f"edit_level.n_edits must be an integer in [1, {MAX_LEVEL_EDITS}], "
+                f"got {n_edits!r:.40}"
+            )
         world: RLEnvWorld = instance.environment.world  # type: ignore[assignment]  # has one
         if type(world)._edit_level is RLEnvWorld._edit_level:
-            raise bad(f"edit_level: {type(world).__name__} has no _edit_level: "
-                       f"{type(instance.environment).__name__} offers no edits of its levels")
+            raise bad(
+                f"edit_level: {type(world).__name__} has no _edit_level: "
+                f"{type(instance.environment).__name__} offers no edits of its levels"
+            )
         try:
             check_size(edit["level"])
         except PackedSceneError as error:
@@ -82,9 +85,10 @@ class EditLevel(Part):
         except Exception as error:  # user code raised: nothing changed, the episode goes on
             logger.error("%s raised", hook, exc_info=error)
             detail = "".join(traceback.format_exception(error)).rstrip()
-            raise RequestError(ErrorCode.ENVIRONMENT_ERROR,
-                               f"{hook} raised {type(error).__name__}: {error}; nothing "
-                               f"changed\n{detail}") from None
+            raise RequestError(
+                ErrorCode.ENVIRONMENT_ERROR,
+                f"{hook} raised {type(error).__name__}: {error}; nothing changed\n{detail}",
+            ) from None
         instance.answer.info = {"level": _travelled(edited, hook)}  # type: ignore[union-attr]
 
 

@@ -44,8 +44,10 @@ class Observer:
         if "agent" in request:
             asked = request["agent"]
             if self._several:
-                observation["agent"] = {agent.name: packed_observation(agent, codec, asked)
-                                        for agent, codec in self._agents}
+                observation["agent"] = {
+                    agent.name: packed_observation(agent, codec, asked)
+                    for agent, codec in self._agents
+                }
             else:
                 agent, codec = self._agents[0]
                 observation["agent"] = packed_observation(agent, codec, asked)
@@ -57,8 +59,9 @@ class Observer:
         if "render" in request:
             size = request["render"]
             width, height = environment.render_size
-            observation["render"] = environment._render(size.get("width", width),
-                                                        size.get("height", height))
+            observation["render"] = environment._render(
+                size.get("width", width), size.get("height", height)
+            )
         if "draw" in request:
             drawn = observation["draw"] = environment._draw()
             check_text_keys(drawn, "_draw() returned")
@@ -79,8 +82,10 @@ def packed_observation(agent: RLAgent, codec: Codec, request: Any) -> Any:
         not_finite = non_finite_observation(agent, data)
         if not_finite is not None:
             raise not_finite from None
-        raise ValueError(f"the observation of {agent.get_path()} does not fit its space "
-                         f"{agent.observation_space}: it {error}") from None
+        raise ValueError(
+            f"the observation of {agent.get_path()} does not fit its space "
+            f"{agent.observation_space}: it {error}"
+        ) from None
 
 
 def non_finite_observation(agent: RLAgent, data: Any) -> FloatingPointError | None:
@@ -91,8 +96,9 @@ def non_finite_observation(agent: RLAgent, data: Any) -> FloatingPointError | No
     where = find_non_finite(data)
     if where is None:
         return None
-    return FloatingPointError(f"the observation of {agent.get_path()} is not finite at "
-                              f"{where or '()'}: {data!r:.200}")
+    return FloatingPointError(
+        f"the observation of {agent.get_path()} is not finite at {where or '()'}: {data!r:.200}"
+    )
 
 
 def check_text_keys(value: Any, what: str) -> None:

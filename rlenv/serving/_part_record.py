@@ -51,8 +51,7 @@ class Part:
         """Whether this part, with this value, takes control."""
         return self.takes_control
 
-    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
-              where: str) -> Any:
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool, where: str) -> Any:
         """Check the part (``parts[self.name]``) against ``instance``; the value to apply.
 
         ``fresh`` says whether the request starts an episode first (``reset``, ``restore``).
@@ -67,7 +66,6 @@ class Part:
 
         ``request`` is the whole plan (an ``action`` reads its ``repeat_action``).
         """
-
 
 
 class Host(Protocol):

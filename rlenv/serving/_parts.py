@@ -40,8 +40,17 @@ from rlenv.serving._part_record import Host, HostPart, Part, bad
 from rlenv.serving._settings import check_keys
 from rlenv.serving._step_parts import Action, Config, Observation, RepeatAction, Reset
 
-__all__ = ["PARTS", "HostPart", "Part", "Shape", "StepsPlan", "dispatch", "plan_for", "shape_of",
-           "takes_control"]
+__all__ = [
+    "PARTS",
+    "HostPart",
+    "Part",
+    "Shape",
+    "StepsPlan",
+    "dispatch",
+    "plan_for",
+    "shape_of",
+    "takes_control",
+]
 
 AGENT_ONLY: Mapping[str, Any] = {"agent": {}}
 _RUNNING = Episode.RUNNING
@@ -57,11 +66,14 @@ class Batch(HostPart):
 
     def controls(self, value: Any) -> bool:
         return isinstance(value, list) and any(
-            isinstance(part, Mapping) and takes_control(part) for part in value)
+            isinstance(part, Mapping) and takes_control(part) for part in value
+        )
 
     def takes_control(self, request: Request, checked: Any) -> bool:
-        return any(plan.__class__ is dict and takes_control(parts)
-                   for parts, plan in zip(request.parts["batch"], checked, strict=False))
+        return any(
+            plan.__class__ is dict and takes_control(parts)
+            for parts, plan in zip(request.parts["batch"], checked, strict=False)
+        )
 
     def check(self, host: Host, request: Request) -> Any:
         batch = request.parts["batch"]
@@ -74,24 +86,37 @@ class Batch(HostPart):
             if parts is not None:
                 if not isinstance(parts, Mapping):
                     raise bad(f"batch[{index}] must be a map or nil")
-        shapes = [None if parts is None else shape_of(parts, f"batch[{index}].")
-                  for index, parts in enumerate(batch)]
-        return [None if shape is None else _plan_or_refusal(instance, parts, shape, request.id)
-                for instance, parts, shape in zip(host.instances, batch, shapes, strict=False)]
+        shapes = [
+            None if parts is None else shape_of(parts, f"batch[{index}].")
+            for index, parts in enumerate(batch)
+        ]
+        return [
+            None if shape is None else _plan_or_refusal(instance, parts, shape, request.id)
+            for instance, parts, shape in zip(host.instances, batch, shapes, strict=False)
+        ]
 
     def served(self, host: Host, checked: Any) -> list[Instance]:
-        return [instance for instance, plan in zip(host.instances, checked, strict=False)
-                if plan.__class__ is dict]  # a refusal or a gap served nothing
+        return [
+            instance
+            for instance, plan in zip(host.instances, checked, strict=False)
+            if plan.__class__ is dict
+        ]  # a refusal or a gap served nothing
 
     def run(self, host: Host, request: Request, checked: Any, reports: bool) -> Reply:
-        return BatchResponse(request.id, tuple(
-            plan if plan is None or plan.__class__ is ErrorReply else
-            instance.serve(plan, request.id, reports)
-            for instance, plan in zip(host.instances, checked, strict=False)))
+        return BatchResponse(
+            request.id,
+            tuple(
+                plan
+                if plan is None or plan.__class__ is ErrorReply
+                else instance.serve(plan, request.id, reports)
+                for instance, plan in zip(host.instances, checked, strict=False)
+            ),
+        )
 
 
-def _plan_or_refusal(instance: Instance, parts: Mapping[str, Any], shape: Shape,
-                     reply_id: int) -> Plan | ErrorReply:
+def _plan_or_refusal(
+    instance: Instance, parts: Mapping[str, Any], shape: Shape, reply_id: int
+) -> Plan | ErrorReply:
     try:
         return plan_for(instance, parts, shape)
     except RequestError as error:
@@ -112,8 +137,13 @@ class StepsPlan:
 
     __slots__ = ("actions", "repeat", "resets", "starts")
 
-    def __init__(self, actions: list[Any], resets: list[bool], repeat: int | None,
-                 starts: list[Plan | None] | None = None) -> None:
+    def __init__(
+        self,
+        actions: list[Any],
+        resets: list[bool],
+        repeat: int | None,
+        starts: list[Plan | None] | None = None,
+    ) -> None:
         self.actions, self.resets, self.repeat = actions, resets, repeat
         self.starts = starts
 
@@ -121,12 +151,18 @@ class StepsPlan:
         """Each instance's plan, as a request to it alone would have it."""
         repeat = self.repeat
         starts = self.starts or [None] * len(self.resets)
-        return [({**start, "observation": AGENT_ONLY} if start is not None else
-                 {"reset": {"seed": None, "options": {}}, "observation": AGENT_ONLY}) if resets
-                else {"action": action, "observation": AGENT_ONLY} if repeat is None
-                else {"repeat_action": repeat, "action": action, "observation": AGENT_ONLY}
-                for action, resets, start in zip(self.actions, self.resets, starts,
-                                                 strict=True)]
+        return [
+            (
+                {**start, "observation": AGENT_ONLY}
+                if start is not None
+                else {"reset": {"seed": None, "options": {}}, "observation": AGENT_ONLY}
+            )
+            if resets
+            else {"action": action, "observation": AGENT_ONLY}
+            if repeat is None
+            else {"repeat_action": repeat, "action": action, "observation": AGENT_ONLY}
+            for action, resets, start in zip(self.actions, self.resets, starts, strict=True)
+        ]
 
 
 class Steps(HostPart):
@@ -164,23 +200,35 @@ class Steps(HostPart):
             checked = host.steps_action(steps["action"])
         except SpaceMismatch as error:
             raise RequestError(ErrorCode.INVALID_ACTION, str(error)) from None
-        actions = list(checked) if checked.__class__ is np.ndarray else \
-            list(iterate(host.steps_action_space, checked))
+        actions = (
+            list(checked)
+            if checked.__class__ is np.ndarray
+            else list(iterate(host.steps_action_space, checked))
+        )
         starts = steps.get("reset_with")
-        return StepsPlan(actions, reset, repeat,
-                         None if starts is None else _starts(host, starts, reset))
+        return StepsPlan(
+            actions, reset, repeat, None if starts is None else _starts(host, starts, reset)
+        )
 
     def served(self, host: Host, checked: Any) -> list[Instance]:
         return host.instances
 
     def run(self, host: Host, request: Request, checked: Any, reports: bool) -> Reply:
         lean = host.lean
-        if lean is not None and reports and checked.starts is None and \
-                not any(i.tree.real_time for i in host.instances):
+        if (
+            lean is not None
+            and reports
+            and checked.starts is None
+            and not any(i.tree.real_time for i in host.instances)
+        ):
             return lean.run(request.id, checked)
-        return host.columns.stack(request.id, [
-            instance.serve(plan, request.id, reports)
-            for instance, plan in zip(host.instances, checked.plans(), strict=True)])
+        return host.columns.stack(
+            request.id,
+            [
+                instance.serve(plan, request.id, reports)
+                for instance, plan in zip(host.instances, checked.plans(), strict=True)
+            ],
+        )
 
 
 _START_KEYS = frozenset({"config", "reset"})
@@ -197,8 +245,9 @@ def _starts(host: Host, entries: Any, flags: list[bool]) -> list[Plan | None]:
     if not isinstance(entries, list) or len(entries) != count:
         raise bad(f"steps.reset_with must be a list of {count} entries (a map or nil each)")
     starts: list[Plan | None] = []
-    for index, (instance, entry, resets) in enumerate(zip(host.instances, entries, flags,
-                                                          strict=True)):
+    for index, (instance, entry, resets) in enumerate(
+        zip(host.instances, entries, flags, strict=True)
+    ):
         if entry is None:
             starts.append(None)
             continue
@@ -227,8 +276,9 @@ def _reset_mask(mask: Any, count: int) -> list[bool]:
         if not mask.translate(None, b"\x00\x01"):  # every byte is 0 or 1
             flags = list(map(bool, mask))
     elif isinstance(mask, np.ndarray):
-        if mask.ndim == 1 and (mask.dtype == np.bool_ or (
-                mask.dtype == np.uint8 and bool(np.all(mask <= 1)))):
+        if mask.ndim == 1 and (
+            mask.dtype == np.bool_ or (mask.dtype == np.uint8 and bool(np.all(mask <= 1)))
+        ):
             flags = mask.astype(bool).tolist()
     elif isinstance(mask, list) and all(type(flag) is bool for flag in mask):
         flags = mask
@@ -242,16 +292,32 @@ def _reset_mask(mask: Any, count: int) -> list[bool]:
 # --- the table --------------------------------------------------------------------------------
 
 PARTS: dict[str, Part | HostPart] = {
-    part.name: part for part in (
-        Restore(), Inspect(), Snapshot(), Episodes(), EditLevel(), Claim(), Config(), Reset(),
-        RepeatAction(), Heuristic(), Action(), Observation(), Batch(), Steps())
+    part.name: part
+    for part in (
+        Restore(),
+        Inspect(),
+        Snapshot(),
+        Episodes(),
+        EditLevel(),
+        Claim(),
+        Config(),
+        Reset(),
+        RepeatAction(),
+        Heuristic(),
+        Action(),
+        Observation(),
+        Batch(),
+        Steps(),
+    )
 }
 """Every kind of request part, in the order they apply."""
 
 _ORDER = {name: index for index, name in enumerate(PARTS)}
 _INSTANCE_KEYS = ", ".join(name for name, part in PARTS.items() if isinstance(part, Part))
-_REQUEST_KEYS = ", ".join([_INSTANCE_KEYS, "token", "shared_memory"] + [
-    name for name, part in PARTS.items() if isinstance(part, HostPart)])
+_REQUEST_KEYS = ", ".join(
+    [_INSTANCE_KEYS, "token", "shared_memory"]
+    + [name for name, part in PARTS.items() if isinstance(part, HostPart)]
+)
 _MAX_SHAPES = 512
 
 
@@ -273,8 +339,7 @@ class Shape:
             record = PARTS.get(key)
             if record is None or (where and isinstance(record, HostPart)):
                 expected = _INSTANCE_KEYS if where else _REQUEST_KEYS
-                raise bad(f"unknown request key {where}{str(key)!r}; expected any of "
-                           f"{expected}")
+                raise bad(f"unknown request key {where}{str(key)!r}; expected any of {expected}")
             records.append(record)
         host_parts = [r for r in records if isinstance(r, HostPart)]
         if host_parts and len(records) > 1:
@@ -285,8 +350,9 @@ class Shape:
         if alone and any(r.name not in (alone[0], "observation") for r in records):
             raise bad(f"{alone[0]} goes alone (with an observation at most)")
         self.host_part: HostPart | None = host_parts[0] if host_parts else None
-        self.parts: tuple[Part, ...] = tuple(sorted(
-            (r for r in records if isinstance(r, Part)), key=lambda r: _ORDER[r.name]))
+        self.parts: tuple[Part, ...] = tuple(
+            sorted((r for r in records if isinstance(r, Part)), key=lambda r: _ORDER[r.name])
+        )
         self.fresh = "reset" in keys or "restore" in keys
 
 
@@ -308,8 +374,7 @@ def shape_of(parts: Mapping[str, Any], where: str = "") -> Shape:
     return shape
 
 
-def plan_for(instance: Instance, parts: Mapping[str, Any], shape: Shape,
-             where: str = "") -> Plan:
+def plan_for(instance: Instance, parts: Mapping[str, Any], shape: Shape, where: str = "") -> Plan:
     """Check every part of a request to ``instance``; the plan that applies them.
 
     Raises:
@@ -331,8 +396,9 @@ def dispatch(instance: Instance, request: Plan) -> None:
     for name, value in request.items():
         record = PARTS.get(name)
         if record is None or not isinstance(record, Part):
-            raise RuntimeError(f"_on_got_connection passed on a request with an unknown part "
-                               f"{name!r:.40}")
+            raise RuntimeError(
+                f"_on_got_connection passed on a request with an unknown part {name!r:.40}"
+            )
         record.apply(instance, value, request)
 
 

@@ -87,8 +87,9 @@ class Penalties:
             logger.warning("wrong token from %s (%d in a row)", address, record.failures)
             return 0.0
         delay = min(MAX_PENALTY, 2.0 ** (beyond - 1))
-        logger.warning("wrong token from %s (%d in a row): answered in %g s", address,
-                       record.failures, delay)
+        logger.warning(
+            "wrong token from %s (%d in a row): answered in %g s", address, record.failures, delay
+        )
         return delay
 
     def hold(self, address: str) -> None:
@@ -108,5 +109,5 @@ class Penalties:
         """Make room: forget addresses holding nothing (the oldest quarter if all hold some)."""
         kept = {address: record for address, record in self._records.items() if record.held}
         if len(kept) >= _ADDRESSES // 2:
-            kept = dict(list(kept.items())[_ADDRESSES // 4:])
+            kept = dict(list(kept.items())[_ADDRESSES // 4 :])
         self._records = kept

@@ -75,5 +75,6 @@ class Players:
         """Every agent that has a heuristic, driven by it (for a request's ``heuristic``)."""
         if self._heuristics is None:
             self._heuristics = DrivenAgents(
-                {a.name: HEURISTIC for a in agents if a.has_heuristic()}, agents)
+                {a.name: HEURISTIC for a in agents if a.has_heuristic()}, agents
+            )
         return self._heuristics

@@ -58,8 +58,9 @@ def conform(current: Any, value: Any) -> Any:
     """
     where = find_non_finite(value)
     if where is not None:
-        raise TypeError(f"must be finite, got {value!r:.60}" +
-                        (f" (not finite at {where})" if where else ""))
+        raise TypeError(
+            f"must be finite, got {value!r:.60}" + (f" (not finite at {where})" if where else "")
+        )
     number = isinstance(value, int | float) and not isinstance(value, bool)
     if isinstance(current, bool | np.bool_):
         if isinstance(value, bool):
@@ -71,14 +72,15 @@ def conform(current: Any, value: Any) -> Any:
         if isinstance(value, int) and not isinstance(value, bool):
             return value
     elif isinstance(current, tuple):
-        if isinstance(value, list | tuple) and len(value) == len(current) and all(
-            isinstance(item, int | float) and not isinstance(item, bool) for item in value
+        if (
+            isinstance(value, list | tuple)
+            and len(value) == len(current)
+            and all(isinstance(item, int | float) and not isinstance(item, bool) for item in value)
         ):
             return tuple(float(item) for item in value)
     elif current is None or isinstance(value, type(current)):
         return value
-    raise TypeError(f"must be {_sort_of(current)} like {to_wire(current)!r:.40}, got "
-                    f"{value!r:.60}")
+    raise TypeError(f"must be {_sort_of(current)} like {to_wire(current)!r:.40}, got {value!r:.60}")
 
 
 def _sort_of(value: Any) -> str:

@@ -47,12 +47,10 @@ KEEP_EVENTS = 200_000
 them (some 40 MB at 200 bytes a step)."""
 
 
-
 class _Kept:
     __slots__ = ("id", "log", "steps", "stop", "terminated", "truncated")
 
-    def __init__(self, identifier: int, log: EpisodeLog, terminated: bool,
-                 truncated: bool) -> None:
+    def __init__(self, identifier: int, log: EpisodeLog, terminated: bool, truncated: bool) -> None:
         events = log.events
         stop = len(events)
         while events[stop - 1][0] != "action":  # the events after its last action are no step's
@@ -62,8 +60,13 @@ class _Kept:
         self.steps = sum(event[0] == "action" for event in events)
 
     def entry(self) -> dict[str, Any]:
-        return {"id": self.id, "terminated": self.terminated, "truncated": self.truncated,
-                "steps": self.steps, "events": self.stop}
+        return {
+            "id": self.id,
+            "terminated": self.terminated,
+            "truncated": self.truncated,
+            "steps": self.steps,
+            "events": self.stop,
+        }
 
 
 class RecentEpisodes:
@@ -80,8 +83,9 @@ class RecentEpisodes:
 
     __slots__ = ("_events", "_kept", "_next_id", "keep", "keeping", "max_events")
 
-    def __init__(self, keep: int = KEEP_EPISODES, max_events: int = KEEP_EVENTS,
-                 eager: bool = False) -> None:
+    def __init__(
+        self, keep: int = KEEP_EPISODES, max_events: int = KEEP_EVENTS, eager: bool = False
+    ) -> None:
         if keep < 0:
             raise ValueError(f"keep_episodes must be >= 0 (0: keep none), got {keep}")
         if max_events < 0:
@@ -105,8 +109,13 @@ class RecentEpisodes:
         A log that is kept must not be used again: the instance starts the next episode in a
         new one.
         """
-        if not self.keeping or log.overflowed or log.timed or \
-                len(log.events) > self.max_events or not _acted(log.events):
+        if (
+            not self.keeping
+            or log.overflowed
+            or log.timed
+            or len(log.events) > self.max_events
+            or not _acted(log.events)
+        ):
             return False
         kept = _Kept(self._next_id, log, terminated, truncated)
         self._next_id += 1
@@ -134,8 +143,11 @@ class RecentEpisodes:
         if kept is None:
             return None
         stop = min(kept.stop, start + PAGE_EVENTS)
-        return {**kept.entry(), "from": start,
-                "snapshot": kept.log.snapshot(slice(min(start, stop), stop))}
+        return {
+            **kept.entry(),
+            "from": start,
+            "snapshot": kept.log.snapshot(slice(min(start, stop), stop)),
+        }
 
     def to_wire(self, last: int | None = None) -> list[dict[str, Any]]:
         """The kept episodes (the ``last`` ones only, if given), oldest first, whole (2.5).
@@ -152,13 +164,23 @@ class RecentEpisodes:
             kept = kept[-last:]
         events = sum(entry.stop for entry in kept)
         if events > WHOLE_EVENTS:
-            raise RequestError(ErrorCode.BAD_REQUEST, f"these episodes hold {events:,} events, "
-                               f"more than one answer carries ({WHOLE_EVENTS:,}); ask for "
-                               "fewer (last), or page them (protocol 2.6: {\"index\": true}, "
-                               "then {\"episode\": ID, \"from\": K})")
-        return [{"snapshot": entry.log.snapshot(slice(0, entry.stop)), "id": entry.id,
-                 "terminated": entry.terminated, "truncated": entry.truncated,
-                 "steps": entry.steps} for entry in kept]
+            raise RequestError(
+                ErrorCode.BAD_REQUEST,
+                f"these episodes hold {events:,} events, "
+                f"more than one answer carries ({WHOLE_EVENTS:,}); ask for "
+                'fewer (last), or page them (protocol 2.6: {"index": true}, '
+                'then {"episode": ID, "from": K})',
+            )
+        return [
+            {
+                "snapshot": entry.log.snapshot(slice(0, entry.stop)),
+                "id": entry.id,
+                "terminated": entry.terminated,
+                "truncated": entry.truncated,
+                "steps": entry.steps,
+            }
+            for entry in kept
+        ]
 
 
 def _acted(events: list[list[Any]]) -> bool:

@@ -51,11 +51,13 @@ class Roster:
         if not environment.agents and environment.agent is not None:
             environment.agents = [environment.agent]
         if not environment.agents:
-            raise RuntimeError(f"{environment!r} has no agent: add an RLAgent child or set "
-                               "self.agent")
+            raise RuntimeError(
+                f"{environment!r} has no agent: add an RLAgent child or set self.agent"
+            )
         if environment.world is None:
-            raise RuntimeError(f"{environment!r} has no world: add an RLEnvWorld child or set "
-                               "self.world")
+            raise RuntimeError(
+                f"{environment!r} has no world: add an RLEnvWorld child or set self.world"
+            )
         for agent in environment.agents:
             for attribute in ("action_space", "observation_space"):
                 if not isinstance(getattr(agent, attribute, None), spaces.Space):
@@ -90,8 +92,9 @@ class Roster:
     def joint_end(self) -> tuple[bool, bool]:
         """The episode's flags (terminated, truncated), as an answer reports them."""
         if self.several:
-            terminated, truncated = joint_end([(agent.terminated, agent.truncated)
-                                                for agent in self.agents])
+            terminated, truncated = joint_end(
+                [(agent.terminated, agent.truncated) for agent in self.agents]
+            )
             return bool(terminated), bool(truncated)
         agent = self.agents[0]
         return bool(agent.terminated), bool(agent.truncated)
@@ -111,11 +114,16 @@ class Roster:
                 agent.reward = 0.0
             return reward, bool(agent.terminated), bool(agent.truncated), None
         outcomes: dict[str, dict[str, Any]] = {
-            each.name: {"reward": float(each.reward) if reports else 0.0,
-                        "terminated": bool(each.terminated), "truncated": bool(each.truncated)}
-            for each in agents}
-        terminated, truncated = joint_end([(o["terminated"], o["truncated"])
-                                            for o in outcomes.values()])
+            each.name: {
+                "reward": float(each.reward) if reports else 0.0,
+                "terminated": bool(each.terminated),
+                "truncated": bool(each.truncated),
+            }
+            for each in agents
+        }
+        terminated, truncated = joint_end(
+            [(o["terminated"], o["truncated"]) for o in outcomes.values()]
+        )
         if reports:
             self.clear_rewards()
         return sum(o["reward"] for o in outcomes.values()), terminated, truncated, outcomes

@@ -77,8 +77,7 @@ class Settings:
                 except RequestError as error:
                     if part != "agent" or not self._instance.multi_agent:
                         raise
-                    raise RequestError(error.code, f"config.agent: {node.name}: {error}") \
-                        from None
+                    raise RequestError(error.code, f"config.agent: {node.name}: {error}") from None
 
     def configure(self, config: Mapping[str, Any]) -> None:
         """Apply a checked ``config`` part through the environment's ``_configure``.
@@ -135,8 +134,9 @@ class Settings:
                 try:
                     node.configure(own)
                 except Exception as error:  # user code: what it keeps is its own
-                    logger.error("could not undo the configuration of %s", node.get_path(),
-                                 exc_info=error)
+                    logger.error(
+                        "could not undo the configuration of %s", node.get_path(), exc_info=error
+                    )
 
     def state(self) -> dict[str, dict[str, Any]]:
         """The current value of everything a client may configure (for snapshots).
@@ -152,8 +152,9 @@ class Settings:
         instance = self._instance
         if readers is None or not readers.fit(instance.environment, instance.agents):
             readers = self._readers = _Readers(self._nodes(), instance.multi_agent)
-        return Captured(readers.parts, readers.keys,
-                        tuple([read(node) for node, read in readers.nodes]))
+        return Captured(
+            readers.parts, readers.keys, tuple([read(node) for node, read in readers.nodes])
+        )
 
     def record(self, name: str) -> None:
         """Record the environment's frames into ``name`` in the record directory (``""``: stop)."""
@@ -162,8 +163,9 @@ class Settings:
             self.recorder = None
         if name:
             assert self.record_dir is not None
-            self.recorder = VideoRecorder(self.record_dir / name,
-                                          self._instance.tree.physics_ticks_per_second)
+            self.recorder = VideoRecorder(
+                self.record_dir / name, self._instance.tree.physics_ticks_per_second
+            )
 
     def _nodes(self) -> dict[str, list[Any]]:
         instance = self._instance
@@ -173,8 +175,9 @@ class Settings:
             parts["world"] = [environment.world]
         return parts
 
-    def _reached(self, part: str,
-                 settings: Mapping[str, Any]) -> list[tuple[Any, Mapping[str, Any]]]:
+    def _reached(
+        self, part: str, settings: Mapping[str, Any]
+    ) -> list[tuple[Any, Mapping[str, Any]]]:
         """Each node a part's ``settings`` reach, with the settings it gets."""
         if part == "agent":
             return agent_settings(self._instance.agents, settings)
@@ -200,8 +203,9 @@ class Settings:
         return rest
 
 
-def agent_settings(agents: list[Any],
-                   settings: Mapping[str, Any]) -> list[tuple[Any, Mapping[str, Any]]]:
+def agent_settings(
+    agents: list[Any], settings: Mapping[str, Any]
+) -> list[tuple[Any, Mapping[str, Any]]]:
     """Each agent a ``config.agent`` map reaches, with its own settings (module docstring).
 
     A map of settings only reaches every agent, as it always did; a map that names a class or
@@ -221,8 +225,10 @@ def agent_settings(agents: list[Any],
         if key in names or key in classes:
             kind = "agent" if key in names else "class"
             if not isinstance(value, Mapping):
-                raise RequestError(ErrorCode.BAD_REQUEST,
-                                   f"config.agent.{key} must be a map of that {kind}'s settings")
+                raise RequestError(
+                    ErrorCode.BAD_REQUEST,
+                    f"config.agent.{key} must be a map of that {kind}'s settings",
+                )
             (by_name if kind == "agent" else by_class)[key] = value
         elif any(key in agent.configurable for agent in agents):
             common[key] = value
@@ -233,13 +239,13 @@ def agent_settings(agents: list[Any],
                 f"config.agent has no setting or agent {key!r:.40}; its settings: "
                 f"{', '.join(known) or 'none'}; its agents: "
                 f"{', '.join(agent.name for agent in agents)} (classes: "
-                f"{', '.join(sorted(classes))})")
+                f"{', '.join(sorted(classes))})",
+            )
     if not by_class and not by_name:
         return [(agent, common) for agent in agents]
     reached: list[tuple[Any, Mapping[str, Any]]] = []
     for agent in agents:
-        merged = {**common, **by_class.get(type(agent).__name__, {}),
-                  **by_name.get(agent.name, {})}
+        merged = {**common, **by_class.get(type(agent).__name__, {}), **by_name.get(agent.name, {})}
         if merged:
             reached.append((agent, merged))
     return reached
@@ -268,9 +274,12 @@ class Captured:
 
     __slots__ = ("keys", "parts", "values")
 
-    def __init__(self, parts: tuple[str, ...],
-                 keys: tuple[tuple[str, str | None, tuple[str, ...]], ...],
-                 values: tuple[tuple[Any, ...], ...]) -> None:
+    def __init__(
+        self,
+        parts: tuple[str, ...],
+        keys: tuple[tuple[str, str | None, tuple[str, ...]], ...],
+        values: tuple[tuple[Any, ...], ...],
+    ) -> None:
         self.parts, self.keys, self.values = parts, keys, values
 
     def state(self) -> dict[str, dict[str, Any]]:
@@ -296,8 +305,11 @@ class _Readers:
     def __init__(self, parts: dict[str, list[Any]], by_name: bool) -> None:
         agents = parts["agent"]
         read = [("environment", None, parts["environment"][0])]
-        read += [("agent", agent.name, agent) for agent in agents if agent.configurable] \
-            if by_name else [("agent", None, agents[0])]
+        read += (
+            [("agent", agent.name, agent) for agent in agents if agent.configurable]
+            if by_name
+            else [("agent", None, agents[0])]
+        )
         if "world" in parts:
             read.append(("world", None, parts["world"][0]))
         self.parts = tuple(parts)
@@ -306,14 +318,19 @@ class _Readers:
         self.configurables = [node.configurable for _, _, node in read]
         self.agent_configurables = [agent.configurable for agent in agents]
         self.keys = tuple((part, name, tuple(node.configurable)) for part, name, node in read)
-        self.nodes = tuple((node, _reader(keys)) for (_, _, node), (_, _, keys) in
-                           zip(read, self.keys, strict=True))
+        self.nodes = tuple(
+            (node, _reader(keys))
+            for (_, _, node), (_, _, keys) in zip(read, self.keys, strict=True)
+        )
 
     def fit(self, environment: Any, agents: list[Any]) -> bool:
         """Whether these are still the nodes: the same world and agents, their keys the same."""
         world = environment.world
-        if world is not self.world or self.configurables[0] is not environment.configurable or \
-                agents != self.agents:
+        if (
+            world is not self.world
+            or self.configurables[0] is not environment.configurable
+            or agents != self.agents
+        ):
             return False
         for agent, configurable in zip(agents, self.agent_configurables, strict=True):
             if agent.configurable is not configurable:  # a loop: asked at every reset
@@ -337,11 +354,17 @@ def _check_recording(name: Any, record_dir: Path | None) -> None:
     if not name:
         return
     if record_dir is None:
-        raise RequestError(ErrorCode.INVALID_CONFIG, "recording is disabled on this server; "
-                           "start it with rlenv serve --record-dir DIR")
+        raise RequestError(
+            ErrorCode.INVALID_CONFIG,
+            "recording is disabled on this server; start it with rlenv serve --record-dir DIR",
+        )
     if Path(name).name != name or name.startswith("."):
-        raise RequestError(ErrorCode.INVALID_CONFIG, f"record must be a plain file name in the "
-                           f"server's record directory, got {name!r:.60}")
+        raise RequestError(
+            ErrorCode.INVALID_CONFIG,
+            f"record must be a plain file name in the server's record directory, got {name!r:.60}",
+        )
     if Path(name).suffix not in _VIDEO_SUFFIXES:
-        raise RequestError(ErrorCode.INVALID_CONFIG, f"record must end with one of "
-                           f"{', '.join(sorted(_VIDEO_SUFFIXES))}, got {name!r:.60}")
+        raise RequestError(
+            ErrorCode.INVALID_CONFIG,
+            f"record must end with one of {', '.join(sorted(_VIDEO_SUFFIXES))}, got {name!r:.60}",
+        )

@@ -57,8 +57,7 @@ class EpisodeLog:
         """The configuration at the reset (``{}`` before the first)."""
         return {} if self._config is None else self._config.state()
 
-    def begin(self, config: Captured, rng: np.random.Generator,
-              options: Mapping[str, Any]) -> None:
+    def begin(self, config: Captured, rng: np.random.Generator, options: Mapping[str, Any]) -> None:
         """A reset: remember the configuration and the generator as they are now."""
         self._config = config  # as a map only when a snapshot asks
         self._rng_state = rng.bit_generator.state  # as JSON only when a snapshot asks
@@ -98,9 +97,13 @@ class EpisodeLog:
                 ``None``.
         """
         self.check_snapshot()
-        return {"version": SNAPSHOT_VERSION, "config": self.config,
-                "rng": json.dumps(self._rng_state), "options": self.options,
-                "events": list(self.events) if events is None else self.events[events]}
+        return {
+            "version": SNAPSHOT_VERSION,
+            "config": self.config,
+            "rng": json.dumps(self._rng_state),
+            "options": self.options,
+            "events": list(self.events) if events is None else self.events[events],
+        }
 
     def check_snapshot(self) -> None:
         """Refuse a snapshot that cannot be taken.
@@ -110,12 +113,16 @@ class EpisodeLog:
                 episode has more than :data:`MAX_EVENTS` events.
         """
         if not self.started:
-            raise RequestError(ErrorCode.RESET_REQUIRED, "no episode has started; nothing to "
-                               "snapshot")
+            raise RequestError(
+                ErrorCode.RESET_REQUIRED, "no episode has started; nothing to snapshot"
+            )
         if self.overflowed:
-            raise RequestError(ErrorCode.BAD_REQUEST, f"this episode is too long to snapshot: "
-                               f"more than {MAX_EVENTS:,} actions and changes since its reset "
-                               "(snapshot earlier, or reset)")
+            raise RequestError(
+                ErrorCode.BAD_REQUEST,
+                f"this episode is too long to snapshot: "
+                f"more than {MAX_EVENTS:,} actions and changes since its reset "
+                "(snapshot earlier, or reset)",
+            )
 
 
 def generator_from_state(state: str) -> np.random.Generator:
@@ -129,6 +136,5 @@ def generator_from_state(state: str) -> np.random.Generator:
         bit_generator = _BIT_GENERATORS[parsed["bit_generator"]]()
         bit_generator.state = parsed
     except (ValueError, TypeError, KeyError, OverflowError) as error:
-        raise RequestError(ErrorCode.BAD_REQUEST, f"restore: invalid rng state ({error})") \
-            from None
+        raise RequestError(ErrorCode.BAD_REQUEST, f"restore: invalid rng state ({error})") from None
     return np.random.Generator(bit_generator)

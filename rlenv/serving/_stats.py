@@ -26,8 +26,19 @@ class EpisodeStats:
         agents: the agents' names when there are several (returns are then kept per agent).
     """
 
-    __slots__ = ("_agents", "_length", "_open", "_return", "_returns", "_steps", "_ticks",
-                 "_total_ticks", "episodes", "errors", "finished")
+    __slots__ = (
+        "_agents",
+        "_length",
+        "_open",
+        "_return",
+        "_returns",
+        "_steps",
+        "_ticks",
+        "_total_ticks",
+        "episodes",
+        "errors",
+        "finished",
+    )
 
     def __init__(self, agents: list[str] | None = None) -> None:
         self._agents = agents
@@ -80,13 +91,22 @@ class EpisodeStats:
     def since(self, first: int) -> dict[str, Any]:
         """The finished episodes numbered ``first`` and later (those still kept), and totals."""
         skip = max(first - (self.episodes - len(self.finished)), 0)
-        return {"episodes": list(islice(self.finished, skip, None)), "next": self.episodes,
-                "steps": self._steps + self._length, "ticks": self._total_ticks + self._ticks,
-                "errors": self.errors, "current": self._current() if self._open else None}
+        return {
+            "episodes": list(islice(self.finished, skip, None)),
+            "next": self.episodes,
+            "steps": self._steps + self._length,
+            "ticks": self._total_ticks + self._ticks,
+            "errors": self.errors,
+            "current": self._current() if self._open else None,
+        }
 
     def _current(self) -> dict[str, Any]:
         """The episode under way: its return (per agent too), length and ticks."""
         if self._agents:
-            return {"return": sum(self._returns.values()), "length": self._length,
-                    "ticks": self._ticks, "returns": dict(self._returns)}
+            return {
+                "return": sum(self._returns.values()),
+                "length": self._length,
+                "ticks": self._ticks,
+                "returns": dict(self._returns),
+            }
         return {"return": self._return, "length": self._length, "ticks": self._ticks}

@@ -27,8 +27,7 @@ class Config(Part):
     name = "config"
     takes_control = True
 
-    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
-              where: str) -> Any:
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool, where: str) -> Any:
         config = as_map(parts["config"], "config", where)
         instance.settings.check(config)
         return config
@@ -44,8 +43,7 @@ class Reset(Part):
     takes_control = True
     _KEYS = frozenset({"seed", "options"})
 
-    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
-              where: str) -> Any:
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool, where: str) -> Any:
         reset = as_map(parts["reset"], "reset", where)
         check_keys(reset, self._KEYS, "reset")
         seed, options = reset.get("seed"), reset.get("options")
@@ -75,8 +73,10 @@ def check_options(instance: Instance, options: Mapping[str, Any], where: str) ->
         for key in options:
             if key not in declared:
                 accepted = ", ".join(map(str, declared)) or "none"
-                raise bad(f"{where}: {type(environment).__name__} has no reset option "
-                           f"{str(key)!r:.60}; it accepts {accepted}")
+                raise bad(
+                    f"{where}: {type(environment).__name__} has no reset option "
+                    f"{str(key)!r:.60}; it accepts {accepted}"
+                )
     if "level" in options:
         try:
             check_size(options["level"])
@@ -99,21 +99,23 @@ class Action(Part):
     def controls(self, value: Any) -> bool:
         return value is not None  # nil: no action
 
-    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
-              where: str) -> Any:
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool, where: str) -> Any:
         action = parts["action"]
         if action is None:  # nil: no action
             return None
         if not fresh and instance.state is not _RUNNING:
             instance.check_can_act()  # refuses
-        return instance.checked_action(action, fresh,
-                                       heuristic=frozenset(parts.get("heuristic") or ()))
+        return instance.checked_action(
+            action, fresh, heuristic=frozenset(parts.get("heuristic") or ())
+        )
 
     def apply(self, instance: Instance, value: Any, request: Plan) -> None:
         if value is not None:
-            instance.act(value, request.get("repeat_action") or
-                         instance.environment.repeat_action,
-                         request.get("heuristic") or frozenset())
+            instance.act(
+                value,
+                request.get("repeat_action") or instance.environment.repeat_action,
+                request.get("heuristic") or frozenset(),
+            )
             instance.answer.acted = True  # type: ignore[union-attr]
 
 
@@ -122,8 +124,7 @@ class RepeatAction(Part):
 
     name = "repeat_action"
 
-    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
-              where: str) -> Any:
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool, where: str) -> Any:
         repeat = check_repeat_action(parts["repeat_action"], f"{where}'repeat_action'")
         if parts.get("action") is None:
             raise bad(f"{where}'repeat_action' given without an 'action'")
@@ -137,8 +138,7 @@ class Observation(Part):
     _KEYS = frozenset({"agent", "world", "render", "draw"})
     _RENDER_KEYS = frozenset({"width", "height"})
 
-    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool,
-              where: str) -> Any:
+    def check(self, instance: Instance, parts: Mapping[str, Any], fresh: bool, where: str) -> Any:
         observation = parts["observation"]
         if observation.__class__ is not dict:
             observation = as_map(observation, "observation", where)
@@ -161,8 +161,10 @@ class Observation(Part):
         check_keys(size, self._RENDER_KEYS, "observation.render")
         for key, value in size.items():
             if type(value) is not int or not 1 <= value <= MAX_RENDER_SIZE:
-                raise bad(f"observation.render.{key} must be an integer in "
-                           f"[1, {MAX_RENDER_SIZE}], got {value!r:.40}")
+                raise bad(
+                    f"observation.render.{key} must be an integer in "
+                    f"[1, {MAX_RENDER_SIZE}], got {value!r:.40}"
+                )
 
     def apply(self, instance: Instance, value: Any, request: Plan) -> None:
         instance.send_response(value)

@@ -20,13 +20,17 @@ def explain_target_error(error: Exception, target: str) -> str | None:
     module_name, _, class_name = target.partition(":")
     if module_name.endswith(".py") or "/" in module_name or "\\" in module_name:
         dotted = module_name.replace("\\", "/").removeprefix("./").removesuffix(".py")
-        return (f"{target!r} names a file; MODULE:CLASS names a module as Python imports it: "
-                f"drop .py ({dotted.replace('/', '.')}:{class_name})")
+        return (
+            f"{target!r} names a file; MODULE:CLASS names a module as Python imports it: "
+            f"drop .py ({dotted.replace('/', '.')}:{class_name})"
+        )
     if isinstance(error, ModuleNotFoundError):
         if error.name is None or not f"{module_name}.".startswith(f"{error.name}."):
             return None  # the module itself imports something missing: the message says what
-        return (f"{error}: run rlenv from the folder that holds the module, or put that folder "
-                "on PYTHONPATH")
+        return (
+            f"{error}: run rlenv from the folder that holds the module, or put that folder "
+            "on PYTHONPATH"
+        )
     module = sys.modules.get(canonical_name(module_name))
     if not isinstance(error, ImportError) or module is None or hasattr(module, class_name):
         return None

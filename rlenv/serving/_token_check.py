@@ -50,8 +50,10 @@ class TokenCheck:
             return None, 0.0
         if token is None:
             logger.warning("client %s: refused, no token", peer.address)
-            return "this server requires a token: pass token=... to the client (or set " \
-                   "RLENV_TOKEN)", 0.0
+            return (
+                "this server requires a token: pass token=... to the client (or set RLENV_TOKEN)",
+                0.0,
+            )
         if not hmac.compare_digest(token.encode(), self._token.encode()):
             return "wrong token", self._penalties.failed(peer.host)
         return None, 0.0

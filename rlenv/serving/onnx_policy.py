@@ -27,8 +27,15 @@ from gymnasium import spaces
 
 from rlenv.protocol.space_json import space_from_json
 
-__all__ = ["ACTION_SPACE_KEY", "OBSERVATION_SPACE_KEY", "POLICY_DEADLINE", "POLICY_MEMORY",
-           "OnnxPolicy", "PolicyError", "fit_action"]
+__all__ = [
+    "ACTION_SPACE_KEY",
+    "OBSERVATION_SPACE_KEY",
+    "POLICY_DEADLINE",
+    "POLICY_MEMORY",
+    "OnnxPolicy",
+    "PolicyError",
+    "fit_action",
+]
 
 OBSERVATION_SPACE_KEY = "rlenv.observation_space"
 """The metadata key of the observation space (its spec, as JSON)."""
@@ -71,14 +78,15 @@ class OnnxPolicy:
         try:
             import onnxruntime
         except ImportError as error:
-            raise ImportError(f"a policy file needs onnxruntime ({error}); install the onnx "
-                              "extra: pip install 'rlenv[onnx]'") from None
+            raise ImportError(
+                f"a policy file needs onnxruntime ({error}); install the onnx "
+                "extra: pip install 'rlenv[onnx]'"
+            ) from None
         self.path = Path(path)
         try:
             model = self.path.read_bytes()
         except OSError as error:
-            raise ValueError(f"cannot read the policy {path}: {error.strerror or error}") \
-                from None
+            raise ValueError(f"cannot read the policy {path}: {error.strerror or error}") from None
         options = onnxruntime.SessionOptions()
         options.intra_op_num_threads = options.inter_op_num_threads = 1
         options.log_severity_level = 4  # fatal only: failures are ours to report, once
@@ -86,24 +94,25 @@ class OnnxPolicy:
         options.add_session_config_entry("session.use_env_allocators", "1")
         try:
             self._session = onnxruntime.InferenceSession(
-                model, options, providers=["CPUExecutionProvider"])
+                model, options, providers=["CPUExecutionProvider"]
+            )
         except Exception as error:  # onnxruntime's own exception types
             reason = " ".join(str(error).split())[:200]
             raise ValueError(f"{path} is not an ONNX model ({reason})") from None
         metadata = self._session.get_modelmeta().custom_metadata_map
-        missing = [key for key in (OBSERVATION_SPACE_KEY, ACTION_SPACE_KEY)
-                   if key not in metadata]
+        missing = [key for key in (OBSERVATION_SPACE_KEY, ACTION_SPACE_KEY) if key not in metadata]
         if missing:
-            raise ValueError(f"{path} holds no {missing[0]} in its metadata; export it with "
-                             "rlenv_tools.policies.export_onnx")
+            raise ValueError(
+                f"{path} holds no {missing[0]} in its metadata; export it with "
+                "rlenv_tools.policies.export_onnx"
+            )
         try:
             self.observation_space = space_from_json(metadata[OBSERVATION_SPACE_KEY])
             self.action_space = space_from_json(metadata[ACTION_SPACE_KEY])
         except ValueError as error:
             raise ValueError(f"{path}: its metadata's space is unreadable: {error}") from None
         inputs, outputs = self._session.get_inputs(), self._session.get_outputs()
-        if [i.name for i in inputs] != ["observation"] or "action" not in \
-                [o.name for o in outputs]:
+        if [i.name for i in inputs] != ["observation"] or "action" not in [o.name for o in outputs]:
             raise ValueError(f"{path} must take one input 'observation' and give 'action'")
         self._dtype = np.dtype(self.observation_space.dtype)
         self._output = ["action"]
@@ -125,8 +134,10 @@ class OnnxPolicy:
                 return np.asarray(self._session.run(self._output, feed, options)[0])
         except Exception as error:  # onnxruntime's own exception types
             if options.terminate:
-                raise PolicyError(f"policy {self.path.name} ran past its deadline of "
-                                  f"{POLICY_DEADLINE} s and was stopped") from None
+                raise PolicyError(
+                    f"policy {self.path.name} ran past its deadline of "
+                    f"{POLICY_DEADLINE} s and was stopped"
+                ) from None
             reason = " ".join(str(error).split())
             raise PolicyError(f"policy {self.path.name} failed: {reason[-200:]}") from None
 
@@ -138,22 +149,29 @@ class OnnxPolicy:
         """
         actions = self.run(np.asarray(observation, self._dtype)[None])
         if actions.ndim == 0 or len(actions) != 1:
-            raise PolicyError(f"policy {self.path.name} gave {_shape(actions)} for one "
-                              "observation; its first dimension must be the batch's (1)")
+            raise PolicyError(
+                f"policy {self.path.name} gave {_shape(actions)} for one "
+                "observation; its first dimension must be the batch's (1)"
+            )
         return fit_action(self.action_space, actions[0], f"policy {self.path.name}")
 
-    def check_spaces(self, agent: str, observation_space: spaces.Space,
-                     action_space: spaces.Space) -> None:
+    def check_spaces(
+        self, agent: str, observation_space: spaces.Space, action_space: spaces.Space
+    ) -> None:
         """Refuse to drive ``agent`` unless its spaces are the file's, bounds and dtype included.
 
         Raises:
             ValueError: one line naming the agent, the file, and both spaces that differ.
         """
-        for which, theirs, ours in (("observation", observation_space, self.observation_space),
-                                    ("action", action_space, self.action_space)):
+        for which, theirs, ours in (
+            ("observation", observation_space, self.observation_space),
+            ("action", action_space, self.action_space),
+        ):
             if not _same(theirs, ours):
-                raise ValueError(f"--policy {agent}={self.path}: the file's {which} space is "
-                                 f"{_one_line(ours)}, agent {agent!r}'s is {_one_line(theirs)}")
+                raise ValueError(
+                    f"--policy {agent}={self.path}: the file's {which} space is "
+                    f"{_one_line(ours)}, agent {agent!r}'s is {_one_line(theirs)}"
+                )
 
 
 def fit_action(space: spaces.Space, action: Any, who: str = "the policy") -> Any:
@@ -170,28 +188,29 @@ def fit_action(space: spaces.Space, action: Any, who: str = "the policy") -> Any
     if isinstance(space, spaces.Box):
         values = np.asarray(action)
         if values.shape != space.shape or values.dtype.kind not in "biuf":
-            raise PolicyError(f"{who} gave {_shape(values)}; its action space is "
-                              f"{_one_line(space)}")
+            raise PolicyError(
+                f"{who} gave {_shape(values)}; its action space is {_one_line(space)}"
+            )
         if values.dtype.kind == "f" and values.size and math.isnan(values.min()):  # NaN wins
-            raise PolicyError(f"{who} gave NaN in its action; no action of {_one_line(space)} "
-                              "is NaN")
-        return np.minimum(np.maximum(values, space.low), space.high).astype(space.dtype,
-                                                                            copy=False)
+            raise PolicyError(
+                f"{who} gave NaN in its action; no action of {_one_line(space)} is NaN"
+            )
+        return np.minimum(np.maximum(values, space.low), space.high).astype(space.dtype, copy=False)
     if isinstance(space, spaces.Discrete):
         values = np.asarray(action)
         if values.size == 1 and values.dtype.kind in "biuf":
             value = values.reshape(()).item()
             if float(value).is_integer() and space.start <= value < space.start + space.n:
                 return int(value)
-        raise PolicyError(f"{who} gave {_shape(values)}; its action space is "
-                          f"{_one_line(space)}")
+        raise PolicyError(f"{who} gave {_shape(values)}; its action space is {_one_line(space)}")
     try:
         member = space.contains(action)
     except Exception:  # an action of another kind altogether
         member = False
     if not member:
-        raise PolicyError(f"{who} gave {_shape(np.asarray(action))}, not an action of "
-                          f"{_one_line(space)}")
+        raise PolicyError(
+            f"{who} gave {_shape(np.asarray(action))}, not an action of {_one_line(space)}"
+        )
     return action
 
 
@@ -240,10 +259,15 @@ def _share_bounded_arena(onnxruntime: Any) -> None:
     with _arena_lock:
         if _arena_shared:
             return
-        memory = onnxruntime.OrtMemoryInfo("Cpu", onnxruntime.OrtAllocatorType.ORT_ARENA_ALLOCATOR,
-                                           0, onnxruntime.OrtMemType.DEFAULT)
+        memory = onnxruntime.OrtMemoryInfo(
+            "Cpu",
+            onnxruntime.OrtAllocatorType.ORT_ARENA_ALLOCATOR,
+            0,
+            onnxruntime.OrtMemType.DEFAULT,
+        )
         onnxruntime.create_and_register_allocator(
-            memory, onnxruntime.OrtArenaCfg(POLICY_MEMORY, -1, -1, -1))
+            memory, onnxruntime.OrtArenaCfg(POLICY_MEMORY, -1, -1, -1)
+        )
         _arena_shared = True
 
 
@@ -259,8 +283,9 @@ def _same(first: spaces.Space, second: spaces.Space) -> bool:
     if type(first) is not type(second) or first != second or first.dtype != second.dtype:
         return False
     if isinstance(first, spaces.Box) and isinstance(second, spaces.Box):  # (the same type)
-        return bool(np.array_equal(first.low, second.low) and
-                    np.array_equal(first.high, second.high))
+        return bool(
+            np.array_equal(first.low, second.low) and np.array_equal(first.high, second.high)
+        )
     return True
 
 

@@ -44,9 +44,11 @@ class HostPerClient:
         self._spare: Host | None = build()  # proves the environment loads; the first client's
         if self._spare.driver is not None:
             self._spare.close()
-            raise ValueError("--policy drives every agent, so the server plays its episodes "
-                             "itself and no client controls them: leave out --per-client, or "
-                             "drive fewer agents")
+            raise ValueError(
+                "--policy drives every agent, so the server plays its episodes "
+                "itself and no client controls them: leave out --per-client, or "
+                "drive fewer agents"
+            )
         self.hello = self._spare.hello
         self._hosts: dict[Peer, Host] = {}
 
@@ -75,14 +77,21 @@ class HostPerClient:
             host = self._spare or self._build()
         except Exception as error:  # the environment failed to build: this client is told
             logger.exception("no environment for client %s", peer.address)
-            endpoint.reply(peer, ErrorReply(request.id, ErrorCode.ENVIRONMENT_ERROR,
-                                            f"the server could not build an environment for "
-                                            f"this client: {error}", fatal=True))
+            endpoint.reply(
+                peer,
+                ErrorReply(
+                    request.id,
+                    ErrorCode.ENVIRONMENT_ERROR,
+                    f"the server could not build an environment for this client: {error}",
+                    fatal=True,
+                ),
+            )
             return None
         self._spare = None
         self._hosts[peer] = host
-        logger.info("client %s has an environment of its own (%d clients)", peer.address,
-                    len(self._hosts))
+        logger.info(
+            "client %s has an environment of its own (%d clients)", peer.address, len(self._hosts)
+        )
         return host
 
     def _dropped(self, peer: Peer) -> None:
@@ -91,8 +100,9 @@ class HostPerClient:
             host.close()
 
     def _time_to_next_tick(self) -> float | None:
-        waits = [wait for host in self._hosts.values()
-                 if (wait := host.time_to_next_tick()) is not None]
+        waits = [
+            wait for host in self._hosts.values() if (wait := host.time_to_next_tick()) is not None
+        ]
         return min(waits, default=None)
 
     def close(self) -> None:

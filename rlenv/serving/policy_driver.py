@@ -46,8 +46,7 @@ from rlenv.protocol.errors import ErrorCode
 from rlenv.protocol.spaces import SpaceMismatch, compile_check
 from rlenv.serving.onnx_policy import OnnxPolicy, PolicyError, fit_action
 
-__all__ = ["FAILURE_PAUSE", "HEURISTIC", "DrivenAgents", "Policy", "PolicyDriver",
-           "load_policies"]
+__all__ = ["FAILURE_PAUSE", "HEURISTIC", "DrivenAgents", "Policy", "PolicyDriver", "load_policies"]
 
 logger = logging.getLogger(__name__)
 
@@ -70,8 +69,10 @@ def load_policies(policies: Mapping[str, str | Path]) -> dict[str, Policy]:
         ImportError: a file, and no onnxruntime.
         ValueError: a file that cannot be read or is not an rlenv policy (one line).
     """
-    return {agent: HEURISTIC if path == HEURISTIC else OnnxPolicy(path)
-            for agent, path in policies.items()}
+    return {
+        agent: HEURISTIC if path == HEURISTIC else OnnxPolicy(path)
+        for agent, path in policies.items()
+    }
 
 
 class DrivenAgents:
@@ -94,25 +95,32 @@ class DrivenAgents:
             agent = by_name.get(name)
             if agent is None:
                 what = policy if policy == HEURISTIC else policy.path
-                raise ValueError(f"--policy {name}={what}: the environment has no agent "
-                                 f"{name!r}; its agents: {', '.join(names)}")
+                raise ValueError(
+                    f"--policy {name}={what}: the environment has no agent "
+                    f"{name!r}; its agents: {', '.join(names)}"
+                )
             if policy == HEURISTIC:
                 if not agent.has_heuristic():
                     cls = type(agent).__name__
-                    raise ValueError(f"--policy {name}=heuristic: agent {name!r} (class {cls}) "
-                                     f"has no heuristic; define {cls}.heuristic(observation)")
+                    raise ValueError(
+                        f"--policy {name}=heuristic: agent {name!r} (class {cls}) "
+                        f"has no heuristic; define {cls}.heuristic(observation)"
+                    )
             else:
-                policy.check_spaces(
-                    name, agent.observation_space, agent.action_space)
+                policy.check_spaces(name, agent.observation_space, agent.action_space)
         self.policies = dict(policies)
         self.names = frozenset(policies)
         self.every_agent = self.names == set(names)
-        self._checks = {name: compile_check(by_name[name].action_space, "action")
-                        for name, policy in policies.items() if policy == HEURISTIC}
+        self._checks = {
+            name: compile_check(by_name[name].action_space, "action")
+            for name, policy in policies.items()
+            if policy == HEURISTIC
+        }
         self._failed: set[str] = set()  # agents whose policy failure was logged
 
-    def actions(self, agents: Sequence[RLAgent],
-                only: Collection[str] | None = None) -> dict[str, Any]:
+    def actions(
+        self, agents: Sequence[RLAgent], only: Collection[str] | None = None
+    ) -> dict[str, Any]:
         """The driven agents' actions (those still in the episode, of ``only`` if given).
 
         A policy file's is checked against its agent's action space (clipped into a ``Box``);
@@ -123,8 +131,11 @@ class DrivenAgents:
                 no action of its space; the first failure of each agent is logged.
         """
         names = self.names if only is None else self.names & set(only)
-        return {agent.name: self._action(agent, self.policies[agent.name]) for agent in agents
-                if agent.name in names and not (agent.terminated or agent.truncated)}
+        return {
+            agent.name: self._action(agent, self.policies[agent.name])
+            for agent in agents
+            if agent.name in names and not (agent.terminated or agent.truncated)
+        }
 
     def _action(self, agent: RLAgent, policy: Policy) -> Any:
         who = f"agent {agent.name!r}"
@@ -135,8 +146,10 @@ class DrivenAgents:
         except PolicyError as error:
             failure = PolicyError(error if policy == HEURISTIC else f"{who}: {error}")
         except Exception as error:  # the policy's code, or the environment's observation
-            failure = PolicyError(f"{who}: its {'heuristic' if policy == HEURISTIC else 'policy'} "
-                                  f"failed: {type(error).__name__}: {error}")
+            failure = PolicyError(
+                f"{who}: its {'heuristic' if policy == HEURISTIC else 'policy'} "
+                f"failed: {type(error).__name__}: {error}"
+            )
         else:
             try:
                 return fit_action(agent.action_space, action, f"{who}: its policy")
@@ -152,9 +165,11 @@ class DrivenAgents:
         try:
             return self._checks[agent.name](action)
         except SpaceMismatch as error:
-            raise PolicyError(f"{type(agent).__name__}.heuristic of agent {agent.name!r} gave "
-                              f"{action!r:.80}, not an action of {agent.action_space}: "
-                              f"{error}") from None
+            raise PolicyError(
+                f"{type(agent).__name__}.heuristic of agent {agent.name!r} gave "
+                f"{action!r:.80}, not an action of {agent.action_space}: "
+                f"{error}"
+            ) from None
 
     def complete(self, action: Any, agents: Sequence[RLAgent]) -> Any:
         """A joint action (several agents) with the driven agents' actions put in."""
@@ -172,9 +187,14 @@ class PolicyDriver:
         clock: the clock of :data:`FAILURE_PAUSE`.
     """
 
-    def __init__(self, answer: Callable[[Request], Reply], instance: Any,
-                 driven: DrivenAgents, max_episode_steps: int | None = None,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self,
+        answer: Callable[[Request], Reply],
+        instance: Any,
+        driven: DrivenAgents,
+        max_episode_steps: int | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self._answer, self._instance, self._driven = answer, instance, driven
         self.max_episode_steps = max_episode_steps
         self.episodes = 0  # started so far: the seed of the next one
@@ -200,8 +220,11 @@ class PolicyDriver:
             return
         instance = self._instance
         try:
-            action = {} if instance.multi_agent else \
-                self._driven.actions(instance.agents)[instance.agents[0].name]
+            action = (
+                {}
+                if instance.multi_agent
+                else self._driven.actions(instance.agents)[instance.agents[0].name]
+            )
         except PolicyError as error:  # logged by DrivenAgents; nothing was applied
             instance.abandon_episode(f"the episode failed: {error}")
             self._fail()
@@ -226,8 +249,11 @@ class PolicyDriver:
             return True
         assert isinstance(reply, ErrorReply)
         message = reply.message
-        if reply.code != ErrorCode.ENVIRONMENT_ERROR and message not in self._logged and \
-                len(self._logged) < _LOGGED:
+        if (
+            reply.code != ErrorCode.ENVIRONMENT_ERROR
+            and message not in self._logged
+            and len(self._logged) < _LOGGED
+        ):
             self._logged.add(message)
             logger.warning("a policy-driven request failed (logged once): %s", message)
         self._fail()

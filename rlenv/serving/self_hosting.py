@@ -124,9 +124,11 @@ def _serve(environment: RLEnvironment, hosting: SelfHosting) -> None:
     try:
         communication = environment.communication
         if communication.address is None:
-            raise RuntimeError(f"{type(environment).__name__}._ready did not call "
-                               "self.communication.start_server(port, host): rlenv.run needs "
-                               "it (or serve the class with rlenv serve)")
+            raise RuntimeError(
+                f"{type(environment).__name__}._ready did not call "
+                "self.communication.start_server(port, host): rlenv.run needs "
+                "it (or serve the class with rlenv serve)"
+            )
         hosting.endpoint.hello = host.hello
         hosting.host = host
         tree = host.instances[0].tree
@@ -138,6 +140,7 @@ def _serve(environment: RLEnvironment, hosting: SelfHosting) -> None:
 
 def _until_stopped(work: Callable[[], None]) -> None:
     """Run ``work()`` until it returns, or until SIGINT or SIGTERM (then return)."""
+
     def stop(signum: int, frame: FrameType | None) -> None:
         raise _Stopped
 

@@ -65,25 +65,38 @@ class Server:
     """
 
     def __init__(
-        self, environment: RLEnvironment | type[RLEnvironment] | str, host: str = DEFAULT_HOST,
-        port: int = 0, lifeline: int | None = None, token: str | None = None,
-        limits: Limits | None = None, instances: int = 1, record_dir: Path | None = None,
-        real_time: bool = False, per_client: bool = False,
-        policies: Mapping[str, str | Path] | None = None, max_episode_steps: int | None = None,
+        self,
+        environment: RLEnvironment | type[RLEnvironment] | str,
+        host: str = DEFAULT_HOST,
+        port: int = 0,
+        lifeline: int | None = None,
+        token: str | None = None,
+        limits: Limits | None = None,
+        instances: int = 1,
+        record_dir: Path | None = None,
+        real_time: bool = False,
+        per_client: bool = False,
+        policies: Mapping[str, str | Path] | None = None,
+        max_episode_steps: int | None = None,
         keep_episodes: int | None = None,
     ) -> None:
         loaded = load_policies(policies or {})
 
         def build() -> Host:
-            return Host(environment, instances, record_dir=record_dir, real_time=real_time,
-                        policies=loaded, max_episode_steps=max_episode_steps,
-                        keep_episodes=keep_episodes)
+            return Host(
+                environment,
+                instances,
+                record_dir=record_dir,
+                real_time=real_time,
+                policies=loaded,
+                max_episode_steps=max_episode_steps,
+                keep_episodes=keep_episodes,
+            )
 
         if per_client and not isinstance(environment, str | type):
             raise TypeError("a server per client needs the environment class, not an instance")
         self.host: Host | HostPerClient = HostPerClient(build) if per_client else build()
-        self.endpoint = Endpoint(self.host.hello, limits or Limits(), token,
-                                 per_client=per_client)
+        self.endpoint = Endpoint(self.host.hello, limits or Limits(), token, per_client=per_client)
         self.address = self.endpoint.start_server(port, host)
         if lifeline is not None:
             self.endpoint.watch_lifeline(lifeline)

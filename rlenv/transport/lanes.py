@@ -32,8 +32,16 @@ from rlenv.protocol.messages import Hello
 from rlenv.protocol.shared_memory import Layout, Slots
 from rlenv.transport.sockets import AnswerWaiter, readable_now
 
-__all__ = ["LANE_NAME", "KEY_SIZE", "Lane", "LaneClosed", "accept_lane", "listen_for_lane",
-           "open_lane", "wait_for"]
+__all__ = [
+    "LANE_NAME",
+    "KEY_SIZE",
+    "Lane",
+    "LaneClosed",
+    "accept_lane",
+    "listen_for_lane",
+    "open_lane",
+    "wait_for",
+]
 
 LANE_NAME = re.compile(r"rlenv-lane-[0-9a-f]{32}")
 """The only names a server connects to (abstract Unix sockets, with this prefix)."""
@@ -58,8 +66,9 @@ class Lane:
         sock: this end's TCP socket, watched with the doorbell while waiting.
     """
 
-    def __init__(self, memory: mmap.mmap, doorbell: socket.socket, slots: Slots,
-                 sock: socket.socket) -> None:
+    def __init__(
+        self, memory: mmap.mmap, doorbell: socket.socket, slots: Slots, sock: socket.socket
+    ) -> None:
         self.memory, self.doorbell, self.slots, self.sock = memory, doorbell, slots, sock
         self.doorbell.setblocking(False)
         self._poll = select.poll()
@@ -121,8 +130,9 @@ class Lane:
             pass
 
 
-def wait_for(ready: Callable[[], bool], lane: Lane, waiter: AnswerWaiter,
-             timeout: float | None) -> bool:
+def wait_for(
+    ready: Callable[[], bool], lane: Lane, waiter: AnswerWaiter, timeout: float | None
+) -> bool:
     """Wait until ``ready()`` (what was awaited is in the slots) or the lane's socket has bytes.
 
     Spins first (:meth:`AnswerWaiter.spin`), looking at the slots and the socket in turn; then
@@ -204,8 +214,9 @@ def open_lane(name: str, key: bytes, hello: Hello, sock: socket.socket) -> Lane:
     return Lane(memory, doorbell, Slots(memory, layout, hello), sock)
 
 
-def accept_lane(listener: socket.socket, key: bytes, hello: Hello, sock: socket.socket,
-                timeout: float) -> Lane:
+def accept_lane(
+    listener: socket.socket, key: bytes, hello: Hello, sock: socket.socket, timeout: float
+) -> Lane:
     """The client's end, once the server answered: take the block the server sent.
 
     Raises:
@@ -221,8 +232,10 @@ def accept_lane(listener: socket.socket, key: bytes, hello: Hello, sock: socket.
             if message != key or len(fds) != 1:
                 raise OSError("the shared-memory lane's connection did not carry its key")
             if os.fstat(fds[0]).st_size != layout.size:
-                raise OSError(f"the server's block is {os.fstat(fds[0]).st_size} bytes, "
-                              f"expected {layout.size}")
+                raise OSError(
+                    f"the server's block is {os.fstat(fds[0]).st_size} bytes, "
+                    f"expected {layout.size}"
+                )
             memory = mmap.mmap(fds[0], layout.size)
         finally:
             for fd in fds:

@@ -28,9 +28,16 @@ import time
 from collections.abc import Callable
 from typing import TypeVar
 
-__all__ = ["CONTENDED", "GAVE_WAY", "REQUEST_SPIN_WINDOW", "SPIN_WINDOW", "AnswerWaiter",
-           "configure_socket", "is_loopback",
-           "readable_now"]
+__all__ = [
+    "CONTENDED",
+    "GAVE_WAY",
+    "REQUEST_SPIN_WINDOW",
+    "SPIN_WINDOW",
+    "AnswerWaiter",
+    "configure_socket",
+    "is_loopback",
+    "readable_now",
+]
 
 SPIN_WINDOW = 300e-6
 """Seconds after a request within which a client spins for its answer (if the last came so)."""
@@ -78,8 +85,9 @@ class AnswerWaiter:
 
     __slots__ = ("calm_at", "clock", "lost", "lost_at", "quick", "since", "window")
 
-    def __init__(self, clock: Callable[[], float] = time.perf_counter,
-                 window: float = SPIN_WINDOW) -> None:
+    def __init__(
+        self, clock: Callable[[], float] = time.perf_counter, window: float = SPIN_WINDOW
+    ) -> None:
         self.clock = clock
         self.window = window
         self.quick = False
@@ -180,8 +188,10 @@ def configure_socket(sock: socket.socket, receive_timeout: float, send_timeout: 
     """
     sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
     sock.settimeout(None)
-    for option, seconds in ((socket.SO_RCVTIMEO, receive_timeout),
-                            (socket.SO_SNDTIMEO, send_timeout)):
+    for option, seconds in (
+        (socket.SO_RCVTIMEO, receive_timeout),
+        (socket.SO_SNDTIMEO, send_timeout),
+    ):
         whole = int(seconds)
         micros = int(round((seconds - whole) * 1e6))
         if whole == 0 and micros == 0:

@@ -15,4 +15,3 @@ not the public API (the docs' reference is).
 """
 
 import rlenv  # noqa: F401  (its import keeps the old names of moved modules working)
-

@@ -55,8 +55,18 @@ from rlenv.targets import module_name
 from rlenv.transport import _procfs as procfs
 from rlenv_client.launcher import end_process
 
-__all__ = ["Figure", "HandWrittenServer", "HandWrittenVector", "Rate", "format_table",
-           "interleaved", "random_steps", "random_steps_of", "run_benchmarks", "to_json"]
+__all__ = [
+    "Figure",
+    "HandWrittenServer",
+    "HandWrittenVector",
+    "Rate",
+    "format_table",
+    "interleaved",
+    "random_steps",
+    "random_steps_of",
+    "run_benchmarks",
+    "to_json",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -123,8 +133,14 @@ class Rate:
         rates: units per second, one per timed round.
     """
 
-    def __init__(self, run: Callable[[int], None], steps: int, scale: int = 1, name: str = "",
-                 warmup: int | None = None) -> None:
+    def __init__(
+        self,
+        run: Callable[[int], None],
+        steps: int,
+        scale: int = 1,
+        name: str = "",
+        warmup: int | None = None,
+    ) -> None:
         self.run, self.steps, self.scale, self.name = run, steps, scale, name
         self.warmup = steps if warmup is None else warmup
         self.rates: list[float] = []
@@ -141,8 +157,9 @@ class Rate:
         return statistics.median(self.rates)
 
 
-def interleaved(rounds: int, *measures: Rate,
-                progress: Callable[[str], None] | None = None) -> list[float]:
+def interleaved(
+    rounds: int, *measures: Rate, progress: Callable[[str], None] | None = None
+) -> list[float]:
     """The median rate of each measure, their rounds taken in turn after one warm-up round.
 
     Taking turns puts a figure and its baseline under the same conditions, however the
@@ -155,20 +172,26 @@ def interleaved(rounds: int, *measures: Rate,
         for measure in measures:
             measure.round()
         if progress is not None:
-            progress(f"round {number + 1}/{rounds}: " + ", ".join(
-                f"{measure.name} {measure.rates[-1]:,.0f}" for measure in measures))
+            progress(
+                f"round {number + 1}/{rounds}: "
+                + ", ".join(f"{measure.name} {measure.rates[-1]:,.0f}" for measure in measures)
+            )
     return [measure.median for measure in measures]
 
 
-def _calls(call: Callable[[], object], latencies: list[float] | None = None,
-           ) -> Callable[[int], None]:
+def _calls(
+    call: Callable[[], object],
+    latencies: list[float] | None = None,
+) -> Callable[[int], None]:
     """``run(n)`` calling ``call`` n times; each call's duration into ``latencies`` if given."""
+
     def run(n: int) -> None:
         for _ in range(n):
             started = time.perf_counter()
             call()
             if latencies is not None:
                 latencies.append(time.perf_counter() - started)
+
     return run
 
 
@@ -192,15 +215,16 @@ def _receive_frame(sock: socket.socket) -> bytes:
         if not chunk:
             raise ConnectionError("the server closed the connection")
         data += chunk
-    return data[HEADER.size:]
+    return data[HEADER.size :]
 
 
 class _PingPong:
     """A Python echo server answering every frame with a fixed reply (the floor)."""
 
     def __init__(self, reply: bytes) -> None:
-        self.process = subprocess.Popen([sys.executable, "-c", _ECHO_SERVER],
-                                        stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+        self.process = subprocess.Popen(
+            [sys.executable, "-c", _ECHO_SERVER], stdin=subprocess.PIPE, stdout=subprocess.PIPE
+        )
         assert self.process.stdin is not None and self.process.stdout is not None
         port = int(self.process.stdout.readline())
         self.process.stdin.write(reply)
@@ -214,7 +238,7 @@ class _PingPong:
         data = self.sock.recv(65536)
         while len(data) < self.reply_size + HEADER.size:
             data += self.sock.recv(65536)
-        msgpack.unpackb(data[HEADER.size:])
+        msgpack.unpackb(data[HEADER.size :])
 
     def close(self) -> None:
         self.sock.close()
@@ -237,7 +261,9 @@ class HandWrittenServer:
     def __init__(self, instances: int = 1) -> None:
         self.process = subprocess.Popen(
             [sys.executable, "-m", module_name(HAND_WRITTEN), str(instances)],
-            stdout=subprocess.PIPE, text=True)
+            stdout=subprocess.PIPE,
+            text=True,
+        )
         try:
             assert self.process.stdout is not None
             line = self.process.stdout.readline()
@@ -260,8 +286,7 @@ class HandWrittenServer:
         """One step: ``(observation, reward, terminated, truncated, info)``."""
         reply = self.call({"action": action.tobytes(), "repeat_action": repeat_action})
         observation = np.frombuffer(reply["observation"], np.float32).copy()
-        return observation, reply["reward"], reply["terminated"], reply["truncated"], \
-            reply["info"]
+        return observation, reply["reward"], reply["terminated"], reply["truncated"], reply["info"]
 
     def close(self) -> None:
         """Close the connection and stop the server."""
@@ -300,13 +325,21 @@ class HandWrittenVector:
         """One vector step of ``actions`` (one float32 per CartPole)."""
         count = self.instances
         for index, server in enumerate(self.servers):
-            server.sock.sendall(_frame({"id": 1, "action": actions[index * count:(index + 1) *
-                                                                   count].tobytes(),
-                                        "reset": self.resets[index], "repeat_action": 4}))
+            server.sock.sendall(
+                _frame(
+                    {
+                        "id": 1,
+                        "action": actions[index * count : (index + 1) * count].tobytes(),
+                        "reset": self.resets[index],
+                        "repeat_action": 4,
+                    }
+                )
+            )
         for index, server in enumerate(self.servers):
             reply = msgpack.unpackb(_receive_frame(server.sock))
-            self.observations[index * count:(index + 1) * count] = \
-                np.frombuffer(reply["observation"], np.float32).reshape(count, 5)
+            self.observations[index * count : (index + 1) * count] = np.frombuffer(
+                reply["observation"], np.float32
+            ).reshape(count, 5)
             self.resets[index] = [bool(fell) for fell in reply["terminated"]]
 
     def close(self) -> None:
@@ -323,8 +356,17 @@ def _step_request(action: np.ndarray | int) -> bytes:
 
 def _step_reply(observation: np.ndarray) -> bytes:
     """A step answer as rlenv's server sends one, the observation as raw bytes."""
-    return _frame({"id": 1, "observation": {"agent": observation.tobytes()}, "reward": 1.0,
-                   "terminated": False, "truncated": False, "info": {}, "frames": 4})
+    return _frame(
+        {
+            "id": 1,
+            "observation": {"agent": observation.tobytes()},
+            "reward": 1.0,
+            "terminated": False,
+            "truncated": False,
+            "info": {},
+            "frames": 4,
+        }
+    )
 
 
 def _rss_kib(pid: int) -> int:
@@ -335,7 +377,9 @@ def _rss_kib(pid: int) -> int:
 
 
 def run_benchmarks(
-    rounds: int = 5, steps: int = 2000, quick: bool = False,
+    rounds: int = 5,
+    steps: int = 2000,
+    quick: bool = False,
     progress: Callable[[str], None] = logger.info,
 ) -> list[Figure]:
     """Measure every figure (see the module docstring).
@@ -346,13 +390,14 @@ def run_benchmarks(
         quick: fewer vector layouts.
         progress: told what is being measured, before each figure.
     """
-    progress("(a, b, c, g) ping-pong, (r) hand-written server, in-process and remote CartPole "
-             "steps, in turns")
+    progress(
+        "(a, b, c, g) ping-pong, (r) hand-written server, in-process and remote CartPole "
+        "steps, in turns"
+    )
     figures, cartpole_rss = _single_steps(rounds, steps)
     progress("(d) 84x84x3 uint8 observations and a ping-pong of the same bytes, in turns")
     figures.append(_image_steps(rounds, steps // 2))
-    progress("(e, f, i) RemoteVectorEnv layouts, make_vec and gymnasium's AsyncVectorEnv, "
-             "in turns")
+    progress("(e, f, i) RemoteVectorEnv layouts, make_vec and gymnasium's AsyncVectorEnv, in turns")
     figures += _vectors(rounds, steps, quick)
     progress("(h) memory")
     figures.append(Figure("one CartPole server process, resident", cartpole_rss / 1024, "MiB"))
@@ -367,10 +412,15 @@ def _single_steps(rounds: int, steps: int) -> tuple[list[Figure], int]:
     action = np.zeros(1, np.float32)
     pong_latencies: list[float] = []
     step_latencies: list[float] = []
-    with _PingPong(_step_reply(np.zeros(5, np.float32))) as echo, HandWrittenServer() as raw, \
-            LocalClient(CARTPOLE) as local, ServerProcess(CARTPOLE) as server, \
-            Client(server.host, server.port) as client, ServerProcess(CARTPOLE) as other, \
-            Client(other.host, other.port, shared_memory=False) as socket_client:
+    with (
+        _PingPong(_step_reply(np.zeros(5, np.float32))) as echo,
+        HandWrittenServer() as raw,
+        LocalClient(CARTPOLE) as local,
+        ServerProcess(CARTPOLE) as server,
+        Client(server.host, server.port) as client,
+        ServerProcess(CARTPOLE) as other,
+        Client(other.host, other.port, shared_memory=False) as socket_client,
+    ):
         request = _step_request(action)
         raw.call({"config": ENDLESS, "reset": {"seed": 0}})
         for each in (local, client, socket_client):
@@ -388,23 +438,50 @@ def _single_steps(rounds: int, steps: int) -> tuple[list[Figure], int]:
         cartpole_rss = _rss_kib(server.pid)
     pong = "msgpack ping-pong"
     figures = [
-        Figure("hand-written CartPole server, raw client (repeat 4)", hand_written, "steps/s",
-               pong, floor),
+        Figure(
+            "hand-written CartPole server, raw client (repeat 4)",
+            hand_written,
+            "steps/s",
+            pong,
+            floor,
+        ),
         Figure("msgpack ping-pong over loopback", floor, "round trips/s"),
         Figure("in-process CartPole step (repeat 4)", local_rate, "steps/s", pong, floor),
         Figure("remote CartPole Client.step (repeat 1)", remote_1, "steps/s", pong, floor),
-        Figure("remote CartPole Client.step (repeat 4)", remote_4, "steps/s",
-               "hand-written server (repeat 4)", hand_written),
-        Figure("remote CartPole Client.step on the socket alone (repeat 4)", socket_4,
-               "steps/s", "hand-written server (repeat 4)", hand_written),
-        Figure("Client.step through shared memory against the socket", remote_4, "steps/s",
-               "the socket alone", socket_4),
+        Figure(
+            "remote CartPole Client.step (repeat 4)",
+            remote_4,
+            "steps/s",
+            "hand-written server (repeat 4)",
+            hand_written,
+        ),
+        Figure(
+            "remote CartPole Client.step on the socket alone (repeat 4)",
+            socket_4,
+            "steps/s",
+            "hand-written server (repeat 4)",
+            hand_written,
+        ),
+        Figure(
+            "Client.step through shared memory against the socket",
+            remote_4,
+            "steps/s",
+            "the socket alone",
+            socket_4,
+        ),
     ]
     for quantile in (50, 99):
         mine = float(np.percentile(step_latencies, quantile)) * 1e6
         theirs = float(np.percentile(pong_latencies, quantile)) * 1e6
-        figures.append(Figure(f"p{quantile} remote step latency (repeat 4)", mine, "us",
-                              f"p{quantile} ping-pong", theirs))
+        figures.append(
+            Figure(
+                f"p{quantile} remote step latency (repeat 4)",
+                mine,
+                "us",
+                f"p{quantile} ping-pong",
+                theirs,
+            )
+        )
     return figures, cartpole_rss
 
 
@@ -413,15 +490,25 @@ def _image_steps(rounds: int, steps: int) -> Figure:
     from rlenv_client import Client, ServerProcess
 
     image = np.zeros((84, 84, 3), np.uint8)
-    with _PingPong(_step_reply(image)) as echo, ServerProcess(PIXELS) as server, \
-            Client(server.host, server.port) as client:
+    with (
+        _PingPong(_step_reply(image)) as echo,
+        ServerProcess(PIXELS) as server,
+        Client(server.host, server.port) as client,
+    ):
         client.reset(seed=0)
         request = _step_request(0)
         image_floor, rate = interleaved(
-            rounds, Rate(_calls(lambda: echo.round_trip(request)), steps),
-            Rate(_calls(lambda: client.step(0, 1)), steps))
-    return Figure("remote 84x84x3 observation step", rate, "steps/s",
-                  "ping-pong carrying the same bytes", image_floor)
+            rounds,
+            Rate(_calls(lambda: echo.round_trip(request)), steps),
+            Rate(_calls(lambda: client.step(0, 1)), steps),
+        )
+    return Figure(
+        "remote 84x84x3 observation step",
+        rate,
+        "steps/s",
+        "ping-pong carrying the same bytes",
+        image_floor,
+    )
 
 
 def _vectors(rounds: int, steps: int, quick: bool) -> list[Figure]:
@@ -445,45 +532,90 @@ def _vectors(rounds: int, steps: int, quick: bool) -> list[Figure]:
         floor = HandWrittenVector(len(layout), layout[0])  # as make_vec lays them out
         stack.callback(floor.close)
         async_rate, made_rate, floor_rate, sockets_rate = interleaved(
-            rounds, Rate(random_steps(async_envs), batches * 8, scale=8),
+            rounds,
+            Rate(random_steps(async_envs), batches * 8, scale=8),
             Rate(random_steps(made), batches, scale=64),
             Rate(random_steps_of(floor.step, made), batches, scale=64),
-            Rate(random_steps(on_sockets), batches, scale=64))
+            Rate(random_steps(on_sockets), batches, scale=64),
+        )
     figures = [
         Figure(f"gymnasium {theirs}", async_rate, "env-steps/s"),
         Figure(f"{floor_name}, raw client", floor_rate, "env-steps/s", theirs, async_rate),
-        Figure("gymnasium.make_vec('rlenv/CartPole-v0', num_envs=64)", made_rate, "env-steps/s",
-               theirs, async_rate),
-        Figure("make_vec('rlenv/CartPole-v0', 64) against the floor", made_rate, "env-steps/s",
-               floor_name, floor_rate),
-        Figure("make_vec('rlenv/CartPole-v0', 64) on sockets alone", sockets_rate,
-               "env-steps/s", theirs, async_rate),
-        Figure("make_vec(64) through shared memory against sockets", made_rate, "env-steps/s",
-               "sockets alone", sockets_rate),
+        Figure(
+            "gymnasium.make_vec('rlenv/CartPole-v0', num_envs=64)",
+            made_rate,
+            "env-steps/s",
+            theirs,
+            async_rate,
+        ),
+        Figure(
+            "make_vec('rlenv/CartPole-v0', 64) against the floor",
+            made_rate,
+            "env-steps/s",
+            floor_name,
+            floor_rate,
+        ),
+        Figure(
+            "make_vec('rlenv/CartPole-v0', 64) on sockets alone",
+            sockets_rate,
+            "env-steps/s",
+            theirs,
+            async_rate,
+        ),
+        Figure(
+            "make_vec(64) through shared memory against sockets",
+            made_rate,
+            "env-steps/s",
+            "sockets alone",
+            sockets_rate,
+        ),
     ]
-    served = [(4, 1), (8, 4), (64, 32)] if quick else \
-        [(1, 1), (2, 1), (4, 1), (8, 1), (8, 4), (64, 32), (64, 64)]
+    served = (
+        [(4, 1), (8, 4), (64, 32)]
+        if quick
+        else [(1, 1), (2, 1), (4, 1), (8, 1), (8, 4), (64, 32), (64, 64)]
+    )
     layouts: list[tuple[str, int, dict[str, Any]]] = [
-        (f"{count} envs, {-(-count // per_server)} servers x {per_server}", count,
-         {"instances_per_server": per_server}) for count, per_server in served
-    ] + [("8 envs, 2 servers x 4, sockets alone", 8,
-          {"instances_per_server": 4, "shared_memory": False}),
-         ("64 envs in this process", 64, {"in_process": True})]
+        (
+            f"{count} envs, {-(-count // per_server)} servers x {per_server}",
+            count,
+            {"instances_per_server": per_server},
+        )
+        for count, per_server in served
+    ] + [
+        (
+            "8 envs, 2 servers x 4, sockets alone",
+            8,
+            {"instances_per_server": 4, "shared_memory": False},
+        ),
+        ("64 envs in this process", 64, {"in_process": True}),
+    ]
     with contextlib.ExitStack() as stack:
         async_envs = gymnasium.vector.AsyncVectorEnv([lambda: gymnasium.make("CartPole-v1")] * 8)
         stack.callback(async_envs.close)
         measures = [Rate(random_steps(async_envs), steps // 4, scale=8)]
         for _, count, place in layouts:
-            envs = stack.enter_context(RemoteVectorEnv(count, CARTPOLE, repeat_action=1,
-                                                       **place))
+            envs = stack.enter_context(RemoteVectorEnv(count, CARTPOLE, repeat_action=1, **place))
             envs.reset(seed=0)
             batch = np.zeros((count, 1), np.float32)
-            measures.append(Rate(_calls(functools.partial(envs.step, batch)),
-                                  max(steps // count, 20), scale=count))
+            measures.append(
+                Rate(
+                    _calls(functools.partial(envs.step, batch)),
+                    max(steps // count, 20),
+                    scale=count,
+                )
+            )
         async_rate, *vector_rates = interleaved(rounds, *measures)
     for (name, _, _), rate in zip(layouts, vector_rates, strict=True):
-        figures.append(Figure(f"RemoteVectorEnv {name} (repeat 1, zero actions)", rate,
-                              "env-steps/s", theirs, async_rate))
+        figures.append(
+            Figure(
+                f"RemoteVectorEnv {name} (repeat 1, zero actions)",
+                rate,
+                "env-steps/s",
+                theirs,
+                async_rate,
+            )
+        )
     return figures
 
 
@@ -493,8 +625,9 @@ def random_steps(envs: Any, batches: int = 64) -> Callable[[int], None]:
     return random_steps_of(envs.step, envs, batches)
 
 
-def random_steps_of(step: Callable[[Any], object], envs: Any,
-                    batches: int = 64) -> Callable[[int], None]:
+def random_steps_of(
+    step: Callable[[Any], object], envs: Any, batches: int = 64
+) -> Callable[[int], None]:
     """``run(n)``: ``n`` calls of ``step`` with random actions of the vector ``envs``."""
     envs.action_space.seed(0)
     actions = [envs.action_space.sample() for _ in range(batches)]
@@ -502,6 +635,7 @@ def random_steps_of(step: Callable[[Any], object], envs: Any,
     def run(n: int) -> None:
         for i in range(n):
             step(actions[i % batches])
+
     return run
 
 
@@ -524,8 +658,13 @@ def _instance_kib(count: int = 50) -> float:
 
     Measured in a fresh process: in this one, memory freed by the other figures would hold them.
     """
-    output = subprocess.run([sys.executable, "-c", _INSTANCE_MEMORY, CARTPOLE, str(count)],
-                            capture_output=True, text=True, check=True, timeout=120).stdout
+    output = subprocess.run(
+        [sys.executable, "-c", _INSTANCE_MEMORY, CARTPOLE, str(count)],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=120,
+    ).stdout
     return float(output)
 
 
@@ -535,14 +674,18 @@ def format_table(figures: list[Figure]) -> str:
     lines = [f"{'measurement':<{width}}{'value':>14}  {'unit':<14}{'x baseline':>11}  baseline"]
     for figure in figures:
         ratio = "" if figure.ratio is None else f"{figure.ratio:.2f}"
-        baseline = "" if figure.baseline is None else \
-            f"{figure.baseline_name} ({figure.baseline:,.0f} {figure.unit})"
-        lines.append(f"{figure.name:<{width}}{figure.value:>14,.1f}  {figure.unit:<14}"
-                     f"{ratio:>11}  {baseline}")
+        baseline = (
+            ""
+            if figure.baseline is None
+            else f"{figure.baseline_name} ({figure.baseline:,.0f} {figure.unit})"
+        )
+        lines.append(
+            f"{figure.name:<{width}}{figure.value:>14,.1f}  {figure.unit:<14}"
+            f"{ratio:>11}  {baseline}"
+        )
     return "\n".join(lines)
 
 
 def to_json(figures: list[Figure]) -> str:
     """The figures as JSON (a list of objects, ratios included)."""
-    return json.dumps([{**asdict(figure), "ratio": figure.ratio} for figure in figures],
-                      indent=2)
+    return json.dumps([{**asdict(figure), "ratio": figure.ratio} for figure in figures], indent=2)

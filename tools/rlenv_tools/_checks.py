@@ -72,8 +72,7 @@ def _seeded_reset(env: RemoteEnv) -> str:
     again, _ = env.reset(seed=2024)
     difference = observation_difference(first, again)
     if difference is not None:
-        raise AssertionError(f"reset(seed=2024) twice gave different observations, at "
-                             f"{difference}")
+        raise AssertionError(f"reset(seed=2024) twice gave different observations, at {difference}")
     return "reset(seed=2024) twice gives the same observation"
 
 
@@ -81,8 +80,10 @@ def _step_types(env: RemoteEnv) -> str:
     env.reset(seed=1)
     observation, reward, terminated, truncated, info = env.step(env.action_space.sample())
     if type(reward) is not float or type(terminated) is not bool or type(truncated) is not bool:
-        raise AssertionError(f"step returned reward {type(reward).__name__}, flags "
-                             f"{type(terminated).__name__}/{type(truncated).__name__}")
+        raise AssertionError(
+            f"step returned reward {type(reward).__name__}, flags "
+            f"{type(terminated).__name__}/{type(truncated).__name__}"
+        )
     if observation not in env.observation_space:
         raise AssertionError("the observation after a step is outside the observation space")
     return f"{info['frames']} physics ticks per step"
@@ -98,8 +99,9 @@ def _bad_action_refused(env: RemoteEnv) -> str:
             raise AssertionError(f"expected invalid_action, got {error.code}") from None
         difference = observation_difference(before, env.client.observe()["agent"])
         if difference is not None:
-            raise AssertionError(f"a refused action changed the observation, at "
-                                 f"{difference}") from None
+            raise AssertionError(
+                f"a refused action changed the observation, at {difference}"
+            ) from None
         return f"refused with: {error.message}"
     raise AssertionError("a 3x3 NaN action was accepted")
 
@@ -112,13 +114,19 @@ def _render(env: RemoteEnv) -> str:
 
 
 def _sb3_check_env(env: RemoteEnv) -> str:
-    problem = _sb3_action_problem(env.action_space) or \
-        _sb3_observation_problem(env.observation_space)
+    problem = _sb3_action_problem(env.action_space) or _sb3_observation_problem(
+        env.observation_space
+    )
     if problem is not None:
         several = len(env.client.hello.agents) > 1
-        raise _Skip(f"SB3 cannot train these spaces: {problem}" + (
-            "; with several agents, train one agent or a team (docs/several-agents.md)"
-            if several else ""))
+        raise _Skip(
+            f"SB3 cannot train these spaces: {problem}"
+            + (
+                "; with several agents, train one agent or a team (docs/several-agents.md)"
+                if several
+                else ""
+            )
+        )
     try:
         from stable_baselines3.common.env_checker import check_env as sb3_check_env
     except ImportError:
@@ -133,13 +141,18 @@ def _sb3_action_problem(space: spaces.Space) -> str | None:
     (an int ``n``) actions (``stable_baselines3.common.preprocessing.get_action_dim``), and
     their discrete actions start at 0.
     """
-    takes = ("(SB3's algorithms take Box, Discrete, MultiDiscrete or MultiBinary actions: "
-             "stable_baselines3.common.preprocessing.get_action_dim)")
+    takes = (
+        "(SB3's algorithms take Box, Discrete, MultiDiscrete or MultiBinary actions: "
+        "stable_baselines3.common.preprocessing.get_action_dim)"
+    )
     if isinstance(space, spaces.Box):
         return None
     if isinstance(space, spaces.MultiBinary):
-        return None if isinstance(space.n, int | np.integer) else \
-            f"the action space is a MultiBinary of shape {space.shape} (SB3 takes an int n)"
+        return (
+            None
+            if isinstance(space.n, int | np.integer)
+            else f"the action space is a MultiBinary of shape {space.shape} (SB3 takes an int n)"
+        )
     if isinstance(space, spaces.Discrete | spaces.MultiDiscrete):
         return _sb3_discrete_problem(space, "action")
     return f"the action space is a {type(space).__name__} {takes}"
@@ -152,9 +165,11 @@ def _sb3_observation_problem(space: spaces.Space) -> str | None:
     ``Dict`` of them, one level deep (``MultiInputPolicy``;
     ``stable_baselines3.common.preprocessing.get_obs_shape``).
     """
-    reads = ("(SB3's policies read Box, Discrete, MultiDiscrete or MultiBinary observations, "
-             "or a Dict of them one level deep: stable_baselines3.common.preprocessing"
-             ".get_obs_shape)")
+    reads = (
+        "(SB3's policies read Box, Discrete, MultiDiscrete or MultiBinary observations, "
+        "or a Dict of them one level deep: stable_baselines3.common.preprocessing"
+        ".get_obs_shape)"
+    )
     members = space.spaces.items() if isinstance(space, spaces.Dict) else [(None, space)]
     for key, member in members:
         where = "the observation space" if key is None else f"observation {key!r}"
@@ -169,8 +184,9 @@ def _sb3_observation_problem(space: spaces.Space) -> str | None:
     return None
 
 
-def _sb3_discrete_problem(space: spaces.Discrete | spaces.MultiDiscrete, kind: str,
-                          where: str | None = None) -> str | None:
+def _sb3_discrete_problem(
+    space: spaces.Discrete | spaces.MultiDiscrete, kind: str, where: str | None = None
+) -> str | None:
     """Why SB3 cannot take a (multi-)discrete ``kind`` space: a start not at 0, a 2-D nvec."""
     where = where or f"the {kind} space"
     name = type(space).__name__
@@ -194,8 +210,9 @@ def _pettingzoo_api_test(address: str, token: str | None, timeout: float) -> str
             found = _warnings_of(lambda: parallel_api_test(env, num_cycles=_PETTINGZOO_CYCLES))
     finally:
         env.close()
-    return f"agents {', '.join(env.possible_agents)}, episodes of {_PETTINGZOO_CYCLES} " \
-           f"cycles: {found}"
+    return (
+        f"agents {', '.join(env.possible_agents)}, episodes of {_PETTINGZOO_CYCLES} cycles: {found}"
+    )
 
 
 CHECKS: list[tuple[str, Callable[[RemoteEnv], str]]] = [
@@ -209,8 +226,9 @@ CHECKS: list[tuple[str, Callable[[RemoteEnv], str]]] = [
 """The checks of the environment, in order, each over the one :class:`RemoteEnv`."""
 
 
-def run_checks(target: str, timeout: float = 30.0, compliance: bool = False,
-               token: str | None = None) -> list[CheckResult]:
+def run_checks(
+    target: str, timeout: float = 30.0, compliance: bool = False, token: str | None = None
+) -> list[CheckResult]:
     """Run every check against ``target``: ``HOST:PORT`` of a server, or ``MODULE:CLASS``.
 
     Args:
@@ -225,19 +243,32 @@ def run_checks(target: str, timeout: float = 30.0, compliance: bool = False,
     """
     is_address = ":" in target and target.rsplit(":", 1)[1].isdigit()
     try:
-        env = RemoteEnv(address=target, timeout=timeout, token=token) if is_address else \
-            RemoteEnv(target, timeout=timeout, max_restarts=0, share_server=False)
+        env = (
+            RemoteEnv(address=target, timeout=timeout, token=token)
+            if is_address
+            else RemoteEnv(target, timeout=timeout, max_restarts=0, share_server=False)
+        )
     except Exception as error:
         return [CheckResult("connect", "fail", f"{type(error).__name__}: {error}")]
     hello = env.client.hello
-    results = [CheckResult("connect", "pass", f"{hello.environment}: action space "
-                           f"{hello.action_space}, observation space {hello.observation_space}")]
+    results = [
+        CheckResult(
+            "connect",
+            "pass",
+            f"{hello.environment}: action space "
+            f"{hello.action_space}, observation space {hello.observation_space}",
+        )
+    ]
     try:
         results += [_run(name, functools.partial(check, env)) for name, check in CHECKS]
         address = env.client.address
         env.client.close()  # release control: the checks below bring their own clients
-        results.append(_run("pettingzoo parallel_api_test",
-                            lambda: _pettingzoo_api_test(address, token, timeout)))
+        results.append(
+            _run(
+                "pettingzoo parallel_api_test",
+                lambda: _pettingzoo_api_test(address, token, timeout),
+            )
+        )
         if compliance:
             results.append(_compliance(env, address, token, timeout))
     finally:
@@ -255,14 +286,15 @@ def _run(name: str, check: Callable[[], str]) -> CheckResult:
         return CheckResult(name, "fail", f"{type(error).__name__}: {error}")
 
 
-def _compliance(env: RemoteEnv, address: str, token: str | None,
-                timeout: float) -> CheckResult:
+def _compliance(env: RemoteEnv, address: str, token: str | None, timeout: float) -> CheckResult:
     from rlenv_tools.compliance import check_server
 
     host, port = parse_address(address)
     server = env.server
-    report = check_server(host, port, token=token, timeout=timeout,
-                          pid=server.pid if server is not None else None)
+    report = check_server(
+        host, port, token=token, timeout=timeout, pid=server.pid if server is not None else None
+    )
     detail = report.summary() + "".join(f"\n      - {line}" for line in report.failures)
-    return CheckResult("compliance under hostile input", "pass" if report.passed else "fail",
-                       detail)
+    return CheckResult(
+        "compliance under hostile input", "pass" if report.passed else "fail", detail
+    )

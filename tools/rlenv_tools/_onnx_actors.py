@@ -25,8 +25,7 @@ class Actor(torch.nn.Module):
             is the action before ``predict`` unscales (a squashing policy, as SAC's) or clips it.
     """
 
-    def __init__(self, policy: Any, action_space: spaces.Box | spaces.Discrete,
-                 sb3: bool) -> None:
+    def __init__(self, policy: Any, action_space: spaces.Box | spaces.Discrete, sb3: bool) -> None:
         super().__init__()
         self.policy, self.sb3 = policy, sb3
         self.discrete = isinstance(action_space, spaces.Discrete)

@@ -149,8 +149,15 @@ class Processes:
         self.cursor = mark.environment.fork()
         return self.cursor
 
-    def goto(self, timeline: Timeline, step: int, steps: Events, checkpoints: Checkpoints,
-             records: list[StepRecord], check: Callable[[int, str], None]) -> Result:
+    def goto(
+        self,
+        timeline: Timeline,
+        step: int,
+        steps: Events,
+        checkpoints: Checkpoints,
+        records: list[StepRecord],
+        check: Callable[[int, str], None],
+    ) -> Result:
         """Bring the cursor to ``step`` of ``timeline``; what that step returned.
 
         ``steps``, ``checkpoints`` and ``records`` are the timeline's; from where the cursor
@@ -167,8 +174,14 @@ class Processes:
             else:
                 self.resume(mark)
                 result = mark.result
-            result = self.take(base, steps[base:step], result,  # type: ignore[arg-type]
-                               checkpoints, records, check)
+            result = self.take(
+                base,
+                steps[base:step],
+                result,  # type: ignore[arg-type]
+                checkpoints,
+                records,
+                check,
+            )
         except (ConnectionError, RemoteError) as error:
             self.drop_cursor()
             raise RuntimeError(f"the timeline's environment failed: {error}") from None
@@ -176,8 +189,15 @@ class Processes:
         assert result is not None
         return result
 
-    def take(self, step: int, steps: Events, result: Result, checkpoints: Checkpoints,
-             records: list[StepRecord], check: Callable[[int, str], None] | None) -> Result:
+    def take(
+        self,
+        step: int,
+        steps: Events,
+        result: Result,
+        checkpoints: Checkpoints,
+        records: list[StepRecord],
+        check: Callable[[int, str], None] | None,
+    ) -> Result:
         """Take ``steps`` after ``step`` on the cursor, parking checkpoints where due.
 
         A timeline's own steps are checked against the recording (``check(step, digest)``;
@@ -187,7 +207,7 @@ class Processes:
         cursor = self.stepping()
         done = 0
         while done < len(steps):
-            chunk = steps[done:checkpoints.next_due(step + done) - step]
+            chunk = steps[done : checkpoints.next_due(step + done) - step]
             taken, observation, info = cursor.run(chunk, stop_at_end=check is None)
             for record in taken:
                 done += 1
@@ -201,8 +221,15 @@ class Processes:
                 break
         return result
 
-    def play(self, policy: Callable[[Any], Any], max_steps: int, repeat_action: int | None,
-             result: Result, checkpoints: Checkpoints, records: list[StepRecord]) -> Result:
+    def play(
+        self,
+        policy: Callable[[Any], Any],
+        max_steps: int,
+        repeat_action: int | None,
+        result: Result,
+        checkpoints: Checkpoints,
+        records: list[StepRecord],
+    ) -> Result:
         """A branch's new steps on the cursor, ``policy`` choosing each action.
 
         At most ``max_steps`` of them, fewer where its episode ends; checkpoints are parked
@@ -212,7 +239,8 @@ class Processes:
         for _ in range(max_steps):
             action = policy(result[0])
             observation, reward, terminated, truncated, info = cursor.call(
-                "step", action, repeat_action)
+                "step", action, repeat_action
+            )
             result = (observation, float(reward), bool(terminated), bool(truncated), info)
             records.append((digest(observation), *result[1:4]))
             self.park_if_due(len(records), checkpoints, result)

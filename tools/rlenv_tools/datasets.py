@@ -34,8 +34,9 @@ try:
     import minari
     from minari.data_collector import EpisodeBuffer
 except ImportError as missing:  # pragma: no cover - the message names the extra
-    raise ImportError(f"rlenv_tools.datasets needs the minari extra: pip install "
-                      f"'rlenv[minari]' ({missing})") from None
+    raise ImportError(
+        f"rlenv_tools.datasets needs the minari extra: pip install 'rlenv[minari]' ({missing})"
+    ) from None
 
 __all__ = ["DATASET_ID_FORM", "check_dataset_id", "create_dataset", "environment_spec"]
 
@@ -68,15 +69,21 @@ def environment_spec(target: str, repeat_action: int | None = None) -> EnvSpec:
             spec = gymnasium.spec(env_id)
             return dataclasses.replace(spec, kwargs={**spec.kwargs, **extra})
     name = target.rpartition(":")[2] or target
-    return EnvSpec(id=f"rlenv/{name}", entry_point=_ENTRY_POINT,
-                   kwargs={"target": target, **extra})
+    return EnvSpec(id=f"rlenv/{name}", entry_point=_ENTRY_POINT, kwargs={"target": target, **extra})
 
 
 def create_dataset(
-    dataset_id: str, directory: str | Path, *, target: str | None = None,
-    trust_target: bool = False, description: str | None = None, algorithm_name: str | None = None,
-    author: str | None = None, author_email: str | None = None,
-    code_permalink: str | None = None, report: Callable[[str], None] | None = None,
+    dataset_id: str,
+    directory: str | Path,
+    *,
+    target: str | None = None,
+    trust_target: bool = False,
+    description: str | None = None,
+    algorithm_name: str | None = None,
+    author: str | None = None,
+    author_email: str | None = None,
+    code_permalink: str | None = None,
+    report: Callable[[str], None] | None = None,
 ) -> minari.MinariDataset:
     """Turn the recordings in ``directory`` into the Minari dataset ``dataset_id``.
 
@@ -111,20 +118,29 @@ def create_dataset(
     if target is None:
         target = _one_target(episodes, Path(directory))
         if not trust_target:
-            check_target(target, named_by=f"a recording in {directory}",
-                         folder=Path(directory))
+            check_target(target, named_by=f"a recording in {directory}", folder=Path(directory))
     spec = environment_spec(target, _repeat_action(episodes))
     env = gymnasium.make(spec)
     try:
         client = env.unwrapped.client  # type: ignore[attr-defined]
-        buffers = [_episode(number, path, episode, client, report)
-                   for number, (path, episode) in enumerate(zip(paths, episodes, strict=True))]
+        buffers = [
+            _episode(number, path, episode, client, report)
+            for number, (path, episode) in enumerate(zip(paths, episodes, strict=True))
+        ]
         return minari.create_dataset_from_buffers(
-            dataset_id, buffers, env=env, description=description or
-            f"{len(buffers)} episodes of {target}, recorded by rlenv and re-simulated",
-            algorithm_name=algorithm_name, author=author, author_email=author_email,
-            code_permalink=code_permalink, requirements=_requirements(),
-            data_format="hdf5", jpeg_encoding=False)
+            dataset_id,
+            buffers,
+            env=env,
+            description=description
+            or f"{len(buffers)} episodes of {target}, recorded by rlenv and re-simulated",
+            algorithm_name=algorithm_name,
+            author=author,
+            author_email=author_email,
+            code_permalink=code_permalink,
+            requirements=_requirements(),
+            data_format="hdf5",
+            jpeg_encoding=False,
+        )
     finally:
         env.close()
 
@@ -135,8 +151,9 @@ def _recordings(directory: Path) -> list[Path]:
         raise ValueError(f"{directory} is not a folder of recordings")
     paths = sorted(directory.glob("*.rlenv"))
     if not paths:
-        raise ValueError(f"{directory} holds no recordings (*.rlenv files written by "
-                         f"RecordEpisodes)")
+        raise ValueError(
+            f"{directory} holds no recordings (*.rlenv files written by RecordEpisodes)"
+        )
     return paths
 
 
@@ -144,23 +161,32 @@ def _one_target(episodes: Sequence[EpisodeFile], directory: Path) -> str:
     """The one environment the recordings name."""
     targets = {episode.target for episode in episodes}
     if None in targets:
-        raise ValueError(f"a recording in {directory} names no environment (it was made at an "
-                         f"address); pass the target (--target MODULE:CLASS)")
+        raise ValueError(
+            f"a recording in {directory} names no environment (it was made at an "
+            f"address); pass the target (--target MODULE:CLASS)"
+        )
     if len(targets) > 1:
-        raise ValueError(f"{directory} holds recordings of several environments: "
-                         f"{', '.join(sorted(map(str, targets)))}; a dataset holds one")
+        raise ValueError(
+            f"{directory} holds recordings of several environments: "
+            f"{', '.join(sorted(map(str, targets)))}; a dataset holds one"
+        )
     return str(targets.pop())
 
 
 def _repeat_action(episodes: Sequence[EpisodeFile]) -> int | None:
     """The ticks per step every recorded action ran, if they all ran the same."""
-    frames = {event[2] for episode in episodes for event in episode.snapshot["events"]
-              if event[0] == "action"}
+    frames = {
+        event[2]
+        for episode in episodes
+        for event in episode.snapshot["events"]
+        if event[0] == "action"
+    }
     return frames.pop() if len(frames) == 1 else None
 
 
-def _episode(number: int, path: Path, episode: EpisodeFile, client: Any,
-             report: Callable[[str], None] | None) -> EpisodeBuffer:
+def _episode(
+    number: int, path: Path, episode: EpisodeFile, client: Any, report: Callable[[str], None] | None
+) -> EpisodeBuffer:
     """Re-simulate one recording, check it, and return it as Minari's episode buffer."""
     result = replay(episode, client, keep=True)
     if result.divergence is not None:
@@ -174,16 +200,24 @@ def _episode(number: int, path: Path, episode: EpisodeFile, client: Any,
         terminated = trajectory.terminated
         truncated = trajectory.truncated or not terminated  # else a client's time limit cut it
         if report is not None:
-            report(f"{path.name} is an older recording, without its end: "
-                   f"{'terminated' if terminated else 'truncated'}, as re-simulated")
+            report(
+                f"{path.name} is an older recording, without its end: "
+                f"{'terminated' if terminated else 'truncated'}, as re-simulated"
+            )
     steps = len(trajectory.actions)
     buffer = EpisodeBuffer(id=number, observations=trajectory.observations[0])
     for t in range(steps):
         last = t == steps - 1
-        buffer = buffer.add_step_data({
-            "observation": trajectory.observations[t + 1], "action": trajectory.actions[t],
-            "reward": float(trajectory.rewards[t]), "terminated": last and terminated,
-            "truncated": last and truncated, "info": {}})
+        buffer = buffer.add_step_data(
+            {
+                "observation": trajectory.observations[t + 1],
+                "action": trajectory.actions[t],
+                "reward": float(trajectory.rewards[t]),
+                "terminated": last and terminated,
+                "truncated": last and truncated,
+                "info": {},
+            }
+        )
     return buffer
 
 

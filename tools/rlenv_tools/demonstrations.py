@@ -24,8 +24,13 @@ from rlenv_client.replay import EpisodeFile, digest, next_episode_path
 __all__ = ["record"]
 
 
-def record(target_or_env: str | gymnasium.Env, controller: Callable[[Any], Any], episodes: int,
-           directory: str | Path, seed: int | None = None) -> list[Path]:
+def record(
+    target_or_env: str | gymnasium.Env,
+    controller: Callable[[Any], Any],
+    episodes: int,
+    directory: str | Path,
+    seed: int | None = None,
+) -> list[Path]:
     """Play ``episodes`` whole episodes with ``controller`` and record each into ``directory``.
 
     Args:
@@ -41,8 +46,11 @@ def record(target_or_env: str | gymnasium.Env, controller: Callable[[Any], Any],
         The files written, in order.
     """
     if isinstance(target_or_env, str):
-        env = gymnasium.make(target_or_env) if target_or_env in gymnasium.registry \
+        env = (
+            gymnasium.make(target_or_env)
+            if target_or_env in gymnasium.registry
             else RemoteEnv(target_or_env)
+        )
     else:
         env = target_or_env
     folder = Path(directory)
@@ -59,8 +67,11 @@ def record(target_or_env: str | gymnasium.Env, controller: Callable[[Any], Any],
                 seen.append(digest(observation))
                 done = terminated or truncated
             path = next_episode_path(folder)
-            EpisodeFile(remote.target, remote.client.snapshot(),  # type: ignore[attr-defined]
-                        seen).save(path)
+            EpisodeFile(
+                remote.target,
+                remote.client.snapshot(),  # type: ignore[attr-defined]
+                seen,
+            ).save(path)
             written.append(path)
     finally:
         if env is not target_or_env:

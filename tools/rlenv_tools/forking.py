@@ -55,8 +55,9 @@ StepRecord = tuple[str, float, bool, bool]
 """What :meth:`ForkedEnvironment.run` tells of each step: the observation's digest, the reward,
 terminated, truncated."""
 
-_CALLS = frozenset({"configure", "draw", "node", "restore", "set_property", "snapshot", "step",
-                    "tree"})
+_CALLS = frozenset(
+    {"configure", "draw", "node", "restore", "set_property", "snapshot", "step", "tree"}
+)
 _FORKED = struct.Struct("<i")  # the copy's pid, in the message that carries its socket
 _FAILED = _FORKED.pack(-1)  # no copy: the error's frame follows
 
@@ -73,9 +74,14 @@ class ForkedEnvironment:
             and spaces); a copy's is its original's.
     """
 
-    def __init__(self, sock: socket.socket, pid: int, hello: Hello | None,
-                 process: subprocess.Popen[bytes] | None = None, lifeline: int | None = None,
-                 ) -> None:
+    def __init__(
+        self,
+        sock: socket.socket,
+        pid: int,
+        hello: Hello | None,
+        process: subprocess.Popen[bytes] | None = None,
+        lifeline: int | None = None,
+    ) -> None:
         self._socket = sock
         self.pid = pid
         self.hello = hello
@@ -100,9 +106,18 @@ class ForkedEnvironment:
         lifeline, held = os.pipe()
         try:
             process = subprocess.Popen(
-                [sys.executable, "-m", "rlenv_tools.forking", str(theirs.fileno()),
-                 str(lifeline), target],
-                pass_fds=(theirs.fileno(), lifeline), stdin=subprocess.DEVNULL, process_group=0)
+                [
+                    sys.executable,
+                    "-m",
+                    "rlenv_tools.forking",
+                    str(theirs.fileno()),
+                    str(lifeline),
+                    target,
+                ],
+                pass_fds=(theirs.fileno(), lifeline),
+                stdin=subprocess.DEVNULL,
+                process_group=0,
+            )
         except BaseException:
             os.close(held)
             raise
@@ -128,8 +143,13 @@ class ForkedEnvironment:
         self._send(["call", name, list(args), kwargs])
         return self._receive()
 
-    def run(self, steps: Sequence[Sequence[Any]], *, stop_at_end: bool = False,
-            observations: bool = False) -> tuple[list[StepRecord], Any, dict[str, Any]]:
+    def run(
+        self,
+        steps: Sequence[Sequence[Any]],
+        *,
+        stop_at_end: bool = False,
+        observations: bool = False,
+    ) -> tuple[list[StepRecord], Any, dict[str, Any]]:
         """Take ``steps`` there, each a list of events ending with ``["action", action, frames]``.
 
         The events before a step's action are ``["config", part]`` (a ``configure``) and
@@ -255,8 +275,9 @@ def _serve(sock: socket.socket, target: str) -> None:
         return
     _reply(sock, "ok", client.hello.to_wire())
 
-    def run(steps: list[list[Any]], stop_at_end: bool,
-            every: bool) -> tuple[list[StepRecord], Any, dict[str, Any]]:
+    def run(
+        steps: list[list[Any]], stop_at_end: bool, every: bool
+    ) -> tuple[list[StepRecord], Any, dict[str, Any]]:
         records: list[StepRecord] = []
         seen = []
         observation: Any = None
@@ -265,8 +286,7 @@ def _serve(sock: socket.socket, target: str) -> None:
             for change in changes:
                 apply_change(client, change)
             observation, reward, terminated, truncated, info = client.step(action, frames)
-            records.append((digest(observation), float(reward), bool(terminated),
-                            bool(truncated)))
+            records.append((digest(observation), float(reward), bool(terminated), bool(truncated)))
             seen.append(observation)
             if stop_at_end and (terminated or truncated):
                 break
@@ -286,8 +306,11 @@ def _serve(sock: socket.socket, target: str) -> None:
             else:
                 _reply(sock, "error", ["bad_request", f"no operation {request[0]!r:.40}"])
         except RlenvError as error:
-            _reply(sock, "error", [getattr(error, "code", "bad_request"),
-                                   getattr(error, "message", str(error))])
+            _reply(
+                sock,
+                "error",
+                [getattr(error, "code", "bad_request"), getattr(error, "message", str(error))],
+            )
         except Exception as error:  # noqa: BLE001 (the owner is told; the process goes on)
             _reply(sock, "error", ["environment_error", _described(error)])
 
@@ -347,7 +370,7 @@ def _arm(lifeline: int) -> None:
 
 def main(argv: Sequence[str] | None = None) -> None:
     """``python -m rlenv_tools.forking FD LIFELINE MODULE:CLASS``: serve the socket ``FD``."""
-    fd, lifeline, target = (sys.argv[1:] if argv is None else argv)
+    fd, lifeline, target = sys.argv[1:] if argv is None else argv
     _arm(int(lifeline))
     sock = socket.socket(fileno=int(fd))
     try:

@@ -42,12 +42,13 @@ def observation_difference(expected: Any, got: Any, where: str = "") -> str | No
     elif _is_sequence(expected) or _is_sequence(got):
         if not (_is_sequence(expected) and _is_sequence(got)) or len(expected) != len(got):
             return f"{here}: {_short(expected)} != {_short(got)}"
-        members = [(one, other, f"{where}[{index}]")
-                   for index, (one, other) in enumerate(zip(expected, got, strict=True))]
+        members = [
+            (one, other, f"{where}[{index}]")
+            for index, (one, other) in enumerate(zip(expected, got, strict=True))
+        ]
     else:
         one, other = np.asarray(expected), np.asarray(got)
-        if one.shape != other.shape or one.dtype != other.dtype or \
-                not _same_values(one, other):
+        if one.shape != other.shape or one.dtype != other.dtype or not _same_values(one, other):
             return f"{here}: {_short(expected)} != {_short(got)}"
         return None
     for one, other, inside in members:

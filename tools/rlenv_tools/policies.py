@@ -44,8 +44,12 @@ class ExportMismatch(ValueError):
     """The ONNX file's actions differ from the torch policy's (the message names the largest)."""
 
 
-def export_onnx(model: Any, path: str | Path, observation_space: spaces.Space | None = None,
-                action_space: spaces.Space | None = None) -> Path:
+def export_onnx(
+    model: Any,
+    path: str | Path,
+    observation_space: spaces.Space | None = None,
+    action_space: spaces.Space | None = None,
+) -> Path:
     """Write ``model``'s deterministic policy to ``path`` as ONNX, and check it.
 
     Args:
@@ -77,25 +81,37 @@ def export_onnx(model: Any, path: str | Path, observation_space: spaces.Space | 
     observation_space = observation_space or (policy.observation_space if sb3 else None)
     action_space = action_space or (policy.action_space if sb3 else None)
     if observation_space is None or action_space is None:
-        raise TypeError("export_onnx needs observation_space and action_space for a module "
-                        "that is not a Stable-Baselines3 policy")
+        raise TypeError(
+            "export_onnx needs observation_space and action_space for a module "
+            "that is not a Stable-Baselines3 policy"
+        )
     for which, space in (("observation", observation_space), ("action", action_space)):
         if not isinstance(space, spaces.Box | spaces.Discrete):
-            raise TypeError(f"export_onnx takes Box and Discrete spaces; the {which} space is "
-                            f"{space}")
+            raise TypeError(
+                f"export_onnx takes Box and Discrete spaces; the {which} space is {space}"
+            )
     actor = Actor(policy, cast(spaces.Box | spaces.Discrete, action_space), sb3)  # checked above
     observations = _sample(observation_space, CHECKED_OBSERVATIONS)
     path = Path(path)
     with warnings.catch_warnings():  # the TorchScript exporter: torch.export cannot trace SB3
         warnings.simplefilter("ignore")
-        torch.onnx.export(actor, (torch.as_tensor(observations[:1]),), str(path),
-                          input_names=["observation"], output_names=["action"],
-                          dynamic_axes={"observation": {0: "batch"}, "action": {0: "batch"}},
-                          dynamo=False)
+        torch.onnx.export(
+            actor,
+            (torch.as_tensor(observations[:1]),),
+            str(path),
+            input_names=["observation"],
+            output_names=["action"],
+            dynamic_axes={"observation": {0: "batch"}, "action": {0: "batch"}},
+            dynamo=False,
+        )
     graph = onnx.load(str(path))
-    onnx.helper.set_model_props(graph, {
-        OBSERVATION_SPACE_KEY: space_to_json_text(observation_space),
-        ACTION_SPACE_KEY: space_to_json_text(action_space)})
+    onnx.helper.set_model_props(
+        graph,
+        {
+            OBSERVATION_SPACE_KEY: space_to_json_text(observation_space),
+            ACTION_SPACE_KEY: space_to_json_text(action_space),
+        },
+    )
     onnx.checker.check_model(graph)
     onnx.save(graph, str(path))
     try:
@@ -118,8 +134,9 @@ def _check(path: Path, expected: np.ndarray, observations: np.ndarray) -> None:
     got = OnnxPolicy(path).run(observations)
     expected = np.asarray(expected).reshape(got.shape)
     if got.dtype != expected.dtype:
-        raise ExportMismatch(f"{path}: the ONNX actions are {got.dtype}, the policy's "
-                             f"{expected.dtype}")
+        raise ExportMismatch(
+            f"{path}: the ONNX actions are {got.dtype}, the policy's {expected.dtype}"
+        )
     difference = np.abs(got.astype(np.float64) - expected.astype(np.float64))
     largest = int(np.argmax(difference))
     limit = 0.0 if got.dtype.kind in "iub" else TOLERANCE
@@ -130,4 +147,5 @@ def _check(path: Path, expected: np.ndarray, observations: np.ndarray) -> None:
             f"{int((difference > limit).any(axis=tuple(range(1, difference.ndim))).sum())} of "
             f"{len(observations)} observations; the largest difference is "
             f"{difference.flat[largest]:.6g} (observation {row}: ONNX "
-            f"{got.flat[largest]!r}, torch {expected.flat[largest]!r}; tolerance {limit:g})")
+            f"{got.flat[largest]!r}, torch {expected.flat[largest]!r}; tolerance {limit:g})"
+        )

@@ -60,8 +60,7 @@ from rlenv_tools._timeline_processes import (
 )
 from rlenv_tools.forking import ForkedEnvironment, StepRecord
 
-__all__ = ["MAX_MEMORY", "MAX_PROCESSES", "Step", "Tick", "Timeline", "TimelineDiff",
-           "load_policy"]
+__all__ = ["MAX_MEMORY", "MAX_PROCESSES", "Step", "Tick", "Timeline", "TimelineDiff", "load_policy"]
 
 _SKIPPED_AT_ONCE = 10_000  # ticks a tick view takes unread in one run
 MAX_PROCESSES = 512
@@ -175,17 +174,27 @@ class Timeline:
         RuntimeError: the environment re-simulated the recording differently.
     """
 
-    def __init__(self, episode: EpisodeFile, *, target: str | None = None,
-                 trust_target: bool = False, checkpoint_every: int | None = None,
-                 timeout: float = 60.0, max_processes: int = MAX_PROCESSES,
-                 max_memory: int = MAX_MEMORY) -> None:
+    def __init__(
+        self,
+        episode: EpisodeFile,
+        *,
+        target: str | None = None,
+        trust_target: bool = False,
+        checkpoint_every: int | None = None,
+        timeout: float = 60.0,
+        max_processes: int = MAX_PROCESSES,
+        max_memory: int = MAX_MEMORY,
+    ) -> None:
         if target is None:
             target = episode.target
             if target is None:
                 raise ValueError("the recording names no target: pass target='MODULE:CLASS'")
             if not trust_target:
-                check_target(target, named_by=_named_by(episode),
-                             folder=None if episode.path is None else episode.path.parent)
+                check_target(
+                    target,
+                    named_by=_named_by(episode),
+                    folder=None if episode.path is None else episode.path.parent,
+                )
         if checkpoint_every is not None and checkpoint_every < 1:
             raise ValueError("checkpoint_every must be at least 1")
         if max_processes < 2 * WORKING:
@@ -208,21 +217,41 @@ class Timeline:
             raise
 
     @classmethod
-    def open(cls, path: str | Path, *, target: str | None = None, trust_target: bool = False,
-             checkpoint_every: int | None = None, timeout: float = 60.0,
-             max_processes: int = MAX_PROCESSES, max_memory: int = MAX_MEMORY) -> Timeline:
+    def open(
+        cls,
+        path: str | Path,
+        *,
+        target: str | None = None,
+        trust_target: bool = False,
+        checkpoint_every: int | None = None,
+        timeout: float = 60.0,
+        max_processes: int = MAX_PROCESSES,
+        max_memory: int = MAX_MEMORY,
+    ) -> Timeline:
         """The timeline of the recording at ``path`` (see :class:`Timeline` for the rest).
 
         Raises:
             ValueError: the file is not an rlenv episode, not a regular file, or too large
                 (:func:`~rlenv_client.recordings.read_recording`; and as :class:`Timeline`).
         """
-        return cls(EpisodeFile.load(path), target=target, trust_target=trust_target,
-                   checkpoint_every=checkpoint_every, timeout=timeout,
-                   max_processes=max_processes, max_memory=max_memory)
+        return cls(
+            EpisodeFile.load(path),
+            target=target,
+            trust_target=trust_target,
+            checkpoint_every=checkpoint_every,
+            timeout=timeout,
+            max_processes=max_processes,
+            max_memory=max_memory,
+        )
 
-    def _setup(self, episode: EpisodeFile, processes: Processes, owner: bool,
-               checkpoints: Checkpoints, records: list[StepRecord]) -> None:
+    def _setup(
+        self,
+        episode: EpisodeFile,
+        processes: Processes,
+        owner: bool,
+        checkpoints: Checkpoints,
+        records: list[StepRecord],
+    ) -> None:
         self.episode = episode
         # A started process has said its hello (ForkedEnvironment.start).
         self.hello = cast(Hello, processes.first.hello)
@@ -238,8 +267,10 @@ class Timeline:
                 self._steps.append(pending)
                 pending = []
         if episode.observations and len(episode.observations) != len(self._steps) + 1:
-            raise ValueError(f"the recording has {len(episode.observations)} observations for "
-                             f"{len(self._steps)} actions (one more expected)")
+            raise ValueError(
+                f"the recording has {len(episode.observations)} observations for "
+                f"{len(self._steps)} actions (one more expected)"
+            )
 
     def __len__(self) -> int:
         """The number of actions (the last step's number)."""
@@ -296,11 +327,20 @@ class Timeline:
         """
         observation, reward, terminated, truncated, info = self._goto(step)
         cursor = self._processes.stepping()
-        entries = cursor.call("tree") if nodes is None else \
-            [cursor.call("node", path) for path in nodes]
+        entries = (
+            cursor.call("tree") if nodes is None else [cursor.call("node", path) for path in nodes]
+        )
         properties = {node["path"]: dict(node["exported"]) for node in entries}
-        return Step(step, copy.deepcopy(observation), reward, terminated, truncated,
-                    copy.deepcopy(info), cursor.call("draw"), properties)
+        return Step(
+            step,
+            copy.deepcopy(observation),
+            reward,
+            terminated,
+            truncated,
+            copy.deepcopy(info),
+            cursor.call("draw"),
+            properties,
+        )
 
     def tree(self, step: int) -> list[dict[str, Any]]:
         """Every node after ``step``, as the inspector's tree lists them (``client.tree()``).
@@ -353,9 +393,15 @@ class Timeline:
         finally:
             ticking.end()
 
-    def branch(self, step: int, actions: Iterable[Any] | None = None, *,
-               policy: Callable[[Any], Any] | str | Path | None = None,
-               max_steps: int | None = None, repeat_action: int | None = None) -> Timeline:
+    def branch(
+        self,
+        step: int,
+        actions: Iterable[Any] | None = None,
+        *,
+        policy: Callable[[Any], Any] | str | Path | None = None,
+        max_steps: int | None = None,
+        repeat_action: int | None = None,
+    ) -> Timeline:
         """A timeline sharing this one's first ``step`` steps, then going on differently.
 
         It continues with ``actions``, or with a policy for at most ``max_steps`` steps, and
@@ -393,8 +439,10 @@ class Timeline:
         checkpoints = self._checkpoints.upto(step)
         actions = None if actions is None else list(actions)
         length = max_steps if actions is None else len(actions)
-        checkpoints.every = max(checkpoints.every,  # half the room left, at most
-                                -(-length // (self._processes.room() // 2 or 1)))  # type: ignore[operator]
+        checkpoints.every = max(
+            checkpoints.every,  # half the room left, at most
+            -(-length // (self._processes.room() // 2 or 1)),  # type: ignore[operator]
+        )
         records = self._records[:step]
         terminated, truncated = result[2], result[3]
         if step == len(self) and self.ended:
@@ -409,15 +457,21 @@ class Timeline:
                 steps = [[["action", action, repeat_action]] for action in actions or ()]
                 result = processes.take(step, steps, result, checkpoints, records, None)
             else:
-                result = processes.play(policy, max_steps, repeat_action,  # type: ignore[arg-type]
-                                        result, checkpoints, records)
+                result = processes.play(
+                    policy,
+                    max_steps,  # type: ignore[arg-type]
+                    repeat_action,
+                    result,
+                    checkpoints,
+                    records,
+                )
             snapshot = cursor.call("snapshot")
         except ConnectionError as error:
             raise RuntimeError(f"the timeline's environment failed: {error}") from None
         except RemoteError:
             processes.drop_cursor()  # it took part of the branch
             raise
-        digests = self.episode.observations[:step + 1] + [record[0] for record in records[step:]]
+        digests = self.episode.observations[: step + 1] + [record[0] for record in records[step:]]
         ends = records[-1][2:] if len(records) > step else (terminated, truncated)
         episode = EpisodeFile(self.episode.target, snapshot, digests, *ends)
         branch = object.__new__(Timeline)
@@ -427,13 +481,20 @@ class Timeline:
 
     def diff(self, other: Timeline) -> TimelineDiff:
         """How ``other`` differs from this timeline, step by step (both re-simulated)."""
-        steps = [[(timeline.episode.observations[0], 0.0, False, False), *timeline._records]
-                 for timeline in (self, other)]
-        first = next((k for k, (a, b) in enumerate(zip(*steps, strict=False)) if a != b),
-                     None if len(steps[0]) == len(steps[1]) else min(map(len, steps)))
+        steps = [
+            [(timeline.episode.observations[0], 0.0, False, False), *timeline._records]
+            for timeline in (self, other)
+        ]
+        first = next(
+            (k for k, (a, b) in enumerate(zip(*steps, strict=False)) if a != b),
+            None if len(steps[0]) == len(steps[1]) else min(map(len, steps)),
+        )
         mine, theirs = self._every_observation(), other._every_observation()
-        return TimelineDiff(first, [_subtract(a, b) for a, b in zip(mine, theirs, strict=False)],
-                            [b - a for a, b in zip(self.rewards, other.rewards, strict=False)])
+        return TimelineDiff(
+            first,
+            [_subtract(a, b) for a, b in zip(mine, theirs, strict=False)],
+            [b - a for a, b in zip(self.rewards, other.rewards, strict=False)],
+        )
 
     def save(self, path: str | Path) -> None:
         """Write this timeline as a recording that ``rlenv replay`` re-runs."""
@@ -457,8 +518,9 @@ class Timeline:
         """Bring the cursor to ``step`` of this timeline; what that step returned."""
         if not 0 <= step <= len(self):
             raise IndexError(f"no step {step}: the timeline has steps 0 to {len(self)}")
-        return self._processes.goto(self, step, self._steps, self._checkpoints, self._records,
-                                    self._check)
+        return self._processes.goto(
+            self, step, self._steps, self._checkpoints, self._records, self._check
+        )
 
     def _check(self, step: int, observed: str) -> None:
         digests = self.episode.observations
@@ -466,10 +528,13 @@ class Timeline:
             digests.append(observed)
         elif observed != digests[step]:
             why = older_settings(self.episode.snapshot, self.hello.agents) or (
-                " (the environment depends on something a snapshot does not hold)")
-            raise RuntimeError(f"step {step}: the re-simulated observation differs from the "
-                               "recording: its snapshot's settings, generator state and actions "
-                               f"gave another observation{why}")
+                " (the environment depends on something a snapshot does not hold)"
+            )
+            raise RuntimeError(
+                f"step {step}: the re-simulated observation differs from the "
+                "recording: its snapshot's settings, generator state and actions "
+                f"gave another observation{why}"
+            )
 
     def _every_observation(self) -> list[Any]:
         """Every step's observation, re-simulated from the reset in one run."""
@@ -502,8 +567,9 @@ def _subtract(mine: Any, theirs: Any) -> Any:
     return np.asarray(theirs, np.float64) - np.asarray(mine, np.float64)
 
 
-def _read_ticks(ticking: ForkedEnvironment, changes: list[list[Any]], action: Any, first: int,
-                last: int) -> list[Tick]:
+def _read_ticks(
+    ticking: ForkedEnvironment, changes: list[list[Any]], action: Any, first: int, last: int
+) -> list[Tick]:
     """Ticks ``first`` to ``last`` of an action, each taken on ``ticking`` with its own read.
 
     ``ticking`` is a copy at the state before the step, ``changes`` the events recorded before
@@ -516,8 +582,18 @@ def _read_ticks(ticking: ForkedEnvironment, changes: list[list[Any]], action: An
         events = [*changes, ["action", action, 1]] if tick == 1 else [["action", action, 1]]
         ((_, reward, terminated, truncated),), observation, info = ticking.run([events])
         properties = {node["path"]: dict(node["exported"]) for node in ticking.call("tree")}
-        ticks.append(Tick(tick, observation, reward, terminated, truncated, info, properties,
-                          ticking.call("draw")))
+        ticks.append(
+            Tick(
+                tick,
+                observation,
+                reward,
+                terminated,
+                truncated,
+                info,
+                properties,
+                ticking.call("draw"),
+            )
+        )
         if terminated or truncated:
             break
     return ticks

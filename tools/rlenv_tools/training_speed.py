@@ -38,12 +38,30 @@ import gymnasium
 from rlenv_client.launcher import end_process
 from rlenv_tools._bench import Rate, interleaved
 
-__all__ = ["PPO_CONFIGS", "Measure", "Row", "busy_process", "format_rows", "measure_training",
-           "ppo_rows", "resolve_target", "rows_to_json", "sync_vector_rows"]
+__all__ = [
+    "PPO_CONFIGS",
+    "Measure",
+    "Row",
+    "busy_process",
+    "format_rows",
+    "measure_training",
+    "ppo_rows",
+    "resolve_target",
+    "rows_to_json",
+    "sync_vector_rows",
+]
 
 PPO_CONFIGS: dict[str, dict[str, Any]] = {
-    "rl-zoo": {"n_steps": 32, "batch_size": 256, "n_epochs": 20, "gae_lambda": 0.8,
-               "gamma": 0.98, "ent_coef": 0.0, "learning_rate": 1e-3, "clip_range": 0.2},
+    "rl-zoo": {
+        "n_steps": 32,
+        "batch_size": 256,
+        "n_epochs": 20,
+        "gae_lambda": 0.8,
+        "gamma": 0.98,
+        "ent_coef": 0.0,
+        "learning_rate": 1e-3,
+        "clip_range": 0.2,
+    },
     "rollout-heavy": {"n_steps": 128, "batch_size": 256, "n_epochs": 1},
 }
 """PPO's hyperparameters for each configuration: rl-zoo's for CartPole-v1 (constant rates
@@ -64,8 +82,14 @@ class Measure(Rate):
         close: frees what it holds.
     """
 
-    def __init__(self, name: str, run: Callable[[int], None], steps: int, warmup: int,
-                 close: Callable[[], None]) -> None:
+    def __init__(
+        self,
+        name: str,
+        run: Callable[[int], None],
+        steps: int,
+        warmup: int,
+        close: Callable[[], None],
+    ) -> None:
         super().__init__(run, steps, name=name, warmup=warmup)
         self.close = close
 
@@ -93,8 +117,9 @@ def resolve_target(target: str) -> tuple[str, int | None]:
         registration = ENVIRONMENTS[target]
         return registration.target, registration.max_episode_steps
     if ":" not in target:
-        raise ValueError(f"expected MODULE:CLASS or a registered id ({', '.join(ENVIRONMENTS)}),"
-                         f" got {target!r}")
+        raise ValueError(
+            f"expected MODULE:CLASS or a registered id ({', '.join(ENVIRONMENTS)}), got {target!r}"
+        )
     return target, None
 
 
@@ -107,6 +132,7 @@ def _env_factory(target: str, limit: int | None, **kwargs: Any) -> Callable[[], 
         if limit is not None:
             env = gymnasium.wrappers.TimeLimit(env, limit)
         return env
+
     return make
 
 
@@ -114,14 +140,26 @@ def _rows(group: str, measures: Sequence[Measure], baseline: Measure) -> list[Ro
     rows = []
     for measure in measures:
         ratios = [rate / base for rate, base in zip(measure.rates, baseline.rates, strict=True)]
-        rows.append(Row(group, measure.name, statistics.median(measure.rates), baseline.name,
-                        statistics.median(ratios), min(ratios)))
+        rows.append(
+            Row(
+                group,
+                measure.name,
+                statistics.median(measure.rates),
+                baseline.name,
+                statistics.median(ratios),
+                min(ratios),
+            )
+        )
     return rows
 
 
 def ppo_rows(
-    target: str, configs: Sequence[str] = tuple(PPO_CONFIGS), envs: int = 8, rounds: int = 3,
-    updates: int = 12, native: str | None = None,
+    target: str,
+    configs: Sequence[str] = tuple(PPO_CONFIGS),
+    envs: int = 8,
+    rounds: int = 3,
+    updates: int = 12,
+    native: str | None = None,
     progress: Callable[[str], None] = lambda message: None,
 ) -> list[Row]:
     """PPO's training speed by how it reaches ``envs`` environments (see the module docstring).
@@ -142,12 +180,15 @@ def ppo_rows(
 
     module_class, limit = resolve_target(target)
     ways: list[tuple[str, Callable[[], Any]]] = [
-        ("in process: make_vec_env(in_process=True)",
-         lambda: make_vec_env(_env_factory(module_class, limit, in_process=True), n_envs=envs)),
-        (f"SB3VecEnv({envs})",
-         lambda: SB3VecEnv(envs, module_class, max_episode_steps=limit)),
-        ("make_vec_env (DummyVecEnv, gym.make each)",
-         lambda: make_vec_env(_env_factory(module_class, limit), n_envs=envs)),
+        (
+            "in process: make_vec_env(in_process=True)",
+            lambda: make_vec_env(_env_factory(module_class, limit, in_process=True), n_envs=envs),
+        ),
+        (f"SB3VecEnv({envs})", lambda: SB3VecEnv(envs, module_class, max_episode_steps=limit)),
+        (
+            "make_vec_env (DummyVecEnv, gym.make each)",
+            lambda: make_vec_env(_env_factory(module_class, limit), n_envs=envs),
+        ),
     ]
     if native is not None:
         ways.append((f"native {native}", lambda: make_vec_env(native, n_envs=envs)))
@@ -159,9 +200,15 @@ def ppo_rows(
         try:
             for name, make in ways:
                 model = PPO("MlpPolicy", make(), seed=0, verbose=0, **hyperparameters)
-                measures.append(Measure(
-                    name, functools.partial(model.learn, reset_num_timesteps=False),
-                    updates * batch, 2 * batch, model.get_env().close))
+                measures.append(
+                    Measure(
+                        name,
+                        functools.partial(model.learn, reset_num_timesteps=False),
+                        updates * batch,
+                        2 * batch,
+                        model.get_env().close,
+                    )
+                )
             progress(f"PPO, {config}: {len(measures)} trainers, {rounds} rounds in turns")
             interleaved(rounds, *measures, progress=progress)
         finally:
@@ -179,12 +226,16 @@ def _random_steps(envs: gymnasium.vector.VectorEnv, seed: int = 0) -> Callable[[
     def run(steps: int) -> None:
         for turn in range(max(1, steps // envs.num_envs)):
             envs.step(actions[turn % 64])
+
     return run
 
 
 def sync_vector_rows(
-    target: str, counts: Sequence[int] = (1, 2, 4, 8, 16), rounds: int = 3,
-    steps: int = 8000, progress: Callable[[str], None] = lambda message: None,
+    target: str,
+    counts: Sequence[int] = (1, 2, 4, 8, 16),
+    rounds: int = 3,
+    steps: int = 8000,
+    progress: Callable[[str], None] = lambda message: None,
 ) -> list[Row]:
     """Gymnasium's ``SyncVectorEnv`` of k served environments on random actions, by k.
 
@@ -199,19 +250,26 @@ def sync_vector_rows(
                 factory = _env_factory(module_class, limit, in_process=in_process)
                 vector = gymnasium.vector.SyncVectorEnv([factory] * count)
                 name = f"SyncVectorEnv({count})" + (" in process" if in_process else "")
-                measures[count, in_process] = Measure(name, _random_steps(vector), steps,
-                                                      steps // 4, vector.close)
+                measures[count, in_process] = Measure(
+                    name, _random_steps(vector), steps, steps // 4, vector.close
+                )
         progress(f"SyncVectorEnv: {len(measures)} vectors, {rounds} rounds in turns")
         interleaved(rounds, *measures.values(), progress=progress)
     finally:
         for measure in measures.values():
             measure.close()
     first = measures[counts[0], False]
-    rows = _rows("SyncVectorEnv, random actions: against one env",
-                 [measures[count, False] for count in counts], first)
+    rows = _rows(
+        "SyncVectorEnv, random actions: against one env",
+        [measures[count, False] for count in counts],
+        first,
+    )
     for count in counts:
-        rows += _rows("SyncVectorEnv, random actions: against in process",
-                      [measures[count, False]], measures[count, True])
+        rows += _rows(
+            "SyncVectorEnv, random actions: against in process",
+            [measures[count, False]],
+            measures[count, True],
+        )
     return rows
 
 
@@ -221,9 +279,15 @@ def busy_process() -> subprocess.Popen[bytes]:
 
 
 def measure_training(
-    target: str, envs: int = 8, rounds: int = 3, busy: bool = False,
-    torch_threads: int | None = None, native: str | None = None, steps: int = 8000,
-    ppo: bool = True, progress: Callable[[str], None] = lambda message: None,
+    target: str,
+    envs: int = 8,
+    rounds: int = 3,
+    busy: bool = False,
+    torch_threads: int | None = None,
+    native: str | None = None,
+    steps: int = 8000,
+    ppo: bool = True,
+    progress: Callable[[str], None] = lambda message: None,
 ) -> list[Row]:
     """Every figure of the module docstring for ``target`` (``rlenv bench --train``).
 
@@ -255,8 +319,7 @@ def measure_training(
         if torch_threads is not None:
             torch.set_num_threads(torch_threads)
         logging.getLogger("rlenv_client").setLevel(logging.WARNING)
-        return rows + ppo_rows(target, envs=envs, rounds=rounds, native=native,
-                               progress=progress)
+        return rows + ppo_rows(target, envs=envs, rounds=rounds, native=native, progress=progress)
     finally:
         if hog is not None:
             end_process(hog, 0.0, first=None)
@@ -274,10 +337,16 @@ def format_rows(rows: Sequence[Row]) -> str:
     for row in rows:
         if row.group != group:
             group = row.group
-            lines += ["", f"{group} (env-steps/s; ratio to the baseline of each round)", "",
-                      "| how the trainer reaches the envs | env-steps/s | baseline | ratio "
-                      "(median) | ratio (min) |", "|---|---:|---|---:|---:|"]
-        lines.append(f"| {row.name} | {row.rate:,.0f} | {row.baseline} | {row.ratio:.2f} | "
-                     f"{row.ratio_min:.2f} |")
+            lines += [
+                "",
+                f"{group} (env-steps/s; ratio to the baseline of each round)",
+                "",
+                "| how the trainer reaches the envs | env-steps/s | baseline | ratio "
+                "(median) | ratio (min) |",
+                "|---|---:|---|---:|---:|",
+            ]
+        lines.append(
+            f"| {row.name} | {row.rate:,.0f} | {row.baseline} | {row.ratio:.2f} | "
+            f"{row.ratio_min:.2f} |"
+        )
     return "\n".join(lines).lstrip("\n")
-

@@ -29,6 +29,17 @@ from rlenv_client.curriculum.scores import positive_value_loss as positive_value
 from rlenv_client.curriculum.vector import CurriculumVectorEnv as CurriculumVectorEnv
 from rlenv_client.curriculum.vector import Episode as Episode
 
-__all__ = ["PRIORITIZATIONS", "CurriculumVectorEnv", "EnvironmentParameters",
-           "EnvironmentParametersError", "Episode", "Level", "LevelSampler", "configurable_keys",
-           "configure_arguments", "learnability", "max_mc", "positive_value_loss"]
+__all__ = [
+    "PRIORITIZATIONS",
+    "CurriculumVectorEnv",
+    "EnvironmentParameters",
+    "EnvironmentParametersError",
+    "Episode",
+    "Level",
+    "LevelSampler",
+    "configurable_keys",
+    "configure_arguments",
+    "learnability",
+    "max_mc",
+    "positive_value_loss",
+]

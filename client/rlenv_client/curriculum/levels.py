@@ -58,13 +58,17 @@ def _copy(value: Any, where: str) -> Any:
         return [_copy(item, f"{where}[{index}]") for index, item in enumerate(value)]
     if isinstance(value, dict):
         return {_key(key, where): _copy(item, f"{where}[{key!r}]") for key, item in value.items()}
-    raise ValueError(f"{where} is a {type(value).__name__}: a level is an int seed or plain data "
-                     "(maps with str keys, lists, numbers, strings, bytes, booleans, None), as a "
-                     "packed scene's data")
+    raise ValueError(
+        f"{where} is a {type(value).__name__}: a level is an int seed or plain data "
+        "(maps with str keys, lists, numbers, strings, bytes, booleans, None), as a "
+        "packed scene's data"
+    )
 
 
 def _key(key: Any, where: str) -> str:
     if not isinstance(key, str):
-        raise ValueError(f"{where} has a {type(key).__name__} key {key!r:.40}: a level's maps "
-                         "have str keys, as msgpack and json carry them")
+        raise ValueError(
+            f"{where} has a {type(key).__name__} key {key!r:.40}: a level's maps "
+            "have str keys, as msgpack and json carry them"
+        )
     return str(key)

@@ -16,16 +16,32 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["SECTIONS", "Criteria", "Draw", "EnvironmentParametersError", "Lesson", "Parameter",
-           "count_samplers", "finite", "names_file", "read_parameter"]
+__all__ = [
+    "SECTIONS",
+    "Criteria",
+    "Draw",
+    "EnvironmentParametersError",
+    "Lesson",
+    "Parameter",
+    "count_samplers",
+    "finite",
+    "names_file",
+    "read_parameter",
+]
 
 
 SECTIONS = ("environment", "agent", "world")
 """The sections of a ``config`` request: the first part of a configure key."""
 
 _MEASURES = ("reward", "progress")
-_CRITERIA_KEYS = {"measure", "behavior", "threshold", "min_lesson_length", "signal_smoothing",
-                  "require_reset"}
+_CRITERIA_KEYS = {
+    "measure",
+    "behavior",
+    "threshold",
+    "min_lesson_length",
+    "signal_smoothing",
+    "require_reset",
+}
 
 Draw = Callable[[np.random.Generator], float]
 
@@ -88,8 +104,9 @@ def count_samplers(section: Mapping[str, Any]) -> int:
     return count
 
 
-def read_parameter(name: str, value: Any, seeds: Any,
-               behaviors: Mapping[str, Any] | None) -> Parameter:
+def read_parameter(
+    name: str, value: Any, seeds: Any, behaviors: Mapping[str, Any] | None
+) -> Parameter:
     """One parameter of the section: a plain value, a sampler or a curriculum."""
     where = f"environment_parameters.{name}"
     if not (isinstance(value, Mapping) and "curriculum" in value):
@@ -105,8 +122,9 @@ def read_parameter(name: str, value: Any, seeds: Any,
         at = f"{where}[{index}]"
         last = index == len(curriculum) - 1
         if not isinstance(lesson, Mapping):
-            raise EnvironmentParametersError(f"{at} must be a map (name, value, "
-                                             "completion_criteria)")
+            raise EnvironmentParametersError(
+                f"{at} must be a map (name, value, completion_criteria)"
+            )
         _only(lesson, {"name", "value", "completion_criteria"}, at)
         for required in ("name", "value"):
             if required not in lesson:
@@ -114,13 +132,23 @@ def read_parameter(name: str, value: Any, seeds: Any,
         criteria = lesson.get("completion_criteria")
         if criteria is None and not last:
             raise EnvironmentParametersError(
-                f"{at}.completion_criteria is missing: every lesson but the last needs one")
+                f"{at}.completion_criteria is missing: every lesson but the last needs one"
+            )
         if criteria is not None and last:
             raise EnvironmentParametersError(
-                f"{at}.completion_criteria: the last lesson has none (it never ends)")
+                f"{at}.completion_criteria: the last lesson has none (it never ends)"
+            )
         draw, rng = _sampler(lesson["value"], f"{at}.value", next(seeds))
-        lessons.append(Lesson(str(lesson["name"]), draw, rng, None if criteria is None else
-                               _criteria(criteria, f"{at}.completion_criteria", behaviors)))
+        lessons.append(
+            Lesson(
+                str(lesson["name"]),
+                draw,
+                rng,
+                None
+                if criteria is None
+                else _criteria(criteria, f"{at}.completion_criteria", behaviors),
+            )
+        )
     return Parameter(name, lessons)
 
 
@@ -135,37 +163,44 @@ def _criteria(data: Any, where: str, behaviors: Mapping[str, Any] | None) -> Cri
     if behaviors is not None and behavior not in behaviors:
         raise EnvironmentParametersError(
             f"{where}.behavior: {behavior!r} is not in behaviors ("
-            f"{', '.join(map(str, behaviors)) or 'none'})")
+            f"{', '.join(map(str, behaviors)) or 'none'})"
+        )
     measure = data.get("measure", "reward")
     if measure not in _MEASURES:
         raise EnvironmentParametersError(
-            f"{where}.measure must be reward or progress, got {measure!r:.40}")
+            f"{where}.measure must be reward or progress, got {measure!r:.40}"
+        )
     threshold = _number(data, "threshold", where) if "threshold" in data else 0.0
     if measure == "progress" and not 0.0 <= threshold <= 1.0:
         raise EnvironmentParametersError(
-            f"{where}.threshold must be in [0, 1] when the measure is progress, got {threshold}")
+            f"{where}.threshold must be in [0, 1] when the measure is progress, got {threshold}"
+        )
     length = data.get("min_lesson_length", 0)
     if type(length) is not int or length < 0:
         raise EnvironmentParametersError(
-            f"{where}.min_lesson_length must be an integer >= 0, got {length!r:.40}")
+            f"{where}.min_lesson_length must be an integer >= 0, got {length!r:.40}"
+        )
     flags = {}
     for flag, default in (("signal_smoothing", True), ("require_reset", False)):
         flags[flag] = data.get(flag, default)
         if not isinstance(flags[flag], bool):
             raise EnvironmentParametersError(
-                f"{where}.{flag} must be true or false, got {flags[flag]!r:.40}")
+                f"{where}.{flag} must be true or false, got {flags[flag]!r:.40}"
+            )
     return Criteria(behavior, measure, threshold, length, **flags)
 
 
-def _sampler(value: Any, where: str, seed: np.random.SeedSequence
-             ) -> tuple[Draw, np.random.Generator]:
+def _sampler(
+    value: Any, where: str, seed: np.random.SeedSequence
+) -> tuple[Draw, np.random.Generator]:
     """A value as ML-Agents writes it: a number, or ``{sampler_type, sampler_parameters}``."""
     rng = np.random.default_rng(seed)
     if not isinstance(value, Mapping):
         if not _is_number(value):
             raise EnvironmentParametersError(
                 f"{where} must be a number or a sampler (sampler_type, sampler_parameters), "
-                f"got {value!r:.40}")
+                f"got {value!r:.40}"
+            )
         return (lambda _rng: value), rng
     _only(value, {"sampler_type", "sampler_parameters"}, where)
     for required in ("sampler_type", "sampler_parameters"):
@@ -175,7 +210,8 @@ def _sampler(value: Any, where: str, seed: np.random.SeedSequence
     if kind not in _SAMPLERS:
         raise EnvironmentParametersError(
             f"{where}.sampler_type: unknown sampler {kind!r:.40}; ML-Agents' are "
-            f"{', '.join(_SAMPLERS)}")
+            f"{', '.join(_SAMPLERS)}"
+        )
     parameters = value["sampler_parameters"]
     where = f"{where}.sampler_parameters"
     if not isinstance(parameters, Mapping):
@@ -184,8 +220,9 @@ def _sampler(value: Any, where: str, seed: np.random.SeedSequence
     _only(parameters, {*fields, "seed"}, where)
     for field in fields:
         if field not in parameters:
-            raise EnvironmentParametersError(f"{where} has no {field} ({kind} needs "
-                                             f"{', '.join(fields)})")
+            raise EnvironmentParametersError(
+                f"{where} has no {field} ({kind} needs {', '.join(fields)})"
+            )
     if "seed" in parameters:
         own = parameters["seed"]
         if type(own) is not int or own < 0:
@@ -198,7 +235,8 @@ def _uniform(parameters: Mapping[str, Any], where: str) -> Draw:
     low, high = _number(parameters, "min_value", where), _number(parameters, "max_value", where)
     if low > high:
         raise EnvironmentParametersError(
-            f"{where}.min_value ({low}) is greater than max_value ({high})")
+            f"{where}.min_value ({low}) is greater than max_value ({high})"
+        )
     return lambda rng: float(rng.uniform(low, high))
 
 
@@ -216,14 +254,19 @@ def _multirange(parameters: Mapping[str, Any], where: str) -> Draw:
         raise EnvironmentParametersError(f"{where} must be a non-empty list of [min, max]")
     ranges = []
     for index, interval in enumerate(intervals):
-        if not isinstance(interval, list | tuple) or len(interval) != 2 \
-                or not all(map(_is_number, interval)):
+        if (
+            not isinstance(interval, list | tuple)
+            or len(interval) != 2
+            or not all(map(_is_number, interval))
+        ):
             raise EnvironmentParametersError(
-                f"{where}[{index}] must be [min, max], two numbers, got {interval!r:.40}")
+                f"{where}[{index}] must be [min, max], two numbers, got {interval!r:.40}"
+            )
         low, high = map(float, interval)
         if low > high:
             raise EnvironmentParametersError(
-                f"{where}[{index}]: min ({low}) is greater than max ({high})")
+                f"{where}[{index}]: min ({low}) is greater than max ({high})"
+            )
         ranges.append((low, high))
     total = sum(high - low for low, high in ranges)
 
@@ -242,8 +285,9 @@ def _multirange(parameters: Mapping[str, Any], where: str) -> Draw:
 def _constant(parameters: Mapping[str, Any], where: str) -> Draw:
     value = parameters["value"]
     if not _is_number(value):
-        raise EnvironmentParametersError(f"{where}.value must be a finite number, got "
-                                         f"{value!r:.40}")
+        raise EnvironmentParametersError(
+            f"{where}.value must be a finite number, got {value!r:.40}"
+        )
     return lambda rng: value
 
 
@@ -266,15 +310,15 @@ def names_file(text: str) -> bool:
 
 
 def _is_number(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool) and \
-        math.isfinite(value)
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
 
 
 def _number(data: Mapping[str, Any], key: str, where: str) -> float:
     value = data[key]
     if not _is_number(value):
-        raise EnvironmentParametersError(f"{where}.{key} must be a finite number, got "
-                                         f"{value!r:.40}")
+        raise EnvironmentParametersError(
+            f"{where}.{key} must be a finite number, got {value!r:.40}"
+        )
     return float(value)
 
 
@@ -293,4 +337,5 @@ def _only(data: Mapping[str, Any], allowed: set[str], where: str) -> None:
     for key in data:
         if key not in allowed:
             raise EnvironmentParametersError(
-                f"{where}.{key}: unknown key; allowed: {', '.join(sorted(allowed))}")
+                f"{where}.{key}: unknown key; allowed: {', '.join(sorted(allowed))}"
+            )

@@ -83,7 +83,8 @@ class EnvironmentParameters:
     def __init__(self, config: Mapping[str, Any], seed: int | None = None) -> None:
         if not isinstance(config, Mapping):
             raise EnvironmentParametersError(
-                f"environment_parameters must be a map, got {type(config).__name__}")
+                f"environment_parameters must be a map, got {type(config).__name__}"
+            )
         behaviors: Mapping[str, Any] | None = None
         section: Any = config
         if "environment_parameters" in config or "behaviors" in config:  # a whole config
@@ -92,26 +93,31 @@ class EnvironmentParameters:
                 raise EnvironmentParametersError("behaviors must be a map of behavior names")
             section = config.get("environment_parameters") or {}
             if not isinstance(section, Mapping):
-                raise EnvironmentParametersError("environment_parameters must be a map, got "
-                                                 f"{type(section).__name__}")
+                raise EnvironmentParametersError(
+                    f"environment_parameters must be a map, got {type(section).__name__}"
+                )
         seeds = iter(np.random.SeedSequence(seed).spawn(count_samplers(section)))
-        self._parameters = [read_parameter(str(name), value, seeds, behaviors)
-                            for name, value in section.items()]
+        self._parameters = [
+            read_parameter(str(name), value, seeds, behaviors) for name, value in section.items()
+        ]
         capacity: dict[str, int] = {}
         for parameter in self._parameters:
             for lesson in parameter.lessons:
                 if lesson.criteria is not None:
                     criteria = lesson.criteria
-                    capacity[criteria.behavior] = max(capacity.get(criteria.behavior, 1),
-                                                      criteria.min_lesson_length)
+                    capacity[criteria.behavior] = max(
+                        capacity.get(criteria.behavior, 1), criteria.min_lesson_length
+                    )
         self._rewards: dict[str, deque[float]] = {
-            behavior: deque(maxlen=size) for behavior, size in capacity.items()}
+            behavior: deque(maxlen=size) for behavior, size in capacity.items()
+        }
         self._by_name = {parameter.name: parameter for parameter in self._parameters}
         self._reset_required = False
 
     @classmethod
-    def from_yaml(cls, source: str | os.PathLike[str], seed: int | None = None
-                  ) -> EnvironmentParameters:
+    def from_yaml(
+        cls, source: str | os.PathLike[str], seed: int | None = None
+    ) -> EnvironmentParameters:
         """Read a config from YAML text or a YAML file (needs PyYAML).
 
         Args:
@@ -125,8 +131,9 @@ class EnvironmentParameters:
         try:
             import yaml
         except ImportError:
-            raise ImportError("reading YAML needs PyYAML: pip install pyyaml (or pass the "
-                              "config as a dict)") from None
+            raise ImportError(
+                "reading YAML needs PyYAML: pip install pyyaml (or pass the config as a dict)"
+            ) from None
         text = str(source)
         if isinstance(source, os.PathLike) or names_file(text):
             text = Path(source).read_text(encoding="utf-8")
@@ -134,7 +141,8 @@ class EnvironmentParameters:
         if not isinstance(data, Mapping):
             raise EnvironmentParametersError(
                 f"the YAML must be a map of environment parameters, got {data!r:.60} "
-                "(a str that names no existing file is read as YAML text)")
+                "(a str that names no existing file is read as YAML text)"
+            )
         return cls(data, seed)
 
     @property
@@ -177,16 +185,21 @@ class EnvironmentParameters:
                 candidates = [key for key in offered if key.partition(".")[2] == name]
                 if len(candidates) != 1:
                     listed = ", ".join(candidates or offered) or "none"
-                    problem = "is ambiguous: it could be" if candidates else \
-                        "names no configurable setting; the environment offers"
+                    problem = (
+                        "is ambiguous: it could be"
+                        if candidates
+                        else "names no configurable setting; the environment offers"
+                    )
                     raise EnvironmentParametersError(
                         f"environment parameter {name!r} {problem} {listed}"
-                        + (" (name it by its configure key)" if candidates else ""))
+                        + (" (name it by its configure key)" if candidates else "")
+                    )
                 key = candidates[0]
             if key in resolved.values():
                 other = next(n for n, k in resolved.items() if k == key)
                 raise EnvironmentParametersError(
-                    f"environment parameters {other!r} and {name!r} both set {key}")
+                    f"environment parameters {other!r} and {name!r} both set {key}"
+                )
             resolved[name] = key
         for parameter in self._parameters:
             parameter.key = resolved[parameter.name]
@@ -203,7 +216,8 @@ class EnvironmentParameters:
             raise EnvironmentParametersError(
                 f"environment parameter {name!r} is a bare name: call "
                 "bind(configurable_keys(client.tree())) first, or name it by its configure key "
-                f"(such as world.{name})")
+                f"(such as world.{name})"
+            )
         return parameter.key
 
     def sample(self) -> dict[str, float]:
@@ -219,11 +233,14 @@ class EnvironmentParameters:
         """
         keys = [self.key(parameter.name) for parameter in self._parameters]
         self._reset_required = False
-        return {key: parameter.current.draw(parameter.current.rng)
-                for key, parameter in zip(keys, self._parameters, strict=True)}
+        return {
+            key: parameter.current.draw(parameter.current.rng)
+            for key, parameter in zip(keys, self._parameters, strict=True)
+        }
 
-    def add_episode(self, reward: float, progress: float | None = None,
-                    behavior: str | None = None) -> bool:
+    def add_episode(
+        self, reward: float, progress: float | None = None, behavior: str | None = None
+    ) -> bool:
         """Count a finished episode and move on the curricula whose lesson is complete.
 
         As ML-Agents documents it: a lesson is complete once its behavior finished at least
@@ -256,19 +273,24 @@ class EnvironmentParameters:
             if not 0.0 <= progress <= 1.0:
                 raise ValueError(f"add_episode: progress must be in [0, 1], got {progress}")
         if behavior is not None and behavior not in self._rewards:
-            raise ValueError(f"add_episode: no completion_criteria names behavior {behavior!r}; "
-                             f"they name {', '.join(self._rewards) or 'none'}")
+            raise ValueError(
+                f"add_episode: no completion_criteria names behavior {behavior!r}; "
+                f"they name {', '.join(self._rewards) or 'none'}"
+            )
         counted = [b for b in self._rewards if behavior is None or b == behavior]
-        checked = [(parameter, criteria) for parameter in self._parameters
-                   if (criteria := parameter.current.criteria) is not None
-                   and criteria.behavior in counted]
+        checked = [
+            (parameter, criteria)
+            for parameter in self._parameters
+            if (criteria := parameter.current.criteria) is not None and criteria.behavior in counted
+        ]
         if progress is None:
             for parameter, criteria in checked:
                 if criteria.measure == "progress":
                     raise ValueError(
                         f"environment parameter {parameter.name!r}: lesson "
                         f"{parameter.current.name!r} measures progress; pass "
-                        "add_episode(reward, progress=fraction of training done)")
+                        "add_episode(reward, progress=fraction of training done)"
+                    )
         for name in counted:
             self._rewards[name].append(reward)
         changed = False
@@ -278,8 +300,12 @@ class EnvironmentParameters:
                 parameter.index += 1
                 changed = True
                 self._reset_required |= criteria.require_reset
-                logger.info("environment parameter %r: lesson %r complete, now %r",
-                            parameter.name, completed.name, parameter.current.name)
+                logger.info(
+                    "environment parameter %r: lesson %r complete, now %r",
+                    parameter.name,
+                    completed.name,
+                    parameter.current.name,
+                )
         if changed:
             for rewards in self._rewards.values():
                 rewards.clear()
@@ -300,11 +326,11 @@ class EnvironmentParameters:
         try:
             return self._by_name[name]
         except KeyError:
-            raise KeyError(f"no environment parameter {name!r}; there are "
-                           f"{', '.join(self._by_name) or 'none'}") from None
+            raise KeyError(
+                f"no environment parameter {name!r}; there are {', '.join(self._by_name) or 'none'}"
+            ) from None
 
-    def _complete(self, parameter: Parameter, criteria: Criteria,
-                  progress: float | None) -> bool:
+    def _complete(self, parameter: Parameter, criteria: Criteria, progress: float | None) -> bool:
         """ML-Agents' ``CompletionCriteriaSettings.need_increment``, smoothing kept here.
 
         Its buffer holds as many rewards as the largest ``min_lesson_length`` of the behavior's
@@ -334,8 +360,12 @@ def configurable_keys(tree: Iterable[Mapping[str, Any]]) -> set[str]:
     Returns:
         ``{"environment.repeat_action", "agent.max_speed", "world.difficulty", ...}``.
     """
-    return {f"{node['config']}.{name}" for node in tree if "config" in node
-            for name in node.get("configurable", ())}
+    return {
+        f"{node['config']}.{name}"
+        for node in tree
+        if "config" in node
+        for name in node.get("configurable", ())
+    }
 
 
 def configure_arguments(values: Mapping[str, Any]) -> dict[str, Any]:
@@ -352,8 +382,10 @@ def configure_arguments(values: Mapping[str, Any]) -> dict[str, Any]:
     for key, value in values.items():
         section, _, name = key.partition(".")
         if section not in SECTIONS or not name:
-            raise ValueError(f"{key!r} is not a configure key (one of "
-                             f"{', '.join(s + '.NAME' for s in SECTIONS)})")
+            raise ValueError(
+                f"{key!r} is not a configure key (one of "
+                f"{', '.join(s + '.NAME' for s in SECTIONS)})"
+            )
         if section == "environment":
             arguments[name] = value
         else:

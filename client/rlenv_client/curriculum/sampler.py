@@ -71,19 +71,30 @@ class LevelSampler:
         ValueError: an argument out of its range, named in the message.
     """
 
-    def __init__(self, capacity: int, replay_prob: float = 0.95, staleness_coeff: float = 0.5,
-                 prioritization: str = "rank", temperature: float = 1.0, k: int = 1,
-                 minimum_fill_ratio: float = 1.0, duplicate_check: bool = True,
-                 robust: bool = False, seed: int | None = None) -> None:
+    def __init__(
+        self,
+        capacity: int,
+        replay_prob: float = 0.95,
+        staleness_coeff: float = 0.5,
+        prioritization: str = "rank",
+        temperature: float = 1.0,
+        k: int = 1,
+        minimum_fill_ratio: float = 1.0,
+        duplicate_check: bool = True,
+        robust: bool = False,
+        seed: int | None = None,
+    ) -> None:
         self.capacity = _count("capacity", capacity)
         self.replay_prob = _unit("replay_prob", replay_prob)
         self.staleness_coeff = _unit("staleness_coeff", staleness_coeff)
         if prioritization not in PRIORITIZATIONS:
-            raise ValueError(f"prioritization must be one of {PRIORITIZATIONS}, "
-                             f"not {prioritization!r}")
+            raise ValueError(
+                f"prioritization must be one of {PRIORITIZATIONS}, not {prioritization!r}"
+            )
         self.prioritization = prioritization
-        if isinstance(temperature, bool) or not (isinstance(temperature, int | float)
-                                                 and temperature > 0):
+        if isinstance(temperature, bool) or not (
+            isinstance(temperature, int | float) and temperature > 0
+        ):
             raise ValueError(f"temperature must be a number > 0, not {temperature!r}")
         self.temperature = float(temperature)
         self.k = _count("k", k)
@@ -168,8 +179,10 @@ class LevelSampler:
     def weights(self) -> dict[int, float]:
         """Each buffered level's probability of being drawn by :meth:`sample_replay_level`."""
         weights: np.ndarray | list[float] = self._slot_weights() if self._size else []
-        return {int(level_id): float(weight)
-                for level_id, weight in zip(self._ids[:self._size], weights, strict=True)}
+        return {
+            int(level_id): float(weight)
+            for level_id, weight in zip(self._ids[: self._size], weights, strict=True)
+        }
 
     def level(self, level_id: int) -> Level:
         """A copy of a buffered level's data.
@@ -194,12 +207,20 @@ class LevelSampler:
             A map of the episode count, the next id, the buffered levels in buffer order (id,
             level, score, stamp) and the generator's state.
         """
-        return {"episode_count": self._episode_count, "next_id": self._next_id,
-                "levels": [{"id": int(self._ids[slot]), "level": level_copy(self._levels[slot]),
-                            "score": float(self._scores[slot]),
-                            "timestamp": int(self._timestamps[slot])}
-                           for slot in range(self._size)],
-                "rng": _generator_state(self._rng)}
+        return {
+            "episode_count": self._episode_count,
+            "next_id": self._next_id,
+            "levels": [
+                {
+                    "id": int(self._ids[slot]),
+                    "level": level_copy(self._levels[slot]),
+                    "score": float(self._scores[slot]),
+                    "timestamp": int(self._timestamps[slot]),
+                }
+                for slot in range(self._size)
+            ],
+            "rng": _generator_state(self._rng),
+        }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Continue from a :meth:`state_dict`, into a sampler made with the same arguments.
@@ -210,10 +231,19 @@ class LevelSampler:
         """
         entries = state["levels"]
         if len(entries) > self.capacity:
-            raise ValueError(f"state holds {len(entries)} levels, more than this sampler's "
-                             f"capacity ({self.capacity})")
-        levels = [(int(entry["id"]), level_copy(entry["level"]), _score(entry["score"]),
-                   int(entry["timestamp"])) for entry in entries]
+            raise ValueError(
+                f"state holds {len(entries)} levels, more than this sampler's "
+                f"capacity ({self.capacity})"
+            )
+        levels = [
+            (
+                int(entry["id"]),
+                level_copy(entry["level"]),
+                _score(entry["score"]),
+                int(entry["timestamp"]),
+            )
+            for entry in entries
+        ]
         self._rng.bit_generator.state = _generator_state_from(state["rng"])
         self._clear()
         for slot, (level_id, data, score, timestamp) in enumerate(levels):
@@ -260,16 +290,18 @@ class LevelSampler:
 
     def _slot_weights(self) -> np.ndarray:
         """The replay weights of the filled slots, in slot order."""
-        staleness = self._episode_count - self._timestamps[:self._size]
+        staleness = self._episode_count - self._timestamps[: self._size]
         total = staleness.sum()
-        staleness_weights = (staleness / total if total > 0
-                             else np.full(self._size, 1.0 / self._size))
-        return ((1.0 - self.staleness_coeff) * self._score_weights()
-                + self.staleness_coeff * staleness_weights)
+        staleness_weights = (
+            staleness / total if total > 0 else np.full(self._size, 1.0 / self._size)
+        )
+        return (
+            1.0 - self.staleness_coeff
+        ) * self._score_weights() + self.staleness_coeff * staleness_weights
 
     def _score_weights(self) -> np.ndarray:
         ranks = np.empty(self._size, dtype=np.float64)
-        ranks[np.argsort(-self._scores[:self._size], kind="stable")] = np.arange(1, self._size + 1)
+        ranks[np.argsort(-self._scores[: self._size], kind="stable")] = np.arange(1, self._size + 1)
         if self.prioritization == "rank":
             weights = (1.0 / ranks) ** (1.0 / self.temperature)
         else:
@@ -302,12 +334,19 @@ def _score(score: Any) -> float:
 def _generator_state(rng: np.random.Generator) -> dict[str, Any]:
     """The generator's state with its 128-bit integers as decimal strings (msgpack's are 64-bit)."""
     state = rng.bit_generator.state
-    return {"bit_generator": state["bit_generator"], "state": str(state["state"]["state"]),
-            "inc": str(state["state"]["inc"]), "has_uint32": int(state["has_uint32"]),
-            "uinteger": int(state["uinteger"])}
+    return {
+        "bit_generator": state["bit_generator"],
+        "state": str(state["state"]["state"]),
+        "inc": str(state["state"]["inc"]),
+        "has_uint32": int(state["has_uint32"]),
+        "uinteger": int(state["uinteger"]),
+    }
 
 
 def _generator_state_from(data: dict[str, Any]) -> dict[str, Any]:
-    return {"bit_generator": data["bit_generator"],
-            "state": {"state": int(data["state"]), "inc": int(data["inc"])},
-            "has_uint32": int(data["has_uint32"]), "uinteger": int(data["uinteger"])}
+    return {
+        "bit_generator": data["bit_generator"],
+        "state": {"state": int(data["state"]), "inc": int(data["inc"])},
+        "has_uint32": int(data["has_uint32"]),
+        "uinteger": int(data["uinteger"]),
+    }

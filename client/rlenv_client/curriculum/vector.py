@@ -92,11 +92,27 @@ class Episode:
             ``None``.
     """
 
-    __slots__ = ("env", "first_step", "last_step", "level", "level_id", "replayed", "reward",
-                 "rewards", "success", "trial")
+    __slots__ = (
+        "env",
+        "first_step",
+        "last_step",
+        "level",
+        "level_id",
+        "replayed",
+        "reward",
+        "rewards",
+        "success",
+        "trial",
+    )
 
-    def __init__(self, env: int, level: Level, level_id: int | None, first_step: int,
-                 trial: int | None = None) -> None:
+    def __init__(
+        self,
+        env: int,
+        level: Level,
+        level_id: int | None,
+        first_step: int,
+        trial: int | None = None,
+    ) -> None:
         self.env, self.level, self.level_id, self.trial = env, level, level_id, trial
         self.replayed = level_id is not None
         self.first_step, self.last_step = first_step, first_step - 1
@@ -104,9 +120,11 @@ class Episode:
         self.rewards: list[float] = []
 
     def __repr__(self) -> str:
-        return (f"Episode(env={self.env}, level_id={self.level_id}, trial={self.trial}, "
-                f"steps={self.first_step}..{self.last_step}, reward={self.reward:.3g}, "
-                f"success={self.success})")
+        return (
+            f"Episode(env={self.env}, level_id={self.level_id}, trial={self.trial}, "
+            f"steps={self.first_step}..{self.last_step}, reward={self.reward:.3g}, "
+            f"success={self.success})"
+        )
 
 
 class CurriculumVectorEnv(VectorWrapper):
@@ -139,27 +157,36 @@ class CurriculumVectorEnv(VectorWrapper):
             above 1 with ``score="external"``).
     """
 
-    def __init__(self, envs: VectorEnv, sampler: LevelSampler | None = None,
-                 parameters: EnvironmentParameters | None = None,
-                 score: str | Callable[[Episode], float] = "learnability", *,
-                 seed: int | None = None, outcomes_kept: int = 32,
-                 edit_levels: int = 0, rollouts_per_level: int = 1) -> None:
+    def __init__(
+        self,
+        envs: VectorEnv,
+        sampler: LevelSampler | None = None,
+        parameters: EnvironmentParameters | None = None,
+        score: str | Callable[[Episode], float] = "learnability",
+        *,
+        seed: int | None = None,
+        outcomes_kept: int = 32,
+        edit_levels: int = 0,
+        rollouts_per_level: int = 1,
+    ) -> None:
         super().__init__(envs)
         remote: Any = envs.unwrapped  # a RemoteVectorEnv (checked next)
         if not hasattr(remote, "set_next_reset"):
-            raise TypeError(f"CurriculumVectorEnv needs a RemoteVectorEnv, got "
-                            f"{type(remote).__name__}")
+            raise TypeError(
+                f"CurriculumVectorEnv needs a RemoteVectorEnv, got {type(remote).__name__}"
+            )
         if not (callable(score) or score in ("learnability", "external")):
-            raise ValueError(f"score must be 'learnability', 'external' or a callable, "
-                             f"not {score!r}")
+            raise ValueError(
+                f"score must be 'learnability', 'external' or a callable, not {score!r}"
+            )
         mode = AutoresetMode(envs.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP))
         if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
-            raise ValueError(f"CurriculumVectorEnv needs NEXT_STEP or SAME_STEP autoreset, "
-                             f"not {mode}")
+            raise ValueError(
+                f"CurriculumVectorEnv needs NEXT_STEP or SAME_STEP autoreset, not {mode}"
+            )
         self._remote: Any = remote
         self._same_step = mode is AutoresetMode.SAME_STEP
-        self.sampler = sampler if sampler is not None else \
-            LevelSampler(DEFAULT_CAPACITY, seed=seed)
+        self.sampler = sampler if sampler is not None else LevelSampler(DEFAULT_CAPACITY, seed=seed)
         self.parameters = parameters
         if parameters is not None:
             parameters.bind(configurable_keys(self._remote.clients[0].tree()))
@@ -182,19 +209,22 @@ class CurriculumVectorEnv(VectorWrapper):
         self._playing: list[Episode | None] = [None] * self.num_envs
         self._next: list[tuple[Level, int | None, int | None] | None] = [None] * self.num_envs
         self._autoreset = np.zeros(self.num_envs, np.bool_)
-        if not isinstance(edit_levels, int) or isinstance(edit_levels, bool) or \
-                edit_levels < 0:
+        if not isinstance(edit_levels, int) or isinstance(edit_levels, bool) or edit_levels < 0:
             raise ValueError(f"edit_levels must be an int >= 0, got {edit_levels!r}")
         self.edit_levels = edit_levels
         """ACCEL: how many edits make the level played after a replay (0: none)."""
         self._edited: list[Level | None] = [None] * self.num_envs
-        if not isinstance(rollouts_per_level, int) or isinstance(rollouts_per_level, bool) or \
-                rollouts_per_level < 1:
-            raise ValueError(f"rollouts_per_level must be an int >= 1, got "
-                             f"{rollouts_per_level!r}")
+        if (
+            not isinstance(rollouts_per_level, int)
+            or isinstance(rollouts_per_level, bool)
+            or rollouts_per_level < 1
+        ):
+            raise ValueError(f"rollouts_per_level must be an int >= 1, got {rollouts_per_level!r}")
         if rollouts_per_level > 1 and score == "external":
-            raise ValueError("rollouts_per_level > 1 needs a score the wrapper computes "
-                             "('learnability' or a callable), not 'external'")
+            raise ValueError(
+                "rollouts_per_level > 1 needs a score the wrapper computes "
+                "('learnability' or a callable), not 'external'"
+            )
         self._trials = Trials(rollouts_per_level)
 
     @property
@@ -202,8 +232,12 @@ class CurriculumVectorEnv(VectorWrapper):
         """How many episodes a new level plays on trial before it is offered to the buffer."""
         return self._trials.rollouts_per_level
 
-    def reset(self, *, seed: int | list[int | None] | None = None,
-              options: Mapping[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+    def reset(
+        self,
+        *,
+        seed: int | list[int | None] | None = None,
+        options: Mapping[str, Any] | None = None,
+    ) -> tuple[Any, dict[str, Any]]:
         """Start every sub-environment on its next level (each new or replayed).
 
         Episodes under way are cut short: they give no outcome, and a level on trial is played
@@ -290,8 +324,9 @@ class CurriculumVectorEnv(VectorWrapper):
             return None
         return episode.level_id
 
-    def score_rollout(self, advantages: ArrayLike, values: ArrayLike,
-                      score: str = "positive_value_loss") -> list[Episode]:
+    def score_rollout(
+        self, advantages: ArrayLike, values: ArrayLike, score: str = "positive_value_loss"
+    ) -> list[Episode]:
         """Score the episodes that ended in the last rollout, from the trainer's estimates.
 
         For a loop that steps this wrapper ``T`` times, then computes GAE: row ``t`` of the
@@ -316,10 +351,15 @@ class CurriculumVectorEnv(VectorWrapper):
             raise ValueError(f"score must be one of {_ROLLOUT_SCORES}, not {score!r}")
         advantages = np.asarray(advantages, np.float64)
         values = np.asarray(values, np.float64)
-        if advantages.ndim != 2 or advantages.shape[1] != self.num_envs or \
-                values.shape != advantages.shape:
-            raise ValueError(f"advantages and values must both be (T, {self.num_envs}), got "
-                             f"{advantages.shape} and {values.shape}")
+        if (
+            advantages.ndim != 2
+            or advantages.shape[1] != self.num_envs
+            or values.shape != advantages.shape
+        ):
+            raise ValueError(
+                f"advantages and values must both be (T, {self.num_envs}), got "
+                f"{advantages.shape} and {values.shape}"
+            )
         first = self.steps - len(advantages)
         scored = []
         for episode in self.finished:
@@ -329,8 +369,11 @@ class CurriculumVectorEnv(VectorWrapper):
             if score == "positive_value_loss":
                 value = positive_value_loss(advantages[rows, episode.env])
             else:
-                best = max(self._max_returns.get(episode.level_id, -np.inf), episode.reward) \
-                    if episode.level_id is not None else episode.reward
+                best = (
+                    max(self._max_returns.get(episode.level_id, -np.inf), episode.reward)
+                    if episode.level_id is not None
+                    else episode.reward
+                )
                 value = max_mc(best, values[rows, episode.env])
             level_id = self.update(episode, value)
             if score == "max_mc" and level_id is not None:
@@ -386,8 +429,13 @@ class CurriculumVectorEnv(VectorWrapper):
             replayed_mask[index] = level_mask[index] = True
             if self._same_step:  # its reset comes within the step its episode ends in
                 self._choose(int(index))
-        return {**infos, "replayed": replayed, "_replayed": replayed_mask, "level": levels,
-                "_level": level_mask}
+        return {
+            **infos,
+            "replayed": replayed,
+            "_replayed": replayed_mask,
+            "level": levels,
+            "_level": level_mask,
+        }
 
     def _finish(self, index: int, terminated: bool, last_infos: Mapping[str, Any]) -> None:
         """Sub-environment ``index``'s episode ended: score it, or keep it to be scored."""
@@ -395,16 +443,20 @@ class CurriculumVectorEnv(VectorWrapper):
         self._playing[index] = None
         if episode is None:
             return
-        if _row(last_infos, "server_restarted", index) is not None or \
-                _row(last_infos, "interrupted", index) is not None:
+        if (
+            _row(last_infos, "server_restarted", index) is not None
+            or _row(last_infos, "interrupted", index) is not None
+        ):
             self._lost(episode)
             return  # not an outcome of the level
         if self.edit_levels and episode.level_id is not None:
             self._edited[index] = self._remote.clients[0].edit_level(
-                episode.level, int(self._rng.integers(_SEEDS)), self.edit_levels)
+                episode.level, int(self._rng.integers(_SEEDS)), self.edit_levels
+            )
         success = _row(last_infos, "success", index)
-        episode.success = bool(success) if success is not None else \
-            terminated and episode.reward > 0
+        episode.success = (
+            bool(success) if success is not None else terminated and episode.reward > 0
+        )
         if self.parameters is not None:
             self.parameters.add_episode(episode.reward, progress=self.progress)
         if self.score == "external":
@@ -423,8 +475,7 @@ class CurriculumVectorEnv(VectorWrapper):
                 if level_id is not None:
                     self._outcomes[level_id] = deque(results, maxlen=self._outcomes_kept)
             return
-        outcomes = self._outcomes.get(episode.level_id) if episode.level_id is not None \
-            else None
+        outcomes = self._outcomes.get(episode.level_id) if episode.level_id is not None else None
         if outcomes is None:
             outcomes = deque(maxlen=self._outcomes_kept)
         outcomes.append(float(episode.success))
@@ -448,8 +499,9 @@ class CurriculumVectorEnv(VectorWrapper):
         """Drop what is kept of levels no longer in the buffer (one may just have left)."""
         buffered = self.sampler.weights()
         self._outcomes = {key: value for key, value in self._outcomes.items() if key in buffered}
-        self._max_returns = {key: value for key, value in self._max_returns.items()
-                             if key in buffered}
+        self._max_returns = {
+            key: value for key, value in self._max_returns.items() if key in buffered
+        }
 
 
 def _row(infos: Mapping[str, Any], key: str, index: int) -> Any:

@@ -86,8 +86,13 @@ class PhysicsBody(Node2D):
     """
 
     def __init__(
-        self, body: pymunk.Body, *, position: Vec = (0.0, 0.0), angle: float = 0.0,
-        rotation: float = 0.0, name: str | None = None,
+        self,
+        body: pymunk.Body,
+        *,
+        position: Vec = (0.0, 0.0),
+        angle: float = 0.0,
+        rotation: float = 0.0,
+        name: str | None = None,
     ) -> None:
         if angle and rotation:
             raise ValueError("give the body's rotation or its angle (the same thing), not both")
@@ -114,8 +119,10 @@ class PhysicsBody(Node2D):
             self._frame_pose = frame._global_pose()
             x, y, angle = compose(self._frame_pose, x, y, angle)
         if self.body.space is not None:
-            raise RuntimeError(f"{self!r}: its body is in a space already (was _enter_tree "
-                               "called outside the tree's lifecycle?)")
+            raise RuntimeError(
+                f"{self!r}: its body is in a space already (was _enter_tree "
+                "called outside the tree's lifecycle?)"
+            )
         self._built_pose = (x, y, angle)
         self._set_body_pose(x, y, angle)
         self.world = world
@@ -274,8 +281,11 @@ class PhysicsBody(Node2D):
 
     def _shape_children(self) -> list[Any]:
         """The children holding a pymunk shape: its CollisionShape children."""
-        return [child for child in self._children
-                if isinstance(getattr(child, "shape", None), pymunk.Shape)]
+        return [
+            child
+            for child in self._children
+            if isinstance(getattr(child, "shape", None), pymunk.Shape)
+        ]
 
 
 class RigidBody(PhysicsBody):
@@ -303,11 +313,18 @@ class RigidBody(PhysicsBody):
     """
 
     def __init__(
-        self, mass: float = 0.0, moment: float = 0.0, *, position: Vec = (0.0, 0.0),
-        angle: float = 0.0, rotation: float = 0.0, name: str | None = None,
+        self,
+        mass: float = 0.0,
+        moment: float = 0.0,
+        *,
+        position: Vec = (0.0, 0.0),
+        angle: float = 0.0,
+        rotation: float = 0.0,
+        name: str | None = None,
     ) -> None:
-        super().__init__(pymunk.Body(mass, moment), position=position, angle=angle,
-                         rotation=rotation, name=name)
+        super().__init__(
+            pymunk.Body(mass, moment), position=position, angle=angle, rotation=rotation, name=name
+        )
 
     def apply_force(self, force: Vec, at: Vec = (0.0, 0.0)) -> None:
         """Push the body with ``force`` during the coming step of the space.
@@ -334,8 +351,9 @@ class RigidBody(PhysicsBody):
             force: the force, in world coordinates.
         """
         pointer = self._chipmunk
-        apply_force_at_world_point_of(pointer, force,
-                                      local_to_world_of(pointer, center_of_gravity_of(pointer)))
+        apply_force_at_world_point_of(
+            pointer, force, local_to_world_of(pointer, center_of_gravity_of(pointer))
+        )
 
     def apply_impulse(self, impulse: Vec, at: Vec = (0.0, 0.0)) -> None:
         """Change the body's velocity at once by ``impulse`` (divided by its mass).
@@ -363,11 +381,20 @@ class StaticBody(PhysicsBody):
     """
 
     def __init__(
-        self, *, position: Vec = (0.0, 0.0), angle: float = 0.0, rotation: float = 0.0,
+        self,
+        *,
+        position: Vec = (0.0, 0.0),
+        angle: float = 0.0,
+        rotation: float = 0.0,
         name: str | None = None,
     ) -> None:
-        super().__init__(pymunk.Body(body_type=pymunk.Body.STATIC), position=position,
-                         angle=angle, rotation=rotation, name=name)
+        super().__init__(
+            pymunk.Body(body_type=pymunk.Body.STATIC),
+            position=position,
+            angle=angle,
+            rotation=rotation,
+            name=name,
+        )
 
 
 class KinematicBody(PhysicsBody):
@@ -386,8 +413,17 @@ class KinematicBody(PhysicsBody):
     """
 
     def __init__(
-        self, *, position: Vec = (0.0, 0.0), angle: float = 0.0, rotation: float = 0.0,
+        self,
+        *,
+        position: Vec = (0.0, 0.0),
+        angle: float = 0.0,
+        rotation: float = 0.0,
         name: str | None = None,
     ) -> None:
-        super().__init__(pymunk.Body(body_type=pymunk.Body.KINEMATIC), position=position,
-                         angle=angle, rotation=rotation, name=name)
+        super().__init__(
+            pymunk.Body(body_type=pymunk.Body.KINEMATIC),
+            position=position,
+            angle=angle,
+            rotation=rotation,
+            name=name,
+        )

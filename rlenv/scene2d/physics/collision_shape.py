@@ -64,14 +64,23 @@ class CollisionShape(Node):
     the space)."""
 
     def __init__(
-        self, shape: pymunk.Shape, *, mass: float = 0.0, density: float = 0.0,
-        friction: float = 0.5, elasticity: float = 0.0, sensor: bool = False,
-        color: Color | None = None, name: str | None = None,
+        self,
+        shape: pymunk.Shape,
+        *,
+        mass: float = 0.0,
+        density: float = 0.0,
+        friction: float = 0.5,
+        elasticity: float = 0.0,
+        sensor: bool = False,
+        color: Color | None = None,
+        name: str | None = None,
     ) -> None:
         super().__init__(name)
         if shape.space is not None:
-            raise ValueError(f"{self!r}: the shape is in a space already; give each "
-                             "CollisionShape a shape of its own")
+            raise ValueError(
+                f"{self!r}: the shape is in a space already; give each "
+                "CollisionShape a shape of its own"
+            )
         number(shape.radius, f"{self!r}: radius", low=0.0)
         self.shape = shape
         self.color = color
@@ -145,9 +154,7 @@ class CollisionShape(Node):
         return cls(pymunk.Circle(None, radius, offset), **kwargs)
 
     @classmethod
-    def box(
-        cls, width: float, height: float, radius: float = 0.0, **kwargs: Any
-    ) -> CollisionShape:
+    def box(cls, width: float, height: float, radius: float = 0.0, **kwargs: Any) -> CollisionShape:
         """A rectangle centred on the body's origin, aligned with its axes (RectangleShape2D).
 
         Example: ``CollisionShape.box(0.5, 0.3, mass=1.0)``. For a box off the origin, use
@@ -197,8 +204,10 @@ class CollisionShape(Node):
         if not isinstance(parent, PhysicsBody):
             raise RuntimeError(f"{self!r} must be a child of a body node, not of {parent!r}")
         if self.shape.space is not None:
-            raise RuntimeError(f"{self!r}: its shape is in a space already (was _enter_tree "
-                               "called outside the tree's lifecycle?)")
+            raise RuntimeError(
+                f"{self!r}: its shape is in a space already (was _enter_tree "
+                "called outside the tree's lifecycle?)"
+            )
         self.body_node = parent
         self._world = world_of(self)
         self.shape.body = parent.body

@@ -52,8 +52,14 @@ class Joint(Node):
     _TREE_STATE = Node._TREE_STATE | {"constraint", "_world", "_attached"}
 
     def __init__(
-        self, node_a: str, node_b: str, make: ConstraintFactory, *,
-        collide_bodies: bool = False, max_force: float = float("inf"), name: str | None = None,
+        self,
+        node_a: str,
+        node_b: str,
+        make: ConstraintFactory,
+        *,
+        collide_bodies: bool = False,
+        max_force: float = float("inf"),
+        name: str | None = None,
     ) -> None:
         super().__init__(name)
         self.node_a = node_a
@@ -81,7 +87,12 @@ class Joint(Node):
 
     @classmethod
     def groove(
-        cls, node_a: str, node_b: str, groove_a: Vec, groove_b: Vec, anchor_b: Vec = (0.0, 0.0),
+        cls,
+        node_a: str,
+        node_b: str,
+        groove_a: Vec,
+        groove_b: Vec,
+        anchor_b: Vec = (0.0, 0.0),
         **kwargs: Any,
     ) -> Joint:
         """A slot: the point ``anchor_b`` of body b slides along a groove of body a (GrooveJoint2D).
@@ -94,8 +105,7 @@ class Joint(Node):
             anchor_b: the point of body b held on the groove, in body b's frame.
             **kwargs: ``collide_bodies``, ``max_force``, ``name``.
         """
-        recipe = ConstraintRecipe("groove", groove_a=groove_a, groove_b=groove_b,
-                                  anchor_b=anchor_b)
+        recipe = ConstraintRecipe("groove", groove_a=groove_a, groove_b=groove_b, anchor_b=anchor_b)
         return cls(node_a, node_b, recipe, **kwargs)
 
     @classmethod
@@ -116,8 +126,15 @@ class Joint(Node):
 
     @classmethod
     def spring(
-        cls, node_a: str, node_b: str, anchor_a: Vec, anchor_b: Vec, rest_length: float,
-        stiffness: float, damping: float, **kwargs: Any,
+        cls,
+        node_a: str,
+        node_b: str,
+        anchor_a: Vec,
+        anchor_b: Vec,
+        rest_length: float,
+        stiffness: float,
+        damping: float,
+        **kwargs: Any,
     ) -> Joint:
         """A damped spring between a point of each body (DampedSpringJoint2D).
 
@@ -131,8 +148,14 @@ class Joint(Node):
             damping: force per unit of stretching speed (e.g. newton-seconds per metre).
             **kwargs: ``collide_bodies``, ``max_force``, ``name``.
         """
-        recipe = ConstraintRecipe("spring", anchor_a=anchor_a, anchor_b=anchor_b,
-                                  rest_length=rest_length, stiffness=stiffness, damping=damping)
+        recipe = ConstraintRecipe(
+            "spring",
+            anchor_a=anchor_a,
+            anchor_b=anchor_b,
+            rest_length=rest_length,
+            stiffness=stiffness,
+            damping=damping,
+        )
         return cls(node_a, node_b, recipe, **kwargs)
 
     @property
@@ -166,8 +189,9 @@ class Joint(Node):
             make = self._make
             if isinstance(make, ConstraintRecipe):
                 frame = frame_of(self)
-                self.constraint = make.build(bodies[0], bodies[1],
-                                             None if frame is None else frame._global_pose())
+                self.constraint = make.build(
+                    bodies[0], bodies[1], None if frame is None else frame._global_pose()
+                )
             else:
                 self.constraint = make(bodies[0], bodies[1])
             self.constraint.collide_bodies = self._collide_bodies
@@ -183,8 +207,12 @@ class Joint(Node):
         """
         constraint = self.constraint
         space = world.space
-        if constraint is not None and constraint.a.space is space and \
-                constraint.b.space is space and refresh_constraint(constraint):
+        if (
+            constraint is not None
+            and constraint.a.space is space
+            and constraint.b.space is space
+            and refresh_constraint(constraint)
+        ):
             space.add(constraint)
             return
         self.constraint = None

@@ -32,8 +32,13 @@ __all__ = ["PhysicsWorld"]
 
 logger = logging.getLogger(__name__)
 
-_SPACE_SETTINGS = ("collision_slop", "collision_bias", "collision_persistence",
-                   "idle_speed_threshold", "sleep_time_threshold")
+_SPACE_SETTINGS = (
+    "collision_slop",
+    "collision_bias",
+    "collision_persistence",
+    "idle_speed_threshold",
+    "sleep_time_threshold",
+)
 """What a space is set up with besides gravity, iterations and damping (and its handlers)."""
 
 _PHASES = ("begin", "pre_solve", "post_solve", "separate")
@@ -61,10 +66,16 @@ class _Space(pymunk.Space):
         self.theirs: dict[str, tuple[_Callback, Any]] = {}  # the user's, and their data
         super().on_collision(begin=self._begin, separate=self._separate)
 
-    def on_collision(self, collision_type_a: int | None = None,
-                     collision_type_b: int | None = None, begin: _Callback | None = None,
-                     pre_solve: _Callback | None = None, post_solve: _Callback | None = None,
-                     separate: _Callback | None = None, data: Any = None) -> None:
+    def on_collision(
+        self,
+        collision_type_a: int | None = None,
+        collision_type_b: int | None = None,
+        begin: _Callback | None = None,
+        pre_solve: _Callback | None = None,
+        post_solve: _Callback | None = None,
+        separate: _Callback | None = None,
+        data: Any = None,
+    ) -> None:
         """Set up a collision handler as pymunk does; one without types runs beside rlenv's."""
         if collision_type_a is None and collision_type_b is None:
             for phase, callback in (("begin", begin), ("separate", separate)):
@@ -73,15 +84,20 @@ class _Space(pymunk.Space):
                 elif callback is not None:
                     self.theirs[phase] = (callback, data)
             begin = separate = None  # rlenv's stay, and call the user's
-        super().on_collision(collision_type_a, collision_type_b, begin, pre_solve, post_solve,
-                             separate, data)
+        super().on_collision(
+            collision_type_a, collision_type_b, begin, pre_solve, post_solve, separate, data
+        )
 
     def rlenv_alone(self) -> bool:
         """Whether no collision handler but rlenv's is set up."""
         handlers = collision_handlers(self)
         catch_all = handlers[_CATCH_ALL]
-        return len(handlers) == 1 and not self.theirs and catch_all.pre_solve is None and \
-            catch_all.post_solve is None
+        return (
+            len(handlers) == 1
+            and not self.theirs
+            and catch_all.pre_solve is None
+            and catch_all.post_solve is None
+        )
 
     def copy_handlers(self, into: _Space) -> None:
         """Set up this space's collision handlers of the user's again in ``into``."""
@@ -148,12 +164,15 @@ class PhysicsWorld(SpaceOwner):
         process_mode: ProcessMode = ProcessMode.INHERIT,
     ) -> None:
         super().__init__(name, process_mode=process_mode)
-        self.space = self._new_space(vector(gravity, "gravity"),
-                                     integer(iterations, "iterations", 1, 2**31 - 1),
-                                     number(damping, "damping", low=0.0))
+        self.space = self._new_space(
+            vector(gravity, "gravity"),
+            integer(iterations, "iterations", 1, 2**31 - 1),
+            number(damping, "damping", low=0.0),
+        )
         self._shape_nodes: dict[pymunk.Shape, CollisionShape] = {}
-        self._kept_members: tuple[int | None, list[PhysicsBody], list[CollisionShape],
-                                  list[Joint], Refill] | None = None  # see _members
+        self._kept_members: (
+            tuple[int | None, list[PhysicsBody], list[CollisionShape], list[Joint], Refill] | None
+        ) = None  # see _members
         self._touched = False  # a contact began since the space was made or restarted
 
     def _new_space(self, gravity: Vec, iterations: int, damping: float) -> _Space:
@@ -191,8 +210,13 @@ class PhysicsWorld(SpaceOwner):
         """
         old = self.space
         bodies, shapes, joints, refill, unchanged = self._members()
-        in_place = FAST and unchanged and not self._touched and old.rlenv_alone() and \
-            old.sleep_time_threshold == math.inf
+        in_place = (
+            FAST
+            and unchanged
+            and not self._touched
+            and old.rlenv_alone()
+            and old.sleep_time_threshold == math.inf
+        )
         self._touched = False
         if in_place and refill.into(old):
             return
@@ -207,8 +231,7 @@ class PhysicsWorld(SpaceOwner):
         for joint in joints:  # once every body is back, as joints attach when ready
             joint._reattach(self)
 
-    def _members(self) -> tuple[list[PhysicsBody], list[CollisionShape], list[Joint], Refill,
-                                bool]:
+    def _members(self) -> tuple[list[PhysicsBody], list[CollisionShape], list[Joint], Refill, bool]:
         """The bodies, shapes and joints in this world's space, in tree order, and their Refill.
 
         Kept while the tree's structure stays the same; the last item says whether it did since
@@ -228,10 +251,12 @@ class PhysicsWorld(SpaceOwner):
             elif isinstance(node, Joint) and node._world is self and node._attached:
                 joints.append(node)
         # An attached joint has its constraint, and a body in the space the pose it entered with.
-        refill = Refill([body.body for body in bodies], [shape.shape for shape in shapes],
-                        cast(list[pymunk.Constraint], [joint.constraint for joint in joints]),
-                        cast(list[tuple[float, float, float]],
-                             [body._built_pose for body in bodies]))
+        refill = Refill(
+            [body.body for body in bodies],
+            [shape.shape for shape in shapes],
+            cast(list[pymunk.Constraint], [joint.constraint for joint in joints]),
+            cast(list[tuple[float, float, float]], [body._built_pose for body in bodies]),
+        )
         self._kept_members = (version, bodies, shapes, joints, refill)
         return bodies, shapes, joints, refill, False
 
@@ -284,12 +309,22 @@ class PhysicsWorld(SpaceOwner):
 
     def _enter_tree(self) -> None:
         parent = self.parent
-        others = [node.name for node in parent.get_children()
-                  if node is not self and isinstance(node, PhysicsWorld)] if parent else []
+        others = (
+            [
+                node.name
+                for node in parent.get_children()
+                if node is not self and isinstance(node, PhysicsWorld)
+            ]
+            if parent
+            else []
+        )
         if others:
-            logger.warning("%r enters beside %s: each PhysicsWorld simulates a space of its own. "
-                           "Left from an earlier reset? Remove the old one first", self,
-                           ", ".join(others))
+            logger.warning(
+                "%r enters beside %s: each PhysicsWorld simulates a space of its own. "
+                "Left from an earlier reset? Remove the old one first",
+                self,
+                ", ".join(others),
+            )
 
     def _physics_step(self, delta: float) -> None:
         step_space(self.space, delta, self._check_masses)  # before pymunk checks new bodies
@@ -300,12 +335,21 @@ class PhysicsWorld(SpaceOwner):
         """Refuse, naming the node, a dynamic body without a positive, finite mass and moment."""
         for body in bodies_to_check(self.space):
             if body.body_type == pymunk.Body.DYNAMIC and not (
-                    0 < body.mass < math.inf and body.moment > 0):
-                node = next((node for node in self.iter_subtree()
-                             if isinstance(node, PhysicsBody) and node.body is body), body)
-                raise ValueError(f"{node!r} has mass {body.mass} and moment {body.moment}: give "
-                                 "it a mass and moment, or its CollisionShape children a mass "
-                                 "or density")
+                0 < body.mass < math.inf and body.moment > 0
+            ):
+                node = next(
+                    (
+                        node
+                        for node in self.iter_subtree()
+                        if isinstance(node, PhysicsBody) and node.body is body
+                    ),
+                    body,
+                )
+                raise ValueError(
+                    f"{node!r} has mass {body.mass} and moment {body.moment}: give "
+                    "it a mass and moment, or its CollisionShape children a mass "
+                    "or density"
+                )
 
     def _on_begin(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
         self._touched = True

@@ -73,18 +73,30 @@ class ComplianceReport:
 
     def summary(self) -> str:
         """One line of figures, then the skipped probes and why."""
-        memory = "" if self.rss_growth_kib is None else \
-            f", server peak memory grew {self.rss_growth_kib} KiB"
+        memory = (
+            ""
+            if self.rss_growth_kib is None
+            else f", server peak memory grew {self.rss_growth_kib} KiB"
+        )
         skipped = f"; skipped: {'; '.join(self.skipped)}" if self.skipped else ""
-        return (f"{self.probes} probes, {self.frames_tried} malformed frames, "
-                f"{self.controller_steps} controller steps, {self.replies_read} replies read, "
-                f"{len(self.failures)} failures, {len(self.skipped)} skipped{memory}{skipped}")
+        return (
+            f"{self.probes} probes, {self.frames_tried} malformed frames, "
+            f"{self.controller_steps} controller steps, {self.replies_read} replies read, "
+            f"{len(self.failures)} failures, {len(self.skipped)} skipped{memory}{skipped}"
+        )
 
 
 def check_server(
-    host: str, port: int, *, token: str | None = None, pid: int | None = None,
-    random_frames: int = 200, frame_deadline: float | None = None, seed: int = 0,
-    timeout: float = 10.0, action: Callable[[], Any] | None = None,
+    host: str,
+    port: int,
+    *,
+    token: str | None = None,
+    pid: int | None = None,
+    random_frames: int = 200,
+    frame_deadline: float | None = None,
+    seed: int = 0,
+    timeout: float = 10.0,
+    action: Callable[[], Any] | None = None,
 ) -> ComplianceReport:
     """Run the compliance suite against a running server (which must have no controller).
 
@@ -107,26 +119,32 @@ def check_server(
     report = ComplianceReport()
     peak_before = peak_rss_kib(pid)
     tap = ReplyTap()
-    with TappedClient(tap, "the controller", host, port, timeout=timeout,
-                      token=token) as controller:
-        harness = Harness(host, port, token, timeout, controller, report, random.Random(seed),
-                          action, tap)
+    with TappedClient(
+        tap, "the controller", host, port, timeout=timeout, token=token
+    ) as controller:
+        harness = Harness(
+            host, port, token, timeout, controller, report, random.Random(seed), action, tap
+        )
         hostile, contract = HostileProbes(harness), ContractProbes(harness)
         # Before the controller's first reset: nobody controls the environment yet.
-        harness.run("a refused request takes no control",
-                    contract.refused_request_takes_no_control)
+        harness.run("a refused request takes no control", contract.refused_request_takes_no_control)
         if harness.started:
-            for name, probe in [*hostile.frame_probes(), *contract.ext_type_probes(),
-                                *hostile.request_probes(random_frames),
-                                ("the token rule", contract.token_rule)]:
+            for name, probe in [
+                *hostile.frame_probes(),
+                *contract.ext_type_probes(),
+                *hostile.request_probes(random_frames),
+                ("the token rule", contract.token_rule),
+            ]:
                 harness.run(name, probe)
             if frame_deadline is not None:
                 harness.run("slow drip", lambda: hostile.slow_drip(frame_deadline))
             for name, probe in [*hostile.controller_probes(), *contract.probes_under_control()]:
                 harness.run(name, probe)
         else:
-            report.failures.append("the controller could not start an episode: the other "
-                                   "probes need one (does another client control the server?)")
+            report.failures.append(
+                "the controller could not start an episode: the other "
+                "probes need one (does another client control the server?)"
+            )
     report.failures.extend(tap.unreported())  # in the frames read after the last check
     report.replies_read = tap.frames
     peak_after = peak_rss_kib(pid)

@@ -35,6 +35,7 @@ from rlenv_tools.compliance._harness import (
 
 __all__ = ["ContractProbes"]
 
+
 class ContractProbes:
     """The contract probes of one run, on ``harness``."""
 
@@ -45,15 +46,21 @@ class ContractProbes:
 
     def ext_type_probes(self) -> Probes:
         """Requests holding ext type -1 (a timestamp) or a foreign one."""
-        return [("ext type -1 (a msgpack timestamp) in reset.options",
-                 lambda: self.ext_type_refused(-1)),
-                ("ext type 5 in reset.options", lambda: self.ext_type_refused(5))]
+        return [
+            (
+                "ext type -1 (a msgpack timestamp) in reset.options",
+                lambda: self.ext_type_refused(-1),
+            ),
+            ("ext type 5 in reset.options", lambda: self.ext_type_refused(5)),
+        ]
 
     def probes_under_control(self) -> Probes:
         """The probes that need the controller in control, last the tap's final reading."""
         return [
-            ("another client while the controller holds control",
-             self.open_to_all_while_controlled),
+            (
+                "another client while the controller holds control",
+                self.open_to_all_while_controlled,
+            ),
             ("determinism after sets", self.determinism.determinism_after_sets),
             ("repeated restores", self.determinism.repeated_restores),
             ("no ext type but 1 in the server's frames", self.no_foreign_ext_types),
@@ -74,12 +81,14 @@ class ContractProbes:
             reply = self.harness.read_frame(sock)
             assert_error(reply, ErrorCode.BAD_FRAME, "ext type", fatal=False)
             message = reply["error"]["message"]
-            assert str(code) in message, \
+            assert str(code) in message, (
                 f"expected the message to name ext type {code}, got {message!r}"
+            )
             sock.sendall(frame(pack({"id": 2})))
             after = self.harness.read_frame(sock)
-            assert after.get("id") == 2 and "error" not in after, \
+            assert after.get("id") == 2 and "error" not in after, (
                 f"after the refused frame, expected an answer to {{'id': 2}}, got {after!r:.200}"
+            )
 
     def token_rule(self) -> None:
         """The token is checked on the first request, not the first frame.
@@ -100,12 +109,15 @@ class ContractProbes:
                 assert_error(harness.read_frame(sock), ErrorCode.BAD_REQUEST, "id", fatal=False)
                 sock.sendall(frame(pack({"id": 1, "token": token})))
                 after = harness.read_frame(sock)
-                assert after.get("id") == 1 and "error" not in after, \
+                assert after.get("id") == 1 and "error" not in after, (
                     f"then expected {{'id': 1, 'token': ...}} to be accepted, got {after!r:.200}"
+                )
             except AssertionError as failure:
                 problems.append(f"a malformed first frame {{'id': 'x', 'token': ...}}: {failure}")
-        for what, request in (("a wrong token", {"id": 1, "token": token + "-wrong"}),
-                              ("no token", {"id": 1})):
+        for what, request in (
+            ("a wrong token", {"id": 1, "token": token + "-wrong"}),
+            ("no token", {"id": 1}),
+        ):
             with harness.connect(authenticate=False) as sock:
                 harness.send_probe(sock, frame(pack(request)))
                 reply = harness.read_frame(sock)
@@ -128,22 +140,27 @@ class ContractProbes:
         with self.harness.client() as other:
             for what, parts, code in (
                 ("reset(seed=-1)", {"reset": {"seed": -1}}, ErrorCode.BAD_REQUEST),
-                ("a reset with the action 'jump'", {"reset": {}, "action": "jump"},
-                 ErrorCode.INVALID_ACTION),
+                (
+                    "a reset with the action 'jump'",
+                    {"reset": {}, "action": "jump"},
+                    ErrorCode.INVALID_ACTION,
+                ),
             ):
                 other.send_request(Request(0, parts))
                 reply = other.receive_reply()
-                assert isinstance(reply, ErrorReply), \
+                assert isinstance(reply, ErrorReply), (
                     f"another client's {what} was accepted: {reply!r:.160}"
-                assert reply.code == code, \
-                    f"another client's {what}: expected {code}, got {reply.code}: " \
-                    f"{reply.message}"
+                )
+                assert reply.code == code, (
+                    f"another client's {what}: expected {code}, got {reply.code}: {reply.message}"
+                )
             try:
                 self.harness.start_episode()
             except RemoteError as error:
                 assert error.code != ErrorCode.BUSY, (
                     "after another client's refused requests, expected the first valid reset "
-                    f"to be answered, got busy: {error.message}")
+                    f"to be answered, got busy: {error.message}"
+                )
                 raise
 
     def open_to_all_while_controlled(self) -> None:
@@ -157,24 +174,35 @@ class ContractProbes:
         problems = []
         own = self.determinism.answer({"observation": {"agent": {}}}).observation
         tree = self.controller.tree()
-        readable = next(((node["path"], name) for node in tree
-                         for name in node.get("exported") or ()), None)
-        writable = next(([node["path"], name, value] for node in tree
-                         for name, value in (node.get("exported") or {}).items()
-                         if name not in node.get("read_only", ()) and type(value) is float),
-                        None)
+        readable = next(
+            ((node["path"], name) for node in tree for name in node.get("exported") or ()), None
+        )
+        writable = next(
+            (
+                [node["path"], name, value]
+                for node in tree
+                for name, value in (node.get("exported") or {}).items()
+                if name not in node.get("read_only", ()) and type(value) is float
+            ),
+            None,
+        )
         with self.harness.client() as other:
-            for what, parts in (("reset(seed=1)", {"reset": {"seed": 1}}),
-                                ("action", other.step_request(self.harness.valid_action()).parts)):
+            for what, parts in (
+                ("reset(seed=1)", {"reset": {"seed": 1}}),
+                ("action", other.step_request(self.harness.valid_action()).parts),
+            ):
                 other.send_request(Request(0, parts))
                 reply = other.receive_reply()
                 if not isinstance(reply, ErrorReply):
-                    problems.append(f"another client's {what} was accepted while the "
-                                    "controller held control")
+                    problems.append(
+                        f"another client's {what} was accepted while the controller held control"
+                    )
                 elif reply.code != ErrorCode.BUSY or reply.fatal:
                     fatal = "fatal " if reply.fatal else ""
-                    problems.append(f"another client's {what}: expected a non-fatal busy, got "
-                                    f"{fatal}{reply.code}: {reply.message}")
+                    problems.append(
+                        f"another client's {what}: expected a non-fatal busy, got "
+                        f"{fatal}{reply.code}: {reply.message}"
+                    )
             answered: list[tuple[str, dict[str, Any]]] = [
                 ("observation", {"observation": {"agent": {}}}),
                 ("snapshot", {"snapshot": {}}),
@@ -183,27 +211,41 @@ class ContractProbes:
                 ("id-only request", {}),
             ]
             if readable is not None:
-                answered.append((f"inspect get of {readable[0]}:{readable[1]}", {"inspect": {
-                    "get": {"path": readable[0], "property": readable[1]}}}))
+                answered.append(
+                    (
+                        f"inspect get of {readable[0]}:{readable[1]}",
+                        {"inspect": {"get": {"path": readable[0], "property": readable[1]}}},
+                    )
+                )
             if writable is not None:  # set to the value it has: logged, changes nothing
                 path, name, value = writable
-                answered.append((f"inspect set of {path}:{name}", {"inspect": {
-                    "set": {"path": path, "property": name, "value": value}}}))
+                answered.append(
+                    (
+                        f"inspect set of {path}:{name}",
+                        {"inspect": {"set": {"path": path, "property": name, "value": value}}},
+                    )
+                )
             for what, parts in answered:
                 other.send_request(Request(0, parts))
                 reply = other.receive_reply()
                 if isinstance(reply, ErrorReply):
-                    problems.append(f"another client's {what}: expected an answer, got "
-                                    f"{reply.code}: {reply.message}")
+                    problems.append(
+                        f"another client's {what}: expected an answer, got "
+                        f"{reply.code}: {reply.message}"
+                    )
                 elif what == "observation" and pack(reply.observation) != pack(own):
-                    problems.append("another client's observation differs from the "
-                                    "controller's: the refused requests changed the environment")
+                    problems.append(
+                        "another client's observation differs from the "
+                        "controller's: the refused requests changed the environment"
+                    )
         if writable is not None and not problems:
             events = self.controller.snapshot()["events"]
             if not events or list(events[-1]) != ["set", *writable]:
-                problems.append(f"another client's inspect set of {writable[0]}:{writable[1]} "
-                                f"is not the last event of the controller's snapshot: "
-                                f"{events[-1:]!r:.120}")
+                problems.append(
+                    f"another client's inspect set of {writable[0]}:{writable[1]} "
+                    f"is not the last event of the controller's snapshot: "
+                    f"{events[-1:]!r:.120}"
+                )
         assert not problems, "; ".join(problems)
 
     def no_foreign_ext_types(self) -> None:

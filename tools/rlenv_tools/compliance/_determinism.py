@@ -61,8 +61,10 @@ class DeterminismProbes:
         if isinstance(reply, ErrorReply):
             if reply.code == ErrorCode.ENVIRONMENT_ERROR:
                 self.harness.start_episode()  # for the probes after this one
-                raise Skipped("the environment raised on an action of its space: "
-                              f"{reply.message.splitlines()[0]}")
+                raise Skipped(
+                    "the environment raised on an action of its space: "
+                    f"{reply.message.splitlines()[0]}"
+                )
             raise RemoteError(reply.code, reply.message, reply.fatal)
         return reply
 
@@ -156,8 +158,10 @@ class DeterminismProbes:
         """
         prop = self.settable()
         if prop is None:
-            raise Skipped("the environment exports no writable float (or list of floats) "
-                          "property in inspect tree")
+            raise Skipped(
+                "the environment exports no writable float (or list of floats) "
+                "property in inspect tree"
+            )
         seed, value = self.harness.seed, prop.moved()
         try:
             first = self.trajectory({"reset": {"seed": seed}}, self.actions)
@@ -169,17 +173,20 @@ class DeterminismProbes:
             problems = []
             difference = _difference(first, second)
             if difference is not None:
-                problems.append(f"after inspect set {prop} = {value} then reset(seed={seed}), "
-                                f"the same actions gave another trajectory than before the "
-                                f"set, at {difference}")
+                problems.append(
+                    f"after inspect set {prop} = {value} then reset(seed={seed}), "
+                    f"the same actions gave another trajectory than before the "
+                    f"set, at {difference}"
+                )
             taken = "a snapshot taken right after that reset, restored,"
             if isinstance(restored, str):
                 problems.append(f"{taken} expected the trajectory before the set, got {restored}")
             elif (difference := _difference(first, restored)) is not None:
                 problems.append(
-                    f"{taken} replays that other trajectory too" if problems and
-                    _difference(second, restored) is None else
-                    f"{taken} gave another trajectory than before the set, at {difference}")
+                    f"{taken} replays that other trajectory too"
+                    if problems and _difference(second, restored) is None
+                    else f"{taken} gave another trajectory than before the set, at {difference}"
+                )
             assert not problems, "; ".join(problems)
         finally:
             self.put_back(prop)
@@ -217,10 +224,15 @@ class DeterminismProbes:
                 if isinstance(restored, str):
                     problems.append(f"{what}: expected it to replay the episode, got {restored}")
                 elif (difference := _difference(original, restored)) is not None:
-                    problems.append(f"{what}, then the same actions, differs from what the "
-                                    f"episode did after the snapshot, at {difference}")
-            if not isinstance(first, str) and not isinstance(second, str) and \
-                    (difference := _difference(first, second)) is not None:
+                    problems.append(
+                        f"{what}, then the same actions, differs from what the "
+                        f"episode did after the snapshot, at {difference}"
+                    )
+            if (
+                not isinstance(first, str)
+                and not isinstance(second, str)
+                and (difference := _difference(first, second)) is not None
+            ):
                 problems.append(f"the two restores differ from each other, at {difference}")
             assert not problems, "; ".join(problems)
         finally:
@@ -242,8 +254,10 @@ class _Property:
         Each number moves away from zero by its magnitude (at least 1), ``times`` times, so
         that signs (a mass, a length) stay as they were.
         """
+
         def move(value: float) -> float:
             return value + times * math.copysign(max(1.0, abs(value)), value)
+
         if isinstance(self.original, list):
             return [move(value) for value in self.original]
         return move(self.original)
@@ -258,6 +272,7 @@ def _writable_candidates(tree: Any) -> list[_Property]:
     Vectors (a gravity, say) first, then in tree order. Whether one is writable only a set can
     tell.
     """
+
     def is_float(value: Any) -> bool:
         return type(value) is float and math.isfinite(value)
 
@@ -267,8 +282,9 @@ def _writable_candidates(tree: Any) -> list[_Property]:
         if not isinstance(exported, dict) or not isinstance(node.get("path"), str):
             continue
         for name, value in exported.items():
-            if is_float(value) or (isinstance(value, list) and value and
-                                   all(is_float(item) for item in value)):
+            if is_float(value) or (
+                isinstance(value, list) and value and all(is_float(item) for item in value)
+            ):
                 found.append(_Property(node["path"], str(name), value))
     return sorted(found, key=lambda prop: not isinstance(prop.original, list))
 
@@ -289,8 +305,15 @@ class _Record:
     def of(cls, response: Response, observation: Any) -> _Record:
         """The record of ``response``, whose agent observation reads as ``observation``."""
         sent = response.observation.get("agent") if response.observation else None
-        return cls(sent, observation, response.reward, response.terminated,
-                   response.truncated, response.frames, response.agents)
+        return cls(
+            sent,
+            observation,
+            response.reward,
+            response.terminated,
+            response.truncated,
+            response.frames,
+            response.agents,
+        )
 
     def bits(self, start: bool) -> bytes:
         """The record as msgpack (floats as float 64): equal bytes, bit-identical records.
@@ -343,4 +366,3 @@ def _show(value: Any) -> str:
     if isinstance(value, tuple | list):
         return "(" + ", ".join(_show(item) for item in value) + ")"
     return repr(value)
-

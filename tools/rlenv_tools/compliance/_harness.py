@@ -28,8 +28,16 @@ from rlenv_client.client import Client
 if TYPE_CHECKING:
     from rlenv_tools.compliance import ComplianceReport
 
-__all__ = ["Harness", "Probes", "ReplyTap", "Skipped", "TappedClient", "assert_error",
-           "connection_closed", "peak_rss_kib"]
+__all__ = [
+    "Harness",
+    "Probes",
+    "ReplyTap",
+    "Skipped",
+    "TappedClient",
+    "assert_error",
+    "connection_closed",
+    "peak_rss_kib",
+]
 
 Probes = list[tuple[str, Callable[[], None]]]
 """Probes to run, each with its name (the start of its failure and skip lines)."""
@@ -78,13 +86,15 @@ class ReplyTap:
         for code in codes:
             if code != NDARRAY_EXT and code not in self._codes:
                 self._codes.add(code)
-                self.foreign.append(f"the server sent ext type {code} (only ext type 1 may "
-                                    f"travel) to {where}: {message!r:.160}")
+                self.foreign.append(
+                    f"the server sent ext type {code} (only ext type 1 may "
+                    f"travel) to {where}: {message!r:.160}"
+                )
         return message
 
     def unreported(self) -> list[str]:
         """The findings not returned before; marks them returned."""
-        lines, self._reported = self.foreign[self._reported:], len(self.foreign)
+        lines, self._reported = self.foreign[self._reported :], len(self.foreign)
         return lines
 
 
@@ -126,8 +136,8 @@ class TappedClient(Client):
             (length,) = HEADER.unpack_from(stream)
             if len(stream) < HEADER.size + length:
                 break
-            body = bytes(stream[HEADER.size:HEADER.size + length])
-            del stream[:HEADER.size + length]
+            body = bytes(stream[HEADER.size : HEADER.size + length])
+            del stream[: HEADER.size + length]
             try:
                 self._tap.read(body, self._where)
             except (ValueError, msgpack.UnpackException):
@@ -151,9 +161,18 @@ class Harness:
         seed: the seed of the episodes the contract probes compare (the rng's first draw).
     """
 
-    def __init__(self, host: str, port: int, token: str | None, timeout: float,
-                 controller: Client, report: ComplianceReport, rng: random.Random,
-                 action: Callable[[], Any] | None, tap: ReplyTap) -> None:
+    def __init__(
+        self,
+        host: str,
+        port: int,
+        token: str | None,
+        timeout: float,
+        controller: Client,
+        report: ComplianceReport,
+        rng: random.Random,
+        action: Callable[[], Any] | None,
+        tap: ReplyTap,
+    ) -> None:
         self.address = (host, port)
         self.token = token
         self.timeout = timeout
@@ -190,11 +209,11 @@ class Harness:
                     self.report.failures.append(
                         f"after {name}, the environment raised on an action of its space "
                         f"(pass action=... to step with others): "
-                        f"{error.message.splitlines()[0]}")
+                        f"{error.message.splitlines()[0]}"
+                    )
                 self.environment_errors += 1
             else:
-                self.report.failures.append(
-                    f"after {name}, the controller could not step: {error}")
+                self.report.failures.append(f"after {name}, the controller could not step: {error}")
             self.start_episode()  # what a trainer does: the next probes go on
         except Exception as error:
             self.report.failures.append(f"after {name}, the controller could not step: {error}")
@@ -221,8 +240,9 @@ class Harness:
 
     def client(self) -> Client:
         """Another well-behaved client (its replies are tapped too)."""
-        return TappedClient(self.tap, "another client", *self.address, timeout=self.timeout,
-                            token=self.token)
+        return TappedClient(
+            self.tap, "another client", *self.address, timeout=self.timeout, token=self.token
+        )
 
     # --- raw connections ---
 
@@ -260,8 +280,7 @@ class Harness:
         try:
             message = self.tap.read(body, "a raw connection")
         except (ValueError, msgpack.UnpackException) as error:
-            raise AssertionError(f"the server sent a frame that is not msgpack: {error}") \
-                from None
+            raise AssertionError(f"the server sent a frame that is not msgpack: {error}") from None
         assert isinstance(message, dict), f"the server sent a non-map {message!r:.100}"
         return message
 

@@ -25,6 +25,7 @@ from rlenv_tools.observations import observation_difference
 
 __all__ = ["HostileProbes"]
 
+
 class HostileProbes:
     """The hostile-input probes of one run, on ``harness``."""
 
@@ -36,6 +37,7 @@ class HostileProbes:
 
     def frame_probes(self) -> Probes:
         """Bytes that are no frame or no msgpack map: a network service's first hazards."""
+
         def fatal(data: bytes, words: str) -> Callable[[], None]:
             return lambda: self.expect_fatal(data, ErrorCode.BAD_FRAME, words)
 
@@ -57,6 +59,7 @@ class HostileProbes:
 
     def request_probes(self, random_frames: int) -> Probes:
         """Malformed requests, then deeply nested msgpack, random frames, a frame cut short."""
+
         def refused(request: dict[str, Any], words: str) -> Callable[[], None]:
             return lambda: self.expect_error(pack(request), ErrorCode.BAD_REQUEST, words)
 
@@ -64,15 +67,20 @@ class HostileProbes:
             ("an unknown key", refused({"id": 1, "launch": True}, "'launch'")),
             ("an id that is not an integer", refused({"id": "one"}, "'id'")),
             ("a config that is not a map", refused({"id": 1, "config": [1]}, "'config'")),
-            ("repeat_action 0",
-             refused({"id": 1, "action": 0, "repeat_action": 0}, "repeat_action")),
+            (
+                "repeat_action 0",
+                refused({"id": 1, "action": 0, "repeat_action": 0}, "repeat_action"),
+            ),
             ("steps that are not a map", refused({"id": 1, "steps": [1]}, "'steps'")),
-            ("steps without actions",
-             refused({"id": 1, "steps": {"reset": [True]}}, "'action'")),
-            ("steps with a reset mask of numbers",
-             refused({"id": 1, "steps": {"action": [0], "reset": [2]}}, "steps.reset")),
-            ("deeply nested msgpack",
-             lambda: self.expect_error(b"\x91" * 5000 + b"\xc0", ErrorCode.BAD_FRAME, "")),
+            ("steps without actions", refused({"id": 1, "steps": {"reset": [True]}}, "'action'")),
+            (
+                "steps with a reset mask of numbers",
+                refused({"id": 1, "steps": {"action": [0], "reset": [2]}}, "steps.reset"),
+            ),
+            (
+                "deeply nested msgpack",
+                lambda: self.expect_error(b"\x91" * 5000 + b"\xc0", ErrorCode.BAD_FRAME, ""),
+            ),
             (f"{random_frames} random frames", lambda: self.random_frames(random_frames)),
             ("a frame cut short by a hang-up", self.truncated_then_gone),
         ]
@@ -124,40 +132,73 @@ class HostileProbes:
         """Wrong actions, steps and configuration from the controller."""
         space = self.controller.action_space
         probes = [
-            ("an action of the wrong shape",
-             lambda: self.refused(np.zeros((7, 3)), ErrorCode.INVALID_ACTION, "action")),
-            ("an action that is text",
-             lambda: self.refused("jump", ErrorCode.INVALID_ACTION, "action")),
-            ("an unknown configuration key",
-             lambda: self.refused_config(ErrorCode.INVALID_CONFIG, "no_such_setting")),
+            (
+                "an action of the wrong shape",
+                lambda: self.refused(np.zeros((7, 3)), ErrorCode.INVALID_ACTION, "action"),
+            ),
+            (
+                "an action that is text",
+                lambda: self.refused("jump", ErrorCode.INVALID_ACTION, "action"),
+            ),
+            (
+                "an unknown configuration key",
+                lambda: self.refused_config(ErrorCode.INVALID_CONFIG, "no_such_setting"),
+            ),
         ]
         if isinstance(space, spaces.Box) and space.dtype.kind == "f":
             nan = np.full(space.shape, np.nan, dtype=space.dtype)
-            probes.append(("a NaN action",
-                           lambda: self.refused(nan, ErrorCode.INVALID_ACTION, "finite")))
-            probes.append(("an infinite action",
-                           lambda: self.refused(np.full(space.shape, np.inf, space.dtype),
-                                                ErrorCode.INVALID_ACTION, "finite")))
+            probes.append(
+                ("a NaN action", lambda: self.refused(nan, ErrorCode.INVALID_ACTION, "finite"))
+            )
+            probes.append(
+                (
+                    "an infinite action",
+                    lambda: self.refused(
+                        np.full(space.shape, np.inf, space.dtype),
+                        ErrorCode.INVALID_ACTION,
+                        "finite",
+                    ),
+                )
+            )
             if np.isfinite(space.high).all():
                 above = (space.high + np.abs(space.high) + 1).astype(space.dtype)
-                probes.append(("an action out of bounds",
-                               lambda: self.refused(above, ErrorCode.INVALID_ACTION, "bounds")))
+                probes.append(
+                    (
+                        "an action out of bounds",
+                        lambda: self.refused(above, ErrorCode.INVALID_ACTION, "bounds"),
+                    )
+                )
         if isinstance(space, spaces.Discrete):
             beyond = int(space.start + space.n)
-            probes.append(("an action out of range",
-                           lambda: self.refused(beyond, ErrorCode.INVALID_ACTION, "outside")))
+            probes.append(
+                (
+                    "an action out of range",
+                    lambda: self.refused(beyond, ErrorCode.INVALID_ACTION, "outside"),
+                )
+            )
         instances = self.controller.hello.instances
-        probes.append(("steps with a reset mask of the wrong length",
-                       lambda: self.steps_refused(instances, [True] * (instances + 1),
-                                                  ErrorCode.BAD_REQUEST, "flags for")))
+        probes.append(
+            (
+                "steps with a reset mask of the wrong length",
+                lambda: self.steps_refused(
+                    instances, [True] * (instances + 1), ErrorCode.BAD_REQUEST, "flags for"
+                ),
+            )
+        )
         if instances > 1:  # the controller resets instance 0 only
-            probes.append(("steps before every instance was reset",
-                           lambda: self.steps_refused(instances, None, ErrorCode.RESET_REQUIRED,
-                                                      "steps: instance 1")))
+            probes.append(
+                (
+                    "steps before every instance was reset",
+                    lambda: self.steps_refused(
+                        instances, None, ErrorCode.RESET_REQUIRED, "steps: instance 1"
+                    ),
+                )
+            )
         return probes
 
-    def steps_refused(self, instances: int, reset: list[bool] | None, code: ErrorCode,
-                      words: str) -> None:
+    def steps_refused(
+        self, instances: int, reset: list[bool] | None, code: ErrorCode, words: str
+    ) -> None:
         """Valid actions for every instance, with ``reset`` as the mask, are refused."""
         space = self.controller.action_space
         out = cast(Any, create_empty_array(space, instances))  # an action space: never None
@@ -166,15 +207,18 @@ class HostileProbes:
         def attempt() -> object:
             self.controller.send_steps(actions, None if reset is None else np.array(reset))
             return self.controller.receive_steps()
+
         self.refused_unchanged(attempt, code, words, "the steps")
 
     def refused(self, action: Any, code: ErrorCode, words: str) -> None:
         """``action`` is refused, changing nothing."""
-        self.refused_unchanged(lambda: self.controller.step(action), code, words,
-                               f"the action {action!r:.60}")
+        self.refused_unchanged(
+            lambda: self.controller.step(action), code, words, f"the action {action!r:.60}"
+        )
 
-    def refused_unchanged(self, attempt: Callable[[], object], code: ErrorCode, words: str,
-                          what: str) -> None:
+    def refused_unchanged(
+        self, attempt: Callable[[], object], code: ErrorCode, words: str, what: str
+    ) -> None:
         """``attempt()`` must be refused (``code``, ``words`` in the message), changing nothing."""
         before = self.controller.observe()["agent"]
         try:
@@ -186,8 +230,9 @@ class HostileProbes:
             raise AssertionError(f"{what} was accepted: {answer!r:.80}")
         after = self.controller.observe()["agent"]
         difference = observation_difference(before, after)
-        assert difference is None, \
+        assert difference is None, (
             f"{what} was refused but changed the environment, at {difference}"
+        )
 
     def refused_config(self, code: ErrorCode, key: str) -> None:
         """Configuring ``key`` is refused with ``code``, naming the key."""
@@ -198,4 +243,3 @@ class HostileProbes:
             assert error.code == code and key in error.message, error.message
         else:
             raise AssertionError(f"configuration {key!r} was accepted")
-

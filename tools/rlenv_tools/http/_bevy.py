@@ -41,11 +41,21 @@ __all__ = ["BEVY_SESSION", "bevy_endpoints"]
 BEVY_SESSION = "bevy"
 """The id of the session bevy_rl's routes drive."""
 
-_AGENT_STATES = {"type": "array", "items": {
-    "type": "object", "required": ["reward", "is_terminated"],
-    "properties": {"reward": {"type": "number"}, "is_terminated": {"type": "boolean"}}}}
-_PROBLEMS = ("not_found", "environment_error", "environment_lost", ErrorCode.TIMEOUT,
-             "session_limit")
+_AGENT_STATES = {
+    "type": "array",
+    "items": {
+        "type": "object",
+        "required": ["reward", "is_terminated"],
+        "properties": {"reward": {"type": "number"}, "is_terminated": {"type": "boolean"}},
+    },
+}
+_PROBLEMS = (
+    "not_found",
+    "environment_error",
+    "environment_lost",
+    ErrorCode.TIMEOUT,
+    "session_limit",
+)
 
 
 def bevy_endpoints(gateway: Gateway) -> list[Endpoint]:
@@ -54,13 +64,17 @@ def bevy_endpoints(gateway: Gateway) -> list[Endpoint]:
 
     async def session() -> Session:
         if gateway.catalog.target is None:
-            raise Problem("not_found", "bevy_rl's routes drive the command line's TARGET, and "
-                                       "this gateway has none (rlenv http TARGET)")
+            raise Problem(
+                "not_found",
+                "bevy_rl's routes drive the command line's TARGET, and "
+                "this gateway has none (rlenv http TARGET)",
+            )
         async with creating:  # two first requests at once create one session
             found = gateway.sessions.find(BEVY_SESSION)
             if found is None:
-                found = await gateway.sessions.create(gateway.catalog.target,
-                                                      session_id=BEVY_SESSION)
+                found = await gateway.sessions.create(
+                    gateway.catalog.target, session_id=BEVY_SESSION
+                )
                 await found.reset()
         found.touch()
         return found
@@ -81,78 +95,135 @@ def bevy_endpoints(gateway: Gateway) -> list[Endpoint]:
     async def step(request: Request) -> Response:
         driven = await session()
         action = _action(request.query_params.get("payload"), driven.agents)
-        answer = await driven.step(action, _integer(request, "repeat_action", 1,
-                                                    MAX_REPEAT_ACTION))
+        answer = await driven.step(action, _integer(request, "repeat_action", 1, MAX_REPEAT_ACTION))
         if len(driven.agents) == 1:
             done = answer["terminated"] or answer["truncated"]
             return json_response([{"reward": answer["reward"], "is_terminated": done}])
         outcomes = answer["info"].get("agents", {})
         return json_response([_agent_state(outcomes.get(name)) for name in driven.agents])
 
-    payload = Parameter("payload", {"type": "string"}, "URL-encoded JSON: [{\"action\": \"<the "
-                        "action as JSON text>\"}, ...], one entry per agent", required=True)
+    payload = Parameter(
+        "payload",
+        {"type": "string"},
+        'URL-encoded JSON: [{"action": "<the action as JSON text>"}, ...], one entry per agent',
+        required=True,
+    )
     return [
-        Endpoint("GET", "/step", step, "bevy_step", "bevy_rl: act, one action per agent",
-                 "bevy_rl", {200: Answer("each agent's reward and whether it is done",
-                                         _AGENT_STATES)},
-                 problems=(*_PROBLEMS, ErrorCode.BAD_REQUEST, ErrorCode.RESET_REQUIRED,
-                           ErrorCode.INVALID_ACTION),
-                 query=(payload, Parameter("repeat_action", {"type": "integer", "minimum": 1,
-                                                             "maximum": MAX_REPEAT_ACTION},
-                                           "physics ticks (default: the environment's)"))),
-        Endpoint("GET", "/state", state, "bevy_state", "bevy_rl: the observation as JSON",
-                 "bevy_rl", {200: Answer("the observation", "Observation")},
-                 problems=(*_PROBLEMS, ErrorCode.RESET_REQUIRED)),
-        Endpoint("GET", "/visual_observations", visual_observations, "bevy_visual_observations",
-                 "bevy_rl: the current frame", "bevy_rl",
-                 {200: Answer("a PNG image", {"type": "string", "contentMediaType": "image/png"},
-                              "image/png")}, problems=_PROBLEMS),
-        *(Endpoint(method, "/reset", reset, f"bevy_reset_{method.lower()}",
-                   "bevy_rl: start an episode", "bevy_rl",
-                   {200: Answer("each agent's state", _AGENT_STATES)},
-                   problems=(*_PROBLEMS, ErrorCode.BAD_REQUEST),
-                   query=(Parameter("seed", {"type": "integer", "minimum": 0},
-                                    "the episode's seed (an addition to bevy_rl)"),))
-          for method in ("POST", "GET")),
+        Endpoint(
+            "GET",
+            "/step",
+            step,
+            "bevy_step",
+            "bevy_rl: act, one action per agent",
+            "bevy_rl",
+            {200: Answer("each agent's reward and whether it is done", _AGENT_STATES)},
+            problems=(
+                *_PROBLEMS,
+                ErrorCode.BAD_REQUEST,
+                ErrorCode.RESET_REQUIRED,
+                ErrorCode.INVALID_ACTION,
+            ),
+            query=(
+                payload,
+                Parameter(
+                    "repeat_action",
+                    {"type": "integer", "minimum": 1, "maximum": MAX_REPEAT_ACTION},
+                    "physics ticks (default: the environment's)",
+                ),
+            ),
+        ),
+        Endpoint(
+            "GET",
+            "/state",
+            state,
+            "bevy_state",
+            "bevy_rl: the observation as JSON",
+            "bevy_rl",
+            {200: Answer("the observation", "Observation")},
+            problems=(*_PROBLEMS, ErrorCode.RESET_REQUIRED),
+        ),
+        Endpoint(
+            "GET",
+            "/visual_observations",
+            visual_observations,
+            "bevy_visual_observations",
+            "bevy_rl: the current frame",
+            "bevy_rl",
+            {
+                200: Answer(
+                    "a PNG image", {"type": "string", "contentMediaType": "image/png"}, "image/png"
+                )
+            },
+            problems=_PROBLEMS,
+        ),
+        *(
+            Endpoint(
+                method,
+                "/reset",
+                reset,
+                f"bevy_reset_{method.lower()}",
+                "bevy_rl: start an episode",
+                "bevy_rl",
+                {200: Answer("each agent's state", _AGENT_STATES)},
+                problems=(*_PROBLEMS, ErrorCode.BAD_REQUEST),
+                query=(
+                    Parameter(
+                        "seed",
+                        {"type": "integer", "minimum": 0},
+                        "the episode's seed (an addition to bevy_rl)",
+                    ),
+                ),
+            )
+            for method in ("POST", "GET")
+        ),
     ]
 
 
-def _integer(request: Request, name: str, minimum: int,
-             maximum: int | None = None) -> int | None:
+def _integer(request: Request, name: str, minimum: int, maximum: int | None = None) -> int | None:
     text = request.query_params.get(name)
     if text is None:
         return None
     if not text.isdigit() or int(text) < minimum:
-        raise Problem(ErrorCode.BAD_REQUEST, f"{name} must be an integer >= {minimum}, got "
-                                             f"{text!r:.20}")
+        raise Problem(
+            ErrorCode.BAD_REQUEST, f"{name} must be an integer >= {minimum}, got {text!r:.20}"
+        )
     if maximum is not None and (len(text) > 20 or int(text) > maximum):
-        raise Problem(ErrorCode.BAD_REQUEST, f"{name} must be at most {maximum}, got "
-                                             f"{text!r:.20}")
+        raise Problem(ErrorCode.BAD_REQUEST, f"{name} must be at most {maximum}, got {text!r:.20}")
     return int(text)
 
 
 def _action(payload: str | None, agents: tuple[str, ...]) -> Any:
     """The action of a bevy_rl payload: one agent's, or a map from agent to action."""
-    shape = (f"[{{\"action\": \"<the action as JSON text>\"}}, ...] with one entry per agent "
-             f"({len(agents)}: {list(agents)})")
+    shape = (
+        f'[{{"action": "<the action as JSON text>"}}, ...] with one entry per agent '
+        f"({len(agents)}: {list(agents)})"
+    )
     if payload is None:
         raise Problem(ErrorCode.BAD_REQUEST, f"GET /step needs ?payload= (URL-encoded): {shape}")
     entries = parse_json(payload, f"the payload (expected {shape})")
-    if type(entries) is not list or len(entries) != len(agents) or \
-            not all(type(entry) is dict and "action" in entry for entry in entries):
+    if (
+        type(entries) is not list
+        or len(entries) != len(agents)
+        or not all(type(entry) is dict and "action" in entry for entry in entries)
+    ):
         raise Problem(ErrorCode.BAD_REQUEST, f"the payload must be {shape}")
-    actions = [parse_json(entry["action"], f"payload[{index}].action")
-               if isinstance(entry["action"], str) else entry["action"]
-               for index, entry in enumerate(entries)]
+    actions = [
+        parse_json(entry["action"], f"payload[{index}].action")
+        if isinstance(entry["action"], str)
+        else entry["action"]
+        for index, entry in enumerate(entries)
+    ]
     if len(agents) == 1:
         return actions[0]
-    return {name: action for name, action in zip(agents, actions, strict=True)
-            if action is not None}
+    return {
+        name: action for name, action in zip(agents, actions, strict=True) if action is not None
+    }
 
 
 def _agent_state(outcome: Any) -> dict[str, Any]:
     if not isinstance(outcome, dict):  # an agent done before this step
         return {"reward": 0.0, "is_terminated": True}
-    return {"reward": float(outcome.get("reward", 0.0)),
-            "is_terminated": bool(outcome.get("terminated") or outcome.get("truncated"))}
-
+    return {
+        "reward": float(outcome.get("reward", 0.0)),
+        "is_terminated": bool(outcome.get("terminated") or outcome.get("truncated")),
+    }

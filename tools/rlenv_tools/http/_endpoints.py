@@ -19,12 +19,23 @@ from rlenv.protocol.errors import ErrorCode
 from rlenv_tools.http.json_spaces import dumps
 from rlenv_tools.http.problems import COMMON_HEADERS, Problem
 
-__all__ = ["JSON", "Answer", "Endpoint", "JSONRoute", "Parameter", "json_response",
-           "object_body", "parse_json", "read_json"]
+__all__ = [
+    "JSON",
+    "Answer",
+    "Endpoint",
+    "JSONRoute",
+    "Parameter",
+    "json_response",
+    "object_body",
+    "parse_json",
+    "read_json",
+]
 
 JSON = "application/json"
-_JSON_HEADERS = [(b"content-type", JSON.encode()),
-                 *((k.lower().encode(), v.encode()) for k, v in COMMON_HEADERS.items())]
+_JSON_HEADERS = [
+    (b"content-type", JSON.encode()),
+    *((k.lower().encode(), v.encode()) for k, v in COMMON_HEADERS.items()),
+]
 
 
 class Answer(NamedTuple):
@@ -94,33 +105,50 @@ class JSONRoute:
         body_required: refuse a request without a body (400).
     """
 
-    def __init__(self, handler: Callable[[dict[str, str], Any], Awaitable[Any]], *,
-                 body_required: bool) -> None:
+    def __init__(
+        self, handler: Callable[[dict[str, str], Any], Awaitable[Any]], *, body_required: bool
+    ) -> None:
         self.handler = handler
         self.body_required = body_required
 
-    async def __call__(self, scope: MutableMapping[str, Any],
-                       receive: Callable[[], Awaitable[MutableMapping[str, Any]]],
-                       send: Callable[[MutableMapping[str, Any]], Awaitable[None]]) -> None:
+    async def __call__(
+        self,
+        scope: MutableMapping[str, Any],
+        receive: Callable[[], Awaitable[MutableMapping[str, Any]]],
+        send: Callable[[MutableMapping[str, Any]], Awaitable[None]],
+    ) -> None:
         """Serve one request."""
         message = await receive()
         body = message.get("body", b"")
         while message.get("more_body"):
             message = await receive()
             body += message.get("body", b"")
-        answer = dumps(await self.handler(scope["path_params"], _parse(
-            body, self.body_required, f"{scope['method']} {scope['path']}")))
-        await send({"type": "http.response.start", "status": 200,
-                    "headers": [*_JSON_HEADERS, (b"content-length", b"%d" % len(answer))]})
+        answer = dumps(
+            await self.handler(
+                scope["path_params"],
+                _parse(body, self.body_required, f"{scope['method']} {scope['path']}"),
+            )
+        )
+        await send(
+            {
+                "type": "http.response.start",
+                "status": 200,
+                "headers": [*_JSON_HEADERS, (b"content-length", b"%d" % len(answer))],
+            }
+        )
         await send({"type": "http.response.body", "body": answer})
 
 
-def json_response(value: Any, status: int = 200,
-                  headers: Mapping[str, str] | None = None) -> Response:
+def json_response(
+    value: Any, status: int = 200, headers: Mapping[str, str] | None = None
+) -> Response:
     """``value`` as an ``application/json`` answer (numpy values and NaN converted)."""
-    return Response(dumps(value), status,
-                    headers=COMMON_HEADERS if headers is None else {**COMMON_HEADERS, **headers},
-                    media_type=JSON)
+    return Response(
+        dumps(value),
+        status,
+        headers=COMMON_HEADERS if headers is None else {**COMMON_HEADERS, **headers},
+        media_type=JSON,
+    )
 
 
 def _no_constant(name: str) -> Any:
@@ -159,8 +187,12 @@ def parse_json(text: str | bytes, what: str = "the body") -> Any:
         raise Problem(ErrorCode.BAD_REQUEST, f"{what} is not JSON: {error}") from None
 
 
-def object_body(value: Any, allowed: frozenset[str], required: frozenset[str] = frozenset(),
-                what: str = "the body") -> dict[str, Any]:
+def object_body(
+    value: Any,
+    allowed: frozenset[str],
+    required: frozenset[str] = frozenset(),
+    what: str = "the body",
+) -> dict[str, Any]:
     """``value`` checked to be a JSON object with ``required`` keys and no others.
 
     Raises:
@@ -169,12 +201,16 @@ def object_body(value: Any, allowed: frozenset[str], required: frozenset[str] = 
     if value is None:
         value = {}
     if type(value) is not dict:
-        raise Problem(ErrorCode.BAD_REQUEST, f"{what} must be a JSON object with keys "
-                                             f"{sorted(allowed)}, got {type(value).__name__}")
+        raise Problem(
+            ErrorCode.BAD_REQUEST,
+            f"{what} must be a JSON object with keys {sorted(allowed)}, got {type(value).__name__}",
+        )
     unknown = value.keys() - allowed
     if unknown:
-        raise Problem(ErrorCode.BAD_REQUEST, f"{what} has an unknown key {sorted(unknown)[0]!r} "
-                                             f"(expected {sorted(allowed)})")
+        raise Problem(
+            ErrorCode.BAD_REQUEST,
+            f"{what} has an unknown key {sorted(unknown)[0]!r} (expected {sorted(allowed)})",
+        )
     missing = required - value.keys()
     if missing:
         raise Problem(ErrorCode.BAD_REQUEST, f"{what} lacks {sorted(missing)[0]!r}")

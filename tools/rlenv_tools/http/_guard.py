@@ -52,8 +52,9 @@ class Guard:
         max_body: the largest request body, in bytes.
     """
 
-    def __init__(self, app: ASGIApp, *, origins: OriginPolicy, token: str | None,
-                 max_body: int) -> None:
+    def __init__(
+        self, app: ASGIApp, *, origins: OriginPolicy, token: str | None, max_body: int
+    ) -> None:
         self.app = app
         self._origins = origins
         self._token = None if token is None else token.encode()
@@ -95,15 +96,23 @@ class Guard:
             receive = self._counted(receive)
         await self.app(scope, receive, send)
 
-    def _problem(self, host: bytes | None, origin: bytes | None, authorization: bytes,
-                 length: bytes, fetch_site: bytes, peer: str) -> tuple[Problem | None, float]:
+    def _problem(
+        self,
+        host: bytes | None,
+        origin: bytes | None,
+        authorization: bytes,
+        length: bytes,
+        fetch_site: bytes,
+        peer: str,
+    ) -> tuple[Problem | None, float]:
         """Why the request is refused (``None``: it passes), and how long to hold the answer."""
         try:
             refusal = self._refusals[host, origin]
         except KeyError:
             refusal = self._origins.refusal(
                 None if host is None else host.decode("latin-1"),
-                None if origin is None else origin.decode("latin-1"))
+                None if origin is None else origin.decode("latin-1"),
+            )
             if len(self._refusals) >= _REMEMBERED:  # bounded against a flood of names
                 self._refusals.clear()
             self._refusals[host, origin] = refusal
@@ -111,30 +120,42 @@ class Guard:
             return Problem("forbidden", refusal), 0.0
         if fetch_site and fetch_site.lower() not in _OWN_FETCHES:
             site = fetch_site.decode("latin-1")
-            return Problem("forbidden", "refused: a request a page of another origin made "
-                                        f"(Sec-Fetch-Site: {site:.20})"), 0.0
+            return Problem(
+                "forbidden",
+                f"refused: a request a page of another origin made (Sec-Fetch-Site: {site:.20})",
+            ), 0.0
         if self._token is not None:
             problem, delay = self._token_problem(authorization, peer)
             if problem is not None:
                 return problem, delay
         if length and (not length.isdigit() or int(length) > self._max_body):
-            return Problem("payload_too_large", f"a body is at most {self._max_body} bytes, "
-                                                f"this one {length.decode('latin-1')[:20]}",
-                           headers=_CLOSE), 0.0
+            return Problem(
+                "payload_too_large",
+                f"a body is at most {self._max_body} bytes, "
+                f"this one {length.decode('latin-1')[:20]}",
+                headers=_CLOSE,
+            ), 0.0
         return None, 0.0
 
     def _token_problem(self, authorization: bytes, peer: str) -> tuple[Problem | None, float]:
         """Why ``authorization`` from ``peer`` is refused (``None``: it passes); the hold."""
         assert self._token is not None
         scheme, _, token = authorization.partition(b" ")
-        if scheme.lower() == b"bearer" and token and \
-                hmac.compare_digest(token.strip(), self._token):
+        if (
+            scheme.lower() == b"bearer"
+            and token
+            and hmac.compare_digest(token.strip(), self._token)
+        ):
             return None, 0.0
         delay = self._penalties.failed(peer) if token else 0.0
-        return Problem(ErrorCode.UNAUTHORIZED,
-                       "this gateway requires its token: send Authorization: Bearer TOKEN (the "
-                       "RLENV_TOKEN it was started with)" if not token else "wrong token",
-                       headers={"WWW-Authenticate": 'Bearer realm="rlenv"'}), delay
+        return Problem(
+            ErrorCode.UNAUTHORIZED,
+            "this gateway requires its token: send Authorization: Bearer TOKEN (the "
+            "RLENV_TOKEN it was started with)"
+            if not token
+            else "wrong token",
+            headers={"WWW-Authenticate": 'Bearer realm="rlenv"'},
+        ), delay
 
     def _counted(self, receive: Receive) -> Receive:
         """``receive`` that refuses a chunked body once it grows past ``max_body``."""
@@ -145,16 +166,19 @@ class Guard:
             message = await receive()
             received += len(message.get("body", b""))
             if received > self._max_body:
-                raise Problem("payload_too_large", f"a body is at most {self._max_body} bytes",
-                              headers=_CLOSE)
+                raise Problem(
+                    "payload_too_large", f"a body is at most {self._max_body} bytes", headers=_CLOSE
+                )
             return message
+
         return counted
 
 
 async def _refuse(problem: Problem, scope: Scope, receive: Receive, send: Send) -> None:
     """Answer ``problem``: as HTTP, or a WebSocket's denial (close code 1008 without one)."""
-    if scope["type"] == "websocket" and \
-            "websocket.http.response" not in scope.get("extensions", {}):
+    if scope["type"] == "websocket" and "websocket.http.response" not in scope.get(
+        "extensions", {}
+    ):
         await send({"type": "websocket.close", "code": 1008})
         return
     await problem.response(scope.get("path"))(scope, receive, send)

@@ -22,9 +22,15 @@ _PATH_PARAMETER = re.compile(r"{(\w+)}")
 _EVERY_ROUTE = ("forbidden", "internal_error")  # Host/Origin refused; the gateway's own bug
 
 
-def openapi_document(endpoints: Iterable[Endpoint], schemas: Mapping[str, Any], *,
-                     title: str, version: str, description: str,
-                     token_required: bool) -> dict[str, Any]:
+def openapi_document(
+    endpoints: Iterable[Endpoint],
+    schemas: Mapping[str, Any],
+    *,
+    title: str,
+    version: str,
+    description: str,
+    token_required: bool,
+) -> dict[str, Any]:
     """The OpenAPI 3.1 document of ``endpoints``.
 
     Args:
@@ -47,29 +53,43 @@ def openapi_document(endpoints: Iterable[Endpoint], schemas: Mapping[str, Any], 
         "components": {"schemas": {"Problem": _PROBLEM, **schemas}},
     }
     if token_required:
-        document["components"]["securitySchemes"] = {"bearer": {"type": "http",
-                                                                 "scheme": "bearer"}}
+        document["components"]["securitySchemes"] = {"bearer": {"type": "http", "scheme": "bearer"}}
         document["security"] = [{"bearer": []}]
     return document
 
 
 def _operation(endpoint: Endpoint, token_required: bool) -> dict[str, Any]:
-    operation: dict[str, Any] = {"operationId": endpoint.operation, "summary": endpoint.summary,
-                                 "tags": [endpoint.tag]}
+    operation: dict[str, Any] = {
+        "operationId": endpoint.operation,
+        "summary": endpoint.summary,
+        "tags": [endpoint.tag],
+    }
     description = endpoint.description
     if endpoint.method == "WEBSOCKET":
         description = f"A WebSocket (GET with Upgrade: websocket). {description}".strip()
     if description:
         operation["description"] = description
-    parameters = [{"name": name, "in": "path", "required": True, "schema": {"type": "string"}}
-                  for name in _PATH_PARAMETER.findall(endpoint.path)]
-    parameters += [{"name": p.name, "in": "query", "required": p.required, "schema": p.schema,
-                    "description": p.description} for p in endpoint.query]
+    parameters = [
+        {"name": name, "in": "path", "required": True, "schema": {"type": "string"}}
+        for name in _PATH_PARAMETER.findall(endpoint.path)
+    ]
+    parameters += [
+        {
+            "name": p.name,
+            "in": "query",
+            "required": p.required,
+            "schema": p.schema,
+            "description": p.description,
+        }
+        for p in endpoint.query
+    ]
     if parameters:
         operation["parameters"] = parameters
     if endpoint.body is not None:
-        operation["requestBody"] = {"required": endpoint.body_required, "content": {
-            JSON: {"schema": _schema(endpoint.body)}}}
+        operation["requestBody"] = {
+            "required": endpoint.body_required,
+            "content": {JSON: {"schema": _schema(endpoint.body)}},
+        }
     responses = {str(status): _answer(answer) for status, answer in endpoint.answers.items()}
     problems = [*endpoint.problems, *_EVERY_ROUTE]
     if token_required:
@@ -96,8 +116,10 @@ def _problem_answers(codes: Iterable[str]) -> dict[str, Any]:
     answers = {}
     for status, codes_of_status in by_status.items():
         named = "; ".join(f"{PROBLEMS[code].title} ({code})" for code in codes_of_status)
-        answers[str(status)] = {"description": named, "content": {
-            PROBLEM_MEDIA_TYPE: {"schema": {"$ref": "#/components/schemas/Problem"}}}}
+        answers[str(status)] = {
+            "description": named,
+            "content": {PROBLEM_MEDIA_TYPE: {"schema": {"$ref": "#/components/schemas/Problem"}}},
+        }
     return answers
 
 
@@ -108,9 +130,10 @@ def _schema(schema: Any) -> Any:
 
 
 _PROBLEM = {
-    "type": "object", "required": ["type", "title", "status", "detail", "code"],
+    "type": "object",
+    "required": ["type", "title", "status", "detail", "code"],
     "description": "RFC 9457 problem details; code is the protocol's error code or the "
-                   f"gateway's; type is {PROBLEM_TYPE!r} and the code",
+    f"gateway's; type is {PROBLEM_TYPE!r} and the code",
     "properties": {
         "type": {"type": "string", "format": "uri"},
         "title": {"type": "string"},

@@ -30,20 +30,32 @@ def encode_png(image: np.ndarray, level: int = 6) -> bytes:
     array = np.asarray(image)
     if array.ndim == 2:
         array = array[:, :, None]
-    if array.dtype != np.uint8 or array.ndim != 3 or array.shape[2] not in _COLOR_TYPES \
-            or 0 in array.shape:
-        raise ValueError(f"a PNG image is a non-empty (height, width[, 1-4 channels]) uint8 "
-                         f"array, got {array.dtype} of shape {np.shape(image)}")
+    if (
+        array.dtype != np.uint8
+        or array.ndim != 3
+        or array.shape[2] not in _COLOR_TYPES
+        or 0 in array.shape
+    ):
+        raise ValueError(
+            f"a PNG image is a non-empty (height, width[, 1-4 channels]) uint8 "
+            f"array, got {array.dtype} of shape {np.shape(image)}"
+        )
     height, width, channels = array.shape
     rows = np.empty((height, 1 + width * channels), np.uint8)
     rows[:, 0] = 0  # filter type None on every row
     rows[:, 1:] = array.reshape(height, width * channels)
     header = struct.pack(">IIBBBBB", width, height, 8, _COLOR_TYPES[channels], 0, 0, 0)
-    return b"".join((_SIGNATURE, _chunk(b"IHDR", header),
-                     _chunk(b"IDAT", zlib.compress(rows.tobytes(), level)),
-                     _chunk(b"IEND", b"")))
+    return b"".join(
+        (
+            _SIGNATURE,
+            _chunk(b"IHDR", header),
+            _chunk(b"IDAT", zlib.compress(rows.tobytes(), level)),
+            _chunk(b"IEND", b""),
+        )
+    )
 
 
 def _chunk(kind: bytes, data: bytes) -> bytes:
-    return b"".join((struct.pack(">I", len(data)), kind, data,
-                     struct.pack(">I", zlib.crc32(kind + data))))
+    return b"".join(
+        (struct.pack(">I", len(data)), kind, data, struct.pack(">I", zlib.crc32(kind + data)))
+    )

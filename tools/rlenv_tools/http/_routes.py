@@ -92,19 +92,26 @@ class _Handlers:
         body = object_body(await read_json(request, required=False), _CREATE_KEYS)
         env_id = body.get("env_id", self.gateway.catalog.target)
         if env_id is None:
-            raise Problem(ErrorCode.BAD_REQUEST, f"env_id is required: one of "
-                                                 f"{self.gateway.catalog.ids()}")
+            raise Problem(
+                ErrorCode.BAD_REQUEST, f"env_id is required: one of {self.gateway.catalog.ids()}"
+            )
         settings = body.get("kwargs")
         if settings is not None and type(settings) is not dict:
-            raise Problem(ErrorCode.BAD_REQUEST, "kwargs must be a JSON object of settings "
-                                                 "(as BaseClient.configure takes them)")
+            raise Problem(
+                ErrorCode.BAD_REQUEST,
+                "kwargs must be a JSON object of settings (as BaseClient.configure takes them)",
+            )
         client = request.client
-        session = await self.sessions.create(env_id, settings,
-                                             owner=None if client is None else client.host)
+        session = await self.sessions.create(
+            env_id, settings, owner=None if client is None else client.host
+        )
         if await request.is_disconnected():  # abandoned mid-request: nobody knows its id
             await self.sessions.abandon(session)
-        return json_response({"id": session.id, "env_id": session.env_id, **session.spaces()},
-                             201, headers={"Location": f"/v1/envs/{session.id}"})
+        return json_response(
+            {"id": session.id, "env_id": session.env_id, **session.spaces()},
+            201,
+            headers={"Location": f"/v1/envs/{session.id}"},
+        )
 
     async def list_sessions(self, request: Request) -> Response:
         return json_response({"envs": [session.describe() for session in self.sessions.all()]})
@@ -121,16 +128,23 @@ class _Handlers:
         width, height = _size(request, "width"), _size(request, "height")
         frame = await session.render(width, height)
         if _RAW in request.headers.get("accept", ""):
-            return Response(frame.tobytes(), headers={
-                **COMMON_HEADERS, "X-Shape": ",".join(map(str, frame.shape)),
-                "X-Dtype": frame.dtype.name}, media_type=_RAW)
+            return Response(
+                frame.tobytes(),
+                headers={
+                    **COMMON_HEADERS,
+                    "X-Shape": ",".join(map(str, frame.shape)),
+                    "X-Dtype": frame.dtype.name,
+                },
+                media_type=_RAW,
+            )
         png = await asyncio.to_thread(encode_png, frame)  # zlib lets the loop go on meanwhile
         return Response(png, headers=COMMON_HEADERS, media_type="image/png")
 
     async def action_space(self, request: Request) -> Response:
         space = self.session_at(request.path_params).client.action_space
-        return json_response({"space": space_to_json(space),
-                              "schema": json_schema(space, images=False)})
+        return json_response(
+            {"space": space_to_json(space), "schema": json_schema(space, images=False)}
+        )
 
     async def observation_space(self, request: Request) -> Response:
         space = self.session_at(request.path_params).client.observation_space
@@ -165,71 +179,195 @@ def session_endpoints(gateway: Gateway) -> list[Endpoint]:
     handlers = _Handlers(gateway)
     one = "/v1/envs/{id}"
     return [
-        Endpoint("POST", f"{one}/step", handlers.step, "step",
-                 "Act for repeat_action physics ticks", "sessions",
-                 {200: Answer("the transition; info.frames: the ticks that ran", "Step")},
-                 body="StepBody", body_required=True, json=True,
-                 problems=(*_CALL, ErrorCode.BAD_REQUEST, ErrorCode.RESET_REQUIRED,
-                           ErrorCode.INVALID_ACTION, ErrorCode.BUSY),
-                 description="A step before a reset, or after the episode ended, is refused "
-                             "(409); an action outside the space too (422), naming the field."),
-        Endpoint("POST", f"{one}/reset", handlers.reset, "reset",
-                 "Start an episode (seed 0 is a seed)", "sessions",
-                 {200: Answer("the first observation", "Reset")}, body="ResetBody",
-                 json=True, problems=(*_CALL, ErrorCode.BAD_REQUEST, ErrorCode.BUSY)),
-        Endpoint("POST", "/v1/envs", handlers.create, "create_session", "Create a session",
-                 "sessions",
-                 {201: Answer("the session's id and spaces", "Created")}, body="CreateBody",
-                 problems=(ErrorCode.BAD_REQUEST, "session_limit", "environment_error",
-                           "environment_lost", ErrorCode.INVALID_CONFIG, ErrorCode.TIMEOUT,
-                           ErrorCode.BUSY),
-                 description="env_id: the command line's TARGET (the default) or a registered "
-                             "id; kwargs: settings, as BaseClient.configure takes them."),
-        Endpoint("GET", "/v1/envs", handlers.list_sessions, "list_sessions", "List the sessions",
-                 "sessions", {200: Answer("every session", "SessionList")}),
-        Endpoint("GET", one, handlers.get_session, "get_session",
-                 "A session's status, episode and step", "sessions",
-                 {200: Answer("the session", "Session")}, problems=_ENV),
-        Endpoint("DELETE", one, handlers.delete_session, "delete_session",
-                 "Close a session and its environment", "sessions",
-                 {204: Answer("closed", media_type="")}, problems=_ENV),
-        Endpoint("GET", f"{one}/render", handlers.render, "render", "Draw the current state",
-                 "sessions",
-                 {200: Answer("a PNG image, or with Accept: application/octet-stream the raw "
-                              "uint8 bytes (X-Shape: height,width,3 and X-Dtype headers)",
-                              {"type": "string", "contentMediaType": "image/png"}, "image/png")},
-                 problems=(*_CALL, ErrorCode.BAD_REQUEST, ErrorCode.RESET_REQUIRED),
-                 query=(Parameter("width", {"type": "integer", "minimum": 1,
-                                            "maximum": MAX_RENDER_SIZE}, "pixels"),
-                        Parameter("height", {"type": "integer", "minimum": 1,
-                                             "maximum": MAX_RENDER_SIZE}, "pixels"))),
-        Endpoint("GET", f"{one}/action_space", handlers.action_space, "action_space",
-                 "The action space and the JSON Schema of actions", "sessions",
-                 {200: Answer("the space in gymnasium's terms, and its schema", "SpaceAnswer")},
-                 problems=_ENV),
-        Endpoint("GET", f"{one}/observation_space", handlers.observation_space, "observation_space",
-                 "The observation space and the JSON Schema of observations", "sessions",
-                 {200: Answer("the space in gymnasium's terms, and its schema", "SpaceAnswer")},
-                 problems=_ENV),
-        Endpoint("POST", f"{one}/action_space/sample", handlers.sample, "sample_action",
-                 "A random action", "sessions", {200: Answer("an action", "Sample")},
-                 problems=_ENV),
-        Endpoint("POST", f"{one}/action_space/contains", handlers.contains, "action_space_contains",
-                 "Whether an action belongs to the action space (checked as a step would)",
-                 "sessions", {200: Answer("member, and the reason when not", "Contains")},
-                 body="Sample", body_required=True, problems=_ENV),
-        Endpoint("GET", f"{one}/snapshot", handlers.snapshot, "snapshot",
-                 "The state as data, to restore here or in another session", "sessions",
-                 {200: Answer("the snapshot", "SnapshotBody")},
-                 problems=(*_CALL, ErrorCode.RESET_REQUIRED, ErrorCode.BAD_REQUEST)),
-        Endpoint("POST", f"{one}/restore", handlers.restore, "restore",
-                 "Bring the environment to a snapshot's state", "sessions",
-                 {200: Answer("the observation in the restored state", "Reset")},
-                 body="SnapshotBody", body_required=True,
-                 problems=(*_CALL, ErrorCode.BAD_REQUEST, ErrorCode.INVALID_ACTION,
-                           ErrorCode.INVALID_CONFIG, ErrorCode.BUSY)),
-        Endpoint("GET", "/v1", handlers.versions, "versions", "Versions, capabilities and limits",
-                 "gateway", {200: Answer("what this gateway serves", {"type": "object"})}),
+        Endpoint(
+            "POST",
+            f"{one}/step",
+            handlers.step,
+            "step",
+            "Act for repeat_action physics ticks",
+            "sessions",
+            {200: Answer("the transition; info.frames: the ticks that ran", "Step")},
+            body="StepBody",
+            body_required=True,
+            json=True,
+            problems=(
+                *_CALL,
+                ErrorCode.BAD_REQUEST,
+                ErrorCode.RESET_REQUIRED,
+                ErrorCode.INVALID_ACTION,
+                ErrorCode.BUSY,
+            ),
+            description="A step before a reset, or after the episode ended, is refused "
+            "(409); an action outside the space too (422), naming the field.",
+        ),
+        Endpoint(
+            "POST",
+            f"{one}/reset",
+            handlers.reset,
+            "reset",
+            "Start an episode (seed 0 is a seed)",
+            "sessions",
+            {200: Answer("the first observation", "Reset")},
+            body="ResetBody",
+            json=True,
+            problems=(*_CALL, ErrorCode.BAD_REQUEST, ErrorCode.BUSY),
+        ),
+        Endpoint(
+            "POST",
+            "/v1/envs",
+            handlers.create,
+            "create_session",
+            "Create a session",
+            "sessions",
+            {201: Answer("the session's id and spaces", "Created")},
+            body="CreateBody",
+            problems=(
+                ErrorCode.BAD_REQUEST,
+                "session_limit",
+                "environment_error",
+                "environment_lost",
+                ErrorCode.INVALID_CONFIG,
+                ErrorCode.TIMEOUT,
+                ErrorCode.BUSY,
+            ),
+            description="env_id: the command line's TARGET (the default) or a registered "
+            "id; kwargs: settings, as BaseClient.configure takes them.",
+        ),
+        Endpoint(
+            "GET",
+            "/v1/envs",
+            handlers.list_sessions,
+            "list_sessions",
+            "List the sessions",
+            "sessions",
+            {200: Answer("every session", "SessionList")},
+        ),
+        Endpoint(
+            "GET",
+            one,
+            handlers.get_session,
+            "get_session",
+            "A session's status, episode and step",
+            "sessions",
+            {200: Answer("the session", "Session")},
+            problems=_ENV,
+        ),
+        Endpoint(
+            "DELETE",
+            one,
+            handlers.delete_session,
+            "delete_session",
+            "Close a session and its environment",
+            "sessions",
+            {204: Answer("closed", media_type="")},
+            problems=_ENV,
+        ),
+        Endpoint(
+            "GET",
+            f"{one}/render",
+            handlers.render,
+            "render",
+            "Draw the current state",
+            "sessions",
+            {
+                200: Answer(
+                    "a PNG image, or with Accept: application/octet-stream the raw "
+                    "uint8 bytes (X-Shape: height,width,3 and X-Dtype headers)",
+                    {"type": "string", "contentMediaType": "image/png"},
+                    "image/png",
+                )
+            },
+            problems=(*_CALL, ErrorCode.BAD_REQUEST, ErrorCode.RESET_REQUIRED),
+            query=(
+                Parameter(
+                    "width", {"type": "integer", "minimum": 1, "maximum": MAX_RENDER_SIZE}, "pixels"
+                ),
+                Parameter(
+                    "height",
+                    {"type": "integer", "minimum": 1, "maximum": MAX_RENDER_SIZE},
+                    "pixels",
+                ),
+            ),
+        ),
+        Endpoint(
+            "GET",
+            f"{one}/action_space",
+            handlers.action_space,
+            "action_space",
+            "The action space and the JSON Schema of actions",
+            "sessions",
+            {200: Answer("the space in gymnasium's terms, and its schema", "SpaceAnswer")},
+            problems=_ENV,
+        ),
+        Endpoint(
+            "GET",
+            f"{one}/observation_space",
+            handlers.observation_space,
+            "observation_space",
+            "The observation space and the JSON Schema of observations",
+            "sessions",
+            {200: Answer("the space in gymnasium's terms, and its schema", "SpaceAnswer")},
+            problems=_ENV,
+        ),
+        Endpoint(
+            "POST",
+            f"{one}/action_space/sample",
+            handlers.sample,
+            "sample_action",
+            "A random action",
+            "sessions",
+            {200: Answer("an action", "Sample")},
+            problems=_ENV,
+        ),
+        Endpoint(
+            "POST",
+            f"{one}/action_space/contains",
+            handlers.contains,
+            "action_space_contains",
+            "Whether an action belongs to the action space (checked as a step would)",
+            "sessions",
+            {200: Answer("member, and the reason when not", "Contains")},
+            body="Sample",
+            body_required=True,
+            problems=_ENV,
+        ),
+        Endpoint(
+            "GET",
+            f"{one}/snapshot",
+            handlers.snapshot,
+            "snapshot",
+            "The state as data, to restore here or in another session",
+            "sessions",
+            {200: Answer("the snapshot", "SnapshotBody")},
+            problems=(*_CALL, ErrorCode.RESET_REQUIRED, ErrorCode.BAD_REQUEST),
+        ),
+        Endpoint(
+            "POST",
+            f"{one}/restore",
+            handlers.restore,
+            "restore",
+            "Bring the environment to a snapshot's state",
+            "sessions",
+            {200: Answer("the observation in the restored state", "Reset")},
+            body="SnapshotBody",
+            body_required=True,
+            problems=(
+                *_CALL,
+                ErrorCode.BAD_REQUEST,
+                ErrorCode.INVALID_ACTION,
+                ErrorCode.INVALID_CONFIG,
+                ErrorCode.BUSY,
+            ),
+        ),
+        Endpoint(
+            "GET",
+            "/v1",
+            handlers.versions,
+            "versions",
+            "Versions, capabilities and limits",
+            "gateway",
+            {200: Answer("what this gateway serves", {"type": "object"})},
+        ),
     ]
 
 
@@ -238,8 +376,10 @@ def _size(request: Request, name: str) -> int | None:
     if text is None:
         return None
     if not text.isdigit() or not 1 <= int(text) <= MAX_RENDER_SIZE:
-        raise Problem(ErrorCode.BAD_REQUEST, f"{name} must be an integer in [1, "
-                                             f"{MAX_RENDER_SIZE}], got {text!r:.20}")
+        raise Problem(
+            ErrorCode.BAD_REQUEST,
+            f"{name} must be an integer in [1, {MAX_RENDER_SIZE}], got {text!r:.20}",
+        )
     return int(text)
 
 
@@ -250,65 +390,131 @@ def component_schemas(observation: dict[str, Any], action: dict[str, Any]) -> di
         observation: the JSON Schema of observations (the TARGET's, or any value).
         action: the JSON Schema of actions.
     """
-    info = {"type": "object", "description": "the environment's info; frames: the physics "
-                                             "ticks that ran; agents: each agent's reward and "
-                                             "flags (several agents)",
-            "properties": {"frames": {"type": "integer", "minimum": 0}}}
-    space = {"type": "object", "required": ["type"],
-             "properties": {"type": {"enum": ["Box", "Discrete", "MultiDiscrete", "MultiBinary",
-                                              "Tuple", "Dict"]}},
-             "description": "a gymnasium space: {\"type\": \"Box\", \"shape\", \"low\", "
-                            "\"high\", \"dtype\"}, {\"type\": \"Discrete\", \"n\", \"start\"}, "
-                            "{\"type\": \"Dict\", \"spaces\"} ..."}
-    session = {"type": "object", "required": ["id", "env_id", "status", "episode", "step"],
-               "properties": {
-                   "id": {"type": "string"}, "env_id": {"type": "string"},
-                   "status": {"enum": ["ready", "running", "ended", "timed_out", "lost"]},
-                   "episode": {"type": "integer"}, "step": {"type": "integer"},
-                   "agents": {"type": "array", "items": {"type": "string"}},
-                   "idle_seconds": {"type": "number"}, "created": {"type": "string"},
-                   "max_episode_steps": {"type": "integer"},
-                   "problem": {"$ref": "#/components/schemas/Problem"}}}
+    info = {
+        "type": "object",
+        "description": "the environment's info; frames: the physics "
+        "ticks that ran; agents: each agent's reward and "
+        "flags (several agents)",
+        "properties": {"frames": {"type": "integer", "minimum": 0}},
+    }
+    space = {
+        "type": "object",
+        "required": ["type"],
+        "properties": {
+            "type": {"enum": ["Box", "Discrete", "MultiDiscrete", "MultiBinary", "Tuple", "Dict"]}
+        },
+        "description": 'a gymnasium space: {"type": "Box", "shape", "low", '
+        '"high", "dtype"}, {"type": "Discrete", "n", "start"}, '
+        '{"type": "Dict", "spaces"} ...',
+    }
+    session = {
+        "type": "object",
+        "required": ["id", "env_id", "status", "episode", "step"],
+        "properties": {
+            "id": {"type": "string"},
+            "env_id": {"type": "string"},
+            "status": {"enum": ["ready", "running", "ended", "timed_out", "lost"]},
+            "episode": {"type": "integer"},
+            "step": {"type": "integer"},
+            "agents": {"type": "array", "items": {"type": "string"}},
+            "idle_seconds": {"type": "number"},
+            "created": {"type": "string"},
+            "max_episode_steps": {"type": "integer"},
+            "problem": {"$ref": "#/components/schemas/Problem"},
+        },
+    }
     return {
         "Observation": observation,
         "Action": action,
         "Info": info,
         "Space": space,
-        "CreateBody": {"type": "object", "additionalProperties": False, "properties": {
-            "env_id": {"type": "string"}, "kwargs": {"type": "object"}}},
-        "Created": {"type": "object", "required": ["id", "env_id", "action_space",
-                                                  "observation_space"], "properties": {
-            "id": {"type": "string"}, "env_id": {"type": "string"},
-            "action_space": {"$ref": "#/components/schemas/Space"},
-            "observation_space": {"$ref": "#/components/schemas/Space"}}},
+        "CreateBody": {
+            "type": "object",
+            "additionalProperties": False,
+            "properties": {"env_id": {"type": "string"}, "kwargs": {"type": "object"}},
+        },
+        "Created": {
+            "type": "object",
+            "required": ["id", "env_id", "action_space", "observation_space"],
+            "properties": {
+                "id": {"type": "string"},
+                "env_id": {"type": "string"},
+                "action_space": {"$ref": "#/components/schemas/Space"},
+                "observation_space": {"$ref": "#/components/schemas/Space"},
+            },
+        },
         "Session": session,
-        "SessionList": {"type": "object", "properties": {
-            "envs": {"type": "array", "items": {"$ref": "#/components/schemas/Session"}}}},
-        "ResetBody": {"type": "object", "additionalProperties": False, "properties": {
-            "seed": {"type": ["integer", "null"], "minimum": 0},
-            "options": {"type": ["object", "null"]}}},
-        "Reset": {"type": "object", "required": ["observation", "info"], "properties": {
-            "observation": {"$ref": "#/components/schemas/Observation"},
-            "info": {"$ref": "#/components/schemas/Info"}}},
-        "StepBody": {"type": "object", "required": ["action"], "additionalProperties": False,
-                     "properties": {"action": {"$ref": "#/components/schemas/Action"},
-                                    "repeat_action": {"type": "integer", "minimum": 1,
-                                                      "maximum": MAX_REPEAT_ACTION}}},
-        "Step": {"type": "object", "required": ["observation", "reward", "terminated",
-                                                "truncated", "info"], "properties": {
-            "observation": {"$ref": "#/components/schemas/Observation"},
-            "reward": {"type": "number"}, "terminated": {"type": "boolean"},
-            "truncated": {"type": "boolean"}, "info": {"$ref": "#/components/schemas/Info"}}},
-        "SpaceAnswer": {"type": "object", "required": ["space", "schema"], "properties": {
-            "space": {"$ref": "#/components/schemas/Space"},
-            "schema": {"type": "object", "description": "a JSON Schema (2020-12)"}}},
-        "Sample": {"type": "object", "required": ["action"], "properties": {
-            "action": {"$ref": "#/components/schemas/Action"}}},
-        "Contains": {"type": "object", "required": ["member"], "properties": {
-            "member": {"type": "boolean"}, "reason": {"type": "string"}}},
-        "SnapshotBody": {"type": "object", "required": ["snapshot"], "properties": {
-            "snapshot": {"type": "object", "description": "the state as data: configuration, "
-                                                          "generator, actions since the reset"}}},
+        "SessionList": {
+            "type": "object",
+            "properties": {
+                "envs": {"type": "array", "items": {"$ref": "#/components/schemas/Session"}}
+            },
+        },
+        "ResetBody": {
+            "type": "object",
+            "additionalProperties": False,
+            "properties": {
+                "seed": {"type": ["integer", "null"], "minimum": 0},
+                "options": {"type": ["object", "null"]},
+            },
+        },
+        "Reset": {
+            "type": "object",
+            "required": ["observation", "info"],
+            "properties": {
+                "observation": {"$ref": "#/components/schemas/Observation"},
+                "info": {"$ref": "#/components/schemas/Info"},
+            },
+        },
+        "StepBody": {
+            "type": "object",
+            "required": ["action"],
+            "additionalProperties": False,
+            "properties": {
+                "action": {"$ref": "#/components/schemas/Action"},
+                "repeat_action": {"type": "integer", "minimum": 1, "maximum": MAX_REPEAT_ACTION},
+            },
+        },
+        "Step": {
+            "type": "object",
+            "required": ["observation", "reward", "terminated", "truncated", "info"],
+            "properties": {
+                "observation": {"$ref": "#/components/schemas/Observation"},
+                "reward": {"type": "number"},
+                "terminated": {"type": "boolean"},
+                "truncated": {"type": "boolean"},
+                "info": {"$ref": "#/components/schemas/Info"},
+            },
+        },
+        "SpaceAnswer": {
+            "type": "object",
+            "required": ["space", "schema"],
+            "properties": {
+                "space": {"$ref": "#/components/schemas/Space"},
+                "schema": {"type": "object", "description": "a JSON Schema (2020-12)"},
+            },
+        },
+        "Sample": {
+            "type": "object",
+            "required": ["action"],
+            "properties": {"action": {"$ref": "#/components/schemas/Action"}},
+        },
+        "Contains": {
+            "type": "object",
+            "required": ["member"],
+            "properties": {"member": {"type": "boolean"}, "reason": {"type": "string"}},
+        },
+        "SnapshotBody": {
+            "type": "object",
+            "required": ["snapshot"],
+            "properties": {
+                "snapshot": {
+                    "type": "object",
+                    "description": "the state as data: configuration, "
+                    "generator, actions since the reset",
+                }
+            },
+        },
     }
 
 
@@ -316,6 +522,8 @@ def target_schemas(gateway: Gateway) -> tuple[dict[str, Any], dict[str, Any]]:
     """The observation and action schemas of the TARGET's environment (any value without)."""
     hello = gateway.hello
     if hello is None:
-        return ({"description": "a value of the session's observation space"},
-                {"description": "a value of the session's action space"})
+        return (
+            {"description": "a value of the session's observation space"},
+            {"description": "a value of the session's action space"},
+        )
     return json_schema(hello.observation_space), json_schema(hello.action_space, images=False)

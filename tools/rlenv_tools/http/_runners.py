@@ -65,8 +65,9 @@ class Runner:
         self._executor = ThreadPoolExecutor(1, thread_name_prefix="rlenv-http-session")
         self._waiter = AnswerWaiter()
 
-    async def exchange(self, send: Callable[[], None], receive: Callable[[], _T],
-                       client: AnswerSource) -> _T:
+    async def exchange(
+        self, send: Callable[[], None], receive: Callable[[], _T], client: AnswerSource
+    ) -> _T:
         """``send()``, then ``receive()`` once ``client``'s answer has arrived.
 
         Both run on the event loop's thread: ``send`` must not block (a small request on a
@@ -123,7 +124,8 @@ class Runner:
 
     def _late(self, limit: float | None = None) -> EnvironmentTimeout:
         return EnvironmentTimeout(
-            f"the environment did not answer within {limit or self.timeout:g} s")
+            f"the environment did not answer within {limit or self.timeout:g} s"
+        )
 
     def close(self) -> None:
         """Let the session's thread end once its last call returns."""

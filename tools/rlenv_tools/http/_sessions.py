@@ -86,8 +86,14 @@ class Session:
         owner: the address of the client that created it (``None``: shared, bevy_rl's).
     """
 
-    def __init__(self, session_id: str, entry: Entry, opened: Opened,
-                 clock: Callable[[], float] = time.monotonic, owner: str | None = None) -> None:
+    def __init__(
+        self,
+        session_id: str,
+        entry: Entry,
+        opened: Opened,
+        clock: Callable[[], float] = time.monotonic,
+        owner: str | None = None,
+    ) -> None:
         self.id = session_id
         self.owner = owner
         self.env_id = entry.env_id
@@ -120,10 +126,15 @@ class Session:
     def describe(self) -> dict[str, Any]:
         """The session as ``GET /v1/envs/{id}`` shows it."""
         described: dict[str, Any] = {
-            "id": self.id, "env_id": self.env_id, "status": self.status.value,
-            "episode": self.episode, "step": self.step_index, "agents": list(self.agents),
+            "id": self.id,
+            "env_id": self.env_id,
+            "status": self.status.value,
+            "episode": self.episode,
+            "step": self.step_index,
+            "agents": list(self.agents),
             "idle_seconds": round(self._clock() - self.last_used, 3),
-            "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(self.created))}
+            "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(self.created)),
+        }
         if self.max_episode_steps is not None:
             described["max_episode_steps"] = self.max_episode_steps
         if self.failure is not None:
@@ -132,8 +143,10 @@ class Session:
 
     def spaces(self) -> dict[str, Any]:
         """The action and observation spaces, as JSON (:func:`space_to_json`)."""
-        return {"action_space": space_to_json(self.client.action_space),
-                "observation_space": space_to_json(self.client.observation_space)}
+        return {
+            "action_space": space_to_json(self.client.action_space),
+            "observation_space": space_to_json(self.client.observation_space),
+        }
 
     # --- what clients ask -------------------------------------------------------------------
 
@@ -141,12 +154,14 @@ class Session:
         """Configure the environment as ``BaseClient.configure(**settings)`` does."""
         await self.call(lambda: self.client.configure(**settings))
 
-    async def reset(self, seed: int | None = None,
-                    options: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    async def reset(
+        self, seed: int | None = None, options: Mapping[str, Any] | None = None
+    ) -> dict[str, Any]:
         """Start an episode: ``{"observation", "info"}`` (seed 0 is a seed)."""
         client = self.client
         observation, info = await self.call(
-            client.receive_reset, lambda: client.send_reset(seed=seed, options=options))
+            client.receive_reset, lambda: client.send_reset(seed=seed, options=options)
+        )
         self._begin(0)
         answer = {"observation": self._encode_observation(observation), "info": to_json(info)}
         self._publish("reset", answer)
@@ -164,20 +179,33 @@ class Session:
         action = self._decode_action(action)
         client = self.client
         observation, reward, terminated, truncated, info = await self.call(
-            client.receive_step, lambda: client.send_step(action, repeat_action))
+            client.receive_step, lambda: client.send_step(action, repeat_action)
+        )
         self.step_index += 1
-        if self.max_episode_steps is not None and self.step_index >= self.max_episode_steps \
-                and not terminated:
+        if (
+            self.max_episode_steps is not None
+            and self.step_index >= self.max_episode_steps
+            and not terminated
+        ):
             truncated, info = True, truncate_agents(info)  # each agent still in it too
         if terminated or truncated:
             self.status = Status.ENDED
-            self._ending = "terminated" if terminated else (
-                "was truncated" if self.max_episode_steps is None or
-                self.step_index < self.max_episode_steps else
-                f"reached its time limit of {self.max_episode_steps} steps")
-        answer = {"observation": self._encode_observation(observation), "reward": float(reward),
-                  "terminated": bool(terminated), "truncated": bool(truncated),
-                  "info": to_json(info)}
+            self._ending = (
+                "terminated"
+                if terminated
+                else (
+                    "was truncated"
+                    if self.max_episode_steps is None or self.step_index < self.max_episode_steps
+                    else f"reached its time limit of {self.max_episode_steps} steps"
+                )
+            )
+        answer = {
+            "observation": self._encode_observation(observation),
+            "reward": float(reward),
+            "terminated": bool(terminated),
+            "truncated": bool(truncated),
+            "info": to_json(info),
+        }
         self._publish("step", answer)
         return answer
 
@@ -198,8 +226,11 @@ class Session:
         """Bring the environment to a snapshot's state: ``{"observation", "info"}``."""
         observation, info = await self.call(lambda: self.client.restore(snapshot))
         events = snapshot.get("events")
-        self._begin(sum(1 for event in events if event and event[0] == "action")
-                    if isinstance(events, list) else 0)
+        self._begin(
+            sum(1 for event in events if event and event[0] == "action")
+            if isinstance(events, list)
+            else 0
+        )
         answer = {"observation": self._encode_observation(observation), "info": to_json(info)}
         self._publish("restore", answer)
         return answer
@@ -210,8 +241,7 @@ class Session:
 
     # --- the environment's calls, failures --------------------------------------------------
 
-    async def call(self, function: Callable[[], _T],
-                   send: Callable[[], None] | None = None) -> _T:
+    async def call(self, function: Callable[[], _T], send: Callable[[], None] | None = None) -> _T:
         """``function()`` (a call to :attr:`client`) through the runner, failures as problems.
 
         With ``send``, ``send()`` sends the request and ``function()`` receives its answer,
@@ -233,21 +263,25 @@ class Session:
             return await runner.exchange(send, function, self.client)
         except RemoteError as error:
             if error.fatal:
-                raise await self._fail(Status.LOST, "environment_lost",
-                                       f"the environment's server closed the connection: "
-                                       f"{error}") from None
+                raise await self._fail(
+                    Status.LOST,
+                    "environment_lost",
+                    f"the environment's server closed the connection: {error}",
+                ) from None
             raise from_remote_error(error) from None
         except TimeoutError as error:
             raise await self._fail(Status.TIMED_OUT, ErrorCode.TIMEOUT, str(error)) from None
         except ConnectionLost as error:
-            raise await self._fail(Status.LOST, "environment_lost",
-                                   f"the environment's server died: {error}") from None
+            raise await self._fail(
+                Status.LOST, "environment_lost", f"the environment's server died: {error}"
+            ) from None
 
     async def _fail(self, status: Status, code: str, why: str) -> Problem:
         """Mark the session over (it says so until deleted) and release its environment."""
         self.status = status
-        self.failure = Problem(code, f"{why}; this session is over: DELETE it and create "
-                                     "another (the others go on)")
+        self.failure = Problem(
+            code, f"{why}; this session is over: DELETE it and create another (the others go on)"
+        )
         logger.warning("session %s (%s): %s", self.id, self.env_id, why)
         self._publish("status", self.describe())
         await self.close(keep_watchers=True, hung=status is Status.TIMED_OUT)
@@ -269,8 +303,7 @@ class Session:
             close = functools.partial(opened.close, _HUNG_GRACE) if hung else opened.close
             await asyncio.get_running_loop().run_in_executor(None, close)
         except Exception:  # a half-interrupted environment may fail to close: it is gone anyway
-            logger.warning("session %s: closing its environment failed", self.id,
-                           exc_info=True)
+            logger.warning("session %s: closing its environment failed", self.id, exc_info=True)
 
     # --- watchers ---------------------------------------------------------------------------
 
@@ -323,10 +356,15 @@ class Sessions:
         clock: monotonic seconds.
     """
 
-    def __init__(self, catalog: Catalog, *, max_sessions: int = 32,
-                 max_sessions_per_client: int = MAX_SESSIONS_PER_CLIENT,
-                 idle_timeout: float | None = 600.0,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self,
+        catalog: Catalog,
+        *,
+        max_sessions: int = 32,
+        max_sessions_per_client: int = MAX_SESSIONS_PER_CLIENT,
+        idle_timeout: float | None = 600.0,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.catalog = catalog
         self.max_sessions = max_sessions
         self.max_sessions_per_client = max_sessions_per_client
@@ -350,16 +388,24 @@ class Sessions:
         """
         session = self._sessions.get(session_id)
         if session is None:
-            raise Problem("unknown_session", f"no session {session_id!r:.80} (deleted, reaped "
-                                             "after being idle, or never created)")
+            raise Problem(
+                "unknown_session",
+                f"no session {session_id!r:.80} (deleted, reaped "
+                "after being idle, or never created)",
+            )
         return session
 
     def find(self, session_id: str) -> Session | None:
         """The session ``session_id``, or ``None``."""
         return self._sessions.get(session_id)
 
-    async def create(self, env_id: object, settings: Mapping[str, Any] | None = None,
-                     session_id: str | None = None, owner: str | None = None) -> Session:
+    async def create(
+        self,
+        env_id: object,
+        settings: Mapping[str, Any] | None = None,
+        session_id: str | None = None,
+        owner: str | None = None,
+    ) -> Session:
         """Open a session on ``env_id``, configured with ``settings`` (``kwargs``).
 
         Args:
@@ -376,23 +422,32 @@ class Sessions:
         """
         entry = self.catalog.entry(env_id)
         if len(self._sessions) + sum(self._opening.values()) >= self.max_sessions:
-            raise Problem("session_limit",
-                          f"this gateway holds at most {self.max_sessions} sessions; delete "
-                          "one, or retry once an idle one is reaped",
-                          headers={"Retry-After": str(self.retry_after())})
+            raise Problem(
+                "session_limit",
+                f"this gateway holds at most {self.max_sessions} sessions; delete "
+                "one, or retry once an idle one is reaped",
+                headers={"Retry-After": str(self.retry_after())},
+            )
         if owner is not None:
             held = [s for s in self._sessions.values() if s.owner == owner]
             if len(held) + self._opening.get(owner, 0) >= self.max_sessions_per_client:
-                raise Problem("session_limit",
-                              f"this gateway holds at most {self.max_sessions_per_client} "
-                              f"sessions per client, and {owner} has as many; delete one, or "
-                              "retry once an idle one is reaped",
-                              headers={"Retry-After": str(self.retry_after(held))})
+                raise Problem(
+                    "session_limit",
+                    f"this gateway holds at most {self.max_sessions_per_client} "
+                    f"sessions per client, and {owner} has as many; delete one, or "
+                    "retry once an idle one is reaped",
+                    headers={"Retry-After": str(self.retry_after(held))},
+                )
         # counted from now on: concurrent creations respect the limits
         self._opening[owner] = self._opening.get(owner, 0) + 1
         try:
-            session = Session(session_id or secrets.token_hex(8), entry,
-                              await self.catalog.open(entry), self._clock, owner)
+            session = Session(
+                session_id or secrets.token_hex(8),
+                entry,
+                await self.catalog.open(entry),
+                self._clock,
+                owner,
+            )
             if settings:
                 try:
                     await session.configure(settings)
@@ -410,8 +465,9 @@ class Sessions:
     async def abandon(self, session: Session) -> None:
         """Delete ``session``, just created for a client that left before it heard of it."""
         if self._sessions.get(session.id) is session:
-            logger.warning("session %s deleted: its client left before it was told of it",
-                        session.id)
+            logger.warning(
+                "session %s deleted: its client left before it was told of it", session.id
+            )
             await self.delete(session.id)
 
     async def delete(self, session_id: str) -> None:
@@ -438,8 +494,9 @@ class Sessions:
         if self.idle_timeout is None:
             return []
         deadline = self._clock() - self.idle_timeout
-        idle = [s.id for s in self._sessions.values()
-                if s.last_used < deadline and not s.websockets]
+        idle = [
+            s.id for s in self._sessions.values() if s.last_used < deadline and not s.websockets
+        ]
         for session_id in idle:
             logger.info("session %s reaped after %.0f s idle", session_id, self.idle_timeout)
             await self.delete(session_id)

@@ -38,9 +38,11 @@ if TYPE_CHECKING:
 __all__ = ["stream_endpoints"]
 
 _KEEP_ALIVE = 15.0  # seconds between comments on a quiet event stream
-_MESSAGE_KEYS = {"reset": frozenset({"type", "seed", "options"}),
-                 "step": frozenset({"type", "action", "repeat_action"}),
-                 "close": frozenset({"type"})}
+_MESSAGE_KEYS = {
+    "reset": frozenset({"type", "seed", "options"}),
+    "step": frozenset({"type", "action", "repeat_action"}),
+    "close": frozenset({"type"}),
+}
 _STEP_REQUIRED = frozenset({"action"})
 
 
@@ -64,8 +66,9 @@ def stream_endpoints(gateway: Gateway) -> list[Endpoint]:
                 if message["type"] == "websocket.disconnect":
                     return
                 try:  # a text frame, or a binary one holding UTF-8 JSON
-                    answer = await _answer(sessions.get(session_id), message.get("text") or
-                                           message.get("bytes") or b"")
+                    answer = await _answer(
+                        sessions.get(session_id), message.get("text") or message.get("bytes") or b""
+                    )
                 except Problem as problem:
                     answer = {"type": "error", "problem": problem.to_json(websocket.url.path)}
                 await send({"type": "websocket.send", "text": dumps(answer).decode()})
@@ -81,25 +84,48 @@ def stream_endpoints(gateway: Gateway) -> list[Endpoint]:
         session = sessions.get(request.path_params["id"])
         session.touch()
         queue = session.watch()
-        return StreamingResponse(_follow(session, queue), media_type="text/event-stream",
-                                 headers={**COMMON_HEADERS, "X-Accel-Buffering": "no"})
+        return StreamingResponse(
+            _follow(session, queue),
+            media_type="text/event-stream",
+            headers={**COMMON_HEADERS, "X-Accel-Buffering": "no"},
+        )
 
-    message = {"type": "object", "required": ["type"],
-               "properties": {"type": {"enum": ["reset", "step", "close"]}}}
+    message = {
+        "type": "object",
+        "required": ["type"],
+        "properties": {"type": {"enum": ["reset", "step", "close"]}},
+    }
     return [
-        Endpoint("WEBSOCKET", "/v1/envs/{id}/ws", conversation, "session_websocket",
-                 "A WebSocket of typed JSON messages: reset, step, close", "streams",
-                 {101: Answer("switching to the WebSocket protocol", message, "")},
-                 problems=("unknown_session",),
-                 description="Send {\"type\": \"reset\", \"seed\"?, \"options\"?}, {\"type\": "
-                             "\"step\", \"action\", \"repeat_action\"?} or {\"type\": "
-                             "\"close\"}; each is answered with a message of the same type "
-                             "(the HTTP route's answer), or {\"type\": \"error\", \"problem\"}."),
-        Endpoint("GET", "/v1/envs/{id}/events", events, "session_events",
-                 "Follow a session's transitions (server-sent events)", "streams",
-                 {200: Answer("events reset, step, restore and status; id: the step's index "
-                              "in the episode", {"type": "string"}, "text/event-stream")},
-                 problems=("unknown_session",)),
+        Endpoint(
+            "WEBSOCKET",
+            "/v1/envs/{id}/ws",
+            conversation,
+            "session_websocket",
+            "A WebSocket of typed JSON messages: reset, step, close",
+            "streams",
+            {101: Answer("switching to the WebSocket protocol", message, "")},
+            problems=("unknown_session",),
+            description='Send {"type": "reset", "seed"?, "options"?}, {"type": '
+            '"step", "action", "repeat_action"?} or {"type": '
+            '"close"}; each is answered with a message of the same type '
+            '(the HTTP route\'s answer), or {"type": "error", "problem"}.',
+        ),
+        Endpoint(
+            "GET",
+            "/v1/envs/{id}/events",
+            events,
+            "session_events",
+            "Follow a session's transitions (server-sent events)",
+            "streams",
+            {
+                200: Answer(
+                    "events reset, step, restore and status; id: the step's index in the episode",
+                    {"type": "string"},
+                    "text/event-stream",
+                )
+            },
+            problems=("unknown_session",),
+        ),
     ]
 
 
@@ -108,10 +134,16 @@ async def _answer(session: Session, text: str | bytes) -> dict[str, Any]:
     message = parse_json(text, "the message")
     kind = message.get("type") if type(message) is dict else None
     if kind not in _MESSAGE_KEYS:
-        raise Problem(ErrorCode.BAD_REQUEST, "a message is a JSON object whose type is 'reset', "
-                                             "'step' or 'close'")
-    body = object_body(message, _MESSAGE_KEYS[kind],
-                       _STEP_REQUIRED if kind == "step" else frozenset(), what=f"a {kind} message")
+        raise Problem(
+            ErrorCode.BAD_REQUEST,
+            "a message is a JSON object whose type is 'reset', 'step' or 'close'",
+        )
+    body = object_body(
+        message,
+        _MESSAGE_KEYS[kind],
+        _STEP_REQUIRED if kind == "step" else frozenset(),
+        what=f"a {kind} message",
+    )
     session.touch()
     if kind == "step":
         return {"type": kind, **await session.step(body["action"], body.get("repeat_action"))}

@@ -65,8 +65,9 @@ class Entry:
 class Opened:
     """A session's environment: its client, the runner that calls it, its server subprocess."""
 
-    def __init__(self, client: Client, runner: Runner,
-                 process: ServerProcess | None = None) -> None:
+    def __init__(
+        self, client: Client, runner: Runner, process: ServerProcess | None = None
+    ) -> None:
         self.client, self.runner, self.process = client, runner, process
 
     def close(self, grace: float = _CLOSING_GRACE) -> None:
@@ -95,8 +96,10 @@ class Catalog:
     def __init__(self, target: str | None, *, timeout: float = 30.0) -> None:
         self.target = target
         self.timeout = timeout
-        self._entries = {env_id: Entry(env_id, r.target, r.max_episode_steps)
-                         for env_id, r in ENVIRONMENTS.items()}
+        self._entries = {
+            env_id: Entry(env_id, r.target, r.max_episode_steps)
+            for env_id, r in ENVIRONMENTS.items()
+        }
         if target is not None:
             self._entries[target] = Entry(target, target)
 
@@ -112,8 +115,10 @@ class Catalog:
         """
         entry = self._entries.get(env_id) if isinstance(env_id, str) else None
         if entry is None:
-            raise Problem(ErrorCode.BAD_REQUEST,
-                          f"unknown env_id {env_id!r:.80}: this gateway serves {self.ids()}")
+            raise Problem(
+                ErrorCode.BAD_REQUEST,
+                f"unknown env_id {env_id!r:.80}: this gateway serves {self.ids()}",
+            )
         return entry
 
     def describe(self) -> Hello | None:
@@ -141,8 +146,10 @@ class Catalog:
         """
         runner = Runner(self.timeout)
         try:
-            return await runner.call(_guarded(lambda: self._open_blocking(entry, runner)),
-                                     timeout=_STARTUP_TIMEOUT + self.timeout)
+            return await runner.call(
+                _guarded(lambda: self._open_blocking(entry, runner)),
+                timeout=_STARTUP_TIMEOUT + self.timeout,
+            )
         except BaseException:
             runner.close()
             raise
@@ -154,8 +161,9 @@ class Catalog:
         try:
             process = ServerProcess(entry.target, startup_timeout=_STARTUP_TIMEOUT)
         except ServerStartError as error:
-            raise Problem("environment_lost", f"the server of {entry.env_id} did not start: "
-                                              f"{error}") from None
+            raise Problem(
+                "environment_lost", f"the server of {entry.env_id} did not start: {error}"
+            ) from None
         try:
             return Opened(_connect(process.host, process.port, self.timeout), runner, process)
         except BaseException:
@@ -178,12 +186,15 @@ def _connect(host: str, port: int, timeout: float) -> Client:
 
 def _guarded(open_client: Callable[[], _T]) -> Callable[[], _T]:
     """``open_client`` whose failures (the environment's own code raising) are problems."""
+
     def call() -> _T:
         try:
             return open_client()
         except (Problem, TimeoutError):
             raise
         except Exception as error:
-            raise Problem(ErrorCode.ENVIRONMENT_ERROR,
-                          f"the environment could not be created: {error!r:.400}") from None
+            raise Problem(
+                ErrorCode.ENVIRONMENT_ERROR, f"the environment could not be created: {error!r:.400}"
+            ) from None
+
     return call

@@ -71,16 +71,18 @@ def http_protocol(http: str, *, head_timeout: float, max_connections: int) -> ty
     if http not in ("httptools", "h11"):
         raise ValueError(f"unknown HTTP implementation {http!r}: auto, httptools or h11")
     if not FAST:
-        logger.warning("uvicorn %s is not a version rlenv was tested with (%s to %s): responses "
-                       "take two writes, and request heads have no deadline",
-                       uvicorn.__version__, *(".".join(map(str, v)) for v in TESTED))
+        logger.warning(
+            "uvicorn %s is not a version rlenv was tested with (%s to %s): responses "
+            "take two writes, and request heads have no deadline",
+            uvicorn.__version__,
+            *(".".join(map(str, v)) for v in TESTED),
+        )
         return http
     if http == "httptools":
         from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol as base
     else:
         from uvicorn.protocols.http.h11_impl import H11Protocol as base  # type: ignore[assignment]
-    return _bounded(_one_write(base), head_timeout=head_timeout,
-                    max_connections=max_connections)
+    return _bounded(_one_write(base), head_timeout=head_timeout, max_connections=max_connections)
 
 
 def connection_limit(max_connections: int) -> int | None:
@@ -147,8 +149,9 @@ def _one_write(base: type[Any]) -> type[asyncio.Protocol]:
     return OneWriteProtocol
 
 
-def _bounded(base: type[Any], *, head_timeout: float,
-                     max_connections: int) -> type[asyncio.Protocol]:
+def _bounded(
+    base: type[Any], *, head_timeout: float, max_connections: int
+) -> type[asyncio.Protocol]:
     """The protocol ``base`` (uvicorn's) with the head deadline and the connection bound."""
 
     class BoundedProtocol(base):

@@ -97,34 +97,56 @@ class Gateway:
         self.settings = settings
         self.hello = hello
         self.catalog = Catalog(settings.target, timeout=settings.timeout)
-        self.sessions = Sessions(self.catalog, max_sessions=settings.max_sessions,
-                                 max_sessions_per_client=settings.max_sessions_per_client,
-                                 idle_timeout=settings.idle_timeout)
+        self.sessions = Sessions(
+            self.catalog,
+            max_sessions=settings.max_sessions,
+            max_sessions_per_client=settings.max_sessions_per_client,
+            idle_timeout=settings.idle_timeout,
+        )
         self._openapi: bytes | None = None
         self.endpoints: list[Endpoint] = [
-            *session_endpoints(self), *stream_endpoints(self), *bevy_endpoints(self),
-            Endpoint("GET", "/openapi.json", self._openapi_route, "openapi",
-                     "This document (OpenAPI 3.1)", "gateway",
-                     {200: Answer("the OpenAPI document", {"type": "object"})}),
+            *session_endpoints(self),
+            *stream_endpoints(self),
+            *bevy_endpoints(self),
+            Endpoint(
+                "GET",
+                "/openapi.json",
+                self._openapi_route,
+                "openapi",
+                "This document (OpenAPI 3.1)",
+                "gateway",
+                {200: Answer("the OpenAPI document", {"type": "object"})},
+            ),
         ]
 
     def about(self) -> dict[str, Any]:
         """``GET /v1``: versions, capabilities and limits."""
         settings = self.settings
         return {
-            "versions": ["v1"], "api": _API_VERSION, "rlenv": _package_version(),
-            "protocol": list(PROTOCOL_VERSION), "target": settings.target,
+            "versions": ["v1"],
+            "api": _API_VERSION,
+            "rlenv": _package_version(),
+            "protocol": list(PROTOCOL_VERSION),
+            "target": settings.target,
             "env_ids": self.catalog.ids(),
             "hosting": "isolated",
-            "capabilities": {"websocket": True, "events": True, "bevy_rl": bool(settings.target),
-                             "render": ["image/png", "application/octet-stream"],
-                             "snapshots": True, "openapi": "/openapi.json"},
-            "limits": {"max_sessions": settings.max_sessions,
-                       "max_sessions_per_client": settings.max_sessions_per_client,
-                       "max_body": settings.max_body,
-                       "timeout": settings.timeout, "idle_timeout": settings.idle_timeout,
-                       "head_timeout": settings.head_timeout,
-                       "max_connections": settings.max_connections},
+            "capabilities": {
+                "websocket": True,
+                "events": True,
+                "bevy_rl": bool(settings.target),
+                "render": ["image/png", "application/octet-stream"],
+                "snapshots": True,
+                "openapi": "/openapi.json",
+            },
+            "limits": {
+                "max_sessions": settings.max_sessions,
+                "max_sessions_per_client": settings.max_sessions_per_client,
+                "max_body": settings.max_body,
+                "timeout": settings.timeout,
+                "idle_timeout": settings.idle_timeout,
+                "head_timeout": settings.head_timeout,
+                "max_connections": settings.max_connections,
+            },
             "token_required": settings.token is not None,
         }
 
@@ -132,11 +154,15 @@ class Gateway:
         """The OpenAPI document, generated from the route table and the TARGET's spaces."""
         observation, action = target_schemas(self)
         return openapi_document(
-            self.endpoints, component_schemas(observation, action),
-            title="rlenv HTTP gateway", version=_API_VERSION, token_required=self.settings.token
-            is not None, description=f"Sessions on {self.settings.target or 'registered ids'}"
+            self.endpoints,
+            component_schemas(observation, action),
+            title="rlenv HTTP gateway",
+            version=_API_VERSION,
+            token_required=self.settings.token is not None,
+            description=f"Sessions on {self.settings.target or 'registered ids'}"
             ", bevy_rl's routes, a WebSocket and server-sent events per session. Errors are "
-            "RFC 9457 problems (application/problem+json) with the error code in 'code'.")
+            "RFC 9457 problems (application/problem+json) with the error code in 'code'.",
+        )
 
     async def _openapi_route(self, request: Request) -> Response:
         if self._openapi is None:
@@ -174,10 +200,10 @@ def create_app(settings: Settings, hello: Hello | None = None) -> Starlette:
     origins = OriginPolicy(settings.port, host_names(settings.host))
     app = Starlette(
         routes=_routes(gateway.endpoints),
-        middleware=[Middleware(Guard, origins=origins, token=settings.token,
-                               max_body=settings.max_body)],
-        exception_handlers={Problem: _problem, HTTPException: _http_exception,
-                            Exception: _bug},
+        middleware=[
+            Middleware(Guard, origins=origins, token=settings.token, max_body=settings.max_body)
+        ],
+        exception_handlers={Problem: _problem, HTTPException: _http_exception, Exception: _bug},
         lifespan=lifespan,
     )
     app.state.gateway = gateway
@@ -194,9 +220,12 @@ def _routes(endpoints: list[Endpoint]) -> list[BaseRoute]:
         if "WEBSOCKET" in methods:
             routes.append(WebSocketRoute(path, methods["WEBSOCKET"].handler))
         elif len(methods) == 1:
-            (method, endpoint), = methods.items()
-            handler = JSONRoute(endpoint.handler, body_required=endpoint.body_required) \
-                if endpoint.json else endpoint.handler
+            ((method, endpoint),) = methods.items()
+            handler = (
+                JSONRoute(endpoint.handler, body_required=endpoint.body_required)
+                if endpoint.json
+                else endpoint.handler
+            )
             routes.append(Route(path, handler, methods=[method]))
         else:
             assert not any(e.json for e in methods.values()), f"{path}: JSON routes go alone"
@@ -212,6 +241,7 @@ def _dispatch(methods: dict[str, Endpoint]) -> Callable[[Request], Awaitable[Res
 
     async def dispatch(request: Request) -> Response:
         return await handlers[request.method](request)
+
     return dispatch
 
 
@@ -224,14 +254,19 @@ async def _http_exception(request: Request, error: Exception) -> Response:
     """Starlette's own refusals (no such route, or method) as problems."""
     assert isinstance(error, HTTPException)
     if error.status_code == 405:
-        problem = Problem("method_not_allowed", f"{request.method} is not allowed on "
-                                                f"{request.url.path}", headers=error.headers)
+        problem = Problem(
+            "method_not_allowed",
+            f"{request.method} is not allowed on {request.url.path}",
+            headers=error.headers,
+        )
     elif error.status_code == 404:
-        problem = Problem("not_found", f"no route {request.url.path!r:.100} (GET /openapi.json "
-                                       "lists them)")
+        problem = Problem(
+            "not_found", f"no route {request.url.path!r:.100} (GET /openapi.json lists them)"
+        )
     else:
-        code = next((c for c, kind in PROBLEMS.items() if kind.status == error.status_code),
-                    "bad_request")
+        code = next(
+            (c for c, kind in PROBLEMS.items() if kind.status == error.status_code), "bad_request"
+        )
         problem = Problem(code, str(error.detail), headers=error.headers)
     return problem.response(request.url.path)
 
@@ -240,7 +275,8 @@ async def _bug(request: Request, error: Exception) -> Response:
     """The gateway's own bug: logged, answered as a problem; the next request is served."""
     logger.error("%s %s failed", request.method, request.url.path, exc_info=error)
     return Problem("internal_error", f"the gateway failed: {error!r:.300}").response(
-        request.url.path)
+        request.url.path
+    )
 
 
 def _package_version() -> str:
@@ -263,8 +299,13 @@ class _Server(uvicorn.Server):
         await super().shutdown(sockets)
 
 
-def serve(settings: Settings, *, ready: Callable[[str], None] | None = None,
-          loop: str = "auto", http: str = "auto") -> None:
+def serve(
+    settings: Settings,
+    *,
+    ready: Callable[[str], None] | None = None,
+    loop: str = "auto",
+    http: str = "auto",
+) -> None:
     """Run the gateway until SIGTERM or SIGINT (on this, the main, thread).
 
     Args:
@@ -282,19 +323,30 @@ def serve(settings: Settings, *, ready: Callable[[str], None] | None = None,
         raise InsecureBindError(
             f"refusing to listen on {settings.host}: anyone who can reach it could drive the "
             "environments. Set a token (rlenv http --token, or RLENV_TOKEN) that clients must "
-            "send as Authorization: Bearer, or bind 127.0.0.1")
+            "send as Authorization: Bearer, or bind 127.0.0.1"
+        )
     hello = Catalog(settings.target, timeout=settings.timeout).describe()
     family = socket.AF_INET6 if ":" in settings.host else socket.AF_INET
     sock = _listen(family, settings.host, settings.port)
     settings = replace(settings, port=sock.getsockname()[1])
     app = create_app(settings, hello)
     config = uvicorn.Config(
-        app, loop=loop, lifespan="on",
-        http=http_protocol(http, head_timeout=settings.head_timeout,
-                           max_connections=settings.max_connections),
-        limit_concurrency=connection_limit(settings.max_connections), log_config=None,
-        access_log=False, proxy_headers=False, server_header=False, ws_max_size=settings.max_body,
-        ws_per_message_deflate=False, timeout_keep_alive=15, timeout_graceful_shutdown=3)
+        app,
+        loop=loop,
+        lifespan="on",
+        http=http_protocol(
+            http, head_timeout=settings.head_timeout, max_connections=settings.max_connections
+        ),
+        limit_concurrency=connection_limit(settings.max_connections),
+        log_config=None,
+        access_log=False,
+        proxy_headers=False,
+        server_header=False,
+        ws_max_size=settings.max_body,
+        ws_per_message_deflate=False,
+        timeout_keep_alive=15,
+        timeout_graceful_shutdown=3,
+    )
     server = _Server(config, app.state.gateway)
     if ready is not None:
         shown = f"[{settings.host}]" if family == socket.AF_INET6 else settings.host

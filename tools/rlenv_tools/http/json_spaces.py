@@ -30,8 +30,16 @@ from gymnasium import spaces
 from rlenv.protocol.space_json import json_number, space_from_json, space_to_json
 from rlenv_tools.http._png import encode_png
 
-__all__ = ["action_decoder", "dumps", "is_image", "json_schema", "space_from_json",
-           "space_to_json", "to_json", "value_encoder"]
+__all__ = [
+    "action_decoder",
+    "dumps",
+    "is_image",
+    "json_schema",
+    "space_from_json",
+    "space_to_json",
+    "to_json",
+    "value_encoder",
+]
 
 _PER_ELEMENT = 64
 """1-D arrays up to this size get per-element bounds in their schema; larger ones, and arrays
@@ -62,9 +70,12 @@ def json_schema(space: spaces.Space, *, images: bool = True) -> dict[str, Any]:
     if isinstance(space, spaces.Box):
         if images and is_image(space):
             height, width, channels = space.shape
-            return {"type": "string", "contentEncoding": "base64",
-                    "contentMediaType": "image/png",
-                    "description": f"a {width}x{height} PNG image, {channels} channel(s)"}
+            return {
+                "type": "string",
+                "contentEncoding": "base64",
+                "contentMediaType": "image/png",
+                "description": f"a {width}x{height} PNG image, {channels} channel(s)",
+            }
         return _array_schema(space.low, space.high, space.dtype)
     if isinstance(space, spaces.Discrete):
         start = int(space.start)
@@ -72,28 +83,47 @@ def json_schema(space: spaces.Space, *, images: bool = True) -> dict[str, Any]:
     if isinstance(space, spaces.MultiDiscrete):
         return _array_schema(space.start, space.start + space.nvec - 1, space.dtype)
     if isinstance(space, spaces.MultiBinary):
-        return _array_schema(np.zeros(space.shape, np.int8), np.ones(space.shape, np.int8),
-                             np.dtype(np.int8))
+        return _array_schema(
+            np.zeros(space.shape, np.int8), np.ones(space.shape, np.int8), np.dtype(np.int8)
+        )
     if isinstance(space, spaces.Tuple):
         items = [json_schema(s, images=images) for s in space.spaces]
-        return {"type": "array", "prefixItems": items, "items": False,
-                "minItems": len(items), "maxItems": len(items)}
+        return {
+            "type": "array",
+            "prefixItems": items,
+            "items": False,
+            "minItems": len(items),
+            "maxItems": len(items),
+        }
     if isinstance(space, spaces.Dict):
-        return {"type": "object", "additionalProperties": False,
-                "properties": {k: json_schema(s, images=images) for k, s in space.spaces.items()},
-                "required": list(space.spaces)}
+        return {
+            "type": "object",
+            "additionalProperties": False,
+            "properties": {k: json_schema(s, images=images) for k, s in space.spaces.items()},
+            "required": list(space.spaces),
+        }
     return {"description": f"a value of {space}"}
 
 
 def _array_schema(low: np.ndarray, high: np.ndarray, dtype: np.dtype) -> dict[str, Any]:
     shape = low.shape
-    if len(shape) == 1 and 0 < shape[0] <= _PER_ELEMENT and not (
-            (low == low.flat[0]).all() and (high == high.flat[0]).all()):
-        return {"type": "array", "prefixItems": [_element(lo, hi, dtype) for lo, hi in
-                                                  zip(low.tolist(), high.tolist(), strict=True)],
-                "items": False, "minItems": shape[0], "maxItems": shape[0]}
-    schema = _element(low.min().item() if low.size else 0, high.max().item() if high.size
-                      else 0, dtype)
+    if (
+        len(shape) == 1
+        and 0 < shape[0] <= _PER_ELEMENT
+        and not ((low == low.flat[0]).all() and (high == high.flat[0]).all())
+    ):
+        return {
+            "type": "array",
+            "prefixItems": [
+                _element(lo, hi, dtype) for lo, hi in zip(low.tolist(), high.tolist(), strict=True)
+            ],
+            "items": False,
+            "minItems": shape[0],
+            "maxItems": shape[0],
+        }
+    schema = _element(
+        low.min().item() if low.size else 0, high.max().item() if high.size else 0, dtype
+    )
     for size in reversed(shape):
         schema = {"type": "array", "items": schema, "minItems": size, "maxItems": size}
     return schema
@@ -152,6 +182,7 @@ def action_decoder(space: spaces.Space) -> Callable[[Any], Any]:
             if value.__class__ is not dict:
                 return value
             return {k: fields[k](v) if k in fields else v for k, v in value.items()}
+
         return decode_dict
     if isinstance(space, spaces.Tuple):
         items = [action_decoder(s) for s in space.spaces]
@@ -160,6 +191,7 @@ def action_decoder(space: spaces.Space) -> Callable[[Any], Any]:
             if value.__class__ is not list or len(value) != len(items):
                 return value
             return [decode(v) for decode, v in zip(items, value, strict=True)]
+
         return decode_tuple
     return _unchanged
 
@@ -182,10 +214,14 @@ def _float_array_decoder(dtype: np.dtype, shape: tuple[int, ...]) -> Callable[[A
             array = np.asarray(value)
         except ValueError:  # ragged
             return value
-        if array.dtype.kind not in "iuf" or array.shape != shape or \
-                not (np.abs(array) <= limit).all():
+        if (
+            array.dtype.kind not in "iuf"
+            or array.shape != shape
+            or not (np.abs(array) <= limit).all()
+        ):
             return value
         return array.astype(dtype)
+
     return decode
 
 

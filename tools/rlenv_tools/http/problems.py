@@ -20,15 +20,24 @@ from starlette.responses import Response
 from rlenv.protocol.errors import ErrorCode, RemoteError
 from rlenv_tools.http.json_spaces import dumps
 
-__all__ = ["COMMON_HEADERS", "PROBLEMS", "PROBLEM_MEDIA_TYPE", "PROBLEM_TYPE", "Problem",
-           "ProblemKind", "from_remote_error"]
+__all__ = [
+    "COMMON_HEADERS",
+    "PROBLEMS",
+    "PROBLEM_MEDIA_TYPE",
+    "PROBLEM_TYPE",
+    "Problem",
+    "ProblemKind",
+    "from_remote_error",
+]
 
 PROBLEM_MEDIA_TYPE = "application/problem+json"
 PROBLEM_TYPE = "urn:rlenv:problem:"
 """The prefix of every problem's ``type``; the code follows it."""
 
-COMMON_HEADERS: Mapping[str, str] = {"Cache-Control": "no-store",
-                                     "X-Content-Type-Options": "nosniff"}
+COMMON_HEADERS: Mapping[str, str] = {
+    "Cache-Control": "no-store",
+    "X-Content-Type-Options": "nosniff",
+}
 """Headers of every answer: nothing is cached, nothing is sniffed into another type."""
 
 
@@ -77,8 +86,9 @@ class Problem(Exception):
         members: extension members added to the body.
     """
 
-    def __init__(self, code: str, detail: str, *, headers: Mapping[str, str] | None = None,
-                 **members: Any) -> None:
+    def __init__(
+        self, code: str, detail: str, *, headers: Mapping[str, str] | None = None, **members: Any
+    ) -> None:
         super().__init__(detail)
         self.code = str(code)
         self.kind = PROBLEMS.get(self.code, _UNKNOWN)
@@ -93,9 +103,13 @@ class Problem(Exception):
 
     def to_json(self, instance: str | None = None) -> dict[str, Any]:
         """The problem details object."""
-        body: dict[str, Any] = {"type": PROBLEM_TYPE + self.code, "title": self.kind.title,
-                                "status": self.kind.status, "detail": self.detail,
-                                "code": self.code}
+        body: dict[str, Any] = {
+            "type": PROBLEM_TYPE + self.code,
+            "title": self.kind.title,
+            "status": self.kind.status,
+            "detail": self.detail,
+            "code": self.code,
+        }
         if instance is not None:
             body["instance"] = instance
         body.update(self.members)
@@ -103,9 +117,12 @@ class Problem(Exception):
 
     def response(self, instance: str | None = None) -> Response:
         """The ``application/problem+json`` response."""
-        return Response(dumps(self.to_json(instance)), self.kind.status,
-                        headers={**COMMON_HEADERS, **self.headers},
-                        media_type=PROBLEM_MEDIA_TYPE)
+        return Response(
+            dumps(self.to_json(instance)),
+            self.kind.status,
+            headers={**COMMON_HEADERS, **self.headers},
+            media_type=PROBLEM_MEDIA_TYPE,
+        )
 
 
 def from_remote_error(error: RemoteError) -> Problem:

@@ -41,8 +41,17 @@ from rlenv_tools.inspector._web import InspectorServer
 if TYPE_CHECKING:
     from rlenv_client.session import Session
 
-__all__ = ["Demonstrator", "Inspector", "InspectorError", "InspectorServer", "Timelines",
-           "Watcher", "inspect_recordings", "inspect_sessions", "serve"]
+__all__ = [
+    "Demonstrator",
+    "Inspector",
+    "InspectorError",
+    "InspectorServer",
+    "Timelines",
+    "Watcher",
+    "inspect_recordings",
+    "inspect_sessions",
+    "serve",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -77,30 +86,51 @@ class Inspector:
         ValueError: both ``addresses`` and ``recordings``, or neither.
     """
 
-    def __init__(self, addresses: Sequence[str], token: str | None = None, port: int = 0,
-                 timeout: float = 30.0, *, record_demonstrations: str | Path | None = None,
-                 target: str | None = None, demonstration_rate: float | None = None,
-                 recordings: Sequence[str | Path] = (),
-                 policies: Sequence[str | Path] = (), trust_target: bool = False) -> None:
+    def __init__(
+        self,
+        addresses: Sequence[str],
+        token: str | None = None,
+        port: int = 0,
+        timeout: float = 30.0,
+        *,
+        record_demonstrations: str | Path | None = None,
+        target: str | None = None,
+        demonstration_rate: float | None = None,
+        recordings: Sequence[str | Path] = (),
+        policies: Sequence[str | Path] = (),
+        trust_target: bool = False,
+    ) -> None:
         if bool(addresses) == bool(recordings):
             raise ValueError("the inspector watches addresses or opens recordings (one of them)")
         env = dict(os.environ)
         if token is not None:
             env["RLENV_TOKEN"] = token
-        options = [] if record_demonstrations is None else \
-            ["--record-demonstrations", str(record_demonstrations)]
+        options = (
+            []
+            if record_demonstrations is None
+            else ["--record-demonstrations", str(record_demonstrations)]
+        )
         options += [] if target is None else ["--target", target]
-        options += [] if demonstration_rate is None else \
-            ["--demonstration-rate", str(demonstration_rate)]
+        options += (
+            [] if demonstration_rate is None else ["--demonstration-rate", str(demonstration_rate)]
+        )
         for policy in policies:
             options += ["--policy", str(policy)]
         options += ["--trust-target"] if trust_target else []
-        command = ["rlenv_tools.inspector", *addresses] if addresses else \
-            ["rlenv", "replay", *map(str, recordings), "--inspect"]
+        command = (
+            ["rlenv_tools.inspector", *addresses]
+            if addresses
+            else ["rlenv", "replay", *map(str, recordings), "--inspect"]
+        )
         self._process = subprocess.Popen(
             [sys.executable, "-m", *command, "--port", str(port), "--follow-stdin", *options],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-            env=env, start_new_session=True)
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            env=env,
+            start_new_session=True,
+        )
         assert self._process.stdout is not None
         self.url = _read_url(self._process.stdout, timeout, self._process)
         self._lines = threading.Thread(target=_drain, args=(self._process.stdout,), daemon=True)
@@ -149,10 +179,10 @@ def inspect_sessions(sessions: Sequence[Session]) -> Inspector:
     """
     clients = [session.client for session in sessions]
     if not all(isinstance(client, Client) for client in clients):
-        raise ValueError("the inspector watches served environments: in_process=True has no "
-                         "server to watch")
-    inspector = Inspector([client.address for client in clients],
-                          token=sessions[0].token)
+        raise ValueError(
+            "the inspector watches served environments: in_process=True has no server to watch"
+        )
+    inspector = Inspector([client.address for client in clients], token=sessions[0].token)
 
     def follow() -> None:
         inspector.follow([session.client.address for session in sessions])
@@ -163,10 +193,14 @@ def inspect_sessions(sessions: Sequence[Session]) -> Inspector:
     return inspector
 
 
-def inspect_recordings(paths: Sequence[str | Path], *,
-                       policies: Mapping[str, Callable[[Any], Any]] | None = None,
-                       target: str | None = None, trust_target: bool = False,
-                       port: int = 0) -> InspectorServer:
+def inspect_recordings(
+    paths: Sequence[str | Path],
+    *,
+    policies: Mapping[str, Callable[[Any], Any]] | None = None,
+    target: str | None = None,
+    trust_target: bool = False,
+    port: int = 0,
+) -> InspectorServer:
     """The page with ``paths`` as timelines, served by a thread of this process.
 
     What ``rlenv replay FILE ... --inspect`` serves, with Python callables as policies to
@@ -179,8 +213,11 @@ def inspect_recordings(paths: Sequence[str | Path], *,
     Raises:
         ValueError: a file is not an rlenv episode.
     """
-    server = InspectorServer(Watcher([]), port=port, timelines=Timelines(
-        paths, policies=policies, target=target, trust_target=trust_target))
+    server = InspectorServer(
+        Watcher([]),
+        port=port,
+        timelines=Timelines(paths, policies=policies, target=target, trust_target=trust_target),
+    )
     server.start()
     logger.warning("rlenv inspector: %s", server.url)
     return server
@@ -193,7 +230,7 @@ def _read_url(stdout: IO[str], timeout: float, process: subprocess.Popen[str]) -
     reader.start()
     reader.join(timeout)
     if said and said[-1].startswith(_READY):
-        return said[-1][len(_READY):].strip()
+        return said[-1][len(_READY) :].strip()
     end_process(process, 0.0, first=None)
     raise RuntimeError("rlenv inspect did not start: " + "".join(said).strip())
 
@@ -210,12 +247,21 @@ def _drain(stdout: IO[str]) -> None:
         sys.stderr.write(line)
 
 
-def serve(addresses: Sequence[str], *, token: str | None, port: int, follow_stdin: bool,
-          ready: Callable[[str], None], record_demonstrations: str | Path | None = None,
-          target: str | None = None, demonstration_rate: float | None = None,
-          recordings: Sequence[str | Path] = (),
-          policies: Mapping[str, Callable[[Any], Any]] | None = None,
-          unavailable: Mapping[str, str] | None = None, trust_target: bool = False) -> None:
+def serve(
+    addresses: Sequence[str],
+    *,
+    token: str | None,
+    port: int,
+    follow_stdin: bool,
+    ready: Callable[[str], None],
+    record_demonstrations: str | Path | None = None,
+    target: str | None = None,
+    demonstration_rate: float | None = None,
+    recordings: Sequence[str | Path] = (),
+    policies: Mapping[str, Callable[[Any], Any]] | None = None,
+    unavailable: Mapping[str, str] | None = None,
+    trust_target: bool = False,
+) -> None:
     """Serve the page (``rlenv inspect``); ``ready(line)`` once it listens, with its address.
 
     Until interrupted, or until standard input closes with ``follow_stdin`` (address lists,
@@ -230,11 +276,21 @@ def serve(addresses: Sequence[str], *, token: str | None, port: int, follow_stdi
         ValueError: an address is not ``HOST:PORT``, the rate is not positive, or a recording
             is not an rlenv episode.
     """
-    timelines = Timelines(recordings, policies=policies, unavailable=unavailable,
-                          target=target, trust_target=trust_target)
+    timelines = Timelines(
+        recordings,
+        policies=policies,
+        unavailable=unavailable,
+        target=target,
+        trust_target=trust_target,
+    )
     watcher = Watcher(addresses, token=token)
-    demonstrator = None if record_demonstrations is None else Demonstrator(
-        watcher, record_demonstrations, target=target, rate=demonstration_rate, token=token)
+    demonstrator = (
+        None
+        if record_demonstrations is None
+        else Demonstrator(
+            watcher, record_demonstrations, target=target, rate=demonstration_rate, token=token
+        )
+    )
     server = InspectorServer(watcher, port=port, demonstrator=demonstrator, timelines=timelines)
     ready(f"{_READY}{server.url}")
     if follow_stdin:

@@ -59,8 +59,7 @@ __all__ = ["Demonstrator", "held_action", "idle_action", "key_map"]
 class _Control:
     """One taken instance: its connection, the agent played, key map, held keys, the thread."""
 
-    def __init__(self, client: Client, server: int, instance: int,
-                 keys: dict[str, Any]) -> None:
+    def __init__(self, client: Client, server: int, instance: int, keys: dict[str, Any]) -> None:
         self.client = client
         self.server = server
         self.instance = instance
@@ -113,8 +112,15 @@ class Demonstrator:
         token: the servers' secret, if they need one (default ``$RLENV_TOKEN``).
     """
 
-    def __init__(self, watcher: Watcher, directory: str | Path, *, target: str | None = None,
-                 rate: float | None = None, token: str | None = None) -> None:
+    def __init__(
+        self,
+        watcher: Watcher,
+        directory: str | Path,
+        *,
+        target: str | None = None,
+        rate: float | None = None,
+        token: str | None = None,
+    ) -> None:
         if rate is not None and not rate > 0:
             raise ValueError(f"the demonstration rate must be > 0 actions a second, got {rate}")
         self.watcher = watcher
@@ -133,16 +139,19 @@ class Demonstrator:
         with self._lock:
             control = self._control
             running = control is not None and not control.stop.is_set()
-            return {"controlling": running,
-                    "server": control.server if running else None,  # type: ignore[union-attr]
-                    "instance": control.instance if running else None,  # type: ignore
-                    "agent": control.agent if running else None,  # type: ignore[union-attr]
-                    "heuristic": list(control.heuristic) if running else [],  # type: ignore
-                    "claim": control.claim if running else False,  # type: ignore[union-attr]
-                    "keys": sorted(control.keys) if running else [],  # type: ignore[union-attr]
-                    "held": list(control.held) if running else [],  # type: ignore[union-attr]
-                    "episodes": self.episodes, "directory": str(self.directory),
-                    "error": self.error}
+            return {
+                "controlling": running,
+                "server": control.server if running else None,  # type: ignore[union-attr]
+                "instance": control.instance if running else None,  # type: ignore
+                "agent": control.agent if running else None,  # type: ignore[union-attr]
+                "heuristic": list(control.heuristic) if running else [],  # type: ignore
+                "claim": control.claim if running else False,  # type: ignore[union-attr]
+                "keys": sorted(control.keys) if running else [],  # type: ignore[union-attr]
+                "held": list(control.held) if running else [],  # type: ignore[union-attr]
+                "episodes": self.episodes,
+                "directory": str(self.directory),
+                "error": self.error,
+            }
 
     def take(self, server: int, instance: int, agent: str | None = None) -> dict[str, Any]:
         """Take control of ``instance`` of ``server`` and play ``agent`` (see the module).
@@ -198,13 +207,11 @@ class Demonstrator:
 
     # --- taking, stepping ---------------------------------------------------------------------
 
-    def _start(self, client: Client, server: int, instance: int,
-               agent: str | None) -> _Control:
+    def _start(self, client: Client, server: int, instance: int, agent: str | None) -> _Control:
         hello = client.hello
         count = hello.instances
         if not 0 <= instance < count:
-            raise InspectorError(404, f"server {server} has {count} instances, not "
-                                      f"{instance + 1}")
+            raise InspectorError(404, f"server {server} has {count} instances, not {instance + 1}")
         control = _Control(client, server, instance, {})
         tree = _answer(control.exchange({"inspect": {"tree": {}}})).info["tree"]
         if len(hello.agents) > 1:
@@ -218,11 +225,13 @@ class Demonstrator:
         if isinstance(reply, ErrorReply) and reply.code == "busy" and control.agent is not None:
             control.claim = True  # a trainer controls it: play the agent beside it
             kept: dict[int, EpisodeFile] = {}  # the server keeps them from now on
-            fetch_episodes(lambda part: _answer(control.exchange({"episodes": part})), hello,
-                           cache=kept)
+            fetch_episodes(
+                lambda part: _answer(control.exchange({"episodes": part})), hello, cache=kept
+            )
             control.send_claim(idle)  # refused here: 409 claimed by another, 422 otherwise
-            play: Callable[[], None] = functools.partial(self._play_beside, control, idle, rate,
-                                                         kept)
+            play: Callable[[], None] = functools.partial(
+                self._play_beside, control, idle, rate, kept
+            )
         else:
             observation, _ = client.reset_result(_answer(reply))
             play = functools.partial(self._play, control, observation, rate)
@@ -240,17 +249,19 @@ class Demonstrator:
                 with self._lock:
                     actions = [control.keys[key] for key in control.held]
                 observation, _, terminated, truncated, _ = client.step_result(
-                    control.exchange(control.step_parts(held_action(space, actions))))
+                    control.exchange(control.step_parts(held_action(space, actions)))
+                )
                 seen.append(digest(observation))
                 if terminated or truncated:
                     snapshot = _answer(control.exchange({"snapshot": {}})).info["snapshot"]
                     with self._lock:
-                        EpisodeFile(self.target, snapshot, seen, terminated, truncated,
-                                    agent=control.agent).save(
-                            next_episode_path(self.directory))
+                        EpisodeFile(
+                            self.target, snapshot, seen, terminated, truncated, agent=control.agent
+                        ).save(next_episode_path(self.directory))
                         self.episodes += 1
-                    observation, _ = client.reset_result(control.exchange(
-                        client.reset_request().parts))
+                    observation, _ = client.reset_result(
+                        control.exchange(client.reset_request().parts)
+                    )
                     seen = [digest(observation)]
                 due = max(due + 1.0 / rate, time.monotonic() - 1.0)  # no burst after a stall
                 control.stop.wait(max(0.0, due - time.monotonic()))
@@ -259,8 +270,9 @@ class Demonstrator:
                 self.error = f"the demonstration stopped: {error}"
                 control.stop.set()
 
-    def _play_beside(self, control: _Control, idle: Any, rate: float,
-                     cache: dict[int, EpisodeFile]) -> None:
+    def _play_beside(
+        self, control: _Control, idle: Any, rate: float, cache: dict[int, EpisodeFile]
+    ) -> None:
         """Hold the keys' action for the claimed agent; record the trainer's episodes that end.
 
         The agent was claimed (with ``idle``) before the thread started, and ``cache`` holds
@@ -293,16 +305,22 @@ class Demonstrator:
                 self.error = f"the demonstration stopped: {error}"
                 control.stop.set()
 
-    def _save_new(self, control: _Control, kept: Mapping[int, EpisodeFile],
-                  known: set[int]) -> None:
+    def _save_new(
+        self, control: _Control, kept: Mapping[int, EpisodeFile], known: set[int]
+    ) -> None:
         """Save each ``kept`` episode (by id) not ``known`` before, as the person's."""
         for identifier in sorted(kept.keys() - known):
             known.add(identifier)
             episode = kept[identifier]
             with self._lock:
-                EpisodeFile(self.target or episode.target, episode.snapshot, [],
-                            episode.terminated, episode.truncated,
-                            agent=control.agent).save(next_episode_path(self.directory))
+                EpisodeFile(
+                    self.target or episode.target,
+                    episode.snapshot,
+                    [],
+                    episode.terminated,
+                    episode.truncated,
+                    agent=control.agent,
+                ).save(next_episode_path(self.directory))
                 self.episodes += 1
 
     def _release_locked(self) -> None:
@@ -337,33 +355,41 @@ def _choose(control: _Control, tree: Sequence[Mapping[str, Any]], agent: str | N
     playable = [name for name in hello.agents if name not in hello.driven]
     if agent is None:
         if len(playable) != 1:
-            raise InspectorError(422, f"this environment has {len(hello.agents)} agents: "
-                                      f"choose the one to play ({', '.join(playable)})")
+            raise InspectorError(
+                422,
+                f"this environment has {len(hello.agents)} agents: "
+                f"choose the one to play ({', '.join(playable)})",
+            )
         agent = playable[0]
     if agent not in hello.agents:
-        raise InspectorError(404, f"no agent {agent!r:.40}; the agents: "
-                                  f"{', '.join(hello.agents)}")
+        raise InspectorError(404, f"no agent {agent!r:.40}; the agents: {', '.join(hello.agents)}")
     if agent in hello.driven:
-        raise InspectorError(422, f"agent {agent!r} is driven by the server (rlenv serve "
-                                  f"--policy); choose another: {', '.join(playable)}")
+        raise InspectorError(
+            422,
+            f"agent {agent!r} is driven by the server (rlenv serve "
+            f"--policy); choose another: {', '.join(playable)}",
+        )
     joint = hello.action_space
     assert isinstance(joint, spaces.Dict)
     nodes = _agent_nodes(tree)
     control.agent, control.space = agent, joint[agent]
     others = [name for name in playable if name != agent]
     control.heuristic = [name for name in others if nodes[name].get("heuristic")]
-    control.idle = {name: idle_action(joint[name]) for name in others
-                    if name not in control.heuristic}
+    control.idle = {
+        name: idle_action(joint[name]) for name in others if name not in control.heuristic
+    }
 
 
 def _agent_nodes(tree: Sequence[Mapping[str, Any]]) -> dict[str, Mapping[str, Any]]:
     """The agents' nodes of an ``inspect tree``, by agent name (the last part of the path)."""
-    return {str(node["path"]).rsplit("/", 1)[-1]: node for node in tree
-            if node.get("config") == "agent"}
+    return {
+        str(node["path"]).rsplit("/", 1)[-1]: node for node in tree if node.get("config") == "agent"
+    }
 
 
-def key_map(tree: Sequence[Mapping[str, Any]], space: spaces.Space,
-            agent: str | None = None) -> dict[str, Any]:
+def key_map(
+    tree: Sequence[Mapping[str, Any]], space: spaces.Space, agent: str | None = None
+) -> dict[str, Any]:
     """The keys of ``agent`` (the only one if ``None``), as actions of its ``space``.
 
     The tree is ``inspect tree``'s (its agent nodes carry ``demonstration_keys``); the
@@ -376,18 +402,23 @@ def key_map(tree: Sequence[Mapping[str, Any]], space: spaces.Space,
     agents = _agent_nodes(tree)
     if agent is None:
         if len(agents) != 1:
-            raise InspectorError(422, f"this environment has {len(agents)} agents: choose "
-                                      f"the one to play ({', '.join(agents)})")
+            raise InspectorError(
+                422,
+                f"this environment has {len(agents)} agents: choose "
+                f"the one to play ({', '.join(agents)})",
+            )
         (node,) = agents.values()
     elif agent in agents:
         node = agents[agent]
     else:
         raise InspectorError(404, f"no agent {agent!r:.40}; the agents: {', '.join(agents)}")
-    keys = {key: _action(space, value)
-            for key, value in node.get("demonstration_keys", {}).items()}
+    keys = {key: _action(space, value) for key, value in node.get("demonstration_keys", {}).items()}
     if not keys:
-        raise InspectorError(422, f"demonstrations need a key map: {node['type']} "
-                                  f"names no demonstration_keys for {space}")
+        raise InspectorError(
+            422,
+            f"demonstrations need a key map: {node['type']} "
+            f"names no demonstration_keys for {space}",
+        )
     return keys
 
 

@@ -45,17 +45,27 @@ class Branch:
 
     def describe(self) -> dict[str, Any]:
         label = {"episode": "the episode", "policy": f"policy {''.join(self.actions)}"}.get(
-            self.how, f"keys {' '.join(key_name(k) for k in self.actions[-6:])}" +
-            (" …" if len(self.actions) > 6 else ""))
-        return {"branch": self.number, "parent": self.parent, "at": self.at, "how": self.how,
-                "label": label, "length": len(self.timeline), "ended": self.timeline.ended}
+            self.how,
+            f"keys {' '.join(key_name(k) for k in self.actions[-6:])}"
+            + (" …" if len(self.actions) > 6 else ""),
+        )
+        return {
+            "branch": self.number,
+            "parent": self.parent,
+            "at": self.at,
+            "how": self.how,
+            "label": label,
+            "length": len(self.timeline),
+            "ended": self.timeline.ended,
+        }
 
 
 class Root:
     """A recording, its timeline once opened, its branches, and the lock they share."""
 
-    def __init__(self, number: int, name: str, load: Callable[[], EpisodeFile],
-                 origin: dict[str, Any]) -> None:
+    def __init__(
+        self, number: int, name: str, load: Callable[[], EpisodeFile], origin: dict[str, Any]
+    ) -> None:
         self.number = number
         self.name = name
         self.load = load
@@ -102,15 +112,26 @@ class Recordings:
     Args: as :class:`~rlenv_tools.inspector._timelines.Timelines` takes them.
     """
 
-    def __init__(self, *, target: str | None, trust_target: bool, checkpoint_every: int | None,
-                 max_recent: int, max_files: int, max_processes: int, max_memory: int) -> None:
+    def __init__(
+        self,
+        *,
+        target: str | None,
+        trust_target: bool,
+        checkpoint_every: int | None,
+        max_recent: int,
+        max_files: int,
+        max_processes: int,
+        max_memory: int,
+    ) -> None:
         self._target = target
         self._trust = trust_target
         self._every = checkpoint_every
         self._max_recent = max_recent
         self._max_files = max_files
-        self._share = {"max_processes": max_processes // (max_recent + max_files),
-                       "max_memory": max_memory // (max_recent + max_files)}
+        self._share = {
+            "max_processes": max_processes // (max_recent + max_files),
+            "max_memory": max_memory // (max_recent + max_files),
+        }
         self._openings = 0
         self._lock = threading.Lock()  # the registry; each root has its own
         self._roots: dict[int, Root] = {}
@@ -127,8 +148,9 @@ class Recordings:
         number = self.add(Path(path).name, lambda: episode, {"file": str(path)})
         with self._lock:
             files = [root for root in self._roots.values() if "file" in root.origin]
-            for root, name in zip(files, _distinct([Path(r.origin["file"]) for r in files]),
-                                  strict=True):
+            for root, name in zip(
+                files, _distinct([Path(r.origin["file"]) for r in files]), strict=True
+            ):
                 root.name = name
         return number
 
@@ -139,8 +161,9 @@ class Recordings:
             self._roots[number] = Root(number, name, load, origin)
             return number
 
-    def find_recent(self, episodes: list[EpisodeFile], server: int, instance: int,
-                    identifier: str) -> EpisodeFile:
+    def find_recent(
+        self, episodes: list[EpisodeFile], server: int, instance: int, identifier: str
+    ) -> EpisodeFile:
         """The recent episode ``identifier``: in ``episodes``, else among those last listed.
 
         Raises:
@@ -152,8 +175,11 @@ class Recordings:
         if not found and identifier in listed:
             found = [listed[identifier]]
         if not found:
-            raise InspectorError(404, f"instance {instance} of server {server} keeps no episode "
-                                      f"{identifier!r:.40} (any more: newer ones replaced it)")
+            raise InspectorError(
+                404,
+                f"instance {instance} of server {server} keeps no episode "
+                f"{identifier!r:.40} (any more: newer ones replaced it)",
+            )
         return found[0]
 
     def listed(self, server: int, instance: int, episodes: list[EpisodeFile]) -> None:
@@ -162,7 +188,7 @@ class Recordings:
             kept = self._listed.setdefault((server, instance), {})
             for episode in episodes:
                 kept[episode_id(episode)] = episode
-            for identifier in list(kept)[:max(0, len(kept) - _LISTED)]:
+            for identifier in list(kept)[: max(0, len(kept) - _LISTED)]:
                 del kept[identifier]  # the oldest listed first
 
     def roots(self) -> list[Root]:
@@ -187,10 +213,14 @@ class Recordings:
         if root.timeline is not None:
             return root.timeline
         try:  # a live server's recent episode has no digests: the timeline records them
-            timeline = Timeline(root.load(), target=self._target, trust_target=self._trust,
-                                checkpoint_every=self._every, **self._share)
-        except (ValueError, ServerStartError, RuntimeError, OSError, RemoteError,
-                *LOST) as error:
+            timeline = Timeline(
+                root.load(),
+                target=self._target,
+                trust_target=self._trust,
+                checkpoint_every=self._every,
+                **self._share,
+            )
+        except (ValueError, ServerStartError, RuntimeError, OSError, RemoteError, *LOST) as error:
             root.error = f"cannot open {root.name}: {error}"
             raise InspectorError(422, root.error) from None
         root.error = ""
@@ -219,13 +249,14 @@ class Recordings:
         A recent episode leaves the list; a file stays in it, to open again.
         """
         with self._lock:
-            opened = sorted((root for root in self._roots.values() if root.opened),
-                            key=lambda root: root.opened)
+            opened = sorted(
+                (root for root in self._roots.values() if root.opened), key=lambda root: root.opened
+            )
         recent = [root for root in opened if "recent" in root.origin]
         files = [root for root in opened if "recent" not in root.origin]
-        for root in recent[:max(0, len(recent) - self._max_recent)]:
+        for root in recent[: max(0, len(recent) - self._max_recent)]:
             self._remove(root)
-        for root in files[:max(0, len(files) - self._max_files)]:
+        for root in files[: max(0, len(files) - self._max_files)]:
             with root.lock:
                 root.shut()
 
@@ -253,8 +284,9 @@ def _distinct(paths: list[Path]) -> list[str]:
     names = []
     for parts in resolved:
         depth = 1
-        while depth < len(parts) and sum(other[-depth:] == parts[-depth:]
-                                         for other in resolved) > 1:
+        while (
+            depth < len(parts) and sum(other[-depth:] == parts[-depth:] for other in resolved) > 1
+        ):
             depth += 1
         names.append("/".join(parts[-depth:]).lstrip("/"))
     return names

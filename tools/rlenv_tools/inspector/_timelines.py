@@ -70,18 +70,31 @@ class Timelines:
         max_memory: the most memory (PSS, bytes) they hold in all (shared the same way).
     """
 
-    def __init__(self, paths: Iterable[str | Path] = (), *,
-                 policies: Mapping[str, Policy] | None = None,
-                 unavailable: Mapping[str, str] | None = None, target: str | None = None,
-                 trust_target: bool = False, checkpoint_every: int | None = None,
-                 max_recent: int = 3, max_files: int = 3, max_processes: int = 1024,
-                 max_memory: int = 4 << 30) -> None:
+    def __init__(
+        self,
+        paths: Iterable[str | Path] = (),
+        *,
+        policies: Mapping[str, Policy] | None = None,
+        unavailable: Mapping[str, str] | None = None,
+        target: str | None = None,
+        trust_target: bool = False,
+        checkpoint_every: int | None = None,
+        max_recent: int = 3,
+        max_files: int = 3,
+        max_processes: int = 1024,
+        max_memory: int = 4 << 30,
+    ) -> None:
         self.policies = dict(policies or {})
         self.unavailable = dict(unavailable or {})
-        self._recordings = Recordings(target=target, trust_target=trust_target,
-                                      checkpoint_every=checkpoint_every, max_recent=max_recent,
-                                      max_files=max_files, max_processes=max_processes,
-                                      max_memory=max_memory)
+        self._recordings = Recordings(
+            target=target,
+            trust_target=trust_target,
+            checkpoint_every=checkpoint_every,
+            max_recent=max_recent,
+            max_files=max_files,
+            max_processes=max_processes,
+            max_memory=max_memory,
+        )
         for path in paths:
             self.add_file(path)
 
@@ -99,8 +112,9 @@ class Timelines:
         """Offer ``episode`` (a live instance's recent one, say) as ``name``; its number."""
         return self._recordings.add(name, lambda: episode, dict(origin))
 
-    def open_recent(self, episodes: list[EpisodeFile], server: int, instance: int,
-                    identifier: str) -> dict[str, Any]:
+    def open_recent(
+        self, episodes: list[EpisodeFile], server: int, instance: int, identifier: str
+    ) -> dict[str, Any]:
         """Offer the recent episode whose :func:`episode_id` is ``identifier``; its description.
 
         An identifier, not a place in ``episodes``: the list moves on as episodes finish. It is
@@ -113,8 +127,12 @@ class Timelines:
         found = self._recordings.find_recent(episodes, server, instance, identifier)
         origin = {"server": server, "instance": instance, "recent": identifier}
         steps = sum(event[0] == "action" for event in found.snapshot["events"])
-        number = self.add_episode(found, f"server {server} · instance {instance} · "
-                                  f"recent episode of {steps} steps ({identifier[:6]})", origin)
+        number = self.add_episode(
+            found,
+            f"server {server} · instance {instance} · "
+            f"recent episode of {steps} steps ({identifier[:6]})",
+            origin,
+        )
         return self.describe(number)
 
     def listed(self, server: int, instance: int, episodes: list[EpisodeFile]) -> None:
@@ -128,11 +146,20 @@ class Timelines:
     def list(self) -> dict[str, Any]:
         """Every timeline offered (number, name, origin, whether open), and the policies."""
         roots = self._recordings.roots()
-        return {"timelines": [{"timeline": root.number, "name": root.name,
-                               "origin": root.origin, "open": root.timeline is not None,
-                               "error": root.error} for root in roots],
-                "policies": sorted(self.policies),
-                "unavailable": dict(self.unavailable)}
+        return {
+            "timelines": [
+                {
+                    "timeline": root.number,
+                    "name": root.name,
+                    "origin": root.origin,
+                    "open": root.timeline is not None,
+                    "error": root.error,
+                }
+                for root in roots
+            ],
+            "policies": sorted(self.policies),
+            "unavailable": dict(self.unavailable),
+        }
 
     def describe(self, number: int) -> dict[str, Any]:
         """One timeline (opened if it was not): its length, keys and tree of branches.
@@ -160,15 +187,23 @@ class Timelines:
         with self._recordings.using(number) as root:
             timeline = self._branch(root, branch).timeline
             state = self._call(lambda: timeline.at(_step(timeline, step)))
-            return {"timeline": number, "branch": branch, "step": step,
-                    "length": len(timeline), "reward": to_json(state.reward),
-                    "terminated": state.terminated, "truncated": state.truncated,
-                    "info": to_json(state.info), "observation": self._shown(root,
-                                                                           state.observation),
-                    "draw": to_json(state.draw), "properties": to_json(state.properties)}
+            return {
+                "timeline": number,
+                "branch": branch,
+                "step": step,
+                "length": len(timeline),
+                "reward": to_json(state.reward),
+                "terminated": state.terminated,
+                "truncated": state.truncated,
+                "info": to_json(state.info),
+                "observation": self._shown(root, state.observation),
+                "draw": to_json(state.draw),
+                "properties": to_json(state.properties),
+            }
 
-    def ticks(self, number: int, branch: int, step: int, first: int = 1,
-              count: int = MAX_TICKS) -> dict[str, Any]:
+    def ticks(
+        self, number: int, branch: int, step: int, first: int = 1, count: int = MAX_TICKS
+    ) -> dict[str, Any]:
         """A page of the physics ticks inside ``step``'s action: ``count`` from tick ``first``.
 
         ``{"timeline", "branch", "step", "frames" (the ticks the action asked for), "first",
@@ -187,20 +222,37 @@ class Timelines:
         with self._recordings.using(number) as root:
             timeline = self._branch(root, branch).timeline
             if not 1 <= step <= len(timeline):
-                raise InspectorError(400, f"step {step} has no action: steps 1 to "
-                                          f"{len(timeline)} have")
+                raise InspectorError(
+                    400, f"step {step} has no action: steps 1 to {len(timeline)} have"
+                )
             frames = timeline.frames(step)
             ticks = self._call(lambda: timeline.ticks(step, first=first, count=count))
-            more = len(ticks) == count and first + count <= frames and \
-                not (ticks[-1].terminated or ticks[-1].truncated)
-            return {"timeline": number, "branch": branch, "step": step, "frames": frames,
-                    "first": first, "next": first + count if more else None, "ticks": [
-                        {"tick": tick.tick, "reward": to_json(tick.reward),
-                         "terminated": tick.terminated, "truncated": tick.truncated,
-                         "info": to_json(tick.info),
-                         "observation": self._shown(root, tick.observation),
-                         "properties": to_json(tick.properties), "draw": to_json(tick.draw)}
-                        for tick in ticks]}
+            more = (
+                len(ticks) == count
+                and first + count <= frames
+                and not (ticks[-1].terminated or ticks[-1].truncated)
+            )
+            return {
+                "timeline": number,
+                "branch": branch,
+                "step": step,
+                "frames": frames,
+                "first": first,
+                "next": first + count if more else None,
+                "ticks": [
+                    {
+                        "tick": tick.tick,
+                        "reward": to_json(tick.reward),
+                        "terminated": tick.terminated,
+                        "truncated": tick.truncated,
+                        "info": to_json(tick.info),
+                        "observation": self._shown(root, tick.observation),
+                        "properties": to_json(tick.properties),
+                        "draw": to_json(tick.draw),
+                    }
+                    for tick in ticks
+                ],
+            }
 
     def compare(self, number: int, first: int, second: int, step: int) -> dict[str, Any]:
         """Two branches side by side (``a``: ``first``, ``b``: ``second``).
@@ -216,25 +268,38 @@ class Timelines:
         with self._recordings.using(number) as root:
             a, b = self._branch(root, first), self._branch(root, second)
             if not 0 <= step <= max(len(a.timeline), len(b.timeline)):
-                raise InspectorError(400, f"no step {step}: the branches have steps 0 to "
-                                          f"{max(len(a.timeline), len(b.timeline))}")
+                raise InspectorError(
+                    400,
+                    f"no step {step}: the branches have steps 0 to "
+                    f"{max(len(a.timeline), len(b.timeline))}",
+                )
             diff = self._diff(root, a, b)
             sides = {}
             for name, branch in (("a", a), ("b", b)):
                 rewards = branch.timeline.rewards
-                state = self._call(functools.partial(branch.timeline.at, step)) \
-                    if step <= len(branch.timeline) else None
-                sides[name] = {"branch": branch.number, "label": branch.describe()["label"],
-                               "length": len(branch.timeline), "rewards": to_json(rewards),
-                               "return": to_json(sum(rewards)),
-                               "observation": None if state is None else
-                               self._shown(root, state.observation),
-                               "reward": None if state is None else to_json(state.reward)}
+                state = (
+                    self._call(functools.partial(branch.timeline.at, step))
+                    if step <= len(branch.timeline)
+                    else None
+                )
+                sides[name] = {
+                    "branch": branch.number,
+                    "label": branch.describe()["label"],
+                    "length": len(branch.timeline),
+                    "rewards": to_json(rewards),
+                    "return": to_json(sum(rewards)),
+                    "observation": None if state is None else self._shown(root, state.observation),
+                    "reward": None if state is None else to_json(state.reward),
+                }
             reached = step < len(diff.observations)
-            return {"timeline": number, "step": step, "a": sides["a"], "b": sides["b"],
-                    "first_difference": diff.first_difference,
-                    "difference": self._shown(root, diff.observations[step]) if reached
-                    else None}
+            return {
+                "timeline": number,
+                "step": step,
+                "a": sides["a"],
+                "b": sides["b"],
+                "first_difference": diff.first_difference,
+                "difference": self._shown(root, diff.observations[step]) if reached else None,
+            }
 
     # --- branching -------------------------------------------------------------------------------
 
@@ -265,19 +330,26 @@ class Timelines:
         with self._recordings.using(number) as root:
             node = self._branch(root, branch)
             if node.how != "keys":
-                raise InspectorError(409, f"branch {branch} is {node.describe()['label']}: "
-                                          "only a key branch grows key by key")
+                raise InspectorError(
+                    409,
+                    f"branch {branch} is {node.describe()['label']}: "
+                    "only a key branch grows key by key",
+                )
             if node.timeline.ended:
-                raise InspectorError(409, f"branch {branch}'s episode ended at step "
-                                          f"{len(node.timeline)}: branch from an earlier step")
+                raise InspectorError(
+                    409,
+                    f"branch {branch}'s episode ended at step "
+                    f"{len(node.timeline)}: branch from an earlier step",
+                )
             action = self._action(root, key)
             timeline = node.timeline
             node.timeline = self._call(lambda: timeline.branch(len(timeline), [action]))
             node.actions.append(key)
             return {**self._describe(root), "branch": node.number}
 
-    def branch_policy(self, number: int, branch: int, step: int, policy: str,
-                      max_steps: int) -> dict[str, Any]:
+    def branch_policy(
+        self, number: int, branch: int, step: int, policy: str, max_steps: int
+    ) -> dict[str, Any]:
         """A new branch of ``branch`` at ``step``, its actions chosen by ``policy``.
 
         At most ``max_steps`` of them; fewer where its episode ends.
@@ -288,10 +360,13 @@ class Timelines:
         """
         if policy not in self.policies:
             if policy in self.unavailable:
-                raise InspectorError(422, f"policy {policy} is unavailable: "
-                                          f"{self.unavailable[policy]}")
-            known = ", ".join(sorted(self.policies)) or "none (rlenv replay FILE --inspect " \
-                                                        "--policy FILE.onnx gives one)"
+                raise InspectorError(
+                    422, f"policy {policy} is unavailable: {self.unavailable[policy]}"
+                )
+            known = (
+                ", ".join(sorted(self.policies))
+                or "none (rlenv replay FILE --inspect --policy FILE.onnx gives one)"
+            )
             raise InspectorError(404, f"no policy {policy!r:.40}: the policies are {known}")
         if not 1 <= max_steps <= MAX_BRANCH_STEPS:
             raise InspectorError(400, f"max_steps must be 1 to {MAX_BRANCH_STEPS}")
@@ -300,8 +375,9 @@ class Timelines:
             parent = self._branch(root, branch)
             _step(parent.timeline, step)
             try:
-                made = self._call(lambda: parent.timeline.branch(step, policy=chosen,
-                                                                 max_steps=max_steps))
+                made = self._call(
+                    lambda: parent.timeline.branch(step, policy=chosen, max_steps=max_steps)
+                )
             except InspectorError:
                 raise
             except Exception as error:  # the policy's own failure: the page says which
@@ -319,12 +395,16 @@ class Timelines:
         self._recordings.opened(root)
         branch = root.branches.get(number)
         if branch is None:
-            raise InspectorError(404, f"timeline {root.number} has no branch {number} "
-                                      f"(branches 0 to {max(root.branches)})")
+            raise InspectorError(
+                404,
+                f"timeline {root.number} has no branch {number} "
+                f"(branches 0 to {max(root.branches)})",
+            )
         return branch
 
-    def _add_branch(self, root: Root, parent: int, at: int, how: str, timeline: Timeline,
-                    actions: Sequence[str]) -> Branch:
+    def _add_branch(
+        self, root: Root, parent: int, at: int, how: str, timeline: Timeline, actions: Sequence[str]
+    ) -> Branch:
         number = max(root.branches) + 1
         root.branches[number] = Branch(number, parent, at, how, timeline, list(actions))
         return root.branches[number]
@@ -333,18 +413,28 @@ class Timelines:
         if key not in root.keys:
             if not root.keys:
                 raise InspectorError(422, f"no keys to branch with: {root.keys_error}")
-            raise InspectorError(422, f"{key!r:.20} is none of the agent's keys "
-                                      f"({', '.join(map(key_name, root.keys))})")
+            raise InspectorError(
+                422,
+                f"{key!r:.20} is none of the agent's keys ({', '.join(map(key_name, root.keys))})",
+            )
         return root.keys[key]
 
     def _describe(self, root: Root) -> dict[str, Any]:
         timeline = self._recordings.opened(root)
-        return {"timeline": root.number, "name": root.name, "origin": root.origin,
-                "target": timeline.episode.target, "length": len(timeline),
-                "ended": timeline.ended, "agents": root.agents,
-                "keys": list(root.keys), "keys_error": root.keys_error,
-                "policies": sorted(self.policies), "unavailable": dict(self.unavailable),
-                "branches": [branch.describe() for branch in root.branches.values()]}
+        return {
+            "timeline": root.number,
+            "name": root.name,
+            "origin": root.origin,
+            "target": timeline.episode.target,
+            "length": len(timeline),
+            "ended": timeline.ended,
+            "agents": root.agents,
+            "keys": list(root.keys),
+            "keys_error": root.keys_error,
+            "policies": sorted(self.policies),
+            "unavailable": dict(self.unavailable),
+            "branches": [branch.describe() for branch in root.branches.values()],
+        }
 
     def _diff(self, root: Root, a: Branch, b: Branch) -> Any:
         kept = root.diffs.get((a.number, b.number))
@@ -374,4 +464,3 @@ def _step(timeline: Timeline, step: int) -> int:
     if not 0 <= step <= len(timeline):
         raise InspectorError(400, f"no step {step}: the timeline has steps 0 to {len(timeline)}")
     return step
-

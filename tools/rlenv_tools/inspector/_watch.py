@@ -80,8 +80,9 @@ class Watcher:
         timeout: seconds to wait for an answer.
     """
 
-    def __init__(self, addresses: Sequence[str], token: str | None = None,
-                 timeout: float = 5.0) -> None:
+    def __init__(
+        self, addresses: Sequence[str], token: str | None = None, timeout: float = 5.0
+    ) -> None:
         for address in addresses:
             parse_address(address)  # refuses a malformed one now
         self._servers = [_Watched(address) for address in addresses]
@@ -95,20 +96,27 @@ class Watcher:
         """Every server: its address, environment, spaces, instances and restarts."""
         described = []
         for index, watched in enumerate(self._servers):
-            entry: dict[str, Any] = {"index": index, "address": watched.address,
-                                     "restarts": watched.restarts}
+            entry: dict[str, Any] = {
+                "index": index,
+                "address": watched.address,
+                "restarts": watched.restarts,
+            }
             try:
                 client = self._client(index)
             except InspectorError as error:
                 entry["error"] = str(error)
             else:
                 hello = client.hello
-                entry.update(environment=hello.environment, instances=hello.instances,
-                             agents=list(hello.agents), driven=list(hello.driven),
-                             action_space=_short(hello.action_space),
-                             observation_space=_short(hello.observation_space),
-                             ticks_per_second=hello.physics_ticks_per_second,
-                             protocol=".".join(map(str, hello.protocol)))
+                entry.update(
+                    environment=hello.environment,
+                    instances=hello.instances,
+                    agents=list(hello.agents),
+                    driven=list(hello.driven),
+                    action_space=_short(hello.action_space),
+                    observation_space=_short(hello.observation_space),
+                    ticks_per_second=hello.physics_ticks_per_second,
+                    protocol=".".join(map(str, hello.protocol)),
+                )
             described.append(entry)
         return described
 
@@ -121,8 +129,11 @@ class Watcher:
             unpacked = client.observation_result(reply)
         except LOST as error:
             raise InspectorError(503, str(error)) from None
-        shown = {name: _shown(unpacked[name]) for name in agents} if len(agents) > 1 else \
-            {agents[0] if agents else "agent": _shown(unpacked)}
+        shown = (
+            {name: _shown(unpacked[name]) for name in agents}
+            if len(agents) > 1
+            else {agents[0] if agents else "agent": _shown(unpacked)}
+        )
         return {"draw": to_json((reply.observation or {}).get("draw")), "observation": shown}
 
     def tree(self, server: int, instance: int) -> list[dict[str, Any]]:
@@ -136,11 +147,15 @@ class Watcher:
         agent of several has them on a server that sets one agent by its name (protocol 2.6);
         on an older one a setting would change every agent, so it has none.
         """
-        node = dict(to_json(self._ask(server, instance, {"inspect": {"node": {"path": path}}})
-                            .info["node"]))
+        node = dict(
+            to_json(self._ask(server, instance, {"inspect": {"node": {"path": path}}}).info["node"])
+        )
         hello = self._client(server).hello
-        shared = node.get("config") == "agent" and len(hello.agents) > 1 and \
-            hello.protocol < AGENT_SETTINGS_SINCE
+        shared = (
+            node.get("config") == "agent"
+            and len(hello.agents) > 1
+            and hello.protocol < AGENT_SETTINGS_SINCE
+        )
         node["settings"] = [] if shared else list(node.get("configurable", ()))
         return node
 
@@ -158,14 +173,16 @@ class Watcher:
                 settings = {node["path"].rsplit("/", 1)[-1]: settings}
             self._ask(server, instance, {"inspect": {"configure": {node["config"]: settings}}})
             return "setting"
-        self._ask(server, instance, {"inspect": {"set": {"path": path, "property": name,
-                                                        "value": value}}})
+        self._ask(
+            server, instance, {"inspect": {"set": {"path": path, "property": name, "value": value}}}
+        )
         return "episode"
 
     def stats(self, server: int, instance: int, since: int) -> dict[str, Any]:
         """The server's episode statistics (see ``inspect stats``), and this server's restarts."""
-        stats = dict(self._ask(server, instance, {"inspect": {"stats": {"since": since}}})
-                     .info["stats"])
+        stats = dict(
+            self._ask(server, instance, {"inspect": {"stats": {"since": since}}}).info["stats"]
+        )
         watched = self._servers[server]
         with watched.lock:
             if instance in watched.reconnected and stats["steps"] < watched.steps[instance]:
@@ -196,8 +213,9 @@ class Watcher:
         if refusal is not None:
             raise InspectorError(422, refusal)
         cache = self._watched(server).recent.setdefault(instance, {})
-        return fetch_episodes(lambda part: self._ask(server, instance, {"episodes": part}),
-                              hello, cache=cache)
+        return fetch_episodes(
+            lambda part: self._ask(server, instance, {"episodes": part}), hello, cache=cache
+        )
 
     def address(self, server: int) -> str:
         """The ``HOST:PORT`` of ``server`` (a controller of its own connects there).
@@ -247,8 +265,9 @@ class Watcher:
             client = self._connected(watched)
             count = client.hello.instances
             if not 0 <= instance < count:
-                raise InspectorError(404, f"server {server} has {count} instances, not "
-                                          f"{instance + 1}")
+                raise InspectorError(
+                    404, f"server {server} has {count} instances, not {instance + 1}"
+                )
             try:
                 if count == 1:
                     client.send_request(Request(0, dict(parts)))
@@ -284,8 +303,9 @@ class Watcher:
         if now - watched.lost_at < _RETRY_AFTER:
             raise InspectorError(503, f"{watched.address} is unreachable: {watched.error}")
         try:
-            watched.client = Client(*parse_address(watched.address), timeout=self._timeout,
-                                    token=self._token)
+            watched.client = Client(
+                *parse_address(watched.address), timeout=self._timeout, token=self._token
+            )
         except RemoteError as error:
             watched.lost_at, watched.error = now, f"{error.code}: {error.message}"
             raise InspectorError(503, f"{watched.address} refused: {watched.error}") from None
@@ -327,8 +347,11 @@ def _short(space: spaces.Space) -> str:
     if isinstance(space, spaces.Box):
         return f"Box{space.shape} {space.dtype}"
     if isinstance(space, spaces.Dict):
-        return "Dict(" + ", ".join(f"{key}: {_short(inner)}"
-                                   for key, inner in space.spaces.items()) + ")"
+        return (
+            "Dict("
+            + ", ".join(f"{key}: {_short(inner)}" for key, inner in space.spaces.items())
+            + ")"
+        )
     if isinstance(space, spaces.Tuple):
         return "Tuple(" + ", ".join(_short(inner) for inner in space.spaces) + ")"
     return str(space)
@@ -340,11 +363,20 @@ def _shown(observation: Any) -> dict[str, Any]:
         image = _as_image(observation)
         if image is not None:
             height, width, channels = image.shape
-            return {"image": {"width": width, "height": height, "channels": channels,
-                              "data": base64.b64encode(image.tobytes()).decode("ascii")}}
+            return {
+                "image": {
+                    "width": width,
+                    "height": height,
+                    "channels": channels,
+                    "data": base64.b64encode(image.tobytes()).decode("ascii"),
+                }
+            }
         flat = observation.ravel()
-        return {"numbers": [_number(x) for x in flat[:_MAX_NUMBERS].tolist()],
-                "shape": list(observation.shape), "dtype": observation.dtype.str}
+        return {
+            "numbers": [_number(x) for x in flat[:_MAX_NUMBERS].tolist()],
+            "shape": list(observation.shape),
+            "dtype": observation.dtype.str,
+        }
     if isinstance(observation, Mapping):
         return {"parts": {str(key): _shown(value) for key, value in observation.items()}}
     if isinstance(observation, tuple | list):

@@ -59,10 +59,12 @@ __all__ = ["InspectorServer"]
 logger = logging.getLogger(__name__)
 
 _MAX_BODY = 64 * 1024
-_STATIC = {"inspector.js": "text/javascript; charset=utf-8",
-           "timeline.js": "text/javascript; charset=utf-8",
-           "inspector.css": "text/css; charset=utf-8",
-           "index.html": "text/html; charset=utf-8"}
+_STATIC = {
+    "inspector.js": "text/javascript; charset=utf-8",
+    "timeline.js": "text/javascript; charset=utf-8",
+    "inspector.css": "text/css; charset=utf-8",
+    "index.html": "text/html; charset=utf-8",
+}
 _HEADERS = {
     "Cache-Control": "no-store",
     "X-Content-Type-Options": "nosniff",
@@ -70,8 +72,8 @@ _HEADERS = {
     "Referrer-Policy": "no-referrer",
     "Cross-Origin-Resource-Policy": "same-origin",
     "Content-Security-Policy": "default-src 'none'; script-src 'self'; style-src 'self'; "
-                               "img-src 'self' data:; connect-src 'self'; base-uri 'none'; "
-                               "form-action 'none'; frame-ancestors 'none'",
+    "img-src 'self' data:; connect-src 'self'; base-uri 'none'; "
+    "form-action 'none'; frame-ancestors 'none'",
 }
 
 
@@ -90,9 +92,14 @@ class InspectorServer(ThreadingHTTPServer):
 
     daemon_threads = True
 
-    def __init__(self, watcher: Watcher, port: int = 0, key: str | None = None,
-                 demonstrator: Demonstrator | None = None,
-                 timelines: Timelines | None = None) -> None:
+    def __init__(
+        self,
+        watcher: Watcher,
+        port: int = 0,
+        key: str | None = None,
+        demonstrator: Demonstrator | None = None,
+        timelines: Timelines | None = None,
+    ) -> None:
         super().__init__(("127.0.0.1", port), _Handler)
         self.watcher = watcher
         self.demonstrator = demonstrator
@@ -113,8 +120,9 @@ class InspectorServer(ThreadingHTTPServer):
         moment an inspector asks (the watcher does as it connects).
         """
         self.watcher.servers()
-        self._thread = threading.Thread(target=self.serve_forever, name="rlenv-inspector",
-                                        daemon=True)
+        self._thread = threading.Thread(
+            target=self.serve_forever, name="rlenv-inspector", daemon=True
+        )
         self._thread.start()
 
     def handle_error(self, request: Any, client_address: Any) -> None:
@@ -162,12 +170,15 @@ _GETS: dict[str, Callable[[Watcher, dict[str, list[str]]], Any]] = {
     "api/servers": lambda watcher, q: watcher.servers(),
     "api/frame": lambda watcher, q: watcher.frame(_number(q, "server"), _number(q, "instance")),
     "api/tree": lambda watcher, q: watcher.tree(_number(q, "server"), _number(q, "instance")),
-    "api/node": lambda watcher, q: watcher.node(_number(q, "server"), _number(q, "instance"),
-                                                _text(q, "path")),
-    "api/stats": lambda watcher, q: watcher.stats(_number(q, "server"), _number(q, "instance"),
-                                                  _number(q, "since")),
-    "api/snapshot": lambda watcher, q: watcher.snapshot(_number(q, "server"),
-                                                        _number(q, "instance")),
+    "api/node": lambda watcher, q: watcher.node(
+        _number(q, "server"), _number(q, "instance"), _text(q, "path")
+    ),
+    "api/stats": lambda watcher, q: watcher.stats(
+        _number(q, "server"), _number(q, "instance"), _number(q, "since")
+    ),
+    "api/snapshot": lambda watcher, q: watcher.snapshot(
+        _number(q, "server"), _number(q, "instance")
+    ),
 }
 
 
@@ -179,28 +190,39 @@ def _recent(watcher: Watcher, server: int, instance: int) -> list[Any]:
     return list(recent(server, instance))
 
 
-def _recent_list(inspector: InspectorServer,
-                 query: dict[str, list[str]]) -> list[dict[str, Any]]:
+def _recent_list(inspector: InspectorServer, query: dict[str, list[str]]) -> list[dict[str, Any]]:
     server, instance = _number(query, "server"), _number(query, "instance")
     episodes = _recent(inspector.watcher, server, instance)
     inspector.timelines.listed(server, instance, episodes)
-    return [{"episode": index, "id": episode_id(episode),
-             "steps": sum(1 for e in episode.snapshot.get("events", ()) if e[0] == "action"),
-             "terminated": episode.terminated, "truncated": episode.truncated,
-             "target": episode.target}
-            for index, episode in enumerate(episodes)]
+    return [
+        {
+            "episode": index,
+            "id": episode_id(episode),
+            "steps": sum(1 for e in episode.snapshot.get("events", ()) if e[0] == "action"),
+            "terminated": episode.terminated,
+            "truncated": episode.truncated,
+            "target": episode.target,
+        }
+        for index, episode in enumerate(episodes)
+    ]
 
 
 _TIMELINE_GETS: dict[str, Callable[[Timelines, dict[str, list[str]]], Any]] = {
     "api/timelines": lambda timelines, q: timelines.list(),
     "api/timeline": lambda timelines, q: timelines.describe(_number(q, "timeline")),
     "api/timeline/step": lambda timelines, q: timelines.step(
-        _number(q, "timeline"), _number(q, "branch"), _number(q, "step")),
+        _number(q, "timeline"), _number(q, "branch"), _number(q, "step")
+    ),
     "api/timeline/ticks": lambda timelines, q: timelines.ticks(
-        _number(q, "timeline"), _number(q, "branch"), _number(q, "step"), _number(q, "first", 1),
-        _number(q, "count", MAX_TICKS)),
+        _number(q, "timeline"),
+        _number(q, "branch"),
+        _number(q, "step"),
+        _number(q, "first", 1),
+        _number(q, "count", MAX_TICKS),
+    ),
     "api/timeline/compare": lambda timelines, q: timelines.compare(
-        _number(q, "timeline"), _number(q, "a"), _number(q, "b", 1), _number(q, "step")),
+        _number(q, "timeline"), _number(q, "a"), _number(q, "b", 1), _number(q, "step")
+    ),
 }
 
 
@@ -224,8 +246,8 @@ class _Handler(BaseHTTPRequestHandler):
             self.end_headers()
         elif path in ("", "index.html"):
             self._send_static("index.html")
-        elif path.startswith("static/") and path[len("static/"):] in _STATIC:
-            self._send_static(path[len("static/"):])
+        elif path.startswith("static/") and path[len("static/") :] in _STATIC:
+            self._send_static(path[len("static/") :])
         elif path in _GETS:
             self._answer(lambda: _GETS[path](self.server.watcher, query))
         elif path in _TIMELINE_GETS:
@@ -234,8 +256,12 @@ class _Handler(BaseHTTPRequestHandler):
             self._answer(lambda: _recent_list(self.server, query))
         elif path == "api/control":
             demonstrator = self.server.demonstrator
-            self._send_json(200, {"enabled": False} if demonstrator is None else
-                            {"enabled": True, **demonstrator.status()})
+            self._send_json(
+                200,
+                {"enabled": False}
+                if demonstrator is None
+                else {"enabled": True, **demonstrator.status()},
+            )
         else:
             self._send_json(404, {"error": f"no such page: {path!r:.60}"})
 
@@ -248,8 +274,9 @@ class _Handler(BaseHTTPRequestHandler):
             self._send_json(404, {"error": f"nothing to post to at {path!r:.60}"})
             return
         if self.headers.get_content_type() != "application/json":
-            self._send_json(415, {"error": "a change is a JSON body (Content-Type: "
-                                           "application/json)"})
+            self._send_json(
+                415, {"error": "a change is a JSON body (Content-Type: application/json)"}
+            )
             return
         self._answer(lambda: _POSTS[path](self))
 
@@ -260,29 +287,37 @@ class _Handler(BaseHTTPRequestHandler):
 
     def _route(self) -> tuple[str, dict[str, list[str]]] | None:
         """The path below the key and the query, or ``None`` once a refusal is sent."""
-        refusal = self.server.origins.refusal(self.headers.get("Host", ""),
-                                              self.headers.get("Origin"))
+        refusal = self.server.origins.refusal(
+            self.headers.get("Host", ""), self.headers.get("Origin")
+        )
         if refusal is not None:
             self._send_json(403, {"error": refusal})
             return None
         url = urlsplit(self.path)
         key, _, rest = url.path.lstrip("/").partition("/")
         if not hmac.compare_digest(key.encode(), self.server.key.encode()):
-            self._send_json(403, {"error": "refused: the URL lacks this inspector's key "
-                                           "(use the address it printed)"})
+            self._send_json(
+                403,
+                {
+                    "error": "refused: the URL lacks this inspector's key "
+                    "(use the address it printed)"
+                },
+            )
             return None
         return rest, parse_qs(url.query)
 
-    def _body(self, what: str, expected: set[str],
-              optional: frozenset[str] = frozenset()) -> dict[str, Any]:
+    def _body(
+        self, what: str, expected: set[str], optional: frozenset[str] = frozenset()
+    ) -> dict[str, Any]:
         """The request's JSON body: a map of ``expected``, and maybe some of ``optional``.
 
         ``server`` and ``instance``, when expected, must be integers >= 0.
         """
         length = self.headers.get("Content-Length", "")
         if not length.isdigit() or not 0 < int(length) <= _MAX_BODY:
-            raise InspectorError(400, f"{what}'s body must be 1 to {_MAX_BODY} bytes, with its "
-                                      "Content-Length")
+            raise InspectorError(
+                400, f"{what}'s body must be 1 to {_MAX_BODY} bytes, with its Content-Length"
+            )
         try:
             body = json.loads(self.rfile.read(int(length)), parse_constant=_no_constant)
         except ValueError as error:
@@ -290,8 +325,7 @@ class _Handler(BaseHTTPRequestHandler):
         if not isinstance(body, dict) or not expected <= set(body) <= expected | optional:
             also = f" (and maybe {sorted(optional)})" if optional else ""
             raise InspectorError(400, f"{what} is a map of exactly {sorted(expected)}{also}")
-        for name in ("server", "instance", "timeline", "branch", "step", "episode",
-                     "max_steps"):
+        for name in ("server", "instance", "timeline", "branch", "step", "episode", "max_steps"):
             if name in body and (type(body[name]) is not int or not 0 <= body[name] < 2**31):
                 raise InspectorError(400, f"{name} must be an integer >= 0")
         for name in ("key", "policy", "id", "agent"):
@@ -302,38 +336,41 @@ class _Handler(BaseHTTPRequestHandler):
     def _open_recent(self) -> Any:
         body = self._body("opening a recent episode", {"server", "instance", "id"})
         episodes = _recent(self.server.watcher, body["server"], body["instance"])
-        return self.server.timelines.open_recent(episodes, body["server"], body["instance"],
-                                                 body["id"])
+        return self.server.timelines.open_recent(
+            episodes, body["server"], body["instance"], body["id"]
+        )
 
     def _branch_keys(self) -> Any:
         body = self._body("a key branch", {"timeline", "branch", "step", "key"})
-        return self.server.timelines.branch_keys(body["timeline"], body["branch"], body["step"],
-                                                 body["key"])
+        return self.server.timelines.branch_keys(
+            body["timeline"], body["branch"], body["step"], body["key"]
+        )
 
     def _extend(self) -> Any:
         body = self._body("a key step", {"timeline", "branch", "key"})
         return self.server.timelines.extend(body["timeline"], body["branch"], body["key"])
 
     def _branch_policy(self) -> Any:
-        body = self._body("a policy branch", {"timeline", "branch", "step", "policy",
-                                              "max_steps"})
-        return self.server.timelines.branch_policy(body["timeline"], body["branch"],
-                                                   body["step"], body["policy"],
-                                                   body["max_steps"])
+        body = self._body("a policy branch", {"timeline", "branch", "step", "policy", "max_steps"})
+        return self.server.timelines.branch_policy(
+            body["timeline"], body["branch"], body["step"], body["policy"], body["max_steps"]
+        )
 
     def _edit(self) -> Any:
         edit = self._body("an edit", {"server", "instance", "path", "property", "value"})
         for name in ("path", "property"):
             if not isinstance(edit[name], str):
                 raise InspectorError(400, f"{name} must be a string")
-        scope = self.server.watcher.edit(edit["server"], edit["instance"], edit["path"],
-                                         edit["property"], edit["value"])
+        scope = self.server.watcher.edit(
+            edit["server"], edit["instance"], edit["path"], edit["property"], edit["value"]
+        )
         return {"scope": scope}
 
     def _demonstrator(self) -> Demonstrator:
         if self.server.demonstrator is None:
-            raise InspectorError(404, "demonstrations are off: start the inspector with "
-                                      "--record-demonstrations DIR")
+            raise InspectorError(
+                404, "demonstrations are off: start the inspector with --record-demonstrations DIR"
+            )
         return self.server.demonstrator
 
     def _take(self) -> Any:
@@ -342,8 +379,11 @@ class _Handler(BaseHTTPRequestHandler):
 
     def _keys(self) -> Any:
         held = self._body("a key change", {"held"})["held"]
-        if not isinstance(held, list) or not all(isinstance(key, str) for key in held) or \
-                len(held) > 32:
+        if (
+            not isinstance(held, list)
+            or not all(isinstance(key, str) for key in held)
+            or len(held) > 32
+        ):
             raise InspectorError(400, "held is a list of at most 32 key names")
         return self._demonstrator().hold(held)
 

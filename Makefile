@@ -21,6 +21,7 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/ruff check rlenv client tools examples tests benchmarks docs
+	$(BIN)/ruff format --check rlenv client tools examples tests benchmarks docs
 	$(BIN)/python -m pytest
 
 # Optional: servers on Ray (the ray extra) and their tests: one node, then a fake cluster.
@@ -149,8 +150,10 @@ $(LOWEST_VENV)/.installed: pyproject.toml .ci/lowest.txt
 test-lowest: $(LOWEST_VENV)/.installed
 	$(LOWEST_VENV)/bin/python -m pytest
 
+# The linter, then the formatter (ruff format, pinned in the test extra: its output is checked).
 lint: $(STAMP)
 	$(BIN)/ruff check rlenv client tools examples tests benchmarks docs
+	$(BIN)/ruff format rlenv client tools examples tests benchmarks docs
 
 # The type checker: mypy with pyproject.toml's [tool.mypy] (its files: rlenv and
 # client/rlenv_client), 0 errors and no unused "type: ignore" (the typecheck extra installs it).

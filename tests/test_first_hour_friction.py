@@ -215,13 +215,13 @@ def test_ctrl_c_as_soon_as_it_listens_exits_with_status_0(args: list[str]) -> No
     [
         (
             "examples/cartpole.py:CartPoleEnvironment",
-            "rlenv serve: 'examples/cartpole.py:CartPoleEnvironment' names a file; MODULE:CLASS names a "
-            "module as Python imports it: drop .py (examples.cartpole:CartPoleEnvironment)",
+            "rlenv serve: 'examples/cartpole.py:CartPoleEnvironment' names a file; MODULE:CLASS "
+            "names a module as Python imports it: drop .py (examples.cartpole:CartPoleEnvironment)",
         ),
         (
             "examples.cartpole:CartpoleEnvironment",
-            "rlenv serve: module 'examples.cartpole' has no attribute 'CartpoleEnvironment': did you "
-            "mean CartPoleEnvironment?",
+            "rlenv serve: module 'examples.cartpole' has no attribute 'CartpoleEnvironment': did "
+            "you mean CartPoleEnvironment?",
         ),
         (
             "examples.cartpole:Nope",

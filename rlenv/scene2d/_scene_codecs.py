@@ -196,8 +196,8 @@ class SensorCodec(Node2DCodec):
     def construct(self, node: Node, name: str, properties: Mapping[str, Any]) -> None:
         """See :meth:`Codec.construct`."""
         RaycastSensor2D.__init__(
-            node,
-            name,  # type: ignore[arg-type]
+            node,  # type: ignore[arg-type]
+            name,
             **{key: properties[key] for key in self.settings},
             position=properties["position"],
             rotation=properties["rotation"],
@@ -267,9 +267,9 @@ class BodyCodec(Node2DCodec):
             else pymunk.Body(body_type=_BODY_TYPES[kind])
         )
         PhysicsBody.__init__(
-            node,
+            node,  # type: ignore[arg-type]
             body,
-            position=properties["position"],  # type: ignore[arg-type]
+            position=properties["position"],
             rotation=properties["rotation"],
             name=name,
         )
@@ -310,8 +310,8 @@ class WorldCodec(Codec):
     def construct(self, node: Node, name: str, properties: Mapping[str, Any]) -> None:
         """See :meth:`Codec.construct`."""
         PhysicsWorld.__init__(
-            node,
-            properties["gravity"],  # type: ignore[arg-type]
+            node,  # type: ignore[arg-type]
+            properties["gravity"],
             iterations=properties["iterations"],
             damping=properties["damping"],
             name=name,
@@ -357,8 +357,8 @@ class ShapeCodec(Codec):
     def construct(self, node: Node, name: str, properties: Mapping[str, Any]) -> None:
         """See :meth:`Codec.construct`."""
         CollisionShape.__init__(
-            node,
-            copy_shape(properties["shape"]),  # type: ignore[arg-type]
+            node,  # type: ignore[arg-type]
+            copy_shape(properties["shape"]),
             friction=properties["friction"],
             elasticity=properties["elasticity"],
             sensor=properties["sensor"],
@@ -409,9 +409,9 @@ class JointCodec(Codec):
     def construct(self, node: Node, name: str, properties: Mapping[str, Any]) -> None:
         """See :meth:`Codec.construct`."""
         Joint.__init__(
-            node,
+            node,  # type: ignore[arg-type]
             properties["a"],
-            properties["b"],  # type: ignore[arg-type]
+            properties["b"],
             properties["constraint"],
             collide_bodies=properties["collide_bodies"],
             max_force=properties["max_force"],

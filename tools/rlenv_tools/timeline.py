@@ -441,8 +441,8 @@ class Timeline:
         length = max_steps if actions is None else len(actions)
         checkpoints.every = max(
             checkpoints.every,  # half the room left, at most
-            -(-length // (self._processes.room() // 2 or 1)),
-        )  # type: ignore[operator]
+            -(-length // (self._processes.room() // 2 or 1)),  # type: ignore[operator]
+        )
         records = self._records[:step]
         terminated, truncated = result[2], result[3]
         if step == len(self) and self.ended:
@@ -459,8 +459,8 @@ class Timeline:
             else:
                 result = processes.play(
                     policy,
-                    max_steps,
-                    repeat_action,  # type: ignore[arg-type]
+                    max_steps,  # type: ignore[arg-type]
+                    repeat_action,
                     result,
                     checkpoints,
                     records,

@@ -108,6 +108,7 @@ class RLEnvironment(RLNode):
 
     def __init__(self, name: str | None = None, *, repeat_action: int = 4) -> None:
         super().__init__(name)
+        self._agent_watch: AgentWatch | None = None  # the server's (rlenv.serving)
         self.agent: RLAgent | None = None
         self.agents: list[RLAgent] = []
         self.world: RLEnvWorld | None = None
@@ -116,7 +117,6 @@ class RLEnvironment(RLNode):
         self.communication = Communication()
         self.repeat_action = repeat_action
         self.__np_random: np.random.Generator | None = None
-        self._agent_watch: AgentWatch | None = None  # the server's (rlenv.serving)
 
     @property
     def np_random(self) -> np.random.Generator:
@@ -254,7 +254,7 @@ class RLEnvironment(RLNode):
         ``action`` is checked already: one agent's action, or with several agents a map from
         agent name to action for the agents still in the episode.
         """
-        give_action(self.agents, action)
+        give_action(self.agents, action, self.multi_agent)
         tree = self.get_tree()
         timer = self.physics_frames_timer
         timer.start(frames or self.repeat_action)
@@ -297,9 +297,13 @@ class AgentWatch(Protocol):
         """``agent`` is about to leave the tree: its last transition is taken now."""
 
 
-def give_action(agents: list[RLAgent], action: Any) -> None:
-    """Hand a checked action to the agents: the one agent's, or each its own from the map."""
-    if len(agents) == 1:
+def give_action(agents: list[RLAgent], action: Any, several: bool = False) -> None:
+    """Hand a checked action to the agents: the one agent's, or each its own from the map.
+
+    The action is a map by agent name when there are ``several`` agents (or possible agents,
+    while agents come and go), or more than one agent.
+    """
+    if len(agents) == 1 and not several:
         agents[0].set_action(action)
         return
     for agent in agents:

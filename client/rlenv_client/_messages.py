@@ -19,6 +19,7 @@ import numpy as np
 from gymnasium.vector.utils import batch_space
 
 from rlenv.protocol import Hello, Request, Response
+from rlenv.protocol._agent_maps import agent_codec
 from rlenv.protocol.spaces import Codec, codec_for
 
 __all__ = ["Requests", "answer_info", "reset_part"]
@@ -57,7 +58,7 @@ class Requests:
     def __init__(self, hello: Hello, observation: Mapping[str, Any]) -> None:
         self._hello = hello
         self._observation = observation
-        self._action: Codec = codec_for(hello.action_space)
+        self._action: Codec = agent_codec(hello.action_space, hello.possible_agents is not None)
         self._columns: tuple[Codec, Codec] | None = None  # (actions, observations) of K
 
     def step(self, action: Any, repeat_action: int | None, request_id: int) -> Request:

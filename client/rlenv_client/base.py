@@ -35,8 +35,9 @@ from rlenv.protocol import (
     Response,
     StepsResponse,
 )
+from rlenv.protocol._agent_maps import agent_codec
 from rlenv.protocol.errors import ConnectionLost, RemoteError
-from rlenv.protocol.spaces import Codec, codec_for
+from rlenv.protocol.spaces import Codec
 from rlenv_client._messages import Requests, answer_info
 from rlenv_client.inspection import Inspection, config_request
 
@@ -78,7 +79,9 @@ class BaseClient(Inspection, ABC):
         self.action_space: spaces.Space = hello.action_space
         self.observation_space: spaces.Space = hello.observation_space
         self._requests = Requests(hello, self._observation_request)
-        self._observations: Codec = codec_for(hello.observation_space)
+        self._observations: Codec = agent_codec(
+            hello.observation_space, hello.possible_agents is not None
+        )
 
     # --- the API ----------------------------------------------------------------------------
 

@@ -12,15 +12,16 @@ acts), and may not act for them.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from typing import Any
 
 from gymnasium import spaces
 
-from rlenv.agent import RLAgent
 from rlenv.protocol.errors import ErrorCode, RequestError
 from rlenv.protocol.messages import MAX_REPEAT_ACTION
 from rlenv.protocol.spaces import SpaceMismatch, compile_check
+from rlenv.serving._agents_in_play import AgentsInPlay
+from rlenv.serving._roster import Roster
 
 __all__ = ["MAX_REPEAT_ACTION", "ActionCheck", "check_repeat_action"]
 
@@ -52,14 +53,30 @@ class ActionCheck:
     """
 
     def __init__(
-        self, agents: Sequence[RLAgent], space: spaces.Space, driven: frozenset[str] = frozenset()
+        self,
+        agents: Sequence[Any],
+        space: spaces.Space,
+        driven: frozenset[str] = frozenset(),
+        due: Callable[[], Collection[str]] | None = None,
     ) -> None:
         self._every = list(agents)
         self._agents = [agent for agent in agents if agent.name not in driven]
         self._driven = driven
-        self._several = len(agents) > 1
+        self._due = due
+        self._several = due is not None or len(agents) > 1
         self._one = compile_check(space, "action")
         self._each = {a.name: compile_check(a.action_space, f"action[{a.name!r}]") for a in agents}
+
+    @classmethod
+    def of(cls, roster: Roster, space: spaces.Space, driven: frozenset[str]) -> ActionCheck:
+        """The check of a roster's agents.
+
+        While agents come and go (:class:`AgentsInPlay`), of every possible agent: an action
+        is needed from those due.
+        """
+        in_play = roster if isinstance(roster, AgentsInPlay) else None
+        due = None if in_play is None else (lambda: in_play.asked)
+        return cls(roster.actors(), space, driven, due)
 
     def __call__(
         self,
@@ -109,7 +126,18 @@ class ActionCheck:
                         "other"
                     )
                 agents = [a for a in agents if a.name not in heuristic]
-            live = [a.name for a in agents if fresh or not (a.terminated or a.truncated)]
+            if self._due is not None:
+                if fresh:
+                    raise RequestError(
+                        ErrorCode.BAD_REQUEST,
+                        f"{where}an action in the request that resets: agents come and go "
+                        "here, and which ones start is known only once the reset ran; send "
+                        "the action in the next request",
+                    )
+                due = self._due()
+                live = [a.name for a in agents if a.name in due]
+            else:
+                live = [a.name for a in agents if fresh or not (a.terminated or a.truncated)]
             missing = sorted(set(live) - action.keys())
             if missing:
                 raise SpaceMismatch(f"no action for agent {missing[0]!r}")

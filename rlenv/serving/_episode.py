@@ -141,6 +141,7 @@ class EpisodeRun:
         self.state = Episode.RUNNING
         try:
             environment._reset(options)
+            self.roster.started()
         except RequestError as error:  # refused half way (level data, say): nothing is sure
             self._broken(error)
             self.abandon(f"the reset was refused ({error})")
@@ -164,10 +165,20 @@ class EpisodeRun:
         if self.state is Episode.ENDED:
             raise RequestError(ErrorCode.RESET_REQUIRED, "the episode has ended; reset first")
 
-    def act(self, action: Any, frames: int, replaying: bool) -> None:
+    def act(
+        self,
+        action: Any,
+        frames: int,
+        replaying: bool,
+        decide: Callable[[], Any] | None = None,
+    ) -> None:
         """Run a checked (joint) action for ``frames`` ticks (lockstep), or apply it now.
 
-        An action ``replaying`` a log (a restore) leaves its answer no reward nor ticks.
+        While agents come and go, the roster says how many ticks the step runs
+        (:meth:`Roster.ticks_for`), and when only agents the server drives are due after them,
+        ``decide`` gives their action and the step goes on (each part is logged as an action
+        of its own). An action ``replaying`` a log (a restore) runs the ticks logged, and
+        leaves its answer no reward nor ticks.
         """
         tree = self.tree
         if tree.real_time:
@@ -175,8 +186,17 @@ class EpisodeRun:
             return
         self._ticks = 0
         self.state = _ACTING
-        self.log.acted(action, frames)
-        self.environment._step(action, frames)
+        roster = self.roster
+        while True:
+            ticks = frames if replaying else roster.ticks_for(frames)
+            self.log.acted(action, ticks)
+            self.environment._step(action, ticks)
+            roster.boundary()
+            if replaying or decide is None or roster.ended():
+                break
+            action = decide()
+            if action is None:
+                break
         tree.paused = True
         self.state = Episode.ENDED if self.roster.ended() else _RUNNING
         if replaying:  # the restore's answer reports none of the replay's ticks
@@ -194,7 +214,7 @@ class EpisodeRun:
         self.late_actions += self.late
         self._last_action_at = tree.physics_frames
         if not self._ended_unseen:
-            give_action(self.roster.agents, action)
+            give_action(self.roster.agents, action, self.roster.several)
 
     def _end_tick(self, delta: float) -> None:
         """The end of a tick (after pymunk stepped): rewards, flags, the end of the episode."""

@@ -31,6 +31,7 @@ from rlenv.protocol.errors import ErrorCode, RequestError
 from rlenv.protocol.spaces import compile_check
 from rlenv.scene2d.packed_scene import MAX_DEPTH, MAX_NODES
 from rlenv.serving._actions import MAX_REPEAT_ACTION
+from rlenv.serving._agents_in_play import AgentsInPlay
 from rlenv.serving._claims import Requester
 from rlenv.serving._columns import Columns
 from rlenv.serving._endpoint import Endpoint, Peer
@@ -156,7 +157,7 @@ class Host:
             environment=first.environment.name,
             action_space=first.action_space,
             observation_space=first.observation_space,
-            agents=tuple(agent.name for agent in first.agents),
+            agents=tuple(agent.name for agent in first.roster.actors()),
             physics_ticks_per_second=first.tree.physics_ticks_per_second,
             repeat_action=first.environment.repeat_action,
             render_modes=("rgb_array",),
@@ -164,6 +165,9 @@ class Host:
             instances=count,
             limits=dict(REQUEST_LIMITS),
             target=target,
+            possible_agents=(
+                first.roster.hello_classes() if isinstance(first.roster, AgentsInPlay) else None
+            ),
         )
         self.steps_action_space = batch_space(first.action_space, count)
         self.steps_action = compile_check(self.steps_action_space, "steps.action")
@@ -185,12 +189,12 @@ class Host:
         """Let ``policies`` drive their agents in every instance; a driver when they drive all."""
         if real_time:
             raise ValueError("--policy drives agents in lockstep: leave out --real-time")
-        driven = [DrivenAgents(policies, instance.agents) for instance in self.instances]
+        driven = [DrivenAgents(policies, instance.roster.actors()) for instance in self.instances]
         for instance, agents in zip(self.instances, driven, strict=True):
             instance.drive(agents)
         first = self.instances[0]
         self.hello.driven = tuple(
-            agent.name for agent in first.agents if agent.name in driven[0].names
+            agent.name for agent in first.roster.actors() if agent.name in driven[0].names
         )
         if driven[0].every_agent:
             if len(self.instances) > 1:

@@ -32,6 +32,7 @@ from rlenv.node import check_initialised
 from rlenv.protocol import ErrorReply, Response
 from rlenv.protocol.errors import ErrorCode, RequestError
 from rlenv.serving._actions import ActionCheck
+from rlenv.serving._agents_in_play import roster_of
 from rlenv.serving._claims import Claims, Requester
 from rlenv.serving._episode import Episode, EpisodeRun
 from rlenv.serving._observing import Observer, check_text_keys
@@ -191,7 +192,9 @@ class Instance:
             keep_events,
             eager=keep_episodes is not None,
         )
-        self.stats = EpisodeStats([a.name for a in self.agents] if self.multi_agent else None)
+        self.stats = EpisodeStats(
+            [a.name for a in self.roster.actors()] if self.multi_agent else None
+        )
         episode = self.episode = EpisodeRun(
             self.environment,
             self.tree,
@@ -224,7 +227,7 @@ class Instance:
         tree = SceneTree(environment.physics_ticks_per_second, clock=self._clock)
         tree.root.add_child(environment)
         tree.paused = True
-        roster = Roster.of(environment)
+        roster = roster_of(environment)
         action_space = roster.space("action_space")
         observation_space = roster.space("observation_space")
         if replacing and (action_space, observation_space) != (
@@ -239,10 +242,10 @@ class Instance:
         self.environment, self.tree, self.roster, self.agents = environment, tree, roster, agents
         self.multi_agent = roster.several
         self.action_space, self.observation_space = action_space, observation_space
-        self.checked_action = ActionCheck(
-            agents, action_space, self.driven.names if self.driven else frozenset()
+        self.checked_action = ActionCheck.of(
+            roster, action_space, self.driven.names if self.driven else frozenset()
         )
-        self.observe = Observer(environment, agents).observe
+        self.observe = Observer(environment, roster).observe
 
     # --- one way in -------------------------------------------------------------------------
 
@@ -313,7 +316,11 @@ class Instance:
             raise RuntimeError("an answer can only be sent while a request is served")
         if answer.reply is not None:
             raise RuntimeError("a request gets one answer: _send_response ran twice")
-        observation = None if observation_request is None else self.observe(observation_request)
+        observation = (
+            None
+            if observation_request is None
+            else self.observe(observation_request, answer.reports)
+        )
         answer.reply = self._response(answer, observation)
 
     def after_send(self) -> None:
@@ -431,7 +438,7 @@ class Instance:
     def drive(self, driven: DrivenAgents) -> None:
         """Let policies act for the ``driven`` agents within every action (several agents)."""
         self.players.driven = driven
-        self.checked_action = ActionCheck(self.agents, self.action_space, driven.names)
+        self.checked_action = ActionCheck.of(self.roster, self.action_space, driven.names)
 
     def act(self, action: Any, frames: int, heuristic: frozenset[str] = frozenset()) -> None:
         """Run a checked action for ``frames`` ticks (lockstep), or apply it now (real time).
@@ -442,13 +449,13 @@ class Instance:
         """
         if self.multi_agent and not self.replaying:
             try:
-                action = self.players.complete(action, heuristic, self.agents)
+                action = self.players.complete(action, heuristic, self.roster)
             except PolicyError as error:  # a failed episode; the environment is intact
                 self.abandon_episode(f"the episode failed: {error}")
                 raise RequestError(
                     ErrorCode.ENVIRONMENT_ERROR, f"{error}; reset required"
                 ) from None
-        self.episode.act(action, frames, self.replaying)
+        self.episode.act(action, frames, self.replaying, lambda: self.players.decide(self.roster))
 
     # --- answers ----------------------------------------------------------------------------
 

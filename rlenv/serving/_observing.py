@@ -7,13 +7,15 @@ checked to be data a client can read (every map key a str).
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
 from rlenv.agent import RLAgent
 from rlenv.environment import RLEnvironment
 from rlenv.protocol.codec import find_non_text_key
 from rlenv.protocol.spaces import Codec, SpaceMismatch, codec_for, find_non_finite
+from rlenv.serving._agents_in_play import AgentsInPlay
+from rlenv.serving._roster import Roster
 
 __all__ = ["Observer", "check_text_keys", "non_finite_observation", "packed_observation"]
 
@@ -26,13 +28,28 @@ class Observer:
         agents: its agents; with several, agent observations are keyed by agent name.
     """
 
-    def __init__(self, environment: RLEnvironment, agents: Sequence[RLAgent]) -> None:
+    def __init__(self, environment: RLEnvironment, roster: Roster) -> None:
         self.environment = environment
+        agents = roster.agents
         self._agents = [(agent, codec_for(agent.observation_space)) for agent in agents]
-        self._several = len(agents) > 1
+        self._several = roster.several
+        self._in_play = roster if isinstance(roster, AgentsInPlay) else None
+        if self._in_play is not None:
+            codecs = {
+                name: codec_for(one.observation_space)
+                for name, one in self._in_play.possible.items()
+            }
+            self._codecs = codecs
+            self._asked: Any = {}
+            self._in_play._observe = lambda agent: packed_observation(
+                agent, codecs[agent.name], self._asked
+            )
 
-    def observe(self, request: Mapping[str, Any]) -> dict[str, Any]:
+    def observe(self, request: Mapping[str, Any], reports: bool = True) -> dict[str, Any]:
         """The parts of the state an ``observation`` part asks for.
+
+        While agents come and go, the agents the answer holds: those due (every agent in play
+        for an answer that does not ``reports``), and those that left since the last answer.
 
         Raises:
             ValueError: an agent's observation does not fit its space or is not finite, or data
@@ -43,7 +60,17 @@ class Observer:
         environment = self.environment
         if "agent" in request:
             asked = request["agent"]
-            if self._several:
+            in_play = self._in_play
+            if in_play is not None:
+                self._asked = asked
+                codecs = self._codecs
+                observation["agent"] = {
+                    agent.name: packed_observation(agent, codecs[agent.name], asked)
+                    for agent in in_play.answering(reports)
+                }
+                for name, gone in in_play.departures(reports).items():
+                    observation["agent"][name] = gone.observation
+            elif self._several:
                 observation["agent"] = {
                     agent.name: packed_observation(agent, codec, asked)
                     for agent, codec in self._agents

@@ -16,7 +16,9 @@ from collections.abc import Sequence
 from typing import Any
 
 from rlenv.agent import RLAgent
+from rlenv.serving._agents_in_play import AgentsInPlay
 from rlenv.serving._claims import Claims
+from rlenv.serving._roster import Roster
 from rlenv.serving.policy_driver import HEURISTIC, DrivenAgents
 
 __all__ = ["Players"]
@@ -49,21 +51,45 @@ class Players:
         if self.claims is not None and not self.claims.release(owner):
             self.claims = None
 
-    def complete(self, action: Any, heuristic: frozenset[str], agents: Sequence[RLAgent]) -> Any:
+    def complete(self, action: Any, heuristic: frozenset[str], roster: Roster) -> Any:
         """The joint ``action`` completed by the others who act within it.
 
         The driven agents' actions go in, then the claimed agents' held actions, then those of
-        the agents named in ``heuristic`` (by their heuristic).
+        the agents named in ``heuristic`` (by their heuristic): of the agents that decide now
+        (every agent, unless agents come and go).
 
         Raises:
             PolicyError: a policy or a heuristic gave no action of its agent's space.
         """
+        agents = roster.deciding()
         if self.driven is not None:
             action = self.driven.complete(action, agents)
         if self.claims is not None:
             action, heuristic = self.claims.complete(action, heuristic)
         if heuristic:
-            action = {**action, **self._heuristic(agents).actions(agents, heuristic)}
+            acting = self._heuristic(roster.actors())
+            action = {**action, **acting.actions(agents, heuristic)}
+        return action
+
+    def decide(self, roster: Roster) -> Any:
+        """After a step's ticks: the driven agents' action if only they are due, else ``None``.
+
+        The step then goes on (agents that come and go and decide at their own pace): those
+        agents decided in the server.
+
+        Raises:
+            PolicyError: a policy or a heuristic gave no action of its agent's space.
+        """
+        driven = self.driven
+        if driven is None or driven.every_agent or not isinstance(roster, AgentsInPlay):
+            return None
+        due = roster.due_now()
+        if not due:
+            return None
+        if any(agent.name not in driven.names for agent in due):
+            return None
+        action = driven.actions(due)
+        roster.decided(action)
         return action
 
     def claimed(self, agents: Sequence[RLAgent]) -> list[str]:
@@ -71,7 +97,7 @@ class Players:
         owners = self.claims.owners if self.claims is not None else {}
         return [agent.name for agent in agents if agent.name in owners]
 
-    def _heuristic(self, agents: Sequence[RLAgent]) -> DrivenAgents:
+    def _heuristic(self, agents: Sequence[Any]) -> DrivenAgents:
         """Every agent that has a heuristic, driven by it (for a request's ``heuristic``)."""
         if self._heuristics is None:
             self._heuristics = DrivenAgents(

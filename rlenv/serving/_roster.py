@@ -71,11 +71,32 @@ class Roster:
             return getattr(agents[0], which)
         return spaces.Dict({agent.name: getattr(agent, which) for agent in agents})
 
+    def actors(self) -> list[Any]:
+        """Every agent that may act: each with its ``name`` and ``action_space``."""
+        return self.agents
+
+    def deciding(self) -> list[RLAgent]:
+        """The agents that decide at this answer: every agent."""
+        return self.agents
+
     def begin(self) -> None:
         """A new episode: no agent has earned anything or ended."""
         for agent in self.agents:
             agent.reward = 0.0
             agent.terminated = agent.truncated = False
+
+    def started(self) -> None:
+        """The reset's hooks ran (the agents that come and go start now; these are fixed)."""
+
+    def ticks_for(self, repeat_action: int) -> int:
+        """The ticks a step runs: ``repeat_action`` (every agent decides at every answer)."""
+        return repeat_action
+
+    def boundary(self) -> None:
+        """A step's ticks ran (the agents that decide at every answer are due now)."""
+
+    def decided(self, names: Any) -> None:
+        """The agents ``names`` decided in the server (every agent decides at every answer)."""
 
     def after_tick(self, delta: float) -> None:
         """The end of a tick (after pymunk stepped): each agent's ``_after_physics_tick``."""

@@ -10,6 +10,7 @@ later (the last :data:`KEPT`), the totals, and the episode under way.
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Mapping
 from itertools import islice
 from typing import Any
 
@@ -68,11 +69,12 @@ class EpisodeStats:
         self._ticks += ticks
         self._length += acted
 
-    def reported_agents(self, rewards: dict[str, float], ticks: int, acted: bool) -> None:
+    def reported_agents(self, rewards: Mapping[str, float | None], ticks: int, acted: bool) -> None:
         """As :meth:`reported`, with several agents' rewards."""
         returns = self._returns
         for name, reward in rewards.items():
-            returns[name] += reward
+            if reward is not None:  # None: an agent's first transition (it just joined)
+                returns[name] += reward
         self._ticks += ticks
         self._length += acted
 

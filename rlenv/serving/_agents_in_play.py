@@ -107,12 +107,10 @@ class AgentsInPlay(Roster):
     __slots__ = (
         "_first_tick",
         "_observe",
-        "_open",
         "asked",
         "departed",
         "due",
         "ends",
-        "environment",
         "new",
         "possible",
         "tick",
@@ -122,21 +120,19 @@ class AgentsInPlay(Roster):
     def __init__(
         self, environment: RLEnvironment, observe: Callable[[RLAgent], Any] | None = None
     ) -> None:
-        super().__init__(environment.agents)
+        super().__init__(environment)
+        self.agents = environment.agents  # the same list: rlenv keeps it as agents come and go
         self.several = True
-        self.environment = environment
         self.possible = _possible_agents(environment)
         self._observe = observe or (lambda agent: agent.get_data({}))
         self.tick = 0
         self.used: set[str] = set()
         self.departed: dict[str, Departure] = {}
         self.due: set[str] = set()  # decisions come due since the last answer
-        self.asked: set[str] = set()  # the agents the last answer asked to act
+        self.asked: set[str] = set()  # the agents answers asked to act, until an action
         self.new: set[str] = set()  # joined since the last answer: their first has no reward
         self.ends: list[tuple[bool, bool]] = []  # how each agent that left this episode left
-        self._open = False
         self._first_tick = False
-        environment._agent_watch = self
 
     def space(self, which: str) -> spaces.Space:
         """A ``Dict`` of every possible agent's ``which`` space, keyed by name."""
@@ -183,10 +179,6 @@ class AgentsInPlay(Roster):
         self.asked = set()
         self._open = True
         self._first_tick = True
-
-    def close(self) -> None:
-        """No episode runs (after an error): the tree may change freely."""
-        self._open = False
 
     def _in_tree(self) -> list[RLAgent]:
         return [
@@ -235,7 +227,9 @@ class AgentsInPlay(Roster):
         """The agents in play an answer observes: those due (every one for an observer)."""
         if not reports:
             return list(self.agents)
-        return [agent for agent in self.agents if agent.name in self.due]
+        return [
+            agent for agent in self.agents if agent.name in self.due or agent.name in self.asked
+        ]
 
     def departures(self, reports: bool) -> dict[str, Departure]:
         """The agents that left since the last answer (none in an observer's answer)."""
@@ -262,6 +256,10 @@ class AgentsInPlay(Roster):
             self.due, self.departed, self.new = set(), {}, set()
         total = sum(o["reward"] for o in outcomes.values() if o["reward"] is not None)
         return total, terminated, truncated, outcomes
+
+    def acted(self) -> None:
+        """An action applies: the agents it was asked of decided."""
+        self.asked = set()
 
     # --- decisions --------------------------------------------------------------------------
 

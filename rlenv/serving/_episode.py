@@ -187,6 +187,7 @@ class EpisodeRun:
         self._ticks = 0
         self.state = _ACTING
         roster = self.roster
+        roster.acted()
         while True:
             ticks = frames if replaying else roster.ticks_for(frames)
             self.log.acted(action, ticks)
@@ -301,6 +302,7 @@ class EpisodeRun:
         self.stats.end("error")
         self._ticks = 0  # the failed request's ticks and rewards are no one's
         self.roster.clear_rewards()
+        self.roster.close()
 
     def refuse_without_episode(self) -> None:
         """Refuse what needs an episode, saying why there is none.

@@ -33,11 +33,14 @@ class Roster:
         several: whether there are several (their spaces and outcomes are keyed by name).
     """
 
-    __slots__ = ("agents", "several")
+    __slots__ = ("_open", "agents", "environment", "several")
 
-    def __init__(self, agents: list[RLAgent]) -> None:
-        self.agents = agents
-        self.several = len(agents) > 1
+    def __init__(self, environment: RLEnvironment) -> None:
+        self.environment = environment
+        self.agents = list(environment.agents)
+        self.several = len(self.agents) > 1
+        self._open = False  # an episode runs: the tree may not change its agents
+        environment._agent_watch = self
 
     @classmethod
     def of(cls, environment: RLEnvironment) -> Roster:
@@ -62,7 +65,7 @@ class Roster:
             for attribute in ("action_space", "observation_space"):
                 if not isinstance(getattr(agent, attribute, None), spaces.Space):
                     raise RuntimeError(f"{agent!r} must set {attribute} to a gymnasium space")
-        return cls(list(environment.agents))
+        return cls(environment)
 
     def space(self, which: str) -> spaces.Space:
         """The agents' ``which`` space: the agent's own, or a ``Dict`` keyed by agent name."""
@@ -80,13 +83,44 @@ class Roster:
         return self.agents
 
     def begin(self) -> None:
-        """A new episode: no agent has earned anything or ended."""
+        """A new episode: no agent has earned anything or ended; the reset may change the tree."""
+        self._open = False
         for agent in self.agents:
             agent.reward = 0.0
             agent.terminated = agent.truncated = False
 
     def started(self) -> None:
-        """The reset's hooks ran (the agents that come and go start now; these are fixed)."""
+        """The reset's hooks ran: until the next reset, the tree may not change its agents."""
+        self._open = True
+
+    def close(self) -> None:
+        """No episode runs (after an error): the tree may change freely."""
+        self._open = False
+
+    # --- the tree's changes (rlenv.environment.AgentWatch): refused in an episode ----------
+
+    def joining(self, agent: RLAgent) -> None:
+        """Refuse an agent added during an episode: this environment's agents are fixed."""
+        if self._open:
+            self._refuse(f"add agent {agent.name!r} to", "join")
+
+    def joined(self, agent: RLAgent) -> None:
+        """Nothing: an agent joins only environments that declare who may."""
+
+    def leaving(self, agent: RLAgent) -> None:
+        """Refuse an agent of this episode's removed during it: its agents are fixed."""
+        if self._open and agent in self.agents:
+            self._refuse(f"remove agent {agent.name!r} from", "leave")
+
+    def _refuse(self, what: str, verb: str) -> None:
+        environment = self.environment
+        raise ValueError(
+            f"cannot {what} {environment.name} during an episode: "
+            f"{type(environment).__name__} declares no possible_agents (declare "
+            "RLEnvironment.possible_agents, a map from each name that may appear to its "
+            f"RLAgent class, to let agents {verb}; or end an agent's episode with "
+            "set_terminated())"
+        )
 
     def ticks_for(self, repeat_action: int) -> int:
         """The ticks a step runs: ``repeat_action`` (every agent decides at every answer)."""
@@ -94,6 +128,9 @@ class Roster:
 
     def boundary(self) -> None:
         """A step's ticks ran (the agents that decide at every answer are due now)."""
+
+    def acted(self) -> None:
+        """An action applies (every agent decides at every answer: nothing to keep)."""
 
     def decided(self, names: Any) -> None:
         """The agents ``names`` decided in the server (every agent decides at every answer)."""

@@ -60,6 +60,7 @@ PLINKO: Final = "examples.plinko:PlinkoEnvironment"
 SPACES: Final = "protocol_vectors:SpacesEnvironment"
 CHASE: Final = "per_agent_envs:ChaseEnvironment"
 TAG: Final = "examples.tag:TagEnvironment"
+COME_AND_GO: Final = "come_and_go_envs:ComeAndGoEnvironment"
 VARIES: Final = "<varies>"
 """What a path listed in an exchange's ``varies`` is replaced with before comparing."""
 
@@ -585,6 +586,39 @@ def _agent_settings(recording: Recording) -> None:
         {"id": 4, "config": {"agent": {"Runner3": {"max_force": 1.0}}}},
         "a key that is neither a setting nor an agent",
         "invalid_config naming the settings, the agents and their classes",
+    )
+
+
+@scenario(
+    "come_and_go.json",
+    "Agents that come and go (protocol 2.6): a join, a departure, the end when none is left",
+    COME_AND_GO,
+)
+def _come_and_go(recording: Recording) -> None:
+    link = recording.connect()
+    link.hello("possible_agents: A, B, C, D (Walker); agents lists the same names")
+    link.request({"id": 1, "reset": {"seed": 0}, "observation": AGENT}, "A and B start")
+    every = {"A": 2, "B": 2}
+    link.request({"id": 2, "action": every, "observation": AGENT}, "ticks 1 to 4")
+    link.request(
+        {"id": 3, "action": every, "observation": AGENT},
+        "ticks 5 to 8",
+        "C joined at tick 6: in the answer, its reward nil",
+    )
+    link.request(
+        {"id": 4, "action": {**every, "C": 2}, "observation": AGENT},
+        "ticks 9 to 12",
+        "B left at tick 10: its last observation, reward and terminated, once",
+    )
+    link.request(
+        {"id": 5, "action": {"A": 2, "B": 2, "C": 0}, "observation": AGENT},
+        "an entry for B, who left: ignored",
+        "A and C",
+    )
+    link.request(
+        {"id": 6, "action": {"A": 2}, "observation": AGENT},
+        "no entry for C, who is due",
+        "invalid_action naming C",
     )
 
 

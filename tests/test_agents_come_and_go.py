@@ -12,6 +12,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from conftest import Serve
 
@@ -239,3 +240,29 @@ def test_an_environment_without_declaration_nor_periods_answers_every_agent_as_e
         observation, *_ = client.step(client.action_space.sample())
         assert sorted(observation) == sorted(client.hello.agents)
     client.close()
+
+
+def test_steps_columns_keep_a_slot_per_possible_agent_with_due_flags(serve: Serve) -> None:
+    with Client(serve(COME_AND_GO, args=["--instances", "2"]).address) as client:
+        every = {name: np.full(2, 2, np.int64) for name in "ABCD"}  # whole columns
+        client.send_steps(every, reset=np.array([True, True]))
+        start = client.receive_steps()
+        assert {name: flags.tolist() for name, flags in start.due.items()} == {
+            "A": [True, True], "B": [True, True], "C": [False, False], "D": [False, False]
+        }  # fmt: skip
+        assert start.observation["C"].tolist() == [[0.0, 0.0], [0.0, 0.0]]  # zeros: absent
+        client.send_steps(every)
+        client.receive_steps()
+        client.send_steps(every)  # C joins at tick 6 in both instances
+        joined = client.receive_steps()
+        assert joined.due["C"].tolist() == [True, True]
+        assert joined.info[0]["agents"]["C"]["reward"] is None
+        assert joined.observation["C"].tolist() == [[0.0, 8.0], [0.0, 8.0]]
+        client.send_steps(every)  # B freed at tick 10: its last row, then never again
+        left = client.receive_steps()
+        assert left.due["B"].tolist() == [True, True]
+        assert left.info[1]["agents"]["B"]["terminated"]
+        client.send_steps(every)
+        after = client.receive_steps()
+        assert after.due["B"].tolist() == [False, False]
+        assert after.observation["B"].tolist() == [[0.0, 0.0], [0.0, 0.0]]

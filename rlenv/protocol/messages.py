@@ -401,7 +401,9 @@ class StepsResponse:
     holds one map per instance (``agents`` in it for several agents). ``errors`` is ``None``
     when every instance succeeded, else one entry per instance: ``None`` or the
     :class:`ErrorReply` of an instance that failed (its row of the other columns is
-    meaningless).
+    meaningless). ``due`` (protocol 2.6), while agents come and go: for each possible agent, K
+    bools, whether it is in that row's answer (the ``observation`` column holds zeros where it
+    is not); ``None`` otherwise.
     """
 
     id: int
@@ -412,6 +414,7 @@ class StepsResponse:
     frames: np.ndarray
     info: tuple[dict[str, Any], ...]
     errors: tuple[ErrorReply | None, ...] | None = None
+    due: dict[str, np.ndarray] | None = None
 
     def to_wire(self) -> dict[str, Any]:
         """The message as a msgpack-ready map (the numeric columns as raw bytes)."""
@@ -427,6 +430,10 @@ class StepsResponse:
             columns["errors"] = [
                 None if error is None else error.to_wire()["error"] for error in self.errors
             ]
+        if self.due is not None:
+            columns["due"] = {
+                name: np.asarray(flags, _FLAG).tobytes() for name, flags in self.due.items()
+            }
         return {"id": self.id, "steps": columns}
 
     @classmethod
@@ -458,6 +465,10 @@ class StepsResponse:
                 )
             if not all(type(item) is dict for item in info):
                 raise ValueError("an info that is not a map")
+            due = columns.get("due")
+            if due is not None:
+                due = {str(name): _column(flags, _FLAG, size).astype(np.bool_)
+                       for name, flags in due.items()}  # fmt: skip
             return cls(
                 id=wire["id"],
                 observation=columns["observation"],
@@ -467,6 +478,7 @@ class StepsResponse:
                 frames=frames,
                 info=tuple(info),
                 errors=errors,
+                due=due,
             )
         except (KeyError, TypeError, ValueError, RemoteProtocolError) as exc:
             raise RemoteProtocolError(f"invalid steps response: {exc!r}") from None

@@ -22,12 +22,18 @@ __all__ = ["Columns"]
 class Columns:
     """Stacks the answers of a host's instances, in the order of the rows.
 
+    While agents come and go (``some``), a row's answer holds some of the agents: the column
+    holds every possible agent, zeros where one is not in the row's answer, and ``due`` says
+    where each is.
+
     Args:
         observation_space: the (joint) observation space of one instance.
+        some: whether an answer holds some of the agents of the ``Dict`` space.
     """
 
-    def __init__(self, observation_space: spaces.Space) -> None:
+    def __init__(self, observation_space: spaces.Space, some: bool = False) -> None:
         self._codec = codec_for(observation_space)
+        self._some = some
         # The packed observation of zeros, for the rows of instances that failed.
         zeros = next(
             iter(
@@ -53,7 +59,11 @@ class Columns:
                 info.append({})
                 continue
             assert isinstance(reply, Response) and reply.observation is not None
-            observations.append(reply.observation["agent"])
+            observations.append(
+                {**self._blank, **reply.observation["agent"]}
+                if self._some
+                else reply.observation["agent"]
+            )
             reward[row], terminated[row], truncated[row], frames[row] = (
                 reply.reward,
                 reply.terminated,
@@ -68,6 +78,13 @@ class Columns:
             if failed
             else None
         )
+        due = None
+        if self._some:
+            due = {name: np.zeros(count, np.bool_) for name in self._blank}
+            for row, reply in enumerate(replies):
+                if reply.__class__ is Response:
+                    for name in reply.observation["agent"]:  # type: ignore[attr-defined,index]
+                        due[name][row] = True
         return StepsResponse(
             reply_id,
             self._codec.join(observations),
@@ -77,4 +94,5 @@ class Columns:
             frames,
             tuple(info),
             errors,
+            due,
         )

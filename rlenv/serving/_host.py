@@ -171,7 +171,7 @@ class Host:
         )
         self.steps_action_space = batch_space(first.action_space, count)
         self.steps_action = compile_check(self.steps_action_space, "steps.action")
-        self.columns = Columns(first.observation_space)
+        self.columns = Columns(first.observation_space, isinstance(first.roster, AgentsInPlay))
         self.lean = LeanSteps(self.instances) if LeanSteps.serves(self.instances) else None
         self._clocked: list[Instance] = []  # those in real time: each instance tells (below)
         for instance in self.instances:

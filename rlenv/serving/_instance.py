@@ -440,22 +440,30 @@ class Instance:
         self.players.driven = driven
         self.checked_action = ActionCheck.of(self.roster, self.action_space, driven.names)
 
-    def act(self, action: Any, frames: int, heuristic: frozenset[str] = frozenset()) -> None:
+    def act(
+        self,
+        action: Any,
+        frames: int,
+        heuristic: frozenset[str] = frozenset(),
+        goes_on: bool = False,
+    ) -> None:
         """Run a checked action for ``frames`` ticks (lockstep), or apply it now (real time).
 
         With several agents, the driven agents' actions, the claimed agents' held actions
         (:mod:`rlenv.serving._claims`) and those of the agents named in ``heuristic`` (by their
-        heuristic) are put in first, unless the action replays a log.
+        heuristic) are put in first, unless the action replays a log (a logged part of a step
+        that ``goes_on``, too: see :meth:`EpisodeRun.act`).
         """
-        if self.multi_agent and not self.replaying:
-            try:
-                action = self.players.complete(action, heuristic, self.roster)
-            except PolicyError as error:  # a failed episode; the environment is intact
-                self.abandon_episode(f"the episode failed: {error}")
-                raise RequestError(
-                    ErrorCode.ENVIRONMENT_ERROR, f"{error}; reset required"
-                ) from None
-        self.episode.act(action, frames, self.replaying, lambda: self.players.decide(self.roster))
+        players, roster = self.players, self.roster
+        try:
+            if self.multi_agent and not self.replaying:
+                action = players.complete(action, heuristic, roster)
+            self.episode.act(
+                action, frames, self.replaying, lambda: players.decide(roster), goes_on
+            )
+        except PolicyError as error:  # a failed episode; the environment is intact
+            self.abandon_episode(f"the episode failed: {error}")
+            raise RequestError(ErrorCode.ENVIRONMENT_ERROR, f"{error}; reset required") from None
 
     # --- answers ----------------------------------------------------------------------------
 

@@ -179,13 +179,7 @@ class RemoteVectorEnv(VectorEnv):
         self._last: Any = None  # the last batch of observations returned
         self._interrupted: str | None = None  # what interrupted the last step or reset
         if inspector:
-            from rlenv_tools.inspector import inspect_sessions
-
-            try:
-                self.inspector = inspect_sessions(self.sessions)
-            except BaseException:
-                self.close()
-                raise
+            self._start_inspector()
 
     @property
     def clients(self) -> list[BaseClient]:
@@ -399,6 +393,16 @@ class RemoteVectorEnv(VectorEnv):
             session.close()
 
     # --- internals --------------------------------------------------------------------------
+
+    def _start_inspector(self) -> None:
+        """Start the live inspector on every server; a vector it fails for is closed."""
+        from rlenv_tools.inspector import inspect_sessions
+
+        try:
+            self.inspector = inspect_sessions(self.sessions)
+        except BaseException:
+            self.close()
+            raise
 
     @property
     def _mode(self) -> AutoresetMode:

@@ -41,10 +41,10 @@ class ServerGroups:
             for size, end in zip(sizes, accumulate(sizes), strict=True)
         ]
         self._owner = [number for number, group in enumerate(self.groups) for _ in group]
-        # The order in which a step's answers are awaited: the server that answered last comes
-        # first, so that this process sleeps until all have answered rather than waking for
-        # each (on a small machine, it shares a core with a server it would slow down).
-        self._gather_order = list(range(len(sessions)))[::-1]
+        self.gather_order = list(range(len(sessions)))[::-1]
+        """The order in which a step's answers are awaited: the server that answered last comes
+        first, so that this process sleeps until all have answered rather than waking for
+        each (on a small machine, it shares a core with a server it would slow down)."""
 
     @property
     def num_envs(self) -> int:
@@ -112,7 +112,7 @@ class ServerGroups:
             except LOST as error:
                 raise session.failure(error) from None
         refusals: dict[int, RemoteError] = {}  # by server: the first one's is raised
-        order = self._gather_order
+        order = self.gather_order
         late: list[int] = []
         for turn, number in enumerate(order):
             if turn == 1:  # the first awaited answered: are any of the others still at work?
@@ -132,6 +132,6 @@ class ServerGroups:
                     raise session.failure(error) from None
                 columns.cut_short(group, last, {"server_restarted": session.restart(error)})
         if late:  # it answered after the one awaited first: await it first next time
-            self._gather_order = [late[-1], *(n for n in order if n != late[-1])]
+            self.gather_order = [late[-1], *(n for n in order if n != late[-1])]
         if refusals:
             raise refusals[min(refusals)]

@@ -13,8 +13,7 @@ that pack actions and unpack observations are prepared once, from the hello.
 A client waits for one answer at a time: the answer to the request it sent last. An answer to
 an earlier request, whose caller gave up on it (a ``KeyboardInterrupt`` while it waited, as in
 a notebook), is read when it comes and dropped, never taken for the answer to a later request
-(:class:`~rlenv_client._answers.Answers`, which the client holds, keeps that order and checks
-each answer).
+(the client's ``Answers``, in ``_answers.py``, keep that order and check each answer).
 """
 
 from __future__ import annotations

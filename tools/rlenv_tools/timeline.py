@@ -38,12 +38,10 @@ episode's checkpoints take at most half, each branch at most half of what is lef
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, replace
+from collections.abc import Callable, Iterable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, cast
-
-import numpy as np
 
 from rlenv.protocol import Hello
 from rlenv.protocol.errors import RemoteError
@@ -51,6 +49,7 @@ from rlenv_client.replay import EpisodeFile, digest
 from rlenv_client.trusted_targets import check_target
 from rlenv_tools._branch_continuation import Continuation, load_policy
 from rlenv_tools._recorded_steps import check_digest, recorded_steps
+from rlenv_tools._timeline_diff import TimelineDiff, timeline_diff
 from rlenv_tools._timeline_processes import (
     WORKING,
     Checkpoints,
@@ -68,25 +67,6 @@ MAX_PROCESSES = 512
 """A timeline's processes at most, its branches' included (``max_processes``' default)."""
 MAX_MEMORY = 2 << 30
 """The memory a timeline's processes hold at most, in bytes (``max_memory``' default)."""
-
-
-@dataclass(frozen=True)
-class TimelineDiff:
-    """How two timelines differ (:meth:`Timeline.diff`).
-
-    Attributes:
-        first_difference: the first step where the observations (bit for bit) or the rewards
-            differ, where one of the two episodes ended (terminated or truncated) and the
-            other did not, or that only one of the two reaches; ``None`` when they are the
-            same.
-        observations: for each step both reach, the other's observation minus this one's
-            (float64 arrays; maps and sequences of them for composite observations).
-        rewards: for each step both reach, the other's reward minus this one's.
-    """
-
-    first_difference: int | None
-    observations: list[Any]
-    rewards: list[float]
 
 
 class Timeline:
@@ -384,19 +364,11 @@ class Timeline:
 
     def diff(self, other: Timeline) -> TimelineDiff:
         """How ``other`` differs from this timeline, step by step (both re-simulated)."""
-        steps = [
-            [(timeline.episode.observations[0], 0.0, False, False), *timeline._records]
-            for timeline in (self, other)
-        ]
-        first = next(
-            (k for k, (a, b) in enumerate(zip(*steps, strict=False)) if a != b),
-            None if len(steps[0]) == len(steps[1]) else min(map(len, steps)),
-        )
-        mine, theirs = self._every_observation(), other._every_observation()
-        return TimelineDiff(
-            first,
-            [_subtract(a, b) for a, b in zip(mine, theirs, strict=False)],
-            [b - a for a, b in zip(self.rewards, other.rewards, strict=False)],
+        pair = (self, other)
+        return timeline_diff(
+            [[(each.episode.observations[0], 0.0, False, False), *each._records] for each in pair],
+            [each._every_observation() for each in pair],
+            [each.rewards for each in pair],
         )
 
     def save(self, path: str | Path) -> None:
@@ -436,12 +408,3 @@ class Timeline:
 
 def _named_by(episode: EpisodeFile) -> str:
     return "the episode" if episode.path is None else f"the recording {episode.path}"
-
-
-def _subtract(mine: Any, theirs: Any) -> Any:
-    """``theirs - mine`` as float64 arrays, through maps and sequences."""
-    if isinstance(mine, Mapping):
-        return {key: _subtract(mine[key], theirs[key]) for key in mine}
-    if isinstance(mine, (tuple, list)):
-        return [_subtract(a, b) for a, b in zip(mine, theirs, strict=True)]
-    return np.asarray(theirs, np.float64) - np.asarray(mine, np.float64)

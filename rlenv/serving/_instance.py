@@ -31,10 +31,11 @@ from rlenv.environment import RLEnvironment
 from rlenv.protocol import ErrorReply, Response
 from rlenv.protocol.errors import ErrorCode, RequestError
 from rlenv.serving._actions import ActionCheck
+from rlenv.serving._answers import Answer, Answering
 from rlenv.serving._claims import Claims, Requester
 from rlenv.serving._entering import enter
 from rlenv.serving._episode import Episode, EpisodeRun
-from rlenv.serving._observing import Observer, check_text_keys
+from rlenv.serving._observing import Observer
 from rlenv.serving._players import Players
 from rlenv.serving._recent import KEEP_EPISODES, KEEP_EVENTS, RecentEpisodes
 from rlenv.serving._recovery import Recovery
@@ -84,20 +85,6 @@ def load_environment(target: str) -> type[RLEnvironment]:
     if not (isinstance(environment_class, type) and issubclass(environment_class, RLEnvironment)):
         raise TypeError(f"{target} is not an RLEnvironment subclass")
     return environment_class
-
-
-class Answer:
-    """The answer to the request being served, as its parts and hooks build it."""
-
-    __slots__ = ("acted", "config_before", "info", "reply", "reply_id", "reports")
-
-    def __init__(self, reply_id: int, reports: bool) -> None:
-        self.reply_id = reply_id
-        self.reports = reports  # it goes to the controller: rewards and ticks are its
-        self.info: dict[str, Any] | None = None  # entries beside the environment's own
-        self.acted = False
-        self.config_before: dict[str, dict[str, Any]] | None = None  # to undo on failure
-        self.reply: Response | None = None
 
 
 Plan = Mapping[str, Any]
@@ -209,6 +196,8 @@ class Instance:
         self.refuse_without_episode = episode.refuse_without_episode
         self.set_property, self.forget_set = episode.set_property, episode.forget_set
         self.catch_up = episode.catch_up
+        answering = self.answering = Answering(episode, players)  # what the answers say
+        self.info = answering.info
         self.replaying = False  # restoring a snapshot: the episode moves on silently
 
     def _enter(self, environment: RLEnvironment, replacing: bool = False) -> SceneTree:
@@ -305,7 +294,7 @@ class Instance:
             if observation_request is None
             else self.observe(observation_request, answer.reports)
         )
-        answer.reply = self._response(answer, observation)
+        answer.reply = self.answering.response(answer, observation)
 
     def after_send(self) -> None:
         """The answer went out: the environment's ``_after_send_response``.
@@ -415,35 +404,6 @@ class Instance:
         self.episode.act(action, frames, self.replaying, lambda: self.players.decide(self.roster))
 
     # --- answers ----------------------------------------------------------------------------
-
-    def _response(self, answer: Answer, observation: dict[str, Any] | None) -> Response:
-        """The answer: what was observed, the flags, and the rewards and ticks since the last."""
-        reward, terminated, truncated, frames, outcomes = self.episode.report(
-            answer.reports, answer.acted
-        )
-        return Response(
-            answer.reply_id,
-            observation,
-            reward,
-            terminated,
-            truncated,
-            self.info(answer.acted, answer.info),
-            frames,
-            outcomes,
-        )
-
-    def info(self, acted: bool, extra: dict[str, Any] | None) -> dict[str, Any]:
-        """An answer's ``info``: ``_get_info()`` while an episode exists, real time's, ``extra``.
-
-        While observers claim agents (:mod:`rlenv.serving._claims`), ``"claimed"`` lists them.
-        """
-        info = self.episode.info(acted)
-        if extra:
-            check_text_keys(extra, "the answer holds")
-            info = {**info, **extra}
-        if self.players.claims is not None:
-            info = {**info, "claimed": self.players.claimed(self.agents)}
-        return info
 
     def environment_error(self, reply_id: int, error: BaseException) -> ErrorReply:
         """The ``environment_error`` answer for an exception in user code (its traceback in it).

@@ -115,7 +115,7 @@ class EpisodeRun:
     def begin(self, seed: int | None, options: Mapping[str, Any]) -> None:
         """Reset: undo ``inspect`` sets, seed the generator (if given), start a new episode.
 
-        The episode under way is finished: :attr:`recent` may keep its log. If the
+        The episode under way is finished: the recent episodes may keep its log. If the
         environment's reset refuses (a ``RequestError`` from user code, such as level data it
         cannot build), no episode runs and the next reset rebuilds the environment: the
         refusal may have come half way through.
@@ -148,7 +148,7 @@ class EpisodeRun:
             raise
 
     def _finish(self) -> None:
-        """Hand the episode's log to :attr:`recent` (unless an error stopped the episode)."""
+        """Hand the episode's log to the recent episodes (unless an error stopped it)."""
         if self.state is Episode.NOT_STARTED:  # an environment_error: its replay would fail
             return
         if self.recent.finished(self.log, *self.roster.joint_end()):  # as an answer reports

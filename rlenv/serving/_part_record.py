@@ -69,7 +69,7 @@ class Part:
 
 
 class Host(Protocol):
-    """What the parts that address every instance need of the host (:mod:`.host`)."""
+    """What the parts that address every instance need of the host (:mod:`._host`)."""
 
     instances: list[Instance]
     steps_action_space: spaces.Space

@@ -28,6 +28,7 @@ from dm_env_rpc.v1 import (  # noqa: E402
     dm_env_adaptor,
     dm_env_rpc_pb2,
     error,
+    tensor_spec_utils,
     tensor_utils,
 )
 
@@ -370,3 +371,45 @@ def _uid(env: Any, name: str) -> int:
     return next(
         uid for uid, spec in env._dm_env_rpc_specs.observations.items() if spec.name == name
     )
+
+
+def test_every_kind_of_space_is_a_tensor_a_leaf_and_actions_fold_back() -> None:
+    from gymnasium import spaces
+
+    from rlenv_tools._dm_env_rpc_specs import ActionRefused, Specs
+
+    action_space = spaces.Dict(
+        {
+            "move": spaces.Box(-1.0, 2.0, (2,), np.float32),
+            "pick": spaces.Tuple((spaces.Discrete(3, start=-1), spaces.MultiBinary(4))),
+            "gear": spaces.MultiDiscrete([2, 5]),
+        }
+    )
+    observation_space = spaces.Box(0, 255, (4, 4, 3), np.uint8)
+    specs = Specs(action_space, observation_space, ["Agent"])
+    names = {leaf.name: leaf for leaf in specs.actions}
+    assert set(names) == {"action.move", "action.pick.0", "action.pick.1", "action.gear"}
+    pick = tensor_spec_utils.bounds(names["action.pick.0"].spec)
+    assert (pick.min, pick.max) == (-1, 1)
+    assert tensor_spec_utils.bounds(names["action.gear"].spec).max.tolist() == [1, 4]
+    assert names["action.pick.1"].dtype == np.int8
+    sent = {
+        names["action.move"].uid: tensor_utils.pack_tensor(np.array([0.5, 2.0], np.float32)),
+        names["action.pick.0"].uid: tensor_utils.pack_tensor(np.int64(-1)),
+    }
+    last: dict[int, Any] = {}
+    action = specs.action(sent, last)
+    assert action_space.contains(action)
+    assert action["pick"][0] == -1 and action["pick"][1].tolist() == [0, 0, 0, 0]
+    np.testing.assert_array_equal(action["move"], [0.5, 2.0])
+    again = specs.action({}, last)  # nothing sent: the last actions repeat
+    np.testing.assert_array_equal(again["move"], [0.5, 2.0])
+    with pytest.raises(ActionRefused, match="out of its bounds"):
+        specs.action({names["action.gear"].uid: tensor_utils.pack_tensor(np.array([0, 5]))}, last)
+    image = specs.observations[0]
+    assert image.name == "observation" and image.dtype == np.uint8
+    frame = observation_space.sample()
+    tensors = specs.observation_tensors([image.uid], frame, {})
+    np.testing.assert_array_equal(tensor_utils.unpack_tensor(tensors[image.uid]), frame)
+    with pytest.raises(ValueError, match="cannot carry a Text space"):
+        Specs(spaces.Text(5), observation_space, ["Agent"])

@@ -298,6 +298,14 @@ def test_refusals_name_what_is_wrong_and_the_world_goes_on() -> None:
             link.send(dm_env_rpc_pb2.ResetRequest(settings={"seed": tensor_utils.pack_tensor(-1)}))
         with pytest.raises(error.DmEnvRpcError, match=r"no world .*nowhere"):
             link.send(dm_env_rpc_pb2.ResetWorldRequest(world_name="nowhere"))
+        huge = tensor_utils.pack_tensor(np.array([0], np.float32))
+        huge.shape[:] = [100_000, 100_000]  # one element, broadcast: refused before unpacking
+        with pytest.raises(error.DmEnvRpcError, match="has shape"):
+            link.send(dm_env_rpc_pb2.StepRequest(actions={1: huge}))
+        seed = tensor_utils.pack_tensor(np.array([1], np.int64))
+        seed.shape[:] = [100_000, 100_000]
+        with pytest.raises(error.DmEnvRpcError, match="must be a scalar"):
+            link.send(dm_env_rpc_pb2.ResetRequest(settings={"seed": seed}))
         with pytest.raises(error.DmEnvRpcError, match="is joined"):
             link.send(dm_env_rpc_pb2.DestroyWorldRequest(world_name=world))
         assert env.step({"action": 1}).mid()  # still serving

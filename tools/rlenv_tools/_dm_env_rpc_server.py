@@ -106,6 +106,7 @@ class World:
         self._max_steps = target.max_episode_steps
         self.lock = threading.Lock()
         self.joined_by: object | None = None
+        self.destroyed = False  # set under the lock: no stream joins it any more
         self._seed = seed
         self._running = False
         self._steps = 0
@@ -233,6 +234,7 @@ class EnvironmentService(dm_env_rpc_pb2_grpc.EnvironmentServicer):
                 )
             with self._lock:
                 del self._worlds[name]
+            world.destroyed = True
         world.close()
 
     def close(self) -> None:
@@ -296,6 +298,8 @@ class _Stream:
             )
         world = self.service.world(request.world_name)
         with world.lock:
+            if world.destroyed:
+                raise Refused(code_pb2.NOT_FOUND, f"world {world.name!r} was destroyed")
             if world.joined_by is not None:
                 raise Refused(
                     code_pb2.FAILED_PRECONDITION,
@@ -398,6 +402,9 @@ def _only(
             code_pb2.INVALID_ARGUMENT,
             f"{kind} has no setting {unknown[0]!r:.80}: its settings are {sorted(known)}",
         )
+    for name, tensor in settings.items():
+        if tensor.shape:  # every setting is a scalar (and a shape would broadcast one element)
+            raise Refused(code_pb2.INVALID_ARGUMENT, f"{kind}'s setting {name!r} must be a scalar")
     try:
         return {name: tensor_utils.unpack_tensor(tensor) for name, tensor in settings.items()}
     except (ValueError, TypeError) as error:

@@ -61,6 +61,15 @@ class Leaf:
         Raises:
             ActionRefused: another dtype, another shape, a value out of bounds, or no tensor.
         """
+        shape = list(tensor.shape)  # checked first: a one-element tensor broadcasts to it
+        if shape and (
+            len(shape) != len(self.shape)
+            or shape.count(-1) > 1
+            or any(n not in (m, -1) for n, m in zip(shape, self.shape, strict=True))
+        ):
+            raise ActionRefused(
+                f"action {self.name!r} has shape {shape[:8]}, its spec says {list(self.shape)}"
+            )
         try:
             dtype = tensor_utils.get_tensor_type(tensor)
             if dtype != self.dtype:

@@ -203,9 +203,7 @@ globals().update(_suites())
 
 
 def _joined(target: str, **settings: Any) -> tuple[Any, connection.Connection, str]:
-    served = SERVED.get(target)
-    link = served.connect() if served is not None else None
-    assert link is not None
+    link = SERVED[target].connect()
     env, world = dm_env_adaptor.create_and_join_world(
         link, create_world_settings=settings, join_world_settings={}
     )
@@ -248,39 +246,31 @@ def test_an_episode_is_gymnasiums_bit_for_bit_and_ends_terminated() -> None:
         _leave(link, world)
 
 
-def test_the_time_limit_interrupts_and_reset_seeds_the_next_episode() -> None:
+def test_the_time_limit_interrupts_with_discount_one_and_reset_takes_a_seed() -> None:
     env, link, world = _joined("rlenv/Reacher-v0")
+    reference = gym.make("rlenv/Reacher-v0")
+    seed = {"seed": tensor_utils.pack_tensor(3)}
     try:
-        link.send(dm_env_rpc_pb2.ResetRequest(settings={"seed": tensor_utils.pack_tensor(3)}))
-        start = env.step({})
-        steps, action = 0, np.zeros(2, np.float32)
-        while True:
-            response = link.send(dm_env_rpc_pb2.StepRequest(actions={1: _tensor(action)}))
-            steps += 1
-            if response.state != States.RUNNING:
-                break
-        assert response.state == States.INTERRUPTED and steps == 200  # Reacher-v0's limit
-        discount = link.send(
-            dm_env_rpc_pb2.StepRequest(requested_observations=[_uid(env, "discount")])
-        )  # starts the next episode
-        assert discount.state == States.RUNNING
-        link.send(dm_env_rpc_pb2.ResetRequest(settings={"seed": tensor_utils.pack_tensor(3)}))
-        assert np.array_equal(
-            env.step({}).observation["observation"], start.observation["observation"]
-        )
+        link.send(dm_env_rpc_pb2.ResetRequest(settings=seed))
+        first = link.send(dm_env_rpc_pb2.StepRequest(requested_observations=[1]))
+        expected, _ = reference.reset(seed=3)
+        observation = tensor_utils.unpack_tensor(first.observations[1])
+        np.testing.assert_array_equal(observation, expected)
+        action = {1: tensor_utils.pack_tensor(np.zeros(2, np.float32))}
+        discount = _uid(env, "discount")
+        states = [
+            link.send(dm_env_rpc_pb2.StepRequest(actions=action, requested_observations=[discount]))
+            for _ in range(200)  # Reacher-v0's time limit
+        ]
+        assert {response.state for response in states[:-1]} == {States.RUNNING}
+        assert states[-1].state == States.INTERRUPTED  # truncated: bootstrap from it
+        assert tensor_utils.unpack_tensor(states[-1].observations[discount]) == 1.0
+        link.send(dm_env_rpc_pb2.ResetRequest(settings=seed))  # the same seed, the same start
+        again = link.send(dm_env_rpc_pb2.StepRequest(requested_observations=[1]))
+        assert again.state == States.RUNNING
+        assert again.observations[1] == first.observations[1]
     finally:
-        _leave(link, world)
-
-
-def test_interrupted_keeps_discount_one() -> None:
-    env, link, world = _joined("rlenv/Reacher-v0")
-    try:
-        env.reset()
-        for _ in range(199):
-            assert env.step({"action": np.zeros(2, np.float32)}).mid()
-        last = env.step({"action": np.zeros(2, np.float32)})
-        assert last.last() and last.discount == 1.0  # truncated: bootstrap from it
-    finally:
+        reference.close()
         _leave(link, world)
 
 
@@ -369,10 +359,6 @@ def test_a_target_that_cannot_load_stops_the_command_with_its_reason() -> None:
     )
     assert result.returncode == 2
     assert result.stderr.startswith("rlenv dm-env-rpc: ") and "no_such_module" in result.stderr
-
-
-def _tensor(value: np.ndarray) -> Any:
-    return tensor_utils.pack_tensor(value, dtype=value.dtype)
 
 
 def _uid(env: Any, name: str) -> int:

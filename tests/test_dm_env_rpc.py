@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 import rlenv_client  # noqa: F401  (registers the ids)
-from rlenv_client.launcher import end_process
+from rlenv_client.client import Client
+from rlenv_client.launcher import ServerProcess, end_process
 
 pytest.importorskip("dm_env_rpc")
 pytest.importorskip("grpc")
@@ -348,6 +349,24 @@ def test_several_agents_act_and_are_rewarded_each() -> None:
     finally:
         reference.close()
         served.close()
+
+
+def test_a_running_server_is_a_target_too() -> None:
+    with ServerProcess("examples.classic_cartpole:ClassicCartPoleEnvironment") as server:
+        served = Served(f"{server.host}:{server.port}")
+        try:
+            link = served.connect()
+            env, world = dm_env_adaptor.create_and_join_world(
+                link, create_world_settings={"seed": 2}, join_world_settings={}
+            )
+            first = env.reset()
+            assert first.first() and env.step({"action": 1}).mid()
+            _leave(link, world)  # its connection closed: another client may control the server
+            with Client(server.host, server.port) as reference:
+                expected, _ = reference.reset(seed=2)
+            np.testing.assert_array_equal(first.observation["observation"], expected)
+        finally:
+            served.close()
 
 
 def test_a_target_that_cannot_load_stops_the_command_with_its_reason() -> None:

@@ -172,7 +172,7 @@ class EnvironmentService(dm_env_rpc_pb2_grpc.EnvironmentServicer):
         self.target = target
         self.timeout = timeout
         self.max_worlds = max_worlds
-        self._worlds: dict[str, World] = {}
+        self._worlds: dict[str, World | None] = {}  # None: reserved while it starts
         self._lock = threading.Lock()
         self._names = (f"world-{n}" for n in itertools.count(1))
 
@@ -199,7 +199,7 @@ class EnvironmentService(dm_env_rpc_pb2_grpc.EnvironmentServicer):
                     f"{self.max_worlds} worlds exist already (--max-worlds): destroy one first",
                 )
             name = next(self._names)
-            self._worlds[name] = None  # type: ignore[assignment]  # reserved while it starts
+            self._worlds[name] = None
         try:
             world = World(name, self.target, self.timeout, seed)
         except BaseException:

@@ -1,6 +1,6 @@
 """An environment's spaces as dm_env_rpc tensor specs, and values both ways.
 
-The hello's spaces become :class:`TensorSpec` records: every array leaf of a ``Dict`` or
+The hello's spaces become dm_env_rpc ``TensorSpec`` records: every array leaf of a ``Dict`` or
 ``Tuple`` space is one tensor, named by its path joined with dots (dm_env_rpc's own separator,
 which ``DmEnvAdaptor(nested_tensors=True)`` folds back). One agent's tensors are named
 ``action`` and ``observation`` (``observation.camera`` for a ``Dict`` key); several agents'
@@ -155,7 +155,7 @@ class Specs:
     def observation_tensors(
         self, uids: Iterable[int], observation: Any, scalars: Mapping[str, float]
     ) -> dict[int, dm_env_rpc_pb2.Tensor]:
-        """The tensors asked for (``uids``, checked by :meth:`check_requested`)."""
+        """The tensors asked for (``uids``, checked by :meth:`Specs.check_requested`)."""
         tensors = {}
         for uid in uids:
             leaf = self.by_uid[uid]

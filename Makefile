@@ -6,7 +6,8 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-lowest test-ray test-browser test-minari test-onnx test-package screenshot\
+.PHONY: demo test test-lowest test-ray test-browser test-minari test-onnx test-dm-env-rpc\
+	test-package screenshot\
 	screenshot-time-travel plinko-picture sb3 rllib cleanrl bench-http bench-train docs lint typecheck\
 	vectors clean
 
@@ -34,6 +35,13 @@ test-ray: $(STAMP)
 test-minari: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e ".[test,minari]"
 	$(BIN)/python -m pytest -m minari
+
+# Optional: the dm_env_rpc server (the dm-env-rpc extra: grpcio, protobuf, dm-env-rpc): the
+# wheel's own compliance tests on rlenv/CartPole-v1 and rlenv/Reacher-v0, and episodes through
+# its DmEnvAdaptor (one and several agents) against gymnasium's, over real servers (about a minute).
+test-dm-env-rpc: $(STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[test,dm-env-rpc]"
+	$(BIN)/python -m pytest -m dm_env_rpc tests/test_dm_env_rpc.py
 
 # Optional: the inspector's page in headless Chromium (skipped, saying why, without one; .ci/run
 # installs Debian's chromium first), and what watching costs a trainer.

@@ -1,4 +1,4 @@
-"""The ``rlenv`` command: serve, http, inspect, check, bench, replay, dataset, demo."""
+"""The ``rlenv`` command: serve, http, inspect, check, bench, replay, dataset, demo, godot-rl."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ import sys
 from collections.abc import Sequence
 
 from rlenv.protocol.errors import RlenvError
+from rlenv_tools._cli_godot import add_godot_rl
 from rlenv_tools._cli_recordings import add_dataset, add_replay
 from rlenv_tools._cli_serve import add_serve
 from rlenv_tools._cli_trials import add_bench, add_check, add_demo
@@ -58,6 +59,7 @@ def _parser() -> argparse.ArgumentParser:
         add_replay,
         add_dataset,
         add_demo,
+        add_godot_rl,
     ):
         add(commands)
     return parser

@@ -87,7 +87,7 @@ def processes() -> Iterator[Processes]:
 
 
 def _example(processes: Processes, cwd: Path, *args: str) -> subprocess.Popen[str]:
-    """godot-rl's SB3 example, unmodified, in godot-rl's venv (with rlenv's on PATH for env_path)."""
+    """godot-rl's SB3 example, unmodified, in godot-rl's venv, without rlenv's PYTHONPATH."""
     environment = {
         key: value for key, value in os.environ.items() if key not in ("PYTHONPATH", "VIRTUAL_ENV")
     }

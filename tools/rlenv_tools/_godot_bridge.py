@@ -32,6 +32,8 @@ import time
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from gymnasium import spaces
+
 from rlenv_client.client import Client
 from rlenv_client.time_limits import truncate_agents
 from rlenv_tools._godot_wire import (
@@ -238,25 +240,37 @@ class GodotBridge:
         self._reset(ended)
         for instance, outcome in enumerate(outcomes):
             for name in self.agents:
-                reward, terminated, truncated = outcome[name]
                 if name in sitting_out[instance]:
-                    reward, terminated, truncated = 0.0, False, False
-                done = terminated or truncated
-                info: dict[str, Any] = {}
-                if done:
-                    info = {
-                        "terminal_observation": finals[instance][name]
-                        if instance in finals
-                        else self._observed(instance, name),
-                        "TimeLimit.truncated": truncated and not terminated,
-                    }
-                    if instance not in finals:
-                        self._ended[instance].add(name)
-                reply["obs"].append(self._observed(instance, name))
-                reply["reward"].append(float(reward))
-                reply["done"].append(done)
-                reply["info"].append(info)
+                    outcome[name] = (0.0, False, False)
+                final = finals[instance][name] if instance in finals else None
+                report = self._report(instance, name, outcome[name], final)
+                for key, value in zip(reply, report, strict=True):
+                    reply[key].append(value)
         return reply
+
+    def _report(
+        self,
+        instance: int,
+        name: str,
+        outcome: tuple[float, bool, bool],
+        final: dict[str, Any] | None,
+    ) -> tuple[dict[str, Any], float, bool, dict[str, Any]]:
+        """One AIController's ``(obs, reward, done, info)`` after a step.
+
+        ``final`` is its observation at the end of an episode whose instance was reset since
+        (``None`` if it was not: then an agent that ended sits out until the others end).
+        """
+        reward, terminated, truncated = outcome
+        observed = self._observed(instance, name)
+        if not (terminated or truncated):
+            return observed, float(reward), False, {}
+        if final is None:
+            self._ended[instance].add(name)
+        ending = {
+            "terminal_observation": observed if final is None else final,
+            "TimeLimit.truncated": truncated and not terminated,
+        }
+        return observed, float(reward), True, ending
 
     def _action(self, actions: Sequence[Any]) -> Any:
         """One instance's action from its AIControllers' action maps."""
@@ -315,4 +329,6 @@ class GodotBridge:
         hello = self.client.hello
         if not self.several:
             return hello.observation_space, hello.action_space
-        return hello.observation_space[name], hello.action_space[name]
+        observations, actions = hello.observation_space, hello.action_space
+        assert isinstance(observations, spaces.Dict) and isinstance(actions, spaces.Dict)
+        return observations[name], actions[name]

@@ -23,6 +23,7 @@ from typing import Any
 import rlenv
 import rlenv_client
 import rlenv_tools
+from rlenv_client._addresses import is_address
 from rlenv_client.client import Client
 from rlenv_client.launcher import ServerProcess
 from rlenv_client.registration import ENVIRONMENTS
@@ -33,7 +34,7 @@ __all__ = [
     "Game",
     "config_value",
     "godot_arguments",
-    "launcher_main",
+    "launcher_command",
     "play",
     "write_launcher",
 ]
@@ -87,7 +88,7 @@ def play(game: Game) -> None:
     if limit is None and registered is not None:
         limit = registered.max_episode_steps
     with ExitStack() as stack:
-        if _is_address(target):
+        if is_address(target):
             client = stack.enter_context(Client(target, timeout=game.timeout))
         else:
             server = ServerProcess(target, args=["--instances", str(game.instances)])
@@ -103,12 +104,6 @@ def play(game: Game) -> None:
             repeat_action=game.repeat_action,
             max_episode_steps=limit,
         ).serve()
-
-
-def _is_address(target: str) -> bool:
-    """Whether ``target`` is ``HOST:PORT`` (else ``MODULE:CLASS``)."""
-    host, _, port = target.rpartition(":")
-    return bool(host) and port.isdigit()
 
 
 def godot_arguments(argv: Sequence[str]) -> dict[str, str]:
@@ -133,22 +128,20 @@ def godot_arguments(argv: Sequence[str]) -> dict[str, str]:
     return arguments
 
 
-def launcher_main(argv: Sequence[str], command: Sequence[str]) -> int:
-    """A launcher's entry: ``rlenv`` with ``command`` (written in it) and godot-rl's flags.
+def launcher_command(argv: Sequence[str], command: Sequence[str]) -> list[str]:
+    """A launcher's ``rlenv`` command line: ``command`` (written in it) and godot-rl's flags.
 
     ``--port=``, ``--env_seed=`` and ``--action_repeat=`` are the trainer's; flags in
     :data:`GODOT_FLAGS` are ignored; any other ``--KEY=VALUE`` configures the environment
     (``VALUE`` read as JSON where it is JSON, else as a string), after the launcher's own.
     """
-    from rlenv_tools.cli import main
-
     words = list(command)
     for key, value in godot_arguments(argv).items():
         if key in ("port", "env_seed", "action_repeat"):
             words += [f"--{key.replace('_', '-')}", value]
         elif key not in GODOT_FLAGS:
             words += ["--set", f"{key}={value}"]
-    return main(words)
+    return words
 
 
 def config_value(text: str) -> Any:
@@ -164,7 +157,7 @@ def write_launcher(path: Path, command: Sequence[str]) -> None:
 
     It runs ``rlenv`` with ``command`` (``godot-rl TARGET`` and its options) in this Python,
     with this rlenv (their folders written in it), then the flags godot-rl gives a game
-    (:func:`launcher_main`). On Linux godot-rl runs ``env_path`` with its suffix replaced by
+    (:func:`launcher_command`). On Linux godot-rl runs ``env_path`` with its suffix replaced by
     ``.x86_64``: name the file so.
     """
     folders = sorted(
@@ -178,8 +171,9 @@ def write_launcher(path: Path, command: Sequence[str]) -> None:
         '"""rlenv as a Godot game for Godot RL Agents (written by rlenv godot-rl --launcher)."""\n'
         "import sys\n\n"
         f"sys.path[:0] = {folders!r}\n"
-        "from rlenv_tools._godot_game import launcher_main\n\n"
-        f"sys.exit(launcher_main(sys.argv[1:], {list(command)!r}))\n"
+        "from rlenv_tools._godot_game import launcher_command\n"
+        "from rlenv_tools.cli import main\n\n"
+        f"sys.exit(main(launcher_command(sys.argv[1:], {list(command)!r})))\n"
     )
     path.write_text(text)
     path.chmod(path.stat().st_mode | stat.S_IXUSR | stat.S_IXGRP | stat.S_IXOTH)

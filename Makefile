@@ -156,7 +156,7 @@ $(GODOT_RL_VENV)/stable_baselines3_example.py: | $(GODOT_RL_VENV)/.installed
 	mv $@.part $@
 
 test-godot-rl: $(STAMP) $(GODOT_RL_VENV)/.installed $(GODOT_RL_EXAMPLE)
-	GODOT_RL_PYTHON=$(GODOT_RL_VENV)/bin/python GODOT_RL_EXAMPLE=$(abspath $(GODOT_RL_EXAMPLE)) \
+	GODOT_RL_PYTHON=$(abspath $(GODOT_RL_VENV))/bin/python GODOT_RL_EXAMPLE=$(abspath $(GODOT_RL_EXAMPLE)) \
 		OMP_NUM_THREADS=1 $(BIN)/python -m pytest -m godot_rl tests/test_godot_rl.py
 
 # Optional: what serving costs a real trainer (benchmarks/train_speed.py: SB3 PPO and SyncVectorEnv

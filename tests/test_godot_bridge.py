@@ -331,3 +331,16 @@ def test_boxes_are_rescaled_images_are_hex_and_other_spaces_refused() -> None:
         agent_wire(spaces.MultiBinary(3), spaces.Discrete(2))
     with pytest.raises(GodotWireError, match="decodes as an image"):
         agent_wire(spaces.Dict({"pos2d": spaces.Box(-1, 1, (2,))}), spaces.Discrete(2))
+
+
+def test_images_travel_as_hex_under_a_2d_key(trainer: FakeTrainer, games: list[Game]) -> None:
+    game = _godot_rl(games, "rlenv/Pixels-v0", "--port", str(trainer.port), "--env-seed", "2")
+    info = trainer.start()
+    space = gym.make("rlenv/Pixels-v0", in_process=True).observation_space
+    assert info["observation_space"] == [{"obs_2d": {"space": "box", "size": list(space.shape)}}]
+    reset = trainer.ask({"type": "reset"})
+    image = np.frombuffer(bytes.fromhex(reset["obs"][0]["obs_2d"]), np.uint8).reshape(space.shape)
+    reference = gym.make("rlenv/Pixels-v0", in_process=True)
+    assert np.array_equal(image, reference.reset(seed=2)[0])
+    trainer.send({"type": "close"})
+    assert game.finish()[0] == 0

@@ -96,22 +96,25 @@ def _example(processes: Processes, cwd: Path, *args: str) -> subprocess.Popen[st
     return processes.start([GODOT_PYTHON, EXAMPLE, *args], cwd, environment)
 
 
-def _train_until(example: subprocess.Popen[str], length: float) -> list[float]:
+def _train_until(example: subprocess.Popen[str], length: float) -> tuple[list[float], str]:
     """The example's ``ep_len_mean`` rows until one reaches ``length`` (then Ctrl-C: the example
-    saves and closes its environments) or the run ends."""
+    saves and closes its environments) or the run ends; and the end of its output."""
     assert example.stdout is not None
     lengths: list[float] = []
+    output: list[str] = []
     for line in example.stdout:
+        output = [*output[-40:], line]
         found = _EP_LEN.search(line)
         if found:
             lengths.append(float(found.group(1)))
             if lengths[-1] >= length:
                 example.send_signal(signal.SIGINT)
                 break
-    example.communicate(timeout=120)
-    return lengths
+    rest, _ = example.communicate(timeout=120)
+    return lengths, "".join(output) + rest[-3000:]
 
 
+@pytest.mark.timeout(900)  # training: about 2 minutes on an idle machine of 2 cores
 def test_the_sb3_example_trains_cartpole_through_the_launcher_with_n_parallel(
     processes: Processes, tmp_path: Path
 ) -> None:
@@ -133,11 +136,12 @@ def test_the_sb3_example_trains_cartpole_through_the_launcher_with_n_parallel(
         "--timesteps",
         str(BUDGET),
     )
-    lengths = _train_until(example, 400.0)
-    assert lengths and max(lengths) >= 400.0, f"ep_len_mean over training: {lengths}"
+    lengths, output = _train_until(example, 400.0)
+    assert lengths and max(lengths) >= 400.0, f"ep_len_mean over training: {lengths}\n{output}"
     assert example.returncode in (0, -signal.SIGINT)
 
 
+@pytest.mark.timeout(400)
 def test_the_sb3_example_plays_pair_two_agents_per_instance(
     processes: Processes, tmp_path: Path
 ) -> None:

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import os
-import shlex
 import stat
 import sys
 from collections.abc import Sequence
@@ -157,20 +156,24 @@ def write_launcher(path: Path, command: Sequence[str]) -> None:
 
     It runs ``rlenv`` with ``command`` (``godot-rl TARGET`` and its options) in this Python,
     with this rlenv (their folders written in it), then the flags godot-rl gives a game
-    (:func:`launcher_command`). On Linux godot-rl runs ``env_path`` with its suffix replaced by
+    (:func:`launcher_command`). ``sys.executable`` may hold no space (a ``#!`` line's
+    limit). On Linux godot-rl runs ``env_path`` with its suffix replaced by
     ``.x86_64``: name the file so.
     """
-    folders = sorted(
-        {
+    folders = list(
+        dict.fromkeys(
             str(Path(module.__file__ or "").resolve().parent.parent)
             for module in (rlenv, rlenv_client, rlenv_tools)
-        }
+        )
     )
     text = (
-        f"#!{shlex.quote(sys.executable)}\n"
+        f"#!{sys.executable}\n"
         '"""rlenv as a Godot game for Godot RL Agents (written by rlenv godot-rl --launcher)."""\n'
-        "import sys\n\n"
-        f"sys.path[:0] = {folders!r}\n"
+        "import os\nimport sys\n\n"
+        f"FOLDERS = {folders!r}  # this rlenv, for this process and its server's\n"
+        "sys.path[:0] = FOLDERS\n"
+        "inherited = [os.environ['PYTHONPATH']] if os.environ.get('PYTHONPATH') else []\n"
+        "os.environ['PYTHONPATH'] = os.pathsep.join([*FOLDERS, *inherited])\n"
         "from rlenv_tools._godot_game import launcher_command\n"
         "from rlenv_tools.cli import main\n\n"
         f"sys.exit(main(launcher_command(sys.argv[1:], {list(command)!r})))\n"

@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
 .PHONY: demo test test-lowest test-ray test-browser test-minari test-onnx test-dm-env-rpc\
-	test-package screenshot\
+	test-godot-rl test-package screenshot\
 	screenshot-time-travel plinko-picture sb3 rllib cleanrl bench-http bench-train docs lint typecheck\
 	vectors clean
 
@@ -135,6 +135,38 @@ cleanrl: $(CLEANRL_VENV)/.installed $(CLEANRL_PPO)
 	$(CLEANRL_VENV)/bin/python benchmarks/cleanrl_curves.py $(CLEANRL_PPO) \
 		--total-timesteps $(CLEANRL_STEPS) --seeds $(CLEANRL_SEEDS)
 
+# Optional: Godot RL Agents (godot-rl 0.8.2) trains rlenv environments with its own, unmodified
+# examples/stable_baselines3_example.py (tests/test_godot_rl.py: CartPole-v1 through a launcher
+# as env_path with n_parallel=2, to a mean episode length of 400, then Pair; a few minutes).
+# godot-rl pins gymnasium <= 1.0.0, so it gets a venv of its own, .venv-godot-rl (the CPU torch
+# first); rlenv runs beside it from .venv as rlenv godot-rl. The example is not part of rlenv:
+# pass GODOT_RL_EXAMPLE=path/to/stable_baselines3_example.py, or where the network reaches GitHub
+# the target downloads it at godot-rl v0.8.2's commit and checks its sha256. It listens on
+# 127.0.0.1:11008 and 11009, which must be free.
+GODOT_RL_VENV := .venv-godot-rl
+GODOT_RL_COMMIT := f4b53921f0f6602d930b7b174a3ba7b8aed361aa
+GODOT_RL_SHA256 := e4b9c169e3ce9d67031958c6588d1ee8c3262427d52076f0559c6f6279f4449c
+GODOT_RL_EXAMPLE ?= $(GODOT_RL_VENV)/stable_baselines3_example.py
+
+$(GODOT_RL_VENV)/.installed:
+	$(PYTHON) -m venv $(GODOT_RL_VENV)
+	$(GODOT_RL_VENV)/bin/python -m pip install --quiet --upgrade pip
+	$(GODOT_RL_VENV)/bin/python -m pip install --quiet torch==2.13.0
+	$(GODOT_RL_VENV)/bin/python -m pip install --quiet godot-rl==0.8.2
+	touch $@
+
+$(GODOT_RL_VENV)/stable_baselines3_example.py: | $(GODOT_RL_VENV)/.installed
+	curl -fsSL -o $@.part https://raw.githubusercontent.com/edbeeching/godot_rl_agents/$(GODOT_RL_COMMIT)/examples/stable_baselines3_example.py \
+		|| { rm -f $@.part; echo "cannot download the example here: fetch" \
+		"examples/stable_baselines3_example.py from edbeeching/godot_rl_agents and run" \
+		"make test-godot-rl GODOT_RL_EXAMPLE=path/to/it"; exit 1; }
+	echo "$(GODOT_RL_SHA256)  $@.part" | sha256sum --check --quiet
+	mv $@.part $@
+
+test-godot-rl: $(STAMP) $(GODOT_RL_VENV)/.installed $(GODOT_RL_EXAMPLE)
+	GODOT_RL_PYTHON=$(abspath $(GODOT_RL_VENV))/bin/python GODOT_RL_EXAMPLE=$(abspath $(GODOT_RL_EXAMPLE)) \
+		OMP_NUM_THREADS=1 $(BIN)/python -m pytest -m godot_rl tests/test_godot_rl.py
+
 # Optional: what serving costs a real trainer (benchmarks/train_speed.py: SB3 PPO and SyncVectorEnv
 # against the environment in process, under three conditions; about 15 minutes). torch first.
 bench-train: $(STAMP)
@@ -174,4 +206,4 @@ vectors: $(STAMP)
 	$(BIN)/python -m tests.protocol_vectors
 
 clean:
-	rm -rf $(VENV) $(CLEANRL_VENV) $(LOWEST_VENV) build dist site *.egg-info
+	rm -rf $(VENV) $(CLEANRL_VENV) $(GODOT_RL_VENV) $(LOWEST_VENV) build dist site *.egg-info

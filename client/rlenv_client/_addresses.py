@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from rlenv.transport.sockets import format_address
 
-__all__ = ["format_address", "parse_address"]
+__all__ = ["format_address", "is_address", "parse_address"]
 
 
 def parse_address(address: str) -> tuple[str, int]:
@@ -26,3 +26,9 @@ def parse_address(address: str) -> tuple[str, int]:
     if not 0 < int(port) <= 65535:
         raise ValueError(f"{address!r} has no port: ports run from 1 to 65535")
     return host, int(port)
+
+
+def is_address(target: str) -> bool:
+    """Whether a command line's ``target`` is ``HOST:PORT`` (else ``MODULE:CLASS`` or an id)."""
+    host, _, port = target.rpartition(":")
+    return bool(host) and port.isdigit()

@@ -1,4 +1,5 @@
-"""The ``rlenv`` command: serve, http, inspect, check, bench, replay, dataset, demo, dm-env-rpc."""
+"""The ``rlenv`` command: serve, http, inspect, check, bench, replay, dataset, demo, dm-env-rpc,
+godot-rl."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from collections.abc import Sequence
 
 from rlenv.protocol.errors import RlenvError
 from rlenv_tools._cli_dm_env_rpc import add_dm_env_rpc
+from rlenv_tools._cli_godot import add_godot_rl
 from rlenv_tools._cli_recordings import add_dataset, add_replay
 from rlenv_tools._cli_serve import add_serve
 from rlenv_tools._cli_trials import add_bench, add_check, add_demo
@@ -60,6 +62,7 @@ def _parser() -> argparse.ArgumentParser:
         add_dataset,
         add_demo,
         add_dm_env_rpc,
+        add_godot_rl,
     ):
         add(commands)
     return parser

@@ -27,6 +27,7 @@ from typing import TypeVar
 
 from rlenv.protocol import Hello
 from rlenv.protocol.errors import ConnectionLost, ErrorCode, RemoteError, RequestTimeout
+from rlenv_client._addresses import is_address
 from rlenv_client.client import Client
 from rlenv_client.launcher import ServerProcess, ServerStartError
 from rlenv_client.registration import ENVIRONMENTS
@@ -39,12 +40,6 @@ __all__ = ["Catalog", "Entry", "Opened", "is_address"]
 _T = TypeVar("_T")
 _STARTUP_TIMEOUT = 60.0  # seconds a session's server may take to start
 _CLOSING_GRACE = 5.0  # seconds a session's server has to exit on SIGTERM before SIGKILL
-
-
-def is_address(target: str) -> bool:
-    """Whether ``target`` is ``HOST:PORT`` (else ``MODULE:CLASS``)."""
-    host, _, port = target.rpartition(":")
-    return bool(host) and port.isdigit()
 
 
 @dataclass(frozen=True)

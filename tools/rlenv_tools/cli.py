@@ -1,5 +1,4 @@
-"""The ``rlenv`` command: serve, http, inspect, check, bench, replay, dataset, demo, dm-env-rpc,
-godot-rl."""
+"""The ``rlenv`` command: serve, http, inspect, check, bench, replay, dataset, demo, bridges."""
 
 from __future__ import annotations
 

@@ -63,6 +63,8 @@ OtherPolicy = str | os.PathLike[str] | Callable[[Any], Any]
 def agent_classes(target: str) -> dict[str, type[RLAgent]]:
     """Each agent's class, by name, read from one instance of ``target`` built in this process.
 
+    An environment whose agents come and go gives its declaration: every possible agent's.
+
     Raises:
         ImportError, ValueError, TypeError: ``target`` does not load (see
             :func:`rlenv.serving._instance.load_environment`).
@@ -71,7 +73,11 @@ def agent_classes(target: str) -> dict[str, type[RLAgent]]:
 
     with LocalClient(target) as probe:
         assert probe.host is not None
-        return {agent.name: type(agent) for agent in probe.host.instances[0].agents}
+        instance = probe.host.instances[0]
+        declared = instance.environment.possible_agents
+        if declared is not None:
+            return dict(declared)
+        return {agent.name: type(agent) for agent in instance.agents}
 
 
 def policy_arguments(policies: Mapping[str, str]) -> list[str]:

@@ -31,7 +31,7 @@ TESTS = Path(__file__).parent
 COME_AND_GO = "come_and_go_envs:ComeAndGoEnvironment"
 PACED = "come_and_go_envs:PacedEnvironment"
 HUNT = "examples.hunt:HuntEnvironment"
-NOT_A_MOVE = 7  # outside Discrete(3): the client's codec refuses it, if it were ever sent
+NOT_SENT = object()  # cannot travel on the wire: sending it would raise TypeError
 
 
 @pytest.fixture(autouse=True)
@@ -92,7 +92,7 @@ def test_agents_not_due_keep_their_last_observation_and_their_actions_are_never_
         due = dict.fromkeys(env.agents, True)
         deciders = []
         for _ in range(6):
-            actions = {name: 2 if due[name] else NOT_A_MOVE for name in env.agents}
+            actions = {name: 2 if due[name] else NOT_SENT for name in env.agents}
             observations, rewards, terminations, truncations, infos = env.step(actions)
             assert set(observations) == set(env.agents) == set(rewards) == set(infos)
             due = {name: infos[name]["due"] for name in env.agents}
@@ -101,8 +101,14 @@ def test_agents_not_due_keep_their_last_observation_and_their_actions_are_never_
                 if not due[name]:
                     assert rewards[name] == 0.0
                     assert not (terminations[name] or truncations[name])
-        assert deciders == [["Fast", "Plain"], ["Plain", "Slow"], ["Fast", "Jerky", "Plain"],
-                            ["Fast", "Plain"], ["Fast", "Jerky", "Plain"], ["Plain", "Slow"]]  # fmt: skip
+        assert deciders == [
+            ["Fast", "Plain"],  # tick 2
+            ["Plain", "Slow"],  # 3
+            ["Fast", "Jerky", "Plain"],  # 4
+            ["Fast", "Plain"],  # 6
+            ["Fast", "Jerky", "Plain"],  # 8
+            ["Plain", "Slow"],  # 9
+        ]
         _, rewards, *_ = env.step({name: 2 for name in env.agents})  # tick 10: Fast, Plain
         assert rewards["Slow"] == 0.0  # 6 ticks of reward, kept for its decision at 15
         env.reset(seed=0)
@@ -146,7 +152,7 @@ def _play_gymnasium(env: RemoteEnv) -> list[tuple[Any, ...]]:
     observation, info = env.reset(seed=0)
     answers: list[tuple[Any, ...]] = [(observation, info)]
     while True:
-        action = {name: 2 if name in info["due"] else NOT_A_MOVE for name in observation}
+        action = {name: 2 if name in info["due"] else NOT_SENT for name in observation}
         observation, reward, terminated, truncated, info = env.step(action)
         answers.append((observation, reward, terminated, truncated, info))
         if terminated or truncated:
@@ -185,7 +191,7 @@ def test_remote_env_passes_gymnasiums_checker_on_agents_that_come_and_go() -> No
         _, info = env.reset(seed=0)
         _, _, _, _, info = env.step(dict.fromkeys(info["due"], 2))
         assert info["due"] == ("Fast", "Plain")
-        observation, *_ = env.step({"Fast": 2, "Plain": 2, "Slow": NOT_A_MOVE, "Jerky": 0})
+        observation, *_ = env.step({"Fast": 2, "Plain": 2, "Slow": NOT_SENT, "Jerky": 0})
         assert observation["Fast"].tobytes() == np.zeros(2, np.float32).tobytes()  # not due
     finally:
         env.close()

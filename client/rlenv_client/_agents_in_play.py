@@ -22,7 +22,7 @@ from gymnasium.vector.utils import create_empty_array, iterate
 
 from rlenv_client.trainer_view import TrainerView
 
-__all__ = ["AgentsInPlay", "Turn", "answer_reward"]
+__all__ = ["AgentSlots", "AgentsInPlay", "Turn", "answer_reward"]
 
 
 @dataclass(frozen=True)
@@ -49,6 +49,25 @@ class Turn:
     truncated: dict[str, bool]
 
 
+class AgentSlots:
+    """A fixed slot per trainer agent: an observation with an entry for each, zeros if absent.
+
+    Args:
+        view: the agents the trainer acts for, and their spaces.
+    """
+
+    def __init__(self, view: TrainerView) -> None:
+        self.names = view.agents
+        self._zeros = {name: _zeros(space) for name, space in view.agent_spaces()[1].items()}
+
+    def fill(self, observation: Mapping[str, Any]) -> dict[str, Any]:
+        """Every trainer agent's entry of ``observation``, zeros where it has none."""
+        return {
+            name: observation[name] if name in observation else copy.deepcopy(zeros)
+            for name, zeros in self._zeros.items()
+        }
+
+
 class AgentsInPlay:
     """The trainer's agents in play, through the answers of one episode after another.
 
@@ -62,7 +81,7 @@ class AgentsInPlay:
 
     def __init__(self, view: TrainerView) -> None:
         self._names = view.agents
-        self._zeros = {name: _zeros(space) for name, space in view.agent_spaces()[1].items()}
+        self._slots = AgentSlots(view)
         self.agents: tuple[str, ...] = ()
         self.due: tuple[str, ...] = ()
         self._last: dict[str, Any] = {}
@@ -106,10 +125,7 @@ class AgentsInPlay:
 
     def full_observation(self, observation: Mapping[str, Any]) -> dict[str, Any]:
         """Every trainer agent's entry of ``observation``, zeros where it has none."""
-        return {
-            name: observation[name] if name in observation else copy.deepcopy(zeros)
-            for name, zeros in self._zeros.items()
-        }
+        return self._slots.fill(observation)
 
 
 def answer_reward(info: Mapping[str, Any], names: tuple[str, ...]) -> float:

@@ -25,6 +25,18 @@ resets: each step returns its last observation again, reward 0, both flags false
 ``info["waiting"]``; the step that resets its instance ends that wait as truncated, its final
 info holding ``waiting`` too, so that no episode statistics are counted for it. Its actions
 while waiting are ignored.
+
+Agents that come and go (the hello's ``possible_agents``, protocol 2.6) keep a fixed slot per
+possible learner: sub-environment ``i * k + j`` is always agent ``j`` of instance ``i``, in
+play or not. The mask is ``infos["is_active"]`` (Sample Factory's name; TorchRL's ``mask``,
+PufferLib's ``masks``): true where the slot's agent is in its instance's answer, that is, it
+decides now, or it leaves with its final transition (``terminated`` or ``truncated``, with
+``final_obs``). An inactive slot carries its agent's last observation (zeros before it
+joins), reward 0 and both flags false; its action is ignored by the server. A slot whose agent
+is not in play (not joined yet, or gone) waits, with ``info["waiting"]``, as above: it becomes
+active when the agent joins (no episode boundary: the join's observation comes with reward 0),
+and a name is never in play twice in one episode, so a slot whose agent left waits until its
+instance's next episode. Callables in ``others`` are called only where their agent decides.
 """
 
 from __future__ import annotations
@@ -248,8 +260,10 @@ class AgentVectorEnv(VectorEnv):
             vector.single_action_space,
             vector.single_observation_space,
         )
-        self._several = (
-            isinstance(joint_actions, spaces.Dict) and len(vector.clients[0].hello.agents) > 1
+        hello = vector.clients[0].hello
+        self._come_and_go = hello.possible_agents is not None
+        self._several = isinstance(joint_actions, spaces.Dict) and (
+            len(hello.agents) > 1 or self._come_and_go
         )
         first = self.learners[0]
         action_space, observation_space = (
@@ -276,6 +290,7 @@ class AgentVectorEnv(VectorEnv):
         self._waiting = np.zeros(self.num_envs, np.bool_)
         self._steps = np.zeros(self.instances, np.int64)  # of each instance's episode
         self._last = create_empty_array(observation_space, self.num_envs)  # per sub-env
+        self._due: dict[str, np.ndarray] = {}  # by agent, over the instances (come and go)
 
     def _agent_space(self, joint: spaces.Space, name: str) -> spaces.Space:
         # Several agents: the joint spaces are Dicts by agent (see _set_spaces).
@@ -309,7 +324,14 @@ class AgentVectorEnv(VectorEnv):
         self._steps[:] = 0
         observations = self._learner_rows(joint)
         self._last = observations
-        return observations, self._spread(infos)
+        out = self._spread(infos)
+        if self._come_and_go:
+            active = self._take_due(infos)
+            self._waiting[:] = ~active  # not in play yet: its slot waits for it to join
+            out = self._with_active(out, active)
+            if self._waiting.any():
+                out = {**out, "waiting": self._waiting.copy(), "_waiting": self._waiting.copy()}
+        return observations, out
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step every instance with the learners' ``actions`` and the others' policies.
@@ -328,7 +350,10 @@ class AgentVectorEnv(VectorEnv):
                 set_row(column, i, row(actions, i * k + j))
         for name, policy in self.driven_here.items():
             column, seen = self._of(joint, name), self._of(self._joint_observation, name)
-            for live in np.flatnonzero(~self._others_done[name]):
+            acting = ~self._others_done[name]
+            if self._come_and_go:  # only where it decides
+                acting &= self._due.get(name, acting)
+            for live in np.flatnonzero(acting):
                 set_row(column, live, policy(row(seen, live)))
         joint_obs, *flags, infos = self.vector.step(joint)
         self._joint_observation = joint_obs
@@ -343,10 +368,10 @@ class AgentVectorEnv(VectorEnv):
         """
         if not self._several:
             return joint
-        step = _columns(infos["agents"][name])
+        step = _columns(infos["agents"].get(name), self.instances)
         if not ended.any():
             return step
-        final = _columns(infos["final_info"]["agents"][name])
+        final = _columns(infos["final_info"].get("agents", {}).get(name), self.instances)
         return tuple(np.where(ended, last, now) for last, now in zip(final, step, strict=True))
 
     def _outcomes(
@@ -363,6 +388,10 @@ class AgentVectorEnv(VectorEnv):
         truncated = np.zeros(self.num_envs, np.bool_)
         observations = self._learner_rows(joint_obs)
         out = self._spread(infos)
+        instance_ended = np.repeat(ended, k)
+        active = self._take_due(infos) if self._come_and_go else None
+        if active is not None:  # a slot waiting for its agent to join: it joined
+            self._waiting[active & ~instance_ended] = False
         for name in self.driven_here:
             _, done_t, done_c = self._agent_outcome(name, joint, ended, infos)
             self._others_done[name] |= done_t | done_c
@@ -399,14 +428,36 @@ class AgentVectorEnv(VectorEnv):
             )
             if not self._waiting[index] and not ended[instance]:
                 self._waiting[index] = True  # it waits for its instance to reset
-        instance_ended = np.repeat(ended, k)
-        self._waiting[instance_ended] = False
-        for index in np.flatnonzero(self._waiting & ~finished):
+        if active is None:
+            self._waiting[instance_ended] = False
+            carried = self._waiting & ~finished
+        else:  # a new episode's slots wait for their agents, if they do not start
+            self._waiting[instance_ended] = ~active[instance_ended]
+            carried = (self._waiting | ~active) & ~finished & ~instance_ended
+        for index in np.flatnonzero(carried):
             set_row(observations, index, row(self._last, index))
         if self._waiting.any():
             out = {**out, "waiting": self._waiting.copy(), "_waiting": self._waiting.copy()}
+        if active is not None:
+            out = self._with_active(out, active)
         self._last = observations
         return observations, rewards, terminated, truncated, out
+
+    def _take_due(self, infos: Mapping[str, Any]) -> np.ndarray:
+        """Whether each sub-environment's agent is in its answer: its slot is active.
+
+        Keeps the vector's ``due`` columns (agents that come and go) for the next step.
+        """
+        self._due = dict(infos["due"])
+        k = len(self.learners)
+        active = np.zeros(self.num_envs, np.bool_)
+        for j, name in enumerate(self.learners):
+            active[j::k] = self._due[name]
+        return active
+
+    def _with_active(self, out: dict[str, Any], active: np.ndarray) -> dict[str, Any]:
+        """``out`` with ``is_active`` (Sample Factory's name) and its mask."""
+        return {**out, "is_active": active.copy(), "_is_active": np.ones(self.num_envs, np.bool_)}
 
     def _learner_rows(self, joint: Any) -> Any:
         """The learners' observations, instance by instance: row ``i * k + j``."""
@@ -425,7 +476,16 @@ class AgentVectorEnv(VectorEnv):
             key: _repeat(value, k)
             for key, value in infos.items()
             if key
-            not in ("agents", "_agents", "final_obs", "_final_obs", "final_info", "_final_info")
+            not in (
+                "agents",
+                "_agents",
+                "due",
+                "_due",
+                "final_obs",
+                "_final_obs",
+                "final_info",
+                "_final_info",
+            )
         }
 
     def render(self) -> tuple[np.ndarray, ...] | None:
@@ -523,10 +583,21 @@ def _plan_others(
     return here, served
 
 
-def _columns(outcome: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(reward, terminated, truncated)`` of one agent's batched outcome map."""
+def _columns(
+    outcome: Mapping[str, Any] | None, instances: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(reward, terminated, truncated)`` of one agent's batched outcome map.
+
+    ``None`` (no instance's answer holds the agent: agents that come and go): 0 and false; a
+    joined agent's first reward (``None``) is 0.
+    """
+    if outcome is None:
+        return np.zeros(instances), np.zeros(instances, np.bool_), np.zeros(instances, np.bool_)
+    reward = outcome["reward"]
+    if isinstance(reward, np.ndarray) and reward.dtype == object:
+        reward = np.where(reward == None, 0.0, reward)  # noqa: E711 (elementwise)
     return (
-        np.asarray(outcome["reward"], np.float64),
+        np.asarray(reward, np.float64),
         np.asarray(outcome["terminated"], np.bool_),
         np.asarray(outcome["truncated"], np.bool_),
     )

@@ -210,3 +210,84 @@ def test_remote_env_leaves_driven_agents_out_when_agents_come_and_go() -> None:
             assert reward == pytest.approx(sum(o["reward"] or 0.0 for o in mine.values()))
     finally:
         env.close()
+
+
+# --- vector envs: a fixed slot per possible agent, and a mask ---------------------------------
+
+
+def test_agent_vector_keeps_a_slot_per_possible_agent_with_a_mask() -> None:
+    from come_and_go_envs import Walker
+
+    from rlenv_client.agent_vector import AgentVectorEnv
+
+    with AgentVectorEnv(2, COME_AND_GO, agents=Walker) as env:
+        assert env.learners == ["A", "B", "C", "D"] and env.num_envs == 8
+        observations, infos = env.reset(seed=0)
+        assert infos["is_active"].tolist() == [True, True, False, False] * 2
+        assert infos["waiting"].tolist() == [False, False, True, True] * 2
+        assert not observations[2:4].any()  # not in play: zeros
+        moves = np.full(env.num_envs, 2)
+        steps = [env.step(moves) for _ in range(8)]  # the episode: ticks 4, 8 ... 28, 30
+        active = [step[4]["is_active"][:4].tolist() for step in steps]
+        assert active == [
+            [True, True, False, False],
+            [True, True, True, False],  # C joined at tick 6
+            [True, True, True, False],  # B left at tick 10: its final transition
+            [True, False, True, False],
+            [True, False, True, False],  # A terminated at 20
+            [False, False, True, False],
+            [False, False, True, False],
+            [True, True, False, False],  # no one left at 30: the next episode's A and B start
+        ]
+        observations, rewards, terminated, truncated, infos = steps[1]
+        assert observations[2].tolist() == [0.0, 8.0] and rewards[2] == 0.0  # C's first
+        observations, rewards, terminated, truncated, infos = steps[2]
+        assert terminated[:4].tolist() == [False, True, False, False] and rewards[1] == 2.0
+        assert infos["final_obs"][1].tolist() == [10.0, 10.0]
+        observations, rewards, terminated, truncated, infos = steps[3]
+        assert observations[1].tolist() == [10.0, 10.0] and rewards[1] == 0.0  # B waits
+        assert infos["waiting"][:4].tolist() == [False, True, False, True]
+        assert not (terminated[1] or truncated[1])
+        observations, rewards, terminated, truncated, infos = steps[-1]
+        assert truncated[:4].all()  # C's end, and the others' waits end
+        assert [infos["final_info"]["waiting"][i] for i in (0, 1, 3)] == [True, True, True]
+        assert infos["final_obs"][2].tolist() == [22.0, 30.0]  # C truncated at 30
+        assert not observations[2:4].any() and observations[0].tolist() == [0.0, 0.0]
+
+
+def test_agent_vector_slots_of_agents_not_due_carry_their_last_observation() -> None:
+    from rlenv_client.agent_vector import AgentVectorEnv
+
+    with AgentVectorEnv(1, PACED, agents=["Fast", "Slow", "Plain", "Jerky"]) as env:
+        first, infos = env.reset(seed=0)
+        assert infos["is_active"].all() and "waiting" not in infos
+        observations, rewards, _, _, infos = env.step(np.full(4, 2))  # tick 2: Fast, Plain
+        assert infos["is_active"].tolist() == [True, False, True, False]
+        assert observations[[1, 3]].tobytes() == first[[1, 3]].tobytes()
+        assert rewards.tolist() == [2.0, 0.0, 2.0, 0.0]
+        observations, rewards, _, _, infos = env.step(np.full(4, 2))  # tick 3: Plain, Slow
+        assert infos["is_active"].tolist() == [False, True, True, False]
+        assert rewards[1] == 3.0  # Slow's 3 ticks, at its decision
+
+
+def test_agent_vector_on_the_hunt_trains_prey_slots_that_come_and_go() -> None:
+    from examples.hunt import Prey
+    from rlenv_client.agent_vector import AgentVectorEnv
+
+    with AgentVectorEnv(1, HUNT, agents=Prey) as env:  # the hunter: its heuristic, served
+        assert env.learners == [f"Prey{n}" for n in range(1, 9)]
+        _, infos = env.reset(seed=0)
+        assert infos["waiting"].tolist() == [False, False] + [True] * 6
+        joined = caught = False
+        waiting = infos["waiting"]
+        for _ in range(600):
+            actions = env.action_space.sample()
+            _, rewards, terminated, _, infos = env.step(actions)
+            active = infos["is_active"]
+            assert not rewards[~active].any()  # an inactive slot earns nothing
+            joined |= bool((waiting & active & ~terminated).any())
+            caught |= bool(terminated.any())
+            waiting = infos.get("waiting", np.zeros(8, np.bool_))
+            if joined and caught:
+                break
+        assert joined and caught

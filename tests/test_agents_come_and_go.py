@@ -266,3 +266,27 @@ def test_steps_columns_keep_a_slot_per_possible_agent_with_due_flags(serve: Serv
         after = client.receive_steps()
         assert after.due["B"].tolist() == [False, False]
         assert after.observation["B"].tolist() == [[0.0, 0.0], [0.0, 0.0]]
+
+
+def test_driven_agents_due_on_the_way_decide_in_the_server_and_replay_bit_for_bit() -> None:
+    prey = {f"Prey{number}": "heuristic" for number in range(1, 9)}
+    first = LocalClient("examples.hunt:HuntEnvironment", policies=prey)
+    other = LocalClient("examples.hunt:HuntEnvironment", policies=prey)
+    observation, _ = first.reset(seed=5)
+    for _ in range(30):  # prey decide at ticks 2, 6, ... in the server, between the hunter's
+        observation, _, _, _, info = first.step({"Hunter": observation["Hunter"][4:6] / 10})
+        assert info["frames"] == 4 and "Hunter" in observation
+    snapshot = first.snapshot()
+    restored, _ = other.restore(snapshot)
+    assert restored["Hunter"].tobytes() == observation["Hunter"].tobytes()
+    for _ in range(30):
+        action = {"Hunter": observation["Hunter"][4:6] / 10}
+        one, two = first.step(action), other.step(action)
+        assert sorted(one[0]) == sorted(two[0])
+        assert all(one[0][name].tobytes() == two[0][name].tobytes() for name in one[0])
+        assert one[1:4] == two[1:4]
+        observation = one[0]
+        if one[2] or one[3]:
+            break
+    first.close()
+    other.close()

@@ -5,7 +5,7 @@ a reset, the generator's state as JSON, the reset's options and the events since
 
     {"version": 1, "config": {"environment": {...}, "agent": {...}, "world": {...}},
      "rng": "<the generator's state, as JSON>", "options": {...},
-     "events": [["config", {...}], ["action", action, frames],
+     "events": [["config", {...}], ["action", action, frames], ["action", action, frames, true],
                 ["set", node path, property, value], ...]}
 
 :func:`parse_snapshot` checks the structure (a server before it restores one, a client before
@@ -64,7 +64,11 @@ def parse_snapshot(snapshot: Any) -> dict[str, Any]:
         valid = isinstance(event, list) and (
             (len(event) == 2 and event[0] == "config" and isinstance(event[1], Mapping))
             or (
-                len(event) == 3 and event[0] == "action" and type(event[2]) is int and event[2] >= 1
+                len(event) in (3, 4)
+                and event[0] == "action"
+                and type(event[2]) is int
+                and event[2] >= 1
+                and event[3:] in ([], [True])  # true: the step goes on (driven agents decided)
             )
             or (
                 len(event) == 4

@@ -258,8 +258,21 @@ class AgentsInPlay(Roster):
         return total, terminated, truncated, outcomes
 
     def acted(self) -> None:
-        """An action applies: the agents it was asked of decided."""
-        self.asked = set()
+        """A step starts: the agents due decide; the last answer told who joined and left.
+
+        An agent's reward counts from its last decision (a replayed log's steps too).
+        """
+        for agent in self.agents:
+            if agent.name in self.due and agent.name not in self.new:
+                agent.reward = 0.0
+        self.asked, self.due, self.departed, self.new = set(), set(), {}, set()
+
+    def replayed(self) -> None:
+        """A restore replayed the log: its last answer told the due their rewards, and who left."""
+        for agent in self.agents:
+            if agent.name in self.due:
+                agent.reward = 0.0
+        self.departed = {}
 
     # --- decisions --------------------------------------------------------------------------
 
@@ -290,8 +303,14 @@ class AgentsInPlay(Roster):
         self._first_tick = True
 
     def decided(self, names: Any) -> None:
-        """The agents ``names`` decided in the server (driven): they are due no more."""
+        """The agents ``names`` decided in the server (driven): they are due no more.
+
+        Their rewards count from now (since their last decision).
+        """
         self.due.difference_update(names)
+        for agent in self.agents:
+            if agent.name in names:
+                agent.reward = 0.0
 
     # --- the tree's changes (rlenv.environment.AgentWatch) ----------------------------------
 

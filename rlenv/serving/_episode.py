@@ -171,14 +171,15 @@ class EpisodeRun:
         frames: int,
         replaying: bool,
         decide: Callable[[], Any] | None = None,
+        goes_on: bool = False,
     ) -> None:
         """Run a checked (joint) action for ``frames`` ticks (lockstep), or apply it now.
 
         While agents come and go, the roster says how many ticks the step runs
         (:meth:`Roster.ticks_for`), and when only agents the server drives are due after them,
         ``decide`` gives their action and the step goes on (each part is logged as an action
-        of its own). An action ``replaying`` a log (a restore) runs the ticks logged, and
-        leaves its answer no reward nor ticks.
+        of its own, ``goes_on``). An action ``replaying`` a log (a restore) runs the ticks
+        logged, and leaves its answer no reward nor ticks.
         """
         tree = self.tree
         if tree.real_time:
@@ -187,10 +188,13 @@ class EpisodeRun:
         self._ticks = 0
         self.state = _ACTING
         roster = self.roster
-        roster.acted()
+        if goes_on:  # a replayed part of a step that went on: driven agents decided
+            roster.decided(action)
+        else:
+            roster.acted()
         while True:
             ticks = frames if replaying else roster.ticks_for(frames)
-            self.log.acted(action, ticks)
+            self.log.acted(action, ticks, goes_on)
             self.environment._step(action, ticks)
             roster.boundary()
             if replaying or decide is None or roster.ended():
@@ -198,11 +202,12 @@ class EpisodeRun:
             action = decide()
             if action is None:
                 break
+            goes_on = True
         tree.paused = True
         self.state = Episode.ENDED if self.roster.ended() else _RUNNING
         if replaying:  # the restore's answer reports none of the replay's ticks
             self._ticks = 0
-            self.roster.clear_rewards()
+            self.roster.replayed()
 
     def _act_now(self, action: Any) -> None:
         """Real time: give the action at once; the answer carries the latest state.

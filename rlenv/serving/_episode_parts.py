@@ -145,7 +145,7 @@ class Restore(Part):
                 else:
                     if instance.state is Episode.ENDED:
                         raise RuntimeError("the snapshot acts after its episode ended")
-                    instance.act(next(checked), event[2])
+                    instance.act(next(checked), event[2], goes_on=len(event) == 4)
         except RequestError as error:  # a set the replay refused: the episode is half restored
             instance.abandon_episode("a restore failed part way")
             raise RequestError(error.code, f"{error}; reset required") from None

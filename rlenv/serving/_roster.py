@@ -129,6 +129,10 @@ class Roster:
     def boundary(self) -> None:
         """A step's ticks ran (the agents that decide at every answer are due now)."""
 
+    def replayed(self) -> None:
+        """A restore replayed the log: its answer reports nothing the replay earned."""
+        self.clear_rewards()
+
     def acted(self) -> None:
         """An action applies (every agent decides at every answer: nothing to keep)."""
 

@@ -72,12 +72,17 @@ class EpisodeLog:
         if self.started:
             self.record(["config", dict(config)])
 
-    def acted(self, action: Any, frames: int) -> None:
-        """An action that ran ``frames`` ticks at most."""
+    def acted(self, action: Any, frames: int, goes_on: bool = False) -> None:
+        """An action that ran ``frames`` ticks at most.
+
+        ``goes_on``: the actions of driven agents that decided in the server while the step
+        went on (agents that decide at their own pace); logged as ``[..., true]``.
+        """
+        event = ["action", action, frames, True] if goes_on else ["action", action, frames]
         if len(self.events) < MAX_EVENTS and not self.overflowed:  # record()'s common case
-            self.events.append(["action", action, frames])
+            self.events.append(event)
         else:
-            self.record(["action", action, frames])
+            self.record(event)
 
     def record(self, event: list[Any]) -> None:
         """Append ``event``; past :data:`MAX_EVENTS`, forget them all and remember why."""

@@ -12,7 +12,7 @@ each read the part their convention needs.
 from __future__ import annotations
 
 import copy
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -22,7 +22,15 @@ from gymnasium.vector.utils import create_empty_array, iterate
 
 from rlenv_client.trainer_view import TrainerView
 
-__all__ = ["AgentSlots", "AgentsInPlay", "Turn", "answer_reward"]
+__all__ = [
+    "AgentSlots",
+    "AgentsInPlay",
+    "Turn",
+    "answer_reward",
+    "due_columns",
+    "slot_mask",
+    "with_column",
+]
 
 
 @dataclass(frozen=True)
@@ -132,6 +140,36 @@ def answer_reward(info: Mapping[str, Any], names: tuple[str, ...]) -> float:
     """The sum of ``names``' rewards in the answer's ``info["agents"]`` (``None``: 0)."""
     outcomes = info.get("agents") or {}
     return float(sum(outcomes[name]["reward"] or 0.0 for name in names if name in outcomes))
+
+
+def due_columns(slots: AgentSlots | None, count: int) -> dict[str, np.ndarray] | None:
+    """Per slot, a column of ``count`` falses: whether its agent is in each row's answer.
+
+    ``None`` without slots (no agents come and go).
+    """
+    if slots is None:
+        return None
+    return {name: np.zeros(count, np.bool_) for name in slots.names}
+
+
+def slot_mask(due: Mapping[str, np.ndarray], learners: Sequence[str], count: int) -> np.ndarray:
+    """Whether each of ``count`` sub-environments' agent is in its answer.
+
+    Row ``i * k + j`` is learner ``j`` of instance ``i``; ``due`` has a column over the
+    instances per agent.
+    """
+    k = len(learners)
+    active = np.zeros(count, np.bool_)
+    for j, name in enumerate(learners):
+        active[j::k] = due[name]
+    return active
+
+
+def with_column(infos: dict[str, Any], key: str, value: Any, count: int) -> dict[str, Any]:
+    """Batched ``infos`` with ``key`` set in every one of ``count`` rows (``None``: unchanged)."""
+    if value is None:
+        return infos
+    return {**infos, key: value, f"_{key}": np.ones(count, np.bool_)}
 
 
 def _zeros(space: spaces.Space) -> Any:

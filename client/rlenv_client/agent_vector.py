@@ -52,6 +52,7 @@ from gymnasium.vector.utils import batch_space, create_empty_array
 
 from rlenv.agent import RLAgent
 from rlenv.serving.policy_driver import HEURISTIC
+from rlenv_client._agents_in_play import slot_mask, with_column
 from rlenv_client._rows import check_shape, row, set_row
 from rlenv_client.vector import RemoteVectorEnv
 from rlenv_client.vector_servers import default_layout
@@ -326,9 +327,10 @@ class AgentVectorEnv(VectorEnv):
         self._last = observations
         out = self._spread(infos)
         if self._come_and_go:
-            active = self._take_due(infos)
+            self._due = dict(infos["due"])  # kept for the callables of the next step
+            active = slot_mask(self._due, self.learners, self.num_envs)
             self._waiting[:] = ~active  # not in play yet: its slot waits for it to join
-            out = self._with_active(out, active)
+            out = with_column(out, "is_active", active, self.num_envs)
             if self._waiting.any():
                 out = {**out, "waiting": self._waiting.copy(), "_waiting": self._waiting.copy()}
         return observations, out
@@ -389,9 +391,11 @@ class AgentVectorEnv(VectorEnv):
         observations = self._learner_rows(joint_obs)
         out = self._spread(infos)
         instance_ended = np.repeat(ended, k)
-        active = self._take_due(infos) if self._come_and_go else None
-        if active is not None:  # a slot waiting for its agent to join: it joined
-            self._waiting[active & ~instance_ended] = False
+        active = None
+        if self._come_and_go:
+            self._due = dict(infos["due"])
+            active = slot_mask(self._due, self.learners, self.num_envs)
+            self._waiting[active & ~instance_ended] = False  # a waiting slot's agent joined
         for name in self.driven_here:
             _, done_t, done_c = self._agent_outcome(name, joint, ended, infos)
             self._others_done[name] |= done_t | done_c
@@ -438,26 +442,9 @@ class AgentVectorEnv(VectorEnv):
             set_row(observations, index, row(self._last, index))
         if self._waiting.any():
             out = {**out, "waiting": self._waiting.copy(), "_waiting": self._waiting.copy()}
-        if active is not None:
-            out = self._with_active(out, active)
+        out = with_column(out, "is_active", active, self.num_envs)  # Sample Factory's name
         self._last = observations
         return observations, rewards, terminated, truncated, out
-
-    def _take_due(self, infos: Mapping[str, Any]) -> np.ndarray:
-        """Whether each sub-environment's agent is in its answer: its slot is active.
-
-        Keeps the vector's ``due`` columns (agents that come and go) for the next step.
-        """
-        self._due = dict(infos["due"])
-        k = len(self.learners)
-        active = np.zeros(self.num_envs, np.bool_)
-        for j, name in enumerate(self.learners):
-            active[j::k] = self._due[name]
-        return active
-
-    def _with_active(self, out: dict[str, Any], active: np.ndarray) -> dict[str, Any]:
-        """``out`` with ``is_active`` (Sample Factory's name) and its mask."""
-        return {**out, "is_active": active.copy(), "_is_active": np.ones(self.num_envs, np.bool_)}
 
     def _learner_rows(self, joint: Any) -> Any:
         """The learners' observations, instance by instance: row ``i * k + j``."""

@@ -61,7 +61,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, create_empty_array
 
 from rlenv.protocol import ErrorReply, Request, Response
-from rlenv_client._agents_in_play import AgentSlots, answer_reward
+from rlenv_client._agents_in_play import AgentSlots, answer_reward, due_columns, with_column
 from rlenv_client._rows import check_shape, empty_like, row
 from rlenv_client._server_groups import ServerGroups
 from rlenv_client._step_columns import StepColumns
@@ -239,13 +239,13 @@ class RemoteVectorEnv(VectorEnv):
         super().reset(seed=seed if isinstance(seed, int) else None)
         observations = create_empty_array(self.single_observation_space, self.num_envs)
         frames = np.zeros(self.num_envs, np.int64)
-        due = self._due_columns()
+        due = due_columns(self._slots, self.num_envs)
         infos = self._resets.reset(range(self.num_envs), observations, frames, seeds, options, due)
         self._autoreset[:] = False
         self._steps[:] = 0
         self._last = observations
         merged = self._infos.merge({}, [infos[i] for i in range(self.num_envs)], frames)
-        return observations, self._with_due(merged, due)
+        return observations, with_column(merged, "due", due, self.num_envs)
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step every sub-environment (resetting those that ended, per the autoreset mode).
@@ -312,20 +312,10 @@ class RemoteVectorEnv(VectorEnv):
             rewards,
             terminations,
             truncations,
-            self._with_due(self._infos.merge(infos, env_infos, frames), columns.due),
+            with_column(
+                self._infos.merge(infos, env_infos, frames), "due", columns.due, self.num_envs
+            ),
         )
-
-    def _due_columns(self) -> dict[str, np.ndarray] | None:
-        """While agents come and go, a column per trainer agent: whether it is in the answer."""
-        if self._slots is None:
-            return None
-        return {name: np.zeros(self.num_envs, np.bool_) for name in self._slots.names}
-
-    def _with_due(self, infos: dict[str, Any], due: dict[str, np.ndarray] | None) -> dict:
-        """``infos`` with ``due`` (see the module docstring), while agents come and go."""
-        if due is None:
-            return infos
-        return {**infos, "due": due, "_due": np.ones(self.num_envs, np.bool_)}
 
     def _step_everywhere(self, actions: Any, resetting: np.ndarray) -> StepColumns:
         """Send every server its share of the step, then gather the answers into columns.

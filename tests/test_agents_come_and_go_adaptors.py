@@ -4,8 +4,9 @@ PettingZoo's ``RemoteParallelEnv`` (entries for every agent in play, ``infos[age
 and gymnasium's ``RemoteEnv`` (a fixed ``Dict`` with zeros, ``info["due"]``) on
 ``tests/come_and_go_envs.py``'s games, whose every tick is known (A and B start, C joins at
 tick 6, B is freed at 10, A terminates at 20, C is truncated at 30; four walkers at three
-paces), and on ``examples.hunt``. RLlib's ``RemoteMultiAgentEnv`` is tested in
-``test_rllib.py`` (it needs ray).
+paces), and on ``examples.hunt``; ``AgentVectorEnv``'s fixed slots and mask
+(``infos["is_active"]``) likewise. RLlib's ``RemoteMultiAgentEnv`` is tested in
+``test_rllib.py`` (it needs ray), ``SB3VecEnv(agents=...)`` in ``test_sb3.py``.
 """
 
 from __future__ import annotations

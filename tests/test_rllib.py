@@ -440,3 +440,100 @@ def test_the_server_drives_what_rllib_does_not_train(no_leftovers: str) -> None:
         assert terminateds == {"Chaser": False, "__all__": False}
     finally:
         env.close()
+
+
+# --- agents that come and go: RLlib's own convention -----------------------------------------
+
+
+COME_AND_GO = "come_and_go_envs:ComeAndGoEnvironment"
+PACED = "come_and_go_envs:PacedEnvironment"
+HUNT = "examples.hunt:HuntEnvironment"
+
+
+@pytest.fixture
+def come_and_go_tests(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``tests/come_and_go_envs.py`` importable here and in the servers started."""
+    tests = os.path.dirname(__file__)
+    monkeypatch.syspath_prepend(tests)
+    monkeypatch.setenv(
+        "PYTHONPATH", os.pathsep.join(filter(None, [tests, os.environ.get("PYTHONPATH")]))
+    )
+
+
+def test_agents_come_and_go_in_rllibs_dicts(come_and_go_tests: None) -> None:
+    env = RemoteMultiAgentEnv(COME_AND_GO)
+    try:
+        assert env.possible_agents == ["A", "B", "C", "D"]
+        observations, infos = env.reset(seed=0)
+        assert sorted(observations) == sorted(infos) == env.agents == ["A", "B"]
+        steps = []
+        while True:
+            step = env.step(dict.fromkeys(observations, 2))
+            observations = step[0]
+            steps.append(step)
+            if step[2]["__all__"] or step[3]["__all__"]:
+                break
+        assert [sorted(step[0]) for step in steps] == [
+            ["A", "B"],
+            ["A", "B", "C"],  # C joined at tick 6
+            ["A", "B", "C"],  # B freed at 10: its final observation
+            ["A", "C"],
+            ["A", "C"],  # A terminated at 20
+            ["C"],
+            ["C"],
+            ["C"],  # truncated at 30
+        ]
+        observations, rewards, terminateds, truncateds, _ = steps[1]  # C joins: reward 0.0
+        assert rewards == {"A": 4.0, "B": 4.0, "C": 0.0}
+        assert observations["C"].tolist() == [0.0, 8.0]
+        observations, rewards, terminateds, truncateds, _ = steps[2]  # B leaves, once
+        assert terminateds == {"A": False, "B": True, "C": False, "__all__": False}
+        assert observations["B"].tolist() == [10.0, 10.0] and rewards["B"] == 2.0
+        _, _, terminateds, truncateds, _ = steps[-1]
+        assert terminateds == {"C": False, "__all__": False}
+        assert truncateds == {"C": True, "__all__": True} and env.agents == []
+    finally:
+        env.close()
+
+
+def test_only_agents_that_act_now_are_in_rllibs_dicts(come_and_go_tests: None) -> None:
+    env = RemoteMultiAgentEnv(PACED, max_episode_steps=4)
+    try:
+        observations, _ = env.reset(seed=0)
+        observations, rewards, terminateds, truncateds, _ = env.step(dict.fromkeys(observations, 2))
+        assert sorted(observations) == sorted(rewards) == ["Fast", "Plain"]
+        with pytest.raises(ValueError, match="no action for agent 'Plain', which acts now"):
+            env.step({"Fast": 2})
+        cannot_travel = object()  # sent, it would raise TypeError
+        observations, *_ = env.step({"Fast": 2, "Plain": 2, "Slow": cannot_travel})
+        assert sorted(observations) == ["Plain", "Slow"]
+        observations, *_ = env.step(dict.fromkeys(observations, 2))
+        assert sorted(observations) == ["Fast", "Jerky", "Plain"]
+        observations, rewards, terminateds, truncateds, _ = env.step(dict.fromkeys(observations, 2))
+        # cut by max_episode_steps: every agent in play gets its last observation, truncated
+        assert sorted(observations) == ["Fast", "Jerky", "Plain", "Slow"]
+        assert truncateds == {**dict.fromkeys(observations, True), "__all__": True}
+        assert terminateds["__all__"] is False and env.agents == []
+        assert rewards["Slow"] == 0.0  # not due at tick 6: its reward waits for its decision
+    finally:
+        env.close()
+
+
+def test_ppo_trains_a_policy_per_class_on_the_hunt(no_leftovers: str) -> None:
+    config = multi_agent_config_for(
+        PPOConfig(), HUNT, per="class", num_env_runners=0, max_episode_steps=60
+    )
+    config = (
+        config.env_runners(rollout_fragment_length=100)
+        .training(train_batch_size_per_learner=200, minibatch_size=50, num_epochs=1)
+        .debugging(seed=0)
+    )
+    assert config.policies.keys() == {"Hunter", "Prey"}
+    algo = config.build_algo()
+    try:
+        result = algo.train()
+        agents = set(result["env_runners"]["agent_episode_returns_mean"])
+        assert "Hunter" in agents and {"Prey1", "Prey2"} <= agents
+        assert {"Hunter", "Prey"} <= set(result["learners"])
+    finally:
+        algo.stop()

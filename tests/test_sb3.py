@@ -229,3 +229,38 @@ def test_the_frozen_copy_plays_its_agent() -> None:
     finally:
         envs.close()
         joint.close()
+
+
+# --- agents that come and go: a slot per possible prey, masked ------------------------------
+
+
+def test_sb3_trains_prey_that_come_and_go_in_fixed_slots() -> None:
+    from examples.hunt import HUNTER, PREY, Prey
+    from examples.hunt import TARGET as HUNT
+
+    envs = SB3VecEnv(1, HUNT, agents=Prey)  # the hunter: its heuristic, in the server
+    try:
+        assert envs.num_envs == len(PREY) and envs.venv.driven_by_server == {HUNTER: "heuristic"}
+        envs.reset()
+        assert [info["is_active"] for info in envs.reset_infos] == [True, True] + [False] * 6
+        ends: list[tuple[float, dict]] = []
+        for _ in range(600):
+            envs.step_async(np.stack([envs.action_space.sample() for _ in range(envs.num_envs)]))
+            _, rewards, dones, infos = envs.step_wait()
+            for index, info in enumerate(infos):
+                if not info["is_active"]:
+                    assert rewards[index] == 0.0  # a row SB3 cannot skip: it earns nothing
+                if dones[index] and "episode" in info:
+                    ends.append((float(rewards[index]), info))
+            if len(ends) >= 2:
+                break
+        assert len(ends) >= 2  # two prey caught: each an episode of its slot
+        for reward, info in ends:
+            assert info["terminal_observation"].shape == Prey.observation_space.shape
+            assert not info["TimeLimit.truncated"] and reward < -0.5  # caught: -1
+            assert info["episode"]["l"] >= 1
+        model = PPO("MlpPolicy", envs, seed=0, n_steps=32, batch_size=64, verbose=0)
+        model.learn(total_timesteps=256)
+        assert model.num_timesteps == 256
+    finally:
+        envs.close()

@@ -9,7 +9,7 @@ sub-environment after an interrupted step, end as truncated with their last obse
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -30,12 +30,25 @@ class StepColumns:
         observations: the batch the observations are written into (every row is, by
             :meth:`fill` or :meth:`cut_short`).
         num_envs: how many sub-environments.
+        due: while agents come and go, each possible agent's column of whether it is in the
+            row's answer (false until filled); ``None`` otherwise.
     """
 
-    __slots__ = ("env_infos", "frames", "observations", "rewards", "terminations", "truncations")
+    __slots__ = (
+        "due",
+        "env_infos",
+        "frames",
+        "observations",
+        "rewards",
+        "terminations",
+        "truncations",
+    )
 
-    def __init__(self, observations: Any, num_envs: int) -> None:
+    def __init__(self, observations: Any, num_envs: int, due: Sequence[str] | None = None) -> None:
         self.observations = observations
+        self.due: dict[str, np.ndarray] | None = (
+            None if due is None else {name: np.zeros(num_envs, np.bool_) for name in due}
+        )
         self.rewards = np.zeros(num_envs, np.float64)
         self.terminations = np.zeros(num_envs, np.bool_)
         self.truncations = np.zeros(num_envs, np.bool_)
@@ -65,6 +78,9 @@ class StepColumns:
         self.rewards[span], self.terminations[span] = answer.reward, answer.terminated
         self.truncations[span], self.frames[span] = answer.truncated, answer.frames
         self.env_infos[span] = answer.info
+        if self.due is not None and answer.due is not None:
+            for name, column in self.due.items():
+                column[span] = answer.due[name]
         for refused in answer.errors or ():
             if refused is not None:
                 return RemoteError(refused.code, refused.message, refused.fatal)
@@ -76,3 +92,5 @@ class StepColumns:
             set_row(self.observations, index, row(last, index))
             self.truncations[index] = True
             self.env_infos[index] = dict(info)
+            for column in (self.due or {}).values():
+                column[index] = False

@@ -52,18 +52,37 @@ class BatchedInfos:
         return infos
 
     def _agent_columns(self, env_infos: list[dict[str, Any]]) -> dict[str, Any]:
-        """``agents`` batched as gymnasium's ``_add_info`` batches it, a column per outcome."""
+        """``agents`` batched as gymnasium's ``_add_info`` batches it, a column per outcome.
+
+        When agents come and go, a row holds the agents of its answer only: an agent's columns
+        hold 0.0 and false where it is absent, and its masks say where it is present; a joined
+        agent's first reward (``None``) is 0.0.
+        """
         every = self._all_envs
-        columns: dict[str, Any] = {}
-        for name in env_infos[0]["agents"]:
-            outcomes = [info["agents"][name] for info in env_infos]
-            columns[name] = {
-                "reward": np.array([o["reward"] for o in outcomes], np.float64),
-                "_reward": every.copy(),
-                "terminated": np.array([o["terminated"] for o in outcomes], np.bool_),
-                "_terminated": every.copy(),
-                "truncated": np.array([o["truncated"] for o in outcomes], np.bool_),
-                "_truncated": every.copy(),
+        first = env_infos[0]["agents"].keys()
+        if all(info["agents"].keys() == first for info in env_infos):
+            names, present = list(first), None
+        else:
+            names = list(dict.fromkeys(name for info in env_infos for name in info["agents"]))
+            present = {
+                name: np.array([name in info["agents"] for info in env_infos], np.bool_)
+                for name in names
             }
-            columns[f"_{name}"] = every.copy()
+        columns: dict[str, Any] = {}
+        for name in names:
+            outcomes = [info["agents"].get(name, _ABSENT) for info in env_infos]
+            mask = every if present is None else present[name]
+            columns[name] = {
+                "reward": np.array([o["reward"] or 0.0 for o in outcomes], np.float64),
+                "_reward": mask.copy(),
+                "terminated": np.array([o["terminated"] for o in outcomes], np.bool_),
+                "_terminated": mask.copy(),
+                "truncated": np.array([o["truncated"] for o in outcomes], np.bool_),
+                "_truncated": mask.copy(),
+            }
+            columns[f"_{name}"] = mask.copy()
         return columns
+
+
+_ABSENT = {"reward": 0.0, "terminated": False, "truncated": False}
+"""The outcome of an agent absent from a row's answer (agents that come and go)."""

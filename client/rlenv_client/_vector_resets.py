@@ -33,12 +33,19 @@ class Resets:
         sessions: the vector's servers (the list itself: a restarted server's client is found).
         groups: the sub-environments each session hosts.
         client_of: the client of a sub-environment's server.
+        complete: while agents come and go, what gives a reset's observation (its starting
+            agents') an entry for every agent (zeros); ``None`` otherwise.
     """
 
     def __init__(
-        self, sessions: list[Session], groups: list[range], client_of: Callable[[int], BaseClient]
+        self,
+        sessions: list[Session],
+        groups: list[range],
+        client_of: Callable[[int], BaseClient],
+        complete: Callable[[Mapping[str, Any]], Any] | None = None,
     ) -> None:
         self._sessions, self._groups, self._client_of = sessions, groups, client_of
+        self._complete = complete
         count = sum(len(group) for group in groups)
         self._starts: list[dict[str, Any] | None] = [None] * count  # set_next_reset's
         self._pending = 0  # how many of them are set
@@ -70,12 +77,13 @@ class Resets:
         frames: np.ndarray,
         seeds: Sequence[int | None] | None = None,
         options: Mapping[str, Any] | None = None,
+        due: Mapping[str, np.ndarray] | None = None,
     ) -> dict[int, dict[str, Any]]:
         """Reset the sub-environments ``indices``, a batch per server, each with its next start.
 
         A sub-environment without a start set resets with ``seeds[index]`` and ``options``.
         Their observations and ticks are written in their rows of ``observations`` and
-        ``frames``.
+        ``frames``; while agents come and go, whether each agent starts in its row of ``due``.
 
         Returns:
             Each one's info (``frames`` taken out), by sub-environment.
@@ -91,6 +99,10 @@ class Resets:
         for index, reply in enumerate(exchange(self._sessions, self._groups, plan)):
             if plan[index] is not None:
                 observation, info = self._client_of(index).reset_result(sure_reply(index, reply))
+                if self._complete is not None:
+                    for name, column in (due or {}).items():
+                        column[index] = name in observation
+                    observation = self._complete(observation)
                 set_row(observations, index, observation)
                 frames[index] = info.pop("frames")
                 infos[index] = info

@@ -25,6 +25,18 @@ resets: each step returns its last observation again, reward 0, both flags false
 ``info["waiting"]``; the step that resets its instance ends that wait as truncated, its final
 info holding ``waiting`` too, so that no episode statistics are counted for it. Its actions
 while waiting are ignored.
+
+Agents that come and go (the hello's ``possible_agents``, protocol 2.6) keep a fixed slot per
+possible learner: sub-environment ``i * k + j`` is always agent ``j`` of instance ``i``, in
+play or not. The mask is ``infos["is_active"]`` (Sample Factory's name; TorchRL's ``mask``,
+PufferLib's ``masks``): true where the slot's agent is in its instance's answer, that is, it
+decides now, or it leaves with its final transition (``terminated`` or ``truncated``, with
+``final_obs``). An inactive slot carries its agent's last observation (zeros before it
+joins), reward 0 and both flags false; its action is ignored by the server. A slot whose agent
+is not in play (not joined yet, or gone) waits, with ``info["waiting"]``, as above: it becomes
+active when the agent joins (no episode boundary: the join's observation comes with reward 0),
+and a name is never in play twice in one episode, so a slot whose agent left waits until its
+instance's next episode. Callables in ``others`` are called only where their agent decides.
 """
 
 from __future__ import annotations
@@ -40,6 +52,7 @@ from gymnasium.vector.utils import batch_space, create_empty_array
 
 from rlenv.agent import RLAgent
 from rlenv.serving.policy_driver import HEURISTIC
+from rlenv_client._agents_in_play import slot_mask, with_column
 from rlenv_client._rows import check_shape, row, set_row
 from rlenv_client.vector import RemoteVectorEnv
 from rlenv_client.vector_servers import default_layout
@@ -63,6 +76,8 @@ OtherPolicy = str | os.PathLike[str] | Callable[[Any], Any]
 def agent_classes(target: str) -> dict[str, type[RLAgent]]:
     """Each agent's class, by name, read from one instance of ``target`` built in this process.
 
+    An environment whose agents come and go gives its declaration: every possible agent's.
+
     Raises:
         ImportError, ValueError, TypeError: ``target`` does not load (see
             :func:`rlenv.serving._instance.load_environment`).
@@ -71,7 +86,11 @@ def agent_classes(target: str) -> dict[str, type[RLAgent]]:
 
     with LocalClient(target) as probe:
         assert probe.host is not None
-        return {agent.name: type(agent) for agent in probe.host.instances[0].agents}
+        instance = probe.host.instances[0]
+        declared = instance.environment.possible_agents
+        if declared is not None:
+            return dict(declared)
+        return {agent.name: type(agent) for agent in instance.agents}
 
 
 def policy_arguments(policies: Mapping[str, str]) -> list[str]:
@@ -242,8 +261,10 @@ class AgentVectorEnv(VectorEnv):
             vector.single_action_space,
             vector.single_observation_space,
         )
-        self._several = (
-            isinstance(joint_actions, spaces.Dict) and len(vector.clients[0].hello.agents) > 1
+        hello = vector.clients[0].hello
+        self._come_and_go = hello.possible_agents is not None
+        self._several = isinstance(joint_actions, spaces.Dict) and (
+            len(hello.agents) > 1 or self._come_and_go
         )
         first = self.learners[0]
         action_space, observation_space = (
@@ -270,6 +291,7 @@ class AgentVectorEnv(VectorEnv):
         self._waiting = np.zeros(self.num_envs, np.bool_)
         self._steps = np.zeros(self.instances, np.int64)  # of each instance's episode
         self._last = create_empty_array(observation_space, self.num_envs)  # per sub-env
+        self._due: dict[str, np.ndarray] = {}  # by agent, over the instances (come and go)
 
     def _agent_space(self, joint: spaces.Space, name: str) -> spaces.Space:
         # Several agents: the joint spaces are Dicts by agent (see _set_spaces).
@@ -303,7 +325,15 @@ class AgentVectorEnv(VectorEnv):
         self._steps[:] = 0
         observations = self._learner_rows(joint)
         self._last = observations
-        return observations, self._spread(infos)
+        out = self._spread(infos)
+        if self._come_and_go:
+            self._due = dict(infos["due"])  # kept for the callables of the next step
+            active = slot_mask(self._due, self.learners, self.num_envs)
+            self._waiting[:] = ~active  # not in play yet: its slot waits for it to join
+            out = with_column(out, "is_active", active, self.num_envs)
+            if self._waiting.any():
+                out = {**out, "waiting": self._waiting.copy(), "_waiting": self._waiting.copy()}
+        return observations, out
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step every instance with the learners' ``actions`` and the others' policies.
@@ -322,7 +352,10 @@ class AgentVectorEnv(VectorEnv):
                 set_row(column, i, row(actions, i * k + j))
         for name, policy in self.driven_here.items():
             column, seen = self._of(joint, name), self._of(self._joint_observation, name)
-            for live in np.flatnonzero(~self._others_done[name]):
+            acting = ~self._others_done[name]
+            if self._come_and_go:  # only where it decides
+                acting &= self._due.get(name, acting)
+            for live in np.flatnonzero(acting):
                 set_row(column, live, policy(row(seen, live)))
         joint_obs, *flags, infos = self.vector.step(joint)
         self._joint_observation = joint_obs
@@ -337,10 +370,10 @@ class AgentVectorEnv(VectorEnv):
         """
         if not self._several:
             return joint
-        step = _columns(infos["agents"][name])
+        step = _columns(infos["agents"].get(name), self.instances)
         if not ended.any():
             return step
-        final = _columns(infos["final_info"]["agents"][name])
+        final = _columns(infos["final_info"].get("agents", {}).get(name), self.instances)
         return tuple(np.where(ended, last, now) for last, now in zip(final, step, strict=True))
 
     def _outcomes(
@@ -357,6 +390,12 @@ class AgentVectorEnv(VectorEnv):
         truncated = np.zeros(self.num_envs, np.bool_)
         observations = self._learner_rows(joint_obs)
         out = self._spread(infos)
+        instance_ended = np.repeat(ended, k)
+        active = None
+        if self._come_and_go:
+            self._due = dict(infos["due"])
+            active = slot_mask(self._due, self.learners, self.num_envs)
+            self._waiting[active & ~instance_ended] = False  # a waiting slot's agent joined
         for name in self.driven_here:
             _, done_t, done_c = self._agent_outcome(name, joint, ended, infos)
             self._others_done[name] |= done_t | done_c
@@ -393,12 +432,17 @@ class AgentVectorEnv(VectorEnv):
             )
             if not self._waiting[index] and not ended[instance]:
                 self._waiting[index] = True  # it waits for its instance to reset
-        instance_ended = np.repeat(ended, k)
-        self._waiting[instance_ended] = False
-        for index in np.flatnonzero(self._waiting & ~finished):
+        if active is None:
+            self._waiting[instance_ended] = False
+            carried = self._waiting & ~finished
+        else:  # a new episode's slots wait for their agents, if they do not start
+            self._waiting[instance_ended] = ~active[instance_ended]
+            carried = (self._waiting | ~active) & ~finished & ~instance_ended
+        for index in np.flatnonzero(carried):
             set_row(observations, index, row(self._last, index))
         if self._waiting.any():
             out = {**out, "waiting": self._waiting.copy(), "_waiting": self._waiting.copy()}
+        out = with_column(out, "is_active", active, self.num_envs)  # Sample Factory's name
         self._last = observations
         return observations, rewards, terminated, truncated, out
 
@@ -419,7 +463,16 @@ class AgentVectorEnv(VectorEnv):
             key: _repeat(value, k)
             for key, value in infos.items()
             if key
-            not in ("agents", "_agents", "final_obs", "_final_obs", "final_info", "_final_info")
+            not in (
+                "agents",
+                "_agents",
+                "due",
+                "_due",
+                "final_obs",
+                "_final_obs",
+                "final_info",
+                "_final_info",
+            )
         }
 
     def render(self) -> tuple[np.ndarray, ...] | None:
@@ -517,10 +570,21 @@ def _plan_others(
     return here, served
 
 
-def _columns(outcome: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(reward, terminated, truncated)`` of one agent's batched outcome map."""
+def _columns(
+    outcome: Mapping[str, Any] | None, instances: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(reward, terminated, truncated)`` of one agent's batched outcome map.
+
+    ``None`` (no instance's answer holds the agent: agents that come and go): 0 and false; a
+    joined agent's first reward (``None``) is 0.
+    """
+    if outcome is None:
+        return np.zeros(instances), np.zeros(instances, np.bool_), np.zeros(instances, np.bool_)
+    reward = outcome["reward"]
+    if isinstance(reward, np.ndarray) and reward.dtype == object:
+        reward = np.where(reward == None, 0.0, reward)  # noqa: E711 (elementwise)
     return (
-        np.asarray(outcome["reward"], np.float64),
+        np.asarray(reward, np.float64),
         np.asarray(outcome["terminated"], np.bool_),
         np.asarray(outcome["truncated"], np.bool_),
     )

@@ -15,6 +15,17 @@ A server that RemoteEnv started and lost (killed, crashed, or silent past the ti
 restarted, up to ``max_restarts`` times: the step that was interrupted returns the episode's
 last observation with reward 0 and ``truncated=True``, and ``info["server_restarted"]`` says
 why. Nothing is sent twice, so no transition is invented or duplicated; call ``reset`` next.
+
+An environment whose agents come and go (the hello's ``possible_agents``, protocol 2.6) keeps
+gymnasium's fixed spaces: the observation is a ``Dict`` over every possible agent (the
+trainer's), zeros for an agent not in the answer (not in play, or not due to decide), as the
+vector envs' ``steps`` columns are; ``info["due"]`` names the agents that decide now, and
+``info["agents"]`` holds the rewards and flags of the agents in the answer (the due, and those
+that left, once). An action is a ``Dict`` over every possible agent too: only the entries of
+the agents due are sent. The reward is the sum of the answer's; the episode ends when the
+server's does. A learner per agent is better served by
+:class:`~rlenv_client.pettingzoo.RemoteParallelEnv` or
+:class:`~rlenv_client.agent_vector.AgentVectorEnv` (a slot per agent, with a mask).
 """
 
 from __future__ import annotations
@@ -27,6 +38,7 @@ from typing import TYPE_CHECKING, Any
 import gymnasium
 import numpy as np
 
+from rlenv_client._agents_in_play import AgentsInPlay, answer_reward
 from rlenv_client._display import Display, display_available
 from rlenv_client.base import BaseClient, StepResult
 from rlenv_client.launcher import ServerProcess
@@ -134,6 +146,7 @@ class RemoteEnv(gymnasium.Env):
         except ValueError:
             self.session.close()
             raise
+        self._in_play = AgentsInPlay(self._view) if hello.possible_agents is not None else None
         self.action_space = self._view.action_space
         self.observation_space = self._view.observation_space
         self.repeat_action = repeat_action
@@ -187,7 +200,12 @@ class RemoteEnv(gymnasium.Env):
         except LOST as error:  # nothing happened yet: reset the replacement instead
             self.session.restart(error)
             observation, info = self.client.reset(seed=seed, options=options)
-        observation = self._view.observation(observation)
+        if self._in_play is not None:
+            self._in_play.start(observation)
+            observation = self._in_play.full_observation(observation)
+            info = {**info, "due": self._in_play.due}
+        else:
+            observation = self._view.observation(observation)
         self._last_observation = observation
         self._steps = 0
         if self.render_mode == "human":
@@ -205,8 +223,11 @@ class RemoteEnv(gymnasium.Env):
             ValueError: ``action`` has an entry for an agent the server drives.
             ConnectionLost: the server was lost and cannot be restarted (with how it exited).
         """
+        action = self._view.action(action)
+        if self._in_play is not None and isinstance(action, Mapping):
+            action = self._in_play.action(action)
         try:
-            result = self.client.step(self._view.action(action), self.repeat_action)
+            result = self.client.step(action, self.repeat_action)
         except LOST as error:
             if self._last_observation is None:
                 raise self.session.failure(error) from None
@@ -218,7 +239,9 @@ class RemoteEnv(gymnasium.Env):
                 True,
                 {"frames": 0, "server_restarted": reason},
             )
-        result = self._view.result(result)
+        result = (
+            self._view.result(result) if self._in_play is None else self._in_play_result(result)
+        )
         self._last_observation = result[0]
         self._steps += 1
         if self.max_episode_steps is not None and self._steps >= self.max_episode_steps:
@@ -227,6 +250,19 @@ class RemoteEnv(gymnasium.Env):
         if self.render_mode == "human":
             self.render()
         return result
+
+    def _in_play_result(self, result: StepResult) -> StepResult:
+        """A step's result when agents come and go: fixed slots, the trainer's reward, the due."""
+        assert self._in_play is not None
+        observation, _, terminated, truncated, info = result
+        self._in_play.answer(observation, info, ended=terminated or truncated)
+        return (
+            self._in_play.full_observation(observation),
+            answer_reward(info, self._view.agents),
+            terminated,
+            truncated,
+            {**info, "due": self._in_play.due},
+        )
 
     def render(self) -> np.ndarray | None:
         """The current frame (``rgb_array``), or show it in the window (``human``)."""

@@ -7,6 +7,15 @@ server drives itself (``rlenv serve --policy``, the hello's ``driven``) are in n
 ``possible_agents`` nor ``agents``, and take no actions from here
 (:mod:`rlenv_client.trainer_view`).
 
+Agents that come and go (an environment with ``possible_agents``, protocol 2.6):
+``possible_agents`` lists every agent that may appear, ``agents`` those in play: an agent that
+joins is in it from the answer it first shows up in (its first reward is 0.0), one that leaves
+is removed after the step that returns its final transition. Each step returns entries for
+every agent in play, as PettingZoo's parallel API wants: an agent not due to decide keeps its
+last observation, with reward 0 and both flags false, and ``infos[agent]["due"]`` says
+whether it decides now (every agent's info has it). An action for an agent not due is
+ignored: it is never sent.
+
 Needs the optional extra: ``pip install pettingzoo``.
 """
 
@@ -19,6 +28,7 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
+from rlenv_client._agents_in_play import AgentsInPlay, Turn
 from rlenv_client.session import Session
 from rlenv_client.trainer_view import TrainerView
 
@@ -69,6 +79,11 @@ class RemoteParallelEnv(ParallelEnv):
             self.session.close()
             raise
         self.possible_agents = list(self._view.agents)
+        self._in_play = (
+            AgentsInPlay(self._view)
+            if self.session.client.hello.possible_agents is not None
+            else None
+        )
         self.agents: list[str] = []
         self.action_spaces, self.observation_spaces = self._view.agent_spaces()
         self.repeat_action = repeat_action
@@ -95,10 +110,14 @@ class RemoteParallelEnv(ParallelEnv):
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
-        """Start an episode with every agent."""
+        """Start an episode with every agent (with the starting ones, when agents come and go)."""
         observation, _ = self.session.client.reset(seed=seed, options=options)
-        self.agents = list(self.possible_agents)
         self._cycles = 0
+        if self._in_play is not None:
+            turn = self._in_play.start(observation)
+            self.agents = list(turn.agents)
+            return dict(turn.observations), {agent: {"due": True} for agent in self.agents}
+        self.agents = list(self.possible_agents)
         return self._split(observation), {agent: {} for agent in self.agents}
 
     def step(self, actions: dict[str, Any]) -> tuple[dict[str, Any], ...]:
@@ -112,6 +131,8 @@ class RemoteParallelEnv(ParallelEnv):
             ValueError: an action for an agent the server drives (see
                 :mod:`rlenv_client.trainer_view`).
         """
+        if self._in_play is not None:
+            return self._step_in_play(actions)
         live = list(self.agents)
         self._view.refuse_driven(actions)
         joint = {agent: actions[agent] for agent in live} if self._view.joint else actions[live[0]]
@@ -130,11 +151,31 @@ class RemoteParallelEnv(ParallelEnv):
         terminations = {agent: bool(outcomes[agent]["terminated"]) for agent in live}
         truncations = {agent: bool(outcomes[agent]["truncated"]) or cut for agent in live}
         infos: dict[str, dict[str, Any]] = {agent: {"frames": info["frames"]} for agent in live}
-        for agent in info.get("claimed", ()):  # a person played it (protocol 2.6 claims)
-            if agent in infos:
-                infos[agent]["claimed"] = True
+        _mark_claimed(infos, info)
         self.agents = [agent for agent in live if not (terminations[agent] or truncations[agent])]
         return observations, rewards, terminations, truncations, infos
+
+    def _step_in_play(self, actions: dict[str, Any]) -> tuple[dict[str, Any], ...]:
+        assert self._in_play is not None
+        self._view.refuse_driven(actions)
+        observation, _, terminated, truncated, info = self.session.client.step(
+            self._in_play.action(actions), self.repeat_action
+        )
+        self._cycles += 1
+        cut = self.max_cycles is not None and self._cycles >= self.max_cycles
+        turn: Turn = self._in_play.answer(observation, info, ended=terminated or truncated or cut)
+        infos = {
+            agent: {"frames": info["frames"], "due": agent in turn.due} for agent in turn.agents
+        }
+        _mark_claimed(infos, info)
+        self.agents = list(self._in_play.agents)
+        return (
+            dict(turn.observations),
+            dict(turn.rewards),
+            dict(turn.terminated),
+            dict(turn.truncated),
+            infos,
+        )
 
     def render(self) -> np.ndarray | None:
         """The current frame (``rgb_array``), or ``None``."""
@@ -148,3 +189,10 @@ class RemoteParallelEnv(ParallelEnv):
         if self._view.joint:
             return dict(self._view.observation(observation))
         return {self.possible_agents[0]: observation}
+
+
+def _mark_claimed(infos: dict[str, dict[str, Any]], info: dict[str, Any]) -> None:
+    """``"claimed": True`` in the infos of the agents a person played (protocol 2.6 claims)."""
+    for agent in info.get("claimed", ()):
+        if agent in infos:
+            infos[agent]["claimed"] = True

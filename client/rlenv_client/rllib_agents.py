@@ -7,6 +7,14 @@ once more, on the step it ended, with its last observation), and ``"__all__"`` f
 episode. Agents its server drives (``others``: ``rlenv serve --policy NAME=heuristic`` or
 ``NAME=FILE.onnx``) are not RLlib's: they are out of ``possible_agents`` and need no action.
 
+Agents that come and go (an environment with ``possible_agents``, protocol 2.6) follow RLlib's
+convention: the observations hold the agents that act now (and, once, those that left, with
+their final observation and flags); an agent that joins appears with its first observation
+(its reward 0.0); ``agents`` are those in play; ``"__all__"`` ends the episode. An action for
+an agent that does not act now is never sent. When the episode ends, or
+``max_episode_steps`` cuts it, every agent still in play gets its last observation, truncated
+(RLlib needs one to bootstrap from).
+
 Each agent trains the policy (RLModule) that ``policy_mapping_fn`` gives it: one per agent
 (:func:`policy_per_agent`) or one per RLAgent class (:func:`policy_per_class`: the tag game's
 ``Chaser`` and its two runners are two policies). :func:`multi_agent_config_for` sets
@@ -40,6 +48,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 from ray.rllib.env.multi_agent_env import MultiAgentEnv
 
+from rlenv_client._agents_in_play import AgentsInPlay
 from rlenv_client.agent_vector import agent_classes, policy_arguments
 from rlenv_client.session import Session
 from rlenv_client.trainer_view import TrainerView
@@ -114,6 +123,7 @@ class RemoteMultiAgentEnv(MultiAgentEnv):
         self.possible_agents = list(view.agents)
         self.agents: list[str] = []
         self.action_spaces, self.observation_spaces = view.agent_spaces()
+        self._in_play = AgentsInPlay(view) if hello.possible_agents is not None else None
         self.repeat_action = repeat_action
         self.max_episode_steps = max_episode_steps
         self._steps = 0
@@ -124,8 +134,12 @@ class RemoteMultiAgentEnv(MultiAgentEnv):
         """Start an episode: every agent's first observation."""
         super().reset(seed=seed, options=options)
         observation, _ = self.session.client.reset(seed=seed, options=options)
-        self.agents = list(self.possible_agents)
         self._steps = 0
+        if self._in_play is not None:
+            turn = self._in_play.start(observation)
+            self.agents = list(turn.agents)
+            return dict(turn.observations), {name: {} for name in self.agents}
+        self.agents = list(self.possible_agents)
         observations = self._split(observation)
         return {name: observations[name] for name in self.agents}, {
             name: {} for name in self.agents
@@ -135,8 +149,11 @@ class RemoteMultiAgentEnv(MultiAgentEnv):
         """Act for the agents in the episode; RLlib's five dicts (``"__all__"`` included).
 
         Raises:
-            ValueError: no action for an agent in the episode (named).
+            ValueError: no action for an agent in the episode (named; when agents come and go,
+                for an agent that acts now).
         """
+        if self._in_play is not None:
+            return self._step_in_play(action_dict)
         live = self.agents
         missing = [name for name in live if name not in action_dict]
         if missing:
@@ -167,6 +184,31 @@ class RemoteMultiAgentEnv(MultiAgentEnv):
         terminateds[_ALL] = terminated and not self.agents
         truncateds[_ALL] = (truncated or cut) and not terminated
         return obs, rewards, terminateds, truncateds, {name: {} for name in live}
+
+    def _step_in_play(self, action_dict: dict[str, Any]) -> tuple[dict[str, Any], ...]:
+        assert self._in_play is not None
+        missing = [name for name in self._in_play.due if name not in action_dict]
+        if missing:
+            raise ValueError(f"no action for agent {missing[0]!r}, which acts now")
+        observation, _, terminated, truncated, info = self.session.client.step(
+            self._in_play.action(action_dict), self.repeat_action
+        )
+        self._steps += 1
+        cut = self.max_episode_steps is not None and self._steps >= self.max_episode_steps
+        turn = self._in_play.answer(observation, info, ended=terminated or truncated or cut)
+        self.agents = list(self._in_play.agents)
+        now = [name for name in turn.agents if name in turn.due or name in turn.left]
+        terminateds = {name: turn.terminated[name] for name in now}
+        truncateds = {name: turn.truncated[name] for name in now}
+        terminateds[_ALL] = terminated
+        truncateds[_ALL] = (truncated or cut) and not terminated
+        return (
+            {name: turn.observations[name] for name in now},
+            {name: turn.rewards[name] for name in now},
+            terminateds,
+            truncateds,
+            {name: {} for name in now},
+        )
 
     def close(self) -> None:
         """Disconnect, and stop the server this environment started."""

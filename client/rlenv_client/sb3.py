@@ -14,6 +14,15 @@ as SB3's ``Monitor`` gives them, so that ``ep_rew_mean`` is logged without a ``V
 (wrapping it in one anyway overwrites them with the same figures); a learner's wait for its
 instance to reset counts as no episode.
 
+Agents that come and go (``possible_agents``, protocol 2.6) keep a slot each
+(:class:`~rlenv_client.agent_vector.AgentVectorEnv`), and SB3 cannot skip a row: a slot whose
+agent does not decide now (``info["is_active"]`` false) carries the agent's last observation
+(zeros before it joins), reward 0 and no done, and its action is ignored by the server. An
+agent that leaves ends its slot's episode, ``terminated`` or ``truncated``, with
+``info["terminal_observation"]``; the slot then waits (``info["waiting"]``) until the agent's
+name is next in play, in a later episode of its instance. The steps a slot waits are in no
+episode's length.
+
 :class:`CurriculumCallback` scores the levels of a
 :class:`~rlenv_client.curriculum.CurriculumVectorEnv` (given to :class:`SB3VecEnv` as
 ``vector``) from each rollout's advantages and values (PLR's positive value loss, or
@@ -146,6 +155,7 @@ class SB3VecEnv(VecEnv):
         self._started = time.time()
         self._episode_returns = np.zeros(self.num_envs, np.float64)
         self._episode_lengths = np.zeros(self.num_envs, np.int64)
+        self._waiting = np.zeros(self.num_envs, np.bool_)  # as the last step left them
 
     def reset(self) -> VecEnvObs:
         """Reset every environment, with the seeds given to SB3's ``VecEnv.seed()`` if any."""
@@ -154,6 +164,7 @@ class SB3VecEnv(VecEnv):
         self.reset_infos = _split_infos(infos, self.num_envs)
         self._episode_returns[:] = 0
         self._episode_lengths[:] = 0
+        self._waiting = self._waiting_in(infos)
         self._reset_seeds()
         self._reset_options()
         return observations
@@ -173,7 +184,8 @@ class SB3VecEnv(VecEnv):
         observations, rewards, terminated, truncated, infos = self.venv.step(self._actions)
         dones = terminated | truncated
         self._episode_returns += rewards
-        self._episode_lengths += 1
+        self._episode_lengths += ~self._waiting  # a slot's wait is in no episode
+        self._waiting = self._waiting_in(infos)
         per_env = _split_infos(infos, self.num_envs)
         final = _split_infos(infos.get("final_info", {}), self.num_envs)
         for index in np.flatnonzero(dones):
@@ -189,6 +201,13 @@ class SB3VecEnv(VecEnv):
             self._episode_returns[index] = 0
             self._episode_lengths[index] = 0
         return observations, rewards.astype(np.float32), dones, per_env
+
+    def _waiting_in(self, infos: Mapping[str, Any]) -> np.ndarray:
+        """Which slots wait (:class:`~rlenv_client.agent_vector.AgentVectorEnv`'s ``waiting``)."""
+        waiting = infos.get("waiting")
+        if waiting is None:
+            return np.zeros(self.num_envs, np.bool_)
+        return np.asarray(waiting, np.bool_) & np.asarray(infos["_waiting"], np.bool_)
 
     def close(self) -> None:
         """Stop every server this environment started."""

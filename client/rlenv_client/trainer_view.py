@@ -42,7 +42,8 @@ class TrainerView:
     Attributes:
         agents: the agents the trainer acts for, in the hello's order.
         driven: the agents the server drives (the hello's ``driven``).
-        joint: whether actions are maps by agent name (the environment has several agents).
+        joint: whether actions are maps by agent name (the environment has several agents, or
+            its agents come and go).
         action_space: the trainer's joint action space (the hello's when nothing is driven).
         observation_space: the trainer's joint observation space.
 
@@ -53,7 +54,7 @@ class TrainerView:
 
     def __init__(self, hello: Hello) -> None:
         self.driven = hello.driven
-        self.joint = len(hello.agents) > 1
+        self.joint = len(hello.agents) > 1 or hello.possible_agents is not None
         self.agents = tuple(name for name in hello.agents if name not in hello.driven)
         if self.joint and not (
             isinstance(hello.action_space, spaces.Dict)

@@ -22,6 +22,14 @@ Agents the servers drive themselves (``rlenv serve --policy``, the hello's ``dri
 out of the spaces, actions, observations, rewards and episode ends, as
 :class:`~rlenv_client.env.RemoteEnv` leaves them (:mod:`rlenv_client.trainer_view`).
 
+Agents that come and go (the hello's ``possible_agents``, protocol 2.6) keep a fixed slot
+each: the observation has every possible agent's entry, zeros where the agent is not in the
+sub-environment's answer (not in play, or not due), as the ``steps`` columns have it;
+``infos["due"][name]`` is a column of whether agent ``name`` is in each answer (due, or
+leaving with its final transition), and ``infos["agents"]`` masks each agent's outcome to
+the rows whose answer holds it (a joined agent's first reward, ``None``, is 0.0). The rows of
+the action column of agents not due are ignored by the servers.
+
 ``max_episode_steps`` truncates each sub-environment's episodes, as ``TimeLimit`` does (with
 several agents, each agent still in the episode is truncated in ``info["agents"]``). A lost
 server that this vector started is restarted (``max_restarts`` each), and one of a pool is
@@ -53,6 +61,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, create_empty_array
 
 from rlenv.protocol import ErrorReply, Request, Response
+from rlenv_client._agents_in_play import AgentSlots, answer_reward, due_columns, with_column
 from rlenv_client._rows import check_shape, empty_like, row
 from rlenv_client._server_groups import ServerGroups
 from rlenv_client._step_columns import StepColumns
@@ -175,7 +184,13 @@ class RemoteVectorEnv(VectorEnv):
             self.single_observation_space, self.num_envs
         )
         self._steps = np.zeros(self.num_envs, dtype=np.int64)
-        self._resets = Resets(self.sessions, self._servers.groups, self._servers.client_of)
+        self._slots = AgentSlots(self._view) if hello.possible_agents is not None else None
+        self._resets = Resets(
+            self.sessions,
+            self._servers.groups,
+            self._servers.client_of,
+            None if self._slots is None else self._slots.fill,
+        )
         self._last: Any = None  # the last batch of observations returned
         self._interrupted: str | None = None  # what interrupted the last step or reset
         if inspector:
@@ -224,11 +239,13 @@ class RemoteVectorEnv(VectorEnv):
         super().reset(seed=seed if isinstance(seed, int) else None)
         observations = create_empty_array(self.single_observation_space, self.num_envs)
         frames = np.zeros(self.num_envs, np.int64)
-        infos = self._resets.reset(range(self.num_envs), observations, frames, seeds, options)
+        due = due_columns(self._slots, self.num_envs)
+        infos = self._resets.reset(range(self.num_envs), observations, frames, seeds, options, due)
         self._autoreset[:] = False
         self._steps[:] = 0
         self._last = observations
-        return observations, self._infos.merge({}, [infos[i] for i in range(self.num_envs)], frames)
+        merged = self._infos.merge({}, [infos[i] for i in range(self.num_envs)], frames)
+        return observations, with_column(merged, "due", due, self.num_envs)
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step every sub-environment (resetting those that ended, per the autoreset mode).
@@ -262,9 +279,8 @@ class RemoteVectorEnv(VectorEnv):
             if self._mode is AutoresetMode.NEXT_STEP
             else np.zeros(self.num_envs, dtype=np.bool_)
         )
-        observations, rewards, terminations, truncations, frames, env_infos = self._step_everywhere(
-            actions, resetting
-        )
+        columns = self._step_everywhere(actions, resetting)
+        observations, rewards, terminations, truncations, frames, env_infos = columns
         steps = self._steps
         steps += 1
         steps[resetting] = 0  # these started an episode instead
@@ -283,7 +299,9 @@ class RemoteVectorEnv(VectorEnv):
                     {"final_obs": row(observations, index), "final_info": final_info},
                     int(index),
                 )
-            restarted = self._resets.reset(np.flatnonzero(ended), observations, frames)
+            restarted = self._resets.reset(
+                np.flatnonzero(ended), observations, frames, due=columns.due
+            )
             for reset_index, info in restarted.items():
                 env_infos[reset_index] = info
                 self._steps[reset_index] = 0
@@ -294,7 +312,9 @@ class RemoteVectorEnv(VectorEnv):
             rewards,
             terminations,
             truncations,
-            self._infos.merge(infos, env_infos, frames),
+            with_column(
+                self._infos.merge(infos, env_infos, frames), "due", columns.due, self.num_envs
+            ),
         )
 
     def _step_everywhere(self, actions: Any, resetting: np.ndarray) -> StepColumns:
@@ -309,9 +329,16 @@ class RemoteVectorEnv(VectorEnv):
         starts = self._resets.take_marked(resetting)
         actions = self._view.full_actions(actions, self.num_envs)
         # every row of the observations is written by the servers' answers
-        columns = StepColumns(empty_like(self._observations_template), self.num_envs)
+        columns = StepColumns(
+            empty_like(self._observations_template),
+            self.num_envs,
+            None if self._slots is None else self._slots.names,
+        )
         self._servers.step(actions, resetting, self.repeat_action, starts, columns, self._last)
-        if self._view.driven:  # the trainer's agents' rewards and ends, not every agent's
+        if self._view.driven and self._slots is not None:  # the trainer's agents' rewards
+            for index, info in enumerate(columns.env_infos):  # (the episode's end is theirs)
+                columns.rewards[index] = answer_reward(info, self._view.agents)
+        elif self._view.driven:  # the trainer's agents' rewards and ends, not every agent's
             for index, info in enumerate(columns.env_infos):
                 if "agents" in info:  # not in a lost server's
                     (
@@ -327,7 +354,11 @@ class RemoteVectorEnv(VectorEnv):
         self._interrupted = None
         if self._last is None:
             raise RuntimeError(f"{why} before any observation: call reset()")
-        columns = StepColumns(empty_like(self._observations_template), self.num_envs)
+        columns = StepColumns(
+            empty_like(self._observations_template),
+            self.num_envs,
+            None if self._slots is None else self._slots.names,
+        )
         columns.cut_short(range(self.num_envs), self._last, {"interrupted": why})
         return columns
 

@@ -83,7 +83,7 @@ class Columns:
             due = {name: np.zeros(count, np.bool_) for name in self._blank}
             for row, reply in enumerate(replies):
                 if reply.__class__ is Response:
-                    for name in reply.observation["agent"]:  # type: ignore[attr-defined,index]
+                    for name in reply.observation["agent"]:  # type: ignore[index]
                         due[name][row] = True
         return StepsResponse(
             reply_id,

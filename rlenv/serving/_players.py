@@ -72,7 +72,7 @@ class Players:
         return action
 
     def decide(self, roster: Roster) -> Any:
-        """After a step's ticks: the driven agents' action if only they are due, else ``None``.
+        """After a step's ticks: the driven agents' action unless others are due (``None``).
 
         The step then goes on (agents that come and go and decide at their own pace): those
         agents decided in the server.
@@ -84,10 +84,10 @@ class Players:
         if driven is None or driven.every_agent or not isinstance(roster, AgentsInPlay):
             return None
         due = roster.due_now()
-        if not due:
-            return None
         if any(agent.name not in driven.names for agent in due):
-            return None
+            return None  # an agent the client acts for decides: the step answers
+        if not due:
+            return {}  # the agent due left on the way: no one decides, the step goes on
         action = driven.actions(due)
         roster.decided(action)
         return action

@@ -39,8 +39,12 @@ than three are in play, eight in all. The episode terminates when the eighth pre
 in play.
 
 Each class has a ``heuristic``: the hunter runs at the nearest prey, a prey runs away from the
-hunter and from the walls (``rlenv serve examples.hunt:HuntEnvironment --policy
-Prey=heuristic`` leaves every prey to the server).
+hunter and from the walls. ``rlenv serve examples.hunt:HuntEnvironment --policy
+Prey1=heuristic ... --policy Prey8=heuristic`` leaves every prey to the server: the hunter is
+then the one agent a client acts for (``benchmarks/train_hunt.py`` trains it so).
+
+## Trained
+TRAINED_RESULT
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""``python -m examples.hunt [--host H] [--port P]`` serves the hunter and the prey that come and go."""
+"""``python -m examples.hunt [--host H] [--port P]`` serves the hunter and its prey."""
 
 from rlenv_tools.cli import serve_command
 

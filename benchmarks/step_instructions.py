@@ -1,8 +1,7 @@
 """Instructions per env-step of 32 CartPoles in process, counted by callgrind: steps, resets, both.
 
 ``python benchmarks/step_instructions.py [OTHER_PYTHON ...] [--short N] [--long M] [--modes
-MODE ...]`` runs, under
-``valgrind --tool=callgrind`` (instruction counts: the same on a loaded machine as on a quiet
+MODE ...]`` runs, under ``valgrind --tool=callgrind`` (instruction counts: the same on a loaded machine as on a quiet
 one, where timings drift), a process holding 32 CartPoles in a ``LocalClient`` (the host a
 server runs, without the socket and the codec) that sends ``steps`` requests at repeat_action 4,
 N and then M of them after a warm-up; the difference of the two runs' totals, divided by the

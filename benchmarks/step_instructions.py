@@ -2,17 +2,18 @@
 
 ``python benchmarks/step_instructions.py [OTHER_PYTHON ...] [--short N] [--long M] [--modes
 MODE ...]`` runs, under ``valgrind --tool=callgrind`` (instruction counts: the same on a loaded
-machine as on a quiet one, where timings drift), a process holding 32 CartPoles in a ``LocalClient`` (the host a
-server runs, without the socket and the codec) that sends ``steps`` requests at repeat_action 4,
-N and then M of them after a warm-up; the difference of the two runs' totals, divided by the
-env-steps between them, is the cost of an env-step without the start-up. Three kinds of
-request: ``step`` (CartPole configured not to end, small actions: never a reset), ``reset``
-(every instance reset at every request) and ``mixed`` (random actions, episodes ending and
-reset as a vector's do, a 500-step limit: about a reset per 8 env-steps). A fourth, ``tag``,
-is a fixed set of several agents: 32 single ``step`` requests of one Tag (the chaser and both
-runners acting, small actions) stand for a request of 32 CartPoles. Each interpreter
-given (the ``python`` of another checkout's virtual environment; a shell script setting
-``PYTHONPATH`` counts the shell, so run this script with that ``PYTHONPATH`` instead) is measured as well as this one, from a folder of no checkout's.
+machine as on a quiet one, where timings drift), a process holding 32 CartPoles in a
+``LocalClient`` (the host a server runs, without the socket and the codec) that sends ``steps``
+requests at repeat_action 4, N and then M of them after a warm-up; the difference of the two
+runs' totals, divided by the env-steps between them, is the cost of an env-step without the
+start-up. Three kinds of request: ``step`` (CartPole configured not to end, small actions:
+never a reset), ``reset`` (every instance reset at every request) and ``mixed`` (random actions,
+episodes ending and reset as a vector's do, a 500-step limit: about a reset per 8 env-steps). A
+fourth, ``tag``, is a fixed set of several agents: 32 single ``step`` requests of one Tag (the
+chaser and both runners acting, small actions) stand for a request of 32 CartPoles. Each
+interpreter given (the ``python`` of another checkout's virtual environment) is measured as well
+as this one, from a folder of no checkout's; a shell script setting ``PYTHONPATH`` would count
+the shell, so for another checkout's code run this script with its ``PYTHONPATH`` instead.
 """
 
 from __future__ import annotations

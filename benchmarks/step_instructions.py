@@ -1,16 +1,19 @@
 """Instructions per env-step of 32 CartPoles in process, counted by callgrind: steps, resets, both.
 
-``python benchmarks/step_instructions.py [OTHER_PYTHON ...] [--short N] [--long M]`` runs, under
-``valgrind --tool=callgrind`` (instruction counts: the same on a loaded machine as on a quiet
-one, where timings drift), a process holding 32 CartPoles in a ``LocalClient`` (the host a
-server runs, without the socket and the codec) that sends ``steps`` requests at repeat_action 4,
-N and then M of them after a warm-up; the difference of the two runs' totals, divided by the
-env-steps between them, is the cost of an env-step without the start-up. Three kinds of
-request: ``step`` (CartPole configured not to end, small actions: never a reset), ``reset``
-(every instance reset at every request) and ``mixed`` (random actions, episodes ending and
-reset as a vector's do, a 500-step limit: about a reset per 8 env-steps). Each interpreter
-given (the ``python`` of another checkout's virtual environment, or a script setting its
-``PYTHONPATH``) is measured as well as this one, from a folder of no checkout's.
+``python benchmarks/step_instructions.py [OTHER_PYTHON ...] [--short N] [--long M] [--modes
+MODE ...]`` runs, under ``valgrind --tool=callgrind`` (instruction counts: the same on a loaded
+machine as on a quiet one, where timings drift), a process holding 32 CartPoles in a
+``LocalClient`` (the host a server runs, without the socket and the codec) that sends ``steps``
+requests at repeat_action 4, N and then M of them after a warm-up; the difference of the two
+runs' totals, divided by the env-steps between them, is the cost of an env-step without the
+start-up. Three kinds of request: ``step`` (CartPole configured not to end, small actions:
+never a reset), ``reset`` (every instance reset at every request) and ``mixed`` (random actions,
+episodes ending and reset as a vector's do, a 500-step limit: about a reset per 8 env-steps). A
+fourth, ``tag``, is a fixed set of several agents: 32 single ``step`` requests of one Tag (the
+chaser and both runners acting, small actions) stand for a request of 32 CartPoles. Each
+interpreter given (the ``python`` of another checkout's virtual environment) is measured as well
+as this one, from a folder of no checkout's; a shell script setting ``PYTHONPATH`` would count
+the shell, so for another checkout's code run this script with its ``PYTHONPATH`` instead.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ import tempfile
 
 INSTANCES = 32
 ENDLESS = {"world": {"track_limit": 1e9}, "agent": {"angle_limit": 1e9}}
-MODES = ("step", "reset", "mixed")
+MODES = ("step", "reset", "mixed", "tag")
 
 
 def worker(mode: str, requests: int) -> None:
@@ -32,6 +35,9 @@ def worker(mode: str, requests: int) -> None:
 
     from rlenv_client import LocalClient
 
+    if mode == "tag":
+        tag_worker(requests)
+        return
     client = LocalClient("examples.cartpole:CartPoleEnvironment", instances=INSTANCES)
     resets = [client.reset_request(seed=i) for i in range(INSTANCES)]
     if mode != "mixed":
@@ -54,6 +60,25 @@ def worker(mode: str, requests: int) -> None:
             reset = ended
         elif mode == "step" and (answer.terminated.any() or answer.truncated.any()):
             raise RuntimeError("a CartPole ended: the step figure would count a reset")
+
+
+def tag_worker(requests: int) -> None:
+    """Send ``INSTANCES`` single steps of one Tag per request, after 10 of warm-up."""
+    import numpy as np
+
+    from rlenv_client import LocalClient
+
+    client = LocalClient("examples.tag:TagEnvironment")
+    client.reset(seed=0)
+    rng = np.random.default_rng(0)
+    names = list(client.hello.agents)
+    actions = [
+        {name: rng.uniform(-0.01, 0.01, 2).astype(np.float32) for name in names} for _ in range(64)
+    ]
+    for turn in range((10 + requests) * INSTANCES):
+        *_, terminated, truncated, _ = client.step(actions[turn % 64], repeat_action=4)
+        if terminated or truncated:
+            raise RuntimeError("a Tag episode ended: the tag figure would count a reset")
 
 
 def instructions(python: str, mode: str, requests: int) -> int:
@@ -92,9 +117,13 @@ def main() -> None:
     parser.add_argument("other_python", nargs="*", help="interpreters of other checkouts")
     parser.add_argument("--short", type=int, default=20, help="requests of the short run")
     parser.add_argument("--long", type=int, default=60, help="requests of the long run")
+    parser.add_argument("--modes", nargs="+", choices=MODES, default=list(MODES))
     arguments = parser.parse_args()
     env_steps = (arguments.long - arguments.short) * INSTANCES
-    print(f"instructions per env-step ({INSTANCES} CartPoles, repeat 4): " + ", ".join(MODES))
+    print(
+        f"instructions per env-step ({INSTANCES} CartPoles, repeat 4): "
+        + ", ".join(arguments.modes)
+    )
     for python in [sys.executable, *arguments.other_python]:
         figures = [
             (
@@ -102,7 +131,7 @@ def main() -> None:
                 - instructions(python, mode, arguments.short)
             )
             / env_steps
-            for mode in MODES
+            for mode in arguments.modes
         ]
         print(python, "  ".join(f"{figure / 1e3:.1f}K" for figure in figures))
 

@@ -78,6 +78,7 @@ def test_the_reacher_reaches_and_pays_for_effort(serve: Serve) -> None:
         "reacher",
         "pair",
         "tag",
+        "hunt",
         "plinko",
         "maze",
     ],

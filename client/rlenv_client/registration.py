@@ -31,6 +31,9 @@ ENVIRONMENTS = {
     "rlenv/CartPole-v1": _Registration(
         "rlenv.examples.classic_cartpole:ClassicCartPoleEnvironment", 500
     ),
+    "rlenv/Hunt-v0": _Registration(
+        "rlenv.examples.hunt:HuntEnvironment", None, several_agents=True
+    ),
     "rlenv/Maze-v0": _Registration("rlenv.examples.maze:MazeEnvironment", 250),
     "rlenv/Pair-v0": _Registration("rlenv.examples.pair:PairEnvironment", 300, several_agents=True),
     "rlenv/Pixels-v0": _Registration("rlenv.examples.pixels:PixelsEnvironment", 1000),
@@ -46,7 +49,8 @@ teaches. ``rlenv/CartPole-v1`` is gymnasium's ``CartPole-v1`` (its spaces, rewar
 and 500-step limit) on rlenv's physics, for scripts written for gymnasium's. An id of several
 agents also gives its limit to :class:`~rlenv_client.env.RemoteEnv`, which truncates every agent
 still in the episode in ``info["agents"]`` as well (gymnasium's ``TimeLimit``, which ``make``
-still adds, cuts only the joint episode)."""
+still adds, cuts only the joint episode). ``rlenv/Hunt-v0`` needs none: the hunt truncates
+itself after 1,200 ticks."""
 
 
 def register_environments() -> None:

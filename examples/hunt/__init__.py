@@ -39,8 +39,17 @@ than three are in play, eight in all. The episode terminates when the eighth pre
 in play.
 
 Each class has a ``heuristic``: the hunter runs at the nearest prey, a prey runs away from the
-hunter and from the walls (``rlenv serve examples.hunt:HuntEnvironment --policy
-Prey=heuristic`` leaves every prey to the server).
+hunter and from the walls. ``rlenv serve examples.hunt:HuntEnvironment --policy
+Prey1=heuristic ... --policy Prey8=heuristic`` leaves every prey to the server: the hunter is
+then the one agent a client acts for (``benchmarks/train_hunt.py`` trains it so).
+
+## Trained
+``benchmarks/train_hunt.py`` trains the hunter with SB3's PPO (``n_steps`` 512, ``batch_size``
+256, otherwise SB3's defaults; 4 envs of one server each), the prey driven by their heuristic in
+the servers: 200,704 decisions took 416 s on the 2-core development VM (a busy one). Its
+deterministic policy against the scripted hunter (the ``heuristic``), over the same 20 seeds
+(1000 to 1019): return per episode mean 1.32 against 0.99 (min -1.00 and -1.00, median 1.00
+and 1.00); prey caught per episode mean 7.00 against 6.75 (min 5 and 5, median 7 and 7).
 """
 
 from __future__ import annotations

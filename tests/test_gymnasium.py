@@ -40,26 +40,7 @@ def _warnings(check: Callable[[], None]) -> list[str]:
     return [str(warning.message) for warning in caught]
 
 
-COME_AND_GO = {"rlenv/Hunt-v0"}
-"""Ids whose agents come and go: ``RemoteEnv`` does not yet give an answer holding some of the
-agents as a point of its ``Dict`` space (issue 42, item 4); with the prey driven by the server,
-tests/test_hunt.py checks the hunter's env."""
-
-
-@pytest.mark.parametrize(
-    "env_id",
-    [
-        pytest.param(
-            env_id,
-            marks=pytest.mark.xfail(
-                env_id in COME_AND_GO,
-                reason="RemoteEnv of agents that come and go: issue 42, item 4",
-                strict=True,
-            ),
-        )
-        for env_id in sorted(ENVIRONMENTS)
-    ],
-)
+@pytest.mark.parametrize("env_id", sorted(ENVIRONMENTS))
 def test_check_env_passes_on_every_registered_id(env_id: str) -> None:
     expected: list[str] = []
     if env_id in NATIVE_TWINS:

@@ -215,6 +215,15 @@ def test_refusals_name_the_agent(agents: object, others: object, message: str) -
     assert str(refused.value) == message
 
 
+def test_others_that_is_not_a_map_is_refused_saying_what_it_takes() -> None:
+    with pytest.raises(TypeError) as refused:
+        AgentVectorEnv(1, PAIR, agents="Red", others="heuristic")  # type: ignore[arg-type]
+    assert str(refused.value) == (
+        "others must map agent names (or RLAgent classes) to what drives them, e.g. "
+        '{"Runner1": "heuristic"}; got \'heuristic\''
+    )
+
+
 def test_learners_sharing_a_policy_must_share_spaces() -> None:
     with pytest.raises(
         ValueError, match="agents 'Chaser' and 'Runner1' learn one policy but have different spaces"

@@ -221,7 +221,7 @@ class AgentVectorEnv(VectorEnv):
                 names, already = list(classes), set()
             self.learners = learner_names(agents, names, classes)
             self.driven_here, self.driven_by_server = _plan_others(
-                names, self.learners, classes, dict(others or {}), already
+                names, self.learners, classes, _others_map(others), already
             )
             if self.driven_by_server and (addresses is not None or in_process):
                 where = "servers given by address" if addresses is not None else "in_process"
@@ -507,6 +507,16 @@ def _roster(names: Sequence[str], classes: Mapping[str, type[RLAgent]] | None) -
     if classes is None:
         return ", ".join(names)
     return ", ".join(f"{name} ({classes[name].__name__})" for name in names)
+
+
+def _others_map(others: Any) -> dict[Any, Any]:
+    """``others`` as a dict; refused unless it is a map (``others="heuristic"``, say)."""
+    if others is not None and not isinstance(others, Mapping):
+        raise TypeError(
+            "others must map agent names (or RLAgent classes) to what drives them, "
+            f'e.g. {{"Runner1": "heuristic"}}; got {others!r:.60}'
+        )
+    return dict(others or {})
 
 
 def _plan_others(

@@ -6,12 +6,10 @@
 ``examples/hunt`` has one hunter (a decision every 4 ticks) and up to eight prey that appear
 and are caught during an episode (a decision every 8 ticks). The servers drive every prey by
 its heuristic (``--policy Prey1=heuristic`` ... ``Prey8=heuristic``), so the hunter is the one
-agent the client acts for. On this branch neither ``SB3VecEnv(agents="Hunter")`` (its rows
-expect every agent in every answer) nor ``RemoteEnv`` (an answer holding only a caught prey,
-which the server sends at the tick the prey left, has no hunter entry for its trainer view) steps
-it yet, so the trainer here is the lowest layer that works: :class:`HunterView`, a
-``gymnasium.Env`` over a :class:`~rlenv_client.Client`, in SB3's ``DummyVecEnv`` (one server
-per env).
+agent the client acts for. The trainer here is :class:`HunterView`, a ``gymnasium.Env`` over
+a :class:`~rlenv_client.Client`, in SB3's ``DummyVecEnv`` (one server per env): it was written
+before ``SB3VecEnv(agents="Hunter")`` stepped games whose agents come and go (it does now),
+and it keeps the figures below comparable.
 
 PPO trains for ``T`` env-steps (hunter decisions); then its deterministic policy and the
 scripted hunter (``Hunter.heuristic``, the client calling it) each play ``E`` episodes over the

@@ -34,6 +34,11 @@ episode's checkpoints take at most half, each branch at most half of what is lef
 ``max_memory``, past which no more are parked. Every process dies with the timeline's owner
 (:mod:`rlenv_tools.forking`'s lifeline). A timeline is not thread-safe, and needs ``os.fork``
 (Linux, macOS).
+
+Where agents come and go, or decide at their own pace, each step's observation holds the agents
+of that answer (and is checked as such); :meth:`Timeline.agents_in_play`,
+:meth:`Timeline.departures` and :meth:`Timeline.agent_returns` say who was in play at each step,
+who left, and what each earned.
 """
 
 from __future__ import annotations
@@ -129,7 +134,8 @@ class TimelineDiff:
             other did not, or that only one of the two reaches; ``None`` when they are the
             same.
         observations: for each step both reach, the other's observation minus this one's
-            (float64 arrays; maps and sequences of them for composite observations).
+            (float64 arrays; maps and sequences of them for composite observations; of a map
+            by agent, the agents both answers hold).
         rewards: for each step both reach, the other's reward minus this one's.
     """
 
@@ -206,6 +212,7 @@ class Timeline:
             self._setup(episode, processes, True, unspaced, [])
             start = {**episode.snapshot, "events": []}
             observation, info = processes.first.call("restore", start)
+            self._starting = _answer_agents(observation, self.hello)
             result: Result = (observation, 0.0, False, False, info)
             self._check(0, digest(observation))
             self._checkpoints.keep(0, Mark(processes.first, result))
@@ -295,6 +302,50 @@ class Timeline:
     def rewards(self) -> list[float]:
         """Every step's reward, 0.0 at step 0 (as the timeline first took them: no re-run)."""
         return [0.0] + [record[1] for record in self._records]
+
+    def agents_in_play(self) -> list[list[str]]:
+        """Each step's agents in play, by step (step 0: those the reset started).
+
+        An agent is in play from the answer it joined in to the answer it left in, both
+        included, whether or not it was due at each step between (one that decides at its own
+        pace is absent from some answers). With a fixed set of agents, every step has them all.
+        """
+        in_play = list(self._starting)
+        steps = [list(in_play)]
+        left: set[str] = set()  # those that left at the step before
+        for record in self._records:
+            agents = record[4] or {}
+            in_play = [name for name in in_play if name not in left]
+            in_play += [name for name in agents if name not in in_play]
+            steps.append(list(in_play))
+            left = {name for name, outcome in agents.items() if _left(outcome)}
+        return steps
+
+    def departures(self) -> dict[str, int]:
+        """The step at which each agent that left did so (terminated or truncated)."""
+        return {
+            name: step
+            for step, record in enumerate(self._records, start=1)
+            for name, outcome in (record[4] or {}).items()
+            if _left(outcome)
+        }
+
+    def agent_returns(self, upto: int | None = None) -> dict[str, float]:
+        """Each agent's return: the sum of its rewards up to step ``upto`` (default: the end).
+
+        Every agent that was in play by then is listed, in the order they joined; an agent's
+        first answer (``reward`` ``None``) counts nothing. With one agent, its name holds the
+        episode's return.
+        """
+        records = self._records[:upto]
+        if len(self.hello.agents) < 2:
+            return {self.hello.agents[0]: float(sum(record[1] for record in records))}
+        returns = dict.fromkeys(self._starting, 0.0)
+        for record in records:
+            for name, outcome in (record[4] or {}).items():
+                reward = outcome.get("reward")
+                returns[name] = returns.get(name, 0.0) + (0.0 if reward is None else reward)
+        return returns
 
     @property
     def memory(self) -> int:
@@ -472,17 +523,18 @@ class Timeline:
             processes.drop_cursor()  # it took part of the branch
             raise
         digests = self.episode.observations[: step + 1] + [record[0] for record in records[step:]]
-        ends = records[-1][2:] if len(records) > step else (terminated, truncated)
+        ends = records[-1][2:4] if len(records) > step else (terminated, truncated)
         episode = EpisodeFile(self.episode.target, snapshot, digests, *ends)
         branch = object.__new__(Timeline)
         branch._setup(episode, processes, False, checkpoints, records)
+        branch._starting = self._starting
         processes.position, processes.result = (branch, len(branch)), result
         return branch
 
     def diff(self, other: Timeline) -> TimelineDiff:
         """How ``other`` differs from this timeline, step by step (both re-simulated)."""
         steps = [
-            [(timeline.episode.observations[0], 0.0, False, False), *timeline._records]
+            [(timeline.episode.observations[0], 0.0, False, False, None), *timeline._records]
             for timeline in (self, other)
         ]
         first = next(
@@ -542,6 +594,20 @@ class Timeline:
         return self._processes.every_observation(mark, self._steps)
 
 
+def _answer_agents(observation: Any, hello: Hello) -> list[str]:
+    """The agents an answer's observation holds (a map by name with several agents)."""
+    if len(hello.agents) > 1 and isinstance(observation, Mapping):
+        return [str(name) for name in observation]
+    return list(hello.agents)
+
+
+def _left(outcome: Any) -> bool:
+    """Whether an agent's part of an answer (``info["agents"][name]``) says it left."""
+    return isinstance(outcome, Mapping) and bool(
+        outcome.get("terminated") or outcome.get("truncated")
+    )
+
+
 def _named_by(episode: EpisodeFile) -> str:
     return "the episode" if episode.path is None else f"the recording {episode.path}"
 
@@ -559,9 +625,12 @@ def load_policy(path: str | Path) -> Callable[[Any], Any]:
 
 
 def _subtract(mine: Any, theirs: Any) -> Any:
-    """``theirs - mine`` as float64 arrays, through maps and sequences."""
+    """``theirs - mine`` as float64 arrays, through maps and sequences.
+
+    Of two maps, the keys both hold (agents that come and go: those of both answers).
+    """
     if isinstance(mine, Mapping):
-        return {key: _subtract(mine[key], theirs[key]) for key in mine}
+        return {key: _subtract(mine[key], theirs[key]) for key in mine if key in theirs}
     if isinstance(mine, (tuple, list)):
         return [_subtract(a, b) for a, b in zip(mine, theirs, strict=True)]
     return np.asarray(theirs, np.float64) - np.asarray(mine, np.float64)

@@ -177,7 +177,10 @@ class Timelines:
         """The state after ``step`` of ``branch``: what the page draws and lists.
 
         ``{"timeline", "branch", "step", "length", "reward", "terminated", "truncated",
-        "info", "observation" (by agent, as the live page shows it), "draw" (the scene's draw
+        "info", "observation" (by agent, as the live page shows it: the agents of this answer),
+        "agents_in_play" (the agents in play at this step, :meth:`~rlenv_tools.timeline
+        .Timeline.agents_in_play`), "arrived" and "left" (those that joined, and left, at this
+        step), "agent_returns" (each agent's return up to this step), "draw" (the scene's draw
         list), "properties" (every node's exported values, by path)}``.
 
         Raises:
@@ -187,6 +190,8 @@ class Timelines:
         with self._recordings.using(number) as root:
             timeline = self._branch(root, branch).timeline
             state = self._call(lambda: timeline.at(_step(timeline, step)))
+            in_play = timeline.agents_in_play()
+            before = set(in_play[step - 1]) if step else set()
             return {
                 "timeline": number,
                 "branch": branch,
@@ -197,6 +202,10 @@ class Timelines:
                 "truncated": state.truncated,
                 "info": to_json(state.info),
                 "observation": self._shown(root, state.observation),
+                "agents_in_play": in_play[step],
+                "arrived": [name for name in in_play[step] if name not in before],
+                "left": [name for name, at in timeline.departures().items() if at == step],
+                "agent_returns": to_json(timeline.agent_returns(step)),
                 "draw": to_json(state.draw),
                 "properties": to_json(state.properties),
             }
@@ -288,6 +297,7 @@ class Timelines:
                     "length": len(branch.timeline),
                     "rewards": to_json(rewards),
                     "return": to_json(sum(rewards)),
+                    "agent_returns": to_json(branch.timeline.agent_returns()),
                     "observation": None if state is None else self._shown(root, state.observation),
                     "reward": None if state is None else to_json(state.reward),
                 }
@@ -429,6 +439,9 @@ class Timelines:
             "length": len(timeline),
             "ended": timeline.ended,
             "agents": root.agents,
+            "agents_in_play": timeline.agents_in_play(),
+            "departures": timeline.departures(),
+            "agent_returns": to_json(timeline.agent_returns()),
             "keys": list(root.keys),
             "keys_error": root.keys_error,
             "policies": sorted(self.policies),
@@ -445,8 +458,8 @@ class Timelines:
 
     def _shown(self, root: Root, observation: Any) -> dict[str, Any]:
         """An observation as the live page shows it, by agent."""
-        if len(root.agents) > 1 and isinstance(observation, Mapping):
-            return {name: _shown(observation[name]) for name in root.agents}
+        if len(root.agents) > 1 and isinstance(observation, Mapping):  # the answer's agents
+            return {name: _shown(observation[name]) for name in root.agents if name in observation}
         return {root.agents[0] if root.agents else "agent": _shown(observation)}
 
     @staticmethod

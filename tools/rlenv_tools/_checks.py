@@ -29,7 +29,7 @@ import re
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from gymnasium import spaces
@@ -96,9 +96,10 @@ def _agents_come_and_go(env: RemoteEnv) -> str:
     each action holds an entry for the agents of the last answer only.
     """
     possible = env.client.hello.possible_agents or {}
-    observation_spaces, action_spaces = env.observation_space, env.action_space
+    observation_spaces = cast(spaces.Dict, env.observation_space)  # by agent, here
+    action_spaces = cast(spaces.Dict, env.action_space)
     observation, info = env.reset(seed=7)
-    seen, gone = set(observation), set()
+    seen, gone = set(observation), set[str]()
     steps = 0
     for steps in range(1, _COME_AND_GO_STEPS + 1):
         _check_agents(observation, info, possible, observation_spaces, gone, seen, steps - 1)
@@ -169,9 +170,8 @@ def _step_types(env: RemoteEnv) -> str:
             f"{type(terminated).__name__}/{type(truncated).__name__}"
         )
     if _come_and_go(env):
-        outside = [
-            name for name, value in observation.items() if value not in env.observation_space[name]
-        ]
+        by_agent = cast(spaces.Dict, env.observation_space)
+        outside = [name for name, value in observation.items() if value not in by_agent[name]]
         if outside:
             raise AssertionError(
                 f"the observations of {outside} after a step are outside their spaces"

@@ -356,6 +356,8 @@ def _same_outcome(
     if outcome_digest(reward, terminated, truncated, info) == recorded:
         return True
     last = step == len(episode.outcomes or ())  # its end unknown (None): may be truncated
-    return last and episode.truncated is not False and (
-        outcome_digest(reward, terminated, True, truncate_agents(info)) == recorded
+    return (
+        last
+        and episode.truncated is not False
+        and (outcome_digest(reward, terminated, True, truncate_agents(info)) == recorded)
     )

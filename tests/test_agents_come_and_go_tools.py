@@ -403,3 +403,37 @@ def test_a_dataset_of_agents_that_come_and_go_is_refused_saying_why(
     assert "agents come and go or decide at their own pace" in result.stderr
     assert "datasets of such environments are not supported" in result.stderr
     assert not (tmp_path / "datasets").exists() or not any((tmp_path / "datasets").rglob("*.hdf5"))
+
+
+# --- the page, in a browser ----------------------------------------------------------------------
+
+
+@pytest.mark.browser
+def test_the_page_shows_who_is_in_play_and_their_returns(came_and_went: Recorded) -> None:
+    from browser import Browser, find_chromium
+
+    chromium = find_chromium()
+    if chromium is None:
+        pytest.skip("no Chromium found (apt-get install chromium): the JSON is tested above")
+    seen = came_and_went.seen
+    joined = next(k for k, agents in enumerate(seen.agents) if "C" in agents)
+    page = InspectorServer(
+        Watcher([]), timelines=Timelines([came_and_went.path], trust_target=True)
+    )
+    page.start()
+    try:
+        with Browser(chromium) as browser:
+            browser.open(page.url)
+            agents = "document.getElementById('timeline-agents')"
+            browser.wait_for(f"{agents}.dataset.inPlay === 'A,B'", "step 0's agents not shown")
+            browser.evaluate(f"""(() => {{ const s = document.getElementById('scrubber');
+                s.value = {joined}; s.dispatchEvent(new Event('input')); }})()""")
+            shown = in_play_seen(seen)[joined]
+            browser.wait_for(
+                f"{agents}.dataset.inPlay === '{','.join(shown)}'", "the joined agent not shown"
+            )
+            text = browser.evaluate(f"{agents}.textContent")
+            assert "+C" in text and not browser.evaluate(f"{agents}.hidden")
+            assert "returns: A " in text
+    finally:
+        page.close()

@@ -343,6 +343,14 @@ def test_a_fixed_multi_agent_timeline_has_every_agent_at_every_step(tagged: Reco
         assert digest(timeline.at(17).observation) == digest(tagged.seen.observations[17])
 
 
+def test_the_ticks_of_a_step_are_refused_where_agents_come_and_go(
+    hunt_timeline: Timeline,
+) -> None:
+    with pytest.raises(ValueError, match="not supported where agents come and go"):
+        hunt_timeline.ticks(5)
+    assert digest(hunt_timeline.at(5).observation)  # the timeline goes on serving
+
+
 # --- the inspector -------------------------------------------------------------------------------
 
 
@@ -378,6 +386,8 @@ def test_the_inspector_shows_agents_arriving_and_leaving_and_returns_per_agent(
         assert "B" not in after["agents_in_play"] and "B" not in after["observation"]
         status, _, compared = fetch(page.url, "api/timeline/compare?timeline=0&a=0&b=0&step=1")
         assert status == 200 and compared["a"]["agent_returns"] == returns_seen(seen)
+        status, _, refused = fetch(page.url, "api/timeline/ticks?timeline=0&branch=0&step=2")
+        assert status == 422 and "not supported where agents come and go" in str(refused)
     finally:
         page.close()
 

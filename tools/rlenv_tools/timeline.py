@@ -424,9 +424,17 @@ class Timeline:
 
         Raises:
             IndexError: no such step (step 0 has no action), or ``first`` past its ticks.
-            ValueError: ``count`` below 1.
+            ValueError: ``count`` below 1, or an environment whose agents come and go or
+                decide at their own pace (not supported: an action of one tick would have to
+                hold the agents due at that tick, which the step's action does not).
             RuntimeError: as :meth:`at`.
         """
+        if self.hello.possible_agents is not None:
+            raise ValueError(
+                f"the ticks of a step are not supported where agents come and go or decide "
+                f"at their own pace ({self.hello.environment}'s possible agents): a step's "
+                f"action holds the agents due at its start, not those due at each tick"
+            )
         if not 1 <= step <= len(self):
             raise IndexError(f"step {step} has no action (steps 1 to {len(self)} have)")
         *changes, (_, action, frames) = self._steps[step - 1]

@@ -445,13 +445,13 @@ def test_a_vector_awaits_first_the_server_that_answers_last(serve: Serve) -> Non
     with RemoteVectorEnv(
         addresses=[f"{slow.host}:{slow.port}", f"{quick.host}:{quick.port}"]
     ) as envs:
-        assert envs._gather_order == [1, 0]  # at first the last server is the last rung
+        assert envs._servers.gather_order == [1, 0]  # at first the last server is the last rung
         envs.reset(seed=0)
         for _ in range(20):  # the first step shows it, unless the quick server was held up
             envs.step(np.zeros((33, 1), np.float32))
-            if envs._gather_order == [0, 1]:
+            if envs._servers.gather_order == [0, 1]:
                 break
-        assert envs._gather_order == [0, 1]
+        assert envs._servers.gather_order == [0, 1]
 
 
 def test_a_refused_vector_step_raises_the_first_servers_refusal() -> None:
@@ -461,7 +461,7 @@ def test_a_refused_vector_step_raises_the_first_servers_refusal() -> None:
         actions = np.zeros((4, 1), np.float32)
         actions[1], actions[2] = 5.0, 7.0  # server 0's second instance, server 1's first
         for order in ([0, 1], [1, 0]):
-            envs._gather_order = order
+            envs._servers.gather_order = order
             with pytest.raises(rlenv_client.RemoteError, match=r"action\[1, 0\] is 5.0"):
                 envs.step(actions)
         envs.step(np.zeros((4, 1), np.float32))  # nothing moved: the next step is served

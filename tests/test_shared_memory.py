@@ -738,8 +738,8 @@ def test_slots_of_an_unknown_kind_are_refused_on_the_socket(serve: Serve) -> Non
     server = serve()
     with Client(server.host, server.port, shared_memory=True) as client:
         client.reset(seed=0)
-        lane = client._lane  # what a client of another language could write by mistake
-        assert lane is not None
+        assert client._lane is not None
+        lane = client._lane.lane  # what a client of another language could write by mistake
         header = memoryview(lane.memory)[:32].cast("q")
         header[1], header[2] = 99, 7  # id 99, kind 7
         header[0] += 1

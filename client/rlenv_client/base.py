@@ -12,16 +12,16 @@ that pack actions and unpack observations are prepared once, from the hello.
 
 A client waits for one answer at a time: the answer to the request it sent last. An answer to
 an earlier request, whose caller gave up on it (a ``KeyboardInterrupt`` while it waited, as in
-a notebook), is read when it comes and dropped, never taken for the answer to a later request.
+a notebook), is read when it comes and dropped, never taken for the answer to a later request
+(the client's ``Answers``, in ``_answers.py``, keep that order and check each answer).
 """
 
 from __future__ import annotations
 
-import logging
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
 from itertools import count
-from typing import Any, TypeVar
+from typing import Any
 
 import numpy as np
 from gymnasium import spaces
@@ -36,14 +36,13 @@ from rlenv.protocol import (
     StepsResponse,
 )
 from rlenv.protocol._agent_maps import agent_codec
-from rlenv.protocol.errors import ConnectionLost, RemoteError
+from rlenv.protocol.errors import ConnectionLost
 from rlenv.protocol.spaces import Codec
+from rlenv_client._answers import Answers
 from rlenv_client._messages import Requests, answer_info
 from rlenv_client.inspection import Inspection, config_request
 
 __all__ = ["BaseClient", "StepResult"]
-
-logger = logging.getLogger(__name__)
 
 StepResult = tuple[Any, float, bool, bool, dict[str, Any]]
 """``(observation, reward, terminated, truncated, info)``, as gymnasium's ``step`` returns."""
@@ -51,7 +50,6 @@ StepResult = tuple[Any, float, bool, bool, dict[str, Any]]
 AGENT_ONLY: Mapping[str, Any] = {"agent": {}}
 """What a step observes by default: the agent's observation alone."""
 _AGENT_AND_WORLD: Mapping[str, Any] = {"agent": {}, "world": {}}
-_Answer = TypeVar("_Answer", BatchResponse, StepsResponse)
 
 
 class BaseClient(Inspection, ABC):
@@ -72,10 +70,11 @@ class BaseClient(Inspection, ABC):
     def __init__(self, *, world_data: bool = False) -> None:
         self._observation_request = _AGENT_AND_WORLD if world_data else AGENT_ONLY
         self._ids = count(1)
-        self._awaited = 0  # the id of the request sent last: the answer to wait for
 
     def _set_hello(self, hello: Hello) -> None:
+        """Take the server's ``hello`` (once :attr:`address` is set), before any request."""
         self.hello = hello
+        self._answers = Answers(self.address, self._receive, self.close)
         self.action_space: spaces.Space = hello.action_space
         self.observation_space: spaces.Space = hello.observation_space
         self._requests = Requests(hello, self._observation_request)
@@ -127,7 +126,7 @@ class BaseClient(Inspection, ABC):
 
     def receive_reset(self) -> tuple[Any, dict[str, Any]]:
         """Wait for the answer to the reset sent by :meth:`send_reset`."""
-        return self.reset_result(self._reply())  # type: ignore[arg-type]
+        return self.reset_result(self._answers.reply())  # type: ignore[arg-type]
 
     def step(self, action: Any, repeat_action: int | None = None) -> StepResult:
         """Run ``action`` for ``repeat_action`` physics ticks (default: the server's setting).
@@ -159,7 +158,7 @@ class BaseClient(Inspection, ABC):
 
     def receive_step(self) -> StepResult:
         """Wait for the answer to the step sent by :meth:`send_step`."""
-        return self.step_result(self._reply())  # type: ignore[arg-type]
+        return self.step_result(self._answers.reply())  # type: ignore[arg-type]
 
     def poll(self) -> StepResult:
         """The episode's state without acting, as :meth:`step` returns it.
@@ -172,7 +171,7 @@ class BaseClient(Inspection, ABC):
             RemoteError: ``reset_required`` before the first reset.
         """
         self._post(self._requests.poll(next(self._ids)))
-        return self.step_result(self._reply())  # type: ignore[arg-type]
+        return self.step_result(self._answers.reply())  # type: ignore[arg-type]
 
     def step_result(self, reply: Response | ErrorReply, *, writable: bool = True) -> StepResult:
         """A step's answer as ``(observation, reward, terminated, truncated, info)``.
@@ -231,12 +230,7 @@ class BaseClient(Inspection, ABC):
 
     def receive_reply(self) -> Response | ErrorReply:
         """Wait for the answer to :meth:`send_request`; an error reply is returned, not raised."""
-        message = self._reply()
-        if message.__class__ is not ErrorReply:
-            return self._response(message)  # type: ignore[arg-type]  # checks it is a Response
-        if message.fatal:
-            self.close()
-        return message
+        return self._answers.reply_or_error()
 
     def send_batch(self, requests: Sequence[Request | None]) -> None:
         """Send one request per instance of the server (``None``: skip one)."""
@@ -253,7 +247,7 @@ class BaseClient(Inspection, ABC):
         Raises:
             RemoteError: the whole batch was refused.
         """
-        return self._receive_answer(BatchResponse, "a batch").replies
+        return self._answers.of_kind(BatchResponse, "a batch").replies
 
     def send_steps(
         self,
@@ -286,13 +280,9 @@ class BaseClient(Inspection, ABC):
         Raises:
             RemoteError: the whole request was refused (nothing changed).
         """
-        answer = self._receive_answer(StepsResponse, "steps", copy)
+        answer = self._answers.of_kind(StepsResponse, "steps", copy)
         _, observations = self._requests.column_codecs()
-        try:
-            answer.observation = observations.unpack(answer.observation, writable=False)
-        except (KeyError, TypeError, ValueError) as error:
-            self.close()
-            raise ConnectionLost(f"{self.address} broke the protocol: {error}") from None
+        answer.observation = self._answers.unpack(observations, answer.observation, writable=False)
         return answer
 
     def observe(self) -> dict[str, Any]:
@@ -369,45 +359,11 @@ class BaseClient(Inspection, ABC):
 
     def _post(self, request: Request) -> None:
         """Send ``request``; its answer is the one to wait for from now on."""
-        self._awaited = request.id
+        self._answers.awaited = request.id
         self._send(request)
 
-    def _reply(self, copy: bool = True) -> Reply:
-        """The answer to the request sent last; answers to earlier ones are dropped.
-
-        Their callers gave up on them (interrupted while waiting), so they belong to no one;
-        an unsolicited error (id ``None``: a timeout, say) is returned as it is.
-        """
-        while True:
-            message = self._receive(copy)
-            reply_id = message.id
-            if reply_id is None or reply_id >= self._awaited:
-                return message
-            logger.info(
-                "%s: dropped the answer to request %d, whose caller gave up on it",
-                self.address,
-                reply_id,
-            )
-
-    def _receive_answer(self, kind: type[_Answer], asked: str, copy: bool = True) -> _Answer:
-        """The answer to a batch or steps request, ``kind``; raises a refusal of it whole."""
-        message = self._reply(copy)
-        if message.__class__ is ErrorReply:
-            self._response(message)
-        if message.__class__ is not kind:
-            self.close()
-            raise ConnectionLost(f"{self.address} answered {asked} with {message!r:.80}")
-        return message
-
     def _response(self, message: Response | ErrorReply) -> Response:
-        if message.__class__ is ErrorReply:
-            if message.fatal:
-                self.close()
-            raise RemoteError(message.code, message.message, message.fatal)
-        if message.__class__ is not Response:
-            self.close()
-            raise ConnectionLost(f"{self.address} answered a request with {message!r:.80}")
-        return message
+        return self._answers.response(message)
 
     def _observation(self, response: Response, writable: bool = True) -> Any:
         observation = response.observation
@@ -420,10 +376,6 @@ class BaseClient(Inspection, ABC):
             raise ConnectionLost(f"{self.address} broke the protocol: {error}") from None
 
     def _part(self, response: Response, part: str) -> Any:
-        observation = response.observation
-        if observation is None or part not in observation:
-            self.close()
-            raise ConnectionLost(f"{self.address} broke the protocol: no {part!r} observation")
-        return observation[part]
+        return self._answers.part(response, part)
 
     _info = staticmethod(answer_info)  # an answer's info, frames and all

@@ -46,11 +46,11 @@ from rlenv.protocol.errors import (
     RemoteError,
     RequestTimeout,
 )
-from rlenv.protocol.shared_memory import STEP, STEPS
-from rlenv.transport.lanes import Lane, LaneClosed, wait_for
+from rlenv.transport.lanes import LaneClosed
 from rlenv.transport.sockets import AnswerWaiter, configure_socket, readable_now
 from rlenv_client._addresses import format_address, parse_address
 from rlenv_client._lane_opening import open_lane
+from rlenv_client._lane_traffic import LaneTraffic
 from rlenv_client.base import AGENT_ONLY, BaseClient, StepResult
 
 __all__ = ["Client", "StepResult"]
@@ -109,44 +109,27 @@ class Client(BaseClient):
         self._closed_because = ""  # what closed the connection, when it was no error of its own
         self._waiter = AnswerWaiter()
         self._connection = Connection(Role.CLIENT)
-        self._lane: Lane | None = None
-        self._lane_kind = 0  # the kind of the request sent by the lane, until it is answered
-        self._lane_answers = 0  # the lane's answer sequence number last read
-        try:
-            self._sock: socket.socket | None = socket.create_connection((host, port), timeout)
-        except TimeoutError:
-            raise RequestTimeout(
-                f"connecting to {self.address} took longer than {timeout}s"
-            ) from None
-        except OSError as error:
-            raise ConnectionLost(f"cannot connect to {self.address}: {error}") from None
-        configure_socket(self._sock, timeout, timeout)
-        try:
+        self._lane: LaneTraffic | None = None  # once a shared-memory lane is open
+        self._sock: socket.socket | None = _connected(host, port, timeout, self.address)
+        try:  # a failure of the handshake closes the connection
             message = self._next_message()
-        except BaseException:
-            self.close()
-            raise
-        if isinstance(message, ErrorReply):
-            self.close()
-            raise RemoteError(message.code, message.message, message.fatal)
-        if not isinstance(message, Hello):
-            self.close()
-            raise ConnectionLost(f"{self.address} did not start with a hello")
-        self._set_hello(message)
-        if message.token_required:
-            token = token if token is not None else os.environ.get("RLENV_TOKEN")
-            if token is None:
-                self.close()
-                raise RemoteError(
-                    ErrorCode.UNAUTHORIZED,
-                    f"{self.address} requires a token: pass token=... (or set RLENV_TOKEN)",
-                    fatal=True,
-                )
-            self._post(Request(next(self._ids), token=token))
-            self._response(self.receive_reply())
-        if shared_memory is not False:
-            try:
-                self._lane = open_lane(
+            if isinstance(message, ErrorReply):
+                raise RemoteError(message.code, message.message, message.fatal)
+            if not isinstance(message, Hello):
+                raise ConnectionLost(f"{self.address} did not start with a hello")
+            self._set_hello(message)
+            if message.token_required:
+                token = token if token is not None else os.environ.get("RLENV_TOKEN")
+                if token is None:
+                    raise RemoteError(
+                        ErrorCode.UNAUTHORIZED,
+                        f"{self.address} requires a token: pass token=... (or set RLENV_TOKEN)",
+                        fatal=True,
+                    )
+                self._post(Request(next(self._ids), token=token))
+                self._response(self.receive_reply())
+            if shared_memory is not False:
+                lane = open_lane(
                     message,
                     host,
                     self._sock,
@@ -155,9 +138,11 @@ class Client(BaseClient):
                     required=shared_memory is True,
                     ask=lambda lane: self._call(shared_memory=lane),
                 )
-            except BaseException:
-                self.close()
-                raise
+                if lane is not None:
+                    self._lane = LaneTraffic(lane, self._connection, self._waiter)
+        except BaseException:
+            self.close()
+            raise
 
     @property
     def shared_memory(self) -> bool:
@@ -167,7 +152,7 @@ class Client(BaseClient):
     def close(self) -> None:
         """Close the connection (and the lane); safe to repeat."""
         if self._lane is not None:
-            self._lane.close()
+            self._lane.lane.close()
             self._lane = None
         if self._sock is not None:
             self._sock.close()
@@ -193,7 +178,7 @@ class Client(BaseClient):
         rings for each answer in the lane's slots; the socket carries the others).
         """
         lane = self._lane
-        return (self.fileno(),) if lane is None else (self.fileno(), lane.doorbell.fileno())
+        return (self.fileno(),) if lane is None else (self.fileno(), lane.lane.doorbell.fileno())
 
     def wake(self) -> bool:
         """Whether the answer has arrived, after one of :meth:`answer_descriptors` was readable.
@@ -205,7 +190,7 @@ class Client(BaseClient):
         lane = self._lane
         if lane is not None:
             try:
-                lane.drain()
+                lane.lane.drain()
             except LaneClosed:
                 return True
         return self.answer_arrived()
@@ -225,12 +210,9 @@ class Client(BaseClient):
             raise ConnectionLost(
                 f"the connection to {self.address} is closed{self._closed_because}"
             )
-        lane = self._lane
-        if lane is not None:
+        if self._lane is not None:
             self._settle()
-            kind = lane.slots.write_request(request)
-            if kind:
-                self._rang(lane, request.id, kind)
+            if self._lane.send(request):
                 return
         data = self._connection.send(request)
         try:
@@ -258,17 +240,11 @@ class Client(BaseClient):
         Through the lane, an action of the space's exact dtype and shape (or a ``Discrete``
         integer) is written straight into its slot.
         """
-        lane = self._lane
-        if (
-            lane is not None
-            and self._sock is not None
-            and not self._connection.outstanding
-            and self._observation_request is AGENT_ONLY
-        ):
+        lane = self._free_lane()
+        if lane is not None and self._observation_request is AGENT_ONLY:
             request_id = next(self._ids)
-            if lane.slots.write_step(request_id, action, repeat_action):
-                self._awaited = request_id
-                self._rang(lane, request_id, STEP)
+            if lane.send_step(request_id, action, repeat_action):
+                self._answers.awaited = request_id
                 return
         super().send_step(action, repeat_action)
 
@@ -285,47 +261,35 @@ class Client(BaseClient):
         flags) is written straight into its slots; a request with ``reset_with`` entries goes
         on the socket.
         """
-        lane = self._lane
-        if (
-            lane is not None
-            and self._sock is not None
-            and not self._connection.outstanding
-            and (reset_with is None or all(entry is None for entry in reset_with))
-        ):
+        lane = self._free_lane()
+        if lane is not None and (reset_with is None or all(entry is None for entry in reset_with)):
             request_id = next(self._ids)
-            if lane.slots.write_steps(request_id, action, reset, repeat_action):
-                self._awaited = request_id
-                self._rang(lane, request_id, STEPS)
+            if lane.send_steps(request_id, action, reset, repeat_action):
+                self._answers.awaited = request_id
                 return
         super().send_steps(action, reset, repeat_action, reset_with)
 
-    def _rang(self, lane: Lane, request_id: int, kind: int) -> None:
-        """The lane's slots hold request ``request_id`` of ``kind``: wake the server."""
-        self._connection.note_request(request_id)
-        self._lane_kind = kind
-        lane.ring()
-        self._waiter.sent()
+    def _free_lane(self) -> LaneTraffic | None:
+        """The lane, if a request can go through it now (none is owed an answer)."""
+        if self._sock is None or self._connection.outstanding:
+            return None
+        return self._lane
 
     def _receive(self, copy: bool = True) -> Reply:
-        kind = self._lane_kind
-        if kind and not self._connection.buffered and self._answered_by_lane():
-            self._lane_kind = 0
-            assert self._lane is not None
-            slots = self._lane.slots
-            self._lane_answers = slots.answer_sequence
-            reply = slots.read_answer(kind, copy)
-            try:
-                self._connection.note_reply(reply.id)  # type: ignore[arg-type]
-            except LocalProtocolError as error:
-                self.close()
-                raise ConnectionLost(f"{self.address} broke the protocol: {error}") from None
-            return reply
+        lane = self._lane
+        if lane is not None and lane.kind and not self._connection.buffered:
+            if self._answered_by_lane(lane):
+                try:
+                    return lane.read(copy)
+                except LocalProtocolError as error:
+                    self.close()
+                    raise ConnectionLost(f"{self.address} broke the protocol: {error}") from None
         message = self._next_message()
         if message.__class__ is Hello or message.__class__ is Request:
             self.close()
             raise ConnectionLost(f"{self.address} broke the protocol: {message!r:.80}")
-        if kind and message.id is not None:  # type: ignore[union-attr]
-            self._lane_kind = 0  # the lane's request was answered on the socket
+        if lane is not None and message.id is not None:  # type: ignore[union-attr]
+            lane.kind = 0  # the lane's request (if any) was answered on the socket
         return message  # type: ignore[return-value]
 
     def answer_arrived(self) -> bool:
@@ -334,34 +298,22 @@ class Client(BaseClient):
         True when the lane's slots hold an answer, or the socket has bytes (perhaps only the
         start of a frame) or reached its end; false while the server is still at work.
         """
-        lane = self._lane
-        if (
-            self._lane_kind
-            and lane is not None
-            and lane.slots.answer_sequence != self._lane_answers
-        ):
+        if self._lane is not None and self._lane.arrived():
             return True
         sock = self._sock
         return self._connection.buffered > 0 or sock is None or readable_now(sock)
 
-    def _answered_by_lane(self) -> bool:
+    def _answered_by_lane(self, lane: LaneTraffic) -> bool:
         """Wait for the answer to the lane's request; whether it is in the slots.
 
         Otherwise the socket has bytes: an answer that did not fit, an error, or the end.
         """
-        lane, sock = self._lane, self._sock
-        if lane is None or sock is None:
+        if self._sock is None:
             raise ConnectionLost(
                 f"the connection to {self.address} is closed{self._closed_because}"
             )
-        slots = lane.slots
         try:
-            return wait_for(
-                lambda: slots.answer_sequence != self._lane_answers,
-                lane,
-                self._waiter,
-                self.timeout,
-            )
+            return lane.wait(self.timeout)
         except BlockingIOError:
             self._timed_out()
         except LaneClosed:
@@ -434,3 +386,20 @@ class Client(BaseClient):
         raise RequestTimeout(
             f"{self.address} did not answer within {self.timeout}s; connection closed"
         )
+
+
+def _connected(host: str, port: int, timeout: float, address: str) -> socket.socket:
+    """A socket connected to ``host:port`` (``address``, in messages), its timeouts set.
+
+    Raises:
+        RequestTimeout: connecting took longer than ``timeout`` seconds.
+        ConnectionLost: the server cannot be reached.
+    """
+    try:
+        sock = socket.create_connection((host, port), timeout)
+    except TimeoutError:
+        raise RequestTimeout(f"connecting to {address} took longer than {timeout}s") from None
+    except OSError as error:
+        raise ConnectionLost(f"cannot connect to {address}: {error}") from None
+    configure_socket(sock, timeout, timeout)
+    return sock

@@ -72,8 +72,8 @@ class LocalClient(BaseClient):
             )
         self._replies: deque[Reply] = deque()  # answers not received yet
         self._first = self.host.instances[0]
-        self._set_hello(self.host.hello)
         self.address = f"in-process {self.environment.name}"
+        self._set_hello(self.host.hello)
 
     @property
     def environment(self) -> RLEnvironment:

@@ -46,7 +46,6 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping, Sequence
-from itertools import accumulate
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -54,14 +53,14 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, create_empty_array
 
 from rlenv.protocol import ErrorReply, Request, Response
-from rlenv.protocol.errors import RemoteError
-from rlenv_client._rows import check_shape, empty_like, row, rows
+from rlenv_client._rows import check_shape, empty_like, row
+from rlenv_client._server_groups import ServerGroups
 from rlenv_client._step_columns import StepColumns
 from rlenv_client._vector_infos import BatchedInfos
 from rlenv_client._vector_resets import Resets
 from rlenv_client.base import BaseClient
 from rlenv_client.launcher import ServerProcess
-from rlenv_client.session import LOST, ServerSource, Session
+from rlenv_client.session import ServerSource, Session
 from rlenv_client.time_limits import truncate_agents
 from rlenv_client.trainer_view import TrainerView
 from rlenv_client.vector_servers import (
@@ -137,18 +136,8 @@ class RemoteVectorEnv(VectorEnv):
     ) -> None:
         self.sessions: list[Session] = []  # first: closing a half-built vector closes these
         self.inspector: Inspector | None = None
-        mode = AutoresetMode(autoreset_mode)
-        if mode is AutoresetMode.DISABLED:
-            raise ValueError("RemoteVectorEnv autoresets; use NEXT_STEP or SAME_STEP")
-        if max_episode_steps is not None and max_episode_steps < 1:
-            raise ValueError(f"max_episode_steps must be at least 1, got {max_episode_steps}")
-        if render_mode not in (None, "rgb_array"):
-            raise ValueError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
-        if server_args and (addresses is not None or pool is not None or in_process):
-            raise ValueError(
-                "server_args are for the servers a vector starts, not for "
-                "addresses, a pool or in_process"
-            )
+        started = addresses is None and pool is None and not in_process
+        mode = _checked_mode(autoreset_mode, max_episode_steps, render_mode, server_args, started)
         places = server_places(
             num_envs, target, addresses, pool, in_process, token, instances_per_server, server_args
         )
@@ -159,42 +148,15 @@ class RemoteVectorEnv(VectorEnv):
             max_restarts=max_restarts,
             shared_memory=shared_memory,
         )
-        sizes = [session.client.hello.instances for session in self.sessions]
-        self._groups = [
-            range(end - size, end)  # the sub-environments each session hosts
-            for size, end in zip(sizes, accumulate(sizes), strict=True)
-        ]
-        self._owner = [number for number, group in enumerate(self._groups) for _ in group]
-        # The order in which a step's answers are awaited: the server that answered last comes
-        # first, so that this process sleeps until all have answered rather than waking for
-        # each (on a small machine, it shares a core with a server it would slow down).
-        self._gather_order = list(range(len(self.sessions)))[::-1]
+        self._servers = ServerGroups(self.sessions)
         hello = self.clients[0].hello
-        for client in self.clients[1:]:
-            if (client.action_space, client.observation_space) != (
-                hello.action_space,
-                hello.observation_space,
-            ):
-                self.close()
-                raise ValueError(
-                    f"{client.address} has other spaces than {self.clients[0].address}"
-                )
-        if (
-            num_envs is not None
-            and (addresses is not None or pool is not None)
-            and num_envs != len(self._owner)
-        ):
-            self.close()
-            raise ValueError(
-                f"num_envs={num_envs}, but the servers given host "
-                f"{len(self._owner)} sub-environments"
-            )
-        self.num_envs = len(self._owner)
         try:
+            self._servers.check(num_envs if addresses is not None or pool is not None else None)
             self._view = TrainerView(hello)
         except ValueError:
             self.close()
             raise
+        self.num_envs = self._servers.num_envs
         self.single_action_space = self._view.action_space
         self.single_observation_space = self._view.observation_space
         self.action_space = batch_space(self.single_action_space, self.num_envs)
@@ -213,17 +175,11 @@ class RemoteVectorEnv(VectorEnv):
             self.single_observation_space, self.num_envs
         )
         self._steps = np.zeros(self.num_envs, dtype=np.int64)
-        self._resets = Resets(self.sessions, self._groups, self._client_of)
+        self._resets = Resets(self.sessions, self._servers.groups, self._servers.client_of)
         self._last: Any = None  # the last batch of observations returned
         self._interrupted: str | None = None  # what interrupted the last step or reset
         if inspector:
-            from rlenv_tools.inspector import inspect_sessions
-
-            try:
-                self.inspector = inspect_sessions(self.sessions)
-            except BaseException:
-                self.close()
-                raise
+            self._start_inspector()
 
     @property
     def clients(self) -> list[BaseClient]:
@@ -352,42 +308,9 @@ class RemoteVectorEnv(VectorEnv):
             return self._after_interruption()
         starts = self._resets.take_marked(resetting)
         actions = self._view.full_actions(actions, self.num_envs)
-        for session, group in zip(self.sessions, self._groups, strict=True):
-            try:
-                session.client.send_steps(
-                    rows(actions, group.start, group.stop),
-                    resetting[group.start : group.stop],
-                    self.repeat_action,
-                    None if starts is None else starts[group.start : group.stop],
-                )
-            except LOST as error:
-                raise session.failure(error) from None
-        # every row of the observations is written below
+        # every row of the observations is written by the servers' answers
         columns = StepColumns(empty_like(self._observations_template), self.num_envs)
-        refusals: dict[int, RemoteError] = {}  # by server: the first one's is raised
-        order = self._gather_order
-        late: list[int] = []
-        for turn, number in enumerate(order):
-            if turn == 1:  # the first awaited answered: are any of the others still at work?
-                late = [
-                    other for other in order[1:] if not self.sessions[other].client.answer_arrived()
-                ]
-            session, group = self.sessions[number], self._groups[number]
-            try:
-                answer = session.client.receive_steps(copy=False)  # copied into columns
-                refused = columns.fill(group, answer)
-                if refused is not None:
-                    refusals[number] = refused
-            except RemoteError as error:  # read every server's answer before raising
-                refusals[number] = error
-            except LOST as error:
-                if self._last is None:
-                    raise session.failure(error) from None
-                columns.cut_short(group, self._last, {"server_restarted": session.restart(error)})
-        if late:  # it answered after the one awaited first: await it first next time
-            self._gather_order = [late[-1], *(n for n in order if n != late[-1])]
-        if refusals:
-            raise refusals[min(refusals)]
+        self._servers.step(actions, resetting, self.repeat_action, starts, columns, self._last)
         if self._view.driven:  # the trainer's agents' rewards and ends, not every agent's
             for index, info in enumerate(columns.env_infos):
                 if "agents" in info:  # not in a lost server's
@@ -447,11 +370,11 @@ class RemoteVectorEnv(VectorEnv):
         if self.render_mode is None:
             return None
         plan: list[Request | None] = [
-            self._client_of(i).render_request() for i in range(self.num_envs)
+            self._servers.client_of(i).render_request() for i in range(self.num_envs)
         ]
-        replies = exchange(self.sessions, self._groups, plan)
+        replies = exchange(self.sessions, self._servers.groups, plan)
         return tuple(
-            self._client_of(index).render_result(sure_reply(index, reply))
+            self._servers.client_of(index).render_result(sure_reply(index, reply))
             for index, reply in enumerate(replies)
         )
 
@@ -471,9 +394,45 @@ class RemoteVectorEnv(VectorEnv):
 
     # --- internals --------------------------------------------------------------------------
 
+    def _start_inspector(self) -> None:
+        """Start the live inspector on every server; a vector it fails for is closed."""
+        from rlenv_tools.inspector import inspect_sessions
+
+        try:
+            self.inspector = inspect_sessions(self.sessions)
+        except BaseException:
+            self.close()
+            raise
+
     @property
     def _mode(self) -> AutoresetMode:
         return self.metadata["autoreset_mode"]
 
-    def _client_of(self, index: int) -> BaseClient:
-        return self.sessions[self._owner[index]].client
+
+def _checked_mode(
+    autoreset_mode: AutoresetMode | str,
+    max_episode_steps: int | None,
+    render_mode: str | None,
+    server_args: Sequence[str],
+    started: bool,
+) -> AutoresetMode:
+    """The autoreset mode, once the vector's arguments are checked.
+
+    ``started`` says whether the vector starts its servers itself (``server_args`` are theirs).
+
+    Raises:
+        ValueError: the argument at fault, named.
+    """
+    mode = AutoresetMode(autoreset_mode)
+    if mode is AutoresetMode.DISABLED:
+        raise ValueError("RemoteVectorEnv autoresets; use NEXT_STEP or SAME_STEP")
+    if max_episode_steps is not None and max_episode_steps < 1:
+        raise ValueError(f"max_episode_steps must be at least 1, got {max_episode_steps}")
+    if render_mode not in (None, "rgb_array"):
+        raise ValueError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
+    if server_args and not started:
+        raise ValueError(
+            "server_args are for the servers a vector starts, not for "
+            "addresses, a pool or in_process"
+        )
+    return mode

@@ -2,7 +2,8 @@
 
 Each client is a :class:`Peer`: its socket, its sans-IO :class:`~rlenv.protocol.Connection`,
 whether it authenticated, its shared-memory lane if it asked for one
-(:mod:`rlenv.transport.lanes`), and how it waits. :class:`Connections` holds them for the
+(:mod:`rlenv.transport.lanes`, opened and served by :class:`~rlenv.serving._peer_lanes.PeerLanes`),
+and how it waits. :class:`Connections` holds them for the
 :class:`~rlenv.serving._endpoint.Endpoint` (which adds listening, waiting and control): up to
 :attr:`Limits.max_connections` of them, each answered on its own connection, in arrival order,
 so that a misbehaving client never disturbs another; a connection beyond the cap takes the
@@ -24,17 +25,13 @@ import time
 from collections.abc import Callable
 from dataclasses import replace
 
-from rlenv.protocol import Connection, ErrorReply, Hello, Reply, Request, Response, Role
+from rlenv.protocol import Connection, ErrorReply, Hello, Reply, Request, Role
 from rlenv.protocol.errors import ErrorCode, LocalProtocolError
 from rlenv.serving._access import Limits
+from rlenv.serving._peer_lanes import PeerLanes
 from rlenv.serving._token_check import TokenCheck
-from rlenv.transport.lanes import Lane, LaneClosed, open_lane, wait_for
-from rlenv.transport.sockets import (
-    REQUEST_SPIN_WINDOW,
-    AnswerWaiter,
-    configure_socket,
-    is_loopback,
-)
+from rlenv.transport.lanes import Lane, LaneClosed, wait_for
+from rlenv.transport.sockets import REQUEST_SPIN_WINDOW, AnswerWaiter, configure_socket
 
 __all__ = ["HOUSEKEEPING_INTERVAL", "Connections", "Peer"]
 
@@ -128,6 +125,7 @@ class Connections:
             self.hello = hello
         self._clock = clock
         self._selector = selectors.DefaultSelector()
+        self._lanes = PeerLanes(self._selector, clock)
         self._listener: socket.socket | None = None
         self._peers: dict[socket.socket, Peer] = {}
         self._order: list[Peer] = []  # the peers, in turn order
@@ -269,7 +267,7 @@ class Connections:
             peer.active = False  # it paused: look after everything else from now on
             return
         except LaneClosed as error:
-            self._close_lane(peer, str(error))
+            self._lanes.close(peer, str(error))
             return
         except OSError as error:
             logger.info("client %s: %s", peer.address, error)
@@ -279,32 +277,12 @@ class Connections:
         if not block:  # a look around: whatever came is served in turn, before blocking again
             self._backlog = True
 
-    # --- shared-memory lanes ----------------------------------------------------------------
+    # --- shared-memory lanes (opened, read and written by PeerLanes) ------------------------
 
     def _open_lane(self, peer: Peer, request: Request) -> None:
         """Answer a ``shared_memory`` request: hand the client a lane, or say why not."""
-        value = request.parts["shared_memory"]
-        why = _lane_refusal(peer, request)
-        if why is None:
-            assert self._hello is not None
-            try:
-                peer.lane = open_lane(
-                    value.get("address"), value.get("key"), self._hello, peer.sock
-                )
-            except ValueError as error:
-                why = str(error)
-            except OSError as error:
-                why = f"the client's lane socket cannot be reached: {error}"
-        if why is not None:
-            self._send(peer, ErrorReply(request.id, ErrorCode.BAD_REQUEST, why))
-            return
-        assert peer.lane is not None
-        peer.lane_seen = peer.lane.slots.request_sequence
-        self._selector.register(peer.lane.doorbell, selectors.EVENT_READ)
-        logger.info("client %s steps through shared memory", peer.address)
-        self._send(
-            peer, Response(request.id, info={"shared_memory": peer.lane.slots.layout.to_wire()})
-        )
+        assert self._hello is not None
+        self._send(peer, self._lanes.open(peer, request, self._hello))
 
     def _lane_request(self, peer: Peer) -> Request | None:
         """Take the request waiting on ``peer``'s lane.
@@ -312,44 +290,16 @@ class Connections:
         ``None`` when it was refused (answered on the socket), or when the connection takes no
         more requests (the lane is closed).
         """
-        lane = peer.lane
-        assert lane is not None
-        slots = lane.slots
-        peer.lane_seen = slots.request_sequence  # first: the client wrote it last
-        peer.last_request = self._clock()
-        try:
-            peer.connection.note_request(slots.request_id)
-        except LocalProtocolError as error:
-            self._close_lane(peer, str(error))
+        request = self._lanes.take_request(peer)
+        if isinstance(request, ErrorReply):
+            self._send(peer, request)
             return None
-        try:
-            request = slots.read_request()
-        except ValueError as error:  # slots no client of ours writes: refused on the socket
-            self._send(peer, ErrorReply(slots.request_id, ErrorCode.BAD_REQUEST, str(error)))
-            return None
-        peer.lane_kind = slots.request_kind
-        peer.active = True  # sending requests back to back: wait on its lane and socket alone
         return request
 
     def _ring_heard(self, peer: Peer) -> None:
         """``peer``'s doorbell rang while the endpoint looked around: serve its lane in turn."""
-        assert peer.lane is not None
-        try:
-            peer.lane.drain()
-        except LaneClosed as error:
-            self._close_lane(peer, str(error))
-            return
-        if peer.lane_ready():
+        if self._lanes.heard(peer):
             self._backlog = True
-
-    def _close_lane(self, peer: Peer, reason: str) -> None:
-        lane = peer.lane
-        if lane is None:
-            return
-        peer.lane = None
-        self._selector.unregister(lane.doorbell)
-        lane.close()
-        logger.info("client %s: shared-memory lane closed: %s", peer.address, reason)
 
     def _authenticate(self, peer: Peer, request: Request) -> bool:
         """Check the first request's token; on success lift the frame size limit.
@@ -390,16 +340,9 @@ class Connections:
         self, peer: Peer, message: Reply, why_fatal: str = "error reply closed the connection"
     ) -> None:
         """Send ``message``; a fatal error reply then closes the connection (``why_fatal``)."""
-        kind = peer.lane_kind
-        if kind and message.id is not None:  # the answer to the lane's request
-            peer.lane_kind = 0
-            lane = peer.lane
-            if lane is not None and lane.slots.write_answer(message, kind):
-                peer.connection.note_reply(message.id)
-                lane.ring()
-                peer.waiter.sent()
-                self._waiter.sent()
-                return
+        if self._lanes.answer(peer, message):  # the answer to the lane's request, in it
+            self._waiter.sent()
+            return
         try:
             try:
                 data = peer.connection.send(message)
@@ -441,7 +384,7 @@ class Connections:
 
     def _forget(self, peer: Peer, reason: str) -> None:
         """Take ``peer`` out of every list (its socket stays open)."""
-        self._close_lane(peer, reason)
+        self._lanes.close(peer, reason)
         if self._peers.pop(peer.sock, None) is not None:
             self._selector.unregister(peer.sock)
             self._spin_poll.unregister(peer.sock)
@@ -452,20 +395,3 @@ class Connections:
             logger.info("client %s disconnected: %s", peer.address, reason)
         if self._controller is peer:
             self._controller = None
-
-
-def _lane_refusal(peer: Peer, request: Request) -> str | None:
-    """Why ``peer``'s ``shared_memory`` request is refused before its lane is opened, or None."""
-    try:
-        host = peer.sock.getpeername()[0]
-    except OSError:  # it left meanwhile: the refusal's send drops it
-        host = "an address no longer connected"
-    if len(request.parts) != 1:
-        return "'shared_memory' goes alone in a request"
-    if not isinstance(request.parts["shared_memory"], dict):
-        return "'shared_memory' must be a map with 'address' and 'key'"
-    if not is_loopback(host):
-        return f"shared memory is for clients on this machine; this one is at {host}"
-    if peer.lane is not None:
-        return "this connection has a shared-memory lane already"
-    return None

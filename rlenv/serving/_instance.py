@@ -28,16 +28,17 @@ from gymnasium import spaces
 
 from rlenv.agent import RLAgent
 from rlenv.environment import RLEnvironment
-from rlenv.node import check_initialised
 from rlenv.protocol import ErrorReply, Response
 from rlenv.protocol.errors import ErrorCode, RequestError
 from rlenv.serving._actions import ActionCheck
-from rlenv.serving._agents_in_play import roster_of
+from rlenv.serving._answers import Answer, Answering
 from rlenv.serving._claims import Claims, Requester
+from rlenv.serving._entering import enter
 from rlenv.serving._episode import Episode, EpisodeRun
-from rlenv.serving._observing import Observer, check_text_keys
+from rlenv.serving._observing import Observer
 from rlenv.serving._players import Players
 from rlenv.serving._recent import KEEP_EPISODES, KEEP_EVENTS, RecentEpisodes
+from rlenv.serving._recovery import Recovery
 from rlenv.serving._roster import Roster
 from rlenv.serving._settings import Settings
 from rlenv.serving._snapshots import EpisodeLog
@@ -86,20 +87,6 @@ def load_environment(target: str) -> type[RLEnvironment]:
     return environment_class
 
 
-class Answer:
-    """The answer to the request being served, as its parts and hooks build it."""
-
-    __slots__ = ("acted", "config_before", "info", "reply", "reply_id", "reports")
-
-    def __init__(self, reply_id: int, reports: bool) -> None:
-        self.reply_id = reply_id
-        self.reports = reports  # it goes to the controller: rewards and ticks are its
-        self.info: dict[str, Any] | None = None  # entries beside the environment's own
-        self.acted = False
-        self.config_before: dict[str, dict[str, Any]] | None = None  # to undo on failure
-        self.reply: Response | None = None
-
-
 Plan = Mapping[str, Any]
 """A checked request to one instance: each part's name and checked value, in the order they
 apply (what ``RLEnvironment._on_got_connection`` receives)."""
@@ -132,8 +119,9 @@ class Instance:
             ``abandon``, ``refuse_without_episode``, ``set_property``, ``forget_set`` and
             ``catch_up``.
         recent: the last finished episodes' logs (:mod:`rlenv.serving._recent`).
-        broken: why the next reset rebuilds the environment from its class (user code raised
-            while serving the controller), or ``None``.
+        recovery: the rebuild of the environment after user code raised
+            (:mod:`rlenv.serving._recovery`): ``mark_broken`` is its
+            :meth:`~rlenv.serving._recovery.Recovery.mark_broken`.
         players: who acts for agents beside the controller (:mod:`rlenv.serving._players`):
             ``claim`` and ``release_claim`` are its :meth:`~rlenv.serving._players.Players.claim`
             and ``release``.
@@ -164,9 +152,9 @@ class Instance:
     ) -> None:
         if isinstance(environment, str):
             environment = load_environment(environment)
-        self._class: type[RLEnvironment] | None = None  # what a rebuild builds (or none)
+        recovery = self.recovery = Recovery(environment)  # rebuilds from a class, if given one
+        self.mark_broken = recovery.mark_broken
         if isinstance(environment, type):
-            self._class = environment if environment.rebuild_after_error else None
             environment = environment()
         self._dispatch = dispatch
         self._clock = clock
@@ -185,7 +173,6 @@ class Instance:
         self.requester = Requester()  # who sent the request served (the host shares its own)
         self.real_time_changed: Callable[[], None] | None = None  # the host's, to follow it
         self._enter(environment)
-        self.broken: str | None = None  # why the next reset rebuilds the environment
         self.settings = Settings(self, record_dir)
         self.recent = RecentEpisodes(
             KEEP_EPISODES if keep_episodes is None else keep_episodes,
@@ -209,43 +196,29 @@ class Instance:
         self.refuse_without_episode = episode.refuse_without_episode
         self.set_property, self.forget_set = episode.set_property, episode.forget_set
         self.catch_up = episode.catch_up
+        answering = self.answering = Answering(episode, players)  # what the answers say
+        self.info = answering.info
         self.replaying = False  # restoring a snapshot: the episode moves on silently
 
-    def _enter(self, environment: RLEnvironment, replacing: bool = False) -> None:
-        """Make ``environment`` this instance's, in a new tree (its ``_ready`` runs).
+    def _enter(self, environment: RLEnvironment, replacing: bool = False) -> SceneTree:
+        """Make ``environment`` this instance's, in a new tree (its ``_ready`` runs); the tree.
 
-        Nothing of the instance changes if this raises. An environment ``replacing`` another
-        (rebuilt) must have its spaces.
-
-        Raises:
-            TypeError: the environment's ``__init__`` did not call ``super().__init__()``.
-            RuntimeError: the environment has no agent, no world, or an agent without spaces,
-                or (rebuilt) spaces other than those of the environment it replaces.
+        Nothing of the instance changes if this raises (see
+        :func:`~rlenv.serving._entering.enter`). An environment ``replacing`` another (rebuilt)
+        must have its spaces; its episodes run from then on.
         """
-        check_initialised(environment)
-        environment.communication.bind(self)
-        tree = SceneTree(environment.physics_ticks_per_second, clock=self._clock)
-        tree.root.add_child(environment)
-        tree.paused = True
-        roster = roster_of(environment)
-        action_space = roster.space("action_space")
-        observation_space = roster.space("observation_space")
-        if replacing and (action_space, observation_space) != (
-            self.action_space,
-            self.observation_space,
-        ):
-            raise RuntimeError(
-                f"the rebuilt {type(environment).__name__} has other spaces "
-                "than the one it replaces; clients hold the first ones"
-            )
-        agents = roster.agents
-        self.environment, self.tree, self.roster, self.agents = environment, tree, roster, agents
-        self.multi_agent = roster.several
+        held = (self.action_space, self.observation_space) if replacing else None
+        tree, roster, action_space, observation_space = enter(environment, self, self._clock, held)
+        self.environment, self.tree, self.roster = environment, tree, roster
+        self.agents, self.multi_agent = roster.agents, roster.several
         self.action_space, self.observation_space = action_space, observation_space
         self.checked_action = ActionCheck.of(
             roster, action_space, self.driven.names if self.driven else frozenset()
         )
         self.observe = Observer(environment, roster).observe
+        if replacing:
+            self.episode.enter(environment, tree, roster)
+        return tree
 
     # --- one way in -------------------------------------------------------------------------
 
@@ -321,7 +294,7 @@ class Instance:
             if observation_request is None
             else self.observe(observation_request, answer.reports)
         )
-        answer.reply = self._response(answer, observation)
+        answer.reply = self.answering.response(answer, observation)
 
     def after_send(self) -> None:
         """The answer went out: the environment's ``_after_send_response``.
@@ -345,49 +318,22 @@ class Instance:
         """Seconds until this instance's next tick is due (``None`` in lockstep)."""
         return self.tree.time_to_next_tick()
 
-    def mark_broken(self, error: BaseException | str) -> None:
-        """User code raised ``error`` (or stopped half way, ``why``): the next reset rebuilds.
-
-        Nothing happens if the environment opted out (``rebuild_after_error = False``) or was
-        given as an object rather than its class (there is nothing to build it again from).
-        """
-        if self._class is not None and self.broken is None:
-            why = error if isinstance(error, str) else f"{type(error).__name__}: {error}"
-            self.broken = why[:_MAX_WHY]
+    @property
+    def broken(self) -> str | None:
+        """Why the next reset rebuilds the environment (:attr:`recovery`'s), or ``None``."""
+        return self.recovery.broken
 
     def rebuild(self) -> str:
         """Build the environment again from its class, in a new tree; why it was rebuilt.
 
-        The new environment is constructed, enters its tree and is ready, as at the start; it
-        takes over the configuration, the random generator and real time of the one it
-        replaces (as a reset keeps them), and no episode runs. If building raises, the
-        instance keeps the environment it had (and stays :attr:`broken`).
-
-        Raises:
-            RuntimeError: the instance has no class to rebuild from.
+        See :meth:`rlenv.serving._recovery.Recovery.rebuild`.
         """
-        if self._class is None:
-            raise RuntimeError(
-                "this instance was given an environment object: it has no class to rebuild it from"
-            )
-        why = self.broken or "asked"
-        old, old_tree = self.environment, self.tree
-        config = self.settings.state()
-        generator = old.np_random
-        self._enter(self._class(), replacing=True)
-        self.episode.enter(self.environment, self.tree, self.roster)
-        self.environment.np_random = generator
-        self.tree.real_time = old_tree.real_time
-        self.settings.carry(config)
-        self.broken = None
-        try:
-            old_tree.root.remove_child(old)
-        except Exception as error:  # the broken environment's _exit_tree: its own business
-            logger.warning(
-                "the replaced %s raised leaving its tree", type(old).__name__, exc_info=error
-            )
-        logger.warning("%s rebuilt from its class after %s", type(old).__name__, why)
-        return why
+        return self.recovery.rebuild(
+            self.environment,
+            self.tree,
+            self.settings,
+            lambda environment: self._enter(environment, replacing=True),
+        )
 
     def close(self) -> None:
         """Stop any recording and take the environment out of its tree."""
@@ -467,40 +413,11 @@ class Instance:
 
     # --- answers ----------------------------------------------------------------------------
 
-    def _response(self, answer: Answer, observation: dict[str, Any] | None) -> Response:
-        """The answer: what was observed, the flags, and the rewards and ticks since the last."""
-        reward, terminated, truncated, frames, outcomes = self.episode.report(
-            answer.reports, answer.acted
-        )
-        return Response(
-            answer.reply_id,
-            observation,
-            reward,
-            terminated,
-            truncated,
-            self.info(answer.acted, answer.info),
-            frames,
-            outcomes,
-        )
-
-    def info(self, acted: bool, extra: dict[str, Any] | None) -> dict[str, Any]:
-        """An answer's ``info``: ``_get_info()`` while an episode exists, real time's, ``extra``.
-
-        While observers claim agents (:mod:`rlenv.serving._claims`), ``"claimed"`` lists them.
-        """
-        info = self.episode.info(acted)
-        if extra:
-            check_text_keys(extra, "the answer holds")
-            info = {**info, **extra}
-        if self.players.claims is not None:
-            info = {**info, "claimed": self.players.claimed(self.agents)}
-        return info
-
     def environment_error(self, reply_id: int, error: BaseException) -> ErrorReply:
         """The ``environment_error`` answer for an exception in user code (its traceback in it).
 
         The tree is paused and the next action needs a reset first (which rebuilds the
-        environment, see :meth:`mark_broken`).
+        environment, see :attr:`recovery`).
         """
         self.mark_broken(error)
         self.abandon_episode("the episode was stopped by an environment_error")
@@ -518,7 +435,5 @@ def failure(reply_id: int | None, error: BaseException, consequence: str) -> Err
     detail = detail.replace(f'File "{os.getcwd()}{os.sep}', 'File "')
     return ErrorReply(reply_id, ErrorCode.ENVIRONMENT_ERROR, f"{error}; {consequence}\n{detail}")
 
-
-_MAX_WHY = 500  # characters of an error kept to say why an environment was rebuilt
 
 _HOOKS = ("_on_got_connection", "_configure", "_send_response", "_after_send_response")

@@ -77,6 +77,8 @@ HAND_WRITTEN = "rlenv.examples.handwritten"
 ``examples.handwritten`` in a checkout, :func:`rlenv.targets.module_name`)."""
 ENDLESS = {"world": {"track_limit": 1e9}, "agent": {"angle_limit": 1e9}}
 """CartPole's configuration for the bench: one episode for the whole run, no resets."""
+_ASYNC_CARTPOLES = "AsyncVectorEnv(8) CartPole-v1"
+"""The vector figures' baseline (f), as the table names it."""
 
 _ECHO_SERVER = """
 # The floor: a server of a few lines of Python, run by "python -c", that imports nothing of
@@ -513,18 +515,29 @@ def _image_steps(rounds: int, steps: int) -> Figure:
 
 def _vectors(rounds: int, steps: int, quick: bool) -> list[Figure]:
     """Figures (e, f, i, j): make_vec and its floor first, alone with AsyncVectorEnv."""
+    return _made_vectors(rounds, steps) + _vector_layouts(rounds, steps, quick)
+
+
+def _async_cartpoles(stack: contextlib.ExitStack) -> Any:
+    """The baseline (f): gymnasium's AsyncVectorEnv of 8 CartPole-v1, closed by ``stack``."""
     import gymnasium
 
-    from rlenv_client import RemoteVectorEnv
+    envs = gymnasium.vector.AsyncVectorEnv([lambda: gymnasium.make("CartPole-v1")] * 8)
+    stack.callback(envs.close)
+    return envs
+
+
+def _made_vectors(rounds: int, steps: int) -> list[Figure]:
+    """Figures (f, i, j): AsyncVectorEnv; make_vec on lanes, on sockets, and its floor."""
+    import gymnasium
+
     from rlenv_client.vector_servers import default_layout
 
-    theirs = "AsyncVectorEnv(8) CartPole-v1"
     layout = default_layout(64)
     floor_name = f"hand-written {len(layout)} servers x {layout[0]} CartPoles"
     batches = max(steps // 16, 50)  # vector steps per round: enough for episodes to end
     with contextlib.ExitStack() as stack:
-        async_envs = gymnasium.vector.AsyncVectorEnv([lambda: gymnasium.make("CartPole-v1")] * 8)
-        stack.callback(async_envs.close)
+        async_envs = _async_cartpoles(stack)
         made = gymnasium.make_vec("rlenv/CartPole-v0", num_envs=64)
         stack.callback(made.close)
         on_sockets = gymnasium.make_vec("rlenv/CartPole-v0", num_envs=64, shared_memory=False)
@@ -538,14 +551,16 @@ def _vectors(rounds: int, steps: int, quick: bool) -> list[Figure]:
             Rate(random_steps_of(floor.step, made), batches, scale=64),
             Rate(random_steps(on_sockets), batches, scale=64),
         )
-    figures = [
-        Figure(f"gymnasium {theirs}", async_rate, "env-steps/s"),
-        Figure(f"{floor_name}, raw client", floor_rate, "env-steps/s", theirs, async_rate),
+    return [
+        Figure(f"gymnasium {_ASYNC_CARTPOLES}", async_rate, "env-steps/s"),
+        Figure(
+            f"{floor_name}, raw client", floor_rate, "env-steps/s", _ASYNC_CARTPOLES, async_rate
+        ),
         Figure(
             "gymnasium.make_vec('rlenv/CartPole-v0', num_envs=64)",
             made_rate,
             "env-steps/s",
-            theirs,
+            _ASYNC_CARTPOLES,
             async_rate,
         ),
         Figure(
@@ -559,7 +574,7 @@ def _vectors(rounds: int, steps: int, quick: bool) -> list[Figure]:
             "make_vec('rlenv/CartPole-v0', 64) on sockets alone",
             sockets_rate,
             "env-steps/s",
-            theirs,
+            _ASYNC_CARTPOLES,
             async_rate,
         ),
         Figure(
@@ -570,6 +585,12 @@ def _vectors(rounds: int, steps: int, quick: bool) -> list[Figure]:
             sockets_rate,
         ),
     ]
+
+
+def _vector_layouts(rounds: int, steps: int, quick: bool) -> list[Figure]:
+    """Figures (e): RemoteVectorEnv by environments and servers, and in-process, against (f)."""
+    from rlenv_client import RemoteVectorEnv
+
     served = (
         [(4, 1), (8, 4), (64, 32)]
         if quick
@@ -591,8 +612,7 @@ def _vectors(rounds: int, steps: int, quick: bool) -> list[Figure]:
         ("64 envs in this process", 64, {"in_process": True}),
     ]
     with contextlib.ExitStack() as stack:
-        async_envs = gymnasium.vector.AsyncVectorEnv([lambda: gymnasium.make("CartPole-v1")] * 8)
-        stack.callback(async_envs.close)
+        async_envs = _async_cartpoles(stack)
         measures = [Rate(random_steps(async_envs), steps // 4, scale=8)]
         for _, count, place in layouts:
             envs = stack.enter_context(RemoteVectorEnv(count, CARTPOLE, repeat_action=1, **place))
@@ -606,17 +626,16 @@ def _vectors(rounds: int, steps: int, quick: bool) -> list[Figure]:
                 )
             )
         async_rate, *vector_rates = interleaved(rounds, *measures)
-    for (name, _, _), rate in zip(layouts, vector_rates, strict=True):
-        figures.append(
-            Figure(
-                f"RemoteVectorEnv {name} (repeat 1, zero actions)",
-                rate,
-                "env-steps/s",
-                theirs,
-                async_rate,
-            )
+    return [
+        Figure(
+            f"RemoteVectorEnv {name} (repeat 1, zero actions)",
+            rate,
+            "env-steps/s",
+            _ASYNC_CARTPOLES,
+            async_rate,
         )
-    return figures
+        for (name, _, _), rate in zip(layouts, vector_rates, strict=True)
+    ]
 
 
 def random_steps(envs: Any, batches: int = 64) -> Callable[[int], None]:

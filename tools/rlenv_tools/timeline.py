@@ -43,18 +43,18 @@ who left, and what each earned.
 
 from __future__ import annotations
 
-import copy
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, cast
 
-import numpy as np
-
 from rlenv.protocol import Hello
 from rlenv.protocol.errors import RemoteError
-from rlenv_client.replay import EpisodeFile, digest, older_settings
+from rlenv_client.replay import EpisodeFile, digest
 from rlenv_client.trusted_targets import check_target
+from rlenv_tools._branch_continuation import Continuation, load_policy
+from rlenv_tools._recorded_steps import check_digest, recorded_steps
+from rlenv_tools._timeline_diff import TimelineDiff, timeline_diff
 from rlenv_tools._timeline_processes import (
     WORKING,
     Checkpoints,
@@ -63,85 +63,15 @@ from rlenv_tools._timeline_processes import (
     Result,
     measured_spacing,
 )
-from rlenv_tools.forking import ForkedEnvironment, StepRecord
+from rlenv_tools._timeline_reads import Step, Tick, read_step, read_ticks
+from rlenv_tools.forking import StepRecord
 
 __all__ = ["MAX_MEMORY", "MAX_PROCESSES", "Step", "Tick", "Timeline", "TimelineDiff", "load_policy"]
 
-_SKIPPED_AT_ONCE = 10_000  # ticks a tick view takes unread in one run
 MAX_PROCESSES = 512
 """A timeline's processes at most, its branches' included (``max_processes``' default)."""
 MAX_MEMORY = 2 << 30
 """The memory a timeline's processes hold at most, in bytes (``max_memory``' default)."""
-
-
-@dataclass(frozen=True)
-class Step:
-    """The state after a step (:meth:`Timeline.at`).
-
-    Attributes:
-        step: its number (0: after the reset).
-        observation: the agent's observation, as the recording saw it.
-        reward: the step's reward (0.0 at step 0).
-        terminated: whether the episode terminated at this step.
-        truncated: whether the episode was truncated at this step.
-        info: the step's info (the reset's at step 0).
-        draw: the scene as the inspector's vector draw list (``client.draw()``).
-        properties: every node's exported properties, by node path (the inspect tree's).
-    """
-
-    step: int
-    observation: Any
-    reward: float
-    terminated: bool
-    truncated: bool
-    info: dict[str, Any]
-    draw: dict[str, Any]
-    properties: dict[str, dict[str, Any]]
-
-
-@dataclass(frozen=True)
-class Tick:
-    """The state after one physics tick inside a step's action (:meth:`Timeline.ticks`).
-
-    Attributes:
-        tick: its number inside the action, from 1.
-        observation: the agent's observation after the tick.
-        reward: the tick's reward.
-        terminated: whether the episode terminated at this tick.
-        truncated: whether the episode was truncated at this tick.
-        info: the tick's info.
-        properties: every node's exported properties, by node path.
-        draw: the scene after the tick, as the inspector's vector draw list.
-    """
-
-    tick: int
-    observation: Any
-    reward: float
-    terminated: bool
-    truncated: bool
-    info: dict[str, Any]
-    properties: dict[str, dict[str, Any]]
-    draw: dict[str, Any]
-
-
-@dataclass(frozen=True)
-class TimelineDiff:
-    """How two timelines differ (:meth:`Timeline.diff`).
-
-    Attributes:
-        first_difference: the first step where the observations (bit for bit) or the rewards
-            differ, where one of the two episodes ended (terminated or truncated) and the
-            other did not, or that only one of the two reaches; ``None`` when they are the
-            same.
-        observations: for each step both reach, the other's observation minus this one's
-            (float64 arrays; maps and sequences of them for composite observations; of a map
-            by agent, the agents both answers hold).
-        rewards: for each step both reach, the other's reward minus this one's.
-    """
-
-    first_difference: int | None
-    observations: list[Any]
-    rewards: list[float]
 
 
 class Timeline:
@@ -266,18 +196,7 @@ class Timeline:
         self._owner = owner
         self._checkpoints = checkpoints
         self._records = records  # step k's record at k - 1, as each step is first taken
-        self._steps: list[list[list[Any]]] = []  # each step's events, its action last
-        pending: list[list[Any]] = []
-        for event in episode.snapshot["events"]:
-            pending.append(event)
-            if event[0] == "action":
-                self._steps.append(pending)
-                pending = []
-        if episode.observations and len(episode.observations) != len(self._steps) + 1:
-            raise ValueError(
-                f"the recording has {len(episode.observations)} observations for "
-                f"{len(self._steps)} actions (one more expected)"
-            )
+        self._steps = recorded_steps(episode)  # each step's events, its action last
 
     def __len__(self) -> int:
         """The number of actions (the last step's number)."""
@@ -376,22 +295,8 @@ class Timeline:
                 ``_draw`` that raised).
             RuntimeError: the timeline is closed, or its environment failed.
         """
-        observation, reward, terminated, truncated, info = self._goto(step)
-        cursor = self._processes.stepping()
-        entries = (
-            cursor.call("tree") if nodes is None else [cursor.call("node", path) for path in nodes]
-        )
-        properties = {node["path"]: dict(node["exported"]) for node in entries}
-        return Step(
-            step,
-            copy.deepcopy(observation),
-            reward,
-            terminated,
-            truncated,
-            copy.deepcopy(info),
-            cursor.call("draw"),
-            properties,
-        )
+        result = self._goto(step)
+        return read_step(self._processes.stepping(), step, result, nodes)
 
     def tree(self, step: int) -> list[dict[str, Any]]:
         """Every node after ``step``, as the inspector's tree lists them (``client.tree()``).
@@ -444,13 +349,7 @@ class Timeline:
             raise ValueError("count must be at least 1")
         last = frames if count is None else min(frames, first + count - 1)
         self._goto(step - 1)
-        ticking = self._processes.stepping().fork()
-        try:
-            return _read_ticks(ticking, changes, action, first, last)
-        except (ConnectionError, RemoteError) as error:
-            raise RuntimeError(f"the timeline's environment failed: {error}") from None
-        finally:
-            ticking.end()
+        return read_ticks(self._processes.stepping(), changes, action, first, last)
 
     def branch(
         self,
@@ -486,21 +385,14 @@ class Timeline:
             RemoteError: the environment refused an action (nothing of the branch is kept).
             RuntimeError: as :meth:`at`.
         """
-        if (actions is None) == (policy is None):
-            raise ValueError("branch needs actions or a policy (one of them)")
-        if policy is not None and max_steps is None:
-            raise ValueError("a policy needs max_steps")
-        if isinstance(policy, (str, Path)):
-            policy = load_policy(policy)
+        continuation = Continuation.of(actions, policy, max_steps)
         result = self._goto(step)
         if repeat_action is None and self._steps:
             repeat_action = self._steps[min(step, len(self) - 1)][-1][2]
         checkpoints = self._checkpoints.upto(step)
-        actions = None if actions is None else list(actions)
-        length = max_steps if actions is None else len(actions)
         checkpoints.every = max(
             checkpoints.every,  # half the room left, at most
-            -(-length // (self._processes.room() // 2 or 1)),  # type: ignore[operator]
+            -(-continuation.length // (self._processes.room() // 2 or 1)),
         )
         records = self._records[:step]
         terminated, truncated = result[2], result[3]
@@ -510,19 +402,9 @@ class Timeline:
         cursor = processes.stepping()
         processes.position = None  # the cursor leaves this timeline
         try:
-            if terminated or truncated:
-                pass
-            elif policy is None:
-                steps = [[["action", action, repeat_action]] for action in actions or ()]
-                result = processes.take(step, steps, result, checkpoints, records, None)
-            else:
-                result = processes.play(
-                    policy,
-                    max_steps,  # type: ignore[arg-type]
-                    repeat_action,
-                    result,
-                    checkpoints,
-                    records,
+            if not (terminated or truncated):
+                result = continuation.take(
+                    processes, step, repeat_action, result, checkpoints, records
                 )
             snapshot = cursor.call("snapshot")
         except ConnectionError as error:
@@ -541,19 +423,14 @@ class Timeline:
 
     def diff(self, other: Timeline) -> TimelineDiff:
         """How ``other`` differs from this timeline, step by step (both re-simulated)."""
-        steps = [
-            [(timeline.episode.observations[0], 0.0, False, False, None), *timeline._records]
-            for timeline in (self, other)
-        ]
-        first = next(
-            (k for k, (a, b) in enumerate(zip(*steps, strict=False)) if a != b),
-            None if len(steps[0]) == len(steps[1]) else min(map(len, steps)),
-        )
-        mine, theirs = self._every_observation(), other._every_observation()
-        return TimelineDiff(
-            first,
-            [_subtract(a, b) for a, b in zip(mine, theirs, strict=False)],
-            [b - a for a, b in zip(self.rewards, other.rewards, strict=False)],
+        pair = (self, other)
+        return timeline_diff(
+            [
+                [(each.episode.observations[0], 0.0, False, False, None), *each._records]
+                for each in pair
+            ],
+            [each._every_observation() for each in pair],
+            [each.rewards for each in pair],
         )
 
     def save(self, path: str | Path) -> None:
@@ -583,18 +460,7 @@ class Timeline:
         )
 
     def _check(self, step: int, observed: str) -> None:
-        digests = self.episode.observations
-        if step == len(digests):  # not recorded: the first time through records it
-            digests.append(observed)
-        elif observed != digests[step]:
-            why = older_settings(self.episode.snapshot, self.hello.agents) or (
-                " (the environment depends on something a snapshot does not hold)"
-            )
-            raise RuntimeError(
-                f"step {step}: the re-simulated observation differs from the "
-                "recording: its snapshot's settings, generator state and actions "
-                f"gave another observation{why}"
-            )
+        check_digest(self.episode, self.hello.agents, step, observed)
 
     def _every_observation(self) -> list[Any]:
         """Every step's observation, re-simulated from the reset in one run."""
@@ -618,74 +484,3 @@ def _left(outcome: Any) -> bool:
 
 def _named_by(episode: EpisodeFile) -> str:
     return "the episode" if episode.path is None else f"the recording {episode.path}"
-
-
-def load_policy(path: str | Path) -> Callable[[Any], Any]:
-    """``OnnxPolicy(path).act``: a policy file as a branch's policy (loaded once, here).
-
-    Raises:
-        ImportError: onnxruntime is missing (the message says to install ``rlenv[onnx]``).
-        ValueError: the file is not a policy file (one line naming it).
-    """
-    from rlenv.serving.onnx_policy import OnnxPolicy
-
-    return OnnxPolicy(path).act
-
-
-def _subtract(mine: Any, theirs: Any) -> Any:
-    """``theirs - mine`` as float64 arrays, through maps and sequences.
-
-    Of two maps, the keys both hold (agents that come and go: those of both answers).
-    """
-    if isinstance(mine, Mapping):
-        return {key: _subtract(mine[key], theirs[key]) for key in mine if key in theirs}
-    if isinstance(mine, (tuple, list)):
-        return [_subtract(a, b) for a, b in zip(mine, theirs, strict=True)]
-    return np.asarray(theirs, np.float64) - np.asarray(mine, np.float64)
-
-
-def _read_ticks(
-    ticking: ForkedEnvironment, changes: list[list[Any]], action: Any, first: int, last: int
-) -> list[Tick]:
-    """Ticks ``first`` to ``last`` of an action, each taken on ``ticking`` with its own read.
-
-    ``ticking`` is a copy at the state before the step, ``changes`` the events recorded before
-    the action. Fewer ticks come back where the episode ends.
-    """
-    if first > 1 and _skip(ticking, changes, action, first - 1):
-        return []  # the episode ended before ``first``
-    ticks = []
-    for tick in range(first, last + 1):
-        events = [*changes, ["action", action, 1]] if tick == 1 else [["action", action, 1]]
-        ((_, reward, terminated, truncated, _),), observation, info = ticking.run([events])
-        properties = {node["path"]: dict(node["exported"]) for node in ticking.call("tree")}
-        ticks.append(
-            Tick(
-                tick,
-                observation,
-                reward,
-                terminated,
-                truncated,
-                info,
-                properties,
-                ticking.call("draw"),
-            )
-        )
-        if terminated or truncated:
-            break
-    return ticks
-
-
-def _skip(ticking: ForkedEnvironment, changes: list[list[Any]], action: Any, ticks: int) -> bool:
-    """Take the first ``ticks`` ticks of an action unread; whether the episode ended."""
-    taken = 0
-    while taken < ticks:
-        chunk = min(_SKIPPED_AT_ONCE, ticks - taken)
-        steps = [[["action", action, 1]] for _ in range(chunk)]
-        if taken == 0:
-            steps[0] = [*changes, *steps[0]]
-        records, _, _ = ticking.run(steps, stop_at_end=True)
-        taken += len(records)
-        if records[-1][2] or records[-1][3]:
-            return True
-    return False

@@ -46,7 +46,6 @@ learn from.
 from __future__ import annotations
 
 import logging
-from collections import deque
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -54,6 +53,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 from numpy.typing import ArrayLike
 
+from rlenv_client.curriculum._scoring import LevelScores
 from rlenv_client.curriculum._trials import Trials
 from rlenv_client.curriculum.levels import Level
 from rlenv_client.curriculum.parameters import (
@@ -62,7 +62,6 @@ from rlenv_client.curriculum.parameters import (
     configure_arguments,
 )
 from rlenv_client.curriculum.sampler import LevelSampler
-from rlenv_client.curriculum.scores import learnability, max_mc, positive_value_loss
 
 __all__ = ["DEFAULT_CAPACITY", "CurriculumVectorEnv", "Episode"]
 
@@ -202,9 +201,6 @@ class CurriculumVectorEnv(VectorWrapper):
         self.steps = 0
         """How many steps this wrapper made (the index of the next one)."""
         self._rng = np.random.default_rng(seed)
-        self._outcomes: dict[int, deque[float]] = {}
-        self._outcomes_kept = outcomes_kept
-        self._max_returns: dict[int, float] = {}
         self._keep_rewards = callable(score)
         self._playing: list[Episode | None] = [None] * self.num_envs
         self._next: list[tuple[Level, int | None, int | None] | None] = [None] * self.num_envs
@@ -226,6 +222,7 @@ class CurriculumVectorEnv(VectorWrapper):
                 "('learnability' or a callable), not 'external'"
             )
         self._trials = Trials(rollouts_per_level)
+        self._scores = LevelScores(self.sampler, self._trials, outcomes_kept)
 
     @property
     def rollouts_per_level(self) -> int:
@@ -313,16 +310,7 @@ class CurriculumVectorEnv(VectorWrapper):
             full of higher scores) or is still on trial, or a replayed one has left the buffer
             since.
         """
-        if episode.trial is not None:
-            results = self._trials.done(episode.trial, float(score))
-            return None if results is None else self._offer(episode.level, float(np.mean(results)))
-        if episode.level_id is None:
-            return self._offer(episode.level, score)
-        try:
-            self.sampler.update(episode.level_id, score)
-        except KeyError:
-            return None
-        return episode.level_id
+        return self._scores.update(episode, score)
 
     def score_rollout(
         self, advantages: ArrayLike, values: ArrayLike, score: str = "positive_value_loss"
@@ -366,18 +354,9 @@ class CurriculumVectorEnv(VectorWrapper):
             if episode.last_step < first:
                 continue
             rows = slice(max(episode.first_step, first) - first, episode.last_step - first + 1)
-            if score == "positive_value_loss":
-                value = positive_value_loss(advantages[rows, episode.env])
-            else:
-                best = (
-                    max(self._max_returns.get(episode.level_id, -np.inf), episode.reward)
-                    if episode.level_id is not None
-                    else episode.reward
-                )
-                value = max_mc(best, values[rows, episode.env])
-            level_id = self.update(episode, value)
-            if score == "max_mc" and level_id is not None:
-                self._max_returns[level_id] = best
+            self._scores.score_rollout(
+                episode, score, advantages[rows, episode.env], values[rows, episode.env]
+            )
             scored.append(episode)
         self.finished = []
         return scored
@@ -462,46 +441,15 @@ class CurriculumVectorEnv(VectorWrapper):
         if self.score == "external":
             self.finished.append(episode)
         elif self.score == "learnability":
-            self._score_learnability(episode)
+            self._scores.score_learnability(episode)
         else:
             assert callable(self.score)
             self.update(episode, self.score(episode))
-
-    def _score_learnability(self, episode: Episode) -> None:
-        if episode.trial is not None:
-            results = self._trials.done(episode.trial, float(episode.success))
-            if results is not None:
-                level_id = self._offer(episode.level, learnability(results))
-                if level_id is not None:
-                    self._outcomes[level_id] = deque(results, maxlen=self._outcomes_kept)
-            return
-        outcomes = self._outcomes.get(episode.level_id) if episode.level_id is not None else None
-        if outcomes is None:
-            outcomes = deque(maxlen=self._outcomes_kept)
-        outcomes.append(float(episode.success))
-        level_id = self.update(episode, learnability(outcomes))
-        if level_id is not None:
-            self._outcomes[level_id] = outcomes
-
-    def _offer(self, level: Level, score: float) -> int | None:
-        """Insert a new level; forget what is kept of a level it evicts."""
-        level_id = self.sampler.insert(level, score)
-        if level_id is not None and len(self.sampler) == self.sampler.capacity:
-            self._forget_evicted()
-        return level_id
 
     def _lost(self, episode: Episode) -> None:
         """An episode ended without an outcome: its level on trial, if any, needs another."""
         if episode.trial is not None:
             self._trials.lost(episode.trial)
-
-    def _forget_evicted(self) -> None:
-        """Drop what is kept of levels no longer in the buffer (one may just have left)."""
-        buffered = self.sampler.weights()
-        self._outcomes = {key: value for key, value in self._outcomes.items() if key in buffered}
-        self._max_returns = {
-            key: value for key, value in self._max_returns.items() if key in buffered
-        }
 
 
 def _row(infos: Mapping[str, Any], key: str, index: int) -> Any:

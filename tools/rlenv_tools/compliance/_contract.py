@@ -173,19 +173,7 @@ class ContractProbes:
         """
         problems = []
         own = self.determinism.answer({"observation": {"agent": {}}}).observation
-        tree = self.controller.tree()
-        readable = next(
-            ((node["path"], name) for node in tree for name in node.get("exported") or ()), None
-        )
-        writable = next(
-            (
-                [node["path"], name, value]
-                for node in tree
-                for name, value in (node.get("exported") or {}).items()
-                if name not in node.get("read_only", ()) and type(value) is float
-            ),
-            None,
-        )
+        answered, writable = _open_requests(self.controller.tree())
         with self.harness.client() as other:
             for what, parts in (
                 ("reset(seed=1)", {"reset": {"seed": 1}}),
@@ -203,28 +191,6 @@ class ContractProbes:
                         f"another client's {what}: expected a non-fatal busy, got "
                         f"{fatal}{reply.code}: {reply.message}"
                     )
-            answered: list[tuple[str, dict[str, Any]]] = [
-                ("observation", {"observation": {"agent": {}}}),
-                ("snapshot", {"snapshot": {}}),
-                ("inspect tree", {"inspect": {"tree": {}}}),
-                ("{'action': nil}", {"action": None}),
-                ("id-only request", {}),
-            ]
-            if readable is not None:
-                answered.append(
-                    (
-                        f"inspect get of {readable[0]}:{readable[1]}",
-                        {"inspect": {"get": {"path": readable[0], "property": readable[1]}}},
-                    )
-                )
-            if writable is not None:  # set to the value it has: logged, changes nothing
-                path, name, value = writable
-                answered.append(
-                    (
-                        f"inspect set of {path}:{name}",
-                        {"inspect": {"set": {"path": path, "property": name, "value": value}}},
-                    )
-                )
             for what, parts in answered:
                 other.send_request(Request(0, parts))
                 reply = other.receive_reply()
@@ -281,3 +247,53 @@ def _observer_difference(own: Any, observers: Any, come_and_go: bool) -> str | N
         if name not in theirs or pack(theirs[name]) != pack(value):
             return f", at agent {name!r}"
     return None
+
+
+def _open_requests(
+    tree: list[dict[str, Any]],
+) -> tuple[list[tuple[str, dict[str, Any]]], list[Any] | None]:
+    """The requests any client may send while another controls, each with its name in words.
+
+    The reads, ``action: nil`` and an id-only request; an ``inspect get`` of the first exported
+    property in ``tree`` (the controller's inspect tree), and an ``inspect set`` of the first
+    writable float property to the value it has (logged, it changes nothing).
+
+    Returns:
+        The named requests' parts, and the set's ``[path, property, value]`` (``None``: the
+        tree has no writable float property).
+    """
+    readable = next(
+        ((node["path"], name) for node in tree for name in node.get("exported") or ()), None
+    )
+    writable = next(
+        (
+            [node["path"], name, value]
+            for node in tree
+            for name, value in (node.get("exported") or {}).items()
+            if name not in node.get("read_only", ()) and type(value) is float
+        ),
+        None,
+    )
+    answered: list[tuple[str, dict[str, Any]]] = [
+        ("observation", {"observation": {"agent": {}}}),
+        ("snapshot", {"snapshot": {}}),
+        ("inspect tree", {"inspect": {"tree": {}}}),
+        ("{'action': nil}", {"action": None}),
+        ("id-only request", {}),
+    ]
+    if readable is not None:
+        answered.append(
+            (
+                f"inspect get of {readable[0]}:{readable[1]}",
+                {"inspect": {"get": {"path": readable[0], "property": readable[1]}}},
+            )
+        )
+    if writable is not None:
+        path, name, value = writable
+        answered.append(
+            (
+                f"inspect set of {path}:{name}",
+                {"inspect": {"set": {"path": path, "property": name, "value": value}}},
+            )
+        )
+    return answered, writable

@@ -58,18 +58,39 @@ _PROBLEMS = (
 )
 
 
-def bevy_endpoints(gateway: Gateway) -> list[Endpoint]:
-    """bevy_rl's four routes, on ``gateway``'s TARGET."""
-    creating = asyncio.Lock()
+_PAYLOAD = Parameter(
+    "payload",
+    {"type": "string"},
+    'URL-encoded JSON: [{"action": "<the action as JSON text>"}, ...], one entry per agent',
+    required=True,
+)
+_REPEAT_ACTION = Parameter(
+    "repeat_action",
+    {"type": "integer", "minimum": 1, "maximum": MAX_REPEAT_ACTION},
+    "physics ticks (default: the environment's)",
+)
+_SEED = Parameter(
+    "seed", {"type": "integer", "minimum": 0}, "the episode's seed (an addition to bevy_rl)"
+)
 
-    async def session() -> Session:
+
+class _Handlers:
+    """bevy_rl's handlers, each driving the ``bevy`` session of ``gateway``'s TARGET."""
+
+    def __init__(self, gateway: Gateway) -> None:
+        self.gateway = gateway
+        self.creating = asyncio.Lock()
+
+    async def session(self) -> Session:
+        """The ``bevy`` session, created and reset by the first request that needs it."""
+        gateway = self.gateway
         if gateway.catalog.target is None:
             raise Problem(
                 "not_found",
                 "bevy_rl's routes drive the command line's TARGET, and "
                 "this gateway has none (rlenv http TARGET)",
             )
-        async with creating:  # two first requests at once create one session
+        async with self.creating:  # two first requests at once create one session
             found = gateway.sessions.find(BEVY_SESSION)
             if found is None:
                 found = await gateway.sessions.create(
@@ -79,21 +100,21 @@ def bevy_endpoints(gateway: Gateway) -> list[Endpoint]:
         found.touch()
         return found
 
-    async def state(request: Request) -> Response:
-        return json_response(await (await session()).observe())
+    async def state(self, request: Request) -> Response:
+        return json_response(await (await self.session()).observe())
 
-    async def visual_observations(request: Request) -> Response:
-        frame = await (await session()).render()
+    async def visual_observations(self, request: Request) -> Response:
+        frame = await (await self.session()).render()
         png = await asyncio.to_thread(encode_png, frame)
         return Response(png, headers=COMMON_HEADERS, media_type="image/png")
 
-    async def reset(request: Request) -> Response:
-        driven = await session()
+    async def reset(self, request: Request) -> Response:
+        driven = await self.session()
         await driven.reset(_integer(request, "seed", 0))
         return json_response([{"reward": 0.0, "is_terminated": False} for _ in driven.agents])
 
-    async def step(request: Request) -> Response:
-        driven = await session()
+    async def step(self, request: Request) -> Response:
+        driven = await self.session()
         action = _action(request.query_params.get("payload"), driven.agents)
         answer = await driven.step(action, _integer(request, "repeat_action", 1, MAX_REPEAT_ACTION))
         if len(driven.agents) == 1:
@@ -102,17 +123,15 @@ def bevy_endpoints(gateway: Gateway) -> list[Endpoint]:
         outcomes = answer["info"].get("agents", {})
         return json_response([_agent_state(outcomes.get(name)) for name in driven.agents])
 
-    payload = Parameter(
-        "payload",
-        {"type": "string"},
-        'URL-encoded JSON: [{"action": "<the action as JSON text>"}, ...], one entry per agent',
-        required=True,
-    )
+
+def bevy_endpoints(gateway: Gateway) -> list[Endpoint]:
+    """bevy_rl's four routes, on ``gateway``'s TARGET."""
+    handlers = _Handlers(gateway)
     return [
         Endpoint(
             "GET",
             "/step",
-            step,
+            handlers.step,
             "bevy_step",
             "bevy_rl: act, one action per agent",
             "bevy_rl",
@@ -123,19 +142,12 @@ def bevy_endpoints(gateway: Gateway) -> list[Endpoint]:
                 ErrorCode.RESET_REQUIRED,
                 ErrorCode.INVALID_ACTION,
             ),
-            query=(
-                payload,
-                Parameter(
-                    "repeat_action",
-                    {"type": "integer", "minimum": 1, "maximum": MAX_REPEAT_ACTION},
-                    "physics ticks (default: the environment's)",
-                ),
-            ),
+            query=(_PAYLOAD, _REPEAT_ACTION),
         ),
         Endpoint(
             "GET",
             "/state",
-            state,
+            handlers.state,
             "bevy_state",
             "bevy_rl: the observation as JSON",
             "bevy_rl",
@@ -145,7 +157,7 @@ def bevy_endpoints(gateway: Gateway) -> list[Endpoint]:
         Endpoint(
             "GET",
             "/visual_observations",
-            visual_observations,
+            handlers.visual_observations,
             "bevy_visual_observations",
             "bevy_rl: the current frame",
             "bevy_rl",
@@ -160,19 +172,13 @@ def bevy_endpoints(gateway: Gateway) -> list[Endpoint]:
             Endpoint(
                 method,
                 "/reset",
-                reset,
+                handlers.reset,
                 f"bevy_reset_{method.lower()}",
                 "bevy_rl: start an episode",
                 "bevy_rl",
                 {200: Answer("each agent's state", _AGENT_STATES)},
                 problems=(*_PROBLEMS, ErrorCode.BAD_REQUEST),
-                query=(
-                    Parameter(
-                        "seed",
-                        {"type": "integer", "minimum": 0},
-                        "the episode's seed (an addition to bevy_rl)",
-                    ),
-                ),
+                query=(_SEED,),
             )
             for method in ("POST", "GET")
         ),

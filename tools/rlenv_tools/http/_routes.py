@@ -61,6 +61,8 @@ _STEP_KEYS = frozenset({"action", "repeat_action"})
 _ACTION = frozenset({"action"})
 _RESTORE_KEYS = frozenset({"snapshot"})
 _RAW = "application/octet-stream"
+_ONE = "/v1/envs/{id}"
+_PIXELS = {"type": "integer", "minimum": 1, "maximum": MAX_RENDER_SIZE}
 
 _ENV = ("unknown_session",)
 _CALL = (*_ENV, "environment_error", "environment_lost", ErrorCode.TIMEOUT)
@@ -177,11 +179,30 @@ class _Handlers:
 def session_endpoints(gateway: Gateway) -> list[Endpoint]:
     """The ``/v1`` routes, served from ``gateway``'s sessions (the hot ones first)."""
     handlers = _Handlers(gateway)
-    one = "/v1/envs/{id}"
+    return [
+        *_loop_endpoints(handlers),
+        *_lifecycle_endpoints(handlers),
+        _render_endpoint(handlers),
+        *_space_endpoints(handlers),
+        *_snapshot_endpoints(handlers),
+        Endpoint(
+            "GET",
+            "/v1",
+            handlers.versions,
+            "versions",
+            "Versions, capabilities and limits",
+            "gateway",
+            {200: Answer("what this gateway serves", {"type": "object"})},
+        ),
+    ]
+
+
+def _loop_endpoints(handlers: _Handlers) -> list[Endpoint]:
+    """A trainer's loop: step and reset (JSON in, JSON out, the hot routes)."""
     return [
         Endpoint(
             "POST",
-            f"{one}/step",
+            f"{_ONE}/step",
             handlers.step,
             "step",
             "Act for repeat_action physics ticks",
@@ -202,7 +223,7 @@ def session_endpoints(gateway: Gateway) -> list[Endpoint]:
         ),
         Endpoint(
             "POST",
-            f"{one}/reset",
+            f"{_ONE}/reset",
             handlers.reset,
             "reset",
             "Start an episode (seed 0 is a seed)",
@@ -212,6 +233,12 @@ def session_endpoints(gateway: Gateway) -> list[Endpoint]:
             json=True,
             problems=(*_CALL, ErrorCode.BAD_REQUEST, ErrorCode.BUSY),
         ),
+    ]
+
+
+def _lifecycle_endpoints(handlers: _Handlers) -> list[Endpoint]:
+    """A session's life: create, list, describe, close."""
+    return [
         Endpoint(
             "POST",
             "/v1/envs",
@@ -244,7 +271,7 @@ def session_endpoints(gateway: Gateway) -> list[Endpoint]:
         ),
         Endpoint(
             "GET",
-            one,
+            _ONE,
             handlers.get_session,
             "get_session",
             "A session's status, episode and step",
@@ -254,7 +281,7 @@ def session_endpoints(gateway: Gateway) -> list[Endpoint]:
         ),
         Endpoint(
             "DELETE",
-            one,
+            _ONE,
             handlers.delete_session,
             "delete_session",
             "Close a session and its environment",
@@ -262,36 +289,37 @@ def session_endpoints(gateway: Gateway) -> list[Endpoint]:
             {204: Answer("closed", media_type="")},
             problems=_ENV,
         ),
+    ]
+
+
+def _render_endpoint(handlers: _Handlers) -> Endpoint:
+    """The current frame: a PNG, or the raw bytes."""
+    return Endpoint(
+        "GET",
+        f"{_ONE}/render",
+        handlers.render,
+        "render",
+        "Draw the current state",
+        "sessions",
+        {
+            200: Answer(
+                "a PNG image, or with Accept: application/octet-stream the raw "
+                "uint8 bytes (X-Shape: height,width,3 and X-Dtype headers)",
+                {"type": "string", "contentMediaType": "image/png"},
+                "image/png",
+            )
+        },
+        problems=(*_CALL, ErrorCode.BAD_REQUEST, ErrorCode.RESET_REQUIRED),
+        query=(Parameter("width", _PIXELS, "pixels"), Parameter("height", _PIXELS, "pixels")),
+    )
+
+
+def _space_endpoints(handlers: _Handlers) -> list[Endpoint]:
+    """The spaces: each with its JSON Schema, a random action, a membership check."""
+    return [
         Endpoint(
             "GET",
-            f"{one}/render",
-            handlers.render,
-            "render",
-            "Draw the current state",
-            "sessions",
-            {
-                200: Answer(
-                    "a PNG image, or with Accept: application/octet-stream the raw "
-                    "uint8 bytes (X-Shape: height,width,3 and X-Dtype headers)",
-                    {"type": "string", "contentMediaType": "image/png"},
-                    "image/png",
-                )
-            },
-            problems=(*_CALL, ErrorCode.BAD_REQUEST, ErrorCode.RESET_REQUIRED),
-            query=(
-                Parameter(
-                    "width", {"type": "integer", "minimum": 1, "maximum": MAX_RENDER_SIZE}, "pixels"
-                ),
-                Parameter(
-                    "height",
-                    {"type": "integer", "minimum": 1, "maximum": MAX_RENDER_SIZE},
-                    "pixels",
-                ),
-            ),
-        ),
-        Endpoint(
-            "GET",
-            f"{one}/action_space",
+            f"{_ONE}/action_space",
             handlers.action_space,
             "action_space",
             "The action space and the JSON Schema of actions",
@@ -301,7 +329,7 @@ def session_endpoints(gateway: Gateway) -> list[Endpoint]:
         ),
         Endpoint(
             "GET",
-            f"{one}/observation_space",
+            f"{_ONE}/observation_space",
             handlers.observation_space,
             "observation_space",
             "The observation space and the JSON Schema of observations",
@@ -311,7 +339,7 @@ def session_endpoints(gateway: Gateway) -> list[Endpoint]:
         ),
         Endpoint(
             "POST",
-            f"{one}/action_space/sample",
+            f"{_ONE}/action_space/sample",
             handlers.sample,
             "sample_action",
             "A random action",
@@ -321,7 +349,7 @@ def session_endpoints(gateway: Gateway) -> list[Endpoint]:
         ),
         Endpoint(
             "POST",
-            f"{one}/action_space/contains",
+            f"{_ONE}/action_space/contains",
             handlers.contains,
             "action_space_contains",
             "Whether an action belongs to the action space (checked as a step would)",
@@ -331,9 +359,15 @@ def session_endpoints(gateway: Gateway) -> list[Endpoint]:
             body_required=True,
             problems=_ENV,
         ),
+    ]
+
+
+def _snapshot_endpoints(handlers: _Handlers) -> list[Endpoint]:
+    """The state as data: take a snapshot, restore one."""
+    return [
         Endpoint(
             "GET",
-            f"{one}/snapshot",
+            f"{_ONE}/snapshot",
             handlers.snapshot,
             "snapshot",
             "The state as data, to restore here or in another session",
@@ -343,7 +377,7 @@ def session_endpoints(gateway: Gateway) -> list[Endpoint]:
         ),
         Endpoint(
             "POST",
-            f"{one}/restore",
+            f"{_ONE}/restore",
             handlers.restore,
             "restore",
             "Bring the environment to a snapshot's state",
@@ -358,15 +392,6 @@ def session_endpoints(gateway: Gateway) -> list[Endpoint]:
                 ErrorCode.INVALID_CONFIG,
                 ErrorCode.BUSY,
             ),
-        ),
-        Endpoint(
-            "GET",
-            "/v1",
-            handlers.versions,
-            "versions",
-            "Versions, capabilities and limits",
-            "gateway",
-            {200: Answer("what this gateway serves", {"type": "object"})},
         ),
     ]
 
@@ -383,6 +408,133 @@ def _size(request: Request, name: str) -> int | None:
     return int(text)
 
 
+# The component schemas: the bodies and answers of the session routes, by name.
+_INFO: dict[str, Any] = {
+    "type": "object",
+    "description": "the environment's info; frames: the physics "
+    "ticks that ran; agents: each agent's reward and "
+    "flags (several agents)",
+    "properties": {"frames": {"type": "integer", "minimum": 0}},
+}
+_SPACE: dict[str, Any] = {
+    "type": "object",
+    "required": ["type"],
+    "properties": {
+        "type": {"enum": ["Box", "Discrete", "MultiDiscrete", "MultiBinary", "Tuple", "Dict"]}
+    },
+    "description": 'a gymnasium space: {"type": "Box", "shape", "low", '
+    '"high", "dtype"}, {"type": "Discrete", "n", "start"}, '
+    '{"type": "Dict", "spaces"} ...',
+}
+_SESSION: dict[str, Any] = {
+    "type": "object",
+    "required": ["id", "env_id", "status", "episode", "step"],
+    "properties": {
+        "id": {"type": "string"},
+        "env_id": {"type": "string"},
+        "status": {"enum": ["ready", "running", "ended", "timed_out", "lost"]},
+        "episode": {"type": "integer"},
+        "step": {"type": "integer"},
+        "agents": {"type": "array", "items": {"type": "string"}},
+        "idle_seconds": {"type": "number"},
+        "created": {"type": "string"},
+        "max_episode_steps": {"type": "integer"},
+        "problem": {"$ref": "#/components/schemas/Problem"},
+    },
+}
+_SCHEMAS: dict[str, Any] = {
+    "Info": _INFO,
+    "Space": _SPACE,
+    "CreateBody": {
+        "type": "object",
+        "additionalProperties": False,
+        "properties": {"env_id": {"type": "string"}, "kwargs": {"type": "object"}},
+    },
+    "Created": {
+        "type": "object",
+        "required": ["id", "env_id", "action_space", "observation_space"],
+        "properties": {
+            "id": {"type": "string"},
+            "env_id": {"type": "string"},
+            "action_space": {"$ref": "#/components/schemas/Space"},
+            "observation_space": {"$ref": "#/components/schemas/Space"},
+        },
+    },
+    "Session": _SESSION,
+    "SessionList": {
+        "type": "object",
+        "properties": {
+            "envs": {"type": "array", "items": {"$ref": "#/components/schemas/Session"}}
+        },
+    },
+    "ResetBody": {
+        "type": "object",
+        "additionalProperties": False,
+        "properties": {
+            "seed": {"type": ["integer", "null"], "minimum": 0},
+            "options": {"type": ["object", "null"]},
+        },
+    },
+    "Reset": {
+        "type": "object",
+        "required": ["observation", "info"],
+        "properties": {
+            "observation": {"$ref": "#/components/schemas/Observation"},
+            "info": {"$ref": "#/components/schemas/Info"},
+        },
+    },
+    "StepBody": {
+        "type": "object",
+        "required": ["action"],
+        "additionalProperties": False,
+        "properties": {
+            "action": {"$ref": "#/components/schemas/Action"},
+            "repeat_action": {"type": "integer", "minimum": 1, "maximum": MAX_REPEAT_ACTION},
+        },
+    },
+    "Step": {
+        "type": "object",
+        "required": ["observation", "reward", "terminated", "truncated", "info"],
+        "properties": {
+            "observation": {"$ref": "#/components/schemas/Observation"},
+            "reward": {"type": "number"},
+            "terminated": {"type": "boolean"},
+            "truncated": {"type": "boolean"},
+            "info": {"$ref": "#/components/schemas/Info"},
+        },
+    },
+    "SpaceAnswer": {
+        "type": "object",
+        "required": ["space", "schema"],
+        "properties": {
+            "space": {"$ref": "#/components/schemas/Space"},
+            "schema": {"type": "object", "description": "a JSON Schema (2020-12)"},
+        },
+    },
+    "Sample": {
+        "type": "object",
+        "required": ["action"],
+        "properties": {"action": {"$ref": "#/components/schemas/Action"}},
+    },
+    "Contains": {
+        "type": "object",
+        "required": ["member"],
+        "properties": {"member": {"type": "boolean"}, "reason": {"type": "string"}},
+    },
+    "SnapshotBody": {
+        "type": "object",
+        "required": ["snapshot"],
+        "properties": {
+            "snapshot": {
+                "type": "object",
+                "description": "the state as data: configuration, "
+                "generator, actions since the reset",
+            }
+        },
+    },
+}
+
+
 def component_schemas(observation: dict[str, Any], action: dict[str, Any]) -> dict[str, Any]:
     """The component schemas the session routes name (for :mod:`rlenv_tools.http._openapi`).
 
@@ -390,132 +542,7 @@ def component_schemas(observation: dict[str, Any], action: dict[str, Any]) -> di
         observation: the JSON Schema of observations (the TARGET's, or any value).
         action: the JSON Schema of actions.
     """
-    info = {
-        "type": "object",
-        "description": "the environment's info; frames: the physics "
-        "ticks that ran; agents: each agent's reward and "
-        "flags (several agents)",
-        "properties": {"frames": {"type": "integer", "minimum": 0}},
-    }
-    space = {
-        "type": "object",
-        "required": ["type"],
-        "properties": {
-            "type": {"enum": ["Box", "Discrete", "MultiDiscrete", "MultiBinary", "Tuple", "Dict"]}
-        },
-        "description": 'a gymnasium space: {"type": "Box", "shape", "low", '
-        '"high", "dtype"}, {"type": "Discrete", "n", "start"}, '
-        '{"type": "Dict", "spaces"} ...',
-    }
-    session = {
-        "type": "object",
-        "required": ["id", "env_id", "status", "episode", "step"],
-        "properties": {
-            "id": {"type": "string"},
-            "env_id": {"type": "string"},
-            "status": {"enum": ["ready", "running", "ended", "timed_out", "lost"]},
-            "episode": {"type": "integer"},
-            "step": {"type": "integer"},
-            "agents": {"type": "array", "items": {"type": "string"}},
-            "idle_seconds": {"type": "number"},
-            "created": {"type": "string"},
-            "max_episode_steps": {"type": "integer"},
-            "problem": {"$ref": "#/components/schemas/Problem"},
-        },
-    }
-    return {
-        "Observation": observation,
-        "Action": action,
-        "Info": info,
-        "Space": space,
-        "CreateBody": {
-            "type": "object",
-            "additionalProperties": False,
-            "properties": {"env_id": {"type": "string"}, "kwargs": {"type": "object"}},
-        },
-        "Created": {
-            "type": "object",
-            "required": ["id", "env_id", "action_space", "observation_space"],
-            "properties": {
-                "id": {"type": "string"},
-                "env_id": {"type": "string"},
-                "action_space": {"$ref": "#/components/schemas/Space"},
-                "observation_space": {"$ref": "#/components/schemas/Space"},
-            },
-        },
-        "Session": session,
-        "SessionList": {
-            "type": "object",
-            "properties": {
-                "envs": {"type": "array", "items": {"$ref": "#/components/schemas/Session"}}
-            },
-        },
-        "ResetBody": {
-            "type": "object",
-            "additionalProperties": False,
-            "properties": {
-                "seed": {"type": ["integer", "null"], "minimum": 0},
-                "options": {"type": ["object", "null"]},
-            },
-        },
-        "Reset": {
-            "type": "object",
-            "required": ["observation", "info"],
-            "properties": {
-                "observation": {"$ref": "#/components/schemas/Observation"},
-                "info": {"$ref": "#/components/schemas/Info"},
-            },
-        },
-        "StepBody": {
-            "type": "object",
-            "required": ["action"],
-            "additionalProperties": False,
-            "properties": {
-                "action": {"$ref": "#/components/schemas/Action"},
-                "repeat_action": {"type": "integer", "minimum": 1, "maximum": MAX_REPEAT_ACTION},
-            },
-        },
-        "Step": {
-            "type": "object",
-            "required": ["observation", "reward", "terminated", "truncated", "info"],
-            "properties": {
-                "observation": {"$ref": "#/components/schemas/Observation"},
-                "reward": {"type": "number"},
-                "terminated": {"type": "boolean"},
-                "truncated": {"type": "boolean"},
-                "info": {"$ref": "#/components/schemas/Info"},
-            },
-        },
-        "SpaceAnswer": {
-            "type": "object",
-            "required": ["space", "schema"],
-            "properties": {
-                "space": {"$ref": "#/components/schemas/Space"},
-                "schema": {"type": "object", "description": "a JSON Schema (2020-12)"},
-            },
-        },
-        "Sample": {
-            "type": "object",
-            "required": ["action"],
-            "properties": {"action": {"$ref": "#/components/schemas/Action"}},
-        },
-        "Contains": {
-            "type": "object",
-            "required": ["member"],
-            "properties": {"member": {"type": "boolean"}, "reason": {"type": "string"}},
-        },
-        "SnapshotBody": {
-            "type": "object",
-            "required": ["snapshot"],
-            "properties": {
-                "snapshot": {
-                    "type": "object",
-                    "description": "the state as data: configuration, "
-                    "generator, actions since the reset",
-                }
-            },
-        },
-    }
+    return {"Observation": observation, "Action": action, **_SCHEMAS}
 
 
 def target_schemas(gateway: Gateway) -> tuple[dict[str, Any], dict[str, Any]]:

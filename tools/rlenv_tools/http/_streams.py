@@ -44,13 +44,22 @@ _MESSAGE_KEYS = {
     "close": frozenset({"type"}),
 }
 _STEP_REQUIRED = frozenset({"action"})
+_MESSAGE: dict[str, Any] = {  # the schema of a message, for OpenAPI
+    "type": "object",
+    "required": ["type"],
+    "properties": {"type": {"enum": ["reset", "step", "close"]}},
+}
 
 
-def stream_endpoints(gateway: Gateway) -> list[Endpoint]:
-    """The WebSocket and the event stream of each session."""
-    sessions = gateway.sessions
+class _Handlers:
+    """The streams' handlers, each on one of ``gateway``'s sessions."""
 
-    async def conversation(websocket: WebSocket) -> None:
+    def __init__(self, gateway: Gateway) -> None:
+        self.sessions = gateway.sessions
+
+    async def conversation(self, websocket: WebSocket) -> None:
+        """A session's WebSocket: each message answered in order, until it closes."""
+        sessions = self.sessions
         session_id = websocket.path_params["id"]
         try:
             session = sessions.get(session_id)
@@ -80,8 +89,9 @@ def stream_endpoints(gateway: Gateway) -> list[Endpoint]:
         finally:
             session.websockets -= 1
 
-    async def events(request: Request) -> Response:
-        session = sessions.get(request.path_params["id"])
+    async def events(self, request: Request) -> Response:
+        """A session's event stream."""
+        session = self.sessions.get(request.path_params["id"])
         session.touch()
         queue = session.watch()
         return StreamingResponse(
@@ -90,20 +100,19 @@ def stream_endpoints(gateway: Gateway) -> list[Endpoint]:
             headers={**COMMON_HEADERS, "X-Accel-Buffering": "no"},
         )
 
-    message = {
-        "type": "object",
-        "required": ["type"],
-        "properties": {"type": {"enum": ["reset", "step", "close"]}},
-    }
+
+def stream_endpoints(gateway: Gateway) -> list[Endpoint]:
+    """The WebSocket and the event stream of each session."""
+    handlers = _Handlers(gateway)
     return [
         Endpoint(
             "WEBSOCKET",
             "/v1/envs/{id}/ws",
-            conversation,
+            handlers.conversation,
             "session_websocket",
             "A WebSocket of typed JSON messages: reset, step, close",
             "streams",
-            {101: Answer("switching to the WebSocket protocol", message, "")},
+            {101: Answer("switching to the WebSocket protocol", _MESSAGE, "")},
             problems=("unknown_session",),
             description='Send {"type": "reset", "seed"?, "options"?}, {"type": '
             '"step", "action", "repeat_action"?} or {"type": '
@@ -113,7 +122,7 @@ def stream_endpoints(gateway: Gateway) -> list[Endpoint]:
         Endpoint(
             "GET",
             "/v1/envs/{id}/events",
-            events,
+            handlers.events,
             "session_events",
             "Follow a session's transitions (server-sent events)",
             "streams",

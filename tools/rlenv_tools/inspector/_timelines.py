@@ -33,11 +33,17 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from rlenv.protocol.errors import RemoteError
 from rlenv_client.replay import EpisodeFile
-from rlenv_client.session import LOST
-from rlenv_tools.inspector._recordings import Branch, Recordings, Root, episode_id, key_name
-from rlenv_tools.inspector._watch import InspectorError, _shown, to_json
+from rlenv_tools.inspector._recordings import Branch, Recordings, Root, episode_id
+from rlenv_tools.inspector._timeline_errors import chosen_policy, key_action, page_call
+from rlenv_tools.inspector._timeline_json import (
+    agents_json,
+    shown,
+    side_json,
+    state_json,
+    ticks_json,
+)
+from rlenv_tools.inspector._watch import InspectorError, to_json
 from rlenv_tools.timeline import Timeline
 
 __all__ = ["MAX_BRANCH_STEPS", "MAX_TICKS", "Timelines", "episode_id"]
@@ -189,25 +195,13 @@ class Timelines:
         """
         with self._recordings.using(number) as root:
             timeline = self._branch(root, branch).timeline
-            state = self._call(lambda: timeline.at(_step(timeline, step)))
-            in_play = timeline.agents_in_play()
-            before = set(in_play[step - 1]) if step else set()
+            state = page_call(lambda: timeline.at(_step(timeline, step)))
+            where = {"timeline": number, "branch": branch, "step": step}
             return {
-                "timeline": number,
-                "branch": branch,
-                "step": step,
+                **where,
                 "length": len(timeline),
-                "reward": to_json(state.reward),
-                "terminated": state.terminated,
-                "truncated": state.truncated,
-                "info": to_json(state.info),
-                "observation": self._shown(root, state.observation),
-                "agents_in_play": in_play[step],
-                "arrived": [name for name in in_play[step] if name not in before],
-                "left": [name for name, at in timeline.departures().items() if at == step],
-                "agent_returns": to_json(timeline.agent_returns(step)),
-                "draw": to_json(state.draw),
-                "properties": to_json(state.properties),
+                **state_json(state, root.agents),
+                **agents_json(timeline, step),
             }
 
     def ticks(
@@ -237,35 +231,11 @@ class Timelines:
                 )
             frames = timeline.frames(step)
             try:
-                ticks = self._call(lambda: timeline.ticks(step, first=first, count=count))
+                ticks = page_call(lambda: timeline.ticks(step, first=first, count=count))
             except ValueError as error:  # agents that come and go: not supported, said why
                 raise InspectorError(422, str(error)) from None
-            more = (
-                len(ticks) == count
-                and first + count <= frames
-                and not (ticks[-1].terminated or ticks[-1].truncated)
-            )
-            return {
-                "timeline": number,
-                "branch": branch,
-                "step": step,
-                "frames": frames,
-                "first": first,
-                "next": first + count if more else None,
-                "ticks": [
-                    {
-                        "tick": tick.tick,
-                        "reward": to_json(tick.reward),
-                        "terminated": tick.terminated,
-                        "truncated": tick.truncated,
-                        "info": to_json(tick.info),
-                        "observation": self._shown(root, tick.observation),
-                        "properties": to_json(tick.properties),
-                        "draw": to_json(tick.draw),
-                    }
-                    for tick in ticks
-                ],
-            }
+            where = {"timeline": number, "branch": branch, "step": step}
+            return {**where, **ticks_json(ticks, frames, first, count, root.agents)}
 
     def compare(self, number: int, first: int, second: int, step: int) -> dict[str, Any]:
         """Two branches side by side (``a``: ``first``, ``b``: ``second``).
@@ -289,22 +259,12 @@ class Timelines:
             diff = self._diff(root, a, b)
             sides = {}
             for name, branch in (("a", a), ("b", b)):
-                rewards = branch.timeline.rewards
                 state = (
-                    self._call(functools.partial(branch.timeline.at, step))
+                    page_call(functools.partial(branch.timeline.at, step))
                     if step <= len(branch.timeline)
                     else None
                 )
-                sides[name] = {
-                    "branch": branch.number,
-                    "label": branch.describe()["label"],
-                    "length": len(branch.timeline),
-                    "rewards": to_json(rewards),
-                    "return": to_json(sum(rewards)),
-                    "agent_returns": to_json(branch.timeline.agent_returns()),
-                    "observation": None if state is None else self._shown(root, state.observation),
-                    "reward": None if state is None else to_json(state.reward),
-                }
+                sides[name] = side_json(branch, state, root.agents)
             reached = step < len(diff.observations)
             return {
                 "timeline": number,
@@ -312,7 +272,7 @@ class Timelines:
                 "a": sides["a"],
                 "b": sides["b"],
                 "first_difference": diff.first_difference,
-                "difference": self._shown(root, diff.observations[step]) if reached else None,
+                "difference": shown(diff.observations[step], root.agents) if reached else None,
             }
 
     # --- branching -------------------------------------------------------------------------------
@@ -327,9 +287,9 @@ class Timelines:
         """
         with self._recordings.using(number) as root:
             parent = self._branch(root, branch)
-            action = self._action(root, key)
+            action = key_action(root, key)
             _step(parent.timeline, step)
-            made = self._call(lambda: parent.timeline.branch(step, [action]))
+            made = page_call(lambda: parent.timeline.branch(step, [action]))
             new = self._add_branch(root, branch, step, "keys", made, [key])
             return {**self._describe(root), "branch": new.number}
 
@@ -355,9 +315,9 @@ class Timelines:
                     f"branch {branch}'s episode ended at step "
                     f"{len(node.timeline)}: branch from an earlier step",
                 )
-            action = self._action(root, key)
+            action = key_action(root, key)
             timeline = node.timeline
-            node.timeline = self._call(lambda: timeline.branch(len(timeline), [action]))
+            node.timeline = page_call(lambda: timeline.branch(len(timeline), [action]))
             node.actions.append(key)
             return {**self._describe(root), "branch": node.number}
 
@@ -372,24 +332,14 @@ class Timelines:
             InspectorError: as :meth:`step`; 404 no such policy (or 422 one that could not be
                 loaded, saying why); 422 the policy failed.
         """
-        if policy not in self.policies:
-            if policy in self.unavailable:
-                raise InspectorError(
-                    422, f"policy {policy} is unavailable: {self.unavailable[policy]}"
-                )
-            known = (
-                ", ".join(sorted(self.policies))
-                or "none (rlenv replay FILE --inspect --policy FILE.onnx gives one)"
-            )
-            raise InspectorError(404, f"no policy {policy!r:.40}: the policies are {known}")
+        chosen = chosen_policy(self.policies, self.unavailable, policy)
         if not 1 <= max_steps <= MAX_BRANCH_STEPS:
             raise InspectorError(400, f"max_steps must be 1 to {MAX_BRANCH_STEPS}")
-        chosen = self.policies[policy]
         with self._recordings.using(number) as root:
             parent = self._branch(root, branch)
             _step(parent.timeline, step)
             try:
-                made = self._call(
+                made = page_call(
                     lambda: parent.timeline.branch(step, policy=chosen, max_steps=max_steps)
                 )
             except InspectorError:
@@ -423,16 +373,6 @@ class Timelines:
         root.branches[number] = Branch(number, parent, at, how, timeline, list(actions))
         return root.branches[number]
 
-    def _action(self, root: Root, key: str) -> Any:
-        if key not in root.keys:
-            if not root.keys:
-                raise InspectorError(422, f"no keys to branch with: {root.keys_error}")
-            raise InspectorError(
-                422,
-                f"{key!r:.20} is none of the agent's keys ({', '.join(map(key_name, root.keys))})",
-            )
-        return root.keys[key]
-
     def _describe(self, root: Root) -> dict[str, Any]:
         timeline = self._recordings.opened(root)
         return {
@@ -456,25 +396,9 @@ class Timelines:
     def _diff(self, root: Root, a: Branch, b: Branch) -> Any:
         kept = root.diffs.get((a.number, b.number))
         if kept is None or kept[0] is not a.timeline or kept[1] is not b.timeline:
-            kept = (a.timeline, b.timeline, self._call(lambda: a.timeline.diff(b.timeline)))
+            kept = (a.timeline, b.timeline, page_call(lambda: a.timeline.diff(b.timeline)))
             root.diffs[(a.number, b.number)] = kept
         return kept[2]
-
-    def _shown(self, root: Root, observation: Any) -> dict[str, Any]:
-        """An observation as the live page shows it, by agent."""
-        if len(root.agents) > 1 and isinstance(observation, Mapping):  # the answer's agents
-            return {name: _shown(observation[name]) for name in root.agents if name in observation}
-        return {root.agents[0] if root.agents else "agent": _shown(observation)}
-
-    @staticmethod
-    def _call(compute: Callable[[], Any]) -> Any:
-        """``compute()``, its timeline's failures as the page's errors."""
-        try:
-            return compute()
-        except IndexError as error:
-            raise InspectorError(400, str(error)) from None
-        except (RuntimeError, RemoteError, *LOST) as error:
-            raise InspectorError(422, f"the timeline's environment failed: {error}") from None
 
 
 def _step(timeline: Timeline, step: int) -> int:

@@ -43,7 +43,7 @@ who left, and what each earned.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, cast
@@ -54,6 +54,7 @@ from rlenv_client.replay import EpisodeFile, digest
 from rlenv_client.trusted_targets import check_target
 from rlenv_tools._branch_continuation import Continuation, load_policy
 from rlenv_tools._recorded_steps import check_digest, recorded_steps
+from rlenv_tools._timeline_agents import agent_returns, agents_in_play, answer_agents, departures
 from rlenv_tools._timeline_diff import TimelineDiff, timeline_diff
 from rlenv_tools._timeline_processes import (
     WORKING,
@@ -142,7 +143,7 @@ class Timeline:
             self._setup(episode, processes, True, unspaced, [])
             start = {**episode.snapshot, "events": []}
             observation, info = processes.first.call("restore", start)
-            self._starting = _answer_agents(observation, self.hello)
+            self._starting = answer_agents(observation, self.hello)
             result: Result = (observation, 0.0, False, False, info)
             self._check(0, digest(observation))
             self._checkpoints.keep(0, Mark(processes.first, result))
@@ -229,25 +230,11 @@ class Timeline:
         included, whether or not it was due at each step between (one that decides at its own
         pace is absent from some answers). With a fixed set of agents, every step has them all.
         """
-        in_play = list(self._starting)
-        steps = [list(in_play)]
-        left: set[str] = set()  # those that left at the step before
-        for record in self._records:
-            agents = record[4] or {}
-            in_play = [name for name in in_play if name not in left]
-            in_play += [name for name in agents if name not in in_play]
-            steps.append(list(in_play))
-            left = {name for name, outcome in agents.items() if _left(outcome)}
-        return steps
+        return agents_in_play(self._starting, self._records)
 
     def departures(self) -> dict[str, int]:
         """The step at which each agent that left did so (terminated or truncated)."""
-        return {
-            name: step
-            for step, record in enumerate(self._records, start=1)
-            for name, outcome in (record[4] or {}).items()
-            if _left(outcome)
-        }
+        return departures(self._records)
 
     def agent_returns(self, upto: int | None = None) -> dict[str, float]:
         """Each agent's return: the sum of its rewards up to step ``upto`` (default: the end).
@@ -256,15 +243,7 @@ class Timeline:
         first answer (``reward`` ``None``) counts nothing. With one agent, its name holds the
         episode's return.
         """
-        records = self._records[:upto]
-        if len(self.hello.agents) < 2:
-            return {self.hello.agents[0]: float(sum(record[1] for record in records))}
-        returns = dict.fromkeys(self._starting, 0.0)
-        for record in records:
-            for name, outcome in (record[4] or {}).items():
-                reward = outcome.get("reward")
-                returns[name] = returns.get(name, 0.0) + (0.0 if reward is None else reward)
-        return returns
+        return agent_returns(self._starting, self._records[:upto], self.hello)
 
     @property
     def memory(self) -> int:
@@ -466,20 +445,6 @@ class Timeline:
         """Every step's observation, re-simulated from the reset in one run."""
         _, mark = self._checkpoints.nearest(0)
         return self._processes.every_observation(mark, self._steps)
-
-
-def _answer_agents(observation: Any, hello: Hello) -> list[str]:
-    """The agents an answer's observation holds (a map by name with several agents)."""
-    if len(hello.agents) > 1 and isinstance(observation, Mapping):
-        return [str(name) for name in observation]
-    return list(hello.agents)
-
-
-def _left(outcome: Any) -> bool:
-    """Whether an agent's part of an answer (``info["agents"][name]``) says it left."""
-    return isinstance(outcome, Mapping) and bool(
-        outcome.get("terminated") or outcome.get("truncated")
-    )
 
 
 def _named_by(episode: EpisodeFile) -> str:

@@ -2,12 +2,15 @@
 
 An episode file holds the server's snapshot of the episode (its configuration, generator state,
 reset options and every action, see :mod:`rlenv.serving._snapshots`), a digest of every
-observation the client saw, and how the episode ended (``terminated``, ``truncated``: what the
+observation the client saw, a digest of every step's reward and flags (agent by agent, with
+several agents: :func:`outcome_digest`; recordings made before it lack it), and how the episode
+ended (``terminated``, ``truncated``: what the
 last step returned, time limits included; recordings made before these two were added lack
 them and still load, with ``None``). Replaying restores the start of the episode on a fresh server,
-sends the same actions, and compares each observation with the recorded digest: a
-deterministic environment gives bit-identical observations, and the first difference is
-reported.
+sends the same actions, and compares each observation (and each reward and flag, where
+recorded) with the recorded digest: a deterministic environment gives bit-identical answers,
+and the first difference is reported. Where agents come and go, an answer's observation holds
+the agents of that answer, and so does its digest.
 
     env = RecordEpisodes(gymnasium.make("rlenv/CartPole-v0"), "episodes/")
     ...                                        # episodes/episode-0001.rlenv, ... as they end
@@ -29,6 +32,7 @@ from rlenv.protocol import pack, unpack
 from rlenv.protocol.errors import RequestError
 from rlenv.protocol.snapshots import parse_snapshot
 from rlenv_client.recordings import check_frames, read_recording
+from rlenv_client.time_limits import truncate_agents
 
 if TYPE_CHECKING:  # only named: base.py's Inspection builds EpisodeFiles
     from rlenv_client.base import BaseClient
@@ -41,6 +45,7 @@ __all__ = [
     "apply_change",
     "digest",
     "next_episode_path",
+    "outcome_digest",
     "older_settings",
     "replay",
 ]
@@ -53,6 +58,17 @@ _NAME = re.compile(r"episode-(\d+)\.rlenv")
 def digest(observation: Any) -> str:
     """A short fingerprint of an observation's exact bytes (dtype and shape included)."""
     return hashlib.blake2b(pack(observation), digest_size=16).hexdigest()
+
+
+def outcome_digest(reward: Any, terminated: Any, truncated: Any, info: Mapping[str, Any]) -> str:
+    """A short fingerprint of a step's reward and flags, and each agent's (``info["agents"]``).
+
+    Agents count by name, whatever order the answer listed them in; an agent's reward is
+    ``None`` in the answer where it joined.
+    """
+    agents = info.get("agents") or {}
+    by_agent = sorted(((str(name), agents[name]) for name in agents), key=lambda item: item[0])
+    return digest([float(reward), bool(terminated), bool(truncated), by_agent])
 
 
 def next_episode_path(directory: Path) -> Path:
@@ -69,7 +85,9 @@ class EpisodeFile:
 
     ``terminated`` and ``truncated`` are ``None`` in recordings older than them. ``agent``
     names the agent a person played, in a demonstration of one agent of several (the
-    inspector's Take control); ``None`` otherwise. ``path`` is where :meth:`load` read it.
+    inspector's Take control); ``None`` otherwise. ``outcomes`` holds each step's
+    :func:`outcome_digest` (``None`` in recordings older than it, and where not kept). ``path``
+    is where :meth:`load` read it.
     """
 
     target: str | None
@@ -78,6 +96,7 @@ class EpisodeFile:
     terminated: bool | None = None
     truncated: bool | None = None
     agent: str | None = None
+    outcomes: list[str] | None = None
     path: Path | None = field(default=None, compare=False, repr=False)
     """The file it was read from (``None``: made in this process, or a server's)."""
 
@@ -94,6 +113,8 @@ class EpisodeFile:
             data.update(terminated=self.terminated, truncated=self.truncated)
         if self.agent is not None:
             data["agent"] = self.agent
+        if self.outcomes is not None:
+            data["outcomes"] = self.outcomes
         Path(path).write_bytes(pack(data))
 
     @classmethod
@@ -141,6 +162,16 @@ class EpisodeFile:
         agent = data.get("agent")
         if not (agent is None or isinstance(agent, str)):
             raise ValueError(f"{path} is not an rlenv episode: its agent must be a name")
+        outcomes = data.get("outcomes")
+        if outcomes is not None and (
+            not isinstance(outcomes, list)
+            or not all(isinstance(seen, str) for seen in outcomes)
+            or len(outcomes) > len(observations)
+        ):
+            raise ValueError(
+                f"{path} is not an rlenv episode: its outcomes must be a list of digests, "
+                "one per step"
+            )
         return cls(
             target,
             snapshot,
@@ -148,6 +179,7 @@ class EpisodeFile:
             data.get("terminated"),
             data.get("truncated"),
             agent,
+            outcomes,
             Path(path),
         )
 
@@ -166,24 +198,32 @@ class RecordEpisodes(gymnasium.Wrapper):
         self.directory.mkdir(parents=True, exist_ok=True)
         self.episodes = 0
         self._observations: list[str] = []
+        self._outcomes: list[str] = []
 
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
         """Reset and start recording a new episode."""
         observation, info = self.env.reset(**kwargs)
         self._observations = [digest(observation)]
+        self._outcomes = []
         return observation, info
 
     def step(self, action: Any) -> tuple[Any, Any, bool, bool, dict[str, Any]]:
         """Step, remember the observation's digest, and write the episode when it ends."""
         observation, reward, terminated, truncated, info = self.env.step(action)
         self._observations.append(digest(observation))
+        self._outcomes.append(outcome_digest(reward, terminated, truncated, info))
         if terminated or truncated:
             self.episodes += 1
             remote = self.env.unwrapped
             client: BaseClient = remote.client  # type: ignore[attr-defined]
             target: str | None = remote.target  # type: ignore[attr-defined]
             EpisodeFile(
-                target, client.snapshot(), self._observations, bool(terminated), bool(truncated)
+                target,
+                client.snapshot(),
+                self._observations,
+                bool(terminated),
+                bool(truncated),
+                outcomes=self._outcomes,
             ).save(self.directory / f"episode-{self.episodes:04d}.rlenv")
         return observation, reward, terminated, truncated, info
 
@@ -207,12 +247,15 @@ class Trajectory:
 class ReplayResult:
     """What a replay found: ``divergence`` is ``None`` when every observation matched.
 
+    And every reward and flag, where the recording kept them (``outcomes_checked``).
+
     ``trajectory`` holds the replayed steps when :func:`replay` was asked to keep them.
     """
 
     steps: int
     divergence: str | None
     trajectory: Trajectory | None = None
+    outcomes_checked: bool = False
 
 
 def apply_change(client: BaseClient, event: Sequence[Any]) -> None:
@@ -265,13 +308,14 @@ def replay(episode: EpisodeFile, client: BaseClient, *, keep: bool = False) -> R
             + older_settings(episode.snapshot, client.hello.agents),
         )
     kept = Trajectory([observation]) if keep else None
+    outcomes = iter(episode.outcomes or ())
     steps = 0
     for event in episode.snapshot["events"]:
         if event[0] != "action":
             apply_change(client, event)
             continue
         steps += 1
-        observation, reward, terminated, truncated, _ = client.step(event[1], event[2])
+        observation, reward, terminated, truncated, info = client.step(event[1], event[2])
         recorded = next(expected, None)
         if recorded is None:
             break
@@ -281,9 +325,39 @@ def replay(episode: EpisodeFile, client: BaseClient, *, keep: bool = False) -> R
                 f"step {steps}: the observation differs from the "
                 f"recording{older_settings(episode.snapshot, client.hello.agents)}",
             )
+        outcome = next(outcomes, None)
+        if outcome is not None and not _same_outcome(
+            outcome, (reward, terminated, truncated, info), episode, steps
+        ):
+            return ReplayResult(
+                steps,
+                f"step {steps}: the reward or flags differ from the recording (of "
+                f"{', '.join(map(str, info.get('agents') or {})) or 'the agent'})",
+            )
         if kept is not None:
             kept.observations.append(observation)
             kept.actions.append(event[1])
             kept.rewards.append(reward)
             kept.terminated, kept.truncated = bool(terminated), bool(truncated)
-    return ReplayResult(steps, None, kept)
+    return ReplayResult(steps, None, kept, episode.outcomes is not None)
+
+
+def _same_outcome(
+    recorded: str, answer: tuple[Any, Any, Any, dict[str, Any]], episode: EpisodeFile, step: int
+) -> bool:
+    """Whether the replayed step's reward and flags are the recorded ones.
+
+    The recording's last step may have been truncated by the client's time limit
+    (``max_episode_steps``), which the server's answer does not show: there (unless the
+    recording says it was not truncated) the replay applies that truncation too before it
+    compares.
+    """
+    reward, terminated, truncated, info = answer
+    if outcome_digest(reward, terminated, truncated, info) == recorded:
+        return True
+    last = step == len(episode.outcomes or ())  # its end unknown (None): may be truncated
+    return (
+        last
+        and episode.truncated is not False
+        and (outcome_digest(reward, terminated, True, truncate_agents(info)) == recorded)
+    )

@@ -104,7 +104,8 @@ def _replay(args: argparse.Namespace) -> int:
     finally:
         session.close()
     if result.divergence is None:
-        print(f"replayed {result.steps} steps of {args.file}: every observation identical")
+        also = ", every reward and flag too" if result.outcomes_checked else ""
+        print(f"replayed {result.steps} steps of {args.file}: every observation identical{also}")
         return 0
     print(f"replayed {args.file}: first divergence at {result.divergence}")
     return 1

@@ -25,7 +25,8 @@ class TimelineDiff:
             other did not, or that only one of the two reaches; ``None`` when they are the
             same.
         observations: for each step both reach, the other's observation minus this one's
-            (float64 arrays; maps and sequences of them for composite observations).
+            (float64 arrays; maps and sequences of them for composite observations; of a map
+            by agent, the agents both answers hold).
         rewards: for each step both reach, the other's reward minus this one's.
     """
 
@@ -58,9 +59,12 @@ def timeline_diff(
 
 
 def _subtract(mine: Any, theirs: Any) -> Any:
-    """``theirs - mine`` as float64 arrays, through maps and sequences."""
+    """``theirs - mine`` as float64 arrays, through maps and sequences.
+
+    Of two maps, the keys both hold (agents that come and go: those of both answers).
+    """
     if isinstance(mine, Mapping):
-        return {key: _subtract(mine[key], theirs[key]) for key in mine}
+        return {key: _subtract(mine[key], theirs[key]) for key in mine if key in theirs}
     if isinstance(mine, (tuple, list)):
         return [_subtract(a, b) for a, b in zip(mine, theirs, strict=True)]
     return np.asarray(theirs, np.float64) - np.asarray(mine, np.float64)

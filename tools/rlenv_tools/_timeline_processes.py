@@ -215,7 +215,7 @@ class Processes:
                     records.append(record)
                 if check is not None:
                     check(step + done, record[0])
-            result = (observation, *taken[-1][1:], info)
+            result = (observation, *taken[-1][1:4], info)
             self.park_if_due(step + done, checkpoints, result)
             if check is None and (result[2] or result[3]):
                 break
@@ -242,7 +242,7 @@ class Processes:
                 "step", action, repeat_action
             )
             result = (observation, float(reward), bool(terminated), bool(truncated), info)
-            records.append((digest(observation), *result[1:4]))
+            records.append((digest(observation), *result[1:4], info.get("agents")))
             self.park_if_due(len(records), checkpoints, result)
             if terminated or truncated:
                 break

@@ -131,7 +131,7 @@ def _read_ticks(
     ticks = []
     for tick in range(first, last + 1):
         events = [*changes, ["action", action, 1]] if tick == 1 else [["action", action, 1]]
-        ((_, reward, terminated, truncated),), observation, info = ticking.run([events])
+        ((_, reward, terminated, truncated, _),), observation, info = ticking.run([events])
         properties = {node["path"]: dict(node["exported"]) for node in ticking.call("tree")}
         ticks.append(
             Tick(

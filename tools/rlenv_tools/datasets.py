@@ -11,6 +11,12 @@ terminations and truncations are how each episode ended. The dataset's ``env_spe
 ``requirements`` pin rlenv and pymunk to the versions that re-simulated it.
 
     $ rlenv dataset create cartpole/expert-v0 --from episodes/
+
+An environment whose agents come and go, or decide at their own pace (its hello's
+``possible_agents``), is refused: a Minari episode holds one observation in its space at every
+step, and such an environment's answers hold only some of its agents (each agent's life would
+be an episode of its own, of its class's spaces, which Minari's one space per dataset cannot
+hold for agents of several classes).
 """
 
 from __future__ import annotations
@@ -108,6 +114,7 @@ def create_dataset(
     Raises:
         ValueError: a malformed id, an empty folder, recordings of several environments or of
             none, a recording that no longer replays (its step is named), a dataset that exists,
+            an environment whose agents come and go (not supported: the message says why),
             a recording that is no regular file or is too large
             (:func:`~rlenv_client.recordings.read_recording`), or a recorded target that is no
             installed package with neither ``target`` nor ``trust_target``.
@@ -123,6 +130,7 @@ def create_dataset(
     env = gymnasium.make(spec)
     try:
         client = env.unwrapped.client  # type: ignore[attr-defined]
+        _check_fixed_agents(target, client.hello.possible_agents)
         buffers = [
             _episode(number, path, episode, client, report)
             for number, (path, episode) in enumerate(zip(paths, episodes, strict=True))
@@ -143,6 +151,18 @@ def create_dataset(
         )
     finally:
         env.close()
+
+
+def _check_fixed_agents(target: str, possible_agents: dict[str, str] | None) -> None:
+    """Refuse an environment whose agents come and go (see the module's docstring)."""
+    if possible_agents is None:
+        return
+    raise ValueError(
+        f"{target}'s agents come and go or decide at their own pace (its possible agents: "
+        f"{', '.join(possible_agents)}): its answers hold only some agents, and a Minari "
+        "episode holds one observation of one space at every step; datasets of such "
+        "environments are not supported (record and replay them, or open them as timelines)"
+    )
 
 
 def _recordings(directory: Path) -> list[Path]:

@@ -51,9 +51,10 @@ from rlenv_client.launcher import ServerStartError, end_process
 
 __all__ = ["ForkedEnvironment", "StepRecord"]
 
-StepRecord = tuple[str, float, bool, bool]
+StepRecord = tuple[str, float, bool, bool, Any]
 """What :meth:`ForkedEnvironment.run` tells of each step: the observation's digest, the reward,
-terminated, truncated."""
+terminated, truncated, and with several agents ``info["agents"]`` (each agent of the answer's
+reward and flags; ``None`` with one agent)."""
 
 _CALLS = frozenset(
     {"configure", "draw", "node", "restore", "set_property", "snapshot", "step", "tree"}
@@ -286,7 +287,15 @@ def _serve(sock: socket.socket, target: str) -> None:
             for change in changes:
                 apply_change(client, change)
             observation, reward, terminated, truncated, info = client.step(action, frames)
-            records.append((digest(observation), float(reward), bool(terminated), bool(truncated)))
+            records.append(
+                (
+                    digest(observation),
+                    float(reward),
+                    bool(terminated),
+                    bool(truncated),
+                    info.get("agents"),
+                )
+            )
             seen.append(observation)
             if stop_at_end and (terminated or truncated):
                 break

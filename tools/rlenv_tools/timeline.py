@@ -34,6 +34,11 @@ episode's checkpoints take at most half, each branch at most half of what is lef
 ``max_memory``, past which no more are parked. Every process dies with the timeline's owner
 (:mod:`rlenv_tools.forking`'s lifeline). A timeline is not thread-safe, and needs ``os.fork``
 (Linux, macOS).
+
+Where agents come and go, or decide at their own pace, each step's observation holds the agents
+of that answer (and is checked as such); :meth:`Timeline.agents_in_play`,
+:meth:`Timeline.departures` and :meth:`Timeline.agent_returns` say who was in play at each step,
+who left, and what each earned.
 """
 
 from __future__ import annotations
@@ -49,6 +54,7 @@ from rlenv_client.replay import EpisodeFile, digest
 from rlenv_client.trusted_targets import check_target
 from rlenv_tools._branch_continuation import Continuation, load_policy
 from rlenv_tools._recorded_steps import check_digest, recorded_steps
+from rlenv_tools._timeline_agents import agent_returns, agents_in_play, answer_agents, departures
 from rlenv_tools._timeline_diff import TimelineDiff, timeline_diff
 from rlenv_tools._timeline_processes import (
     WORKING,
@@ -137,6 +143,7 @@ class Timeline:
             self._setup(episode, processes, True, unspaced, [])
             start = {**episode.snapshot, "events": []}
             observation, info = processes.first.call("restore", start)
+            self._starting = answer_agents(observation, self.hello)
             result: Result = (observation, 0.0, False, False, info)
             self._check(0, digest(observation))
             self._checkpoints.keep(0, Mark(processes.first, result))
@@ -216,6 +223,28 @@ class Timeline:
         """Every step's reward, 0.0 at step 0 (as the timeline first took them: no re-run)."""
         return [0.0] + [record[1] for record in self._records]
 
+    def agents_in_play(self) -> list[list[str]]:
+        """Each step's agents in play, by step (step 0: those the reset started).
+
+        An agent is in play from the answer it joined in to the answer it left in, both
+        included, whether or not it was due at each step between (one that decides at its own
+        pace is absent from some answers). With a fixed set of agents, every step has them all.
+        """
+        return agents_in_play(self._starting, self._records)
+
+    def departures(self) -> dict[str, int]:
+        """The step at which each agent that left did so (terminated or truncated)."""
+        return departures(self._records)
+
+    def agent_returns(self, upto: int | None = None) -> dict[str, float]:
+        """Each agent's return: the sum of its rewards up to step ``upto`` (default: the end).
+
+        Every agent that was in play by then is listed, in the order they joined; an agent's
+        first answer (``reward`` ``None``) counts nothing. With one agent, its name holds the
+        episode's return.
+        """
+        return agent_returns(self._starting, self._records[:upto], self.hello)
+
     @property
     def memory(self) -> int:
         """The memory (PSS, bytes) its processes hold now, its branches' included.
@@ -279,9 +308,17 @@ class Timeline:
 
         Raises:
             IndexError: no such step (step 0 has no action), or ``first`` past its ticks.
-            ValueError: ``count`` below 1.
+            ValueError: ``count`` below 1, or an environment whose agents come and go or
+                decide at their own pace (not supported: an action of one tick would have to
+                hold the agents due at that tick, which the step's action does not).
             RuntimeError: as :meth:`at`.
         """
+        if self.hello.possible_agents is not None:
+            raise ValueError(
+                f"the ticks of a step are not supported where agents come and go or decide "
+                f"at their own pace ({self.hello.environment}'s possible agents): a step's "
+                f"action holds the agents due at its start, not those due at each tick"
+            )
         if not 1 <= step <= len(self):
             raise IndexError(f"step {step} has no action (steps 1 to {len(self)} have)")
         *changes, (_, action, frames) = self._steps[step - 1]
@@ -355,10 +392,11 @@ class Timeline:
             processes.drop_cursor()  # it took part of the branch
             raise
         digests = self.episode.observations[: step + 1] + [record[0] for record in records[step:]]
-        ends = records[-1][2:] if len(records) > step else (terminated, truncated)
+        ends = records[-1][2:4] if len(records) > step else (terminated, truncated)
         episode = EpisodeFile(self.episode.target, snapshot, digests, *ends)
         branch = object.__new__(Timeline)
         branch._setup(episode, processes, False, checkpoints, records)
+        branch._starting = self._starting
         processes.position, processes.result = (branch, len(branch)), result
         return branch
 
@@ -366,7 +404,10 @@ class Timeline:
         """How ``other`` differs from this timeline, step by step (both re-simulated)."""
         pair = (self, other)
         return timeline_diff(
-            [[(each.episode.observations[0], 0.0, False, False), *each._records] for each in pair],
+            [
+                [(each.episode.observations[0], 0.0, False, False, None), *each._records]
+                for each in pair
+            ],
             [each._every_observation() for each in pair],
             [each.rewards for each in pair],
         )

@@ -199,10 +199,20 @@ class ContractProbes:
                         f"another client's {what}: expected an answer, got "
                         f"{reply.code}: {reply.message}"
                     )
-                elif what == "observation" and pack(reply.observation) != pack(own):
+                elif (
+                    what == "observation"
+                    and (
+                        difference := _observer_difference(
+                            own,
+                            reply.observation,
+                            self.controller.hello.possible_agents is not None,
+                        )
+                    )
+                    is not None
+                ):
                     problems.append(
-                        "another client's observation differs from the "
-                        "controller's: the refused requests changed the environment"
+                        f"another client's observation differs from the "
+                        f"controller's{difference}: the refused requests changed the environment"
                     )
         if writable is not None and not problems:
             events = self.controller.snapshot()["events"]
@@ -218,6 +228,25 @@ class ContractProbes:
         """No frame the suite read so far held an ext type other than 1."""
         found = self.harness.tap.unreported()
         assert not found, "; ".join(found)
+
+
+def _observer_difference(own: Any, observers: Any, come_and_go: bool) -> str | None:
+    """How an observer's observation differs from the controller's, or ``None``.
+
+    Where agents come and go, the controller's answer holds the agents of its last answer and
+    an observer's every agent in play: each of the controller's agents is compared, agent by
+    agent (``", at agent NAME"`` names the first that differs).
+    """
+    if not come_and_go:
+        return None if pack(observers) == pack(own) else ""
+    mine, theirs = (
+        (value or {}).get("agent") or {} if isinstance(value, dict) else {}
+        for value in (own, observers)
+    )
+    for name, value in mine.items():
+        if name not in theirs or pack(theirs[name]) != pack(value):
+            return f", at agent {name!r}"
+    return None
 
 
 def _open_requests(

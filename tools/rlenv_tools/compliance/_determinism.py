@@ -7,7 +7,8 @@
 - **repeated restores**: a snapshot taken mid-episode (after a mid-episode ``inspect set``)
   restored twice, with other steps between, replays bit for bit what the episode did.
 
-Trajectories are lists of :class:`_Record`, compared by their msgpack bytes.
+Trajectories are lists of :class:`_Record`, compared by their msgpack bytes, agent by agent
+where an answer holds several (by name: where agents come and go, an answer holds some).
 """
 
 from __future__ import annotations
@@ -108,7 +109,10 @@ class DeterminismProbes:
         """
         if not self._searched:
             self._searched = True
-            self._property = self.find_settable()
+            try:
+                self._property = self.find_settable()
+            finally:
+                self.harness.start_episode()  # the search may have played an episode to its end
         return self._property
 
     def find_settable(self) -> _Property | None:
@@ -321,10 +325,27 @@ class _Record:
         The start of a trajectory (the answer to a reset or a restore, or the step a snapshot
         was taken after) compares by its observation and flags only.
         """
-        fields = [self.sent, self.terminated, self.truncated]
+        fields = [_by_agent(self.sent), self.terminated, self.truncated]
         if not start:
-            fields += [self.reward, self.frames, self.agents]
+            fields += [self.reward, self.frames, _by_agent(self.agents)]
         return pack(fields)
+
+    def agent_difference(self, other: _Record, start: bool) -> str:
+        """``", at agent NAME"``: the first agent (by name) whose part differs, else ``""``.
+
+        An answer of several agents is compared agent by agent, by name: its observation
+        and, past the start, its reward and flags.
+        """
+        parts = [(self.sent, other.sent)] + ([] if start else [(self.agents, other.agents)])
+        for mine, theirs in parts:
+            if not (isinstance(mine, dict) and isinstance(theirs, dict)):
+                continue
+            for name in sorted(mine.keys() | theirs.keys(), key=str):
+                if name not in mine or name not in theirs:
+                    return f", at agent {name!r} (in one answer only)"
+                if pack(mine[name]) != pack(theirs[name]):
+                    return f", at agent {name!r}"
+        return ""
 
     def show(self, start: bool) -> str:
         """The record, for a failure line."""
@@ -346,10 +367,18 @@ def _difference(expected: Sequence[_Record], got: Sequence[_Record]) -> str | No
             where = "the first observation" if start else f"step {index}"
             shown_want, shown_have = want.show(start), have.show(start)
             bits = " (equal as printed, different bits)" if shown_want == shown_have else ""
-            return f"{where}: expected {shown_want:.240}, got {shown_have:.240}{bits}"
+            agent = want.agent_difference(have, start)
+            return f"{where}{agent}: expected {shown_want:.240}, got {shown_have:.240}{bits}"
     if len(expected) != len(got):
         return f"the episode lasted {len(got) - 1} steps, expected {len(expected) - 1}"
     return None
+
+
+def _by_agent(value: Any) -> Any:
+    """A map of agents as pairs sorted by name (answers compare agent by agent), else itself."""
+    if isinstance(value, dict):
+        return sorted(value.items(), key=lambda item: str(item[0]))
+    return value
 
 
 def _show(value: Any) -> str:

@@ -13,15 +13,15 @@ from typing import Any
 
 from rlenv_tools.inspector._recordings import Branch
 from rlenv_tools.inspector._watch import _shown, to_json
-from rlenv_tools.timeline import Step, Tick
+from rlenv_tools.timeline import Step, Tick, Timeline
 
-__all__ = ["shown", "side_json", "state_json", "ticks_json"]
+__all__ = ["agents_json", "shown", "side_json", "state_json", "ticks_json"]
 
 
 def shown(observation: Any, agents: Sequence[str]) -> dict[str, Any]:
     """An observation as the live page shows it, by agent."""
-    if len(agents) > 1 and isinstance(observation, Mapping):
-        return {name: _shown(observation[name]) for name in agents}
+    if len(agents) > 1 and isinstance(observation, Mapping):  # the answer's agents
+        return {name: _shown(observation[name]) for name in agents if name in observation}
     return {agents[0] if agents else "agent": _shown(observation)}
 
 
@@ -39,6 +39,23 @@ def state_json(state: Step, agents: Sequence[str]) -> dict[str, Any]:
         "observation": shown(state.observation, agents),
         "draw": to_json(state.draw),
         "properties": to_json(state.properties),
+    }
+
+
+def agents_json(timeline: Timeline, step: int) -> dict[str, Any]:
+    """Who is in play at ``step`` and what each agent earned so far.
+
+    ``agents_in_play`` (:meth:`~rlenv_tools.timeline.Timeline.agents_in_play`), ``arrived``
+    and ``left`` (those that joined, and left, at this step) and ``agent_returns`` (each
+    agent's return up to this step).
+    """
+    in_play = timeline.agents_in_play()
+    before = set(in_play[step - 1]) if step else set()
+    return {
+        "agents_in_play": in_play[step],
+        "arrived": [name for name in in_play[step] if name not in before],
+        "left": [name for name, at in timeline.departures().items() if at == step],
+        "agent_returns": to_json(timeline.agent_returns(step)),
     }
 
 
@@ -87,6 +104,7 @@ def side_json(branch: Branch, state: Step | None, agents: Sequence[str]) -> dict
         "length": len(branch.timeline),
         "rewards": to_json(rewards),
         "return": to_json(sum(rewards)),
+        "agent_returns": to_json(branch.timeline.agent_returns()),
         "observation": None if state is None else shown(state.observation, agents),
         "reward": None if state is None else to_json(state.reward),
     }

@@ -36,8 +36,14 @@ from typing import Any
 from rlenv_client.replay import EpisodeFile
 from rlenv_tools.inspector._recordings import Branch, Recordings, Root, episode_id
 from rlenv_tools.inspector._timeline_errors import chosen_policy, key_action, page_call
-from rlenv_tools.inspector._timeline_json import shown, side_json, state_json, ticks_json
-from rlenv_tools.inspector._watch import InspectorError
+from rlenv_tools.inspector._timeline_json import (
+    agents_json,
+    shown,
+    side_json,
+    state_json,
+    ticks_json,
+)
+from rlenv_tools.inspector._watch import InspectorError, to_json
 from rlenv_tools.timeline import Timeline
 
 __all__ = ["MAX_BRANCH_STEPS", "MAX_TICKS", "Timelines", "episode_id"]
@@ -177,7 +183,10 @@ class Timelines:
         """The state after ``step`` of ``branch``: what the page draws and lists.
 
         ``{"timeline", "branch", "step", "length", "reward", "terminated", "truncated",
-        "info", "observation" (by agent, as the live page shows it), "draw" (the scene's draw
+        "info", "observation" (by agent, as the live page shows it: the agents of this answer),
+        "agents_in_play" (the agents in play at this step, :meth:`~rlenv_tools.timeline
+        .Timeline.agents_in_play`), "arrived" and "left" (those that joined, and left, at this
+        step), "agent_returns" (each agent's return up to this step), "draw" (the scene's draw
         list), "properties" (every node's exported values, by path)}``.
 
         Raises:
@@ -188,7 +197,12 @@ class Timelines:
             timeline = self._branch(root, branch).timeline
             state = page_call(lambda: timeline.at(_step(timeline, step)))
             where = {"timeline": number, "branch": branch, "step": step}
-            return {**where, "length": len(timeline), **state_json(state, root.agents)}
+            return {
+                **where,
+                "length": len(timeline),
+                **state_json(state, root.agents),
+                **agents_json(timeline, step),
+            }
 
     def ticks(
         self, number: int, branch: int, step: int, first: int = 1, count: int = MAX_TICKS
@@ -204,7 +218,8 @@ class Timelines:
 
         Raises:
             InspectorError: as :meth:`step` (step 0 has no ticks: 400; ``first`` past the
-                step's ticks, or ``count`` outside 1 to :data:`MAX_TICKS`: 400).
+                step's ticks, or ``count`` outside 1 to :data:`MAX_TICKS`: 400; an environment
+                whose agents come and go, whose ticks are not supported: 422, saying so).
         """
         if not 1 <= count <= MAX_TICKS:
             raise InspectorError(400, f"count must be 1 to {MAX_TICKS}")
@@ -215,7 +230,10 @@ class Timelines:
                     400, f"step {step} has no action: steps 1 to {len(timeline)} have"
                 )
             frames = timeline.frames(step)
-            ticks = page_call(lambda: timeline.ticks(step, first=first, count=count))
+            try:
+                ticks = page_call(lambda: timeline.ticks(step, first=first, count=count))
+            except ValueError as error:  # agents that come and go: not supported, said why
+                raise InspectorError(422, str(error)) from None
             where = {"timeline": number, "branch": branch, "step": step}
             return {**where, **ticks_json(ticks, frames, first, count, root.agents)}
 
@@ -365,6 +383,9 @@ class Timelines:
             "length": len(timeline),
             "ended": timeline.ended,
             "agents": root.agents,
+            "agents_in_play": timeline.agents_in_play(),
+            "departures": timeline.departures(),
+            "agent_returns": to_json(timeline.agent_returns()),
             "keys": list(root.keys),
             "keys_error": root.keys_error,
             "policies": sorted(self.policies),

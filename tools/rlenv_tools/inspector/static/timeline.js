@@ -232,7 +232,21 @@ function showStep(state) {
   showTree(Object.keys(state.properties));
   showProperties();
   showPosition();
+  showAgents(state);
   compareSoon();
+}
+
+// Who is in play at this step (+ joined now, "left" as they go) and each agent's return so far.
+function showAgents(state) {
+  const box = $("timeline-agents");
+  const agents = state.agents_in_play || [];
+  box.hidden = agents.length < 2;
+  const joined = (name) => (state.step > 0 && state.arrived.includes(name) ? "+" : "");
+  const left = (name) => (state.left.includes(name) ? " (left)" : "");
+  const returns = Object.entries(state.agent_returns || {});
+  box.textContent = `in play: ${agents.map((n) => joined(n) + n + left(n)).join(", ")}` +
+    ` · returns: ${returns.map(([n, r]) => `${n} ${formatNumber(r)}`).join(", ")}`;
+  box.dataset.inPlay = agents.join(",");
 }
 
 function showPosition() {

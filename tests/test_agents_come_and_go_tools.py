@@ -1,0 +1,449 @@
+"""The tools where agents come and go and decide at their own pace (issue 42, item 4's tools).
+
+``rlenv check`` and its compliance suite, recordings and ``rlenv replay``, timelines, the
+inspector's timeline JSON and ``rlenv dataset create``, on the hunt (prey that appear and are
+caught, two decision periods), ``tests/come_and_go_envs.py``'s environments, and the fixed
+multi-agent tag, which must stay as it was. Real servers and subprocesses throughout.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from conftest import Serve
+from inspector_http import fetch
+
+from examples import hunt, tag
+from rlenv.protocol import Response
+from rlenv_client.env import RemoteEnv
+from rlenv_client.replay import EpisodeFile, RecordEpisodes, digest
+from rlenv_tools.compliance._determinism import _difference, _Record
+from rlenv_tools.inspector import InspectorServer, Timelines, Watcher
+from rlenv_tools.timeline import Timeline
+
+ROOT = Path(__file__).parent.parent
+COME_AND_GO = "tests.come_and_go_envs:ComeAndGoEnvironment"
+PACED = "tests.come_and_go_envs:PacedEnvironment"
+
+
+def rlenv(*args: str, timeout: float = 400) -> subprocess.CompletedProcess[str]:
+    """``rlenv ARGS`` in a subprocess, from the checkout's root (its tests package importable)."""
+    return subprocess.run(
+        [sys.executable, "-m", "rlenv", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        stdin=subprocess.DEVNULL,
+        cwd=ROOT,
+        env={
+            **os.environ,
+            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
+        },
+    )
+
+
+def report_lines(output: str) -> dict[str, str]:
+    """``rlenv check``'s report: each check's name to its status (PASS, FAIL, SKIP)."""
+    lines = {}
+    for line in output.splitlines():
+        status, _, rest = line.partition("  ")
+        if status in ("PASS", "FAIL", "SKIP"):
+            lines[rest.strip().split("  ")[0]] = status
+    return lines
+
+
+# --- rlenv check ---------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("target", [hunt.TARGET, PACED])
+def test_check_passes_agent_by_agent_where_agents_come_and_go(target: str) -> None:
+    result = rlenv("check", target)
+    assert result.returncode == 0, result.stdout + result.stderr
+    checks = report_lines(result.stdout)
+    assert checks["agents come and go"] == "PASS"
+    assert checks["step returns gymnasium types"] == "PASS"
+    assert checks["gymnasium check_env"] == "SKIP"  # it asserts every key in every answer
+    assert "FAIL" not in checks.values(), result.stdout
+
+
+@pytest.mark.parametrize("target", [hunt.TARGET, COME_AND_GO])
+def test_check_with_compliance_passes_at_an_address(serve: Serve, target: str) -> None:
+    server = serve(target)
+    result = rlenv("check", server.address, "--compliance")
+    assert result.returncode == 0, result.stdout + result.stderr
+    checks = report_lines(result.stdout)
+    assert checks["compliance under hostile input"] == "PASS", result.stdout
+    assert checks["agents come and go"] == "PASS"
+
+
+def test_check_of_a_fixed_multi_agent_example_is_as_before() -> None:
+    result = rlenv("check", tag.TARGET)
+    assert result.returncode == 0, result.stdout + result.stderr
+    checks = report_lines(result.stdout)
+    assert checks["gymnasium check_env"] == "PASS"
+    assert "agents come and go" not in checks  # only where they do
+    assert checks["pettingzoo parallel_api_test"] in ("PASS", "SKIP")
+
+
+def answer(observation: dict[str, bytes], agents: dict[str, Any]) -> _Record:
+    response = Response(
+        id=0,
+        observation={"agent": observation},
+        reward=sum(a["reward"] or 0.0 for a in agents.values()),
+        terminated=False,
+        truncated=False,
+        frames=4,
+        agents=agents,
+    )
+    return _Record.of(response, observation)
+
+
+def test_determinism_compares_answers_agent_by_agent() -> None:
+    start = answer({"A": b"0"}, {})
+    a = {"reward": 1.0, "terminated": False, "truncated": False}
+    b = {"reward": None, "terminated": False, "truncated": False}
+    one = answer({"A": b"1", "B": b"2"}, {"A": a, "B": b})
+    same_in_another_order = answer({"B": b"2", "A": b"1"}, {"B": b, "A": a})
+    assert _difference([start, one], [start, same_in_another_order]) is None
+    other_b = answer({"A": b"1", "B": b"3"}, {"A": a, "B": b})
+    found = _difference([start, one], [start, other_b])
+    assert found is not None and found.startswith("step 1, at agent 'B':")
+    without_b = answer({"A": b"1"}, {"A": a})
+    found = _difference([start, one], [start, without_b])
+    assert found is not None and "at agent 'B' (in one answer only)" in found
+
+
+# --- recordings and replay -----------------------------------------------------------------------
+
+
+@dataclass
+class Seen:
+    """What the recording client saw: each answer's observation and ``info["agents"]``."""
+
+    observations: list[dict[str, Any]] = field(default_factory=list)
+    agents: list[dict[str, Any]] = field(default_factory=list)
+    actions: list[dict[str, Any]] = field(default_factory=list)
+
+
+def hunt_policy(observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The hunter runs at the nearest prey (its heuristic); the prey stand still: catches."""
+    return {
+        name: hunt.Hunter.heuristic(None, value)  # type: ignore[arg-type]
+        if name == hunt.HUNTER
+        else np.zeros(2, np.float32)
+        for name, value in observation.items()
+    }
+
+
+def walk(observation: dict[str, np.ndarray]) -> dict[str, int]:
+    return {name: 2 for name in observation}
+
+
+def record_one(target: str, directory: Path, policy: Any, steps: int | None, seed: int) -> Seen:
+    """Record one episode of ``target`` played by ``policy``, at most ``steps`` steps if given
+    (a client's time limit)."""
+    env = RecordEpisodes(
+        RemoteEnv(target, max_restarts=0, share_server=False, max_episode_steps=steps), directory
+    )
+    seen = Seen()
+    try:
+        observation, info = env.reset(seed=seed)
+        seen.observations.append(observation)
+        seen.agents.append(info.get("agents", {}))
+        while True:
+            action = policy(observation)
+            observation, _, terminated, truncated, info = env.step(action)
+            seen.actions.append(action)
+            seen.observations.append(observation)
+            seen.agents.append(info.get("agents", {}))
+            if terminated or truncated:
+                return seen
+    finally:
+        env.close()
+
+
+@dataclass
+class Recorded:
+    path: Path
+    seen: Seen
+
+
+@pytest.fixture(scope="module")
+def hunted(tmp_path_factory: pytest.TempPathFactory) -> Recorded:
+    """A whole hunt (its own 1,200-tick limit ends it): prey appear and are caught."""
+    directory = tmp_path_factory.mktemp("hunt")
+    seen = record_one(hunt.TARGET, directory, hunt_policy, None, seed=4)
+    return Recorded(directory / "episode-0001.rlenv", seen)
+
+
+@pytest.fixture(scope="module")
+def came_and_went(tmp_path_factory: pytest.TempPathFactory) -> Recorded:
+    """ComeAndGo's whole episode: C joins, B is freed, A terminates, C is truncated."""
+    directory = tmp_path_factory.mktemp("come_and_go")
+    seen = record_one(COME_AND_GO, directory, walk, 100, seed=1)
+    return Recorded(directory / "episode-0001.rlenv", seen)
+
+
+@pytest.fixture(scope="module")
+def tagged(tmp_path_factory: pytest.TempPathFactory) -> Recorded:
+    """A fixed multi-agent tag episode of 40 steps, random actions."""
+    directory = tmp_path_factory.mktemp("tag")
+    rng = np.random.default_rng(0)
+    env_spaces: dict[str, Any] = {}
+
+    def policy(observation: dict[str, Any]) -> dict[str, Any]:
+        return {
+            name: rng.uniform(-1, 1, env_spaces[name].shape).astype(np.float32)
+            for name in observation
+        }
+
+    probe = RemoteEnv(tag.TARGET, max_restarts=0, share_server=False)
+    env_spaces.update(probe.action_space.spaces)
+    probe.close()
+    seen = record_one(tag.TARGET, directory, policy, 40, seed=2)
+    return Recorded(directory / "episode-0001.rlenv", seen)
+
+
+def arrivals_and_departures(seen: Seen) -> tuple[set[str], set[str]]:
+    """The agents that joined after the reset, and those that left, as the client saw them."""
+    joined = {
+        name for agents in seen.agents[1:] for name, a in agents.items() if a["reward"] is None
+    }
+    left = {
+        name
+        for agents in seen.agents
+        for name, a in agents.items()
+        if a["terminated"] or a["truncated"]
+    }
+    return joined, left
+
+
+def test_the_recordings_hold_agents_that_came_and_went(
+    hunted: Recorded, came_and_went: Recorded
+) -> None:
+    joined, left = arrivals_and_departures(hunted.seen)
+    assert joined and (left - {hunt.HUNTER}), "the hunt had no prey that appeared and was caught"
+    assert arrivals_and_departures(came_and_went.seen) == ({"C"}, {"A", "B", "C"})
+
+
+@pytest.mark.parametrize("recorded", ["hunted", "came_and_went", "tagged"])
+def test_replay_is_bit_for_bit_rewards_and_flags_included(
+    recorded: str, request: pytest.FixtureRequest
+) -> None:
+    path = request.getfixturevalue(recorded).path
+    result = rlenv("replay", str(path), "--trust-target")
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "every observation identical, every reward and flag too" in result.stdout
+
+
+def test_replay_finds_a_reward_that_differs(came_and_went: Recorded, tmp_path: Path) -> None:
+    episode = EpisodeFile.load(came_and_went.path)
+    assert episode.outcomes is not None and len(episode.outcomes) == len(came_and_went.seen.actions)
+    outcomes = list(episode.outcomes)
+    outcomes[2] = digest("another reward")
+    tampered = tmp_path / "tampered.rlenv"
+    EpisodeFile(
+        episode.target,
+        episode.snapshot,
+        episode.observations,
+        episode.terminated,
+        episode.truncated,
+        outcomes=outcomes,
+    ).save(tampered)
+    result = rlenv("replay", str(tampered), "--trust-target")
+    assert result.returncode != 0
+    assert "step 3: the reward or flags differ from the recording" in result.stdout + result.stderr
+
+
+# --- timelines -----------------------------------------------------------------------------------
+
+
+def left(agents: dict[str, Any]) -> set[str]:
+    """The agents of an answer's ``info["agents"]`` that left in it."""
+    return {name for name, a in agents.items() if a["terminated"] or a["truncated"]}
+
+
+def in_play_seen(seen: Seen) -> list[list[str]]:
+    """Each step's agents in play as the client saw them: from joining to leaving, included."""
+    in_play = list(seen.observations[0])
+    steps = [list(in_play)]
+    for before, agents in zip(seen.agents, seen.agents[1:], strict=False):
+        in_play = [name for name in in_play if name not in left(before)]
+        in_play += [name for name in agents if name not in in_play]
+        steps.append(list(in_play))
+    return steps
+
+
+def returns_seen(seen: Seen, upto: int | None = None) -> dict[str, float]:
+    """Each agent's return up to step ``upto``, from what the client saw."""
+    returns: dict[str, float] = dict.fromkeys(seen.observations[0], 0.0)
+    for agents in seen.agents[1 : None if upto is None else upto + 1]:
+        for name, a in agents.items():
+            returns[name] = returns.get(name, 0.0) + (a["reward"] or 0.0)
+    return returns
+
+
+@pytest.fixture(scope="module")
+def hunt_timeline(hunted: Recorded) -> Iterator[Timeline]:
+    with Timeline.open(hunted.path, trust_target=True, checkpoint_every=16) as timeline:
+        yield timeline
+
+
+def test_a_hunt_timeline_scrubs_bit_for_bit(hunt_timeline: Timeline, hunted: Recorded) -> None:
+    seen = hunted.seen
+    assert len(hunt_timeline) == len(seen.actions)
+    for step in (150, 3, 0, 77, len(seen.actions), 76, 120):  # back and forth
+        state = hunt_timeline.at(step)
+        assert list(state.observation) == list(seen.observations[step])  # the answer's agents
+        assert digest(state.observation) == digest(seen.observations[step])
+        if step:
+            assert state.info["agents"] == seen.agents[step]
+    assert hunt_timeline.agents_in_play() == in_play_seen(seen)
+    departures = hunt_timeline.departures()
+    assert set(departures) == set().union(*map(left, seen.agents))
+    assert all(name in seen.agents[step] for name, step in departures.items())
+    assert hunt_timeline.agent_returns() == pytest.approx(returns_seen(seen), abs=0)
+    assert hunt_timeline.agent_returns(60) == pytest.approx(returns_seen(seen, 60), abs=0)
+
+
+def test_a_hunt_timeline_branches_bit_for_bit(hunt_timeline: Timeline, hunted: Recorded) -> None:
+    seen = hunted.seen
+    again = hunt_timeline.branch(90, seen.actions[90:])  # the recorded actions again
+    assert len(again) == len(hunt_timeline)
+    assert hunt_timeline.diff(again).first_difference is None
+    assert again.agents_in_play() == hunt_timeline.agents_in_play()
+    assert again.agent_returns() == hunt_timeline.agent_returns()
+    for step in (91, 140, len(again)):
+        assert digest(again.at(step).observation) == digest(seen.observations[step])
+    still = hunt_timeline.branch(
+        90, policy=lambda o: {name: np.zeros(2, np.float32) for name in o}, max_steps=60
+    )
+    assert hunt_timeline.diff(still).first_difference == 91
+    assert still.agents_in_play()[:91] == hunt_timeline.agents_in_play()[:91]
+    saved = Path(hunted.path).with_name("still.rlenv")
+    still.save(saved)
+    replayed = rlenv("replay", str(saved), "--trust-target")
+    assert replayed.returncode == 0 and "every observation identical" in replayed.stdout
+
+
+def test_a_fixed_multi_agent_timeline_has_every_agent_at_every_step(tagged: Recorded) -> None:
+    with Timeline.open(tagged.path, trust_target=True) as timeline:
+        agents = list(tagged.seen.observations[0])
+        assert timeline.agents_in_play() == [agents] * (len(timeline) + 1)
+        assert timeline.departures() == {}
+        assert timeline.agent_returns() == pytest.approx(returns_seen(tagged.seen), abs=0)
+        assert digest(timeline.at(17).observation) == digest(tagged.seen.observations[17])
+
+
+def test_the_ticks_of_a_step_are_refused_where_agents_come_and_go(
+    hunt_timeline: Timeline,
+) -> None:
+    with pytest.raises(ValueError, match="not supported where agents come and go"):
+        hunt_timeline.ticks(5)
+    assert digest(hunt_timeline.at(5).observation)  # the timeline goes on serving
+
+
+# --- the inspector -------------------------------------------------------------------------------
+
+
+def test_the_inspector_shows_agents_arriving_and_leaving_and_returns_per_agent(
+    came_and_went: Recorded,
+) -> None:
+    seen = came_and_went.seen
+    page = InspectorServer(
+        Watcher([]), timelines=Timelines([came_and_went.path], trust_target=True)
+    )
+    page.start()
+    try:
+        status, _, described = fetch(page.url, "api/timeline?timeline=0")
+        assert status == 200, described
+        assert described["agents_in_play"] == in_play_seen(seen)
+        assert described["departures"] == {
+            name: step for step, agents in enumerate(seen.agents) for name in left(agents)
+        }
+        assert described["agent_returns"] == returns_seen(seen)
+        joined = next(k for k, agents in enumerate(seen.agents) if "C" in agents)
+        status, _, state = fetch(page.url, f"api/timeline/step?timeline=0&branch=0&step={joined}")
+        assert status == 200, state
+        assert state["arrived"] == ["C"] and state["left"] == list(left(seen.agents[joined]))
+        assert set(state["observation"]) == set(seen.observations[joined])  # the answer's
+        assert state["agents_in_play"] == in_play_seen(seen)[joined]
+        assert state["agent_returns"] == returns_seen(seen, joined)
+        freed = described["departures"]["B"]
+        status, _, state = fetch(page.url, f"api/timeline/step?timeline=0&branch=0&step={freed}")
+        assert "B" in state["left"] and "B" in state["agents_in_play"]
+        status, _, after = fetch(
+            page.url, f"api/timeline/step?timeline=0&branch=0&step={freed + 1}"
+        )
+        assert "B" not in after["agents_in_play"] and "B" not in after["observation"]
+        status, _, compared = fetch(page.url, "api/timeline/compare?timeline=0&a=0&b=0&step=1")
+        assert status == 200 and compared["a"]["agent_returns"] == returns_seen(seen)
+        status, _, refused = fetch(page.url, "api/timeline/ticks?timeline=0&branch=0&step=2")
+        assert status == 422 and "not supported where agents come and go" in str(refused)
+    finally:
+        page.close()
+
+
+# --- datasets ------------------------------------------------------------------------------------
+
+
+@pytest.mark.minari
+def test_a_dataset_of_agents_that_come_and_go_is_refused_saying_why(
+    came_and_went: Recorded, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    pytest.importorskip("minari")
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "datasets"))
+    result = rlenv(
+        "dataset",
+        "create",
+        "walkers/come-and-go-v0",
+        "--from",
+        str(came_and_went.path.parent),
+        "--trust-target",
+    )
+    assert result.returncode != 0
+    assert "agents come and go or decide at their own pace" in result.stderr
+    assert "datasets of such environments are not supported" in result.stderr
+    assert not (tmp_path / "datasets").exists() or not any((tmp_path / "datasets").rglob("*.hdf5"))
+
+
+# --- the page, in a browser ----------------------------------------------------------------------
+
+
+@pytest.mark.browser
+def test_the_page_shows_who_is_in_play_and_their_returns(came_and_went: Recorded) -> None:
+    from browser import Browser, find_chromium
+
+    chromium = find_chromium()
+    if chromium is None:
+        pytest.skip("no Chromium found (apt-get install chromium): the JSON is tested above")
+    seen = came_and_went.seen
+    joined = next(k for k, agents in enumerate(seen.agents) if "C" in agents)
+    page = InspectorServer(
+        Watcher([]), timelines=Timelines([came_and_went.path], trust_target=True)
+    )
+    page.start()
+    try:
+        with Browser(chromium) as browser:
+            browser.open(page.url)
+            agents = "document.getElementById('timeline-agents')"
+            browser.wait_for(f"{agents}.dataset.inPlay === 'A,B'", "step 0's agents not shown")
+            browser.evaluate(f"""(() => {{ const s = document.getElementById('scrubber');
+                s.value = {joined}; s.dispatchEvent(new Event('input')); }})()""")
+            shown = in_play_seen(seen)[joined]
+            browser.wait_for(
+                f"{agents}.dataset.inPlay === '{','.join(shown)}'", "the joined agent not shown"
+            )
+            text = browser.evaluate(f"{agents}.textContent")
+            assert "+C" in text and not browser.evaluate(f"{agents}.hidden")
+            assert "returns: A " in text
+    finally:
+        page.close()

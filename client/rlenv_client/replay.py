@@ -203,14 +203,14 @@ class RecordEpisodes(gymnasium.Wrapper):
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
         """Reset and start recording a new episode."""
         observation, info = self.env.reset(**kwargs)
-        self._observations = [digest(observation)]
+        self._observations = [digest(_answered(observation, info))]
         self._outcomes = []
         return observation, info
 
     def step(self, action: Any) -> tuple[Any, Any, bool, bool, dict[str, Any]]:
         """Step, remember the observation's digest, and write the episode when it ends."""
         observation, reward, terminated, truncated, info = self.env.step(action)
-        self._observations.append(digest(observation))
+        self._observations.append(digest(_answered(observation, info)))
         self._outcomes.append(outcome_digest(reward, terminated, truncated, info))
         if terminated or truncated:
             self.episodes += 1
@@ -288,6 +288,17 @@ def older_settings(snapshot: Mapping[str, Any], agents: Sequence[str]) -> str:
         f"settings, {dict(kept)!r:.60}, which replay on every agent; if the agents' "
         "settings differed, it cannot replay)"
     )
+
+
+def _answered(observation: Any, info: Mapping[str, Any]) -> Any:
+    """The observation of the answer's agents, where agents come and go (``info["due"]``).
+
+    ``RemoteEnv`` fills the slots of the agents not in the answer with zeros; a recording keeps
+    what the server answered, which a replay's ``Client`` compares.
+    """
+    if "due" not in info or not isinstance(observation, Mapping):
+        return observation
+    return {name: observation[name] for name in info["agents"] if name in observation}
 
 
 def replay(episode: EpisodeFile, client: BaseClient, *, keep: bool = False) -> ReplayResult:

@@ -14,9 +14,9 @@ not installed, or cannot train the spaces (a multi-agent environment's ``Dict`` 
 Where agents come and go, or decide at their own pace (the hello's ``possible_agents``), an
 answer holds only the agents due and those that just left, so the checks follow the agents:
 each observation is checked against its own agent's space, and each action holds an entry for
-every agent of the last answer. gymnasium's ``check_env`` (which asserts every key of the
-``Dict`` space in every answer) gives way to "agents come and go" (:func:`_agents_come_and_go`),
-and ``parallel_api_test`` is skipped until ``RemoteParallelEnv`` follows such agents.
+every agent of the last answer ("agents come and go", :func:`_agents_come_and_go`). gymnasium's
+``check_env`` runs on ``RemoteEnv``'s fixed slots (zeros for the agents not in an answer), and
+``parallel_api_test`` on ``RemoteParallelEnv``, which follows the agents.
 The details hold no ANSI colour codes (gymnasium colours its warnings; they are removed).
 """
 
@@ -76,11 +76,6 @@ def _come_and_go(env: RemoteEnv) -> bool:
 
 
 def _gymnasium_check_env(env: RemoteEnv) -> str:
-    if _come_and_go(env):
-        raise _Skip(
-            "agents come and go here: an answer holds only some agents of the Dict space, "
-            "which check_env refuses; checked agent by agent in 'agents come and go'"
-        )
     return _warnings_of(lambda: check_env(env, skip_render_check=True))
 
 
@@ -99,7 +94,7 @@ def _agents_come_and_go(env: RemoteEnv) -> str:
     observation_spaces = cast(spaces.Dict, env.observation_space)  # by agent, here
     action_spaces = cast(spaces.Dict, env.action_space)
     observation, info = env.reset(seed=7)
-    seen, gone = set(observation), set[str]()
+    seen, gone = set(info["agents"]), set[str]()
     steps = 0
     for steps in range(1, _COME_AND_GO_STEPS + 1):
         _check_agents(observation, info, possible, observation_spaces, gone, seen, steps - 1)
@@ -108,15 +103,15 @@ def _agents_come_and_go(env: RemoteEnv) -> str:
             for name, flags in info["agents"].items()
             if flags["terminated"] or flags["truncated"]
         }
-        seen |= set(observation)
-        action = {name: action_spaces[name].sample() for name in observation if name not in gone}
+        seen |= set(info["agents"])
+        action = {name: action_spaces[name].sample() for name in info["due"] if name not in gone}
         observation, reward, terminated, truncated, info = env.step(action)
         if type(reward) is not float:
             raise AssertionError(f"step {steps} returned reward {type(reward).__name__}")
         if terminated or truncated:
             break
     _check_agents(observation, info, possible, observation_spaces, gone, seen, steps)
-    seen |= set(observation)
+    seen |= set(info["agents"])
     return f"{len(seen)} of {len(possible)} possible agents in {steps} steps, each in its space"
 
 
@@ -131,12 +126,14 @@ def _check_agents(
 ) -> None:
     """One answer of :func:`_agents_come_and_go`, agent by agent."""
     where = f"step {step}" if step else "the reset"
-    if set(observation) != set(info["agents"]):
+    if set(observation) != set(possible) or not set(info["due"]) <= set(info["agents"]):
         raise AssertionError(
-            f"at {where}, the observation's agents {sorted(observation)} are not "
-            f"info['agents']' {sorted(info['agents'])}"
+            f"at {where}, the observation holds {sorted(observation)} (every possible agent "
+            f"expected) and info['due'] {sorted(info['due'])} (some of info['agents'], "
+            f"{sorted(info['agents'])})"
         )
-    for name, value in observation.items():
+    for name in info["agents"]:
+        value = observation[name]
         if name not in possible:
             raise AssertionError(f"at {where}, {name!r} is not a possible agent")
         if name in gone:
@@ -289,18 +286,13 @@ def _sb3_discrete_problem(
     return None
 
 
-def _pettingzoo_api_test(address: str, token: str | None, timeout: float, come_and_go: bool) -> str:
+def _pettingzoo_api_test(address: str, token: str | None, timeout: float) -> str:
     try:
         from pettingzoo.test import parallel_api_test
 
         from rlenv_client.pettingzoo import RemoteParallelEnv
     except ImportError:
         raise _Skip("pettingzoo is not installed (pip install 'rlenv[pettingzoo]')") from None
-    if come_and_go:
-        raise _Skip(
-            "agents come and go here, and RemoteParallelEnv does not follow them yet "
-            "(issue 42): the checks above follow them"
-        )
     env = RemoteParallelEnv(address=address, timeout=timeout, token=token)
     try:
         with contextlib.redirect_stdout(io.StringIO()):  # it prints "Passed Parallel API test"
@@ -368,7 +360,7 @@ def run_checks(
         results.append(
             _run(
                 "pettingzoo parallel_api_test",
-                lambda: _pettingzoo_api_test(address, token, timeout, _come_and_go(env)),
+                lambda: _pettingzoo_api_test(address, token, timeout),
             )
         )
         if compliance:

@@ -14,7 +14,64 @@ from typing import Any
 from rlenv.protocol import Hello
 from rlenv_tools.forking import StepRecord
 
-__all__ = ["agent_returns", "agents_in_play", "answer_agents", "departures"]
+__all__ = [
+    "AgentHistory",
+    "agent_returns",
+    "agents_in_play",
+    "answer_agents",
+    "check_ticks_supported",
+    "departures",
+]
+
+
+class AgentHistory:
+    """A timeline's agents, step by step: who was in play, who left when, what each earned.
+
+    Args:
+        starting: the agents the reset started.
+        records: the timeline's step records, in order.
+        hello: its server's hello.
+    """
+
+    def __init__(self, starting: Sequence[str], records: Sequence[StepRecord], hello: Hello):
+        self._starting, self._records, self._hello = starting, records, hello
+
+    def in_play(self) -> list[list[str]]:
+        """Each step's agents in play, by step (step 0: those the reset started).
+
+        An agent is in play from the answer it joined in to the answer it left in, both
+        included, whether or not it was due at each step between (one that decides at its own
+        pace is absent from some answers). With a fixed set of agents, every step has them all.
+        """
+        return agents_in_play(self._starting, self._records)
+
+    def departures(self) -> dict[str, int]:
+        """The step at which each agent that left did so (terminated or truncated)."""
+        return departures(self._records)
+
+    def returns(self, upto: int | None = None) -> dict[str, float]:
+        """Each agent's return: the sum of its rewards up to step ``upto`` (default: the end).
+
+        Every agent that was in play by then is listed, in the order they joined; an agent's
+        first answer (``reward`` ``None``) counts nothing. With one agent, its name holds the
+        episode's return.
+        """
+        return agent_returns(self._starting, self._records[:upto], self._hello)
+
+
+def check_ticks_supported(hello: Hello) -> None:
+    """Refuse the tick view of a step where agents come and go or decide at their own pace.
+
+    Raises:
+        ValueError: saying why (an action of one tick would have to hold the agents due at
+            that tick, which the step's action does not).
+    """
+    if hello.possible_agents is not None:
+        raise ValueError(
+            f"the ticks of a step are not supported where agents come and go or decide "
+            f"at their own pace ({hello.environment}'s possible agents): a step's "
+            f"action holds the agents due at its start, not those due at each tick"
+        )
 
 
 def answer_agents(observation: Any, hello: Hello) -> list[str]:

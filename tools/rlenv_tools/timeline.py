@@ -54,7 +54,7 @@ from rlenv_client.replay import EpisodeFile, digest
 from rlenv_client.trusted_targets import check_target
 from rlenv_tools._branch_continuation import Continuation, load_policy
 from rlenv_tools._recorded_steps import check_digest, recorded_steps
-from rlenv_tools._timeline_agents import agent_returns, agents_in_play, answer_agents, departures
+from rlenv_tools._timeline_agents import AgentHistory, answer_agents, check_ticks_supported
 from rlenv_tools._timeline_diff import TimelineDiff, timeline_diff
 from rlenv_tools._timeline_processes import (
     WORKING,
@@ -223,27 +223,10 @@ class Timeline:
         """Every step's reward, 0.0 at step 0 (as the timeline first took them: no re-run)."""
         return [0.0] + [record[1] for record in self._records]
 
-    def agents_in_play(self) -> list[list[str]]:
-        """Each step's agents in play, by step (step 0: those the reset started).
-
-        An agent is in play from the answer it joined in to the answer it left in, both
-        included, whether or not it was due at each step between (one that decides at its own
-        pace is absent from some answers). With a fixed set of agents, every step has them all.
-        """
-        return agents_in_play(self._starting, self._records)
-
-    def departures(self) -> dict[str, int]:
-        """The step at which each agent that left did so (terminated or truncated)."""
-        return departures(self._records)
-
-    def agent_returns(self, upto: int | None = None) -> dict[str, float]:
-        """Each agent's return: the sum of its rewards up to step ``upto`` (default: the end).
-
-        Every agent that was in play by then is listed, in the order they joined; an agent's
-        first answer (``reward`` ``None``) counts nothing. With one agent, its name holds the
-        episode's return.
-        """
-        return agent_returns(self._starting, self._records[:upto], self.hello)
+    @property
+    def agents(self) -> AgentHistory:
+        """Its agents, step by step: in play, departures, returns (agents may come and go)."""
+        return AgentHistory(self._starting, self._records, self.hello)
 
     @property
     def memory(self) -> int:
@@ -313,12 +296,7 @@ class Timeline:
                 hold the agents due at that tick, which the step's action does not).
             RuntimeError: as :meth:`at`.
         """
-        if self.hello.possible_agents is not None:
-            raise ValueError(
-                f"the ticks of a step are not supported where agents come and go or decide "
-                f"at their own pace ({self.hello.environment}'s possible agents): a step's "
-                f"action holds the agents due at its start, not those due at each tick"
-            )
+        check_ticks_supported(self.hello)
         if not 1 <= step <= len(self):
             raise IndexError(f"step {step} has no action (steps 1 to {len(self)} have)")
         *changes, (_, action, frames) = self._steps[step - 1]

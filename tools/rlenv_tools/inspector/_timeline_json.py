@@ -49,13 +49,13 @@ def agents_json(timeline: Timeline, step: int) -> dict[str, Any]:
     and ``left`` (those that joined, and left, at this step) and ``agent_returns`` (each
     agent's return up to this step).
     """
-    in_play = timeline.agents_in_play()
+    in_play = timeline.agents.in_play()
     before = set(in_play[step - 1]) if step else set()
     return {
         "agents_in_play": in_play[step],
         "arrived": [name for name in in_play[step] if name not in before],
-        "left": [name for name, at in timeline.departures().items() if at == step],
-        "agent_returns": to_json(timeline.agent_returns(step)),
+        "left": [name for name, at in timeline.agents.departures().items() if at == step],
+        "agent_returns": to_json(timeline.agents.returns(step)),
     }
 
 
@@ -104,7 +104,7 @@ def side_json(branch: Branch, state: Step | None, agents: Sequence[str]) -> dict
         "length": len(branch.timeline),
         "rewards": to_json(rewards),
         "return": to_json(sum(rewards)),
-        "agent_returns": to_json(branch.timeline.agent_returns()),
+        "agent_returns": to_json(branch.timeline.agents.returns()),
         "observation": None if state is None else shown(state.observation, agents),
         "reward": None if state is None else to_json(state.reward),
     }

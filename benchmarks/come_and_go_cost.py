@@ -20,9 +20,7 @@ from __future__ import annotations
 
 import argparse
 import os
-import subprocess
 import sys
-import tempfile
 import time
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
@@ -31,9 +29,9 @@ from pathlib import Path
 import numpy as np
 from procfs import cpu_seconds
 from versus import compare, single, vector
+from versus import served as serve_with
 
 from rlenv_client import Client
-from rlenv_client.launcher import end_process
 
 THIS = Path(__file__).resolve().parent.parent
 CARTPOLE = "examples.cartpole:CartPoleEnvironment"
@@ -44,21 +42,9 @@ TAG = "examples.tag:TagEnvironment"
 def served(checkout: Path, target: str, *args: str) -> Iterator[tuple[str, int]]:
     """``rlenv serve target`` of ``checkout``'s code; its (address, pid)."""
     path = os.pathsep.join(str(checkout / part) for part in ("", "client", "tools"))
-    process = subprocess.Popen(
-        [sys.executable, "-m", "rlenv", "serve", target, "--port", "0", *args],
-        stdout=subprocess.PIPE,
-        text=True,
-        stdin=subprocess.DEVNULL,
-        start_new_session=True,
-        cwd=tempfile.gettempdir(),
-        env={**os.environ, "PYTHONPATH": path},
-    )
-    try:
-        line = process.stdout.readline()  # type: ignore[union-attr]
-        assert line.startswith("listening on "), line
-        yield line.split()[-1], process.pid
-    finally:
-        end_process(process, 10.0)
+    env = {**os.environ, "PYTHONPATH": path}
+    with serve_with(sys.executable, *args, target=target, env=env) as server:
+        yield server
 
 
 def tag(address: str, pid: int, steps: int) -> Callable[[], tuple[float, float]]:

@@ -23,7 +23,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import ExitStack, contextmanager
 
 import numpy as np
@@ -37,17 +37,20 @@ ENDLESS = {"world": {"track_limit": 1e9}, "agent": {"angle_limit": 1e9}}
 
 
 @contextmanager
-def served(python: str, *args: str) -> Iterator[tuple[str, int]]:
-    """``rlenv serve CARTPOLE`` run by ``python``; its (address, pid)."""
+def served(
+    python: str, *args: str, target: str = CARTPOLE, env: Mapping[str, str] | None = None
+) -> Iterator[tuple[str, int]]:
+    """``rlenv serve target`` (CartPole) run by ``python`` in ``env``; its (address, pid)."""
     # From a folder of no checkout's: ``python -m`` puts the working directory first on the
     # path, which would run this checkout's rlenv with the other's interpreter.
     process = subprocess.Popen(
-        [python, "-m", "rlenv", "serve", CARTPOLE, "--port", "0", *args],
+        [python, "-m", "rlenv", "serve", target, "--port", "0", *args],
         stdout=subprocess.PIPE,
         text=True,
         stdin=subprocess.DEVNULL,
         start_new_session=True,
         cwd=tempfile.gettempdir(),
+        env=None if env is None else dict(env),
     )
     try:
         line = process.stdout.readline()  # type: ignore[union-attr]

@@ -359,16 +359,18 @@ def _same_outcome(
     """Whether the replayed step's reward and flags are the recorded ones.
 
     The recording's last step may have been truncated by the client's time limit
-    (``max_episode_steps``), which the server's answer does not show: there (unless the
-    recording says it was not truncated) the replay applies that truncation too before it
-    compares.
+    (``max_episode_steps``, or gymnasium's ``TimeLimit``), which the server's answer does not
+    show: there (unless the recording says it was not truncated) the replay applies that
+    truncation too before it compares.
     """
     reward, terminated, truncated, info = answer
     if outcome_digest(reward, terminated, truncated, info) == recorded:
         return True
     last = step == len(episode.outcomes or ())  # its end unknown (None): may be truncated
-    return (
-        last
-        and episode.truncated is not False
-        and (outcome_digest(reward, terminated, True, truncate_agents(info)) == recorded)
+    if not last or episode.truncated is False:
+        return False
+    # rlenv's own time limits truncate each agent too; gymnasium's TimeLimit only the episode
+    return recorded in (
+        outcome_digest(reward, terminated, True, truncate_agents(info)),
+        outcome_digest(reward, terminated, True, info),
     )

@@ -290,3 +290,14 @@ def test_driven_agents_due_on_the_way_decide_in_the_server_and_replay_bit_for_bi
             break
     first.close()
     other.close()
+
+
+def test_real_time_is_refused_where_agents_come_and_go() -> None:
+    client = LocalClient(PACED)
+    with pytest.raises(RemoteError) as refused:
+        client.configure(real_time=True)
+    assert refused.value.code == ErrorCode.INVALID_CONFIG
+    assert "real_time is not supported where agents come and go" in refused.value.message
+    observation, _ = client.reset(seed=0)  # lockstep, as ever
+    assert sorted(observation) == ["Fast", "Jerky", "Plain", "Slow"]
+    client.close()

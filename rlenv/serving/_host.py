@@ -177,6 +177,11 @@ class Host:
         for instance in self.instances:
             instance.real_time_changed = self._follow_real_time
             if real_time:
+                if isinstance(instance.roster, AgentsInPlay):
+                    raise ValueError(
+                        "--real-time is not supported where agents come and go or decide at "
+                        "their own pace: they play in lockstep"
+                    )
                 instance.set_real_time(True)
         self._after_send_hooks = any(instance.has_after_send for instance in self.instances)
         self.driver: PolicyDriver | None = None

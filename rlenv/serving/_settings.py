@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, Any
 from rlenv.protocol.errors import ErrorCode, RequestError
 from rlenv.scene2d.recording import VideoRecorder
 from rlenv.serving._actions import check_repeat_action
+from rlenv.serving._agents_in_play import AgentsInPlay
 
 if TYPE_CHECKING:
     from rlenv.serving._instance import Answer, Instance
@@ -186,8 +187,15 @@ class Settings:
     def _check_environment(self, settings: Mapping[str, Any]) -> dict[str, Any]:
         """Check what the server handles itself (real_time, record); the rest is the node's."""
         rest = dict(settings)
-        if "real_time" in rest and type(rest.pop("real_time")) is not bool:
+        real_time = rest.pop("real_time", False)
+        if type(real_time) is not bool:
             raise RequestError(ErrorCode.INVALID_CONFIG, "real_time must be a bool")
+        if real_time and isinstance(self._instance.roster, AgentsInPlay):
+            raise RequestError(
+                ErrorCode.INVALID_CONFIG,
+                "real_time is not supported where agents come and go or decide at their own "
+                "pace: they play in lockstep",
+            )
         if "record" in rest:
             _check_recording(rest.pop("record"), self.record_dir)
         if "repeat_action" in rest:

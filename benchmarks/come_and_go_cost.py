@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 from procfs import cpu_seconds
-from versus import compare, single, vector
+from versus import compare, compare_vectors, single
 from versus import served as serve_with
 
 from rlenv_client import Client
@@ -95,13 +95,7 @@ def main() -> None:
     with ExitStack() as stack:
         ours_v = [stack.enter_context(served(THIS, CARTPOLE, "--instances", "32")) for _ in "ab"]
         theirs_v = [stack.enter_context(served(base, CARTPOLE, "--instances", "32")) for _ in "ab"]
-        steps = max(arguments.steps // 20, 20)
-        compare(
-            "vector step, 64 CartPoles in 2 servers, repeat 4",
-            vector([a for a, _ in ours_v], [p for _, p in ours_v], steps),
-            vector([a for a, _ in theirs_v], [p for _, p in theirs_v], steps),
-            arguments.rounds,
-        )
+        compare_vectors(ours_v, theirs_v, max(arguments.steps // 20, 20), arguments.rounds)
 
 
 if __name__ == "__main__":

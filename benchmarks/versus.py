@@ -148,13 +148,19 @@ def main() -> None:
             stack.enter_context(served(arguments.other_python, "--instances", "32"))
             for _ in range(2)
         ]
-        steps = max(arguments.steps // 20, 20)
-        compare(
-            "vector step, 64 CartPoles in 2 servers, repeat 4",
-            vector([a for a, _ in ours_v], [p for _, p in ours_v], steps),
-            vector([a for a, _ in theirs_v], [p for _, p in theirs_v], steps),
-            arguments.rounds,
-        )
+        compare_vectors(ours_v, theirs_v, max(arguments.steps // 20, 20), arguments.rounds)
+
+
+def compare_vectors(
+    ours: list[tuple[str, int]], theirs: list[tuple[str, int]], steps: int, rounds: int
+) -> None:
+    """The vector figure: two servers of 32 CartPoles a side, ``(address, pid)`` each."""
+    compare(
+        "vector step, 64 CartPoles in 2 servers, repeat 4",
+        vector([a for a, _ in ours], [p for _, p in ours], steps),
+        vector([a for a, _ in theirs], [p for _, p in theirs], steps),
+        rounds,
+    )
 
 
 if __name__ == "__main__":

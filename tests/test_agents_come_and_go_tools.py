@@ -454,3 +454,34 @@ def test_the_page_shows_who_is_in_play_and_their_returns(came_and_went: Recorded
             assert "returns: A " in text
     finally:
         page.close()
+
+
+def test_a_recording_whose_driven_agents_decided_during_steps_says_why_it_cannot_replay(
+    tmp_path: Path,
+) -> None:
+    prey = [f"--policy=Prey{number}=heuristic" for number in range(1, 9)]
+    env = RecordEpisodes(
+        RemoteEnv(hunt.TARGET, max_restarts=0, share_server=False, server_args=prey), tmp_path
+    )
+    try:
+        observation, info = env.reset(seed=1)
+        for _ in range(400):
+            hunter = observation["Hunter"]
+            observation, _, terminated, truncated, info = env.step({"Hunter": hunter[4:6] / 10})
+            if terminated or truncated:
+                break
+    finally:
+        env.close()
+    path = next(tmp_path.glob("episode-*.rlenv"))
+    events = EpisodeFile.load(path).snapshot["events"]
+    assert any(len(event) == 4 for event in events)  # prey decided between the hunter's
+    replayed = subprocess.run(
+        [sys.executable, "-m", "rlenv", "replay", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert replayed.returncode == 1
+    assert "its server drove agents that decided during a step" in replayed.stdout
+    with pytest.raises(ValueError, match="a timeline cannot take those steps yet"):
+        Timeline.open(path, trust_target=True)

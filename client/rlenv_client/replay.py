@@ -309,6 +309,13 @@ def replay(episode: EpisodeFile, client: BaseClient, *, keep: bool = False) -> R
         client: a client of a (fresh) server of the recording's environment.
         keep: also return every observation, action and reward (``result.trajectory``).
     """
+    if any(event[0] == "action" and len(event) == 4 for event in episode.snapshot["events"]):
+        return ReplayResult(
+            0,
+            "its server drove agents that decided during a step (rlenv serve --policy, where "
+            "agents decide at their own pace): a replay step by step cannot play that back; "
+            "restore its snapshot on a server instead (client.restore)",
+        )
     start = {**episode.snapshot, "events": []}
     observation, _ = client.restore(start)
     expected = iter(episode.observations)

@@ -20,8 +20,16 @@ def recorded_steps(episode: EpisodeFile) -> Events:
     """Each step's events in ``episode``, its action last.
 
     Raises:
-        ValueError: the recording's digests are not one more than its actions.
+        ValueError: the recording's digests are not one more than its actions, or its
+            server drove agents that decided during a step (not supported: a timeline takes
+            one action per step).
     """
+    if any(event[0] == "action" and len(event) == 4 for event in episode.snapshot["events"]):
+        raise ValueError(
+            "its server drove agents that decided during a step (rlenv serve --policy, where "
+            "agents decide at their own pace): a timeline cannot take those steps yet; restore "
+            "its snapshot on a server instead"
+        )
     steps: Events = []
     pending: list[list[Any]] = []
     for event in episode.snapshot["events"]:

@@ -238,7 +238,8 @@ class AgentsInPlay(Roster):
     def outcome(self, reports: bool) -> Outcome:
         """The answer's agents' rewards (``None`` for one that just joined) and flags."""
         outcomes: dict[str, dict[str, Any]] = {}
-        for agent in self.answering(reports):
+        answering = self.answering(reports)
+        for agent in answering:
             name = agent.name
             reward = None if name in self.new else float(agent.reward) if reports else 0.0
             outcomes[name] = {"reward": reward, "terminated": False, "truncated": False}
@@ -250,9 +251,9 @@ class AgentsInPlay(Roster):
             }
         terminated, truncated = self.joint_end()
         if reports:
-            for agent in self.answering(reports):
+            for agent in answering:
                 agent.reward = 0.0
-            self.asked = {agent.name for agent in self.answering(reports)}
+            self.asked = {agent.name for agent in answering}
             self.due, self.departed, self.new = set(), {}, set()
         total = sum(o["reward"] for o in outcomes.values() if o["reward"] is not None)
         return total, terminated, truncated, outcomes

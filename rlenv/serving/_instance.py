@@ -169,6 +169,7 @@ class Instance:
         self.responds_itself = "_send_response" in hooks
         self.has_after_send = "_after_send_response" in hooks
         players = self.players = Players()  # who acts for agents beside the controller
+        self._decide = lambda: players.decide(self.roster)  # made once: act is a hot path
         self.claim, self.release_claim = players.claim, players.release
         self.requester = Requester()  # who sent the request served (the host shares its own)
         self.real_time_changed: Callable[[], None] | None = None  # the host's, to follow it
@@ -404,9 +405,7 @@ class Instance:
         try:
             if self.multi_agent and not self.replaying:
                 action = players.complete(action, heuristic, roster)
-            self.episode.act(
-                action, frames, self.replaying, lambda: players.decide(roster), goes_on
-            )
+            self.episode.act(action, frames, self.replaying, self._decide, goes_on)
         except PolicyError as error:  # a failed episode; the environment is intact
             self.abandon_episode(f"the episode failed: {error}")
             raise RequestError(ErrorCode.ENVIRONMENT_ERROR, f"{error}; reset required") from None

@@ -19,7 +19,6 @@ from __future__ import annotations
 import logging
 import os
 import signal
-import sys
 from collections.abc import Callable
 from types import FrameType
 from typing import TYPE_CHECKING
@@ -110,7 +109,7 @@ def run(environment: RLEnvironment | type[RLEnvironment]) -> None:
         if error is not hosting.refused:
             raise
         logger.debug("rlenv.run could not listen", exc_info=error)
-        print(f"rlenv.run: {error}", file=sys.stderr)
+        logger.error("rlenv.run: %s", error)  # one line on stderr (run configures logging)
         raise SystemExit(2) from None
     finally:
         hosting.endpoint.close()

@@ -131,7 +131,25 @@ class ComeAndGoEnvironment(RLEnvironment):
             self.get_node("C").set_truncated()
 
 
-class PacedEnvironment(RLEnvironment):
+class _CountingEnvironment(RLEnvironment):
+    """A fixed set of walkers, counting the episode's ticks; ``_tick`` acts on each."""
+
+    ticks = 0
+
+    def _reset(self, options: Mapping[str, Any]) -> None:
+        self.ticks = 0
+        for agent in self.agents:
+            agent.reset(None)
+
+    def _physics_process(self, delta: float) -> None:
+        self.ticks += 1
+        self._tick()
+
+    def _tick(self) -> None:
+        """What the environment does at the tick just counted."""
+
+
+class PacedEnvironment(_CountingEnvironment):
     """Four agents, three paces: Fast every 2 ticks, Slow every 6 at 3, Plain every answer."""
 
     def __init__(self) -> None:
@@ -143,21 +161,14 @@ class PacedEnvironment(RLEnvironment):
         for agent in (fast, slow, plain, jerky):
             self.add_child(agent)
         self.add_child(LineWorld())
-        self.ticks = 0
 
-    def _reset(self, options: Mapping[str, Any]) -> None:
-        self.ticks = 0
-        for agent in self.agents:
-            agent.reset(None)
-
-    def _physics_process(self, delta: float) -> None:
-        self.ticks += 1
+    def _tick(self) -> None:
         if self.ticks >= 24:
             for agent in self.agents:
                 agent.set_truncated()
 
 
-class FixedEnvironment(RLEnvironment):
+class FixedEnvironment(_CountingEnvironment):
     """Two walkers, no declaration, no periods: every agent at every answer, as ever."""
 
     def __init__(self) -> None:
@@ -165,14 +176,7 @@ class FixedEnvironment(RLEnvironment):
         self.add_child(Walker("A"))
         self.add_child(Walker("B"))
         self.add_child(LineWorld())
-        self.ticks = 0
 
-    def _reset(self, options: Mapping[str, Any]) -> None:
-        self.ticks = 0
-        for agent in self.agents:
-            agent.reset(None)
-
-    def _physics_process(self, delta: float) -> None:
-        self.ticks += 1
+    def _tick(self) -> None:
         if self.ticks == 6:
             self.add_child(Walker("C"))

@@ -20,15 +20,17 @@ def add_http(commands: Commands) -> None:
     http = commands.add_parser(
         "http",
         help="serve environments over HTTP/JSON (needs the http extra)",
-        description="An HTTP/JSON gateway: sessions under /v1/envs, bevy_rl's routes on TARGET, "
-        "a WebSocket and server-sent events per session, GET /openapi.json. See docs/http.md.",
+        description="An HTTP/JSON gateway: sessions under /v1/envs, bevy_rl's routes and "
+        "OpenEnv's (under /openenv) on TARGET, a WebSocket and server-sent events per "
+        "session, GET /openapi.json. See docs/http.md.",
     )
     http.add_argument(
         "target",
         nargs="?",
         default=None,
-        help="the environment class (MODULE:CLASS) or a running server "
-        "(HOST:PORT); sessions may also use the registered ids",
+        help="the environment class (MODULE:CLASS), a running server (HOST:PORT) "
+        "or a registered id (rlenv/CartPole-v1, with its time limit); sessions may "
+        "also use the registered ids",
     )
     http.add_argument(
         "--host", default=DEFAULT_HOST, help=f"address to bind (default {DEFAULT_HOST})"

@@ -79,26 +79,17 @@ class _Handlers:
 
     def __init__(self, gateway: Gateway) -> None:
         self.gateway = gateway
-        self.creating = asyncio.Lock()
 
     async def session(self) -> Session:
         """The ``bevy`` session, created and reset by the first request that needs it."""
-        gateway = self.gateway
-        if gateway.catalog.target is None:
+        target = self.gateway.catalog.target
+        if target is None:
             raise Problem(
                 "not_found",
                 "bevy_rl's routes drive the command line's TARGET, and "
                 "this gateway has none (rlenv http TARGET)",
             )
-        async with self.creating:  # two first requests at once create one session
-            found = gateway.sessions.find(BEVY_SESSION)
-            if found is None:
-                found = await gateway.sessions.create(
-                    gateway.catalog.target, session_id=BEVY_SESSION
-                )
-                await found.reset()
-        found.touch()
-        return found
+        return await self.gateway.sessions.shared(BEVY_SESSION, target, reset=True)
 
     async def state(self, request: Request) -> Response:
         return json_response(await (await self.session()).observe())

@@ -372,6 +372,7 @@ class Sessions:
         self._clock = clock
         self._sessions: dict[str, Session] = {}
         self._opening: dict[str | None, int] = {}  # creations under way, by client
+        self._creating_shared = asyncio.Lock()
 
     def __len__(self) -> int:
         return len(self._sessions)
@@ -461,6 +462,28 @@ class Sessions:
                 del self._opening[owner]
         logger.info("session %s created on %s", session.id, env_id)
         return session
+
+    async def shared(self, session_id: str, env_id: str, *, reset: bool = False) -> Session:
+        """The shared session ``session_id`` (owned by no client), created on first use.
+
+        Two first requests at once create one session. Its ``last_used`` is now.
+
+        Args:
+            session_id: its id (bevy_rl's ``bevy``, OpenEnv's ``openenv``).
+            env_id: what it is created on.
+            reset: reset it once created.
+
+        Raises:
+            Problem: as :meth:`create`, and the reset's.
+        """
+        async with self._creating_shared:
+            found = self._sessions.get(session_id)
+            if found is None:
+                found = await self.create(env_id, session_id=session_id)
+                if reset:
+                    await found.reset()
+        found.touch()
+        return found
 
     async def abandon(self, session: Session) -> None:
         """Delete ``session``, just created for a client that left before it heard of it."""

@@ -35,7 +35,7 @@ if TYPE_CHECKING:
     from rlenv_tools.http._sessions import Session
     from rlenv_tools.http.app import Gateway
 
-__all__ = ["stream_endpoints"]
+__all__ = ["deny", "stream_endpoints"]
 
 _KEEP_ALIVE = 15.0  # seconds between comments on a quiet event stream
 _MESSAGE_KEYS = {
@@ -64,7 +64,7 @@ class _Handlers:
         try:
             session = sessions.get(session_id)
         except Problem as problem:
-            await _deny(websocket, problem)
+            await deny(websocket, problem)
             return
         await websocket.accept()
         session.websockets += 1
@@ -161,7 +161,7 @@ async def _answer(session: Session, text: str | bytes) -> dict[str, Any]:
     return {"type": "close"}
 
 
-async def _deny(websocket: WebSocket, problem: Problem) -> None:
+async def deny(websocket: WebSocket, problem: Problem) -> None:
     """Refuse a WebSocket with the problem as an HTTP answer (or close it, 1008)."""
     if "websocket.http.response" in websocket.scope.get("extensions", {}):
         await websocket.send_denial_response(problem.response(websocket.url.path))

@@ -1,8 +1,9 @@
 """What an ``env_id`` names, and how a session's environment is opened.
 
 A session's ``env_id`` is the command line's TARGET or an id registered by
-:mod:`rlenv_client.registration` (``rlenv/CartPole-v0`` ..., with its time limit). Nothing
-else: a request never names a module to import or an address to connect to.
+:mod:`rlenv_client.registration` (``rlenv/CartPole-v0`` ..., with its time limit; a TARGET
+may be one of them too). Nothing else: a request never names a module to import or an address
+to connect to.
 
 Where the environment runs: never in the gateway's process (see ``docs/http.md`` for the
 measurements behind this), so that a deadline holds whatever its code does and a hung
@@ -84,7 +85,8 @@ class Catalog:
     """The ``env_id`` values served and how each is opened; see the module docstring.
 
     Args:
-        target: the command line's TARGET (``MODULE:CLASS`` or ``HOST:PORT``), or ``None``.
+        target: the command line's TARGET (``MODULE:CLASS``, ``HOST:PORT`` or a registered id,
+            which keeps its time limit), or ``None``.
         timeout: seconds an environment may take to answer one request.
     """
 
@@ -95,7 +97,7 @@ class Catalog:
             env_id: Entry(env_id, r.target, r.max_episode_steps)
             for env_id, r in ENVIRONMENTS.items()
         }
-        if target is not None:
+        if target is not None and target not in self._entries:
             self._entries[target] = Entry(target, target)
 
     def ids(self) -> list[str]:
@@ -126,7 +128,7 @@ class Catalog:
         """
         if self.target is None:
             return None
-        opened = self._open_blocking(Entry(self.target, self.target), Runner(self.timeout))
+        opened = self._open_blocking(self._entries[self.target], Runner(self.timeout))
         try:
             return opened.client.hello
         finally:

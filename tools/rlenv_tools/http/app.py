@@ -1,7 +1,8 @@
 """The gateway as a Starlette application, and ``rlenv http``'s server (uvicorn).
 
 :func:`create_app` assembles the route tables (:mod:`~rlenv_tools.http._routes`,
-:mod:`~rlenv_tools.http._streams`, :mod:`~rlenv_tools.http._bevy`, ``/openapi.json``) behind the
+:mod:`~rlenv_tools.http._streams`, :mod:`~rlenv_tools.http._bevy`,
+:mod:`~rlenv_tools.http._openenv`, ``/openapi.json``) behind the
 :class:`~rlenv_tools.http._guard.Guard`, with every error answered as a problem (unknown routes,
 methods, and the gateway's own bugs included: never an HTML page). :func:`serve` binds the
 socket, says where, and runs uvicorn until SIGTERM or SIGINT: open streams end, sessions close
@@ -36,6 +37,7 @@ from rlenv_tools.http._bevy import bevy_endpoints
 from rlenv_tools.http._endpoints import Answer, Endpoint, JSONRoute
 from rlenv_tools.http._guard import Guard
 from rlenv_tools.http._openapi import openapi_document
+from rlenv_tools.http._openenv import openenv_endpoints
 from rlenv_tools.http._routes import component_schemas, session_endpoints, target_schemas
 from rlenv_tools.http._sessions import MAX_SESSIONS_PER_CLIENT, Sessions
 from rlenv_tools.http._streams import stream_endpoints
@@ -56,7 +58,8 @@ class Settings:
     """How the gateway serves.
 
     Attributes:
-        target: the command line's TARGET (``MODULE:CLASS`` or ``HOST:PORT``), or ``None``.
+        target: the command line's TARGET (``MODULE:CLASS``, ``HOST:PORT`` or a registered
+            id), or ``None``.
         host: the address to bind (loopback by default).
         port: the port to bind (0: a free one).
         token: the bearer token every request must carry (required beyond loopback).
@@ -108,6 +111,7 @@ class Gateway:
             *session_endpoints(self),
             *stream_endpoints(self),
             *bevy_endpoints(self),
+            *openenv_endpoints(self),
             Endpoint(
                 "GET",
                 "/openapi.json",
@@ -134,6 +138,7 @@ class Gateway:
                 "websocket": True,
                 "events": True,
                 "bevy_rl": bool(settings.target),
+                "openenv": "/openenv" if settings.target else None,
                 "render": ["image/png", "application/octet-stream"],
                 "snapshots": True,
                 "openapi": "/openapi.json",

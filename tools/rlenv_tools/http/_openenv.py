@@ -160,9 +160,8 @@ class _Handlers:
                 answer = await self.answer(
                     session, message.get("text") or message.get("bytes") or b"", websocket
                 )
-                if answer is None:
-                    await websocket.close(1000)
-                    return
+                if answer is None:  # close: the session ends first, then the WebSocket
+                    break
                 await _send(websocket, answer)
         except WebSocketDisconnect:  # gone while its answer was on the way
             return
@@ -170,6 +169,7 @@ class _Handlers:
             session.websockets -= 1
             if self.sessions.find(session.id) is session:
                 await self.sessions.delete(session.id)
+        await websocket.close(1000)
 
     async def answer(
         self, session: Session, text: str | bytes, websocket: WebSocket

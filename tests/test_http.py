@@ -248,6 +248,13 @@ def test_openapi_is_generated_from_the_routes(gateway: Gateway) -> None:
         "/visual_observations": {"get"},
         "/reset": {"get", "post"},
         "/step": {"get"},
+        "/openenv/ws": {"get"},
+        "/openenv/reset": {"post"},
+        "/openenv/step": {"post"},
+        "/openenv/state": {"get"},
+        "/openenv/health": {"get"},
+        "/openenv/schema": {"get"},
+        "/openenv/metadata": {"get"},
         "/openapi.json": {"get"},
     }
     assert {path: set(item) for path, item in paths.items()} == expected

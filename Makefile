@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
 .PHONY: demo test test-lowest test-ray test-browser test-minari test-onnx test-dm-env-rpc\
-	test-godot-rl test-package screenshot\
+	test-godot-rl test-openenv test-package screenshot\
 	screenshot-time-travel plinko-picture sb3 rllib cleanrl bench-http bench-train docs lint typecheck\
 	vectors clean
 
@@ -172,6 +172,22 @@ test-godot-rl: $(STAMP) $(GODOT_RL_EXAMPLE)
 		GODOT_RL_EXAMPLE=$(abspath $(GODOT_RL_EXAMPLE)) OMP_NUM_THREADS=1 \
 		$(BIN)/python -m pytest -m godot_rl tests/test_godot_rl.py; fi
 
+# Optional: OpenEnv's own client (openenv-core 0.3.0's GenericEnvClient) plays rlenv/CartPole-v1
+# and rlenv/Pair-v0 through rlenv http's /openenv routes, bit for bit like gym.make
+# (tests/test_openenv.py; about 20 s). openenv-core brings FastAPI, Gradio, the OpenAI client and
+# fastmcp, none of which rlenv needs, so it gets a venv of its own, .venv-openenv, beside rlenv's
+# test extra.
+OPENENV_VENV := .venv-openenv
+
+$(OPENENV_VENV)/.installed: pyproject.toml
+	$(PYTHON) -m venv $(OPENENV_VENV)
+	$(OPENENV_VENV)/bin/python -m pip install --quiet --upgrade pip
+	$(OPENENV_VENV)/bin/python -m pip install --quiet openenv-core==0.3.0 -e ".[test]"
+	touch $@
+
+test-openenv: $(OPENENV_VENV)/.installed
+	$(OPENENV_VENV)/bin/python -m pytest -m openenv tests/test_openenv.py
+
 # Optional: what serving costs a real trainer (benchmarks/train_speed.py: SB3 PPO and SyncVectorEnv
 # against the environment in process, under three conditions; about 15 minutes). torch first.
 bench-train: $(STAMP)
@@ -211,4 +227,5 @@ vectors: $(STAMP)
 	$(BIN)/python -m tests.protocol_vectors
 
 clean:
-	rm -rf $(VENV) $(CLEANRL_VENV) $(GODOT_RL_VENV) $(LOWEST_VENV) build dist site *.egg-info
+	rm -rf $(VENV) $(CLEANRL_VENV) $(GODOT_RL_VENV) $(OPENENV_VENV) $(LOWEST_VENV) build dist site \
+		*.egg-info

@@ -18,6 +18,7 @@ import gymnasium as gym
 import jsonschema
 import numpy as np
 import pytest
+from conftest import Serve
 from http_gateway import Gateway, assert_problem
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 from websockets.sync.client import ClientConnection, connect
@@ -322,6 +323,24 @@ def test_websockets_count_against_their_clients_sessions() -> None:
             assert third.ask("reset", {})["type"] == "observation"
     finally:
         limited.close()
+
+
+def test_a_session_that_cannot_be_made_is_a_factory_error(serve: Serve) -> None:
+    server = serve()
+    relay = Gateway(server.address)  # described at its start, then its server is gone
+    try:
+        server.close()
+        with openenv_websocket(relay) as conversation:
+            refused = json.loads(conversation.websocket.recv(timeout=60))["data"]
+            assert refused["code"] == "FACTORY_ERROR"
+            assert refused["problem"]["code"] == "environment_lost"
+            with pytest.raises(ConnectionClosed) as closed:
+                conversation.websocket.recv(timeout=30)
+            assert closed.value.rcvd is not None and closed.value.rcvd.code == 1011
+        assert relay.get("/v1/envs") == {"envs": []}
+        assert relay.get("/openenv/health") == {"status": "healthy"}
+    finally:
+        relay.close()
 
 
 def test_without_a_target_the_routes_say_so_and_the_token_guards_them() -> None:

@@ -68,7 +68,6 @@ _WS_CODES = {  # the problems' codes as OpenEnv's WSErrorCode
     ErrorCode.BAD_REQUEST: "VALIDATION_ERROR",
     ErrorCode.INVALID_ACTION: "VALIDATION_ERROR",
     ErrorCode.INVALID_CONFIG: "VALIDATION_ERROR",
-    "session_limit": "CAPACITY_REACHED",
     ErrorCode.TIMEOUT: "SESSION_ERROR",
     "environment_lost": "SESSION_ERROR",
 }
@@ -147,7 +146,7 @@ class _Handlers:
                 target, owner=None if client is None else client.host
             )
         except Problem as problem:
-            code = _WS_CODES.get(problem.code, "FACTORY_ERROR")
+            code = "CAPACITY_REACHED" if problem.code == "session_limit" else "FACTORY_ERROR"
             await _send(websocket, _error(problem, code, websocket.url.path))
             await websocket.close(_WS_CLOSE_CODES.get(problem.code, 1011), problem.detail[:120])
             return

@@ -174,7 +174,7 @@ test-godot-rl: $(STAMP) $(GODOT_RL_EXAMPLE)
 
 # Optional: OpenEnv's own client (openenv-core 0.3.0's GenericEnvClient) plays rlenv/CartPole-v1
 # and rlenv/Pair-v0 through rlenv http's /openenv routes, bit for bit like gym.make
-# (tests/test_openenv.py; about 20 s). openenv-core brings FastAPI, Gradio, the OpenAI client and
+# (tests/test_openenv.py; under a minute, after pip). openenv-core brings FastAPI, Gradio, the OpenAI client and
 # fastmcp, none of which rlenv needs, so it gets a venv of its own, .venv-openenv, beside rlenv's
 # test extra.
 OPENENV_VENV := .venv-openenv

@@ -43,8 +43,9 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 from rlenv.protocol.errors import ErrorCode
 from rlenv.serving._actions import MAX_REPEAT_ACTION
 from rlenv_tools.http._endpoints import Answer, Endpoint, json_response, object_body, parse_json
+from rlenv_tools.http._routes import target_schemas
 from rlenv_tools.http._streams import deny
-from rlenv_tools.http.json_spaces import dumps, json_schema
+from rlenv_tools.http.json_spaces import dumps
 from rlenv_tools.http.problems import Problem
 
 if TYPE_CHECKING:
@@ -71,7 +72,6 @@ _WS_CODES = {  # the problems' codes as OpenEnv's WSErrorCode
     ErrorCode.TIMEOUT: "SESSION_ERROR",
     "environment_lost": "SESSION_ERROR",
 }
-_WS_CLOSE_CODES = {"session_limit": 1013}  # try again later; any other failure to open: 1011
 _PROBLEMS = ("not_found", "environment_error", "environment_lost", ErrorCode.TIMEOUT)
 
 
@@ -145,10 +145,11 @@ class _Handlers:
             session = await self.sessions.create(
                 target, owner=None if client is None else client.host
             )
-        except Problem as problem:
-            code = "CAPACITY_REACHED" if problem.code == "session_limit" else "FACTORY_ERROR"
+        except Problem as problem:  # full: try again later (1013); else an internal error
+            full = problem.code == "session_limit"
+            code = "CAPACITY_REACHED" if full else "FACTORY_ERROR"
             await _send(websocket, _error(problem, code, websocket.url.path))
-            await websocket.close(_WS_CLOSE_CODES.get(problem.code, 1011), problem.detail[:120])
+            await websocket.close(1013 if full else 1011, problem.detail[:120])
             return
         session.websockets += 1
         try:
@@ -224,12 +225,11 @@ class _Handlers:
 
     async def schema(self, request: Request) -> Response:
         self.target()
-        hello = self.gateway.hello
-        assert hello is not None  # described before serving
+        observation, action = target_schemas(self.gateway)
         return json_response(
             {
-                "action": _action_schema(json_schema(hello.action_space, images=False)),
-                "observation": _observation_schema(json_schema(hello.observation_space)),
+                "action": _action_schema(action),
+                "observation": _observation_schema(observation),
                 "state": _STATE,
             }
         )
@@ -237,16 +237,16 @@ class _Handlers:
     async def metadata(self, request: Request) -> Response:
         target = self.target()
         hello = self.gateway.hello
-        assert hello is not None
-        about = self.gateway.about()
+        described = (
+            target if hello is None else f"{hello.environment} (agents: {', '.join(hello.agents)})"
+        )
         return json_response(
             {
                 "name": target,
-                "description": f"rlenv's {hello.environment} (agents: "
-                f"{', '.join(hello.agents)}), served by rlenv http: each WebSocket a session "
-                "of its own; GET /openenv/schema gives its action and observation",
+                "description": f"rlenv's {described}, served by rlenv http: each WebSocket "
+                "a session of its own; GET /openenv/schema gives its action and observation",
                 "readme_content": None,
-                "version": about["rlenv"],
+                "version": self.gateway.about()["rlenv"],
                 "author": None,
                 "documentation_url": None,
             }

@@ -325,6 +325,25 @@ def test_websockets_count_against_their_clients_sessions() -> None:
         limited.close()
 
 
+def test_the_gateways_deadline_holds_and_the_other_websockets_go_on() -> None:
+    slow = Gateway("examples.faulty:SlowEnvironment", "--timeout", "3")  # action 1 hangs
+    try:
+        with openenv_websocket(slow) as hung, openenv_websocket(slow) as fine:
+            for conversation in (hung, fine):
+                assert conversation.ask("reset", {"seed": 0})["type"] == "observation"
+            started = time.monotonic()
+            timed_out = hung.error("step", {"action": 1})
+            assert time.monotonic() - started < 30
+            assert timed_out["code"] == "SESSION_ERROR"
+            assert timed_out["problem"]["code"] == "timeout"
+            assert hung.error("step", {"action": 0})["problem"]["code"] == "timeout"  # over
+            assert hung.ask("state")["data"]["status"] == "timed_out"
+            step = fine.ask("step", {"action": 0})["data"]
+            assert step["observation"]["observation"] == [1]
+    finally:
+        slow.close()
+
+
 def test_a_session_that_cannot_be_made_is_a_factory_error(serve: Serve) -> None:
     server = serve()
     relay = Gateway(server.address)  # described at its start, then its server is gone

@@ -148,6 +148,20 @@ def assert_problem(reply: Reply, status: int, code: str) -> dict[str, Any]:
     return problem
 
 
+def assert_same_observation(wire: Any, expected: Any) -> None:
+    """A JSON observation is gymnasium's float32 one, bit for bit (keyed by agent or not).
+
+    float32 -> JSON -> float32 is exact: the gateway writes each value's shortest repr.
+    """
+    if isinstance(expected, dict):
+        assert isinstance(wire, dict) and wire.keys() == expected.keys(), (wire, expected)
+        for name in expected:
+            assert_same_observation(wire[name], expected[name])
+        return
+    assert expected.dtype == np.float32, expected
+    assert np.array_equal(np.asarray(wire, dtype=np.float32), expected), (wire, expected)
+
+
 def decode_png(data: bytes) -> np.ndarray:
     """The pixels of a PNG written with filter type 0 (as the gateway writes them)."""
     assert data[:8] == b"\x89PNG\r\n\x1a\n"

@@ -16,10 +16,9 @@ from typing import Any
 
 import gymnasium as gym
 import jsonschema
-import numpy as np
 import pytest
 from conftest import Serve
-from http_gateway import Gateway, assert_problem
+from http_gateway import Gateway, assert_problem, assert_same_observation
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 from websockets.sync.client import ClientConnection, connect
 
@@ -80,22 +79,6 @@ def _wait_until_gone(gateway: Gateway, session_id: str, seconds: float = 30.0) -
         time.sleep(0.02)
 
 
-def _as_gymnasium(observation: Any) -> Any:
-    """A wire observation as gymnasium's float32 arrays (float32 -> JSON -> float32 is exact)."""
-    if isinstance(observation, dict):
-        return {name: _as_gymnasium(value) for name, value in observation.items()}
-    return np.asarray(observation, dtype=np.float32)
-
-
-def _assert_same(wire: Any, expected: Any) -> None:
-    if isinstance(expected, dict):
-        assert wire.keys() == expected.keys()
-        for name in expected:
-            _assert_same(wire[name], expected[name])
-    else:
-        assert expected.dtype == np.float32 and np.array_equal(wire, expected), (wire, expected)
-
-
 def test_health_schema_and_metadata_describe_the_target(gateway: Gateway) -> None:
     assert gateway.get("/openenv/health") == {"status": "healthy"}
     schema = gateway.get("/openenv/schema")
@@ -143,7 +126,7 @@ def test_each_websocket_is_a_session_of_its_own_played_as_gymnasium_plays_it(
             }
             jsonschema.validate(data["observation"], schema["observation"])
             expected, _ = expected_env.reset(seed=3)
-            _assert_same(_as_gymnasium(data["observation"]["observation"]), expected)
+            assert_same_observation(data["observation"]["observation"], expected)
             steps = 0
             while True:  # a balancing policy, to the time limit
                 action = int(expected[2] + 0.5 * expected[3] > 0)
@@ -151,7 +134,7 @@ def test_each_websocket_is_a_session_of_its_own_played_as_gymnasium_plays_it(
                 expected, reward, terminated, truncated, _ = expected_env.step(action)
                 steps += 1
                 observation = answer["observation"]
-                _assert_same(_as_gymnasium(observation["observation"]), expected)
+                assert_same_observation(observation["observation"], expected)
                 assert answer["reward"] == reward
                 assert observation["metadata"]["terminated"] == terminated
                 assert observation["metadata"]["truncated"] == truncated
@@ -173,7 +156,7 @@ def test_each_websocket_is_a_session_of_its_own_played_as_gymnasium_plays_it(
             assert ended["problem"]["code"] == "reset_required"
             again = conversation.ask("reset", {})["data"]  # no seed: the episodes go on
             expected, _ = expected_env.reset()
-            _assert_same(_as_gymnasium(again["observation"]["observation"]), expected)
+            assert_same_observation(again["observation"]["observation"], expected)
             state = conversation.ask("state")["data"]
             assert state["episode"] == 2 and state["step_count"] == 0
             assert state["episode_id"] not in (None, "first")
@@ -284,14 +267,14 @@ def test_several_agents_travel_keyed_by_agent() -> None:
         with openenv_websocket(pair) as conversation:
             data = conversation.ask("reset", {"seed": 5})["data"]
             expected, _ = expected_env.reset(seed=5)
-            _assert_same(_as_gymnasium(data["observation"]["observation"]), expected)
+            assert_same_observation(data["observation"]["observation"], expected)
             for _ in range(400):
                 action = {
                     name: a.tolist() for name, a in expected_env.action_space.sample().items()
                 }
                 data = conversation.ask("step", {"action": action})["data"]
                 expected, reward, terminated, truncated, info = expected_env.step(action)
-                _assert_same(_as_gymnasium(data["observation"]["observation"]), expected)
+                assert_same_observation(data["observation"]["observation"], expected)
                 metadata = data["observation"]["metadata"]
                 assert data["reward"] == reward and data["done"] == (terminated or truncated)
                 assert (metadata["terminated"], metadata["truncated"]) == (terminated, truncated)

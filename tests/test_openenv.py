@@ -13,7 +13,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
-from http_gateway import Gateway
+from http_gateway import Gateway, assert_same_observation
 
 import rlenv_client  # noqa: F401  (registers the ids)
 
@@ -35,34 +35,19 @@ def cartpole() -> Iterator[Gateway]:
     started.close()
 
 
-def _as_gymnasium(observation: Any) -> Any:
-    if isinstance(observation, dict):
-        return {name: _as_gymnasium(value) for name, value in observation.items()}
-    return np.asarray(observation, dtype=np.float32)
-
-
-def _assert_same(wire: Any, expected: Any) -> None:
-    if isinstance(expected, dict):
-        assert wire.keys() == expected.keys()
-        for name in expected:
-            _assert_same(wire[name], expected[name])
-    else:
-        assert expected.dtype == np.float32 and np.array_equal(wire, expected), (wire, expected)
-
-
 def _play(env: Any, expected_env: gym.Env, seed: int | None, policy: Any) -> tuple[int, bool, bool]:
     """One episode through OpenEnv's client beside gymnasium's; its length and flags."""
     result = env.reset() if seed is None else env.reset(seed=seed)
     expected, _ = expected_env.reset(seed=seed)
     assert result.reward is None and result.done is False
-    _assert_same(_as_gymnasium(result.observation["observation"]), expected)
+    assert_same_observation(result.observation["observation"], expected)
     steps = 0
     while True:
         action = policy(expected)
         result = env.step({"action": action})
         expected, reward, terminated, truncated, info = expected_env.step(action)
         steps += 1
-        _assert_same(_as_gymnasium(result.observation["observation"]), expected)
+        assert_same_observation(result.observation["observation"], expected)
         metadata = result.observation["metadata"]
         assert result.reward == reward and result.done == (terminated or truncated)
         assert (metadata["terminated"], metadata["truncated"]) == (terminated, truncated)

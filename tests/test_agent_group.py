@@ -395,3 +395,21 @@ def test_an_observer_sees_the_members_in_play_and_takes_no_reward(serve: Serve) 
     assert (
         info["agents"]["Discs"]["reward"].tobytes() == alone["agents"]["Discs"]["reward"].tobytes()
     )
+
+
+def test_member_slots_out_of_range_or_not_ints_are_refused_naming_the_group() -> None:
+    from swarm_envs import Discs
+
+    group = Discs("Herd")
+    group._members.begin()  # a reset's start: slots 0 to 5 in play
+    for index, message in [
+        (8, "member 8 is out of range: group Herd has slots 0..7"),
+        (-1, "member -1 is out of range"),
+        (True, "a member is an int slot in 0..7, got True"),
+        (2.0, "a member is an int slot in 0..7, got 2.0"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            group.add_member(index)
+    assert group.add_member() == 6 and group.add_member(np.int64(7)) == 7
+    with pytest.raises(ValueError, match="group Herd has no free member slot"):
+        group.add_member()

@@ -400,7 +400,8 @@ class AgentVectorEnv(VectorEnv):
             _, done_t, done_c = self._agent_outcome(name, joint, ended, infos)
             self._others_done[name] |= done_t | done_c
             self._others_done[name][ended] = False
-        waiting = self._waiting
+        # a waiting slot whose agent joined in the very step its instance ended: its one row
+        waiting = self._waiting & ~self._joined_at_the_end(ended, infos)
         for j, name in enumerate(self.learners):
             reward, done_t, done_c = self._agent_outcome(name, joint, ended, infos)
             span = slice(j, self.num_envs, k)
@@ -414,7 +415,7 @@ class AgentVectorEnv(VectorEnv):
         for index in np.flatnonzero(finished):
             instance = index // k
             name = self.learners[index % k]
-            if self._waiting[index]:
+            if waiting[index]:
                 final_obs, final_info = row(self._last, index), {"waiting": True}
             elif ended[instance]:
                 final_obs = self._of(infos["final_obs"][instance], name)
@@ -445,6 +446,23 @@ class AgentVectorEnv(VectorEnv):
         out = with_column(out, "is_active", active, self.num_envs)  # Sample Factory's name
         self._last = observations
         return observations, rewards, terminated, truncated, out
+
+    def _joined_at_the_end(self, ended: np.ndarray, infos: Mapping[str, Any]) -> np.ndarray:
+        """Per slot, whether its agent is in the last answer of its instance's ended episode.
+
+        Only agents that come and go can be there while their slot waits: they joined in that
+        very step (its answer holds the agents due and the leavers alone).
+        """
+        joined = np.zeros(self.num_envs, np.bool_)
+        if not (self._come_and_go and ended.any()):
+            return joined
+        outcomes = infos["final_info"].get("agents", {})
+        k = len(self.learners)
+        for j, name in enumerate(self.learners):
+            present = outcomes.get(f"_{name}")
+            if present is not None:
+                joined[j::k] = present & ended
+        return joined & self._waiting
 
     def _learner_rows(self, joint: Any) -> Any:
         """The learners' observations, instance by instance: row ``i * k + j``."""

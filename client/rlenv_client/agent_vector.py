@@ -651,10 +651,17 @@ def _columns(
     """``(reward, terminated, truncated)`` of one agent's batched outcome map.
 
     ``None`` (no instance's answer holds the agent: agents that come and go): 0 and false; a
-    joined agent's first reward (``None``) is 0.
+    joined agent's first reward (``None``) is 0. A group's (arrays over its members) is the
+    group's as one agent: its members' rewards summed, and ended where no member is left in
+    play (terminated if one of those that ended now terminated).
     """
     if outcome is None:
         return np.zeros(instances), np.zeros(instances, np.bool_), np.zeros(instances, np.bool_)
+    if "joined" in outcome:
+        ending = outcome["terminated"] | outcome["truncated"]
+        over = ~(outcome["active"] & ~ending).any(axis=-1) & outcome["_active"]
+        terminated = over & outcome["terminated"].any(axis=-1)
+        return outcome["reward"].sum(axis=-1), terminated, over & ~terminated
     reward = outcome["reward"]
     if isinstance(reward, np.ndarray) and reward.dtype == object:
         reward = np.where(reward == None, 0.0, reward)  # noqa: E711 (elementwise)

@@ -125,7 +125,7 @@ class GroupSlots:
         step = (infos.get("agents") or {}).get(self.name)
         final = (infos.get("final_info", {}).get("agents") or {}).get(self.name)
         shape = (self.instances, self.count)
-        columns = []
+        columns: list[np.ndarray] = []
         for key in _FLAGS:
             now = step[key] if step is not None else np.zeros(shape)
             if final is not None and ended.any():
@@ -185,8 +185,10 @@ class GroupSlots:
         final_obs = np.full(self.num_envs, None, dtype=object)
         for index in np.flatnonzero(finished):
             final_obs[index] = final_rows[index]
+        agent = np.full(self.num_envs, None, dtype=object)
+        agent[finished] = self.name
         final_info: dict[str, Any] = {
-            "agent": np.where(finished, self.name, None).astype(object),
+            "agent": agent,
             "_agent": finished.copy(),
             "instance": self._instance.copy(),
             "_instance": finished.copy(),

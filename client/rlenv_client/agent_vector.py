@@ -377,9 +377,9 @@ class AgentVectorEnv(VectorEnv):
             raise RuntimeError("call reset() before step()")
         check_shape(self.action_space, actions, "actions")
         k, joint = len(self.learners), self._joint_action
-        if self._group is not None:
-            name = self._group.name
-            joint[name] = self._group.action(actions, joint[name])
+        if self._group is not None:  # the joint action is a map: the group is keyed
+            columns = cast(dict[str, Any], joint)
+            columns[self._group.name] = self._group.action(actions, columns[self._group.name])
         else:
             for j, name in enumerate(self.learners):
                 column = self._of(joint, name)
@@ -428,8 +428,11 @@ class AgentVectorEnv(VectorEnv):
             self._others_done[name][ended] = False
         out = self._spread(infos)
         if self._group is not None:
-            (*step, finals), active = self._group.outcomes(joint_obs, ended, infos)
-            return (*step, self._group_infos({**out, **finals}, active))  # type: ignore[return-value]
+            (observations, rewards, terminated, truncated, finals), mask = self._group.outcomes(
+                joint_obs, ended, infos
+            )
+            out = self._group_infos({**out, **finals}, mask)
+            return observations, rewards, terminated, truncated, out
         rewards = np.zeros(self.num_envs, np.float64)
         terminated = np.zeros(self.num_envs, np.bool_)
         truncated = np.zeros(self.num_envs, np.bool_)

@@ -31,6 +31,8 @@ from rlenv_client.vector import RemoteVectorEnv
 TESTS = Path(__file__).parent
 SWARM = "swarm_envs:SwarmEnvironment"
 MIXED = "swarm_envs:MixedEnvironment"
+PACED = "swarm_envs:PacedSwarmEnvironment"  # the group decides every 3 ticks
+DISCRETE = "swarm_envs:DiscreteSwarmEnvironment"  # Discrete(5): none, +x, -x, +y, -y
 MEMBERS = 8  # Discs.instance_count
 STARTING = [True] * 6 + [False] * 2  # Discs.initial_count: 6
 LEFT = np.array([-1.0, 0.0], np.float32)  # a push towards -x: member 0 leaves at step 5
@@ -160,6 +162,23 @@ def test_sb3_trains_ppo_on_the_group_beside_a_driven_shepherd() -> None:
         env.close()
 
 
+def test_discrete_members_and_a_paced_group_are_sub_environments_too() -> None:
+    with AgentVectorEnv(2, DISCRETE, agents="Discs") as env:
+        assert env.single_action_space == spaces.Discrete(5)
+        assert env.action_space == spaces.MultiDiscrete([5] * 16)
+        env.reset(seed=0)
+        moves = np.zeros(16, np.int64)
+        moves[0], moves[9] = 2, 1  # -x for member 0 of instance 0, +x for member 1 of 1
+        observations, *_ = env.step(moves)
+        assert observations[0, 2] < 0 < observations[9, 2]
+        assert observations[1, 2] == observations[8, 2] == 0.0
+    with AgentVectorEnv(1, PACED, agents="Discs") as env:
+        env.reset(seed=0)
+        _, rewards, _, _, infos = env.step(_still(MEMBERS))
+        assert infos["frames"].tolist() == [3] * MEMBERS  # the group's decision period
+        assert infos["is_active"].tolist() == STARTING and rewards[:6].all()
+
+
 def test_a_group_beside_an_ordinary_agent_picks_either_to_learn() -> None:
     still_group = np.zeros((MEMBERS, 2), np.float32)
     with AgentVectorEnv(
@@ -205,7 +224,7 @@ def test_remote_vector_env_gives_the_group_as_arrays() -> None:
         assert final["active"][0].tolist() == [True] * 7 + [False]  # 6 joined at the end
 
 
-@pytest.mark.parametrize("target", [SWARM, MIXED])
+@pytest.mark.parametrize("target", [SWARM, MIXED, PACED])
 def test_remote_env_passes_gymnasiums_checker_on_a_group(target: str) -> None:
     env = RemoteEnv(target)
     try:
@@ -225,7 +244,7 @@ def test_remote_env_passes_gymnasiums_checker_on_a_group(target: str) -> None:
 # --- PettingZoo: members as named agents -----------------------------------------------------
 
 
-@pytest.mark.parametrize("target", [SWARM, MIXED])
+@pytest.mark.parametrize("target", [SWARM, MIXED, PACED])
 def test_parallel_api_test_passes_on_a_group(target: str) -> None:
     pytest.importorskip("pettingzoo")
     from pettingzoo.test import parallel_api_test

@@ -52,7 +52,7 @@ from gymnasium.vector.utils import batch_space, create_empty_array
 
 from rlenv.agent import RLAgent
 from rlenv.serving.policy_driver import HEURISTIC
-from rlenv_client._agents_in_play import slot_mask, with_column
+from rlenv_client._agents_in_play import as_one, slot_mask, with_column
 from rlenv_client._group_slots import GroupSlots
 from rlenv_client._rows import check_shape, repeat_rows, row, set_row
 from rlenv_client.vector import RemoteVectorEnv
@@ -660,11 +660,10 @@ def _columns(
     """
     if outcome is None:
         return np.zeros(instances), np.zeros(instances, np.bool_), np.zeros(instances, np.bool_)
-    if "joined" in outcome:
-        ending = outcome["terminated"] | outcome["truncated"]
-        over = ~(outcome["active"] & ~ending).any(axis=-1) & outcome["_active"]
-        terminated = over & outcome["terminated"].any(axis=-1)
-        return outcome["reward"].sum(axis=-1), terminated, over & ~terminated
+    if "joined" in outcome:  # rows whose answer lacks the group: 0 and false
+        reward, terminated, truncated = as_one(outcome)
+        present = outcome["_active"]
+        return reward, terminated & present, truncated & present
     reward = outcome["reward"]
     if isinstance(reward, np.ndarray) and reward.dtype == object:
         reward = np.where(reward == None, 0.0, reward)  # noqa: E711 (elementwise)

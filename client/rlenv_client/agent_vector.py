@@ -37,6 +37,17 @@ is not in play (not joined yet, or gone) waits, with ``info["waiting"]``, as abo
 active when the agent joins (no episode boundary: the join's observation comes with reward 0),
 and a name is never in play twice in one episode, so a slot whose agent left waits until its
 instance's next episode. Callables in ``others`` are called only where their agent decides.
+
+A group of agents (an :class:`~rlenv.agent_group.RLAgentGroup`, the hello's ``groups``,
+protocol 2.7) learns alone: with ``agents=GROUP`` each member of each instance is one
+sub-environment, sub-environment ``i * N + m`` being member ``m`` of instance ``i``
+(``num_envs = instances * N``, the member's spaces), and the group's arrays are reshaped, with no
+loop over members (:mod:`rlenv_client._group_slots`). ``is_active`` is the group's ``active``
+row: a member in play, or ending with its final transition (``terminated`` or ``truncated``,
+``final_obs``), once; then its slot is out of play until its instance resets (zeros, reward 0,
+``waiting``), and a member that joins turns its slot active with its first observation and
+reward 0. The group's other agents are driven as above; a callable driving a group gets its
+``(N, *obs)`` array and returns ``(N, *act)``.
 """
 
 from __future__ import annotations
@@ -160,9 +171,11 @@ class AgentVectorEnv(VectorEnv):
 
     Args:
         instances: how many copies of the environment (``None``: as many as ``addresses``
-            host). The vector has ``instances * len(learners)`` sub-environments.
+            host). The vector has ``instances * len(learners)`` sub-environments
+            (``instances * N`` for a group of ``N`` members).
         target: the environment class as ``MODULE:CLASS``.
-        agents: which agents learn (:data:`Agents`); they must share their spaces.
+        agents: which agents learn (:data:`Agents`); they must share their spaces. A group
+            learns alone: its members are the sub-environments (see the module).
         others: what drives each other agent, by name or by RLAgent class
             (:data:`OtherPolicy`); by default its heuristic.
         addresses: ``HOST:PORT`` of running servers instead; they can only be given callables
@@ -188,8 +201,9 @@ class AgentVectorEnv(VectorEnv):
 
     Raises:
         ValueError: an unknown agent in ``agents`` or ``others``, a learner in ``others``,
-            learners with different spaces, another agent with neither a heuristic nor an
-            entry in ``others`` (named), or a server-side policy where no server is started.
+            learners with different spaces, a group among several learners, another agent with
+            neither a heuristic nor an entry in ``others`` (named), or a server-side policy
+            where no server is started.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": ["rgb_array"]}

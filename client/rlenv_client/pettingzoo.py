@@ -16,6 +16,14 @@ last observation, with reward 0 and both flags false, and ``infos[agent]["due"]`
 whether it decides now (every agent's info has it). An action for an agent not due is
 ignored: it is never sent.
 
+A group of agents (an :class:`~rlenv.agent_group.RLAgentGroup`, protocol 2.7) is one array on
+the wire and named agents here: member ``i`` of group ``G`` is ``f"{G}_{i}"`` (PettingZoo's
+``pursuer_0`` convention), every member in ``possible_agents`` (in the group's place), with one
+member's spaces; ``agents`` holds the members in play, as above: a member joins from the answer
+it first shows up in (reward 0.0) and leaves after the step that returns its final transition,
+never to come back in the episode. The members' actions travel as the group's one array (zeros
+in the rows of members not in play). :mod:`rlenv_client._members_in_play` does it.
+
 Needs the optional extra: ``pip install pettingzoo``.
 """
 

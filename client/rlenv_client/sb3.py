@@ -23,6 +23,12 @@ agent that leaves ends its slot's episode, ``terminated`` or ``truncated``, with
 name is next in play, in a later episode of its instance. The steps a slot waits are in no
 episode's length.
 
+A group of agents (``agents=GROUP``, an :class:`~rlenv.agent_group.RLAgentGroup`) gives a
+sub-environment per member per instance (``num_envs`` instances of ``N`` members: ``num_envs * N``
+of SB3's), the same way: a member that ends gives its ``terminal_observation`` and its
+``episode`` once, then its slot waits (zeros) until its instance resets; one that joins starts
+an episode from its first observation. One policy learns from every member.
+
 :class:`CurriculumCallback` scores the levels of a
 :class:`~rlenv_client.curriculum.CurriculumVectorEnv` (given to :class:`SB3VecEnv` as
 ``vector``) from each rollout's advantages and values (PLR's positive value loss, or
@@ -65,7 +71,8 @@ class SB3VecEnv(VecEnv):
 
     Args:
         num_envs: how many sub-environments; with ``agents``, how many instances of the
-            environment (each gives one sub-environment per learning agent).
+            environment (each gives one sub-environment per learning agent, or per member of
+            a learning group).
         target: the environment class as ``MODULE:CLASS``, or a registered id's target.
         addresses: ``HOST:PORT`` of running servers instead of starting them.
         repeat_action: physics ticks per step (the servers' default if ``None``).

@@ -121,9 +121,10 @@ class GroupMembers:
         self.group._rewards.fill(0.0)
         if self._any_ended or self._any_joined:
             self._ended.fill(False)
+            self._pending.fill(False)  # ended outside a tick: the answer observed them
             self._final_rewards.fill(0.0)
             self._joined.fill(False)
-            self._any_ended = self._any_joined = False
+            self._any_ended = self._any_joined = self._any_pending = False
             self._update()
 
     def outcome(self, reports: bool) -> tuple[dict[str, np.ndarray], float]:

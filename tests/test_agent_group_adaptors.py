@@ -290,3 +290,25 @@ def test_pettingzoo_names_members_and_follows_them_in_and_out() -> None:
         assert "Discs_0" not in env.agents and "Discs_0" not in history[5][1][0]
     finally:
         env.close()
+
+
+def test_pettingzoo_marks_every_member_of_a_group_a_person_claimed(serve: Any) -> None:
+    pytest.importorskip("pettingzoo")
+    from rlenv_client import Client
+    from rlenv_client.pettingzoo import RemoteParallelEnv
+
+    server = serve(MIXED)
+    env = RemoteParallelEnv(address=f"{server.host}:{server.port}")
+    try:
+        env.reset(seed=0)
+        with Client(server.host, server.port) as person:
+            assert person.claim("Discs", np.zeros((MEMBERS, 2), np.float32)) == ["Discs"]
+            infos = env.step({agent: np.zeros(2, np.float32) for agent in env.agents})[4]
+            assert [name for name, info in infos.items() if info.get("claimed")] == [
+                f"Discs_{i}" for i in range(6)
+            ]
+            person.release_claim()
+            infos = env.step({agent: np.zeros(2, np.float32) for agent in env.agents})[4]
+            assert all("claimed" not in info for info in infos.values())
+    finally:
+        env.close()

@@ -89,7 +89,10 @@ class GroupSlots:
         truncated |= waited | cut
         finished = terminated | truncated
         observations = self._rows(joint)
-        final_rows = self._final_rows(observations, ended, infos, waited | cut)
+        out: dict[str, Any] = {}
+        if finished.any():  # before the rows of those that left are zeroed
+            final_rows = self._final_rows(observations, ended, infos, waited | cut)
+            out = self._finals(final_rows, finished, waited, ended, infos)
         left = finished & ~over
         if left.any():
             observations[left] = 0  # out of play until the instance resets
@@ -100,9 +103,6 @@ class GroupSlots:
         self._in_play = np.where(over, starting, np.where(decided, active & ~finished, in_play))
         self._last = observations
         is_active = np.where(over, starting, active)
-        out: dict[str, Any] = {}
-        if finished.any():
-            out = self._finals(final_rows, finished, waited, ended, infos)
         rows = (observations, np.where(active, reward, 0.0), terminated, truncated, out)
         return rows, is_active
 

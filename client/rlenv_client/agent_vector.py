@@ -526,7 +526,7 @@ class AgentVectorEnv(VectorEnv):
             present = outcomes.get(f"_{name}")
             if present is not None:
                 joined[j::k] = present & ended
-        return joined & self._waiting
+        return joined
 
     def _learner_rows(self, joint: Any) -> Any:
         """The learners' observations, instance by instance: row ``i * k + j``."""

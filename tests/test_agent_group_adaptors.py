@@ -199,6 +199,17 @@ def test_a_group_beside_an_ordinary_agent_picks_either_to_learn() -> None:
         AgentVectorEnv(1, MIXED, agents=["Discs", "Shepherd"], in_process=True)
 
 
+def test_agent_classes_name_a_groups_members_in_its_place() -> None:
+    from swarm_envs import Discs, Shepherd
+
+    from rlenv_client.agent_vector import agent_classes
+
+    assert agent_classes(MIXED) == {"Discs": Discs, "Shepherd": Shepherd}
+    members = agent_classes(MIXED, members=True)
+    assert members == {**{f"Discs_{i}": Discs for i in range(MEMBERS)}, "Shepherd": Shepherd}
+    assert list(members)[-1] == "Shepherd"  # in the environment's order
+
+
 # --- RemoteVectorEnv and RemoteEnv: the group's stacked arrays --------------------------------
 
 

@@ -27,6 +27,7 @@ __all__ = [
     "AgentsInPlay",
     "Turn",
     "answer_reward",
+    "as_one",
     "due_columns",
     "slot_mask",
     "with_column",
@@ -88,16 +89,26 @@ class AgentsInPlay:
     """
 
     def __init__(self, view: TrainerView) -> None:
+        self._view = view
         self._names = view.agents
         self._slots = AgentSlots(view)
         self.agents: tuple[str, ...] = ()
         self.due: tuple[str, ...] = ()
         self._last: dict[str, Any] = {}
 
-    def start(self, observation: Mapping[str, Any]) -> Turn:
-        """The reset's answer: its agents start (each due)."""
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Every agent the trainer may see (PettingZoo's and RLlib's ``possible_agents``)."""
+        return self._names
+
+    def agent_spaces(self) -> tuple[dict[str, spaces.Space], dict[str, spaces.Space]]:
+        """Each agent's action and observation space, by name."""
+        return self._view.agent_spaces()
+
+    def start(self, observation: Mapping[str, Any], info: Mapping[str, Any] | None = None) -> Turn:
+        """The reset's answer (and its ``info``): its agents start (each due)."""
         self.agents, self.due, self._last = (), (), {}
-        return self.answer(observation, {})
+        return self.answer(observation, info or {})
 
     def answer(
         self, observation: Mapping[str, Any], info: Mapping[str, Any], *, ended: bool = False
@@ -111,6 +122,10 @@ class AgentsInPlay:
         rewards, terminated, truncated = {}, {}, {}
         for name in agents:
             outcome = outcomes.get(name, {}) if name in observation else {}
+            if "joined" in outcome:  # a group's, here one agent (members: MembersInPlay)
+                outcome = dict(
+                    zip(("reward", "terminated", "truncated"), as_one(outcome), strict=True)
+                )
             reward = outcome.get("reward")
             rewards[name] = 0.0 if reward is None else float(reward)
             terminated[name] = bool(outcome.get("terminated", False))
@@ -137,9 +152,25 @@ class AgentsInPlay:
 
 
 def answer_reward(info: Mapping[str, Any], names: tuple[str, ...]) -> float:
-    """The sum of ``names``' rewards in the answer's ``info["agents"]`` (``None``: 0)."""
+    """The sum of ``names``' rewards in the answer's ``info["agents"]`` (``None``: 0).
+
+    A group's reward is an array over its members (protocol 2.7): its sum counts.
+    """
     outcomes = info.get("agents") or {}
-    return float(sum(outcomes[name]["reward"] or 0.0 for name in names if name in outcomes))
+    rewards = (outcomes[name]["reward"] for name in names if name in outcomes)
+    return float(sum(0.0 if reward is None else np.sum(reward) for reward in rewards))
+
+
+def as_one(outcome: Mapping[str, Any]) -> tuple[Any, Any, Any]:
+    """A group's outcome (arrays over its members, last axis) as one agent's.
+
+    Its members' rewards summed; ended where no member is left in play, terminated if one
+    of those ending now terminated (the server's joint end counts the group as one agent).
+    """
+    ending = outcome["terminated"] | outcome["truncated"]
+    over = ~(outcome["active"] & ~ending).any(axis=-1)
+    terminated = over & outcome["terminated"].any(axis=-1)
+    return outcome["reward"].sum(axis=-1), terminated, over & ~terminated
 
 
 def due_columns(slots: AgentSlots | None, count: int) -> dict[str, np.ndarray] | None:

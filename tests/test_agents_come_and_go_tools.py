@@ -148,10 +148,11 @@ def walk(observation: dict[str, np.ndarray]) -> dict[str, int]:
 
 
 def answered(observation: Any, info: dict[str, Any]) -> Any:
-    """The answer's agents of RemoteEnv's observation (its slots of the others are zeros)."""
+    """The answer's agents of RemoteEnv's observation (its slots of the others are zeros; the
+    agents the server drives are not in it)."""
     if "due" not in info:
         return observation
-    return {name: observation[name] for name in info["agents"]}
+    return {name: observation[name] for name in info["agents"] if name in observation}
 
 
 def record_one(target: str, directory: Path, policy: Any, steps: int | None, seed: int) -> Seen:
@@ -456,32 +457,136 @@ def test_the_page_shows_who_is_in_play_and_their_returns(came_and_went: Recorded
         page.close()
 
 
-def test_a_recording_whose_driven_agents_decided_during_steps_says_why_it_cannot_replay(
-    tmp_path: Path,
-) -> None:
-    prey = [f"--policy=Prey{number}=heuristic" for number in range(1, 9)]
+# --- driven agents deciding during steps -------------------------------------------------------
+
+DRIVEN = "tests.come_and_go_envs:DrivenEnvironment"
+STEADY = ["--policy=Follower=heuristic", "--policy=Late=heuristic"]
+PREY_DRIVEN = [f"--policy=Prey{number}=heuristic" for number in range(1, 9)]
+
+
+def hunter_alone(observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The hunter runs at the nearest prey (the prey are the server's)."""
+    return {hunt.HUNTER: hunt.Hunter.heuristic(None, observation[hunt.HUNTER])}  # type: ignore[arg-type]
+
+
+def record_driven(target: str, directory: Path, policy: Any, server_args: list[str]) -> Seen:
+    """Record one episode of ``target`` on a server that drives agents (``server_args``)."""
     env = RecordEpisodes(
-        RemoteEnv(hunt.TARGET, max_restarts=0, share_server=False, server_args=prey), tmp_path
+        RemoteEnv(target, max_restarts=0, share_server=False, server_args=server_args), directory
     )
+    seen = Seen()
     try:
-        observation, info = env.reset(seed=1)
-        for _ in range(400):
-            hunter = observation["Hunter"]
-            observation, _, terminated, truncated, info = env.step({"Hunter": hunter[4:6] / 10})
+        observation, info = env.reset(seed=3)
+        seen.observations.append(answered(observation, info))
+        seen.agents.append(info.get("agents", {}))
+        while True:
+            action = policy(answered(observation, info))
+            observation, _, terminated, truncated, info = env.step(action)
+            seen.actions.append(action)
+            seen.observations.append(answered(observation, info))
+            seen.agents.append(info.get("agents", {}))
             if terminated or truncated:
-                break
+                return seen
     finally:
         env.close()
-    path = next(tmp_path.glob("episode-*.rlenv"))
-    events = EpisodeFile.load(path).snapshot["events"]
-    assert any(len(event) == 4 for event in events)  # prey decided between the hunter's
-    replayed = subprocess.run(
-        [sys.executable, "-m", "rlenv", "replay", str(path)],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert replayed.returncode == 1
-    assert "its server drove agents that decided during a step" in replayed.stdout
-    with pytest.raises(ValueError, match="a timeline cannot take those steps yet"):
-        Timeline.open(path, trust_target=True)
+
+
+@pytest.fixture(scope="module")
+def driven_steady(tmp_path_factory: pytest.TempPathFactory) -> Recorded:
+    """DrivenEnvironment with its Steady agents driven: they decide inside the leader's steps,
+    one of them joining and one leaving inside a step."""
+    directory = tmp_path_factory.mktemp("driven")
+    seen = record_driven(DRIVEN, directory, lambda o: {"Leader": 2}, STEADY)
+    return Recorded(directory / "episode-0001.rlenv", seen)
+
+
+@pytest.fixture(scope="module")
+def driven_prey(tmp_path_factory: pytest.TempPathFactory) -> Recorded:
+    """A whole hunt whose prey (every 8 ticks) the server drives beside the hunter (every 4)."""
+    directory = tmp_path_factory.mktemp("driven_prey")
+    seen = record_driven(hunt.TARGET, directory, hunter_alone, PREY_DRIVEN)
+    return Recorded(directory / "episode-0001.rlenv", seen)
+
+
+def parts(path: Path) -> list[list[Any]]:
+    """The recording's parts of steps that went on while driven agents decided."""
+    return [event for event in EpisodeFile.load(path).snapshot["events"] if len(event) == 4]
+
+
+def test_recordings_of_driven_agents_hold_steps_that_went_on(
+    driven_steady: Recorded, driven_prey: Recorded
+) -> None:
+    assert {"Follower", "Late"} == {
+        name for event in parts(driven_steady.path) for name in event[1]
+    }
+    assert parts(driven_prey.path)  # prey decided between the hunter's decisions
+    assert EpisodeFile.load(driven_prey.path).driven == [f"Prey{n}" for n in range(1, 9)]
+    seen = driven_steady.seen
+    assert all(set(observation) <= {"Leader"} for observation in seen.observations)
+    joined, gone = arrivals_and_departures(seen)
+    assert joined == {"Late"} and "Late" in gone  # joined and freed inside steps
+
+
+@pytest.mark.parametrize("recorded", ["driven_steady", "driven_prey"])
+def test_a_recording_whose_driven_agents_decided_during_steps_replays_bit_for_bit(
+    recorded: str, request: pytest.FixtureRequest
+) -> None:
+    path = request.getfixturevalue(recorded).path
+    result = rlenv("replay", str(path), "--trust-target")
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "every observation identical, every reward and flag too" in result.stdout
+
+
+def test_a_replay_of_driven_agents_finds_an_action_that_differs(
+    driven_prey: Recorded, tmp_path: Path
+) -> None:
+    episode = EpisodeFile.load(driven_prey.path)
+    events = [list(event) for event in episode.snapshot["events"]]
+    for event in events:
+        if len(event) == 4:  # the prey that decided during steps stand still instead
+            event[1] = {name: np.zeros(2, np.float32) for name in event[1]}
+    EpisodeFile(
+        episode.target,
+        {**episode.snapshot, "events": events},
+        episode.observations,
+        episode.terminated,
+        episode.truncated,
+        outcomes=episode.outcomes,
+        driven=episode.driven,
+    ).save(tmp_path / "tampered.rlenv")
+    result = rlenv("replay", str(tmp_path / "tampered.rlenv"), "--trust-target")
+    assert result.returncode == 1
+    assert "first divergence at step" in result.stdout
+
+
+ACT_FOR_EVERY_AGENT = {
+    "driven_steady": {"Leader": 2, "Follower": 2, "Late": 2},
+    "driven_prey": {name: np.zeros(2, np.float32) for name in hunt.HuntEnvironment.possible_agents},
+}
+
+
+@pytest.mark.parametrize("recorded", ["driven_steady", "driven_prey"])
+def test_a_timeline_of_driven_agents_deciding_during_steps_is_bit_for_bit(
+    recorded: str, request: pytest.FixtureRequest
+) -> None:
+    seen = request.getfixturevalue(recorded).seen
+    path = request.getfixturevalue(recorded).path
+    with Timeline.open(path, trust_target=True, checkpoint_every=4) as timeline:
+        assert len(timeline) == len(seen.actions)
+        for step in (len(seen.actions), 1, 5, 2, len(seen.actions) - 1, 3):
+            state = timeline.at(step)
+            assert digest(state.observation) == digest(seen.observations[step])
+            if step:
+                assert state.info["agents"] == seen.agents[step]
+        assert timeline.agents.in_play() == in_play_seen(seen)
+        assert timeline.agents.returns() == pytest.approx(returns_seen(seen), abs=0)
+        assert timeline.frames(1) == 4  # its parts' ticks together
+        middle = len(timeline) // 2
+        # No one drives in a timeline's server: a branch's actions act for the driven too.
+        again = timeline.branch(middle, [ACT_FOR_EVERY_AGENT[recorded]] * 6)
+        assert digest(again.at(middle).observation) == digest(seen.observations[middle])
+        assert len(again) > middle
+        saved = path.with_name(f"branch-{recorded}.rlenv")
+        again.save(saved)
+    replayed = rlenv("replay", str(saved), "--trust-target")
+    assert replayed.returncode == 0, replayed.stdout + replayed.stderr

@@ -50,6 +50,7 @@ from typing import Any, cast
 
 from rlenv.protocol import Hello
 from rlenv.protocol.errors import RemoteError
+from rlenv_client._recorded_parts import as_recorded, driven_agents, split_step
 from rlenv_client.replay import EpisodeFile, digest
 from rlenv_client.trusted_targets import check_target
 from rlenv_tools._branch_continuation import Continuation, load_policy
@@ -142,7 +143,11 @@ class Timeline:
             unspaced = Checkpoints(len(episode.snapshot["events"]) + 1, {})  # until measured
             self._setup(episode, processes, True, unspaced, [])
             start = {**episode.snapshot, "events": []}
-            observation, info = processes.first.call("restore", start)
+            processes.driven = driven_agents(episode.snapshot["events"], episode.driven)
+            restored, info = processes.first.call("restore", start)
+            observation = as_recorded(
+                (restored, 0.0, False, False, info), self.hello, processes.driven
+            )[0]
             self._starting = answer_agents(observation, self.hello)
             result: Result = (observation, 0.0, False, False, info)
             self._check(0, digest(observation))
@@ -211,7 +216,7 @@ class Timeline:
         """
         if not 1 <= step <= len(self):
             raise IndexError(f"step {step} has no action (steps 1 to {len(self)} have)")
-        return int(self._steps[step - 1][-1][2])
+        return sum(int(event[2]) for event in split_step(self._steps[step - 1])[1])
 
     @property
     def ended(self) -> bool:
@@ -345,7 +350,7 @@ class Timeline:
         continuation = Continuation.of(actions, policy, max_steps)
         result = self._goto(step)
         if repeat_action is None and self._steps:
-            repeat_action = self._steps[min(step, len(self) - 1)][-1][2]
+            repeat_action = split_step(self._steps[min(step, len(self) - 1)])[1][0][2]
         checkpoints = self._checkpoints.upto(step)
         checkpoints.every = max(
             checkpoints.every,  # half the room left, at most
@@ -363,7 +368,7 @@ class Timeline:
                 result = continuation.take(
                     processes, step, repeat_action, result, checkpoints, records
                 )
-            snapshot = cursor.call("snapshot")
+            snapshot = self._shared_log(step, cursor.call("snapshot"))
         except ConnectionError as error:
             raise RuntimeError(f"the timeline's environment failed: {error}") from None
         except RemoteError:
@@ -371,7 +376,9 @@ class Timeline:
             raise
         digests = self.episode.observations[: step + 1] + [record[0] for record in records[step:]]
         ends = records[-1][2:4] if len(records) > step else (terminated, truncated)
-        episode = EpisodeFile(self.episode.target, snapshot, digests, *ends)
+        episode = EpisodeFile(
+            self.episode.target, snapshot, digests, *ends, driven=sorted(processes.driven) or None
+        )
         branch = object.__new__(Timeline)
         branch._setup(episode, processes, False, checkpoints, records)
         branch._starting = self._starting
@@ -415,6 +422,16 @@ class Timeline:
         return self._processes.goto(
             self, step, self._steps, self._checkpoints, self._records, self._check
         )
+
+    def _shared_log(self, step: int, snapshot: dict[str, Any]) -> dict[str, Any]:
+        """A branch's ``snapshot`` with this timeline's own events for the first ``step`` steps.
+
+        The branch's server took a step whose driven agents decided during it part by part,
+        and logged each part as an action of its own; the recording's events say it as one
+        step (``rlenv_client._recorded_parts``), one event for each of the branch's.
+        """
+        shared = [event for events in self._steps[:step] for event in events]
+        return {**snapshot, "events": [*shared, *snapshot["events"][len(shared) :]]}
 
     def _check(self, step: int, observed: str) -> None:
         check_digest(self.episode, self.hello.agents, step, observed)

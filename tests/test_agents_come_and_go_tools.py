@@ -403,24 +403,105 @@ def test_the_inspector_shows_agents_arriving_and_leaving_and_returns_per_agent(
 # --- datasets ------------------------------------------------------------------------------------
 
 
+@dataclass
+class Life:
+    """One agent's life as the recording's client saw it."""
+
+    observations: list[Any]
+    actions: list[Any]
+    rewards: list[float]
+    terminated: bool
+    truncated: bool
+
+
+def lives_seen(seen: Seen) -> dict[str, Life]:
+    """Each agent's life: the answers it appears in, the actions sent after each but its last,
+    the rewards of each but its first, its flags at its last (truncated: still in play)."""
+    lives = {}
+    names = dict.fromkeys(name for observation in seen.observations for name in observation)
+    for name in names:
+        answers = [k for k, observation in enumerate(seen.observations) if name in observation]
+        last = seen.agents[answers[-1]].get(name, {})
+        ended = bool(last.get("terminated") or last.get("truncated"))
+        lives[name] = Life(
+            [seen.observations[k][name] for k in answers],
+            [seen.actions[k][name] for k in answers[:-1]],
+            [seen.agents[k][name]["reward"] for k in answers[1:]],
+            bool(last.get("terminated")),
+            bool(last.get("truncated")) or not ended,
+        )
+    return {name: life for name, life in lives.items() if life.actions}
+
+
+def assert_lives(dataset: Any, lives: list[Life]) -> None:
+    """The dataset's episodes are these lives, bit for bit, in order."""
+    episodes = list(dataset.iterate_episodes())
+    assert len(episodes) == len(lives)
+    for episode, life in zip(episodes, lives, strict=True):
+        observations = np.stack(life.observations)
+        assert episode.observations.dtype == observations.dtype
+        assert episode.observations.tobytes() == observations.tobytes()
+        assert np.array_equal(episode.actions, np.asarray(life.actions))
+        assert list(episode.rewards) == life.rewards
+        ending = np.zeros(len(life.actions), bool)
+        ending[-1] = True
+        assert list(episode.terminations) == list(ending & life.terminated)
+        assert list(episode.truncations) == list(ending & life.truncated)
+
+
 @pytest.mark.minari
-def test_a_dataset_of_agents_that_come_and_go_is_refused_saying_why(
+@pytest.mark.parametrize(
+    ("recorded", "dataset_id", "classes"),
+    [
+        ("came_and_went", "walkers/come-and-go-v0", {"Walker": ["A", "B", "C"]}),
+        ("hunted", "hunt/recorded-v0", None),
+        ("driven_steady", "walkers/driven-v0", {"Walker": ["Leader"]}),  # Steady: driven
+    ],
+)
+def test_agents_that_come_and_go_become_a_dataset_per_class_each_life_an_episode(
+    recorded: str,
+    dataset_id: str,
+    classes: dict[str, list[str]] | None,
+    request: pytest.FixtureRequest,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    minari = pytest.importorskip("minari")
+    from rlenv_tools.datasets import class_dataset_id
+
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "datasets"))
+    chosen = request.getfixturevalue(recorded)
+    lives = lives_seen(chosen.seen)
+    if classes is None:  # the hunt: a hunter and the prey that appeared
+        classes = {
+            "Hunter": [hunt.HUNTER],
+            "Prey": [name for name in lives if name != hunt.HUNTER],
+        }
+        assert len(classes["Prey"]) > 2  # prey joined during the episode
+    result = rlenv(
+        "dataset", "create", dataset_id, "--from", str(chosen.path.parent), "--trust-target"
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    for cls, names in classes.items():
+        steps = sum(len(lives[name].actions) for name in names)
+        one = class_dataset_id(dataset_id, cls)
+        assert f"wrote dataset {one}: {len(names)} episodes, {steps} steps" in result.stdout
+        dataset = minari.load_dataset(one)
+        assert_lives(dataset, [lives[name] for name in names])
+    assert result.stdout.count("wrote dataset") == len(classes)
+
+
+@pytest.mark.minari
+def test_create_dataset_of_agents_that_come_and_go_says_to_make_one_per_class(
     came_and_went: Recorded, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     pytest.importorskip("minari")
+    from rlenv_tools.datasets import create_dataset
+
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "datasets"))
-    result = rlenv(
-        "dataset",
-        "create",
-        "walkers/come-and-go-v0",
-        "--from",
-        str(came_and_went.path.parent),
-        "--trust-target",
-    )
-    assert result.returncode != 0
-    assert "agents come and go or decide at their own pace" in result.stderr
-    assert "datasets of such environments are not supported" in result.stderr
-    assert not (tmp_path / "datasets").exists() or not any((tmp_path / "datasets").rglob("*.hdf5"))
+    with pytest.raises(ValueError, match="make one dataset per agent class with create_datasets"):
+        create_dataset("walkers/one-v0", came_and_went.path.parent, trust_target=True)
+    assert not any((tmp_path / "datasets").rglob("*.hdf5"))
 
 
 # --- the page, in a browser ----------------------------------------------------------------------

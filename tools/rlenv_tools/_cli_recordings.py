@@ -226,7 +226,7 @@ def _dataset_create(args: argparse.Namespace) -> int:
         )
     for dataset in datasets:  # one, or one per agent class where agents come and go
         print(
-            f"wrote dataset {dataset.spec.dataset_id}: {dataset.total_episodes} episodes, "
+            f"wrote dataset {dataset.id}: {dataset.total_episodes} episodes, "
             f"{dataset.total_steps} steps, each observation identical to its recording"
         )
     return 0

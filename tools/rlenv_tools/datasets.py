@@ -307,7 +307,7 @@ def _class_datasets(
             )
     except BaseException:
         for dataset in written:
-            minari.delete_dataset(dataset.spec.dataset_id)
+            minari.delete_dataset(dataset.id)
         raise
     return written
 

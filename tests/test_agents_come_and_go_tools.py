@@ -351,12 +351,42 @@ def test_a_fixed_multi_agent_timeline_has_every_agent_at_every_step(tagged: Reco
         assert digest(timeline.at(17).observation) == digest(tagged.seen.observations[17])
 
 
-def test_the_ticks_of_a_step_are_refused_where_agents_come_and_go(
-    hunt_timeline: Timeline,
+def test_the_ticks_of_a_step_where_an_agent_joins_inside_it_are_bit_for_bit(
+    came_and_went: Recorded,
 ) -> None:
-    with pytest.raises(ValueError, match="not supported where agents come and go"):
-        hunt_timeline.ticks(5)
-    assert digest(hunt_timeline.at(5).observation)  # the timeline goes on serving
+    # Every walker walks at +1 a tick from its first decision, and observes [position, tick]:
+    # A from tick 1; C joins at tick 6, inside step 2 (ticks 5 to 8), still at 0 until it
+    # decides at tick 8; B is freed at tick 10, inside step 3.
+    with Timeline.open(came_and_went.path, trust_target=True) as timeline:
+        ticks = timeline.ticks(2)
+        assert [tick.tick for tick in ticks] == [1, 2, 3, 4] and timeline.frames(2) == 4
+        for tick in ticks:
+            now = 4 + tick.tick
+            assert tick.observation["A"].tolist() == [now, now]
+            assert ("C" in tick.observation) == (now >= 6)
+            if now >= 6:
+                assert tick.observation["C"].tolist() == [0.0, now]
+        assert digest(ticks[-1].observation) == digest(timeline.at(2).observation)
+        assert ticks[-1].info["agents"] == came_and_went.seen.agents[2]
+        page = timeline.ticks(3, first=2, count=2)  # B leaves at tick 10: the step's second
+        assert [tick.tick for tick in page] == [2, 3]
+        assert "B" not in page[1].observation and page[1].observation["A"].tolist() == [11, 11]
+        assert digest(timeline.at(3).observation) == digest(came_and_went.seen.observations[3])
+
+
+def test_the_ticks_of_a_hunt_step_end_at_its_answer(hunt_timeline: Timeline) -> None:
+    joined = next(
+        step
+        for step in range(1, len(hunt_timeline) + 1)
+        if any(a["reward"] is None for a in hunt_timeline.at(step).info["agents"].values())
+    )
+    ticks = hunt_timeline.ticks(joined)
+    assert len(ticks) == hunt_timeline.frames(joined) > 1
+    state = hunt_timeline.at(joined)
+    assert digest(ticks[-1].observation) == digest(state.observation)
+    assert ticks[-1].properties == state.properties
+    assert ticks[0].properties != ticks[-1].properties  # the scene moved inside the step
+    assert ticks[-2].properties != ticks[-1].properties
 
 
 # --- the inspector -------------------------------------------------------------------------------
@@ -394,8 +424,8 @@ def test_the_inspector_shows_agents_arriving_and_leaving_and_returns_per_agent(
         assert "B" not in after["agents_in_play"] and "B" not in after["observation"]
         status, _, compared = fetch(page.url, "api/timeline/compare?timeline=0&a=0&b=0&step=1")
         assert status == 200 and compared["a"]["agent_returns"] == returns_seen(seen)
-        status, _, refused = fetch(page.url, "api/timeline/ticks?timeline=0&branch=0&step=2")
-        assert status == 422 and "not supported where agents come and go" in str(refused)
+        status, _, ticked = fetch(page.url, "api/timeline/ticks?timeline=0&branch=0&step=2")
+        assert status == 200 and [tick["tick"] for tick in ticked["ticks"]] == [1, 2, 3, 4]
     finally:
         page.close()
 

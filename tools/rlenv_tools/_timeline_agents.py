@@ -19,7 +19,6 @@ __all__ = [
     "agent_returns",
     "agents_in_play",
     "answer_agents",
-    "check_ticks_supported",
     "departures",
 ]
 
@@ -57,21 +56,6 @@ class AgentHistory:
         episode's return.
         """
         return agent_returns(self._starting, self._records[:upto], self._hello)
-
-
-def check_ticks_supported(hello: Hello) -> None:
-    """Refuse the tick view of a step where agents come and go or decide at their own pace.
-
-    Raises:
-        ValueError: saying why (an action of one tick would have to hold the agents due at
-            that tick, which the step's action does not).
-    """
-    if hello.possible_agents is not None:
-        raise ValueError(
-            f"the ticks of a step are not supported where agents come and go or decide "
-            f"at their own pace ({hello.environment}'s possible agents): a step's "
-            f"action holds the agents due at its start, not those due at each tick"
-        )
 
 
 def answer_agents(observation: Any, hello: Hello) -> list[str]:

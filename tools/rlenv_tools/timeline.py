@@ -55,7 +55,7 @@ from rlenv_client.replay import EpisodeFile, digest
 from rlenv_client.trusted_targets import check_target
 from rlenv_tools._branch_continuation import Continuation, load_policy
 from rlenv_tools._recorded_steps import check_digest, recorded_steps
-from rlenv_tools._timeline_agents import AgentHistory, answer_agents, check_ticks_supported
+from rlenv_tools._timeline_agents import AgentHistory, answer_agents
 from rlenv_tools._timeline_diff import TimelineDiff, timeline_diff
 from rlenv_tools._timeline_processes import (
     WORKING,
@@ -65,7 +65,7 @@ from rlenv_tools._timeline_processes import (
     Result,
     measured_spacing,
 )
-from rlenv_tools._timeline_reads import Step, Tick, read_step, read_ticks
+from rlenv_tools._timeline_reads import Step, Tick, read_step, read_ticks, restored_ticks
 from rlenv_tools.forking import StepRecord
 
 __all__ = ["MAX_MEMORY", "MAX_PROCESSES", "Step", "Tick", "Timeline", "TimelineDiff", "load_policy"]
@@ -294,24 +294,56 @@ class Timeline:
         the rewards' sum); an agent that does something once per action (a jump, a counter)
         would do it at every tick here. Fewer ticks come back where the episode ends.
 
+        Where agents come and go or decide at their own pace, each tick but the last is
+        instead the recording's log restored up to it (bit for bit the state after that tick
+        of the step, driven agents' decisions inside it included, at the cost of a replay from
+        the reset): its observation holds the agents due at that tick and its reward is 0.0
+        (each agent's reward is summed until its decision); the last tick is the step's own
+        answer (:meth:`at`).
+
         Raises:
             IndexError: no such step (step 0 has no action), or ``first`` past its ticks.
-            ValueError: ``count`` below 1, or an environment whose agents come and go or
-                decide at their own pace (not supported: an action of one tick would have to
-                hold the agents due at that tick, which the step's action does not).
+            ValueError: ``count`` below 1.
             RuntimeError: as :meth:`at`.
         """
-        check_ticks_supported(self.hello)
         if not 1 <= step <= len(self):
             raise IndexError(f"step {step} has no action (steps 1 to {len(self)} have)")
-        *changes, (_, action, frames) = self._steps[step - 1]
+        changes, actions = split_step(self._steps[step - 1])
+        frames = self.frames(step)
         if not 1 <= first <= frames:
             raise IndexError(f"step {step} has ticks 1 to {frames}, not {first}")
         if count is not None and count < 1:
             raise ValueError("count must be at least 1")
         last = frames if count is None else min(frames, first + count - 1)
-        self._goto(step - 1)
-        return read_ticks(self._processes.stepping(), changes, action, first, last)
+        if self.hello.possible_agents is None:
+            self._goto(step - 1)
+            return read_ticks(self._processes.stepping(), changes, actions[0][1], first, last)
+        ticks = []
+        if first < frames:
+            before = [event for events in self._steps[: step - 1] for event in events]
+            ticks = restored_ticks(
+                self._processes.stepping(),
+                self.episode.snapshot,
+                [*before, *changes],
+                actions,
+                first,
+                min(last, frames - 1),
+            )
+        if last == frames:  # the step's own answer: its observation, rewards and flags
+            state = self.at(step)
+            ticks.append(
+                Tick(
+                    frames,
+                    state.observation,
+                    state.reward,
+                    state.terminated,
+                    state.truncated,
+                    state.info,
+                    state.properties,
+                    state.draw,
+                )
+            )
+        return ticks
 
     def branch(
         self,

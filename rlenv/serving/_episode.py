@@ -34,7 +34,7 @@ from rlenv.protocol.errors import ErrorCode, RequestError
 from rlenv.serving import _inspector as inspector
 from rlenv.serving._observing import check_text_keys
 from rlenv.serving._recent import RecentEpisodes
-from rlenv.serving._roster import Roster
+from rlenv.serving._roster import Roster, reward_total
 from rlenv.serving._snapshots import EpisodeLog
 from rlenv.serving._stats import EpisodeStats
 from rlenv.tree import SceneTree
@@ -273,7 +273,7 @@ class EpisodeRun:
                 self.stats.reported(reward, frames, acted)
             else:
                 self.stats.reported_agents(
-                    {name: o["reward"] for name, o in outcomes.items()}, frames, acted
+                    {name: reward_total(o["reward"]) for name, o in outcomes.items()}, frames, acted
                 )
             if terminated or truncated:
                 self.stats.end("terminated" if terminated else "truncated")

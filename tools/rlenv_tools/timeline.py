@@ -294,7 +294,9 @@ class Timeline:
         the rewards' sum); an agent that does something once per action (a jump, a counter)
         would do it at every tick here. Fewer ticks come back where the episode ends.
 
-        Where agents come and go or decide at their own pace, each tick but the last is
+        Where agents come and go or decide at their own pace, or with a group of agents
+        (whose members may join inside a step, with no action until they decide), each tick
+        but the last is
         instead the recording's log restored up to it (bit for bit the state after that tick
         of the step, driven agents' decisions inside it included, at the cost of a replay from
         the reset): its observation holds the agents due at that tick and its reward is 0.0
@@ -315,7 +317,7 @@ class Timeline:
         if count is not None and count < 1:
             raise ValueError("count must be at least 1")
         last = frames if count is None else min(frames, first + count - 1)
-        if self.hello.possible_agents is None:
+        if self.hello.possible_agents is None and not self.hello.groups:
             self._goto(step - 1)
             return read_ticks(self._processes.stepping(), changes, actions[0][1], first, last)
         ticks = []

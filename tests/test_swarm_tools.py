@@ -296,3 +296,60 @@ def test_the_page_shows_a_groups_members(mixed: Recorded) -> None:
             assert "Discs [7 members +1]" in text and "returns: " in text
     finally:
         page.close()
+
+
+# --- datasets ------------------------------------------------------------------------------------
+
+
+def member_lives_seen(seen: Seen) -> list[dict[str, Any]]:
+    """Each member's life as the client saw it, member by member, step by step."""
+    arrivals, departures, _ = members_seen(seen)
+    lives = []
+    for i in range(MEMBERS):
+        if arrivals[i] < 0:
+            continue
+        end = departures[i] if departures[i] >= 0 else len(seen.actions)
+        answers = list(range(arrivals[i], end + 1))
+        last = seen.agents[end]["Discs"]
+        lives.append(
+            {
+                "observations": np.stack([seen.observations[k]["Discs"][i] for k in answers]),
+                "actions": np.stack([seen.actions[k]["Discs"][i] for k in answers[:-1]]),
+                "rewards": [float(seen.agents[k]["Discs"]["reward"][i]) for k in answers[1:]],
+                "terminated": bool(last["terminated"][i]),
+                "truncated": bool(last["truncated"][i]) or departures[i] < 0,
+            }
+        )
+    return lives
+
+
+@pytest.mark.minari
+@pytest.mark.parametrize("recorded", ["swarm", "mixed"])
+def test_a_groups_members_become_a_dataset_each_life_an_episode(
+    recorded: str, request: pytest.FixtureRequest, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    minari = pytest.importorskip("minari")
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "datasets"))
+    chosen = request.getfixturevalue(recorded)
+    result = rlenv(
+        "dataset", "create", "swarm/discs-v0", "--from", str(chosen.path.parent), "--trust-target"
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    lives = member_lives_seen(chosen.seen)
+    steps = sum(len(life["actions"]) for life in lives)
+    assert f"wrote dataset swarm/discs-Discs-v0: {len(lives)} episodes, {steps} steps" in (
+        result.stdout
+    )
+    dataset = minari.load_dataset("swarm/discs-Discs-v0")
+    assert dataset.spec.observation_space.shape == (4,)  # one member's
+    episodes = list(dataset.iterate_episodes())
+    assert len(episodes) == len(lives) == 7  # 6 started, one joined
+    for episode, life in zip(episodes, lives, strict=True):
+        assert episode.observations.tobytes() == life["observations"].tobytes()
+        assert episode.actions.tobytes() == life["actions"].tobytes()
+        assert list(episode.rewards) == life["rewards"]
+        assert bool(episode.terminations[-1]) == life["terminated"]
+        assert bool(episode.truncations[-1]) == life["truncated"]
+    if recorded == "mixed":  # the shepherd: its one life, the whole episode
+        shepherd = minari.load_dataset("swarm/discs-Shepherd-v0")
+        assert shepherd.total_episodes == 1 and shepherd.total_steps == len(chosen.seen.actions)

@@ -44,7 +44,7 @@ from rlenv.targets import same_target
 from rlenv_client.registration import ENVIRONMENTS
 from rlenv_client.replay import EpisodeFile, Trajectory, replay
 from rlenv_client.trusted_targets import check_target
-from rlenv_tools._agent_lives import AgentLife, agent_lives
+from rlenv_tools._agent_lives import AgentLife, agent_lives, member_lives
 
 try:
     import minari
@@ -227,8 +227,8 @@ def _create(
     env = gymnasium.make(spec)
     try:
         client = env.unwrapped.client  # type: ignore[attr-defined]
-        possible = client.hello.possible_agents
-        if possible is None:
+        hello = client.hello
+        if hello.possible_agents is None and not hello.groups:
             buffers = [
                 _episode(number, path, episode, client, report)
                 for number, (path, episode) in enumerate(zip(paths, episodes, strict=True))
@@ -236,7 +236,7 @@ def _create(
             described = f"{len(buffers)} episodes of {target}, recorded by rlenv and re-simulated"
             return [_write(dataset_id, buffers, env, metadata, described)]
         if per_class is False:
-            _refuse_agents_in_play(target, possible)
+            _refuse_several_datasets(target, hello)
         return _class_datasets(dataset_id, target, paths, episodes, env, client, metadata)
     finally:
         env.close()
@@ -278,32 +278,54 @@ def _class_datasets(
     client: Any,
     metadata: _Metadata,
 ) -> list[minari.MinariDataset]:
-    """One dataset per agent class, each agent's life an episode (none written if one fails)."""
+    """One dataset per agent class or group, each life an episode (none written if one fails).
+
+    An agent's role is its class (the hello's ``possible_agents``; its name where the
+    environment declares none); a group's, its name, its members' lives in its member spaces.
+    """
     hello = client.hello
-    possible: dict[str, str] = hello.possible_agents
-    lives: dict[str, list[AgentLife]] = {cls: [] for cls in dict.fromkeys(possible.values())}
+    groups = frozenset(hello.groups)
+    classes: dict[str, str] = hello.possible_agents or {name: name for name in hello.agents}
+    roles = dict.fromkeys(name if name in groups else classes[name] for name in hello.agents)
+    lives: dict[str, list[AgentLife]] = {role: [] for role in roles}
+    spaces: dict[str, tuple[gymnasium.Space, gymnasium.Space]] = {}
+    for name in hello.agents:
+        if name in groups:
+            spaces[name] = (hello.groups[name].observation_space, hello.groups[name].action_space)
+        else:
+            spaces.setdefault(
+                classes[name], (hello.observation_space[name], hello.action_space[name])
+            )
     for path, episode in zip(paths, episodes, strict=True):
         trajectory = _replayed(path, episode, client)
-        for life in agent_lives(trajectory):
-            lives[possible[life.name]].append(life)
+        for life in agent_lives(trajectory, groups):
+            lives[classes[life.name]].append(life)
+        for group in groups:
+            lives[group] += member_lives(trajectory, group)
     written: list[minari.MinariDataset] = []
     try:
         for cls, each in lives.items():
             if not each:
                 continue
-            name = next(life.name for life in each)
-            spaces = (hello.observation_space[name], hello.action_space[name])
             buffers = [
                 _buffer(number, life.observations, life.actions, life.rewards, life.ends)
                 for number, life in enumerate(each)
             ]
-            names = ", ".join(dict.fromkeys(life.name for life in each))
+            names = ", ".join(list(dict.fromkeys(life.name for life in each))[:8])
+            names += ", ..." if len(each) > 8 else ""
             described = (
                 f"{len(buffers)} lives of {cls} agents ({names}) in {len(paths)} episodes of "
                 f"{target}, recorded by rlenv and re-simulated"
             )
             written.append(
-                _write(class_dataset_id(dataset_id, cls), buffers, env, metadata, described, spaces)
+                _write(
+                    class_dataset_id(dataset_id, cls),
+                    buffers,
+                    env,
+                    metadata,
+                    described,
+                    spaces[cls],
+                )
             )
     except BaseException:
         for dataset in written:
@@ -312,13 +334,19 @@ def _class_datasets(
     return written
 
 
-def _refuse_agents_in_play(target: str, possible_agents: dict[str, str]) -> None:
-    """Refuse, in :func:`create_dataset`, an environment whose agents come and go."""
+def _refuse_several_datasets(target: str, hello: Any) -> None:
+    """Refuse, in :func:`create_dataset`, an environment that makes one dataset per role."""
+    if hello.groups:
+        why = f"it has a group of agents ({', '.join(hello.groups)}), whose members' lives"
+    else:
+        why = (
+            f"its agents come and go or decide at their own pace (its possible agents: "
+            f"{', '.join(hello.possible_agents)}), and its answers hold only some agents, whose"
+        )
     raise ValueError(
-        f"{target}'s agents come and go or decide at their own pace (its possible agents: "
-        f"{', '.join(possible_agents)}): its answers hold only some agents, and a Minari "
-        "episode holds one observation of one space at every step; make one dataset per "
-        "agent class with create_datasets (as rlenv dataset create does)"
+        f"{target}: {why} are episodes of their own, and a Minari episode holds one "
+        "observation of one space at every step; make one dataset per agent class with "
+        "create_datasets (as rlenv dataset create does)"
     )
 
 

@@ -273,6 +273,35 @@ def test_the_inspector_shows_a_groups_members_and_return(mixed: Recorded) -> Non
         page.close()
 
 
+def discs_in_space(seen: Seen, step: int) -> int:
+    """The discs in the space after ``step``: members that arrived and did not leave at the
+    edge (their disc leaves the space; a truncated one stays), and the shepherd's."""
+    arrivals, _, _ = members_seen(seen)
+    out = {
+        i
+        for agents in seen.agents[1 : step + 1]
+        for i in np.flatnonzero(agents["Discs"]["active"] & agents["Discs"]["terminated"])
+    }
+    return sum(0 <= arrivals[i] <= step and i not in out for i in range(MEMBERS)) + 1
+
+
+def test_the_inspector_draws_a_groups_bodies(tmp_path: Path) -> None:
+    drawn = record("tests.drawn_swarm_envs:DrawnMixedEnvironment", tmp_path, seed=3)
+    arrivals, departures, _ = members_seen(drawn.seen)
+    first_out = min(d for d in departures if d >= 0)
+    page = InspectorServer(Watcher([]), timelines=Timelines([drawn.path], trust_target=True))
+    page.start()
+    try:
+        for step in (0, max(arrivals), first_out):
+            status, _, state = fetch(page.url, f"api/timeline/step?timeline=0&branch=0&step={step}")
+            assert status == 200, state
+            circles = [shape for shape in state["draw"]["shapes"] if shape[0] == "circle"]
+            assert len(circles) == discs_in_space(drawn.seen, step), step
+        assert discs_in_space(drawn.seen, 0) == 7 and discs_in_space(drawn.seen, max(arrivals)) > 7
+    finally:
+        page.close()
+
+
 @pytest.mark.browser
 def test_the_page_shows_a_groups_members(mixed: Recorded) -> None:
     from browser import Browser, find_chromium

@@ -60,12 +60,11 @@ def agent_lives(trajectory: Trajectory, groups: frozenset[str] = frozenset()) ->
             if name not in seen or name in groups:
                 continue  # driven (not recorded), or a group
             left = bool(outcome["terminated"] or outcome["truncated"])
-            life = in_play.get(name)
-            if life is None:
-                if left or name in lives:
-                    continue  # gone in its first answer (no step)
-                lives[name] = in_play[name] = AgentLife(name, [seen[name]])
+            if name not in in_play:
+                if not (left or name in lives):  # else gone in its first answer (no step)
+                    lives[name] = in_play[name] = AgentLife(name, [seen[name]])
                 continue
+            life = in_play[name]
             life.observations.append(seen[name])
             life.rewards.append(float(outcome["reward"] or 0.0))
             if left:
@@ -119,8 +118,8 @@ def member_lives(trajectory: Trajectory, group: str) -> list[AgentLife]:
             continue
         started = not joined[rows[0] - 1, i]
         appearances = np.concatenate([[0], rows]) if started else rows
-        gone = np.flatnonzero(ended[appearances[1:] - 1, i]) if appearances.size > 1 else []
-        if len(gone):
+        gone = np.flatnonzero(ended[appearances[1:] - 1, i])
+        if gone.size:
             appearances = appearances[: gone[0] + 2]
         if appearances.size < 2:
             continue  # no step

@@ -243,8 +243,10 @@ class Processes:
         for _ in range(max_steps):
             action = policy(result[0])
             answer = cursor.call("step", action, repeat_action)
+            hello = self.first.hello
+            assert hello is not None  # a started process said its hello
             observation, reward, terminated, truncated, info = as_recorded(
-                answer, self.first.hello, self.driven
+                answer, hello, self.driven
             )
             result = (observation, float(reward), bool(terminated), bool(truncated), info)
             records.append((digest(observation), *result[1:4], info.get("agents")))

@@ -310,7 +310,7 @@ class Timeline:
         """
         if not 1 <= step <= len(self):
             raise IndexError(f"step {step} has no action (steps 1 to {len(self)} have)")
-        changes, actions = split_step(self._steps[step - 1])
+        changes, actions = (list(map(list, events)) for events in split_step(self._steps[step - 1]))
         frames = self.frames(step)
         if not 1 <= first <= frames:
             raise IndexError(f"step {step} has ticks 1 to {frames}, not {first}")

@@ -29,6 +29,8 @@ from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 from rlenv.protocol import Hello
+from rlenv_client._agents_in_play import answer_reward
+from rlenv_client.trainer_view import TrainerView
 
 if TYPE_CHECKING:
     from rlenv_client.base import BaseClient, StepResult
@@ -81,10 +83,6 @@ def as_recorded(result: StepResult, hello: Hello, driven: frozenset[str]) -> Ste
     """
     if not driven:
         return result
-    # Here, not at the top: the client's base module imports this one (through replay).
-    from rlenv_client._agents_in_play import answer_reward
-    from rlenv_client.trainer_view import TrainerView
-
     view = TrainerView(dataclasses.replace(hello, driven=tuple(driven & set(hello.agents))))
     if hello.possible_agents is None:
         return view.result(result)

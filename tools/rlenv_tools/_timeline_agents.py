@@ -39,10 +39,19 @@ class AgentHistory:
         starting: the agents the reset started.
         records: the timeline's step records, in order.
         hello: its server's hello.
+        members: where the groups' member histories are kept between calls, by group, with
+            the number of records each was read from (a timeline's own map).
     """
 
-    def __init__(self, starting: Sequence[str], records: Sequence[StepRecord], hello: Hello):
+    def __init__(
+        self,
+        starting: Sequence[str],
+        records: Sequence[StepRecord],
+        hello: Hello,
+        members: dict[str, tuple[int, MemberHistory]] | None = None,
+    ):
         self._starting, self._records, self._hello = starting, records, hello
+        self._members = {} if members is None else members
 
     def in_play(self) -> list[list[str]]:
         """Each step's agents in play, by step (step 0: those the reset started).
@@ -77,7 +86,14 @@ class AgentHistory:
                 f"{self._hello.environment} has no group {group!r}; its groups: "
                 f"{', '.join(self._hello.groups) or 'none'}"
             )
-        return member_history(group, self._hello.groups[group].instance_count, self._records)
+        kept = self._members.get(group)
+        if kept is None or kept[0] != len(self._records):
+            count = self._hello.groups[group].instance_count
+            kept = self._members[group] = (
+                len(self._records),
+                member_history(group, count, self._records),
+            )
+        return kept[1]
 
 
 @dataclass(frozen=True)

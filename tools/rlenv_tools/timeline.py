@@ -202,6 +202,7 @@ class Timeline:
         self._owner = owner
         self._checkpoints = checkpoints
         self._records = records  # step k's record at k - 1, as each step is first taken
+        self._member_histories: dict[str, Any] = {}  # AgentHistory.members' (per group)
         self._steps = recorded_steps(episode)  # each step's events, its action last
 
     def __len__(self) -> int:
@@ -231,7 +232,7 @@ class Timeline:
     @property
     def agents(self) -> AgentHistory:
         """Its agents, step by step: in play, departures, returns (agents may come and go)."""
-        return AgentHistory(self._starting, self._records, self.hello)
+        return AgentHistory(self._starting, self._records, self.hello, self._member_histories)
 
     @property
     def memory(self) -> int:

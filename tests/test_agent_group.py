@@ -162,6 +162,18 @@ def test_members_out_of_play_get_no_action_rows_and_zero_observation_rows() -> N
 # --- members that come and go ----------------------------------------------------------------
 
 
+def test_a_reset_chooses_who_starts_and_a_slot_left_out_is_free_to_join() -> None:
+    client = LocalClient("swarm_envs:ChosenSwarmEnvironment")
+    group = _group(client)
+    answers = _play(client, steps=3)
+    assert answers[0]["agents"]["Discs"]["active"].tolist() == [False] + [True] * 5 + [False, True]
+    assert not answers[0]["agents"]["Discs"]["joined"].any()  # starting is not joining
+    assert answers[3]["agents"]["Discs"]["joined"].tolist() == [True] + [False] * 7  # slot 0
+    assert group.applied[0][6].tolist() == [-1.0, 0.0]  # out of play: the overridden no_action
+    assert group.applied[0][7].tolist() == pytest.approx([1.0, 0.3])
+    client.close()
+
+
 def test_members_leave_once_with_a_final_transition_and_are_never_observed_again() -> None:
     client = LocalClient(SWARM)
     answers = _play(client)

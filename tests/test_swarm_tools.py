@@ -382,3 +382,59 @@ def test_a_groups_members_become_a_dataset_each_life_an_episode(
     if recorded == "mixed":  # the shepherd: its one life, the whole episode
         shepherd = minari.load_dataset("swarm/discs-Shepherd-v0")
         assert shepherd.total_episodes == 1 and shepherd.total_steps == len(chosen.seen.actions)
+
+
+# --- a group that decides every 3 ticks ----------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def paced(tmp_path_factory: pytest.TempPathFactory) -> Recorded:
+    """PacedSwarmEnvironment's episode, recorded from a Client's answers (the group is in the
+    answers where it decides, and in those where a member left)."""
+    from rlenv_client.replay import outcome_digest
+    from rlenv_client.session import Session
+
+    target = "tests.swarm_envs:PacedSwarmEnvironment"
+    session = Session(target)
+    rng = np.random.default_rng(5)
+    seen = Seen()
+    try:
+        client = session.client
+        observation, info = client.reset(seed=5)
+        seen.observations.append(observation)
+        seen.agents.append(info.get("agents", {}))
+        digests, outcomes = [digest(observation)], []
+        while True:
+            action = {"Discs": rng.uniform(-1, 1, (MEMBERS, 2)).astype(np.float32)}
+            observation, reward, terminated, truncated, info = client.step(action)
+            seen.actions.append(action)
+            seen.observations.append(observation)
+            seen.agents.append(info["agents"])
+            digests.append(digest(observation))
+            outcomes.append(outcome_digest(reward, terminated, truncated, info))
+            if terminated or truncated:
+                break
+        path = tmp_path_factory.mktemp("paced") / "episode-0001.rlenv"
+        EpisodeFile(
+            target, client.snapshot(), digests, terminated, truncated, outcomes=outcomes
+        ).save(path)
+    finally:
+        session.close()
+    return Recorded(path, seen)
+
+
+def test_a_paced_group_replays_and_scrubs_bit_for_bit(paced: Recorded) -> None:
+    result = rlenv("replay", str(paced.path), "--trust-target")
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "every observation identical, every reward and flag too" in result.stdout
+    arrivals, departures, returns = members_seen(paced.seen)
+    with Timeline.open(paced.path, trust_target=True) as timeline:
+        for step in (len(timeline), 2, 7):
+            assert digest(timeline.at(step).observation) == digest(paced.seen.observations[step])
+        members = timeline.agents.members("Discs")
+        assert members.arrivals.tolist() == arrivals and max(arrivals) > 0
+        assert members.departures.tolist() == departures
+        assert members.returns.tolist() == pytest.approx(returns.tolist(), abs=1e-12)
+        assert timeline.frames(1) == 3  # the group decides every 3 ticks
+        ticks = timeline.ticks(4)  # tick 10: a member joins inside this step
+        assert digest(ticks[-1].observation) == digest(timeline.at(4).observation)

@@ -354,9 +354,11 @@ def replay(episode: EpisodeFile, client: BaseClient, *, keep: bool = False) -> R
         for change in changes:
             apply_change(client, change)
         steps += 1
-        observation, reward, terminated, truncated, info = as_recorded(
-            take_step(client, actions), hello, driven
-        )
+        try:
+            taken = take_step(client, actions)
+        except ValueError as error:  # a step of parts it cannot merge: said, not raised
+            return ReplayResult(steps, f"step {steps}: {error}")
+        observation, reward, terminated, truncated, info = as_recorded(taken, hello, driven)
         recorded = next(expected, None)
         if recorded is None:
             break

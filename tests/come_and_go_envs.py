@@ -12,6 +12,11 @@ agent under a used name), ``add_undeclared``, ``add_wrong_class``.
 
 ``PacedEnvironment``: ``Fast`` decides every 2 ticks, ``Slow`` every 6 ticks at offset 3, and
 ``Plain`` at every answer (no period); ``Jerky`` (period 4) does not act between decisions.
+
+``DrivenEnvironment``, for a server that drives its ``Steady`` agents (``rlenv serve
+--policy Follower=heuristic --policy Late=heuristic``): ``Leader`` decides every 4 ticks,
+``Follower`` every 3 at offset 1 (inside the leader's steps), ``Late`` (every 2) joins at tick 5
+and is freed at tick 13, both inside a step; every agent is truncated at tick 24.
 """
 
 from __future__ import annotations
@@ -24,7 +29,14 @@ from gymnasium import spaces
 
 from rlenv import RLAgent, RLEnvironment, RLEnvWorld
 
-__all__ = ["ComeAndGoEnvironment", "FixedEnvironment", "PacedEnvironment", "Walker"]
+__all__ = [
+    "ComeAndGoEnvironment",
+    "DrivenEnvironment",
+    "FixedEnvironment",
+    "PacedEnvironment",
+    "Steady",
+    "Walker",
+]
 
 
 class Walker(RLAgent):
@@ -68,6 +80,13 @@ class Sprinter(RLAgent):
 
     action_space = Walker.action_space
     observation_space = Walker.observation_space
+
+
+class Steady(Walker):
+    """A walker with a heuristic: right up to position 3, then back (a server may drive it)."""
+
+    def heuristic(self, observation: np.ndarray) -> int:
+        return 2 if observation[0] < 3 else 0
 
 
 def _tick(agent: RLAgent) -> int:
@@ -180,3 +199,36 @@ class FixedEnvironment(_CountingEnvironment):
     def _tick(self) -> None:
         if self.ticks == 6:
             self.add_child(Walker("C"))
+
+
+class DrivenEnvironment(_CountingEnvironment):
+    """A leader every 4 ticks; ``Steady`` agents (driven) deciding inside its steps."""
+
+    possible_agents = {"Leader": Walker, "Follower": Steady, "Late": Steady}
+
+    def __init__(self) -> None:
+        super().__init__("Driven", repeat_action=4)
+        leader, follower = Walker("Leader"), Steady("Follower")
+        leader.decision_period = 4
+        follower.decision_period, follower.decision_offset = 3, 1
+        self.add_child(leader)
+        self.add_child(follower)
+        self.add_child(LineWorld())
+
+    def _reset(self, options: Mapping[str, Any]) -> None:
+        late = self.get_node_or_null("Late")
+        if late is not None:
+            self.remove_child(late)
+            late.queue_free()
+        super()._reset(options)
+
+    def _tick(self) -> None:
+        if self.ticks == 5:
+            late = Steady("Late")
+            late.decision_period = 2
+            self.add_child(late)
+        if self.ticks == 13:
+            self.get_node("Late").queue_free()
+        if self.ticks >= 24:
+            for agent in self.agents:
+                agent.set_truncated()

@@ -148,10 +148,11 @@ def walk(observation: dict[str, np.ndarray]) -> dict[str, int]:
 
 
 def answered(observation: Any, info: dict[str, Any]) -> Any:
-    """The answer's agents of RemoteEnv's observation (its slots of the others are zeros)."""
+    """The answer's agents of RemoteEnv's observation (its slots of the others are zeros; the
+    agents the server drives are not in it)."""
     if "due" not in info:
         return observation
-    return {name: observation[name] for name in info["agents"]}
+    return {name: observation[name] for name in info["agents"] if name in observation}
 
 
 def record_one(target: str, directory: Path, policy: Any, steps: int | None, seed: int) -> Seen:
@@ -350,12 +351,42 @@ def test_a_fixed_multi_agent_timeline_has_every_agent_at_every_step(tagged: Reco
         assert digest(timeline.at(17).observation) == digest(tagged.seen.observations[17])
 
 
-def test_the_ticks_of_a_step_are_refused_where_agents_come_and_go(
-    hunt_timeline: Timeline,
+def test_the_ticks_of_a_step_where_an_agent_joins_inside_it_are_bit_for_bit(
+    came_and_went: Recorded,
 ) -> None:
-    with pytest.raises(ValueError, match="not supported where agents come and go"):
-        hunt_timeline.ticks(5)
-    assert digest(hunt_timeline.at(5).observation)  # the timeline goes on serving
+    # Every walker walks at +1 a tick from its first decision, and observes [position, tick]:
+    # A from tick 1; C joins at tick 6, inside step 2 (ticks 5 to 8), still at 0 until it
+    # decides at tick 8; B is freed at tick 10, inside step 3.
+    with Timeline.open(came_and_went.path, trust_target=True) as timeline:
+        ticks = timeline.ticks(2)
+        assert [tick.tick for tick in ticks] == [1, 2, 3, 4] and timeline.frames(2) == 4
+        for tick in ticks:
+            now = 4 + tick.tick
+            assert tick.observation["A"].tolist() == [now, now]
+            assert ("C" in tick.observation) == (now >= 6)
+            if now >= 6:
+                assert tick.observation["C"].tolist() == [0.0, now]
+        assert digest(ticks[-1].observation) == digest(timeline.at(2).observation)
+        assert ticks[-1].info["agents"] == came_and_went.seen.agents[2]
+        page = timeline.ticks(3, first=2, count=2)  # B leaves at tick 10: the step's second
+        assert [tick.tick for tick in page] == [2, 3]
+        assert "B" not in page[1].observation and page[1].observation["A"].tolist() == [11, 11]
+        assert digest(timeline.at(3).observation) == digest(came_and_went.seen.observations[3])
+
+
+def test_the_ticks_of_a_hunt_step_end_at_its_answer(hunt_timeline: Timeline) -> None:
+    joined = next(
+        step
+        for step in range(1, len(hunt_timeline) + 1)
+        if any(a["reward"] is None for a in hunt_timeline.at(step).info["agents"].values())
+    )
+    ticks = hunt_timeline.ticks(joined)
+    assert len(ticks) == hunt_timeline.frames(joined) > 1
+    state = hunt_timeline.at(joined)
+    assert digest(ticks[-1].observation) == digest(state.observation)
+    assert ticks[-1].properties == state.properties
+    assert ticks[0].properties != ticks[-1].properties  # the scene moved inside the step
+    assert ticks[-2].properties != ticks[-1].properties
 
 
 # --- the inspector -------------------------------------------------------------------------------
@@ -393,8 +424,8 @@ def test_the_inspector_shows_agents_arriving_and_leaving_and_returns_per_agent(
         assert "B" not in after["agents_in_play"] and "B" not in after["observation"]
         status, _, compared = fetch(page.url, "api/timeline/compare?timeline=0&a=0&b=0&step=1")
         assert status == 200 and compared["a"]["agent_returns"] == returns_seen(seen)
-        status, _, refused = fetch(page.url, "api/timeline/ticks?timeline=0&branch=0&step=2")
-        assert status == 422 and "not supported where agents come and go" in str(refused)
+        status, _, ticked = fetch(page.url, "api/timeline/ticks?timeline=0&branch=0&step=2")
+        assert status == 200 and [tick["tick"] for tick in ticked["ticks"]] == [1, 2, 3, 4]
     finally:
         page.close()
 
@@ -402,24 +433,105 @@ def test_the_inspector_shows_agents_arriving_and_leaving_and_returns_per_agent(
 # --- datasets ------------------------------------------------------------------------------------
 
 
+@dataclass
+class Life:
+    """One agent's life as the recording's client saw it."""
+
+    observations: list[Any]
+    actions: list[Any]
+    rewards: list[float]
+    terminated: bool
+    truncated: bool
+
+
+def lives_seen(seen: Seen) -> dict[str, Life]:
+    """Each agent's life: the answers it appears in, the actions sent after each but its last,
+    the rewards of each but its first, its flags at its last (truncated: still in play)."""
+    lives = {}
+    names = dict.fromkeys(name for observation in seen.observations for name in observation)
+    for name in names:
+        answers = [k for k, observation in enumerate(seen.observations) if name in observation]
+        last = seen.agents[answers[-1]].get(name, {})
+        ended = bool(last.get("terminated") or last.get("truncated"))
+        lives[name] = Life(
+            [seen.observations[k][name] for k in answers],
+            [seen.actions[k][name] for k in answers[:-1]],
+            [seen.agents[k][name]["reward"] for k in answers[1:]],
+            bool(last.get("terminated")),
+            bool(last.get("truncated")) or not ended,
+        )
+    return {name: life for name, life in lives.items() if life.actions}
+
+
+def assert_lives(dataset: Any, lives: list[Life]) -> None:
+    """The dataset's episodes are these lives, bit for bit, in order."""
+    episodes = list(dataset.iterate_episodes())
+    assert len(episodes) == len(lives)
+    for episode, life in zip(episodes, lives, strict=True):
+        observations = np.stack(life.observations)
+        assert episode.observations.dtype == observations.dtype
+        assert episode.observations.tobytes() == observations.tobytes()
+        assert np.array_equal(episode.actions, np.asarray(life.actions))
+        assert list(episode.rewards) == life.rewards
+        ending = np.zeros(len(life.actions), bool)
+        ending[-1] = True
+        assert list(episode.terminations) == list(ending & life.terminated)
+        assert list(episode.truncations) == list(ending & life.truncated)
+
+
 @pytest.mark.minari
-def test_a_dataset_of_agents_that_come_and_go_is_refused_saying_why(
+@pytest.mark.parametrize(
+    ("recorded", "dataset_id", "classes"),
+    [
+        ("came_and_went", "walkers/come-and-go-v0", {"Walker": ["A", "B", "C"]}),
+        ("hunted", "hunt/recorded-v0", None),
+        ("driven_steady", "walkers/driven-v0", {"Walker": ["Leader"]}),  # Steady: driven
+    ],
+)
+def test_agents_that_come_and_go_become_a_dataset_per_class_each_life_an_episode(
+    recorded: str,
+    dataset_id: str,
+    classes: dict[str, list[str]] | None,
+    request: pytest.FixtureRequest,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    minari = pytest.importorskip("minari")
+    from rlenv_tools.datasets import class_dataset_id
+
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "datasets"))
+    chosen = request.getfixturevalue(recorded)
+    lives = lives_seen(chosen.seen)
+    if classes is None:  # the hunt: a hunter and the prey that appeared
+        classes = {
+            "Hunter": [hunt.HUNTER],
+            "Prey": [name for name in lives if name != hunt.HUNTER],
+        }
+        assert len(classes["Prey"]) > 2  # prey joined during the episode
+    result = rlenv(
+        "dataset", "create", dataset_id, "--from", str(chosen.path.parent), "--trust-target"
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    for cls, names in classes.items():
+        steps = sum(len(lives[name].actions) for name in names)
+        one = class_dataset_id(dataset_id, cls)
+        assert f"wrote dataset {one}: {len(names)} episodes, {steps} steps" in result.stdout
+        dataset = minari.load_dataset(one)
+        assert_lives(dataset, [lives[name] for name in names])
+    assert result.stdout.count("wrote dataset") == len(classes)
+
+
+@pytest.mark.minari
+def test_create_dataset_of_agents_that_come_and_go_says_to_make_one_per_class(
     came_and_went: Recorded, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     pytest.importorskip("minari")
+    from rlenv_tools.datasets import create_dataset
+
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "datasets"))
-    result = rlenv(
-        "dataset",
-        "create",
-        "walkers/come-and-go-v0",
-        "--from",
-        str(came_and_went.path.parent),
-        "--trust-target",
-    )
-    assert result.returncode != 0
-    assert "agents come and go or decide at their own pace" in result.stderr
-    assert "datasets of such environments are not supported" in result.stderr
-    assert not (tmp_path / "datasets").exists() or not any((tmp_path / "datasets").rglob("*.hdf5"))
+    with pytest.raises(ValueError, match="make one dataset per agent class with create_datasets"):
+        create_dataset("walkers/one-v0", came_and_went.path.parent, trust_target=True)
+    assert not any((tmp_path / "datasets").rglob("*.hdf5"))
 
 
 # --- the page, in a browser ----------------------------------------------------------------------
@@ -456,32 +568,136 @@ def test_the_page_shows_who_is_in_play_and_their_returns(came_and_went: Recorded
         page.close()
 
 
-def test_a_recording_whose_driven_agents_decided_during_steps_says_why_it_cannot_replay(
-    tmp_path: Path,
-) -> None:
-    prey = [f"--policy=Prey{number}=heuristic" for number in range(1, 9)]
+# --- driven agents deciding during steps -------------------------------------------------------
+
+DRIVEN = "tests.come_and_go_envs:DrivenEnvironment"
+STEADY = ["--policy=Follower=heuristic", "--policy=Late=heuristic"]
+PREY_DRIVEN = [f"--policy=Prey{number}=heuristic" for number in range(1, 9)]
+
+
+def hunter_alone(observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The hunter runs at the nearest prey (the prey are the server's)."""
+    return {hunt.HUNTER: hunt.Hunter.heuristic(None, observation[hunt.HUNTER])}  # type: ignore[arg-type]
+
+
+def record_driven(target: str, directory: Path, policy: Any, server_args: list[str]) -> Seen:
+    """Record one episode of ``target`` on a server that drives agents (``server_args``)."""
     env = RecordEpisodes(
-        RemoteEnv(hunt.TARGET, max_restarts=0, share_server=False, server_args=prey), tmp_path
+        RemoteEnv(target, max_restarts=0, share_server=False, server_args=server_args), directory
     )
+    seen = Seen()
     try:
-        observation, info = env.reset(seed=1)
-        for _ in range(400):
-            hunter = observation["Hunter"]
-            observation, _, terminated, truncated, info = env.step({"Hunter": hunter[4:6] / 10})
+        observation, info = env.reset(seed=3)
+        seen.observations.append(answered(observation, info))
+        seen.agents.append(info.get("agents", {}))
+        while True:
+            action = policy(answered(observation, info))
+            observation, _, terminated, truncated, info = env.step(action)
+            seen.actions.append(action)
+            seen.observations.append(answered(observation, info))
+            seen.agents.append(info.get("agents", {}))
             if terminated or truncated:
-                break
+                return seen
     finally:
         env.close()
-    path = next(tmp_path.glob("episode-*.rlenv"))
-    events = EpisodeFile.load(path).snapshot["events"]
-    assert any(len(event) == 4 for event in events)  # prey decided between the hunter's
-    replayed = subprocess.run(
-        [sys.executable, "-m", "rlenv", "replay", str(path)],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert replayed.returncode == 1
-    assert "its server drove agents that decided during a step" in replayed.stdout
-    with pytest.raises(ValueError, match="a timeline cannot take those steps yet"):
-        Timeline.open(path, trust_target=True)
+
+
+@pytest.fixture(scope="module")
+def driven_steady(tmp_path_factory: pytest.TempPathFactory) -> Recorded:
+    """DrivenEnvironment with its Steady agents driven: they decide inside the leader's steps,
+    one of them joining and one leaving inside a step."""
+    directory = tmp_path_factory.mktemp("driven")
+    seen = record_driven(DRIVEN, directory, lambda o: {"Leader": 2}, STEADY)
+    return Recorded(directory / "episode-0001.rlenv", seen)
+
+
+@pytest.fixture(scope="module")
+def driven_prey(tmp_path_factory: pytest.TempPathFactory) -> Recorded:
+    """A whole hunt whose prey (every 8 ticks) the server drives beside the hunter (every 4)."""
+    directory = tmp_path_factory.mktemp("driven_prey")
+    seen = record_driven(hunt.TARGET, directory, hunter_alone, PREY_DRIVEN)
+    return Recorded(directory / "episode-0001.rlenv", seen)
+
+
+def parts(path: Path) -> list[list[Any]]:
+    """The recording's parts of steps that went on while driven agents decided."""
+    return [event for event in EpisodeFile.load(path).snapshot["events"] if len(event) == 4]
+
+
+def test_recordings_of_driven_agents_hold_steps_that_went_on(
+    driven_steady: Recorded, driven_prey: Recorded
+) -> None:
+    assert {"Follower", "Late"} == {
+        name for event in parts(driven_steady.path) for name in event[1]
+    }
+    assert parts(driven_prey.path)  # prey decided between the hunter's decisions
+    assert EpisodeFile.load(driven_prey.path).driven == [f"Prey{n}" for n in range(1, 9)]
+    seen = driven_steady.seen
+    assert all(set(observation) <= {"Leader"} for observation in seen.observations)
+    joined, gone = arrivals_and_departures(seen)
+    assert joined == {"Late"} and "Late" in gone  # joined and freed inside steps
+
+
+@pytest.mark.parametrize("recorded", ["driven_steady", "driven_prey"])
+def test_a_recording_whose_driven_agents_decided_during_steps_replays_bit_for_bit(
+    recorded: str, request: pytest.FixtureRequest
+) -> None:
+    path = request.getfixturevalue(recorded).path
+    result = rlenv("replay", str(path), "--trust-target")
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "every observation identical, every reward and flag too" in result.stdout
+
+
+def test_a_replay_of_driven_agents_finds_an_action_that_differs(
+    driven_prey: Recorded, tmp_path: Path
+) -> None:
+    episode = EpisodeFile.load(driven_prey.path)
+    events = [list(event) for event in episode.snapshot["events"]]
+    for event in events:
+        if len(event) == 4:  # the prey that decided during steps stand still instead
+            event[1] = {name: np.zeros(2, np.float32) for name in event[1]}
+    EpisodeFile(
+        episode.target,
+        {**episode.snapshot, "events": events},
+        episode.observations,
+        episode.terminated,
+        episode.truncated,
+        outcomes=episode.outcomes,
+        driven=episode.driven,
+    ).save(tmp_path / "tampered.rlenv")
+    result = rlenv("replay", str(tmp_path / "tampered.rlenv"), "--trust-target")
+    assert result.returncode == 1
+    assert "first divergence at step" in result.stdout
+
+
+ACT_FOR_EVERY_AGENT = {
+    "driven_steady": {"Leader": 2, "Follower": 2, "Late": 2},
+    "driven_prey": {name: np.zeros(2, np.float32) for name in hunt.HuntEnvironment.possible_agents},
+}
+
+
+@pytest.mark.parametrize("recorded", ["driven_steady", "driven_prey"])
+def test_a_timeline_of_driven_agents_deciding_during_steps_is_bit_for_bit(
+    recorded: str, request: pytest.FixtureRequest
+) -> None:
+    seen = request.getfixturevalue(recorded).seen
+    path = request.getfixturevalue(recorded).path
+    with Timeline.open(path, trust_target=True, checkpoint_every=4) as timeline:
+        assert len(timeline) == len(seen.actions)
+        for step in (len(seen.actions), 1, 5, 2, len(seen.actions) - 1, 3):
+            state = timeline.at(step)
+            assert digest(state.observation) == digest(seen.observations[step])
+            if step:
+                assert state.info["agents"] == seen.agents[step]
+        assert timeline.agents.in_play() == in_play_seen(seen)
+        assert timeline.agents.returns() == pytest.approx(returns_seen(seen), abs=0)
+        assert timeline.frames(1) == 4  # its parts' ticks together
+        middle = len(timeline) // 2
+        # No one drives in a timeline's server: a branch's actions act for the driven too.
+        again = timeline.branch(middle, [ACT_FOR_EVERY_AGENT[recorded]] * 6)
+        assert digest(again.at(middle).observation) == digest(seen.observations[middle])
+        assert len(again) > middle
+        saved = path.with_name(f"branch-{recorded}.rlenv")
+        again.save(saved)
+    replayed = rlenv("replay", str(saved), "--trust-target")
+    assert replayed.returncode == 0, replayed.stdout + replayed.stderr

@@ -19,7 +19,7 @@ def test_an_error_in_the_environment_process_comes_with_its_traceback() -> None:
             environment.run([[1]])  # not a step: the process's own loop raises on it
         assert raised.value.code == "environment_error"
         message = raised.value.message
-        assert message.startswith("TypeError: cannot unpack non-iterable int object\n")
+        assert message.startswith("TypeError: 'int' object is not subscriptable\n")
         assert "Traceback (most recent call last):" in message
         assert "forking.py" in message and ", in run\n" in message  # where it was raised
         copy = environment.fork()  # the process went on serving

@@ -31,6 +31,13 @@ import gymnasium
 from rlenv.protocol import pack, unpack
 from rlenv.protocol.errors import RequestError
 from rlenv.protocol.snapshots import parse_snapshot
+from rlenv_client._recorded_parts import (
+    as_recorded,
+    driven_agents,
+    recorded_steps,
+    split_step,
+    take_step,
+)
 from rlenv_client.recordings import check_frames, read_recording
 from rlenv_client.time_limits import truncate_agents
 
@@ -86,8 +93,10 @@ class EpisodeFile:
     ``terminated`` and ``truncated`` are ``None`` in recordings older than them. ``agent``
     names the agent a person played, in a demonstration of one agent of several (the
     inspector's Take control); ``None`` otherwise. ``outcomes`` holds each step's
-    :func:`outcome_digest` (``None`` in recordings older than it, and where not kept). ``path``
-    is where :meth:`load` read it.
+    :func:`outcome_digest` (``None`` in recordings older than it, and where not kept).
+    ``driven`` names the agents the recording's server drove (its hello's ``driven``, ``rlenv
+    serve --policy``), which the adaptors leave out of their observations and so the digests
+    do (``None``: none, or a recording older than it). ``path`` is where :meth:`load` read it.
     """
 
     target: str | None
@@ -97,6 +106,7 @@ class EpisodeFile:
     truncated: bool | None = None
     agent: str | None = None
     outcomes: list[str] | None = None
+    driven: list[str] | None = None
     path: Path | None = field(default=None, compare=False, repr=False)
     """The file it was read from (``None``: made in this process, or a server's)."""
 
@@ -115,6 +125,8 @@ class EpisodeFile:
             data["agent"] = self.agent
         if self.outcomes is not None:
             data["outcomes"] = self.outcomes
+        if self.driven is not None:
+            data["driven"] = self.driven
         Path(path).write_bytes(pack(data))
 
     @classmethod
@@ -172,6 +184,11 @@ class EpisodeFile:
                 f"{path} is not an rlenv episode: its outcomes must be a list of digests, "
                 "one per step"
             )
+        driven = data.get("driven")
+        if driven is not None and (
+            not isinstance(driven, list) or not all(isinstance(name, str) for name in driven)
+        ):
+            raise ValueError(f"{path} is not an rlenv episode: its driven must be a list of names")
         return cls(
             target,
             snapshot,
@@ -180,6 +197,7 @@ class EpisodeFile:
             data.get("truncated"),
             agent,
             outcomes,
+            driven,
             Path(path),
         )
 
@@ -224,6 +242,7 @@ class RecordEpisodes(gymnasium.Wrapper):
                 bool(terminated),
                 bool(truncated),
                 outcomes=self._outcomes,
+                driven=list(client.hello.driven) or None,
             ).save(self.directory / f"episode-{self.episodes:04d}.rlenv")
         return observation, reward, terminated, truncated, info
 
@@ -233,12 +252,14 @@ class Trajectory:
     """What a replay saw, as gymnasium returned it: ``observations`` has one more than the rest.
 
     ``terminated`` and ``truncated`` are what the server's last step returned (a client-side
-    time limit does not show there).
+    time limit does not show there). ``agents`` holds each step's ``info["agents"]`` (each agent
+    of the answer's reward and flags; ``None`` with one agent).
     """
 
     observations: list[Any] = field(default_factory=list)
     actions: list[Any] = field(default_factory=list)
     rewards: list[Any] = field(default_factory=list)
+    agents: list[Any] = field(default_factory=list)
     terminated: bool = False
     truncated: bool = False
 
@@ -308,16 +329,16 @@ def replay(episode: EpisodeFile, client: BaseClient, *, keep: bool = False) -> R
         episode: the recording.
         client: a client of a (fresh) server of the recording's environment.
         keep: also return every observation, action and reward (``result.trajectory``).
+
+    A step in which the recording's server let driven agents decide (``rlenv serve
+    --policy``, where agents decide at their own pace) is taken part by part, with the
+    logged actions, on a server that drives no one, and its answers merged into the one the
+    recording saw (:mod:`rlenv_client._recorded_parts`).
     """
-    if any(event[0] == "action" and len(event) == 4 for event in episode.snapshot["events"]):
-        return ReplayResult(
-            0,
-            "its server drove agents that decided during a step (rlenv serve --policy, where "
-            "agents decide at their own pace): a replay step by step cannot play that back; "
-            "restore its snapshot on a server instead (client.restore)",
-        )
     start = {**episode.snapshot, "events": []}
-    observation, _ = client.restore(start)
+    driven = driven_agents(episode.snapshot["events"], episode.driven)
+    hello = client.hello
+    observation = as_recorded((client.restore(start)[0], 0.0, False, False, {}), hello, driven)[0]
     expected = iter(episode.observations)
     if digest(observation) != next(expected, None):
         return ReplayResult(
@@ -328,12 +349,16 @@ def replay(episode: EpisodeFile, client: BaseClient, *, keep: bool = False) -> R
     kept = Trajectory([observation]) if keep else None
     outcomes = iter(episode.outcomes or ())
     steps = 0
-    for event in episode.snapshot["events"]:
-        if event[0] != "action":
-            apply_change(client, event)
-            continue
+    for step in recorded_steps(episode.snapshot["events"]):
+        changes, actions = split_step(step)
+        for change in changes:
+            apply_change(client, change)
         steps += 1
-        observation, reward, terminated, truncated, info = client.step(event[1], event[2])
+        try:
+            taken = take_step(client, actions)
+        except ValueError as error:  # a step of parts it cannot merge: said, not raised
+            return ReplayResult(steps, f"step {steps}: {error}")
+        observation, reward, terminated, truncated, info = as_recorded(taken, hello, driven)
         recorded = next(expected, None)
         if recorded is None:
             break
@@ -354,8 +379,9 @@ def replay(episode: EpisodeFile, client: BaseClient, *, keep: bool = False) -> R
             )
         if kept is not None:
             kept.observations.append(observation)
-            kept.actions.append(event[1])
+            kept.actions.append(actions[0][1])
             kept.rewards.append(reward)
+            kept.agents.append(info.get("agents"))
             kept.terminated, kept.truncated = bool(terminated), bool(truncated)
     return ReplayResult(steps, None, kept, episode.outcomes is not None)
 

@@ -21,14 +21,16 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Mapping
-from typing import Any, cast
+from typing import TYPE_CHECKING, Any, cast
 
 from gymnasium import spaces
 from gymnasium.vector.utils import concatenate, create_empty_array
 
 from rlenv.protocol import Hello
 from rlenv.protocol.messages import joint_end
-from rlenv_client.base import StepResult
+
+if TYPE_CHECKING:  # a name only: the client's base imports the replays, which import this
+    from rlenv_client.base import StepResult
 
 __all__ = ["TrainerView"]
 

@@ -142,6 +142,15 @@ class AgentsInPlay(Roster):
         self.ends: list[tuple[bool, bool]] = []  # how each agent that left this episode left
         self._first_tick = False
 
+    def set_observe(self, observe: Callable[[RLAgent], Any]) -> None:
+        """Take each leaving agent's last observation with ``observe`` (packed, as answers are).
+
+        The instance's :class:`~rlenv.serving._observing.Observer` sets it, so that a
+        departure's observation is packed by the same codecs, for the same request, as the
+        answer's others.
+        """
+        self._observe = observe
+
     def space(self, which: str) -> spaces.Space:
         """A ``Dict`` of every possible agent's ``which`` space, keyed by name."""
         return spaces.Dict({name: getattr(one, which) for name, one in self.possible.items()})

@@ -41,8 +41,8 @@ class Observer:
             }
             self._codecs = codecs
             self._asked: Any = {}
-            self._in_play._observe = lambda agent: packed_observation(
-                agent, codecs[agent.name], self._asked
+            self._in_play.set_observe(
+                lambda agent: packed_observation(agent, codecs[agent.name], self._asked)
             )
 
     def observe(self, request: Mapping[str, Any], reports: bool = True) -> dict[str, Any]:

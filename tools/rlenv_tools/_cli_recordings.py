@@ -170,7 +170,9 @@ def add_dataset(commands: Commands) -> None:
     dataset = commands.add_parser("dataset", help="Minari datasets (the minari extra)")
     dataset_commands = dataset.add_subparsers(dest="dataset_command", required=True)
     create = dataset_commands.add_parser(
-        "create", help="re-simulate recorded episodes, check them and write a Minari dataset"
+        "create",
+        help="re-simulate recorded episodes, check them and write a Minari dataset (one per "
+        "agent class where agents come and go)",
     )
     create.add_argument(
         "dataset_id", metavar="DATASET_ID", help="Minari's id: ENV/NAME-vN or NAMESPACE/ENV/NAME-vN"
@@ -204,13 +206,13 @@ def add_dataset(commands: Commands) -> None:
 
 def _dataset_create(args: argparse.Namespace) -> int:
     try:
-        from rlenv_tools.datasets import create_dataset
+        from rlenv_tools.datasets import create_datasets
     except ImportError as error:
         print(f"rlenv dataset: {error}", file=sys.stderr)
         return 2
     with warnings.catch_warnings():  # Minari's advice on every field left out, one line each
         warnings.filterwarnings("ignore", message=r"`\w+` is set to None", category=UserWarning)
-        dataset = create_dataset(
+        datasets = create_datasets(
             args.dataset_id,
             args.source,
             target=args.target,
@@ -222,8 +224,9 @@ def _dataset_create(args: argparse.Namespace) -> int:
             code_permalink=args.code_permalink,
             report=lambda line: print(f"note: {line}"),
         )
-    print(
-        f"wrote dataset {args.dataset_id}: {dataset.total_episodes} episodes, "
-        f"{dataset.total_steps} steps, each observation identical to its recording"
-    )
+    for dataset in datasets:  # one, or one per agent class where agents come and go
+        print(
+            f"wrote dataset {dataset.id}: {dataset.total_episodes} episodes, "
+            f"{dataset.total_steps} steps, each observation identical to its recording"
+        )
     return 0

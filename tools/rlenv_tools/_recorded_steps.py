@@ -1,15 +1,16 @@
 """A recording's steps as a timeline takes them, and their observations checked.
 
-:func:`recorded_steps` cuts a recording's events at each action (a step's changes, then its
-action); :func:`check_digest` compares an observation a timeline re-simulated with the digest the
-recording holds for its step (or records it, where the recording holds none yet).
+:func:`recorded_steps` cuts a recording's events into steps (a step's changes, then its
+action and the parts that went on after it); :func:`check_digest` compares an observation a
+timeline re-simulated with the digest the recording holds for its step (or records it, where
+the recording holds none yet).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
 
+from rlenv_client._recorded_parts import recorded_steps as steps_of
 from rlenv_client.replay import EpisodeFile, older_settings
 from rlenv_tools._timeline_processes import Events
 
@@ -17,26 +18,15 @@ __all__ = ["check_digest", "recorded_steps"]
 
 
 def recorded_steps(episode: EpisodeFile) -> Events:
-    """Each step's events in ``episode``, its action last.
+    """Each step's events in ``episode``: its changes, its action, then the parts that went on.
+
+    (Parts: where the recording's server let driven agents decide during a step, see
+    :mod:`rlenv_client._recorded_parts`.)
 
     Raises:
-        ValueError: the recording's digests are not one more than its actions, or its
-            server drove agents that decided during a step (not supported: a timeline takes
-            one action per step).
+        ValueError: the recording's digests are not one more than its actions.
     """
-    if any(event[0] == "action" and len(event) == 4 for event in episode.snapshot["events"]):
-        raise ValueError(
-            "its server drove agents that decided during a step (rlenv serve --policy, where "
-            "agents decide at their own pace): a timeline cannot take those steps yet; restore "
-            "its snapshot on a server instead"
-        )
-    steps: Events = []
-    pending: list[list[Any]] = []
-    for event in episode.snapshot["events"]:
-        pending.append(event)
-        if event[0] == "action":
-            steps.append(pending)
-            pending = []
+    steps: Events = [list(map(list, step)) for step in steps_of(episode.snapshot["events"])]
     if episode.observations and len(episode.observations) != len(steps) + 1:
         raise ValueError(
             f"the recording has {len(episode.observations)} observations for "

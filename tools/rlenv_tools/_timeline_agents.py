@@ -4,22 +4,30 @@ Where agents come and go, or decide at their own pace, an answer holds only the 
 those that just left; a timeline's step records (:data:`~rlenv_tools.forking.StepRecord`)
 carry each answer's ``info["agents"]``, from which these are read (no re-simulation).
 :class:`~rlenv_tools.timeline.Timeline` answers with them.
+
+A group of agents (``rlenv.RLAgentGroup``) counts as one agent here: in play while a member
+is, its return the sum of its members'. :class:`MemberHistory` says the rest, member by member,
+as arrays over the steps (one array operation per step, never one per member): who was in
+play, when each arrived and left, what each earned.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
+
+import numpy as np
 
 from rlenv.protocol import Hello
 from rlenv_tools.forking import StepRecord
 
 __all__ = [
     "AgentHistory",
+    "MemberHistory",
     "agent_returns",
     "agents_in_play",
     "answer_agents",
-    "check_ticks_supported",
     "departures",
 ]
 
@@ -31,10 +39,19 @@ class AgentHistory:
         starting: the agents the reset started.
         records: the timeline's step records, in order.
         hello: its server's hello.
+        members: where the groups' member histories are kept between calls, by group, with
+            the number of records each was read from (a timeline's own map).
     """
 
-    def __init__(self, starting: Sequence[str], records: Sequence[StepRecord], hello: Hello):
+    def __init__(
+        self,
+        starting: Sequence[str],
+        records: Sequence[StepRecord],
+        hello: Hello,
+        members: dict[str, tuple[int, MemberHistory]] | None = None,
+    ):
         self._starting, self._records, self._hello = starting, records, hello
+        self._members = {} if members is None else members
 
     def in_play(self) -> list[list[str]]:
         """Each step's agents in play, by step (step 0: those the reset started).
@@ -54,24 +71,80 @@ class AgentHistory:
 
         Every agent that was in play by then is listed, in the order they joined; an agent's
         first answer (``reward`` ``None``) counts nothing. With one agent, its name holds the
-        episode's return.
+        episode's return. A group's is the sum of its members' returns.
         """
         return agent_returns(self._starting, self._records[:upto], self._hello)
 
+    def members(self, group: str) -> MemberHistory:
+        """Group ``group``'s members, step by step (see :class:`MemberHistory`).
 
-def check_ticks_supported(hello: Hello) -> None:
-    """Refuse the tick view of a step where agents come and go or decide at their own pace.
+        Raises:
+            KeyError: the environment has no group of that name (the hello's ``groups``).
+        """
+        if group not in self._hello.groups:
+            raise KeyError(
+                f"{self._hello.environment} has no group {group!r}; its groups: "
+                f"{', '.join(self._hello.groups) or 'none'}"
+            )
+        kept = self._members.get(group)
+        if kept is None or kept[0] != len(self._records):
+            count = self._hello.groups[group].instance_count
+            kept = self._members[group] = (
+                len(self._records),
+                member_history(group, count, self._records),
+            )
+        return kept[1]
 
-    Raises:
-        ValueError: saying why (an action of one tick would have to hold the agents due at
-            that tick, which the step's action does not).
+
+@dataclass(frozen=True)
+class MemberHistory:
+    """A group's members over a timeline's steps, as arrays (member ``i`` is column ``i``).
+
+    Attributes:
+        in_play: ``(steps + 1, N)`` bool: whether each member was in play at each step, from
+            the answer it joined in (step 0: the reset's) to the answer it left in, both
+            included, whether or not the group was due at each step between.
+        arrivals: ``(N,)`` int: the step each member first played at (0: it started), ``-1``
+            for one that never did.
+        departures: ``(N,)`` int: the step each member left at, ``-1`` for one that did not.
+        returns: ``(N,)`` float64: each member's return (its first answer counts nothing).
     """
-    if hello.possible_agents is not None:
-        raise ValueError(
-            f"the ticks of a step are not supported where agents come and go or decide "
-            f"at their own pace ({hello.environment}'s possible agents): a step's "
-            f"action holds the agents due at its start, not those due at each tick"
+
+    in_play: np.ndarray
+    arrivals: np.ndarray
+    departures: np.ndarray
+    returns: np.ndarray
+
+
+def member_history(group: str, count: int, records: Sequence[StepRecord]) -> MemberHistory:
+    """Group ``group``'s members (``count`` of them) over ``records`` (see :class:`MemberHistory`).
+
+    A member whose first reported row is not ``joined`` started at the reset (step 0); one whose
+    is joined at that step. It is in play until the row it ended in, included.
+    """
+    steps = len(records)
+    reported = np.zeros((steps + 1, count), np.bool_)
+    joined = np.zeros((steps + 1, count), np.bool_)
+    ended = np.zeros((steps + 1, count), np.bool_)
+    returns = np.zeros(count, np.float64)
+    for step, record in enumerate(records, start=1):
+        outcome = (record[4] or {}).get(group)
+        if outcome is None:
+            continue  # the group was not due
+        active = np.asarray(outcome["active"], np.bool_)
+        reported[step] = active
+        joined[step] = np.asarray(outcome["joined"], np.bool_)
+        ended[step] = active & (
+            np.asarray(outcome["terminated"], np.bool_) | np.asarray(outcome["truncated"], np.bool_)
         )
+        returns += np.where(active, np.asarray(outcome["reward"], np.float64), 0.0)
+    first_row = np.where(reported.any(axis=0), reported.argmax(axis=0), -1)
+    started = (first_row >= 0) & ~joined[np.maximum(first_row, 0), np.arange(count)]
+    arrivals = np.where(started, 0, np.where(joined.any(axis=0), joined.argmax(axis=0), -1))
+    departures = np.where(ended.any(axis=0), ended.argmax(axis=0), -1)
+    rows = np.arange(steps + 1)[:, None]
+    in_play = (arrivals >= 0) & (rows >= arrivals) & ((departures < 0) | (rows <= departures))
+    return MemberHistory(in_play, arrivals, departures, returns)
 
 
 def answer_agents(observation: Any, hello: Hello) -> list[str]:
@@ -93,7 +166,7 @@ def agents_in_play(starting: Sequence[str], records: Sequence[StepRecord]) -> li
     for record in records:
         agents = record[4] or {}
         in_play = [name for name in in_play if name not in left]
-        in_play += [name for name in agents if name not in in_play]
+        in_play += [name for name in agents if name not in in_play and _reports(agents[name])]
         steps.append(list(in_play))
         left = {name for name, outcome in agents.items() if _left(outcome)}
     return steps
@@ -123,12 +196,31 @@ def agent_returns(
     for record in records:
         for name, outcome in (record[4] or {}).items():
             reward = outcome.get("reward")
+            if name in hello.groups:  # the rows it reports (the others are zeros)
+                reward = float(np.sum(reward, where=np.asarray(outcome["active"], np.bool_)))
             returns[name] = returns.get(name, 0.0) + (0.0 if reward is None else reward)
     return returns
 
 
-def _left(outcome: Any) -> bool:
-    """Whether an agent's part of an answer (``info["agents"][name]``) says it left."""
-    return isinstance(outcome, Mapping) and bool(
-        outcome.get("terminated") or outcome.get("truncated")
+def _reports(outcome: Any) -> bool:
+    """Whether an agent's part of an answer reports it: a group's, when it has a row."""
+    return not (isinstance(outcome, Mapping) and "active" in outcome) or bool(
+        np.any(outcome["active"])
     )
+
+
+def _left(outcome: Any) -> bool:
+    """Whether an agent's part of an answer (``info["agents"][name]``) says it left.
+
+    A group's (arrays, a row per member) says so when every row it reports ended: the group,
+    as one agent, ends when no member is left in play.
+    """
+    if not isinstance(outcome, Mapping):
+        return False
+    if "active" in outcome:
+        active = np.asarray(outcome["active"], np.bool_)
+        ended = np.asarray(outcome["terminated"], np.bool_) | np.asarray(
+            outcome["truncated"], np.bool_
+        )
+        return bool(active.any() and ended[active].all())
+    return bool(outcome.get("terminated") or outcome.get("truncated"))

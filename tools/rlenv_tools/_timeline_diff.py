@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from rlenv_client.replay import digest
+
 __all__ = ["TimelineDiff", "timeline_diff"]
 
 
@@ -43,11 +45,11 @@ def timeline_diff(
     """How the second of two timelines differs from the first.
 
     Each argument holds the two timelines' steps, from step 0: ``outcomes`` each step's
-    observation digest, reward and ends (compared as they are), ``observations`` and
+    observation digest, reward and ends (compared bit for bit), ``observations`` and
     ``rewards`` what is subtracted where both reach.
     """
     first = next(
-        (k for k, (a, b) in enumerate(zip(*outcomes, strict=False)) if a != b),
+        (k for k, (a, b) in enumerate(zip(*outcomes, strict=False)) if not _same(a, b)),
         None if len(outcomes[0]) == len(outcomes[1]) else min(map(len, outcomes)),
     )
     mine, theirs = observations
@@ -56,6 +58,11 @@ def timeline_diff(
         [_subtract(a, b) for a, b in zip(mine, theirs, strict=False)],
         [b - a for a, b in zip(*rewards, strict=False)],
     )
+
+
+def _same(mine: Sequence[Any], theirs: Sequence[Any]) -> bool:
+    """Whether two steps' outcomes are the same, bit for bit (a group's are arrays)."""
+    return digest(list(mine)) == digest(list(theirs))
 
 
 def _subtract(mine: Any, theirs: Any) -> Any:

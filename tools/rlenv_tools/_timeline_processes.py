@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from rlenv.protocol.errors import RemoteError
+from rlenv_client._recorded_parts import as_recorded
 from rlenv_client.replay import digest
 from rlenv_tools.forking import ForkedEnvironment, StepRecord
 
@@ -32,7 +33,7 @@ WORKING = 2
 """Processes besides the checkpoints: the cursor, a tick view's copy."""
 _MEASURE_EVERY = 8  # parks between two measures of the memory (an eighth of them, past 64)
 Result = tuple[Any, float, bool, bool, dict[str, Any]]  # observation, reward, ends, info
-Events = list[list[list[Any]]]  # each step's events, its action last
+Events = list[list[list[Any]]]  # each step's events: changes, its action, its parts
 
 
 @dataclass(frozen=True)
@@ -113,6 +114,7 @@ class Processes:
         self.closed = False
         self.limit = limit
         self.memory = memory
+        self.driven: frozenset[str] = frozenset()  # the recording's server's (as_recorded)
         self._measured = 0  # bytes, at the last measure
         self._since = 0  # parks since
 
@@ -208,7 +210,9 @@ class Processes:
         done = 0
         while done < len(steps):
             chunk = steps[done : checkpoints.next_due(step + done) - step]
-            taken, observation, info = cursor.run(chunk, stop_at_end=check is None)
+            taken, observation, info = cursor.run(
+                chunk, stop_at_end=check is None, driven=sorted(self.driven)
+            )
             for record in taken:
                 done += 1
                 if step + done > len(records):
@@ -238,8 +242,11 @@ class Processes:
         cursor = self.stepping()
         for _ in range(max_steps):
             action = policy(result[0])
-            observation, reward, terminated, truncated, info = cursor.call(
-                "step", action, repeat_action
+            answer = cursor.call("step", action, repeat_action)
+            hello = self.first.hello
+            assert hello is not None  # a started process said its hello
+            observation, reward, terminated, truncated, info = as_recorded(
+                answer, hello, self.driven
             )
             result = (observation, float(reward), bool(terminated), bool(truncated), info)
             records.append((digest(observation), *result[1:4], info.get("agents")))
@@ -261,7 +268,7 @@ class Processes:
             cursor = self.resume(mark)
             observations = [mark.result[0]]
             if steps:
-                observations += cursor.run(steps, observations=True)[1]
+                observations += cursor.run(steps, observations=True, driven=sorted(self.driven))[1]
         except (ConnectionError, RemoteError) as error:
             self.drop_cursor()
             raise RuntimeError(f"the timeline's environment failed: {error}") from None

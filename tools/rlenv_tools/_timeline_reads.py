@@ -3,7 +3,9 @@
 :class:`Step` is the state after a step (:meth:`~rlenv_tools.timeline.Timeline.at`), read from
 the process standing at it; :class:`Tick` the state after one physics tick inside a step's
 action (:meth:`~rlenv_tools.timeline.Timeline.ticks`), each read on a copy of the process at
-the step before, which takes the action one tick at a time.
+the step before, which takes the action one tick at a time (:func:`read_ticks`), or, where
+agents come and go or decide at their own pace, restored from the recording's log cut at that
+tick (:func:`restored_ticks`).
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from rlenv.protocol.errors import RemoteError
 from rlenv_tools._timeline_processes import Result
 from rlenv_tools.forking import ForkedEnvironment
 
-__all__ = ["Step", "Tick", "read_step", "read_ticks"]
+__all__ = ["Step", "Tick", "read_step", "read_ticks", "restored_ticks"]
 
 _SKIPPED_AT_ONCE = 10_000  # ticks a tick view takes unread in one run
 
@@ -163,3 +165,53 @@ def _skip(ticking: ForkedEnvironment, changes: list[list[Any]], action: Any, tic
         if records[-1][2] or records[-1][3]:
             return True
     return False
+
+
+def restored_ticks(
+    cursor: ForkedEnvironment,
+    snapshot: dict[str, Any],
+    before: list[list[Any]],
+    actions: list[list[Any]],
+    first: int,
+    last: int,
+) -> list[Tick]:
+    """Ticks ``first`` to ``last`` of a step, each restored from the log cut at that tick.
+
+    Where agents come and go, a step's ticks cannot be taken one action of one tick at a
+    time: at each tick other agents would be due, and answer, than in the step. Instead each
+    tick's state is the snapshot ``snapshot`` restored with the events ``before`` the step's
+    actions, then its ``actions`` (the action, then the parts that went on while driven agents
+    decided) cut at that tick: the state after it, bit for bit, as the step ran it. The answer
+    of a restore holds the agents due at that tick and no reward (an agent's reward is summed
+    until its decision: the step's answer says it). Each restore runs on a copy of ``cursor``.
+
+    Raises:
+        RuntimeError: the environment failed.
+    """
+    ticks = []
+    for tick in range(first, last + 1):
+        cut = _cut(actions, tick)
+        ticking = cursor.fork()
+        try:
+            observation, info = ticking.call("restore", {**snapshot, "events": [*before, *cut]})
+            properties = {node["path"]: dict(node["exported"]) for node in ticking.call("tree")}
+            draw = ticking.call("draw")
+        except (ConnectionError, RemoteError) as error:
+            raise RuntimeError(f"the timeline's environment failed: {error}") from None
+        finally:
+            ticking.end()
+        ticks.append(Tick(tick, observation, 0.0, False, False, info, properties, draw))
+    return ticks
+
+
+def _cut(actions: list[list[Any]], tick: int) -> list[list[Any]]:
+    """A step's ``actions`` (each with the ticks it ran) up to tick ``tick`` of the step."""
+    cut = []
+    for action in actions:
+        frames = int(action[2])
+        if tick <= frames:
+            cut.append([action[0], action[1], tick, *action[3:]])
+            break
+        cut.append(action)
+        tick -= frames
+    return cut

@@ -150,22 +150,29 @@ class ForkedEnvironment:
         *,
         stop_at_end: bool = False,
         observations: bool = False,
+        driven: Sequence[str] = (),
     ) -> tuple[list[StepRecord], Any, dict[str, Any]]:
         """Take ``steps`` there, each a list of events ending with ``["action", action, frames]``.
 
         The events before a step's action are ``["config", part]`` (a ``configure``) and
-        ``["set", path, property, value]``, as an episode's snapshot records them.
+        ``["set", path, property, value]``, as an episode's snapshot records them; after it may
+        come the parts of a step that went on while driven agents decided (``["action",
+        action, frames, true]``), each taken as a request of its own and their answers merged
+        (:func:`rlenv_client._recorded_parts.take_step`).
 
         Args:
             steps: the steps, in order.
             stop_at_end: stop after a step that ended the episode.
             observations: return every step's observation (else only the last one's).
+            driven: the agents the recording's server drove, left out of each step's
+                observation and reward as its adaptor left them out
+                (:func:`rlenv_client._recorded_parts.as_recorded`).
 
         Returns:
             Each step's record (digest, reward, terminated, truncated); the last step's
             observation (every step's, as a list, with ``observations``) and info.
         """
-        self._send(["run", [list(step) for step in steps], stop_at_end, observations])
+        self._send(["run", [list(step) for step in steps], stop_at_end, observations, list(driven)])
         records, observation, info = self._receive()
         return [tuple(record) for record in records], observation, info
 
@@ -264,6 +271,7 @@ def _wait_gone(pid: int, timeout: float = 5.0) -> None:
 def _serve(sock: socket.socket, target: str) -> None:
     """The process's loop: answer calls until the socket closes."""
     from rlenv.protocol.errors import RlenvError
+    from rlenv_client._recorded_parts import as_recorded, split_step, take_step
     from rlenv_client.local import LocalClient
     from rlenv_client.replay import apply_change, digest
 
@@ -277,16 +285,20 @@ def _serve(sock: socket.socket, target: str) -> None:
     _reply(sock, "ok", client.hello.to_wire())
 
     def run(
-        steps: list[list[Any]], stop_at_end: bool, every: bool
+        steps: list[list[Any]], stop_at_end: bool, every: bool, driven: list[str]
     ) -> tuple[list[StepRecord], Any, dict[str, Any]]:
+        left_out = frozenset(driven)
         records: list[StepRecord] = []
         seen = []
         observation: Any = None
         info: dict[str, Any] = {}
-        for *changes, (_, action, frames) in steps:
+        for step in steps:
+            changes, actions = split_step(step)
             for change in changes:
                 apply_change(client, change)
-            observation, reward, terminated, truncated, info = client.step(action, frames)
+            observation, reward, terminated, truncated, info = as_recorded(
+                take_step(client, actions), client.hello, left_out
+            )
             records.append(
                 (
                     digest(observation),

@@ -50,11 +50,12 @@ from typing import Any, cast
 
 from rlenv.protocol import Hello
 from rlenv.protocol.errors import RemoteError
+from rlenv_client._recorded_parts import as_recorded, driven_agents, split_step
 from rlenv_client.replay import EpisodeFile, digest
 from rlenv_client.trusted_targets import check_target
 from rlenv_tools._branch_continuation import Continuation, load_policy
 from rlenv_tools._recorded_steps import check_digest, recorded_steps
-from rlenv_tools._timeline_agents import AgentHistory, answer_agents, check_ticks_supported
+from rlenv_tools._timeline_agents import AgentHistory, answer_agents
 from rlenv_tools._timeline_diff import TimelineDiff, timeline_diff
 from rlenv_tools._timeline_processes import (
     WORKING,
@@ -64,7 +65,7 @@ from rlenv_tools._timeline_processes import (
     Result,
     measured_spacing,
 )
-from rlenv_tools._timeline_reads import Step, Tick, read_step, read_ticks
+from rlenv_tools._timeline_reads import Step, Tick, read_step, read_ticks, restored_ticks
 from rlenv_tools.forking import StepRecord
 
 __all__ = ["MAX_MEMORY", "MAX_PROCESSES", "Step", "Tick", "Timeline", "TimelineDiff", "load_policy"]
@@ -142,7 +143,11 @@ class Timeline:
             unspaced = Checkpoints(len(episode.snapshot["events"]) + 1, {})  # until measured
             self._setup(episode, processes, True, unspaced, [])
             start = {**episode.snapshot, "events": []}
-            observation, info = processes.first.call("restore", start)
+            processes.driven = driven_agents(episode.snapshot["events"], episode.driven)
+            restored, info = processes.first.call("restore", start)
+            observation = as_recorded(
+                (restored, 0.0, False, False, info), self.hello, processes.driven
+            )[0]
             self._starting = answer_agents(observation, self.hello)
             result: Result = (observation, 0.0, False, False, info)
             self._check(0, digest(observation))
@@ -197,6 +202,7 @@ class Timeline:
         self._owner = owner
         self._checkpoints = checkpoints
         self._records = records  # step k's record at k - 1, as each step is first taken
+        self._member_histories: dict[str, Any] = {}  # AgentHistory.members' (per group)
         self._steps = recorded_steps(episode)  # each step's events, its action last
 
     def __len__(self) -> int:
@@ -211,7 +217,7 @@ class Timeline:
         """
         if not 1 <= step <= len(self):
             raise IndexError(f"step {step} has no action (steps 1 to {len(self)} have)")
-        return int(self._steps[step - 1][-1][2])
+        return sum(int(event[2]) for event in split_step(self._steps[step - 1])[1])
 
     @property
     def ended(self) -> bool:
@@ -226,7 +232,7 @@ class Timeline:
     @property
     def agents(self) -> AgentHistory:
         """Its agents, step by step: in play, departures, returns (agents may come and go)."""
-        return AgentHistory(self._starting, self._records, self.hello)
+        return AgentHistory(self._starting, self._records, self.hello, self._member_histories)
 
     @property
     def memory(self) -> int:
@@ -289,24 +295,58 @@ class Timeline:
         the rewards' sum); an agent that does something once per action (a jump, a counter)
         would do it at every tick here. Fewer ticks come back where the episode ends.
 
+        Where agents come and go or decide at their own pace, or with a group of agents
+        (whose members may join inside a step, with no action until they decide), each tick
+        but the last is
+        instead the recording's log restored up to it (bit for bit the state after that tick
+        of the step, driven agents' decisions inside it included, at the cost of a replay from
+        the reset): its observation holds the agents due at that tick and its reward is 0.0
+        (each agent's reward is summed until its decision); the last tick is the step's own
+        answer (:meth:`at`).
+
         Raises:
             IndexError: no such step (step 0 has no action), or ``first`` past its ticks.
-            ValueError: ``count`` below 1, or an environment whose agents come and go or
-                decide at their own pace (not supported: an action of one tick would have to
-                hold the agents due at that tick, which the step's action does not).
+            ValueError: ``count`` below 1.
             RuntimeError: as :meth:`at`.
         """
-        check_ticks_supported(self.hello)
         if not 1 <= step <= len(self):
             raise IndexError(f"step {step} has no action (steps 1 to {len(self)} have)")
-        *changes, (_, action, frames) = self._steps[step - 1]
+        changes, actions = (list(map(list, events)) for events in split_step(self._steps[step - 1]))
+        frames = self.frames(step)
         if not 1 <= first <= frames:
             raise IndexError(f"step {step} has ticks 1 to {frames}, not {first}")
         if count is not None and count < 1:
             raise ValueError("count must be at least 1")
         last = frames if count is None else min(frames, first + count - 1)
-        self._goto(step - 1)
-        return read_ticks(self._processes.stepping(), changes, action, first, last)
+        if self.hello.possible_agents is None and not self.hello.groups:
+            self._goto(step - 1)
+            return read_ticks(self._processes.stepping(), changes, actions[0][1], first, last)
+        ticks = []
+        if first < frames:
+            before = [event for events in self._steps[: step - 1] for event in events]
+            ticks = restored_ticks(
+                self._processes.stepping(),
+                self.episode.snapshot,
+                [*before, *changes],
+                actions,
+                first,
+                min(last, frames - 1),
+            )
+        if last == frames:  # the step's own answer: its observation, rewards and flags
+            state = self.at(step)
+            ticks.append(
+                Tick(
+                    frames,
+                    state.observation,
+                    state.reward,
+                    state.terminated,
+                    state.truncated,
+                    state.info,
+                    state.properties,
+                    state.draw,
+                )
+            )
+        return ticks
 
     def branch(
         self,
@@ -345,7 +385,7 @@ class Timeline:
         continuation = Continuation.of(actions, policy, max_steps)
         result = self._goto(step)
         if repeat_action is None and self._steps:
-            repeat_action = self._steps[min(step, len(self) - 1)][-1][2]
+            repeat_action = split_step(self._steps[min(step, len(self) - 1)])[1][0][2]
         checkpoints = self._checkpoints.upto(step)
         checkpoints.every = max(
             checkpoints.every,  # half the room left, at most
@@ -363,7 +403,7 @@ class Timeline:
                 result = continuation.take(
                     processes, step, repeat_action, result, checkpoints, records
                 )
-            snapshot = cursor.call("snapshot")
+            snapshot = self._shared_log(step, cursor.call("snapshot"))
         except ConnectionError as error:
             raise RuntimeError(f"the timeline's environment failed: {error}") from None
         except RemoteError:
@@ -371,7 +411,9 @@ class Timeline:
             raise
         digests = self.episode.observations[: step + 1] + [record[0] for record in records[step:]]
         ends = records[-1][2:4] if len(records) > step else (terminated, truncated)
-        episode = EpisodeFile(self.episode.target, snapshot, digests, *ends)
+        episode = EpisodeFile(
+            self.episode.target, snapshot, digests, *ends, driven=sorted(processes.driven) or None
+        )
         branch = object.__new__(Timeline)
         branch._setup(episode, processes, False, checkpoints, records)
         branch._starting = self._starting
@@ -415,6 +457,16 @@ class Timeline:
         return self._processes.goto(
             self, step, self._steps, self._checkpoints, self._records, self._check
         )
+
+    def _shared_log(self, step: int, snapshot: dict[str, Any]) -> dict[str, Any]:
+        """A branch's ``snapshot`` with this timeline's own events for the first ``step`` steps.
+
+        The branch's server took a step whose driven agents decided during it part by part,
+        and logged each part as an action of its own; the recording's events say it as one
+        step (``rlenv_client._recorded_parts``), one event for each of the branch's.
+        """
+        shared = [event for events in self._steps[:step] for event in events]
+        return {**snapshot, "events": [*shared, *snapshot["events"][len(shared) :]]}
 
     def _check(self, step: int, observed: str) -> None:
         check_digest(self.episode, self.hello.agents, step, observed)

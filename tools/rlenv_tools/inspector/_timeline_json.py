@@ -11,6 +11,8 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import numpy as np
+
 from rlenv_tools.inspector._recordings import Branch
 from rlenv_tools.inspector._watch import _shown, to_json
 from rlenv_tools.timeline import Step, Tick, Timeline
@@ -46,8 +48,9 @@ def agents_json(timeline: Timeline, step: int) -> dict[str, Any]:
     """Who is in play at ``step`` and what each agent earned so far.
 
     ``agents_in_play`` (:meth:`~rlenv_tools.timeline.Timeline.agents_in_play`), ``arrived``
-    and ``left`` (those that joined, and left, at this step) and ``agent_returns`` (each
-    agent's return up to this step).
+    and ``left`` (those that joined, and left, at this step), ``agent_returns`` (each
+    agent's return up to this step: a group's is its members' sum) and ``groups`` (each group
+    of agents' members at this step: :func:`_members_json`).
     """
     in_play = timeline.agents.in_play()
     before = set(in_play[step - 1]) if step else set()
@@ -56,6 +59,22 @@ def agents_json(timeline: Timeline, step: int) -> dict[str, Any]:
         "arrived": [name for name in in_play[step] if name not in before],
         "left": [name for name, at in timeline.agents.departures().items() if at == step],
         "agent_returns": to_json(timeline.agents.returns(step)),
+        "groups": {name: _members_json(timeline, name, step) for name in timeline.hello.groups},
+    }
+
+
+def _members_json(timeline: Timeline, group: str, step: int) -> dict[str, Any]:
+    """A group's members at ``step``: how many in play, who arrived and left, their returns.
+
+    ``in_play`` (a count), ``arrived`` and ``left`` (member indices, at this step) and
+    ``returns`` (each member's return over the whole timeline).
+    """
+    members = timeline.agents.members(group)
+    return {
+        "in_play": int(members.in_play[step].sum()),
+        "arrived": [int(i) for i in np.flatnonzero(members.arrivals == step)] if step else [],
+        "left": [int(i) for i in np.flatnonzero(members.departures == step)],
+        "returns": members.returns.tolist(),
     }
 
 

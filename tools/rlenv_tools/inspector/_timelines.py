@@ -218,8 +218,7 @@ class Timelines:
 
         Raises:
             InspectorError: as :meth:`step` (step 0 has no ticks: 400; ``first`` past the
-                step's ticks, or ``count`` outside 1 to :data:`MAX_TICKS`: 400; an environment
-                whose agents come and go, whose ticks are not supported: 422, saying so).
+                step's ticks, or ``count`` outside 1 to :data:`MAX_TICKS`: 400).
         """
         if not 1 <= count <= MAX_TICKS:
             raise InspectorError(400, f"count must be 1 to {MAX_TICKS}")
@@ -230,10 +229,7 @@ class Timelines:
                     400, f"step {step} has no action: steps 1 to {len(timeline)} have"
                 )
             frames = timeline.frames(step)
-            try:
-                ticks = page_call(lambda: timeline.ticks(step, first=first, count=count))
-            except ValueError as error:  # agents that come and go: not supported, said why
-                raise InspectorError(422, str(error)) from None
+            ticks = page_call(lambda: timeline.ticks(step, first=first, count=count))
             where = {"timeline": number, "branch": branch, "step": step}
             return {**where, **ticks_json(ticks, frames, first, count, root.agents)}
 

@@ -237,16 +237,27 @@ function showStep(state) {
 }
 
 // Who is in play at this step (+ joined now, "left" as they go) and each agent's return so far.
+// A group of agents shows its members in play, those that joined (+) and left (-) now.
 function showAgents(state) {
   const box = $("timeline-agents");
   const agents = state.agents_in_play || [];
-  box.hidden = agents.length < 2;
+  const groups = state.groups || {};
+  box.hidden = agents.length < 2 && Object.keys(groups).length === 0;
   const joined = (name) => (state.step > 0 && state.arrived.includes(name) ? "+" : "");
   const left = (name) => (state.left.includes(name) ? " (left)" : "");
+  const members = (name) => {
+    const group = groups[name];
+    if (!group) return "";
+    const moved = (group.arrived.length ? ` +${group.arrived.length}` : "") +
+      (group.left.length ? ` -${group.left.length}` : "");
+    return ` [${group.in_play} members${moved}]`;
+  };
   const returns = Object.entries(state.agent_returns || {});
-  box.textContent = `in play: ${agents.map((n) => joined(n) + n + left(n)).join(", ")}` +
+  box.textContent = "in play: " +
+    agents.map((n) => joined(n) + n + members(n) + left(n)).join(", ") +
     ` · returns: ${returns.map(([n, r]) => `${n} ${formatNumber(r)}`).join(", ")}`;
   box.dataset.inPlay = agents.join(",");
+  box.dataset.members = Object.entries(groups).map(([n, g]) => `${n}:${g.in_play}`).join(",");
 }
 
 function showPosition() {

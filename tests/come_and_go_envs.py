@@ -44,9 +44,11 @@ class Walker(RLAgent):
 
     action_space = spaces.Discrete(3)
     observation_space = spaces.Box(-1000.0, 1000.0, (2,), np.float32)
+    configurable = ("stride",)
 
     def __init__(self, name: str) -> None:
         super().__init__(name)
+        self.stride = 1.0  # a setting: how far a step of velocity 1 goes
         self.position = 0.0
         self.velocity = 0.0
         self.actions: list[tuple[int, Any]] = []  # (tick, action) as set_action got them
@@ -64,7 +66,7 @@ class Walker(RLAgent):
         self.velocity = 0.0
 
     def _physics_process(self, delta: float) -> None:
-        self.position += self.velocity
+        self.position += self.velocity * self.stride
 
     def _after_physics_tick(self, delta: float) -> None:
         self.add_reward(1.0)

@@ -232,6 +232,33 @@ def test_a_snapshot_with_agents_that_came_and_went_replays_bit_for_bit(serve: Se
                 break
 
 
+def test_a_snapshot_restores_over_an_episode_whose_agents_all_left() -> None:
+    """A reset keeps the settings of the agents in the tree, whoever played; a restore over
+    an instance where those agents are gone (or not yet come) sets the ones there are."""
+    first, fresh = LocalClient(COME_AND_GO), LocalClient(COME_AND_GO)
+    answers = _play(first)
+    assert answers[-1]["terminated"] or answers[-1]["truncated"]  # A and C left, B was freed
+    first.configure(agent={"A": {"stride": 0.5}})  # A is still in the tree, out of play
+    observation, _ = first.reset(seed=1)
+    first.configure(agent={"B": {"stride": 3.0}})  # the new B, during the episode
+    for _ in range(4):
+        observation, *_ = first.step(dict.fromkeys(observation, 2))
+    snapshot, at_snapshot = first.snapshot(), observation
+    assert snapshot["config"]["agent"] == {"A": {"stride": 0.5}, "C": {"stride": 1.0}}
+    for _ in range(10):  # to the end of the episode: no agent is left in play
+        observation, _, terminated, truncated, _ = first.step(dict.fromkeys(observation, 2))
+        if terminated or truncated:
+            break
+    assert terminated or truncated
+    for client in (first, first, fresh):  # over the ended episode, twice; on a new instance
+        restored, _ = client.restore(snapshot)
+        assert sorted(restored) == sorted(at_snapshot) == ["A", "C"]
+        for name in restored:
+            assert restored[name].tobytes() == at_snapshot[name].tobytes()
+    first.close()
+    fresh.close()
+
+
 def test_an_environment_without_declaration_nor_periods_answers_every_agent_as_ever() -> None:
     client = LocalClient("examples.pair:PairEnvironment")
     assert client.hello.possible_agents is None

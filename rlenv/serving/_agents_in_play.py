@@ -199,6 +199,18 @@ class AgentsInPlay(Roster):
         for members in self.groups:
             members.start()
 
+    def settable(self) -> list[RLAgent]:
+        """The agents a ``config`` reaches: every agent in the tree, in play or not.
+
+        A reset captures their settings before its hooks run, so a snapshot holds those of
+        the agents it starts from, whoever played the episode before.
+        """
+        return self._in_tree()
+
+    def absent_possible(self) -> frozenset[str]:
+        """The names of possible agents that are not in the tree (they left, or never came)."""
+        return frozenset(self.possible.keys() - {agent.name for agent in self._in_tree()})
+
     def _in_tree(self) -> list[RLAgent]:
         return [
             node

@@ -109,14 +109,14 @@ class Restore(Part):
             settings = config.get("environment")
             if isinstance(settings, Mapping) and settings.get("real_time"):
                 raise bad("restore: snapshots replay in lockstep; this one asks for real time")
-        instance.settings.check(snapshot["config"])
+        instance.settings.check(snapshot["config"], recorded=True)
         if snapshot["options"]:
             check_options(instance, snapshot["options"], "restore: options")
         actions = []
         for index, event in enumerate(snapshot["events"]):
             where = f"restore: events[{index}]: "
-            if event[0] == "config":
-                instance.settings.check(event[1])
+            if event[0] == "config":  # checked again when the replay reaches it
+                instance.settings.check(event[1], recorded=True)
             elif event[0] == "action":
                 check_repeat_action(event[2], f"{where}the action's frames")
                 actions.append(
@@ -133,12 +133,13 @@ class Restore(Part):
         snapshot, actions, rng = value
         instance.replaying = True
         try:
-            instance.settings.configure(snapshot["config"])
+            instance.settings.configure(snapshot["config"], recorded=True)
             instance.environment.np_random = rng
             instance.begin_episode(None, snapshot["options"])
             checked = iter(actions)
             for index, event in enumerate(snapshot["events"]):
-                if event[0] == "config":
+                if event[0] == "config":  # the agents it names may have come since
+                    _prefixed(f"restore: events[{index}]: ", instance.settings.check, event[1])
                     instance.settings.configure(event[1])
                 elif event[0] == "set":
                     _prefixed(f"restore: events[{index}]: ", instance.set_property, *event[1:])

@@ -98,6 +98,14 @@ class Roster:
         """Every agent that may act: each with its ``name`` and ``action_space``."""
         return self.agents
 
+    def settable(self) -> list[RLAgent]:
+        """The agents a ``config`` reaches (and a reset captures): every agent."""
+        return self.agents
+
+    def absent_possible(self) -> frozenset[str]:
+        """The names of agents that may appear but are not in the tree: none, here."""
+        return frozenset()
+
     def deciding(self) -> list[RLAgent]:
         """The agents that decide at this answer: every agent."""
         return self.agents

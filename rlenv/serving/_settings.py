@@ -57,8 +57,11 @@ class Settings:
         self.recorder: VideoRecorder | None = None
         self._readers: _Readers | None = None  # how to capture, for the nodes as they are
 
-    def check(self, config: Mapping[str, Any]) -> None:
+    def check(self, config: Mapping[str, Any], recorded: bool = False) -> None:
         """Check a ``config`` part (every node it applies to) without applying it.
+
+        A ``recorded`` one (a snapshot's, or the one a rebuilt environment carries) may name
+        agents that may appear but are not in this tree: it sets those there are.
 
         Raises:
             RequestError: ``bad_request`` (its shape) or ``invalid_config`` naming the key.
@@ -72,7 +75,7 @@ class Settings:
                 raise RequestError(ErrorCode.BAD_REQUEST, f"config.{part} must be a map")
             if part == "environment":
                 settings = self._check_environment(settings)
-            for node, own in self._reached(part, settings):
+            for node, own in self._reached(part, settings, recorded):
                 try:
                     node.check_config(own)
                 except RequestError as error:
@@ -80,7 +83,7 @@ class Settings:
                         raise
                     raise RequestError(error.code, f"config.agent: {node.name}: {error}") from None
 
-    def configure(self, config: Mapping[str, Any]) -> None:
+    def configure(self, config: Mapping[str, Any], recorded: bool = False) -> None:
         """Apply a checked ``config`` part through the environment's ``_configure``.
 
         The configuration it replaces is kept until the request is answered (a request that
@@ -93,10 +96,10 @@ class Settings:
         if instance.configures_itself:
             instance.environment._configure(config)
         else:
-            self.apply(config)
+            self.apply(config, recorded)
         instance.log.configured(config)
 
-    def apply(self, config: Mapping[str, Any]) -> None:
+    def apply(self, config: Mapping[str, Any], recorded: bool = False) -> None:
         """Apply a checked ``config`` part to its nodes (what ``_configure`` does by default).
 
         A configured property is the configuration's from then on: a reset keeps it, even if
@@ -108,7 +111,7 @@ class Settings:
             settings = config[part]
             if part == "environment":
                 settings = self._apply_environment(settings)
-            for node, own in self._reached(part, settings):
+            for node, own in self._reached(part, settings, recorded):
                 node.configure(own)
                 for key in own:
                     self._instance.forget_set(node, key)
@@ -123,8 +126,8 @@ class Settings:
         instance = self._instance
         if instance.configures_itself:
             instance.environment._configure(config)
-        else:
-            self.apply(config)
+        else:  # agents that were in the replaced tree may not be in the new one yet
+            self.apply(config, recorded=True)
 
     def undo(self, answer: Answer) -> None:
         """Put back the settings a failed request changed (as they were before it)."""
@@ -151,7 +154,8 @@ class Settings:
         """:meth:`state` as it is now, read cheaply (every reset does): its map comes later."""
         readers = self._readers
         instance = self._instance
-        if readers is None or not readers.fit(instance.environment, instance.agents):
+        agents = instance.roster.settable()
+        if readers is None or not readers.fit(instance.environment, agents):
             readers = self._readers = _Readers(self._nodes(), instance.multi_agent)
         return Captured(
             readers.parts, readers.keys, tuple([read(node) for node, read in readers.nodes])
@@ -171,17 +175,26 @@ class Settings:
     def _nodes(self) -> dict[str, list[Any]]:
         instance = self._instance
         environment = instance.environment
-        parts: dict[str, list[Any]] = {"environment": [environment], "agent": instance.agents}
+        parts: dict[str, list[Any]] = {
+            "environment": [environment],
+            "agent": instance.roster.settable(),
+        }
         if environment.world is not None:
             parts["world"] = [environment.world]
         return parts
 
     def _reached(
-        self, part: str, settings: Mapping[str, Any]
+        self, part: str, settings: Mapping[str, Any], recorded: bool = False
     ) -> list[tuple[Any, Mapping[str, Any]]]:
-        """Each node a part's ``settings`` reach, with the settings it gets."""
+        """Each node a part's ``settings`` reach, with the settings it gets.
+
+        ``recorded`` settings (from another tree: a snapshot's, a replaced environment's) may
+        name agents that may appear but are not in this tree: they reach no one.
+        """
         if part == "agent":
-            return agent_settings(self._instance.agents, settings)
+            roster = self._instance.roster
+            absent = roster.absent_possible() if recorded else frozenset()
+            return agent_settings(roster.settable(), settings, absent)
         return [(node, settings) for node in self._nodes()[part]]
 
     def _check_environment(self, settings: Mapping[str, Any]) -> dict[str, Any]:
@@ -212,12 +225,13 @@ class Settings:
 
 
 def agent_settings(
-    agents: list[Any], settings: Mapping[str, Any]
+    agents: list[Any], settings: Mapping[str, Any], absent: frozenset[str] = frozenset()
 ) -> list[tuple[Any, Mapping[str, Any]]]:
     """Each agent a ``config.agent`` map reaches, with its own settings (module docstring).
 
     A map of settings only reaches every agent, as it always did; a map that names a class or
-    an agent reaches the agents it gives a setting.
+    an agent reaches the agents it gives a setting. A key in ``absent`` (agents that may
+    appear but are not in the tree) reaches no one.
 
     Raises:
         RequestError: ``invalid_config`` for a key that is neither a setting nor an agent's
@@ -230,6 +244,8 @@ def agent_settings(
     by_class: dict[str, Mapping[str, Any]] = {}
     by_name: dict[str, Mapping[str, Any]] = {}
     for key, value in settings.items():
+        if key in absent and key not in names:
+            continue
         if key in names or key in classes:
             kind = "agent" if key in names else "class"
             if not isinstance(value, Mapping):

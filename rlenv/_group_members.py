@@ -105,7 +105,7 @@ class GroupMembers:
     def ticked(self) -> None:
         """The end of a tick, after the hooks: members whose flags were set leave now.
 
-        Their final observation rows are taken now (one :meth:`get_data` of the group).
+        Their final observation rows are taken now (one ``get_data`` of the group).
         """
         group = self.group
         ending = self._scratch

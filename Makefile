@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
 .PHONY: demo test test-lowest test-ray test-browser test-minari test-onnx test-dm-env-rpc\
-	test-godot-rl test-package screenshot\
+	test-godot-rl test-trainers test-package screenshot\
 	screenshot-time-travel plinko-picture sb3 rllib cleanrl bench-http bench-train docs lint typecheck\
 	vectors clean
 
@@ -172,6 +172,18 @@ test-godot-rl: $(STAMP) $(GODOT_RL_EXAMPLE)
 		GODOT_RL_EXAMPLE=$(abspath $(GODOT_RL_EXAMPLE)) OMP_NUM_THREADS=1 \
 		$(BIN)/python -m pytest -m godot_rl tests/test_godot_rl.py; fi
 
+# Optional: the trainer matrix (.ci/test-trainers): docs/other-trainers.md's recipes
+# (examples/recipes: PufferLib, TorchRL, Sample Factory, gymnasium's benchmark_step) as smoke
+# tests, each library in a venv of its own under TRAINERS_VENVS (the CPU torch first; never .venv),
+# at the versions the page's table gives. A library pip cannot install here is reported "not
+# run", with pip's reason; a recipe that fails fails the target. About a minute a recipe once the
+# venvs are made (RECIPES="torchrl pufferlib" runs some).
+TRAINERS_VENVS ?= .venv-trainers
+RECIPES ?=
+
+test-trainers:
+	PYTHON=$(PYTHON) .ci/test-trainers $(TRAINERS_VENVS) $(RECIPES)
+
 # Optional: what serving costs a real trainer (benchmarks/train_speed.py: SB3 PPO and SyncVectorEnv
 # against the environment in process, under three conditions; about 15 minutes). torch first.
 bench-train: $(STAMP)
@@ -211,4 +223,4 @@ vectors: $(STAMP)
 	$(BIN)/python -m tests.protocol_vectors
 
 clean:
-	rm -rf $(VENV) $(CLEANRL_VENV) $(GODOT_RL_VENV) $(LOWEST_VENV) build dist site *.egg-info
+	rm -rf $(VENV) $(CLEANRL_VENV) $(GODOT_RL_VENV) $(LOWEST_VENV) $(TRAINERS_VENVS) build dist site *.egg-info

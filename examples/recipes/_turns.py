@@ -20,19 +20,19 @@ Measure = Callable[[], float]
 """One round's steps/s of one side."""
 
 
-def arguments(description: str | None) -> argparse.Namespace:
+def arguments(description: str | None, smoke_rounds: int = 2) -> argparse.Namespace:
     """The recipes' command line: ``--rounds``, ``--seconds`` and ``--smoke``.
 
-    ``--seconds`` is a side's share of a round; ``--smoke`` is 2 rounds of 0.5 s, what a smoke
-    test needs (not a figure).
+    ``--seconds`` is a side's share of a round; ``--smoke`` is ``smoke_rounds`` rounds of 0.5 s,
+    what a smoke test needs (not a figure).
     """
     parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--seconds", type=float, default=3.0)
-    parser.add_argument("--smoke", action="store_true", help="2 rounds of 0.5 s")
+    parser.add_argument("--smoke", action="store_true", help=f"{smoke_rounds} rounds of 0.5 s")
     parsed = parser.parse_args()
     if parsed.smoke:
-        parsed.rounds, parsed.seconds = 2, 0.5
+        parsed.rounds, parsed.seconds = smoke_rounds, 0.5
     return parsed
 
 

@@ -16,6 +16,7 @@ that ended is masked. Then the figure: steps/s on ``rlenv/CartPole-v1`` against 
 from __future__ import annotations
 
 import functools
+import itertools
 from typing import Any
 
 import gymnasium as gym
@@ -124,12 +125,11 @@ def check_masks(backend: str, steps: int = 600) -> None:
 def random_steps(envs: Any) -> Stepper:
     """A vector's step of random actions (drawn beforehand), counting its env-steps."""
     envs.action_space.seed(0)
-    actions = [envs.action_space.sample() for _ in range(64)]
-    turn = iter(range(1 << 62))
+    actions = itertools.cycle([envs.action_space.sample() for _ in range(64)])
 
     def step() -> int:
         for _ in range(10):
-            envs.step(actions[next(turn) % len(actions)])
+            envs.step(next(actions))
         return 10 * envs.num_agents
 
     return step

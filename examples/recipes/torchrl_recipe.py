@@ -41,7 +41,7 @@ def parallel(make: Callable[[], EnvBase]) -> EnvBase:
     """Two ``make`` environments in a ``ParallelEnv``, its workers forked.
 
     The default start method, spawn, imports torch afresh in every worker (seconds each on a
-    small machine); forking before any tensor work is safe on the CPU.
+    small machine); fork starts them at once (on the CPU: the recipe checks it).
     """
     return ParallelEnv(2, make, mp_start_method="fork")
 

@@ -50,7 +50,12 @@ APPO = [
 """A small APPO on the CPU, after ``sf_examples/train_gym_env.py``'s CartPole line."""
 
 
-def make_env(full_env_name: str, cfg: object = None, env_config: object = None, render_mode=None):
+def make_env(
+    full_env_name: str,
+    cfg: object = None,
+    env_config: object = None,
+    render_mode: str | None = None,
+) -> gym.Env:
     """Sample Factory's environment function: ``gym.make`` of the id, as its gym example does."""
     return gym.make(full_env_name, render_mode=render_mode)
 

@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
 .PHONY: demo test test-lowest test-ray test-browser test-minari test-onnx test-dm-env-rpc\
-	test-godot-rl test-openenv test-package screenshot\
+	test-godot-rl test-openenv test-trainers test-package screenshot\
 	screenshot-time-travel plinko-picture sb3 rllib cleanrl bench-http bench-train docs lint typecheck\
 	vectors clean
 
@@ -188,6 +188,18 @@ $(OPENENV_VENV)/.installed: pyproject.toml
 test-openenv: $(OPENENV_VENV)/.installed
 	$(OPENENV_VENV)/bin/python -m pytest -m openenv tests/test_openenv.py
 
+# Optional: the trainer matrix (.ci/test-trainers): docs/other-trainers.md's recipes
+# (examples/recipes: PufferLib, TorchRL, Sample Factory, gymnasium's benchmark_step) as smoke
+# tests, each library in a venv of its own under TRAINERS_VENVS (the CPU torch first; never .venv),
+# at the versions the page's table gives. A library pip cannot install here is reported "not
+# run", with pip's reason; a recipe that fails fails the target. About a minute a recipe once the
+# venvs are made (RECIPES="torchrl pufferlib" runs some).
+TRAINERS_VENVS ?= .venv-trainers
+RECIPES ?=
+
+test-trainers:
+	PYTHON=$(PYTHON) .ci/test-trainers $(TRAINERS_VENVS) $(RECIPES)
+
 # Optional: what serving costs a real trainer (benchmarks/train_speed.py: SB3 PPO and SyncVectorEnv
 # against the environment in process, under three conditions; about 15 minutes). torch first.
 bench-train: $(STAMP)
@@ -227,5 +239,5 @@ vectors: $(STAMP)
 	$(BIN)/python -m tests.protocol_vectors
 
 clean:
-	rm -rf $(VENV) $(CLEANRL_VENV) $(GODOT_RL_VENV) $(OPENENV_VENV) $(LOWEST_VENV) build dist site \
-		*.egg-info
+	rm -rf $(VENV) $(CLEANRL_VENV) $(GODOT_RL_VENV) $(OPENENV_VENV) $(LOWEST_VENV) \
+		$(TRAINERS_VENVS) build dist site *.egg-info

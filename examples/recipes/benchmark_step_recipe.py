@@ -1,0 +1,68 @@
+"""Gymnasium's own benchmarks on rlenv: ``benchmark_step`` and ``benchmark_vector_step``.
+
+    pip install rlenv
+    python examples/recipes/benchmark_step_recipe.py [--smoke] [--rounds R] [--seconds S]
+
+``gymnasium.utils.performance.benchmark_step(env, target_duration, seed)`` steps random actions
+for ``target_duration`` seconds, resetting at each episode's end, and returns steps/s; here on
+``gym.make("rlenv/CartPole-v1")`` (a server subprocess) against ``gym.make("CartPole-v1")``,
+one call a round, in turns. ``benchmark_vector_step`` does the same for ``gym.make_vec`` of 8:
+rlenv's id makes its ``RemoteVectorEnv`` (servers in columns), CartPole-v1's default is
+gymnasium's NumPy ``CartPoleVectorEnv``, and ``vectorization_mode="sync"`` a
+``SyncVectorEnv`` of 8 (measured too, for the Python loop a user's own environment gets).
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+from _turns import Measure, arguments, contest
+from gymnasium.utils.performance import benchmark_step, benchmark_vector_step
+
+import rlenv_client  # noqa: F401  (registers the rlenv/ ids with gymnasium)
+
+VECTOR = 8
+
+
+def benchmark(env: gym.Env | gym.vector.VectorEnv, seconds: float) -> Measure:
+    """One round: gymnasium's benchmark of ``env`` (a vector's if it is one), seeded 0."""
+    if isinstance(env, gym.vector.VectorEnv):
+        return lambda: benchmark_vector_step(env, target_duration=seconds, seed=0)
+    return lambda: benchmark_step(env, target_duration=seconds, seed=0)
+
+
+def main() -> None:
+    """One figure a benchmark."""
+    args = arguments(__doc__)
+    ours, theirs = gym.make("rlenv/CartPole-v1"), gym.make("CartPole-v1")
+    try:
+        print(
+            contest(
+                "gymnasium benchmark_step",
+                benchmark(ours, args.seconds),
+                benchmark(theirs, args.seconds),
+                args.rounds,
+            )
+        )
+    finally:
+        ours.close()
+        theirs.close()
+    for mode in (None, "sync"):
+        ours = gym.make_vec("rlenv/CartPole-v1", num_envs=VECTOR)
+        theirs = gym.make_vec("CartPole-v1", num_envs=VECTOR, vectorization_mode=mode)
+        try:
+            print(
+                contest(
+                    f"gymnasium benchmark_vector_step, make_vec({VECTOR}) against CartPole-v1's "
+                    f"{type(theirs.unwrapped).__name__}",
+                    benchmark(ours, args.seconds),
+                    benchmark(theirs, args.seconds),
+                    args.rounds,
+                )
+            )
+        finally:
+            ours.close()
+            theirs.close()
+
+
+if __name__ == "__main__":
+    main()

@@ -10,11 +10,11 @@ swarm's group does every physics tick:
 
 The three ways: pymunk's public properties (``body.position``, ``body.force = ...``);
 Chipmunk's accessors called straight on each body (``rlenv.scene2d._chipmunk``, what rlenv's
-bodies use); ``pymunk.batch`` (``get_space_bodies`` / ``set_space_bodies`` into a ``Buffer``
-kept between calls (one for reads, one on an array for writes), with ``BODY_ID`` to find each body's row: batch calls visit every body
-of the space, the walls' static body included, in Chipmunk's order, which a body's removal
-changes). Prints microseconds per call (min and median of the rounds) and each way's ratio
-to the properties.
+bodies use); ``pymunk.batch`` (``get_space_bodies`` / ``set_space_bodies`` with ``Buffer``s
+kept between calls, one for reads and one on an array for writes, and ``BODY_ID`` to find each
+body's row: batch calls visit every body of the space, the walls' static body included, in
+Chipmunk's order, which a body's removal changes). Prints microseconds per call (min and median
+of the rounds) and each way's ratio to the properties.
 """
 
 from __future__ import annotations

@@ -102,7 +102,7 @@ def member_name(slot: int) -> str:
 
 
 class SwarmWorld(RLEnvWorld):
-    """The room: a fresh :class:`~rlenv.PhysicsWorld` and :class:`~.scene.SwarmBodies` at every reset.
+    """The room: a fresh :class:`~rlenv.PhysicsWorld` and :class:`~.scene.SwarmBodies` each reset.
 
     Args:
         count: the most members.

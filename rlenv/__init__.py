@@ -4,6 +4,7 @@ Layout (the design card's, one concept per module):
 
 - ``node``, ``signals``, ``tree``, ``timer``: the Godot-style scene tree runtime;
 - ``environment``, ``agent``, ``world`` (and their base ``rl_node``): what users subclass;
+  ``agent_group``: a group of agents of one role, stepped as arrays (``RLAgentGroup``);
   ``levels``: a world whose levels come from the seed or as data (``LevelWorld``);
 - ``views``: queries over a tree, bulk reads and writes (``view``);
 - ``communication``: an environment's link to its clients (``start_server``; ``run`` hosts
@@ -45,6 +46,7 @@ _EXPORTS = {
     "CollisionShape": "rlenv.scene2d.physics",
     "Joint": "rlenv.scene2d.physics",
     "RLAgent": "rlenv.agent",
+    "RLAgentGroup": "rlenv.agent_group",
     "RLEnvWorld": "rlenv.world",
     "LevelWorld": "rlenv.levels",
     "RLEnvironment": "rlenv.environment",
@@ -74,6 +76,7 @@ def __getattr__(name: str) -> Any:
 
 if TYPE_CHECKING:
     from rlenv.agent import RLAgent as RLAgent
+    from rlenv.agent_group import RLAgentGroup as RLAgentGroup
     from rlenv.communication import Communication as Communication
     from rlenv.environment import RLEnvironment as RLEnvironment
     from rlenv.levels import LevelWorld as LevelWorld

@@ -68,6 +68,7 @@ class RLAgent(RLNode):
     decision_period: int | None = None
     decision_offset: int = 0
     act_between_decisions: bool = True
+    _IS_GROUP: ClassVar[bool] = False  # True on RLAgentGroup (rlenv.agent_group) only
 
     def __init__(self, name: str | None = None) -> None:
         super().__init__(name)

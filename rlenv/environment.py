@@ -136,8 +136,16 @@ class RLEnvironment(RLNode):
 
     @property
     def multi_agent(self) -> bool:
-        """Whether the environment has several agents (spaces and outcomes keyed by name)."""
-        return len(self.agents) > 1 or self.possible_agents is not None
+        """Whether the environment has several agents (spaces and outcomes keyed by name).
+
+        A group of agents (:class:`~rlenv.agent_group.RLAgentGroup`) counts as several.
+        """
+        agents = self.agents
+        return (
+            len(agents) > 1
+            or self.possible_agents is not None
+            or any(agent._IS_GROUP for agent in agents)
+        )
 
     def add_child(self, node: Node) -> None:
         """Add ``node`` (see :meth:`Node.add_child`); an RLAgent added in an episode joins it.

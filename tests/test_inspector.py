@@ -153,7 +153,7 @@ def test_it_watches_a_trainer_and_edits_between_its_steps(server: ServerProcess,
         wait_until(lambda: trainer.episodes > 3, "the trainer did not run")
         status, _, servers = fetch(page, "api/servers")
         assert status == 200 and servers[0]["environment"] == "CartPole"
-        assert servers[0]["instances"] == 1 and servers[0]["protocol"] == "2.6"
+        assert servers[0]["instances"] == 1 and servers[0]["protocol"] == "2.7"
         frames = [fetch(page, "api/frame")[2] for _ in range(3)]
         assert all(len(f["draw"]["shapes"]) == 3 for f in frames)
         assert len({str(f["draw"]["shapes"]) for f in frames}) > 1  # the cart moves

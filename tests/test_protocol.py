@@ -1388,7 +1388,7 @@ def test_send_that_fails_to_encode_changes_nothing(ready: Pair) -> None:
 
 def test_a_client_learns_the_servers_frame_limit_from_the_hello(pair: Pair) -> None:
     hello = pair.handshake(make_hello(limits={"max_frame_size": 1000, "idle_timeout": None}))
-    assert hello.protocol == (2, 6)
+    assert hello.protocol == (2, 7)
     assert hello.limits == {"max_frame_size": 1000, "idle_timeout": None}
     assert pair.client.max_send_size == 1000
     with pytest.raises(LocalProtocolError, match="exceeds the peer's frame limit of 1000"):

@@ -54,7 +54,7 @@ def test_the_last_n_episodes_replay_to_what_the_live_episodes_saw(serve: Serve) 
     live = serve(args=["--keep-episodes", "3"])
     lived = []
     with Client(live.address, timeout=10) as trainer:
-        assert trainer.hello.protocol == (2, 6) and trainer.hello.target == TARGET
+        assert trainer.hello.protocol == (2, 7) and trainer.hello.target == TARGET
         assert trainer.episodes() == []  # none finished yet
         for seed in range(5):  # cut short by the next reset, except the pushed one (seed 3)
             actions = [RIGHT] * 60 if seed == 3 else [LEFT, RIGHT] * (2 + seed)

@@ -19,6 +19,7 @@ from rlenv.protocol.errors import ProtocolVersionError as ProtocolVersionError
 from rlenv.protocol.errors import RemoteError as RemoteError
 from rlenv.protocol.errors import RequestTimeout as RequestTimeout
 from rlenv.protocol.errors import RlenvError as RlenvError
+from rlenv.protocol.messages import GroupSpec as GroupSpec
 from rlenv_client.base import BaseClient as BaseClient
 from rlenv_client.base import StepResult as StepResult
 from rlenv_client.client import Client as Client
@@ -34,6 +35,7 @@ __all__ = [
     "Client",
     "ConnectionLost",
     "ErrorCode",
+    "GroupSpec",
     "LocalClient",
     "ProtocolVersionError",
     "RemoteEnv",

@@ -29,6 +29,7 @@ from gymnasium import spaces
 from rlenv.protocol import (
     BatchResponse,
     ErrorReply,
+    GroupSpec,
     Hello,
     Reply,
     Request,
@@ -62,6 +63,12 @@ class BaseClient(Inspection, ABC):
         observation_space (gymnasium.spaces.Space): the agent's observation space, as the
             server declared it.
         address (str): where the environment is, for messages.
+        groups (dict[str, GroupSpec]): the environment's groups of agents (protocol 2.7), by
+            agent name: each one's ``instance_count`` and one member's spaces (empty when
+            none). A group's observation is one array ``(instance_count, *obs_shape)``, its
+            action one array ``(instance_count, *act_shape)``, and its entry in
+            ``info["agents"]`` arrays ``reward``, ``terminated``, ``truncated``, ``active``
+            and ``joined`` (docs/several-agents.md, "Swarms").
     """
 
     hello: Hello
@@ -77,6 +84,7 @@ class BaseClient(Inspection, ABC):
         self._answers = Answers(self.address, self._receive, self.close)
         self.action_space: spaces.Space = hello.action_space
         self.observation_space: spaces.Space = hello.observation_space
+        self.groups: dict[str, GroupSpec] = hello.groups
         self._requests = Requests(hello, self._observation_request)
         self._observations: Codec = agent_codec(
             hello.observation_space, hello.possible_agents is not None

@@ -31,6 +31,7 @@ from rlenv.protocol.connection import State as State
 from rlenv.protocol.messages import PROTOCOL_VERSION as PROTOCOL_VERSION
 from rlenv.protocol.messages import BatchResponse as BatchResponse
 from rlenv.protocol.messages import ErrorReply as ErrorReply
+from rlenv.protocol.messages import GroupSpec as GroupSpec
 from rlenv.protocol.messages import Hello as Hello
 from rlenv.protocol.messages import Message as Message
 from rlenv.protocol.messages import Reply as Reply
@@ -47,6 +48,7 @@ __all__ = [
     "BatchResponse",
     "Connection",
     "ErrorReply",
+    "GroupSpec",
     "Hello",
     "Message",
     "Reply",

@@ -38,6 +38,7 @@ __all__ = [
     "PROTOCOL_VERSION",
     "BatchResponse",
     "ErrorReply",
+    "GroupSpec",
     "Hello",
     "Message",
     "Reply",
@@ -47,7 +48,7 @@ __all__ = [
     "joint_end",
 ]
 
-PROTOCOL_VERSION: Final = (2, 6)
+PROTOCOL_VERSION: Final = (2, 7)
 """(major, minor). Peers with different majors refuse each other; a newer minor only adds."""
 
 MAX_REPEAT_ACTION: Final = 10_000
@@ -64,6 +65,41 @@ MAX_RENDER_SIZE: Final = 4096
 _REWARD = np.dtype("<f8")
 _FRAMES = np.dtype("<i8")
 _FLAG = np.dtype("|u1")
+
+
+@dataclass(frozen=True, slots=True)
+class GroupSpec:
+    """A group of agents (protocol 2.7): its most members and one member's spaces.
+
+    The group is one agent of the hello's ``agents``, whose spaces are these stacked over
+    ``instance_count`` members (docs/protocol.md, "Swarms").
+    """
+
+    instance_count: int
+    observation_space: spaces.Space
+    action_space: spaces.Space
+
+    def to_wire(self) -> dict[str, Any]:
+        """The group's entry in the hello's ``groups``."""
+        return {
+            "instance_count": self.instance_count,
+            "observation_space": space_to_spec(self.observation_space),
+            "action_space": space_to_spec(self.action_space),
+        }
+
+    @classmethod
+    def from_wire(cls, wire: Any) -> GroupSpec:
+        """Read a hello's group entry.
+
+        Raises:
+            TypeError: it is not a map with a positive ``instance_count`` and two spaces.
+        """
+        count = wire["instance_count"]
+        if type(count) is not int or count < 1:
+            raise TypeError(f"a group's instance_count must be an int >= 1, got {count!r:.40}")
+        return cls(
+            count, space_from_spec(wire["observation_space"]), space_from_spec(wire["action_space"])
+        )
 
 
 @dataclass(slots=True)
@@ -88,6 +124,10 @@ class Hello:
     class's name, in ``agents``' order, when agents come and go or decide at their own pace:
     then an answer holds only the agents due to decide and those that left (docs/protocol.md,
     "Agents that come and go"). ``None`` when every agent is in every answer.
+    ``groups`` (protocol 2.7) maps each agent of ``agents`` that is a group of agents
+    (``rlenv.RLAgentGroup``) to its :class:`GroupSpec`; empty when none is, or from an older
+    server. An environment with a group has keyed spaces and outcomes (docs/protocol.md,
+    "Swarms").
     """
 
     environment: str
@@ -104,6 +144,7 @@ class Hello:
     target: str | None = None
     driven: tuple[str, ...] = ()
     possible_agents: dict[str, str] | None = None
+    groups: dict[str, GroupSpec] = field(default_factory=dict)
     protocol: tuple[int, int] = PROTOCOL_VERSION
 
     def to_wire(self) -> dict[str, Any]:
@@ -125,6 +166,7 @@ class Hello:
                 "target": self.target,
                 "driven": list(self.driven),
                 "possible_agents": self.possible_agents,
+                "groups": {name: group.to_wire() for name, group in self.groups.items()},
             }
         }
 
@@ -163,6 +205,7 @@ class Hello:
                 target=_target(body.get("target")),
                 driven=_driven(body.get("driven", []), body["agents"]),
                 possible_agents=_possible(body.get("possible_agents"), body["agents"]),
+                groups=_groups(body.get("groups", {}), body["agents"]),
                 protocol=(int(version[0]), int(version[1])),
             )
         except (KeyError, TypeError, ValueError) as exc:
@@ -182,6 +225,13 @@ def _possible(value: Any, agents: Any) -> dict[str, str] | None:
             f"possible_agents must map each of agents, in order, to a class name, got {value!r:.80}"
         )
     return dict(value)
+
+
+def _groups(value: Any, agents: Any) -> dict[str, GroupSpec]:
+    """A hello's groups: a map from some of its ``agents`` to their group specs (2.7)."""
+    if not (isinstance(value, Mapping) and all(name in agents for name in value)):
+        raise TypeError(f"groups must map some of the agents to groups, got {value!r:.80}")
+    return {str(name): GroupSpec.from_wire(group) for name, group in value.items()}
 
 
 def _target(value: Any) -> str | None:

@@ -26,6 +26,7 @@ from collections.abc import Callable, Mapping
 from enum import Enum
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 from gymnasium.utils import seeding
 
 from rlenv.environment import RLEnvironment, give_action
@@ -45,6 +46,13 @@ if TYPE_CHECKING:
 __all__ = ["Episode", "EpisodeRun"]
 
 logger = logging.getLogger(__name__)
+
+
+def _total(reward: Any) -> float | None:
+    """An agent's reward in an answer as one number (a group's rows summed)."""
+    if reward.__class__ is np.ndarray:
+        return float(reward.sum())
+    return reward
 
 
 class Episode(Enum):
@@ -273,7 +281,7 @@ class EpisodeRun:
                 self.stats.reported(reward, frames, acted)
             else:
                 self.stats.reported_agents(
-                    {name: o["reward"] for name, o in outcomes.items()}, frames, acted
+                    {name: _total(o["reward"]) for name, o in outcomes.items()}, frames, acted
                 )
             if terminated or truncated:
                 self.stats.end("terminated" if terminated else "truncated")

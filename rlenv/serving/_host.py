@@ -26,7 +26,7 @@ from typing import Any
 from gymnasium.vector.utils import batch_space
 
 from rlenv.environment import RLEnvironment
-from rlenv.protocol import ErrorReply, Hello, Reply, Request, Response
+from rlenv.protocol import ErrorReply, GroupSpec, Hello, Reply, Request, Response
 from rlenv.protocol.errors import ErrorCode, RequestError
 from rlenv.protocol.spaces import compile_check
 from rlenv.scene2d.packed_scene import MAX_DEPTH, MAX_NODES
@@ -168,6 +168,14 @@ class Host:
             possible_agents=(
                 first.roster.hello_classes() if isinstance(first.roster, AgentsInPlay) else None
             ),
+            groups={
+                members.group.name: GroupSpec(
+                    members.group.instance_count,
+                    members.group.member_observation_space,
+                    members.group.member_action_space,
+                )
+                for members in first.roster.groups
+            },
         )
         self.steps_action_space = batch_space(first.action_space, count)
         self.steps_action = compile_check(self.steps_action_space, "steps.action")

@@ -103,6 +103,8 @@ def packed_observation(agent: RLAgent, codec: Codec, request: Any) -> Any:
         ValueError: it does not fit the agent's observation space.
     """
     data = agent.get_data(request)
+    if agent._IS_GROUP:  # rows of members not in the answer are zeros
+        data = agent._members.observed(data)  # type: ignore[attr-defined]
     try:
         return codec.pack(data)
     except SpaceMismatch as error:

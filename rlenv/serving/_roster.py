@@ -6,15 +6,22 @@ by agent name with several. Through an episode the roster keeps what each agent 
 how it ended: it clears them at a reset, runs each agent's end of tick, says when every agent
 ended, and gives what an answer reports (each agent's reward since the previous answer, its
 flags, and the joint end: :func:`rlenv.protocol.messages.joint_end`).
+
+A group of agents (:class:`~rlenv.agent_group.RLAgentGroup`) is one agent here, whose
+outcome is arrays over its members (``reward``, ``terminated``, ``truncated``, ``active``,
+``joined``); its members' bookkeeping is its own, which the roster runs at a reset, at the end
+of each tick and at each answer. An environment with a group has keyed spaces and outcomes.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 from gymnasium import spaces
 
+from rlenv._group_members import GroupMembers
 from rlenv.agent import RLAgent
+from rlenv.agent_group import RLAgentGroup
 from rlenv.environment import RLEnvironment
 from rlenv.protocol.messages import joint_end
 
@@ -22,7 +29,8 @@ __all__ = ["Outcome", "Roster"]
 
 Outcome = tuple[float, bool, bool, dict[str, dict[str, Any]] | None]
 """What an answer reports of the agents: the reward, the flags, and each agent's with several
-(its ``reward``, ``terminated`` and ``truncated``; ``None`` with one agent)."""
+(its ``reward``, ``terminated`` and ``truncated``; a group's as arrays, with ``active`` and
+``joined``; ``None`` with one agent)."""
 
 
 class Roster:
@@ -30,15 +38,19 @@ class Roster:
 
     Attributes:
         agents: the environment's agents, in its order.
-        several: whether there are several (their spaces and outcomes are keyed by name).
+        several: whether there are several, or a group (spaces and outcomes keyed by name).
+        groups: the members of the environment's groups (each group's bookkeeping).
     """
 
-    __slots__ = ("_open", "agents", "environment", "several")
+    __slots__ = ("_open", "agents", "environment", "groups", "several")
 
     def __init__(self, environment: RLEnvironment) -> None:
         self.environment = environment
         self.agents = list(environment.agents)
-        self.several = len(self.agents) > 1
+        self.groups: list[GroupMembers] = [
+            agent._members for agent in self.agents if isinstance(agent, RLAgentGroup)
+        ]
+        self.several = len(self.agents) > 1 or bool(self.groups)
         self._open = False  # an episode runs: the tree may not change its agents
         environment._agent_watch = self
 
@@ -88,10 +100,14 @@ class Roster:
         for agent in self.agents:
             agent.reward = 0.0
             agent.terminated = agent.truncated = False
+        for members in self.groups:
+            members.begin()
 
     def started(self) -> None:
         """The reset's hooks ran: until the next reset, the tree may not change its agents."""
         self._open = True
+        for members in self.groups:
+            members.start()
 
     def close(self) -> None:
         """No episode runs (after an error): the tree may change freely."""
@@ -143,6 +159,8 @@ class Roster:
         """The end of a tick (after pymunk stepped): each agent's ``_after_physics_tick``."""
         for agent in self.agents:
             agent._after_physics_tick(delta)
+        for members in self.groups:
+            members.ticked()
 
     def ended(self) -> bool:
         """Whether every agent terminated or was truncated (the episode is over)."""
@@ -165,6 +183,8 @@ class Roster:
         """Forget what the agents earned since the last answer (no one is to report it)."""
         for agent in self.agents:
             agent.reward = 0.0
+        for members in self.groups:
+            members.clear()
 
     def outcome(self, reports: bool) -> Outcome:
         """The agents' reward (cleared if it ``reports`` it) and flags, and each one's."""
@@ -175,17 +195,20 @@ class Roster:
             if reports:
                 agent.reward = 0.0
             return reward, bool(agent.terminated), bool(agent.truncated), None
-        outcomes: dict[str, dict[str, Any]] = {
-            each.name: {
-                "reward": float(each.reward) if reports else 0.0,
-                "terminated": bool(each.terminated),
-                "truncated": bool(each.truncated),
-            }
-            for each in agents
-        }
-        terminated, truncated = joint_end(
-            [(o["terminated"], o["truncated"]) for o in outcomes.values()]
-        )
+        outcomes: dict[str, dict[str, Any]] = {}
+        total = 0.0
+        for each in agents:
+            if each._IS_GROUP:
+                outcomes[each.name], reward = cast(RLAgentGroup, each)._members.outcome(reports)
+            else:
+                reward = float(each.reward) if reports else 0.0
+                outcomes[each.name] = {
+                    "reward": reward,
+                    "terminated": bool(each.terminated),
+                    "truncated": bool(each.truncated),
+                }
+            total += reward
+        terminated, truncated = self.joint_end()
         if reports:
             self.clear_rewards()
-        return sum(o["reward"] for o in outcomes.values()), terminated, truncated, outcomes
+        return total, terminated, truncated, outcomes

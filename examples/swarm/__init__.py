@@ -57,7 +57,17 @@ from gymnasium import spaces
 
 from rlenv import PhysicsWorld, RLAgent, RLAgentGroup, RLEnvironment, RLEnvWorld
 
-from .scene import DAMPING, OBSERVATION_SIZE, SwarmBodies, observe, steer
+from .scene import (
+    DAMPING,
+    EPISODE_TICKS,
+    JOIN_TICKS,
+    OBSERVATION_SIZE,
+    SwarmBodies,
+    joining,
+    observe,
+    starting,
+    steer,
+)
 
 __all__ = [
     "EPISODE_TICKS",
@@ -84,16 +94,8 @@ GROUP = "Flock"
 """The group's name (``agents="Flock"`` in the adaptors)."""
 MEMBERS = 64
 """The flock of ``rlenv/Swarm-v0``."""
-EPISODE_TICKS = 600
-JOIN_TICKS = 8
-"""Ticks between two members joining, while some have not started."""
 _MEMBER_OBSERVATION = spaces.Box(-1.0, 1.0, (OBSERVATION_SIZE,), np.float32)
 _MEMBER_ACTION = spaces.Box(-1.0, 1.0, (2,), np.float32)
-
-
-def starting(count: int) -> int:
-    """How many members of a flock of ``count`` start an episode: three quarters."""
-    return max(1, count * 3 // 4)
 
 
 def member_name(slot: int) -> str:
@@ -148,6 +150,9 @@ class _Swarm(RLEnvironment):
 
     members: ClassVar[int] = MEMBERS
     render_size = (400, 400)
+    configurable = (*RLEnvironment.configurable, "episode_ticks")
+    episode_ticks = EPISODE_TICKS
+    """The time limit in ticks (configurable: ``client.configure(episode_ticks=...)``)."""
 
     def __init__(self) -> None:
         super().__init__("Swarm", repeat_action=4)
@@ -173,12 +178,12 @@ class _Swarm(RLEnvironment):
 
     def _physics_process(self, delta: float) -> None:
         self.ticks += 1
-        if self.joined < self.members and self.ticks % JOIN_TICKS == 0:
+        if joining(self.ticks, self.joined, self.members):
             slot = self.joined
             self.joined += 1
             self.bodies.add([slot])
             self._join(slot)
-        if self.ticks >= EPISODE_TICKS:
+        if self.ticks >= self.episode_ticks:
             self._truncate()
 
     def _start(self, slots: list[int]) -> None:

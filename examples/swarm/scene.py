@@ -29,6 +29,8 @@ from rlenv.scene2d import _chipmunk
 
 __all__ = [
     "ARRIVAL_REWARD",
+    "EPISODE_TICKS",
+    "JOIN_TICKS",
     "MAX_FORCE",
     "NEST_FRACTION",
     "OBSERVATION_SIZE",
@@ -36,10 +38,13 @@ __all__ = [
     "RADIUS",
     "SPEED",
     "SwarmBodies",
+    "SwarmFloor",
     "distances",
     "forces",
+    "joining",
     "observe",
     "room_half",
+    "starting",
     "steer",
 ]
 
@@ -61,10 +66,25 @@ ARRIVAL_REWARD = 1.0
 """Reward for reaching the nest."""
 OBSERVATION_SIZE = 6
 """A member's observation: position, velocity, the nest relative to it."""
+EPISODE_TICKS = 600
+"""The ticks after which the members still in play are truncated (10 s)."""
+JOIN_TICKS = 8
+"""Ticks between two members joining, while some have not started."""
+TICKS_PER_SECOND = 60
 
 _ID = pymunk.batch.BodyFields.BODY_ID
 _STATE = _ID | pymunk.batch.BodyFields.POSITION | pymunk.batch.BodyFields.VELOCITY
 _FORCE = pymunk.batch.BodyFields.FORCE
+
+
+def starting(count: int) -> int:
+    """How many members of a flock of ``count`` start an episode: three quarters."""
+    return max(1, count * 3 // 4)
+
+
+def joining(tick: int, joined: int, count: int) -> bool:
+    """Whether a member joins at ``tick`` (from 1), ``joined`` of ``count`` having started."""
+    return joined < count and tick % JOIN_TICKS == 0
 
 
 def room_half(count: int) -> float:
@@ -186,7 +206,7 @@ class SwarmBodies:
         for slot in slots:
             body = self.bodies[slot]
             x, y = self.spots[slot].tolist()
-            _chipmunk.place_at_rest(body, x, y, 0.0)
+            body.position = (x, y)  # a new body, at rest (a slot plays once an episode)
             self.space.add(body, self.discs[slot])
             self.states[slot] = (x, y, 0.0, 0.0)
         self.in_play[slots] = True
@@ -251,3 +271,68 @@ class SwarmBodies:
         self.distances[rows] = now
         arrived = now < self.nest_radius
         return rewards + ARRIVAL_REWARD * arrived, arrived
+
+
+class SwarmFloor:
+    """The floor of ``benchmarks/swarm.py``: the whole game in bare pymunk and numpy, no rlenv.
+
+    What the group version does in a step, and nothing more: the same bodies, the same join
+    schedule and time limit, forces pushed and states read by ``pymunk.batch``, rewards and
+    observations as arrays (this module's functions), in a bare ``pymunk.Space``.
+
+    Args:
+        count: the most members.
+        episode_ticks: the time limit.
+    """
+
+    def __init__(self, count: int, episode_ticks: int = EPISODE_TICKS) -> None:
+        self.count = count
+        self.episode_ticks = episode_ticks
+        self.observations = np.zeros((count, OBSERVATION_SIZE), np.float32)
+        self.rewards = np.zeros(count)
+        self.bodies = SwarmBodies(pymunk.Space(), count)
+        self.tick = self.joined = 0
+
+    def reset(self, rng: np.random.Generator) -> np.ndarray:
+        """A new space and episode; the observations."""
+        space = pymunk.Space()
+        space.gravity = (0.0, 0.0)
+        space.damping = DAMPING
+        self.bodies = SwarmBodies(space, self.count)
+        self.bodies.reset(rng)
+        self.tick, self.joined = 0, starting(self.count)
+        self.bodies.add(list(range(self.joined)))
+        observe(self.bodies.states, self.bodies.nest, self.bodies.half, self.observations)
+        return self.observations
+
+    def step(self, actions: np.ndarray, ticks: int = 4) -> int:
+        """``ticks`` ticks of ``actions`` (N, 2); how many members it stepped (in play or ending).
+
+        :attr:`observations` and :attr:`rewards` hold the step's; the episode ended when no
+        member is in play (:meth:`ended`).
+        """
+        bodies, delta = self.bodies, 1.0 / TICKS_PER_SECOND
+        self.rewards[:] = 0.0
+        stepped = np.zeros(self.count, bool)
+        for _ in range(ticks):
+            self.tick += 1
+            if joining(self.tick, self.joined, self.count):
+                self.joined += 1
+                bodies.add([self.joined - 1])
+            bodies.push(actions)
+            bodies.space.step(delta)
+            bodies.read()
+            rows = np.flatnonzero(bodies.in_play)
+            stepped[rows] = True
+            rewards, arrived = bodies.progress(rows)
+            self.rewards[rows] += rewards
+            ending = rows if self.tick >= self.episode_ticks else rows[arrived]
+            bodies.remove(ending.tolist())
+            if not bodies.in_play.any():
+                break
+        observe(bodies.states, bodies.nest, bodies.half, self.observations)
+        return int(stepped.sum())
+
+    def ended(self) -> bool:
+        """Whether no member is in play."""
+        return not self.bodies.in_play.any()

@@ -256,6 +256,26 @@ def test_agent_vector_keeps_a_slot_per_possible_agent_with_a_mask() -> None:
         assert not observations[2:4].any() and observations[0].tolist() == [0.0, 0.0]
 
 
+def test_agent_vector_gives_an_agent_that_joins_as_its_instance_ends_its_one_row() -> None:
+    from come_and_go_envs import Walker
+
+    from rlenv_client.agent_vector import AgentVectorEnv
+
+    # C joins at tick 6, in the answer at tick 8: the second step, which the time limit ends
+    with AgentVectorEnv(2, COME_AND_GO, agents=Walker, max_episode_steps=2) as env:
+        env.reset(seed=0)
+        env.step(np.full(env.num_envs, 2))
+        _, rewards, terminated, truncated, infos = env.step(np.full(env.num_envs, 2))
+        assert truncated.all() and not terminated.any()
+        final = infos["final_info"]
+        for c, d in ((2, 3), (6, 7)):  # C and D of each instance
+            assert infos["final_obs"][c].tolist() == [0.0, 8.0]  # its first observation
+            assert rewards[c] == 0.0 and not final["_waiting"][c]  # a row, not a wait
+            assert (final["agent"][c], final["frames"][c]) == ("C", 4)
+            assert final["waiting"][d] and infos["final_obs"][d].tolist() == [0.0, 0.0]
+        assert infos["waiting"].tolist() == [False, False, True, True] * 2  # the next episode
+
+
 def test_agent_vector_slots_of_agents_not_due_carry_their_last_observation() -> None:
     from rlenv_client.agent_vector import AgentVectorEnv
 

@@ -88,16 +88,26 @@ class AgentsInPlay:
     """
 
     def __init__(self, view: TrainerView) -> None:
+        self._view = view
         self._names = view.agents
         self._slots = AgentSlots(view)
         self.agents: tuple[str, ...] = ()
         self.due: tuple[str, ...] = ()
         self._last: dict[str, Any] = {}
 
-    def start(self, observation: Mapping[str, Any]) -> Turn:
-        """The reset's answer: its agents start (each due)."""
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Every agent the trainer may see (PettingZoo's and RLlib's ``possible_agents``)."""
+        return self._names
+
+    def agent_spaces(self) -> tuple[dict[str, spaces.Space], dict[str, spaces.Space]]:
+        """Each agent's action and observation space, by name."""
+        return self._view.agent_spaces()
+
+    def start(self, observation: Mapping[str, Any], info: Mapping[str, Any] | None = None) -> Turn:
+        """The reset's answer (and its ``info``): its agents start (each due)."""
         self.agents, self.due, self._last = (), (), {}
-        return self.answer(observation, {})
+        return self.answer(observation, info or {})
 
     def answer(
         self, observation: Mapping[str, Any], info: Mapping[str, Any], *, ended: bool = False
@@ -137,9 +147,13 @@ class AgentsInPlay:
 
 
 def answer_reward(info: Mapping[str, Any], names: tuple[str, ...]) -> float:
-    """The sum of ``names``' rewards in the answer's ``info["agents"]`` (``None``: 0)."""
+    """The sum of ``names``' rewards in the answer's ``info["agents"]`` (``None``: 0).
+
+    A group's reward is an array over its members (protocol 2.7): its sum counts.
+    """
     outcomes = info.get("agents") or {}
-    return float(sum(outcomes[name]["reward"] or 0.0 for name in names if name in outcomes))
+    rewards = (outcomes[name]["reward"] for name in names if name in outcomes)
+    return float(sum(0.0 if reward is None else np.sum(reward) for reward in rewards))
 
 
 def due_columns(slots: AgentSlots | None, count: int) -> dict[str, np.ndarray] | None:

@@ -14,7 +14,7 @@ from typing import Any, SupportsIndex
 import numpy as np
 from gymnasium import spaces
 
-__all__ = ["check_shape", "empty_like", "row", "rows", "set_row", "set_rows"]
+__all__ = ["check_shape", "empty_like", "repeat_rows", "row", "rows", "set_row", "set_rows"]
 
 _ARRAYS = (spaces.Box, spaces.Discrete, spaces.MultiDiscrete, spaces.MultiBinary)
 
@@ -75,6 +75,13 @@ def set_rows(out: Any, start: int, part: Any) -> None:
 def set_row(out: Any, index: SupportsIndex, value: Any) -> None:
     """Write one sub-environment's ``value`` into row ``index`` of ``out``."""
     _write(out, value, lambda piece: index)
+
+
+def repeat_rows(value: Any, k: int) -> Any:
+    """A batched value (or a map of them) with each row repeated ``k`` times."""
+    if isinstance(value, dict):
+        return {key: repeat_rows(item, k) for key, item in value.items()}
+    return np.repeat(value, k, axis=0) if k > 1 else value
 
 
 def _read(batch: Any, take: Callable[[Any], Any]) -> Any:

@@ -70,8 +70,14 @@ class BatchedInfos:
             }
         columns: dict[str, Any] = {}
         for name in names:
-            outcomes = [info["agents"].get(name, _ABSENT) for info in env_infos]
             mask = every if present is None else present[name]
+            outcomes = [info["agents"].get(name) for info in env_infos]
+            sample = next(outcome for outcome in outcomes if outcome is not None)
+            if "joined" in sample:  # a group's: one row per member (protocol 2.7)
+                columns[name] = _group_columns(outcomes, sample, mask)
+                columns[f"_{name}"] = mask.copy()
+                continue
+            outcomes = [_ABSENT if outcome is None else outcome for outcome in outcomes]
             columns[name] = {
                 "reward": np.array([o["reward"] or 0.0 for o in outcomes], np.float64),
                 "_reward": mask.copy(),
@@ -86,3 +92,18 @@ class BatchedInfos:
 
 _ABSENT = {"reward": 0.0, "terminated": False, "truncated": False}
 """The outcome of an agent absent from a row's answer (agents that come and go)."""
+
+
+def _group_columns(
+    outcomes: list[dict[str, Any] | None], sample: dict[str, Any], mask: np.ndarray
+) -> dict[str, Any]:
+    """A group's outcomes over the rows, each array stacked: ``(rows, members)``.
+
+    A row whose answer does not hold the group has zeros and falses.
+    """
+    columns: dict[str, Any] = {}
+    for key, value in sample.items():
+        absent = np.zeros_like(value)
+        columns[key] = np.stack([absent if o is None else o[key] for o in outcomes])
+        columns[f"_{key}"] = mask.copy()
+    return columns

@@ -53,7 +53,8 @@ from gymnasium.vector.utils import batch_space, create_empty_array
 from rlenv.agent import RLAgent
 from rlenv.serving.policy_driver import HEURISTIC
 from rlenv_client._agents_in_play import slot_mask, with_column
-from rlenv_client._rows import check_shape, row, set_row
+from rlenv_client._group_slots import GroupSlots
+from rlenv_client._rows import check_shape, repeat_rows, row, set_row
 from rlenv_client.vector import RemoteVectorEnv
 from rlenv_client.vector_servers import default_layout
 
@@ -73,15 +74,21 @@ OtherPolicy = str | os.PathLike[str] | Callable[[Any], Any]
 """What drives another agent: ``"heuristic"``, an ONNX file, or ``policy(observation)``."""
 
 
-def agent_classes(target: str) -> dict[str, type[RLAgent]]:
+def agent_classes(target: str, *, members: bool = False) -> dict[str, type[RLAgent]]:
     """Each agent's class, by name, read from one instance of ``target`` built in this process.
 
     An environment whose agents come and go gives its declaration: every possible agent's.
+
+    Args:
+        target: the environment class as ``MODULE:CLASS``.
+        members: name each group's members in its place (``f"{group}_{i}"``, each of the
+            group's class), as PettingZoo and RLlib see them.
 
     Raises:
         ImportError, ValueError, TypeError: ``target`` does not load (see
             :func:`rlenv.serving._instance.load_environment`).
     """
+    from rlenv_client._members_in_play import member_names
     from rlenv_client.local import LocalClient
 
     with LocalClient(target) as probe:
@@ -89,8 +96,15 @@ def agent_classes(target: str) -> dict[str, type[RLAgent]]:
         instance = probe.host.instances[0]
         declared = instance.environment.possible_agents
         if declared is not None:
-            return dict(declared)
-        return {agent.name: type(agent) for agent in instance.agents}
+            classes = dict(declared)
+        else:
+            classes = {agent.name: type(agent) for agent in instance.agents}
+        groups = probe.hello.groups if members else {}
+    return {
+        each: cls
+        for name, cls in classes.items()
+        for each in (member_names(name, groups[name].instance_count) if name in groups else (name,))
+    }
 
 
 def policy_arguments(policies: Mapping[str, str]) -> list[str]:
@@ -264,14 +278,28 @@ class AgentVectorEnv(VectorEnv):
         hello = vector.clients[0].hello
         self._come_and_go = hello.possible_agents is not None
         self._several = isinstance(joint_actions, spaces.Dict) and (
-            len(hello.agents) > 1 or self._come_and_go
+            len(hello.agents) > 1 or self._come_and_go or bool(hello.groups)
         )
         first = self.learners[0]
-        action_space, observation_space = (
-            self._agent_space(joint_actions, first),
-            self._agent_space(joint_observations, first),
-        )
+        self._group: GroupSlots | None = None
+        if first in hello.groups:  # its members are the sub-environments
+            group = hello.groups[first]
+            action_space, observation_space = group.action_space, group.observation_space
+            self._per_instance = group.instance_count
+            self._group = GroupSlots(first, self.instances, group.instance_count, observation_space)
+        else:
+            action_space, observation_space = (
+                self._agent_space(joint_actions, first),
+                self._agent_space(joint_observations, first),
+            )
+            self._per_instance = len(self.learners)
         for name in self.learners[1:]:
+            if name in hello.groups or self._group is not None:
+                grouped = first if self._group is not None else name
+                raise ValueError(
+                    f"agents: group {grouped!r} learns alone (each of its members is a "
+                    f"sub-environment): give agents={grouped!r}, and train the others apart"
+                )
             if (
                 self._agent_space(joint_actions, name),
                 self._agent_space(joint_observations, name),
@@ -280,8 +308,7 @@ class AgentVectorEnv(VectorEnv):
                     f"agents {first!r} and {name!r} learn one policy but have "
                     "different spaces; train them apart"
                 )
-        k = len(self.learners)
-        self.num_envs = self.instances * k
+        self.num_envs = self.instances * self._per_instance
         self.single_action_space, self.single_observation_space = action_space, observation_space
         self.action_space = batch_space(action_space, self.num_envs)
         self.observation_space = batch_space(observation_space, self.num_envs)
@@ -316,18 +343,22 @@ class AgentVectorEnv(VectorEnv):
             ValueError: a list of seeds of another length.
         """
         if seed is not None and not isinstance(seed, int) and len(seed) == self.num_envs:
-            seed = list(seed)[:: len(self.learners)]
+            seed = list(seed)[:: self._per_instance]
         joint, infos = self.vector.reset(seed=seed, options=options)
         self._joint_observation = joint
         for done in self._others_done.values():
             done[:] = False
         self._waiting[:] = False
         self._steps[:] = 0
-        observations = self._learner_rows(joint)
-        self._last = observations
         out = self._spread(infos)
         if self._come_and_go:
             self._due = dict(infos["due"])  # kept for the callables of the next step
+        if self._group is not None:
+            observations, active = self._group.start(joint, infos)
+            return observations, self._group_infos(out, active)
+        observations = self._learner_rows(joint)
+        self._last = observations
+        if self._come_and_go:
             active = slot_mask(self._due, self.learners, self.num_envs)
             self._waiting[:] = ~active  # not in play yet: its slot waits for it to join
             out = with_column(out, "is_active", active, self.num_envs)
@@ -346,10 +377,14 @@ class AgentVectorEnv(VectorEnv):
             raise RuntimeError("call reset() before step()")
         check_shape(self.action_space, actions, "actions")
         k, joint = len(self.learners), self._joint_action
-        for j, name in enumerate(self.learners):
-            column = self._of(joint, name)
-            for i in range(self.instances):
-                set_row(column, i, row(actions, i * k + j))
+        if self._group is not None:
+            name = self._group.name
+            joint[name] = self._group.action(actions, joint[name])
+        else:
+            for j, name in enumerate(self.learners):
+                column = self._of(joint, name)
+                for i in range(self.instances):
+                    set_row(column, i, row(actions, i * k + j))
         for name, policy in self.driven_here.items():
             column, seen = self._of(joint, name), self._of(self._joint_observation, name)
             acting = ~self._others_done[name]
@@ -385,22 +420,27 @@ class AgentVectorEnv(VectorEnv):
         limit = self.vector.max_episode_steps
         timed_out = self._steps >= limit if limit is not None else np.zeros_like(ended)
         self._steps[ended] = 0
-        rewards = np.zeros(self.num_envs, np.float64)
-        terminated = np.zeros(self.num_envs, np.bool_)
-        truncated = np.zeros(self.num_envs, np.bool_)
-        observations = self._learner_rows(joint_obs)
-        out = self._spread(infos)
-        instance_ended = np.repeat(ended, k)
-        active = None
         if self._come_and_go:
             self._due = dict(infos["due"])
-            active = slot_mask(self._due, self.learners, self.num_envs)
-            self._waiting[active & ~instance_ended] = False  # a waiting slot's agent joined
         for name in self.driven_here:
             _, done_t, done_c = self._agent_outcome(name, joint, ended, infos)
             self._others_done[name] |= done_t | done_c
             self._others_done[name][ended] = False
-        waiting = self._waiting
+        out = self._spread(infos)
+        if self._group is not None:
+            (*step, finals), active = self._group.outcomes(joint_obs, ended, infos)
+            return (*step, self._group_infos({**out, **finals}, active))  # type: ignore[return-value]
+        rewards = np.zeros(self.num_envs, np.float64)
+        terminated = np.zeros(self.num_envs, np.bool_)
+        truncated = np.zeros(self.num_envs, np.bool_)
+        observations = self._learner_rows(joint_obs)
+        instance_ended = np.repeat(ended, k)
+        active = None
+        if self._come_and_go:
+            active = slot_mask(self._due, self.learners, self.num_envs)
+            self._waiting[active & ~instance_ended] = False  # a waiting slot's agent joined
+        # a waiting slot whose agent joined in the very step its instance ended: its one row
+        waiting = self._waiting & ~self._joined_at_the_end(ended, infos)
         for j, name in enumerate(self.learners):
             reward, done_t, done_c = self._agent_outcome(name, joint, ended, infos)
             span = slice(j, self.num_envs, k)
@@ -414,7 +454,7 @@ class AgentVectorEnv(VectorEnv):
         for index in np.flatnonzero(finished):
             instance = index // k
             name = self.learners[index % k]
-            if self._waiting[index]:
+            if waiting[index]:
                 final_obs, final_info = row(self._last, index), {"waiting": True}
             elif ended[instance]:
                 final_obs = self._of(infos["final_obs"][instance], name)
@@ -446,6 +486,31 @@ class AgentVectorEnv(VectorEnv):
         self._last = observations
         return observations, rewards, terminated, truncated, out
 
+    def _group_infos(self, out: dict[str, Any], active: np.ndarray) -> dict[str, Any]:
+        """A group's infos: ``is_active`` per member slot, and ``waiting`` where any waits."""
+        assert self._group is not None
+        waiting = self._group.waiting
+        if waiting.any():
+            out = {**out, "waiting": waiting, "_waiting": waiting.copy()}
+        return with_column(out, "is_active", active, self.num_envs)
+
+    def _joined_at_the_end(self, ended: np.ndarray, infos: Mapping[str, Any]) -> np.ndarray:
+        """Per slot, whether its agent is in the last answer of its instance's ended episode.
+
+        Only agents that come and go can be there while their slot waits: they joined in that
+        very step (its answer holds the agents due and the leavers alone).
+        """
+        joined = np.zeros(self.num_envs, np.bool_)
+        if not (self._come_and_go and ended.any()):
+            return joined
+        outcomes = infos["final_info"].get("agents", {})
+        k = len(self.learners)
+        for j, name in enumerate(self.learners):
+            present = outcomes.get(f"_{name}")
+            if present is not None:
+                joined[j::k] = present & ended
+        return joined & self._waiting
+
     def _learner_rows(self, joint: Any) -> Any:
         """The learners' observations, instance by instance: row ``i * k + j``."""
         k = len(self.learners)
@@ -457,10 +522,10 @@ class AgentVectorEnv(VectorEnv):
         return out
 
     def _spread(self, infos: Mapping[str, Any]) -> dict[str, Any]:
-        """The instances' infos, each repeated for its learners (``agents`` and finals left)."""
-        k = len(self.learners)
+        """The instances' infos, each repeated for its slots (``agents`` and finals left)."""
+        k = self._per_instance
         return {
-            key: _repeat(value, k)
+            key: repeat_rows(value, k)
             for key, value in infos.items()
             if key
             not in (
@@ -480,7 +545,7 @@ class AgentVectorEnv(VectorEnv):
         frames = self.vector.render()
         if frames is None:
             return None
-        return tuple(frame for frame in frames for _ in self.learners)
+        return tuple(frame for frame in frames for _ in range(self._per_instance))
 
     def close_extras(self, **kwargs: Any) -> None:
         """Stop the servers this vector started."""
@@ -612,10 +677,3 @@ def _final_info(
         if mask is None or mask[instance]:
             info[key] = value[instance]
     return info
-
-
-def _repeat(value: Any, k: int) -> Any:
-    """A batched info value with each instance's row repeated ``k`` times."""
-    if isinstance(value, dict):
-        return {key: _repeat(item, k) for key, item in value.items()}
-    return np.repeat(value, k, axis=0) if k > 1 else value

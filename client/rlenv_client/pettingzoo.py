@@ -28,7 +28,8 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from rlenv_client._agents_in_play import AgentsInPlay, Turn
+from rlenv_client._agents_in_play import Turn
+from rlenv_client._members_in_play import in_play
 from rlenv_client.session import Session
 from rlenv_client.trainer_view import TrainerView
 
@@ -78,14 +79,14 @@ class RemoteParallelEnv(ParallelEnv):
         except ValueError:
             self.session.close()
             raise
-        self.possible_agents = list(self._view.agents)
-        self._in_play = (
-            AgentsInPlay(self._view)
-            if self.session.client.hello.possible_agents is not None
-            else None
+        self._in_play = in_play(self._view, self.session.client.hello)
+        self.possible_agents = list(
+            self._view.agents if self._in_play is None else self._in_play.names
         )
         self.agents: list[str] = []
-        self.action_spaces, self.observation_spaces = self._view.agent_spaces()
+        self.action_spaces, self.observation_spaces = (
+            self._view if self._in_play is None else self._in_play
+        ).agent_spaces()
         self.repeat_action = repeat_action
         self.max_cycles = max_cycles
         self.render_mode = render_mode
@@ -111,10 +112,10 @@ class RemoteParallelEnv(ParallelEnv):
         self, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
         """Start an episode with every agent (with the starting ones, when agents come and go)."""
-        observation, _ = self.session.client.reset(seed=seed, options=options)
+        observation, info = self.session.client.reset(seed=seed, options=options)
         self._cycles = 0
         if self._in_play is not None:
-            turn = self._in_play.start(observation)
+            turn = self._in_play.start(observation, info)
             self.agents = list(turn.agents)
             return dict(turn.observations), {agent: {"due": True} for agent in self.agents}
         self.agents = list(self.possible_agents)

@@ -48,7 +48,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 from ray.rllib.env.multi_agent_env import MultiAgentEnv
 
-from rlenv_client._agents_in_play import AgentsInPlay
+from rlenv_client._members_in_play import in_play
 from rlenv_client.agent_vector import agent_classes, policy_arguments
 from rlenv_client.session import Session
 from rlenv_client.trainer_view import TrainerView
@@ -120,10 +120,12 @@ class RemoteMultiAgentEnv(MultiAgentEnv):
             raise
         self._several = view.joint
         self.driven = tuple(hello.driven)
-        self.possible_agents = list(view.agents)
+        self._in_play = in_play(view, hello)
+        self.possible_agents = list(view.agents if self._in_play is None else self._in_play.names)
         self.agents: list[str] = []
-        self.action_spaces, self.observation_spaces = view.agent_spaces()
-        self._in_play = AgentsInPlay(view) if hello.possible_agents is not None else None
+        self.action_spaces, self.observation_spaces = (
+            view if self._in_play is None else self._in_play
+        ).agent_spaces()
         self.repeat_action = repeat_action
         self.max_episode_steps = max_episode_steps
         self._steps = 0
@@ -133,10 +135,10 @@ class RemoteMultiAgentEnv(MultiAgentEnv):
     ) -> tuple[dict[str, Any], dict[str, Any]]:
         """Start an episode: every agent's first observation."""
         super().reset(seed=seed, options=options)
-        observation, _ = self.session.client.reset(seed=seed, options=options)
+        observation, info = self.session.client.reset(seed=seed, options=options)
         self._steps = 0
         if self._in_play is not None:
-            turn = self._in_play.start(observation)
+            turn = self._in_play.start(observation, info)
             self.agents = list(turn.agents)
             return dict(turn.observations), {name: {} for name in self.agents}
         self.agents = list(self.possible_agents)
@@ -197,7 +199,8 @@ class RemoteMultiAgentEnv(MultiAgentEnv):
         cut = self.max_episode_steps is not None and self._steps >= self.max_episode_steps
         turn = self._in_play.answer(observation, info, ended=terminated or truncated or cut)
         self.agents = list(self._in_play.agents)
-        now = [name for name in turn.agents if name in turn.due or name in turn.left]
+        deciding = {*turn.due, *turn.left}
+        now = [name for name in turn.agents if name in deciding]
         terminateds = {name: turn.terminated[name] for name in now}
         truncateds = {name: turn.truncated[name] for name in now}
         terminateds[_ALL] = terminated
@@ -248,13 +251,21 @@ class AgentMapping:
 
 
 def policy_per_agent(target: str) -> AgentMapping:
-    """One policy per agent, named as the agent."""
-    return AgentMapping({name: name for name in agent_classes(target)})
+    """One policy per agent, named as the agent; a group's members share the group's."""
+    agents = agent_classes(target)
+    return AgentMapping(
+        {  # a member f"{group}_{i}": its group's
+            name: name if name in agents else name.rpartition("_")[0]
+            for name in agent_classes(target, members=True)
+        }
+    )
 
 
 def policy_per_class(target: str) -> AgentMapping:
-    """One policy per RLAgent class, named as the class (its agents share it)."""
-    return AgentMapping({name: cls.__name__ for name, cls in agent_classes(target).items()})
+    """One policy per RLAgent class, named as the class: its agents (and members) share it."""
+    return AgentMapping(
+        {name: cls.__name__ for name, cls in agent_classes(target, members=True).items()}
+    )
 
 
 def register_multi_agent(target: str, name: str | None = None, **options: Any) -> str:

@@ -17,18 +17,22 @@ __all__ = ["truncate_agents"]
 def truncate_agents(info: dict[str, Any]) -> dict[str, Any]:
     """``info`` with every agent still in the episode marked truncated in ``info["agents"]``.
 
-    Agents whose episode had already ended keep their flags. An ``info`` without ``agents``
-    (one agent) is returned as it is; otherwise a copy (``info`` itself is left unchanged).
+    Agents whose episode had already ended keep their flags; so do a group's members
+    (protocol 2.7: its outcome is arrays over them), those in the answer that are still in
+    play being truncated. An ``info`` without ``agents`` (one agent) is returned as it is;
+    otherwise a copy (``info`` itself is left unchanged).
     """
     agents = info.get("agents")
     if not agents:
         return info
-    return {
-        **info,
-        "agents": {
-            name: outcome
-            if outcome["terminated"] or outcome["truncated"]
-            else {**outcome, "truncated": True}
-            for name, outcome in agents.items()
-        },
-    }
+    return {**info, "agents": {name: _truncated(outcome) for name, outcome in agents.items()}}
+
+
+def _truncated(outcome: dict[str, Any]) -> dict[str, Any]:
+    """One agent's outcome, truncated unless it ended (a group's: each member's row)."""
+    if "joined" in outcome:  # a group's, one row per member
+        playing = outcome["active"] & ~(outcome["terminated"] | outcome["truncated"])
+        return {**outcome, "truncated": outcome["truncated"] | playing}
+    if outcome["terminated"] or outcome["truncated"]:
+        return outcome
+    return {**outcome, "truncated": True}

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import re
 import warnings
 from typing import Any
 
 import gymnasium
 import numpy as np
 from conftest import Serve
+from gymnasium.utils import seeding
 from gymnasium.utils.env_checker import check_env
 
 from examples.swarm import (
@@ -19,8 +21,9 @@ from examples.swarm import (
     member_name,
     starting,
 )
-from examples.swarm.scene import steer
+from examples.swarm.scene import SwarmFloor, steer
 from rlenv_client import Client
+from rlenv_tools._swarm_bench import measure_swarm, summary_line, swarm_line
 
 STEPS = 60  # 240 ticks: every member that joins has joined, the first are home
 
@@ -131,3 +134,39 @@ def test_gym_make_swarm_passes_check_env() -> None:
         assert [str(warning.message) for warning in caught] == []
     finally:
         env.close()
+
+
+def test_the_benchmarks_floor_moves_the_discs_as_the_served_group_does(serve: Serve) -> None:
+    """The floor (bare pymunk and numpy) does the group's work: the same bodies, bit for bit."""
+    server = serve(TARGET)
+    floor = SwarmFloor(MEMBERS)
+    rng = np.random.default_rng(5)
+    with Client(server.host, server.port, timeout=30, world_data=True) as client:
+        observation, info = client.reset(seed=21)
+        first = starting(MEMBERS)  # the rows in play; the answer's others are zeros
+        assert np.array_equal(
+            floor.reset(seeding.np_random(21)[0])[:first], observation[GROUP][:first]
+        )
+        for _ in range(STEPS):
+            action = rng.uniform(-1, 1, (MEMBERS, 2)).astype(np.float32)
+            observation, _, _, _, info = client.step({GROUP: action})
+            stepped = floor.step(action)
+            outcome = info["agents"][GROUP]
+            assert stepped == outcome["active"].sum()
+            assert np.array_equal(floor.bodies.in_play, ~np.isnan(info["world"]["bodies"][:, 0]))
+            positions = np.array([(*body.position, *body.velocity) for body in floor.bodies.bodies])
+            in_play = floor.bodies.in_play
+            assert np.array_equal(positions[in_play], info["world"]["bodies"][in_play])
+            active = outcome["active"]
+            assert np.array_equal(floor.observations[active], observation[GROUP][active])
+
+
+def test_the_swarm_benchmark_prints_its_lines() -> None:
+    (rates,) = measure_swarm(rounds=1, steps=10, sizes=(16,), progress=lambda _: None)
+    assert re.fullmatch(
+        r"swarm N=16: group \d+ agent-steps/s, nodes \d+, floor \d+", swarm_line(rates)
+    )
+    assert re.fullmatch(
+        r"swarm: group/nodes \d+\.\dx, floor/group \d+\.\dx at N=16", summary_line(rates)
+    )
+    assert min(rates.group + rates.nodes + rates.floor) > 0

@@ -290,6 +290,7 @@ class SwarmFloor:
         self.episode_ticks = episode_ticks
         self.observations = np.zeros((count, OBSERVATION_SIZE), np.float32)
         self.rewards = np.zeros(count)
+        self.actions = np.zeros((count, 2), np.float32)
         self.bodies = SwarmBodies(pymunk.Space(), count)
         self.tick = self.joined = 0
 
@@ -309,9 +310,13 @@ class SwarmFloor:
         """``ticks`` ticks of ``actions`` (N, 2); how many members it stepped (in play or ending).
 
         :attr:`observations` and :attr:`rewards` hold the step's; the episode ended when no
-        member is in play (:meth:`ended`).
+        member is in play (:meth:`ended`). A member not in play when the step starts gets no
+        force in it (as a group's ``actions`` rows of members out of play).
         """
         bodies, delta = self.bodies, 1.0 / TICKS_PER_SECOND
+        np.copyto(self.actions, actions)
+        self.actions[~bodies.in_play] = 0.0
+        actions = self.actions
         self.rewards[:] = 0.0
         stepped = np.zeros(self.count, bool)
         for _ in range(ticks):

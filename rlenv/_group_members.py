@@ -29,6 +29,7 @@ class GroupMembers:
     __slots__ = (
         "_any_ended",
         "_any_joined",
+        "_any_pending",
         "_ended",
         "_final_observations",
         "_final_rewards",
@@ -84,6 +85,7 @@ class GroupMembers:
         for array in (group._terminations, group._truncations, self._ended, self._joined):
             array[:] = False
         self._pending[:] = False
+        self._any_pending = False
         for flags in self._end_flags:
             flags[:] = False
         group._rewards[:] = 0.0
@@ -109,22 +111,20 @@ class GroupMembers:
         ending = self._scratch
         np.logical_or(group._terminations, group._truncations, out=ending)
         np.logical_and(ending, group._active, out=ending)
-        if ending.any():
+        if np.count_nonzero(ending):
             self._end(ending, group._terminations[ending])
-        if self._pending.any():
+        if self._any_pending:
             self._take_finals()
 
     def clear(self) -> None:
         """Forget what the members earned and who came and left since the last answer."""
-        self.group._rewards[:] = 0.0
-        if self._any_ended:
-            self._ended[:] = False
-            self._final_rewards[:] = 0.0
-            self._any_ended = False
-        if self._any_joined:
-            self._joined[:] = False
-            self._any_joined = False
-        self._update()
+        self.group._rewards.fill(0.0)
+        if self._any_ended or self._any_joined:
+            self._ended.fill(False)
+            self._final_rewards.fill(0.0)
+            self._joined.fill(False)
+            self._any_ended = self._any_joined = False
+            self._update()
 
     def outcome(self, reports: bool) -> tuple[dict[str, np.ndarray], float]:
         """An answer's outcome of the group, its arrays, and their total reward.
@@ -171,7 +171,7 @@ class GroupMembers:
             np.copyto(rows, data, casting="same_kind")
         except (TypeError, ValueError):  # not of the space: its codec says how, precisely
             return data
-        live = group._active | self._pending
+        live = group._active | self._pending if self._any_pending else group._active
         rows[~live] = 0
         if self._any_ended:
             taken = self._ended & ~self._pending
@@ -240,6 +240,7 @@ class GroupMembers:
         group._active[ending] = False
         self._ended |= ending
         self._pending |= ending
+        self._any_pending = True
         self._final_rewards[ending] = group._rewards[ending]
         ended_terminated, ended_truncated = self._end_flags
         ended_terminated[ending] = terminated
@@ -247,7 +248,7 @@ class GroupMembers:
         self._any_ended = True
         self.any_terminated = self.any_terminated or bool(terminated.any())
         self._update()
-        if not group._active.any():
+        if not np.count_nonzero(group._active):
             group.terminated = self.any_terminated
             group.truncated = not self.any_terminated
 
@@ -256,8 +257,9 @@ class GroupMembers:
         data = np.asarray(self.group.get_data({}))
         self._final_observations[pending] = data[pending]
         pending[:] = False
+        self._any_pending = False
 
     def _update(self) -> None:
         active = self.group._active
-        self.full = bool(active.all()) and not self._any_ended
+        self.full = np.count_nonzero(active) == active.size and not self._any_ended
         self.idle_rows.reshape(-1)[:] = ~active

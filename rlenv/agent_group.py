@@ -154,6 +154,7 @@ class RLAgentGroup(RLAgent):
             self.action_space.dtype
         )
         self._actions[...] = self._no_action
+        self._idle_is_default = cls.no_action is RLAgentGroup.no_action
         self._rewards = np.zeros(count, np.float64)
         self._terminations = np.zeros(count, np.bool_)
         self._truncations = np.zeros(count, np.bool_)
@@ -218,7 +219,8 @@ class RLAgentGroup(RLAgent):
         np.copyto(actions, action, casting="unsafe")
         members = self._members
         if not members.full:
-            np.copyto(actions, self._no_action, where=members.idle_rows)
+            idle = self._no_action if self._idle_is_default else self.no_action()
+            np.copyto(actions, idle, where=members.idle_rows)
 
     def no_action(self) -> np.ndarray:
         """The group's idle action: every member's idle action (override for another)."""

@@ -61,6 +61,7 @@ SPACES: Final = "protocol_vectors:SpacesEnvironment"
 CHASE: Final = "per_agent_envs:ChaseEnvironment"
 TAG: Final = "examples.tag:TagEnvironment"
 COME_AND_GO: Final = "come_and_go_envs:ComeAndGoEnvironment"
+SWARM: Final = "swarm_envs:SwarmEnvironment"
 VARIES: Final = "<varies>"
 """What a path listed in an exchange's ``varies`` is replaced with before comparing."""
 
@@ -619,6 +620,48 @@ def _come_and_go(recording: Recording) -> None:
         {"id": 6, "action": {"A": 2}, "observation": AGENT},
         "no entry for C, who is due",
         "invalid_action naming C",
+    )
+
+
+@scenario(
+    "swarm.json",
+    "A group of agents (protocol 2.7): one array per group, members that join and leave",
+    SWARM,
+    "--instances",
+    "2",
+)
+def _swarm(recording: Recording) -> None:
+    link = recording.connect()
+    link.hello("groups: Discs, 8 members of Box (4,) observations and Box (2,) actions")
+    link.request({"id": 1, "reset": {"seed": 0}, "observation": AGENT}, "6 members start")
+    push = {"Discs": f4(*[1.0, 0.3] * 8)}  # one array of (8, 2): every row, in play or not
+    link.request({"id": 2, "action": push, "observation": AGENT}, "ticks 1 to 4")
+    link.request({"id": 3, "action": push, "observation": AGENT}, "ticks 5 to 8")
+    link.request(
+        {"id": 4, "action": push, "observation": AGENT},
+        "ticks 9 to 12",
+        "member 6 joined at tick 10: its joined row set, its reward 0",
+    )
+    link.request({"id": 5, "action": push, "observation": AGENT}, "ticks 13 to 16")
+    link.request(
+        {"id": 6, "action": push, "observation": AGENT},
+        "ticks 17 to 20",
+        "member 3 left at the edge: its final row, terminated, once; the step goes on",
+    )
+    link.request(
+        {"id": 7, "action": push, "observation": AGENT},
+        "ticks 21 to 24",
+        "member 3 is out of play: zeros, active false",
+    )
+    link.request(
+        {"id": 8, "action": {"Discs": f4(*[1.0, 0.3] * 7)}, "observation": AGENT},
+        "an action of 7 rows for a group of 8",
+        "invalid_action naming the group",
+    )
+    link.request(
+        {"id": 9, "steps": {"action": {"Discs": f4(*[0.0] * 32)}, "reset": [True, True]}},
+        "steps: both instances reset",
+        "the group's column (2, 8, 4); each row's info.agents holds its arrays",
     )
 
 

@@ -32,6 +32,7 @@ __all__ = [
     "EDGE",
     "JOIN_TICK",
     "TIME_LIMIT",
+    "BadCountEnvironment",
     "DiscreteSwarmEnvironment",
     "Discs",
     "MixedEnvironment",
@@ -238,4 +239,17 @@ class MixedEnvironment(RLEnvironment):
         super().__init__("Mixed", repeat_action=4)
         self.add_child(Discs())
         self.add_child(Shepherd())
+        self.add_child(DiscWorld())
+
+
+class TooManyDiscs(Discs):
+    instance_count = 65_537
+
+
+class BadCountEnvironment(RLEnvironment):
+    """A group whose instance_count is out of range: the server does not start."""
+
+    def __init__(self) -> None:
+        super().__init__("Bad")
+        self.add_child(TooManyDiscs())
         self.add_child(DiscWorld())

@@ -63,7 +63,11 @@ class ActionCheck:
         self._agents = [agent for agent in agents if agent.name not in driven]
         self._driven = driven
         self._due = due
-        self._several = due is not None or len(agents) > 1
+        self._several = (
+            due is not None
+            or len(agents) > 1
+            or any(getattr(agent, "_IS_GROUP", False) for agent in agents)
+        )
         self._one = compile_check(space, "action")
         self._each = {a.name: compile_check(a.action_space, f"action[{a.name!r}]") for a in agents}
 

@@ -16,20 +16,26 @@ cost). Within an episode:
   again;
 - an answer holds the agents due to decide and those that left; a step runs until one that
   the client acts for is due (docs/protocol.md, "Agents that come and go").
+
+A group of agents (:class:`~rlenv.agent_group.RLAgentGroup`) is one agent here: it decides as
+a whole, its members' ends and joins since its last decision go out at its next one (its
+outcome's arrays), and it leaves once no member is left in play. Groups are fixed children:
+one added or removed during an episode is refused.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 from gymnasium import spaces
 
 from rlenv.agent import RLAgent
+from rlenv.agent_group import RLAgentGroup
 from rlenv.environment import RLEnvironment
 from rlenv.protocol.messages import MAX_REPEAT_ACTION, joint_end
-from rlenv.serving._roster import Outcome, Roster
+from rlenv.serving._roster import Outcome, Roster, reward_total
 
 __all__ = ["MAX_POSSIBLE_AGENTS", "AgentsInPlay", "Departure", "PossibleAgent", "roster_of"]
 
@@ -60,6 +66,8 @@ class Departure:
     reward: float
     terminated: bool
     truncated: bool
+    outcome: dict[str, Any] | None = None
+    """A group's outcome (its arrays over members); ``None`` for an agent."""
 
 
 def roster_of(environment: RLEnvironment) -> Roster:
@@ -179,6 +187,8 @@ class AgentsInPlay(Roster):
         self.asked = set()
         self._open = True
         self._first_tick = True
+        for members in self.groups:
+            members.start()
 
     def _in_tree(self) -> list[RLAgent]:
         return [
@@ -191,6 +201,8 @@ class AgentsInPlay(Roster):
         """The end of a tick: the agents' ``_after_physics_tick``, who left, who is due."""
         for agent in list(self.agents):
             agent._after_physics_tick(delta)
+        for members in self.groups:
+            members.ticked()
         if self._first_tick:
             self._first_tick = False
             for agent in self.agents:
@@ -241,10 +253,13 @@ class AgentsInPlay(Roster):
         answering = self.answering(reports)
         for agent in answering:
             name = agent.name
+            if agent._IS_GROUP:
+                outcomes[name], _ = cast(RLAgentGroup, agent)._members.outcome(reports)
+                continue
             reward = None if name in self.new else float(agent.reward) if reports else 0.0
             outcomes[name] = {"reward": reward, "terminated": False, "truncated": False}
         for name, gone in self.departures(reports).items():
-            outcomes[name] = {
+            outcomes[name] = gone.outcome or {
                 "reward": gone.reward,
                 "terminated": gone.terminated,
                 "truncated": gone.truncated,
@@ -253,9 +268,11 @@ class AgentsInPlay(Roster):
         if reports:
             for agent in answering:
                 agent.reward = 0.0
+                if agent._IS_GROUP:
+                    cast(RLAgentGroup, agent)._members.clear()
             self.asked = {agent.name for agent in answering}
             self.due, self.departed, self.new = set(), {}, set()
-        total = sum(o["reward"] for o in outcomes.values() if o["reward"] is not None)
+        total = sum(reward_total(o["reward"]) for o in outcomes.values())
         return total, terminated, truncated, outcomes
 
     def acted(self) -> None:
@@ -265,14 +282,16 @@ class AgentsInPlay(Roster):
         """
         for agent in self.agents:
             if agent.name in self.due and agent.name not in self.new:
-                agent.reward = 0.0
+                _forget_reward(agent)
         self.asked, self.due, self.departed, self.new = set(), set(), {}, set()
 
     def replayed(self) -> None:
         """A restore replayed the log: its last answer told the due their rewards, and who left."""
         for agent in self.agents:
             if agent.name in self.due:
-                agent.reward = 0.0
+                _forget_reward(agent)
+                if agent._IS_GROUP:  # its members' comings and goings were told
+                    cast(RLAgentGroup, agent)._members.clear()
         self.departed = {}
 
     # --- decisions --------------------------------------------------------------------------
@@ -311,7 +330,7 @@ class AgentsInPlay(Roster):
         self.due.difference_update(names)
         for agent in self.agents:
             if agent.name in names:
-                agent.reward = 0.0
+                _forget_reward(agent)
 
     # --- the tree's changes (rlenv.environment.AgentWatch) ----------------------------------
 
@@ -319,6 +338,11 @@ class AgentsInPlay(Roster):
         """Refuse ``agent`` unless it may join this episode (raises ``ValueError``)."""
         if not self._open:
             return
+        if agent._IS_GROUP:
+            raise ValueError(
+                f"cannot add group {agent.name!r} to {self.environment.name} during an "
+                "episode: groups are fixed children (their members come and go: add_member)"
+            )
         if agent.name in self.used:
             raise ValueError(
                 f"cannot add agent {agent.name!r} to {self.environment.name}: the name was "
@@ -346,12 +370,25 @@ class AgentsInPlay(Roster):
         It terminated, unless it was truncated already.
         """
         if self._open and agent in self.agents:
+            if agent._IS_GROUP:
+                raise ValueError(
+                    f"cannot remove group {agent.name!r} from {self.environment.name} during "
+                    "an episode: groups are fixed children (their members leave: "
+                    "remove_member)"
+                )
             self._depart(agent, terminated=agent.terminated or not agent.truncated)
 
     def _depart(self, agent: RLAgent, terminated: bool) -> None:
         name = agent.name
-        reward = 0.0 if name in self.new else float(agent.reward)
-        self.departed[name] = Departure(self._observe(agent), reward, terminated, not terminated)
+        observation = self._observe(agent)
+        outcome = None
+        if agent._IS_GROUP:  # its last members' final transitions
+            members = cast(RLAgentGroup, agent)._members
+            outcome, reward = members.outcome(True)
+            members.clear()
+        else:
+            reward = 0.0 if name in self.new else float(agent.reward)
+        self.departed[name] = Departure(observation, reward, terminated, not terminated, outcome)
         self.ends.append((terminated, not terminated))
         agent.reward = 0.0
         self.agents.remove(agent)
@@ -382,6 +419,13 @@ class AgentsInPlay(Roster):
                 f"cannot add agent {name!r} to {environment.name}: it is a "
                 f"{type(agent).__name__}, and {where} declares it a {declared.cls.__name__}"
             )
+
+
+def _forget_reward(agent: RLAgent) -> None:
+    """An agent's reward counts from now (a group's rows too)."""
+    agent.reward = 0.0
+    if agent._IS_GROUP:
+        cast(RLAgentGroup, agent)._rewards[:] = 0.0
 
 
 def _possible_agents(environment: RLEnvironment) -> dict[str, PossibleAgent]:

@@ -26,7 +26,6 @@ from collections.abc import Callable, Mapping
 from enum import Enum
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
 from gymnasium.utils import seeding
 
 from rlenv.environment import RLEnvironment, give_action
@@ -35,7 +34,7 @@ from rlenv.protocol.errors import ErrorCode, RequestError
 from rlenv.serving import _inspector as inspector
 from rlenv.serving._observing import check_text_keys
 from rlenv.serving._recent import RecentEpisodes
-from rlenv.serving._roster import Roster
+from rlenv.serving._roster import Roster, reward_total
 from rlenv.serving._snapshots import EpisodeLog
 from rlenv.serving._stats import EpisodeStats
 from rlenv.tree import SceneTree
@@ -46,13 +45,6 @@ if TYPE_CHECKING:
 __all__ = ["Episode", "EpisodeRun"]
 
 logger = logging.getLogger(__name__)
-
-
-def _total(reward: Any) -> float | None:
-    """An agent's reward in an answer as one number (a group's rows summed)."""
-    if reward.__class__ is np.ndarray:
-        return float(reward.sum())
-    return reward
 
 
 class Episode(Enum):
@@ -281,7 +273,7 @@ class EpisodeRun:
                 self.stats.reported(reward, frames, acted)
             else:
                 self.stats.reported_agents(
-                    {name: _total(o["reward"]) for name, o in outcomes.items()}, frames, acted
+                    {name: reward_total(o["reward"]) for name, o in outcomes.items()}, frames, acted
                 )
             if terminated or truncated:
                 self.stats.end("terminated" if terminated else "truncated")

@@ -125,8 +125,11 @@ def non_finite_observation(agent: RLAgent, data: Any) -> FloatingPointError | No
     where = find_non_finite(data)
     if where is None:
         return None
+    whose = f"{agent.get_path()}"
+    if agent._IS_GROUP and where:  # its first index is a member's
+        whose = f"member {where[1:].split(',')[0].rstrip(']')} of group {whose}"
     return FloatingPointError(
-        f"the observation of {agent.get_path()} is not finite at {where or '()'}: {data!r:.200}"
+        f"the observation of {whose} is not finite at {where or '()'}: {data!r:.200}"
     )
 
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from typing import Any, cast
 
+import numpy as np
 from gymnasium import spaces
 
 from rlenv._group_members import GroupMembers
@@ -25,12 +26,19 @@ from rlenv.agent_group import RLAgentGroup
 from rlenv.environment import RLEnvironment
 from rlenv.protocol.messages import joint_end
 
-__all__ = ["Outcome", "Roster"]
+__all__ = ["Outcome", "Roster", "reward_total"]
 
 Outcome = tuple[float, bool, bool, dict[str, dict[str, Any]] | None]
 """What an answer reports of the agents: the reward, the flags, and each agent's with several
 (its ``reward``, ``terminated`` and ``truncated``; a group's as arrays, with ``active`` and
 ``joined``; ``None`` with one agent)."""
+
+
+def reward_total(reward: Any) -> float:
+    """An agent's reward in an answer as one number: a group's rows summed; 0 for ``None``."""
+    if reward.__class__ is np.ndarray:
+        return float(reward.sum())
+    return 0.0 if reward is None else reward
 
 
 class Roster:

@@ -12,7 +12,8 @@ PPO trains for ``T`` member-steps (sub-environment steps); then its deterministi
 scripted flock (``Flock.heuristic``: every member steered to the nest) and random actions each
 play ``E`` episodes over the same seeds (1000 on), the client acting for the whole flock with
 one ``(64, 2)`` array a step. Printed for each: the flock's return per episode (the members'
-rewards summed) and the members home per episode, mean, min and median over the seeds.
+rewards summed), the members home and the steps per episode (150 at most: the sooner the flock
+is home, the better), mean, min and median over the seeds.
 """
 
 from __future__ import annotations
@@ -38,28 +39,30 @@ Flock = Callable[[np.ndarray], np.ndarray]
 """A flock's policy: the members' observations ``(64, 6)`` to their actions ``(64, 2)``."""
 
 
-def play(flock: Flock, seeds: range) -> list[tuple[float, int]]:
-    """``flock`` over one episode per seed on a server of its own: (return, members home)."""
+def play(flock: Flock, seeds: range) -> list[tuple[float, int, int]]:
+    """``flock`` over one episode per seed on a server of its own: (return, home, steps)."""
     results = []
     with ServerProcess(TARGET) as server, Client(server.host, server.port, timeout=60) as client:
         for seed in seeds:
             observation, _ = client.reset(seed=seed)
-            total, home = 0.0, 0
+            total, home, steps = 0.0, 0, 0
             while True:
                 action = {GROUP: flock(observation[GROUP])}
                 observation, reward, terminated, truncated, info = client.step(action)
                 total += reward
                 home += int(info["agents"][GROUP]["terminated"].sum())
+                steps += 1
                 if terminated or truncated:
                     break
-            results.append((total, home))
+            results.append((total, home, steps))
     return results
 
 
-def summary(results: list[tuple[float, int]]) -> dict[str, float]:
-    """Mean, min and median of the returns and of the members home."""
-    returns = [total for total, _ in results]
-    home = [count for _, count in results]
+def summary(results: list[tuple[float, int, int]]) -> dict[str, float]:
+    """Mean, min and median of the returns, of the members home and of the steps."""
+    returns = [total for total, _, _ in results]
+    home = [count for _, count, _ in results]
+    steps = [count for _, _, count in results]
     return {
         "return_mean": statistics.fmean(returns),
         "return_min": min(returns),
@@ -67,6 +70,9 @@ def summary(results: list[tuple[float, int]]) -> dict[str, float]:
         "home_mean": statistics.fmean(home),
         "home_min": min(home),
         "home_median": statistics.median(home),
+        "steps_mean": statistics.fmean(steps),
+        "steps_min": min(steps),
+        "steps_median": statistics.median(steps),
     }
 
 
@@ -122,7 +128,8 @@ def main() -> None:
             f"{name:>8}: return mean {figures['return_mean']:.2f} (min "
             f"{figures['return_min']:.2f}, median {figures['return_median']:.2f}); home "
             f"mean {figures['home_mean']:.1f} (min {figures['home_min']}, median "
-            f"{figures['home_median']})"
+            f"{figures['home_median']}); steps mean {figures['steps_mean']:.1f} (min "
+            f"{figures['steps_min']}, median {figures['steps_median']})"
         )
     if args.json:
         with open(args.json, "w") as out:

@@ -29,8 +29,9 @@ members not in play are ignored.
 of members not in this answer are zeros; ``info["agents"]["Flock"]["active"]`` says which are.
 
 ## Rewards
-Per member: 0.1 per metre it comes closer to the nest in a tick (negative when it goes away),
-and +1 when it reaches the nest. A member's first transition after it joined has reward 0.
+Per member and tick in play: 0.1 per metre it came closer to the nest (negative when it went
+away), -0.001 (the sooner home, the better), and +1 when it reaches the nest. A member's first
+transition after it joined has reward 0.
 
 ## Episode End
 A member terminates when its disc's centre is inside the nest (radius 1.05 m): its disc leaves

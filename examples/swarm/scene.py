@@ -37,6 +37,7 @@ __all__ = [
     "PROGRESS_REWARD",
     "RADIUS",
     "SPEED",
+    "TICK_REWARD",
     "SwarmBodies",
     "SwarmFloor",
     "distances",
@@ -64,6 +65,8 @@ PROGRESS_REWARD = 0.1
 """Reward per metre a member comes closer to the nest (negative when it goes away)."""
 ARRIVAL_REWARD = 1.0
 """Reward for reaching the nest."""
+TICK_REWARD = -0.001
+"""Reward per tick in play: the sooner home, the better."""
 OBSERVATION_SIZE = 6
 """A member's observation: position, velocity, the nest relative to it."""
 EPISODE_TICKS = 600
@@ -263,11 +266,11 @@ class SwarmBodies:
     def progress(self, rows: slice | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The rewards of ``rows`` for the tick just read, and which of them reached the nest.
 
-        Updates their :attr:`distances`. A member that reached the nest gets
-        :data:`ARRIVAL_REWARD` on top of its progress.
+        Updates their :attr:`distances`. A row's reward is its progress and
+        :data:`TICK_REWARD`, and :data:`ARRIVAL_REWARD` for a member that reached the nest.
         """
         now = distances(self.states[rows], self.nest)
-        rewards = PROGRESS_REWARD * (self.distances[rows] - now)
+        rewards = PROGRESS_REWARD * (self.distances[rows] - now) + TICK_REWARD
         self.distances[rows] = now
         arrived = now < self.nest_radius
         return rewards + ARRIVAL_REWARD * arrived, arrived

@@ -353,10 +353,12 @@ class PhysicsWorld(SpaceOwner):
 
     def _on_begin(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
         self._touched = True
-        self._report(arbiter, "collision_started", "body_entered")
+        if self._shape_nodes:  # else no shape has a node to tell (bare pymunk shapes, a swarm's)
+            self._report(arbiter, "collision_started", "body_entered")
 
     def _on_separate(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
-        self._report(arbiter, "collision_ended", "body_exited")
+        if self._shape_nodes:
+            self._report(arbiter, "collision_ended", "body_exited")
 
     def _report(self, arbiter: pymunk.Arbiter, shape_signal: str, body_signal: str) -> None:
         first, second = arbiter.shapes

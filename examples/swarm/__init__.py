@@ -43,8 +43,19 @@ the scripted baseline); ``rlenv serve examples.swarm:SwarmEnvironment --policy
 Flock=heuristic`` lets it play. Random actions bring few members home.
 
 ## Trained
-See ``benchmarks/train_swarm.py`` (PPO over ``SB3VecEnv(..., agents="Flock")``: every member a
-sub-environment, one policy for all).
+``benchmarks/train_swarm.py`` trains the flock with SB3's PPO over ``SB3VecEnv(2, TARGET,
+agents="Flock")``: every member of both instances a sub-environment (128), one policy for all
+(``n_steps`` 64, ``batch_size`` 1024, learning rate 1e-3; torch on one thread). 3,000,000
+member-steps took 656 s on the 2-core development VM (a busy one). Its deterministic policy,
+the scripted flock (the ``heuristic``) and random actions, over the same 10 seeds (1000 to
+1009): return per episode mean 86.97, 86.98 and -36.34 (min 84.23, 84.03, -38.74; median
+87.15, 87.11, -36.47); members home per episode 64.0, 64.0 and 0.4; steps per episode mean
+83.5, 83.1 and 150 (the time limit). The trained flock is as fast home as the scripted one.
+
+## Cost
+``rlenv bench --swarm`` (``benchmarks/swarm.py``): the group, the nodes and the floor for 16,
+64 and 256 members; figures in benchmarks/README.md ("A swarm") and docs/several-agents.md
+("Swarms").
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ quarters of the flock start; the others join one by one, every 8 ticks::
     |___PhysicsFramesTimer
     |___Flock (Flock: RLAgentGroup)   instance_count 64, initial_count 48
     |___World (SwarmWorld)
-        |___Physics (PhysicsWorld)    the walls, the nest and the 64 discs (scene.SwarmBodies)
+        |___Physics (PhysicsWorld)    contact_monitor False; the walls, the nest, the 64 discs
 
 The same scene is written as 64 ``RLAgent`` nodes, ``Member0`` .. ``Member63``, in
 :class:`SwarmNodesEnvironment`, and as bare pymunk and numpy in ``benchmarks/swarm.py``'s
@@ -133,7 +133,9 @@ class SwarmWorld(RLEnvWorld):
         if self.physics is not None:
             self.remove_child(self.physics)
             self.physics.queue_free()
-        self.physics = PhysicsWorld(gravity=(0.0, 0.0), damping=DAMPING, name="Physics")
+        self.physics = PhysicsWorld(
+            gravity=(0.0, 0.0), damping=DAMPING, contact_monitor=False, name="Physics"
+        )  # no node listens to a contact: the discs' contacts cost pymunk's step alone
         self.add_child(self.physics)
         self.bodies = SwarmBodies(self.physics.space, self.count)
         self.bodies.reset(self.np_random)

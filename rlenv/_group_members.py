@@ -121,9 +121,10 @@ class GroupMembers:
         self.group._rewards.fill(0.0)
         if self._any_ended or self._any_joined:
             self._ended.fill(False)
+            self._pending.fill(False)  # ended outside a tick: the answer observed them
             self._final_rewards.fill(0.0)
             self._joined.fill(False)
-            self._any_ended = self._any_joined = False
+            self._any_ended = self._any_joined = self._any_pending = False
             self._update()
 
     def outcome(self, reports: bool) -> tuple[dict[str, np.ndarray], float]:
@@ -182,7 +183,7 @@ class GroupMembers:
 
     def add(self, index: int | None) -> int:
         group = self.group
-        name = type(group).__name__
+        name = group.name
         if self._open and (group.terminated or group.truncated):
             raise ValueError(
                 f"group {name} has ended in this episode (no member was left in play): no "
@@ -212,7 +213,7 @@ class GroupMembers:
         group = self.group
         index = self._slot(index)
         if not group._active[index]:
-            raise ValueError(f"member {index} of group {type(group).__name__} is not in play")
+            raise ValueError(f"member {index} of group {group.name} is not in play")
         if not self._open:  # the reset's hooks: out of the start, its slot free
             group._active[index] = self._used[index] = False
             self._update()
@@ -229,7 +230,7 @@ class GroupMembers:
             raise ValueError(f"a member is an int slot in 0..{count - 1}, got {index!r:.40}")
         if not 0 <= index < count:
             raise ValueError(
-                f"member {index} is out of range: group {type(self.group).__name__} has "
+                f"member {index} is out of range: group {self.group.name} has "
                 f"slots 0..{count - 1} (its instance_count)"
             )
         return int(index)

@@ -33,6 +33,7 @@ __all__ = [
     "JOIN_TICK",
     "TIME_LIMIT",
     "BadCountEnvironment",
+    "ChosenSwarmEnvironment",
     "DiscreteSwarmEnvironment",
     "Discs",
     "MixedEnvironment",
@@ -224,6 +225,37 @@ class PacedDiscs(Discs):
     """The discs, deciding together every 3 ticks."""
 
     decision_period = 3
+
+
+class ChosenDiscs(Discs):
+    """Its reset chooses who starts: member 0 sits out (its slot stays free), member 7 starts.
+
+    Rows out of play get an action of its own (``no_action``): a push of -1 in x.
+    """
+
+    def reset(self, arguments: Any) -> None:
+        super().reset(arguments)
+        self.remove_member(0)
+        self.space_of_disc(0)
+        self.add_member(7)
+        self.bodies[7] = _disc(self.world.space, 1.5, 1.5)
+
+    def space_of_disc(self, index: int) -> None:
+        """Take disc ``index`` out of the space (its member does not start)."""
+        body = self.bodies[index]
+        self.world.space.remove(body, *body.shapes)
+        self.bodies[index] = pymunk.Body(1.0, 1.0)
+
+    def no_action(self) -> np.ndarray:
+        idle = np.zeros(self.action_space.shape, np.float32)
+        idle[:, 0] = -1.0
+        return idle
+
+
+class ChosenSwarmEnvironment(SwarmEnvironment):
+    """The group of discs whose reset chooses who starts (``ChosenDiscs``)."""
+
+    group_class = ChosenDiscs
 
 
 class PacedSwarmEnvironment(SwarmEnvironment):

@@ -162,6 +162,18 @@ def test_members_out_of_play_get_no_action_rows_and_zero_observation_rows() -> N
 # --- members that come and go ----------------------------------------------------------------
 
 
+def test_a_reset_chooses_who_starts_and_a_slot_left_out_is_free_to_join() -> None:
+    client = LocalClient("swarm_envs:ChosenSwarmEnvironment")
+    group = _group(client)
+    answers = _play(client, steps=3)
+    assert answers[0]["agents"]["Discs"]["active"].tolist() == [False] + [True] * 5 + [False, True]
+    assert not answers[0]["agents"]["Discs"]["joined"].any()  # starting is not joining
+    assert answers[3]["agents"]["Discs"]["joined"].tolist() == [True] + [False] * 7  # slot 0
+    assert group.applied[0][6].tolist() == [-1.0, 0.0]  # out of play: the overridden no_action
+    assert group.applied[0][7].tolist() == pytest.approx([1.0, 0.3])
+    client.close()
+
+
 def test_members_leave_once_with_a_final_transition_and_are_never_observed_again() -> None:
     client = LocalClient(SWARM)
     answers = _play(client)
@@ -354,3 +366,50 @@ def test_a_kept_episode_with_members_that_came_and_went_replays_bit_for_bit(serv
             assert info["agents"]["Discs"]["active"].tolist() == in_play.tolist()
             expected = answers[step]["observation"]["Discs"][in_play]
             assert restored["Discs"][in_play].tobytes() == expected.tobytes()
+
+
+def test_steps_of_a_paced_group_say_where_it_is_due(serve: Serve) -> None:
+    with Client(serve(PACED, args=["--instances", "2"]).address) as client:
+        action = {"Discs": np.tile(PUSH, (2, 1, 1))}
+        client.send_steps(action, reset=np.ones(2, bool))
+        assert client.receive_steps().due["Discs"].tolist() == [True, True]
+        client.send_steps(action)
+        answer = client.receive_steps()
+        assert answer.frames.tolist() == [3, 3]  # the group's period
+        assert answer.due["Discs"].tolist() == [True, True]
+        assert answer.observation["Discs"].shape == (2, 8, 4)
+        assert answer.info[0]["agents"]["Discs"]["active"].sum() == 6
+
+
+def test_an_observer_sees_the_members_in_play_and_takes_no_reward(serve: Serve) -> None:
+    server = serve(SWARM)
+    with Client(server.address) as trainer, Client(server.address) as observer:
+        trainer.reset(seed=0)
+        trainer.step({"Discs": PUSH})
+        seen, reward, _, _, info = observer.poll()
+        assert reward == 0.0 and not info["agents"]["Discs"]["reward"].any()
+        assert info["agents"]["Discs"]["active"].tolist() == [True] * 6 + [False] * 2
+        _, reward, _, _, info = trainer.step({"Discs": PUSH})
+    alone = _play(LocalClient(SWARM), seed=0, steps=2)[2]  # the same steps, no observer
+    assert reward == alone["reward"] < 0.0
+    assert (
+        info["agents"]["Discs"]["reward"].tobytes() == alone["agents"]["Discs"]["reward"].tobytes()
+    )
+
+
+def test_member_slots_out_of_range_or_not_ints_are_refused_naming_the_group() -> None:
+    from swarm_envs import Discs
+
+    group = Discs("Herd")
+    group._members.begin()  # a reset's start: slots 0 to 5 in play
+    for index, message in [
+        (8, "member 8 is out of range: group Herd has slots 0..7"),
+        (-1, "member -1 is out of range"),
+        (True, "a member is an int slot in 0..7, got True"),
+        (2.0, "a member is an int slot in 0..7, got 2.0"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            group.add_member(index)
+    assert group.add_member() == 6 and group.add_member(np.int64(7)) == 7
+    with pytest.raises(ValueError, match="group Herd has no free member slot"):
+        group.add_member()

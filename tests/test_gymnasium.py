@@ -519,7 +519,7 @@ def test_a_server_of_an_older_protocol_is_refused_clearly() -> None:
     try:
         host, port = listener.getsockname()
         with pytest.raises(
-            ProtocolVersionError, match=r"server speaks rlenv protocol 1.0, this client speaks 2\.6"
+            ProtocolVersionError, match=r"server speaks rlenv protocol 1.0, this client speaks 2\.7"
         ):
             RemoteVectorEnv(addresses=[f"{host}:{port}"])
     finally:

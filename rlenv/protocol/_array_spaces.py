@@ -142,17 +142,6 @@ def _bounds_test(low: np.ndarray, high: np.ndarray, dtype: np.dtype) -> Callable
 
         return few
 
-    lo, hi = min(lows), max(highs)
-    if lows.count(lo) == len(lows) and highs.count(hi) == len(highs):  # one bound for all
-        unbounded = floats and lo == -math.inf and hi == math.inf
-
-        def uniform(array: np.ndarray) -> bool:
-            if test_finite and not math.isfinite(array.sum(dtype=np.float64)):
-                return False  # NaN or infinity (or an overflowing sum: the careful path says)
-            return unbounded or bool(lo <= array.min() and array.max() <= hi)  # NaN: False
-
-        return uniform
-
     def many(array: np.ndarray) -> bool:
         if test_finite and not np.isfinite(array.sum(dtype=np.float64)):
             return False

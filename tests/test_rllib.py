@@ -31,7 +31,11 @@ from examples.tag import TARGET as TAG_TARGET  # noqa: E402
 from rlenv_client import ConnectionLost, RemoteVectorEnv  # noqa: E402
 from rlenv_client.registration import ENVIRONMENTS  # noqa: E402
 from rlenv_client.rllib import RLlibEnvCreator, config_for, register  # noqa: E402
-from rlenv_client.rllib_agents import RemoteMultiAgentEnv, multi_agent_config_for  # noqa: E402
+from rlenv_client.rllib_agents import (  # noqa: E402
+    RemoteMultiAgentEnv,
+    multi_agent_config_for,
+    policy_per_agent,
+)
 
 pytestmark = pytest.mark.ray
 
@@ -535,5 +539,62 @@ def test_ppo_trains_a_policy_per_class_on_the_hunt(no_leftovers: str) -> None:
         agents = set(result["env_runners"]["agent_episode_returns_mean"])
         assert "Hunter" in agents and {"Prey1", "Prey2"} <= agents
         assert {"Hunter", "Prey"} <= set(result["learners"])
+    finally:
+        algo.stop()
+
+
+# --- a group of agents: its members are RLlib's agents, with one policy ------------------------
+
+
+SWARM_MIXED = "swarm_envs:MixedEnvironment"
+DISCS = [f"Discs_{i}" for i in range(8)]
+
+
+def test_a_groups_members_are_agents_in_rllibs_dicts(come_and_go_tests: None) -> None:
+    env = RemoteMultiAgentEnv(SWARM_MIXED, max_episode_steps=4)
+    try:
+        assert env.possible_agents == [*DISCS, "Shepherd"]
+        assert env.observation_spaces["Discs_7"] == gym.spaces.Box(-50.0, 50.0, (4,), np.float32)
+        observations, _ = env.reset(seed=0)
+        assert list(observations) == env.agents == [*DISCS[:6], "Shepherd"]  # 6 start
+        steps = []
+        for _ in range(4):
+            actions = {name: np.zeros(2, np.float32) for name in observations}
+            steps.append(env.step(actions))
+            observations = steps[-1][0]
+        observations, rewards, terminateds, truncateds, _ = steps[2]  # tick 12: Discs_6 joined
+        assert list(observations) == [*DISCS[:7], "Shepherd"] and rewards["Discs_6"] == 0.0
+        assert rewards["Shepherd"] == pytest.approx(0.4)
+        observations, rewards, terminateds, truncateds, _ = steps[3]  # cut by the time limit
+        assert truncateds == {**dict.fromkeys([*DISCS[:7], "Shepherd"], True), "__all__": True}
+        assert env.agents == []
+    finally:
+        env.close()
+
+
+def test_ppo_trains_one_policy_for_a_group_beside_the_shepherds(
+    no_leftovers: str, come_and_go_tests: None
+) -> None:
+    config = multi_agent_config_for(
+        PPOConfig(), SWARM_MIXED, per="class", num_env_runners=0, max_episode_steps=30
+    )
+    config = (
+        config.env_runners(rollout_fragment_length=60)
+        .training(train_batch_size_per_learner=240, minibatch_size=60, num_epochs=1)
+        .debugging(seed=0)
+    )
+    assert config.policies.keys() == {"Discs", "Shepherd"}
+    mapping = config.policy_mapping_fn
+    assert {mapping(name, None) for name in DISCS} == {"Discs"}
+    assert policy_per_agent(SWARM_MIXED).policies == {**dict.fromkeys(DISCS, "Discs"),
+                                                      "Shepherd": "Shepherd"}  # fmt: skip
+    algo = config.build_algo()
+    try:
+        result = algo.train()
+        assert set(result["env_runners"]["module_episode_returns_mean"]) == {"Discs", "Shepherd"}
+        assert {"Discs_0", "Discs_6", "Shepherd"} <= set(
+            result["env_runners"]["agent_episode_returns_mean"]
+        )
+        assert {"Discs", "Shepherd"} <= set(result["learners"])
     finally:
         algo.stop()

@@ -27,6 +27,7 @@ __all__ = [
     "AgentsInPlay",
     "Turn",
     "answer_reward",
+    "as_one",
     "due_columns",
     "slot_mask",
     "with_column",
@@ -121,6 +122,10 @@ class AgentsInPlay:
         rewards, terminated, truncated = {}, {}, {}
         for name in agents:
             outcome = outcomes.get(name, {}) if name in observation else {}
+            if "joined" in outcome:  # a group's, here one agent (members: MembersInPlay)
+                outcome = dict(
+                    zip(("reward", "terminated", "truncated"), as_one(outcome), strict=True)
+                )
             reward = outcome.get("reward")
             rewards[name] = 0.0 if reward is None else float(reward)
             terminated[name] = bool(outcome.get("terminated", False))
@@ -154,6 +159,18 @@ def answer_reward(info: Mapping[str, Any], names: tuple[str, ...]) -> float:
     outcomes = info.get("agents") or {}
     rewards = (outcomes[name]["reward"] for name in names if name in outcomes)
     return float(sum(0.0 if reward is None else np.sum(reward) for reward in rewards))
+
+
+def as_one(outcome: Mapping[str, Any]) -> tuple[Any, Any, Any]:
+    """A group's outcome (arrays over its members, last axis) as one agent's.
+
+    Its members' rewards summed; ended where no member is left in play, terminated if one
+    of those ending now terminated (the server's joint end counts the group as one agent).
+    """
+    ending = outcome["terminated"] | outcome["truncated"]
+    over = ~(outcome["active"] & ~ending).any(axis=-1)
+    terminated = over & outcome["terminated"].any(axis=-1)
+    return outcome["reward"].sum(axis=-1), terminated, over & ~terminated
 
 
 def due_columns(slots: AgentSlots | None, count: int) -> dict[str, np.ndarray] | None:

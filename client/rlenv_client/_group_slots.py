@@ -89,7 +89,10 @@ class GroupSlots:
         truncated |= waited | cut
         finished = terminated | truncated
         observations = self._rows(joint)
-        final_rows = self._final_rows(observations, ended, infos, waited | cut)
+        out: dict[str, Any] = {}
+        if finished.any():  # before the rows of those that left are zeroed
+            final_rows = self._final_rows(observations, ended, infos, waited | cut)
+            out = self._finals(final_rows, finished, waited, ended, infos)
         left = finished & ~over
         if left.any():
             observations[left] = 0  # out of play until the instance resets
@@ -100,9 +103,6 @@ class GroupSlots:
         self._in_play = np.where(over, starting, np.where(decided, active & ~finished, in_play))
         self._last = observations
         is_active = np.where(over, starting, active)
-        out: dict[str, Any] = {}
-        if finished.any():
-            out = self._finals(final_rows, finished, waited, ended, infos)
         rows = (observations, np.where(active, reward, 0.0), terminated, truncated, out)
         return rows, is_active
 
@@ -125,7 +125,7 @@ class GroupSlots:
         step = (infos.get("agents") or {}).get(self.name)
         final = (infos.get("final_info", {}).get("agents") or {}).get(self.name)
         shape = (self.instances, self.count)
-        columns = []
+        columns: list[np.ndarray] = []
         for key in _FLAGS:
             now = step[key] if step is not None else np.zeros(shape)
             if final is not None and ended.any():
@@ -185,8 +185,10 @@ class GroupSlots:
         final_obs = np.full(self.num_envs, None, dtype=object)
         for index in np.flatnonzero(finished):
             final_obs[index] = final_rows[index]
+        agent = np.full(self.num_envs, None, dtype=object)
+        agent[finished] = self.name
         final_info: dict[str, Any] = {
-            "agent": np.where(finished, self.name, None).astype(object),
+            "agent": agent,
             "_agent": finished.copy(),
             "instance": self._instance.copy(),
             "_instance": finished.copy(),

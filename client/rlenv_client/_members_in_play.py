@@ -61,13 +61,14 @@ class MembersInPlay:
     Attributes:
         names: every agent the trainer may see, in the hello's order, each group's members in
             its place (PettingZoo's and RLlib's ``possible_agents``).
+        members: each group's members' names, by group.
         agents: the agents in play after the last answer.
         due: the agents that decide at the last answer.
     """
 
     def __init__(self, view: TrainerView, groups: Mapping[str, GroupSpec]) -> None:
         self._groups = {name: groups[name] for name in view.agents if name in groups}
-        self._members = {
+        self.members = {
             name: member_names(name, group.instance_count) for name, group in self._groups.items()
         }
         self._others = tuple(name for name in view.agents if name not in self._groups)
@@ -76,7 +77,7 @@ class MembersInPlay:
         self._observation_spaces: dict[str, spaces.Space] = {}
         for name in view.agents:
             group = self._groups.get(name)
-            for each in self._members[name] if group is not None else (name,):
+            for each in self.members[name] if group is not None else (name,):
                 self._action_spaces[each] = actions[name] if group is None else group.action_space
                 self._observation_spaces[each] = (
                     observations[name] if group is None else group.observation_space
@@ -126,7 +127,7 @@ class MembersInPlay:
         """The joint action of the agents due: each group's members' entries in one array."""
         due = set(self.due)
         joint = {name: actions[name] for name in self._others if name in due and name in actions}
-        for group, names in self._members.items():
+        for group, names in self.members.items():
             given = [index for index, name in enumerate(names) if name in due and name in actions]
             if not given:
                 continue
@@ -152,7 +153,7 @@ class MembersInPlay:
                     bool(outcome.get("terminated", False)),
                     bool(outcome.get("truncated", False)),
                 )
-        for group, names in self._members.items():
+        for group, names in self.members.items():
             outcome = outcomes.get(group)
             if outcome is None or group not in observation:
                 continue  # the group does not decide now

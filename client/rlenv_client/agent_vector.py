@@ -37,6 +37,17 @@ is not in play (not joined yet, or gone) waits, with ``info["waiting"]``, as abo
 active when the agent joins (no episode boundary: the join's observation comes with reward 0),
 and a name is never in play twice in one episode, so a slot whose agent left waits until its
 instance's next episode. Callables in ``others`` are called only where their agent decides.
+
+A group of agents (an :class:`~rlenv.agent_group.RLAgentGroup`, the hello's ``groups``,
+protocol 2.7) learns alone: with ``agents=GROUP`` each member of each instance is one
+sub-environment, sub-environment ``i * N + m`` being member ``m`` of instance ``i``
+(``num_envs = instances * N``, the member's spaces), and the group's arrays are reshaped, with no
+loop over members (:mod:`rlenv_client._group_slots`). ``is_active`` is the group's ``active``
+row: a member in play, or ending with its final transition (``terminated`` or ``truncated``,
+``final_obs``), once; then its slot is out of play until its instance resets (zeros, reward 0,
+``waiting``), and a member that joins turns its slot active with its first observation and
+reward 0. The group's other agents are driven as above; a callable driving a group gets its
+``(N, *obs)`` array and returns ``(N, *act)``.
 """
 
 from __future__ import annotations
@@ -52,7 +63,7 @@ from gymnasium.vector.utils import batch_space, create_empty_array
 
 from rlenv.agent import RLAgent
 from rlenv.serving.policy_driver import HEURISTIC
-from rlenv_client._agents_in_play import slot_mask, with_column
+from rlenv_client._agents_in_play import as_one, slot_mask, with_column
 from rlenv_client._group_slots import GroupSlots
 from rlenv_client._rows import check_shape, repeat_rows, row, set_row
 from rlenv_client.vector import RemoteVectorEnv
@@ -160,9 +171,11 @@ class AgentVectorEnv(VectorEnv):
 
     Args:
         instances: how many copies of the environment (``None``: as many as ``addresses``
-            host). The vector has ``instances * len(learners)`` sub-environments.
+            host). The vector has ``instances * len(learners)`` sub-environments
+            (``instances * N`` for a group of ``N`` members).
         target: the environment class as ``MODULE:CLASS``.
-        agents: which agents learn (:data:`Agents`); they must share their spaces.
+        agents: which agents learn (:data:`Agents`); they must share their spaces. A group
+            learns alone: its members are the sub-environments (see the module).
         others: what drives each other agent, by name or by RLAgent class
             (:data:`OtherPolicy`); by default its heuristic.
         addresses: ``HOST:PORT`` of running servers instead; they can only be given callables
@@ -188,8 +201,9 @@ class AgentVectorEnv(VectorEnv):
 
     Raises:
         ValueError: an unknown agent in ``agents`` or ``others``, a learner in ``others``,
-            learners with different spaces, another agent with neither a heuristic nor an
-            entry in ``others`` (named), or a server-side policy where no server is started.
+            learners with different spaces, a group among several learners, another agent with
+            neither a heuristic nor an entry in ``others`` (named), or a server-side policy
+            where no server is started.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": ["rgb_array"]}
@@ -377,9 +391,9 @@ class AgentVectorEnv(VectorEnv):
             raise RuntimeError("call reset() before step()")
         check_shape(self.action_space, actions, "actions")
         k, joint = len(self.learners), self._joint_action
-        if self._group is not None:
-            name = self._group.name
-            joint[name] = self._group.action(actions, joint[name])
+        if self._group is not None:  # the joint action is a map: the group is keyed
+            columns = cast(dict[str, Any], joint)
+            columns[self._group.name] = self._group.action(actions, columns[self._group.name])
         else:
             for j, name in enumerate(self.learners):
                 column = self._of(joint, name)
@@ -428,8 +442,11 @@ class AgentVectorEnv(VectorEnv):
             self._others_done[name][ended] = False
         out = self._spread(infos)
         if self._group is not None:
-            (*step, finals), active = self._group.outcomes(joint_obs, ended, infos)
-            return (*step, self._group_infos({**out, **finals}, active))  # type: ignore[return-value]
+            (observations, rewards, terminated, truncated, finals), mask = self._group.outcomes(
+                joint_obs, ended, infos
+            )
+            out = self._group_infos({**out, **finals}, mask)
+            return observations, rewards, terminated, truncated, out
         rewards = np.zeros(self.num_envs, np.float64)
         terminated = np.zeros(self.num_envs, np.bool_)
         truncated = np.zeros(self.num_envs, np.bool_)
@@ -509,7 +526,7 @@ class AgentVectorEnv(VectorEnv):
             present = outcomes.get(f"_{name}")
             if present is not None:
                 joined[j::k] = present & ended
-        return joined & self._waiting
+        return joined
 
     def _learner_rows(self, joint: Any) -> Any:
         """The learners' observations, instance by instance: row ``i * k + j``."""
@@ -651,10 +668,16 @@ def _columns(
     """``(reward, terminated, truncated)`` of one agent's batched outcome map.
 
     ``None`` (no instance's answer holds the agent: agents that come and go): 0 and false; a
-    joined agent's first reward (``None``) is 0.
+    joined agent's first reward (``None``) is 0. A group's (arrays over its members) is the
+    group's as one agent: its members' rewards summed, and ended where no member is left in
+    play (terminated if one of those that ended now terminated).
     """
     if outcome is None:
         return np.zeros(instances), np.zeros(instances, np.bool_), np.zeros(instances, np.bool_)
+    if "joined" in outcome:  # rows whose answer lacks the group: 0 and false
+        reward, terminated, truncated = as_one(outcome)
+        present = outcome["_active"]
+        return reward, terminated & present, truncated & present
     reward = outcome["reward"]
     if isinstance(reward, np.ndarray) and reward.dtype == object:
         reward = np.where(reward == None, 0.0, reward)  # noqa: E711 (elementwise)

@@ -26,6 +26,12 @@ the agents due are sent. The reward is the sum of the answer's; the episode ends
 server's does. A learner per agent is better served by
 :class:`~rlenv_client.pettingzoo.RemoteParallelEnv` or
 :class:`~rlenv_client.agent_vector.AgentVectorEnv` (a slot per agent, with a mask).
+
+A group of agents (an :class:`~rlenv.agent_group.RLAgentGroup`, protocol 2.7) is one entry of
+the ``Dict`` spaces, its members' values stacked: ``observation[group]`` is ``(N, *obs)``
+(zeros in the rows of members not in play), the action's entry ``(N, *act)``, and
+``info["agents"][group]`` arrays over the members (``reward``, ``terminated``, ``truncated``,
+``active``, ``joined``); the reward sums the group's rows with the other agents'.
 """
 
 from __future__ import annotations

@@ -16,12 +16,20 @@ last observation, with reward 0 and both flags false, and ``infos[agent]["due"]`
 whether it decides now (every agent's info has it). An action for an agent not due is
 ignored: it is never sent.
 
+A group of agents (an :class:`~rlenv.agent_group.RLAgentGroup`, protocol 2.7) is one array on
+the wire and named agents here: member ``i`` of group ``G`` is ``f"{G}_{i}"`` (PettingZoo's
+``pursuer_0`` convention), every member in ``possible_agents`` (in the group's place), with one
+member's spaces; ``agents`` holds the members in play, as above: a member joins from the answer
+it first shows up in (reward 0.0) and leaves after the step that returns its final transition,
+never to come back in the episode. The members' actions travel as the group's one array (zeros
+in the rows of members not in play). :mod:`rlenv_client._members_in_play` does it.
+
 Needs the optional extra: ``pip install pettingzoo``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -29,7 +37,7 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from rlenv_client._agents_in_play import Turn
-from rlenv_client._members_in_play import in_play
+from rlenv_client._members_in_play import MembersInPlay, in_play
 from rlenv_client.session import Session
 from rlenv_client.trainer_view import TrainerView
 
@@ -168,7 +176,8 @@ class RemoteParallelEnv(ParallelEnv):
         infos = {
             agent: {"frames": info["frames"], "due": agent in turn.due} for agent in turn.agents
         }
-        _mark_claimed(infos, info)
+        members = self._in_play.members if isinstance(self._in_play, MembersInPlay) else {}
+        _mark_claimed(infos, info, members)
         self.agents = list(self._in_play.agents)
         return (
             dict(turn.observations),
@@ -192,8 +201,16 @@ class RemoteParallelEnv(ParallelEnv):
         return {self.possible_agents[0]: observation}
 
 
-def _mark_claimed(infos: dict[str, dict[str, Any]], info: dict[str, Any]) -> None:
-    """``"claimed": True`` in the infos of the agents a person played (protocol 2.6 claims)."""
+def _mark_claimed(
+    infos: dict[str, dict[str, Any]],
+    info: dict[str, Any],
+    members: Mapping[str, Sequence[str]] | None = None,
+) -> None:
+    """``"claimed": True`` in the infos of the agents a person played (protocol 2.6 claims).
+
+    A claimed group (``members``: each group's members) played every one of its members.
+    """
     for agent in info.get("claimed", ()):
-        if agent in infos:
-            infos[agent]["claimed"] = True
+        for name in (members or {}).get(agent, (agent,)):
+            if name in infos:
+                infos[name]["claimed"] = True

@@ -37,6 +37,16 @@ it all up::
 RLlib's ``MultiAgentEnvRunner`` builds ``num_envs_per_env_runner`` of these with its own
 vector (the creator is called once per environment, so each has a server of its own).
 
+A group of agents (an :class:`~rlenv.agent_group.RLAgentGroup`, protocol 2.7) gives RLlib its
+members as agents, ``f"{group}_{i}"``, each with one member's spaces, in and out of the dicts
+as agents that come and go are (a member in the dicts from the answer it starts or joins in,
+and once more with its final transition). They share one policy: :func:`policy_per_class`
+maps every member to the group's class name, :func:`policy_per_agent` to the group's name::
+
+    config = multi_agent_config_for(PPOConfig(), "swarm_envs:MixedEnvironment")  # tests/
+    config.policy_mapping_fn("Discs_5")   # "Discs": every disc learns one policy
+    config.policy_mapping_fn("Shepherd")  # "Shepherd"
+
 Needs the optional extra ``rllib`` (and a CPU build of torch); only people who use RLlib
 import this module, through :mod:`rlenv_client.rllib`.
 """

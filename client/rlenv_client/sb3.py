@@ -23,6 +23,12 @@ agent that leaves ends its slot's episode, ``terminated`` or ``truncated``, with
 name is next in play, in a later episode of its instance. The steps a slot waits are in no
 episode's length.
 
+A group of agents (``agents=GROUP``, an :class:`~rlenv.agent_group.RLAgentGroup`) gives a
+sub-environment per member per instance (``num_envs`` instances of ``N`` members: ``num_envs * N``
+of SB3's), the same way: a member that ends gives its ``terminal_observation`` and its
+``episode`` once, then its slot waits (zeros) until its instance resets; one that joins starts
+an episode from its first observation. One policy learns from every member.
+
 :class:`CurriculumCallback` scores the levels of a
 :class:`~rlenv_client.curriculum.CurriculumVectorEnv` (given to :class:`SB3VecEnv` as
 ``vector``) from each rollout's advantages and values (PLR's positive value loss, or
@@ -65,7 +71,8 @@ class SB3VecEnv(VecEnv):
 
     Args:
         num_envs: how many sub-environments; with ``agents``, how many instances of the
-            environment (each gives one sub-environment per learning agent).
+            environment (each gives one sub-environment per learning agent, or per member of
+            a learning group).
         target: the environment class as ``MODULE:CLASS``, or a registered id's target.
         addresses: ``HOST:PORT`` of running servers instead of starting them.
         repeat_action: physics ticks per step (the servers' default if ``None``).
@@ -187,8 +194,9 @@ class SB3VecEnv(VecEnv):
         self._episode_lengths += ~self._waiting  # a slot's wait is in no episode
         self._waiting = self._waiting_in(infos)
         per_env = _split_infos(infos, self.num_envs)
-        final = _split_infos(infos.get("final_info", {}), self.num_envs)
-        for index in np.flatnonzero(dones):
+        ended = np.flatnonzero(dones)
+        final = _split_infos(infos["final_info"], self.num_envs) if ended.size else []
+        for index in ended:
             per_env[index] = {**per_env[index], **final[index]}  # the last step's, as SB3 has it
             per_env[index]["terminal_observation"] = infos["final_obs"][index]
             per_env[index]["TimeLimit.truncated"] = bool(truncated[index] and not terminated[index])
@@ -351,6 +359,8 @@ def _split_infos(infos: dict[str, Any], num_envs: int) -> list[dict[str, Any]]:
     """Split a batched gymnasium info dict (with ``_key`` masks) into one dict per environment.
 
     A nested dict (``agents``: each agent's outcome, with several agents) is split likewise.
+    Columns of numbers give Python numbers (``tolist``: one call, not one per environment,
+    which counts where each member of a group is an environment).
     """
     per_env: list[dict[str, Any]] = [{} for _ in range(num_envs)]
     for key, values in infos.items():
@@ -358,7 +368,12 @@ def _split_infos(infos: dict[str, Any], num_envs: int) -> list[dict[str, Any]]:
             continue
         mask = infos.get(f"_{key}")
         split = _split_infos(values, num_envs) if isinstance(values, dict) else values
-        for index in range(num_envs):
-            if mask is None or mask[index]:
+        if isinstance(split, np.ndarray) and split.ndim == 1:
+            split = split.tolist()
+        if mask is None or mask.all():
+            for info, value in zip(per_env, split, strict=True):
+                info[key] = value
+        else:
+            for index in np.flatnonzero(mask).tolist():
                 per_env[index][key] = split[index]
     return per_env

@@ -4,7 +4,7 @@ A time limit that a client keeps (``RemoteEnv``'s and ``RemoteVectorEnv``'s
 ``max_episode_steps``, the HTTP gateway's) cuts the episode of every agent still in it: the
 joint episode is then truncated, and so is each of those agents in ``info["agents"]``, so that
 the per-agent flags agree with the joint ones (``docs/several-agents.md``, "When the episode
-ends").
+ends"); a group's members in play are truncated in its ``truncated`` array.
 """
 
 from __future__ import annotations

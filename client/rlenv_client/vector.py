@@ -30,6 +30,13 @@ leaving with its final transition), and ``infos["agents"]`` masks each agent's o
 the rows whose answer holds it (a joined agent's first reward, ``None``, is 0.0). The rows of
 the action column of agents not due are ignored by the servers.
 
+A group of agents (an :class:`~rlenv.agent_group.RLAgentGroup`, protocol 2.7) stays one array:
+its observation column is ``(num_envs, N, *obs)``, its action column ``(num_envs, N, *act)``
+(rows of members not in play are ignored), and ``infos["agents"][group]`` holds its outcome
+arrays stacked, ``(num_envs, N)`` each (``reward``, ``terminated``, ``truncated``,
+``active``, ``joined``). :class:`~rlenv_client.agent_vector.AgentVectorEnv` makes each member
+a sub-environment.
+
 ``max_episode_steps`` truncates each sub-environment's episodes, as ``TimeLimit`` does (with
 several agents, each agent still in the episode is truncated in ``info["agents"]``). A lost
 server that this vector started is restarted (``max_restarts`` each), and one of a pool is

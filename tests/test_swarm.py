@@ -170,3 +170,32 @@ def test_the_swarm_benchmark_prints_its_lines() -> None:
         r"swarm: group/nodes \d+\.\dx, floor/group \d+\.\dx at N=16", summary_line(rates)
     )
     assert min(rates.group + rates.nodes + rates.floor) > 0
+
+
+def test_a_snapshot_of_the_flock_restores_and_goes_on_bit_for_bit(serve: Serve) -> None:
+    first_server, other_server = serve(TARGET), serve(TARGET)
+    rng = np.random.default_rng(9)
+    actions = [rng.uniform(-1, 1, (MEMBERS, 2)).astype(np.float32) for _ in range(40)]
+    with (
+        Client(first_server.host, first_server.port, timeout=30, world_data=True) as first,
+        Client(other_server.host, other_server.port, timeout=30, world_data=True) as other,
+    ):
+        observation, _ = first.reset(seed=4)
+        left = joined = 0
+        for action in actions[:20]:  # members join and leave meanwhile
+            pushed = np.clip(steer(observation[GROUP]) + action, -1.0, 1.0)
+            observation, _, _, _, info = first.step({GROUP: pushed})
+            left += int(info["agents"][GROUP]["terminated"].sum())
+            joined += int(info["agents"][GROUP]["joined"].sum())
+        assert left > 0 and joined == 80 // JOIN_TICKS
+        restored, restored_info = other.restore(first.snapshot())
+        assert np.array_equal(
+            restored_info["world"]["bodies"], info["world"]["bodies"], equal_nan=True
+        )
+        for action in actions[20:]:
+            one = first.step({GROUP: action})
+            two = other.step({GROUP: action})
+            assert one[0][GROUP].tobytes() == two[0][GROUP].tobytes()
+            assert np.array_equal(
+                one[4]["world"]["bodies"], two[4]["world"]["bodies"], equal_nan=True
+            )

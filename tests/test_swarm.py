@@ -68,7 +68,7 @@ def test_the_group_and_the_nodes_move_the_discs_bit_for_bit_alike(serve: Serve) 
             joined += int(outcome["joined"].sum())
             assert not flock[GROUP][~outcome["active"]].any()  # rows not reported are zeros
     assert joined == MEMBERS - starting(MEMBERS)  # everyone who waited joined
-    assert left >= 8  # and members reached the nest and left the room
+    assert left >= MEMBERS // 2  # and members reached the nest and left the room (51 of 64)
 
 
 def _episode(client: Client, seed: int, act: Any) -> tuple[float, int, int]:

@@ -40,7 +40,8 @@ truncated for the members still in play after 600 ticks (10 s, 150 steps of 4 ti
 
 ``Flock.heuristic`` steers every member towards the nest, braking a little (:func:`scene.steer`,
 the scripted baseline); ``rlenv serve examples.swarm:SwarmEnvironment --policy
-Flock=heuristic`` lets it play. Random actions bring few members home.
+Flock=heuristic`` lets the server play the flock itself (clients watch, ``rlenv inspect``
+say). Random actions bring few members home.
 
 ## Trained
 ``benchmarks/train_swarm.py`` trains the flock with SB3's PPO over ``SB3VecEnv(2, TARGET,

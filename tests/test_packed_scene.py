@@ -158,6 +158,18 @@ def test_instances_simulate_as_the_original(tree: SceneTree) -> None:
     assert all(h.constraint.b is h.get_node("../Bob").body for h in hinges)
 
 
+def test_a_world_keeps_its_contact_monitor_through_a_packed_scene() -> None:
+    for monitor in (True, False):
+        world = PhysicsWorld(gravity=(0.0, 0.0), contact_monitor=monitor, name="World")
+        data = through_msgpack(PackedScene.pack(world).to_data())
+        built = PackedScene.from_data(data).instantiate()
+        assert isinstance(built, PhysicsWorld) and built.contact_monitor is monitor
+    root = data["root"]
+    refused = {**data, "root": {**root, "properties": {**root["properties"], "contact_monitor": 1}}}
+    with pytest.raises(PackedSceneError, match="contact_monitor"):
+        PackedScene.from_data(refused)
+
+
 def test_instances_share_nothing(tree: SceneTree) -> None:
     scene = PackedScene.pack(level())
     first, second = scene.instantiate(), scene.instantiate()

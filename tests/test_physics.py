@@ -13,6 +13,7 @@ import pymunk
 import pytest
 
 from rlenv.node import Node, ProcessMode
+from rlenv.scene2d._chipmunk import collision_handlers
 from rlenv.scene2d.physics import (
     CollisionShape,
     Joint,
@@ -348,6 +349,38 @@ def test_collision_started_on_both_shapes_and_bodies(
     resting = world.get_node("Ball")
     assert 0.45 < resting.position.y <= 0.6
     assert resting.velocity.y == pytest.approx(0.0, abs=0.05)
+
+
+def test_a_world_without_contact_monitor_simulates_alike_and_reports_no_contact(
+    tree: SceneTree,
+) -> None:
+    """contact_monitor=False: no handler of rlenv's, no signal, the same bodies bit for bit."""
+    worlds, logs = [], []
+    for monitor in (True, False):
+        world = PhysicsWorld(gravity=(0.0, -10.0), contact_monitor=monitor, name=f"W{monitor}")
+        tree.root.add_child(world)
+        log: list = []
+        drop_ball(tree, world, log, elasticity=0.5)
+        worlds.append(world)
+        logs.append(log)
+    tree.paused = False
+    states = []
+    for _ in range(120):
+        tree.physics_tick()
+        states.append(
+            [(*w.get_node("Ball").position, *w.get_node("Ball").velocity) for w in worlds]
+        )
+    assert all(monitored == unmonitored for monitored, unmonitored in states)
+    assert logs[0] and logs[1] == []  # the ball bounced on both floors; one world said so
+    assert worlds[0].contact_monitor and not worlds[1].contact_monitor
+    assert collision_handlers(worlds[1].space) == {}
+    worlds[1].restart()  # a new space, as unmonitored
+    assert collision_handlers(worlds[1].space) == {} and worlds[1].space.own == {}
+    seen: list = []
+    worlds[1].space.on_collision(begin=lambda arbiter, space, data: seen.append(data), data=7)
+    for _ in range(60):
+        tree.physics_tick()
+    assert 7 in seen and logs[1] == []  # the user's catch-all is pymunk's own there
 
 
 def test_signal_arguments_are_the_other_nodes(tree: SceneTree, world: PhysicsWorld) -> None:

@@ -39,6 +39,9 @@ ENVIRONMENTS = {
     "rlenv/Pixels-v0": _Registration("rlenv.examples.pixels:PixelsEnvironment", 1000),
     "rlenv/Plinko-v0": _Registration("rlenv.examples.plinko:PlinkoEnvironment", 100),
     "rlenv/Reacher-v0": _Registration("rlenv.examples.reacher:ReacherEnvironment", 200),
+    "rlenv/Swarm-v0": _Registration(
+        "rlenv.examples.swarm:SwarmEnvironment", None, several_agents=True
+    ),
     "rlenv/Tag-v0": _Registration("rlenv.examples.tag:TagEnvironment", 300, several_agents=True),
     "rlenv/Seeker-v0": _Registration("rlenv.examples.seeker:SeekerEnvironment", 250),
     "rlenv/SeekerPixels-v0": _Registration("rlenv.examples.seeker:SeekerPixelsEnvironment", 250),
@@ -49,8 +52,8 @@ teaches. ``rlenv/CartPole-v1`` is gymnasium's ``CartPole-v1`` (its spaces, rewar
 and 500-step limit) on rlenv's physics, for scripts written for gymnasium's. An id of several
 agents also gives its limit to :class:`~rlenv_client.env.RemoteEnv`, which truncates every agent
 still in the episode in ``info["agents"]`` as well (gymnasium's ``TimeLimit``, which ``make``
-still adds, cuts only the joint episode). ``rlenv/Hunt-v0`` needs none: the hunt truncates
-itself after 1,200 ticks."""
+still adds, cuts only the joint episode). ``rlenv/Hunt-v0`` and ``rlenv/Swarm-v0`` need none:
+the hunt truncates itself after 1,200 ticks, the swarm after 600."""
 
 
 def register_environments() -> None:

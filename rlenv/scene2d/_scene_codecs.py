@@ -284,10 +284,10 @@ class BodyCodec(Node2DCodec):
 
 
 class WorldCodec(Codec):
-    """PhysicsWorld: gravity, solver iterations, damping."""
+    """PhysicsWorld: gravity, solver iterations, damping, whether it monitors contacts."""
 
-    keys = Codec.keys | {"gravity", "iterations", "damping"}
-    handled = Codec.handled | {"space"}
+    keys = Codec.keys | {"gravity", "iterations", "damping", "contact_monitor"}
+    handled = Codec.handled | {"space", "_contact_monitor"}
 
     def pack(self, node: Node) -> dict[str, Any]:
         """See :meth:`Codec.pack`."""
@@ -298,6 +298,8 @@ class WorldCodec(Codec):
             properties["iterations"] = node.iterations
         if node.damping != 1.0:
             properties["damping"] = node.damping
+        if not node.contact_monitor:
+            properties["contact_monitor"] = False
         return properties
 
     def _checked(self, properties: Mapping[str, Any]) -> dict[str, Any]:
@@ -305,6 +307,9 @@ class WorldCodec(Codec):
         checked["gravity"] = vector(properties.get("gravity", (0.0, -9.81)), "gravity")
         checked["iterations"] = integer(properties.get("iterations", 10), "iterations", 1, 1000)
         checked["damping"] = number(properties.get("damping", 1.0), "damping", low=0.0)
+        checked["contact_monitor"] = _boolean(
+            properties.get("contact_monitor", True), "contact_monitor"
+        )
         return checked
 
     def construct(self, node: Node, name: str, properties: Mapping[str, Any]) -> None:
@@ -314,6 +319,7 @@ class WorldCodec(Codec):
             properties["gravity"],
             iterations=properties["iterations"],
             damping=properties["damping"],
+            contact_monitor=properties["contact_monitor"],
             name=name,
         )
 

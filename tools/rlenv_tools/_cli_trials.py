@@ -7,8 +7,11 @@ served and balanced by a controller.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
+from collections.abc import Callable
+from dataclasses import asdict
 
 from rlenv_tools._cli_arguments import Commands
 
@@ -85,6 +88,13 @@ def add_bench(commands: Commands) -> None:
         "is installed) and SyncVectorEnv on TARGET (MODULE:CLASS or a registered "
         "id; default rlenv/CartPole-v1), each against TARGET in process",
     )
+    bench.add_argument(
+        "--swarm",
+        action="store_true",
+        help="instead, a swarm (examples/swarm, 16, 64 and 256 members) served as one "
+        "RLAgentGroup, served as N RLAgent nodes, and its bare pymunk floor "
+        "(default --steps 200)",
+    )
     bench.add_argument("--envs", type=int, default=8, help="--train: environments per trainer")
     bench.add_argument(
         "--busy",
@@ -110,6 +120,8 @@ def _bench(args: argparse.Namespace) -> int:
     def progress(message: str) -> None:
         print(f"... {message}", file=sys.stderr, flush=True)
 
+    if args.swarm:
+        return _bench_swarm(args, progress)
     if args.train is not None:
         from rlenv_tools.training_speed import format_rows, measure_training, rows_to_json
 
@@ -135,6 +147,20 @@ def _bench(args: argparse.Namespace) -> int:
     if args.json:
         with open(args.json, "w") as out:
             out.write(as_json + "\n")
+    return 0
+
+
+def _bench_swarm(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
+    from rlenv_tools._swarm_bench import measure_swarm, summary_line, swarm_line
+
+    results = measure_swarm(rounds=args.rounds, steps=args.steps or 200, progress=progress)
+    for rates in results:
+        print(swarm_line(rates), flush=True)
+    print(summary_line(results[-1]))
+    if args.json:
+        with open(args.json, "w") as out:
+            json.dump([asdict(rates) for rates in results], out, indent=2)
+            out.write("\n")
     return 0
 
 

@@ -55,16 +55,22 @@ class _Space(pymunk.Space):
     replace rlenv's with it, and the signals would stop) runs after rlenv's instead, with the
     user's ``data``; ``pymunk.empty_callback`` removes it again. Everything else is pymunk's.
 
+    A space of a world that monitors no contacts (``begin`` and ``separate`` ``None``) has no
+    handler of rlenv's: the user's catch-all is pymunk's, as in any space.
+
     Args:
-        begin: rlenv's ``begin``.
-        separate: rlenv's ``separate``.
+        begin: rlenv's ``begin``, or ``None``.
+        separate: rlenv's ``separate``, or ``None``.
     """
 
-    def __init__(self, begin: _Callback, separate: _Callback) -> None:
+    def __init__(self, begin: _Callback | None, separate: _Callback | None) -> None:
         super().__init__()
-        self.own = {"begin": begin, "separate": separate}
+        self.own: dict[str, _Callback] = (
+            {} if begin is None or separate is None else {"begin": begin, "separate": separate}
+        )
         self.theirs: dict[str, tuple[_Callback, Any]] = {}  # the user's, and their data
-        super().on_collision(begin=self._begin, separate=self._separate)
+        if self.own:
+            super().on_collision(begin=self._begin, separate=self._separate)
 
     def on_collision(
         self,
@@ -77,7 +83,7 @@ class _Space(pymunk.Space):
         data: Any = None,
     ) -> None:
         """Set up a collision handler as pymunk does; one without types runs beside rlenv's."""
-        if collision_type_a is None and collision_type_b is None:
+        if collision_type_a is None and collision_type_b is None and self.own:
             for phase, callback in (("begin", begin), ("separate", separate)):
                 if callback is pymunk.empty_callback:
                     self.theirs.pop(phase, None)
@@ -91,6 +97,8 @@ class _Space(pymunk.Space):
     def rlenv_alone(self) -> bool:
         """Whether no collision handler but rlenv's is set up."""
         handlers = collision_handlers(self)
+        if not self.own:
+            return not handlers
         catch_all = handlers[_CATCH_ALL]
         return (
             len(handlers) == 1
@@ -136,6 +144,12 @@ class PhysicsWorld(SpaceOwner):
             squared: the default pulls down along y).
         iterations: solver iterations per step (pymunk's default is 10).
         damping: fraction of velocity kept per second (1 keeps all; 0.9 loses 10% a second).
+        contact_monitor: whether the world reports contacts to its nodes, as the collision
+            signals of its shapes and bodies (``collision_started``, ``body_entered`` ...).
+            Godot's ``RigidBody2D.contact_monitor``, for the whole world. ``False`` sets up no
+            collision handler of rlenv's in the space, so that contacts cost pymunk's step alone
+            (a swarm of many discs touching, whose nodes listen to no contact), and emits no
+            collision signal; the simulation is the same.
         name: the node name.
         process_mode: when the space steps; by default it follows its parent.
 
@@ -143,7 +157,7 @@ class PhysicsWorld(SpaceOwner):
         space: the ``pymunk.Space``; :meth:`restart` replaces it with a new one. Its collision
             handlers are the user's to set up (``space.on_collision``); one without collision
             types runs beside rlenv's own, which emits the collision signals, and does not
-            replace it.
+            replace it (without :attr:`contact_monitor` it is pymunk's own).
     """
 
     space: _Space
@@ -160,10 +174,12 @@ class PhysicsWorld(SpaceOwner):
         *,
         iterations: int = 10,
         damping: float = 1.0,
+        contact_monitor: bool = True,
         name: str | None = None,
         process_mode: ProcessMode = ProcessMode.INHERIT,
     ) -> None:
         super().__init__(name, process_mode=process_mode)
+        self._contact_monitor = bool(contact_monitor)
         self.space = self._new_space(
             vector(gravity, "gravity"),
             integer(iterations, "iterations", 1, 2**31 - 1),
@@ -175,8 +191,16 @@ class PhysicsWorld(SpaceOwner):
         ) = None  # see _members
         self._touched = False  # a contact began since the space was made or restarted
 
+    @property
+    def contact_monitor(self) -> bool:
+        """Whether the world reports contacts to its nodes (see the class; set when made)."""
+        return self._contact_monitor
+
     def _new_space(self, gravity: Vec, iterations: int, damping: float) -> _Space:
-        space = _Space(self._on_begin, self._on_separate)
+        if self._contact_monitor:
+            space = _Space(self._on_begin, self._on_separate)
+        else:
+            space = _Space(None, None)
         space.gravity = gravity
         space.iterations = iterations
         space.damping = damping
@@ -213,6 +237,7 @@ class PhysicsWorld(SpaceOwner):
         in_place = (
             FAST
             and unchanged
+            and self._contact_monitor  # else a contact leaves no trace in _touched
             and not self._touched
             and old.rlenv_alone()
             and old.sleep_time_threshold == math.inf
@@ -270,7 +295,8 @@ class PhysicsWorld(SpaceOwner):
         memo[id(space)] = self._space_like(space)
 
     def _duplicated(self, original: Node) -> None:
-        self.space.own = {"begin": self._on_begin, "separate": self._on_separate}  # not its
+        if self.space.own:  # not the original's
+            self.space.own = {"begin": self._on_begin, "separate": self._on_separate}
         self._shape_nodes = {}
         self._kept_members = None
         self._touched = False
@@ -353,10 +379,12 @@ class PhysicsWorld(SpaceOwner):
 
     def _on_begin(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
         self._touched = True
-        self._report(arbiter, "collision_started", "body_entered")
+        if self._shape_nodes:  # else no shape has a node to tell (bare pymunk shapes, a swarm's)
+            self._report(arbiter, "collision_started", "body_entered")
 
     def _on_separate(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
-        self._report(arbiter, "collision_ended", "body_exited")
+        if self._shape_nodes:
+            self._report(arbiter, "collision_ended", "body_exited")
 
     def _report(self, arbiter: pymunk.Arbiter, shape_signal: str, body_signal: str) -> None:
         first, second = arbiter.shapes

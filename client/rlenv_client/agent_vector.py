@@ -24,7 +24,7 @@ instance plays on (a runner caught while the other still runs) **waits** until t
 resets: each step returns its last observation again, reward 0, both flags false and
 ``info["waiting"]``; the step that resets its instance ends that wait as truncated, its final
 info holding ``waiting`` too, so that no episode statistics are counted for it. Its actions
-while waiting are ignored.
+while waiting are ignored (the slots and their waits: :mod:`rlenv_client._learner_slots`).
 
 Agents that come and go (the hello's ``possible_agents``, protocol 2.6) keep a fixed slot per
 possible learner: sub-environment ``i * k + j`` is always agent ``j`` of instance ``i``, in
@@ -54,7 +54,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any, SupportsIndex, cast
+from typing import Any, cast
 
 import numpy as np
 from gymnasium import spaces
@@ -63,8 +63,9 @@ from gymnasium.vector.utils import batch_space, create_empty_array
 
 from rlenv.agent import RLAgent
 from rlenv.serving.policy_driver import HEURISTIC
-from rlenv_client._agents_in_play import as_one, slot_mask, with_column
+from rlenv_client._agents_in_play import as_one, with_column
 from rlenv_client._group_slots import GroupSlots
+from rlenv_client._learner_slots import LearnerSlots
 from rlenv_client._rows import check_shape, repeat_rows, row, set_row
 from rlenv_client.vector import RemoteVectorEnv
 from rlenv_client.vector_servers import default_layout
@@ -296,6 +297,7 @@ class AgentVectorEnv(VectorEnv):
         )
         first = self.learners[0]
         self._group: GroupSlots | None = None
+        self._slots: LearnerSlots | None = None
         if first in hello.groups:  # its members are the sub-environments
             group = hello.groups[first]
             action_space, observation_space = group.action_space, group.observation_space
@@ -307,6 +309,14 @@ class AgentVectorEnv(VectorEnv):
                 self._agent_space(joint_observations, first),
             )
             self._per_instance = len(self.learners)
+            self._slots = LearnerSlots(
+                self.learners,
+                self.instances,
+                observation_space,
+                come_and_go=self._come_and_go,
+                share=self._of,
+                add_info=self._add_info,
+            )
         for name in self.learners[1:]:
             if name in hello.groups or self._group is not None:
                 grouped = first if self._group is not None else name
@@ -329,9 +339,7 @@ class AgentVectorEnv(VectorEnv):
         self._joint_action = create_empty_array(joint_actions, self.instances)
         self._joint_observation: Any = None
         self._others_done = {name: np.zeros(self.instances, np.bool_) for name in self.driven_here}
-        self._waiting = np.zeros(self.num_envs, np.bool_)
         self._steps = np.zeros(self.instances, np.int64)  # of each instance's episode
-        self._last = create_empty_array(observation_space, self.num_envs)  # per sub-env
         self._due: dict[str, np.ndarray] = {}  # by agent, over the instances (come and go)
 
     def _agent_space(self, joint: spaces.Space, name: str) -> spaces.Space:
@@ -362,7 +370,6 @@ class AgentVectorEnv(VectorEnv):
         self._joint_observation = joint
         for done in self._others_done.values():
             done[:] = False
-        self._waiting[:] = False
         self._steps[:] = 0
         out = self._spread(infos)
         if self._come_and_go:
@@ -370,15 +377,8 @@ class AgentVectorEnv(VectorEnv):
         if self._group is not None:
             observations, active = self._group.start(joint, infos)
             return observations, self._group_infos(out, active)
-        observations = self._learner_rows(joint)
-        self._last = observations
-        if self._come_and_go:
-            active = slot_mask(self._due, self.learners, self.num_envs)
-            self._waiting[:] = ~active  # not in play yet: its slot waits for it to join
-            out = with_column(out, "is_active", active, self.num_envs)
-            if self._waiting.any():
-                out = {**out, "waiting": self._waiting.copy(), "_waiting": self._waiting.copy()}
-        return observations, out
+        assert self._slots is not None
+        return self._slots.start(joint, self._due, out)
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step every instance with the learners' ``actions`` and the others' policies.
@@ -428,7 +428,6 @@ class AgentVectorEnv(VectorEnv):
     def _outcomes(
         self, joint_obs: Any, joint: tuple[np.ndarray, ...], infos: dict[str, Any]
     ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
-        k = len(self.learners)
         ended = joint[1] | joint[2]
         self._steps += 1
         limit = self.vector.max_episode_steps
@@ -447,61 +446,9 @@ class AgentVectorEnv(VectorEnv):
             )
             out = self._group_infos({**out, **finals}, mask)
             return observations, rewards, terminated, truncated, out
-        rewards = np.zeros(self.num_envs, np.float64)
-        terminated = np.zeros(self.num_envs, np.bool_)
-        truncated = np.zeros(self.num_envs, np.bool_)
-        observations = self._learner_rows(joint_obs)
-        instance_ended = np.repeat(ended, k)
-        active = None
-        if self._come_and_go:
-            active = slot_mask(self._due, self.learners, self.num_envs)
-            self._waiting[active & ~instance_ended] = False  # a waiting slot's agent joined
-        # a waiting slot whose agent joined in the very step its instance ended: its one row
-        waiting = self._waiting & ~self._joined_at_the_end(ended, infos)
-        for j, name in enumerate(self.learners):
-            reward, done_t, done_c = self._agent_outcome(name, joint, ended, infos)
-            span = slice(j, self.num_envs, k)
-            was_waiting = waiting[span].copy()
-            rewards[span] = np.where(was_waiting, 0.0, reward)
-            terminated[span] = done_t & ~was_waiting
-            truncated[span] = ((done_c | timed_out | (ended & ~done_t)) & ~was_waiting) | (
-                was_waiting & ended
-            )
-        finished = terminated | truncated
-        for index in np.flatnonzero(finished):
-            instance = index // k
-            name = self.learners[index % k]
-            if waiting[index]:
-                final_obs, final_info = row(self._last, index), {"waiting": True}
-            elif ended[instance]:
-                final_obs = self._of(infos["final_obs"][instance], name)
-                final_info = _final_info(infos["final_info"], instance, name)
-            else:
-                final_obs = row(observations, index)
-                final_info = {}
-            out = self._add_info(
-                out,
-                {
-                    "final_obs": final_obs,
-                    "final_info": {**final_info, "agent": name, "instance": int(instance)},
-                },
-                int(index),
-            )
-            if not self._waiting[index] and not ended[instance]:
-                self._waiting[index] = True  # it waits for its instance to reset
-        if active is None:
-            self._waiting[instance_ended] = False
-            carried = self._waiting & ~finished
-        else:  # a new episode's slots wait for their agents, if they do not start
-            self._waiting[instance_ended] = ~active[instance_ended]
-            carried = (self._waiting | ~active) & ~finished & ~instance_ended
-        for index in np.flatnonzero(carried):
-            set_row(observations, index, row(self._last, index))
-        if self._waiting.any():
-            out = {**out, "waiting": self._waiting.copy(), "_waiting": self._waiting.copy()}
-        out = with_column(out, "is_active", active, self.num_envs)  # Sample Factory's name
-        self._last = observations
-        return observations, rewards, terminated, truncated, out
+        assert self._slots is not None
+        columns = [self._agent_outcome(name, joint, ended, infos) for name in self.learners]
+        return self._slots.outcomes(joint_obs, columns, ended, timed_out, infos, self._due, out)
 
     def _group_infos(self, out: dict[str, Any], active: np.ndarray) -> dict[str, Any]:
         """A group's infos: ``is_active`` per member slot, and ``waiting`` where any waits."""
@@ -510,33 +457,6 @@ class AgentVectorEnv(VectorEnv):
         if waiting.any():
             out = {**out, "waiting": waiting, "_waiting": waiting.copy()}
         return with_column(out, "is_active", active, self.num_envs)
-
-    def _joined_at_the_end(self, ended: np.ndarray, infos: Mapping[str, Any]) -> np.ndarray:
-        """Per slot, whether its agent is in the last answer of its instance's ended episode.
-
-        Only agents that come and go can be there while their slot waits: they joined in that
-        very step (its answer holds the agents due and the leavers alone).
-        """
-        joined = np.zeros(self.num_envs, np.bool_)
-        if not (self._come_and_go and ended.any()):
-            return joined
-        outcomes = infos["final_info"].get("agents", {})
-        k = len(self.learners)
-        for j, name in enumerate(self.learners):
-            present = outcomes.get(f"_{name}")
-            if present is not None:
-                joined[j::k] = present & ended
-        return joined
-
-    def _learner_rows(self, joint: Any) -> Any:
-        """The learners' observations, instance by instance: row ``i * k + j``."""
-        k = len(self.learners)
-        out = create_empty_array(self.single_observation_space, self.num_envs)
-        for j, name in enumerate(self.learners):
-            column = self._of(joint, name)
-            for i in range(self.instances):
-                set_row(out, i * k + j, row(column, i))
-        return out
 
     def _spread(self, infos: Mapping[str, Any]) -> dict[str, Any]:
         """The instances' infos, each repeated for its slots (``agents`` and finals left)."""
@@ -686,17 +606,3 @@ def _columns(
         np.asarray(outcome["terminated"], np.bool_),
         np.asarray(outcome["truncated"], np.bool_),
     )
-
-
-def _final_info(
-    final_info: Mapping[str, Any], instance: SupportsIndex, name: str
-) -> dict[str, Any]:
-    """The last info of agent ``name`` in ``instance``: the instance's, less the other agents."""
-    info: dict[str, Any] = {}
-    for key, value in final_info.items():
-        if key.startswith("_") or key == "agents":
-            continue
-        mask = final_info.get(f"_{key}")
-        if mask is None or mask[instance]:
-            info[key] = value[instance]
-    return info

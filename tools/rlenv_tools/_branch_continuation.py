@@ -2,7 +2,8 @@
 
 A :class:`Continuation` is the actions given to :meth:`~rlenv_tools.timeline.Timeline.branch`,
 or the policy that chooses them for at most ``max_steps`` steps (a callable, or an ONNX file
-that :func:`load_policy` loads), checked, and taken on the timeline's processes.
+that :func:`load_policy` loads), checked, and taken on the timeline's processes;
+:func:`branch_recording` is the branch's recording, its shared steps as its timeline's.
 """
 
 from __future__ import annotations
@@ -12,10 +13,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, cast
 
-from rlenv_tools._timeline_processes import Checkpoints, Processes, Result
+from rlenv.protocol.errors import RemoteError
+from rlenv_client.replay import EpisodeFile
+from rlenv_tools._timeline_processes import Checkpoints, Events, Processes, Result
 from rlenv_tools.forking import StepRecord
 
-__all__ = ["Continuation", "load_policy"]
+__all__ = ["Continuation", "branch_recording", "load_policy"]
 
 Policy = Callable[[Any], Any]
 
@@ -70,16 +73,82 @@ class Continuation:
         result: Result,
         checkpoints: Checkpoints,
         records: list[StepRecord],
-    ) -> Result:
-        """Its steps after ``step`` on the processes' cursor; what the last one returned.
+        *,
+        ended: bool,
+    ) -> tuple[Result, dict[str, Any]]:
+        """Its steps after ``step`` on the processes' cursor, which leaves its timeline.
 
         ``result`` is what ``step`` returned; each step's record is appended to ``records``
-        and checkpoints are parked where due. It stops early where the episode ends.
+        and checkpoints are parked where due (half the processes' room, at most). It stops
+        early where the episode ends, and takes no step where it ``ended`` at ``step``.
+
+        Returns:
+            What the last step returned, and the cursor's snapshot after it.
+
+        Raises:
+            RemoteError: the environment refused an action (the cursor, which took part of
+                the branch, is ended).
+            RuntimeError: the environment failed.
         """
+        checkpoints.within(self.length, processes.room())
+        cursor = processes.stepping()
+        processes.position = None  # the cursor leaves its timeline
+        try:
+            if not ended:
+                result = self._take(processes, step, repeat_action, result, checkpoints, records)
+            return result, cursor.call("snapshot")
+        except ConnectionError as error:
+            raise RuntimeError(f"the timeline's environment failed: {error}") from None
+        except RemoteError:
+            processes.drop_cursor()  # it took part of the branch
+            raise
+
+    def _take(
+        self,
+        processes: Processes,
+        step: int,
+        repeat_action: int | None,
+        result: Result,
+        checkpoints: Checkpoints,
+        records: list[StepRecord],
+    ) -> Result:
+        """The steps themselves (the actions given, or the policy's); what the last returned."""
         if self.policy is None:
             steps = [[["action", action, repeat_action]] for action in self.actions or ()]
             return processes.take(step, steps, result, checkpoints, records, None)
         return processes.play(self.policy, self.length, repeat_action, result, checkpoints, records)
+
+
+def branch_recording(
+    episode: EpisodeFile,
+    steps: Events,
+    step: int,
+    snapshot: dict[str, Any],
+    records: list[StepRecord],
+    ends: tuple[bool, bool],
+    driven: frozenset[str],
+) -> EpisodeFile:
+    """The recording of a branch from ``step`` of the timeline of ``episode`` (its ``steps``).
+
+    ``snapshot`` is the branch's cursor's after its last step, ``records`` each of its steps'
+    (the shared ones first), ``ends`` its flags at ``step``, ``driven`` the agents its server
+    drove. The first ``step`` steps' events are the timeline's own, one for each of the
+    branch's: where the branch's server took a step whose driven agents decided during it part
+    by part, it logged each part as an action of its own, and the recording's events say it as
+    one step (``rlenv_client._recorded_parts``).
+    """
+    shared = [event for events in steps[:step] for event in events]
+    events = [*shared, *snapshot["events"][len(shared) :]]
+    digests = episode.observations[: step + 1] + [record[0] for record in records[step:]]
+    terminated, truncated = records[-1][2:4] if len(records) > step else ends
+    return EpisodeFile(
+        episode.target,
+        {**snapshot, "events": events},
+        digests,
+        terminated,
+        truncated,
+        driven=sorted(driven) or None,
+    )
 
 
 def load_policy(path: str | Path) -> Callable[[Any], Any]:

@@ -1,6 +1,7 @@
-"""A recording's steps as a timeline takes them, and their observations checked.
+"""A recording as a timeline takes it: its target, its steps, and their observations checked.
 
-:func:`recorded_steps` cuts a recording's events into steps (a step's changes, then its
+:func:`recorded_target` is the target it re-simulates on (the recorded one, checked, unless
+given); :func:`recorded_steps` cuts a recording's events into steps (a step's changes, then its
 action and the parts that went on after it); :func:`check_digest` compares an observation a
 timeline re-simulated with the digest the recording holds for its step (or records it, where
 the recording holds none yet).
@@ -12,9 +13,33 @@ from collections.abc import Sequence
 
 from rlenv_client._recorded_parts import recorded_steps as steps_of
 from rlenv_client.replay import EpisodeFile, older_settings
+from rlenv_client.trusted_targets import check_target
 from rlenv_tools._timeline_processes import Events
 
-__all__ = ["check_digest", "recorded_steps"]
+__all__ = ["check_digest", "recorded_steps", "recorded_target"]
+
+
+def recorded_target(episode: EpisodeFile, target: str | None, trust_target: bool) -> str:
+    """The target to re-simulate ``episode`` on: ``target``, else the recorded one.
+
+    The recorded one is checked (:func:`~rlenv_client.trusted_targets.check_target`) unless
+    ``trust_target``.
+
+    Raises:
+        ValueError: the recording names no target and none is given.
+        UntrustedTargetError: the recorded target is not installed (a ``ValueError``).
+    """
+    if target is not None:
+        return target
+    if episode.target is None:
+        raise ValueError("the recording names no target: pass target='MODULE:CLASS'")
+    if not trust_target:
+        check_target(
+            episode.target,
+            named_by="the episode" if episode.path is None else f"the recording {episode.path}",
+            folder=None if episode.path is None else episode.path.parent,
+        )
+    return episode.target
 
 
 def recorded_steps(episode: EpisodeFile) -> Events:

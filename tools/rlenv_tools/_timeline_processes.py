@@ -72,6 +72,10 @@ class Checkpoints:
         best = max(k for k in self._marks if k <= step)
         return best, self._marks[best]
 
+    def within(self, length: int, room: int) -> None:
+        """Space them so that ``length`` steps park at most half of ``room`` more processes."""
+        self.every = max(self.every, -(-length // (room // 2 or 1)))
+
     def upto(self, step: int) -> Checkpoints:
         """A copy holding the checkpoints at ``step`` and before (a branch's shared part)."""
         return Checkpoints(self.every, {k: m for k, m in self._marks.items() if k <= step})
@@ -139,6 +143,11 @@ class Processes:
         """The memory the processes hold (PSS), in bytes."""
         cursor = [] if self.cursor is None else [self.cursor]
         return sum(environment.memory() for environment in self.parked + cursor)
+
+    def pids(self) -> list[int]:
+        """The ids of the processes holding the environment and its checkpoints."""
+        cursor = [] if self.cursor is None else [self.cursor]
+        return [environment.pid for environment in self.parked + cursor]
 
     def stepping(self) -> ForkedEnvironment:
         """The cursor (there is one: a timeline brought it to a step)."""

@@ -19,7 +19,7 @@ from rlenv.protocol.errors import RemoteError
 from rlenv_tools._timeline_processes import Result
 from rlenv_tools.forking import ForkedEnvironment
 
-__all__ = ["Step", "Tick", "read_step", "read_ticks", "restored_ticks"]
+__all__ = ["Step", "Tick", "answer_tick", "read_step", "read_ticks", "restored_ticks", "tick_span"]
 
 _SKIPPED_AT_ONCE = 10_000  # ticks a tick view takes unread in one run
 
@@ -97,6 +97,36 @@ def read_step(
         copy.deepcopy(info),
         cursor.call("draw"),
         properties,
+    )
+
+
+def tick_span(step: int, frames: int, first: int, count: int | None) -> int:
+    """The last tick of a page from tick ``first``, ``count`` ticks at most (``None``: to the end).
+
+    ``frames``: the ticks of step ``step``.
+
+    Raises:
+        IndexError: ``first`` past its ticks.
+        ValueError: ``count`` below 1.
+    """
+    if not 1 <= first <= frames:
+        raise IndexError(f"step {step} has ticks 1 to {frames}, not {first}")
+    if count is not None and count < 1:
+        raise ValueError("count must be at least 1")
+    return frames if count is None else min(frames, first + count - 1)
+
+
+def answer_tick(state: Step, tick: int) -> Tick:
+    """A step's own answer (:meth:`~rlenv_tools.timeline.Timeline.at`) as its tick ``tick``."""
+    return Tick(
+        tick,
+        state.observation,
+        state.reward,
+        state.terminated,
+        state.truncated,
+        state.info,
+        state.properties,
+        state.draw,
     )
 
 

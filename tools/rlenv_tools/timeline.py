@@ -49,12 +49,10 @@ from pathlib import Path
 from typing import Any, cast
 
 from rlenv.protocol import Hello
-from rlenv.protocol.errors import RemoteError
 from rlenv_client._recorded_parts import as_recorded, driven_agents, split_step
 from rlenv_client.replay import EpisodeFile, digest
-from rlenv_client.trusted_targets import check_target
-from rlenv_tools._branch_continuation import Continuation, load_policy
-from rlenv_tools._recorded_steps import check_digest, recorded_steps
+from rlenv_tools._branch_continuation import Continuation, branch_recording, load_policy
+from rlenv_tools._recorded_steps import check_digest, recorded_steps, recorded_target
 from rlenv_tools._timeline_agents import AgentHistory, answer_agents
 from rlenv_tools._timeline_diff import TimelineDiff, timeline_diff
 from rlenv_tools._timeline_processes import (
@@ -65,7 +63,15 @@ from rlenv_tools._timeline_processes import (
     Result,
     measured_spacing,
 )
-from rlenv_tools._timeline_reads import Step, Tick, read_step, read_ticks, restored_ticks
+from rlenv_tools._timeline_reads import (
+    Step,
+    Tick,
+    answer_tick,
+    read_step,
+    read_ticks,
+    restored_ticks,
+    tick_span,
+)
 from rlenv_tools.forking import StepRecord
 
 __all__ = ["MAX_MEMORY", "MAX_PROCESSES", "Step", "Tick", "Timeline", "TimelineDiff", "load_policy"]
@@ -123,16 +129,7 @@ class Timeline:
         max_processes: int = MAX_PROCESSES,
         max_memory: int = MAX_MEMORY,
     ) -> None:
-        if target is None:
-            target = episode.target
-            if target is None:
-                raise ValueError("the recording names no target: pass target='MODULE:CLASS'")
-            if not trust_target:
-                check_target(
-                    target,
-                    named_by=_named_by(episode),
-                    folder=None if episode.path is None else episode.path.parent,
-                )
+        target = recorded_target(episode, target, trust_target)
         if checkpoint_every is not None and checkpoint_every < 1:
             raise ValueError("checkpoint_every must be at least 1")
         if max_processes < 2 * WORKING:
@@ -152,8 +149,8 @@ class Timeline:
             result: Result = (observation, 0.0, False, False, info)
             self._check(0, digest(observation))
             self._checkpoints.keep(0, Mark(processes.first, result))
-            spacing = checkpoint_every or measured_spacing(len(self), self._goto)
-            self._checkpoints.every = max(spacing, -(-len(self) // (processes.room() // 2 or 1)))
+            self._checkpoints.every = checkpoint_every or measured_spacing(len(self), self._goto)
+            self._checkpoints.within(len(self), processes.room())
             self._goto(len(self))
         except BaseException:
             processes.close()
@@ -245,9 +242,7 @@ class Timeline:
     @property
     def processes(self) -> list[int]:
         """The ids of the processes holding the environment and its checkpoints (the root's)."""
-        processes = self._processes
-        cursor = [] if processes.cursor is None else [processes.cursor]
-        return [environment.pid for environment in processes.parked + cursor]
+        return self._processes.pids()
 
     def at(self, step: int, *, nodes: Iterable[str] | None = None) -> Step:
         """The state after ``step``, re-simulated.
@@ -309,15 +304,9 @@ class Timeline:
             ValueError: ``count`` below 1.
             RuntimeError: as :meth:`at`.
         """
-        if not 1 <= step <= len(self):
-            raise IndexError(f"step {step} has no action (steps 1 to {len(self)} have)")
-        changes, actions = (list(map(list, events)) for events in split_step(self._steps[step - 1]))
         frames = self.frames(step)
-        if not 1 <= first <= frames:
-            raise IndexError(f"step {step} has ticks 1 to {frames}, not {first}")
-        if count is not None and count < 1:
-            raise ValueError("count must be at least 1")
-        last = frames if count is None else min(frames, first + count - 1)
+        last = tick_span(step, frames, first, count)
+        changes, actions = (list(map(list, events)) for events in split_step(self._steps[step - 1]))
         if self.hello.possible_agents is None and not self.hello.groups:
             self._goto(step - 1)
             return read_ticks(self._processes.stepping(), changes, actions[0][1], first, last)
@@ -333,19 +322,7 @@ class Timeline:
                 min(last, frames - 1),
             )
         if last == frames:  # the step's own answer: its observation, rewards and flags
-            state = self.at(step)
-            ticks.append(
-                Tick(
-                    frames,
-                    state.observation,
-                    state.reward,
-                    state.terminated,
-                    state.truncated,
-                    state.info,
-                    state.properties,
-                    state.draw,
-                )
-            )
+            ticks.append(answer_tick(self.at(step), frames))
         return ticks
 
     def branch(
@@ -387,32 +364,16 @@ class Timeline:
         if repeat_action is None and self._steps:
             repeat_action = split_step(self._steps[min(step, len(self) - 1)])[1][0][2]
         checkpoints = self._checkpoints.upto(step)
-        checkpoints.every = max(
-            checkpoints.every,  # half the room left, at most
-            -(-continuation.length // (self._processes.room() // 2 or 1)),
-        )
         records = self._records[:step]
-        terminated, truncated = result[2], result[3]
+        ends = (result[2], result[3])
         if step == len(self) and self.ended:
-            terminated, truncated = bool(self.episode.terminated), bool(self.episode.truncated)
+            ends = (bool(self.episode.terminated), bool(self.episode.truncated))
         processes = self._processes
-        cursor = processes.stepping()
-        processes.position = None  # the cursor leaves this timeline
-        try:
-            if not (terminated or truncated):
-                result = continuation.take(
-                    processes, step, repeat_action, result, checkpoints, records
-                )
-            snapshot = self._shared_log(step, cursor.call("snapshot"))
-        except ConnectionError as error:
-            raise RuntimeError(f"the timeline's environment failed: {error}") from None
-        except RemoteError:
-            processes.drop_cursor()  # it took part of the branch
-            raise
-        digests = self.episode.observations[: step + 1] + [record[0] for record in records[step:]]
-        ends = records[-1][2:4] if len(records) > step else (terminated, truncated)
-        episode = EpisodeFile(
-            self.episode.target, snapshot, digests, *ends, driven=sorted(processes.driven) or None
+        result, snapshot = continuation.take(
+            processes, step, repeat_action, result, checkpoints, records, ended=any(ends)
+        )
+        episode = branch_recording(
+            self.episode, self._steps, step, snapshot, records, ends, processes.driven
         )
         branch = object.__new__(Timeline)
         branch._setup(episode, processes, False, checkpoints, records)
@@ -458,16 +419,6 @@ class Timeline:
             self, step, self._steps, self._checkpoints, self._records, self._check
         )
 
-    def _shared_log(self, step: int, snapshot: dict[str, Any]) -> dict[str, Any]:
-        """A branch's ``snapshot`` with this timeline's own events for the first ``step`` steps.
-
-        The branch's server took a step whose driven agents decided during it part by part,
-        and logged each part as an action of its own; the recording's events say it as one
-        step (``rlenv_client._recorded_parts``), one event for each of the branch's.
-        """
-        shared = [event for events in self._steps[:step] for event in events]
-        return {**snapshot, "events": [*shared, *snapshot["events"][len(shared) :]]}
-
     def _check(self, step: int, observed: str) -> None:
         check_digest(self.episode, self.hello.agents, step, observed)
 
@@ -475,7 +426,3 @@ class Timeline:
         """Every step's observation, re-simulated from the reset in one run."""
         _, mark = self._checkpoints.nearest(0)
         return self._processes.every_observation(mark, self._steps)
-
-
-def _named_by(episode: EpisodeFile) -> str:
-    return "the episode" if episode.path is None else f"the recording {episode.path}"

@@ -256,6 +256,11 @@ class _Handlers:
 def openenv_endpoints(gateway: Gateway) -> list[Endpoint]:
     """OpenEnv's seven routes under ``/openenv``, on ``gateway``'s TARGET."""
     handlers = _Handlers(gateway)
+    return [*_session_endpoints(handlers), *_about_endpoints(handlers)]
+
+
+def _session_endpoints(handlers: _Handlers) -> list[Endpoint]:
+    """The routes that drive sessions: the WebSocket's own; step, reset, state on the shared one."""
     step_problems = (
         *_PROBLEMS,
         ErrorCode.BAD_REQUEST,
@@ -321,6 +326,12 @@ def openenv_endpoints(gateway: Gateway) -> list[Endpoint]:
             {200: Answer("OpenEnv's State", _STATE)},
             problems=(*_PROBLEMS, "session_limit"),
         ),
+    ]
+
+
+def _about_endpoints(handlers: _Handlers) -> list[Endpoint]:
+    """The routes that describe TARGET: health, schema, metadata."""
+    return [
         Endpoint(
             "GET",
             f"{_PREFIX}/health",

@@ -20,10 +20,15 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/rlenv demo
 
+# The suite runs in up to 4 worker processes (pytest-xdist): every test binds port 0 and keeps
+# its files in its own tmp_path, so they never meet; PYTEST_WORKERS=0 runs it in one process.
+PYTEST_WORKERS ?= auto
+PARALLEL := -n $(PYTEST_WORKERS) --maxprocesses 4
+
 test: $(STAMP)
 	$(BIN)/ruff check rlenv client tools examples tests benchmarks docs
 	$(BIN)/ruff format --check rlenv client tools examples tests benchmarks docs
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest $(PARALLEL)
 
 # Optional: servers on Ray (the ray extra) and their tests: one node, then a fake cluster.
 test-ray: $(STAMP)
@@ -221,7 +226,7 @@ $(LOWEST_VENV)/.installed: pyproject.toml .ci/lowest.txt
 	touch $@
 
 test-lowest: $(LOWEST_VENV)/.installed
-	$(LOWEST_VENV)/bin/python -m pytest
+	$(LOWEST_VENV)/bin/python -m pytest $(PARALLEL)
 
 # The linter, then the formatter (ruff format, pinned in the test extra: its output is checked).
 lint: $(STAMP)

@@ -94,29 +94,21 @@ class Continuation:
         cursor = processes.stepping()
         processes.position = None  # the cursor leaves its timeline
         try:
-            if not ended:
-                result = self._take(processes, step, repeat_action, result, checkpoints, records)
+            if ended:
+                pass  # no step where the episode ended at ``step``
+            elif self.policy is None:
+                steps = [[["action", action, repeat_action]] for action in self.actions or ()]
+                result = processes.take(step, steps, result, checkpoints, records, None)
+            else:
+                result = processes.play(
+                    self.policy, self.length, repeat_action, result, checkpoints, records
+                )
             return result, cursor.call("snapshot")
         except ConnectionError as error:
             raise RuntimeError(f"the timeline's environment failed: {error}") from None
         except RemoteError:
             processes.drop_cursor()  # it took part of the branch
             raise
-
-    def _take(
-        self,
-        processes: Processes,
-        step: int,
-        repeat_action: int | None,
-        result: Result,
-        checkpoints: Checkpoints,
-        records: list[StepRecord],
-    ) -> Result:
-        """The steps themselves (the actions given, or the policy's); what the last returned."""
-        if self.policy is None:
-            steps = [[["action", action, repeat_action]] for action in self.actions or ()]
-            return processes.take(step, steps, result, checkpoints, records, None)
-        return processes.play(self.policy, self.length, repeat_action, result, checkpoints, records)
 
 
 def branch_recording(

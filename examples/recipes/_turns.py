@@ -13,11 +13,22 @@ import statistics
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Protocol, TypeVar
 
 Stepper = Callable[[], int]
 """Makes some steps and says how many (env-steps: a vector's step of N envs is N)."""
 Measure = Callable[[], float]
 """One round's steps/s of one side."""
+
+
+class Closeable(Protocol):
+    """An environment (or a vector of them) that is closed after its measure."""
+
+    def close(self) -> None:
+        """Free what it holds (servers, workers)."""
+
+
+Env = TypeVar("Env", bound=Closeable)
 
 
 def arguments(description: str | None, smoke_rounds: int = 2) -> argparse.Namespace:
@@ -86,3 +97,17 @@ def timed(stepper: Stepper, seconds: float) -> Measure:
     """A measure that calls ``stepper`` once to warm up, then gives its :func:`rate`."""
     stepper()
     return lambda: rate(stepper, seconds)
+
+
+def print_contest(
+    name: str, ours: Env, theirs: Env, measure: Callable[[Env], Measure], rounds: int
+) -> None:
+    """Print the :func:`contest` of ``measure(ours)`` against ``measure(theirs)``; close both.
+
+    ``measure`` readies a side (seeds it, warms it up) and gives its round's measure.
+    """
+    try:
+        print(contest(name, measure(ours), measure(theirs), rounds))
+    finally:
+        ours.close()
+        theirs.close()

@@ -15,7 +15,7 @@ gymnasium's NumPy ``CartPoleVectorEnv``, and ``vectorization_mode="sync"`` a
 from __future__ import annotations
 
 import gymnasium as gym
-from _turns import Measure, arguments, contest
+from _turns import Measure, arguments, print_contest
 from gymnasium.utils.performance import benchmark_step, benchmark_vector_step
 
 import rlenv_client  # noqa: F401  (registers the rlenv/ ids with gymnasium)
@@ -33,35 +33,28 @@ def benchmark(env: gym.Env | gym.vector.VectorEnv, seconds: float) -> Measure:
 def main() -> None:
     """One figure a benchmark."""
     args = arguments(__doc__)
-    ours, theirs = gym.make("rlenv/CartPole-v1"), gym.make("CartPole-v1")
-    try:
-        print(
-            contest(
-                "gymnasium benchmark_step",
-                benchmark(ours, args.seconds),
-                benchmark(theirs, args.seconds),
-                args.rounds,
-            )
-        )
-    finally:
-        ours.close()
-        theirs.close()
+
+    def measure(env: gym.Env | gym.vector.VectorEnv) -> Measure:
+        return benchmark(env, args.seconds)
+
+    print_contest(
+        "gymnasium benchmark_step",
+        gym.make("rlenv/CartPole-v1"),
+        gym.make("CartPole-v1"),
+        measure,
+        args.rounds,
+    )
     for mode in (None, "sync"):
         ours = gym.make_vec("rlenv/CartPole-v1", num_envs=VECTOR)
         theirs = gym.make_vec("CartPole-v1", num_envs=VECTOR, vectorization_mode=mode)
-        try:
-            print(
-                contest(
-                    f"gymnasium benchmark_vector_step, make_vec({VECTOR}) against CartPole-v1's "
-                    f"{type(theirs.unwrapped).__name__}",
-                    benchmark(ours, args.seconds),
-                    benchmark(theirs, args.seconds),
-                    args.rounds,
-                )
-            )
-        finally:
-            ours.close()
-            theirs.close()
+        print_contest(
+            f"gymnasium benchmark_vector_step, make_vec({VECTOR}) against CartPole-v1's "
+            f"{type(theirs.unwrapped).__name__}",
+            ours,
+            theirs,
+            measure,
+            args.rounds,
+        )
 
 
 if __name__ == "__main__":

@@ -23,7 +23,7 @@ import gymnasium as gym
 import numpy as np
 import pufferlib.emulation
 import pufferlib.vector
-from _turns import Stepper, arguments, contest, timed
+from _turns import Measure, Stepper, arguments, print_contest, timed
 
 import rlenv_client  # noqa: F401  (registers the rlenv/ ids with gymnasium)
 from rlenv_client.pettingzoo import RemoteParallelEnv
@@ -142,23 +142,15 @@ def main() -> None:
         check_against_gymnasium(backend)
         check_masks(backend)
     print("PufferLib: emulation, Serial and Multiprocessing, Pair's masks: ok")
+
+    def measure(envs: Any) -> Measure:
+        envs.reset(seed=0)
+        return timed(random_steps(envs), args.seconds)
+
     for backend in BACKENDS:
         ours = vector(backend, functools.partial(cartpole, "rlenv/CartPole-v1"))
         theirs = vector(backend, functools.partial(cartpole, "CartPole-v1"))
-        try:
-            ours.reset(seed=0)
-            theirs.reset(seed=0)
-            print(
-                contest(
-                    f"PufferLib {backend}({ENVS})",
-                    timed(random_steps(ours), args.seconds),
-                    timed(random_steps(theirs), args.seconds),
-                    args.rounds,
-                )
-            )
-        finally:
-            ours.close()
-            theirs.close()
+        print_contest(f"PufferLib {backend}({ENVS})", ours, theirs, measure, args.rounds)
 
 
 if __name__ == "__main__":

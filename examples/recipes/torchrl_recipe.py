@@ -14,10 +14,11 @@ masked out until the joint episode ends. Then the figure: ``rollout`` steps/s on
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 
 import torch
-from _turns import Stepper, arguments, contest, timed
+from _turns import Measure, Stepper, arguments, print_contest, timed
 from torchrl.envs import EnvBase, GymEnv, ParallelEnv, check_env_specs
 from torchrl.envs.libs.pettingzoo import PettingZooWrapper
 
@@ -95,6 +96,12 @@ def check_masks() -> None:
         env.close()
 
 
+def seeded_rollouts(env: EnvBase, steps: int, seconds: float) -> Measure:
+    """One round: ``env``'s rollouts of ``steps`` steps, seeded 0 (warmed up: :func:`timed`)."""
+    env.set_seed(0)
+    return timed(rollouts(env, steps), seconds)
+
+
 def main() -> None:
     """The checks, then the figure."""
     args = arguments(__doc__)
@@ -106,20 +113,8 @@ def main() -> None:
         ("ParallelEnv(2) rollout", parallel, 50),
     ):
         ours, theirs = wrap(rlenv_cartpole), wrap(native_cartpole)
-        try:
-            ours.set_seed(0)
-            theirs.set_seed(0)
-            print(
-                contest(
-                    f"TorchRL {name}",
-                    timed(rollouts(ours, steps), args.seconds),
-                    timed(rollouts(theirs, steps), args.seconds),
-                    args.rounds,
-                )
-            )
-        finally:
-            ours.close()
-            theirs.close()
+        measure = functools.partial(seeded_rollouts, steps=steps, seconds=args.seconds)
+        print_contest(f"TorchRL {name}", ours, theirs, measure, args.rounds)
 
 
 if __name__ == "__main__":

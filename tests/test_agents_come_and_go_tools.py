@@ -8,11 +8,8 @@ multi-agent tag, which must stay as it was. Real servers and subprocesses throug
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -20,44 +17,18 @@ import numpy as np
 import pytest
 from conftest import Serve
 from inspector_http import fetch
+from tool_runs import Recorded, Seen, record_one, report_lines, rlenv
 
 from examples import hunt, tag
 from rlenv.protocol import Response
 from rlenv_client.env import RemoteEnv
-from rlenv_client.replay import EpisodeFile, RecordEpisodes, digest
+from rlenv_client.replay import EpisodeFile, digest
 from rlenv_tools.compliance._determinism import _difference, _Record
 from rlenv_tools.inspector import InspectorServer, Timelines, Watcher
 from rlenv_tools.timeline import Timeline
 
-ROOT = Path(__file__).parent.parent
 COME_AND_GO = "tests.come_and_go_envs:ComeAndGoEnvironment"
 PACED = "tests.come_and_go_envs:PacedEnvironment"
-
-
-def rlenv(*args: str, timeout: float = 400) -> subprocess.CompletedProcess[str]:
-    """``rlenv ARGS`` in a subprocess, from the checkout's root (its tests package importable)."""
-    return subprocess.run(
-        [sys.executable, "-m", "rlenv", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        stdin=subprocess.DEVNULL,
-        cwd=ROOT,
-        env={
-            **os.environ,
-            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
-        },
-    )
-
-
-def report_lines(output: str) -> dict[str, str]:
-    """``rlenv check``'s report: each check's name to its status (PASS, FAIL, SKIP)."""
-    lines = {}
-    for line in output.splitlines():
-        status, _, rest = line.partition("  ")
-        if status in ("PASS", "FAIL", "SKIP"):
-            lines[rest.strip().split("  ")[0]] = status
-    return lines
 
 
 # --- rlenv check ---------------------------------------------------------------------------------
@@ -124,15 +95,6 @@ def test_determinism_compares_answers_agent_by_agent() -> None:
 # --- recordings and replay -----------------------------------------------------------------------
 
 
-@dataclass
-class Seen:
-    """What the recording client saw: each answer's observation and ``info["agents"]``."""
-
-    observations: list[dict[str, Any]] = field(default_factory=list)
-    agents: list[dict[str, Any]] = field(default_factory=list)
-    actions: list[dict[str, Any]] = field(default_factory=list)
-
-
 def hunt_policy(observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """The hunter runs at the nearest prey (its heuristic); the prey stand still: catches."""
     return {
@@ -145,43 +107,6 @@ def hunt_policy(observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
 
 def walk(observation: dict[str, np.ndarray]) -> dict[str, int]:
     return {name: 2 for name in observation}
-
-
-def answered(observation: Any, info: dict[str, Any]) -> Any:
-    """The answer's agents of RemoteEnv's observation (its slots of the others are zeros; the
-    agents the server drives are not in it)."""
-    if "due" not in info:
-        return observation
-    return {name: observation[name] for name in info["agents"] if name in observation}
-
-
-def record_one(target: str, directory: Path, policy: Any, steps: int | None, seed: int) -> Seen:
-    """Record one episode of ``target`` played by ``policy``, at most ``steps`` steps if given
-    (a client's time limit)."""
-    env = RecordEpisodes(
-        RemoteEnv(target, max_restarts=0, share_server=False, max_episode_steps=steps), directory
-    )
-    seen = Seen()
-    try:
-        observation, info = env.reset(seed=seed)
-        seen.observations.append(answered(observation, info))
-        seen.agents.append(info.get("agents", {}))
-        while True:
-            action = policy(answered(observation, info))
-            observation, _, terminated, truncated, info = env.step(action)
-            seen.actions.append(action)
-            seen.observations.append(answered(observation, info))
-            seen.agents.append(info.get("agents", {}))
-            if terminated or truncated:
-                return seen
-    finally:
-        env.close()
-
-
-@dataclass
-class Recorded:
-    path: Path
-    seen: Seen
 
 
 @pytest.fixture(scope="module")
@@ -258,14 +183,7 @@ def test_replay_finds_a_reward_that_differs(came_and_went: Recorded, tmp_path: P
     outcomes = list(episode.outcomes)
     outcomes[2] = digest("another reward")
     tampered = tmp_path / "tampered.rlenv"
-    EpisodeFile(
-        episode.target,
-        episode.snapshot,
-        episode.observations,
-        episode.terminated,
-        episode.truncated,
-        outcomes=outcomes,
-    ).save(tampered)
+    replace(episode, outcomes=outcomes).save(tampered)
     result = rlenv("replay", str(tampered), "--trust-target")
     assert result.returncode != 0
     assert "step 3: the reward or flags differ from the recording" in result.stdout + result.stderr
@@ -580,34 +498,12 @@ def hunter_alone(observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     return {hunt.HUNTER: hunt.Hunter.heuristic(None, observation[hunt.HUNTER])}  # type: ignore[arg-type]
 
 
-def record_driven(target: str, directory: Path, policy: Any, server_args: list[str]) -> Seen:
-    """Record one episode of ``target`` on a server that drives agents (``server_args``)."""
-    env = RecordEpisodes(
-        RemoteEnv(target, max_restarts=0, share_server=False, server_args=server_args), directory
-    )
-    seen = Seen()
-    try:
-        observation, info = env.reset(seed=3)
-        seen.observations.append(answered(observation, info))
-        seen.agents.append(info.get("agents", {}))
-        while True:
-            action = policy(answered(observation, info))
-            observation, _, terminated, truncated, info = env.step(action)
-            seen.actions.append(action)
-            seen.observations.append(answered(observation, info))
-            seen.agents.append(info.get("agents", {}))
-            if terminated or truncated:
-                return seen
-    finally:
-        env.close()
-
-
 @pytest.fixture(scope="module")
 def driven_steady(tmp_path_factory: pytest.TempPathFactory) -> Recorded:
     """DrivenEnvironment with its Steady agents driven: they decide inside the leader's steps,
     one of them joining and one leaving inside a step."""
     directory = tmp_path_factory.mktemp("driven")
-    seen = record_driven(DRIVEN, directory, lambda o: {"Leader": 2}, STEADY)
+    seen = record_one(DRIVEN, directory, lambda o: {"Leader": 2}, None, 3, server_args=STEADY)
     return Recorded(directory / "episode-0001.rlenv", seen)
 
 
@@ -615,7 +511,7 @@ def driven_steady(tmp_path_factory: pytest.TempPathFactory) -> Recorded:
 def driven_prey(tmp_path_factory: pytest.TempPathFactory) -> Recorded:
     """A whole hunt whose prey (every 8 ticks) the server drives beside the hunter (every 4)."""
     directory = tmp_path_factory.mktemp("driven_prey")
-    seen = record_driven(hunt.TARGET, directory, hunter_alone, PREY_DRIVEN)
+    seen = record_one(hunt.TARGET, directory, hunter_alone, None, 3, server_args=PREY_DRIVEN)
     return Recorded(directory / "episode-0001.rlenv", seen)
 
 
@@ -656,15 +552,9 @@ def test_a_replay_of_driven_agents_finds_an_action_that_differs(
     for event in events:
         if len(event) == 4:  # the prey that decided during steps stand still instead
             event[1] = {name: np.zeros(2, np.float32) for name in event[1]}
-    EpisodeFile(
-        episode.target,
-        {**episode.snapshot, "events": events},
-        episode.observations,
-        episode.terminated,
-        episode.truncated,
-        outcomes=episode.outcomes,
-        driven=episode.driven,
-    ).save(tmp_path / "tampered.rlenv")
+    replace(episode, snapshot={**episode.snapshot, "events": events}).save(
+        tmp_path / "tampered.rlenv"
+    )
     result = rlenv("replay", str(tmp_path / "tampered.rlenv"), "--trust-target")
     assert result.returncode == 1
     assert "first divergence at step" in result.stdout

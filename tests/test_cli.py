@@ -11,24 +11,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import Serve
+from tool_runs import ROOT, rlenv
 
 from rlenv_client import Client
 
-ROOT = Path(__file__).parent.parent
-
-
-def run(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "rlenv", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        stdin=subprocess.DEVNULL,
-    )
-
 
 def test_demo_balances_the_pole_and_prints_each_return() -> None:
-    result = run("demo", "--episodes", "2", "--max-seconds", "5")
+    result = rlenv("demo", "--episodes", "2", "--max-seconds", "5")
     assert result.returncode == 0, result.stderr
     returns = re.findall(r"episode (\d): return (\d+)", result.stdout)
     assert [episode for episode, _ in returns] == ["1", "2"]
@@ -36,10 +25,10 @@ def test_demo_balances_the_pole_and_prints_each_return() -> None:
 
 
 def test_serve_refuses_a_bad_target_clearly() -> None:
-    result = run("serve", "examples.cartpole:Nothing")
+    result = rlenv("serve", "examples.cartpole:Nothing")
     assert result.returncode != 0
     assert "module 'examples.cartpole' has no attribute 'Nothing'" in result.stderr
-    result = run("serve", "examples.cartpole")
+    result = rlenv("serve", "examples.cartpole")
     assert "expected MODULE:CLASS" in result.stderr
 
 
@@ -83,7 +72,7 @@ def test_the_readme_example_environment_serves(serve: Serve, tmp_path: Path) -> 
 
 
 def test_check_reports_a_good_environment() -> None:
-    result = run("check", "examples.cartpole:CartPoleEnvironment", "--compliance")
+    result = rlenv("check", "examples.cartpole:CartPoleEnvironment", "--compliance")
     assert result.returncode == 0, result.stdout + result.stderr
     lines = result.stdout.splitlines()
     assert lines[0].startswith("PASS  connect")
@@ -97,17 +86,17 @@ def test_check_reports_a_good_environment() -> None:
 
 def test_check_fails_a_broken_environment(serve: Serve) -> None:
     server = serve("examples.faulty:WrongShapeEnvironment")
-    result = run("check", server.address)
+    result = rlenv("check", server.address)
     assert result.returncode == 1
     assert re.search(r"^FAIL  gymnasium check_env .*observation", result.stdout, re.M)
     assert re.search(r"^\d+ passed, [1-9]\d* failed$", result.stdout.splitlines()[-1])
-    result = run("check", "127.0.0.1:1")
+    result = rlenv("check", "127.0.0.1:1")
     assert result.returncode == 1 and "FAIL  connect" in result.stdout
 
 
 def test_bench_prints_every_figure_with_its_baseline(tmp_path: Path) -> None:
     out = tmp_path / "figures.json"
-    result = run(
+    result = rlenv(
         "bench", "--rounds", "1", "--steps", "40", "--quick", "--json", str(out), timeout=300
     )
     assert result.returncode == 0, result.stderr

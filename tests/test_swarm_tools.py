@@ -6,11 +6,8 @@ and subprocesses throughout.
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -18,42 +15,16 @@ import numpy as np
 import pytest
 from conftest import Serve
 from inspector_http import fetch
+from tool_runs import Recorded, Seen, report_lines, rlenv
 
 from rlenv_client.env import RemoteEnv
 from rlenv_client.replay import EpisodeFile, RecordEpisodes, digest
 from rlenv_tools.inspector import InspectorServer, Timelines, Watcher
 from rlenv_tools.timeline import Timeline
 
-ROOT = Path(__file__).parent.parent
 SWARM = "tests.swarm_envs:SwarmEnvironment"
 MIXED = "tests.swarm_envs:MixedEnvironment"
 MEMBERS = 8
-
-
-def rlenv(*args: str, timeout: float = 400) -> subprocess.CompletedProcess[str]:
-    """``rlenv ARGS`` in a subprocess, from the checkout's root (its tests package importable)."""
-    return subprocess.run(
-        [sys.executable, "-m", "rlenv", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        stdin=subprocess.DEVNULL,
-        cwd=ROOT,
-        env={
-            **os.environ,
-            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
-        },
-    )
-
-
-def report_lines(output: str) -> dict[str, str]:
-    """``rlenv check``'s report: each check's name to its status (PASS, FAIL, SKIP)."""
-    lines = {}
-    for line in output.splitlines():
-        status, _, rest = line.partition("  ")
-        if status in ("PASS", "FAIL", "SKIP"):
-            lines[rest.strip().split("  ")[0]] = status
-    return lines
 
 
 # --- rlenv check ---------------------------------------------------------------------------------
@@ -82,21 +53,6 @@ def test_compliance_passes_on_a_group(serve: Serve, target: str) -> None:
 
 
 # --- recordings and replay -----------------------------------------------------------------------
-
-
-@dataclass
-class Seen:
-    """What the recording client saw: each answer's observation and ``info["agents"]``."""
-
-    observations: list[dict[str, Any]] = field(default_factory=list)
-    agents: list[dict[str, Any]] = field(default_factory=list)
-    actions: list[dict[str, Any]] = field(default_factory=list)
-
-
-@dataclass
-class Recorded:
-    path: Path
-    seen: Seen
 
 
 def record(target: str, directory: Path, seed: int) -> Recorded:
@@ -174,14 +130,9 @@ def test_a_replay_finds_a_member_action_that_differs(mixed: Recorded, tmp_path: 
     pushed = np.array(actions[4][1]["Discs"], np.float32)
     pushed[2] = -pushed[2]  # one member of eight pushes the other way at step 5
     actions[4][1] = {**actions[4][1], "Discs": pushed}
-    EpisodeFile(
-        episode.target,
-        {**episode.snapshot, "events": events},
-        episode.observations,
-        episode.terminated,
-        episode.truncated,
-        outcomes=episode.outcomes,
-    ).save(tmp_path / "tampered.rlenv")
+    replace(episode, snapshot={**episode.snapshot, "events": events}).save(
+        tmp_path / "tampered.rlenv"
+    )
     result = rlenv("replay", str(tmp_path / "tampered.rlenv"), "--trust-target")
     assert result.returncode == 1
     assert "first divergence at step 5" in result.stdout

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import warnings
 from typing import Any
 
 import gymnasium
 import numpy as np
 import pytest
+from api_warnings import warnings_of
 from conftest import Serve
 from gymnasium.utils.env_checker import check_env
 
@@ -112,9 +112,6 @@ def test_gym_make_with_the_prey_driven_is_the_hunters_env() -> None:
     env = gymnasium.make("rlenv/Hunt-v0", server_args=PREY_DRIVEN)
     try:
         assert list(env.observation_space) == list(env.action_space) == [HUNTER]
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            check_env(env.unwrapped)
-        assert [str(warning.message) for warning in caught] == []
+        assert warnings_of(lambda: check_env(env.unwrapped)) == []
     finally:
         env.close()

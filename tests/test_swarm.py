@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import re
-import warnings
 from typing import Any
 
 import gymnasium
 import numpy as np
+from api_warnings import warnings_of
 from conftest import Serve
 from gymnasium.utils import seeding
 from gymnasium.utils.env_checker import check_env
@@ -128,10 +128,7 @@ def test_gym_make_swarm_passes_check_env() -> None:
     env = gymnasium.make("rlenv/Swarm-v0")
     try:
         assert list(env.observation_space) == [GROUP]
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            check_env(env.unwrapped)
-        assert [str(warning.message) for warning in caught] == []
+        assert warnings_of(lambda: check_env(env.unwrapped)) == []
     finally:
         env.close()
 

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from answers import play
 from conftest import Serve
 from gymnasium import spaces
 
@@ -39,26 +40,10 @@ def _tests_on_path(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def _play(client: Any, seed: int = 1, steps: int = 60) -> list[dict[str, Any]]:
     """Reset, then push the discs until the episode ends: every answer (copies of its arrays)."""
-    observation, info = client.reset(seed=seed)
-    answers = [{"observation": observation, "agents": info["agents"], "frames": info["frames"]}]
-    for _ in range(steps):
-        action = {"Discs": PUSH}
-        if "Shepherd" in client.hello.agents:
-            action["Shepherd"] = np.array([0.0, 1.0], np.float32)
-        observation, reward, terminated, truncated, info = client.step(action)
-        answers.append(
-            {
-                "observation": {name: np.array(value) for name, value in observation.items()},
-                "agents": info["agents"],
-                "reward": reward,
-                "frames": info["frames"],
-                "terminated": terminated,
-                "truncated": truncated,
-            }
-        )
-        if terminated or truncated:
-            break
-    return answers
+    action = {"Discs": PUSH}
+    if "Shepherd" in client.hello.agents:
+        action["Shepherd"] = np.array([0.0, 1.0], np.float32)
+    return play(client, lambda _: dict(action), seed, steps)
 
 
 def _group(client: LocalClient) -> Any:

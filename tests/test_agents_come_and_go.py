@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from answers import play
 from conftest import Serve
 
 from rlenv.protocol.errors import ErrorCode, RemoteError
@@ -34,25 +35,7 @@ def _tests_on_path(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def _play(client: Any, steps: int = 40) -> list[dict[str, Any]]:
     """Step with +1 for every agent in each answer, until the episode ends: every answer."""
-    observation, info = client.reset(seed=0)
-    answers = [{"observation": observation, "agents": info["agents"], "frames": info["frames"]}]
-    for _ in range(steps):
-        observation, reward, terminated, truncated, info = client.step(
-            dict.fromkeys(observation, 2)
-        )
-        answers.append(
-            {
-                "observation": observation,
-                "reward": reward,
-                "agents": info["agents"],
-                "frames": info["frames"],
-                "terminated": terminated,
-                "truncated": truncated,
-            }
-        )
-        if terminated or truncated:
-            break
-    return answers
+    return play(client, lambda observation: dict.fromkeys(observation, 2), 0, steps)
 
 
 def test_the_hello_lists_every_possible_agent_and_its_spaces(serve: Serve) -> None:

@@ -259,6 +259,32 @@ def openenv_endpoints(gateway: Gateway) -> list[Endpoint]:
     return [*_session_endpoints(handlers), *_about_endpoints(handlers)]
 
 
+def _openenv(
+    method: str,
+    name: str,
+    handler: Any,
+    summary: str,
+    answers: dict[int, Answer],
+    operation: str | None = None,
+    **more: Any,
+) -> Endpoint:
+    """The OpenEnv route ``/openenv/NAME``, tagged ``openenv``.
+
+    Its operation is ``openenv_NAME`` (or ``operation``), its summary ``OpenEnv: SUMMARY``;
+    ``more`` are :class:`Endpoint`'s other fields.
+    """
+    return Endpoint(
+        method,
+        f"{_PREFIX}/{name}",
+        handler,
+        operation or f"openenv_{name}",
+        f"OpenEnv: {summary}",
+        "openenv",
+        answers,
+        **more,
+    )
+
+
 def _session_endpoints(handlers: _Handlers) -> list[Endpoint]:
     """The routes that drive sessions: the WebSocket's own; step, reset, state on the shared one."""
     step_problems = (
@@ -269,27 +295,24 @@ def _session_endpoints(handlers: _Handlers) -> list[Endpoint]:
         "session_limit",
     )
     return [
-        Endpoint(
+        _openenv(
             "WEBSOCKET",
-            f"{_PREFIX}/ws",
+            "ws",
             handlers.conversation,
-            "openenv_websocket",
-            "OpenEnv: a session of its own, messages {type, data}: reset, step, state, close",
-            "openenv",
+            "a session of its own, messages {type, data}: reset, step, state, close",
             {101: Answer("switching to the WebSocket protocol", _WS_MESSAGE, "")},
+            operation="openenv_websocket",
             problems=("not_found",),
             description='Send {"type": "reset", "data": {"seed"?, "episode_id"?, "options"?}}, '
             '{"type": "step", "data": {"action", "metadata"?, "repeat_action"?}}, {"type": '
             '"state"} or {"type": "close"}; answered {"type": "observation", "data"}, {"type": '
             '"state", "data"}, or {"type": "error", "data": {"message", "code", "problem"}}.',
         ),
-        Endpoint(
+        _openenv(
             "POST",
-            f"{_PREFIX}/step",
+            "step",
             handlers.http_step,
-            "openenv_step",
-            "OpenEnv: act in the shared session openenv",
-            "openenv",
+            "act in the shared session openenv",
             {200: Answer("OpenEnv's StepResponse", _OBSERVATION_ANSWER)},
             body={
                 "type": "object",
@@ -304,25 +327,21 @@ def _session_endpoints(handlers: _Handlers) -> list[Endpoint]:
             json=True,
             problems=step_problems,
         ),
-        Endpoint(
+        _openenv(
             "POST",
-            f"{_PREFIX}/reset",
+            "reset",
             handlers.http_reset,
-            "openenv_reset",
-            "OpenEnv: start an episode of the shared session openenv",
-            "openenv",
+            "start an episode of the shared session openenv",
             {200: Answer("OpenEnv's ResetResponse", _OBSERVATION_ANSWER)},
             body=_RESET_SCHEMA,
             json=True,
             problems=(*_PROBLEMS, ErrorCode.BAD_REQUEST, "session_limit"),
         ),
-        Endpoint(
+        _openenv(
             "GET",
-            f"{_PREFIX}/state",
+            "state",
             handlers.http_state,
-            "openenv_state",
-            "OpenEnv: the shared session's State",
-            "openenv",
+            "the shared session's State",
             {200: Answer("OpenEnv's State", _STATE)},
             problems=(*_PROBLEMS, "session_limit"),
         ),
@@ -332,32 +351,26 @@ def _session_endpoints(handlers: _Handlers) -> list[Endpoint]:
 def _about_endpoints(handlers: _Handlers) -> list[Endpoint]:
     """The routes that describe TARGET: health, schema, metadata."""
     return [
-        Endpoint(
+        _openenv(
             "GET",
-            f"{_PREFIX}/health",
+            "health",
             handlers.health,
-            "openenv_health",
-            "OpenEnv: health",
-            "openenv",
+            "health",
             {200: Answer("healthy", {"type": "object", "properties": {"status": {}}})},
         ),
-        Endpoint(
+        _openenv(
             "GET",
-            f"{_PREFIX}/schema",
+            "schema",
             handlers.schema,
-            "openenv_schema",
-            "OpenEnv: the JSON Schemas of actions, observations and states",
-            "openenv",
+            "the JSON Schemas of actions, observations and states",
             {200: Answer("OpenEnv's SchemaResponse", {"type": "object"})},
             problems=("not_found",),
         ),
-        Endpoint(
+        _openenv(
             "GET",
-            f"{_PREFIX}/metadata",
+            "metadata",
             handlers.metadata,
-            "openenv_metadata",
-            "OpenEnv: the environment's metadata",
-            "openenv",
+            "the environment's metadata",
             {200: Answer("OpenEnv's EnvironmentMetadata", {"type": "object"})},
             problems=("not_found",),
         ),

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from conftest import Serve
 from inspector_http import fetch
-from tool_runs import Recorded, Seen, record_one, report_lines, rlenv
+from tool_runs import Recorded, Seen, assert_replays_bit_for_bit, record_one, report_lines, rlenv
 
 from examples import hunt, tag
 from rlenv.protocol import Response
@@ -172,9 +172,7 @@ def test_replay_is_bit_for_bit_rewards_and_flags_included(
     recorded: str, request: pytest.FixtureRequest
 ) -> None:
     path = request.getfixturevalue(recorded).path
-    result = rlenv("replay", str(path), "--trust-target")
-    assert result.returncode == 0, result.stdout + result.stderr
-    assert "every observation identical, every reward and flag too" in result.stdout
+    assert_replays_bit_for_bit(path)
 
 
 def test_replay_finds_a_reward_that_differs(came_and_went: Recorded, tmp_path: Path) -> None:
@@ -539,9 +537,7 @@ def test_a_recording_whose_driven_agents_decided_during_steps_replays_bit_for_bi
     recorded: str, request: pytest.FixtureRequest
 ) -> None:
     path = request.getfixturevalue(recorded).path
-    result = rlenv("replay", str(path), "--trust-target")
-    assert result.returncode == 0, result.stdout + result.stderr
-    assert "every observation identical, every reward and flag too" in result.stdout
+    assert_replays_bit_for_bit(path)
 
 
 def test_a_replay_of_driven_agents_finds_an_action_that_differs(

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from conftest import Serve
 from inspector_http import fetch
-from tool_runs import Recorded, Seen, report_lines, rlenv
+from tool_runs import Recorded, Seen, assert_replays_bit_for_bit, report_lines, rlenv
 
 from rlenv_client.env import RemoteEnv
 from rlenv_client.replay import EpisodeFile, RecordEpisodes, digest
@@ -118,9 +118,7 @@ def test_the_recordings_hold_members_that_came_and_went(swarm: Recorded, mixed: 
 @pytest.mark.parametrize("recorded", ["swarm", "mixed"])
 def test_a_group_replays_bit_for_bit(recorded: str, request: pytest.FixtureRequest) -> None:
     path = request.getfixturevalue(recorded).path
-    result = rlenv("replay", str(path), "--trust-target")
-    assert result.returncode == 0, result.stdout + result.stderr
-    assert "every observation identical, every reward and flag too" in result.stdout
+    assert_replays_bit_for_bit(path)
 
 
 def test_a_replay_finds_a_member_action_that_differs(mixed: Recorded, tmp_path: Path) -> None:
@@ -375,9 +373,7 @@ def paced(tmp_path_factory: pytest.TempPathFactory) -> Recorded:
 
 
 def test_a_paced_group_replays_and_scrubs_bit_for_bit(paced: Recorded) -> None:
-    result = rlenv("replay", str(paced.path), "--trust-target")
-    assert result.returncode == 0, result.stdout + result.stderr
-    assert "every observation identical, every reward and flag too" in result.stdout
+    assert_replays_bit_for_bit(paced.path)
     arrivals, departures, returns = members_seen(paced.seen)
     with Timeline.open(paced.path, trust_target=True) as timeline:
         for step in (len(timeline), 2, 7):

@@ -33,6 +33,13 @@ def rlenv(*args: str, timeout: float = 400) -> subprocess.CompletedProcess[str]:
     )
 
 
+def assert_replays_bit_for_bit(path: Path) -> None:
+    """``rlenv replay PATH --trust-target`` finds every observation, reward and flag identical."""
+    result = rlenv("replay", str(path), "--trust-target")
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "every observation identical, every reward and flag too" in result.stdout
+
+
 def report_lines(output: str) -> dict[str, str]:
     """``rlenv check``'s report: each check's name to its status (PASS, FAIL, SKIP)."""
     lines = {}

@@ -294,12 +294,20 @@ def test_websockets_count_against_their_clients_sessions() -> None:
             first.ask("reset", {"seed": 0})
             (session,) = _session_ids(limited)
             with openenv_websocket(limited) as second:
-                refused = json.loads(second.websocket.recv(timeout=60))
-                assert refused["type"] == "error" and refused["data"]["code"] == "CAPACITY_REACHED"
-                assert refused["data"]["problem"]["code"] == "session_limit"
-                with pytest.raises(ConnectionClosed) as closed:
-                    second.websocket.recv(timeout=30)
-                assert closed.value.rcvd is not None and closed.value.rcvd.code == 1013
+                try:
+                    refused = json.loads(second.websocket.recv(timeout=60))
+                except ConnectionClosed as closed_first:
+                    # websockets 13.0's threading client (make test-lowest) may drop the message
+                    # that arrives just before the close: the close still says why.
+                    assert closed_first.rcvd is not None and closed_first.rcvd.code == 1013
+                    assert "sessions per client" in closed_first.rcvd.reason
+                else:
+                    assert refused["type"] == "error"
+                    assert refused["data"]["code"] == "CAPACITY_REACHED"
+                    assert refused["data"]["problem"]["code"] == "session_limit"
+                    with pytest.raises(ConnectionClosed) as closed:
+                        second.websocket.recv(timeout=30)
+                    assert closed.value.rcvd is not None and closed.value.rcvd.code == 1013
             assert first.ask("step", {"action": 1})["type"] == "observation"  # unaffected
         _wait_until_gone(limited, session)
         with openenv_websocket(limited) as third:  # the first's slot is free again

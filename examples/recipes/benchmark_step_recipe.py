@@ -10,13 +10,15 @@ one call a round, in turns. ``benchmark_vector_step`` does the same for ``gym.ma
 rlenv's id makes its ``RemoteVectorEnv`` (servers in columns), CartPole-v1's default is
 gymnasium's NumPy ``CartPoleVectorEnv``, and ``vectorization_mode="sync"`` a
 ``SyncVectorEnv`` of 8 (measured too, for the Python loop a user's own environment gets).
+A gymnasium without ``benchmark_vector_step`` (before 1.3) measures ``benchmark_step`` alone,
+and says so.
 """
 
 from __future__ import annotations
 
 import gymnasium as gym
 from _turns import Measure, arguments, print_contest
-from gymnasium.utils.performance import benchmark_step, benchmark_vector_step
+from gymnasium.utils import performance
 
 import rlenv_client  # noqa: F401  (registers the rlenv/ ids with gymnasium)
 
@@ -26,8 +28,8 @@ VECTOR = 8
 def benchmark(env: gym.Env | gym.vector.VectorEnv, seconds: float) -> Measure:
     """One round: gymnasium's benchmark of ``env`` (a vector's if it is one), seeded 0."""
     if isinstance(env, gym.vector.VectorEnv):
-        return lambda: benchmark_vector_step(env, target_duration=seconds, seed=0)
-    return lambda: benchmark_step(env, target_duration=seconds, seed=0)
+        return lambda: performance.benchmark_vector_step(env, target_duration=seconds, seed=0)
+    return lambda: performance.benchmark_step(env, target_duration=seconds, seed=0)
 
 
 def main() -> None:
@@ -44,6 +46,9 @@ def main() -> None:
         measure,
         args.rounds,
     )
+    if not hasattr(performance, "benchmark_vector_step"):
+        print(f"gymnasium benchmark_vector_step: not in gymnasium {gym.__version__}, not run")
+        return
     for mode in (None, "sync"):
         ours = gym.make_vec("rlenv/CartPole-v1", num_envs=VECTOR)
         theirs = gym.make_vec("CartPole-v1", num_envs=VECTOR, vectorization_mode=mode)

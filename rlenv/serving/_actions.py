@@ -49,6 +49,7 @@ class ActionCheck:
     Args:
         agents: the instance's agents.
         space: their joint action space (the agent's own with one agent).
+        several: whether actions are keyed by agent name (the roster's ``several``).
         driven: the agents a policy drives (with several agents): no action is needed for them.
     """
 
@@ -56,6 +57,7 @@ class ActionCheck:
         self,
         agents: Sequence[Any],
         space: spaces.Space,
+        several: bool,
         driven: frozenset[str] = frozenset(),
         due: Callable[[], Collection[str]] | None = None,
     ) -> None:
@@ -63,11 +65,7 @@ class ActionCheck:
         self._agents = [agent for agent in agents if agent.name not in driven]
         self._driven = driven
         self._due = due
-        self._several = (
-            due is not None
-            or len(agents) > 1
-            or any(getattr(agent, "_IS_GROUP", False) for agent in agents)
-        )
+        self._several = several
         self._one = compile_check(space, "action")
         self._each = {a.name: compile_check(a.action_space, f"action[{a.name!r}]") for a in agents}
 
@@ -80,7 +78,7 @@ class ActionCheck:
         """
         in_play = roster if isinstance(roster, AgentsInPlay) else None
         due = None if in_play is None else (lambda: in_play.asked)
-        return cls(roster.actors(), space, driven, due)
+        return cls(roster.actors(), space, roster.several, driven, due)
 
     def __call__(
         self,

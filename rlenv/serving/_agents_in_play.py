@@ -37,7 +37,19 @@ from rlenv.environment import RLEnvironment
 from rlenv.protocol.messages import MAX_REPEAT_ACTION, joint_end
 from rlenv.serving._roster import Outcome, Roster, reward_total
 
-__all__ = ["MAX_POSSIBLE_AGENTS", "AgentsInPlay", "Departure", "PossibleAgent", "roster_of"]
+__all__ = [
+    "LOCKSTEP_ONLY",
+    "MAX_POSSIBLE_AGENTS",
+    "AgentsInPlay",
+    "Departure",
+    "PossibleAgent",
+    "roster_of",
+]
+
+LOCKSTEP_ONLY = (
+    "is not supported where agents come and go or decide at their own pace: they play in lockstep"
+)
+"""Why real time is refused for such environments (``rlenv serve --real-time``, a config)."""
 
 MAX_POSSIBLE_AGENTS = 1024
 """The most agents an environment may declare (each is in the hello, with its spaces)."""

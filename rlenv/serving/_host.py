@@ -31,7 +31,7 @@ from rlenv.protocol.errors import ErrorCode, RequestError
 from rlenv.protocol.spaces import compile_check
 from rlenv.scene2d.packed_scene import MAX_DEPTH, MAX_NODES
 from rlenv.serving._actions import MAX_REPEAT_ACTION
-from rlenv.serving._agents_in_play import AgentsInPlay
+from rlenv.serving._agents_in_play import LOCKSTEP_ONLY, AgentsInPlay
 from rlenv.serving._claims import Requester
 from rlenv.serving._columns import Columns
 from rlenv.serving._endpoint import Endpoint, Peer
@@ -186,10 +186,7 @@ class Host:
             instance.real_time_changed = self._follow_real_time
             if real_time:
                 if isinstance(instance.roster, AgentsInPlay):
-                    raise ValueError(
-                        "--real-time is not supported where agents come and go or decide at "
-                        "their own pace: they play in lockstep"
-                    )
+                    raise ValueError(f"--real-time {LOCKSTEP_ONLY}")
                 instance.set_real_time(True)
         self._after_send_hooks = any(instance.has_after_send for instance in self.instances)
         self.driver: PolicyDriver | None = None

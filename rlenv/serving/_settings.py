@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any
 from rlenv.protocol.errors import ErrorCode, RequestError
 from rlenv.scene2d.recording import VideoRecorder
 from rlenv.serving._actions import check_repeat_action
-from rlenv.serving._agents_in_play import AgentsInPlay
+from rlenv.serving._agents_in_play import LOCKSTEP_ONLY, AgentsInPlay
 
 if TYPE_CHECKING:
     from rlenv.serving._instance import Answer, Instance
@@ -204,11 +204,7 @@ class Settings:
         if type(real_time) is not bool:
             raise RequestError(ErrorCode.INVALID_CONFIG, "real_time must be a bool")
         if real_time and isinstance(self._instance.roster, AgentsInPlay):
-            raise RequestError(
-                ErrorCode.INVALID_CONFIG,
-                "real_time is not supported where agents come and go or decide at their own "
-                "pace: they play in lockstep",
-            )
+            raise RequestError(ErrorCode.INVALID_CONFIG, f"real_time {LOCKSTEP_ONLY}")
         if "record" in rest:
             _check_recording(rest.pop("record"), self.record_dir)
         if "repeat_action" in rest:
